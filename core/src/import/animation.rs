@@ -1,0 +1,186 @@
+//! glTF animations to clips, bound to a character's nodes.
+
+use gltf::json::{
+    animation::{Interpolation as JsonInterpolation, Property as JsonProperty},
+    validation::Checked,
+};
+
+use super::{ImportError, accessor::Accessors, document::Document};
+use crate::{
+    clip::{Channel, Clip, Interpolation, Property},
+    limits::Limits,
+    skeleton::Skeleton,
+};
+
+/// Reads every animation of `doc`. `bind` maps a node of the document to
+/// the character's node (identity for the character's own file, by name for
+/// a clip file); channels whose node has no match are dropped with a
+/// warning.
+pub(crate) fn read_clips(
+    doc: &Document,
+    skeleton: &Skeleton,
+    bind: &dyn Fn(usize) -> Option<usize>,
+    limits: &Limits,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<Clip>, ImportError> {
+    let root = &doc.root;
+    let acc = Accessors {
+        root,
+        buffers: &doc.buffers,
+    };
+    let mut keys = 0u64;
+    for animation in &root.animations {
+        for sampler in &animation.samplers {
+            keys = keys.saturating_add(acc.count(sampler.input.value())?);
+        }
+    }
+    if keys > limits.max_keyframes {
+        return Err(ImportError::limit(
+            "keyframe count",
+            keys,
+            limits.max_keyframes,
+        ));
+    }
+    let max_values = limits
+        .max_keyframes
+        .saturating_mul(3 * limits.max_morph_targets.max(4));
+
+    let mut clips: Vec<Clip> = Vec::with_capacity(root.animations.len());
+    let mut unbound = 0usize;
+    for (a, animation) in root.animations.iter().enumerate() {
+        let mut channels = Vec::with_capacity(animation.channels.len());
+        for (c, channel) in animation.channels.iter().enumerate() {
+            let path = format!("animations[{a}].channels[{c}]");
+            let sampler = animation
+                .samplers
+                .get(channel.sampler.value())
+                .ok_or_else(|| {
+                    ImportError::invalid(format!("{path}.sampler"), "sampler does not exist")
+                })?;
+            let spath = format!("animations[{a}].samplers[{}]", channel.sampler.value());
+            let property = match channel.target.path {
+                Checked::Valid(JsonProperty::Translation) => Property::Translation,
+                Checked::Valid(JsonProperty::Rotation) => Property::Rotation,
+                Checked::Valid(JsonProperty::Scale) => Property::Scale,
+                Checked::Valid(JsonProperty::MorphTargetWeights) => Property::Weights,
+                Checked::Invalid => {
+                    return Err(ImportError::invalid(
+                        format!("{path}.target.path"),
+                        "unknown path",
+                    ));
+                }
+            };
+            let interpolation = match sampler.interpolation {
+                Checked::Valid(JsonInterpolation::Step) => Interpolation::Step,
+                Checked::Valid(JsonInterpolation::Linear) => Interpolation::Linear,
+                Checked::Valid(JsonInterpolation::CubicSpline) => Interpolation::CubicSpline,
+                Checked::Invalid => {
+                    return Err(ImportError::invalid(
+                        format!("{spath}.interpolation"),
+                        "unknown interpolation",
+                    ));
+                }
+            };
+            let Some(node) = bind(channel.target.node.value()) else {
+                unbound += 1;
+                continue;
+            };
+            let width = match property {
+                Property::Translation | Property::Scale => 3,
+                Property::Rotation => 4,
+                Property::Weights => skeleton.nodes[node].morph_weights.len(),
+            };
+            if width == 0 {
+                warnings.push(format!(
+                    "{path} animates morph weights of a node without morph targets; ignored"
+                ));
+                continue;
+            }
+            let times = acc.floats(sampler.input.value(), limits.max_keyframes)?;
+            if times.width != 1 || times.values.is_empty() {
+                return Err(ImportError::invalid(
+                    format!("{spath}.input"),
+                    "must be a non-empty SCALAR accessor of key times",
+                ));
+            }
+            if let Some(k) = times.values.windows(2).position(|w| w[1] < w[0]) {
+                return Err(ImportError::invalid(
+                    format!("{spath}.input"),
+                    format!(
+                        "key times must increase: key {} is {} after key {} at {}",
+                        k + 1,
+                        times.values[k + 1],
+                        k,
+                        times.values[k]
+                    ),
+                ));
+            }
+            let values = acc.floats(sampler.output.value(), max_values)?;
+            let per_key = if interpolation == Interpolation::CubicSpline {
+                3
+            } else {
+                1
+            };
+            let expected = times.values.len() * per_key * width;
+            if values.values.len() != expected {
+                return Err(ImportError::invalid(
+                    format!("{spath}.output"),
+                    format!(
+                        "has {} numbers, {} keys of {property:?} with {interpolation:?} need {expected}",
+                        values.values.len(),
+                        times.values.len()
+                    ),
+                ));
+            }
+            if property == Property::Rotation {
+                let zero = values
+                    .values
+                    .chunks_exact(4)
+                    .position(|q| q.iter().all(|v| *v == 0.0));
+                if let Some(k) = zero {
+                    if per_key == 1 || k % 3 == 1 {
+                        return Err(ImportError::invalid(
+                            format!("{spath}.output"),
+                            format!("rotation key {} is the zero quaternion", k / per_key),
+                        ));
+                    }
+                }
+            }
+            channels.push(Channel {
+                node,
+                property,
+                interpolation,
+                times: times.values,
+                values: values.values,
+                width,
+            });
+        }
+        let mut name = animation
+            .name
+            .clone()
+            .filter(|n| !n.is_empty())
+            .unwrap_or_else(|| format!("animation_{a}"));
+        if clips.iter().any(|c| c.name == name) {
+            let unique = format!("{name}_{a}");
+            warnings.push(format!(
+                "animations[{a}]: name {name:?} is used twice; this one is {unique:?}"
+            ));
+            name = unique;
+        }
+        let duration = channels
+            .iter()
+            .filter_map(|c| c.times.last().copied())
+            .fold(0.0f32, f32::max);
+        clips.push(Clip {
+            name,
+            channels,
+            duration,
+        });
+    }
+    if unbound > 0 {
+        warnings.push(format!(
+            "{unbound} animation channels target nodes that the character does not have; ignored"
+        ));
+    }
+    Ok(clips)
+}

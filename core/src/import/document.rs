@@ -1,0 +1,285 @@
+//! Parsing and validating the glTF JSON, resolving its buffers, and checking
+//! the node graph.
+
+use gltf::json::{self, validation::Validate as _};
+
+use super::{
+    ImportError,
+    source::{Container, Upload, UriTarget, check_json_depth, resolve_uri},
+};
+use crate::limits::Limits;
+
+/// Extensions that change how geometry is stored; a file that requires one
+/// cannot be read correctly without decoding it.
+const GEOMETRY_EXTENSIONS: &[&str] = &[
+    "KHR_draco_mesh_compression",
+    "EXT_meshopt_compression",
+    "KHR_meshopt_compression",
+    "EXT_mesh_gpu_instancing",
+];
+
+/// A parsed, validated glTF file with its buffers in memory.
+pub(crate) struct Document {
+    pub(crate) root: json::Root,
+    pub(crate) buffers: Vec<Vec<u8>>,
+    /// Parent of each node.
+    pub(crate) parents: Vec<Option<usize>>,
+    pub(crate) warnings: Vec<String>,
+}
+
+impl Document {
+    pub(crate) fn parse(upload: Upload<'_>, limits: &Limits) -> Result<Self, ImportError> {
+        let total = upload.total_bytes();
+        if total > limits.max_file_bytes {
+            return Err(ImportError::limit(
+                "upload size in bytes",
+                total,
+                limits.max_file_bytes,
+            ));
+        }
+        let container = Container::parse(upload.main)?;
+        check_json_depth(container.json, limits.max_json_depth)?;
+        let root =
+            json::Root::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
+        let mut warnings = Vec::new();
+        validate(&root, &mut warnings)?;
+        let nodes = root.nodes.len() as u64;
+        if nodes > limits.max_nodes {
+            return Err(ImportError::limit("node count", nodes, limits.max_nodes));
+        }
+        let parents = node_parents(&root)?;
+        let buffers = load_buffers(&root, upload, container.bin)?;
+        check_images(&root, upload, &mut warnings)?;
+        Ok(Self {
+            root,
+            buffers,
+            parents,
+            warnings,
+        })
+    }
+
+    /// Node indices of the scene to bake, depth-first in child order: the
+    /// default scene, else the first scene, else every root node.
+    pub(crate) fn scene_nodes(&self) -> Vec<usize> {
+        let roots: Vec<usize> = match self.root.scene.or(if self.root.scenes.is_empty() {
+            None
+        } else {
+            Some(json::Index::new(0))
+        }) {
+            Some(scene) => self.root.scenes[scene.value()]
+                .nodes
+                .iter()
+                .map(|n| n.value())
+                .collect(),
+            None => (0..self.root.nodes.len())
+                .filter(|&n| self.parents[n].is_none())
+                .collect(),
+        };
+        let mut seen = vec![false; self.root.nodes.len()];
+        let mut out = Vec::new();
+        let mut stack: Vec<usize> = roots.into_iter().rev().collect();
+        while let Some(n) = stack.pop() {
+            if std::mem::replace(&mut seen[n], true) {
+                continue;
+            }
+            out.push(n);
+            if let Some(children) = &self.root.nodes[n].children {
+                stack.extend(children.iter().rev().map(|c| c.value()));
+            }
+        }
+        out
+    }
+
+    /// All nodes with each parent before its children.
+    pub(crate) fn parents_first(&self) -> Vec<usize> {
+        let mut order: Vec<usize> = (0..self.parents.len())
+            .filter(|&n| self.parents[n].is_none())
+            .collect();
+        let mut i = 0;
+        while i < order.len() {
+            if let Some(children) = &self.root.nodes[order[i]].children {
+                order.extend(children.iter().map(|c| c.value()));
+            }
+            i += 1;
+        }
+        order
+    }
+}
+
+fn validate(root: &json::Root, warnings: &mut Vec<String>) -> Result<(), ImportError> {
+    for ext in &root.extensions_required {
+        if GEOMETRY_EXTENSIONS.contains(&ext.as_str()) {
+            return Err(ImportError::UnsupportedExtension(ext.clone()));
+        }
+        warnings.push(format!(
+            "required extension {ext} is ignored: it does not change geometry or animation"
+        ));
+    }
+    let mut first = None;
+    root.validate(root, json::Path::new, &mut |path, error| {
+        let path = path().to_string();
+        if first.is_none() && !path.starts_with("extensionsRequired") {
+            first = Some((path, error));
+        }
+    });
+    match first {
+        None => Ok(()),
+        Some((path, error)) => Err(ImportError::invalid(
+            path,
+            match error {
+                json::validation::Error::IndexOutOfBounds => "index out of bounds",
+                json::validation::Error::Invalid => "invalid value",
+                json::validation::Error::Missing => "required value missing",
+                json::validation::Error::Oversize => "size exceeds the system's limits",
+                json::validation::Error::Unsupported => "unsupported",
+            },
+        )),
+    }
+}
+
+/// Parent of every node; refuses nodes with two parents and cycles.
+fn node_parents(root: &json::Root) -> Result<Vec<Option<usize>>, ImportError> {
+    let n = root.nodes.len();
+    let mut parents = vec![None; n];
+    for (i, node) in root.nodes.iter().enumerate() {
+        for child in node.children.iter().flatten() {
+            let c = child.value();
+            if c == i {
+                return Err(ImportError::invalid(
+                    format!("nodes[{i}].children"),
+                    "a node is its own child",
+                ));
+            }
+            if let Some(p) = parents[c].replace(i) {
+                return Err(ImportError::invalid(
+                    format!("nodes[{i}].children"),
+                    format!(
+                        "node {c} is already a child of node {p}: the node graph must be a forest"
+                    ),
+                ));
+            }
+        }
+    }
+    // With one parent each, a cycle is a chain that never reaches a root.
+    let mut state = vec![0u8; n]; // 0 unknown, 1 on the current walk, 2 reaches a root
+    for start in 0..n {
+        let mut walk = Vec::new();
+        let mut node = start;
+        loop {
+            match state[node] {
+                2 => break,
+                1 => {
+                    return Err(ImportError::invalid(
+                        format!("nodes[{node}]"),
+                        "the node graph has a cycle through this node",
+                    ));
+                }
+                _ => {}
+            }
+            state[node] = 1;
+            walk.push(node);
+            match parents[node] {
+                Some(p) => node = p,
+                None => break,
+            }
+        }
+        for w in walk {
+            state[w] = 2;
+        }
+    }
+    Ok(parents)
+}
+
+fn load_buffers(
+    root: &json::Root,
+    upload: Upload<'_>,
+    bin: Option<&[u8]>,
+) -> Result<Vec<Vec<u8>>, ImportError> {
+    let mut buffers = Vec::with_capacity(root.buffers.len());
+    for (i, buffer) in root.buffers.iter().enumerate() {
+        let path = format!("buffers[{i}]");
+        let data: Vec<u8> = match &buffer.uri {
+            Some(uri) => match resolve_uri(uri, &format!("{path}.uri"))? {
+                UriTarget::Data(bytes) => bytes,
+                UriTarget::File(name) => upload
+                    .side_file(&name)
+                    .ok_or_else(|| ImportError::MissingFile {
+                        path: format!("{path}.uri"),
+                        name: name.clone(),
+                        available: upload.side_file_names(),
+                    })?
+                    .bytes
+                    .clone(),
+            },
+            None if i == 0 => bin
+                .ok_or_else(|| {
+                    ImportError::invalid(&path, "has no uri and the file has no GLB binary chunk")
+                })?
+                .to_vec(),
+            None => return Err(ImportError::invalid(&path, "has no uri")),
+        };
+        let declared = buffer.byte_length.0;
+        if (data.len() as u64) < declared {
+            return Err(ImportError::invalid(
+                &path,
+                format!(
+                    "declares byteLength {declared} but its data has {} bytes",
+                    data.len()
+                ),
+            ));
+        }
+        let mut data = data;
+        data.truncate(declared as usize);
+        buffers.push(data);
+    }
+    Ok(buffers)
+}
+
+/// Image URIs must be safe; a missing image is only a warning, since AO
+/// does not use textures.
+fn check_images(
+    root: &json::Root,
+    upload: Upload<'_>,
+    warnings: &mut Vec<String>,
+) -> Result<(), ImportError> {
+    for (i, image) in root.images.iter().enumerate() {
+        if let Some(uri) = &image.uri {
+            if let UriTarget::File(name) = resolve_uri(uri, &format!("images[{i}].uri"))? {
+                if upload.side_file(&name).is_none() {
+                    warnings.push(format!(
+                        "images[{i}]: {name:?} was not uploaded (AO does not need images)"
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The relative file names a `.gltf` refers to (buffers first, then
+/// images), for callers that gather side files. Forbidden URIs are errors.
+pub fn referenced_files(main: &[u8], limits: &Limits) -> Result<Vec<String>, ImportError> {
+    let container = Container::parse(main)?;
+    check_json_depth(container.json, limits.max_json_depth)?;
+    let root =
+        json::Root::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
+    let buffers = root
+        .buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (format!("buffers[{i}].uri"), &b.uri));
+    let images = root
+        .images
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (format!("images[{i}].uri"), &b.uri));
+    let mut names = Vec::new();
+    for (path, uri) in buffers.chain(images) {
+        if let Some(uri) = uri {
+            if let UriTarget::File(name) = resolve_uri(uri, &path)? {
+                names.push(name);
+            }
+        }
+    }
+    Ok(names)
+}

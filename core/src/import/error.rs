@@ -1,0 +1,92 @@
+//! The one error type of glTF import.
+
+/// Why a glTF upload was refused. Every variant names the part of the file
+/// that is wrong (a JSON path such as `accessors[3]`, an element index), so
+/// the message can go back to the user as is.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ImportError {
+    /// The GLB container (header or chunks) is malformed.
+    #[error("malformed GLB container: {0}")]
+    Container(String),
+    /// The JSON does not parse, or does not have glTF's shape.
+    #[error("invalid glTF JSON: {0}")]
+    Json(String),
+    /// A declared size or count is over a configured limit.
+    #[error("{what} is {count}, over the limit of {limit}")]
+    Limit {
+        /// What was counted.
+        what: String,
+        /// The count the file declares.
+        count: u64,
+        /// The configured limit.
+        limit: u64,
+    },
+    /// A URI is not allowed: only `data:` URIs and names of files uploaded
+    /// with the glTF are.
+    #[error("{path}: URI {uri:?} is not allowed: {reason}")]
+    ForbiddenUri {
+        /// Where the URI is, e.g. `buffers[1].uri`.
+        path: String,
+        /// The URI as written in the file (truncated).
+        uri: String,
+        /// Why it is refused.
+        reason: &'static str,
+    },
+    /// A buffer's file was not uploaded with the glTF.
+    #[error("{path}: file {name:?} was not uploaded with the glTF (uploaded: {available})")]
+    MissingFile {
+        /// Where the reference is, e.g. `buffers[0].uri`.
+        path: String,
+        /// The file name the glTF asks for.
+        name: String,
+        /// The names that were uploaded.
+        available: String,
+    },
+    /// The file requires an extension that changes geometry and that aobake
+    /// does not decode.
+    #[error("extensionsRequired lists {0:?}, which aobake does not support")]
+    UnsupportedExtension(String),
+    /// Anything else that is wrong at a given place in the file.
+    #[error("{path}: {problem}")]
+    Invalid {
+        /// Where in the glTF, e.g. `meshes[0].primitives[1].attributes.JOINTS_0`.
+        path: String,
+        /// What is wrong there.
+        problem: String,
+    },
+    /// The file has no triangles to bake.
+    #[error("the scene has no triangle meshes")]
+    NoGeometry,
+}
+
+impl ImportError {
+    pub(crate) fn invalid(path: impl Into<String>, problem: impl Into<String>) -> Self {
+        Self::Invalid {
+            path: path.into(),
+            problem: problem.into(),
+        }
+    }
+
+    pub(crate) fn limit(what: impl Into<String>, count: u64, limit: u64) -> Self {
+        Self::Limit {
+            what: what.into(),
+            count,
+            limit,
+        }
+    }
+
+    /// A stable machine-readable code for the error's kind, for API
+    /// responses (`problem+json` `code`).
+    pub fn code(&self) -> &'static str {
+        match self {
+            Self::Container(_) => "gltf_container",
+            Self::Json(_) => "gltf_json",
+            Self::Limit { .. } => "limit_exceeded",
+            Self::ForbiddenUri { .. } => "forbidden_uri",
+            Self::MissingFile { .. } => "missing_file",
+            Self::UnsupportedExtension(_) => "unsupported_extension",
+            Self::Invalid { .. } => "gltf_invalid",
+            Self::NoGeometry => "no_geometry",
+        }
+    }
+}

@@ -1,0 +1,83 @@
+//! glTF import from bytes.
+//!
+//! [`import_character`] turns an upload (a `.glb`, or a `.gltf` with the
+//! files uploaded beside it) into a [`Character`] and the clips of the same
+//! file; [`import_clips`] reads the animations of a second file and binds
+//! them to a character's nodes by name. Input is untrusted: every count is
+//! checked against [`Limits`] before allocation, every byte range against
+//! the data present, every URI against the uploaded names, and every number
+//! for finiteness. Errors name the JSON path and element that is wrong.
+
+mod accessor;
+mod animation;
+mod document;
+mod error;
+mod mesh;
+mod source;
+
+pub use document::referenced_files;
+pub use error::ImportError;
+pub use source::{SideFile, Upload};
+
+use crate::{character::Character, clip::Clip, limits::Limits};
+
+/// A character with the clips of its own file.
+#[derive(Debug, Clone)]
+pub struct Imported {
+    /// The merged, skinned occluder and its skeleton.
+    pub character: Character,
+    /// The animations of the file, bound to its nodes.
+    pub clips: Vec<Clip>,
+    /// Things that were accepted but deserve a look (normalised weights,
+    /// missing images, ignored primitives).
+    pub warnings: Vec<String>,
+}
+
+/// Imports a character and the animations of its file.
+pub fn import_character(upload: Upload<'_>, limits: &Limits) -> Result<Imported, ImportError> {
+    let doc = document::Document::parse(upload, limits)?;
+    let (character, mut warnings) = mesh::build_character(&doc, limits)?;
+    warnings.splice(0..0, doc.warnings.iter().cloned());
+    let clips = animation::read_clips(&doc, &character.skeleton, &Some, limits, &mut warnings)?;
+    Ok(Imported {
+        character,
+        clips,
+        warnings,
+    })
+}
+
+/// Imports the animations of a separate glTF file (clips shipped apart from
+/// the character), binding each channel to the character's node of the same
+/// name. Returns the clips and warnings.
+pub fn import_clips(
+    upload: Upload<'_>,
+    character: &Character,
+    limits: &Limits,
+) -> Result<(Vec<Clip>, Vec<String>), ImportError> {
+    let doc = document::Document::parse(upload, limits)?;
+    let mut warnings = doc.warnings.clone();
+    let names: Vec<Option<usize>> = doc
+        .root
+        .nodes
+        .iter()
+        .map(|n| {
+            n.name
+                .as_deref()
+                .and_then(|name| character.skeleton.find(name))
+        })
+        .collect();
+    let clips = animation::read_clips(
+        &doc,
+        &character.skeleton,
+        &|node| names.get(node).copied().flatten(),
+        limits,
+        &mut warnings,
+    )?;
+    if clips.iter().all(|c| c.channels.is_empty()) {
+        return Err(ImportError::invalid(
+            "animations",
+            "no animation channel targets a node name of the character",
+        ));
+    }
+    Ok((clips, warnings))
+}

@@ -1,0 +1,344 @@
+//! The bytes of an upload: GLB container parsing, JSON nesting check and URI
+//! resolution among the files uploaded together.
+//!
+//! Nothing here touches the file system or the network: a URI is either a
+//! `data:` URI, decoded in memory, or the name of one of the uploaded side
+//! files.
+
+use base64::Engine as _;
+use percent_encoding::percent_decode_str;
+
+use super::ImportError;
+
+/// One uploaded file: its name (as the client sent it, a relative path such
+/// as `Fox.bin` or `textures/skin.png`) and its bytes.
+#[derive(Debug, Clone)]
+pub struct SideFile {
+    /// Relative name, `/`-separated.
+    pub name: String,
+    /// Contents.
+    pub bytes: Vec<u8>,
+}
+
+/// A glTF upload: the main file (`.glb` or `.gltf`) and the files uploaded
+/// with it, which are the only places external URIs may point to.
+#[derive(Debug, Clone, Copy)]
+pub struct Upload<'a> {
+    /// The `.glb` or `.gltf` bytes.
+    pub main: &'a [u8],
+    /// Buffers and images uploaded with a `.gltf`.
+    pub side_files: &'a [SideFile],
+}
+
+impl<'a> Upload<'a> {
+    /// An upload of one self-contained file (a `.glb`, or a `.gltf` whose
+    /// buffers are all `data:` URIs).
+    pub fn single(main: &'a [u8]) -> Self {
+        Self {
+            main,
+            side_files: &[],
+        }
+    }
+
+    pub(crate) fn total_bytes(&self) -> u64 {
+        self.main.len() as u64
+            + self
+                .side_files
+                .iter()
+                .map(|f| f.bytes.len() as u64)
+                .sum::<u64>()
+    }
+
+    /// Finds a side file by the normalised relative path a URI resolved to;
+    /// falls back to a unique file with the same last path segment, since
+    /// clients often upload `scene.bin` for a URI `data/scene.bin`.
+    pub(crate) fn side_file(&self, path: &str) -> Option<&'a SideFile> {
+        let wanted = normalize_name(path);
+        if let Some(f) = self
+            .side_files
+            .iter()
+            .find(|f| normalize_name(&f.name) == wanted)
+        {
+            return Some(f);
+        }
+        let base = wanted.rsplit('/').next().unwrap_or(&wanted);
+        let mut by_base = self
+            .side_files
+            .iter()
+            .filter(|f| normalize_name(&f.name).rsplit('/').next() == Some(base));
+        match (by_base.next(), by_base.next()) {
+            (Some(f), None) => Some(f),
+            _ => None,
+        }
+    }
+
+    pub(crate) fn side_file_names(&self) -> String {
+        if self.side_files.is_empty() {
+            return "none".into();
+        }
+        let names: Vec<&str> = self.side_files.iter().map(|f| f.name.as_str()).collect();
+        names.join(", ")
+    }
+}
+
+fn normalize_name(name: &str) -> String {
+    name.split('/')
+        .filter(|s| !s.is_empty() && *s != ".")
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
+/// The two chunks of a GLB. glTF's own `Glb::from_slice` subtracts before it
+/// checks and so panics on a header length below 12; this parser checks
+/// every length against the bytes actually present first.
+pub(crate) struct Container<'a> {
+    pub(crate) json: &'a [u8],
+    pub(crate) bin: Option<&'a [u8]>,
+}
+
+const GLB_MAGIC: &[u8; 4] = b"glTF";
+const CHUNK_JSON: u32 = 0x4E4F_534A;
+const CHUNK_BIN: u32 = 0x004E_4942;
+
+fn read_u32(bytes: &[u8], at: usize) -> Option<u32> {
+    let b = bytes.get(at..at.checked_add(4)?)?;
+    Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+}
+
+impl<'a> Container<'a> {
+    pub(crate) fn parse(bytes: &'a [u8]) -> Result<Self, ImportError> {
+        if !bytes.starts_with(GLB_MAGIC) {
+            return Ok(Self {
+                json: bytes,
+                bin: None,
+            });
+        }
+        let err = |m: String| ImportError::Container(m);
+        let version = read_u32(bytes, 4).ok_or_else(|| err("truncated header".into()))?;
+        if version != 2 {
+            return Err(err(format!(
+                "version {version}, only version 2 is supported"
+            )));
+        }
+        let declared = read_u32(bytes, 8).ok_or_else(|| err("truncated header".into()))? as usize;
+        if declared > bytes.len() {
+            return Err(err(format!(
+                "header declares {declared} bytes but the file has {}",
+                bytes.len()
+            )));
+        }
+        if declared < 12 {
+            return Err(err(format!(
+                "header declares {declared} bytes, less than the header itself"
+            )));
+        }
+        let body = &bytes[..declared];
+        let mut at = 12usize;
+        let mut json = None;
+        let mut bin = None;
+        let mut index = 0;
+        while at < body.len() {
+            let len = read_u32(body, at).ok_or_else(|| {
+                err(format!(
+                    "chunk {index}: truncated chunk header at byte {at}"
+                ))
+            })? as usize;
+            let ty = read_u32(body, at + 4).ok_or_else(|| {
+                err(format!(
+                    "chunk {index}: truncated chunk header at byte {at}"
+                ))
+            })?;
+            let start = at + 8;
+            let end = start
+                .checked_add(len)
+                .filter(|&end| end <= body.len())
+                .ok_or_else(|| {
+                    err(format!(
+                        "chunk {index}: declares {len} bytes but only {} remain",
+                        body.len().saturating_sub(start)
+                    ))
+                })?;
+            let data = &body[start..end];
+            match (index, ty) {
+                (0, CHUNK_JSON) => json = Some(data),
+                (0, _) => return Err(err(format!("first chunk has type {ty:#010x}, not JSON"))),
+                (1, CHUNK_BIN) => bin = Some(data),
+                // The spec says readers ignore chunks of unknown type.
+                _ => {}
+            }
+            // Chunks are 4-byte aligned; a writer that forgot padding still
+            // gets its next chunk read at the exact end of the last one.
+            at = end;
+            index += 1;
+        }
+        let json = json.ok_or_else(|| err("no JSON chunk".into()))?;
+        Ok(Self { json, bin })
+    }
+}
+
+/// Refuses JSON that nests arrays or objects deeper than `limit`, with one
+/// pass over the bytes before any parser allocates for them.
+pub(crate) fn check_json_depth(json: &[u8], limit: usize) -> Result<(), ImportError> {
+    let mut depth = 0usize;
+    let mut in_string = false;
+    let mut escaped = false;
+    for &b in json {
+        if in_string {
+            match (escaped, b) {
+                (true, _) => escaped = false,
+                (false, b'\\') => escaped = true,
+                (false, b'"') => in_string = false,
+                _ => {}
+            }
+            continue;
+        }
+        match b {
+            b'"' => in_string = true,
+            b'{' | b'[' => {
+                depth += 1;
+                if depth > limit {
+                    return Err(ImportError::limit(
+                        "JSON nesting depth",
+                        depth as u64,
+                        limit as u64,
+                    ));
+                }
+            }
+            b'}' | b']' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// Where a URI points after validation.
+#[derive(Debug, PartialEq)]
+pub(crate) enum UriTarget {
+    /// A `data:` URI, decoded.
+    Data(Vec<u8>),
+    /// A normalised relative path, to be looked up among the side files.
+    File(String),
+}
+
+/// Validates and resolves a glTF URI. `path` names the JSON field for the
+/// error message.
+pub(crate) fn resolve_uri(uri: &str, path: &str) -> Result<UriTarget, ImportError> {
+    let forbid = |reason| ImportError::ForbiddenUri {
+        path: path.to_owned(),
+        uri: uri.chars().take(120).collect(),
+        reason,
+    };
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let (meta, payload) = rest
+            .split_once(',')
+            .ok_or_else(|| forbid("data URI without a comma"))?;
+        let bytes = if meta.ends_with(";base64") {
+            base64::engine::general_purpose::STANDARD
+                .decode(payload.trim())
+                .map_err(|_| forbid("data URI with invalid base64"))?
+        } else {
+            percent_decode_str(payload).collect()
+        };
+        return Ok(UriTarget::Data(bytes));
+    }
+    // A scheme is letters, digits, `+-.` before the first `:` that comes
+    // before any `/`, `?` or `#` (RFC 3986 §3.1). `C:\x` counts as one too.
+    if let Some(colon) = uri.find(':') {
+        if !uri[..colon].contains(['/', '?', '#']) {
+            return Err(forbid(
+                "only data: URIs and relative names of uploaded files are allowed",
+            ));
+        }
+    }
+    let decoded = percent_decode_str(uri)
+        .decode_utf8()
+        .map_err(|_| forbid("percent-encoding does not decode to UTF-8"))?;
+    if decoded.contains('\0') {
+        return Err(forbid("contains a NUL character"));
+    }
+    if decoded.contains('\\') {
+        return Err(forbid("contains a backslash"));
+    }
+    if decoded.starts_with('/') {
+        return Err(forbid("absolute paths are not allowed"));
+    }
+    // Query and fragment are not part of a file name.
+    let name = decoded.split(['?', '#']).next().unwrap_or_default();
+    let mut segments = Vec::new();
+    for segment in name.split('/') {
+        match segment {
+            "" | "." => {}
+            ".." => return Err(forbid("`..` segments are not allowed")),
+            s => segments.push(s),
+        }
+    }
+    if segments.is_empty() {
+        return Err(forbid("empty file name"));
+    }
+    Ok(UriTarget::File(segments.join("/")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uris_resolve_only_to_data_or_relative_names() {
+        assert_eq!(
+            resolve_uri("Fox.bin", "b").unwrap(),
+            UriTarget::File("Fox.bin".into())
+        );
+        assert_eq!(
+            resolve_uri("./data/My%20Mesh.bin", "b").unwrap(),
+            UriTarget::File("data/My Mesh.bin".into())
+        );
+        assert_eq!(
+            resolve_uri("data:application/octet-stream;base64,AAEC", "b").unwrap(),
+            UriTarget::Data(vec![0, 1, 2])
+        );
+        for bad in [
+            "../secret.bin",
+            "a/../../etc/passwd",
+            "%2e%2e/x.bin",
+            "/etc/passwd",
+            "file:///etc/passwd",
+            "http://example.com/a.bin",
+            "C:\\Windows\\a.bin",
+            "a\\..\\b.bin",
+            "x%00.bin",
+            "",
+        ] {
+            let err = resolve_uri(bad, "buffers[0].uri").unwrap_err();
+            assert!(
+                matches!(err, ImportError::ForbiddenUri { .. }),
+                "{bad}: {err}"
+            );
+        }
+    }
+
+    #[test]
+    fn glb_lengths_are_checked_before_use() {
+        let mut glb = b"glTF".to_vec();
+        glb.extend_from_slice(&2u32.to_le_bytes());
+        glb.extend_from_slice(&4u32.to_le_bytes());
+        assert!(matches!(
+            Container::parse(&glb),
+            Err(ImportError::Container(_))
+        ));
+        let mut glb = b"glTF".to_vec();
+        glb.extend_from_slice(&2u32.to_le_bytes());
+        glb.extend_from_slice(&24u32.to_le_bytes());
+        glb.extend_from_slice(&1000u32.to_le_bytes());
+        glb.extend_from_slice(&CHUNK_JSON.to_le_bytes());
+        glb.extend_from_slice(b"{}  ");
+        let err = Container::parse(&glb).err().unwrap();
+        assert!(err.to_string().contains("declares 1000 bytes"), "{err}");
+    }
+
+    #[test]
+    fn json_depth_ignores_brackets_in_strings() {
+        assert!(check_json_depth(br#"{"a":"[[[[[[[[[["}"#, 2).is_ok());
+        assert!(check_json_depth(br#"{"a":"\"[[[["}"#, 2).is_ok());
+        assert!(check_json_depth(b"[[[]]]", 2).is_err());
+    }
+}

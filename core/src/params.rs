@@ -1,0 +1,383 @@
+//! Poses as vectors of numbers (DESIGN §3), and seeded samplers of
+//! reference poses.
+//!
+//! * Joint angles (Kontkanen & Aila 2006): for each animated joint, its
+//!   local rotation relative to the rest rotation as a rotation vector,
+//!   `r = log(rest⁻¹ · q)`, 3 numbers; optionally the translation of the
+//!   topmost animated nodes relative to rest. Both directions are exact up
+//!   to float rounding: `pose = rest · exp(r)`.
+//! * Handles (Kirk & Arikan 2007, Fig. 4): per joint its position and the
+//!   position of a point offset from the bone axis, both relative to the
+//!   root joint's position; two handles fix a bone's frame.
+
+use glam::{Quat, Vec3};
+use rand::{RngExt as _, SeedableRng as _};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    character::Character,
+    clip::{Clip, Property},
+    geometry::bounds,
+    pose::Pose,
+    skeleton::Skeleton,
+};
+
+/// Closed range of one parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Range {
+    /// Smallest value.
+    pub min: f32,
+    /// Largest value.
+    pub max: f32,
+}
+
+/// How a joint-angle layout is derived from clips.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LayoutOptions {
+    /// Add the translation of the topmost animated nodes (3 numbers each).
+    pub root_translation: bool,
+    /// Widen each range by this fraction of its span on both sides.
+    pub margin: f32,
+    /// Frame rate at which clips are sampled to find the ranges, besides
+    /// every key time (cubic splines can overshoot their keys).
+    pub fps: f32,
+}
+
+impl Default for LayoutOptions {
+    fn default() -> Self {
+        Self {
+            root_translation: false,
+            margin: 0.1,
+            fps: 30.0,
+        }
+    }
+}
+
+/// Why a parameterisation could not be made.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum ParamError {
+    /// No clip rotates a node that moves the mesh.
+    #[error("no clip rotates a joint that moves the mesh; joint angles need animated joints")]
+    NothingAnimated,
+    /// A parameter vector of the wrong length.
+    #[error("expected {expected} parameters, got {got}")]
+    Length {
+        /// Parameters of the layout.
+        expected: usize,
+        /// Parameters given.
+        got: usize,
+    },
+}
+
+/// The joint-angle parameterisation of a character's poses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JointAngles {
+    /// Nodes with 3 rotation-vector parameters each, in node order.
+    pub joints: Vec<usize>,
+    /// Nodes with 3 translation parameters each (offset from rest).
+    pub translations: Vec<usize>,
+    /// Range per parameter: joints first, then translations.
+    pub ranges: Vec<Range>,
+    /// Name per parameter, such as `Hips.rx` or `Root.ty`.
+    pub names: Vec<String>,
+}
+
+/// `log(q)` as a rotation vector (axis times angle, angle in [0, π]).
+pub fn rotation_vector(q: Quat) -> Vec3 {
+    let q = if q.w < 0.0 { -q } else { q };
+    q.to_scaled_axis()
+}
+
+impl JointAngles {
+    /// The layout for the joints that `clips` rotate, with ranges over the
+    /// clips' frames widened by the margin.
+    pub fn from_clips(
+        character: &Character,
+        clips: &[Clip],
+        options: LayoutOptions,
+    ) -> Result<Self, ParamError> {
+        let skeleton = &character.skeleton;
+        let relevant = character.relevant_nodes();
+        let animated = |property: Property| {
+            let mut nodes: Vec<usize> = clips
+                .iter()
+                .flat_map(|c| &c.channels)
+                .filter(|c| c.property == property && relevant[c.node])
+                .map(|c| c.node)
+                .collect();
+            nodes.sort_unstable();
+            nodes.dedup();
+            nodes
+        };
+        let joints = animated(Property::Rotation);
+        if joints.is_empty() {
+            return Err(ParamError::NothingAnimated);
+        }
+        let translations = if options.root_translation {
+            let moved = animated(Property::Translation);
+            let mut is_animated = vec![false; skeleton.nodes.len()];
+            for &n in joints.iter().chain(&moved) {
+                is_animated[n] = true;
+            }
+            moved
+                .into_iter()
+                .filter(|&n| {
+                    let mut p = skeleton.nodes[n].parent;
+                    while let Some(a) = p {
+                        if is_animated[a] {
+                            return false;
+                        }
+                        p = skeleton.nodes[a].parent;
+                    }
+                    true
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let mut names = Vec::new();
+        for &j in &joints {
+            for axis in ["rx", "ry", "rz"] {
+                names.push(format!("{}.{axis}", skeleton.label(j)));
+            }
+        }
+        for &t in &translations {
+            for axis in ["tx", "ty", "tz"] {
+                names.push(format!("{}.{axis}", skeleton.label(t)));
+            }
+        }
+        let mut layout = Self {
+            ranges: vec![
+                Range {
+                    min: f32::INFINITY,
+                    max: f32::NEG_INFINITY,
+                };
+                names.len()
+            ],
+            joints,
+            translations,
+            names,
+        };
+        for clip in clips {
+            let mut times = clip.key_times();
+            times.extend(clip.frame_times(options.fps));
+            for t in times {
+                let params = layout.params(skeleton, &Pose::sample(skeleton, clip, t));
+                for (range, v) in layout.ranges.iter_mut().zip(params) {
+                    range.min = range.min.min(v);
+                    range.max = range.max.max(v);
+                }
+            }
+        }
+        for range in &mut layout.ranges {
+            let pad = (range.max - range.min) * options.margin;
+            range.min -= pad;
+            range.max += pad;
+        }
+        Ok(layout)
+    }
+
+    /// Number of parameters.
+    pub fn len(&self) -> usize {
+        self.names.len()
+    }
+
+    /// Whether the layout has no parameters.
+    pub fn is_empty(&self) -> bool {
+        self.names.is_empty()
+    }
+
+    /// Pose → parameters.
+    pub fn params(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
+        let mut out = Vec::with_capacity(self.len());
+        for &j in &self.joints {
+            let rest = skeleton.nodes[j].rest.rotation;
+            out.extend(rotation_vector(rest.inverse() * pose.locals[j].rotation).to_array());
+        }
+        for &t in &self.translations {
+            out.extend(
+                (pose.locals[t].translation - skeleton.nodes[t].rest.translation).to_array(),
+            );
+        }
+        out
+    }
+
+    /// Parameters → pose: the rest pose with the parameterised rotations
+    /// and translations set.
+    pub fn pose(&self, skeleton: &Skeleton, params: &[f32]) -> Result<Pose, ParamError> {
+        if params.len() != self.len() {
+            return Err(ParamError::Length {
+                expected: self.len(),
+                got: params.len(),
+            });
+        }
+        let mut pose = Pose::rest(skeleton);
+        let (rot, trans) = params.split_at(3 * self.joints.len());
+        for (&j, r) in self.joints.iter().zip(rot.chunks_exact(3)) {
+            let rest = skeleton.nodes[j].rest.rotation;
+            pose.locals[j].rotation =
+                (rest * Quat::from_scaled_axis(Vec3::from_slice(r))).normalize();
+        }
+        for (&t, d) in self.translations.iter().zip(trans.chunks_exact(3)) {
+            pose.locals[t].translation = skeleton.nodes[t].rest.translation + Vec3::from_slice(d);
+        }
+        Ok(pose)
+    }
+
+    /// `count` parameter vectors, each parameter uniform in its range
+    /// (Kontkanen & Aila's random reference poses). Same seed, same poses.
+    pub fn sample_uniform(&self, count: usize, seed: u64) -> Vec<Vec<f32>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..count)
+            .map(|_| {
+                self.ranges
+                    .iter()
+                    .map(|r| {
+                        if r.max > r.min {
+                            rng.random_range(r.min..=r.max)
+                        } else {
+                            r.min
+                        }
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+/// A clip and a time in it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ClipFrame {
+    /// Index into the clip list.
+    pub clip: usize,
+    /// Seconds.
+    pub time: f32,
+}
+
+/// Every frame of every clip at `fps` (Kirk & Arikan train on clip frames).
+pub fn clip_frames(clips: &[Clip], fps: f32) -> Vec<ClipFrame> {
+    clips
+        .iter()
+        .enumerate()
+        .flat_map(|(clip, c)| {
+            c.frame_times(fps)
+                .into_iter()
+                .map(move |time| ClipFrame { clip, time })
+        })
+        .collect()
+}
+
+/// `count` frames drawn uniformly over the total duration of the clips,
+/// seeded. Clips of zero duration contribute their single frame with the
+/// weight of one 30 fps frame.
+pub fn random_clip_frames(clips: &[Clip], count: usize, seed: u64) -> Vec<ClipFrame> {
+    let spans: Vec<f32> = clips.iter().map(|c| c.duration.max(1.0 / 30.0)).collect();
+    let total: f32 = spans.iter().sum();
+    if clips.is_empty() || total <= 0.0 {
+        return Vec::new();
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..count)
+        .map(|_| {
+            let mut u = rng.random_range(0.0..total);
+            let mut clip = 0;
+            while clip + 1 < spans.len() && u >= spans[clip] {
+                u -= spans[clip];
+                clip += 1;
+            }
+            ClipFrame {
+                clip,
+                time: u.min(clips[clip].duration),
+            }
+        })
+        .collect()
+}
+
+/// Kirk & Arikan's handle layout of a character.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Handles {
+    /// The joint whose position is the origin of all handles.
+    pub root: usize,
+    /// Joints with two handles each, in palette order.
+    pub joints: Vec<usize>,
+    /// Per joint, the off-axis handle in the joint's local frame.
+    pub offsets: Vec<Vec3>,
+}
+
+impl Handles {
+    /// Places one off-axis handle per joint, perpendicular to the bone (to
+    /// the first child joint, else from the parent joint) at half the bone's
+    /// length, measured in the rest pose.
+    pub fn new(character: &Character) -> Self {
+        let skeleton = &character.skeleton;
+        let joints = character.joint_nodes();
+        let world = skeleton.world_from_node(&Pose::rest(skeleton).locals);
+        let root = *joints
+            .iter()
+            .min_by_key(|&&j| skeleton.depth(j))
+            .expect("a character has at least one joint");
+        let diag =
+            bounds(character.positions.iter().copied()).map_or(1.0, |(lo, hi)| (hi - lo).length());
+        let is_joint = {
+            let mut v = vec![false; skeleton.nodes.len()];
+            joints.iter().for_each(|&j| v[j] = true);
+            v
+        };
+        let joint_parent = |mut n: usize| {
+            while let Some(p) = skeleton.nodes[n].parent {
+                if is_joint[p] {
+                    return Some(p);
+                }
+                n = p;
+            }
+            None
+        };
+        let offsets = joints
+            .iter()
+            .map(|&j| {
+                let here = world[j].translation;
+                let child = joints.iter().find(|&&c| joint_parent(c) == Some(j));
+                let bone = match (child, joint_parent(j)) {
+                    (Some(&c), _) => Vec3::from(world[c].translation - here),
+                    (None, Some(p)) => Vec3::from(here - world[p].translation),
+                    (None, None) => Vec3::ZERO,
+                };
+                let (dir, len) = match bone.try_normalize() {
+                    Some(d) => (d, bone.length()),
+                    None => (Vec3::Y, 0.1 * diag),
+                };
+                let offset_in_world = dir.any_orthonormal_vector() * (0.5 * len);
+                world[j].inverse().transform_vector3(offset_in_world)
+            })
+            .collect();
+        Self {
+            root,
+            joints,
+            offsets,
+        }
+    }
+
+    /// Numbers per pose: 6 per joint.
+    pub fn len(&self) -> usize {
+        6 * self.joints.len()
+    }
+
+    /// Whether there are no handles.
+    pub fn is_empty(&self) -> bool {
+        self.joints.is_empty()
+    }
+
+    /// The handle vector of a pose: per joint, its position and its
+    /// off-axis handle, minus the root joint's position.
+    pub fn handles(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
+        let world = skeleton.world_from_node(&pose.locals);
+        let origin = Vec3::from(world[self.root].translation);
+        let mut out = Vec::with_capacity(self.len());
+        for (&j, offset) in self.joints.iter().zip(&self.offsets) {
+            out.extend((Vec3::from(world[j].translation) - origin).to_array());
+            out.extend((world[j].transform_point3(*offset) - origin).to_array());
+        }
+        out
+    }
+}

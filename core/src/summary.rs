@@ -1,0 +1,118 @@
+//! What `aobake inspect` reports about a character, as data.
+
+use serde::Serialize;
+
+use crate::{
+    Character, Clip, Pose,
+    geometry::bounds,
+    params::{Handles, JointAngles, LayoutOptions},
+};
+
+/// Frame rate at which clips are sampled for the bounds.
+const BOUNDS_FPS: f32 = 30.0;
+
+/// A clip's name and length.
+#[derive(Debug, Clone, Serialize)]
+pub struct ClipSummary {
+    /// Name.
+    pub name: String,
+    /// Seconds.
+    pub duration: f32,
+    /// Channels bound to the character.
+    pub channels: usize,
+    /// Keys over all channels.
+    pub keys: usize,
+}
+
+/// Counts and bounds of a character with its clips.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// Meshes in the file.
+    pub meshes: usize,
+    /// Primitives in the file.
+    pub primitives: usize,
+    /// Vertices over the file's meshes, each mesh once.
+    pub vertices_unique: u64,
+    /// Triangles over the file's meshes, each mesh once.
+    pub triangles_unique: u64,
+    /// Vertices of the merged occluder (every mesh instance of the scene).
+    pub vertices: usize,
+    /// Triangles of the merged occluder.
+    pub triangles: usize,
+    /// Nodes of the scene that instance a mesh.
+    pub mesh_instances: usize,
+    /// Skins in the file.
+    pub skins: usize,
+    /// Joints in the palette (skin joints used by the scene, plus one per
+    /// rigid mesh node).
+    pub joints: usize,
+    /// Morph targets over all primitives.
+    pub morph_targets: usize,
+    /// Clips with their durations.
+    pub clips: Vec<ClipSummary>,
+    /// Joint-angle parameters (3 per animated joint), without root
+    /// translation; 0 when no clip rotates a joint.
+    pub pose_parameters: usize,
+    /// Kirk & Arikan handle numbers (6 per joint).
+    pub handle_parameters: usize,
+    /// Bounds of the posed mesh over every clip frame (30 fps and every
+    /// key) and the bind pose: `[min, max]`.
+    pub bounds: [[f32; 3]; 2],
+    /// Length of the bounds' diagonal.
+    pub diagonal: f32,
+}
+
+impl Summary {
+    /// Inspects a character. Skins the mesh at every frame of every clip
+    /// for the bounds, so it costs about one skinning per frame.
+    pub fn of(character: &Character, clips: &[Clip]) -> Self {
+        let mut poses = vec![Pose::bind(character)];
+        for clip in clips {
+            let mut times = clip.key_times();
+            times.extend(clip.frame_times(BOUNDS_FPS));
+            times.sort_by(f32::total_cmp);
+            times.dedup();
+            poses.extend(
+                times
+                    .into_iter()
+                    .map(|t| Pose::sample(&character.skeleton, clip, t)),
+            );
+        }
+        let (lo, hi) = poses
+            .iter()
+            .filter_map(|p| bounds(character.skin(p).positions))
+            .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+            .unwrap_or_default();
+        let pose_parameters = JointAngles::from_clips(character, clips, LayoutOptions::default())
+            .map_or(0, |l| l.len());
+        Self {
+            meshes: character.source.meshes,
+            primitives: character.source.primitives,
+            vertices_unique: character.source.vertices,
+            triangles_unique: character.source.triangles,
+            vertices: character.vertex_count(),
+            triangles: character.triangles.len(),
+            mesh_instances: {
+                let mut nodes: Vec<usize> = character.primitives.iter().map(|p| p.node).collect();
+                nodes.dedup();
+                nodes.len()
+            },
+            skins: character.source.skins,
+            joints: character.joints.len(),
+            morph_targets: character.morph_target_count(),
+            clips: clips
+                .iter()
+                .map(|c| ClipSummary {
+                    name: c.name.clone(),
+                    duration: c.duration,
+                    channels: c.channels.len(),
+                    keys: c.channels.iter().map(|ch| ch.keys()).sum(),
+                })
+                .collect(),
+            pose_parameters,
+            handle_parameters: Handles::new(character).len(),
+            bounds: [lo.to_array(), hi.to_array()],
+            diagonal: (hi - lo).length(),
+        }
+    }
+}

@@ -1,0 +1,86 @@
+//! `aobake inspect`.
+
+use std::path::PathBuf;
+
+use aobake_core::{Limits, summary::Summary};
+use serde::Serialize;
+
+/// Arguments of `aobake inspect`.
+#[derive(Debug, clap::Args)]
+pub(super) struct Args {
+    /// glTF files (.glb, or .gltf with its buffers beside it).
+    #[arg(required = true)]
+    files: Vec<PathBuf>,
+    /// Print one JSON object per file (a JSON array) instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Serialize)]
+struct Report {
+    file: String,
+    #[serde(flatten)]
+    summary: Summary,
+    warnings: Vec<String>,
+}
+
+pub(super) fn run(args: &Args) -> anyhow::Result<()> {
+    let limits = Limits::default();
+    let mut reports = Vec::new();
+    for file in &args.files {
+        let imported = super::load::character(file, &limits)?;
+        let report = Report {
+            file: file.display().to_string(),
+            summary: Summary::of(&imported.character, &imported.clips),
+            warnings: imported.warnings,
+        };
+        if !args.json {
+            print_text(&report);
+        }
+        reports.push(report);
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&reports)?);
+    }
+    Ok(())
+}
+
+fn print_text(r: &Report) {
+    let s = &r.summary;
+    println!("{}", r.file);
+    println!(
+        "  meshes       {} ({} primitives), {} instanced in the scene",
+        s.meshes, s.primitives, s.mesh_instances
+    );
+    println!(
+        "  vertices     {} in the scene ({} in the file's meshes)",
+        s.vertices, s.vertices_unique
+    );
+    println!(
+        "  triangles    {} in the scene ({} in the file's meshes)",
+        s.triangles, s.triangles_unique
+    );
+    println!(
+        "  skins        {}, joints {}, morph targets {}",
+        s.skins, s.joints, s.morph_targets
+    );
+    println!(
+        "  pose params  {} joint angles, {} handle coordinates",
+        s.pose_parameters, s.handle_parameters
+    );
+    println!("  clips        {}", s.clips.len());
+    for c in &s.clips {
+        println!(
+            "    {:<24} {:>8.3} s  {} channels, {} keys",
+            c.name, c.duration, c.channels, c.keys
+        );
+    }
+    let [lo, hi] = s.bounds;
+    println!(
+        "  bounds       [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}] over all clips (diagonal {:.4})",
+        lo[0], lo[1], lo[2], hi[0], hi[1], hi[2], s.diagonal
+    );
+    for w in &r.warnings {
+        println!("  warning      {w}");
+    }
+}
