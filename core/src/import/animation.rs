@@ -137,13 +137,13 @@ pub(crate) fn read_clips(
                     .values
                     .chunks_exact(4)
                     .position(|q| q.iter().all(|v| *v == 0.0));
-                if let Some(k) = zero {
-                    if per_key == 1 || k % 3 == 1 {
-                        return Err(ImportError::invalid(
-                            format!("{spath}.output"),
-                            format!("rotation key {} is the zero quaternion", k / per_key),
-                        ));
-                    }
+                if let Some(k) = zero
+                    && (per_key == 1 || k % 3 == 1)
+                {
+                    return Err(ImportError::invalid(
+                        format!("{spath}.output"),
+                        format!("rotation key {} is the zero quaternion", k / per_key),
+                    ));
                 }
             }
             channels.push(Channel {

@@ -116,12 +116,29 @@ fn validate(root: &json::Root, warnings: &mut Vec<String>) -> Result<(), ImportE
         ));
     }
     let mut first = None;
+    let mut missing_bounds = 0usize;
     root.validate(root, json::Path::new, &mut |path, error| {
         let path = path().to_string();
-        if first.is_none() && !path.starts_with("extensionsRequired") {
+        if path.starts_with("extensionsRequired") {
+            return;
+        }
+        // POSITION accessors must declare min and max, but many exporters
+        // leave them out and nothing here needs them.
+        if error == json::validation::Error::Missing
+            && (path.ends_with(".min") || path.ends_with(".max"))
+        {
+            missing_bounds += 1;
+            return;
+        }
+        if first.is_none() {
             first = Some((path, error));
         }
     });
+    if missing_bounds > 0 {
+        warnings.push(format!(
+            "{missing_bounds} POSITION accessor bounds (min/max) are missing; the spec requires them"
+        ));
+    }
     match first {
         None => Ok(()),
         Some((path, error)) => Err(ImportError::invalid(
@@ -243,14 +260,13 @@ fn check_images(
     warnings: &mut Vec<String>,
 ) -> Result<(), ImportError> {
     for (i, image) in root.images.iter().enumerate() {
-        if let Some(uri) = &image.uri {
-            if let UriTarget::File(name) = resolve_uri(uri, &format!("images[{i}].uri"))? {
-                if upload.side_file(&name).is_none() {
-                    warnings.push(format!(
-                        "images[{i}]: {name:?} was not uploaded (AO does not need images)"
-                    ));
-                }
-            }
+        if let Some(uri) = &image.uri
+            && let UriTarget::File(name) = resolve_uri(uri, &format!("images[{i}].uri"))?
+            && upload.side_file(&name).is_none()
+        {
+            warnings.push(format!(
+                "images[{i}]: {name:?} was not uploaded (AO does not need images)"
+            ));
         }
     }
     Ok(())
@@ -275,10 +291,10 @@ pub fn referenced_files(main: &[u8], limits: &Limits) -> Result<Vec<String>, Imp
         .map(|(i, b)| (format!("images[{i}].uri"), &b.uri));
     let mut names = Vec::new();
     for (path, uri) in buffers.chain(images) {
-        if let Some(uri) = uri {
-            if let UriTarget::File(name) = resolve_uri(uri, &path)? {
-                names.push(name);
-            }
+        if let Some(uri) = uri
+            && let UriTarget::File(name) = resolve_uri(uri, &path)?
+        {
+            names.push(name);
         }
     }
     Ok(names)

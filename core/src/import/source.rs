@@ -243,12 +243,12 @@ pub(crate) fn resolve_uri(uri: &str, path: &str) -> Result<UriTarget, ImportErro
     }
     // A scheme is letters, digits, `+-.` before the first `:` that comes
     // before any `/`, `?` or `#` (RFC 3986 §3.1). `C:\x` counts as one too.
-    if let Some(colon) = uri.find(':') {
-        if !uri[..colon].contains(['/', '?', '#']) {
-            return Err(forbid(
-                "only data: URIs and relative names of uploaded files are allowed",
-            ));
-        }
+    if let Some(colon) = uri.find(':')
+        && !uri[..colon].contains(['/', '?', '#'])
+    {
+        return Err(forbid(
+            "only data: URIs and relative names of uploaded files are allowed",
+        ));
     }
     let decoded = percent_decode_str(uri)
         .decode_utf8()

@@ -1,0 +1,15 @@
+//! Integration tests of aobake-core, one binary (STYLE.md: link once).
+
+#[path = "integration/util.rs"]
+mod util;
+
+#[path = "integration/malformed.rs"]
+mod malformed;
+#[path = "integration/params.rs"]
+mod params;
+#[path = "integration/real_characters.rs"]
+mod real_characters;
+#[path = "integration/skinning.rs"]
+mod skinning;
+#[path = "integration/synthetic.rs"]
+mod synthetic;

@@ -1,0 +1,322 @@
+//! Hostile and broken input: each case gives a clear, typed error that
+//! names what is wrong; none panics; none reads a file outside the upload.
+
+use aobake_core::{ImportError, Limits, SideFile, Upload, import_character};
+use serde_json::json;
+
+use crate::util::{self, Gltf};
+
+fn import(bytes: &[u8]) -> Result<aobake_core::Imported, ImportError> {
+    import_character(Upload::single(bytes), &Limits::default())
+}
+
+fn expect_err(g: &Gltf, needle: &str) -> ImportError {
+    let err = g
+        .import()
+        .err()
+        .unwrap_or_else(|| panic!("expected an error containing {needle:?}"));
+    assert!(
+        err.to_string().contains(needle),
+        "error {err:?} does not contain {needle:?}"
+    );
+    err
+}
+
+#[test]
+fn the_tiny_rig_itself_is_valid() {
+    let imported = util::tiny_rig().import().unwrap();
+    assert_eq!(imported.character.vertex_count(), 8);
+    assert_eq!(imported.clips.len(), 1);
+}
+
+#[test]
+fn truncated_glb_at_every_length_is_an_error() {
+    let path = util::character_path("RiggedSimple.glb").unwrap();
+    let bytes = std::fs::read(path).unwrap();
+    for len in (0..bytes.len()).step_by(7) {
+        let err = import(&bytes[..len]).err();
+        assert!(err.is_some(), "truncated to {len} bytes, yet it imported");
+    }
+}
+
+#[test]
+fn lying_chunk_lengths() {
+    let glb = util::tiny_rig().glb();
+    // Total length larger than the file.
+    let mut lie = glb.clone();
+    lie[8..12].copy_from_slice(&(glb.len() as u32 + 100).to_le_bytes());
+    assert!(matches!(import(&lie), Err(ImportError::Container(m)) if m.contains("declares")));
+    // Total length below the header.
+    lie[8..12].copy_from_slice(&3u32.to_le_bytes());
+    assert!(matches!(import(&lie), Err(ImportError::Container(_))));
+    // JSON chunk longer than the rest.
+    let mut lie = glb.clone();
+    lie[12..16].copy_from_slice(&u32::MAX.to_le_bytes());
+    assert!(matches!(import(&lie), Err(ImportError::Container(m)) if m.contains("chunk 0")));
+    // BIN chunk longer than the rest.
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let mut lie = glb.clone();
+    lie[20 + json_len..24 + json_len].copy_from_slice(&1_000_000u32.to_le_bytes());
+    assert!(matches!(import(&lie), Err(ImportError::Container(m)) if m.contains("chunk 1")));
+    // BIN chunk shorter than the buffer's byteLength.
+    let mut lie = glb[..20 + json_len + 8 + 8].to_vec();
+    lie[20 + json_len..24 + json_len].copy_from_slice(&8u32.to_le_bytes());
+    let total = lie.len() as u32;
+    lie[8..12].copy_from_slice(&total.to_le_bytes());
+    let err = import(&lie).unwrap_err();
+    assert!(err.to_string().contains("buffers[0]"), "{err}");
+}
+
+#[test]
+fn accessor_count_past_the_buffer() {
+    let mut g = util::tiny_rig();
+    g.json["accessors"][0]["count"] = json!(9);
+    let err = expect_err(&g, "accessors[0]");
+    assert!(err.to_string().contains("do not fit"), "{err}");
+    let mut g = util::tiny_rig();
+    g.json["accessors"][0]["byteOffset"] = json!(4);
+    expect_err(&g, "do not fit");
+    let mut g = util::tiny_rig();
+    g.json["bufferViews"][0]["byteLength"] = json!(1 << 30);
+    expect_err(&g, "bufferViews[0]");
+}
+
+#[test]
+fn index_past_the_vertices() {
+    let mut g = util::tiny_rig();
+    // Patch the first index (u16 at the index view's offset) to 8.
+    let offset = g.json["bufferViews"][1]["byteOffset"].as_u64().unwrap() as usize;
+    g.bin[offset..offset + 2].copy_from_slice(&8u16.to_le_bytes());
+    let err = expect_err(&g, "meshes[0].primitives[0].indices");
+    assert!(
+        err.to_string()
+            .contains("index 0 (accessor 1) is 8, but POSITION has 8 vertices"),
+        "{err}"
+    );
+}
+
+#[test]
+fn joint_index_past_the_skin() {
+    let mut g = util::tiny_rig();
+    let offset = g.json["bufferViews"][2]["byteOffset"].as_u64().unwrap() as usize;
+    g.bin[offset + 8 * 5..offset + 8 * 5 + 2].copy_from_slice(&7u16.to_le_bytes());
+    let err = expect_err(&g, "JOINTS_0");
+    assert!(err.to_string().contains("vertex 5 uses joint 7"), "{err}");
+    assert!(err.to_string().contains("skin 0 has 2 joints"), "{err}");
+}
+
+#[test]
+fn path_traversal_and_absolute_uris_never_touch_the_file_system() {
+    let g = util::tiny_rig();
+    // A file that must not be read: its content would make a valid import.
+    let outside = std::env::temp_dir().join(format!("aobake-secret-{}.bin", std::process::id()));
+    std::fs::write(&outside, &g.bin).unwrap();
+    let abs = outside.display().to_string();
+    for uri in [
+        "../secret.bin".to_owned(),
+        "sub/../../secret.bin".to_owned(),
+        "%2E%2E/secret.bin".to_owned(),
+        abs.clone(),
+        format!("file://{abs}"),
+        "http://127.0.0.1:1/secret.bin".to_owned(),
+        "\\\\server\\share\\secret.bin".to_owned(),
+    ] {
+        let (main, side) = g.with_side_file(&uri, "secret.bin");
+        let err = import_character(
+            Upload {
+                main: &main,
+                side_files: &side,
+            },
+            &Limits::default(),
+        )
+        .unwrap_err();
+        assert!(
+            matches!(err, ImportError::ForbiddenUri { .. }),
+            "{uri}: {err}"
+        );
+        assert!(err.to_string().contains("buffers[0].uri"), "{err}");
+    }
+    std::fs::remove_file(outside).unwrap();
+}
+
+#[test]
+fn side_files_resolve_by_name_only() {
+    let g = util::tiny_rig();
+    let (main, side) = g.with_side_file("data/rig%20mesh.bin", "data/rig mesh.bin");
+    assert!(
+        import_character(
+            Upload {
+                main: &main,
+                side_files: &side
+            },
+            &Limits::default()
+        )
+        .is_ok()
+    );
+    // A unique base name matches too.
+    let (main, side) = g.with_side_file("deep/dir/rig.bin", "rig.bin");
+    assert!(
+        import_character(
+            Upload {
+                main: &main,
+                side_files: &side
+            },
+            &Limits::default()
+        )
+        .is_ok()
+    );
+    // A missing one names what was uploaded.
+    let (main, _) = g.with_side_file("rig.bin", "rig.bin");
+    let other = [SideFile {
+        name: "other.bin".into(),
+        bytes: vec![],
+    }];
+    let err = import_character(
+        Upload {
+            main: &main,
+            side_files: &other,
+        },
+        &Limits::default(),
+    )
+    .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "buffers[0].uri: file \"rig.bin\" was not uploaded with the glTF (uploaded: other.bin)"
+    );
+}
+
+#[test]
+fn nan_and_infinite_data() {
+    // NaN keyframe time.
+    let mut g = util::tiny_rig();
+    let view = g.json["accessors"][5]["bufferView"].as_u64().unwrap() as usize;
+    let offset = g.json["bufferViews"][view]["byteOffset"].as_u64().unwrap() as usize;
+    g.bin[offset + 4..offset + 8].copy_from_slice(&f32::NAN.to_le_bytes());
+    let err = expect_err(&g, "accessors[5]");
+    assert!(
+        err.to_string().contains("element 1 component 0 is NaN"),
+        "{err}"
+    );
+    // Infinite position.
+    let mut g = util::tiny_rig();
+    g.bin[12..16].copy_from_slice(&f32::INFINITY.to_le_bytes());
+    expect_err(&g, "element 1 component 0 is inf");
+    // Out-of-range node translation (parses as infinity).
+    let mut g = util::tiny_rig();
+    g.json["nodes"][1]["translation"] = json!([1e39, 0.0, 0.0]);
+    expect_err(&g, "nodes[1]");
+}
+
+#[test]
+fn cyclic_and_shared_node_graphs() {
+    let mut g = util::tiny_rig();
+    g.json["nodes"][1]["children"] = json!([0]);
+    expect_err(&g, "cycle");
+    let mut g = util::tiny_rig();
+    g.json["nodes"][2]["children"] = json!([1]);
+    expect_err(&g, "already a child");
+    let mut g = util::tiny_rig();
+    g.json["nodes"][1]["children"] = json!([1]);
+    expect_err(&g, "own child");
+}
+
+#[test]
+fn huge_declared_counts_are_refused_before_allocation() {
+    let mut g = util::tiny_rig();
+    g.json["accessors"][0]["count"] = json!(4_000_000_000u64);
+    let err = expect_err(&g, "vertex count is");
+    assert_eq!(err.code(), "limit_exceeded");
+    let mut g = util::tiny_rig();
+    g.json["accessors"][5]["count"] = json!(u32::MAX);
+    expect_err(&g, "keyframe count is");
+    let limits = Limits {
+        max_joints: 1,
+        ..Limits::default()
+    };
+    let err = import_character(Upload::single(&util::tiny_rig().glb()), &limits).unwrap_err();
+    assert_eq!(err.to_string(), "joint count is 2, over the limit of 1");
+    let limits = Limits {
+        max_file_bytes: 100,
+        ..Limits::default()
+    };
+    assert!(import_character(Upload::single(&util::tiny_rig().glb()), &limits).is_err());
+}
+
+#[test]
+fn deep_json_nesting_is_refused() {
+    let mut json = String::from(r#"{"asset":{"version":"2.0"},"extras":"#);
+    json.push_str(&"[".repeat(10_000));
+    json.push_str(&"]".repeat(10_000));
+    json.push('}');
+    let err = import(json.as_bytes()).unwrap_err();
+    assert_eq!(err.code(), "limit_exceeded");
+    assert!(
+        err.to_string().starts_with("JSON nesting depth is 65"),
+        "{err}"
+    );
+}
+
+#[test]
+fn not_gltf_at_all() {
+    for bytes in [
+        &b""[..],
+        b"hello",
+        b"{}",
+        b"[1,2,3]",
+        b"{\"asset\":{\"version\":\"2.0\"}}",
+        b"glTF",
+    ] {
+        let err = import(bytes).unwrap_err();
+        assert!(!err.to_string().is_empty());
+    }
+    assert_eq!(
+        import(b"{\"asset\":{\"version\":\"2.0\"}}").unwrap_err(),
+        ImportError::NoGeometry
+    );
+}
+
+#[test]
+fn bad_references_and_types() {
+    let mut g = util::tiny_rig();
+    g.json["meshes"][0]["primitives"][0]["indices"] = json!(99);
+    expect_err(&g, "index out of bounds");
+    let mut g = util::tiny_rig();
+    g.json["accessors"][0]["type"] = json!("VEC2");
+    expect_err(&g, "must be VEC3");
+    let mut g = util::tiny_rig();
+    g.json["accessors"][0]["componentType"] = json!(1234);
+    expect_err(&g, "accessors[0]");
+    let mut g = util::tiny_rig();
+    g.json["meshes"][0]["primitives"][0]["mode"] = json!(9);
+    expect_err(&g, "mode");
+    let mut g = util::tiny_rig();
+    g.json["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
+    assert_eq!(
+        g.import().unwrap_err(),
+        ImportError::UnsupportedExtension("KHR_draco_mesh_compression".into())
+    );
+    let mut g = util::tiny_rig();
+    g.json["animations"][0]["samplers"][0]["output"] = json!(4);
+    expect_err(&g, "animations[0].samplers[0].output");
+}
+
+#[test]
+fn decreasing_key_times() {
+    let mut g = util::tiny_rig();
+    let view = g.json["accessors"][5]["bufferView"].as_u64().unwrap() as usize;
+    let offset = g.json["bufferViews"][view]["byteOffset"].as_u64().unwrap() as usize;
+    g.bin[offset..offset + 4].copy_from_slice(&2.0f32.to_le_bytes());
+    expect_err(&g, "key times must increase");
+}
+
+#[test]
+fn fuzz_regressions_do_not_panic() {
+    let dir = util::repo().join("fuzz/regressions");
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let bytes = std::fs::read(entry.path()).unwrap();
+        let _ = import(&bytes);
+    }
+}

@@ -1,0 +1,132 @@
+//! Pose parameters: joint angles both ways, ranges from clips, handles,
+//! seeded samplers.
+
+use aobake_core::{
+    Pose,
+    params::{Handles, JointAngles, LayoutOptions, clip_frames, random_clip_frames},
+};
+
+use crate::util;
+
+fn characters_with_clips() -> Vec<aobake_core::Imported> {
+    util::all_characters()
+        .iter()
+        .map(|p| util::load(p))
+        .filter(|i| !i.clips.is_empty())
+        .collect()
+}
+
+#[test]
+fn joint_angles_round_trip_through_clip_poses() {
+    for imported in characters_with_clips() {
+        let c = &imported.character;
+        let Ok(layout) = JointAngles::from_clips(c, &imported.clips, LayoutOptions::default())
+        else {
+            continue;
+        };
+        for clip in &imported.clips {
+            let pose = Pose::sample(&c.skeleton, clip, clip.duration * 0.37);
+            let params = layout.params(&c.skeleton, &pose);
+            let back = layout.pose(&c.skeleton, &params).unwrap();
+            for &j in &layout.joints {
+                let (a, b) = (pose.locals[j].rotation, back.locals[j].rotation);
+                assert!(a.dot(b).abs() > 1.0 - 1e-5, "{}: joint {j}", clip.name);
+            }
+            // Parameters of a clip frame lie inside the ranges.
+            for ((v, r), name) in params.iter().zip(&layout.ranges).zip(&layout.names) {
+                assert!(
+                    *v >= r.min - 1e-5 && *v <= r.max + 1e-5,
+                    "{name}: {v} not in {r:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn joint_angle_pose_reproduces_the_skinned_mesh() {
+    let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
+    let c = &imported.character;
+    let options = LayoutOptions {
+        root_translation: true,
+        ..LayoutOptions::default()
+    };
+    let layout = JointAngles::from_clips(c, &imported.clips, options).unwrap();
+    assert_eq!(layout.translations.len(), 1, "one topmost translated node");
+    // RiggedFigure animates only rotations and the root translation, so the
+    // parameters carry the whole pose.
+    let clip = &imported.clips[0];
+    let pose = Pose::sample(&c.skeleton, clip, 0.6);
+    let direct = c.skin(&pose);
+    let via = c.skin(
+        &layout
+            .pose(&c.skeleton, &layout.params(&c.skeleton, &pose))
+            .unwrap(),
+    );
+    let worst = direct
+        .positions
+        .iter()
+        .zip(&via.positions)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "worst {worst}");
+}
+
+#[test]
+fn uniform_sampler_is_seeded_and_stays_in_range() {
+    let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
+    let c = &imported.character;
+    let layout = JointAngles::from_clips(c, &imported.clips, LayoutOptions::default()).unwrap();
+    let a = layout.sample_uniform(50, 7);
+    assert_eq!(a, layout.sample_uniform(50, 7));
+    assert_ne!(a, layout.sample_uniform(50, 8));
+    for params in &a {
+        for (v, r) in params.iter().zip(&layout.ranges) {
+            assert!(*v >= r.min && *v <= r.max);
+        }
+        let posed = c.skin(&layout.pose(&c.skeleton, params).unwrap());
+        assert!(posed.positions.iter().all(|p| p.is_finite()));
+    }
+    assert!(layout.pose(&c.skeleton, &[0.0]).is_err());
+}
+
+#[test]
+fn handles_are_root_relative_and_move_with_the_pose() {
+    let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
+    let c = &imported.character;
+    let handles = Handles::new(c);
+    assert_eq!(handles.len(), 6 * 19);
+    let rest = handles.handles(&c.skeleton, &Pose::rest(&c.skeleton));
+    let root = handles
+        .joints
+        .iter()
+        .position(|&j| j == handles.root)
+        .unwrap();
+    assert_eq!(&rest[6 * root..6 * root + 3], &[0.0, 0.0, 0.0]);
+    // Off-axis handles are not on the joint.
+    for k in 0..handles.joints.len() {
+        let (a, b) = (&rest[6 * k..6 * k + 3], &rest[6 * k + 3..6 * k + 6]);
+        let d: f32 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
+        assert!(d > 0.0, "joint {k}");
+    }
+    let moved = handles.handles(
+        &c.skeleton,
+        &Pose::sample(&c.skeleton, &imported.clips[0], 0.6),
+    );
+    assert_ne!(rest, moved);
+}
+
+#[test]
+fn clip_frame_samplers() {
+    let imported = util::load(&util::character_path("RiggedSimple.glb").unwrap());
+    let frames = clip_frames(&imported.clips, 24.0);
+    assert_eq!(frames.first().unwrap().time, 0.0);
+    assert_eq!(frames.last().unwrap().time, imported.clips[0].duration);
+    let random = random_clip_frames(&imported.clips, 20, 3);
+    assert_eq!(random, random_clip_frames(&imported.clips, 20, 3));
+    assert!(
+        random
+            .iter()
+            .all(|f| f.time >= 0.0 && f.time <= imported.clips[0].duration)
+    );
+}
