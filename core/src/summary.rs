@@ -43,6 +43,8 @@ pub struct Summary {
     pub mesh_instances: usize,
     /// Skins in the file.
     pub skins: usize,
+    /// Joints of each skin the scene uses.
+    pub skin_joints: Vec<usize>,
     /// Joints in the palette (skin joints used by the scene, plus one per
     /// rigid mesh node).
     pub joints: usize,
@@ -98,6 +100,7 @@ impl Summary {
                 nodes.len()
             },
             skins: character.source.skins,
+            skin_joints: character.skins.iter().flatten().map(|r| r.len()).collect(),
             joints: character.joints.len(),
             morph_targets: character.morph_target_count(),
             clips: clips

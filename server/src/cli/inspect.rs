@@ -60,9 +60,17 @@ fn print_text(r: &Report) {
         "  triangles    {} in the scene ({} in the file's meshes)",
         s.triangles, s.triangles_unique
     );
+    let per_skin: Vec<String> = s.skin_joints.iter().map(usize::to_string).collect();
     println!(
-        "  skins        {}, joints {}, morph targets {}",
-        s.skins, s.joints, s.morph_targets
+        "  skins        {}{}, palette joints {} (a rigid mesh node is a one-joint skin), morph targets {}",
+        s.skins,
+        if per_skin.is_empty() {
+            String::new()
+        } else {
+            format!(" ({} joints)", per_skin.join(" + "))
+        },
+        s.joints,
+        s.morph_targets
     );
     println!(
         "  pose params  {} joint angles, {} handle coordinates",
