@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 /// Upper bounds for one import. Every count is checked against the numbers
 /// the glTF JSON declares, before the data is decoded, so a file that claims
 /// a billion vertices is rejected without allocating for them.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Limits {
     /// Bytes of the main file plus every side file.
@@ -21,6 +21,8 @@ pub struct Limits {
     pub max_joints: u64,
     /// Keyframes over every animation sampler of the file.
     pub max_keyframes: u64,
+    /// Largest key time in seconds (clips are sampled frame by frame).
+    pub max_clip_seconds: f32,
     /// Morph targets of one mesh.
     pub max_morph_targets: u64,
     /// Nesting depth of JSON arrays and objects.
@@ -39,6 +41,7 @@ impl Limits {
             max_nodes: 100_000,
             max_joints: 2_048,
             max_keyframes: 20_000_000,
+            max_clip_seconds: 3600.0,
             max_morph_targets: 256,
             max_json_depth: 64,
         }

@@ -220,8 +220,8 @@ impl Accessors<'_> {
         let size = ct.size();
         let offsets = component_offsets(ty, size);
         let element_size = offsets.last().map_or(0, |o| o + size);
-        let mut values = vec![0.0f64; count * width];
-
+        // Check the data's extent before allocating for it.
+        let mut source = None;
         if let Some(view_index) = accessor.buffer_view {
             let (bytes, stride) = view_bytes(self, view_index.value(), &path)?;
             let stride = stride.unwrap_or(element_size);
@@ -251,7 +251,10 @@ impl Accessors<'_> {
                     ));
                 }
             }
-            let start = start as usize;
+            source = Some((bytes, stride, start as usize));
+        }
+        let mut values = vec![0.0f64; count * width];
+        if let Some((bytes, stride, start)) = source {
             for (i, element) in values.chunks_exact_mut(width).enumerate() {
                 let base = start + i * stride;
                 for (value, offset) in element.iter_mut().zip(&offsets) {

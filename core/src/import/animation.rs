@@ -41,9 +41,6 @@ pub(crate) fn read_clips(
             limits.max_keyframes,
         ));
     }
-    let max_values = limits
-        .max_keyframes
-        .saturating_mul(3 * limits.max_morph_targets.max(4));
 
     let mut clips: Vec<Clip> = Vec::with_capacity(root.animations.len());
     let mut unbound = 0usize;
@@ -115,21 +112,47 @@ pub(crate) fn read_clips(
                     ),
                 ));
             }
-            let values = acc.floats(sampler.output.value(), max_values)?;
+            if let Some(k) = times
+                .values
+                .iter()
+                .position(|&t| t < 0.0 || t > limits.max_clip_seconds)
+            {
+                return Err(ImportError::invalid(
+                    format!("{spath}.input"),
+                    format!(
+                        "key {k} is at {} s, outside 0..={} s",
+                        times.values[k], limits.max_clip_seconds
+                    ),
+                ));
+            }
             let per_key = if interpolation == Interpolation::CubicSpline {
                 3
             } else {
                 1
             };
-            let expected = times.values.len() * per_key * width;
-            if values.values.len() != expected {
+            let numbers = times.values.len() * per_key * width;
+            // Weights are scalars (one per target); other outputs have one
+            // element per value. The exact count bounds the allocation.
+            let elements = if property == Property::Weights {
+                numbers
+            } else {
+                numbers / width
+            };
+            let declared = acc.count(sampler.output.value())?;
+            if declared != elements as u64 {
                 return Err(ImportError::invalid(
                     format!("{spath}.output"),
                     format!(
-                        "has {} numbers, {} keys of {property:?} with {interpolation:?} need {expected}",
-                        values.values.len(),
+                        "has {declared} elements; {} keys of {property:?} with {interpolation:?} need {elements}",
                         times.values.len()
                     ),
+                ));
+            }
+            let values = acc.floats(sampler.output.value(), elements as u64)?;
+            if values.values.len() != numbers {
+                return Err(ImportError::invalid(
+                    format!("{spath}.output"),
+                    format!("has {} numbers, {numbers} needed", values.values.len()),
                 ));
             }
             if property == Property::Rotation {

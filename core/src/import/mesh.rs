@@ -255,7 +255,16 @@ pub(crate) fn skeleton(
     let mut nodes = Vec::with_capacity(doc.root.nodes.len());
     for ((i, node), weights) in doc.root.nodes.iter().enumerate().zip(morph_weights) {
         let rest = match node.matrix {
-            Some(m) => Transform::from_matrix(Mat4::from_cols_array(&m)),
+            Some(m) => {
+                let t = Transform::from_matrix(Mat4::from_cols_array(&m));
+                if !t.rotation.is_finite() && m.iter().all(|v| v.is_finite()) {
+                    return Err(ImportError::invalid(
+                        format!("nodes[{i}].matrix"),
+                        "cannot be decomposed into translation, rotation and scale",
+                    ));
+                }
+                t
+            }
             None => Transform {
                 translation: node.translation.map_or(Vec3::ZERO, Vec3::from_array),
                 rotation: node
@@ -307,6 +316,12 @@ impl Builder<'_> {
         }
         let skin = &self.doc.root.skins[s];
         let n = skin.joints.len();
+        if n == 0 {
+            return Err(ImportError::invalid(
+                format!("skins[{s}].joints"),
+                "a skin needs at least one joint",
+            ));
+        }
         let matrices = match skin.inverse_bind_matrices {
             Some(a) => {
                 let m = self.acc.floats(a.value(), self.limits.max_joints)?;

@@ -301,6 +301,24 @@ fn bad_references_and_types() {
 }
 
 #[test]
+fn absurd_key_times_and_empty_skins() {
+    let mut g = util::tiny_rig();
+    let view = g.json["accessors"][5]["bufferView"].as_u64().unwrap() as usize;
+    let offset = g.json["bufferViews"][view]["byteOffset"].as_u64().unwrap() as usize;
+    g.bin[offset + 4..offset + 8].copy_from_slice(&1e30f32.to_le_bytes());
+    expect_err(
+        &g,
+        "key 1 is at 1000000000000000000000000000000 s, outside 0..=3600 s",
+    );
+    let mut g = util::tiny_rig();
+    g.json["skins"][0]["joints"] = json!([]);
+    expect_err(&g, "skins[0].joints: a skin needs at least one joint");
+    let mut g = util::tiny_rig();
+    g.json["accessors"][6]["count"] = json!(3);
+    expect_err(&g, "has 3 elements; 2 keys of Rotation with Linear need 2");
+}
+
+#[test]
 fn decreasing_key_times() {
     let mut g = util::tiny_rig();
     let view = g.json["accessors"][5]["bufferView"].as_u64().unwrap() as usize;
