@@ -18,6 +18,9 @@ const GEOMETRY_EXTENSIONS: &[&str] = &[
     "EXT_mesh_gpu_instancing",
 ];
 
+/// Extensions whose data the accessor reader handles natively.
+const DECODED_EXTENSIONS: &[&str] = &["KHR_mesh_quantization"];
+
 /// A parsed, validated glTF file with its buffers in memory.
 pub(crate) struct Document {
     pub(crate) root: json::Root,
@@ -111,9 +114,31 @@ fn validate(root: &json::Root, warnings: &mut Vec<String>) -> Result<(), ImportE
         if GEOMETRY_EXTENSIONS.contains(&ext.as_str()) {
             return Err(ImportError::UnsupportedExtension(ext.clone()));
         }
+        if DECODED_EXTENSIONS.contains(&ext.as_str()) {
+            continue;
+        }
         warnings.push(format!(
             "required extension {ext} is ignored: it does not change geometry or animation"
         ));
+    }
+    // gltf-json's validation indexes `accessors` with the POSITION index
+    // unchecked (mesh.rs, primitive_validate_hook) and panics on a bad one,
+    // so attribute indices are checked first.
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &prim.attributes {
+                if index.value() >= root.accessors.len() {
+                    let name = match semantic {
+                        json::validation::Checked::Valid(s) => s.to_string(),
+                        json::validation::Checked::Invalid => "?".to_owned(),
+                    };
+                    return Err(ImportError::invalid(
+                        format!("meshes[{m}].primitives[{p}].attributes[\"{name}\"]"),
+                        format!("accessor {} does not exist", index.value()),
+                    ));
+                }
+            }
+        }
     }
     let mut first = None;
     let mut missing_bounds = 0usize;
