@@ -81,7 +81,15 @@ fn strips_fans_non_indexed_and_quantized_positions() {
         json!({"attributes": {"POSITION": p}, "mode": 1}),
         json!({}),
     );
+    g.json["extensionsRequired"] = json!(["KHR_mesh_quantization", "KHR_texture_transform"]);
     let imported = g.import().unwrap();
+    let ext_warnings: Vec<_> = imported
+        .warnings
+        .iter()
+        .filter(|w| w.contains("extension"))
+        .collect();
+    assert_eq!(ext_warnings.len(), 1, "{ext_warnings:?}");
+    assert!(ext_warnings[0].contains("KHR_texture_transform"));
     let c = &imported.character;
     assert_eq!(c.vertex_count(), 8);
     assert_eq!(c.triangles.len(), 4);
