@@ -100,3 +100,24 @@ fn kenney_character_loads_without_its_missing_texture() {
         imported.warnings
     );
 }
+
+#[test]
+fn bind_pose_returns_the_modelled_skinned_mesh() {
+    for path in util::all_characters() {
+        let imported = util::load(&path);
+        let c = &imported.character;
+        let posed = c.skin(&aobake_core::Pose::bind(c));
+        let diagonal = aobake_core::geometry::bounds(c.positions.iter().copied())
+            .map_or(1.0, |(lo, hi)| (hi - lo).length());
+        for prim in c.primitives.iter().filter(|p| p.skin.is_some()) {
+            for v in prim.vertices.clone() {
+                let error = posed.positions[v].distance(c.positions[v]);
+                assert!(
+                    error <= 1e-4 * diagonal,
+                    "{}: vertex {v} moved by {error} in the bind pose",
+                    path.display()
+                );
+            }
+        }
+    }
+}
