@@ -78,7 +78,15 @@ pub(crate) fn read_clips(
                     ));
                 }
             };
-            let Some(node) = bind(channel.target.node.value()) else {
+            // gltf-json's validation skips channel targets.
+            let target = channel.target.node.value();
+            if target >= root.nodes.len() {
+                return Err(ImportError::invalid(
+                    format!("{path}.target.node"),
+                    format!("node {target} does not exist"),
+                ));
+            }
+            let Some(node) = bind(target) else {
                 unbound += 1;
                 continue;
             };

@@ -319,6 +319,16 @@ fn absurd_key_times_and_empty_skins() {
 }
 
 #[test]
+fn animation_target_node_out_of_range() {
+    let mut g = util::tiny_rig();
+    g.json["animations"][0]["channels"][0]["target"]["node"] = json!(9);
+    expect_err(
+        &g,
+        "animations[0].channels[0].target.node: node 9 does not exist",
+    );
+}
+
+#[test]
 fn decreasing_key_times() {
     let mut g = util::tiny_rig();
     let view = g.json["accessors"][5]["bufferView"].as_u64().unwrap() as usize;
