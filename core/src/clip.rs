@@ -179,6 +179,22 @@ impl Clip {
         times
     }
 
+    /// Every key time and every frame at `fps`, sorted; when that is more
+    /// than `max` times, `max` of them evenly spread over the list.
+    pub fn sample_times(&self, fps: f32, max: usize) -> Vec<f32> {
+        let mut times = self.key_times();
+        times.extend(self.frame_times(fps));
+        times.sort_by(f32::total_cmp);
+        times.dedup();
+        if times.len() <= max || max == 0 {
+            return times;
+        }
+        let step = (times.len() - 1) as f64 / (max - 1).max(1) as f64;
+        (0..max)
+            .map(|i| times[((i as f64 * step).round() as usize).min(times.len() - 1)])
+            .collect()
+    }
+
     /// Times `0, 1/fps, 2/fps, ...` up to and including the duration.
     pub fn frame_times(&self, fps: f32) -> Vec<f32> {
         let frames = (self.duration * fps).floor() as usize;

@@ -25,6 +25,8 @@ pub struct Limits {
     pub max_clip_seconds: f32,
     /// Morph targets of one mesh.
     pub max_morph_targets: u64,
+    /// Morph-target data: vertices × targets over all primitives.
+    pub max_morph_deltas: u64,
     /// Nesting depth of JSON arrays and objects.
     pub max_json_depth: usize,
 }
@@ -43,6 +45,7 @@ impl Limits {
             max_keyframes: 20_000_000,
             max_clip_seconds: 3600.0,
             max_morph_targets: 256,
+            max_morph_deltas: 16_000_000,
             max_json_depth: 64,
         }
     }

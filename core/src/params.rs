@@ -23,6 +23,9 @@ use crate::{
     skeleton::Skeleton,
 };
 
+/// At most this many poses per clip when finding parameter ranges.
+const MAX_RANGE_SAMPLES: usize = 10_000;
+
 /// Closed range of one parameter.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Range {
@@ -160,9 +163,7 @@ impl JointAngles {
             names,
         };
         for clip in clips {
-            let mut times = clip.key_times();
-            times.extend(clip.frame_times(options.fps));
-            for t in times {
+            for t in clip.sample_times(options.fps, MAX_RANGE_SAMPLES) {
                 let params = layout.params(skeleton, &Pose::sample(skeleton, clip, t));
                 for (range, v) in layout.ranges.iter_mut().zip(params) {
                     range.min = range.min.min(v);
@@ -234,7 +235,7 @@ impl JointAngles {
                 self.ranges
                     .iter()
                     .map(|r| {
-                        if r.max > r.min {
+                        if r.max > r.min && (r.max - r.min).is_finite() {
                             rng.random_range(r.min..=r.max)
                         } else {
                             r.min
@@ -324,21 +325,31 @@ impl Handles {
             joints.iter().for_each(|&j| v[j] = true);
             v
         };
-        let joint_parent = |mut n: usize| {
-            while let Some(p) = skeleton.nodes[n].parent {
-                if is_joint[p] {
-                    return Some(p);
-                }
-                n = p;
-            }
-            None
-        };
-        let offsets = joints
+        // Nearest joint ancestor of each joint, found once (depth-bounded).
+        let parents: Vec<Option<usize>> = joints
             .iter()
             .map(|&j| {
+                let mut n = j;
+                while let Some(p) = skeleton.nodes[n].parent {
+                    if is_joint[p] {
+                        return Some(p);
+                    }
+                    n = p;
+                }
+                None
+            })
+            .collect();
+        let offsets = joints
+            .iter()
+            .zip(&parents)
+            .map(|(&j, &parent)| {
                 let here = world[j].translation;
-                let child = joints.iter().find(|&&c| joint_parent(c) == Some(j));
-                let bone = match (child, joint_parent(j)) {
+                let child = joints
+                    .iter()
+                    .zip(&parents)
+                    .find(|(_, p)| **p == Some(j))
+                    .map(|(c, _)| c);
+                let bone = match (child, parent) {
                     (Some(&c), _) => Vec3::from(world[c].translation - here),
                     (None, Some(p)) => Vec3::from(here - world[p].translation),
                     (None, None) => Vec3::ZERO,

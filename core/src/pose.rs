@@ -142,7 +142,10 @@ impl Character {
                 }
             }
             *p = m.transform_point3(*p);
-            *n = (cofactor(&Mat3::from_mat4(m)) * *n).normalize_or_zero();
+            // The cofactor is det · M⁻ᵀ: a mirroring transform (det < 0)
+            // would turn normals inside out without the sign.
+            let linear = Mat3::from_mat4(m);
+            *n = (cofactor(&linear) * *n * linear.determinant().signum()).normalize_or_zero();
         }
         for prim in self.primitives.iter().filter(|p| p.computed_normals) {
             angle_weighted_normals(

@@ -10,6 +10,8 @@ use crate::{
 
 /// Frame rate at which clips are sampled for the bounds.
 const BOUNDS_FPS: f32 = 30.0;
+/// At most this many poses per clip for the bounds.
+const MAX_BOUNDS_SAMPLES: usize = 2_000;
 
 /// A clip's name and length.
 #[derive(Debug, Clone, Serialize)]
@@ -65,24 +67,18 @@ pub struct Summary {
 }
 
 impl Summary {
-    /// Inspects a character. Skins the mesh at every frame of every clip
-    /// for the bounds, so it costs about one skinning per frame.
+    /// Inspects a character. Skins the mesh at every key and 30 fps frame
+    /// of every clip (at most 2,000 per clip) for the bounds, so it costs
+    /// about one skinning per frame.
     pub fn of(character: &Character, clips: &[Clip]) -> Self {
-        let mut poses = vec![Pose::bind(character)];
-        for clip in clips {
-            let mut times = clip.key_times();
-            times.extend(clip.frame_times(BOUNDS_FPS));
-            times.sort_by(f32::total_cmp);
-            times.dedup();
-            poses.extend(
-                times
-                    .into_iter()
-                    .map(|t| Pose::sample(&character.skeleton, clip, t)),
-            );
-        }
-        let (lo, hi) = poses
-            .iter()
-            .filter_map(|p| bounds(character.skin(p).positions))
+        let clip_poses = clips.iter().flat_map(|clip| {
+            clip.sample_times(BOUNDS_FPS, MAX_BOUNDS_SAMPLES)
+                .into_iter()
+                .map(move |t| Pose::sample(&character.skeleton, clip, t))
+        });
+        let (lo, hi) = std::iter::once(Pose::bind(character))
+            .chain(clip_poses)
+            .filter_map(|p| bounds(character.skin(&p).positions))
             .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
             .unwrap_or_default();
         let pose_parameters = JointAngles::from_clips(character, clips, LayoutOptions::default())

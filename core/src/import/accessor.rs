@@ -46,8 +46,9 @@ fn width_of(ty: Type) -> usize {
 }
 
 /// Byte offset of each component within one element, with the column
-/// padding glTF requires for 1- and 2-byte matrices (spec §3.6.2.4).
-fn component_offsets(ty: Type, size: usize) -> Vec<usize> {
+/// padding glTF requires for 1- and 2-byte matrices (spec §3.6.2.4), and
+/// the element's size including that padding.
+fn layout(ty: Type, size: usize) -> (Vec<usize>, usize) {
     let (columns, rows) = match ty {
         Type::Mat2 => (2, 2),
         Type::Mat3 => (3, 3),
@@ -59,9 +60,10 @@ fn component_offsets(ty: Type, size: usize) -> Vec<usize> {
     } else {
         rows * size
     };
-    (0..columns)
+    let offsets = (0..columns)
         .flat_map(|c| (0..rows).map(move |r| c * column_stride + r * size))
-        .collect()
+        .collect();
+    (offsets, columns * column_stride)
 }
 
 #[derive(Clone, Copy)]
@@ -218,8 +220,7 @@ impl Accessors<'_> {
         let count = count as usize;
         let width = width_of(ty);
         let size = ct.size();
-        let offsets = component_offsets(ty, size);
-        let element_size = offsets.last().map_or(0, |o| o + size);
+        let (offsets, element_size) = layout(ty, size);
         // Check the data's extent before allocating for it.
         let mut source = None;
         if let Some(view_index) = accessor.buffer_view {
@@ -319,8 +320,7 @@ impl Accessors<'_> {
             ));
         }
         let vsize = ct.size();
-        let offsets = component_offsets(ty, vsize);
-        let element_size = offsets.last().map_or(0, |o| o + vsize);
+        let (offsets, element_size) = layout(ty, vsize);
         let (vbytes, _) = view_bytes(self, sparse.values.buffer_view.value(), &spath)?;
         let vstart = sparse.values.byte_offset.0 as usize;
         if vstart
@@ -359,13 +359,15 @@ mod tests {
 
     #[test]
     fn matrix_columns_are_padded_for_small_components() {
-        assert_eq!(component_offsets(Type::Mat2, 1), vec![0, 1, 4, 5]);
+        assert_eq!(layout(Type::Mat2, 1), (vec![0, 1, 4, 5], 8));
+        assert_eq!(layout(Type::Mat3, 1).1, 12);
         assert_eq!(
-            component_offsets(Type::Mat3, 2),
-            vec![0, 2, 4, 8, 10, 12, 16, 18, 20]
+            layout(Type::Mat3, 2),
+            (vec![0, 2, 4, 8, 10, 12, 16, 18, 20], 24)
         );
-        assert_eq!(component_offsets(Type::Mat4, 4)[15], 60);
-        assert_eq!(component_offsets(Type::Vec3, 2), vec![0, 2, 4]);
+        assert_eq!(layout(Type::Mat4, 4).0[15], 60);
+        assert_eq!(layout(Type::Mat4, 4).1, 64);
+        assert_eq!(layout(Type::Vec3, 2), (vec![0, 2, 4], 6));
     }
 
     #[test]

@@ -12,6 +12,10 @@ use crate::{
     skeleton::Skeleton,
 };
 
+/// Output numbers allowed per allowed keyframe over a whole file: a cubic
+/// rotation key has 12; weights of many morph targets need the budget.
+const NUMBERS_PER_KEY: u64 = 12;
+
 /// Reads every animation of `doc`. `bind` maps a node of the document to
 /// the character's node (identity for the character's own file, by name for
 /// a clip file); channels whose node has no match are dropped with a
@@ -28,10 +32,13 @@ pub(crate) fn read_clips(
         root,
         buffers: &doc.buffers,
     };
+    // Every channel decodes its sampler, so keys are counted per channel.
     let mut keys = 0u64;
     for animation in &root.animations {
-        for sampler in &animation.samplers {
-            keys = keys.saturating_add(acc.count(sampler.input.value())?);
+        for channel in &animation.channels {
+            if let Some(sampler) = animation.samplers.get(channel.sampler.value()) {
+                keys = keys.saturating_add(acc.count(sampler.input.value())?);
+            }
         }
     }
     if keys > limits.max_keyframes {
@@ -42,6 +49,7 @@ pub(crate) fn read_clips(
         ));
     }
 
+    let mut numbers_left = limits.max_keyframes.saturating_mul(NUMBERS_PER_KEY);
     let mut clips: Vec<Clip> = Vec::with_capacity(root.animations.len());
     let mut unbound = 0usize;
     for (a, animation) in root.animations.iter().enumerate() {
@@ -146,6 +154,13 @@ pub(crate) fn read_clips(
             } else {
                 numbers / width
             };
+            numbers_left = numbers_left.checked_sub(numbers as u64).ok_or_else(|| {
+                ImportError::limit(
+                    "animation output values",
+                    numbers as u64,
+                    limits.max_keyframes.saturating_mul(NUMBERS_PER_KEY),
+                )
+            })?;
             let declared = acc.count(sampler.output.value())?;
             if declared != elements as u64 {
                 return Err(ImportError::invalid(
@@ -163,18 +178,26 @@ pub(crate) fn read_clips(
                     format!("has {} numbers, {numbers} needed", values.values.len()),
                 ));
             }
+            let mut values = values;
             if property == Property::Rotation {
-                let zero = values
-                    .values
-                    .chunks_exact(4)
-                    .position(|q| q.iter().all(|v| *v == 0.0));
-                if let Some(k) = zero
-                    && (per_key == 1 || k % 3 == 1)
-                {
-                    return Err(ImportError::invalid(
-                        format!("{spath}.output"),
-                        format!("rotation key {} is the zero quaternion", k / per_key),
-                    ));
+                // Value keys (not tangents) must be rotations; normalised
+                // here so that slerp sees unit quaternions.
+                for (k, q) in values.values.chunks_exact_mut(4).enumerate() {
+                    if per_key == 3 && k % 3 != 1 {
+                        continue;
+                    }
+                    let quat = glam::Quat::from_slice(q);
+                    let length = quat.length();
+                    if !(length > 1e-6 && length.is_finite()) {
+                        return Err(ImportError::invalid(
+                            format!("{spath}.output"),
+                            format!(
+                                "rotation key {} is not a rotation (length {length})",
+                                k / per_key
+                            ),
+                        ));
+                    }
+                    q.copy_from_slice(&(quat / length).to_array());
                 }
             }
             channels.push(Channel {

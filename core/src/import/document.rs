@@ -18,6 +18,9 @@ const GEOMETRY_EXTENSIONS: &[&str] = &[
     "EXT_mesh_gpu_instancing",
 ];
 
+/// Top-level parts of a glTF that AO does not read.
+const UNUSED_PARTS: &[&str] = &["materials", "textures", "images", "samplers", "cameras"];
+
 /// Extensions whose data the accessor reader handles natively.
 const DECODED_EXTENSIONS: &[&str] = &["KHR_mesh_quantization"];
 
@@ -142,6 +145,7 @@ fn validate(root: &json::Root, warnings: &mut Vec<String>) -> Result<(), ImportE
     }
     let mut first = None;
     let mut missing_bounds = 0usize;
+    let mut ignored = 0usize;
     root.validate(root, json::Path::new, &mut |path, error| {
         let path = path().to_string();
         if path.starts_with("extensionsRequired") {
@@ -149,16 +153,32 @@ fn validate(root: &json::Root, warnings: &mut Vec<String>) -> Result<(), ImportE
         }
         // POSITION accessors must declare min and max, but many exporters
         // leave them out and nothing here needs them.
-        if error == json::validation::Error::Missing
-            && (path.ends_with(".min") || path.ends_with(".max"))
-        {
+        let missing = error == json::validation::Error::Missing;
+        if missing && (path.ends_with(".min") || path.ends_with(".max")) {
             missing_bounds += 1;
+            return;
+        }
+        // The spec allows accessors without bufferView (all zeros, or
+        // sparse); the reader fills zeros.
+        if missing && path.starts_with("accessors[") && path.ends_with(".bufferView") {
+            return;
+        }
+        // Materials, textures, images, samplers and cameras are never used
+        // for AO: a problem there (e.g. a webp texture without `source`)
+        // is not worth refusing the character for.
+        if UNUSED_PARTS.iter().any(|p| path.starts_with(p)) {
+            ignored += 1;
             return;
         }
         if first.is_none() {
             first = Some((path, error));
         }
     });
+    if ignored > 0 {
+        warnings.push(format!(
+            "{ignored} problems in materials, textures, images or cameras ignored (AO does not use them)"
+        ));
+    }
     if missing_bounds > 0 {
         warnings.push(format!(
             "{missing_bounds} POSITION accessor bounds (min/max) are missing; the spec requires them"

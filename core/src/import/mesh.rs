@@ -21,6 +21,10 @@ use crate::{
 /// validator's tolerance for `ACCESSOR_WEIGHTS_NON_NORMALIZED` is similar).
 const WEIGHT_SUM_TOLERANCE: f32 = 2e-3;
 
+/// At most this many JOINTS_n/WEIGHTS_n sets (32 influences per vertex);
+/// real rigs use 1 or 2.
+const MAX_INFLUENCE_SETS: usize = 8;
+
 fn attribute(prim: &json::mesh::Primitive, semantic: Semantic) -> Option<usize> {
     prim.attributes
         .get(&Checked::Valid(semantic))
@@ -81,6 +85,7 @@ struct Builder<'a> {
     primitives: Vec<Primitive>,
     morphs: Vec<Morph>,
     morph_weights: Vec<Vec<f32>>,
+    morph_deltas: u64,
     unnormalized: usize,
     unweighted: usize,
     zero_weight_out_of_range: usize,
@@ -125,8 +130,18 @@ pub(crate) fn build_character(
             triangles = triangles.saturating_add(triangles_in(mode, index_count));
             if node.skin.is_some() {
                 let s = (0..)
-                    .take_while(|&k| attribute(prim, Semantic::Joints(k)).is_some())
+                    .take_while(|&k| {
+                        attribute(prim, Semantic::Joints(k)).is_some()
+                            && attribute(prim, Semantic::Weights(k)).is_some()
+                    })
                     .count();
+                if s > MAX_INFLUENCE_SETS {
+                    return Err(ImportError::limit(
+                        format!("{path}: JOINTS_n/WEIGHTS_n sets"),
+                        s as u64,
+                        MAX_INFLUENCE_SETS as u64,
+                    ));
+                }
                 sets = sets.max(s);
             }
         }
@@ -164,6 +179,7 @@ pub(crate) fn build_character(
         primitives: Vec::new(),
         morphs: Vec::new(),
         morph_weights: vec![Vec::new(); root.nodes.len()],
+        morph_deltas: 0,
         unnormalized: 0,
         unweighted: 0,
         zero_weight_out_of_range: 0,
@@ -256,14 +272,23 @@ pub(crate) fn skeleton(
     for ((i, node), weights) in doc.root.nodes.iter().enumerate().zip(morph_weights) {
         let rest = match node.matrix {
             Some(m) => {
-                let t = Transform::from_matrix(Mat4::from_cols_array(&m));
-                if !t.rotation.is_finite() && m.iter().all(|v| v.is_finite()) {
-                    return Err(ImportError::invalid(
-                        format!("nodes[{i}].matrix"),
-                        "cannot be decomposed into translation, rotation and scale",
-                    ));
+                let matrix = Mat4::from_cols_array(&m);
+                let t = Transform::from_matrix(matrix);
+                if t.rotation.is_finite() || !matrix.is_finite() {
+                    t
+                } else {
+                    // A zero scale on some axis (a hidden part) leaves no
+                    // rotation to recover; keep translation and scale.
+                    Transform {
+                        translation: matrix.w_axis.truncate(),
+                        rotation: glam::Quat::IDENTITY,
+                        scale: Vec3::new(
+                            matrix.x_axis.truncate().length(),
+                            matrix.y_axis.truncate().length(),
+                            matrix.z_axis.truncate().length(),
+                        ),
+                    }
                 }
-                t
             }
             None => Transform {
                 translation: node.translation.map_or(Vec3::ZERO, Vec3::from_array),
@@ -522,6 +547,15 @@ impl Builder<'_> {
                 format!("{path}.targets count"),
                 targets.len() as u64,
                 self.limits.max_morph_targets,
+            ));
+        }
+        let deltas = (count as u64).saturating_mul(targets.len() as u64);
+        self.morph_deltas = self.morph_deltas.saturating_add(deltas);
+        if self.morph_deltas > self.limits.max_morph_deltas {
+            return Err(ImportError::limit(
+                "morph-target vertices (vertices × targets)",
+                self.morph_deltas,
+                self.limits.max_morph_deltas,
             ));
         }
         let mut out = Vec::with_capacity(targets.len());

@@ -56,6 +56,12 @@ pub fn import_clips(
 ) -> Result<(Vec<Clip>, Vec<String>), ImportError> {
     let doc = document::Document::parse(upload, limits)?;
     let mut warnings = doc.warnings.clone();
+    let mut by_name = std::collections::HashMap::new();
+    for (i, node) in character.skeleton.nodes.iter().enumerate().rev() {
+        if let Some(name) = &node.name {
+            by_name.insert(name.as_str(), i); // the first node of a name wins
+        }
+    }
     let names: Vec<Option<usize>> = doc
         .root
         .nodes
@@ -63,7 +69,7 @@ pub fn import_clips(
         .map(|n| {
             n.name
                 .as_deref()
-                .and_then(|name| character.skeleton.find(name))
+                .and_then(|name| by_name.get(name).copied())
         })
         .collect();
     let clips = animation::read_clips(

@@ -348,3 +348,72 @@ fn cubic_spline_rotation_clip_samples_between_keys() {
         pose.locals[1].rotation
     );
 }
+
+#[test]
+fn real_world_oddities_are_accepted() {
+    let mut g = util::tiny_rig();
+    // A custom attribute (Blender's custom attributes, EXT_mesh_features).
+    let extra = g.floats(&[0.0; 8], "SCALAR");
+    g.json["meshes"][0]["primitives"][0]["attributes"]["_FEATURE_ID_0"] = json!(extra);
+    // A texture without `source` (webp/basisu through an extension).
+    g.json["textures"] = json!([{"extensions": {"EXT_texture_webp": {"source": 0}}}]);
+    // An all-zero accessor without bufferView, used as a morph target.
+    let zeros = g.json["accessors"].as_array().unwrap().len();
+    g.json["accessors"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"componentType": 5126, "type": "VEC3", "count": 8}));
+    g.json["meshes"][0]["primitives"][0]["targets"] = json!([{"POSITION": zeros}]);
+    let imported = g.import().unwrap();
+    assert_eq!(imported.character.morph_target_count(), 1);
+    assert!(
+        imported.character.morphs[0].targets[0]
+            .positions
+            .iter()
+            .all(|d| *d == Vec3::ZERO)
+    );
+    assert!(
+        imported
+            .warnings
+            .iter()
+            .any(|w| w.contains("materials, textures")),
+        "{:?}",
+        imported.warnings
+    );
+}
+
+#[test]
+fn mirrored_nodes_keep_outward_normals() {
+    let mut g = Gltf::new();
+    let p = g.floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.], "VEC3");
+    let n = g.floats(&[0., 0., 1., 0., 0., 1., 0., 0., 1.], "VEC3");
+    rigid(
+        &mut g,
+        json!({"attributes": {"POSITION": p, "NORMAL": n}}),
+        json!({"scale": [-1.0, 1.0, 1.0]}),
+    );
+    let c = g.import().unwrap().character;
+    let posed = c.skin(&Pose::rest(&c.skeleton));
+    // Mirroring in x leaves a +z normal pointing along +z.
+    assert!(close(posed.normals[0], Vec3::Z), "{}", posed.normals[0]);
+}
+
+#[test]
+fn zero_scale_node_matrix_is_accepted() {
+    let mut g = Gltf::new();
+    let p = g.floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.], "VEC3");
+    let mut m = glam::Mat4::from_translation(Vec3::new(1.0, 2.0, 3.0)).to_cols_array();
+    m[0] = 0.0;
+    rigid(
+        &mut g,
+        json!({"attributes": {"POSITION": p}}),
+        json!({"matrix": m}),
+    );
+    let c = g.import().unwrap().character;
+    let posed = c.skin(&Pose::rest(&c.skeleton));
+    assert!(
+        close(posed.positions[1], Vec3::new(1.0, 2.0, 3.0)),
+        "{}",
+        posed.positions[1]
+    );
+}
