@@ -6,6 +6,10 @@ use glam::Vec3;
 /// uses): each triangle adds its unit face normal times the corner angle at
 /// the vertex. Only the vertices in `vertices` are written; degenerate
 /// triangles add nothing, and a vertex without a valid triangle gets zero.
+///
+/// glTF asks renderers to use flat normals when a primitive has none; AO is
+/// baked per vertex and needs one normal per vertex, so aobake uses these,
+/// which is also what the Blender reference baker does.
 pub fn angle_weighted_normals(
     positions: &[Vec3],
     triangles: &[[u32; 3]],
