@@ -6,6 +6,9 @@ use serde_json::json;
 
 use crate::util::{self, Gltf};
 
+/// The tiny rig's accessor of key times.
+const KEY_TIMES: usize = 5;
+
 fn import(bytes: &[u8]) -> Result<aobake_core::Imported, ImportError> {
     import_character(Upload::single(bytes), &Limits::default())
 }
@@ -85,7 +88,7 @@ fn accessor_count_past_the_buffer() {
 fn index_past_the_vertices() {
     let mut g = util::tiny_rig();
     // Patch the first index (u16 at the index view's offset) to 8.
-    let offset = g.json["bufferViews"][1]["byteOffset"].as_u64().unwrap() as usize;
+    let offset = g.accessor_offset(1);
     g.bin[offset..offset + 2].copy_from_slice(&8u16.to_le_bytes());
     let err = expect_err(&g, "meshes[0].primitives[0].indices");
     assert!(
@@ -98,7 +101,7 @@ fn index_past_the_vertices() {
 #[test]
 fn joint_index_past_the_skin() {
     let mut g = util::tiny_rig();
-    let offset = g.json["bufferViews"][2]["byteOffset"].as_u64().unwrap() as usize;
+    let offset = g.accessor_offset(2);
     g.bin[offset + 8 * 5..offset + 8 * 5 + 2].copy_from_slice(&7u16.to_le_bytes());
     let err = expect_err(&g, "JOINTS_0");
     assert!(err.to_string().contains("vertex 5 uses joint 7"), "{err}");
@@ -189,8 +192,7 @@ fn side_files_resolve_by_name_only() {
 fn nan_and_infinite_data() {
     // NaN keyframe time.
     let mut g = util::tiny_rig();
-    let view = g.json["accessors"][5]["bufferView"].as_u64().unwrap() as usize;
-    let offset = g.json["bufferViews"][view]["byteOffset"].as_u64().unwrap() as usize;
+    let offset = g.accessor_offset(KEY_TIMES);
     g.bin[offset + 4..offset + 8].copy_from_slice(&f32::NAN.to_le_bytes());
     let err = expect_err(&g, "accessors[5]");
     assert!(
@@ -303,8 +305,7 @@ fn bad_references_and_types() {
 #[test]
 fn absurd_key_times_and_empty_skins() {
     let mut g = util::tiny_rig();
-    let view = g.json["accessors"][5]["bufferView"].as_u64().unwrap() as usize;
-    let offset = g.json["bufferViews"][view]["byteOffset"].as_u64().unwrap() as usize;
+    let offset = g.accessor_offset(KEY_TIMES);
     g.bin[offset + 4..offset + 8].copy_from_slice(&1e30f32.to_le_bytes());
     expect_err(
         &g,
@@ -331,8 +332,7 @@ fn animation_target_node_out_of_range() {
 #[test]
 fn decreasing_key_times() {
     let mut g = util::tiny_rig();
-    let view = g.json["accessors"][5]["bufferView"].as_u64().unwrap() as usize;
-    let offset = g.json["bufferViews"][view]["byteOffset"].as_u64().unwrap() as usize;
+    let offset = g.accessor_offset(KEY_TIMES);
     g.bin[offset..offset + 4].copy_from_slice(&2.0f32.to_le_bytes());
     expect_err(&g, "key times must increase");
 }

@@ -117,6 +117,20 @@ impl Gltf {
         )
     }
 
+    /// Byte offset in `bin` of an accessor's first element.
+    pub fn accessor_offset(&self, accessor: usize) -> usize {
+        let view = self.json["accessors"][accessor]["bufferView"]
+            .as_u64()
+            .unwrap() as usize;
+        let view_offset = self.json["bufferViews"][view]["byteOffset"]
+            .as_u64()
+            .unwrap() as usize;
+        view_offset
+            + self.json["accessors"][accessor]["byteOffset"]
+                .as_u64()
+                .unwrap_or(0) as usize
+    }
+
     pub fn floats(&mut self, values: &[f32], ty: &str) -> usize {
         let width = match ty {
             "SCALAR" => 1,
