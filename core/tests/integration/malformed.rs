@@ -9,6 +9,10 @@ use crate::util::{self, Gltf};
 /// The tiny rig's accessor of key times.
 const KEY_TIMES: usize = 5;
 
+fn import_with(main: &[u8], side_files: &[SideFile]) -> Result<aobake_core::Imported, ImportError> {
+    import_character(Upload { main, side_files }, &Limits::default())
+}
+
 fn import(bytes: &[u8]) -> Result<aobake_core::Imported, ImportError> {
     import_character(Upload::single(bytes), &Limits::default())
 }
@@ -125,14 +129,7 @@ fn path_traversal_and_absolute_uris_never_touch_the_file_system() {
         "\\\\server\\share\\secret.bin".to_owned(),
     ] {
         let (main, side) = g.with_side_file(&uri, "secret.bin");
-        let err = import_character(
-            Upload {
-                main: &main,
-                side_files: &side,
-            },
-            &Limits::default(),
-        )
-        .unwrap_err();
+        let err = import_with(&main, &side).unwrap_err();
         assert!(
             matches!(err, ImportError::ForbiddenUri { .. }),
             "{uri}: {err}"
@@ -146,42 +143,17 @@ fn path_traversal_and_absolute_uris_never_touch_the_file_system() {
 fn side_files_resolve_by_name_only() {
     let g = util::tiny_rig();
     let (main, side) = g.with_side_file("data/rig%20mesh.bin", "data/rig mesh.bin");
-    assert!(
-        import_character(
-            Upload {
-                main: &main,
-                side_files: &side
-            },
-            &Limits::default()
-        )
-        .is_ok()
-    );
+    assert!(import_with(&main, &side).is_ok());
     // A unique base name matches too.
     let (main, side) = g.with_side_file("deep/dir/rig.bin", "rig.bin");
-    assert!(
-        import_character(
-            Upload {
-                main: &main,
-                side_files: &side
-            },
-            &Limits::default()
-        )
-        .is_ok()
-    );
+    assert!(import_with(&main, &side).is_ok());
     // A missing one names what was uploaded.
     let (main, _) = g.with_side_file("rig.bin", "rig.bin");
     let other = [SideFile {
         name: "other.bin".into(),
         bytes: vec![],
     }];
-    let err = import_character(
-        Upload {
-            main: &main,
-            side_files: &other,
-        },
-        &Limits::default(),
-    )
-    .unwrap_err();
+    let err = import_with(&main, &other).unwrap_err();
     assert_eq!(
         err.to_string(),
         "buffers[0].uri: file \"rig.bin\" was not uploaded with the glTF (uploaded: other.bin)"

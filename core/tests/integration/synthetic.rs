@@ -115,7 +115,7 @@ fn strips_fans_non_indexed_and_quantized_positions() {
 #[test]
 fn sparse_accessor_overrides_selected_elements() {
     let mut g = Gltf::new();
-    let p = g.floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.], "VEC3");
+    let p = g.unit_triangle();
     let sparse_idx = g.accessor(&[2, 0], U16, "SCALAR", 1); // index 2 (u16), padded
     let sparse_view_idx = g.json["accessors"][sparse_idx]["bufferView"].clone();
     let sparse_val = g.floats(&[0.0, 5.0, 0.0], "VEC3");
@@ -143,7 +143,7 @@ fn sparse_accessor_overrides_selected_elements() {
 #[test]
 fn morph_targets_follow_animated_weights() {
     let mut g = Gltf::new();
-    let p = g.floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.], "VEC3");
+    let p = g.unit_triangle();
     let d = g.floats(&[0., 0., 1., 0., 0., 1., 0., 0., 1.], "VEC3");
     let mesh = g.mesh(json!({"primitives": [{"attributes": {"POSITION": p}, "targets": [{"POSITION": d}]}], "weights": [0.25]}));
     let n = g.node(json!({"mesh": mesh}));
@@ -385,7 +385,7 @@ fn real_world_oddities_are_accepted() {
 #[test]
 fn mirrored_nodes_keep_outward_normals() {
     let mut g = Gltf::new();
-    let p = g.floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.], "VEC3");
+    let p = g.unit_triangle();
     let n = g.floats(&[0., 0., 1., 0., 0., 1., 0., 0., 1.], "VEC3");
     rigid(
         &mut g,
@@ -401,7 +401,7 @@ fn mirrored_nodes_keep_outward_normals() {
 #[test]
 fn zero_scale_node_matrix_is_accepted() {
     let mut g = Gltf::new();
-    let p = g.floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.], "VEC3");
+    let p = g.unit_triangle();
     let mut m = glam::Mat4::from_translation(Vec3::new(1.0, 2.0, 3.0)).to_cols_array();
     m[0] = 0.0;
     rigid(

@@ -24,18 +24,14 @@ pub fn shared_data() -> Option<PathBuf> {
 
 /// A character file by name: bundled copies first, then the shared data.
 pub fn character_path(file: &str) -> Option<PathBuf> {
-    let stem = file.rsplit_once('.').map_or(file, |(s, _)| s);
     let bundled = repo().join("tests/data/characters");
-    for dir in [Some(bundled), shared_data()].into_iter().flatten() {
-        for entry in std::fs::read_dir(&dir).ok()?.flatten() {
-            let candidate = entry.path().join(file);
-            if candidate.is_file() {
-                return Some(candidate);
-            }
-        }
-        let _ = stem;
-    }
-    None
+    [Some(bundled), shared_data()]
+        .into_iter()
+        .flatten()
+        .filter_map(|dir| std::fs::read_dir(dir).ok())
+        .flat_map(|entries| entries.flatten())
+        .map(|entry| entry.path().join(file))
+        .find(|candidate| candidate.is_file())
 }
 
 pub fn load(path: &Path) -> Imported {
@@ -129,6 +125,11 @@ impl Gltf {
             + self.json["accessors"][accessor]["byteOffset"]
                 .as_u64()
                 .unwrap_or(0) as usize
+    }
+
+    /// The triangle (0,0,0), (1,0,0), (0,1,0) as a VEC3 accessor.
+    pub fn unit_triangle(&mut self) -> usize {
+        self.floats(&[0., 0., 0., 1., 0., 0., 0., 1., 0.], "VEC3")
     }
 
     pub fn floats(&mut self, values: &[f32], ty: &str) -> usize {
