@@ -31,6 +31,7 @@ pub mod ply;
 pub mod pose;
 pub mod skeleton;
 pub mod summary;
+pub mod trace;
 
 pub use character::Character;
 pub use clip::Clip;

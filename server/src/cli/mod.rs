@@ -3,6 +3,8 @@
 mod inspect;
 mod load;
 mod pose;
+mod posing;
+mod trace;
 
 use clap::{Parser, Subcommand};
 
@@ -22,6 +24,9 @@ enum Command {
     /// Pose a character at a clip time (or in its bind pose) and write the
     /// skinned mesh as PLY, in aobake's vertex order.
     Pose(pose::Args),
+    /// Ray-trace ground-truth ambient occlusion at every vertex of a posed
+    /// character or a PLY mesh and write it as CSV.
+    Trace(trace::Args),
 }
 
 /// Runs a parsed command line.
@@ -29,5 +34,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Inspect(args) => inspect::run(&args),
         Command::Pose(args) => pose::run(&args),
+        Command::Trace(args) => trace::run(&args),
     }
 }

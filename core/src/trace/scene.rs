@@ -1,0 +1,361 @@
+//! The occluder: one BVH over a posed mesh, an optional ground, and the two
+//! ray queries the estimators need (any hit within a distance, and closest
+//! hit with the side of the surface that was hit).
+
+use glam::{Vec3, Vec3A};
+use obvhs::{
+    BvhBuildParams,
+    cwbvh::{CwBvh, builder::build_cwbvh},
+    ray::{Ray, RayHit},
+    rt_triangle::RtTriangle,
+};
+use serde::{Deserialize, Serialize};
+
+use super::TraceError;
+
+/// The scene is traced in a local frame: centred on the mesh's bounding
+/// box and scaled by a power of two (exact in floating point) so that the
+/// diagonal is between 45 and 91 units. obvhs culls BVH nodes that end
+/// closer than an absolute 1e-4 along the ray; in this frame that is about
+/// 2e-6 of the model, whatever units the model came in.
+const LOCAL_DIAGONAL: f32 = 64.0;
+
+/// Surface rays start this fraction of the model's bounding-box diagonal
+/// off the surface (the self-intersection offset). Rounding of positions
+/// is ~1e-7 of the coordinates, far below; the model's own detail is far
+/// above (2e-5 of a 1.8 m character is 36 µm).
+const LIFT: f32 = 2e-5;
+
+/// Hits closer than this along a ray (local units) are ignored; it is just
+/// above the distance under which obvhs culls BVH nodes (1e-4), so a
+/// triangle is never hit closer than its node can be.
+const TMIN: f32 = 2e-4;
+
+/// A coordinate axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    /// x
+    X,
+    /// y (glTF's up axis)
+    Y,
+    /// z (Blender's up axis)
+    Z,
+}
+
+impl Axis {
+    fn index(self) -> usize {
+        match self {
+            Axis::X => 0,
+            Axis::Y => 1,
+            Axis::Z => 2,
+        }
+    }
+}
+
+/// A ground plane perpendicular to `up` at coordinate `height`.
+///
+/// Without `half_size` the ground is a solid half-space: everything below
+/// `height` is inside it, so a point resting on it (a foot sole) is
+/// occluded by it. With `half_size` it is a double-sided square of that
+/// half edge centred under the mesh's bounding box, as Blender's reference
+/// baker builds it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Ground {
+    /// The up axis.
+    pub up: Axis,
+    /// Coordinate of the plane along `up`, in model units.
+    pub height: f32,
+    /// Half edge of a finite square ground; `None` for an infinite one.
+    pub half_size: Option<f32>,
+}
+
+/// BVH build quality: a trade of build time against trace speed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BvhQuality {
+    /// obvhs `fast_build`.
+    Fast,
+    /// obvhs `medium_build`.
+    #[default]
+    Medium,
+    /// obvhs `slow_build` (spatial pre-splits are not used: primitives are
+    /// given as boxes).
+    Slow,
+}
+
+impl BvhQuality {
+    fn params(self) -> BvhBuildParams {
+        match self {
+            BvhQuality::Fast => BvhBuildParams::fast_build(),
+            BvhQuality::Medium => BvhBuildParams::medium_build(),
+            BvhQuality::Slow => BvhBuildParams::slow_build(),
+        }
+    }
+}
+
+/// How to build a [`Scene`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct SceneOptions {
+    /// Optional ground plane.
+    pub ground: Option<Ground>,
+    /// BVH build quality.
+    pub quality: BvhQuality,
+}
+
+/// The closest surface along a ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Hit {
+    /// Distance in local units.
+    pub t: f32,
+    /// The ray hit the back of a triangle (its counter-clockwise normal
+    /// points along the ray) or entered the ground from below.
+    pub back_face: bool,
+}
+
+/// The ground in the local frame.
+#[derive(Debug, Clone, Copy)]
+struct LocalGround {
+    axis: usize,
+    height: f32,
+    /// Half edge of a finite square, centred under the mesh's bounding box
+    /// (the local origin).
+    half_size: Option<f32>,
+}
+
+impl LocalGround {
+    fn others(&self) -> [usize; 2] {
+        match self.axis {
+            0 => [1, 2],
+            1 => [0, 2],
+            _ => [0, 1],
+        }
+    }
+
+    /// Distance to the ground along the ray, if it is hit before `tmax`;
+    /// `Some(0)` and `back_face` for an origin inside the solid half-space.
+    fn hit(&self, origin: Vec3A, dir: Vec3A, tmax: f32) -> Option<Hit> {
+        let o = origin[self.axis] - self.height;
+        let d = dir[self.axis];
+        match self.half_size {
+            None => {
+                if o < 0.0 {
+                    return Some(Hit {
+                        t: 0.0,
+                        back_face: true,
+                    });
+                }
+                // Going down from on or above the plane.
+                if d < 0.0 {
+                    let t = -o / d;
+                    if t < tmax {
+                        return Some(Hit {
+                            t,
+                            back_face: false,
+                        });
+                    }
+                }
+                None
+            }
+            Some(half) => {
+                if d == 0.0 {
+                    return None;
+                }
+                let t = -o / d;
+                // A point on the plane is occluded by it only going down.
+                if !(t > 0.0 || (t == 0.0 && d < 0.0)) || t >= tmax {
+                    return None;
+                }
+                let [a, b] = self.others();
+                let pa = origin[a] + dir[a] * t;
+                let pb = origin[b] + dir[b] * t;
+                (pa.abs() <= half && pb.abs() <= half).then_some(Hit {
+                    t,
+                    back_face: d > 0.0,
+                })
+            }
+        }
+    }
+}
+
+/// A posed mesh (and optional ground) ready for ray queries.
+///
+/// Triangles are double-sided. Degenerate triangles (zero area) are
+/// dropped; they cannot be hit.
+pub struct Scene {
+    /// `None` when the mesh has no triangle with area.
+    bvh: Option<CwBvh>,
+    /// Triangles in BVH primitive order, in the local frame.
+    triangles: Vec<RtTriangle>,
+    centre: Vec3A,
+    /// local = (world − centre) · scale.
+    scale: f32,
+    /// Self-intersection offset of surface points, in local units.
+    lift: f32,
+    ground: Option<LocalGround>,
+    /// World-space bounding box of the mesh.
+    bounds: (Vec3, Vec3),
+}
+
+impl std::fmt::Debug for Scene {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Scene")
+            .field("triangles", &self.triangles.len())
+            .field("nodes", &self.node_count())
+            .field("bounds", &self.bounds)
+            .field("ground", &self.ground)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Scene {
+    /// Builds the BVH over `triangles` (indices into `positions`).
+    pub fn new(
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        options: &SceneOptions,
+    ) -> Result<Scene, TraceError> {
+        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(TraceError::Invalid(format!(
+                "vertex {i} has a non-finite position"
+            )));
+        }
+        let n = positions.len();
+        if let Some((t, _)) = triangles
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.iter().any(|&i| i as usize >= n))
+        {
+            return Err(TraceError::Invalid(format!(
+                "triangle {t} indexes a vertex beyond the {n} given"
+            )));
+        }
+        let (lo, hi) =
+            crate::geometry::bounds(positions.iter().copied()).unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        let diagonal = (hi - lo).length();
+        let scale = if diagonal > 0.0 && diagonal.is_finite() {
+            (LOCAL_DIAGONAL / diagonal).log2().round().exp2()
+        } else {
+            1.0
+        };
+        let centre = Vec3A::from((lo + hi) * 0.5);
+        let local = |p: Vec3| (Vec3A::from(p) - centre) * scale;
+
+        let mut tris: Vec<RtTriangle> = triangles
+            .iter()
+            .map(|t| {
+                RtTriangle::new(
+                    local(positions[t[0] as usize]),
+                    local(positions[t[1] as usize]),
+                    local(positions[t[2] as usize]),
+                )
+            })
+            .filter(|t| t.ng.length_squared() > 0.0 && t.ng.is_finite())
+            .collect();
+        let bvh = (!tris.is_empty()).then(|| {
+            let bvh = build_cwbvh(
+                &tris,
+                options.quality.params(),
+                &mut std::time::Duration::default(),
+            );
+            tris = bvh
+                .primitive_indices
+                .iter()
+                .map(|&i| tris[i as usize])
+                .collect();
+            bvh
+        });
+
+        let ground = match options.ground {
+            None => None,
+            Some(g) => {
+                if !g.height.is_finite() || g.half_size.is_some_and(|h| !(h.is_finite() && h > 0.0))
+                {
+                    return Err(TraceError::Invalid(
+                        "the ground's height and half size must be finite, and the half size positive".into(),
+                    ));
+                }
+                let axis = g.up.index();
+                Some(LocalGround {
+                    axis,
+                    height: (g.height - centre[axis]) * scale,
+                    half_size: g.half_size.map(|half| half * scale),
+                })
+            }
+        };
+        let local_diagonal = diagonal * scale;
+        Ok(Scene {
+            bvh,
+            triangles: tris,
+            centre,
+            scale,
+            lift: (LIFT * local_diagonal).max(4.0 * TMIN),
+            ground,
+            bounds: (lo, hi),
+        })
+    }
+
+    /// World-space bounding box of the mesh (ground excluded).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.bounds
+    }
+
+    /// Number of triangles in the BVH (degenerate ones dropped).
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Number of BVH nodes.
+    pub fn node_count(&self) -> usize {
+        self.bvh.as_ref().map_or(0, |b| b.nodes.len())
+    }
+
+    /// World point to the local frame.
+    pub(crate) fn to_local(&self, p: Vec3) -> Vec3A {
+        (Vec3A::from(p) - self.centre) * self.scale
+    }
+
+    /// How far surface rays start off the surface, in local units.
+    pub(crate) fn lift(&self) -> f32 {
+        self.lift
+    }
+
+    /// World distance to local; infinity stays infinite.
+    pub(crate) fn local_distance(&self, d: f32) -> f32 {
+        d * self.scale
+    }
+
+    /// True when a surface lies along the ray within (TMIN, `tmax`) (local
+    /// units). Stops at the first hit (obvhs `ray_traverse_miss`).
+    #[inline]
+    pub(crate) fn occluded(&self, origin: Vec3A, dir: Vec3A, tmax: f32) -> bool {
+        if let Some(g) = &self.ground
+            && g.hit(origin, dir, tmax).is_some()
+        {
+            return true;
+        }
+        let Some(bvh) = &self.bvh else {
+            return false;
+        };
+        let ray = Ray::new(origin, dir, TMIN, tmax);
+        !bvh.ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
+    }
+
+    /// The closest surface along the ray within (TMIN, `tmax`) (local units).
+    pub(crate) fn closest(&self, origin: Vec3A, dir: Vec3A, tmax: f32) -> Option<Hit> {
+        let ground = self.ground.as_ref().and_then(|g| g.hit(origin, dir, tmax));
+        let tmax = ground.map_or(tmax, |g| g.t);
+        let mesh = self.bvh.as_ref().and_then(|bvh| {
+            let ray = Ray::new(origin, dir, TMIN, tmax);
+            let mut hit = RayHit::none();
+            bvh.ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray))
+                .then(|| Hit {
+                    t: hit.t,
+                    // RtTriangle stores ng = (v0 − v1) × (v2 − v0), the
+                    // opposite of the counter-clockwise normal.
+                    back_face: self.triangles[hit.primitive_id as usize].ng.dot(dir) < 0.0,
+                })
+        });
+        mesh.or(ground)
+    }
+}
