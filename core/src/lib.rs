@@ -29,6 +29,7 @@ pub mod limits;
 pub mod params;
 pub mod ply;
 pub mod pose;
+pub mod shapes;
 pub mod skeleton;
 pub mod summary;
 pub mod trace;

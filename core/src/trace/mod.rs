@@ -34,6 +34,7 @@
 //! * Points with a zero normal (a vertex used by no triangle with area)
 //!   get occlusion 0.
 
+mod bvh;
 mod sampling;
 mod scene;
 
@@ -42,7 +43,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use sampling::MAX_SAMPLES;
-pub use scene::{Axis, BvhQuality, Ground, Scene, SceneOptions};
+pub use scene::{Axis, BvhQuality, Ground, Scene, SceneOptions, Traversal};
+
+use scene::Tracer;
 
 use sampling::{Frame, cosine_hemisphere, point_seed, sample_2d, uniform_sphere};
 
@@ -188,18 +191,20 @@ fn morton_order(points: &[Vec3]) -> Vec<u32> {
 /// reuse the BVH nodes of one region, few enough to balance two cores.
 const CHUNK: usize = 32;
 
-/// Evaluates `f(index)` for every point, in parallel and in Morton order;
-/// results are returned in point order.
+/// Evaluates `f(tracer, index)` for every point, in parallel and in Morton
+/// order; results are returned in point order.
 fn par_points<T: Send + Clone + Default>(
+    scene: &Scene,
     points: &[Vec3],
     progress: Progress<'_>,
-    f: impl Fn(u32) -> T + Sync,
+    f: impl Fn(&mut Tracer<'_>, u32) -> T + Sync,
 ) -> Vec<T> {
     let order = morton_order(points);
     let chunks: Vec<Vec<T>> = order
         .par_chunks(CHUNK)
         .map(|chunk| {
-            let values = chunk.iter().map(|&i| f(i)).collect();
+            let mut tracer = scene.tracer();
+            let values = chunk.iter().map(|&i| f(&mut tracer, i)).collect();
             progress(chunk.len());
             values
         })
@@ -353,7 +358,7 @@ fn surface_from(
 ) -> Vec<f32> {
     let tmax = scene.local_distance(params.max_distance);
     let samples = params.samples;
-    par_points(points, progress, |i| {
+    par_points(scene, points, progress, |tracer, i| {
         let Some(n) = normals[i as usize].try_normalize() else {
             return 0.0;
         };
@@ -366,13 +371,13 @@ fn surface_from(
         });
         match params.falloff {
             Falloff::None => {
-                let hits = dirs.filter(|&d| scene.occluded(origin, d, tmax)).count();
+                let hits = dirs.filter(|&d| tracer.occluded(origin, d, tmax)).count();
                 hits as f32 / samples as f32
             }
             Falloff::Exponential { tau } => {
                 let tau_local = tau / scene.local_distance(1.0);
                 let sum: f64 = dirs
-                    .filter_map(|d| scene.closest(origin, d, tmax))
+                    .filter_map(|d| tracer.closest(origin, d, tmax))
                     .map(|h| f64::from((-tau_local * h.t).exp()))
                     .sum();
                 (sum / f64::from(samples)) as f32
@@ -401,7 +406,7 @@ pub fn volume_occlusion(
     check_points(points)?;
     let tmax = scene.local_distance(params.max_distance);
     let samples = params.samples;
-    Ok(par_points(points, progress, |i| {
+    Ok(par_points(scene, points, progress, |tracer, i| {
         let origin = scene.to_local(points[i as usize]);
         let seed = point_seed(params.seed, i);
         let mut hits = 0u32;
@@ -409,7 +414,7 @@ pub fn volume_occlusion(
         for s in 0..samples {
             let (u, v) = sample_2d(s, seed);
             let d = uniform_sphere(u, v);
-            if scene.occluded(origin, d, tmax) {
+            if tracer.occluded(origin, d, tmax) {
                 hits += 1;
                 sum += d;
             }
@@ -468,7 +473,7 @@ pub fn kroon_occlusion(
     }
     let d_max = scene.local_distance(params.max_distance);
     let samples = params.samples;
-    Ok(par_points(points, progress, |i| {
+    Ok(par_points(scene, points, progress, |tracer, i| {
         let origin = scene.to_local(points[i as usize]);
         let normal = normals.map(|n| Vec3A::from(n[i as usize].normalize_or_zero()));
         let seed = point_seed(params.seed, i);
@@ -477,7 +482,7 @@ pub fn kroon_occlusion(
         for s in 0..samples {
             let (u, v) = sample_2d(s, seed);
             let d = uniform_sphere(u, v);
-            let Some(hit) = scene.closest(origin, d, f32::INFINITY) else {
+            let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
                 continue;
             };
             back += u32::from(hit.back_face);

@@ -11,7 +11,7 @@ use obvhs::{
 };
 use serde::{Deserialize, Serialize};
 
-use super::TraceError;
+use super::{TraceError, bvh::Bvh8};
 
 /// The scene is traced in a local frame: centred on the mesh's bounding
 /// box and scaled by a power of two (exact in floating point) so that the
@@ -94,6 +94,18 @@ impl BvhQuality {
     }
 }
 
+/// Which traversal kernel answers ray queries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Traversal {
+    /// aobake's 8-wide BVH with exact f32 child boxes (see `bvh.rs`),
+    /// converted from obvhs's tree: the fastest.
+    #[default]
+    Wide,
+    /// obvhs's own CWBVH traversal (`ray_traverse_miss`), kept to compare.
+    Obvhs,
+}
+
 /// How to build a [`Scene`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct SceneOptions {
@@ -101,6 +113,16 @@ pub struct SceneOptions {
     pub ground: Option<Ground>,
     /// BVH build quality.
     pub quality: BvhQuality,
+    /// Traversal kernel.
+    pub traversal: Traversal,
+}
+
+/// The acceleration structure over the triangles.
+enum Accel {
+    /// No triangle with area.
+    Empty,
+    Obvhs(CwBvh),
+    Wide(Bvh8),
 }
 
 /// The closest surface along a ray.
@@ -183,8 +205,7 @@ impl LocalGround {
 /// Triangles are double-sided. Degenerate triangles (zero area) are
 /// dropped; they cannot be hit.
 pub struct Scene {
-    /// `None` when the mesh has no triangle with area.
-    bvh: Option<CwBvh>,
+    accel: Accel,
     /// Triangles in BVH primitive order, in the local frame.
     triangles: Vec<RtTriangle>,
     centre: Vec3A,
@@ -252,7 +273,9 @@ impl Scene {
             })
             .filter(|t| t.ng.length_squared() > 0.0 && t.ng.is_finite())
             .collect();
-        let bvh = (!tris.is_empty()).then(|| {
+        let accel = if tris.is_empty() {
+            Accel::Empty
+        } else {
             let bvh = build_cwbvh(
                 &tris,
                 options.quality.params(),
@@ -263,8 +286,11 @@ impl Scene {
                 .iter()
                 .map(|&i| tris[i as usize])
                 .collect();
-            bvh
-        });
+            match options.traversal {
+                Traversal::Obvhs => Accel::Obvhs(bvh),
+                Traversal::Wide => Accel::Wide(Bvh8::new(&bvh, &tris)),
+            }
+        };
 
         let ground = match options.ground {
             None => None,
@@ -285,7 +311,7 @@ impl Scene {
         };
         let local_diagonal = diagonal * scale;
         Ok(Scene {
-            bvh,
+            accel,
             triangles: tris,
             centre,
             scale,
@@ -307,7 +333,11 @@ impl Scene {
 
     /// Number of BVH nodes.
     pub fn node_count(&self) -> usize {
-        self.bvh.as_ref().map_or(0, |b| b.nodes.len())
+        match &self.accel {
+            Accel::Empty => 0,
+            Accel::Obvhs(bvh) => bvh.nodes.len(),
+            Accel::Wide(bvh) => bvh.node_count(),
+        }
     }
 
     /// World point to the local frame.
@@ -325,37 +355,66 @@ impl Scene {
         d * self.scale
     }
 
+    /// A ray-query context for one thread (it owns the traversal stack).
+    pub(crate) fn tracer(&self) -> Tracer<'_> {
+        Tracer {
+            scene: self,
+            stack: Vec::with_capacity(64),
+        }
+    }
+}
+
+/// Ray queries against a [`Scene`], with scratch space reused between
+/// rays; one per thread or task.
+pub(crate) struct Tracer<'a> {
+    scene: &'a Scene,
+    stack: Vec<u32>,
+}
+
+impl Tracer<'_> {
     /// True when a surface lies along the ray within (TMIN, `tmax`) (local
-    /// units). Stops at the first hit (obvhs `ray_traverse_miss`).
+    /// units). Stops at the first hit.
     #[inline]
-    pub(crate) fn occluded(&self, origin: Vec3A, dir: Vec3A, tmax: f32) -> bool {
-        if let Some(g) = &self.ground
+    pub(crate) fn occluded(&mut self, origin: Vec3A, dir: Vec3A, tmax: f32) -> bool {
+        let scene = self.scene;
+        if let Some(g) = &scene.ground
             && g.hit(origin, dir, tmax).is_some()
         {
             return true;
         }
-        let Some(bvh) = &self.bvh else {
-            return false;
-        };
         let ray = Ray::new(origin, dir, TMIN, tmax);
-        !bvh.ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
+        match &scene.accel {
+            Accel::Empty => false,
+            Accel::Wide(bvh) => bvh
+                .traverse::<true>(&scene.triangles, ray, &mut self.stack)
+                .is_some(),
+            Accel::Obvhs(bvh) => {
+                !bvh.ray_traverse_miss(ray, |ray, id| scene.triangles[id].intersect(ray))
+            }
+        }
     }
 
     /// The closest surface along the ray within (TMIN, `tmax`) (local units).
-    pub(crate) fn closest(&self, origin: Vec3A, dir: Vec3A, tmax: f32) -> Option<Hit> {
-        let ground = self.ground.as_ref().and_then(|g| g.hit(origin, dir, tmax));
+    pub(crate) fn closest(&mut self, origin: Vec3A, dir: Vec3A, tmax: f32) -> Option<Hit> {
+        let scene = self.scene;
+        let ground = scene.ground.as_ref().and_then(|g| g.hit(origin, dir, tmax));
         let tmax = ground.map_or(tmax, |g| g.t);
-        let mesh = self.bvh.as_ref().and_then(|bvh| {
-            let ray = Ray::new(origin, dir, TMIN, tmax);
-            let mut hit = RayHit::none();
-            bvh.ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray))
-                .then(|| Hit {
-                    t: hit.t,
-                    // RtTriangle stores ng = (v0 − v1) × (v2 − v0), the
-                    // opposite of the counter-clockwise normal.
-                    back_face: self.triangles[hit.primitive_id as usize].ng.dot(dir) < 0.0,
-                })
-        });
-        mesh.or(ground)
+        let ray = Ray::new(origin, dir, TMIN, tmax);
+        let mesh = match &scene.accel {
+            Accel::Empty => None,
+            Accel::Wide(bvh) => bvh.traverse::<false>(&scene.triangles, ray, &mut self.stack),
+            Accel::Obvhs(bvh) => {
+                let mut hit = RayHit::none();
+                bvh.ray_traverse(ray, &mut hit, |ray, id| scene.triangles[id].intersect(ray))
+                    .then_some((hit.primitive_id as usize, hit.t))
+            }
+        };
+        mesh.map(|(id, t)| Hit {
+            t,
+            // RtTriangle stores ng = (v0 − v1) × (v2 − v0), the opposite of
+            // the counter-clockwise normal.
+            back_face: scene.triangles[id].ng.dot(dir) < 0.0,
+        })
+        .or(ground)
     }
 }

@@ -1,5 +1,6 @@
 //! Command-line interface: `aobake <command>`.
 
+mod bench;
 mod inspect;
 mod load;
 mod pose;
@@ -27,6 +28,9 @@ enum Command {
     /// Ray-trace ground-truth ambient occlusion at every vertex of a posed
     /// character or a PLY mesh and write it as CSV.
     Trace(trace::Args),
+    /// Measure speed: print figures for the benchmarks that issues and
+    /// notes quote.
+    Bench(bench::Args),
 }
 
 /// Runs a parsed command line.
@@ -35,5 +39,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Inspect(args) => inspect::run(&args),
         Command::Pose(args) => pose::run(&args),
         Command::Trace(args) => trace::run(&args),
+        Command::Bench(args) => bench::run(&args),
     }
 }

@@ -1,0 +1,320 @@
+//! `aobake bench`: speed measurements that print their figures.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{Context as _, bail};
+use aobake_core::{
+    Limits, ply, shapes,
+    trace::{
+        Axis, BvhQuality, Falloff, Ground, Scene, SceneOptions, SurfaceMesh, SurfaceParams,
+        Traversal, no_progress, vertex_occlusion,
+    },
+};
+use glam::Vec3;
+
+/// Arguments of `aobake bench`.
+#[derive(Debug, clap::Args)]
+pub(super) struct Args {
+    #[command(subcommand)]
+    what: What,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum What {
+    /// Per-vertex AO tracing speed (BVH build + 256 cosine rays per vertex)
+    /// on the ~100k-triangle mesh of the Blender reference, optionally
+    /// interleaved with Blender's Cycles bake of the same PLY.
+    Trace(TraceArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct TraceArgs {
+    /// A z-up PLY mesh to trace instead of the built-in benchmark mesh (an
+    /// icosphere and four boxes on the ground: 101,120 triangles, 50,570
+    /// vertices, as `make_test_meshes.py timing` writes it).
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// Rays per vertex.
+    #[arg(long, default_value_t = 256)]
+    samples: u32,
+    /// Maximum ray distance (model units).
+    #[arg(long, default_value_t = 10.0)]
+    max_distance: f32,
+    /// Timed runs (the first run is not discarded; medians are quoted).
+    #[arg(long, default_value_t = 5)]
+    repeat: usize,
+    /// BVH build quality.
+    #[arg(long, value_enum, default_value = "medium")]
+    quality: Quality,
+    /// Traversal kernels to time, comma-separated; several are run in
+    /// turn within each repetition: `wide` (aobake's, the default) and
+    /// `obvhs` (obvhs's own CWBVH traversal on the same tree).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "wide")]
+    traversal: Vec<Kernel>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Also bake with Blender: the path of `bake_vertex_ao.py` (in
+    /// `shared/tools/blender-ao`); `blender` must be on the PATH. Runs
+    /// alternate between aobake and Blender, so drift in machine speed hits
+    /// both alike.
+    #[arg(long, value_name = "BAKE_VERTEX_AO_PY")]
+    blender: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum Quality {
+    Fast,
+    Medium,
+    Slow,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Kernel {
+    Wide,
+    Obvhs,
+}
+
+impl Kernel {
+    fn traversal(self) -> Traversal {
+        match self {
+            Kernel::Wide => Traversal::Wide,
+            Kernel::Obvhs => Traversal::Obvhs,
+        }
+    }
+}
+
+pub(super) fn run(args: &Args) -> anyhow::Result<()> {
+    match &args.what {
+        What::Trace(a) => trace(a),
+    }
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}
+
+struct Run {
+    build_s: f64,
+    trace_s: f64,
+}
+
+fn run_aobake(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    triangles: &[[u32; 3]],
+    options: &SceneOptions,
+    params: &SurfaceParams,
+) -> anyhow::Result<Run> {
+    let started = Instant::now();
+    let scene = Scene::new(positions, triangles, options)?;
+    let build_s = started.elapsed().as_secs_f64();
+    let started = Instant::now();
+    let mesh = SurfaceMesh {
+        positions,
+        normals,
+        triangles,
+    };
+    let values = vertex_occlusion(&scene, &mesh, params, &no_progress)?;
+    let trace_s = started.elapsed().as_secs_f64();
+    std::hint::black_box(values);
+    Ok(Run { build_s, trace_s })
+}
+
+fn run_blender(script: &Path, ply: &Path, csv: &Path, args: &TraceArgs) -> anyhow::Result<f64> {
+    let mut cmd = Command::new("blender");
+    cmd.args(["-b", "--factory-startup", "--python"])
+        .arg(script)
+        .arg("--")
+        .arg("--mesh")
+        .arg(ply)
+        .arg("--out")
+        .arg(csv)
+        .args([
+            "--samples",
+            &args.samples.to_string(),
+            "--distance",
+            &args.max_distance.to_string(),
+            "--ground",
+        ]);
+    if let Some(t) = args.threads {
+        cmd.args(["--threads", &t.to_string()]);
+    }
+    let out = cmd
+        .output()
+        .context("cannot run `blender` (is it installed?)")?;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let Some(line) = stdout.lines().find_map(|l| l.strip_prefix("BAKE_RESULT ")) else {
+        bail!(
+            "Blender printed no BAKE_RESULT (exit {}): {}",
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let result: serde_json::Value = serde_json::from_str(line)?;
+    result["bake_seconds"]
+        .as_f64()
+        .context("BAKE_RESULT has no bake_seconds")
+}
+
+fn trace(args: &TraceArgs) -> anyhow::Result<()> {
+    let mesh = match &args.mesh {
+        Some(path) => {
+            let m = super::trace::read_ply(path, &Limits::default())?;
+            shapes::TriMesh {
+                positions: m.positions,
+                triangles: m.triangles,
+            }
+        }
+        None => shapes::timing_mesh(),
+    };
+    let normals = mesh.normals();
+    let lowest = mesh
+        .positions
+        .iter()
+        .map(|p| p.z)
+        .fold(f32::INFINITY, f32::min);
+    let options = SceneOptions {
+        ground: Some(Ground {
+            up: Axis::Z,
+            height: lowest,
+            half_size: None,
+        }),
+        quality: match args.quality {
+            Quality::Fast => BvhQuality::Fast,
+            Quality::Medium => BvhQuality::Medium,
+            Quality::Slow => BvhQuality::Slow,
+        },
+        traversal: Traversal::default(),
+    };
+    let params = SurfaceParams {
+        samples: args.samples,
+        max_distance: args.max_distance,
+        seed: 0,
+        falloff: Falloff::None,
+    };
+    let dir = tempfile::tempdir()?;
+    let ply_path = dir.path().join("bench.ply");
+    if args.blender.is_some() {
+        std::fs::write(
+            &ply_path,
+            ply::write(
+                &mesh.positions,
+                &normals,
+                &mesh.triangles,
+                ply::Encoding::Binary,
+            ),
+        )?;
+    }
+    let vertices = mesh.positions.len() as f64;
+    let rays = vertices * f64::from(args.samples);
+    println!(
+        "mesh: {} vertices, {} triangles; {} rays per vertex, max distance {}, ground at z = {lowest}",
+        mesh.positions.len(),
+        mesh.triangles.len(),
+        args.samples,
+        args.max_distance
+    );
+    let mut kernels = args.traversal.clone();
+    kernels.dedup();
+    if kernels.is_empty() {
+        bail!("--traversal names no kernel");
+    }
+    let mut ours: Vec<Vec<Run>> = kernels.iter().map(|_| Vec::new()).collect();
+    let mut theirs = Vec::new();
+    for r in 0..args.repeat {
+        for (k, kernel) in kernels.iter().enumerate() {
+            let options = SceneOptions {
+                traversal: kernel.traversal(),
+                ..options
+            };
+            let run = super::trace::with_threads(args.threads, || {
+                run_aobake(
+                    &mesh.positions,
+                    &normals,
+                    &mesh.triangles,
+                    &options,
+                    &params,
+                )
+            })??;
+            println!(
+                "[{r}] aobake ({kernel:?}): BVH {:.1} ms, trace {:.3} s: {:.2} Mrays/s",
+                run.build_s * 1e3,
+                run.trace_s,
+                rays / run.trace_s / 1e6
+            );
+            ours[k].push(run);
+        }
+        if let Some(script) = &args.blender {
+            let s = run_blender(script, &ply_path, &dir.path().join("blender.csv"), args)?;
+            println!(
+                "[{r}] Blender: bake {s:.2} s: {:.3} M vertex-samples/s",
+                rays / s / 1e6
+            );
+            theirs.push(s);
+        }
+    }
+    for (kernel, runs) in kernels.iter().zip(&ours) {
+        let build = median(&runs.iter().map(|r| r.build_s).collect::<Vec<_>>());
+        let traced = median(&runs.iter().map(|r| r.trace_s).collect::<Vec<_>>());
+        let total = median(
+            &runs
+                .iter()
+                .map(|r| r.build_s + r.trace_s)
+                .collect::<Vec<_>>(),
+        );
+        println!(
+            "aobake ({kernel:?}) median of {}: BVH build {:.1} ms, trace {:.3} s, {:.2} Mrays/s ({:.2} M vertex-samples/s with the build)",
+            runs.len(),
+            build * 1e3,
+            traced,
+            rays / traced / 1e6,
+            rays / total / 1e6
+        );
+    }
+    if kernels.len() > 1 {
+        for (kernel, runs) in kernels.iter().zip(&ours).skip(1) {
+            let pairs: Vec<f64> = runs
+                .iter()
+                .zip(&ours[0])
+                .map(|(other, first)| other.trace_s / first.trace_s)
+                .collect();
+            println!(
+                "trace time {kernel:?} / {:?}: {:.2}x median of pairs",
+                kernels[0],
+                median(&pairs)
+            );
+        }
+    }
+    let ours = &ours[0];
+    if !theirs.is_empty() {
+        let blender = median(&theirs);
+        let pairs: Vec<f64> = theirs
+            .iter()
+            .zip(ours)
+            .map(|(b, o)| b / (o.build_s + o.trace_s))
+            .collect();
+        println!(
+            "Blender median of {}: bake {blender:.2} s, {:.3} M vertex-samples/s",
+            theirs.len(),
+            rays / blender / 1e6
+        );
+        println!(
+            "speed-up of aobake ({:?}) over Blender (bake time / build+trace): {:.1}x median of pairs (min {:.1}x, max {:.1}x)",
+            kernels[0],
+            median(&pairs),
+            pairs.iter().copied().fold(f64::INFINITY, f64::min),
+            pairs.iter().copied().fold(0.0, f64::max)
+        );
+    }
+    Ok(())
+}
