@@ -47,7 +47,7 @@ pub use scene::{Axis, BvhQuality, Ground, Scene, SceneOptions, Traversal};
 
 use scene::Tracer;
 
-use sampling::{Frame, cosine_hemisphere, point_seed, sample_2d, uniform_sphere};
+use sampling::{Frame, cosine_directions, point_seed, sphere_directions};
 
 /// Invalid tracing input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -365,10 +365,9 @@ fn surface_from(
         let origin = origins[i as usize];
         let frame = Frame::new(n);
         let seed = point_seed(params.seed, i);
-        let dirs = (0..samples).map(|s| {
-            let (u, v) = sample_2d(s, seed);
-            frame.to_world(cosine_hemisphere(u, v))
-        });
+        let mut dirs = Vec::new();
+        cosine_directions(samples, seed, &frame, &mut dirs);
+        let dirs = dirs.into_iter();
         match params.falloff {
             Falloff::None => {
                 let hits = dirs.filter(|&d| tracer.occluded(origin, d, tmax)).count();
@@ -411,9 +410,9 @@ pub fn volume_occlusion(
         let seed = point_seed(params.seed, i);
         let mut hits = 0u32;
         let mut sum = Vec3A::ZERO;
-        for s in 0..samples {
-            let (u, v) = sample_2d(s, seed);
-            let d = uniform_sphere(u, v);
+        let mut dirs = Vec::new();
+        sphere_directions(samples, seed, &mut dirs);
+        for d in dirs {
             if tracer.occluded(origin, d, tmax) {
                 hits += 1;
                 sum += d;
@@ -479,9 +478,9 @@ pub fn kroon_occlusion(
         let seed = point_seed(params.seed, i);
         let mut back = 0u32;
         let mut sum = 0.0f64;
-        for s in 0..samples {
-            let (u, v) = sample_2d(s, seed);
-            let d = uniform_sphere(u, v);
+        let mut dirs = Vec::new();
+        sphere_directions(samples, seed, &mut dirs);
+        for d in dirs {
             let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
                 continue;
             };

@@ -11,6 +11,7 @@
 //! order.
 
 use glam::{Vec3, Vec3A};
+use wide::f32x8;
 
 /// The longest sequence `sobol_burley` provides.
 pub const MAX_SAMPLES: u32 = 1 << 16;
@@ -28,10 +29,55 @@ pub(crate) fn point_seed(seed: u64, index: u32) -> u32 {
 /// Sample `i` of the 2-D sequence scrambled by `seed`, in [0, 1)².
 #[inline]
 pub(crate) fn sample_2d(i: u32, seed: u32) -> (f32, f32) {
-    (
-        sobol_burley::sample(i, 0, seed),
-        sobol_burley::sample(i, 1, seed),
-    )
+    // One 4-D call computes dimensions 0–3 with one index shuffle; its
+    // first two equal `sobol_burley::sample(i, 0 | 1, seed)`.
+    let [u, v, ..] = sobol_burley::sample_4d(i, 0, seed);
+    (u, v)
+}
+
+/// The first `samples` points of the sequence scrambled by `seed`, eight
+/// at a time, mapped by `map` (lane-wise u, v → x, y, z) and appended to
+/// `out`. Mapping eight at a time computes square roots, sines and cosines
+/// in SIMD lanes: a third of the ray budget went to them one by one.
+#[inline]
+fn directions(
+    samples: u32,
+    seed: u32,
+    map: impl Fn(f32x8, f32x8) -> [f32x8; 3],
+    out: &mut Vec<Vec3A>,
+) {
+    out.clear();
+    out.reserve(samples as usize);
+    for base in (0..samples).step_by(8) {
+        let n = (samples - base).min(8) as usize;
+        let (mut u, mut v) = ([0.0f32; 8], [0.0f32; 8]);
+        for k in 0..n {
+            (u[k], v[k]) = sample_2d(base + k as u32, seed);
+        }
+        let [x, y, z] = map(f32x8::from(u), f32x8::from(v)).map(f32x8::to_array);
+        out.extend((0..n).map(|k| Vec3A::new(x[k], y[k], z[k])));
+    }
+}
+
+/// Cosine-weighted directions in the hemisphere of `frame`'s normal, one
+/// per sample (see [`cosine_hemisphere`]).
+pub(crate) fn cosine_directions(samples: u32, seed: u32, frame: &Frame, out: &mut Vec<Vec3A>) {
+    let axes = [frame.t, frame.b, frame.n].map(|a| a.to_array().map(f32x8::splat));
+    directions(
+        samples,
+        seed,
+        |u, v| {
+            let [x, y, z] = cosine_hemisphere(u, v);
+            [0, 1, 2].map(|c| axes[0][c] * x + axes[1][c] * y + axes[2][c] * z)
+        },
+        out,
+    );
+}
+
+/// Uniform directions on the sphere, one per sample (see
+/// [`uniform_sphere`]).
+pub(crate) fn sphere_directions(samples: u32, seed: u32, out: &mut Vec<Vec3A>) {
+    directions(samples, seed, uniform_sphere, out);
 }
 
 /// Cosine-weighted direction in the hemisphere of +z (Malley's method: a
@@ -44,19 +90,19 @@ pub(crate) fn sample_2d(i: u32, seed: u32) -> (f32, f32) {
 /// 20–25 % lower error than Shirley & Chiu's concentric map on the corner
 /// and the same on the sphere.
 #[inline]
-pub(crate) fn cosine_hemisphere(u: f32, v: f32) -> Vec3A {
+fn cosine_hemisphere(u: f32x8, v: f32x8) -> [f32x8; 3] {
     let r = u.sqrt();
-    let (s, c) = (std::f32::consts::TAU * v).sin_cos();
-    Vec3A::new(r * c, r * s, (1.0 - u).max(0.0).sqrt())
+    let (s, c) = (f32x8::splat(std::f32::consts::TAU) * v).sin_cos();
+    [r * c, r * s, (f32x8::ONE - u).fast_max(f32x8::ZERO).sqrt()]
 }
 
 /// Uniform direction on the unit sphere (z = 1 − 2u).
 #[inline]
-pub(crate) fn uniform_sphere(u: f32, v: f32) -> Vec3A {
-    let z = 1.0 - 2.0 * u;
-    let r = (1.0 - z * z).max(0.0).sqrt();
-    let (s, c) = (std::f32::consts::TAU * v).sin_cos();
-    Vec3A::new(r * c, r * s, z)
+fn uniform_sphere(u: f32x8, v: f32x8) -> [f32x8; 3] {
+    let z = f32x8::ONE - f32x8::splat(2.0) * u;
+    let r = (f32x8::ONE - z * z).fast_max(f32x8::ZERO).sqrt();
+    let (s, c) = (f32x8::splat(std::f32::consts::TAU) * v).sin_cos();
+    [r * c, r * s, z]
 }
 
 /// An orthonormal frame whose third axis is `n` (unit): maps a direction
@@ -80,8 +126,8 @@ impl Frame {
         }
     }
 
-    #[inline]
-    pub(crate) fn to_world(&self, d: Vec3A) -> Vec3A {
+    #[cfg(test)]
+    fn to_world(&self, d: Vec3A) -> Vec3A {
         self.t * d.x + self.b * d.y + self.n * d.z
     }
 }
@@ -92,13 +138,34 @@ mod tests {
 
     #[test]
     fn cosine_directions_are_unit_and_above_the_plane() {
-        for i in 0..1024 {
-            let (u, v) = sample_2d(i, 7);
-            let d = cosine_hemisphere(u, v);
+        let n = Vec3::new(0.2, -0.4, 0.9).normalize();
+        let mut dirs = Vec::new();
+        // 1021: not a multiple of the eight lanes.
+        cosine_directions(1021, 7, &Frame::new(n), &mut dirs);
+        assert_eq!(dirs.len(), 1021);
+        for (i, d) in dirs.iter().enumerate() {
+            let (u, v) = sample_2d(i as u32, 7);
             assert!((d.length() - 1.0).abs() < 1e-5, "{d}");
-            assert!(d.z > 0.0);
+            let cos = d.dot(n.into());
+            assert!(cos > 0.0);
             // sin²θ = u, the property that makes the sphere-over-plane case exact.
-            assert!((1.0 - d.z * d.z - u).abs() < 1e-5);
+            assert!((1.0 - cos * cos - u).abs() < 1e-5);
+            // The azimuth is 2πv in the frame.
+            let f = Frame::new(n);
+            let (x, y) = (d.dot(f.t), d.dot(f.b));
+            let azimuth = y.atan2(x).rem_euclid(std::f32::consts::TAU);
+            let diff = (azimuth - std::f32::consts::TAU * v).abs();
+            assert!(diff.min(std::f32::consts::TAU - diff) < 1e-3 || u < 1e-6);
+        }
+    }
+
+    #[test]
+    fn the_4d_call_gives_the_2d_sequence() {
+        for i in [0, 1, 5, 100, 65535] {
+            assert_eq!(
+                sample_2d(i, 9),
+                (sobol_burley::sample(i, 0, 9), sobol_burley::sample(i, 1, 9))
+            );
         }
     }
 
@@ -107,9 +174,9 @@ mod tests {
         let n = 4096;
         let mut mean = Vec3A::ZERO;
         let mut up = 0;
-        for i in 0..n {
-            let (u, v) = sample_2d(i, 3);
-            let d = uniform_sphere(u, v);
+        let mut dirs = Vec::new();
+        sphere_directions(n, 3, &mut dirs);
+        for &d in &dirs {
             assert!((d.length() - 1.0).abs() < 1e-5);
             mean += d;
             up += usize::from(d.z > 0.0);
