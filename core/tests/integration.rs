@@ -13,3 +13,5 @@ mod real_characters;
 mod skinning;
 #[path = "integration/synthetic.rs"]
 mod synthetic;
+#[path = "integration/tracing.rs"]
+mod tracing;
