@@ -33,7 +33,13 @@ fn stderr(o: &Output) -> String {
 
 #[test]
 fn help_for_every_command() {
-    for args in [&["--help"][..], &["inspect", "--help"], &["pose", "--help"]] {
+    for args in [
+        &["--help"][..],
+        &["inspect", "--help"],
+        &["pose", "--help"],
+        &["trace", "--help"],
+        &["bench", "trace", "--help"],
+    ] {
         let out = aobake(args);
         assert!(out.status.success(), "{args:?}");
         assert!(stdout(&out).contains("Usage: aobake"), "{args:?}");
@@ -219,4 +225,139 @@ fn errors_are_clear_and_exit_nonzero() {
     let out = aobake(&["inspect", dir.path().join("missing.glb").to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(stderr(&out).contains("cannot read"), "{}", stderr(&out));
+}
+
+/// Reads `index,occlusion` rows, checking the header and the index column.
+fn occlusion_csv(path: &Path) -> Vec<f32> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("index,occlusion"));
+    lines
+        .enumerate()
+        .map(|(i, line)| {
+            let (index, value) = line.split_once(',').unwrap();
+            assert_eq!(index.parse::<usize>().unwrap(), i);
+            value.parse().unwrap()
+        })
+        .collect()
+}
+
+#[test]
+fn trace_writes_occlusion_per_vertex_the_same_on_any_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = sample("RiggedFigure/RiggedFigure.glb");
+    let trace = |name: &str, extra: &[&str]| {
+        let out_csv = dir.path().join(name);
+        let mut args = vec![
+            "trace",
+            "--mesh",
+            file.to_str().unwrap(),
+            "--clip",
+            "animation_0",
+            "--time",
+            "0.6",
+            "--samples",
+            "64",
+            "--out",
+            out_csv.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let out = aobake(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert!(stderr(&out).contains("370 vertices"), "{}", stderr(&out));
+        out_csv
+    };
+    let one = trace("one.csv", &["--threads", "1"]);
+    let two = trace("two.csv", &["--threads", "2"]);
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap());
+    let values = occlusion_csv(&one);
+    assert_eq!(values.len(), 370);
+    assert!(values.iter().all(|v| (0.0..=1.0).contains(v)));
+    let mean = values.iter().sum::<f32>() / 370.0;
+    assert!(mean > 0.02 && mean < 0.6, "mean occlusion {mean}");
+
+    let other_seed = occlusion_csv(&trace("seed.csv", &["--seed", "9"]));
+    assert_ne!(values, other_seed);
+    // A ground under the feet only adds occlusion.
+    let grounded = occlusion_csv(&trace("ground.csv", &["--ground"]));
+    let more = values.iter().zip(&grounded).filter(|(a, b)| b > a).count();
+    assert!(more > 10, "{more} vertices darkened by the ground");
+
+    // The same pose written by `aobake pose` and traced as PLY (positions
+    // and normals as written) gives the same bytes.
+    let ply = dir.path().join("posed.ply");
+    let out = aobake(&[
+        "pose",
+        file.to_str().unwrap(),
+        "--clip",
+        "animation_0",
+        "--time",
+        "0.6",
+        "--out",
+        ply.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let from_ply = dir.path().join("ply.csv");
+    let out = aobake(&[
+        "trace",
+        "--mesh",
+        ply.to_str().unwrap(),
+        "--samples",
+        "64",
+        "--out",
+        from_ply.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(occlusion_csv(&from_ply), values);
+}
+
+#[test]
+fn trace_rejects_bad_arguments_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = sample("RiggedSimple/RiggedSimple.glb");
+    let out_csv = dir.path().join("x.csv");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "trace",
+            "--mesh",
+            file.to_str().unwrap(),
+            "--out",
+            out_csv.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        aobake(&args)
+    };
+    for (extra, message) in [
+        (
+            &["--samples", "0"][..],
+            "samples must be between 1 and 65536",
+        ),
+        (&["--max-distance=-2"], "max_distance must be positive"),
+        (&["--threads", "0"], "--threads must be at least 1"),
+    ] {
+        let out = run(extra);
+        assert!(!out.status.success(), "{extra:?}");
+        assert!(
+            stderr(&out).contains(message),
+            "{extra:?}: {}",
+            stderr(&out)
+        );
+    }
+    assert!(!out_csv.exists(), "nothing is written on error");
+
+    let bad_ply = dir.path().join("bad.ply");
+    std::fs::write(
+        &bad_ply,
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\nnan\n",
+    )
+    .unwrap();
+    let out = aobake(&[
+        "trace",
+        "--mesh",
+        bad_ply.to_str().unwrap(),
+        "--out",
+        out_csv.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("bad.ply"), "{}", stderr(&out));
 }
