@@ -361,3 +361,160 @@ fn trace_rejects_bad_arguments_clearly() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("bad.ply"), "{}", stderr(&out));
 }
+
+/// `../shared/tools/blender-ao/bake_vertex_ao.py`, when it is there.
+fn blender_script() -> Option<PathBuf> {
+    let script = repo().join("../shared/tools/blender-ao/bake_vertex_ao.py");
+    script.is_file().then_some(script)
+}
+
+/// Blender's per-vertex AO (1 = open) of a PLY at 1024 samples.
+fn blender_ao(script: &Path, ply: &Path, csv: &Path, seed: u32) -> Vec<f32> {
+    let out = Command::new("blender")
+        .args(["-b", "--factory-startup", "--python"])
+        .arg(script)
+        .arg("--")
+        .arg("--mesh")
+        .arg(ply)
+        .arg("--out")
+        .arg(csv)
+        .args([
+            "--samples",
+            "1024",
+            "--distance",
+            "100",
+            "--normals",
+            "file",
+        ])
+        .args(["--seed", &seed.to_string()])
+        .output()
+        .expect("blender runs");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = std::fs::read_to_string(csv).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| l.split_once(',').unwrap().1.parse().unwrap())
+        .collect()
+}
+
+fn rms(a: &[f32], b: &[f32]) -> f64 {
+    let sum: f64 = a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum();
+    (sum / a.len() as f64).sqrt()
+}
+
+/// CesiumMan at a clip time, traced by aobake and baked by Blender 3.4
+/// Cycles at 1024 samples with two seeds each. Needs `blender` on the PATH
+/// and `../shared` (the reference tool and the character):
+/// `cargo test -p aobake-server --test integration -- --ignored blender`.
+#[test]
+#[ignore = "needs Blender 3.4 and ../shared/tools/blender-ao"]
+fn trace_agrees_with_blender_on_a_posed_character() {
+    let script = blender_script().expect("../shared/tools/blender-ao");
+    let character = repo().join("../shared/data/CesiumMan/CesiumMan.glb");
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("posed.ply");
+    let out = aobake(&[
+        "pose",
+        character.to_str().unwrap(),
+        "--clip",
+        "animation_0",
+        "--time",
+        "1.0",
+        "--out",
+        ply.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let ours: Vec<Vec<f32>> = (0..2)
+        .map(|seed| {
+            let csv = dir.path().join(format!("ours{seed}.csv"));
+            let out = aobake(&[
+                "trace",
+                "--mesh",
+                ply.to_str().unwrap(),
+                "--samples",
+                "1024",
+                "--max-distance",
+                "100",
+                "--seed",
+                &seed.to_string(),
+                "--out",
+                csv.to_str().unwrap(),
+            ]);
+            assert!(out.status.success(), "{}", stderr(&out));
+            occlusion_csv(&csv).into_iter().map(|o| 1.0 - o).collect()
+        })
+        .collect();
+    let theirs: Vec<Vec<f32>> = (0..2)
+        .map(|seed| {
+            blender_ao(
+                &script,
+                &ply,
+                &dir.path().join(format!("b{seed}.csv")),
+                seed,
+            )
+        })
+        .collect();
+
+    // Vertices where the two conventions agree: not on an open boundary
+    // (UV seams split CesiumMan's vertices) and with every own triangle
+    // facing within 90° of the vertex normal. Elsewhere Blender counts the
+    // space below a triangle's plane as solid (its "shadow terminator"
+    // rule) where aobake lets rays through an open edge or a fold.
+    let mesh = aobake_core::ply::read(
+        &std::fs::read(&ply).unwrap(),
+        &aobake_core::Limits::default(),
+    )
+    .unwrap();
+    let normals = mesh.normals.unwrap();
+    let mut edges = std::collections::HashMap::new();
+    let mut folded = vec![false; normals.len()];
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+        let face = (b - a).cross(c - a).normalize_or_zero();
+        for k in 0..3 {
+            let (i, j) = (t[k], t[(k + 1) % 3]);
+            *edges.entry((i.min(j), i.max(j))).or_insert(0) += 1;
+            folded[t[k] as usize] |= face.dot(normals[t[k] as usize]) < 0.0;
+        }
+    }
+    let mut boundary = vec![false; normals.len()];
+    for ((i, j), n) in edges {
+        if n == 1 {
+            boundary[i as usize] = true;
+            boundary[j as usize] = true;
+        }
+    }
+    let agree: Vec<usize> = (0..normals.len())
+        .filter(|&i| !boundary[i] && !folded[i])
+        .collect();
+    assert!(agree.len() > normals.len() / 3, "{} vertices", agree.len());
+    let pick = |v: &[f32]| agree.iter().map(|&i| v[i]).collect::<Vec<_>>();
+    let (o0, o1, b0, b1) = (
+        pick(&ours[0]),
+        pick(&ours[1]),
+        pick(&theirs[0]),
+        pick(&theirs[1]),
+    );
+    // Seed-to-seed noise of each, and what it allows between one run of
+    // each.
+    let noise = (rms(&o0, &o1).powi(2) / 2.0 + rms(&b0, &b1).powi(2) / 2.0).sqrt();
+    let between = rms(&o0, &b0);
+    let bias = o0
+        .iter()
+        .zip(&b0)
+        .map(|(x, y)| f64::from(x - y))
+        .sum::<f64>()
+        / o0.len() as f64;
+    eprintln!(
+        "{} of {} vertices compared: RMSE {between:.5}, noise allows {noise:.5}, bias {bias:+.5}; whole mesh RMSE {:.5}",
+        agree.len(),
+        normals.len(),
+        rms(&ours[0], &theirs[0])
+    );
+    assert!(noise < 0.003, "noise {noise}");
+    assert!(
+        between < 2.0 * noise,
+        "RMSE {between} against noise {noise}"
+    );
+    assert!(bias.abs() < 1e-3, "bias {bias}");
+}

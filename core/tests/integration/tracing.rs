@@ -466,3 +466,45 @@ fn bad_parameters_are_named() {
     );
     assert!(bad_normal.is_err());
 }
+
+#[test]
+fn rays_below_a_sheet_hit_it_and_past_its_edge_escape() {
+    // A square with every vertex normal tilted β = 35° towards +x: rays
+    // inside the normal's hemisphere but below the square's plane meet the
+    // square, a cosine-weighted fraction (1 − cos β)/2, unless they leave
+    // past its edge. (Blender's bake counts the space below the plane as
+    // solid everywhere, also past an open edge: see README, conventions.)
+    let mesh = grid(Vec3::ZERO, 2.0 * Vec3::X, 2.0 * Vec3::Y, 21, 21);
+    let beta = 35f32.to_radians();
+    let normals = vec![Vec3::new(beta.sin(), 0.0, beta.cos()); mesh.positions.len()];
+    let scene = scene(&mesh, None);
+    let surface = SurfaceMesh {
+        positions: &mesh.positions,
+        normals: &normals,
+        triangles: &mesh.triangles,
+    };
+    let values = vertex_occlusion(&scene, &surface, &ao(1024, 100.0, 0), &no_progress).unwrap();
+    let at = |x: f32, y: f32| {
+        let i = mesh
+            .positions
+            .iter()
+            .position(|p| p.distance(Vec3::new(x, y, 0.0)) < 1e-6)
+            .unwrap();
+        f64::from(values[i])
+    };
+    let below = (1.0 - f64::from(beta.cos())) / 2.0;
+    // Every vertex off the ±y and +x edges, the −x edge included (its
+    // rays below the plane go over the square).
+    let inside: Vec<f32> = mesh
+        .positions
+        .iter()
+        .zip(&values)
+        .filter(|(p, _)| p.x < 1.95 && p.y > 0.05 && p.y < 1.95)
+        .map(|(_, &v)| v)
+        .collect();
+    let (bias, rmse) = errors(&inside, &vec![below; inside.len()]);
+    assert!(bias.abs() < 5e-4 && rmse < 4e-3, "bias {bias}, RMSE {rmse}");
+    assert!((at(0.0, 1.0) - below).abs() < 6e-3, "{}", at(0.0, 1.0));
+    // On the +x edge those rays leave past the edge: nothing occludes.
+    assert_eq!(at(2.0, 1.0), 0.0);
+}
