@@ -5,6 +5,7 @@
 use glam::{Vec3, Vec3A};
 use obvhs::{
     BvhBuildParams,
+    bvh2::{Bvh2, builder::build_bvh2},
     cwbvh::{CwBvh, builder::build_cwbvh},
     ray::{Ray, RayHit},
     rt_triangle::RtTriangle,
@@ -104,6 +105,8 @@ pub enum Traversal {
     Wide,
     /// obvhs's own CWBVH traversal (`ray_traverse_miss`), kept to compare.
     Obvhs,
+    /// obvhs's binary BVH (BVH2) and its traversal, kept to compare.
+    ObvhsBvh2,
 }
 
 /// How to build a [`Scene`].
@@ -122,6 +125,7 @@ enum Accel {
     /// No triangle with area.
     Empty,
     Obvhs(CwBvh),
+    Bvh2(Bvh2),
     Wide(Bvh8),
 }
 
@@ -275,6 +279,18 @@ impl Scene {
             .collect();
         let accel = if tris.is_empty() {
             Accel::Empty
+        } else if options.traversal == Traversal::ObvhsBvh2 {
+            let bvh = build_bvh2(
+                &tris,
+                options.quality.params(),
+                &mut std::time::Duration::default(),
+            );
+            tris = bvh
+                .primitive_indices
+                .iter()
+                .map(|&i| tris[i as usize])
+                .collect();
+            Accel::Bvh2(bvh)
         } else {
             let bvh = build_cwbvh(
                 &tris,
@@ -289,6 +305,7 @@ impl Scene {
             match options.traversal {
                 Traversal::Obvhs => Accel::Obvhs(bvh),
                 Traversal::Wide => Accel::Wide(Bvh8::new(&bvh, &tris)),
+                Traversal::ObvhsBvh2 => unreachable!("built above"),
             }
         };
 
@@ -336,6 +353,7 @@ impl Scene {
         match &self.accel {
             Accel::Empty => 0,
             Accel::Obvhs(bvh) => bvh.nodes.len(),
+            Accel::Bvh2(bvh) => bvh.nodes.len(),
             Accel::Wide(bvh) => bvh.node_count(),
         }
     }
@@ -391,6 +409,9 @@ impl Tracer<'_> {
             Accel::Obvhs(bvh) => {
                 !bvh.ray_traverse_miss(ray, |ray, id| scene.triangles[id].intersect(ray))
             }
+            Accel::Bvh2(bvh) => {
+                !bvh.ray_traverse_miss(ray, |ray, id| scene.triangles[id].intersect(ray))
+            }
         }
     }
 
@@ -404,6 +425,11 @@ impl Tracer<'_> {
             Accel::Empty => None,
             Accel::Wide(bvh) => bvh.traverse::<false>(&scene.triangles, ray, &mut self.stack),
             Accel::Obvhs(bvh) => {
+                let mut hit = RayHit::none();
+                bvh.ray_traverse(ray, &mut hit, |ray, id| scene.triangles[id].intersect(ray))
+                    .then_some((hit.primitive_id as usize, hit.t))
+            }
+            Accel::Bvh2(bvh) => {
                 let mut hit = RayHit::none();
                 bvh.ray_traverse(ray, &mut hit, |ray, id| scene.triangles[id].intersect(ray))
                     .then_some((hit.primitive_id as usize, hit.t))

@@ -394,7 +394,7 @@ fn the_same_seed_gives_the_same_bits_on_any_thread_count() {
 fn both_traversal_kernels_give_the_same_occlusion() {
     let (mesh, _) = sphere_over_floor();
     let params = ao(64, 100.0, 0);
-    let values = [Traversal::Wide, Traversal::Obvhs].map(|traversal| {
+    let values = [Traversal::Wide, Traversal::Obvhs, Traversal::ObvhsBvh2].map(|traversal| {
         let options = SceneOptions {
             traversal,
             ..SceneOptions::default()
@@ -403,6 +403,7 @@ fn both_traversal_kernels_give_the_same_occlusion() {
         vertex_ao(&scene, &mesh, &params)
     });
     assert_eq!(values[0], values[1]);
+    assert_eq!(values[0], values[2]);
 }
 
 #[test]

@@ -50,7 +50,8 @@ struct TraceArgs {
     quality: Quality,
     /// Traversal kernels to time, comma-separated; several are run in
     /// turn within each repetition: `wide` (aobake's, the default) and
-    /// `obvhs` (obvhs's own CWBVH traversal on the same tree).
+    /// `obvhs` (obvhs's own CWBVH traversal on the same tree) and `bvh2`
+    /// (obvhs's binary BVH).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "wide")]
     traversal: Vec<Kernel>,
     /// Worker threads (default: all cores).
@@ -75,6 +76,7 @@ enum Quality {
 enum Kernel {
     Wide,
     Obvhs,
+    Bvh2,
 }
 
 impl Kernel {
@@ -82,6 +84,7 @@ impl Kernel {
         match self {
             Kernel::Wide => Traversal::Wide,
             Kernel::Obvhs => Traversal::Obvhs,
+            Kernel::Bvh2 => Traversal::ObvhsBvh2,
         }
     }
 }
