@@ -127,7 +127,7 @@ impl Frame {
     }
 
     #[cfg(test)]
-    fn to_world(&self, d: Vec3A) -> Vec3A {
+    fn to_world(self, d: Vec3A) -> Vec3A {
         self.t * d.x + self.b * d.y + self.n * d.z
     }
 }
