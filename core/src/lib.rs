@@ -17,6 +17,9 @@
 //!    computed from a pose. Seeded samplers give reference poses.
 //! 4. [`ply`]: the posed mesh as PLY, in the product's vertex order, so
 //!    other tools can bake the very same triangles.
+//! 5. [`trace`]: ground-truth AO by ray tracing (surface, obscurance,
+//!    volume and Kroon's estimators); [`reference`] traces a batch of poses
+//!    into the block of AO values that the models are fitted to.
 //!
 //! [`Limits`] bounds what an upload may declare; it is checked before
 //! anything is allocated.
@@ -29,6 +32,7 @@ pub mod limits;
 pub mod params;
 pub mod ply;
 pub mod pose;
+pub mod reference;
 pub mod shapes;
 pub mod skeleton;
 pub mod summary;

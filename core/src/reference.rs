@@ -1,0 +1,101 @@
+//! Reference data: ground-truth AO of a character in a batch of poses, the
+//! unit of work a bake's jobs compute (DESIGN §4–5). A batch depends only
+//! on its poses and the tracing parameters, so batches can run on any
+//! worker, in any order, and be stacked into the training matrix.
+
+use crate::{
+    Character,
+    pose::Pose,
+    trace::{
+        Progress, Scene, SceneOptions, SurfaceMesh, SurfaceParams, TraceError, vertex_occlusion,
+    },
+};
+
+/// Occlusion of every vertex in every pose of a batch: row `p` (pose `p`
+/// of the batch) is `values[p * vertices..(p + 1) * vertices]`, in the
+/// character's vertex order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AoBlock {
+    /// Vertices per pose.
+    pub vertices: usize,
+    /// Pose-major occlusion values (0 = open, 1 = blocked).
+    pub values: Vec<f32>,
+}
+
+impl AoBlock {
+    /// Number of poses.
+    pub fn poses(&self) -> usize {
+        self.values.len().checked_div(self.vertices).unwrap_or(0)
+    }
+
+    /// The occlusion of every vertex in pose `p`.
+    pub fn row(&self, p: usize) -> &[f32] {
+        &self.values[p * self.vertices..(p + 1) * self.vertices]
+    }
+}
+
+/// Skins `character` into each pose, builds a fresh BVH (rebuilding beats
+/// refitting: see `trace`'s notes) and traces per-vertex AO with `params`.
+/// Every pose uses the same seed, so a vertex's rays take the same
+/// directions relative to its normal in every pose: the sampling noise is
+/// correlated across poses and the pose-to-pose differences, which the
+/// models fit, are less noisy. `progress` counts vertices.
+pub fn trace_poses(
+    character: &Character,
+    poses: &[Pose],
+    options: &SceneOptions,
+    params: &SurfaceParams,
+    progress: Progress<'_>,
+) -> Result<AoBlock, TraceError> {
+    let vertices = character.positions.len();
+    let mut values = Vec::with_capacity(vertices * poses.len());
+    for pose in poses {
+        let posed = character.skin(pose);
+        let scene = Scene::new(&posed.positions, &character.triangles, options)?;
+        let mesh = SurfaceMesh {
+            positions: &posed.positions,
+            normals: &posed.normals,
+            triangles: &character.triangles,
+        };
+        values.extend(vertex_occlusion(&scene, &mesh, params, progress)?);
+    }
+    Ok(AoBlock { vertices, values })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Limits, Upload, import_character, trace::no_progress};
+
+    #[test]
+    fn batches_stack_into_the_whole() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/data/characters/RiggedFigure/RiggedFigure.glb"
+        );
+        let bytes = std::fs::read(path).unwrap();
+        let imported = import_character(Upload::single(&bytes), &Limits::default()).unwrap();
+        let c = &imported.character;
+        let clip = &imported.clips[0];
+        let poses: Vec<Pose> = [0.0, 0.4, 0.8, 1.2]
+            .iter()
+            .map(|&t| Pose::sample(&c.skeleton, clip, t))
+            .collect();
+        let params = SurfaceParams {
+            samples: 32,
+            max_distance: 1.0,
+            seed: 4,
+            falloff: crate::trace::Falloff::None,
+        };
+        let options = SceneOptions::default();
+        let whole = trace_poses(c, &poses, &options, &params, &no_progress).unwrap();
+        assert_eq!(whole.poses(), 4);
+        assert_eq!(whole.vertices, c.positions.len());
+        let first = trace_poses(c, &poses[..1], &options, &params, &no_progress).unwrap();
+        let rest = trace_poses(c, &poses[1..], &options, &params, &no_progress).unwrap();
+        assert_eq!(first.row(0), whole.row(0));
+        assert_eq!([first.values, rest.values].concat(), whole.values);
+        // The pose changes the occlusion.
+        assert_ne!(whole.row(0), whole.row(2));
+    }
+}
