@@ -121,17 +121,7 @@ fn pose_writes_the_skinned_mesh_as_ply() {
         bind.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let out = aobake(&[
-        "pose",
-        file.to_str().unwrap(),
-        "--clip",
-        "animation_0",
-        "--time",
-        "1.0",
-        "--out",
-        posed.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let out = pose_ply(&file, "1.0", &posed);
     assert!(stderr(&out).contains("160 vertices, 188 triangles"));
     let (b, p) = (
         ply_positions(&std::fs::read(&bind).unwrap()),
@@ -242,28 +232,47 @@ fn occlusion_csv(path: &Path) -> Vec<f32> {
         .collect()
 }
 
+/// `aobake pose FILE --clip animation_0 --time TIME --out PLY`, which must
+/// succeed.
+fn pose_ply(file: &Path, time: &str, ply: &Path) -> Output {
+    let out = aobake(&[
+        "pose",
+        file.to_str().unwrap(),
+        "--clip",
+        "animation_0",
+        "--time",
+        time,
+        "--out",
+        ply.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    out
+}
+
+/// `aobake trace --mesh MESH --out CSV ARGS...`, which must succeed.
+fn trace_ok(mesh: &Path, csv: &Path, args: &[&str]) -> Output {
+    let mut all = vec![
+        "trace",
+        "--mesh",
+        mesh.to_str().unwrap(),
+        "--out",
+        csv.to_str().unwrap(),
+    ];
+    all.extend_from_slice(args);
+    let out = aobake(&all);
+    assert!(out.status.success(), "{}", stderr(&out));
+    out
+}
+
 #[test]
 fn trace_writes_occlusion_per_vertex_the_same_on_any_thread_count() {
     let dir = tempfile::tempdir().unwrap();
     let file = sample("RiggedFigure/RiggedFigure.glb");
     let trace = |name: &str, extra: &[&str]| {
         let out_csv = dir.path().join(name);
-        let mut args = vec![
-            "trace",
-            "--mesh",
-            file.to_str().unwrap(),
-            "--clip",
-            "animation_0",
-            "--time",
-            "0.6",
-            "--samples",
-            "64",
-            "--out",
-            out_csv.to_str().unwrap(),
-        ];
+        let mut args = vec!["--clip", "animation_0", "--time", "0.6", "--samples", "64"];
         args.extend_from_slice(extra);
-        let out = aobake(&args);
-        assert!(out.status.success(), "{}", stderr(&out));
+        let out = trace_ok(&file, &out_csv, &args);
         assert!(stderr(&out).contains("370 vertices"), "{}", stderr(&out));
         out_csv
     };
@@ -286,28 +295,9 @@ fn trace_writes_occlusion_per_vertex_the_same_on_any_thread_count() {
     // The same pose written by `aobake pose` and traced as PLY (positions
     // and normals as written) gives the same bytes.
     let ply = dir.path().join("posed.ply");
-    let out = aobake(&[
-        "pose",
-        file.to_str().unwrap(),
-        "--clip",
-        "animation_0",
-        "--time",
-        "0.6",
-        "--out",
-        ply.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    pose_ply(&file, "0.6", &ply);
     let from_ply = dir.path().join("ply.csv");
-    let out = aobake(&[
-        "trace",
-        "--mesh",
-        ply.to_str().unwrap(),
-        "--samples",
-        "64",
-        "--out",
-        from_ply.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    trace_ok(&ply, &from_ply, &["--samples", "64"]);
     assert_eq!(occlusion_csv(&from_ply), values);
 }
 
@@ -316,11 +306,11 @@ fn trace_rejects_bad_arguments_clearly() {
     let dir = tempfile::tempdir().unwrap();
     let file = sample("RiggedSimple/RiggedSimple.glb");
     let out_csv = dir.path().join("x.csv");
-    let run = |extra: &[&str]| {
+    let run = |mesh: &Path, extra: &[&str]| {
         let mut args = vec![
             "trace",
             "--mesh",
-            file.to_str().unwrap(),
+            mesh.to_str().unwrap(),
             "--out",
             out_csv.to_str().unwrap(),
         ];
@@ -335,7 +325,7 @@ fn trace_rejects_bad_arguments_clearly() {
         (&["--max-distance=-2"], "max_distance must be positive"),
         (&["--threads", "0"], "--threads must be at least 1"),
     ] {
-        let out = run(extra);
+        let out = run(&file, extra);
         assert!(!out.status.success(), "{extra:?}");
         assert!(
             stderr(&out).contains(message),
@@ -351,13 +341,7 @@ fn trace_rejects_bad_arguments_clearly() {
         "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\nnan\n",
     )
     .unwrap();
-    let out = aobake(&[
-        "trace",
-        "--mesh",
-        bad_ply.to_str().unwrap(),
-        "--out",
-        out_csv.to_str().unwrap(),
-    ]);
+    let out = run(&bad_ply, &[]);
     assert!(!out.status.success());
     assert!(stderr(&out).contains("bad.ply"), "{}", stderr(&out));
 }
@@ -413,34 +397,20 @@ fn trace_agrees_with_blender_on_a_posed_character() {
     let character = repo().join("../shared/data/CesiumMan/CesiumMan.glb");
     let dir = tempfile::tempdir().unwrap();
     let ply = dir.path().join("posed.ply");
-    let out = aobake(&[
-        "pose",
-        character.to_str().unwrap(),
-        "--clip",
-        "animation_0",
-        "--time",
-        "1.0",
-        "--out",
-        ply.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    pose_ply(&character, "1.0", &ply);
     let ours: Vec<Vec<f32>> = (0..2)
         .map(|seed| {
             let csv = dir.path().join(format!("ours{seed}.csv"));
-            let out = aobake(&[
-                "trace",
-                "--mesh",
-                ply.to_str().unwrap(),
+            let seed = seed.to_string();
+            let args = [
                 "--samples",
                 "1024",
                 "--max-distance",
                 "100",
                 "--seed",
-                &seed.to_string(),
-                "--out",
-                csv.to_str().unwrap(),
-            ]);
-            assert!(out.status.success(), "{}", stderr(&out));
+                &seed,
+            ];
+            trace_ok(&ply, &csv, &args);
             occlusion_csv(&csv).into_iter().map(|o| 1.0 - o).collect()
         })
         .collect();

@@ -39,76 +39,36 @@ fn union(a: (Vec3A, Vec3A), b: (Vec3A, Vec3A)) -> (Vec3A, Vec3A) {
 
 const EMPTY: (Vec3A, Vec3A) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
 
+/// Empty child slots: +∞ in `lo` and −∞ in `hi`.
+const EMPTY_NODE: Node = Node {
+    lo: [f32x8::splat(f32::INFINITY); 3],
+    hi: [f32x8::splat(f32::NEG_INFINITY); 3],
+    first: [0; 8],
+    count: [0; 8],
+};
+
 impl Bvh8 {
     /// Converts obvhs's tree; `triangles[i]` is primitive `i` of `cw`
     /// (i.e. already in `cw.primitive_indices` order).
     pub(crate) fn new(cw: &CwBvh, triangles: &[RtTriangle]) -> Bvh8 {
-        let tri_box = |t: &RtTriangle| {
-            let a = t.aabb();
-            (a.min, a.max)
-        };
-        // Exact bounds of every node, children before parents (post-order
-        // with an explicit stack: obvhs does not promise an index order).
-        let mut bounds = vec![EMPTY; cw.nodes.len()];
-        let mut done = vec![false; cw.nodes.len()];
+        // Parents before children (obvhs does not promise an index order),
+        // then converted in reverse, so children's bounds are known first.
+        let mut order = Vec::with_capacity(cw.nodes.len());
         let mut stack = vec![0usize];
-        while let Some(&i) = stack.last() {
+        while let Some(i) = stack.pop() {
+            order.push(i);
             let node = &cw.nodes[i];
-            let pending: Vec<usize> = (0..8)
-                .filter(|&c| !node.is_child_empty(c) && !node.is_leaf(c))
-                .map(|c| node.child_node_index(c) as usize)
-                .filter(|&n| !done[n])
-                .collect();
-            if !pending.is_empty() {
-                stack.extend(pending);
-                continue;
-            }
-            stack.pop();
-            let mut b = EMPTY;
-            for c in 0..8 {
-                if node.is_child_empty(c) {
-                    continue;
-                }
-                b = union(b, child_bounds(cw, triangles, &bounds, i, c, &tri_box));
-            }
-            bounds[i] = b;
-            done[i] = true;
+            stack.extend(
+                (0..8)
+                    .filter(|&c| !node.is_child_empty(c) && !node.is_leaf(c))
+                    .map(|c| node.child_node_index(c) as usize),
+            );
         }
-
-        let nodes = cw
-            .nodes
-            .iter()
-            .enumerate()
-            .map(|(i, node)| {
-                let mut lo = [[f32::INFINITY; 8]; 3];
-                let mut hi = [[f32::NEG_INFINITY; 8]; 3];
-                let mut first = [0u32; 8];
-                let mut count = [0u8; 8];
-                for c in 0..8 {
-                    if node.is_child_empty(c) {
-                        continue;
-                    }
-                    let (bmin, bmax) = child_bounds(cw, triangles, &bounds, i, c, &tri_box);
-                    for a in 0..3 {
-                        lo[a][c] = bmin[a];
-                        hi[a][c] = bmax[a];
-                    }
-                    if node.is_leaf(c) {
-                        let (start, n) = node.child_primitives(c);
-                        first[c] = start;
-                        count[c] = n as u8;
-                    } else {
-                        first[c] = node.child_node_index(c);
-                    }
-                }
-                Node {
-                    lo: lo.map(f32x8::from),
-                    hi: hi.map(f32x8::from),
-                    first,
-                    count,
-                }
-            })
-            .collect();
+        let mut nodes = vec![EMPTY_NODE; cw.nodes.len()];
+        let mut bounds = vec![EMPTY; cw.nodes.len()];
+        for &i in order.iter().rev() {
+            (nodes[i], bounds[i]) = convert(cw, triangles, &bounds, i);
+        }
         Bvh8 { nodes }
     }
 
@@ -185,24 +145,45 @@ impl Bvh8 {
     }
 }
 
-/// Exact bounds of child `c` of node `i` (its triangles, or its node's
-/// bounds, which must be computed already).
-fn child_bounds(
+/// Node `i` with exact child boxes, and its bounds; `bounds` must hold
+/// those of its child nodes.
+fn convert(
     cw: &CwBvh,
     triangles: &[RtTriangle],
     bounds: &[(Vec3A, Vec3A)],
     i: usize,
-    c: usize,
-    tri_box: &impl Fn(&RtTriangle) -> (Vec3A, Vec3A),
-) -> (Vec3A, Vec3A) {
+) -> (Node, (Vec3A, Vec3A)) {
     let node = &cw.nodes[i];
-    if node.is_leaf(c) {
-        let (start, n) = node.child_primitives(c);
-        triangles[start as usize..(start + n) as usize]
-            .iter()
-            .map(tri_box)
-            .fold(EMPTY, union)
-    } else {
-        bounds[node.child_node_index(c) as usize]
+    let (mut lo, mut hi) = ([[f32::INFINITY; 8]; 3], [[f32::NEG_INFINITY; 8]; 3]);
+    let (mut first, mut count) = ([0u32; 8], [0u8; 8]);
+    let mut all = EMPTY;
+    for c in (0..8).filter(|&c| !node.is_child_empty(c)) {
+        let (bmin, bmax) = if node.is_leaf(c) {
+            let (start, n) = node.child_primitives(c);
+            first[c] = start;
+            count[c] = n as u8;
+            triangles[start as usize..(start + n) as usize]
+                .iter()
+                .map(|t| {
+                    let a = t.aabb();
+                    (a.min, a.max)
+                })
+                .fold(EMPTY, union)
+        } else {
+            first[c] = node.child_node_index(c);
+            bounds[first[c] as usize]
+        };
+        for a in 0..3 {
+            lo[a][c] = bmin[a];
+            hi[a][c] = bmax[a];
+        }
+        all = union(all, (bmin, bmax));
     }
+    let node = Node {
+        lo: lo.map(f32x8::from),
+        hi: hi.map(f32x8::from),
+        first,
+        count,
+    };
+    (node, all)
 }

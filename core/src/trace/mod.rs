@@ -3,8 +3,9 @@
 //! Every method in aobake is fitted to, and judged against, what this
 //! module computes. Values are **occlusion**: 0 = open, 1 = blocked.
 //!
-//! * [`Scene`]: one obvhs compressed wide BVH (CWBVH) per posed mesh,
-//!   double-sided triangles, an optional [`Ground`].
+//! * [`Scene`]: one BVH per posed mesh (built by obvhs, traversed as
+//!   8-wide nodes with exact boxes), double-sided triangles, an optional
+//!   [`Ground`].
 //! * [`vertex_occlusion`], [`surface_occlusion`]: AO at the vertices of a
 //!   mesh, or at any surface points, about their normals (Kontkanen & Aila
 //!   Eq. 1), optionally as obscurance (Eq. 2).
@@ -191,20 +192,26 @@ fn morton_order(points: &[Vec3]) -> Vec<u32> {
 /// reuse the BVH nodes of one region, few enough to balance two cores.
 const CHUNK: usize = 32;
 
-/// Evaluates `f(tracer, index)` for every point, in parallel and in Morton
-/// order; results are returned in point order.
+/// Evaluates `f(tracer, directions, index)` for every point, in parallel
+/// and in Morton order; results are returned in point order. `tracer` and
+/// `directions` (a buffer for the point's ray directions) are reused by
+/// the points of a task.
 fn par_points<T: Send + Clone + Default>(
     scene: &Scene,
     points: &[Vec3],
     progress: Progress<'_>,
-    f: impl Fn(&mut Tracer<'_>, u32) -> T + Sync,
+    f: impl Fn(&mut Tracer<'_>, &mut Vec<Vec3A>, u32) -> T + Sync,
 ) -> Vec<T> {
     let order = morton_order(points);
     let chunks: Vec<Vec<T>> = order
         .par_chunks(CHUNK)
         .map(|chunk| {
             let mut tracer = scene.tracer();
-            let values = chunk.iter().map(|&i| f(&mut tracer, i)).collect();
+            let mut directions = Vec::new();
+            let values = chunk
+                .iter()
+                .map(|&i| f(&mut tracer, &mut directions, i))
+                .collect();
             progress(chunk.len());
             values
         })
@@ -358,16 +365,15 @@ fn surface_from(
 ) -> Vec<f32> {
     let tmax = scene.local_distance(params.max_distance);
     let samples = params.samples;
-    par_points(scene, points, progress, |tracer, i| {
+    par_points(scene, points, progress, |tracer, dirs, i| {
         let Some(n) = normals[i as usize].try_normalize() else {
             return 0.0;
         };
         let origin = origins[i as usize];
         let frame = Frame::new(n);
         let seed = point_seed(params.seed, i);
-        let mut dirs = Vec::new();
-        cosine_directions(samples, seed, &frame, &mut dirs);
-        let dirs = dirs.into_iter();
+        cosine_directions(samples, seed, &frame, dirs);
+        let dirs = dirs.iter().copied();
         match params.falloff {
             Falloff::None => {
                 let hits = dirs.filter(|&d| tracer.occluded(origin, d, tmax)).count();
@@ -405,14 +411,13 @@ pub fn volume_occlusion(
     check_points(points)?;
     let tmax = scene.local_distance(params.max_distance);
     let samples = params.samples;
-    Ok(par_points(scene, points, progress, |tracer, i| {
+    Ok(par_points(scene, points, progress, |tracer, dirs, i| {
         let origin = scene.to_local(points[i as usize]);
         let seed = point_seed(params.seed, i);
         let mut hits = 0u32;
         let mut sum = Vec3A::ZERO;
-        let mut dirs = Vec::new();
-        sphere_directions(samples, seed, &mut dirs);
-        for d in dirs {
+        sphere_directions(samples, seed, dirs);
+        for &d in dirs.iter() {
             if tracer.occluded(origin, d, tmax) {
                 hits += 1;
                 sum += d;
@@ -472,15 +477,14 @@ pub fn kroon_occlusion(
     }
     let d_max = scene.local_distance(params.max_distance);
     let samples = params.samples;
-    Ok(par_points(scene, points, progress, |tracer, i| {
+    Ok(par_points(scene, points, progress, |tracer, dirs, i| {
         let origin = scene.to_local(points[i as usize]);
         let normal = normals.map(|n| Vec3A::from(n[i as usize].normalize_or_zero()));
         let seed = point_seed(params.seed, i);
         let mut back = 0u32;
         let mut sum = 0.0f64;
-        let mut dirs = Vec::new();
-        sphere_directions(samples, seed, &mut dirs);
-        for d in dirs {
+        sphere_directions(samples, seed, dirs);
+        for &d in dirs.iter() {
             let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
                 continue;
             };

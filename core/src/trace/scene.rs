@@ -277,35 +277,20 @@ impl Scene {
             })
             .filter(|t| t.ng.length_squared() > 0.0 && t.ng.is_finite())
             .collect();
+        let params = options.quality.params();
         let accel = if tris.is_empty() {
             Accel::Empty
         } else if options.traversal == Traversal::ObvhsBvh2 {
-            let bvh = build_bvh2(
-                &tris,
-                options.quality.params(),
-                &mut std::time::Duration::default(),
-            );
-            tris = bvh
-                .primitive_indices
-                .iter()
-                .map(|&i| tris[i as usize])
-                .collect();
+            let bvh = build_bvh2(&tris, params, &mut std::time::Duration::default());
+            tris = in_order(&tris, &bvh.primitive_indices);
             Accel::Bvh2(bvh)
         } else {
-            let bvh = build_cwbvh(
-                &tris,
-                options.quality.params(),
-                &mut std::time::Duration::default(),
-            );
-            tris = bvh
-                .primitive_indices
-                .iter()
-                .map(|&i| tris[i as usize])
-                .collect();
-            match options.traversal {
-                Traversal::Obvhs => Accel::Obvhs(bvh),
-                Traversal::Wide => Accel::Wide(Bvh8::new(&bvh, &tris)),
-                Traversal::ObvhsBvh2 => unreachable!("built above"),
+            let bvh = build_cwbvh(&tris, params, &mut std::time::Duration::default());
+            tris = in_order(&tris, &bvh.primitive_indices);
+            if options.traversal == Traversal::Wide {
+                Accel::Wide(Bvh8::new(&bvh, &tris))
+            } else {
+                Accel::Obvhs(bvh)
             }
         };
 
@@ -380,6 +365,15 @@ impl Scene {
             stack: Vec::with_capacity(64),
         }
     }
+}
+
+/// `triangles` in a BVH's primitive order, so that its leaves index them
+/// directly.
+fn in_order(triangles: &[RtTriangle], primitive_indices: &[u32]) -> Vec<RtTriangle> {
+    primitive_indices
+        .iter()
+        .map(|&i| triangles[i as usize])
+        .collect()
 }
 
 /// Ray queries against a [`Scene`], with scratch space reused between
