@@ -24,11 +24,14 @@
 //! [`Limits`] bounds what an upload may declare; it is checked before
 //! anything is allocated.
 
+pub mod asset;
 pub mod character;
 pub mod clip;
 pub mod geometry;
 pub mod import;
 pub mod limits;
+pub mod metrics;
+pub mod model;
 pub mod params;
 pub mod ply;
 pub mod pose;

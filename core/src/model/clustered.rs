@@ -1,0 +1,522 @@
+//! vertex-clustered (Kirk & Arikan 2007): poses as handle vectors,
+//! k-means into `m` pose clusters, PCA to `n` dimensions per cluster, a
+//! linear model per vertex (or per vertex cluster) per pose cluster on
+//! mean-subtracted AO, blended with moving least squares (DESIGN §5).
+//!
+//! One choice beyond the paper, on by default and measured in the issue
+//! note: [`Centering::Cluster`] adds a constant per vertex and pose
+//! cluster, so each cluster's model is centred on the cluster's own mean
+//! AO rather than the global one (Eq. 1 subtracts the global mean only,
+//! which leaves every cluster's prediction at its centre pose equal to the
+//! global mean). [`Centering::Global`] is the paper's Eq. 1 exactly.
+
+use faer::Mat;
+use half::f16;
+use serde::{Deserialize, Serialize};
+
+use super::form::{Block, LinearForm};
+use super::kmeans::kmeans;
+use super::linalg::{principal_axes, ridge_lstsq};
+use crate::reference::AoBlock;
+
+/// MLS weights below this are dropped (and the rest renormalised), so a
+/// pose pays only for the handful of clusters it is near (with α = 10 the
+/// others contribute less than f16 can hold anyway).
+pub const MIN_BLEND_WEIGHT: f64 = 1e-4;
+
+/// What each pose cluster's linear model is centred on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Centering {
+    /// The paper's Eq. 1: AO minus the global mean, no constant term.
+    Global,
+    /// A constant per vertex and cluster as well (one more coefficient).
+    #[default]
+    Cluster,
+}
+
+/// Fitting options of vertex-clustered.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClusteredOptions {
+    /// m: pose clusters (k-means over handle vectors).
+    pub pose_clusters: usize,
+    /// n: PCA dimensions per pose cluster.
+    pub dimensions: usize,
+    /// Vertex clusters per pose cluster (greedy hierarchical clustering,
+    /// Kirk & Arikan §3.2); 0 stores one coefficient vector per vertex.
+    pub vertex_clusters: usize,
+    /// Splitting stops early once every vertex lies within this RMS
+    /// distance (AO per pose) of its cluster's centre.
+    pub vertex_tolerance: f32,
+    /// α: the MLS blend falloff ‖h − h̄_j‖^(−α) (Eq. 5).
+    pub alpha: f32,
+    /// Global (the paper) or per-cluster centring.
+    pub centering: Centering,
+    /// Ridge weight per pose on each cluster's fit (0: pseudo-inverse).
+    pub ridge: f64,
+}
+
+impl Default for ClusteredOptions {
+    fn default() -> Self {
+        Self {
+            pose_clusters: 10,
+            dimensions: 10,
+            vertex_clusters: 0,
+            vertex_tolerance: 0.0,
+            alpha: 10.0,
+            centering: Centering::Cluster,
+            ridge: 0.0,
+        }
+    }
+}
+
+/// One pose cluster's centre and PCA projection.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseCluster {
+    /// h̄_j, the mean handle vector of the cluster's poses.
+    pub center: Vec<f32>,
+    /// P_j: `dimensions × handles` row-major (rows past the cluster's rank
+    /// are zero).
+    pub axes: Vec<f32>,
+}
+
+/// A fitted vertex-clustered model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VertexClustered {
+    /// Numbers per handle vector.
+    pub handles: usize,
+    /// n.
+    pub dimensions: usize,
+    /// α.
+    pub alpha: f32,
+    /// Centring (whether each cluster block has a constant row).
+    pub centering: Centering,
+    /// The pose clusters.
+    pub clusters: Vec<PoseCluster>,
+    /// Block 0: the global mean AO; block 1 + j: pose cluster j's
+    /// coefficients (`n` rows, plus the constant row with
+    /// [`Centering::Cluster`]), per vertex or per vertex cluster.
+    pub form: LinearForm,
+}
+
+/// What the fit did, for the report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ClusteredFitStats {
+    /// Training poses per pose cluster.
+    pub cluster_sizes: Vec<usize>,
+    /// PCA dimensions with variance per cluster (≤ n).
+    pub cluster_ranks: Vec<usize>,
+    /// Vertex clusters per pose cluster (the vertex count without spatial
+    /// compression).
+    pub vertex_clusters: Vec<usize>,
+    /// RMSE of the stored model over the training poses.
+    pub stored_training_rmse: f64,
+}
+
+impl VertexClustered {
+    /// Rows per pose-cluster block.
+    pub fn rows(&self) -> usize {
+        self.dimensions + usize::from(self.centering == Centering::Cluster)
+    }
+
+    /// Fits the model to `handles` (one handle vector per row of `ao`).
+    /// `seed` seeds k-means++.
+    pub fn fit(
+        handles: &[Vec<f32>],
+        ao: &AoBlock,
+        options: &ClusteredOptions,
+        seed: u64,
+    ) -> (Self, ClusteredFitStats) {
+        let p = handles.len();
+        assert_eq!(p, ao.poses(), "one pose per AO row");
+        assert!(p > 0, "at least one reference pose");
+        let dim = handles[0].len();
+        let v = ao.vertices;
+        let n = options.dimensions;
+        let offset = options.centering == Centering::Cluster;
+        let rows = n + usize::from(offset);
+        let m = options.pose_clusters.clamp(1, p);
+
+        let points: Vec<f64> = handles.iter().flatten().map(|&x| f64::from(x)).collect();
+        let km = kmeans(&points, dim, m, seed);
+        let mean: Vec<f64> = (0..v)
+            .map(|i| (0..p).map(|r| f64::from(ao.row(r)[i])).sum::<f64>() / p as f64)
+            .collect();
+
+        let mut blocks = vec![Block {
+            rows: 1,
+            columns: v,
+            coefficients: mean.iter().map(|&x| f16::from_f64(x)).collect(),
+            map: None,
+        }];
+        let mut clusters = Vec::with_capacity(m);
+        let mut stats = ClusteredFitStats {
+            cluster_sizes: Vec::with_capacity(m),
+            cluster_ranks: Vec::with_capacity(m),
+            vertex_clusters: Vec::with_capacity(m),
+            stored_training_rmse: 0.0,
+        };
+        for j in 0..m {
+            let members: Vec<usize> = (0..p).filter(|&r| km.assignment[r] == j).collect();
+            let k = members.len();
+            let center = &km.centers[j * dim..(j + 1) * dim];
+            let xc = Mat::from_fn(k, dim, |r, c| points[members[r] * dim + c] - center[c]);
+            let axes = principal_axes(xc.as_ref(), n);
+            let rank = axes.nrows();
+            let scores = &xc * axes.transpose();
+            let q = Mat::from_fn(k, rank + usize::from(offset), |r, c| {
+                if c < rank { scores[(r, c)] } else { 1.0 }
+            });
+            let y = Mat::from_fn(k, v, |r, i| f64::from(ao.row(members[r])[i]) - mean[i]);
+            let (targets, map) = if options.vertex_clusters > 0 && options.vertex_clusters < v {
+                let groups = vertex_clusters(
+                    y.as_ref(),
+                    options.vertex_clusters,
+                    f64::from(options.vertex_tolerance),
+                );
+                let count = groups.count;
+                let mut sums = Mat::<f64>::zeros(k, count);
+                let mut sizes = vec![0usize; count];
+                for (i, &g) in groups.map.iter().enumerate() {
+                    sizes[g as usize] += 1;
+                    for r in 0..k {
+                        sums[(r, g as usize)] += y[(r, i)];
+                    }
+                }
+                let means = Mat::from_fn(k, count, |r, g| sums[(r, g)] / sizes[g] as f64);
+                (means, Some(groups.map))
+            } else {
+                (y, None)
+            };
+            let (x, _) = ridge_lstsq(q.as_ref(), targets.as_ref(), options.ridge * k as f64);
+            let columns = targets.ncols();
+            // Rows past the cluster's rank stay zero; the constant, if any,
+            // is always the last row.
+            let mut coefficients = vec![f16::ZERO; rows * columns];
+            for r in 0..x.nrows() {
+                let dst = if r < rank { r } else { n };
+                for c in 0..columns {
+                    coefficients[dst * columns + c] = f16::from_f64(x[(r, c)]);
+                }
+            }
+            let mut axes_f32 = vec![0.0f32; n * dim];
+            for r in 0..rank {
+                for c in 0..dim {
+                    axes_f32[r * dim + c] = axes[(r, c)] as f32;
+                }
+            }
+            stats.cluster_sizes.push(k);
+            stats.cluster_ranks.push(rank);
+            stats.vertex_clusters.push(columns);
+            blocks.push(Block {
+                rows,
+                columns,
+                coefficients,
+                map,
+            });
+            clusters.push(PoseCluster {
+                center: center.iter().map(|&x| x as f32).collect(),
+                axes: axes_f32,
+            });
+        }
+        let model = Self {
+            handles: dim,
+            dimensions: n,
+            alpha: options.alpha,
+            centering: options.centering,
+            clusters,
+            form: LinearForm {
+                vertices: v,
+                blocks,
+            },
+        };
+        let mut se = 0.0f64;
+        for (r, h) in handles.iter().enumerate() {
+            let predicted = model.evaluate(h);
+            se += predicted
+                .iter()
+                .zip(ao.row(r))
+                .map(|(&a, &b)| f64::from(a - b).powi(2))
+                .sum::<f64>();
+        }
+        stats.stored_training_rmse = (se / (p * v).max(1) as f64).sqrt();
+        (model, stats)
+    }
+
+    /// Kirk & Arikan's Eq. 5: normalised ‖h − h̄_j‖^(−α), computed in logs
+    /// so that neither tiny nor huge distances overflow; weights under
+    /// [`MIN_BLEND_WEIGHT`] are dropped and the rest renormalised. A pose
+    /// on a centre takes that cluster alone.
+    pub fn blend_weights(&self, h: &[f32]) -> Vec<f64> {
+        let d2: Vec<f64> = self
+            .clusters
+            .iter()
+            .map(|c| {
+                c.center
+                    .iter()
+                    .zip(h)
+                    .map(|(&a, &b)| (f64::from(b) - f64::from(a)).powi(2))
+                    .sum()
+            })
+            .collect();
+        if let Some(hit) = d2.iter().position(|&d| d == 0.0) {
+            return (0..d2.len()).map(|j| f64::from(j == hit)).collect();
+        }
+        let alpha = f64::from(self.alpha);
+        let logs: Vec<f64> = d2.iter().map(|&d| -0.5 * alpha * d.ln()).collect();
+        let top = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let mut w: Vec<f64> = logs.iter().map(|&l| (l - top).exp()).collect();
+        let sum: f64 = w.iter().sum();
+        w.iter_mut().for_each(|x| *x /= sum);
+        w.iter_mut()
+            .filter(|x| **x < MIN_BLEND_WEIGHT)
+            .for_each(|x| *x = 0.0);
+        let sum: f64 = w.iter().sum();
+        w.iter_mut().for_each(|x| *x /= sum);
+        w
+    }
+
+    /// The per-pose weights of the linear form: `[1]` for the mean, then
+    /// per cluster `ω_j · P_j (h − h̄_j)` (and `ω_j` for the constant).
+    pub fn weights(&self, h: &[f32]) -> Vec<f32> {
+        assert_eq!(h.len(), self.handles, "one number per handle coordinate");
+        let omega = self.blend_weights(h);
+        let mut out = Vec::with_capacity(1 + self.clusters.len() * self.rows());
+        out.push(1.0);
+        for (cluster, &w) in self.clusters.iter().zip(&omega) {
+            for r in 0..self.dimensions {
+                let axis = &cluster.axes[r * self.handles..(r + 1) * self.handles];
+                let y: f64 = axis
+                    .iter()
+                    .zip(h.iter().zip(&cluster.center))
+                    .map(|(&a, (&x, &c))| f64::from(a) * (f64::from(x) - f64::from(c)))
+                    .sum();
+                out.push((w * y) as f32);
+            }
+            if self.centering == Centering::Cluster {
+                out.push(w as f32);
+            }
+        }
+        out
+    }
+
+    /// AO of every vertex for a handle vector (Eq. 4).
+    pub fn evaluate(&self, h: &[f32]) -> Vec<f32> {
+        self.form.evaluate(&self.weights(h))
+    }
+
+    /// Bytes of the model: coefficients and maps, centres and axes (f32).
+    pub fn bytes(&self) -> usize {
+        self.form.bytes() + self.clusters.len() * 4 * (self.handles * (1 + self.dimensions))
+    }
+}
+
+/// Vertex clusters of one pose cluster.
+struct VertexGroups {
+    count: usize,
+    map: Vec<u32>,
+}
+
+/// Kirk & Arikan's greedy hierarchical vertex clustering (§3.2): features
+/// are the columns of `y` (each vertex's mean-subtracted AO over the
+/// cluster's poses). Start with one cluster; repeatedly take the cluster
+/// whose farthest vertex is farthest from its centre, make that vertex a
+/// new centre, and reassign the cluster's vertices to the nearer of the
+/// two; stop at `max` clusters or when every vertex is within `tolerance`
+/// (RMS per pose) of its centre. Deterministic: ties go to the lower index.
+fn vertex_clusters(y: faer::MatRef<'_, f64>, max: usize, tolerance: f64) -> VertexGroups {
+    let (k, v) = (y.nrows(), y.ncols());
+    let limit2 = tolerance * tolerance * k as f64;
+    let dist2 = |i: usize, c: &[f64]| (0..k).map(|r| (y[(r, i)] - c[r]).powi(2)).sum::<f64>();
+    let centroid = |members: &[usize]| -> Vec<f64> {
+        let mut c = vec![0.0; k];
+        for &i in members {
+            for (r, x) in c.iter_mut().enumerate() {
+                *x += y[(r, i)];
+            }
+        }
+        c.iter_mut().for_each(|x| *x /= members.len().max(1) as f64);
+        c
+    };
+    // (members, centre, farthest member, its squared distance)
+    struct Group {
+        members: Vec<usize>,
+        center: Vec<f64>,
+        far: usize,
+        far2: f64,
+    }
+    let make =
+        |members: Vec<usize>| -> Group {
+            let center = centroid(&members);
+            let (far, far2) = members.iter().map(|&i| (i, dist2(i, &center))).fold(
+                (members[0], -1.0),
+                |best, x| if x.1 > best.1 { x } else { best },
+            );
+            Group {
+                members,
+                center,
+                far,
+                far2,
+            }
+        };
+    let mut groups = vec![make((0..v).collect())];
+    while groups.len() < max {
+        let (g, _) = groups.iter().enumerate().fold((0, -1.0), |best, (i, gr)| {
+            if gr.far2 > best.1 { (i, gr.far2) } else { best }
+        });
+        if groups[g].far2 <= limit2 || groups[g].members.len() < 2 {
+            break;
+        }
+        let old = std::mem::replace(
+            &mut groups[g],
+            Group {
+                members: Vec::new(),
+                center: Vec::new(),
+                far: 0,
+                far2: 0.0,
+            },
+        );
+        let seed: Vec<f64> = (0..k).map(|r| y[(r, old.far)]).collect();
+        let (mut stay, mut go) = (Vec::new(), Vec::new());
+        for &i in &old.members {
+            if i == old.far || dist2(i, &seed) < dist2(i, &old.center) {
+                go.push(i);
+            } else {
+                stay.push(i);
+            }
+        }
+        if stay.is_empty() {
+            // Every member is nearer the far vertex: split it off alone.
+            stay = go.iter().copied().filter(|&i| i != old.far).collect();
+            go = vec![old.far];
+        }
+        groups[g] = make(stay);
+        groups.push(make(go));
+    }
+    let mut map = vec![0u32; v];
+    for (c, gr) in groups.iter().enumerate() {
+        for &i in &gr.members {
+            map[i] = u32::try_from(c).expect("fewer clusters than u32::MAX");
+        }
+    }
+    VertexGroups {
+        count: groups.len(),
+        map,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two well-separated families of poses on a line, AO piecewise linear
+    /// in the pose: one model per family fits it exactly.
+    fn two_families() -> (Vec<Vec<f32>>, AoBlock) {
+        let mut h = Vec::new();
+        let mut values = Vec::new();
+        for i in 0..20 {
+            let t = i as f32 / 19.0;
+            for (base, slope) in [(0.0f32, 0.4f32), (10.0, -0.3)] {
+                let x = base + t;
+                h.push(vec![x, 2.0 * x]);
+                values.extend([
+                    0.2 + slope * t,
+                    0.5,
+                    0.5 + 0.5 * slope * t,
+                    0.21 + slope * t,
+                ]);
+            }
+        }
+        (
+            h,
+            AoBlock {
+                vertices: 4,
+                values,
+            },
+        )
+    }
+
+    #[test]
+    fn piecewise_linear_ao_is_fitted_per_cluster() {
+        let (h, ao) = two_families();
+        let options = ClusteredOptions {
+            pose_clusters: 2,
+            dimensions: 1,
+            ..ClusteredOptions::default()
+        };
+        let (model, stats) = VertexClustered::fit(&h, &ao, &options, 1);
+        assert_eq!(stats.cluster_sizes, vec![20, 20]);
+        assert_eq!(stats.cluster_ranks, vec![1, 1]);
+        assert!(stats.stored_training_rmse < 2e-3, "{stats:?}");
+        // An unseen pose in the second family.
+        let t = 0.55f32;
+        let x = 10.0 + t;
+        let got = model.evaluate(&[x, 2.0 * x]);
+        let want = [0.2 - 0.3 * t, 0.5, 0.5 - 0.15 * t, 0.21 - 0.3 * t];
+        for (a, b) in got.iter().zip(want) {
+            assert!((a - b).abs() < 2e-3, "{got:?} vs {want:?}");
+        }
+        // The paper's global centring cannot fit both offsets with one
+        // slope per cluster through the global mean.
+        let global = ClusteredOptions {
+            centering: Centering::Global,
+            ..options
+        };
+        let (_, g) = VertexClustered::fit(&h, &ao, &global, 1);
+        assert!(g.stored_training_rmse > 10.0 * stats.stored_training_rmse);
+    }
+
+    #[test]
+    fn vertex_clusters_share_coefficients() {
+        let (h, ao) = two_families();
+        let options = ClusteredOptions {
+            pose_clusters: 2,
+            dimensions: 1,
+            vertex_clusters: 3,
+            ..ClusteredOptions::default()
+        };
+        let (model, stats) = VertexClustered::fit(&h, &ao, &options, 1);
+        assert_eq!(stats.vertex_clusters, vec![3, 3]);
+        // Vertices 0 and 3 move together (offset 0.01): one cluster.
+        for block in &model.form.blocks[1..] {
+            let map = block.map.as_ref().unwrap();
+            assert_eq!(map[0], map[3]);
+            assert_ne!(map[0], map[1]);
+            assert_ne!(map[1], map[2]);
+        }
+        assert!(stats.stored_training_rmse < 0.01, "{stats:?}");
+        let one = ClusteredOptions {
+            vertex_clusters: 1,
+            ..options
+        };
+        let (_, coarse) = VertexClustered::fit(&h, &ao, &one, 1);
+        assert!(coarse.stored_training_rmse > stats.stored_training_rmse);
+    }
+
+    #[test]
+    fn blend_weights_are_normalised_and_local() {
+        let (h, ao) = two_families();
+        let options = ClusteredOptions {
+            pose_clusters: 2,
+            dimensions: 1,
+            ..ClusteredOptions::default()
+        };
+        let (model, _) = VertexClustered::fit(&h, &ao, &options, 1);
+        let w = model.blend_weights(&[10.5, 21.0]);
+        assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        assert_eq!(w.iter().filter(|&&x| x > 0.0).count(), 1, "{w:?}");
+        let c = model.clusters[0].center.clone();
+        let on = model.blend_weights(&c);
+        assert_eq!(on[0], 1.0);
+        // Halfway between the centres both count equally.
+        let mid: Vec<f32> = model.clusters[0]
+            .center
+            .iter()
+            .zip(&model.clusters[1].center)
+            .map(|(a, b)| 0.5 * (a + b))
+            .collect();
+        let half = model.blend_weights(&mid);
+        assert!((half[0] - 0.5).abs() < 1e-6, "{half:?}");
+    }
+}

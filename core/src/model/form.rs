@@ -1,0 +1,214 @@
+//! The run-time form every vertex method reduces to (DESIGN §5): per pose,
+//! a short vector of weights computed once on the CPU, then per vertex a
+//! dot product of those weights with the vertex's f16 coefficients.
+//!
+//! ```text
+//! ao[v] = Σ_b Σ_k w_b[k] · C_b[k, col_b(v)]      col_b(v) = map_b[v], or v
+//! ```
+//!
+//! * static average: one block, one row (the mean), `w = [1]`;
+//! * vertex-linear: one block of N+1 rows, `w = [joint angles…, 1]`
+//!   (or the same as a sparse matrix, [`SparseForm`]);
+//! * vertex-clustered: a block for the mean AO (`w = [1]`) and one block
+//!   per pose cluster with `w = ω_j · P_j (h − h̄_j)` (Kirk & Arikan Eq. 4),
+//!   whose columns are vertex clusters when spatial compression is on.
+//!
+//! `shaders/vertex_ao.wgsl` evaluates exactly this layout on the GPU.
+
+use half::f16;
+
+/// One block of coefficients: `rows × columns`, row-major, so that for a
+/// given row neighbouring vertices read neighbouring values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Block {
+    /// Weights this block takes.
+    pub rows: usize,
+    /// Coefficient columns: vertices, or vertex clusters with a map.
+    pub columns: usize,
+    /// `rows × columns` values, row-major.
+    pub coefficients: Vec<f16>,
+    /// Column of each vertex, when columns are vertex clusters.
+    pub map: Option<Vec<u32>>,
+}
+
+/// A dense linear form over the vertices: blocks of coefficients.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearForm {
+    /// Vertices.
+    pub vertices: usize,
+    /// The blocks, in weight order.
+    pub blocks: Vec<Block>,
+}
+
+impl LinearForm {
+    /// Weights per pose: the sum of the blocks' rows.
+    pub fn weight_count(&self) -> usize {
+        self.blocks.iter().map(|b| b.rows).sum()
+    }
+
+    /// AO of every vertex for one pose's weights.
+    pub fn evaluate(&self, weights: &[f32]) -> Vec<f32> {
+        assert_eq!(weights.len(), self.weight_count(), "one weight per row");
+        let mut out = vec![0.0f32; self.vertices];
+        let mut w = weights;
+        for block in &self.blocks {
+            let (mine, rest) = w.split_at(block.rows);
+            w = rest;
+            for (k, &wk) in mine.iter().enumerate() {
+                if wk == 0.0 {
+                    continue;
+                }
+                let row = &block.coefficients[k * block.columns..(k + 1) * block.columns];
+                match &block.map {
+                    None => out
+                        .iter_mut()
+                        .zip(row)
+                        .for_each(|(o, c)| *o += wk * c.to_f32()),
+                    Some(map) => out
+                        .iter_mut()
+                        .zip(map)
+                        .for_each(|(o, &c)| *o += wk * row[c as usize].to_f32()),
+                }
+            }
+        }
+        out
+    }
+
+    /// Coefficient and map bytes (f16 values, u16 or u32 map entries).
+    pub fn bytes(&self) -> usize {
+        self.blocks
+            .iter()
+            .map(|b| {
+                2 * b.coefficients.len()
+                    + b.map
+                        .as_ref()
+                        .map_or(0, |m| m.len() * map_entry_bytes(b.columns))
+            })
+            .sum()
+    }
+}
+
+/// Bytes per map entry: u16 when the columns fit.
+pub(crate) fn map_entry_bytes(columns: usize) -> usize {
+    if columns <= usize::from(u16::MAX) + 1 {
+        2
+    } else {
+        4
+    }
+}
+
+/// A sparse `rows × vertices` form stored per vertex (CSR): the
+/// vertex-linear model with small coefficients dropped.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SparseForm {
+    /// Vertices.
+    pub vertices: usize,
+    /// Weights per pose.
+    pub rows: usize,
+    /// `vertices + 1` offsets into `rows_of` and `values`.
+    pub offsets: Vec<u32>,
+    /// Row (weight index) of each kept coefficient.
+    pub rows_of: Vec<u16>,
+    /// Kept coefficients.
+    pub values: Vec<f16>,
+}
+
+impl SparseForm {
+    /// Keeps the coefficients of a dense one-block form whose magnitude
+    /// reaches `threshold`, and always the rows listed in `keep_rows`.
+    pub fn from_dense(block: &Block, vertices: usize, threshold: f32, keep_rows: &[usize]) -> Self {
+        let mut offsets = Vec::with_capacity(vertices + 1);
+        let (mut rows_of, mut values) = (Vec::new(), Vec::new());
+        offsets.push(0);
+        for v in 0..vertices {
+            for k in 0..block.rows {
+                let c = block.coefficients[k * block.columns + v];
+                if c.to_f32().abs() >= threshold || keep_rows.contains(&k) {
+                    rows_of.push(u16::try_from(k).expect("at most 65536 rows"));
+                    values.push(c);
+                }
+            }
+            offsets.push(u32::try_from(values.len()).expect("fits u32"));
+        }
+        Self {
+            vertices,
+            rows: block.rows,
+            offsets,
+            rows_of,
+            values,
+        }
+    }
+
+    /// AO of every vertex for one pose's weights.
+    pub fn evaluate(&self, weights: &[f32]) -> Vec<f32> {
+        assert_eq!(weights.len(), self.rows, "one weight per row");
+        self.offsets
+            .windows(2)
+            .map(|w| {
+                let r = w[0] as usize..w[1] as usize;
+                self.rows_of[r.clone()]
+                    .iter()
+                    .zip(&self.values[r])
+                    .map(|(&k, c)| weights[usize::from(k)] * c.to_f32())
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// Offsets, row indices and values.
+    pub fn bytes(&self) -> usize {
+        4 * self.offsets.len() + 2 * self.rows_of.len() + 2 * self.values.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn h(v: &[f32]) -> Vec<f16> {
+        v.iter().map(|&x| f16::from_f32(x)).collect()
+    }
+
+    #[test]
+    fn blocks_maps_and_sparse_agree_with_hand_sums() {
+        let form = LinearForm {
+            vertices: 3,
+            blocks: vec![
+                Block {
+                    rows: 1,
+                    columns: 3,
+                    coefficients: h(&[0.5, 0.25, 0.0]),
+                    map: None,
+                },
+                Block {
+                    rows: 2,
+                    columns: 2,
+                    coefficients: h(&[1.0, -1.0, 0.5, 2.0]),
+                    map: Some(vec![1, 0, 1]),
+                },
+            ],
+        };
+        let ao = form.evaluate(&[1.0, 0.1, 0.2]);
+        // v0: 0.5 + 0.1·(−1) + 0.2·2; v1: 0.25 + 0.1·1 + 0.2·0.5; v2: 0 + 0.1·(−1) + 0.2·2
+        let want = [0.8, 0.45, 0.3];
+        for (a, b) in ao.iter().zip(want) {
+            assert!((a - b).abs() < 1e-6, "{ao:?}");
+        }
+        assert_eq!(form.weight_count(), 3);
+        assert_eq!(form.bytes(), 2 * 3 + 2 * 4 + 2 * 3);
+
+        let dense = Block {
+            rows: 3,
+            columns: 2,
+            coefficients: h(&[0.001, 0.5, -0.25, 0.002, 0.3, 0.4]),
+            map: None,
+        };
+        let sparse = SparseForm::from_dense(&dense, 2, 0.01, &[2]);
+        assert_eq!(sparse.offsets, vec![0, 2, 4]);
+        assert_eq!(sparse.rows_of, vec![1, 2, 0, 2]);
+        let w = [2.0, 3.0, 1.0];
+        let s = sparse.evaluate(&w);
+        assert!((s[0] - (-0.75 + 0.3)).abs() < 1e-3);
+        assert!((s[1] - (1.0 + 0.4)).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,135 @@
+//! Least squares and PCA through faer's SVD, the two solves every vertex
+//! method needs. Everything runs sequentially (faer is built without
+//! rayon), so a fit gives the same bits on every run of one build.
+
+use faer::{Mat, MatRef};
+
+/// How a least-squares fit went, for the report.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SolveStats {
+    /// Singular values kept (the numerical rank of the design matrix).
+    pub rank: usize,
+    /// Columns of the design matrix.
+    pub columns: usize,
+    /// Largest over smallest kept singular value.
+    pub condition: f64,
+}
+
+/// Singular values below this fraction of the largest are treated as zero
+/// (rank deficiency: a parameter that never moves, two that always move
+/// together).
+const RANK_TOLERANCE: f64 = 1e-9;
+
+/// `X = argmin ‖D X − Y‖² + λ‖X‖²` for a `p × k` design `D` and `p × v`
+/// targets `Y`, by the thin SVD `D = U S Vᵀ`: `X = V diag(s / (s² + λ)) Uᵀ
+/// Y`, with singular values under [`RANK_TOLERANCE`] of the largest
+/// dropped. No normal equations and no explicit inverse: with λ = 0 this is
+/// the pseudo-inverse solution, the minimum-norm one when `D` is rank
+/// deficient.
+pub(crate) fn ridge_lstsq(
+    d: MatRef<'_, f64>,
+    y: MatRef<'_, f64>,
+    lambda: f64,
+) -> (Mat<f64>, SolveStats) {
+    let k = d.ncols();
+    if d.nrows() == 0 || k == 0 {
+        return (
+            Mat::zeros(k, y.ncols()),
+            SolveStats {
+                rank: 0,
+                columns: k,
+                condition: 1.0,
+            },
+        );
+    }
+    let svd = d.thin_svd().expect("SVD of a finite matrix converges");
+    let s: Vec<f64> = svd.S().column_vector().iter().copied().collect();
+    let s_max = s.first().copied().unwrap_or(0.0);
+    let kept: Vec<usize> = (0..s.len())
+        .filter(|&i| s[i] > RANK_TOLERANCE * s_max && s[i] > 0.0)
+        .collect();
+    let uty = svd.U().transpose() * y;
+    let filtered = Mat::from_fn(s.len(), y.ncols(), |i, c| {
+        if kept.contains(&i) {
+            uty[(i, c)] * s[i] / (s[i] * s[i] + lambda)
+        } else {
+            0.0
+        }
+    });
+    let x = svd.V() * &filtered;
+    let s_min = kept.last().map_or(1.0, |&i| s[i]);
+    (
+        x,
+        SolveStats {
+            rank: kept.len(),
+            columns: k,
+            condition: if kept.is_empty() { 1.0 } else { s_max / s_min },
+        },
+    )
+}
+
+/// The top `n` principal axes of the rows of a centred `p × d` matrix, as
+/// the rows of an `n' × d` matrix (n' ≤ n: axes without variance are
+/// dropped). Each axis's sign is fixed (its largest component positive) so
+/// the result does not depend on the SVD's arbitrary signs.
+pub(crate) fn principal_axes(centred: MatRef<'_, f64>, n: usize) -> Mat<f64> {
+    let d = centred.ncols();
+    if centred.nrows() == 0 || d == 0 || n == 0 {
+        return Mat::zeros(0, d);
+    }
+    let svd = centred
+        .thin_svd()
+        .expect("SVD of a finite matrix converges");
+    let s: Vec<f64> = svd.S().column_vector().iter().copied().collect();
+    let s_max = s.first().copied().unwrap_or(0.0);
+    let keep = s
+        .iter()
+        .take(n)
+        .take_while(|&&x| x > RANK_TOLERANCE * s_max && x > 0.0)
+        .count();
+    let v = svd.V();
+    Mat::from_fn(keep, d, |i, j| {
+        let col = v.col(i);
+        let big = (0..d)
+            .max_by(|&a, &b| col[a].abs().total_cmp(&col[b].abs()).then(b.cmp(&a)))
+            .expect("d > 0");
+        col[j] * col[big].signum()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recovers_an_exact_linear_map_and_handles_rank_deficiency() {
+        // y = 2 a − b + 3, with a duplicated column (rank deficient).
+        let rows = 20;
+        let d = Mat::from_fn(rows, 4, |i, j| match j {
+            0 => (i as f64 * 0.37).sin(),
+            1 => (i as f64 * 0.91).cos(),
+            2 => (i as f64 * 0.37).sin(),
+            _ => 1.0,
+        });
+        let y = Mat::from_fn(rows, 1, |i, _| 2.0 * d[(i, 0)] - d[(i, 1)] + 3.0);
+        let (x, stats) = ridge_lstsq(d.as_ref(), y.as_ref(), 0.0);
+        assert_eq!(stats.rank, 3);
+        // Minimum norm splits the duplicated column's weight evenly.
+        assert!((x[(0, 0)] - 1.0).abs() < 1e-9 && (x[(2, 0)] - 1.0).abs() < 1e-9);
+        assert!((x[(1, 0)] + 1.0).abs() < 1e-9 && (x[(3, 0)] - 3.0).abs() < 1e-9);
+        // Ridge shrinks.
+        let (xr, _) = ridge_lstsq(d.as_ref(), y.as_ref(), 10.0);
+        let norm = |m: &Mat<f64>| m.norm_l2();
+        assert!(norm(&xr) < norm(&x));
+    }
+
+    #[test]
+    fn principal_axes_of_a_line() {
+        let p = Mat::from_fn(10, 3, |i, j| (i as f64 - 4.5) * [1.0, -2.0, 0.0][j]);
+        let axes = principal_axes(p.as_ref(), 2);
+        assert_eq!(axes.nrows(), 1, "one axis has variance");
+        let s = 5f64.sqrt();
+        assert!((axes[(0, 0)] + 1.0 / s).abs() < 1e-12);
+        assert!((axes[(0, 1)] - 2.0 / s).abs() < 1e-12);
+    }
+}

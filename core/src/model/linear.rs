@@ -1,0 +1,251 @@
+//! vertex-linear (Kontkanen & Aila 2006): per-vertex AO as a linear
+//! function of the joint angles, `a_v = jᵀ t_v` with `j = [angles…, 1]`,
+//! fitted over reference poses by least squares (DESIGN §5).
+
+use faer::Mat;
+use half::f16;
+use serde::{Deserialize, Serialize};
+
+use super::form::{Block, LinearForm, SparseForm};
+use super::linalg::{SolveStats, ridge_lstsq};
+use crate::reference::AoBlock;
+
+/// Fitting options of vertex-linear.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LinearOptions {
+    /// Ridge (Tikhonov) weight λ on the joint-angle coefficients, per
+    /// reference pose: minimises `(1/P)‖J T − A‖² + λ‖T‖²`. The constant
+    /// column is not penalised. 0 gives the pseudo-inverse solution.
+    pub ridge: f64,
+    /// Coefficients of the joint angles with a magnitude below this are
+    /// dropped and the rest stored sparse (CSR per vertex). 0 keeps the
+    /// dense matrix.
+    pub threshold: f32,
+}
+
+impl Default for LinearOptions {
+    fn default() -> Self {
+        Self {
+            ridge: 0.0,
+            threshold: 0.0,
+        }
+    }
+}
+
+/// The stored coefficients: dense `(N+1) × V`, or sparse per vertex.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Coefficients {
+    /// All coefficients.
+    Dense(LinearForm),
+    /// Coefficients over the threshold, and every constant term.
+    Sparse(SparseForm),
+}
+
+/// A fitted vertex-linear model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VertexLinear {
+    /// Joint-angle parameters (N).
+    pub parameters: usize,
+    /// `T` in f16: N+1 rows (the angles, then the constant).
+    pub coefficients: Coefficients,
+}
+
+/// What the fit did, for the report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LinearFitStats {
+    /// The solve of the centred joint-angle matrix.
+    pub solve: SolveStats,
+    /// RMSE over the training poses of the f32 fit, before f16 rounding
+    /// and sparsification.
+    pub training_rmse: f64,
+    /// RMSE over the training poses of the stored model (f16, sparse).
+    pub stored_training_rmse: f64,
+    /// Coefficients kept / all coefficients.
+    pub kept_fraction: f64,
+}
+
+impl VertexLinear {
+    /// Fits `T = J⁺A` over `poses` (one joint-angle vector per row of
+    /// `ao`). The angle columns and the AO are centred first, so the
+    /// constant column, fitted exactly afterwards, is never penalised by
+    /// the ridge; the centred solve goes through an SVD (see
+    /// [`ridge_lstsq`]).
+    pub fn fit(
+        poses: &[Vec<f32>],
+        ao: &AoBlock,
+        options: &LinearOptions,
+    ) -> (Self, LinearFitStats) {
+        let p = poses.len();
+        assert_eq!(p, ao.poses(), "one pose per AO row");
+        assert!(p > 0, "at least one reference pose");
+        let n = poses[0].len();
+        let v = ao.vertices;
+        let mean_j: Vec<f64> = (0..n)
+            .map(|k| poses.iter().map(|q| f64::from(q[k])).sum::<f64>() / p as f64)
+            .collect();
+        let mean_a: Vec<f64> = (0..v)
+            .map(|i| (0..p).map(|r| f64::from(ao.row(r)[i])).sum::<f64>() / p as f64)
+            .collect();
+        let jc = Mat::from_fn(p, n, |r, k| f64::from(poses[r][k]) - mean_j[k]);
+        let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
+        let (t, solve) = ridge_lstsq(jc.as_ref(), ac.as_ref(), options.ridge * p as f64);
+        // The constant: mean AO minus the angles' mean contribution.
+        let constant: Vec<f64> = (0..v)
+            .map(|i| mean_a[i] - (0..n).map(|k| mean_j[k] * t[(k, i)]).sum::<f64>())
+            .collect();
+        let mut coefficients = Vec::with_capacity((n + 1) * v);
+        for k in 0..n {
+            coefficients.extend((0..v).map(|i| f16::from_f64(t[(k, i)])));
+        }
+        coefficients.extend(constant.iter().map(|&c| f16::from_f64(c)));
+        let block = Block {
+            rows: n + 1,
+            columns: v,
+            coefficients,
+            map: None,
+        };
+        let (stored, kept_fraction) = if options.threshold > 0.0 {
+            let sparse = SparseForm::from_dense(&block, v, options.threshold, &[n]);
+            let kept = sparse.values.len() as f64 / ((n + 1) * v).max(1) as f64;
+            (Coefficients::Sparse(sparse), kept)
+        } else {
+            (
+                Coefficients::Dense(LinearForm {
+                    vertices: v,
+                    blocks: vec![block],
+                }),
+                1.0,
+            )
+        };
+        let model = Self {
+            parameters: n,
+            coefficients: stored,
+        };
+        let (mut exact, mut rounded) = (0.0f64, 0.0f64);
+        for (r, q) in poses.iter().enumerate() {
+            let predicted = model.evaluate(q);
+            for (i, (&truth, &pred)) in ao.row(r).iter().zip(&predicted).enumerate() {
+                let f = constant[i] + (0..n).map(|k| f64::from(q[k]) * t[(k, i)]).sum::<f64>();
+                exact += (f - f64::from(truth)).powi(2);
+                rounded += (f64::from(pred) - f64::from(truth)).powi(2);
+            }
+        }
+        let count = (p * v).max(1) as f64;
+        let stats = LinearFitStats {
+            solve,
+            training_rmse: (exact / count).sqrt(),
+            stored_training_rmse: (rounded / count).sqrt(),
+            kept_fraction,
+        };
+        (model, stats)
+    }
+
+    /// The weights of a pose: its joint angles and a 1.
+    pub fn weights(angles: &[f32]) -> Vec<f32> {
+        let mut w = angles.to_vec();
+        w.push(1.0);
+        w
+    }
+
+    /// AO of every vertex at these joint angles.
+    pub fn evaluate(&self, angles: &[f32]) -> Vec<f32> {
+        let w = Self::weights(angles);
+        match &self.coefficients {
+            Coefficients::Dense(form) => form.evaluate(&w),
+            Coefficients::Sparse(form) => form.evaluate(&w),
+        }
+    }
+
+    /// Multiply-adds per vertex at run time (mean over vertices if sparse).
+    pub fn multiply_adds(&self) -> f64 {
+        match &self.coefficients {
+            Coefficients::Dense(_) => (self.parameters + 1) as f64,
+            Coefficients::Sparse(s) => s.values.len() as f64 / s.vertices.max(1) as f64,
+        }
+    }
+
+    /// Coefficient bytes.
+    pub fn bytes(&self) -> usize {
+        match &self.coefficients {
+            Coefficients::Dense(f) => f.bytes(),
+            Coefficients::Sparse(s) => s.bytes(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt as _, SeedableRng as _};
+    use rand_chacha::ChaCha8Rng;
+
+    /// AO that is exactly linear in 3 parameters, plus a vertex that
+    /// ignores them.
+    fn linear_data(poses: usize) -> (Vec<Vec<f32>>, AoBlock) {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let q: Vec<Vec<f32>> = (0..poses)
+            .map(|_| (0..3).map(|_| rng.random_range(-1.0f32..1.0)).collect())
+            .collect();
+        let mut values = Vec::new();
+        for x in &q {
+            values.push(0.5 + 0.1 * x[0] - 0.05 * x[2]);
+            values.push(0.25);
+            values.push(0.3 + 0.2 * x[1]);
+        }
+        (
+            q,
+            AoBlock {
+                vertices: 3,
+                values,
+            },
+        )
+    }
+
+    #[test]
+    fn recovers_linear_ao_on_unseen_poses() {
+        let (q, ao) = linear_data(40);
+        let (model, stats) = VertexLinear::fit(&q, &ao, &LinearOptions::default());
+        assert_eq!(stats.solve.rank, 3);
+        assert!(stats.training_rmse < 1e-6, "{stats:?}");
+        assert!(
+            stats.stored_training_rmse < 1e-3,
+            "f16 rounding only: {stats:?}"
+        );
+        let ao = model.evaluate(&[0.5, -0.5, 1.0]);
+        let want = [0.5 + 0.05 - 0.05, 0.25, 0.3 - 0.1];
+        for (a, b) in ao.iter().zip(want) {
+            assert!((a - b).abs() < 1e-3, "{ao:?}");
+        }
+        assert_eq!(model.multiply_adds(), 4.0);
+        assert_eq!(model.bytes(), 2 * 4 * 3);
+    }
+
+    #[test]
+    fn threshold_drops_small_coefficients_and_ridge_shrinks() {
+        let (q, ao) = linear_data(40);
+        let options = LinearOptions {
+            threshold: 0.01,
+            ..LinearOptions::default()
+        };
+        let (model, stats) = VertexLinear::fit(&q, &ao, &options);
+        // 3 of the 9 angle coefficients are non-zero, plus 3 constants.
+        let Coefficients::Sparse(s) = &model.coefficients else {
+            panic!("sparse expected")
+        };
+        assert_eq!(s.values.len(), 3 + 3);
+        assert!((stats.kept_fraction - 0.5).abs() < 1e-9);
+        assert!(stats.stored_training_rmse < 1e-3);
+        let (ridged, rs) = VertexLinear::fit(
+            &q,
+            &ao,
+            &LinearOptions {
+                ridge: 1.0,
+                ..LinearOptions::default()
+            },
+        );
+        assert!(rs.training_rmse > 1e-3, "ridge trades fit for smaller T");
+        let slope = ridged.evaluate(&[1.0, 0.0, 0.0])[0] - ridged.evaluate(&[0.0, 0.0, 0.0])[0];
+        assert!(slope > 0.0 && slope < 0.1, "{slope}");
+    }
+}

@@ -1,0 +1,480 @@
+//! The per-vertex methods (DESIGN §5): fitting, run-time evaluation, and
+//! their place in the asset container.
+//!
+//! * [`StaticAverage`]: the baseline, mean AO over the reference poses.
+//! * [`VertexLinear`]: Kontkanen & Aila 2006, linear in the joint angles.
+//! * [`VertexClustered`]: Kirk & Arikan 2007, locally linear in PCA-reduced
+//!   handle positions, blended by moving least squares.
+//!
+//! All three evaluate as a [`LinearForm`] (or a [`SparseForm`]): per pose a
+//! few weights computed from the pose, per vertex a dot product with f16
+//! coefficients. [`Model`] ties a fitted model to the pose features it
+//! reads (joint angles or handles) and to the asset container.
+
+mod average;
+mod clustered;
+mod form;
+mod kmeans;
+mod linalg;
+mod linear;
+
+pub use average::StaticAverage;
+pub use clustered::{
+    Centering, ClusteredFitStats, ClusteredOptions, MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
+};
+pub use form::{Block, LinearForm, SparseForm};
+pub use linalg::SolveStats;
+pub use linear::{Coefficients, LinearFitStats, LinearOptions, VertexLinear};
+
+use half::f16;
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    asset::{AssetError, Container, Data, Method, Section},
+    params::{Handles, JointAngles},
+    pose::Pose,
+    skeleton::Skeleton,
+};
+
+/// Version of the fitting algorithms, part of the bake key: bump it when a
+/// change to fitting changes the coefficients a bake produces.
+pub const ALGORITHM_VERSION: u32 = 1;
+
+/// A fitted model and the pose features it reads.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Model {
+    /// The baseline.
+    StaticAverage(StaticAverage),
+    /// Kontkanen & Aila, over these joint angles.
+    VertexLinear(JointAngles, VertexLinear),
+    /// Kirk & Arikan, over these handles.
+    VertexClustered(Handles, VertexClustered),
+}
+
+/// The model's structure in the asset header: what the sections mean.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum Layout {
+    /// `COEF`: V means.
+    StaticAverage,
+    /// `COEF`: `(N+1) × V` row-major, or with `sparse` the CSR values
+    /// (`CSRO` offsets, `CSRR` rows).
+    VertexLinear {
+        /// The joint-angle parameters (N), their nodes and ranges.
+        joint_angles: JointAngles,
+        /// Whether coefficients are sparse.
+        sparse: bool,
+    },
+    /// `COEF`: the mean block then one block per pose cluster;
+    /// `CENT`: `m × H` centres; `AXES`: `m × n × H` projections; `VMAP`:
+    /// the vertex-cluster maps of the blocks that have one, concatenated.
+    VertexClustered {
+        /// The handle layout (H = 6 × joints).
+        handles: Handles,
+        /// n.
+        dimensions: usize,
+        /// α.
+        alpha: f32,
+        /// Centring.
+        centering: Centering,
+        /// Columns of each pose cluster's block (V when unmapped).
+        columns: Vec<usize>,
+    },
+}
+
+/// The asset's JSON header (DESIGN §7).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AssetHeader {
+    /// The program that wrote it.
+    pub generator: String,
+    /// The method.
+    pub method: Method,
+    /// [`ALGORITHM_VERSION`] of the writer.
+    pub algorithm_version: u32,
+    /// sha256 of the bake's canonical request (inputs, method, params,
+    /// algorithm version).
+    pub bake_key: String,
+    /// sha256 of the character upload.
+    pub character: String,
+    /// sha256 of each clip upload (empty when the clips came with the
+    /// character).
+    pub clips: Vec<String>,
+    /// Vertices, in aobake's vertex order.
+    pub vertices: usize,
+    /// What the values mean.
+    pub units: String,
+    /// The bake's fully defaulted parameters.
+    pub params: serde_json::Value,
+    /// The model's structure.
+    pub layout: Layout,
+}
+
+/// What the stored values mean, written into every header.
+pub const UNITS: &str = "occlusion per vertex: 0 = open, 1 = blocked";
+
+impl Model {
+    /// The method.
+    pub fn method(&self) -> Method {
+        match self {
+            Self::StaticAverage(_) => Method::StaticAverage,
+            Self::VertexLinear(..) => Method::VertexLinear,
+            Self::VertexClustered(..) => Method::VertexClustered,
+        }
+    }
+
+    /// Vertices the model covers.
+    pub fn vertices(&self) -> usize {
+        match self {
+            Self::StaticAverage(m) => m.form.vertices,
+            Self::VertexLinear(_, m) => match &m.coefficients {
+                Coefficients::Dense(f) => f.vertices,
+                Coefficients::Sparse(s) => s.vertices,
+            },
+            Self::VertexClustered(_, m) => m.form.vertices,
+        }
+    }
+
+    /// The per-pose weights (joint angles and a 1, blended projections, or
+    /// `[1]`), computed once per pose on the CPU.
+    pub fn weights(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
+        match self {
+            Self::StaticAverage(_) => vec![1.0],
+            Self::VertexLinear(layout, _) => VertexLinear::weights(&layout.params(skeleton, pose)),
+            Self::VertexClustered(handles, m) => m.weights(&handles.handles(skeleton, pose)),
+        }
+    }
+
+    /// AO of every vertex for weights from [`Model::weights`].
+    pub fn evaluate_weights(&self, weights: &[f32]) -> Vec<f32> {
+        match self {
+            Self::StaticAverage(m) => m.form.evaluate(weights),
+            Self::VertexLinear(_, m) => match &m.coefficients {
+                Coefficients::Dense(f) => f.evaluate(weights),
+                Coefficients::Sparse(s) => s.evaluate(weights),
+            },
+            Self::VertexClustered(_, m) => m.form.evaluate(weights),
+        }
+    }
+
+    /// AO of every vertex in a pose.
+    pub fn evaluate(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
+        self.evaluate_weights(&self.weights(skeleton, pose))
+    }
+
+    /// Multiply-adds per vertex for these weights: one per non-zero weight
+    /// (clusters that MLS leaves out cost nothing), or the mean number of
+    /// stored coefficients per vertex for a sparse model.
+    pub fn multiply_adds(&self, weights: &[f32]) -> f64 {
+        match self {
+            Self::VertexLinear(_, m) if matches!(m.coefficients, Coefficients::Sparse(_)) => {
+                m.multiply_adds()
+            }
+            _ => weights.iter().filter(|&&w| w != 0.0).count() as f64,
+        }
+    }
+
+    /// The asset: header and sections.
+    pub fn to_container(&self, header: AssetHeaderFields) -> Container {
+        let (layout, sections) = match self {
+            Self::StaticAverage(m) => (Layout::StaticAverage, form_sections(&m.form)),
+            Self::VertexLinear(joint_angles, m) => match &m.coefficients {
+                Coefficients::Dense(f) => (
+                    Layout::VertexLinear {
+                        joint_angles: joint_angles.clone(),
+                        sparse: false,
+                    },
+                    form_sections(f),
+                ),
+                Coefficients::Sparse(s) => (
+                    Layout::VertexLinear {
+                        joint_angles: joint_angles.clone(),
+                        sparse: true,
+                    },
+                    vec![
+                        section(*b"COEF", Data::F16(s.values.clone())),
+                        section(*b"CSRO", Data::U32(s.offsets.clone())),
+                        section(*b"CSRR", Data::U16(s.rows_of.clone())),
+                    ],
+                ),
+            },
+            Self::VertexClustered(handles, m) => {
+                let mut sections = form_sections(&m.form);
+                sections.push(section(
+                    *b"CENT",
+                    Data::F32(m.clusters.iter().flat_map(|c| c.center.clone()).collect()),
+                ));
+                sections.push(section(
+                    *b"AXES",
+                    Data::F32(m.clusters.iter().flat_map(|c| c.axes.clone()).collect()),
+                ));
+                (
+                    Layout::VertexClustered {
+                        handles: handles.clone(),
+                        dimensions: m.dimensions,
+                        alpha: m.alpha,
+                        centering: m.centering,
+                        columns: m.form.blocks[1..].iter().map(|b| b.columns).collect(),
+                    },
+                    sections,
+                )
+            }
+        };
+        let header = AssetHeader {
+            generator: header.generator,
+            method: self.method(),
+            algorithm_version: ALGORITHM_VERSION,
+            bake_key: header.bake_key,
+            character: header.character,
+            clips: header.clips,
+            vertices: self.vertices(),
+            units: UNITS.to_owned(),
+            params: header.params,
+            layout,
+        };
+        Container::new(self.method(), &header, sections)
+    }
+
+    /// Reads a model back from its container, checking every length
+    /// against the header.
+    pub fn from_container(container: &Container) -> Result<(Self, AssetHeader), AssetError> {
+        let header: AssetHeader = container.header()?;
+        if header.method != container.method {
+            return Err(bad("the header's method differs from the preamble's"));
+        }
+        let v = header.vertices;
+        let coef = f16s(container.section(b"COEF")?)?;
+        let model = match &header.layout {
+            Layout::StaticAverage => Self::StaticAverage(StaticAverage {
+                form: read_form(v, &[1], coef)?,
+            }),
+            Layout::VertexLinear {
+                joint_angles,
+                sparse,
+            } => {
+                let rows = joint_angles.len() + 1;
+                let coefficients = if *sparse {
+                    let Data::U32(offsets) = container.section(b"CSRO")? else {
+                        return Err(bad("CSRO must be u32"));
+                    };
+                    let Data::U16(rows_of) = container.section(b"CSRR")? else {
+                        return Err(bad("CSRR must be u16"));
+                    };
+                    let nnz = coef.len();
+                    let monotone = offsets.windows(2).all(|w| w[0] <= w[1]);
+                    if offsets.len() != v + 1
+                        || offsets.first() != Some(&0)
+                        || offsets.last().map(|&o| o as usize) != Some(nnz)
+                        || !monotone
+                        || rows_of.len() != nnz
+                        || rows_of.iter().any(|&r| usize::from(r) >= rows)
+                    {
+                        return Err(bad("sparse coefficients do not match the header"));
+                    }
+                    Coefficients::Sparse(SparseForm {
+                        vertices: v,
+                        rows,
+                        offsets: offsets.clone(),
+                        rows_of: rows_of.clone(),
+                        values: coef,
+                    })
+                } else {
+                    Coefficients::Dense(read_form(v, &[rows], coef)?)
+                };
+                Self::VertexLinear(
+                    joint_angles.clone(),
+                    VertexLinear {
+                        parameters: joint_angles.len(),
+                        coefficients,
+                    },
+                )
+            }
+            Layout::VertexClustered {
+                handles,
+                dimensions,
+                alpha,
+                centering,
+                columns,
+            } => {
+                let (m, n, h) = (columns.len(), *dimensions, handles.len());
+                let rows = n + usize::from(*centering == Centering::Cluster);
+                let form = read_clustered_form(container, v, rows, columns, coef)?;
+                let Data::F32(centers) = container.section(b"CENT")? else {
+                    return Err(bad("CENT must be f32"));
+                };
+                let Data::F32(axes) = container.section(b"AXES")? else {
+                    return Err(bad("AXES must be f32"));
+                };
+                if centers.len() != m * h || axes.len() != m * n * h {
+                    return Err(bad("cluster centres or axes do not match the header"));
+                }
+                let clusters = (0..m)
+                    .map(|j| PoseCluster {
+                        center: centers[j * h..(j + 1) * h].to_vec(),
+                        axes: axes[j * n * h..(j + 1) * n * h].to_vec(),
+                    })
+                    .collect();
+                Self::VertexClustered(
+                    handles.clone(),
+                    VertexClustered {
+                        handles: h,
+                        dimensions: n,
+                        alpha: *alpha,
+                        centering: *centering,
+                        clusters,
+                        form,
+                    },
+                )
+            }
+        };
+        Ok((model, header))
+    }
+}
+
+/// The parts of the header that come from the bake rather than the model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssetHeaderFields {
+    /// The program that wrote it, such as `aobake 0.1.0`.
+    pub generator: String,
+    /// The bake key.
+    pub bake_key: String,
+    /// sha256 of the character upload.
+    pub character: String,
+    /// sha256 of the clip uploads.
+    pub clips: Vec<String>,
+    /// The bake's fully defaulted parameters.
+    pub params: serde_json::Value,
+}
+
+fn section(tag: [u8; 4], data: Data) -> Section {
+    Section { tag, data }
+}
+
+fn bad(what: &str) -> AssetError {
+    AssetError::Malformed(what.to_owned())
+}
+
+fn f16s(data: &Data) -> Result<Vec<f16>, AssetError> {
+    match data {
+        Data::F16(v) => Ok(v.clone()),
+        _ => Err(bad("COEF must be f16")),
+    }
+}
+
+/// `COEF` (every block's coefficients, concatenated) and, when any block
+/// has a vertex-cluster map, `VMAP` (the maps, concatenated; u16 when
+/// every block has at most 65536 columns).
+fn form_sections(form: &LinearForm) -> Vec<Section> {
+    let mut sections = vec![section(
+        *b"COEF",
+        Data::F16(
+            form.blocks
+                .iter()
+                .flat_map(|b| b.coefficients.iter().copied())
+                .collect(),
+        ),
+    )];
+    let maps: Vec<&Block> = form.blocks.iter().filter(|b| b.map.is_some()).collect();
+    if !maps.is_empty() {
+        let all = maps.iter().flat_map(|b| b.map.iter().flatten().copied());
+        let narrow = maps.iter().all(|b| form::map_entry_bytes(b.columns) == 2);
+        sections.push(section(
+            *b"VMAP",
+            if narrow {
+                Data::U16(all.map(|c| c as u16).collect())
+            } else {
+                Data::U32(all.collect())
+            },
+        ));
+    }
+    sections
+}
+
+/// Unmapped blocks of the given row counts, V columns each.
+fn read_form(v: usize, rows: &[usize], coef: Vec<f16>) -> Result<LinearForm, AssetError> {
+    let want: usize = rows.iter().map(|r| r * v).sum();
+    if coef.len() != want {
+        return Err(bad("COEF length does not match the header"));
+    }
+    let mut rest = coef.as_slice();
+    let blocks = rows
+        .iter()
+        .map(|&r| {
+            let (mine, tail) = rest.split_at(r * v);
+            rest = tail;
+            Block {
+                rows: r,
+                columns: v,
+                coefficients: mine.to_vec(),
+                map: None,
+            }
+        })
+        .collect();
+    Ok(LinearForm {
+        vertices: v,
+        blocks,
+    })
+}
+
+/// The mean block, then one block of `rows` rows per pose cluster with the
+/// given column counts; blocks with fewer columns than vertices read their
+/// map from `VMAP`.
+fn read_clustered_form(
+    container: &Container,
+    v: usize,
+    rows: usize,
+    columns: &[usize],
+    coef: Vec<f16>,
+) -> Result<LinearForm, AssetError> {
+    if columns.iter().any(|&c| c == 0 || c > v) {
+        return Err(bad(
+            "vertex cluster counts must be between 1 and the vertex count",
+        ));
+    }
+    let want = v + columns.iter().map(|c| c * rows).sum::<usize>();
+    if coef.len() != want {
+        return Err(bad("COEF length does not match the header"));
+    }
+    let mapped = columns.iter().filter(|&&c| c < v).count();
+    let maps: Vec<u32> = if mapped > 0 {
+        match container.section(b"VMAP")? {
+            Data::U16(m) => m.iter().map(|&x| u32::from(x)).collect(),
+            Data::U32(m) => m.clone(),
+            _ => return Err(bad("VMAP must be u16 or u32")),
+        }
+    } else {
+        Vec::new()
+    };
+    if maps.len() != mapped * v {
+        return Err(bad("VMAP length does not match the header"));
+    }
+    let mut blocks = vec![Block {
+        rows: 1,
+        columns: v,
+        coefficients: coef[..v].to_vec(),
+        map: None,
+    }];
+    let (mut at, mut map_at) = (v, 0);
+    for &c in columns {
+        let map = if c < v {
+            let m = maps[map_at..map_at + v].to_vec();
+            map_at += v;
+            if m.iter().any(|&x| x as usize >= c) {
+                return Err(bad("VMAP names a vertex cluster that does not exist"));
+            }
+            Some(m)
+        } else {
+            None
+        };
+        blocks.push(Block {
+            rows,
+            columns: c,
+            coefficients: coef[at..at + rows * c].to_vec(),
+            map,
+        });
+        at += rows * c;
+    }
+    Ok(LinearForm {
+        vertices: v,
+        blocks,
+    })
+}
