@@ -25,6 +25,7 @@
 //! anything is allocated.
 
 pub mod asset;
+pub mod bake;
 pub mod character;
 pub mod clip;
 pub mod geometry;
@@ -36,6 +37,7 @@ pub mod params;
 pub mod ply;
 pub mod pose;
 pub mod reference;
+pub mod report;
 pub mod shapes;
 pub mod skeleton;
 pub mod summary;

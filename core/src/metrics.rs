@@ -30,13 +30,19 @@ pub struct FrameError {
 }
 
 impl FrameError {
-    /// Compares one frame. `predicted` and `truth` have the same length.
+    /// Compares one frame. `predicted` and `truth` have the same length. A
+    /// prediction that is not a finite number counts as an error of 1 (too
+    /// bright), the largest an AO value can be off by.
     pub fn of(predicted: &[f32], truth: &[f32]) -> Self {
         assert_eq!(predicted.len(), truth.len(), "one value per vertex");
         let n = predicted.len().max(1) as f64;
         let (mut abs, mut dark, mut bright) = (0.0f64, 0.0f64, 0.0f64);
         for (&p, &t) in predicted.iter().zip(truth) {
-            let d = f64::from(p) - f64::from(t);
+            let d = if p.is_finite() {
+                f64::from(p) - f64::from(t)
+            } else {
+                -1.0
+            };
             abs += d.abs();
             if d > 0.0 {
                 dark += d * d;

@@ -58,7 +58,7 @@ impl Default for LayoutOptions {
 }
 
 /// Why a parameterisation could not be made.
-#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[derive(Debug, Clone, thiserror::Error, PartialEq, Eq)]
 pub enum ParamError {
     /// No clip rotates a node that moves the mesh.
     #[error("no clip rotates a joint that moves the mesh; joint angles need animated joints")]

@@ -40,6 +40,29 @@ impl<'a> Upload<'a> {
         }
     }
 
+    /// The upload's content digest (lower-case hex sha256): of the file
+    /// itself when it comes alone, else of the main file and the side files
+    /// sorted by name, each framed by its length (and name), so that no
+    /// two different uploads share a digest.
+    pub fn digest(&self) -> String {
+        use sha2::{Digest as _, Sha256};
+        if self.side_files.is_empty() {
+            return crate::bake::sha256_hex(self.main);
+        }
+        let mut h = Sha256::new();
+        h.update((self.main.len() as u64).to_le_bytes());
+        h.update(self.main);
+        let mut files: Vec<&SideFile> = self.side_files.iter().collect();
+        files.sort_by(|a, b| a.name.cmp(&b.name));
+        for f in files {
+            h.update((f.name.len() as u64).to_le_bytes());
+            h.update(f.name.as_bytes());
+            h.update((f.bytes.len() as u64).to_le_bytes());
+            h.update(&f.bytes);
+        }
+        h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+    }
+
     pub(crate) fn total_bytes(&self) -> u64 {
         self.main.len() as u64
             + self

@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 use super::form::{Block, LinearForm};
 use super::kmeans::kmeans;
 use super::linalg::{principal_axes, ridge_lstsq};
+use super::linear::{F16_MAX, FitOverflow};
 use crate::reference::AoBlock;
 
 /// MLS weights below this are dropped (and the rest renormalised), so a
@@ -76,8 +77,9 @@ impl Default for ClusteredOptions {
 pub struct PoseCluster {
     /// h̄_j, the mean handle vector of the cluster's poses.
     pub center: Vec<f32>,
-    /// P_j: `dimensions × handles` row-major (rows past the cluster's rank
-    /// are zero).
+    /// P_j: `dimensions × handles` row-major, each row a principal axis
+    /// divided by the standard deviation along it (so projections are
+    /// whitened); rows past the cluster's rank are zero.
     pub axes: Vec<f32>,
 }
 
@@ -127,7 +129,7 @@ impl VertexClustered {
         ao: &AoBlock,
         options: &ClusteredOptions,
         seed: u64,
-    ) -> (Self, ClusteredFitStats) {
+    ) -> Result<(Self, ClusteredFitStats), FitOverflow> {
         let p = handles.len();
         assert_eq!(p, ao.poses(), "one pose per AO row");
         assert!(p > 0, "at least one reference pose");
@@ -190,6 +192,13 @@ impl VertexClustered {
                 (y, None)
             };
             let (x, _) = ridge_lstsq(q.as_ref(), targets.as_ref(), options.ridge * k as f64);
+            let largest = x.norm_max();
+            if !(largest <= F16_MAX) {
+                return Err(FitOverflow {
+                    largest,
+                    parameters: x.nrows(),
+                });
+            }
             let columns = targets.ncols();
             // Rows past the cluster's rank stay zero; the constant, if any,
             // is always the last row.
@@ -241,7 +250,7 @@ impl VertexClustered {
                 .sum::<f64>();
         }
         stats.stored_training_rmse = (se / (p * v).max(1) as f64).sqrt();
-        (model, stats)
+        Ok((model, stats))
     }
 
     /// Kirk & Arikan's Eq. 5: normalised ‖h − h̄_j‖^(−α), computed in logs
@@ -445,7 +454,7 @@ mod tests {
             dimensions: 1,
             ..ClusteredOptions::default()
         };
-        let (model, stats) = VertexClustered::fit(&h, &ao, &options, 1);
+        let (model, stats) = VertexClustered::fit(&h, &ao, &options, 1).unwrap();
         assert_eq!(stats.cluster_sizes, vec![20, 20]);
         assert_eq!(stats.cluster_ranks, vec![1, 1]);
         assert!(stats.stored_training_rmse < 2e-3, "{stats:?}");
@@ -463,7 +472,7 @@ mod tests {
             centering: Centering::Global,
             ..options
         };
-        let (_, g) = VertexClustered::fit(&h, &ao, &global, 1);
+        let (_, g) = VertexClustered::fit(&h, &ao, &global, 1).unwrap();
         assert!(g.stored_training_rmse > 10.0 * stats.stored_training_rmse);
     }
 
@@ -476,7 +485,7 @@ mod tests {
             vertex_clusters: 3,
             ..ClusteredOptions::default()
         };
-        let (model, stats) = VertexClustered::fit(&h, &ao, &options, 1);
+        let (model, stats) = VertexClustered::fit(&h, &ao, &options, 1).unwrap();
         assert_eq!(stats.vertex_clusters, vec![3, 3]);
         // Vertices 0 and 3 move together (offset 0.01): one cluster.
         for block in &model.form.blocks[1..] {
@@ -490,7 +499,7 @@ mod tests {
             vertex_clusters: 1,
             ..options
         };
-        let (_, coarse) = VertexClustered::fit(&h, &ao, &one, 1);
+        let (_, coarse) = VertexClustered::fit(&h, &ao, &one, 1).unwrap();
         assert!(coarse.stored_training_rmse > stats.stored_training_rmse);
     }
 
@@ -502,7 +511,7 @@ mod tests {
             dimensions: 1,
             ..ClusteredOptions::default()
         };
-        let (model, _) = VertexClustered::fit(&h, &ao, &options, 1);
+        let (model, _) = VertexClustered::fit(&h, &ao, &options, 1).unwrap();
         let w = model.blend_weights(&[10.5, 21.0]);
         assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
         assert_eq!(w.iter().filter(|&&x| x > 0.0).count(), 1, "{w:?}");

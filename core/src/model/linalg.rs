@@ -70,8 +70,11 @@ pub(crate) fn ridge_lstsq(
 
 /// The top `n` principal axes of the rows of a centred `p × d` matrix, as
 /// the rows of an `n' × d` matrix (n' ≤ n: axes without variance are
-/// dropped). Each axis's sign is fixed (its largest component positive) so
-/// the result does not depend on the SVD's arbitrary signs.
+/// dropped), each divided by the standard deviation along it, so that the
+/// projections of the rows have unit variance (whitened: coefficients
+/// fitted on them are in AO units whatever the model's length unit). Each
+/// axis's sign is fixed (its largest component positive) so the result
+/// does not depend on the SVD's arbitrary signs.
 pub(crate) fn principal_axes(centred: MatRef<'_, f64>, n: usize) -> Mat<f64> {
     let d = centred.ncols();
     if centred.nrows() == 0 || d == 0 || n == 0 {
@@ -88,12 +91,14 @@ pub(crate) fn principal_axes(centred: MatRef<'_, f64>, n: usize) -> Mat<f64> {
         .take_while(|&&x| x > RANK_TOLERANCE * s_max && x > 0.0)
         .count();
     let v = svd.V();
+    let rows = centred.nrows() as f64;
     Mat::from_fn(keep, d, |i, j| {
         let col = v.col(i);
         let big = (0..d)
             .max_by(|&a, &b| col[a].abs().total_cmp(&col[b].abs()).then(b.cmp(&a)))
             .expect("d > 0");
-        col[j] * col[big].signum()
+        let std = s[i] / rows.sqrt();
+        col[j] * col[big].signum() / std
     })
 }
 
@@ -128,8 +133,12 @@ mod tests {
         let p = Mat::from_fn(10, 3, |i, j| (i as f64 - 4.5) * [1.0, -2.0, 0.0][j]);
         let axes = principal_axes(p.as_ref(), 2);
         assert_eq!(axes.nrows(), 1, "one axis has variance");
-        let s = 5f64.sqrt();
-        assert!((axes[(0, 0)] + 1.0 / s).abs() < 1e-12);
-        assert!((axes[(0, 1)] - 2.0 / s).abs() < 1e-12);
+        // Along (−1, 2, 0)/√5, largest component positive.
+        assert!((axes[(0, 0)] * 2.0 + axes[(0, 1)]).abs() < 1e-12);
+        assert!(axes[(0, 1)] > 0.0 && axes[(0, 2)] == 0.0);
+        // Whitened: the projections have unit variance.
+        let proj = &p * axes.transpose();
+        let var = (0..10).map(|i| proj[(i, 0)].powi(2)).sum::<f64>() / 10.0;
+        assert!((var - 1.0).abs() < 1e-12, "{var}");
     }
 }

@@ -14,11 +14,13 @@ use crate::reference::AoBlock;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LinearOptions {
-    /// Ridge (Tikhonov) weight λ on the joint-angle coefficients, per
-    /// reference pose: minimises `(1/P)‖J T − A‖² + λ‖T‖²`. The constant
-    /// column is not penalised. 0 gives the pseudo-inverse solution.
+    /// Ridge (Tikhonov) weight λ on the coefficients of the standardised
+    /// joint angles, per reference pose: minimises `(1/P)‖J T − A‖² +
+    /// λ‖T‖²`. The constant column is not penalised. 0 gives the
+    /// pseudo-inverse solution.
     pub ridge: f64,
-    /// Coefficients of the joint angles with a magnitude below this are
+    /// Coefficients of the standardised joint angles (AO change per
+    /// standard deviation of the angle) with a magnitude below this are
     /// dropped and the rest stored sparse (CSR per vertex). 0 keeps the
     /// dense matrix.
     pub threshold: f32,
@@ -43,20 +45,35 @@ pub enum Coefficients {
 }
 
 /// A fitted vertex-linear model.
+///
+/// The joint angles enter standardised, `(j_k − μ_k) / σ_k` over the
+/// reference poses, which is the same linear model as Kontkanen & Aila's
+/// `jᵀt` (an affine change of the pose vector, still with the constant
+/// column) but puts every coefficient in AO units (the AO change over one
+/// standard deviation of that angle). That keeps f16 storage accurate (no
+/// large terms cancelling against the constant), makes the ridge weight and
+/// the sparsification threshold unit-free, and makes the constant the mean
+/// AO.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VertexLinear {
     /// Joint-angle parameters (N).
     pub parameters: usize,
-    /// `T` in f16: N+1 rows (the angles, then the constant).
+    /// μ_k: mean of each angle over the reference poses.
+    pub mean: Vec<f32>,
+    /// 1/σ_k, or 0 for an angle that never moved (its column is left out).
+    pub inv_std: Vec<f32>,
+    /// `T` in f16: N+1 rows (the standardised angles, then the constant).
     pub coefficients: Coefficients,
 }
 
 /// What the fit did, for the report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LinearFitStats {
-    /// The solve of the centred joint-angle matrix.
+    /// The solve of the standardised joint-angle matrix.
     pub solve: SolveStats,
-    /// RMSE over the training poses of the f32 fit, before f16 rounding
+    /// Angles that never moved over the reference poses (left out).
+    pub constant_parameters: usize,
+    /// RMSE over the training poses of the f64 fit, before f16 rounding
     /// and sparsification.
     pub training_rmse: f64,
     /// RMSE over the training poses of the stored model (f16, sparse).
@@ -65,17 +82,31 @@ pub struct LinearFitStats {
     pub kept_fraction: f64,
 }
 
+/// A fit whose coefficients f16 cannot hold.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "the fit is ill-conditioned: a coefficient of {largest:e} does not fit in f16; use more reference poses than parameters ({parameters}) or a ridge weight"
+)]
+pub struct FitOverflow {
+    /// The largest coefficient magnitude.
+    pub largest: f64,
+    /// The number of parameters.
+    pub parameters: usize,
+}
+
+/// The largest value an f16 holds.
+pub(crate) const F16_MAX: f64 = 65504.0;
+
 impl VertexLinear {
     /// Fits `T = J⁺A` over `poses` (one joint-angle vector per row of
-    /// `ao`). The angle columns and the AO are centred first, so the
-    /// constant column, fitted exactly afterwards, is never penalised by
-    /// the ridge; the centred solve goes through an SVD (see
+    /// `ao`), on standardised angles; the constant column, the mean AO, is
+    /// never penalised by the ridge. The solve goes through an SVD (see
     /// [`ridge_lstsq`]).
     pub fn fit(
         poses: &[Vec<f32>],
         ao: &AoBlock,
         options: &LinearOptions,
-    ) -> (Self, LinearFitStats) {
+    ) -> Result<(Self, LinearFitStats), FitOverflow> {
         let p = poses.len();
         assert_eq!(p, ao.poses(), "one pose per AO row");
         assert!(p > 0, "at least one reference pose");
@@ -84,21 +115,44 @@ impl VertexLinear {
         let mean_j: Vec<f64> = (0..n)
             .map(|k| poses.iter().map(|q| f64::from(q[k])).sum::<f64>() / p as f64)
             .collect();
+        let inv_std: Vec<f64> = (0..n)
+            .map(|k| {
+                let var = poses
+                    .iter()
+                    .map(|q| (f64::from(q[k]) - mean_j[k]).powi(2))
+                    .sum::<f64>()
+                    / p as f64;
+                // An angle that moved less than this (radians) is constant.
+                if var.sqrt() > 1e-6 {
+                    1.0 / var.sqrt()
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let mean_a: Vec<f64> = (0..v)
             .map(|i| (0..p).map(|r| f64::from(ao.row(r)[i])).sum::<f64>() / p as f64)
             .collect();
-        let jc = Mat::from_fn(p, n, |r, k| f64::from(poses[r][k]) - mean_j[k]);
+        let js = Mat::from_fn(p, n, |r, k| {
+            (f64::from(poses[r][k]) - mean_j[k]) * inv_std[k]
+        });
         let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
-        let (t, solve) = ridge_lstsq(jc.as_ref(), ac.as_ref(), options.ridge * p as f64);
-        // The constant: mean AO minus the angles' mean contribution.
-        let constant: Vec<f64> = (0..v)
-            .map(|i| mean_a[i] - (0..n).map(|k| mean_j[k] * t[(k, i)]).sum::<f64>())
-            .collect();
+        let (t, solve) = ridge_lstsq(js.as_ref(), ac.as_ref(), options.ridge * p as f64);
+        let largest = (0..n)
+            .flat_map(|k| (0..v).map(move |i| (k, i)))
+            .map(|(k, i)| t[(k, i)].abs())
+            .fold(0.0f64, f64::max);
+        if !(largest <= F16_MAX) {
+            return Err(FitOverflow {
+                largest,
+                parameters: n,
+            });
+        }
         let mut coefficients = Vec::with_capacity((n + 1) * v);
         for k in 0..n {
             coefficients.extend((0..v).map(|i| f16::from_f64(t[(k, i)])));
         }
-        coefficients.extend(constant.iter().map(|&c| f16::from_f64(c)));
+        coefficients.extend(mean_a.iter().map(|&c| f16::from_f64(c)));
         let block = Block {
             rows: n + 1,
             columns: v,
@@ -120,13 +174,15 @@ impl VertexLinear {
         };
         let model = Self {
             parameters: n,
+            mean: mean_j.iter().map(|&x| x as f32).collect(),
+            inv_std: inv_std.iter().map(|&x| x as f32).collect(),
             coefficients: stored,
         };
         let (mut exact, mut rounded) = (0.0f64, 0.0f64);
         for (r, q) in poses.iter().enumerate() {
             let predicted = model.evaluate(q);
             for (i, (&truth, &pred)) in ao.row(r).iter().zip(&predicted).enumerate() {
-                let f = constant[i] + (0..n).map(|k| f64::from(q[k]) * t[(k, i)]).sum::<f64>();
+                let f = mean_a[i] + (0..n).map(|k| js[(r, k)] * t[(k, i)]).sum::<f64>();
                 exact += (f - f64::from(truth)).powi(2);
                 rounded += (f64::from(pred) - f64::from(truth)).powi(2);
             }
@@ -134,23 +190,29 @@ impl VertexLinear {
         let count = (p * v).max(1) as f64;
         let stats = LinearFitStats {
             solve,
+            constant_parameters: inv_std.iter().filter(|&&s| s == 0.0).count(),
             training_rmse: (exact / count).sqrt(),
             stored_training_rmse: (rounded / count).sqrt(),
             kept_fraction,
         };
-        (model, stats)
+        Ok((model, stats))
     }
 
-    /// The weights of a pose: its joint angles and a 1.
-    pub fn weights(angles: &[f32]) -> Vec<f32> {
-        let mut w = angles.to_vec();
+    /// The weights of a pose: its standardised joint angles and a 1.
+    pub fn weights(&self, angles: &[f32]) -> Vec<f32> {
+        assert_eq!(angles.len(), self.parameters, "one number per parameter");
+        let mut w: Vec<f32> = angles
+            .iter()
+            .zip(self.mean.iter().zip(&self.inv_std))
+            .map(|(&x, (&m, &s))| (x - m) * s)
+            .collect();
         w.push(1.0);
         w
     }
 
     /// AO of every vertex at these joint angles.
     pub fn evaluate(&self, angles: &[f32]) -> Vec<f32> {
-        let w = Self::weights(angles);
+        let w = self.weights(angles);
         match &self.coefficients {
             Coefficients::Dense(form) => form.evaluate(&w),
             Coefficients::Sparse(form) => form.evaluate(&w),
@@ -165,12 +227,13 @@ impl VertexLinear {
         }
     }
 
-    /// Coefficient bytes.
+    /// Coefficient bytes and the angles' means and scales.
     pub fn bytes(&self) -> usize {
-        match &self.coefficients {
-            Coefficients::Dense(f) => f.bytes(),
-            Coefficients::Sparse(s) => s.bytes(),
-        }
+        8 * self.parameters
+            + match &self.coefficients {
+                Coefficients::Dense(f) => f.bytes(),
+                Coefficients::Sparse(s) => s.bytes(),
+            }
     }
 }
 
@@ -205,7 +268,7 @@ mod tests {
     #[test]
     fn recovers_linear_ao_on_unseen_poses() {
         let (q, ao) = linear_data(40);
-        let (model, stats) = VertexLinear::fit(&q, &ao, &LinearOptions::default());
+        let (model, stats) = VertexLinear::fit(&q, &ao, &LinearOptions::default()).unwrap();
         assert_eq!(stats.solve.rank, 3);
         assert!(stats.training_rmse < 1e-6, "{stats:?}");
         assert!(
@@ -218,7 +281,7 @@ mod tests {
             assert!((a - b).abs() < 1e-3, "{ao:?}");
         }
         assert_eq!(model.multiply_adds(), 4.0);
-        assert_eq!(model.bytes(), 2 * 4 * 3);
+        assert_eq!(model.bytes(), 2 * 4 * 3 + 8 * 3);
     }
 
     #[test]
@@ -228,7 +291,7 @@ mod tests {
             threshold: 0.01,
             ..LinearOptions::default()
         };
-        let (model, stats) = VertexLinear::fit(&q, &ao, &options);
+        let (model, stats) = VertexLinear::fit(&q, &ao, &options).unwrap();
         // 3 of the 9 angle coefficients are non-zero, plus 3 constants.
         let Coefficients::Sparse(s) = &model.coefficients else {
             panic!("sparse expected")
@@ -243,7 +306,8 @@ mod tests {
                 ridge: 1.0,
                 ..LinearOptions::default()
             },
-        );
+        )
+        .unwrap();
         assert!(rs.training_rmse > 1e-3, "ridge trades fit for smaller T");
         let slope = ridged.evaluate(&[1.0, 0.0, 0.0])[0] - ridged.evaluate(&[0.0, 0.0, 0.0])[0];
         assert!(slope > 0.0 && slope < 0.1, "{slope}");

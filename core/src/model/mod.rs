@@ -24,7 +24,7 @@ pub use clustered::{
 };
 pub use form::{Block, LinearForm, SparseForm};
 pub use linalg::SolveStats;
-pub use linear::{Coefficients, LinearFitStats, LinearOptions, VertexLinear};
+pub use linear::{Coefficients, FitOverflow, LinearFitStats, LinearOptions, VertexLinear};
 
 use half::f16;
 use serde::{Deserialize, Serialize};
@@ -58,7 +58,8 @@ pub enum Layout {
     /// `COEF`: V means.
     StaticAverage,
     /// `COEF`: `(N+1) × V` row-major, or with `sparse` the CSR values
-    /// (`CSRO` offsets, `CSRR` rows).
+    /// (`CSRO` offsets, `CSRR` rows); `NORM`: the N angle means, then the N
+    /// inverse standard deviations.
     VertexLinear {
         /// The joint-angle parameters (N), their nodes and ranges.
         joint_angles: JointAngles,
@@ -134,12 +135,22 @@ impl Model {
         }
     }
 
+    /// Bytes of the model's numbers: coefficients, maps, cluster centres
+    /// and axes.
+    pub fn bytes(&self) -> usize {
+        match self {
+            Self::StaticAverage(m) => m.form.bytes(),
+            Self::VertexLinear(_, m) => m.bytes(),
+            Self::VertexClustered(_, m) => m.bytes(),
+        }
+    }
+
     /// The per-pose weights (joint angles and a 1, blended projections, or
     /// `[1]`), computed once per pose on the CPU.
     pub fn weights(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
         match self {
             Self::StaticAverage(_) => vec![1.0],
-            Self::VertexLinear(layout, _) => VertexLinear::weights(&layout.params(skeleton, pose)),
+            Self::VertexLinear(layout, m) => m.weights(&layout.params(skeleton, pose)),
             Self::VertexClustered(handles, m) => m.weights(&handles.handles(skeleton, pose)),
         }
     }
@@ -177,26 +188,30 @@ impl Model {
     pub fn to_container(&self, header: AssetHeaderFields) -> Container {
         let (layout, sections) = match self {
             Self::StaticAverage(m) => (Layout::StaticAverage, form_sections(&m.form)),
-            Self::VertexLinear(joint_angles, m) => match &m.coefficients {
-                Coefficients::Dense(f) => (
+            Self::VertexLinear(joint_angles, m) => {
+                let (sparse, mut sections) = match &m.coefficients {
+                    Coefficients::Dense(f) => (false, form_sections(f)),
+                    Coefficients::Sparse(s) => (
+                        true,
+                        vec![
+                            section(*b"COEF", Data::F16(s.values.clone())),
+                            section(*b"CSRO", Data::U32(s.offsets.clone())),
+                            section(*b"CSRR", Data::U16(s.rows_of.clone())),
+                        ],
+                    ),
+                };
+                sections.push(section(
+                    *b"NORM",
+                    Data::F32(m.mean.iter().chain(&m.inv_std).copied().collect()),
+                ));
+                (
                     Layout::VertexLinear {
                         joint_angles: joint_angles.clone(),
-                        sparse: false,
+                        sparse,
                     },
-                    form_sections(f),
-                ),
-                Coefficients::Sparse(s) => (
-                    Layout::VertexLinear {
-                        joint_angles: joint_angles.clone(),
-                        sparse: true,
-                    },
-                    vec![
-                        section(*b"COEF", Data::F16(s.values.clone())),
-                        section(*b"CSRO", Data::U32(s.offsets.clone())),
-                        section(*b"CSRR", Data::U16(s.rows_of.clone())),
-                    ],
-                ),
-            },
+                    sections,
+                )
+            }
             Self::VertexClustered(handles, m) => {
                 let mut sections = form_sections(&m.form);
                 sections.push(section(
@@ -280,10 +295,19 @@ impl Model {
                 } else {
                     Coefficients::Dense(read_form(v, &[rows], coef)?)
                 };
+                let n = joint_angles.len();
+                let Data::F32(norm) = container.section(b"NORM")? else {
+                    return Err(bad("NORM must be f32"));
+                };
+                if norm.len() != 2 * n {
+                    return Err(bad("NORM length does not match the header"));
+                }
                 Self::VertexLinear(
                     joint_angles.clone(),
                     VertexLinear {
-                        parameters: joint_angles.len(),
+                        parameters: n,
+                        mean: norm[..n].to_vec(),
+                        inv_std: norm[n..].to_vec(),
                         coefficients,
                     },
                 )

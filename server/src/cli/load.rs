@@ -48,15 +48,22 @@ fn gather(path: &Path, limits: &Limits) -> anyhow::Result<(Vec<u8>, Vec<SideFile
 
 /// Imports a character file.
 pub(super) fn character(path: &Path, limits: &Limits) -> anyhow::Result<Imported> {
+    Ok(character_with_digest(path, limits)?.0)
+}
+
+/// Imports a character file and returns its upload digest too.
+pub(super) fn character_with_digest(
+    path: &Path,
+    limits: &Limits,
+) -> anyhow::Result<(Imported, String)> {
     let (main, side_files) = gather(path, limits)?;
-    aobake_core::import_character(
-        Upload {
-            main: &main,
-            side_files: &side_files,
-        },
-        limits,
-    )
-    .with_context(|| format!("cannot import {}", path.display()))
+    let upload = Upload {
+        main: &main,
+        side_files: &side_files,
+    };
+    let imported = aobake_core::import_character(upload, limits)
+        .with_context(|| format!("cannot import {}", path.display()))?;
+    Ok((imported, upload.digest()))
 }
 
 /// Imports the clips of a separate file, bound to `imported`'s nodes by
@@ -66,14 +73,22 @@ pub(super) fn clips(
     imported: &Imported,
     limits: &Limits,
 ) -> anyhow::Result<(Vec<Clip>, Vec<String>)> {
+    let (clips, warnings, _) = clips_with_digest(path, imported, limits)?;
+    Ok((clips, warnings))
+}
+
+/// Imports the clips of a separate file and returns its upload digest too.
+pub(super) fn clips_with_digest(
+    path: &Path,
+    imported: &Imported,
+    limits: &Limits,
+) -> anyhow::Result<(Vec<Clip>, Vec<String>, String)> {
     let (main, side_files) = gather(path, limits)?;
-    aobake_core::import_clips(
-        Upload {
-            main: &main,
-            side_files: &side_files,
-        },
-        &imported.character,
-        limits,
-    )
-    .with_context(|| format!("cannot import clips from {}", path.display()))
+    let upload = Upload {
+        main: &main,
+        side_files: &side_files,
+    };
+    let (clips, warnings) = aobake_core::import_clips(upload, &imported.character, limits)
+        .with_context(|| format!("cannot import clips from {}", path.display()))?;
+    Ok((clips, warnings, upload.digest()))
 }

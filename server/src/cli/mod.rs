@@ -1,6 +1,8 @@
 //! Command-line interface: `aobake <command>`.
 
+mod bake;
 mod bench;
+mod eval;
 mod inspect;
 mod load;
 mod pose;
@@ -28,6 +30,12 @@ enum Command {
     /// Ray-trace ground-truth ambient occlusion at every vertex of a posed
     /// character or a PLY mesh and write it as CSV.
     Trace(trace::Args),
+    /// Bake pose-dependent per-vertex AO: trace reference poses, fit the
+    /// method, judge it on held-out poses against the static average, and
+    /// write the asset, a JSON report and a PSNR plot.
+    Bake(Box<bake::Args>),
+    /// Evaluate a baked asset at a pose and write per-vertex AO as CSV.
+    Eval(eval::Args),
     /// Measure speed: print figures for the benchmarks that issues and
     /// notes quote.
     Bench(bench::Args),
@@ -39,6 +47,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Inspect(args) => inspect::run(&args),
         Command::Pose(args) => pose::run(&args),
         Command::Trace(args) => trace::run(&args),
+        Command::Bake(args) => bake::run(&args),
+        Command::Eval(args) => eval::run(&args),
         Command::Bench(args) => bench::run(&args),
     }
 }

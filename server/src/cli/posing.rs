@@ -28,6 +28,7 @@ pub(super) struct PoseArgs {
 pub(super) struct Posed {
     pub character: Character,
     pub mesh: PosedMesh,
+    pub pose: Pose,
 }
 
 /// Imports `file` and skins it in the pose `args` selects.
@@ -64,5 +65,9 @@ pub(super) fn pose(file: &Path, args: &PoseArgs, limits: &Limits) -> anyhow::Res
         _ => Pose::bind(&character),
     };
     let mesh = character.skin(&pose);
-    Ok(Posed { character, mesh })
+    Ok(Posed {
+        character,
+        mesh,
+        pose,
+    })
 }

@@ -1,0 +1,186 @@
+//! The report every per-vertex bake carries (DESIGN §6): a JSON document
+//! and a PNG plot of PSNR per frame over each test clip for the model and
+//! the static-average baseline, as Kontkanen & Aila plot it (Fig. 3).
+
+use std::sync::Once;
+
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    asset::Method,
+    bake::{BakeParams, Evaluation, FitStats},
+};
+
+/// The font of the plot's labels (DejaVu Sans, Bitstream Vera licence:
+/// `assets/DejaVuSans-LICENSE.txt`), so that plotting needs no system
+/// fonts.
+static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+
+/// Wall-clock seconds of each stage.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Timings {
+    /// Ray tracing the reference poses.
+    pub reference_trace_s: f64,
+    /// Fitting the model (and the baseline).
+    pub fit_s: f64,
+    /// Ray tracing the held-out poses.
+    pub test_trace_s: f64,
+    /// Evaluating the model on them.
+    pub evaluate_s: f64,
+}
+
+/// Sizes of the model and the baseline.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Sizes {
+    /// The whole asset file.
+    pub asset_bytes: usize,
+    /// The model's numbers alone (coefficients, maps, cluster data).
+    pub model_bytes: usize,
+    /// The baseline's numbers (one f16 per vertex).
+    pub baseline_bytes: usize,
+}
+
+/// The character a bake ran on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CharacterInfo {
+    /// Upload digest.
+    pub digest: String,
+    /// Vertices.
+    pub vertices: usize,
+    /// Triangles.
+    pub triangles: usize,
+    /// Clip names: all, training, test.
+    pub clips: Vec<String>,
+    /// Clips the model was fitted on.
+    pub train_clips: Vec<String>,
+    /// Clips whose frames were held out.
+    pub test_clips: Vec<String>,
+    /// Joint-angle parameters and handle numbers.
+    pub joint_angle_parameters: usize,
+    /// Handle coordinates (Kirk & Arikan).
+    pub handle_coordinates: usize,
+}
+
+/// A bake's report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Report {
+    /// The method.
+    pub method: Method,
+    /// The bake key.
+    pub bake_key: String,
+    /// The parameters.
+    pub params: BakeParams,
+    /// The character.
+    pub character: CharacterInfo,
+    /// Rays traced for reference and held-out poses.
+    pub rays: u64,
+    /// Stage times.
+    pub timings: Timings,
+    /// The fit's own figures.
+    pub fit: FitStats,
+    /// Sizes.
+    pub sizes: Sizes,
+    /// Held-out errors against the baseline.
+    pub evaluation: Evaluation,
+}
+
+/// Draws PSNR per frame over each test clip (one panel per clip, the model
+/// and the baseline in each) as PNG bytes.
+pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
+    static REGISTER: Once = Once::new();
+    let mut registered = Ok(());
+    REGISTER.call_once(|| {
+        registered = register_font("sans-serif", FontStyle::Normal, FONT)
+            .map_err(|_| "the bundled font is invalid".to_owned());
+    });
+    registered?;
+    let clips = &report.evaluation.clips;
+    let (width, panel) = (900u32, 280u32);
+    let height = 50 + panel * clips.len().max(1) as u32;
+    let mut rgb = vec![255u8; (width * height * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area();
+        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+        root.fill(&WHITE).map_err(e)?;
+        let (title, body) = root.split_vertically(50);
+        title
+            .titled(
+                &format!(
+                    "{}: PSNR per frame on held-out clip frames (model vs static average)",
+                    report.method.name()
+                ),
+                ("sans-serif", 20),
+            )
+            .map_err(e)?;
+        let panels = body.split_evenly((clips.len().max(1), 1));
+        for (clip, area) in clips.iter().zip(&panels) {
+            let psnr = |v: &[f64]| -> Vec<(f64, f64)> {
+                clip.times
+                    .iter()
+                    .zip(v)
+                    .map(|(&t, &p)| (f64::from(t), p))
+                    .collect()
+            };
+            let model = psnr(&clip.errors.model.psnr_db);
+            let base = psnr(&clip.errors.baseline.psnr_db);
+            let all = model.iter().chain(&base).map(|p| p.1);
+            let lo = all.clone().fold(f64::INFINITY, f64::min);
+            let hi = all.fold(f64::NEG_INFINITY, f64::max);
+            let (lo, hi) = if lo.is_finite() {
+                (lo - 2.0, hi + 2.0)
+            } else {
+                (0.0, 1.0)
+            };
+            let t_max = clip.times.last().map_or(1.0, |&t| f64::from(t)).max(1e-3);
+            let mut chart = ChartBuilder::on(area)
+                .caption(
+                    format!(
+                        "{}: model {:.1} dB, baseline {:.1} dB (mean)",
+                        clip.clip,
+                        clip.errors.model.mean.psnr_db,
+                        clip.errors.baseline.mean.psnr_db
+                    ),
+                    ("sans-serif", 16),
+                )
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(50)
+                .build_cartesian_2d(0f64..t_max, lo..hi)
+                .map_err(e)?;
+            chart
+                .configure_mesh()
+                .x_desc("time (s)")
+                .y_desc("PSNR (dB)")
+                .draw()
+                .map_err(e)?;
+            chart
+                .draw_series(LineSeries::new(model, BLUE.stroke_width(2)))
+                .map_err(e)?
+                .label(report.method.name())
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+            chart
+                .draw_series(LineSeries::new(base, RED.stroke_width(2)))
+                .map_err(e)?
+                .label("static average")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(e)?;
+        }
+        root.present().map_err(e)?;
+    }
+    let mut png = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut png, width, height);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
+        writer.write_image_data(&rgb).map_err(|e| e.to_string())?;
+    }
+    Ok(png)
+}

@@ -1,0 +1,81 @@
+//! `aobake eval`: a baked asset evaluated at a pose, as an engine would at
+//! run time, written as CSV.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{Context as _, bail};
+use aobake_core::{Limits, asset::Container, model::Model};
+
+use super::posing::{PoseArgs, pose};
+
+/// Arguments of `aobake eval`.
+#[derive(Debug, clap::Args)]
+pub(super) struct Args {
+    /// The asset (from `aobake bake`).
+    asset: PathBuf,
+    /// The character it was baked for.
+    file: PathBuf,
+    #[command(flatten)]
+    pose: PoseArgs,
+    /// Output CSV: `index,occlusion` per vertex (0 = open, 1 = blocked).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+pub(super) fn run(args: &Args) -> anyhow::Result<()> {
+    let bytes = std::fs::read(&args.asset)
+        .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    let container = Container::from_bytes(&bytes)
+        .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    let (model, header) = Model::from_container(&container)
+        .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    let limits = Limits::default();
+    let posed = pose(&args.file, &args.pose, &limits)?;
+    let character = &posed.character;
+    if character.vertex_count() != header.vertices {
+        bail!(
+            "{} has {} vertices but the asset was baked for {} vertices (character {})",
+            args.file.display(),
+            character.vertex_count(),
+            header.vertices,
+            header.character
+        );
+    }
+    let nodes = character.skeleton.nodes.len();
+    let fits = match &model {
+        Model::StaticAverage(_) => true,
+        Model::VertexLinear(layout, _) => layout
+            .joints
+            .iter()
+            .chain(&layout.translations)
+            .all(|&n| n < nodes),
+        Model::VertexClustered(handles, _) => {
+            handles.root < nodes && handles.joints.iter().all(|&n| n < nodes)
+        }
+    };
+    if !fits {
+        bail!(
+            "the asset's joints are not in {}: it was baked for another character ({})",
+            args.file.display(),
+            header.character
+        );
+    }
+    let values = model.evaluate(&character.skeleton, &posed.pose);
+    let mut csv = String::with_capacity(values.len() * 16 + 16);
+    csv.push_str("index,occlusion\n");
+    for (i, v) in values.iter().enumerate() {
+        let _ = writeln!(csv, "{i},{v}");
+    }
+    std::fs::write(&args.out, csv)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    eprintln!(
+        "wrote {}: {} vertices, {} asset (format {}.{})",
+        args.out.display(),
+        values.len(),
+        header.method.name(),
+        container.version.0,
+        container.version.1
+    );
+    Ok(())
+}
