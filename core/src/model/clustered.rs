@@ -56,6 +56,11 @@ pub struct ClusteredOptions {
     pub centering: Centering,
     /// Ridge weight per pose on each cluster's fit (0: pseudo-inverse).
     pub ridge: f64,
+    /// At run time each whitened PCA coordinate is clamped to ±this many
+    /// standard deviations of the cluster's training poses (0: no clamp),
+    /// so a pose far from every cluster does not extrapolate a linear
+    /// model without bound (the paper's "blotchy patches").
+    pub clamp: f32,
 }
 
 impl Default for ClusteredOptions {
@@ -68,6 +73,7 @@ impl Default for ClusteredOptions {
             alpha: 10.0,
             centering: Centering::Cluster,
             ridge: 0.0,
+            clamp: 3.0,
         }
     }
 }
@@ -94,6 +100,8 @@ pub struct VertexClustered {
     pub alpha: f32,
     /// Centring (whether each cluster block has a constant row).
     pub centering: Centering,
+    /// Clamp of the whitened coordinates (0: none).
+    pub clamp: f32,
     /// The pose clusters.
     pub clusters: Vec<PoseCluster>,
     /// Block 0: the global mean AO; block 1 + j: pose cluster j's
@@ -234,6 +242,7 @@ impl VertexClustered {
             dimensions: n,
             alpha: options.alpha,
             centering: options.centering,
+            clamp: options.clamp,
             clusters,
             form: LinearForm {
                 vertices: v,
@@ -287,7 +296,8 @@ impl VertexClustered {
     }
 
     /// The per-pose weights of the linear form: `[1]` for the mean, then
-    /// per cluster `ω_j · P_j (h − h̄_j)` (and `ω_j` for the constant).
+    /// per cluster `ω_j · P_j (h − h̄_j)`, each coordinate clamped to
+    /// ±`clamp` (and `ω_j` for the constant).
     pub fn weights(&self, h: &[f32]) -> Vec<f32> {
         assert_eq!(h.len(), self.handles, "one number per handle coordinate");
         let omega = self.blend_weights(h);
@@ -301,6 +311,12 @@ impl VertexClustered {
                     .zip(h.iter().zip(&cluster.center))
                     .map(|(&a, (&x, &c))| f64::from(a) * (f64::from(x) - f64::from(c)))
                     .sum();
+                let y = if self.clamp > 0.0 {
+                    let c = f64::from(self.clamp);
+                    y.clamp(-c, c)
+                } else {
+                    y
+                };
                 out.push((w * y) as f32);
             }
             if self.centering == Centering::Cluster {
@@ -430,10 +446,10 @@ mod tests {
                 let x = base + t;
                 h.push(vec![x, 2.0 * x]);
                 values.extend([
-                    0.2 + slope * t,
+                    0.4 + slope * t,
                     0.5,
                     0.5 + 0.5 * slope * t,
-                    0.21 + slope * t,
+                    0.41 + slope * t,
                 ]);
             }
         }
@@ -462,7 +478,7 @@ mod tests {
         let t = 0.55f32;
         let x = 10.0 + t;
         let got = model.evaluate(&[x, 2.0 * x]);
-        let want = [0.2 - 0.3 * t, 0.5, 0.5 - 0.15 * t, 0.21 - 0.3 * t];
+        let want = [0.4 - 0.3 * t, 0.5, 0.5 - 0.15 * t, 0.41 - 0.3 * t];
         for (a, b) in got.iter().zip(want) {
             assert!((a - b).abs() < 2e-3, "{got:?} vs {want:?}");
         }

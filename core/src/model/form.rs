@@ -13,6 +13,10 @@
 //!   per pose cluster with `w = ω_j · P_j (h − h̄_j)` (Kirk & Arikan Eq. 4),
 //!   whose columns are vertex clusters when spatial compression is on.
 //!
+//! The sum is clamped to [0, 1], the range of AO, as a renderer would
+//! saturate it: a linear model can overshoot on poses far from its
+//! training set.
+//!
 //! `shaders/vertex_ao.wgsl` evaluates exactly this layout on the GPU.
 
 use half::f16;
@@ -71,6 +75,7 @@ impl LinearForm {
                 }
             }
         }
+        out.iter_mut().for_each(|x| *x = x.clamp(0.0, 1.0));
         out
     }
 
@@ -150,7 +155,8 @@ impl SparseForm {
                     .iter()
                     .zip(&self.values[r])
                     .map(|(&k, c)| weights[usize::from(k)] * c.to_f32())
-                    .sum()
+                    .sum::<f32>()
+                    .clamp(0.0, 1.0)
             })
             .collect()
     }
@@ -189,6 +195,11 @@ mod tests {
             ],
         };
         let ao = form.evaluate(&[1.0, 0.1, 0.2]);
+        assert_eq!(
+            form.evaluate(&[1.0, 10.0, 0.0]),
+            vec![0.0, 1.0, 0.0],
+            "clamped"
+        );
         // v0: 0.5 + 0.1·(−1) + 0.2·2; v1: 0.25 + 0.1·1 + 0.2·0.5; v2: 0 + 0.1·(−1) + 0.2·2
         let want = [0.8, 0.45, 0.3];
         for (a, b) in ao.iter().zip(want) {
@@ -206,9 +217,10 @@ mod tests {
         let sparse = SparseForm::from_dense(&dense, 2, 0.01, &[2]);
         assert_eq!(sparse.offsets, vec![0, 2, 4]);
         assert_eq!(sparse.rows_of, vec![1, 2, 0, 2]);
-        let w = [2.0, 3.0, 1.0];
+        let w = [2.0, 1.0, 1.0];
         let s = sparse.evaluate(&w);
-        assert!((s[0] - (-0.75 + 0.3)).abs() < 1e-3);
-        assert!((s[1] - (1.0 + 0.4)).abs() < 1e-3);
+        // v0 = −0.25·1 + 0.3·1; v1 = 0.5·2 + 0.4·1 = 1.4, clamped to 1.
+        assert!((s[0] - 0.05).abs() < 1e-3, "{s:?}");
+        assert_eq!(s[1], 1.0, "clamped");
     }
 }

@@ -78,6 +78,8 @@ pub enum Layout {
         alpha: f32,
         /// Centring.
         centering: Centering,
+        /// Clamp of the whitened coordinates (0: none).
+        clamp: f32,
         /// Columns of each pose cluster's block (V when unmapped).
         columns: Vec<usize>,
     },
@@ -228,6 +230,7 @@ impl Model {
                         dimensions: m.dimensions,
                         alpha: m.alpha,
                         centering: m.centering,
+                        clamp: m.clamp,
                         columns: m.form.blocks[1..].iter().map(|b| b.columns).collect(),
                     },
                     sections,
@@ -317,6 +320,7 @@ impl Model {
                 dimensions,
                 alpha,
                 centering,
+                clamp,
                 columns,
             } => {
                 let (m, n, h) = (columns.len(), *dimensions, handles.len());
@@ -344,6 +348,7 @@ impl Model {
                         dimensions: n,
                         alpha: *alpha,
                         centering: *centering,
+                        clamp: *clamp,
                         clusters,
                         form,
                     },

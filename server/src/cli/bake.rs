@@ -96,6 +96,11 @@ pub(super) struct Args {
     /// coefficient, more accurate).
     #[arg(long, value_enum, default_value = "cluster")]
     centering: CenteringArg,
+    /// vertex-clustered: clamp each whitened PCA coordinate to ± this many
+    /// standard deviations of its cluster's training poses (0: off), so
+    /// poses unlike any training pose do not extrapolate without bound.
+    #[arg(long, default_value_t = 3.0)]
+    clamp: f32,
     /// Worker threads for tracing. Default: one per core.
     #[arg(long)]
     threads: Option<usize>,
@@ -164,6 +169,7 @@ impl Args {
         p.clustered.vertex_clusters = self.vertex_clusters;
         p.clustered.vertex_tolerance = self.vertex_tolerance;
         p.clustered.alpha = self.alpha;
+        p.clustered.clamp = self.clamp;
         p.clustered.centering = match self.centering {
             CenteringArg::Global => Centering::Global,
             CenteringArg::Cluster => Centering::Cluster,
