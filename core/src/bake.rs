@@ -46,8 +46,8 @@ pub struct BakeParams {
     pub method: Method,
     /// Reference poses to fit to.
     pub poses: usize,
-    /// Where they come from (default: random for vertex-linear, clip
-    /// frames otherwise).
+    /// Where they come from (default: mixed for vertex-linear, clip frames
+    /// otherwise).
     pub reference: ReferenceSource,
     /// Rays per vertex and pose.
     pub samples: u32,
@@ -80,8 +80,12 @@ impl BakeParams {
         Self {
             method,
             poses: 256,
+            // Random joint angles alone combine every joint's extremes and
+            // fit clip poses poorly (Fox: +0.5 dB over the baseline on
+            // clip frames against +9 dB with half clip frames); clip frames
+            // alone leave correlated angles that random poses decorrelate.
             reference: match method {
-                Method::VertexLinear => ReferenceSource::Random,
+                Method::VertexLinear => ReferenceSource::Mixed,
                 _ => ReferenceSource::Clips,
             },
             samples: 256,
@@ -373,8 +377,9 @@ impl<'a> Plan<'a> {
                     .iter()
                     .map(|p| self.joint_angles.params(skeleton, p))
                     .collect();
-                let (m, stats) = VertexLinear::fit(&q, ao, &self.params.linear)
-                    .map_err(|e| BakeError::Fit(e.to_string()))?;
+                let (m, stats) =
+                    VertexLinear::fit(&q, &self.joint_angles.ranges, ao, &self.params.linear)
+                        .map_err(|e| BakeError::Fit(e.to_string()))?;
                 (
                     Model::VertexLinear(self.joint_angles.clone(), m),
                     FitStats::VertexLinear(stats),

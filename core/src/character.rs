@@ -126,6 +126,33 @@ impl Character {
             .collect()
     }
 
+    /// The deepest node that is an ancestor-or-self of every palette node
+    /// (their lowest common ancestor), if they share one. Its world
+    /// transform, and those of its ancestors, move the whole mesh rigidly:
+    /// AO, being self-occlusion, does not depend on them.
+    pub fn body_root(&self) -> Option<usize> {
+        let chain = |n: usize| {
+            let mut c = vec![n];
+            while let Some(p) = self.skeleton.nodes[*c.last().expect("non-empty")].parent {
+                c.push(p);
+            }
+            c.reverse();
+            c
+        };
+        let mut joints = self.joint_nodes().into_iter();
+        let mut common = chain(joints.next()?);
+        for j in joints {
+            let other = chain(j);
+            let same = common
+                .iter()
+                .zip(&other)
+                .take_while(|(a, b)| a == b)
+                .count();
+            common.truncate(same);
+        }
+        common.last().copied()
+    }
+
     /// Nodes whose transform can move a vertex: palette nodes, the nodes of
     /// rigid instances and all their ancestors.
     pub fn relevant_nodes(&self) -> Vec<bool> {

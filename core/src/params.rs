@@ -74,6 +74,10 @@ pub enum ParamError {
 }
 
 /// The joint-angle parameterisation of a character's poses.
+///
+/// Rotations of the body root (the joints' lowest common ancestor) and of
+/// its ancestors are left out: they turn the whole mesh, which changes no
+/// self-occlusion.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct JointAngles {
     /// Nodes with 3 rotation-vector parameters each, in node order.
@@ -102,11 +106,23 @@ impl JointAngles {
     ) -> Result<Self, ParamError> {
         let skeleton = &character.skeleton;
         let relevant = character.relevant_nodes();
+        // The body root and its ancestors move the mesh rigidly; AO does
+        // not depend on their rotations.
+        let mut rigid = vec![false; skeleton.nodes.len()];
+        let mut n = character.body_root();
+        while let Some(r) = n {
+            rigid[r] = true;
+            n = skeleton.nodes[r].parent;
+        }
         let animated = |property: Property| {
             let mut nodes: Vec<usize> = clips
                 .iter()
                 .flat_map(|c| &c.channels)
-                .filter(|c| c.property == property && relevant[c.node])
+                .filter(|c| {
+                    c.property == property
+                        && relevant[c.node]
+                        && (property != Property::Rotation || !rigid[c.node])
+                })
                 .map(|c| c.node)
                 .collect();
             nodes.sort_unstable();
@@ -298,8 +314,11 @@ pub fn random_clip_frames(clips: &[Clip], count: usize, seed: u64) -> Vec<ClipFr
 /// Kirk & Arikan's handle layout of a character.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Handles {
-    /// The joint whose position is the origin of all handles.
-    pub root: usize,
+    /// The node whose frame the handles are expressed in: the body root
+    /// (the joints' lowest common ancestor), so that handles do not change
+    /// when the whole character moves or turns; `None` (joints in separate
+    /// trees) uses world space.
+    pub root: Option<usize>,
     /// Joints with two handles each, in palette order.
     pub joints: Vec<usize>,
     /// Per joint, the off-axis handle in the joint's local frame.
@@ -314,10 +333,7 @@ impl Handles {
         let skeleton = &character.skeleton;
         let joints = character.joint_nodes();
         let world = skeleton.world_from_node(&Pose::rest(skeleton).locals);
-        let root = *joints
-            .iter()
-            .min_by_key(|&&j| skeleton.depth(j))
-            .expect("a character has at least one joint");
+        let root = character.body_root();
         let diag =
             bounds(character.positions.iter().copied()).map_or(1.0, |(lo, hi)| (hi - lo).length());
         let is_joint = {
@@ -380,14 +396,17 @@ impl Handles {
     }
 
     /// The handle vector of a pose: per joint, its position and its
-    /// off-axis handle, minus the root joint's position.
+    /// off-axis handle, in the body root's frame.
     pub fn handles(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
         let world = skeleton.world_from_node(&pose.locals);
-        let origin = Vec3::from(world[self.root].translation);
+        let root_from_world = self
+            .root
+            .map_or(glam::Affine3A::IDENTITY, |r| world[r].inverse());
         let mut out = Vec::with_capacity(self.len());
         for (&j, offset) in self.joints.iter().zip(&self.offsets) {
-            out.extend((Vec3::from(world[j].translation) - origin).to_array());
-            out.extend((world[j].transform_point3(*offset) - origin).to_array());
+            let root_from_joint = root_from_world * world[j];
+            out.extend(Vec3::from(root_from_joint.translation).to_array());
+            out.extend(root_from_joint.transform_point3(*offset).to_array());
         }
         out
     }

@@ -72,7 +72,7 @@ impl Default for ClusteredOptions {
             vertex_tolerance: 0.0,
             alpha: 10.0,
             centering: Centering::Cluster,
-            ridge: 0.0,
+            ridge: super::linear::DEFAULT_RIDGE,
             clamp: 3.0,
         }
     }

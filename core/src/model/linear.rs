@@ -8,7 +8,13 @@ use serde::{Deserialize, Serialize};
 
 use super::form::{Block, LinearForm, SparseForm};
 use super::linalg::{SolveStats, ridge_lstsq};
-use crate::reference::AoBlock;
+use crate::{params::Range, reference::AoBlock};
+
+/// The default ridge weight: on standardised angles it shrinks directions
+/// of pose space with less than about 1/1000 of a typical angle's variance
+/// (correlated angles in clip frames), and leaves well-spread random poses
+/// all but untouched (a factor 1/(1 + 0.001)).
+pub const DEFAULT_RIDGE: f64 = 1e-3;
 
 /// Fitting options of vertex-linear.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -29,7 +35,7 @@ pub struct LinearOptions {
 impl Default for LinearOptions {
     fn default() -> Self {
         Self {
-            ridge: 0.0,
+            ridge: DEFAULT_RIDGE,
             threshold: 0.0,
         }
     }
@@ -62,6 +68,11 @@ pub struct VertexLinear {
     pub mean: Vec<f32>,
     /// 1/σ_k, or 0 for an angle that never moved (its column is left out).
     pub inv_std: Vec<f32>,
+    /// The valid range of each angle (from the clips, with the margin):
+    /// angles are clamped to it at run time, so a pose outside what the
+    /// model was fitted on does not extrapolate a linear function without
+    /// bound.
+    pub ranges: Vec<Range>,
     /// `T` in f16: N+1 rows (the standardised angles, then the constant).
     pub coefficients: Coefficients,
 }
@@ -104,6 +115,7 @@ impl VertexLinear {
     /// [`ridge_lstsq`]).
     pub fn fit(
         poses: &[Vec<f32>],
+        ranges: &[Range],
         ao: &AoBlock,
         options: &LinearOptions,
     ) -> Result<(Self, LinearFitStats), FitOverflow> {
@@ -111,6 +123,7 @@ impl VertexLinear {
         assert_eq!(p, ao.poses(), "one pose per AO row");
         assert!(p > 0, "at least one reference pose");
         let n = poses[0].len();
+        assert_eq!(ranges.len(), n, "one range per parameter");
         let v = ao.vertices;
         let mean_j: Vec<f64> = (0..n)
             .map(|k| poses.iter().map(|q| f64::from(q[k])).sum::<f64>() / p as f64)
@@ -176,6 +189,7 @@ impl VertexLinear {
             parameters: n,
             mean: mean_j.iter().map(|&x| x as f32).collect(),
             inv_std: inv_std.iter().map(|&x| x as f32).collect(),
+            ranges: ranges.to_vec(),
             coefficients: stored,
         };
         let (mut exact, mut rounded) = (0.0f64, 0.0f64);
@@ -198,13 +212,15 @@ impl VertexLinear {
         Ok((model, stats))
     }
 
-    /// The weights of a pose: its standardised joint angles and a 1.
+    /// The weights of a pose: its joint angles clamped to their ranges and
+    /// standardised, and a 1.
     pub fn weights(&self, angles: &[f32]) -> Vec<f32> {
         assert_eq!(angles.len(), self.parameters, "one number per parameter");
         let mut w: Vec<f32> = angles
             .iter()
+            .zip(&self.ranges)
             .zip(self.mean.iter().zip(&self.inv_std))
-            .map(|(&x, (&m, &s))| (x - m) * s)
+            .map(|((&x, r), (&m, &s))| (x.clamp(r.min, r.max) - m) * s)
             .collect();
         w.push(1.0);
         w
@@ -243,6 +259,16 @@ mod tests {
     use rand::{RngExt as _, SeedableRng as _};
     use rand_chacha::ChaCha8Rng;
 
+    fn wide() -> Vec<Range> {
+        vec![
+            Range {
+                min: -2.0,
+                max: 2.0
+            };
+            3
+        ]
+    }
+
     /// AO that is exactly linear in 3 parameters, plus a vertex that
     /// ignores them.
     fn linear_data(poses: usize) -> (Vec<Vec<f32>>, AoBlock) {
@@ -268,7 +294,11 @@ mod tests {
     #[test]
     fn recovers_linear_ao_on_unseen_poses() {
         let (q, ao) = linear_data(40);
-        let (model, stats) = VertexLinear::fit(&q, &ao, &LinearOptions::default()).unwrap();
+        let exact = LinearOptions {
+            ridge: 0.0,
+            ..LinearOptions::default()
+        };
+        let (model, stats) = VertexLinear::fit(&q, &wide(), &ao, &exact).unwrap();
         assert_eq!(stats.solve.rank, 3);
         assert!(stats.training_rmse < 1e-6, "{stats:?}");
         assert!(
@@ -281,6 +311,11 @@ mod tests {
             assert!((a - b).abs() < 1e-3, "{ao:?}");
         }
         assert_eq!(model.multiply_adds(), 4.0);
+        // Outside its range an angle is clamped: 3 counts as 2.
+        assert_eq!(
+            model.evaluate(&[3.0, 0.0, 0.0]),
+            model.evaluate(&[2.0, 0.0, 0.0])
+        );
         assert_eq!(model.bytes(), 2 * 4 * 3 + 8 * 3);
     }
 
@@ -291,7 +326,7 @@ mod tests {
             threshold: 0.01,
             ..LinearOptions::default()
         };
-        let (model, stats) = VertexLinear::fit(&q, &ao, &options).unwrap();
+        let (model, stats) = VertexLinear::fit(&q, &wide(), &ao, &options).unwrap();
         // 3 of the 9 angle coefficients are non-zero, plus 3 constants.
         let Coefficients::Sparse(s) = &model.coefficients else {
             panic!("sparse expected")
@@ -301,6 +336,7 @@ mod tests {
         assert!(stats.stored_training_rmse < 1e-3);
         let (ridged, rs) = VertexLinear::fit(
             &q,
+            &wide(),
             &ao,
             &LinearOptions {
                 ridge: 1.0,

@@ -24,7 +24,9 @@ pub use clustered::{
 };
 pub use form::{Block, LinearForm, SparseForm};
 pub use linalg::SolveStats;
-pub use linear::{Coefficients, FitOverflow, LinearFitStats, LinearOptions, VertexLinear};
+pub use linear::{
+    Coefficients, DEFAULT_RIDGE, FitOverflow, LinearFitStats, LinearOptions, VertexLinear,
+};
 
 use half::f16;
 use serde::{Deserialize, Serialize};
@@ -311,6 +313,7 @@ impl Model {
                         parameters: n,
                         mean: norm[..n].to_vec(),
                         inv_std: norm[n..].to_vec(),
+                        ranges: joint_angles.ranges.clone(),
                         coefficients,
                     },
                 )

@@ -97,12 +97,11 @@ fn handles_are_root_relative_and_move_with_the_pose() {
     let handles = Handles::new(c);
     assert_eq!(handles.len(), 6 * 19);
     let rest = handles.handles(&c.skeleton, &Pose::rest(&c.skeleton));
-    let root = handles
-        .joints
-        .iter()
-        .position(|&j| j == handles.root)
-        .unwrap();
-    assert_eq!(&rest[6 * root..6 * root + 3], &[0.0, 0.0, 0.0]);
+    // The body root is a joint here, at the origin of its own frame.
+    let body = c.body_root().unwrap();
+    assert_eq!(handles.root, Some(body));
+    let root = handles.joints.iter().position(|&j| j == body).unwrap();
+    assert!(rest[6 * root..6 * root + 3].iter().all(|x| x.abs() < 1e-6));
     // Off-axis handles are not on the joint.
     for k in 0..handles.joints.len() {
         let (a, b) = (&rest[6 * k..6 * k + 3], &rest[6 * k + 3..6 * k + 6]);
@@ -114,6 +113,17 @@ fn handles_are_root_relative_and_move_with_the_pose() {
         &Pose::sample(&c.skeleton, &imported.clips[0], 0.6),
     );
     assert_ne!(rest, moved);
+    // Turning and moving the whole character changes no handle.
+    let mut turned = Pose::sample(&c.skeleton, &imported.clips[0], 0.6);
+    let top = (0..c.skeleton.nodes.len())
+        .find(|&n| c.skeleton.nodes[n].parent.is_none() && c.skeleton.is_ancestor_or_self(n, body))
+        .unwrap();
+    turned.locals[top].rotation = glam::Quat::from_rotation_y(1.0) * turned.locals[top].rotation;
+    turned.locals[top].translation += glam::Vec3::new(3.0, -1.0, 2.0);
+    let after = handles.handles(&c.skeleton, &turned);
+    for (a, b) in after.iter().zip(&moved) {
+        assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+    }
 }
 
 #[test]

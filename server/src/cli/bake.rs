@@ -35,7 +35,7 @@ pub(super) struct Args {
     #[arg(long, default_value_t = 256)]
     poses: usize,
     /// Where reference poses come from: random joint angles in the
-    /// clips' ranges, random clip frames, or half each. Default: random
+    /// clips' ranges, random clip frames, or half each. Default: mixed
     /// for vertex-linear, clips otherwise.
     #[arg(long, value_enum)]
     reference: Option<ReferenceArg>,
@@ -66,9 +66,10 @@ pub(super) struct Args {
     /// Widen each joint-angle range by this fraction of its span.
     #[arg(long, default_value_t = 0.1)]
     range_margin: f32,
-    /// vertex-linear, vertex-clustered: ridge weight λ per pose
-    /// (minimises (1/P)‖JT − A‖² + λ‖T‖²); 0 is the pseudo-inverse.
-    #[arg(long, default_value_t = 0.0)]
+    /// vertex-linear, vertex-clustered: ridge weight λ per pose on
+    /// standardised pose coordinates (minimises (1/P)‖JT − A‖² + λ‖T‖²);
+    /// 0 is the pseudo-inverse.
+    #[arg(long, default_value_t = aobake_core::model::DEFAULT_RIDGE)]
     ridge: f64,
     /// vertex-linear: drop joint-angle coefficients below this magnitude
     /// and store the rest sparse.

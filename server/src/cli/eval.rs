@@ -51,7 +51,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             .chain(&layout.translations)
             .all(|&n| n < nodes),
         Model::VertexClustered(handles, _) => {
-            handles.root < nodes && handles.joints.iter().all(|&n| n < nodes)
+            handles.root.is_none_or(|r| r < nodes) && handles.joints.iter().all(|&n| n < nodes)
         }
     };
     if !fits {
