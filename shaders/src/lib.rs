@@ -1,8 +1,91 @@
 //! # aobake-shaders
 //!
-//! This crate will own the WGSL of aobake, one file per pipeline under
-//! `shaders/` (run-time AO evaluation per method, the preview raster, GPU AO
-//! tracing), embedded with `include_str!` so the worker, the tests (naga
-//! validation) and the asset exports all use the same text (DESIGN §2).
+//! The WGSL of aobake, one file per pipeline under `shaders/wgsl/`, shared
+//! pieces under `shaders/wgsl/common/`, embedded with `include_str!` so the
+//! worker, the tests (naga validation) and the asset exports use the same
+//! text (DESIGN §2). A pipeline's source is its common pieces followed by
+//! its own file; [`sources`] lists every composed pipeline.
 //!
-//! No shader exists yet; the first arrives with the vertex methods.
+//! * [`VERTEX_AO`]: run-time per-vertex AO of the vertex methods
+//!   (`cs_main` for dense coefficients, `cs_sparse` for CSR), the
+//!   evaluation an engine runs per frame.
+
+/// Half-float decoding shared by the pipelines.
+pub const COMMON_F16: &str = include_str!("../wgsl/common/f16.wgsl");
+
+/// The vertex-method evaluation shader, composed: [`COMMON_F16`] then
+/// `vertex_ao.wgsl`.
+pub const VERTEX_AO: &str = concat!(
+    include_str!("../wgsl/common/f16.wgsl"),
+    "\n",
+    include_str!("../wgsl/vertex_ao.wgsl")
+);
+
+/// Every composed pipeline source, by file name.
+pub fn sources() -> [(&'static str, &'static str); 1] {
+    [("vertex_ao.wgsl", VERTEX_AO)]
+}
+
+/// Workgroup size of the compute entry points (`@workgroup_size(64)`).
+pub const WORKGROUP_SIZE: u32 = 64;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn validate(name: &str, src: &str) -> naga::valid::ModuleInfo {
+        let module = naga::front::wgsl::parse_str(src)
+            .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
+        // The capabilities of a WebGPU-level adapter: nothing optional, so
+        // a shader that passes here runs on GL/llvmpipe and lavapipe too.
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::empty(),
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)))
+    }
+
+    #[test]
+    fn every_shader_parses_and_validates() {
+        for (name, src) in sources() {
+            validate(name, src);
+        }
+    }
+
+    #[test]
+    fn every_wgsl_file_is_used() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/wgsl");
+        let mut files = Vec::new();
+        for entry in std::fs::read_dir(dir)
+            .unwrap()
+            .chain(std::fs::read_dir(format!("{dir}/common")).unwrap())
+        {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "wgsl") {
+                files.push(std::fs::read_to_string(&path).unwrap());
+            }
+        }
+        assert!(!files.is_empty());
+        for text in files {
+            assert!(
+                sources().iter().any(|(_, src)| src.contains(text.trim())),
+                "a .wgsl file under shaders/wgsl is in no pipeline"
+            );
+        }
+    }
+
+    #[test]
+    fn vertex_ao_has_both_entry_points() {
+        let module = naga::front::wgsl::parse_str(VERTEX_AO).unwrap();
+        let names: Vec<&str> = module
+            .entry_points
+            .iter()
+            .map(|e| e.name.as_str())
+            .collect();
+        assert_eq!(names, ["cs_main", "cs_sparse"]);
+        for e in &module.entry_points {
+            assert_eq!(e.workgroup_size, [WORKGROUP_SIZE, 1, 1]);
+        }
+    }
+}

@@ -53,6 +53,15 @@ pub enum Model {
     VertexClustered(Handles, VertexClustered),
 }
 
+/// A model's coefficients, borrowed.
+#[derive(Debug, Clone, Copy)]
+pub enum FormRef<'a> {
+    /// Blocks of dense coefficients.
+    Dense(&'a LinearForm),
+    /// Sparse coefficients per vertex.
+    Sparse(&'a SparseForm),
+}
+
 /// The model's structure in the asset header: what the sections mean.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
@@ -139,6 +148,19 @@ impl Model {
         }
     }
 
+    /// The coefficients as the run time sees them: a dense linear form or a
+    /// sparse one, taking [`Model::weights`].
+    pub fn form(&self) -> FormRef<'_> {
+        match self {
+            Self::StaticAverage(m) => FormRef::Dense(&m.form),
+            Self::VertexLinear(_, m) => match &m.coefficients {
+                Coefficients::Dense(f) => FormRef::Dense(f),
+                Coefficients::Sparse(s) => FormRef::Sparse(s),
+            },
+            Self::VertexClustered(_, m) => FormRef::Dense(&m.form),
+        }
+    }
+
     /// Bytes of the model's numbers: coefficients, maps, cluster centres
     /// and axes.
     pub fn bytes(&self) -> usize {
@@ -161,13 +183,9 @@ impl Model {
 
     /// AO of every vertex for weights from [`Model::weights`].
     pub fn evaluate_weights(&self, weights: &[f32]) -> Vec<f32> {
-        match self {
-            Self::StaticAverage(m) => m.form.evaluate(weights),
-            Self::VertexLinear(_, m) => match &m.coefficients {
-                Coefficients::Dense(f) => f.evaluate(weights),
-                Coefficients::Sparse(s) => s.evaluate(weights),
-            },
-            Self::VertexClustered(_, m) => m.form.evaluate(weights),
+        match self.form() {
+            FormRef::Dense(f) => f.evaluate(weights),
+            FormRef::Sparse(s) => s.evaluate(weights),
         }
     }
 

@@ -1,0 +1,397 @@
+//! wgpu on whatever adapter the machine has: a real GPU, or without one
+//! Mesa's llvmpipe through EGL/GL or lavapipe through Vulkan (DESIGN §10).
+//!
+//! [`VertexAo`] runs `shaders/wgsl/vertex_ao.wgsl`, the run-time evaluation
+//! of the vertex methods, so that what engines will run is tested against
+//! core's CPU evaluation.
+
+use aobake_core::model::{FormRef, LinearForm, Model, SparseForm};
+use wgpu::util::DeviceExt as _;
+
+/// Why the GPU could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter (no GPU and no software driver).
+    #[error("no GPU adapter: {0}")]
+    NoAdapter(String),
+    /// The adapter cannot run compute shaders.
+    #[error("the adapter {0} has no compute shaders")]
+    NoCompute(String),
+    /// Device creation failed.
+    #[error("cannot open the GPU device: {0}")]
+    Device(String),
+    /// A shader or pipeline was rejected.
+    #[error("the GPU rejected a pipeline: {0}")]
+    Pipeline(String),
+    /// The model does not fit this adapter's limits.
+    #[error("the model does not fit the GPU: {0}")]
+    TooLarge(String),
+    /// Reading results back failed.
+    #[error("cannot read results back from the GPU: {0}")]
+    Readback(String),
+}
+
+/// An adapter, its device and queue.
+#[derive(Debug)]
+pub struct Gpu {
+    /// The adapter's description (name, backend, driver).
+    pub info: wgpu::AdapterInfo,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+}
+
+impl Gpu {
+    /// Opens the best adapter over Vulkan and GL (a real GPU before a
+    /// software one).
+    pub fn new() -> Result<Self, GpuError> {
+        pollster::block_on(Self::open())
+    }
+
+    async fn open() -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::VULKAN | wgpu::Backends::GL,
+            flags: wgpu::InstanceFlags::empty(),
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let label = format!("{} ({:?})", info.name, info.backend);
+        if !adapter
+            .get_downlevel_capabilities()
+            .flags
+            .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+        {
+            return Err(GpuError::NoCompute(label));
+        }
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("aobake"),
+                required_features: wgpu::Features::empty(),
+                required_limits: adapter.limits(),
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| GpuError::Device(format!("{label}: {e}")))?;
+        Ok(Self {
+            info,
+            device,
+            queue,
+        })
+    }
+}
+
+/// `Params` of vertex_ao.wgsl, field for field.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    vertices: u32,
+    blocks: u32,
+    row_stride: u32,
+    _pad: u32,
+}
+
+/// `BlockInfo` of vertex_ao.wgsl, field for field.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct BlockInfo {
+    rows: u32,
+    columns: u32,
+    coef_offset: u32,
+    map_offset: u32,
+    weight_offset: u32,
+    _pad: [u32; 3],
+}
+
+const _: () = assert!(std::mem::size_of::<Params>() == 16);
+const _: () = assert!(std::mem::size_of::<BlockInfo>() == 32);
+
+const NO_MAP: u32 = u32::MAX;
+
+/// Most workgroups per dispatch dimension (WebGPU's minimum limit).
+const MAX_GROUPS: u32 = 65_535;
+
+/// A model's coefficients uploaded once; [`VertexAo::evaluate`] then costs
+/// one weight upload, one dispatch and one readback per pose.
+#[derive(Debug)]
+pub struct VertexAo<'g> {
+    gpu: &'g Gpu,
+    pipeline: wgpu::ComputePipeline,
+    params: wgpu::Buffer,
+    blocks: wgpu::Buffer,
+    coefficients: wgpu::Buffer,
+    maps: wgpu::Buffer,
+    sparse_rows: wgpu::Buffer,
+    sparse: bool,
+    vertices: u32,
+    weights: usize,
+    groups: (u32, u32),
+}
+
+/// What a model uploads: the entry point and its buffers' contents.
+struct Upload {
+    entry: &'static str,
+    vertices: u32,
+    weights: usize,
+    blocks: Vec<BlockInfo>,
+    coefficients: Vec<u32>,
+    maps: Vec<u32>,
+    sparse_rows: Vec<u32>,
+}
+
+/// Packs 16-bit values two per u32 (element 2i in the low half), padded
+/// to at least one word.
+fn pack16(values: impl ExactSizeIterator<Item = u16>) -> Vec<u32> {
+    let mut out = vec![0u32; values.len().div_ceil(2).max(1)];
+    for (i, v) in values.enumerate() {
+        out[i / 2] |= u32::from(v) << (16 * (i % 2));
+    }
+    out
+}
+
+fn non_empty(mut v: Vec<u32>) -> Vec<u32> {
+    if v.is_empty() {
+        v.push(0);
+    }
+    v
+}
+
+fn to_u32(n: usize, what: &str) -> Result<u32, GpuError> {
+    u32::try_from(n).map_err(|_| GpuError::TooLarge(format!("{what}: {n}")))
+}
+
+impl<'g> VertexAo<'g> {
+    /// Uploads the model's coefficients and builds the pipeline.
+    pub fn new(gpu: &'g Gpu, model: &Model) -> Result<Self, GpuError> {
+        let Upload {
+            entry,
+            vertices,
+            weights,
+            blocks,
+            coefficients,
+            maps,
+            sparse_rows,
+        } = match model.form() {
+            FormRef::Dense(form) => Self::dense(form)?,
+            FormRef::Sparse(form) => Self::sparse(form)?,
+        };
+        let device = &gpu.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("vertex_ao.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(aobake_shaders::VERTEX_AO.into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry),
+            layout: None,
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            cache: None,
+        });
+        let storage = |label, data: &[u32]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytemuck::cast_slice(data),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let groups_needed = vertices.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1);
+        let groups = (
+            groups_needed.min(MAX_GROUPS),
+            groups_needed.div_ceil(MAX_GROUPS),
+        );
+        let params = Params {
+            vertices,
+            blocks: to_u32(blocks.len(), "blocks")?,
+            row_stride: groups.0 * aobake_shaders::WORKGROUP_SIZE,
+            _pad: 0,
+        };
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let blocks = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("blocks"),
+            contents: bytemuck::cast_slice(&if blocks.is_empty() {
+                vec![bytemuck::Zeroable::zeroed()]
+            } else {
+                blocks
+            }),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let out = Self {
+            gpu,
+            pipeline,
+            params,
+            blocks,
+            coefficients: storage("coefficients", &coefficients),
+            maps: storage("maps", &maps),
+            sparse_rows: storage("sparse rows", &sparse_rows),
+            sparse: entry == "cs_sparse",
+            vertices,
+            weights,
+            groups,
+        };
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline(e.to_string()));
+        }
+        Ok(out)
+    }
+
+    fn dense(form: &LinearForm) -> Result<Upload, GpuError> {
+        let mut blocks = Vec::with_capacity(form.blocks.len());
+        let (mut coef_offset, mut weight_offset) = (0usize, 0usize);
+        let mut maps = Vec::new();
+        for b in &form.blocks {
+            let map_offset = match &b.map {
+                Some(m) => {
+                    let at = to_u32(maps.len(), "map entries")?;
+                    maps.extend_from_slice(m);
+                    at
+                }
+                None => NO_MAP,
+            };
+            blocks.push(BlockInfo {
+                rows: to_u32(b.rows, "rows")?,
+                columns: to_u32(b.columns, "columns")?,
+                coef_offset: to_u32(coef_offset, "coefficients")?,
+                map_offset,
+                weight_offset: to_u32(weight_offset, "weights")?,
+                _pad: [0; 3],
+            });
+            coef_offset += b.coefficients.len();
+            weight_offset += b.rows;
+        }
+        let bits: Vec<u16> = form
+            .blocks
+            .iter()
+            .flat_map(|b| b.coefficients.iter().map(|c| c.to_bits()))
+            .collect();
+        let coefficients = pack16(bits.into_iter());
+        Ok(Upload {
+            entry: "cs_main",
+            vertices: to_u32(form.vertices, "vertices")?,
+            weights: weight_offset,
+            blocks,
+            coefficients,
+            maps: non_empty(maps),
+            sparse_rows: vec![0],
+        })
+    }
+
+    fn sparse(form: &SparseForm) -> Result<Upload, GpuError> {
+        Ok(Upload {
+            entry: "cs_sparse",
+            vertices: to_u32(form.vertices, "vertices")?,
+            weights: form.rows,
+            blocks: Vec::new(),
+            coefficients: pack16(form.values.iter().map(|c| c.to_bits())),
+            maps: form.offsets.clone(),
+            sparse_rows: pack16(form.rows_of.iter().copied()),
+        })
+    }
+
+    /// AO of every vertex for one pose's weights ([`Model::weights`]).
+    pub fn evaluate(&self, weights: &[f32]) -> Result<Vec<f32>, GpuError> {
+        assert_eq!(weights.len(), self.weights, "one weight per row");
+        let device = &self.gpu.device;
+        let weights = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("weights"),
+            contents: bytemuck::cast_slice(if weights.is_empty() {
+                &[0.0f32][..]
+            } else {
+                weights
+            }),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let size = 4 * u64::from(self.vertices.max(1));
+        let ao = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ao"),
+            size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ao readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let layout = self.pipeline.get_bind_group_layout(0);
+        fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+            wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            }
+        }
+        // Auto layouts hold only the bindings the entry point uses.
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = if self.sparse {
+            vec![
+                entry(0, &self.params),
+                entry(2, &self.coefficients),
+                entry(3, &self.maps),
+                entry(4, &weights),
+                entry(5, &ao),
+                entry(6, &self.sparse_rows),
+            ]
+        } else {
+            vec![
+                entry(0, &self.params),
+                entry(1, &self.blocks),
+                entry(2, &self.coefficients),
+                entry(3, &self.maps),
+                entry(4, &weights),
+                entry(5, &ao),
+            ]
+        };
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vertex ao"),
+            layout: &layout,
+            entries: &entries,
+        });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(self.groups.0, self.groups.1, 1);
+        }
+        encoder.copy_buffer_to_buffer(&ao, 0, &staging, 0, size);
+        let submission = self.gpu.queue.submit(Some(encoder.finish()));
+        let slice = staging.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(submission),
+                timeout: None,
+            })
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let values = {
+            let view = slice
+                .get_mapped_range()
+                .map_err(|e| GpuError::Readback(e.to_string()))?;
+            bytemuck::cast_slice::<u8, f32>(&view)[..self.vertices as usize].to_vec()
+        };
+        staging.unmap();
+        Ok(values)
+    }
+}

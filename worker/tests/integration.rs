@@ -1,0 +1,5 @@
+//! The worker's integration tests, one binary (see STYLE: link time).
+
+mod integration {
+    mod gpu;
+}
