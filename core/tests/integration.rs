@@ -5,6 +5,8 @@ mod util;
 
 #[path = "integration/malformed.rs"]
 mod malformed;
+#[path = "integration/methods.rs"]
+mod methods;
 #[path = "integration/params.rs"]
 mod params;
 #[path = "integration/real_characters.rs"]
