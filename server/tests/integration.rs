@@ -5,6 +5,9 @@ use std::{
     process::{Command, Output},
 };
 
+#[path = "integration/bake.rs"]
+mod bake;
+
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
@@ -39,6 +42,8 @@ fn help_for_every_command() {
         &["pose", "--help"],
         &["trace", "--help"],
         &["bench", "trace", "--help"],
+        &["bake", "--help"],
+        &["eval", "--help"],
     ] {
         let out = aobake(args);
         assert!(out.status.success(), "{args:?}");

@@ -20,6 +20,7 @@ use super::trace::{progress_bar, with_threads};
 
 /// Arguments of `aobake bake`.
 #[derive(Debug, clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub(super) struct Args {
     /// The character (.glb, or .gltf with its side files beside it).
     file: PathBuf,

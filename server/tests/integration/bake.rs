@@ -1,0 +1,190 @@
+//! `aobake bake` and `aobake eval` as a user runs them.
+
+use super::{aobake, sample, stderr};
+
+fn run_bake(dir: &std::path::Path, name: &str, extra: &[&str]) -> std::process::Output {
+    let figure = sample("RiggedFigure/RiggedFigure.glb");
+    let out = dir.join(format!("{name}.aob"));
+    let report = dir.join(format!("{name}.json"));
+    let mut args = vec![
+        "bake",
+        figure.to_str().unwrap(),
+        "--poses",
+        "48",
+        "--samples",
+        "32",
+        "--eval-poses",
+        "4",
+        "--eval-fps",
+        "10",
+        "--out",
+        out.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    aobake(&args)
+}
+
+#[test]
+fn bake_writes_a_deterministic_asset_a_report_and_a_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, method) in [
+        ("linear", "vertex-linear"),
+        ("clustered", "vertex-clustered"),
+        ("average", "static-average"),
+    ] {
+        let first = run_bake(dir.path(), name, &["--method", method]);
+        assert!(first.status.success(), "{}", stderr(&first));
+        let bytes = std::fs::read(dir.path().join(format!("{name}.aob"))).unwrap();
+        assert_eq!(&bytes[..4], b"\x89AOB");
+        let again = run_bake(dir.path(), &format!("{name}2"), &["--method", method]);
+        assert!(again.status.success());
+        let bytes2 = std::fs::read(dir.path().join(format!("{name}2.aob"))).unwrap();
+        assert_eq!(
+            bytes, bytes2,
+            "{method}: the same command gives the same bytes"
+        );
+
+        let report: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(dir.path().join(format!("{name}.json"))).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(report["method"], method);
+        assert_eq!(report["sizes"]["asset_bytes"], bytes.len());
+        let clips = &report["evaluation"]["clip_frames"];
+        for who in ["model", "baseline"] {
+            for field in ["mae", "rmse", "psnr_db", "too_dark_mse", "too_bright_mse"] {
+                assert!(clips[who]["mean"][field].is_number(), "{who}.{field}");
+            }
+        }
+        assert_eq!(clips["model"]["frames"], 14, "1.25 s at 10 fps, both ends");
+        assert!(
+            report["evaluation"]["multiply_adds_per_vertex"]
+                .as_f64()
+                .unwrap()
+                >= 1.0
+        );
+        assert!(report["timings"]["reference_trace_s"].is_number());
+        if method != "static-average" {
+            assert!(clips["psnr_gain_db"].as_f64().unwrap() > 0.0, "{report}");
+        }
+        let png = std::fs::read(dir.path().join(format!("{name}.png"))).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+        assert!(stderr(&first).contains("held-out clip frames"));
+    }
+}
+
+#[test]
+fn eval_gives_per_vertex_ao_at_a_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    let baked = run_bake(dir.path(), "m", &["--method", "vertex-linear"]);
+    assert!(baked.status.success(), "{}", stderr(&baked));
+    let asset = dir.path().join("m.aob");
+    let csv = dir.path().join("ao.csv");
+    let figure = sample("RiggedFigure/RiggedFigure.glb");
+    let eval = |time: &str| {
+        let out = aobake(&[
+            "eval",
+            asset.to_str().unwrap(),
+            figure.to_str().unwrap(),
+            "--clip",
+            "animation_0",
+            "--time",
+            time,
+            "--out",
+            csv.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let values: Vec<f32> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+            .collect();
+        assert!(text.starts_with("index,occlusion\n"));
+        values
+    };
+    let a = eval("0.2");
+    assert_eq!(a.len(), 370);
+    assert!(a.iter().all(|v| (0.0..=1.0).contains(v)));
+    assert_ne!(a, eval("0.9"), "the pose changes the AO");
+}
+
+#[test]
+fn eval_refuses_damaged_newer_and_foreign_assets() {
+    let dir = tempfile::tempdir().unwrap();
+    let baked = run_bake(dir.path(), "m", &["--method", "static-average"]);
+    assert!(baked.status.success(), "{}", stderr(&baked));
+    let good = std::fs::read(dir.path().join("m.aob")).unwrap();
+    let bad = dir.path().join("bad.aob");
+    let csv = dir.path().join("ao.csv");
+    let eval = |asset: &std::path::Path, file: &str| {
+        aobake(&[
+            "eval",
+            asset.to_str().unwrap(),
+            sample(file).to_str().unwrap(),
+            "--out",
+            csv.to_str().unwrap(),
+        ])
+    };
+    let mut damaged = good.clone();
+    let last = damaged.len() - 9;
+    damaged[last] ^= 0x40;
+    std::fs::write(&bad, &damaged).unwrap();
+    let out = eval(&bad, "RiggedFigure/RiggedFigure.glb");
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("checksum mismatch"),
+        "{}",
+        stderr(&out)
+    );
+
+    let mut newer = good.clone();
+    newer[8..10].copy_from_slice(&7u16.to_le_bytes());
+    std::fs::write(&bad, &newer).unwrap();
+    let out = eval(&bad, "RiggedFigure/RiggedFigure.glb");
+    assert!(
+        stderr(&out).contains("asset format 7.0 is newer"),
+        "{}",
+        stderr(&out)
+    );
+
+    let out = eval(&dir.path().join("m.aob"), "RiggedSimple/RiggedSimple.glb");
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("baked for 370 vertices"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn bake_names_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_bake(
+        dir.path(),
+        "x",
+        &["--method", "vertex-linear", "--train-clip", "Dance"],
+    );
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("no clip named \"Dance\"; the clips are: animation_0"),
+        "{}",
+        stderr(&out)
+    );
+    let out = run_bake(
+        dir.path(),
+        "x",
+        &["--method", "vertex-clustered", "--alpha", "-1"],
+    );
+    assert!(
+        stderr(&out).contains("alpha must be in (0, 100]"),
+        "{}",
+        stderr(&out)
+    );
+    let skin = sample("SimpleSkin/SimpleSkin.gltf");
+    let out = aobake(&["bake", skin.to_str().unwrap(), "--method", "vertex-linear"]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("--out"), "{}", stderr(&out));
+}
