@@ -218,7 +218,7 @@ pub(super) fn load_inputs(
 }
 
 /// Traces `poses` with a progress bar counting poses.
-fn trace_all(
+pub(super) fn trace_all(
     character: &Character,
     poses: &[Pose],
     params: &BakeParams,

@@ -27,6 +27,11 @@ enum What {
     /// on the ~100k-triangle mesh of the Blender reference, optionally
     /// interleaved with Blender's Cycles bake of the same PLY.
     Trace(TraceArgs),
+    /// Kirk & Arikan's Table 1 on a character: vertex-clustered's mean
+    /// error and size for every pose-cluster count, dimension and
+    /// vertex-cluster level, beside vertex-linear and the static average,
+    /// all judged on the same held-out clip frames.
+    Clusters(super::table::Args),
 }
 
 #[derive(Debug, clap::Args)]
@@ -92,6 +97,7 @@ impl Kernel {
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     match &args.what {
         What::Trace(a) => trace(a),
+        What::Clusters(a) => super::table::run(a),
     }
 }
 

@@ -7,6 +7,7 @@ mod inspect;
 mod load;
 mod pose;
 mod posing;
+mod table;
 mod trace;
 
 use clap::{Parser, Subcommand};
