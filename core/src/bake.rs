@@ -248,7 +248,7 @@ impl<'a> Plan<'a> {
                 p.samples
             )));
         }
-        if p.max_distance.is_some_and(|d| !(d > 0.0)) {
+        if p.max_distance.is_some_and(|d| d.is_nan() || d <= 0.0) {
             return Err(BakeError::Param("max_distance must be positive".into()));
         }
         if !(p.eval_fps > 0.0 && p.eval_fps <= 240.0) {
@@ -424,7 +424,13 @@ impl<'a> Plan<'a> {
         let skeleton = &self.character.skeleton;
         let base = baseline.evaluate();
         let mut random = (Vec::new(), Vec::new());
-        let mut per_clip: Vec<(usize, Vec<f32>, Vec<FrameError>, Vec<FrameError>)> = Vec::new();
+        struct PerClip {
+            clip: usize,
+            times: Vec<f32>,
+            model: Vec<FrameError>,
+            baseline: Vec<FrameError>,
+        }
+        let mut per_clip: Vec<PerClip> = Vec::new();
         let mut multiply_adds = 0.0;
         for (i, t) in tests.iter().enumerate() {
             let w = model.weights(skeleton, &t.pose);
@@ -438,28 +444,33 @@ impl<'a> Plan<'a> {
                     random.1.push(e_base);
                 }
                 Some(f) => {
-                    if per_clip.last().is_none_or(|c| c.0 != f.clip) {
-                        per_clip.push((f.clip, Vec::new(), Vec::new(), Vec::new()));
+                    if per_clip.last().is_none_or(|c| c.clip != f.clip) {
+                        per_clip.push(PerClip {
+                            clip: f.clip,
+                            times: Vec::new(),
+                            model: Vec::new(),
+                            baseline: Vec::new(),
+                        });
                     }
                     let c = per_clip.last_mut().expect("just pushed");
-                    c.1.push(f.time);
-                    c.2.push(e_model);
-                    c.3.push(e_base);
+                    c.times.push(f.time);
+                    c.model.push(e_model);
+                    c.baseline.push(e_base);
                 }
             }
         }
-        let all_model: Vec<FrameError> = per_clip.iter().flat_map(|c| c.2.clone()).collect();
-        let all_base: Vec<FrameError> = per_clip.iter().flat_map(|c| c.3.clone()).collect();
+        let all_model: Vec<FrameError> = per_clip.iter().flat_map(|c| c.model.clone()).collect();
+        let all_base: Vec<FrameError> = per_clip.iter().flat_map(|c| c.baseline.clone()).collect();
         let clip_frames = Comparison::new(Errors::of(&all_model), Errors::of(&all_base));
         Evaluation {
             random_poses: Comparison::new(Errors::of(&random.0), Errors::of(&random.1)),
             clips: per_clip
                 .into_iter()
-                .map(|(c, times, m, b)| ClipEvaluation {
-                    clip: self.clips[c].name.clone(),
+                .map(|c| ClipEvaluation {
+                    clip: self.clips[c.clip].name.clone(),
                     fps: self.params.eval_fps,
-                    times,
-                    errors: Comparison::new(Errors::of(&m), Errors::of(&b)),
+                    times: c.times,
+                    errors: Comparison::new(Errors::of(&c.model), Errors::of(&c.baseline)),
                 })
                 .collect(),
             clip_frames,

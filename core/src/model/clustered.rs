@@ -201,7 +201,7 @@ impl VertexClustered {
             };
             let (x, _) = ridge_lstsq(q.as_ref(), targets.as_ref(), options.ridge * k as f64);
             let largest = x.norm_max();
-            if !(largest <= F16_MAX) {
+            if largest.is_nan() || largest > F16_MAX {
                 return Err(FitOverflow {
                     largest,
                     parameters: x.nrows(),

@@ -155,7 +155,7 @@ impl VertexLinear {
             .flat_map(|k| (0..v).map(move |i| (k, i)))
             .map(|(k, i)| t[(k, i)].abs())
             .fold(0.0f64, f64::max);
-        if !(largest <= F16_MAX) {
+        if largest.is_nan() || largest > F16_MAX {
             return Err(FitOverflow {
                 largest,
                 parameters: n,
