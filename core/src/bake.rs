@@ -8,7 +8,6 @@
 //! the same poses, the same rays, the same coefficients and the same bytes.
 
 use serde::{Deserialize, Serialize};
-use sha2::{Digest as _, Sha256};
 
 use crate::{
     Character, Clip,
@@ -23,6 +22,9 @@ use crate::{
     reference::AoBlock,
     trace::{Falloff, SurfaceParams},
 };
+
+/// Mixed into the seed of everything held out ("heldout!" in ASCII).
+const HELD_OUT_SEED: u64 = 0x6865_6c64_6f75_7421;
 
 /// Where reference (training) poses come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -101,13 +103,24 @@ impl BakeParams {
         }
     }
 
-    /// The tracing parameters of reference and held-out poses.
+    /// The tracing parameters of the reference poses.
     pub fn surface(&self) -> SurfaceParams {
         SurfaceParams {
             samples: self.samples,
             max_distance: self.max_distance.unwrap_or(f32::INFINITY),
             seed: self.seed,
             falloff: Falloff::None,
+        }
+    }
+
+    /// The tracing parameters of the held-out poses: another ray seed, so
+    /// that the ground truth's sampling noise is independent of the noise
+    /// the model was fitted to (with the same seed a vertex would cast the
+    /// same rays in both, and errors would come out too small).
+    pub fn held_out_surface(&self) -> SurfaceParams {
+        SurfaceParams {
+            seed: self.seed ^ HELD_OUT_SEED,
+            ..self.surface()
         }
     }
 
@@ -148,14 +161,7 @@ pub enum BakeError {
     },
 }
 
-/// sha256 of bytes, lower-case hex: the digest of uploads and the key of
-/// bakes.
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    Sha256::digest(bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
-}
+pub use crate::digest::sha256_hex;
 
 /// The bake key (DESIGN §1.2): sha256 over the canonical JSON (keys sorted,
 /// no whitespace) of the input digests, the method, the fully defaulted
@@ -287,6 +293,9 @@ impl<'a> Plan<'a> {
         if !(c.ridge >= 0.0 && c.ridge.is_finite()) {
             return Err(BakeError::Param("ridge must be a finite number ≥ 0".into()));
         }
+        if !(c.clamp >= 0.0 && c.clamp.is_finite()) {
+            return Err(BakeError::Param("clamp must be a finite number ≥ 0".into()));
+        }
         let train = select(clips, &p.train_clips)?;
         let test = select(clips, &p.test_clips)?;
         let train_clips: Vec<Clip> = train.iter().map(|&i| clips[i].clone()).collect();
@@ -346,7 +355,7 @@ impl<'a> Plan<'a> {
     /// Held-out poses: random poses from another seed, then every frame of
     /// every test clip at `eval_fps`.
     pub fn test_poses(&self) -> Vec<TestPose> {
-        let seed = self.params.seed ^ 0x6865_6c64_6f75_7421; // "heldout!"
+        let seed = self.params.seed ^ HELD_OUT_SEED;
         let mut poses: Vec<TestPose> = self
             .random_poses(self.params.eval_poses, seed)
             .into_iter()
@@ -551,6 +560,8 @@ pub struct Evaluation {
 mod tests {
     use super::*;
 
+    const GOLDEN_KEY: &str = "a183eed2ca53af54d3001ad66878cec5c6bb801ce94ba9a1c0a92cfdbb690218";
+
     #[test]
     fn key_depends_on_what_matters_only() {
         let a = BakeParams::new(Method::VertexLinear);
@@ -565,6 +576,17 @@ mod tests {
         let mut c = a.clone();
         c.clustered.alpha = 3.0;
         assert_eq!(k, bake_key("c", &[], &c));
+        // Pinned: a change here invalidates every cached bake, so it must be
+        // deliberate (and come with an ALGORITHM_VERSION bump if fitting
+        // changed).
+        assert_eq!(
+            k,
+            bake_key("c", &[], &BakeParams::new(Method::VertexLinear)),
+        );
+        assert_eq!(
+            bake_key("c", &[], &BakeParams::new(Method::VertexLinear)),
+            GOLDEN_KEY
+        );
         assert_eq!(
             sha256_hex(b"abc"),
             "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"

@@ -28,6 +28,7 @@ pub mod asset;
 pub mod bake;
 pub mod character;
 pub mod clip;
+pub mod digest;
 pub mod geometry;
 pub mod import;
 pub mod limits;

@@ -32,6 +32,19 @@ impl AoBlock {
     pub fn row(&self, p: usize) -> &[f32] {
         &self.values[p * self.vertices..(p + 1) * self.vertices]
     }
+
+    /// Each vertex's mean occlusion over the poses (zeros without poses).
+    pub fn mean(&self) -> Vec<f64> {
+        let mut sums = vec![0.0f64; self.vertices];
+        for r in 0..self.poses() {
+            for (s, &x) in sums.iter_mut().zip(self.row(r)) {
+                *s += f64::from(x);
+            }
+        }
+        let p = self.poses().max(1) as f64;
+        sums.iter_mut().for_each(|s| *s /= p);
+        sums
+    }
 }
 
 /// Skins `character` into each pose, builds a fresh BVH (rebuilding beats

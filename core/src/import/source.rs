@@ -47,7 +47,7 @@ impl<'a> Upload<'a> {
     pub fn digest(&self) -> String {
         use sha2::{Digest as _, Sha256};
         if self.side_files.is_empty() {
-            return crate::bake::sha256_hex(self.main);
+            return crate::digest::sha256_hex(self.main);
         }
         let mut h = Sha256::new();
         h.update((self.main.len() as u64).to_le_bytes());
@@ -60,7 +60,7 @@ impl<'a> Upload<'a> {
             h.update((f.bytes.len() as u64).to_le_bytes());
             h.update(&f.bytes);
         }
-        h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+        crate::digest::hex(&h.finalize())
     }
 
     pub(crate) fn total_bytes(&self) -> u64 {

@@ -16,20 +16,13 @@ pub struct StaticAverage {
 impl StaticAverage {
     /// The mean over the rows of `ao`.
     pub fn fit(ao: &AoBlock) -> Self {
-        let p = ao.poses().max(1) as f64;
-        let mut sums = vec![0.0f64; ao.vertices];
-        for r in 0..ao.poses() {
-            for (s, &x) in sums.iter_mut().zip(ao.row(r)) {
-                *s += f64::from(x);
-            }
-        }
         Self {
             form: LinearForm {
                 vertices: ao.vertices,
                 blocks: vec![Block {
                     rows: 1,
                     columns: ao.vertices,
-                    coefficients: sums.iter().map(|&s| f16::from_f64(s / p)).collect(),
+                    coefficients: ao.mean().into_iter().map(f16::from_f64).collect(),
                     map: None,
                 }],
             },

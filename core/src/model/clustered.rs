@@ -54,7 +54,8 @@ pub struct ClusteredOptions {
     pub alpha: f32,
     /// Global (the paper) or per-cluster centring.
     pub centering: Centering,
-    /// Ridge weight per pose on each cluster's fit (0: pseudo-inverse).
+    /// Ridge weight per pose on each cluster's fit (0: pseudo-inverse); it
+    /// shrinks the per-cluster constant row too, towards the global mean.
     pub ridge: f64,
     /// At run time each whitened PCA coordinate is clamped to ±this many
     /// standard deviations of the cluster's training poses (0: no clamp),
@@ -150,9 +151,7 @@ impl VertexClustered {
 
         let points: Vec<f64> = handles.iter().flatten().map(|&x| f64::from(x)).collect();
         let km = kmeans(&points, dim, m, seed);
-        let mean: Vec<f64> = (0..v)
-            .map(|i| (0..p).map(|r| f64::from(ao.row(r)[i])).sum::<f64>() / p as f64)
-            .collect();
+        let mean = ao.mean();
 
         let mut blocks = vec![Block {
             rows: 1,

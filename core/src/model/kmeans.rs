@@ -64,54 +64,81 @@ pub(crate) fn kmeans(points: &[f64], dim: usize, k: usize, seed: u64) -> KMeans 
     for _ in 0..MAX_ITERATIONS {
         let mut changed = false;
         for (i, a) in assignment.iter_mut().enumerate() {
-            let best = (0..k)
-                .map(|c| (distance2(row(i), &centers[c * dim..(c + 1) * dim]), c))
-                .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
-                .map(|(_, c)| c)
-                .expect("k ≥ 1");
+            let best = nearest_center(row(i), &centers, dim);
             changed |= *a != best;
             *a = best;
         }
         if !changed {
             break;
         }
-        let mut counts = vec![0usize; k];
-        centers.iter_mut().for_each(|x| *x = 0.0);
-        for (i, &a) in assignment.iter().enumerate() {
-            counts[a] += 1;
-            for (c, x) in centers[a * dim..(a + 1) * dim].iter_mut().zip(row(i)) {
-                *c += x;
-            }
-        }
+        let mut counts = means(points, dim, &assignment, &mut centers);
+        // Re-seed each empty cluster with the point farthest from its own
+        // centre, taken from a cluster of two or more; every centre is a
+        // mean at this point, so the distances are the real ones.
         for c in 0..k {
             if counts[c] > 0 {
-                let inv = 1.0 / counts[c] as f64;
-                centers[c * dim..(c + 1) * dim]
-                    .iter_mut()
-                    .for_each(|x| *x *= inv);
-            } else {
-                // Re-seed an empty cluster with the point farthest from
-                // its own centre (taking it from a cluster of two or more).
-                let far = (0..n)
-                    .filter(|&i| counts[assignment[i]] > 1)
-                    .map(|i| {
-                        let a = assignment[i];
-                        (distance2(row(i), &centers[a * dim..(a + 1) * dim]), i)
-                    })
-                    .max_by(|x, y| x.0.total_cmp(&y.0).then(y.1.cmp(&x.1)))
-                    .map(|(_, i)| i)
-                    .expect("n ≥ k, so some cluster has two points");
-                counts[assignment[far]] -= 1;
-                assignment[far] = c;
-                counts[c] = 1;
-                centers[c * dim..(c + 1) * dim].copy_from_slice(row(far));
+                continue;
             }
+            let far = (0..n)
+                .filter(|&i| counts[assignment[i]] > 1)
+                .map(|i| {
+                    let a = assignment[i];
+                    (distance2(row(i), &centers[a * dim..(a + 1) * dim]), i)
+                })
+                .max_by(|x, y| x.0.total_cmp(&y.0).then(y.1.cmp(&x.1)))
+                .map(|(_, i)| i)
+                .expect("n ≥ k, so some cluster has two points");
+            counts[assignment[far]] -= 1;
+            assignment[far] = c;
+            counts[c] = 1;
+            centers[c * dim..(c + 1) * dim].copy_from_slice(row(far));
         }
     }
+    // The centres returned are the means of the final clusters, whatever
+    // ended the loop.
+    means(points, dim, &assignment, &mut centers);
     KMeans {
         centers,
         assignment,
     }
+}
+
+/// The centre nearest to `point` (the lower index on ties).
+fn nearest_center(point: &[f64], centers: &[f64], dim: usize) -> usize {
+    (0..centers.len() / dim)
+        .map(|c| (distance2(point, &centers[c * dim..(c + 1) * dim]), c))
+        .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
+        .map(|(_, c)| c)
+        .expect("k ≥ 1")
+}
+
+/// Sets each non-empty cluster's centre to the mean of its points (empty
+/// ones keep theirs) and returns the cluster sizes.
+fn means(points: &[f64], dim: usize, assignment: &[usize], centers: &mut [f64]) -> Vec<usize> {
+    let k = centers.len() / dim;
+    let mut counts = vec![0usize; k];
+    let mut sums = vec![0.0f64; centers.len()];
+    for (i, &a) in assignment.iter().enumerate() {
+        counts[a] += 1;
+        for (s, x) in sums[a * dim..(a + 1) * dim]
+            .iter_mut()
+            .zip(&points[i * dim..(i + 1) * dim])
+        {
+            *s += x;
+        }
+    }
+    for c in 0..k {
+        if counts[c] > 0 {
+            let inv = 1.0 / counts[c] as f64;
+            for (x, s) in centers[c * dim..(c + 1) * dim]
+                .iter_mut()
+                .zip(&sums[c * dim..(c + 1) * dim])
+            {
+                *x = s * inv;
+            }
+        }
+    }
+    counts
 }
 
 #[cfg(test)]
@@ -130,6 +157,15 @@ mod tests {
             }
         }
         let km = kmeans(&pts, 2, 3, 7);
+        // Centres are the means of their points.
+        for c in 0..3 {
+            let members: Vec<usize> = (0..60).filter(|&i| km.assignment[i] == c).collect();
+            for d in 0..2 {
+                let mean =
+                    members.iter().map(|&i| pts[2 * i + d]).sum::<f64>() / members.len() as f64;
+                assert!((km.centers[2 * c + d] - mean).abs() < 1e-12);
+            }
+        }
         for blob in 0..3 {
             let a = &km.assignment[blob * 20..(blob + 1) * 20];
             assert!(a.iter().all(|&c| c == a[0]), "blob {blob} split: {a:?}");

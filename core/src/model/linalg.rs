@@ -45,25 +45,27 @@ pub(crate) fn ridge_lstsq(
     let svd = d.thin_svd().expect("SVD of a finite matrix converges");
     let s: Vec<f64> = svd.S().column_vector().iter().copied().collect();
     let s_max = s.first().copied().unwrap_or(0.0);
-    let kept: Vec<usize> = (0..s.len())
-        .filter(|&i| s[i] > RANK_TOLERANCE * s_max && s[i] > 0.0)
-        .collect();
+    // Singular values come sorted, largest first: the kept ones are a
+    // prefix.
+    let rank = s
+        .iter()
+        .take_while(|&&x| x > RANK_TOLERANCE * s_max && x > 0.0)
+        .count();
     let uty = svd.U().transpose() * y;
     let filtered = Mat::from_fn(s.len(), y.ncols(), |i, c| {
-        if kept.contains(&i) {
+        if i < rank {
             uty[(i, c)] * s[i] / (s[i] * s[i] + lambda)
         } else {
             0.0
         }
     });
     let x = svd.V() * &filtered;
-    let s_min = kept.last().map_or(1.0, |&i| s[i]);
     (
         x,
         SolveStats {
-            rank: kept.len(),
+            rank,
             columns: k,
-            condition: if kept.is_empty() { 1.0 } else { s_max / s_min },
+            condition: if rank == 0 { 1.0 } else { s_max / s[rank - 1] },
         },
     )
 }
@@ -92,14 +94,18 @@ pub(crate) fn principal_axes(centred: MatRef<'_, f64>, n: usize) -> Mat<f64> {
         .count();
     let v = svd.V();
     let rows = centred.nrows() as f64;
-    Mat::from_fn(keep, d, |i, j| {
-        let col = v.col(i);
-        let big = (0..d)
-            .max_by(|&a, &b| col[a].abs().total_cmp(&col[b].abs()).then(b.cmp(&a)))
-            .expect("d > 0");
-        let std = s[i] / rows.sqrt();
-        col[j] * col[big].signum() / std
-    })
+    // Per axis: its sign (largest component positive) over the standard
+    // deviation of the projections along it.
+    let scale: Vec<f64> = (0..keep)
+        .map(|i| {
+            let col = v.col(i);
+            let big = (0..d)
+                .max_by(|&a, &b| col[a].abs().total_cmp(&col[b].abs()).then(b.cmp(&a)))
+                .expect("d > 0");
+            col[big].signum() / (s[i] / rows.sqrt())
+        })
+        .collect();
+    Mat::from_fn(keep, d, |i, j| v[(j, i)] * scale[i])
 }
 
 #[cfg(test)]

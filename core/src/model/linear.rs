@@ -143,9 +143,7 @@ impl VertexLinear {
                 }
             })
             .collect();
-        let mean_a: Vec<f64> = (0..v)
-            .map(|i| (0..p).map(|r| f64::from(ao.row(r)[i])).sum::<f64>() / p as f64)
-            .collect();
+        let mean_a = ao.mean();
         let js = Mat::from_fn(p, n, |r, k| {
             (f64::from(poses[r][k]) - mean_j[k]) * inv_std[k]
         });

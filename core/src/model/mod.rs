@@ -148,6 +148,37 @@ impl Model {
         }
     }
 
+    /// Whether the model can evaluate poses of `character`: the same vertex
+    /// count, and every node it reads exists. (An asset read from a file is
+    /// self-consistent after [`Model::from_container`]; this checks it
+    /// against the character it is used with.)
+    pub fn check_character(&self, character: &crate::Character) -> Result<(), String> {
+        if character.vertex_count() != self.vertices() {
+            return Err(format!(
+                "the character has {} vertices but the asset was baked for {} vertices",
+                character.vertex_count(),
+                self.vertices()
+            ));
+        }
+        let nodes = character.skeleton.nodes.len();
+        let ok = match self {
+            Self::StaticAverage(_) => true,
+            Self::VertexLinear(layout, _) => layout
+                .joints
+                .iter()
+                .chain(&layout.translations)
+                .all(|&n| n < nodes),
+            Self::VertexClustered(handles, _) => {
+                handles.root.is_none_or(|r| r < nodes) && handles.joints.iter().all(|&n| n < nodes)
+            }
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err("the asset reads joints the character does not have: it was baked for another character".into())
+        }
+    }
+
     /// The coefficients as the run time sees them: a dense linear form or a
     /// sparse one, taking [`Model::weights`].
     pub fn form(&self) -> FormRef<'_> {
@@ -279,11 +310,15 @@ impl Model {
         if header.method != container.method {
             return Err(bad("the header's method differs from the preamble's"));
         }
+        validate_layout(&header)?;
         let v = header.vertices;
         let coef = f16s(container.section(b"COEF")?)?;
+        if coef.iter().any(|c| !c.is_finite()) {
+            return Err(bad("COEF holds a value that is not a finite number"));
+        }
         let model = match &header.layout {
             Layout::StaticAverage => Self::StaticAverage(StaticAverage {
-                form: read_form(v, &[1], coef)?,
+                form: read_form(v, 1, coef)?,
             }),
             Layout::VertexLinear {
                 joint_angles,
@@ -316,14 +351,14 @@ impl Model {
                         values: coef,
                     })
                 } else {
-                    Coefficients::Dense(read_form(v, &[rows], coef)?)
+                    Coefficients::Dense(read_form(v, rows, coef)?)
                 };
                 let n = joint_angles.len();
                 let Data::F32(norm) = container.section(b"NORM")? else {
                     return Err(bad("NORM must be f32"));
                 };
-                if norm.len() != 2 * n {
-                    return Err(bad("NORM length does not match the header"));
+                if norm.len() != 2 * n || norm.iter().any(|x| !x.is_finite()) {
+                    return Err(bad("NORM does not match the header or is not finite"));
                 }
                 Self::VertexLinear(
                     joint_angles.clone(),
@@ -353,8 +388,14 @@ impl Model {
                 let Data::F32(axes) = container.section(b"AXES")? else {
                     return Err(bad("AXES must be f32"));
                 };
-                if centers.len() != m * h || axes.len() != m * n * h {
-                    return Err(bad("cluster centres or axes do not match the header"));
+                // validate_layout bounded m, n and h, so these products fit.
+                if centers.len() != m * h
+                    || axes.len() != m * n * h
+                    || centers.iter().chain(axes).any(|x| !x.is_finite())
+                {
+                    return Err(bad(
+                        "cluster centres or axes do not match the header or are not finite",
+                    ));
                 }
                 let clusters = (0..m)
                     .map(|j| PoseCluster {
@@ -393,6 +434,74 @@ pub struct AssetHeaderFields {
     pub clips: Vec<String>,
     /// The bake's fully defaulted parameters.
     pub params: serde_json::Value,
+}
+
+/// Most vertices, joints, pose clusters and dimensions an asset may
+/// declare: far above any real bake, low enough that every size computed
+/// from them fits in memory arithmetic without overflow.
+const MAX_VERTICES: usize = 1 << 26;
+const MAX_JOINTS: usize = 1 << 12;
+const MAX_POSE_CLUSTERS: usize = 1024;
+const MAX_DIMENSIONS: usize = 256;
+
+/// Checks that the header's layout is self-consistent and within bounds
+/// before any section is interpreted with it, so that a file that passes
+/// its checksums but was written by someone hostile is refused with a
+/// message instead of making evaluation panic or produce NaN.
+fn validate_layout(header: &AssetHeader) -> Result<(), AssetError> {
+    let v = header.vertices;
+    if v == 0 || v > MAX_VERTICES {
+        return Err(bad("the vertex count is 0 or absurdly large"));
+    }
+    match &header.layout {
+        Layout::StaticAverage => {}
+        Layout::VertexLinear { joint_angles, .. } => {
+            let ja = joint_angles;
+            let count = ja.joints.len() + ja.translations.len();
+            if count > MAX_JOINTS || ja.names.len() != 3 * count || ja.ranges.len() != 3 * count {
+                return Err(bad(
+                    "the joint-angle layout's names and ranges do not match its joints",
+                ));
+            }
+            if ja
+                .ranges
+                .iter()
+                .any(|r| !(r.min.is_finite() && r.max.is_finite() && r.min <= r.max))
+            {
+                return Err(bad("a joint-angle range is not finite or is reversed"));
+            }
+        }
+        Layout::VertexClustered {
+            handles,
+            dimensions,
+            alpha,
+            clamp,
+            columns,
+            ..
+        } => {
+            if handles.joints.is_empty()
+                || handles.joints.len() > MAX_JOINTS
+                || handles.offsets.len() != handles.joints.len()
+                || handles.offsets.iter().any(|o| !o.is_finite())
+            {
+                return Err(bad(
+                    "the handle layout is empty or its offsets do not match its joints",
+                ));
+            }
+            if *dimensions == 0 || *dimensions > MAX_DIMENSIONS {
+                return Err(bad("dimensions must be between 1 and 256"));
+            }
+            if columns.is_empty() || columns.len() > MAX_POSE_CLUSTERS {
+                return Err(bad("pose clusters must be between 1 and 1024"));
+            }
+            if !(alpha.is_finite() && *alpha > 0.0) || !(clamp.is_finite() && *clamp >= 0.0) {
+                return Err(bad(
+                    "alpha must be finite and positive, clamp finite and ≥ 0",
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 fn section(tag: [u8; 4], data: Data) -> Section {
@@ -439,29 +548,19 @@ fn form_sections(form: &LinearForm) -> Vec<Section> {
     sections
 }
 
-/// Unmapped blocks of the given row counts, V columns each.
-fn read_form(v: usize, rows: &[usize], coef: Vec<f16>) -> Result<LinearForm, AssetError> {
-    let want: usize = rows.iter().map(|r| r * v).sum();
-    if coef.len() != want {
+/// One unmapped block of `rows` rows and V columns.
+fn read_form(v: usize, rows: usize, coef: Vec<f16>) -> Result<LinearForm, AssetError> {
+    if Some(coef.len()) != rows.checked_mul(v) {
         return Err(bad("COEF length does not match the header"));
     }
-    let mut rest = coef.as_slice();
-    let blocks = rows
-        .iter()
-        .map(|&r| {
-            let (mine, tail) = rest.split_at(r * v);
-            rest = tail;
-            Block {
-                rows: r,
-                columns: v,
-                coefficients: mine.to_vec(),
-                map: None,
-            }
-        })
-        .collect();
     Ok(LinearForm {
         vertices: v,
-        blocks,
+        blocks: vec![Block {
+            rows,
+            columns: v,
+            coefficients: coef,
+            map: None,
+        }],
     })
 }
 
@@ -480,6 +579,7 @@ fn read_clustered_form(
             "vertex cluster counts must be between 1 and the vertex count",
         ));
     }
+    // Bounded by validate_layout: v ≤ 2^26, rows ≤ 257, ≤ 1024 clusters.
     let want = v + columns.iter().map(|c| c * rows).sum::<usize>();
     if coef.len() != want {
         return Err(bad("COEF length does not match the header"));

@@ -8,7 +8,7 @@ use aobake_core::{
     bake::{BakeParams, Evaluation, Plan},
     model::{Model, StaticAverage},
     reference::{AoBlock, trace_poses},
-    trace::{SceneOptions, no_progress},
+    trace::{SceneOptions, SurfaceParams, no_progress},
 };
 
 use crate::util;
@@ -19,12 +19,12 @@ struct Baked {
     bytes: Vec<u8>,
 }
 
-fn trace(character: &Character, poses: &[Pose], params: &BakeParams) -> AoBlock {
+fn trace(character: &Character, poses: &[Pose], surface: &SurfaceParams) -> AoBlock {
     trace_poses(
         character,
         poses,
         &SceneOptions::default(),
-        &params.surface(),
+        surface,
         &no_progress,
     )
     .unwrap()
@@ -34,11 +34,11 @@ fn trace(character: &Character, poses: &[Pose], params: &BakeParams) -> AoBlock 
 fn bake(character: &Character, clips: &[Clip], params: BakeParams) -> Baked {
     let plan = Plan::new(character, clips, params).unwrap();
     let poses = plan.reference_poses();
-    let reference = trace(character, &poses, &plan.params);
+    let reference = trace(character, &poses, &plan.params.surface());
     let (model, _) = plan.fit(&poses, &reference).unwrap();
     let tests = plan.test_poses();
     let test_poses: Vec<Pose> = tests.iter().map(|t| t.pose.clone()).collect();
-    let truth = trace(character, &test_poses, &plan.params);
+    let truth = trace(character, &test_poses, &plan.params.held_out_surface());
     let evaluation = plan.evaluate(&model, &StaticAverage::fit(&reference), &tests, &truth);
     let bytes = model
         .to_container(plan.header("character-digest", &[]))
@@ -205,4 +205,107 @@ fn bad_parameters_are_named() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("no clips"), "{err}");
+}
+
+/// A file that passes every checksum but was written to hurt: its header
+/// edited and the file re-sealed. Each must be refused with an error, never
+/// a panic or NaN.
+#[test]
+fn hostile_assets_with_valid_checksums_are_refused() {
+    use serde_json::{Value, json};
+    let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
+    let c = &imported.character;
+    let linear = bake(c, &imported.clips, quick(Method::VertexLinear)).bytes;
+    let mut clustered_params = quick(Method::VertexClustered);
+    clustered_params.clustered.vertex_clusters = 30;
+    let clustered = bake(c, &imported.clips, clustered_params).bytes;
+
+    let edit = |bytes: &[u8], f: &dyn Fn(&mut Value)| -> Result<Model, AssetError> {
+        let mut container = Container::from_bytes(bytes).unwrap();
+        let mut header: Value = serde_json::from_str(&container.header).unwrap();
+        f(&mut header);
+        container.header = header.to_string();
+        let resealed = Container::from_bytes(&container.to_bytes())?;
+        Model::from_container(&resealed).map(|(m, _)| m)
+    };
+    let linear_edits: Vec<(&str, Box<dyn Fn(&mut Value)>)> = vec![
+        ("no vertices", Box::new(|h| h["vertices"] = json!(0))),
+        (
+            "huge vertices",
+            Box::new(|h| h["vertices"] = json!(u64::MAX)),
+        ),
+        (
+            "names without joints",
+            Box::new(|h| h["layout"]["joint_angles"]["names"] = json!([])),
+        ),
+        (
+            "reversed range",
+            Box::new(|h| {
+                h["layout"]["joint_angles"]["ranges"][0] = json!({"min": 1.0, "max": -1.0})
+            }),
+        ),
+        (
+            "infinite range",
+            Box::new(|h| h["layout"]["joint_angles"]["ranges"][0]["max"] = json!(1e39)),
+        ),
+        (
+            "sparse claimed",
+            Box::new(|h| h["layout"]["sparse"] = json!(true)),
+        ),
+        (
+            "method swapped",
+            Box::new(|h| h["method"] = json!("static-average")),
+        ),
+    ];
+    for (what, f) in &linear_edits {
+        assert!(edit(&linear, f.as_ref()).is_err(), "linear: {what}");
+    }
+    let clustered_edits: Vec<(&str, Box<dyn Fn(&mut Value)>)> = vec![
+        (
+            "huge dimensions",
+            Box::new(|h| h["layout"]["dimensions"] = json!(1u64 << 62)),
+        ),
+        (
+            "zero dimensions",
+            Box::new(|h| h["layout"]["dimensions"] = json!(0)),
+        ),
+        (
+            "no clusters",
+            Box::new(|h| h["layout"]["columns"] = json!([])),
+        ),
+        (
+            "alpha overflow",
+            Box::new(|h| h["layout"]["alpha"] = json!(1e39)),
+        ),
+        (
+            "negative clamp",
+            Box::new(|h| h["layout"]["clamp"] = json!(-1.0)),
+        ),
+        (
+            "offsets missing",
+            Box::new(|h| h["layout"]["handles"]["offsets"] = json!([])),
+        ),
+        (
+            "more columns than vertices",
+            Box::new(|h| h["layout"]["columns"][0] = json!(100_000)),
+        ),
+        (
+            "unmapped columns",
+            Box::new(|h| h["layout"]["columns"][0] = json!(370)),
+        ),
+    ];
+    for (what, f) in &clustered_edits {
+        assert!(edit(&clustered, f.as_ref()).is_err(), "clustered: {what}");
+    }
+    // A NaN coefficient, sealed with a fresh checksum.
+    let mut container = Container::from_bytes(&linear).unwrap();
+    for s in &mut container.sections {
+        if let aobake_core::asset::Data::F16(v) = &mut s.data {
+            v[3] = half::f16::NAN;
+        }
+    }
+    let err = Model::from_container(&Container::from_bytes(&container.to_bytes()).unwrap());
+    assert!(matches!(err, Err(AssetError::Malformed(m)) if m.contains("finite")));
+    // Unedited, both read back.
+    assert!(edit(&linear, &|_| {}).is_ok() && edit(&clustered, &|_| {}).is_ok());
 }

@@ -13,7 +13,7 @@ use aobake_core::{
     model::{Centering, StaticAverage},
     reference::{AoBlock, trace_poses},
     report::{CharacterInfo, Report, Sizes, Timings, psnr_plot_png},
-    trace::SceneOptions,
+    trace::{SceneOptions, SurfaceParams},
 };
 
 use super::trace::{progress_bar, with_threads};
@@ -221,11 +221,10 @@ pub(super) fn load_inputs(
 pub(super) fn trace_all(
     character: &Character,
     poses: &[Pose],
-    params: &BakeParams,
+    surface: &SurfaceParams,
     what: &str,
 ) -> anyhow::Result<AoBlock> {
     let bar = progress_bar(poses.len() as u64, what);
-    let surface = params.surface();
     let options = SceneOptions::default();
     let mut block = AoBlock {
         vertices: character.vertex_count(),
@@ -236,7 +235,7 @@ pub(super) fn trace_all(
             character,
             chunk,
             &options,
-            &surface,
+            surface,
             &aobake_core::trace::no_progress,
         )?;
         block.values.extend(b.values);
@@ -282,7 +281,7 @@ fn bake(args: &Args, inputs: &Inputs, plan: &Plan<'_>) -> anyhow::Result<()> {
 
     let started = Instant::now();
     let poses = plan.reference_poses();
-    let reference = trace_all(character, &poses, params, "reference AO")?;
+    let reference = trace_all(character, &poses, &params.surface(), "reference AO")?;
     timings.reference_trace_s = started.elapsed().as_secs_f64();
 
     let started = Instant::now();
@@ -293,7 +292,12 @@ fn bake(args: &Args, inputs: &Inputs, plan: &Plan<'_>) -> anyhow::Result<()> {
     let started = Instant::now();
     let tests = plan.test_poses();
     let test_poses: Vec<Pose> = tests.iter().map(|t| t.pose.clone()).collect();
-    let truth = trace_all(character, &test_poses, params, "held-out AO")?;
+    let truth = trace_all(
+        character,
+        &test_poses,
+        &params.held_out_surface(),
+        "held-out AO",
+    )?;
     timings.test_trace_s = started.elapsed().as_secs_f64();
 
     let started = Instant::now();

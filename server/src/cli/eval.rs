@@ -33,30 +33,10 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let limits = Limits::default();
     let posed = pose(&args.file, &args.pose, &limits)?;
     let character = &posed.character;
-    if character.vertex_count() != header.vertices {
+    if let Err(e) = model.check_character(character) {
         bail!(
-            "{} has {} vertices but the asset was baked for {} vertices (character {})",
-            args.file.display(),
-            character.vertex_count(),
-            header.vertices,
-            header.character
-        );
-    }
-    let nodes = character.skeleton.nodes.len();
-    let fits = match &model {
-        Model::StaticAverage(_) => true,
-        Model::VertexLinear(layout, _) => layout
-            .joints
-            .iter()
-            .chain(&layout.translations)
-            .all(|&n| n < nodes),
-        Model::VertexClustered(handles, _) => {
-            handles.root.is_none_or(|r| r < nodes) && handles.joints.iter().all(|&n| n < nodes)
-        }
-    };
-    if !fits {
-        bail!(
-            "the asset's joints are not in {}: it was baked for another character ({})",
+            "{} does not fit {}: {e} (character {})",
+            args.asset.display(),
             args.file.display(),
             header.character
         );

@@ -11,7 +11,8 @@ use aobake_core::{
     Limits, Pose,
     asset::Method,
     bake::{BakeParams, Plan},
-    model::{Model, StaticAverage},
+    metrics::{Errors, FrameError},
+    model::StaticAverage,
 };
 
 use super::bake::{load_inputs, trace_all};
@@ -70,10 +71,15 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let (poses, reference, tests, truth, trace_s) = with_threads(args.threads, || {
         let started = Instant::now();
         let poses = plan.reference_poses();
-        let reference = trace_all(character, &poses, &plan.params, "reference AO")?;
+        let reference = trace_all(character, &poses, &plan.params.surface(), "reference AO")?;
         let tests = plan.test_poses();
         let test_poses: Vec<Pose> = tests.iter().map(|t| t.pose.clone()).collect();
-        let truth = trace_all(character, &test_poses, &plan.params, "held-out AO")?;
+        let truth = trace_all(
+            character,
+            &test_poses,
+            &plan.params.held_out_surface(),
+            "held-out AO",
+        )?;
         anyhow::Ok((
             poses,
             reference,
@@ -142,16 +148,11 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         ],
         &linear,
     )?;
-    let c = &plan
-        .evaluate(
-            &Model::StaticAverage(baseline.clone()),
-            &baseline,
-            &tests,
-            &truth,
-        )
-        .clip_frames
-        .baseline
-        .mean;
+    let base = baseline.evaluate();
+    let frames: Vec<FrameError> = (0..tests.len())
+        .map(|i| FrameError::of(&base, truth.row(i)))
+        .collect();
+    let c = Errors::of(&frames).mean;
     println!(
         "| static average | - | - | {:.4} | {:.2} | {} | 1 | - |",
         c.mae,
