@@ -6,8 +6,10 @@
 //! Compatibility: a reader of version `major.minor` reads every file of the
 //! same major (it ignores header fields and section tags it does not know,
 //! which is all a minor version may add) and rejects a newer major with
-//! [`AssetError::NewerMajor`]. Nothing in a file depends on the time or
-//! the machine, so the same bake gives the same bytes.
+//! [`AssetError::NewerMajor`]. Nothing in a file depends on the time, so
+//! the same bake by the same build on the same machine gives the same
+//! bytes (faer chooses SIMD kernels at run time, so fits on CPUs with other
+//! vector units may differ in the last bits).
 
 use half::f16;
 use serde::{Serialize, de::DeserializeOwned};

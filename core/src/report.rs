@@ -2,7 +2,7 @@
 //! and a PNG plot of PSNR per frame over each test clip for the model and
 //! the static-average baseline, as Kontkanen & Aila plot it (Fig. 3).
 
-use std::sync::Once;
+use std::sync::OnceLock;
 
 use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
@@ -51,13 +51,13 @@ pub struct CharacterInfo {
     pub vertices: usize,
     /// Triangles.
     pub triangles: usize,
-    /// Clip names: all, training, test.
+    /// Every clip's name.
     pub clips: Vec<String>,
     /// Clips the model was fitted on.
     pub train_clips: Vec<String>,
     /// Clips whose frames were held out.
     pub test_clips: Vec<String>,
-    /// Joint-angle parameters and handle numbers.
+    /// Joint-angle parameters (Kontkanen & Aila).
     pub joint_angle_parameters: usize,
     /// Handle coordinates (Kirk & Arikan).
     pub handle_coordinates: usize,
@@ -89,13 +89,13 @@ pub struct Report {
 /// Draws PSNR per frame over each test clip (one panel per clip, the model
 /// and the baseline in each) as PNG bytes.
 pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
-    static REGISTER: Once = Once::new();
-    let mut registered = Ok(());
-    REGISTER.call_once(|| {
-        registered = register_font("sans-serif", FontStyle::Normal, FONT)
-            .map_err(|_| "the bundled font is invalid".to_owned());
-    });
-    registered?;
+    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
+    REGISTERED
+        .get_or_init(|| {
+            register_font("sans-serif", FontStyle::Normal, FONT)
+                .map_err(|_| "the bundled font is invalid".to_owned())
+        })
+        .clone()?;
     let clips = &report.evaluation.clips;
     let (width, panel) = (900u32, 280u32);
     let height = 50 + panel * clips.len().max(1) as u32;

@@ -183,6 +183,37 @@ impl<'g> VertexAo<'g> {
             FormRef::Sparse(form) => Self::sparse(form)?,
         };
         let device = &gpu.device;
+        let groups_needed = vertices.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1);
+        let groups = (
+            groups_needed.min(MAX_GROUPS),
+            groups_needed.div_ceil(MAX_GROUPS),
+        );
+        let params = Params {
+            vertices,
+            blocks: to_u32(blocks.len(), "blocks")?,
+            row_stride: groups.0 * aobake_shaders::WORKGROUP_SIZE,
+            _pad: 0,
+        };
+        // Every buffer must fit one storage binding; the shader indexes
+        // coefficients as u32 f16 elements.
+        let limit = u64::from(device.limits().max_storage_buffer_binding_size);
+        for (what, words) in [
+            ("coefficients", coefficients.len()),
+            ("maps", maps.len()),
+            ("sparse rows", sparse_rows.len()),
+            ("vertices", vertices as usize),
+            ("weights", weights),
+        ] {
+            let bytes = 4 * words as u64;
+            if bytes > limit {
+                return Err(GpuError::TooLarge(format!(
+                    "{what} take {bytes} bytes, over the adapter's storage binding limit of {limit}"
+                )));
+            }
+        }
+        if groups.1 > MAX_GROUPS {
+            return Err(GpuError::TooLarge(format!("{vertices} vertices")));
+        }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("vertex_ao.wgsl"),
@@ -202,17 +233,6 @@ impl<'g> VertexAo<'g> {
                 contents: bytemuck::cast_slice(data),
                 usage: wgpu::BufferUsages::STORAGE,
             })
-        };
-        let groups_needed = vertices.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1);
-        let groups = (
-            groups_needed.min(MAX_GROUPS),
-            groups_needed.div_ceil(MAX_GROUPS),
-        );
-        let params = Params {
-            vertices,
-            blocks: to_u32(blocks.len(), "blocks")?,
-            row_stride: groups.0 * aobake_shaders::WORKGROUP_SIZE,
-            _pad: 0,
         };
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("params"),
@@ -271,6 +291,7 @@ impl<'g> VertexAo<'g> {
             coef_offset += b.coefficients.len();
             weight_offset += b.rows;
         }
+        to_u32(coef_offset, "coefficients")?;
         let bits: Vec<u16> = form
             .blocks
             .iter()
@@ -304,6 +325,7 @@ impl<'g> VertexAo<'g> {
     pub fn evaluate(&self, weights: &[f32]) -> Result<Vec<f32>, GpuError> {
         assert_eq!(weights.len(), self.weights, "one weight per row");
         let device = &self.gpu.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let weights = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("weights"),
             contents: bytemuck::cast_slice(if weights.is_empty() {
@@ -371,6 +393,9 @@ impl<'g> VertexAo<'g> {
         }
         encoder.copy_buffer_to_buffer(&ao, 0, &staging, 0, size);
         let submission = self.gpu.queue.submit(Some(encoder.finish()));
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline(e.to_string()));
+        }
         let slice = staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {

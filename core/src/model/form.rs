@@ -17,7 +17,7 @@
 //! saturate it: a linear model can overshoot on poses far from its
 //! training set.
 //!
-//! `shaders/vertex_ao.wgsl` evaluates exactly this layout on the GPU.
+//! `shaders/wgsl/vertex_ao.wgsl` evaluates exactly this layout on the GPU.
 
 use half::f16;
 

@@ -98,47 +98,66 @@ fn every_vertex_method_matches_the_cpu() {
     }
 }
 
-/// Every finite f16 bit pattern through the shader's decoder: one block
-/// holding all of them, read as 0.5 + v·2⁻¹⁷ so that the result stays
-/// inside the [0, 1] clamp.
+/// Every finite f16 bit pattern through the shader's decoder, exactly. Vertex
+/// i reads value i; one block per exponent (binade) holds the values of
+/// that binade and a zero column that every other vertex maps to, and its
+/// weight scales the binade to [0.25, 0.5) (subnormals below 0.5), so
+/// `0.5 + v·w` keeps all 11 significant bits of every value, signs and
+/// subnormals included, inside the [0, 1] clamp and exactly in f32.
 #[test]
-fn the_shader_decodes_every_finite_half() {
+fn the_shader_decodes_every_finite_half_exactly() {
     let values: Vec<f16> = (0..=u16::MAX)
         .map(f16::from_bits)
         .filter(|h| h.is_finite())
         .collect();
     let n = values.len();
-    let form = LinearForm {
-        vertices: n,
-        blocks: vec![
-            Block {
-                rows: 1,
-                columns: 1,
-                coefficients: vec![f16::from_f32(0.5)],
-                map: Some(vec![0; n]),
-            },
-            Block {
-                rows: 1,
-                columns: n,
-                coefficients: values.clone(),
-                map: None,
-            },
-        ],
-    };
-    let model = Model::StaticAverage(StaticAverage { form });
+    let exponent = |h: f16| u32::from((h.to_bits() >> 10) & 0x1f);
+    let mut blocks = vec![Block {
+        rows: 1,
+        columns: 1,
+        coefficients: vec![f16::from_f32(0.5)],
+        map: Some(vec![0; n]),
+    }];
+    let mut weights = vec![1.0f32];
+    for e in 0..31u32 {
+        let mut coefficients = vec![f16::ZERO];
+        let mut map = vec![0u32; n];
+        for (i, &h) in values.iter().enumerate() {
+            if exponent(h) == e {
+                map[i] = coefficients.len() as u32;
+                coefficients.push(h);
+            }
+        }
+        blocks.push(Block {
+            rows: 1,
+            columns: coefficients.len(),
+            coefficients,
+            map: Some(map),
+        });
+        // |v| < 2^(e−14) for e ≥ 1 (2^−14 for subnormals): w = 2^(13−e).
+        weights.push(2f32.powi(13 - e.max(1) as i32));
+    }
+    let model = Model::StaticAverage(StaticAverage {
+        form: LinearForm {
+            vertices: n,
+            blocks,
+        },
+    });
     let gpu = gpu();
-    let weights = [1.0, 2f32.powi(-17)];
     let got = VertexAo::new(&gpu, &model)
         .unwrap()
         .evaluate(&weights)
         .unwrap();
-    let cpu = model.evaluate_weights(&weights);
-    for (i, (g, want)) in got.iter().zip(&cpu).enumerate() {
-        assert!(
-            (g - want).abs() <= 1e-7,
-            "f16 {:#06x} ({}): GPU {g}, CPU {want}",
-            values[i].to_bits(),
-            values[i]
+    for (i, (g, h)) in got.iter().zip(&values).enumerate() {
+        let w = weights[1 + exponent(*h) as usize];
+        let want = 0.5 + h.to_f32() * w;
+        assert_eq!(
+            *g,
+            want,
+            "vertex {i}: f16 {:#06x} ({h}) decoded to {}",
+            h.to_bits(),
+            (g - 0.5) / w
         );
+        assert!((0.0..=1.0).contains(&want));
     }
 }
