@@ -494,7 +494,9 @@ fn validate_layout(header: &AssetHeader) -> Result<(), AssetError> {
             if columns.is_empty() || columns.len() > MAX_POSE_CLUSTERS {
                 return Err(bad("pose clusters must be between 1 and 1024"));
             }
-            if !(alpha.is_finite() && *alpha > 0.0) || !(clamp.is_finite() && *clamp >= 0.0) {
+            let alpha_ok = alpha.is_finite() && *alpha > 0.0;
+            let clamp_ok = clamp.is_finite() && *clamp >= 0.0;
+            if !(alpha_ok && clamp_ok) {
                 return Err(bad(
                     "alpha must be finite and positive, clamp finite and ≥ 0",
                 ));
