@@ -196,7 +196,7 @@ impl<'g> VertexAo<'g> {
         };
         // Every buffer must fit one storage binding; the shader indexes
         // coefficients as u32 f16 elements.
-        let limit = u64::from(device.limits().max_storage_buffer_binding_size);
+        let limit = device.limits().max_storage_buffer_binding_size;
         for (what, words) in [
             ("coefficients", coefficients.len()),
             ("maps", maps.len()),
