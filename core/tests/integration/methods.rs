@@ -207,6 +207,9 @@ fn bad_parameters_are_named() {
     assert!(err.contains("no clips"), "{err}");
 }
 
+/// A change to an asset's JSON header.
+type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+
 /// A file that passes every checksum but was written to hurt: its header
 /// edited and the file re-sealed. Each must be refused with an error, never
 /// a panic or NaN.
@@ -228,7 +231,7 @@ fn hostile_assets_with_valid_checksums_are_refused() {
         let resealed = Container::from_bytes(&container.to_bytes())?;
         Model::from_container(&resealed).map(|(m, _)| m)
     };
-    let linear_edits: Vec<(&str, Box<dyn Fn(&mut Value)>)> = vec![
+    let linear_edits: Vec<(&str, Edit)> = vec![
         ("no vertices", Box::new(|h| h["vertices"] = json!(0))),
         (
             "huge vertices",
@@ -260,7 +263,7 @@ fn hostile_assets_with_valid_checksums_are_refused() {
     for (what, f) in &linear_edits {
         assert!(edit(&linear, f.as_ref()).is_err(), "linear: {what}");
     }
-    let clustered_edits: Vec<(&str, Box<dyn Fn(&mut Value)>)> = vec![
+    let clustered_edits: Vec<(&str, Edit)> = vec![
         (
             "huge dimensions",
             Box::new(|h| h["layout"]["dimensions"] = json!(1u64 << 62)),
