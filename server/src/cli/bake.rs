@@ -182,6 +182,7 @@ impl Args {
 
 /// The character, every clip (files given first, then its own) and the
 /// digests of the uploads.
+#[derive(Debug)]
 pub(super) struct Inputs {
     pub character: Character,
     pub clips: Vec<Clip>,

@@ -31,7 +31,10 @@ enum What {
     /// error and size for every pose-cluster count, dimension and
     /// vertex-cluster level, beside vertex-linear and the static average,
     /// all judged on the same held-out clip frames.
-    Clusters(super::table::Args),
+    Clusters(super::table::ClusterArgs),
+    /// vertex-linear's ridge weight and sparsification threshold: error,
+    /// size and multiply-adds on the same held-out clip frames.
+    Linear(super::table::LinearArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -97,7 +100,8 @@ impl Kernel {
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     match &args.what {
         What::Trace(a) => trace(a),
-        What::Clusters(a) => super::table::run(a),
+        What::Clusters(a) => super::table::clusters(a),
+        What::Linear(a) => super::table::linear(a),
     }
 }
 

@@ -1,8 +1,12 @@
-//! `aobake bench clusters`: Kirk & Arikan's Table 1 on our data. The
-//! reference and held-out AO are traced once; every (pose clusters m,
-//! dimensions n, vertex clusters) combination is then fitted and judged on
-//! the same held-out clip frames, beside vertex-linear and the static
-//! average fitted to the same poses.
+//! `aobake bench clusters` and `aobake bench linear`: parameter sweeps of
+//! the vertex methods on one character. The reference and held-out AO are
+//! traced once; every setting is then fitted to the same reference poses
+//! and judged on the same held-out clip frames.
+//!
+//! * `clusters` is Kirk & Arikan's Table 1 (pose clusters m × dimensions n
+//!   × vertex clusters), beside vertex-linear and the static average.
+//! * `linear` shows the effect of vertex-linear's ridge weight and
+//!   sparsification threshold on error, size and run-time cost.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -10,38 +14,29 @@ use std::time::Instant;
 use aobake_core::{
     Limits, Pose,
     asset::Method,
-    bake::{BakeParams, Plan},
+    bake::{BakeParams, Plan, ReferenceSource, TestPose},
     metrics::{Errors, FrameError},
     model::StaticAverage,
+    reference::AoBlock,
 };
 
-use super::bake::{load_inputs, trace_all};
+use super::bake::{Inputs, load_inputs, trace_all};
 use super::trace::with_threads;
 
-/// Arguments of `aobake bench clusters`.
+/// What both sweeps take.
 #[derive(Debug, clap::Args)]
-pub(super) struct Args {
+pub(super) struct Common {
     /// The character.
     file: PathBuf,
     /// glTF files with more clips for it.
     #[arg(long, num_args = 1..)]
     clips: Vec<PathBuf>,
-    /// Reference poses (random clip frames of the training clips).
+    /// Reference poses.
     #[arg(long, default_value_t = 256)]
     poses: usize,
     /// Rays per vertex and pose.
     #[arg(long, default_value_t = 128)]
     samples: u32,
-    /// Pose cluster counts m to try.
-    #[arg(long, value_delimiter = ',', default_value = "5,10,15")]
-    pose_clusters: Vec<usize>,
-    /// PCA dimensions n to try.
-    #[arg(long, value_delimiter = ',', default_value = "5,10,15")]
-    dimensions: Vec<usize>,
-    /// Vertex-cluster levels to try, as fractions of the vertex count
-    /// (0: none, one coefficient vector per vertex).
-    #[arg(long, value_delimiter = ',', default_value = "0,0.25,0.05")]
-    vertex_fractions: Vec<f64>,
     /// Fit on these clips only (repeat). Default: all.
     #[arg(long = "train-clip", value_name = "NAME")]
     train_clips: Vec<String>,
@@ -56,64 +51,103 @@ pub(super) struct Args {
     threads: Option<usize>,
 }
 
-pub(super) fn run(args: &Args) -> anyhow::Result<()> {
-    let inputs = load_inputs(&args.file, &args.clips, &Limits::default())?;
-    let mut params = BakeParams::new(Method::VertexClustered);
-    params.poses = args.poses;
-    params.samples = args.samples;
-    params.seed = args.seed;
-    params.train_clips.clone_from(&args.train_clips);
-    params.test_clips.clone_from(&args.test_clips);
-    params.eval_poses = 0;
-    let plan = Plan::new(&inputs.character, &inputs.clips, params)?;
-    let character = &inputs.character;
-    let v = character.vertex_count();
-    let (poses, reference, tests, truth, trace_s) = with_threads(args.threads, || {
+/// Arguments of `aobake bench clusters`.
+#[derive(Debug, clap::Args)]
+pub(super) struct ClusterArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Pose cluster counts m to try.
+    #[arg(long, value_delimiter = ',', default_value = "5,10,15")]
+    pose_clusters: Vec<usize>,
+    /// PCA dimensions n to try.
+    #[arg(long, value_delimiter = ',', default_value = "5,10,15")]
+    dimensions: Vec<usize>,
+    /// Vertex-cluster levels to try, as fractions of the vertex count
+    /// (0: none, one coefficient vector per vertex).
+    #[arg(long, value_delimiter = ',', default_value = "0,0.25,0.05")]
+    vertex_fractions: Vec<f64>,
+}
+
+/// Arguments of `aobake bench linear`.
+#[derive(Debug, clap::Args)]
+pub(super) struct LinearArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Ridge weights to try.
+    #[arg(long, value_delimiter = ',', default_value = "0,0.001,0.01,0.1")]
+    ridges: Vec<f64>,
+    /// Sparsification thresholds to try (with the default ridge).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,0.001,0.002,0.005,0.01"
+    )]
+    thresholds: Vec<f32>,
+}
+
+/// Reference and held-out AO, traced once.
+struct Traced<'a> {
+    plan: Plan<'a>,
+    poses: Vec<Pose>,
+    reference: AoBlock,
+    tests: Vec<TestPose>,
+    truth: AoBlock,
+    baseline: StaticAverage,
+}
+
+impl<'a> Traced<'a> {
+    fn new(inputs: &'a Inputs, common: &Common, params: BakeParams) -> anyhow::Result<Self> {
+        let plan = Plan::new(&inputs.character, &inputs.clips, params)?;
+        let character = &inputs.character;
         let started = Instant::now();
-        let poses = plan.reference_poses();
-        let reference = trace_all(character, &poses, &plan.params.surface(), "reference AO")?;
-        let tests = plan.test_poses();
-        let test_poses: Vec<Pose> = tests.iter().map(|t| t.pose.clone()).collect();
-        let truth = trace_all(
-            character,
-            &test_poses,
-            &plan.params.held_out_surface(),
-            "held-out AO",
-        )?;
-        anyhow::Ok((
+        let (poses, reference, tests, truth) = with_threads(common.threads, || {
+            let poses = plan.reference_poses();
+            let reference = trace_all(character, &poses, &plan.params.surface(), "reference AO")?;
+            let tests = plan.test_poses();
+            let test_poses: Vec<Pose> = tests.iter().map(|t| t.pose.clone()).collect();
+            let truth = trace_all(
+                character,
+                &test_poses,
+                &plan.params.held_out_surface(),
+                "held-out AO",
+            )?;
+            anyhow::Ok((poses, reference, tests, truth))
+        })??;
+        println!(
+            "{}: {} vertices, {} reference poses ({:?}), {} held-out clip frames, {} rays per vertex; tracing took {:.1} s",
+            common.file.display(),
+            character.vertex_count(),
+            poses.len(),
+            plan.params.reference,
+            tests.len(),
+            plan.params.samples,
+            started.elapsed().as_secs_f64()
+        );
+        println!();
+        let baseline = StaticAverage::fit(&reference);
+        Ok(Self {
+            plan,
             poses,
             reference,
             tests,
             truth,
-            started.elapsed().as_secs_f64(),
-        ))
-    })??;
-    let baseline = StaticAverage::fit(&reference);
-    println!(
-        "{}: {v} vertices, {} reference poses (clip frames), {} held-out clip frames, {} rays per vertex; tracing took {trace_s:.1} s",
-        args.file.display(),
-        poses.len(),
-        tests.len(),
-        plan.params.samples
-    );
-    println!();
-    println!(
-        "| pose clusters m | dimensions n | vertex clusters | mean abs error | PSNR (dB) | size (bytes) | multiply-adds / vertex | fit (s) |"
-    );
-    println!("|---|---|---|---|---|---|---|---|");
-    let row = |label: [String; 3], p: &BakeParams| -> anyhow::Result<()> {
-        let mut plan = plan.clone();
-        plan.params = p.clone();
+            baseline,
+        })
+    }
+
+    /// Fits `params` and prints a table row: the labels, then mean
+    /// absolute error, PSNR, size, multiply-adds and fit time.
+    fn row(&self, labels: &[String], params: &BakeParams) -> anyhow::Result<()> {
+        let mut plan = self.plan.clone();
+        plan.params = params.clone();
         let started = Instant::now();
-        let (model, _) = plan.fit(&poses, &reference)?;
+        let (model, _) = plan.fit(&self.poses, &self.reference)?;
         let fit_s = started.elapsed().as_secs_f64();
-        let e = plan.evaluate(&model, &baseline, &tests, &truth);
+        let e = plan.evaluate(&model, &self.baseline, &self.tests, &self.truth);
         let c = &e.clip_frames.model.mean;
         println!(
-            "| {} | {} | {} | {:.4} | {:.2} | {} | {:.0} | {:.2} |",
-            label[0],
-            label[1],
-            label[2],
+            "| {} | {:.4} | {:.2} | {} | {:.1} | {:.2} |",
+            labels.join(" | "),
             c.mae,
             c.psnr_db,
             model.bytes(),
@@ -121,43 +155,96 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             fit_s
         );
         Ok(())
-    };
+    }
+
+    /// The static average's row.
+    fn baseline_row(&self, blank: usize) {
+        let base = self.baseline.evaluate();
+        let frames: Vec<FrameError> = (0..self.tests.len())
+            .map(|i| FrameError::of(&base, self.truth.row(i)))
+            .collect();
+        let c = Errors::of(&frames).mean;
+        println!(
+            "| static average |{} {:.4} | {:.2} | {} | 1 | - |",
+            " - |".repeat(blank),
+            c.mae,
+            c.psnr_db,
+            self.baseline.form.bytes()
+        );
+    }
+}
+
+fn params(common: &Common, method: Method) -> BakeParams {
+    let mut p = BakeParams::new(method);
+    p.poses = common.poses;
+    p.samples = common.samples;
+    p.seed = common.seed;
+    p.train_clips.clone_from(&common.train_clips);
+    p.test_clips.clone_from(&common.test_clips);
+    p.eval_poses = 0;
+    p
+}
+
+pub(super) fn clusters(args: &ClusterArgs) -> anyhow::Result<()> {
+    let inputs = load_inputs(&args.common.file, &args.common.clips, &Limits::default())?;
+    let t = Traced::new(
+        &inputs,
+        &args.common,
+        params(&args.common, Method::VertexClustered),
+    )?;
+    let v = inputs.character.vertex_count();
+    println!(
+        "| pose clusters m | dimensions n | vertex clusters | mean abs error | PSNR (dB) | size (bytes) | multiply-adds / vertex | fit (s) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
     for &m in &args.pose_clusters {
         for &n in &args.dimensions {
             for &f in &args.vertex_fractions {
-                let mut p = plan.params.clone();
+                let mut p = t.plan.params.clone();
                 p.clustered.pose_clusters = m;
                 p.clustered.dimensions = n;
                 p.clustered.vertex_clusters = (f * v as f64).round() as usize;
-                let label = if p.clustered.vertex_clusters == 0 {
-                    "none".to_owned()
-                } else {
-                    p.clustered.vertex_clusters.to_string()
+                let vc = match p.clustered.vertex_clusters {
+                    0 => "none".to_owned(),
+                    c => c.to_string(),
                 };
-                row([m.to_string(), n.to_string(), label], &p)?;
+                t.row(&[m.to_string(), n.to_string(), vc], &p)?;
             }
         }
     }
-    let mut linear = plan.params.clone();
+    let mut linear = t.plan.params.clone();
     linear.method = Method::VertexLinear;
-    row(
-        [
+    t.row(
+        &[
             "vertex-linear".into(),
-            plan.joint_angles.len().to_string(),
+            format!("{} angles", t.plan.joint_angles.len()),
             "-".into(),
         ],
         &linear,
     )?;
-    let base = baseline.evaluate();
-    let frames: Vec<FrameError> = (0..tests.len())
-        .map(|i| FrameError::of(&base, truth.row(i)))
-        .collect();
-    let c = Errors::of(&frames).mean;
+    t.baseline_row(2);
+    Ok(())
+}
+
+pub(super) fn linear(args: &LinearArgs) -> anyhow::Result<()> {
+    let inputs = load_inputs(&args.common.file, &args.common.clips, &Limits::default())?;
+    let mut p = params(&args.common, Method::VertexLinear);
+    p.reference = ReferenceSource::Mixed;
+    let t = Traced::new(&inputs, &args.common, p)?;
     println!(
-        "| static average | - | - | {:.4} | {:.2} | {} | 1 | - |",
-        c.mae,
-        c.psnr_db,
-        2 * v
+        "| ridge | threshold | mean abs error | PSNR (dB) | size (bytes) | multiply-adds / vertex | fit (s) |"
     );
+    println!("|---|---|---|---|---|---|---|");
+    for &ridge in &args.ridges {
+        let mut p = t.plan.params.clone();
+        p.linear.ridge = ridge;
+        t.row(&[ridge.to_string(), "0".into()], &p)?;
+    }
+    for &threshold in args.thresholds.iter().filter(|&&x| x > 0.0) {
+        let mut p = t.plan.params.clone();
+        p.linear.threshold = threshold;
+        t.row(&[p.linear.ridge.to_string(), threshold.to_string()], &p)?;
+    }
+    t.baseline_row(1);
     Ok(())
 }
