@@ -25,6 +25,10 @@ use crate::{
 
 /// Mixed into the seed of everything held out ("heldout!" in ASCII).
 const HELD_OUT_SEED: u64 = 0x6865_6c64_6f75_7421;
+/// Mixed into the ray seed of the noise estimate ("noise!!!").
+const NOISE_SEED: u64 = 0x6e6f_6973_6521_2121;
+/// Held-out poses traced twice to estimate the ground truth's noise.
+const NOISE_POSES: usize = 8;
 
 /// Where reference (training) poses come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -120,6 +124,15 @@ impl BakeParams {
     pub fn held_out_surface(&self) -> SurfaceParams {
         SurfaceParams {
             seed: self.seed ^ HELD_OUT_SEED,
+            ..self.surface()
+        }
+    }
+
+    /// The tracing parameters of the second trace that estimates the
+    /// ground truth's noise: independent of both other seeds.
+    pub fn noise_surface(&self) -> SurfaceParams {
+        SurfaceParams {
+            seed: self.seed ^ NOISE_SEED,
             ..self.surface()
         }
     }
@@ -371,6 +384,14 @@ impl<'a> Plan<'a> {
             }
         }
         poses
+    }
+
+    /// Indices of up to 8 test poses, evenly spread, to trace a second time
+    /// for the ground truth's noise (see `report::NoiseEstimate`).
+    pub fn noise_sample(&self, tests: &[TestPose]) -> Vec<usize> {
+        let n = tests.len();
+        let k = n.min(NOISE_POSES);
+        (0..k).map(|i| i * n / k).collect()
     }
 
     /// Fits the method to the reference poses' AO (the `fit` job).

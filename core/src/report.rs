@@ -11,6 +11,8 @@ use serde::{Deserialize, Serialize};
 use crate::{
     asset::Method,
     bake::{BakeParams, Evaluation, FitStats},
+    metrics::psnr,
+    reference::AoBlock,
 };
 
 /// The font of the plot's labels (DejaVu Sans, Bitstream Vera licence:
@@ -84,6 +86,50 @@ pub struct Report {
     pub sizes: Sizes,
     /// Held-out errors against the baseline.
     pub evaluation: Evaluation,
+    /// How noisy the ground truth itself is.
+    pub ground_truth_noise: NoiseEstimate,
+}
+
+/// The Monte Carlo noise of the ground truth: some held-out poses traced a
+/// second time with independent rays. The difference of two independent
+/// estimates has twice the variance of one, so the figures are the
+/// difference's divided by √2: what a perfect model would still score
+/// against this ground truth. Model errors close to them are noise, not
+/// model error; more `--samples` lowers them.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct NoiseEstimate {
+    /// Poses traced twice.
+    pub frames: usize,
+    /// RMSE of one ground-truth estimate.
+    pub rmse: f64,
+    /// Mean absolute error of one estimate.
+    pub mae: f64,
+    /// PSNR of one estimate against the exact AO (peak 1).
+    pub psnr_db: f64,
+}
+
+impl NoiseEstimate {
+    /// From `truth` rows `rows` and the same poses traced again (`again`,
+    /// in that order).
+    pub fn of(rows: &[usize], truth: &AoBlock, again: &AoBlock) -> Self {
+        let (mut se, mut ae, mut n) = (0.0f64, 0.0f64, 0usize);
+        for (k, &r) in rows.iter().enumerate() {
+            for (&a, &b) in truth.row(r).iter().zip(again.row(k)) {
+                let d = f64::from(a) - f64::from(b);
+                se += d * d;
+                ae += d.abs();
+                n += 1;
+            }
+        }
+        let n = n.max(1) as f64;
+        let mse = se / n / 2.0;
+        Self {
+            frames: rows.len(),
+            rmse: mse.sqrt(),
+            mae: ae / n / std::f64::consts::SQRT_2,
+            psnr_db: psnr(mse),
+        }
+    }
 }
 
 /// Draws PSNR per frame over each test clip (one panel per clip, the model
@@ -183,4 +229,27 @@ pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
         writer.write_image_data(&rgb).map_err(|e| e.to_string())?;
     }
     Ok(png)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn noise_of_one_estimate_is_the_difference_over_root_two() {
+        let truth = AoBlock {
+            vertices: 2,
+            values: vec![0.5, 0.5, 0.2, 0.2],
+        };
+        // Row 1 traced again, off by ±0.1.
+        let again = AoBlock {
+            vertices: 2,
+            values: vec![0.3, 0.1],
+        };
+        let n = NoiseEstimate::of(&[1], &truth, &again);
+        assert_eq!(n.frames, 1);
+        assert!((n.rmse - 0.1 / 2f64.sqrt()).abs() < 1e-7, "{n:?}");
+        assert!((n.mae - 0.1 / 2f64.sqrt()).abs() < 1e-7, "{n:?}");
+        assert!((n.psnr_db - 10.0 * (1.0 / 0.005f64).log10()).abs() < 1e-4);
+    }
 }

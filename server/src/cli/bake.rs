@@ -12,7 +12,7 @@ use aobake_core::{
     bake::{BakeParams, Plan, ReferenceSource},
     model::{Centering, StaticAverage},
     reference::{AoBlock, trace_poses},
-    report::{CharacterInfo, Report, Sizes, Timings, psnr_plot_png},
+    report::{CharacterInfo, NoiseEstimate, Report, Sizes, Timings, psnr_plot_png},
     trace::{SceneOptions, SurfaceParams},
 };
 
@@ -72,8 +72,9 @@ pub(super) struct Args {
     /// 0 is the pseudo-inverse.
     #[arg(long, default_value_t = aobake_core::model::DEFAULT_RIDGE)]
     ridge: f64,
-    /// vertex-linear: drop joint-angle coefficients below this magnitude
-    /// and store the rest sparse.
+    /// vertex-linear: drop coefficients whose effect is below this much AO
+    /// per standard deviation of their joint angle, and store the rest
+    /// sparse (see `aobake bench linear` for the trade-off).
     #[arg(long, default_value_t = 0.0)]
     threshold: f32,
     /// vertex-clustered: pose clusters m.
@@ -301,6 +302,14 @@ fn bake(args: &Args, inputs: &Inputs, plan: &Plan<'_>) -> anyhow::Result<()> {
     )?;
     timings.test_trace_s = started.elapsed().as_secs_f64();
 
+    // The ground truth's own noise: a few held-out poses traced again with
+    // other rays.
+    let noise_poses = plan.noise_sample(&tests);
+    let again: Vec<Pose> = noise_poses.iter().map(|&i| tests[i].pose.clone()).collect();
+    let retraced = trace_all(character, &again, &params.noise_surface(), "noise estimate")?;
+    let ground_truth_noise = NoiseEstimate::of(&noise_poses, &truth, &retraced);
+    timings.test_trace_s = started.elapsed().as_secs_f64();
+
     let started = Instant::now();
     let evaluation = plan.evaluate(&model, &baseline, &tests, &truth);
     timings.evaluate_s = started.elapsed().as_secs_f64();
@@ -333,6 +342,7 @@ fn bake(args: &Args, inputs: &Inputs, plan: &Plan<'_>) -> anyhow::Result<()> {
             baseline_bytes: 2 * vertices,
         },
         evaluation,
+        ground_truth_noise,
     };
     let json = serde_json::to_string_pretty(&report).expect("reports serialise");
     write(&args.report, json.as_bytes())?;
@@ -361,6 +371,13 @@ fn bake(args: &Args, inputs: &Inputs, plan: &Plan<'_>) -> anyhow::Result<()> {
         e.clip_frames.baseline.mean.mae,
         e.clip_frames.psnr_gain_db,
         e.clip_frames.mae_ratio,
+    );
+    eprintln!(
+        "ground truth's own noise ({} poses traced twice): RMSE {:.4}, MAE {:.4} (PSNR {:.2} dB): model errors near it are noise",
+        report.ground_truth_noise.frames,
+        report.ground_truth_noise.rmse,
+        report.ground_truth_noise.mae,
+        report.ground_truth_noise.psnr_db,
     );
     eprintln!(
         "held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:.1} s, fit {:.2} s",

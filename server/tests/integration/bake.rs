@@ -78,6 +78,11 @@ fn bake_writes_a_deterministic_asset_a_report_and_a_plot() {
             _ => assert!((1.0 + 11.0..=1.0 + 10.0 * 11.0).contains(&madds), "{madds}"),
         }
         assert!(report["timings"]["reference_trace_s"].is_number());
+        let noise = &report["ground_truth_noise"];
+        assert_eq!(noise["frames"], 8);
+        // 32 rays per vertex: visibly noisy, but far from random.
+        let rmse = noise["rmse"].as_f64().unwrap();
+        assert!(rmse > 0.001 && rmse < 0.1, "{noise}");
         if method != "static-average" {
             assert!(clips["psnr_gain_db"].as_f64().unwrap() > 0.0, "{report}");
         }
