@@ -260,6 +260,12 @@ impl<'a> Plan<'a> {
                 p.poses
             )));
         }
+        if p.eval_poses > 100_000 {
+            return Err(BakeError::Param(format!(
+                "eval_poses must be at most 100000, not {}",
+                p.eval_poses
+            )));
+        }
         if p.samples == 0 || p.samples > crate::trace::MAX_SAMPLES {
             return Err(BakeError::Param(format!(
                 "samples must be between 1 and {}, not {}",
