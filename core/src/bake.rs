@@ -208,6 +208,9 @@ pub struct Plan<'a> {
     pub handles: Handles,
     /// The parameters.
     pub params: BakeParams,
+    /// The training clips, in `train` order (what clip-frame sampling and
+    /// the joint-angle ranges read).
+    train_clips: Vec<Clip>,
 }
 
 fn select(clips: &[Clip], names: &[String]) -> Result<Vec<usize>, BakeError> {
@@ -334,6 +337,7 @@ impl<'a> Plan<'a> {
             joint_angles,
             handles: Handles::new(character),
             params,
+            train_clips,
         })
     }
 
@@ -350,10 +354,9 @@ impl<'a> Plan<'a> {
     }
 
     fn clip_poses(&self, count: usize, seed: u64) -> Vec<Pose> {
-        let train: Vec<Clip> = self.train.iter().map(|&i| self.clips[i].clone()).collect();
-        random_clip_frames(&train, count, seed)
+        random_clip_frames(&self.train_clips, count, seed)
             .iter()
-            .map(|f| Pose::sample(&self.character.skeleton, &train[f.clip], f.time))
+            .map(|f| Pose::sample(&self.character.skeleton, &self.train_clips[f.clip], f.time))
             .collect()
     }
 
@@ -495,8 +498,14 @@ impl<'a> Plan<'a> {
                 }
             }
         }
-        let all_model: Vec<FrameError> = per_clip.iter().flat_map(|c| c.model.clone()).collect();
-        let all_base: Vec<FrameError> = per_clip.iter().flat_map(|c| c.baseline.clone()).collect();
+        let all_model: Vec<FrameError> = per_clip
+            .iter()
+            .flat_map(|c| c.model.iter().copied())
+            .collect();
+        let all_base: Vec<FrameError> = per_clip
+            .iter()
+            .flat_map(|c| c.baseline.iter().copied())
+            .collect();
         let clip_frames = Comparison::new(Errors::of(&all_model), Errors::of(&all_base));
         Evaluation {
             random_poses: Comparison::new(Errors::of(&random.0), Errors::of(&random.1)),
