@@ -8,44 +8,43 @@
 //! 1. [`import`]: an untrusted glTF upload becomes a [`Character`] (every
 //!    mesh of the scene merged into one occluder, bound to a joint palette)
 //!    and its [`Clip`]s; clips shipped in a second file bind by node name.
-//! 2. [`pose`]: a clip sampled at a time gives a [`Pose`] (local transforms
+//!    [`Limits`] bounds what an upload may declare before anything is
+//!    allocated.
+//! 2. [`rig`]: a clip sampled at a time gives a [`Pose`] (local transforms
 //!    of every node, and morph weights); linear blend skinning turns a pose
 //!    into a [`PosedMesh`].
-//! 3. [`params`]: poses as numbers. Joint angles (rotation vectors relative
-//!    to the rest pose, for Kontkanen & Aila) go both ways between pose and
-//!    vector, with ranges taken from the clips; handles (Kirk & Arikan) are
-//!    computed from a pose. Seeded samplers give reference poses.
-//! 4. [`ply`]: the posed mesh as PLY, in the product's vertex order, so
-//!    other tools can bake the very same triangles.
-//! 5. [`trace`]: ground-truth AO by ray tracing (surface, obscurance,
-//!    volume and Kroon's estimators); [`reference`] traces a batch of poses
-//!    into the block of AO values that the models are fitted to.
-//!
-//! [`Limits`] bounds what an upload may declare; it is checked before
-//! anything is allocated.
+//! 3. [`pose_space`]: poses as numbers. Joint angles (Kontkanen & Aila) go
+//!    both ways between pose and vector, with ranges taken from the clips;
+//!    handles (Kirk & Arikan) are computed from a pose. Seeded samplers
+//!    give reference poses.
+//! 4. [`trace`]: ground-truth AO by ray tracing (surface, obscurance,
+//!    volume and Kroon's estimators); [`trace::trace_poses`] traces a batch
+//!    of poses into the block of AO values that the models are fitted to.
+//! 5. [`method`]: the methods, fitted to traced AO and evaluated at run
+//!    time, and the one place that dispatches on [`method::Method`].
+//! 6. [`bake`]: a bake as jobs. [`bake::BakeParams`] (the only home of
+//!    defaults) and the bake key; the planner's job graph; the job
+//!    functions `(spec, inputs, checkpoint) → outputs`; and the in-process
+//!    runner that `aobake bake`, the benches and the tests use (workers
+//!    run the same functions one job at a time).
+//! 7. [`asset`]: the versioned container the bake publishes, the quality
+//!    metrics and the report.
 
 pub mod asset;
 pub mod bake;
-pub mod character;
-pub mod clip;
 pub mod digest;
 pub mod geometry;
 pub mod import;
-pub mod limits;
-pub mod metrics;
-pub mod model;
-pub mod params;
-pub mod ply;
-pub mod pose;
-pub mod reference;
-pub mod report;
-pub mod shapes;
-pub mod skeleton;
-pub mod summary;
+pub mod method;
+pub mod pose_space;
+pub mod rig;
 pub mod trace;
 
-pub use character::Character;
-pub use clip::Clip;
-pub use import::{ImportError, Imported, SideFile, Upload, import_character, import_clips};
-pub use limits::Limits;
-pub use pose::{Pose, PosedMesh};
+pub use import::{
+    ImportError, Imported, SideFile, Upload, import_character, import_clips, limits::Limits,
+};
+pub use rig::{
+    character::Character,
+    clip::Clip,
+    pose::{Pose, PosedMesh},
+};

@@ -5,7 +5,7 @@
 //! of the vertex methods, so that what engines will run is tested against
 //! core's CPU evaluation.
 
-use aobake_core::model::{FormRef, LinearForm, Model, SparseForm};
+use aobake_core::method::vertex::{FormRef, LinearForm, Model, SparseForm};
 use wgpu::util::DeviceExt as _;
 
 /// Why the GPU could not be used.

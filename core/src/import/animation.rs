@@ -7,9 +7,9 @@ use gltf::json::{
 
 use super::{ImportError, accessor::Accessors, document::Document};
 use crate::{
-    clip::{Channel, Clip, Interpolation, Property},
-    limits::Limits,
-    skeleton::Skeleton,
+    import::limits::Limits,
+    rig::clip::{Channel, Clip, Interpolation, Property},
+    rig::skeleton::Skeleton,
 };
 
 /// Output numbers allowed per allowed keyframe over a whole file: a cubic

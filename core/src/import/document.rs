@@ -7,7 +7,7 @@ use super::{
     ImportError,
     source::{Container, Upload, UriTarget, check_json_depth, resolve_uri},
 };
-use crate::limits::Limits;
+use crate::import::limits::Limits;
 
 /// Extensions that change how geometry is stored; a file that requires one
 /// cannot be read correctly without decoding it.

@@ -11,10 +11,10 @@ use gltf::json::{
 
 use super::{ImportError, accessor::Accessors, document::Document};
 use crate::{
-    character::{Character, Joint, Morph, MorphTarget, Primitive, SourceStats},
     geometry::angle_weighted_normals,
-    limits::Limits,
-    skeleton::{Node, Skeleton, Transform},
+    import::limits::Limits,
+    rig::character::{Character, Joint, Morph, MorphTarget, Primitive, SourceStats},
+    rig::skeleton::{Node, Skeleton, Transform},
 };
 
 /// Weight sums farther than this from 1 are reported (the Khronos

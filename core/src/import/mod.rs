@@ -12,14 +12,16 @@ mod accessor;
 mod animation;
 mod document;
 mod error;
+pub mod limits;
 mod mesh;
+pub mod ply;
 mod source;
 
 pub use document::referenced_files;
 pub use error::ImportError;
 pub use source::{SideFile, Upload};
 
-use crate::{character::Character, clip::Clip, limits::Limits};
+use crate::{Character, Clip, Limits};
 
 /// A character with the clips of its own file.
 #[derive(Debug, Clone)]

@@ -36,13 +36,16 @@
 //!   get occlusion 0.
 
 mod bvh;
+mod poses;
 mod sampling;
 mod scene;
+pub mod shapes;
 
 use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use poses::{AoBlock, trace_poses};
 pub use sampling::MAX_SAMPLES;
 pub use scene::{Axis, BvhQuality, Ground, Scene, SceneOptions, Traversal};
 

@@ -4,11 +4,9 @@
 
 use aobake_core::{
     Character, Clip, Pose,
-    asset::{AssetError, Container, Method},
-    bake::{BakeParams, Evaluation, Plan},
-    model::{Model, StaticAverage},
-    reference::{AoBlock, trace_poses},
-    trace::{SceneOptions, SurfaceParams, no_progress},
+    asset::{AssetError, Container},
+    bake::{Bake, BakeParams, Evaluation, Plan, bake_in_process},
+    method::{Method, vertex::Model},
 };
 
 use crate::util;
@@ -19,34 +17,15 @@ struct Baked {
     bytes: Vec<u8>,
 }
 
-fn trace(character: &Character, poses: &[Pose], surface: &SurfaceParams) -> AoBlock {
-    trace_poses(
-        character,
-        poses,
-        &SceneOptions::default(),
-        surface,
-        &no_progress,
-    )
-    .unwrap()
-}
-
 /// The whole bake in process: what `aobake bake` and the service's jobs do.
 fn bake(character: &Character, clips: &[Clip], params: BakeParams) -> Baked {
-    let plan = Plan::new(character, clips, params).unwrap();
-    let poses = plan.reference_poses();
-    let reference = trace(character, &poses, &plan.params.surface());
-    let (model, _) = plan.fit(&poses, &reference).unwrap();
-    let tests = plan.test_poses();
-    let test_poses: Vec<Pose> = tests.iter().map(|t| t.pose.clone()).collect();
-    let truth = trace(character, &test_poses, &plan.params.held_out_surface());
-    let evaluation = plan.evaluate(&model, &StaticAverage::fit(&reference), &tests, &truth);
-    let bytes = model
-        .to_container(plan.header("character-digest", &[]))
-        .to_bytes();
+    let inputs = util::inputs(character, clips);
+    let baked = bake_in_process(&Bake::new(&inputs, params).unwrap()).unwrap();
+    let container = Container::from_bytes(&baked.asset).unwrap();
     Baked {
-        model,
-        evaluation,
-        bytes,
+        model: Model::from_container(&container).unwrap().0,
+        evaluation: baked.report.evaluation,
+        bytes: baked.asset,
     }
 }
 

@@ -3,7 +3,7 @@
 
 use aobake_core::{
     Pose,
-    params::{Handles, JointAngles, LayoutOptions, clip_frames, random_clip_frames},
+    pose_space::{Handles, JointAngles, LayoutOptions, clip_frames, random_clip_frames},
 };
 
 use crate::util;

@@ -4,7 +4,7 @@
 //! Kroon's estimator; determinism across thread counts; and agreement of
 //! the two traversal kernels.
 
-use aobake_core::shapes::{TriMesh, grid, icosphere, subdivided_box};
+use aobake_core::trace::shapes::{TriMesh, grid, icosphere, subdivided_box};
 use aobake_core::trace::{
     Axis, Falloff, Ground, KroonParams, Scene, SceneOptions, SurfaceMesh, SurfaceParams,
     TraceError, Traversal, VolumeParams, kroon_occlusion, no_progress, surface_occlusion,

@@ -280,3 +280,17 @@ pub fn tiny_rig() -> Gltf {
     }]);
     g
 }
+
+/// Bake inputs as if uploaded; the digests are placeholders.
+pub fn inputs(
+    character: &aobake_core::Character,
+    clips: &[aobake_core::Clip],
+) -> aobake_core::bake::BakeInputs {
+    aobake_core::bake::BakeInputs {
+        character: character.clone(),
+        clips: clips.to_vec(),
+        character_digest: "character-digest".into(),
+        clip_digests: Vec::new(),
+        warnings: Vec::new(),
+    }
+}

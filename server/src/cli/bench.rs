@@ -6,7 +6,9 @@ use std::time::Instant;
 
 use anyhow::{Context as _, bail};
 use aobake_core::{
-    Limits, ply, shapes,
+    Limits,
+    import::ply,
+    trace::shapes,
     trace::{
         Axis, BvhQuality, Falloff, Ground, Scene, SceneOptions, SurfaceMesh, SurfaceParams,
         Traversal, no_progress, vertex_occlusion,

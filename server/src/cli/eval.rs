@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use aobake_core::{Limits, asset::Container, model::Model};
+use aobake_core::{Limits, asset::Container, method::vertex::Model};
 
 use super::posing::{PoseArgs, pose};
 

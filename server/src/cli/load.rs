@@ -8,7 +8,7 @@
 use std::path::Path;
 
 use anyhow::{Context as _, bail};
-use aobake_core::{Clip, Imported, Limits, SideFile, Upload, import::referenced_files};
+use aobake_core::{Clip, Imported, Limits, SideFile, bake::UploadBytes, import::referenced_files};
 
 fn read_limited(path: &Path, limits: &Limits) -> anyhow::Result<Vec<u8>> {
     let size = std::fs::metadata(path)
@@ -25,8 +25,8 @@ fn read_limited(path: &Path, limits: &Limits) -> anyhow::Result<Vec<u8>> {
 }
 
 /// The main file's bytes and the side files it refers to that exist beside
-/// it.
-fn gather(path: &Path, limits: &Limits) -> anyhow::Result<(Vec<u8>, Vec<SideFile>)> {
+/// it: what a client uploads for this file.
+pub(super) fn upload(path: &Path, limits: &Limits) -> anyhow::Result<UploadBytes> {
     let main = read_limited(path, limits)?;
     let mut side_files = Vec::new();
     if !main.starts_with(b"glTF") {
@@ -43,27 +43,14 @@ fn gather(path: &Path, limits: &Limits) -> anyhow::Result<(Vec<u8>, Vec<SideFile
             }
         }
     }
-    Ok((main, side_files))
+    Ok(UploadBytes { main, side_files })
 }
 
 /// Imports a character file.
 pub(super) fn character(path: &Path, limits: &Limits) -> anyhow::Result<Imported> {
-    Ok(character_with_digest(path, limits)?.0)
-}
-
-/// Imports a character file and returns its upload digest too.
-pub(super) fn character_with_digest(
-    path: &Path,
-    limits: &Limits,
-) -> anyhow::Result<(Imported, String)> {
-    let (main, side_files) = gather(path, limits)?;
-    let upload = Upload {
-        main: &main,
-        side_files: &side_files,
-    };
-    let imported = aobake_core::import_character(upload, limits)
-        .with_context(|| format!("cannot import {}", path.display()))?;
-    Ok((imported, upload.digest()))
+    let upload = upload(path, limits)?;
+    aobake_core::import_character(upload.upload(), limits)
+        .with_context(|| format!("cannot import {}", path.display()))
 }
 
 /// Imports the clips of a separate file, bound to `imported`'s nodes by
@@ -73,22 +60,7 @@ pub(super) fn clips(
     imported: &Imported,
     limits: &Limits,
 ) -> anyhow::Result<(Vec<Clip>, Vec<String>)> {
-    let (clips, warnings, _) = clips_with_digest(path, imported, limits)?;
-    Ok((clips, warnings))
-}
-
-/// Imports the clips of a separate file and returns its upload digest too.
-pub(super) fn clips_with_digest(
-    path: &Path,
-    imported: &Imported,
-    limits: &Limits,
-) -> anyhow::Result<(Vec<Clip>, Vec<String>, String)> {
-    let (main, side_files) = gather(path, limits)?;
-    let upload = Upload {
-        main: &main,
-        side_files: &side_files,
-    };
-    let (clips, warnings) = aobake_core::import_clips(upload, &imported.character, limits)
-        .with_context(|| format!("cannot import clips from {}", path.display()))?;
-    Ok((clips, warnings, upload.digest()))
+    let upload = upload(path, limits)?;
+    aobake_core::import_clips(upload.upload(), &imported.character, limits)
+        .with_context(|| format!("cannot import clips from {}", path.display()))
 }

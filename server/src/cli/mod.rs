@@ -5,6 +5,7 @@ mod bench;
 mod eval;
 mod inspect;
 mod load;
+mod params;
 mod pose;
 mod posing;
 mod table;
@@ -35,6 +36,9 @@ enum Command {
     /// method, judge it on held-out poses against the static average, and
     /// write the asset, a JSON report and a PSNR plot.
     Bake(Box<bake::Args>),
+    /// Print a method's bake parameters with their defaults (and any
+    /// flags applied) as JSON: the names `--param` and the API take.
+    Params(params::Args),
     /// Evaluate a baked asset at a pose and write per-vertex AO as CSV.
     Eval(eval::Args),
     /// Measure speed: print figures for the benchmarks that issues and
@@ -49,6 +53,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Pose(args) => pose::run(&args),
         Command::Trace(args) => trace::run(&args),
         Command::Bake(args) => bake::run(&args),
+        Command::Params(args) => params::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Bench(args) => bench::run(&args),
     }

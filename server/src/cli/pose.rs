@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use aobake_core::{Limits, ply};
+use aobake_core::{Limits, import::ply};
 
 use super::posing::{PoseArgs, pose};
 

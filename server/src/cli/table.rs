@@ -8,19 +8,18 @@
 //! * `linear` shows the effect of vertex-linear's ridge weight and
 //!   sparsification threshold on error, size and run-time cost.
 
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
 use aobake_core::{
-    Limits, Pose,
-    asset::Method,
-    bake::{BakeParams, Plan, ReferenceSource, TestPose},
-    metrics::{Errors, FrameError},
-    model::StaticAverage,
-    reference::AoBlock,
+    Limits,
+    asset::report::Report,
+    bake::{Bake, BakeInputs, BakeParams, Baked, JobOutput, JobSpec, ReferenceSource},
+    method::Method,
 };
 
-use super::bake::{Inputs, load_inputs, trace_all};
+use super::bake::{load_inputs, run_with_progress};
 use super::trace::with_threads;
 
 /// What both sweeps take.
@@ -85,91 +84,82 @@ pub(super) struct LinearArgs {
     thresholds: Vec<f32>,
 }
 
-/// Reference and held-out AO, traced once.
+/// Reference and held-out AO, traced once: the `sample` jobs' outputs,
+/// which every setting's `fit` and `evaluate` jobs reuse.
 struct Traced<'a> {
-    plan: Plan<'a>,
-    poses: Vec<Pose>,
-    reference: AoBlock,
-    tests: Vec<TestPose>,
-    truth: AoBlock,
-    baseline: StaticAverage,
+    inputs: &'a BakeInputs,
+    params: BakeParams,
+    threads: Option<usize>,
+    samples: HashMap<JobSpec, JobOutput>,
+    joint_angles: usize,
+    /// The first setting's report (for the baseline's row).
+    first: Report,
 }
 
 impl<'a> Traced<'a> {
-    fn new(inputs: &'a Inputs, common: &Common, params: BakeParams) -> anyhow::Result<Self> {
-        let plan = Plan::new(&inputs.character, &inputs.clips, params)?;
-        let character = &inputs.character;
+    fn new(inputs: &'a BakeInputs, common: &Common, params: BakeParams) -> anyhow::Result<Self> {
+        let bake = Bake::new(inputs, params.clone())?;
         let started = Instant::now();
-        let (poses, reference, tests, truth) = with_threads(common.threads, || {
-            let poses = plan.reference_poses();
-            let reference = trace_all(character, &poses, &plan.params.surface(), "reference AO")?;
-            let tests = plan.test_poses();
-            let test_poses: Vec<Pose> = tests.iter().map(|t| t.pose.clone()).collect();
-            let truth = trace_all(
-                character,
-                &test_poses,
-                &plan.params.held_out_surface(),
-                "held-out AO",
-            )?;
-            anyhow::Ok((poses, reference, tests, truth))
-        })??;
+        let outputs = with_threads(common.threads, || run_with_progress(&bake, &HashMap::new()))??;
+        let graph = bake.graph(Default::default());
+        let samples = graph
+            .jobs
+            .iter()
+            .zip(&outputs)
+            .filter(|(j, _)| j.spec.kind() == "sample")
+            .map(|(j, o)| (j.spec.clone(), o.clone()))
+            .collect();
+        let first = Baked::from_output(outputs.last().expect("a graph has jobs"))?.report;
         println!(
-            "{}: {} vertices, {} reference poses ({:?}), {} held-out clip frames, {} rays per vertex; tracing took {:.1} s",
+            "{}: {} vertices, {} reference poses ({:?}), {} held-out clip frames, {} rays per vertex; baking took {:.1} s",
             common.file.display(),
-            character.vertex_count(),
-            poses.len(),
-            plan.params.reference,
-            tests.len(),
-            plan.params.samples,
+            inputs.character.vertex_count(),
+            params.poses,
+            params.reference,
+            first.evaluation.clip_frames.model.frames,
+            params.samples,
             started.elapsed().as_secs_f64()
         );
         println!();
-        let baseline = StaticAverage::fit(&reference);
         Ok(Self {
-            plan,
-            poses,
-            reference,
-            tests,
-            truth,
-            baseline,
+            inputs,
+            threads: common.threads,
+            joint_angles: bake.plan.joint_angles.len(),
+            params,
+            samples,
+            first,
         })
     }
 
-    /// Fits `params` and prints a table row: the labels, then mean
-    /// absolute error, PSNR, size, multiply-adds and fit time.
+    /// Fits `params` to the traced poses and prints a table row: the
+    /// labels, then mean absolute error, PSNR, size, multiply-adds and fit
+    /// time.
     fn row(&self, labels: &[String], params: &BakeParams) -> anyhow::Result<()> {
-        let mut plan = self.plan.clone();
-        plan.params = params.clone();
-        let started = Instant::now();
-        let (model, _) = plan.fit(&self.poses, &self.reference)?;
-        let fit_s = started.elapsed().as_secs_f64();
-        let e = plan.evaluate(&model, &self.baseline, &self.tests, &self.truth);
-        let c = &e.clip_frames.model.mean;
+        let bake = Bake::new(self.inputs, params.clone())?;
+        let outputs = with_threads(self.threads, || run_with_progress(&bake, &self.samples))??;
+        let r = Baked::from_output(outputs.last().expect("a graph has jobs"))?.report;
+        let c = &r.evaluation.clip_frames.model.mean;
         println!(
             "| {} | {:.4} | {:.2} | {} | {:.1} | {:.2} |",
             labels.join(" | "),
             c.mae,
             c.psnr_db,
-            model.bytes(),
-            e.multiply_adds_per_vertex,
-            fit_s
+            r.sizes.model_bytes,
+            r.evaluation.multiply_adds_per_vertex,
+            r.timings.fit_s
         );
         Ok(())
     }
 
     /// The static average's row.
     fn baseline_row(&self, blank: usize) {
-        let base = self.baseline.evaluate();
-        let frames: Vec<FrameError> = (0..self.tests.len())
-            .map(|i| FrameError::of(&base, self.truth.row(i)))
-            .collect();
-        let c = Errors::of(&frames).mean;
+        let c = &self.first.evaluation.clip_frames.baseline.mean;
         println!(
             "| static average |{} {:.4} | {:.2} | {} | 1 | - |",
             " - |".repeat(blank),
             c.mae,
             c.psnr_db,
-            self.baseline.form.bytes()
+            self.first.sizes.baseline_bytes
         );
     }
 }
@@ -200,7 +190,7 @@ pub(super) fn clusters(args: &ClusterArgs) -> anyhow::Result<()> {
     for &m in &args.pose_clusters {
         for &n in &args.dimensions {
             for &f in &args.vertex_fractions {
-                let mut p = t.plan.params.clone();
+                let mut p = t.params.clone();
                 p.clustered.pose_clusters = m;
                 p.clustered.dimensions = n;
                 p.clustered.vertex_clusters = (f * v as f64).round() as usize;
@@ -212,12 +202,12 @@ pub(super) fn clusters(args: &ClusterArgs) -> anyhow::Result<()> {
             }
         }
     }
-    let mut linear = t.plan.params.clone();
+    let mut linear = t.params.clone();
     linear.method = Method::VertexLinear;
     t.row(
         &[
             "vertex-linear".into(),
-            format!("{} angles", t.plan.joint_angles.len()),
+            format!("{} angles", t.joint_angles),
             "-".into(),
         ],
         &linear,
@@ -236,12 +226,12 @@ pub(super) fn linear(args: &LinearArgs) -> anyhow::Result<()> {
     );
     println!("|---|---|---|---|---|---|---|");
     for &ridge in &args.ridges {
-        let mut p = t.plan.params.clone();
+        let mut p = t.params.clone();
         p.linear.ridge = ridge;
         t.row(&[ridge.to_string(), "0".into()], &p)?;
     }
     for &threshold in args.thresholds.iter().filter(|&&x| x > 0.0) {
-        let mut p = t.plan.params.clone();
+        let mut p = t.params.clone();
         p.linear.threshold = threshold;
         t.row(&[p.linear.ridge.to_string(), threshold.to_string()], &p)?;
     }

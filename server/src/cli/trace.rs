@@ -7,7 +7,8 @@ use std::time::Instant;
 
 use anyhow::{Context as _, bail};
 use aobake_core::{
-    Limits, geometry, ply,
+    Limits, geometry,
+    import::ply,
     trace::{
         Axis, Falloff, Ground, Scene, SceneOptions, SurfaceMesh, SurfaceParams, vertex_occlusion,
     },

@@ -4,12 +4,12 @@
 
 use aobake_core::{
     Limits, Pose, Upload,
-    asset::Method,
     bake::{BakeParams, Plan},
     import_character,
-    model::{Block, LinearForm, Model, StaticAverage},
-    reference::trace_poses,
+    method::Method,
+    method::vertex::{Block, LinearForm, Model, StaticAverage},
     trace::SceneOptions,
+    trace::trace_poses,
 };
 use aobake_worker::gpu::{Gpu, VertexAo};
 use half::f16;

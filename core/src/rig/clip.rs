@@ -4,7 +4,7 @@
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::skeleton::Transform;
+use crate::rig::skeleton::Transform;
 
 /// What a channel animates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -12,6 +12,8 @@
 //! vector units may differ in the last bits).
 
 use half::f16;
+
+use crate::method::Method;
 use serde::{Serialize, de::DeserializeOwned};
 
 /// First eight bytes of every asset. Like PNG's: a high-bit byte catches
@@ -31,40 +33,6 @@ const SECTION_HEAD: usize = 24;
 const ALIGN: usize = 8;
 /// A header longer than this is refused before it is read.
 const MAX_HEADER_BYTES: usize = 16 << 20;
-
-/// The method an asset holds, as a number in the preamble (so tools can
-/// tell without parsing JSON) and as a name in the header.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    /// Mean AO over the reference poses.
-    StaticAverage = 1,
-    /// Kontkanen & Aila 2006.
-    VertexLinear = 2,
-    /// Kirk & Arikan 2007.
-    VertexClustered = 3,
-}
-
-impl Method {
-    /// The method's name, as the CLI and the API spell it.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::StaticAverage => "static-average",
-            Self::VertexLinear => "vertex-linear",
-            Self::VertexClustered => "vertex-clustered",
-        }
-    }
-
-    fn from_code(code: u16) -> Option<Self> {
-        [
-            Self::StaticAverage,
-            Self::VertexLinear,
-            Self::VertexClustered,
-        ]
-        .into_iter()
-        .find(|m| *m as u16 == code)
-    }
-}
 
 /// The element type of a section.
 #[derive(Debug, Clone, PartialEq)]

@@ -16,11 +16,11 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    character::Character,
-    clip::{Clip, Property},
     geometry::bounds,
-    pose::Pose,
-    skeleton::Skeleton,
+    rig::character::Character,
+    rig::clip::{Clip, Property},
+    rig::pose::Pose,
+    rig::skeleton::Skeleton,
 };
 
 /// At most this many poses per clip when finding parameter ranges.

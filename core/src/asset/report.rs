@@ -9,16 +9,16 @@ use plotters::style::{FontStyle, register_font};
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    asset::Method,
+    asset::metrics::psnr,
     bake::{BakeParams, Evaluation, FitStats},
-    metrics::psnr,
-    reference::AoBlock,
+    method::Method,
+    trace::AoBlock,
 };
 
 /// The font of the plot's labels (DejaVu Sans, Bitstream Vera licence:
 /// `assets/DejaVuSans-LICENSE.txt`), so that plotting needs no system
 /// fonts.
-static FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// Wall-clock seconds of each stage.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]

@@ -18,7 +18,7 @@ use super::form::{Block, LinearForm};
 use super::kmeans::kmeans;
 use super::linalg::{principal_axes, ridge_lstsq};
 use super::linear::{F16_MAX, FitOverflow};
-use crate::reference::AoBlock;
+use crate::trace::AoBlock;
 
 /// MLS weights below this are dropped (and the rest renormalised), so a
 /// pose pays only for the handful of clusters it is near (with α = 10 the

@@ -6,7 +6,7 @@ use std::ops::Range;
 use glam::{Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::skeleton::Skeleton;
+use crate::rig::skeleton::Skeleton;
 
 /// One entry of the joint palette that vertices are bound to: a node and the
 /// matrix that takes mesh (bind) space into that node's space. Rigid mesh

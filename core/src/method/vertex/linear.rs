@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::form::{Block, LinearForm, SparseForm};
 use super::linalg::{SolveStats, ridge_lstsq};
-use crate::{params::Range, reference::AoBlock};
+use crate::{pose_space::Range, trace::AoBlock};
 
 /// The default ridge weight: on standardised angles it shrinks directions
 /// of pose space with less than about 1/1000 of a typical angle's variance

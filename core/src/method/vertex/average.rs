@@ -4,7 +4,7 @@
 use half::f16;
 
 use super::form::{Block, LinearForm};
-use crate::reference::AoBlock;
+use crate::trace::AoBlock;
 
 /// Mean AO per vertex.
 #[derive(Debug, Clone, PartialEq)]

@@ -4,10 +4,10 @@ use glam::{Affine3A, Mat3, Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    character::Character,
-    clip::Clip,
     geometry::angle_weighted_normals,
-    skeleton::{Skeleton, Transform},
+    rig::character::Character,
+    rig::clip::Clip,
+    rig::skeleton::{Skeleton, Transform},
 };
 
 /// Local transforms of every node and morph weights of every node: what a

@@ -3,13 +3,10 @@
 //! on its poses and the tracing parameters, so batches can run on any
 //! worker, in any order, and be stacked into the training matrix.
 
-use crate::{
-    Character,
-    pose::Pose,
-    trace::{
-        Progress, Scene, SceneOptions, SurfaceMesh, SurfaceParams, TraceError, vertex_occlusion,
-    },
+use super::{
+    Progress, Scene, SceneOptions, SurfaceMesh, SurfaceParams, TraceError, vertex_occlusion,
 };
+use crate::{Character, Pose};
 
 /// Occlusion of every vertex in every pose of a batch: row `p` (pose `p`
 /// of the batch) is `values[p * vertices..(p + 1) * vertices]`, in the

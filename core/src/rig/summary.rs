@@ -5,7 +5,7 @@ use serde::Serialize;
 use crate::{
     Character, Clip, Pose,
     geometry::bounds,
-    params::{Handles, JointAngles, LayoutOptions},
+    pose_space::{Handles, JointAngles, LayoutOptions},
 };
 
 /// Frame rate at which clips are sampled for the bounds.

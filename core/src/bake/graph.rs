@@ -1,0 +1,103 @@
+//! The planner: a bake as a graph of jobs (DESIGN §1.3). The server stores
+//! the graph and hands its jobs to workers as their dependencies finish;
+//! the in-process runner walks it in order. Jobs are listed so that every
+//! job comes after its dependencies.
+
+use crate::method::Family;
+
+use super::{Bake, JobSpec, PoseSet};
+
+/// How a bake is cut into jobs. Cutting never changes the result: `sample`
+/// batches stack byte for byte into the whole.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GraphOptions {
+    /// Poses per `sample` job.
+    pub sample_batch: usize,
+}
+
+impl Default for GraphOptions {
+    /// Four poses per `sample` job: a fraction of a second to a few seconds
+    /// each on a typical character, so a lost job costs little and a
+    /// bake's progress moves steadily.
+    fn default() -> Self {
+        Self { sample_batch: 4 }
+    }
+}
+
+/// One job of the graph and the indices of the jobs it needs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PlannedJob {
+    /// What it computes.
+    pub spec: JobSpec,
+    /// Indices (into [`JobGraph::jobs`]) of its dependencies, all smaller
+    /// than its own.
+    pub deps: Vec<usize>,
+}
+
+/// A bake's jobs in dependency order; the last one produces the asset.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct JobGraph {
+    /// The jobs.
+    pub jobs: Vec<PlannedJob>,
+}
+
+impl JobGraph {
+    /// Units of progress of the whole bake.
+    pub fn total_work(&self) -> u64 {
+        self.jobs.iter().map(|j| j.spec.work()).sum()
+    }
+}
+
+impl Bake<'_> {
+    /// The job graph of this bake; the one place that knows each method
+    /// family's stages.
+    pub fn graph(&self, options: GraphOptions) -> JobGraph {
+        match self.plan.params.method.family() {
+            Family::Vertex => self.vertex_graph(options),
+        }
+    }
+
+    /// `sample` (reference) → `fit`; `sample` (held-out, noise) and `fit`
+    /// → `evaluate`; `fit` and `evaluate` → `assemble`.
+    fn vertex_graph(&self, options: GraphOptions) -> JobGraph {
+        let batch = options.sample_batch.max(1);
+        let mut jobs: Vec<PlannedJob> = Vec::new();
+        let samples = |set: PoseSet, jobs: &mut Vec<PlannedJob>| -> Vec<usize> {
+            let n = self.poses_in(set);
+            (0..n)
+                .step_by(batch)
+                .map(|first| {
+                    jobs.push(PlannedJob {
+                        spec: JobSpec::Sample {
+                            set,
+                            first,
+                            count: batch.min(n - first),
+                        },
+                        deps: Vec::new(),
+                    });
+                    jobs.len() - 1
+                })
+                .collect()
+        };
+        let reference = samples(PoseSet::Reference, &mut jobs);
+        let mut held_out = samples(PoseSet::HeldOut, &mut jobs);
+        held_out.extend(samples(PoseSet::Noise, &mut jobs));
+        jobs.push(PlannedJob {
+            spec: JobSpec::Fit,
+            deps: reference,
+        });
+        let fit = jobs.len() - 1;
+        let mut deps = vec![fit];
+        deps.extend(held_out);
+        jobs.push(PlannedJob {
+            spec: JobSpec::Evaluate,
+            deps,
+        });
+        let evaluate = jobs.len() - 1;
+        jobs.push(PlannedJob {
+            spec: JobSpec::Assemble,
+            deps: vec![fit, evaluate],
+        });
+        JobGraph { jobs }
+    }
+}

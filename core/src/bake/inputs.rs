@@ -1,0 +1,215 @@
+//! A bake's inputs as bytes and as imported data: the character upload
+//! and the clip uploads, each one content-addressed blob.
+
+use crate::{
+    Character, Clip, ImportError, Limits, SideFile, Upload, import_character, import_clips,
+};
+
+/// An upload held in memory: the main file (`.glb` or `.gltf`) and the
+/// files uploaded beside it.
+#[derive(Debug, Clone, Default)]
+pub struct UploadBytes {
+    /// The `.glb` or `.gltf` bytes.
+    pub main: Vec<u8>,
+    /// Buffers and images uploaded with a `.gltf`.
+    pub side_files: Vec<SideFile>,
+}
+
+/// Why an upload blob cannot be read back.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("a bundled upload is malformed: {0}")]
+pub struct BundleError(&'static str);
+
+impl UploadBytes {
+    /// A self-contained file.
+    pub fn single(main: Vec<u8>) -> Self {
+        Self {
+            main,
+            side_files: Vec::new(),
+        }
+    }
+
+    /// The borrowed form core's import reads.
+    pub fn upload(&self) -> Upload<'_> {
+        Upload {
+            main: &self.main,
+            side_files: &self.side_files,
+        }
+    }
+
+    /// The upload's content digest ([`Upload::digest`]).
+    pub fn digest(&self) -> String {
+        self.upload().digest()
+    }
+
+    /// Whether the upload is more than one file.
+    pub fn is_bundle(&self) -> bool {
+        !self.side_files.is_empty()
+    }
+
+    /// The upload as one blob whose sha256 is [`UploadBytes::digest`]: the
+    /// file itself when it comes alone, else the byte stream the digest
+    /// hashes (the main file, then the side files sorted by name, each
+    /// framed by little-endian u64 lengths).
+    pub fn to_blob(&self) -> Vec<u8> {
+        if !self.is_bundle() {
+            return self.main.clone();
+        }
+        let mut out = Vec::new();
+        out.extend((self.main.len() as u64).to_le_bytes());
+        out.extend(&self.main);
+        let mut files: Vec<&SideFile> = self.side_files.iter().collect();
+        files.sort_by(|a, b| a.name.cmp(&b.name));
+        for f in files {
+            out.extend((f.name.len() as u64).to_le_bytes());
+            out.extend(f.name.as_bytes());
+            out.extend((f.bytes.len() as u64).to_le_bytes());
+            out.extend(&f.bytes);
+        }
+        out
+    }
+
+    /// Reads back what [`UploadBytes::to_blob`] wrote; `bundle` says which
+    /// of its two forms the blob has (the store records it).
+    pub fn from_blob(blob: &[u8], bundle: bool) -> Result<Self, BundleError> {
+        if !bundle {
+            return Ok(Self::single(blob.to_vec()));
+        }
+        fn take<'b>(rest: &mut &'b [u8], what: &'static str) -> Result<&'b [u8], BundleError> {
+            let (len, tail) = rest.split_first_chunk::<8>().ok_or(BundleError(what))?;
+            let len = usize::try_from(u64::from_le_bytes(*len)).map_err(|_| BundleError(what))?;
+            if len > tail.len() {
+                return Err(BundleError(what));
+            }
+            let (bytes, tail) = tail.split_at(len);
+            *rest = tail;
+            Ok(bytes)
+        }
+        let mut rest = blob;
+        let main = take(&mut rest, "main file")?.to_vec();
+        let mut side_files = Vec::new();
+        while !rest.is_empty() {
+            let name = std::str::from_utf8(take(&mut rest, "side file name")?)
+                .map_err(|_| BundleError("a side file name is not UTF-8"))?
+                .to_owned();
+            let bytes = take(&mut rest, "side file")?.to_vec();
+            side_files.push(SideFile { name, bytes });
+        }
+        if side_files.is_empty() {
+            return Err(BundleError("a bundle without side files"));
+        }
+        Ok(Self { main, side_files })
+    }
+}
+
+/// A bake's inputs, imported: the character, every clip (those of the
+/// clip uploads first, in upload order, then the character's own) and the
+/// digests that enter the bake key.
+#[derive(Debug, Clone)]
+pub struct BakeInputs {
+    /// The merged occluder and its skeleton.
+    pub character: Character,
+    /// Every clip.
+    pub clips: Vec<Clip>,
+    /// sha256 of the character upload.
+    pub character_digest: String,
+    /// sha256 of each clip upload.
+    pub clip_digests: Vec<String>,
+    /// What import accepted but flagged, prefixed by the file it is about
+    /// (`character` or `clips[i]`).
+    pub warnings: Vec<String>,
+}
+
+/// Which input failed to import, and why.
+#[derive(Debug, thiserror::Error)]
+#[error("{what}: {source}")]
+pub struct InputError {
+    /// `character` or `clips[i]`.
+    pub what: String,
+    /// The import error.
+    #[source]
+    pub source: ImportError,
+}
+
+impl BakeInputs {
+    /// Imports the character and binds the clip uploads' animations to its
+    /// nodes by name.
+    pub fn load(
+        character: &UploadBytes,
+        clips: &[UploadBytes],
+        limits: &Limits,
+    ) -> Result<Self, InputError> {
+        let imported =
+            import_character(character.upload(), limits).map_err(|source| InputError {
+                what: "character".into(),
+                source,
+            })?;
+        let mut warnings: Vec<String> = imported
+            .warnings
+            .iter()
+            .map(|w| format!("character: {w}"))
+            .collect();
+        let mut all = Vec::new();
+        let mut clip_digests = Vec::new();
+        for (i, upload) in clips.iter().enumerate() {
+            let (extra, w) =
+                import_clips(upload.upload(), &imported.character, limits).map_err(|source| {
+                    InputError {
+                        what: format!("clips[{i}]"),
+                        source,
+                    }
+                })?;
+            warnings.extend(w.into_iter().map(|w| format!("clips[{i}]: {w}")));
+            all.extend(extra);
+            clip_digests.push(upload.digest());
+        }
+        all.extend(imported.clips);
+        Ok(Self {
+            character: imported.character,
+            clips: all,
+            character_digest: character.digest(),
+            clip_digests,
+            warnings,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bundle_blob_hashes_to_the_upload_digest_and_reads_back() {
+        let u = UploadBytes {
+            main: b"{\"asset\":{}}".to_vec(),
+            side_files: vec![
+                SideFile {
+                    name: "b.bin".into(),
+                    bytes: vec![1, 2, 3],
+                },
+                SideFile {
+                    name: "a.png".into(),
+                    bytes: vec![],
+                },
+            ],
+        };
+        let blob = u.to_blob();
+        assert_eq!(crate::digest::sha256_hex(&blob), u.digest());
+        let back = UploadBytes::from_blob(&blob, true).unwrap();
+        assert_eq!(back.main, u.main);
+        let names: Vec<&str> = back.side_files.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, ["a.png", "b.bin"]);
+        assert_eq!(back.digest(), u.digest());
+        // Truncated anywhere: an error, never a panic.
+        for cut in 0..blob.len() {
+            let _ = UploadBytes::from_blob(&blob[..cut], true);
+        }
+        assert!(UploadBytes::from_blob(&blob[..blob.len() - 1], true).is_err());
+        let single = UploadBytes::single(b"glTF".to_vec());
+        assert_eq!(single.to_blob(), b"glTF");
+        assert_eq!(
+            crate::digest::sha256_hex(&single.to_blob()),
+            single.digest()
+        );
+    }
+}

@@ -1,0 +1,39 @@
+//! A bake as the service runs it (DESIGN §1.3, §5–6, §8), in this order:
+//!
+//! 1. [`BakeParams`] ([`params`]): everything that determines a bake
+//!    besides its inputs, the only home of defaults, validated, and the
+//!    bake key.
+//! 2. [`BakeInputs`] ([`inputs`]): the uploads imported.
+//! 3. [`Plan`] ([`plan`]): the pose spaces and the seeded reference,
+//!    held-out and noise poses.
+//! 4. [`JobGraph`] ([`graph`]): the bake cut into jobs.
+//! 5. The job functions ([`jobs`]): `sample`, `fit`, `evaluate`,
+//!    `assemble`, each `(spec, dependency outputs, checkpoint?) → outputs`.
+//! 6. [`run_graph`] ([`runner`]): the whole graph in this process.
+//!
+//! Everything is seeded from [`BakeParams::seed`]: the same request gives
+//! the same poses, the same rays, the same coefficients and the same bytes,
+//! however the bake was cut into jobs and however often a job was
+//! interrupted.
+
+pub mod evaluation;
+pub mod graph;
+pub mod inputs;
+pub mod jobs;
+pub mod params;
+pub mod plan;
+pub mod runner;
+
+pub use evaluation::{ClipEvaluation, Comparison, Evaluation};
+pub use graph::{GraphOptions, JobGraph, PlannedJob};
+pub use inputs::{BakeInputs, BundleError, InputError, UploadBytes};
+pub use jobs::{
+    Bake, Checkpoint, IndexedBlock, JobError, JobOutput, JobSink, JobSpec, NoSink, Output, PoseSet,
+    Stop,
+};
+pub use params::{BakeError, BakeParams, ReferenceSource, bake_key};
+pub use plan::{Plan, TestPose};
+pub use runner::{Baked, bake_in_process, run_graph};
+
+pub use crate::digest::sha256_hex;
+pub use crate::method::vertex::FitStats;

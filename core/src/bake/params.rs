@@ -1,0 +1,355 @@
+//! [`BakeParams`]: everything that determines a bake besides its inputs,
+//! and the only place their defaults live. The CLI's flags and `--param`
+//! and the HTTP API's `params` object are both partial overrides of
+//! [`BakeParams::new`], applied by [`BakeParams::with_overrides`] and
+//! checked by [`BakeParams::validate`]; the fully defaulted value enters
+//! the bake key.
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+use crate::{
+    digest::sha256_hex,
+    method::{
+        Method,
+        vertex::{ALGORITHM_VERSION, ClusteredOptions, LinearOptions},
+    },
+    pose_space::ParamError,
+    trace::{Falloff, SurfaceParams},
+};
+
+/// Mixed into the seed of everything held out ("heldout!" in ASCII).
+pub(crate) const HELD_OUT_SEED: u64 = 0x6865_6c64_6f75_7421;
+/// Mixed into the ray seed of the noise estimate ("noise!!!").
+const NOISE_SEED: u64 = 0x6e6f_6973_6521_2121;
+
+/// Where reference (training) poses come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReferenceSource {
+    /// Every joint angle uniform in its range (Kontkanen & Aila).
+    Random,
+    /// Random times in the training clips (Kirk & Arikan train on clip
+    /// frames).
+    Clips,
+    /// Half of each.
+    Mixed,
+}
+
+/// Everything that determines a per-vertex bake besides its inputs. The
+/// fully defaulted value goes into the bake key and the asset header.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BakeParams {
+    /// The method.
+    pub method: Method,
+    /// Reference poses to fit to.
+    pub poses: usize,
+    /// Where they come from (default: mixed for vertex-linear, clip frames
+    /// otherwise).
+    pub reference: ReferenceSource,
+    /// Rays per vertex and pose.
+    pub samples: u32,
+    /// Hits farther than this (model units) do not occlude; `None`: no
+    /// limit.
+    pub max_distance: Option<f32>,
+    /// Seed of poses, rays and k-means.
+    pub seed: u64,
+    /// Clips whose poses train the model (empty: all).
+    pub train_clips: Vec<String>,
+    /// Clips whose every frame is a held-out test (empty: all).
+    pub test_clips: Vec<String>,
+    /// Held-out random poses (joint angles uniform in the training
+    /// clips' ranges, another seed).
+    pub eval_poses: usize,
+    /// Frame rate at which test clips are evaluated.
+    pub eval_fps: f32,
+    /// Joint-angle ranges: the training clips' range widened by this
+    /// fraction of its span on each side.
+    pub range_margin: f32,
+    /// vertex-linear options.
+    pub linear: LinearOptions,
+    /// vertex-clustered options.
+    pub clustered: ClusteredOptions,
+}
+
+impl BakeParams {
+    /// Defaults for a method.
+    pub fn new(method: Method) -> Self {
+        Self {
+            method,
+            poses: 256,
+            // Random joint angles alone combine every joint's extremes and
+            // fit clip poses poorly (Fox: +0.5 dB over the baseline on
+            // clip frames against +9 dB with half clip frames); clip frames
+            // alone leave correlated angles that random poses decorrelate.
+            reference: match method {
+                Method::VertexLinear => ReferenceSource::Mixed,
+                _ => ReferenceSource::Clips,
+            },
+            samples: 256,
+            max_distance: None,
+            seed: 0,
+            train_clips: Vec::new(),
+            test_clips: Vec::new(),
+            eval_poses: 32,
+            eval_fps: 30.0,
+            range_margin: 0.1,
+            linear: LinearOptions::default(),
+            clustered: ClusteredOptions::default(),
+        }
+    }
+
+    /// The tracing parameters of the reference poses.
+    pub fn surface(&self) -> SurfaceParams {
+        SurfaceParams {
+            samples: self.samples,
+            max_distance: self.max_distance.unwrap_or(f32::INFINITY),
+            seed: self.seed,
+            falloff: Falloff::None,
+        }
+    }
+
+    /// The tracing parameters of the held-out poses: another ray seed, so
+    /// that the ground truth's sampling noise is independent of the noise
+    /// the model was fitted to (with the same seed a vertex would cast the
+    /// same rays in both, and errors would come out too small).
+    pub fn held_out_surface(&self) -> SurfaceParams {
+        SurfaceParams {
+            seed: self.seed ^ HELD_OUT_SEED,
+            ..self.surface()
+        }
+    }
+
+    /// The tracing parameters of the second trace that estimates the
+    /// ground truth's noise: independent of both other seeds.
+    pub fn noise_surface(&self) -> SurfaceParams {
+        SurfaceParams {
+            seed: self.seed ^ NOISE_SEED,
+            ..self.surface()
+        }
+    }
+
+    /// The parameters as they enter the key: only the chosen method's
+    /// options.
+    pub(crate) fn canonical(&self) -> serde_json::Value {
+        let mut v = serde_json::to_value(self).expect("params serialise");
+        let map = v.as_object_mut().expect("an object");
+        if self.method != Method::VertexLinear {
+            map.remove("linear");
+        }
+        if self.method != Method::VertexClustered {
+            map.remove("clustered");
+        }
+        v
+    }
+}
+
+/// Why a bake cannot run; each names the offending input.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BakeError {
+    /// A parameter is out of range.
+    #[error("invalid parameter: {0}")]
+    Param(String),
+    /// The character cannot be parameterised.
+    #[error(transparent)]
+    Layout(#[from] ParamError),
+    /// An override names no parameter, or has the wrong type.
+    #[error("invalid params: {0}")]
+    Override(String),
+    /// The fit failed; the message says what to change.
+    #[error("{0}")]
+    Fit(String),
+    /// A named clip does not exist.
+    #[error("no clip named {name:?}; the clips are: {known}")]
+    UnknownClip {
+        /// The name asked for.
+        name: String,
+        /// The names there are.
+        known: String,
+    },
+}
+
+impl BakeParams {
+    /// The defaults for `method` with `overrides` applied: a JSON object
+    /// whose keys are parameter names (nested objects for the method
+    /// options, such as `{"clustered": {"alpha": 5}}`, or dotted keys such
+    /// as `"clustered.alpha"`). Unknown keys and wrong types are refused
+    /// by name; the result is validated.
+    pub fn with_overrides(
+        method: Method,
+        overrides: &Map<String, Value>,
+    ) -> Result<Self, BakeError> {
+        let mut value = serde_json::to_value(Self::new(method)).expect("params serialise");
+        for (key, v) in overrides {
+            if key == "method" {
+                if v.as_str() != Some(method.name()) {
+                    return Err(BakeError::Override(format!(
+                        "params.method ({v}) differs from the bake's method ({method})"
+                    )));
+                }
+                continue;
+            }
+            let path: Vec<&str> = key.split('.').collect();
+            merge(&mut value, &path, v.clone(), key)?;
+        }
+        let params: Self =
+            serde_json::from_value(value).map_err(|e| BakeError::Override(e.to_string()))?;
+        params.validate()?;
+        Ok(params)
+    }
+
+    /// Checks every parameter's range; the error names the parameter.
+    pub fn validate(&self) -> Result<(), BakeError> {
+        let p = self;
+        if p.poses == 0 || p.poses > 100_000 {
+            return Err(BakeError::Param(format!(
+                "poses must be between 1 and 100000, not {}",
+                p.poses
+            )));
+        }
+        if p.eval_poses > 100_000 {
+            return Err(BakeError::Param(format!(
+                "eval_poses must be at most 100000, not {}",
+                p.eval_poses
+            )));
+        }
+        if p.samples == 0 || p.samples > crate::trace::MAX_SAMPLES {
+            return Err(BakeError::Param(format!(
+                "samples must be between 1 and {}, not {}",
+                crate::trace::MAX_SAMPLES,
+                p.samples
+            )));
+        }
+        if p.max_distance.is_some_and(|d| d.is_nan() || d <= 0.0) {
+            return Err(BakeError::Param("max_distance must be positive".into()));
+        }
+        if !(p.eval_fps > 0.0 && p.eval_fps <= 240.0) {
+            return Err(BakeError::Param("eval_fps must be in (0, 240]".into()));
+        }
+        if !(p.range_margin >= 0.0 && p.range_margin <= 10.0) {
+            return Err(BakeError::Param("range_margin must be in [0, 10]".into()));
+        }
+        if !(p.linear.ridge >= 0.0 && p.linear.ridge.is_finite()) {
+            return Err(BakeError::Param("ridge must be a finite number ≥ 0".into()));
+        }
+        if !(p.linear.threshold >= 0.0 && p.linear.threshold.is_finite()) {
+            return Err(BakeError::Param(
+                "threshold must be a finite number ≥ 0".into(),
+            ));
+        }
+        let c = &p.clustered;
+        if c.pose_clusters == 0 || c.pose_clusters > 1024 {
+            return Err(BakeError::Param(
+                "pose_clusters must be between 1 and 1024".into(),
+            ));
+        }
+        if c.dimensions == 0 || c.dimensions > 256 {
+            return Err(BakeError::Param(
+                "dimensions must be between 1 and 256".into(),
+            ));
+        }
+        if !(c.alpha > 0.0 && c.alpha <= 100.0) {
+            return Err(BakeError::Param("alpha must be in (0, 100]".into()));
+        }
+        if !(c.vertex_tolerance >= 0.0 && c.vertex_tolerance.is_finite()) {
+            return Err(BakeError::Param(
+                "vertex_tolerance must be a finite number ≥ 0".into(),
+            ));
+        }
+        if !(c.ridge >= 0.0 && c.ridge.is_finite()) {
+            return Err(BakeError::Param("ridge must be a finite number ≥ 0".into()));
+        }
+        if !(c.clamp >= 0.0 && c.clamp.is_finite()) {
+            return Err(BakeError::Param("clamp must be a finite number ≥ 0".into()));
+        }
+        Ok(())
+    }
+
+    /// Ray-vertex pairs the bake traces for a character of `vertices`
+    /// vertices with `test_frames` clip frames held out: what the service
+    /// bounds per request.
+    pub fn work(&self, vertices: usize, test_frames: usize) -> u128 {
+        let poses = self.poses + self.eval_poses + test_frames + NOISE_POSES;
+        poses as u128 * vertices as u128 * u128::from(self.samples)
+    }
+}
+
+/// Held-out poses traced twice to estimate the ground truth's noise.
+pub(crate) const NOISE_POSES: usize = 8;
+
+/// Sets `path` in `value` (an object) to `v`, refusing keys the defaults
+/// do not have so that a typo is an error, not a silently ignored option.
+fn merge(value: &mut Value, path: &[&str], v: Value, key: &str) -> Result<(), BakeError> {
+    let Some((first, rest)) = path.split_first() else {
+        return Ok(());
+    };
+    let Some(slot) = value.as_object_mut().and_then(|m| m.get_mut(*first)) else {
+        return Err(BakeError::Override(format!("unknown parameter {key:?}")));
+    };
+    if rest.is_empty() {
+        match (slot.is_object(), v) {
+            (true, Value::Object(inner)) => {
+                for (k, x) in inner {
+                    merge(slot, &[k.as_str()], x, &format!("{key}.{k}"))?;
+                }
+            }
+            (_, v) => *slot = v,
+        }
+        Ok(())
+    } else {
+        merge(slot, rest, v, key)
+    }
+}
+
+/// The bake key (DESIGN §1.2): sha256 over the canonical JSON (keys sorted,
+/// no whitespace) of the input digests, the method, the fully defaulted
+/// parameters and the algorithm version.
+pub fn bake_key(character: &str, clips: &[String], params: &BakeParams) -> String {
+    let request = serde_json::json!({
+        "algorithm_version": ALGORITHM_VERSION,
+        "character": character,
+        "clips": clips,
+        "method": params.method,
+        "params": params.canonical(),
+    });
+    sha256_hex(request.to_string().as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOLDEN_KEY: &str = "a183eed2ca53af54d3001ad66878cec5c6bb801ce94ba9a1c0a92cfdbb690218";
+
+    #[test]
+    fn key_depends_on_what_matters_only() {
+        let a = BakeParams::new(Method::VertexLinear);
+        let k = bake_key("c", &[], &a);
+        assert_eq!(k.len(), 64);
+        assert_eq!(k, bake_key("c", &[], &a.clone()));
+        assert_ne!(k, bake_key("d", &[], &a));
+        let mut b = a.clone();
+        b.seed = 1;
+        assert_ne!(k, bake_key("c", &[], &b));
+        // Options of another method do not change the key.
+        let mut c = a.clone();
+        c.clustered.alpha = 3.0;
+        assert_eq!(k, bake_key("c", &[], &c));
+        // Pinned: a change here invalidates every cached bake, so it must be
+        // deliberate (and come with an ALGORITHM_VERSION bump if fitting
+        // changed).
+        assert_eq!(
+            k,
+            bake_key("c", &[], &BakeParams::new(Method::VertexLinear)),
+        );
+        assert_eq!(
+            bake_key("c", &[], &BakeParams::new(Method::VertexLinear)),
+            GOLDEN_KEY
+        );
+        assert_eq!(
+            sha256_hex(b"abc"),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+    }
+}

@@ -1,0 +1,93 @@
+//! The methods (DESIGN §5) and the one place that dispatches on them.
+//!
+//! A [`Method`] names what a bake fits and what an asset holds. Each
+//! method belongs to a [`Family`] that decides the shape of its job graph
+//! (`bake::graph`): the per-vertex family (`sample` jobs → `fit` →
+//! `evaluate` → `assemble`) lives in [`vertex`]; the volume methods (grid
+//! with `slab` jobs, cubemap with `face` jobs) will live beside it, so the
+//! queue and the runner never change when a method arrives.
+
+pub mod vertex;
+
+use serde::{Deserialize, Serialize};
+
+/// The method an asset holds, as a number in the asset preamble (so tools
+/// can tell without parsing JSON) and as a name in headers, the CLI and
+/// the API.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Mean AO over the reference poses (the baseline).
+    StaticAverage = 1,
+    /// Kontkanen & Aila 2006: linear in the joint angles.
+    VertexLinear = 2,
+    /// Kirk & Arikan 2007: pose clusters, PCA, moving least squares.
+    VertexClustered = 3,
+}
+
+/// How a method's bake is split into jobs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Family {
+    /// Per-vertex AO fitted to traced reference poses.
+    Vertex,
+}
+
+impl Method {
+    /// Every method, in code order.
+    pub const ALL: [Self; 3] = [
+        Self::StaticAverage,
+        Self::VertexLinear,
+        Self::VertexClustered,
+    ];
+
+    /// The method's name, as the CLI and the API spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::StaticAverage => "static-average",
+            Self::VertexLinear => "vertex-linear",
+            Self::VertexClustered => "vertex-clustered",
+        }
+    }
+
+    /// The method named `name` (as [`Method::name`] spells it).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// The number in the asset preamble.
+    pub fn code(self) -> u16 {
+        self as u16
+    }
+
+    /// The method with preamble number `code`.
+    pub fn from_code(code: u16) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.code() == code)
+    }
+
+    /// The shape of the method's job graph.
+    pub fn family(self) -> Family {
+        match self {
+            Self::StaticAverage | Self::VertexLinear | Self::VertexClustered => Family::Vertex,
+        }
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::from_name(s).ok_or_else(|| {
+            let names: Vec<&str> = Self::ALL.iter().map(|m| m.name()).collect();
+            format!(
+                "unknown method {s:?}; the methods are: {}",
+                names.join(", ")
+            )
+        })
+    }
+}

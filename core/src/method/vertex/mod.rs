@@ -1,0 +1,231 @@
+//! The per-vertex methods (DESIGN §5): fitting, run-time evaluation, and
+//! their place in the asset container.
+//!
+//! * [`StaticAverage`]: the baseline, mean AO over the reference poses.
+//! * [`VertexLinear`]: Kontkanen & Aila 2006, linear in the joint angles.
+//! * [`VertexClustered`]: Kirk & Arikan 2007, locally linear in PCA-reduced
+//!   handle positions, blended by moving least squares.
+//!
+//! All three evaluate as a [`LinearForm`] (or a [`SparseForm`]): per pose a
+//! few weights computed from the pose, per vertex a dot product with f16
+//! coefficients. [`Model`] ties a fitted model to the pose features it
+//! reads (joint angles or handles) and to the asset container.
+
+mod average;
+mod clustered;
+mod codec;
+mod form;
+mod kmeans;
+mod linalg;
+mod linear;
+
+pub use average::StaticAverage;
+pub use clustered::{
+    Centering, ClusteredFitStats, ClusteredOptions, MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
+};
+pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
+pub use form::{Block, LinearForm, SparseForm};
+pub use linalg::SolveStats;
+pub use linear::{
+    Coefficients, DEFAULT_RIDGE, FitOverflow, LinearFitStats, LinearOptions, VertexLinear,
+};
+
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    method::Method,
+    pose_space::{Handles, JointAngles},
+    rig::{pose::Pose, skeleton::Skeleton},
+    trace::AoBlock,
+};
+
+/// Version of the fitting algorithms, part of the bake key: bump it when a
+/// change to fitting changes the coefficients a bake produces.
+pub const ALGORITHM_VERSION: u32 = 1;
+
+/// A fitted model and the pose features it reads.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Model {
+    /// The baseline.
+    StaticAverage(StaticAverage),
+    /// Kontkanen & Aila, over these joint angles.
+    VertexLinear(JointAngles, VertexLinear),
+    /// Kirk & Arikan, over these handles.
+    VertexClustered(Handles, VertexClustered),
+}
+
+/// A model's coefficients, borrowed.
+#[derive(Debug, Clone, Copy)]
+pub enum FormRef<'a> {
+    /// Blocks of dense coefficients.
+    Dense(&'a LinearForm),
+    /// Sparse coefficients per vertex.
+    Sparse(&'a SparseForm),
+}
+
+impl Model {
+    /// The method.
+    pub fn method(&self) -> Method {
+        match self {
+            Self::StaticAverage(_) => Method::StaticAverage,
+            Self::VertexLinear(..) => Method::VertexLinear,
+            Self::VertexClustered(..) => Method::VertexClustered,
+        }
+    }
+
+    /// Vertices the model covers.
+    pub fn vertices(&self) -> usize {
+        match self {
+            Self::StaticAverage(m) => m.form.vertices,
+            Self::VertexLinear(_, m) => match &m.coefficients {
+                Coefficients::Dense(f) => f.vertices,
+                Coefficients::Sparse(s) => s.vertices,
+            },
+            Self::VertexClustered(_, m) => m.form.vertices,
+        }
+    }
+
+    /// Whether the model can evaluate poses of `character`: the same vertex
+    /// count, and every node it reads exists. (An asset read from a file is
+    /// self-consistent after [`Model::from_container`]; this checks it
+    /// against the character it is used with.)
+    pub fn check_character(&self, character: &crate::Character) -> Result<(), String> {
+        if character.vertex_count() != self.vertices() {
+            return Err(format!(
+                "the character has {} vertices but the asset was baked for {} vertices",
+                character.vertex_count(),
+                self.vertices()
+            ));
+        }
+        let nodes = character.skeleton.nodes.len();
+        let ok = match self {
+            Self::StaticAverage(_) => true,
+            Self::VertexLinear(layout, _) => layout
+                .joints
+                .iter()
+                .chain(&layout.translations)
+                .all(|&n| n < nodes),
+            Self::VertexClustered(handles, _) => {
+                handles.root.is_none_or(|r| r < nodes) && handles.joints.iter().all(|&n| n < nodes)
+            }
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err("the asset reads joints the character does not have: it was baked for another character".into())
+        }
+    }
+
+    /// The coefficients as the run time sees them: a dense linear form or a
+    /// sparse one, taking [`Model::weights`].
+    pub fn form(&self) -> FormRef<'_> {
+        match self {
+            Self::StaticAverage(m) => FormRef::Dense(&m.form),
+            Self::VertexLinear(_, m) => match &m.coefficients {
+                Coefficients::Dense(f) => FormRef::Dense(f),
+                Coefficients::Sparse(s) => FormRef::Sparse(s),
+            },
+            Self::VertexClustered(_, m) => FormRef::Dense(&m.form),
+        }
+    }
+
+    /// Bytes of the model's numbers: coefficients, maps, cluster centres
+    /// and axes.
+    pub fn bytes(&self) -> usize {
+        match self {
+            Self::StaticAverage(m) => m.form.bytes(),
+            Self::VertexLinear(_, m) => m.bytes(),
+            Self::VertexClustered(_, m) => m.bytes(),
+        }
+    }
+
+    /// The per-pose weights (joint angles and a 1, blended projections, or
+    /// `[1]`), computed once per pose on the CPU.
+    pub fn weights(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
+        match self {
+            Self::StaticAverage(_) => vec![1.0],
+            Self::VertexLinear(layout, m) => m.weights(&layout.params(skeleton, pose)),
+            Self::VertexClustered(handles, m) => m.weights(&handles.handles(skeleton, pose)),
+        }
+    }
+
+    /// AO of every vertex for weights from [`Model::weights`].
+    pub fn evaluate_weights(&self, weights: &[f32]) -> Vec<f32> {
+        match self.form() {
+            FormRef::Dense(f) => f.evaluate(weights),
+            FormRef::Sparse(s) => s.evaluate(weights),
+        }
+    }
+
+    /// AO of every vertex in a pose.
+    pub fn evaluate(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
+        self.evaluate_weights(&self.weights(skeleton, pose))
+    }
+
+    /// Multiply-adds per vertex for these weights: one per non-zero weight
+    /// (clusters that MLS leaves out cost nothing), or the mean number of
+    /// stored coefficients per vertex for a sparse model.
+    pub fn multiply_adds(&self, weights: &[f32]) -> f64 {
+        match self {
+            Self::VertexLinear(_, m) if matches!(m.coefficients, Coefficients::Sparse(_)) => {
+                m.multiply_adds()
+            }
+            _ => weights.iter().filter(|&&w| w != 0.0).count() as f64,
+        }
+    }
+}
+
+/// What a fit reports.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "kebab-case")]
+pub enum FitStats {
+    /// Nothing to report.
+    StaticAverage,
+    /// vertex-linear.
+    VertexLinear(LinearFitStats),
+    /// vertex-clustered.
+    VertexClustered(ClusteredFitStats),
+}
+
+/// Fits `method` to the AO of the reference `poses` (the `fit` job's
+/// work): the one place that turns a method name into a fitted model.
+/// `seed` seeds k-means. The error says what to change.
+pub fn fit(
+    method: Method,
+    options: (&LinearOptions, &ClusteredOptions),
+    seed: u64,
+    skeleton: &Skeleton,
+    spaces: (&JointAngles, &Handles),
+    poses: &[Pose],
+    ao: &AoBlock,
+) -> Result<(Model, FitStats), String> {
+    let (linear, clustered) = options;
+    let (joint_angles, handles) = spaces;
+    Ok(match method {
+        Method::StaticAverage => (
+            Model::StaticAverage(StaticAverage::fit(ao)),
+            FitStats::StaticAverage,
+        ),
+        Method::VertexLinear => {
+            let q: Vec<Vec<f32>> = poses
+                .iter()
+                .map(|p| joint_angles.params(skeleton, p))
+                .collect();
+            let (m, stats) = VertexLinear::fit(&q, &joint_angles.ranges, ao, linear)
+                .map_err(|e| e.to_string())?;
+            (
+                Model::VertexLinear(joint_angles.clone(), m),
+                FitStats::VertexLinear(stats),
+            )
+        }
+        Method::VertexClustered => {
+            let h: Vec<Vec<f32>> = poses.iter().map(|p| handles.handles(skeleton, p)).collect();
+            let (m, stats) =
+                VertexClustered::fit(&h, ao, clustered, seed).map_err(|e| e.to_string())?;
+            (
+                Model::VertexClustered(handles.clone(), m),
+                FitStats::VertexClustered(stats),
+            )
+        }
+    })
+}

@@ -1,0 +1,265 @@
+//! A bake as jobs: cutting it into batches or interrupting its jobs never
+//! changes a byte of the result, checkpoints resume where they stopped,
+//! and the planner's graph is well formed.
+
+use std::collections::HashMap;
+
+use aobake_core::{
+    asset::report::Report,
+    bake::{
+        Bake, BakeError, BakeParams, Checkpoint, GraphOptions, JobError, JobOutput, JobSink,
+        JobSpec, NoSink, PoseSet, Stop, bake_in_process, run_graph,
+    },
+    method::Method,
+};
+use serde_json::json;
+
+use crate::util;
+
+fn quick(method: Method) -> BakeParams {
+    let mut p = BakeParams::new(method);
+    p.poses = 12;
+    p.samples = 32;
+    p.eval_poses = 2;
+    p.eval_fps = 5.0;
+    p
+}
+
+/// Saves every checkpoint and asks the job to stop after `stop_after` of
+/// them (never when `None`).
+struct Interrupting {
+    saved: Vec<Checkpoint>,
+    stop_after: Option<usize>,
+    progress: Vec<(u64, u64)>,
+}
+
+impl JobSink for Interrupting {
+    fn checkpoint(&mut self, checkpoint: Checkpoint) -> Result<(), Stop> {
+        self.saved.push(checkpoint);
+        if Some(self.saved.len()) == self.stop_after {
+            return Err(Stop("test".into()));
+        }
+        Ok(())
+    }
+
+    fn progress(&mut self, done: u64, total: u64) {
+        self.progress.push((done, total));
+    }
+}
+
+#[test]
+fn a_sample_job_resumes_from_its_checkpoint_with_the_same_bytes() {
+    let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
+    let inputs = util::inputs(&imported.character, &imported.clips);
+    let bake = Bake::new(&inputs, quick(Method::VertexLinear)).unwrap();
+    let spec = JobSpec::Sample {
+        set: PoseSet::Reference,
+        first: 4,
+        count: 5,
+    };
+    let whole = bake.run_job(&spec, &[], None, &mut NoSink).unwrap();
+    for stop_after in 1..=4 {
+        let mut sink = Interrupting {
+            saved: Vec::new(),
+            stop_after: Some(stop_after),
+            progress: Vec::new(),
+        };
+        let err = bake.run_job(&spec, &[], None, &mut sink).unwrap_err();
+        assert!(matches!(err, JobError::Stopped(_)), "{err}");
+        assert!(err.retryable());
+        let last = sink.saved.pop().unwrap();
+        assert_eq!(last.step, "sample");
+        assert_eq!(
+            last.cursor, stop_after as u64,
+            "a checkpoint after every pose"
+        );
+        // The next attempt starts at the cursor: it reports that progress
+        // first and traces only the poses left.
+        let mut next = Interrupting {
+            saved: Vec::new(),
+            stop_after: None,
+            progress: Vec::new(),
+        };
+        let resumed = bake.run_job(&spec, &[], Some(last), &mut next).unwrap();
+        assert_eq!(next.progress[0], (stop_after as u64, 5));
+        assert_eq!(next.saved.len(), 4 - stop_after);
+        assert_eq!(resumed.outputs, whole.outputs, "stopped after {stop_after}");
+    }
+    // A checkpoint of another job is refused, not silently mixed in.
+    let other = JobSpec::Sample {
+        set: PoseSet::Reference,
+        first: 0,
+        count: 5,
+    };
+    let mut sink = Interrupting {
+        saved: Vec::new(),
+        stop_after: Some(2),
+        progress: Vec::new(),
+    };
+    bake.run_job(&spec, &[], None, &mut sink).unwrap_err();
+    let foreign = sink.saved.pop().unwrap();
+    let err = bake
+        .run_job(&other, &[], Some(foreign), &mut NoSink)
+        .unwrap_err();
+    assert!(
+        matches!(err, JobError::Invalid(_)) && !err.retryable(),
+        "{err}"
+    );
+}
+
+#[test]
+fn cutting_the_bake_into_other_batches_changes_no_byte() {
+    let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
+    let inputs = util::inputs(&imported.character, &imported.clips);
+    for method in [Method::VertexLinear, Method::VertexClustered] {
+        let bake = Bake::new(&inputs, quick(method)).unwrap();
+        let reference = bake_in_process(&bake).unwrap();
+        for batch in [1, 5, 100] {
+            let graph = bake.graph(GraphOptions {
+                sample_batch: batch,
+            });
+            let out = run_graph(&bake, &graph, &HashMap::new(), &mut |_, _, _| {}).unwrap();
+            let asset = out.last().unwrap().get("asset").unwrap();
+            assert_eq!(asset, reference.asset.as_slice(), "{method} batch {batch}");
+            let report: Report =
+                serde_json::from_slice(out.last().unwrap().get("report.json").unwrap()).unwrap();
+            assert_eq!(report.evaluation, reference.report.evaluation);
+            assert_eq!(
+                report.ground_truth_noise,
+                reference.report.ground_truth_noise
+            );
+        }
+    }
+}
+
+#[test]
+fn the_graph_lists_dependencies_first_and_covers_every_pose() {
+    let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
+    let inputs = util::inputs(&imported.character, &imported.clips);
+    let bake = Bake::new(&inputs, quick(Method::VertexLinear)).unwrap();
+    let graph = bake.graph(GraphOptions { sample_batch: 5 });
+    for (i, job) in graph.jobs.iter().enumerate() {
+        assert!(job.deps.iter().all(|&d| d < i), "{i}: {:?}", job.deps);
+    }
+    let kinds: Vec<&str> = graph.jobs.iter().map(|j| j.spec.kind()).collect();
+    assert_eq!(&kinds[kinds.len() - 3..], ["fit", "evaluate", "assemble"]);
+    for set in [PoseSet::Reference, PoseSet::HeldOut, PoseSet::Noise] {
+        let covered: usize = graph
+            .jobs
+            .iter()
+            .filter_map(|j| match j.spec {
+                JobSpec::Sample { set: s, count, .. } if s == set => Some(count),
+                _ => None,
+            })
+            .sum();
+        assert_eq!(covered, bake.poses_in(set), "{set:?}");
+    }
+    assert_eq!(bake.poses_in(PoseSet::Reference), 12);
+    assert_eq!(
+        graph.total_work(),
+        (bake.poses_in(PoseSet::Reference)
+            + bake.poses_in(PoseSet::HeldOut)
+            + bake.poses_in(PoseSet::Noise)
+            + 3) as u64
+    );
+    // Specs travel through the queue as JSON.
+    for job in &graph.jobs {
+        let text = serde_json::to_string(&job.spec).unwrap();
+        assert_eq!(serde_json::from_str::<JobSpec>(&text).unwrap(), job.spec);
+    }
+    assert_eq!(
+        serde_json::to_value(&graph.jobs[0].spec).unwrap(),
+        json!({"kind": "sample", "set": "reference", "first": 0, "count": 5})
+    );
+}
+
+#[test]
+fn a_job_given_the_wrong_inputs_fails_with_a_named_permanent_error() {
+    let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
+    let inputs = util::inputs(&imported.character, &imported.clips);
+    let bake = Bake::new(&inputs, quick(Method::VertexLinear)).unwrap();
+    let half = bake
+        .run_job(
+            &JobSpec::Sample {
+                set: PoseSet::Reference,
+                first: 0,
+                count: 6,
+            },
+            &[],
+            None,
+            &mut NoSink,
+        )
+        .unwrap();
+    let err = bake
+        .run_job(&JobSpec::Fit, &[&half], None, &mut NoSink)
+        .unwrap_err();
+    assert!(!err.retryable());
+    assert!(err.to_string().contains("hold 6 poses, not 12"), "{err}");
+    let err = bake
+        .run_job(
+            &JobSpec::Evaluate,
+            &[&JobOutput::default()],
+            None,
+            &mut NoSink,
+        )
+        .unwrap_err();
+    assert!(
+        err.to_string().contains("no dependency produced model"),
+        "{err}"
+    );
+    let err = bake
+        .run_job(
+            &JobSpec::Sample {
+                set: PoseSet::Noise,
+                first: 0,
+                count: 99,
+            },
+            &[],
+            None,
+            &mut NoSink,
+        )
+        .unwrap_err();
+    assert!(err.to_string().contains("outside the set"), "{err}");
+}
+
+#[test]
+fn parameters_come_from_one_schema_with_named_errors() {
+    let defaults = BakeParams::new(Method::VertexClustered);
+    let none = serde_json::Map::new();
+    assert_eq!(
+        BakeParams::with_overrides(Method::VertexClustered, &none).unwrap(),
+        defaults
+    );
+    let o = |v: serde_json::Value| v.as_object().unwrap().clone();
+    let p = BakeParams::with_overrides(
+        Method::VertexClustered,
+        &o(json!({"poses": 64, "clustered.alpha": 5.0, "clustered": {"dimensions": 4}})),
+    )
+    .unwrap();
+    assert_eq!(
+        (p.poses, p.clustered.alpha, p.clustered.dimensions),
+        (64, 5.0, 4)
+    );
+    assert_eq!(p.samples, defaults.samples);
+    let err = |v| {
+        BakeParams::with_overrides(Method::VertexLinear, &o(v))
+            .unwrap_err()
+            .to_string()
+    };
+    assert!(err(json!({"posez": 1})).contains("unknown parameter \"posez\""));
+    assert!(err(json!({"linear.ridg": 1})).contains("unknown parameter \"linear.ridg\""));
+    assert!(err(json!({"poses": "many"})).contains("invalid type"));
+    assert!(err(json!({"poses": 0})).contains("poses must be between 1 and 100000"));
+    assert!(err(json!({"method": "vertex-clustered"})).contains("differs"));
+    assert!(matches!(
+        BakeParams::with_overrides(Method::VertexLinear, &o(json!({"samples": 0}))),
+        Err(BakeError::Param(_))
+    ));
+    // The work bound the service checks grows with every factor.
+    let w = defaults.work(1000, 10);
+    assert_eq!(
+        w,
+        (256 + 32 + 10 + 8) as u128 * 1000 * 256,
+        "reference, random held-out, clip frames and the noise re-trace"
+    );
+}

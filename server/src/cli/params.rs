@@ -1,0 +1,158 @@
+//! The bake parameters on the command line: named flags for the common
+//! ones and `--param KEY=VALUE` for any, all of them overrides of
+//! `BakeParams::new` (core keeps the only copy of every default; `aobake
+//! params --method M` prints them). `aobake bake` and `aobake submit` share
+//! these flags, so a local bake and a service bake of the same command
+//! line have the same bake key.
+
+use anyhow::{Context as _, bail};
+use aobake_core::{bake::BakeParams, method::Method};
+use serde_json::{Map, Value, json};
+
+/// Flags that set bake parameters. Unset flags keep the method's default.
+#[derive(Debug, Clone, Default, clap::Args)]
+#[command(allow_negative_numbers = true)]
+pub(super) struct ParamArgs {
+    /// Reference poses to fit to.
+    #[arg(long)]
+    poses: Option<usize>,
+    /// Where reference poses come from: random joint angles in the clips'
+    /// ranges, random clip frames, or half each. Default: mixed for
+    /// vertex-linear, clips otherwise.
+    #[arg(long, value_parser = ["random", "clips", "mixed"])]
+    reference: Option<String>,
+    /// Rays per vertex and pose.
+    #[arg(long)]
+    samples: Option<u32>,
+    /// Hits farther than this (model units) do not occlude. Default: no
+    /// limit.
+    #[arg(long)]
+    max_distance: Option<f32>,
+    /// Seed of poses, ray directions and k-means: the same seed gives the
+    /// same asset, byte for byte.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Fit on this clip only (repeat for several). Default: every clip.
+    #[arg(long = "train-clip", value_name = "NAME")]
+    train_clips: Vec<String>,
+    /// Hold out every frame of this clip (repeat for several). Default:
+    /// every clip.
+    #[arg(long = "test-clip", value_name = "NAME")]
+    test_clips: Vec<String>,
+    /// Held-out random poses (another seed than the reference poses).
+    #[arg(long)]
+    eval_poses: Option<usize>,
+    /// Frame rate at which test clips are evaluated.
+    #[arg(long)]
+    eval_fps: Option<f32>,
+    /// vertex-linear, vertex-clustered: ridge weight λ per pose on
+    /// standardised pose coordinates; 0 is the pseudo-inverse.
+    #[arg(long)]
+    ridge: Option<f64>,
+    /// vertex-linear: drop coefficients whose effect is below this much AO
+    /// per standard deviation of their joint angle, and store the rest
+    /// sparse.
+    #[arg(long)]
+    threshold: Option<f32>,
+    /// vertex-clustered: pose clusters m.
+    #[arg(long)]
+    pose_clusters: Option<usize>,
+    /// vertex-clustered: PCA dimensions n per pose cluster.
+    #[arg(long)]
+    dimensions: Option<usize>,
+    /// vertex-clustered: vertex clusters per pose cluster (0: one
+    /// coefficient vector per vertex).
+    #[arg(long)]
+    vertex_clusters: Option<usize>,
+    /// vertex-clustered: MLS blend falloff α (Kirk & Arikan Eq. 5).
+    #[arg(long)]
+    alpha: Option<f32>,
+    /// vertex-clustered: centre each pose cluster on the global mean AO
+    /// (the paper's Eq. 1) or on its own mean.
+    #[arg(long, value_parser = ["global", "cluster"])]
+    centering: Option<String>,
+    /// vertex-clustered: clamp whitened PCA coordinates to ± this many
+    /// standard deviations (0: off).
+    #[arg(long)]
+    clamp: Option<f32>,
+    /// Any parameter by its name in `aobake params` (dotted for method
+    /// options, such as `clustered.vertex_tolerance=0.01`); the value is
+    /// JSON, or a string when it is not. Repeat for several.
+    #[arg(long = "param", value_name = "KEY=VALUE")]
+    params: Vec<String>,
+}
+
+impl ParamArgs {
+    /// The flags as an overrides object for `BakeParams::with_overrides`.
+    pub(super) fn overrides(&self, method: Method) -> anyhow::Result<Map<String, Value>> {
+        let mut m = Map::new();
+        let mut set = |k: &str, v: Value| {
+            m.insert(k.to_owned(), v);
+        };
+        macro_rules! opt {
+            ($field:ident, $key:expr) => {
+                if let Some(v) = &self.$field {
+                    set($key, json!(v));
+                }
+            };
+        }
+        opt!(poses, "poses");
+        opt!(reference, "reference");
+        opt!(samples, "samples");
+        opt!(max_distance, "max_distance");
+        opt!(seed, "seed");
+        opt!(eval_poses, "eval_poses");
+        opt!(eval_fps, "eval_fps");
+        opt!(threshold, "linear.threshold");
+        opt!(pose_clusters, "clustered.pose_clusters");
+        opt!(dimensions, "clustered.dimensions");
+        opt!(vertex_clusters, "clustered.vertex_clusters");
+        opt!(alpha, "clustered.alpha");
+        opt!(centering, "clustered.centering");
+        opt!(clamp, "clustered.clamp");
+        if let Some(r) = self.ridge {
+            let key = match method {
+                Method::VertexClustered => "clustered.ridge",
+                _ => "linear.ridge",
+            };
+            set(key, json!(r));
+        }
+        if !self.train_clips.is_empty() {
+            set("train_clips", json!(self.train_clips));
+        }
+        if !self.test_clips.is_empty() {
+            set("test_clips", json!(self.test_clips));
+        }
+        for kv in &self.params {
+            let Some((k, v)) = kv.split_once('=') else {
+                bail!("--param {kv:?} is not KEY=VALUE");
+            };
+            let value = serde_json::from_str(v).unwrap_or_else(|_| Value::String(v.to_owned()));
+            set(k.trim(), value);
+        }
+        Ok(m)
+    }
+
+    /// The fully defaulted, validated parameters.
+    pub(super) fn params(&self, method: Method) -> anyhow::Result<BakeParams> {
+        BakeParams::with_overrides(method, &self.overrides(method)?)
+            .context("the bake parameters are not valid")
+    }
+}
+
+/// Arguments of `aobake params`.
+#[derive(Debug, clap::Args)]
+pub(super) struct Args {
+    /// The method whose defaults to print.
+    #[arg(long)]
+    method: Method,
+    #[command(flatten)]
+    params: ParamArgs,
+}
+
+/// Prints the fully defaulted parameters (with any flags applied) as JSON.
+pub(super) fn run(args: &Args) -> anyhow::Result<()> {
+    let p = args.params.params(args.method)?;
+    println!("{}", serde_json::to_string_pretty(&p)?);
+    Ok(())
+}
