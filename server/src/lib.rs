@@ -1,10 +1,30 @@
 //! # aobake-server
 //!
-//! The `aobake` binary. Today it is the command-line front of core:
-//! [`cli`] loads characters and clips from files (the only place where
-//! upload names become file-system paths), inspects them and writes posed
-//! meshes. The HTTP service (axum API, planner, job queue on SQLite or
-//! PostgreSQL, blob store, dashboard) will live beside it, in `routes/`,
-//! `store/` and `blobs/` (DESIGN §2).
+//! The `aobake` binary: the HTTP service and the command-line tools.
+//!
+//! * [`app`]: the axum application (state, layers, [`app::app`]) over
+//!   [`routes`] (one file per resource: uploads, bakes, the worker
+//!   protocol, assets, system).
+//! * [`store`]: metadata and the job queue behind one trait (SQLite, the
+//!   embedded default). [`blobs`]: content-addressed bytes behind another
+//!   (local disk).
+//! * [`auth`]: bearer tokens with scopes, stored hashed. [`error`]: one
+//!   error type, problem+json on the wire.
+//! * [`serve`]: `aobake serve`, the API on the embedded defaults with
+//!   supervised local worker processes.
+//! * [`cli`]: every `aobake` command; thin, it parses, calls and prints.
+//!
+//! A bake's life: `POST /v1/bakes` imports the inputs, plans core's job
+//! graph and stores it; workers long-poll `POST /v1/jobs/lease`, run
+//! core's job function, upload outputs and checkpoints as blobs and
+//! complete with their lease token; the last job's completion publishes
+//! the asset, and `GET /v1/cache/{key}` finds it from then on.
 
+pub mod app;
+pub mod auth;
+pub mod blobs;
 pub mod cli;
+pub mod error;
+mod routes;
+pub mod serve;
+pub mod store;

@@ -7,6 +7,10 @@ fn main() -> std::process::ExitCode {
     match aobake_server::cli::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(err) => {
+            if let Some(exit) = err.downcast_ref::<aobake_server::cli::client::Exit>() {
+                eprintln!("{}", exit.message);
+                return std::process::ExitCode::from(exit.code);
+            }
             eprintln!("error: {err:#}");
             std::process::ExitCode::FAILURE
         }

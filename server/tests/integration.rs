@@ -436,7 +436,7 @@ fn trace_agrees_with_blender_on_a_posed_character() {
     // facing within 90° of the vertex normal. Elsewhere Blender counts the
     // space below a triangle's plane as solid (its "shadow terminator"
     // rule) where aobake lets rays through an open edge or a fold.
-    let mesh = aobake_core::ply::read(
+    let mesh = aobake_core::import::ply::read(
         &std::fs::read(&ply).unwrap(),
         &aobake_core::Limits::default(),
     )

@@ -1,14 +1,22 @@
 //! # aobake-worker
 //!
-//! The worker process will own everything that turns one of core's pure job
-//! functions into a running, interruptible process: the lease loop over the
-//! server's HTTP job API, heartbeats off the compute thread, checkpoint upload
-//! and resume, cancellation, and wgpu preview rendering (DESIGN §2, §8).
-//! It holds no queue state and never talks to the database.
+//! Everything that turns one of core's pure job functions into a running,
+//! interruptible process (DESIGN §2, §8). It holds no queue state and
+//! never talks to the database: only to the server's HTTP job API.
 //!
-//! Today it holds the GPU side ([`gpu`]): a wgpu device on whatever adapter
-//! the machine has, and the run-time evaluation of the vertex methods in
-//! WGSL, checked against core's CPU evaluation. The job loop arrives with
-//! the server's job API.
+//! * [`run`] ([`runner`]): the lease loop. Each of `concurrency` threads
+//!   long-polls for a job, downloads its inputs and last checkpoint,
+//!   runs core's job function on its own (compute) thread while a second
+//!   thread heartbeats, uploads checkpoints as the job saves them and its
+//!   outputs at the end, and completes with its lease token. SIGTERM stops
+//!   leasing; a running job finishes or, past the deadline, stops at its
+//!   next checkpoint and gives its lease back.
+//! * [`client`]: the HTTP calls.
+//! * [`gpu`]: a wgpu device on whatever adapter the machine has, and the
+//!   run-time evaluation of the vertex methods in WGSL.
 
+pub mod client;
 pub mod gpu;
+pub mod runner;
+
+pub use runner::{WorkerConfig, run};

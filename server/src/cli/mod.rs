@@ -2,6 +2,7 @@
 
 mod bake;
 mod bench;
+pub mod client;
 mod eval;
 mod inspect;
 mod load;
@@ -41,6 +42,21 @@ enum Command {
     Params(params::Args),
     /// Evaluate a baked asset at a pose and write per-vertex AO as CSV.
     Eval(eval::Args),
+    /// Run the bake service: the HTTP API on SQLite and local disk under
+    /// --data, with local worker processes.
+    Serve(Box<crate::serve::ServeArgs>),
+    /// Run jobs for a server (a separate process; many may run on many
+    /// machines).
+    Worker(client::WorkerArgs),
+    /// Upload a character (and clips) to a server and bake it.
+    Submit(Box<client::SubmitArgs>),
+    /// Show a bake's state and progress.
+    Status(client::StatusArgs),
+    /// Download a finished bake's asset by bake id or bake key (exit 4 when
+    /// there is none).
+    Fetch(client::FetchArgs),
+    /// Manage API tokens.
+    Token(client::TokenArgs),
     /// Measure speed: print figures for the benchmarks that issues and
     /// notes quote.
     Bench(bench::Args),
@@ -56,5 +72,13 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Params(args) => params::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Serve(args) => {
+            tokio::runtime::Runtime::new()?.block_on(crate::serve::serve(*args))
+        }
+        Command::Worker(args) => client::worker(&args),
+        Command::Submit(args) => client::submit(&args),
+        Command::Status(args) => client::status(&args),
+        Command::Fetch(args) => client::fetch(&args),
+        Command::Token(args) => client::token(&args),
     }
 }

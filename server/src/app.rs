@@ -1,0 +1,223 @@
+//! The application: shared state, the router of every route, and the
+//! layers around it (request ids, body limits, timeouts, latency metrics).
+//! [`app`] builds it without a socket, so tests call it directly.
+
+use std::num::NonZeroU32;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use axum::{
+    Router,
+    extract::{DefaultBodyLimit, Request, State},
+    http::HeaderName,
+    middleware::{self, Next},
+    response::Response,
+};
+use governor::{DefaultKeyedRateLimiter, Quota, RateLimiter};
+use prometheus_client::{
+    encoding::EncodeLabelSet,
+    metrics::{family::Family, histogram::Histogram},
+    registry::Registry,
+};
+use tokio::sync::{Notify, broadcast};
+use tower_http::{
+    request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer},
+    timeout::TimeoutLayer,
+};
+
+use crate::{
+    blobs::Blobs,
+    error::ApiError,
+    routes,
+    store::{QueuePolicy, Store},
+};
+
+/// What the server enforces besides the import limits.
+#[derive(Debug, Clone, Copy)]
+pub struct ServerLimits {
+    /// Largest request body (uploads, blobs), checked while it streams.
+    pub max_body_bytes: u64,
+    /// Most ray-vertex pairs one bake may trace.
+    pub max_bake_work: u128,
+    /// Requests per second per token (bursts of twice that).
+    pub requests_per_second: u32,
+    /// Longest a request may take (long polls excepted).
+    pub request_timeout: Duration,
+}
+
+impl Default for ServerLimits {
+    fn default() -> Self {
+        Self {
+            max_body_bytes: 256 << 20,
+            // CesiumMan (3,273 vertices) at 100k poses × 1024 samples is
+            // 3.4e11; this allows ten times that.
+            max_bake_work: 4_000_000_000_000,
+            requests_per_second: 200,
+            request_timeout: Duration::from_secs(120),
+        }
+    }
+}
+
+/// A change a browser or a waiting client hears about.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BakeEvent {
+    /// The bake.
+    pub id: i64,
+    /// Its state.
+    pub state: crate::store::BakeState,
+    /// Units done.
+    pub done: i64,
+    /// Units in all.
+    pub total: i64,
+}
+
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct RouteLabels {
+    method: String,
+    route: String,
+}
+
+/// Request metrics.
+#[derive(Debug)]
+pub struct Metrics {
+    /// The registry `/metrics` encodes.
+    pub registry: std::sync::Mutex<Registry>,
+    latency: Family<RouteLabels, Histogram>,
+}
+
+impl Metrics {
+    fn new() -> Self {
+        let latency = Family::<RouteLabels, Histogram>::new_with_constructor(|| {
+            Histogram::new([
+                0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 5.0,
+            ])
+        });
+        let mut registry = Registry::default();
+        registry.register(
+            "aobake_request_seconds",
+            "HTTP request latency by method and route",
+            latency.clone(),
+        );
+        Self {
+            registry: std::sync::Mutex::new(registry),
+            latency,
+        }
+    }
+}
+
+/// Everything a handler may reach.
+#[derive(Clone, Debug)]
+pub struct AppState {
+    /// Metadata and queue.
+    pub store: Arc<dyn Store>,
+    /// Bytes.
+    pub blobs: Arc<dyn Blobs>,
+    /// Lease and retry behaviour.
+    pub policy: QueuePolicy,
+    /// Limits.
+    pub limits: ServerLimits,
+    /// Import limits.
+    pub import_limits: aobake_core::Limits,
+    /// Woken when jobs may have become available.
+    pub jobs_ready: Arc<Notify>,
+    /// Bake state and progress changes.
+    pub events: broadcast::Sender<BakeEvent>,
+    /// Per-token request rate.
+    pub limiter: Arc<Limiter>,
+    /// Request metrics.
+    pub metrics: Arc<Metrics>,
+}
+
+/// A rate limiter keyed by token hash.
+#[derive(Debug)]
+pub struct Limiter(DefaultKeyedRateLimiter<String>);
+
+impl Limiter {
+    fn new(per_second: u32) -> Self {
+        let rate = NonZeroU32::new(per_second.max(1)).expect("positive");
+        let burst = NonZeroU32::new(per_second.max(1).saturating_mul(2)).expect("positive");
+        Self(RateLimiter::keyed(
+            Quota::per_second(rate).allow_burst(burst),
+        ))
+    }
+
+    /// 429 with the seconds to wait when `key` is over its rate.
+    pub fn check(&self, key: &str) -> Result<(), ApiError> {
+        self.0.check_key(&key.to_owned()).map_err(|not_until| {
+            let wait = not_until.wait_time_from(governor::clock::Clock::now(
+                &governor::clock::DefaultClock::default(),
+            ));
+            ApiError::RateLimited(wait.as_secs().max(1))
+        })
+    }
+}
+
+impl AppState {
+    /// State over a store and a blob store.
+    pub fn new(
+        store: Arc<dyn Store>,
+        blobs: Arc<dyn Blobs>,
+        policy: QueuePolicy,
+        limits: ServerLimits,
+    ) -> Self {
+        Self {
+            store,
+            blobs,
+            policy,
+            limits,
+            import_limits: aobake_core::Limits::default(),
+            jobs_ready: Arc::new(Notify::new()),
+            events: broadcast::channel(1024).0,
+            limiter: Arc::new(Limiter::new(limits.requests_per_second)),
+            metrics: Arc::new(Metrics::new()),
+        }
+    }
+
+    /// Tells listeners about a bake's state and wakes waiting workers.
+    pub fn announce(&self, bake: &crate::store::BakeRow) {
+        let _ = self.events.send(BakeEvent {
+            id: bake.id,
+            state: bake.state,
+            done: bake.done_work,
+            total: bake.total_work,
+        });
+        self.jobs_ready.notify_waiters();
+    }
+}
+
+async fn record_latency(
+    State(metrics): State<Arc<Metrics>>,
+    matched: Option<axum::extract::MatchedPath>,
+    req: Request,
+    next: Next,
+) -> Response {
+    let started = Instant::now();
+    let labels = RouteLabels {
+        method: req.method().to_string(),
+        route: matched.map_or_else(|| "unmatched".to_owned(), |m| m.as_str().to_owned()),
+    };
+    let res = next.run(req).await;
+    metrics
+        .latency
+        .get_or_create(&labels)
+        .observe(started.elapsed().as_secs_f64());
+    res
+}
+
+/// Every route, with request ids, limits and metrics.
+pub fn app(state: AppState) -> Router {
+    let request_id = HeaderName::from_static("x-request-id");
+    let limits = state.limits;
+    let metrics = state.metrics.clone();
+    Router::new()
+        .merge(routes::router(limits.request_timeout))
+        .layer(middleware::from_fn_with_state(metrics, record_latency))
+        .layer(DefaultBodyLimit::max(limits.max_body_bytes as usize))
+        .layer(TimeoutLayer::with_status_code(
+            axum::http::StatusCode::REQUEST_TIMEOUT,
+            limits.request_timeout + Duration::from_secs(60),
+        ))
+        .layer(PropagateRequestIdLayer::new(request_id.clone()))
+        .layer(SetRequestIdLayer::new(request_id, MakeRequestUuid))
+        .with_state(state)
+}

@@ -1,0 +1,103 @@
+//! Bearer tokens with scopes (DESIGN §9): `read` (everything a dashboard
+//! or CI shows), `submit` (uploads and bakes, their control), `worker`
+//! (the job protocol and blobs) and `admin` (all of them, and tokens).
+//! Only a token's sha256 is stored; a token is 32 random bytes in hex.
+
+use axum::{extract::FromRequestParts, http::request::Parts};
+use rand::RngExt as _;
+
+use crate::{app::AppState, error::ApiError};
+
+/// A scope a route needs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scope {
+    /// See bakes, reports, assets, workers.
+    Read,
+    /// Upload and bake.
+    Submit,
+    /// Run jobs.
+    Worker,
+    /// Everything, and tokens.
+    Admin,
+}
+
+impl Scope {
+    /// As stored and as `--scope` spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Read => "read",
+            Self::Submit => "submit",
+            Self::Worker => "worker",
+            Self::Admin => "admin",
+        }
+    }
+
+    /// The scope named `s`.
+    pub fn parse(s: &str) -> Option<Self> {
+        [Self::Read, Self::Submit, Self::Worker, Self::Admin]
+            .into_iter()
+            .find(|x| x.name() == s)
+    }
+}
+
+/// A new random token (64 hex digits).
+pub fn new_token() -> String {
+    let bytes: [u8; 32] = rand::rng().random();
+    aobake_core::digest::hex(&bytes)
+}
+
+/// What is stored of a token.
+pub fn token_hash(token: &str) -> String {
+    aobake_core::digest::sha256_hex(token.as_bytes())
+}
+
+/// The caller, as its bearer token says.
+#[derive(Debug, Clone)]
+pub struct Caller {
+    /// The token's name.
+    pub name: String,
+    /// Its scopes.
+    pub scopes: Vec<Scope>,
+    /// Its hash (the rate limiter's key).
+    pub hash: String,
+}
+
+impl Caller {
+    /// Refuses with 403 unless the caller has `scope` (or `admin`).
+    pub fn require(&self, scope: Scope) -> Result<(), ApiError> {
+        if self.scopes.contains(&scope) || self.scopes.contains(&Scope::Admin) {
+            Ok(())
+        } else {
+            Err(ApiError::Forbidden(scope.name()))
+        }
+    }
+}
+
+impl FromRequestParts<AppState> for Caller {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, ApiError> {
+        let header = parts
+            .headers
+            .get(axum::http::header::AUTHORIZATION)
+            .and_then(|v| v.to_str().ok())
+            .ok_or(ApiError::Unauthorized)?;
+        let token = header
+            .strip_prefix("Bearer ")
+            .ok_or(ApiError::Unauthorized)?
+            .trim();
+        let hash = token_hash(token);
+        let row = state
+            .store
+            .token(&hash)
+            .await?
+            .ok_or(ApiError::Unauthorized)?;
+        let caller = Self {
+            name: row.name,
+            scopes: row.scopes.iter().filter_map(|s| Scope::parse(s)).collect(),
+            hash,
+        };
+        state.limiter.check(&caller.hash)?;
+        Ok(caller)
+    }
+}

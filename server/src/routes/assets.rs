@@ -1,0 +1,96 @@
+//! `GET /v1/assets/{digest}`: published bytes (assets, reports, plots) by
+//! content digest. The digest is the strong `ETag`, so `If-None-Match`
+//! answers 304, and a single `Range` answers 206 with those bytes.
+
+use axum::{
+    Router,
+    extract::{Path, State},
+    http::{HeaderMap, HeaderValue, StatusCode, header},
+    response::{IntoResponse, Response},
+    routing::get,
+};
+
+use crate::{
+    app::AppState,
+    auth::{Caller, Scope},
+    error::{ApiError, ApiResult},
+};
+
+pub(super) fn router() -> Router<AppState> {
+    Router::new().route("/v1/assets/{digest}", get(asset))
+}
+
+async fn asset(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(digest): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    caller.require(Scope::Read)?;
+    crate::blobs::check_digest(&digest)?;
+    let len = state
+        .blobs
+        .len(&digest)
+        .await?
+        .ok_or_else(|| ApiError::NotFound(format!("no asset {digest}")))?;
+    let etag = HeaderValue::from_str(&format!("\"{digest}\"")).expect("hex is a valid header");
+    let matches = headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| {
+            v.split(',')
+                .any(|t| t.trim() == "*" || t.trim().trim_start_matches("W/") == etag)
+        });
+    let common = [
+        (header::ETAG, etag.clone()),
+        (header::ACCEPT_RANGES, HeaderValue::from_static("bytes")),
+        (
+            header::CACHE_CONTROL,
+            HeaderValue::from_static("private, max-age=31536000, immutable"),
+        ),
+    ];
+    if matches {
+        return Ok((StatusCode::NOT_MODIFIED, common).into_response());
+    }
+    let range = headers.get(header::RANGE).and_then(|v| v.to_str().ok());
+    if let Some(range) = range {
+        let ranges = http_range_header::parse_range_header(range)
+            .and_then(|r| r.validate(len))
+            .map_err(|_| {
+                ApiError::bad(
+                    "bad_range",
+                    format!("cannot serve {range:?} of {len} bytes"),
+                )
+            })?;
+        // One range is served as 206; several are served whole (RFC 9110
+        // lets a server ignore a multi-range request).
+        if let [r] = ranges.as_slice() {
+            let (start, end) = (*r.start(), *r.end() + 1);
+            let bytes = state
+                .blobs
+                .get_range(&digest, start, end)
+                .await?
+                .ok_or_else(|| ApiError::NotFound(format!("no asset {digest}")))?;
+            let content_range = format!("bytes {start}-{}/{len}", end - 1);
+            return Ok((
+                StatusCode::PARTIAL_CONTENT,
+                common,
+                [(header::CONTENT_RANGE, content_range)],
+                bytes,
+            )
+                .into_response());
+        }
+    }
+    let bytes = state
+        .blobs
+        .get(&digest)
+        .await?
+        .ok_or_else(|| ApiError::NotFound(format!("no asset {digest}")))?;
+    Ok((
+        StatusCode::OK,
+        common,
+        [(header::CONTENT_TYPE, "application/octet-stream")],
+        bytes,
+    )
+        .into_response())
+}

@@ -1,0 +1,326 @@
+//! Bakes: submit (planned into jobs here, the one place the server meets
+//! core's job graph), list, inspect with every job, the report, live
+//! events, control, and the cache by bake key that CI reads.
+
+use std::convert::Infallible;
+use std::time::Duration;
+
+use aobake_core::{
+    bake::{Bake, BakeInputs, BakeParams, GraphOptions, PoseSet, bake_key},
+    method::Method,
+};
+use axum::{
+    Json, Router,
+    extract::{Path, Query, State},
+    http::StatusCode,
+    response::{
+        IntoResponse, Response,
+        sse::{Event, KeepAlive, Sse},
+    },
+    routing::{get, post},
+};
+use serde::{Deserialize, Serialize};
+use tokio_stream::{Stream, StreamExt as _, wrappers::BroadcastStream};
+
+use super::uploads::load_upload;
+use crate::{
+    app::AppState,
+    auth::{Caller, Scope},
+    error::{ApiError, ApiResult},
+    store::{Action, BakeRow, JobRow, NewBake, NewJob},
+};
+
+pub(super) fn router() -> Router<AppState> {
+    Router::new()
+        .route("/v1/bakes", post(submit).get(list))
+        .route("/v1/bakes/{id}", get(show).patch(patch))
+        .route("/v1/bakes/{id}/report", get(report))
+        .route("/v1/bakes/{id}/events", get(events))
+        .route("/v1/bakes/{id}/{action}", post(control))
+        .route("/v1/cache/{key}", get(cache))
+        .route("/v1/characters/{digest}/bakes", get(versions))
+}
+
+/// `POST /v1/bakes`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct BakeRequest {
+    character: String,
+    #[serde(default)]
+    clips: Vec<String>,
+    method: String,
+    #[serde(default)]
+    params: serde_json::Map<String, serde_json::Value>,
+    #[serde(default)]
+    priority: i64,
+}
+
+/// Progress of a bake in units of work.
+#[derive(Debug, Serialize, Deserialize)]
+pub(crate) struct Progress {
+    done: i64,
+    total: i64,
+}
+
+/// A bake as the API shows it.
+#[derive(Debug, Serialize, Deserialize)]
+pub(crate) struct BakeView {
+    #[serde(flatten)]
+    bake: BakeRow,
+    progress: Progress,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    jobs: Option<Vec<JobRow>>,
+}
+
+fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
+    let running: i64 = jobs
+        .iter()
+        .flatten()
+        .filter(|j| j.state == crate::store::JobState::Running)
+        .map(|j| j.progress)
+        .sum();
+    BakeView {
+        progress: Progress {
+            done: (bake.done_work + running).min(bake.total_work),
+            total: bake.total_work,
+        },
+        bake,
+        jobs,
+    }
+}
+
+async fn submit(
+    State(state): State<AppState>,
+    caller: Caller,
+    body: Result<Json<BakeRequest>, axum::extract::rejection::JsonRejection>,
+) -> ApiResult<Response> {
+    caller.require(Scope::Submit)?;
+    let Json(req) = body.map_err(|e| ApiError::bad("bad_json", e.body_text()))?;
+    let method: Method = req
+        .method
+        .parse()
+        .map_err(|e: String| ApiError::bad("bad_method", e))?;
+    let params = BakeParams::with_overrides(method, &req.params)
+        .map_err(|e| ApiError::bad("bad_params", e.to_string()))?;
+    let character = load_upload(&state, &req.character, "character").await?;
+    let mut clips = Vec::new();
+    for c in &req.clips {
+        clips.push(load_upload(&state, c, "clips").await?);
+    }
+    let limits = state.import_limits.clone();
+    let max_work = state.limits.max_bake_work;
+    let (key, jobs) = tokio::task::spawn_blocking(move || -> ApiResult<_> {
+        let inputs = BakeInputs::load(&character, &clips, &limits)
+            .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
+        let bake = Bake::new(&inputs, params.clone())
+            .map_err(|e| ApiError::bad("bad_params", e.to_string()))?;
+        let frames = bake.poses_in(PoseSet::HeldOut).saturating_sub(params.eval_poses);
+        let work = params.work(inputs.character.vertex_count(), frames);
+        if work > max_work {
+            return Err(ApiError::bad(
+                "too_much_work",
+                format!(
+                    "the bake would trace {work} ray-vertex pairs, over the limit of {max_work}: lower poses, eval_poses or samples"
+                ),
+            ));
+        }
+        let key = bake_key(&inputs.character_digest, &inputs.clip_digests, &params);
+        let graph = bake.graph(GraphOptions::default());
+        let jobs = graph
+            .jobs
+            .iter()
+            .map(|j| NewJob {
+                kind: j.spec.kind().to_owned(),
+                spec: serde_json::to_value(&j.spec).expect("specs serialise"),
+                work: j.spec.work() as i64,
+                deps: j.deps.clone(),
+            })
+            .collect::<Vec<_>>();
+        Ok((key, (jobs, serde_json::to_value(&params).expect("params serialise"))))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))??;
+    if let Some(existing) = state.store.bake_for_key(&key).await? {
+        let status = if existing.state == crate::store::BakeState::Done {
+            StatusCode::OK
+        } else {
+            StatusCode::ACCEPTED
+        };
+        return Ok((status, Json(view(existing, None))).into_response());
+    }
+    let (jobs, params) = jobs;
+    let bake = state
+        .store
+        .create_bake(&NewBake {
+            key,
+            character: req.character,
+            clips: req.clips,
+            method: method.name().to_owned(),
+            params,
+            priority: req.priority,
+            jobs,
+            max_attempts: state.policy.max_attempts,
+        })
+        .await?;
+    state.announce(&bake);
+    Ok((StatusCode::ACCEPTED, Json(view(bake, None))).into_response())
+}
+
+#[derive(Debug, Deserialize)]
+struct ListQuery {
+    method: Option<String>,
+    limit: Option<i64>,
+}
+
+async fn list(
+    State(state): State<AppState>,
+    caller: Caller,
+    Query(q): Query<ListQuery>,
+) -> ApiResult<Json<Vec<BakeView>>> {
+    caller.require(Scope::Read)?;
+    let limit = q.limit.unwrap_or(100).clamp(1, 1000);
+    let bakes = state.store.bakes(None, q.method.as_deref(), limit).await?;
+    Ok(Json(bakes.into_iter().map(|b| view(b, None)).collect()))
+}
+
+async fn versions(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(digest): Path<String>,
+    Query(q): Query<ListQuery>,
+) -> ApiResult<Json<Vec<BakeView>>> {
+    caller.require(Scope::Read)?;
+    crate::blobs::check_digest(&digest)?;
+    let limit = q.limit.unwrap_or(100).clamp(1, 1000);
+    let bakes = state
+        .store
+        .bakes(Some(&digest), q.method.as_deref(), limit)
+        .await?;
+    Ok(Json(bakes.into_iter().map(|b| view(b, None)).collect()))
+}
+
+async fn find(state: &AppState, id: i64) -> ApiResult<BakeRow> {
+    state
+        .store
+        .bake(id)
+        .await?
+        .ok_or_else(|| ApiError::NotFound(format!("no bake {id}")))
+}
+
+async fn show(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+) -> ApiResult<Json<BakeView>> {
+    caller.require(Scope::Read)?;
+    let bake = find(&state, id).await?;
+    let jobs = state.store.jobs(id).await?;
+    Ok(Json(view(bake, Some(jobs))))
+}
+
+async fn report(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+) -> ApiResult<Response> {
+    caller.require(Scope::Read)?;
+    let bake = find(&state, id).await?;
+    let digest = bake
+        .report
+        .ok_or_else(|| ApiError::NotFound(format!("bake {id} has no report yet")))?;
+    let bytes = state
+        .blobs
+        .get(&digest)
+        .await?
+        .ok_or_else(|| ApiError::Internal(format!("report {digest} has no blob")))?;
+    Ok((
+        [(axum::http::header::CONTENT_TYPE, "application/json")],
+        bytes,
+    )
+        .into_response())
+}
+
+#[derive(Debug, Deserialize)]
+struct PatchBody {
+    priority: i64,
+}
+
+async fn patch(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+    body: Result<Json<PatchBody>, axum::extract::rejection::JsonRejection>,
+) -> ApiResult<Json<BakeView>> {
+    caller.require(Scope::Submit)?;
+    let Json(body) = body.map_err(|e| ApiError::bad("bad_json", e.body_text()))?;
+    find(&state, id).await?;
+    let bake = state.store.set_priority(id, body.priority).await?;
+    Ok(Json(view(bake, None)))
+}
+
+async fn control(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path((id, action)): Path<(i64, String)>,
+) -> ApiResult<Json<BakeView>> {
+    caller.require(Scope::Submit)?;
+    let action = match action.as_str() {
+        "cancel" => Action::Cancel,
+        "pause" => Action::Pause,
+        "resume" => Action::Resume,
+        "retry" => Action::Retry,
+        other => {
+            return Err(ApiError::NotFound(format!(
+                "no action {other:?}; the actions are cancel, pause, resume, retry"
+            )));
+        }
+    };
+    find(&state, id).await?;
+    let bake = state.store.control(id, action).await?;
+    state.announce(&bake);
+    Ok(Json(view(bake, None)))
+}
+
+async fn cache(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(key): Path<String>,
+) -> ApiResult<Json<BakeView>> {
+    caller.require(Scope::Read)?;
+    crate::blobs::check_digest(&key)?;
+    match state.store.bake_for_key(&key).await? {
+        Some(b) if b.state == crate::store::BakeState::Done => Ok(Json(view(b, None))),
+        _ => Err(ApiError::NotFound(format!(
+            "no finished bake for key {key}"
+        ))),
+    }
+}
+
+async fn events(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
+    caller.require(Scope::Read)?;
+    let rx = state.events.subscribe();
+    let bake = find(&state, id).await?;
+    let first = crate::app::BakeEvent {
+        id,
+        state: bake.state,
+        done: bake.done_work,
+        total: bake.total_work,
+    };
+    let event = |e: &crate::app::BakeEvent| {
+        Event::default()
+            .event("bake")
+            .json_data(e)
+            .expect("events serialise")
+    };
+    let initial = tokio_stream::once(Ok(event(&first)));
+    let updates = BroadcastStream::new(rx).filter_map(move |e| match e {
+        Ok(e) if e.id == id => Some(Ok(event(&e))),
+        _ => None,
+    });
+    Ok(Sse::new(initial.chain(updates))
+        .keep_alive(KeepAlive::new().interval(Duration::from_secs(15))))
+}

@@ -1,0 +1,246 @@
+//! The worker protocol: lease (long-polled), heartbeat, checkpoint,
+//! complete, fail and release, each but lease checked against the job's
+//! current lease token (a stale one gets 409), and the blobs workers read
+//! and write.
+
+use std::time::Duration;
+
+use axum::{
+    Json, Router,
+    body::Bytes,
+    extract::{Path, State},
+    http::StatusCode,
+    response::{IntoResponse, Response},
+    routing::{get, post},
+};
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    app::AppState,
+    auth::{Caller, Scope},
+    error::{ApiError, ApiResult},
+    store::{CheckpointRef, Completion},
+};
+
+pub(super) fn router() -> Router<AppState> {
+    Router::new()
+        .route("/v1/jobs/lease", post(lease))
+        .route("/v1/jobs/{id}/heartbeat", post(heartbeat))
+        .route("/v1/jobs/{id}/checkpoint", post(checkpoint))
+        .route("/v1/jobs/{id}/complete", post(complete))
+        .route("/v1/jobs/{id}/fail", post(fail))
+        .route("/v1/jobs/{id}/release", post(release))
+        .route("/v1/blobs/{digest}", get(get_blob).put(put_blob))
+}
+
+/// `POST /v1/jobs/lease`.
+#[derive(Debug, Deserialize, Serialize)]
+pub(crate) struct LeaseRequest {
+    /// The worker's id.
+    pub worker: String,
+    /// Seconds to wait for a job before answering 204.
+    #[serde(default)]
+    pub wait_secs: u64,
+}
+
+async fn lease(
+    State(state): State<AppState>,
+    caller: Caller,
+    Json(req): Json<LeaseRequest>,
+) -> ApiResult<Response> {
+    caller.require(Scope::Worker)?;
+    if req.worker.is_empty() || req.worker.len() > 200 {
+        return Err(ApiError::bad(
+            "bad_worker",
+            "worker ids are 1 to 200 characters",
+        ));
+    }
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(req.wait_secs.min(60));
+    loop {
+        // Register interest before looking, so a job made available between
+        // the look and the wait still wakes us.
+        let notified = state.jobs_ready.notified();
+        if let Some(lease) = state.store.lease(&req.worker, &state.policy).await? {
+            if let Some(bake) = state.store.bake(lease.bake.id).await? {
+                state.announce(&bake);
+            }
+            return Ok(Json(lease).into_response());
+        }
+        state.store.worker_seen(&req.worker, "idle", None).await?;
+        let now = tokio::time::Instant::now();
+        if now >= deadline {
+            return Ok(StatusCode::NO_CONTENT.into_response());
+        }
+        // Retry delays and lease expiries free jobs without a notification:
+        // look again at least every second.
+        let nap = (deadline - now).min(Duration::from_secs(1));
+        let _ = tokio::time::timeout(nap, notified).await;
+    }
+}
+
+/// Token and progress.
+#[derive(Debug, Deserialize, Serialize)]
+pub(crate) struct HeartbeatRequest {
+    /// The lease token.
+    pub token: String,
+    /// Units done in this attempt.
+    #[serde(default)]
+    pub progress: i64,
+}
+
+/// Whether the worker should stop.
+#[derive(Debug, Deserialize, Serialize)]
+pub(crate) struct HeartbeatReply {
+    /// The bake was cancelled: stop and drop the job.
+    pub stop: bool,
+}
+
+async fn heartbeat(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+    Json(req): Json<HeartbeatRequest>,
+) -> ApiResult<Json<HeartbeatReply>> {
+    caller.require(Scope::Worker)?;
+    let stop = state
+        .store
+        .heartbeat(id, &req.token, req.progress, &state.policy)
+        .await?;
+    Ok(Json(HeartbeatReply { stop }))
+}
+
+/// A checkpoint whose blob is stored.
+#[derive(Debug, Deserialize, Serialize)]
+pub(crate) struct CheckpointRequest {
+    /// The lease token.
+    pub token: String,
+    /// Step, cursor and blob.
+    #[serde(flatten)]
+    pub checkpoint: CheckpointRef,
+}
+
+async fn checkpoint(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+    Json(req): Json<CheckpointRequest>,
+) -> ApiResult<StatusCode> {
+    caller.require(Scope::Worker)?;
+    require_blob(&state, &req.checkpoint.blob).await?;
+    state
+        .store
+        .checkpoint(id, &req.token, &req.checkpoint)
+        .await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Outputs whose blobs are stored.
+#[derive(Debug, Deserialize, Serialize)]
+pub(crate) struct CompleteRequest {
+    /// The lease token.
+    pub token: String,
+    /// Outputs and timings.
+    #[serde(flatten)]
+    pub completion: Completion,
+}
+
+async fn require_blob(state: &AppState, digest: &str) -> ApiResult<()> {
+    crate::blobs::check_digest(digest)?;
+    if state.blobs.len(digest).await?.is_none() {
+        return Err(ApiError::bad(
+            "missing_blob",
+            format!("blob {digest} was not uploaded"),
+        ));
+    }
+    Ok(())
+}
+
+async fn complete(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+    Json(req): Json<CompleteRequest>,
+) -> ApiResult<StatusCode> {
+    caller.require(Scope::Worker)?;
+    for o in &req.completion.outputs {
+        require_blob(&state, &o.digest).await?;
+    }
+    let bake = state
+        .store
+        .complete(id, &req.token, &req.completion)
+        .await?;
+    state.announce(&bake);
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Why an attempt failed.
+#[derive(Debug, Deserialize, Serialize)]
+pub(crate) struct FailRequest {
+    /// The lease token.
+    pub token: String,
+    /// What went wrong.
+    pub error: String,
+    /// Whether another attempt can help.
+    pub retryable: bool,
+}
+
+async fn fail(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+    Json(req): Json<FailRequest>,
+) -> ApiResult<StatusCode> {
+    caller.require(Scope::Worker)?;
+    let error: String = req.error.chars().take(4000).collect();
+    let bake = state
+        .store
+        .fail(id, &req.token, &error, req.retryable, &state.policy)
+        .await?;
+    state.announce(&bake);
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// The lease token alone.
+#[derive(Debug, Deserialize, Serialize)]
+pub(crate) struct TokenRequest {
+    /// The lease token.
+    pub token: String,
+}
+
+async fn release(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<i64>,
+    Json(req): Json<TokenRequest>,
+) -> ApiResult<StatusCode> {
+    caller.require(Scope::Worker)?;
+    state.store.release(id, &req.token).await?;
+    state.jobs_ready.notify_waiters();
+    Ok(StatusCode::NO_CONTENT)
+}
+
+async fn get_blob(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(digest): Path<String>,
+) -> ApiResult<Response> {
+    caller.require(Scope::Worker)?;
+    let bytes = state
+        .blobs
+        .get(&digest)
+        .await?
+        .ok_or_else(|| ApiError::NotFound(format!("no blob {digest}")))?;
+    Ok(bytes.into_response())
+}
+
+async fn put_blob(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(digest): Path<String>,
+    body: Result<Bytes, axum::extract::rejection::BytesRejection>,
+) -> ApiResult<StatusCode> {
+    caller.require(Scope::Worker)?;
+    let body = body.map_err(|_| ApiError::TooLarge(state.limits.max_body_bytes))?;
+    state.blobs.put(&digest, &body).await?;
+    Ok(StatusCode::NO_CONTENT)
+}

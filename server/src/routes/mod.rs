@@ -1,0 +1,24 @@
+//! The HTTP API under `/v1`, one file per resource, each route beside its
+//! handler (STYLE: axum examples).
+
+mod assets;
+mod bakes;
+mod jobs;
+mod system;
+mod uploads;
+
+use std::time::Duration;
+
+use axum::Router;
+
+use crate::app::AppState;
+
+/// Every route.
+pub(crate) fn router(_request_timeout: Duration) -> Router<AppState> {
+    Router::new()
+        .merge(uploads::router())
+        .merge(bakes::router())
+        .merge(jobs::router())
+        .merge(assets::router())
+        .merge(system::router())
+}

@@ -1,0 +1,121 @@
+//! Workers, tokens, health and metrics.
+
+use axum::{
+    Json, Router,
+    extract::State,
+    http::{StatusCode, header},
+    response::{IntoResponse, Response},
+    routing::{get, post},
+};
+use prometheus_client::encoding::text::encode;
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    app::AppState,
+    auth::{Caller, Scope, new_token, token_hash},
+    error::{ApiError, ApiResult},
+    store::WorkerRow,
+};
+
+pub(super) fn router() -> Router<AppState> {
+    Router::new()
+        .route("/v1/workers", get(workers))
+        .route("/v1/tokens", post(create_token))
+        .route("/healthz", get(|| async { "ok" }))
+        .route("/readyz", get(ready))
+        .route("/metrics", get(metrics))
+}
+
+async fn workers(State(state): State<AppState>, caller: Caller) -> ApiResult<Json<Vec<WorkerRow>>> {
+    caller.require(Scope::Read)?;
+    Ok(Json(state.store.workers().await?))
+}
+
+/// `POST /v1/tokens`.
+#[derive(Debug, Deserialize, Serialize)]
+pub(crate) struct TokenRequest {
+    /// A name to recognise it by.
+    pub name: String,
+    /// Its scopes.
+    pub scopes: Vec<String>,
+}
+
+/// The new token: shown once, stored hashed.
+#[derive(Debug, Deserialize, Serialize)]
+pub(crate) struct NewToken {
+    /// The secret.
+    pub token: String,
+    /// Its name.
+    pub name: String,
+    /// Its scopes.
+    pub scopes: Vec<String>,
+}
+
+async fn create_token(
+    State(state): State<AppState>,
+    caller: Caller,
+    Json(req): Json<TokenRequest>,
+) -> ApiResult<(StatusCode, Json<NewToken>)> {
+    caller.require(Scope::Admin)?;
+    if let Some(bad) = req
+        .scopes
+        .iter()
+        .find(|s| crate::auth::Scope::parse(s).is_none())
+    {
+        return Err(ApiError::bad(
+            "bad_scope",
+            format!("unknown scope {bad:?}; the scopes are read, submit, worker, admin"),
+        ));
+    }
+    let token = new_token();
+    state
+        .store
+        .create_token(&token_hash(&token), &req.name, &req.scopes)
+        .await?;
+    Ok((
+        StatusCode::CREATED,
+        Json(NewToken {
+            token,
+            name: req.name,
+            scopes: req.scopes,
+        }),
+    ))
+}
+
+async fn ready(State(state): State<AppState>) -> ApiResult<&'static str> {
+    state
+        .store
+        .ping()
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))?;
+    Ok("ready")
+}
+
+async fn metrics(State(state): State<AppState>) -> ApiResult<Response> {
+    let (jobs, expiries) = state.store.queue_stats().await?;
+    let mut out = String::new();
+    out.push_str("# HELP aobake_jobs Jobs by state.\n# TYPE aobake_jobs gauge\n");
+    for s in crate::store::JobState::ALL {
+        let n = jobs.iter().find(|(x, _)| *x == s).map_or(0, |(_, n)| *n);
+        out.push_str(&format!("aobake_jobs{{state=\"{}\"}} {n}\n", s.as_str()));
+    }
+    out.push_str(&format!(
+        "# HELP aobake_lease_expiries_total Leases that expired without a heartbeat.\n# TYPE aobake_lease_expiries_total counter\naobake_lease_expiries_total {expiries}\n"
+    ));
+    {
+        let registry = state
+            .metrics
+            .registry
+            .lock()
+            .map_err(|_| ApiError::Internal("metrics lock poisoned".into()))?;
+        encode(&mut out, &registry).map_err(|e| ApiError::Internal(e.to_string()))?;
+    }
+    Ok((
+        [(
+            header::CONTENT_TYPE,
+            "application/openmetrics-text; version=1.0.0; charset=utf-8",
+        )],
+        out,
+    )
+        .into_response())
+}

@@ -1,0 +1,227 @@
+//! `POST /v1/characters` and `POST /v1/clips`: untrusted glTF in, a digest
+//! and the `inspect` summary out. A `.glb` (or self-contained `.gltf`)
+//! comes as the body; a `.gltf` with side files as `multipart/form-data`
+//! (the first part is the main file, the others are named by their file
+//! names, which are the only places its URIs may point to). The same bytes
+//! give the same digest, so uploading twice is harmless.
+
+use aobake_core::{
+    SideFile, bake::UploadBytes, import_character, import_clips, rig::summary::Summary,
+};
+use axum::{
+    Json, Router,
+    body::Bytes,
+    extract::{FromRequest, Multipart, Path, Query, Request, State},
+    http::{StatusCode, header},
+    routing::{get, post},
+};
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    app::AppState,
+    auth::{Caller, Scope},
+    error::{ApiError, ApiResult},
+    store::UploadRow,
+};
+
+pub(super) fn router() -> Router<AppState> {
+    Router::new()
+        .route("/v1/characters", post(post_character))
+        .route("/v1/characters/{digest}", get(get_upload))
+        .route("/v1/clips", post(post_clips))
+        .route("/v1/clips/{digest}", get(get_upload))
+}
+
+/// What an upload answers.
+#[derive(Debug, Serialize, Deserialize)]
+pub(crate) struct Uploaded {
+    digest: String,
+    summary: serde_json::Value,
+}
+
+/// The content type of a `.gltf` and its side files as one body: the
+/// framing of `UploadBytes::to_blob`, whose sha256 is the upload digest.
+const BUNDLE: &str = "application/vnd.aobake.bundle";
+
+/// Reads the body: one file, a bundle, or multipart parts.
+async fn read_upload(state: &AppState, req: Request) -> ApiResult<UploadBytes> {
+    let content_type = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_owned();
+    let multipart = content_type.starts_with("multipart/form-data");
+    let bundle = content_type.starts_with(BUNDLE);
+    let too_large = |e: &dyn std::fmt::Display| {
+        let text = e.to_string();
+        if text.contains("length limit") || text.contains("too large") {
+            ApiError::TooLarge(state.limits.max_body_bytes)
+        } else {
+            ApiError::bad("bad_body", format!("cannot read the body: {text}"))
+        }
+    };
+    if !multipart {
+        let bytes = Bytes::from_request(req, &())
+            .await
+            .map_err(|e| too_large(&e.body_text()))?;
+        if bytes.is_empty() {
+            return Err(ApiError::bad(
+                "empty_body",
+                "the body is empty: send a .glb or .gltf",
+            ));
+        }
+        if bundle {
+            return UploadBytes::from_blob(&bytes, true)
+                .map_err(|e| ApiError::bad("bad_bundle", e.to_string()));
+        }
+        return Ok(UploadBytes::single(bytes.to_vec()));
+    }
+    let mut parts = Multipart::from_request(req, &())
+        .await
+        .map_err(|e| ApiError::bad("bad_multipart", e.body_text()))?;
+    let mut main: Option<Vec<u8>> = None;
+    let mut side_files = Vec::new();
+    while let Some(field) = parts.next_field().await.map_err(|e| too_large(&e))? {
+        let name = field
+            .file_name()
+            .or(field.name())
+            .unwrap_or_default()
+            .to_owned();
+        let bytes = field.bytes().await.map_err(|e| too_large(&e))?.to_vec();
+        if main.is_none() {
+            main = Some(bytes);
+        } else {
+            if name.is_empty() {
+                return Err(ApiError::bad(
+                    "bad_multipart",
+                    "every side file needs a file name (the name its URI uses)",
+                ));
+            }
+            side_files.push(SideFile { name, bytes });
+        }
+    }
+    let main =
+        main.ok_or_else(|| ApiError::bad("empty_body", "the multipart body has no parts"))?;
+    Ok(UploadBytes { main, side_files })
+}
+
+async fn store_upload(
+    state: &AppState,
+    upload: &UploadBytes,
+    kind: &str,
+    summary: serde_json::Value,
+) -> ApiResult<(StatusCode, Json<Uploaded>)> {
+    let blob = upload.to_blob();
+    let digest = upload.digest();
+    state.blobs.put(&digest, &blob).await?;
+    let created = state
+        .store
+        .put_upload(&UploadRow {
+            digest: digest.clone(),
+            kind: kind.to_owned(),
+            bundle: upload.is_bundle(),
+            bytes: blob.len() as i64,
+            summary: summary.clone(),
+        })
+        .await?;
+    let status = if created {
+        StatusCode::CREATED
+    } else {
+        StatusCode::OK
+    };
+    Ok((status, Json(Uploaded { digest, summary })))
+}
+
+async fn post_character(
+    State(state): State<AppState>,
+    caller: Caller,
+    req: Request,
+) -> ApiResult<(StatusCode, Json<Uploaded>)> {
+    caller.require(Scope::Submit)?;
+    let upload = read_upload(&state, req).await?;
+    let limits = state.import_limits.clone();
+    let (summary, upload) = tokio::task::spawn_blocking(move || {
+        let imported = import_character(upload.upload(), &limits)?;
+        let mut s = serde_json::to_value(Summary::of(&imported.character, &imported.clips))
+            .expect("summaries serialise");
+        s["warnings"] = serde_json::json!(imported.warnings);
+        Ok::<_, aobake_core::ImportError>((s, upload))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))?
+    .map_err(|e| ApiError::Unprocessable(format!("the character cannot be imported: {e}")))?;
+    store_upload(&state, &upload, "character", summary).await
+}
+
+#[derive(Debug, Deserialize)]
+struct ClipsQuery {
+    /// The character whose skeleton the clips must drive.
+    character: String,
+}
+
+async fn post_clips(
+    State(state): State<AppState>,
+    caller: Caller,
+    Query(q): Query<ClipsQuery>,
+    req: Request,
+) -> ApiResult<(StatusCode, Json<Uploaded>)> {
+    caller.require(Scope::Submit)?;
+    let character = load_upload(&state, &q.character, "character").await?;
+    let upload = read_upload(&state, req).await?;
+    let limits = state.import_limits.clone();
+    let (summary, upload) = tokio::task::spawn_blocking(move || {
+        let c = import_character(character.upload(), &limits)
+            .map_err(|e| format!("the stored character no longer imports: {e}"))?;
+        let (clips, warnings) = import_clips(upload.upload(), &c.character, &limits)
+            .map_err(|e| format!("the clips cannot be imported: {e}"))?;
+        if clips.is_empty() {
+            return Err("the file has no animations that drive this character".to_owned());
+        }
+        let names: Vec<serde_json::Value> = clips
+            .iter()
+            .map(|c| serde_json::json!({"name": c.name, "duration": c.duration}))
+            .collect();
+        Ok((
+            serde_json::json!({"clips": names, "warnings": warnings, "character": c.character.vertex_count()}),
+            upload,
+        ))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))?
+    .map_err(ApiError::Unprocessable)?;
+    store_upload(&state, &upload, "clips", summary).await
+}
+
+/// An upload's bytes, checked to be of `kind`.
+pub(crate) async fn load_upload(
+    state: &AppState,
+    digest: &str,
+    kind: &str,
+) -> ApiResult<UploadBytes> {
+    crate::blobs::check_digest(digest)?;
+    let row = state
+        .store
+        .upload(digest)
+        .await?
+        .filter(|u| u.kind == kind)
+        .ok_or_else(|| ApiError::NotFound(format!("no {kind} upload {digest}")))?;
+    let blob = state
+        .blobs
+        .get(digest)
+        .await?
+        .ok_or_else(|| ApiError::Internal(format!("upload {digest} has no blob")))?;
+    UploadBytes::from_blob(&blob, row.bundle).map_err(|e| ApiError::Internal(e.to_string()))
+}
+
+async fn get_upload(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(digest): Path<String>,
+) -> ApiResult<Json<UploadRow>> {
+    caller.require(Scope::Read)?;
+    crate::blobs::check_digest(&digest)?;
+    Ok(Json(state.store.upload(&digest).await?.ok_or_else(
+        || ApiError::NotFound(format!("no upload {digest}")),
+    )?))
+}

@@ -1,0 +1,235 @@
+//! `aobake serve`: the API on the embedded defaults (SQLite and blobs
+//! under one data directory) with local worker processes it spawns and
+//! restarts, a lease reaper, and graceful shutdown.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use tokio::process::{Child, Command};
+
+use crate::{
+    app::{AppState, ServerLimits, app},
+    auth::{Scope, new_token, token_hash},
+    blobs::LocalBlobs,
+    store::{QueuePolicy, SqliteStore, Store},
+};
+
+/// `aobake serve`'s settings.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ServeArgs {
+    /// Where the database, the blobs, `server.url` and `admin.token` live.
+    #[arg(long, env = "AOBAKE_DATA", default_value = "aobake-data")]
+    pub data: PathBuf,
+    /// Address to listen on; port 0 picks a free one.
+    #[arg(long, env = "AOBAKE_LISTEN", default_value = "127.0.0.1:8080")]
+    pub listen: SocketAddr,
+    /// Local worker processes to start and supervise (default: one per
+    /// core; 0: none, for remote workers only).
+    #[arg(long, env = "AOBAKE_WORKERS")]
+    pub workers: Option<usize>,
+    /// A lease lasts this long unless heartbeated.
+    #[arg(long, env = "AOBAKE_LEASE_SECS", default_value_t = 30.0)]
+    pub lease_secs: f64,
+    /// Leases a job gets before it is dead and its bake failed.
+    #[arg(long, env = "AOBAKE_MAX_ATTEMPTS", default_value_t = 5)]
+    pub max_attempts: i64,
+    /// Largest request body in bytes.
+    #[arg(long, env = "AOBAKE_MAX_BODY_BYTES", default_value_t = 256 << 20)]
+    pub max_body_bytes: u64,
+    /// Requests per second per token.
+    #[arg(long, env = "AOBAKE_RATE", default_value_t = 200)]
+    pub rate: u32,
+    /// Also upload the bundled Fox and bake it, and say where to watch.
+    #[arg(long)]
+    pub demo: bool,
+}
+
+fn write_private(path: &Path, text: &str) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    #[cfg(unix)]
+    use std::os::unix::fs::OpenOptionsExt as _;
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create(true).truncate(true);
+    #[cfg(unix)]
+    options.mode(0o600);
+    let mut f = options
+        .open(path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    f.write_all(text.as_bytes())?;
+    Ok(())
+}
+
+/// Runs the server until SIGTERM or Ctrl-C.
+pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.data)
+        .with_context(|| format!("cannot create {}", args.data.display()))?;
+    let store = SqliteStore::open(&args.data.join("aobake.db"))
+        .await
+        .context("cannot open the database")?;
+    let blobs = LocalBlobs::open(&args.data.join("blobs"))?;
+    let policy = QueuePolicy {
+        lease_ms: (args.lease_secs * 1000.0) as i64,
+        max_attempts: args.max_attempts,
+        ..QueuePolicy::default()
+    };
+    let limits = ServerLimits {
+        max_body_bytes: args.max_body_bytes,
+        requests_per_second: args.rate,
+        ..ServerLimits::default()
+    };
+    let store: Arc<dyn Store> = Arc::new(store);
+    let admin = match std::env::var("AOBAKE_ADMIN_TOKEN") {
+        Ok(t) if !t.is_empty() => t,
+        _ => {
+            let t = new_token();
+            let path = args.data.join("admin.token");
+            write_private(&path, &t)?;
+            println!("admin token: {t} (also in {})", path.display());
+            t
+        }
+    };
+    store
+        .create_token(
+            &token_hash(&admin),
+            "admin",
+            &[Scope::Admin.name().to_owned()],
+        )
+        .await?;
+    let worker_token = new_token();
+    store
+        .create_token(
+            &token_hash(&worker_token),
+            "local workers",
+            &[Scope::Worker.name().to_owned()],
+        )
+        .await?;
+    let state = AppState::new(store.clone(), Arc::new(blobs), policy, limits);
+    let listener = tokio::net::TcpListener::bind(args.listen)
+        .await
+        .with_context(|| format!("cannot listen on {}", args.listen))?;
+    let url = format!("http://{}", listener.local_addr()?);
+    std::fs::write(args.data.join("server.url"), &url)?;
+    println!("listening on {url}");
+
+    // Leases that expire without a heartbeat free their jobs.
+    let reaper = {
+        let state = state.clone();
+        tokio::spawn(async move {
+            loop {
+                tokio::time::sleep(Duration::from_millis(500)).await;
+                match state.store.reap().await {
+                    Ok(n) if n > 0 => state.jobs_ready.notify_waiters(),
+                    Ok(_) => {}
+                    Err(e) => eprintln!("error: reaping leases: {e}"),
+                }
+            }
+        })
+    };
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let workers = args.workers.unwrap_or(cores);
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let mut supervisors = Vec::new();
+    for slot in 0..workers {
+        let url = url.clone();
+        let token = worker_token.clone();
+        let threads = (cores / workers.max(1)).max(1);
+        let mut stop = stop_rx.clone();
+        let lease_secs = args.lease_secs;
+        supervisors.push(tokio::spawn(async move {
+            let mut restarts = 0u32;
+            loop {
+                let mut child = match spawn_worker(&url, &token, slot, threads, lease_secs) {
+                    Ok(c) => c,
+                    Err(e) => {
+                        eprintln!("error: cannot start worker {slot}: {e:#}");
+                        return;
+                    }
+                };
+                tokio::select! {
+                    status = child.wait() => {
+                        restarts += 1;
+                        let wait = Duration::from_millis(250 * u64::from(restarts.min(20)));
+                        eprintln!("worker {slot} exited ({status:?}); restarting in {wait:?}");
+                        tokio::time::sleep(wait).await;
+                    }
+                    _ = stop.changed() => {
+                        terminate(&mut child).await;
+                        return;
+                    }
+                }
+            }
+        }));
+    }
+    if args.demo {
+        let state = state.clone();
+        let url = url.clone();
+        let admin = admin.clone();
+        tokio::spawn(async move {
+            if let Err(e) = crate::cli::client::demo(&url, &admin).await {
+                eprintln!("error: the demo bake could not be submitted: {e:#}");
+            }
+            drop(state);
+        });
+    }
+    let shutdown = async {
+        let ctrl_c = tokio::signal::ctrl_c();
+        #[cfg(unix)]
+        {
+            let mut term =
+                tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+                    .expect("SIGTERM handler");
+            tokio::select! { _ = ctrl_c => {}, _ = term.recv() => {} }
+        }
+        #[cfg(not(unix))]
+        let _ = ctrl_c.await;
+        eprintln!("shutting down");
+    };
+    axum::serve(listener, app(state))
+        .with_graceful_shutdown(shutdown)
+        .await?;
+    let _ = stop_tx.send(true);
+    for s in supervisors {
+        let _ = s.await;
+    }
+    reaper.abort();
+    Ok(())
+}
+
+fn spawn_worker(
+    url: &str,
+    token: &str,
+    slot: usize,
+    threads: usize,
+    lease_secs: f64,
+) -> anyhow::Result<Child> {
+    let exe = std::env::current_exe().context("cannot find the aobake binary")?;
+    let id = format!("local-{slot}-{}", std::process::id());
+    Command::new(exe)
+        .args(["worker", "--server", url, "--id", &id])
+        .arg("--heartbeat-secs")
+        .arg((lease_secs / 4.0).to_string())
+        .env("AOBAKE_TOKEN", token)
+        .env("RAYON_NUM_THREADS", threads.to_string())
+        .kill_on_drop(true)
+        .spawn()
+        .context("cannot start a worker process")
+}
+
+async fn terminate(child: &mut Child) {
+    #[cfg(unix)]
+    if let Some(pid) = child.id() {
+        let _ = std::process::Command::new("kill")
+            .args(["-TERM", &pid.to_string()])
+            .status();
+        if tokio::time::timeout(Duration::from_secs(30), child.wait())
+            .await
+            .is_ok()
+        {
+            return;
+        }
+    }
+    let _ = child.kill().await;
+}

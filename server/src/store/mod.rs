@@ -1,0 +1,469 @@
+//! What the service knows (DESIGN §8): uploads, bakes, their jobs (the
+//! queue), workers and tokens, behind one small trait. Bytes live in
+//! [`crate::blobs`], never here.
+//!
+//! The queue: a job is `blocked` until its dependencies complete, then
+//! `available`; a worker's lease makes it `running` with a fresh lease
+//! token and counts an attempt; heartbeats extend the lease; `complete`
+//! with the current token makes it `completed` in the same transaction
+//! that unblocks its dependents and advances the bake. A lease that
+//! expires, or a failure that may pass on retry, makes it `retryable`
+//! (with exponential backoff and jitter after a failure) until its
+//! attempts run out: then it is `dead` and its bake `failed`. Every time
+//! comes from the database clock.
+//!
+//! [`SqliteStore`] is the embedded default. Both backends run one shared
+//! test suite (`suite`).
+
+mod sqlite;
+#[cfg(test)]
+pub(crate) mod suite;
+
+pub use sqlite::SqliteStore;
+
+use serde::{Deserialize, Serialize};
+
+/// A failed store operation.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// The lease token is not the job's current one (the lease expired and
+    /// the job moved on, or the job was cancelled).
+    #[error("the lease is no longer held: {0}")]
+    LeaseLost(String),
+    /// The bake or job does not exist.
+    #[error("not found: {0}")]
+    NotFound(String),
+    /// The request conflicts with the bake's state.
+    #[error("{0}")]
+    Conflict(String),
+    /// The database failed.
+    #[error("database: {0}")]
+    Database(#[from] sqlx::Error),
+    /// The schema could not be migrated.
+    #[error("migration: {0}")]
+    Migrate(#[from] sqlx::migrate::MigrateError),
+    /// A stored document did not parse.
+    #[error("stored JSON: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
+/// Results of store operations.
+pub type Result<T, E = StoreError> = std::result::Result<T, E>;
+
+/// A stored upload.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UploadRow {
+    /// sha256 of the upload (its blob's digest).
+    pub digest: String,
+    /// `character` or `clips`.
+    pub kind: String,
+    /// Whether the blob is a bundle of a `.gltf` and its side files.
+    pub bundle: bool,
+    /// Blob size.
+    pub bytes: i64,
+    /// The `inspect` summary.
+    pub summary: serde_json::Value,
+}
+
+/// A bake's state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BakeState {
+    /// Jobs wait for workers.
+    Queued,
+    /// A job has started.
+    Running,
+    /// No new jobs are leased; running ones finish.
+    Paused,
+    /// The asset is published.
+    Done,
+    /// A job died.
+    Failed,
+    /// Cancelled by a user.
+    Cancelled,
+}
+
+impl BakeState {
+    /// As stored.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Queued => "queued",
+            Self::Running => "running",
+            Self::Paused => "paused",
+            Self::Done => "done",
+            Self::Failed => "failed",
+            Self::Cancelled => "cancelled",
+        }
+    }
+
+    fn parse(s: &str) -> Self {
+        match s {
+            "running" => Self::Running,
+            "paused" => Self::Paused,
+            "done" => Self::Done,
+            "failed" => Self::Failed,
+            "cancelled" => Self::Cancelled,
+            _ => Self::Queued,
+        }
+    }
+
+    /// Whether the bake can still change.
+    pub fn is_active(self) -> bool {
+        matches!(self, Self::Queued | Self::Running | Self::Paused)
+    }
+}
+
+/// A job's state (River's names, with `dead` for discarded).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JobState {
+    /// Waiting for its dependencies.
+    Blocked,
+    /// Ready to lease.
+    Available,
+    /// Leased by a worker.
+    Running,
+    /// Failed or lost its lease; leasable again after `run_at`.
+    Retryable,
+    /// Finished; its outputs are final.
+    Completed,
+    /// Its bake was cancelled.
+    Cancelled,
+    /// Out of attempts.
+    Dead,
+}
+
+impl JobState {
+    /// Every state, for metrics.
+    pub const ALL: [Self; 7] = [
+        Self::Blocked,
+        Self::Available,
+        Self::Running,
+        Self::Retryable,
+        Self::Completed,
+        Self::Cancelled,
+        Self::Dead,
+    ];
+
+    /// As stored.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Blocked => "blocked",
+            Self::Available => "available",
+            Self::Running => "running",
+            Self::Retryable => "retryable",
+            Self::Completed => "completed",
+            Self::Cancelled => "cancelled",
+            Self::Dead => "dead",
+        }
+    }
+
+    fn parse(s: &str) -> Self {
+        Self::ALL
+            .into_iter()
+            .find(|x| x.as_str() == s)
+            .unwrap_or(Self::Blocked)
+    }
+}
+
+/// A bake as stored.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BakeRow {
+    /// Its id.
+    pub id: i64,
+    /// The bake key.
+    pub key: String,
+    /// Character digest.
+    pub character: String,
+    /// Clip digests.
+    pub clips: Vec<String>,
+    /// Method name.
+    pub method: String,
+    /// Fully defaulted parameters.
+    pub params: serde_json::Value,
+    /// State.
+    pub state: BakeState,
+    /// Higher runs first.
+    pub priority: i64,
+    /// Units of work in all.
+    pub total_work: i64,
+    /// Units of work of completed jobs.
+    pub done_work: i64,
+    /// Jobs in all.
+    pub jobs_total: i64,
+    /// Jobs completed.
+    pub jobs_done: i64,
+    /// Asset digest, once done.
+    pub asset: Option<String>,
+    /// Report digest, once done.
+    pub report: Option<String>,
+    /// Plot digest, once done.
+    pub plot: Option<String>,
+    /// Why it failed.
+    pub error: Option<String>,
+    /// Milliseconds since the epoch.
+    pub created_at: i64,
+    /// Milliseconds since the epoch.
+    pub updated_at: i64,
+    /// Milliseconds since the epoch.
+    pub finished_at: Option<i64>,
+}
+
+/// A job as stored.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JobRow {
+    /// Its id.
+    pub id: i64,
+    /// Its bake.
+    pub bake_id: i64,
+    /// Index in the bake's graph.
+    pub index: i64,
+    /// `sample`, `fit`, …
+    pub kind: String,
+    /// The job spec (core's `JobSpec`).
+    pub spec: serde_json::Value,
+    /// Units of work.
+    pub work: i64,
+    /// State.
+    pub state: JobState,
+    /// Leases so far.
+    pub attempts: i64,
+    /// Leases allowed.
+    pub max_attempts: i64,
+    /// The worker holding or last holding it.
+    pub worker: Option<String>,
+    /// Units done in the current attempt.
+    pub progress: i64,
+    /// Last checkpoint: step, cursor and blob.
+    pub checkpoint: Option<CheckpointRef>,
+    /// Outputs, once completed.
+    pub outputs: Option<Vec<OutputRef>>,
+    /// The last error.
+    pub error: Option<String>,
+    /// Indices of the jobs it needs.
+    pub deps: Vec<i64>,
+}
+
+/// A checkpoint saved as a blob.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CheckpointRef {
+    /// Named step.
+    pub step: String,
+    /// Cursor within it.
+    pub cursor: i64,
+    /// Blob digest of its data.
+    pub blob: String,
+}
+
+/// A named output blob of a job.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct OutputRef {
+    /// Output name.
+    pub name: String,
+    /// Blob digest.
+    pub digest: String,
+}
+
+/// A job of a bake to create.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewJob {
+    /// `sample`, `fit`, …
+    pub kind: String,
+    /// The spec.
+    pub spec: serde_json::Value,
+    /// Units of work.
+    pub work: i64,
+    /// Indices of dependencies (earlier jobs).
+    pub deps: Vec<usize>,
+}
+
+/// A bake to create.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewBake {
+    /// The bake key.
+    pub key: String,
+    /// Character digest.
+    pub character: String,
+    /// Clip digests.
+    pub clips: Vec<String>,
+    /// Method name.
+    pub method: String,
+    /// Fully defaulted parameters.
+    pub params: serde_json::Value,
+    /// Priority.
+    pub priority: i64,
+    /// Its job graph.
+    pub jobs: Vec<NewJob>,
+    /// Leases allowed per job.
+    pub max_attempts: i64,
+}
+
+/// A leased job and what the worker needs to run it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Lease {
+    /// The job.
+    pub job: JobRow,
+    /// The token `heartbeat`, `checkpoint` and `complete` must present.
+    pub token: String,
+    /// When the lease expires unless extended (ms since the epoch).
+    pub expires_at: i64,
+    /// The bake it belongs to.
+    pub bake: BakeRow,
+    /// Outputs of its dependencies, one entry per dependency.
+    pub inputs: Vec<Completion>,
+    /// The bake's uploads: whether each is a bundle (character first).
+    pub uploads: Vec<UploadRef>,
+}
+
+/// An upload a job reads.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct UploadRef {
+    /// Blob digest.
+    pub digest: String,
+    /// Whether the blob is a bundle.
+    pub bundle: bool,
+}
+
+/// What a completing worker hands in.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Completion {
+    /// Output blobs, already stored.
+    pub outputs: Vec<OutputRef>,
+    /// Stage seconds, for the report.
+    pub timings: serde_json::Value,
+}
+
+/// Changes to a bake's course.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Action {
+    /// Stop it for good.
+    Cancel,
+    /// Lease no more of its jobs.
+    Pause,
+    /// Lease them again.
+    Resume,
+    /// Re-queue its dead and cancelled jobs with fresh attempts.
+    Retry,
+}
+
+/// A worker as last seen.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WorkerRow {
+    /// Its id.
+    pub id: String,
+    /// `idle`, `busy` or `stopped`.
+    pub state: String,
+    /// The job it runs.
+    pub job_id: Option<i64>,
+    /// Last contact (ms since the epoch).
+    pub last_seen: i64,
+    /// First contact.
+    pub started_at: i64,
+}
+
+/// A token as stored (its hash, never the secret).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TokenRow {
+    /// Name.
+    pub name: String,
+    /// Scopes.
+    pub scopes: Vec<String>,
+}
+
+/// How leases and retries behave.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct QueuePolicy {
+    /// A lease lasts this long unless heartbeated.
+    pub lease_ms: i64,
+    /// First retry delay after a failure; doubles per attempt.
+    pub backoff_ms: i64,
+    /// Longest retry delay.
+    pub max_backoff_ms: i64,
+    /// Failures of one worker on one bake before it is kept off the bake.
+    pub worker_failures: i64,
+    /// Leases a job gets before it is dead.
+    pub max_attempts: i64,
+}
+
+impl Default for QueuePolicy {
+    fn default() -> Self {
+        Self {
+            lease_ms: 30_000,
+            backoff_ms: 1_000,
+            max_backoff_ms: 60_000,
+            worker_failures: 3,
+            max_attempts: 5,
+        }
+    }
+}
+
+/// The store: metadata and the queue.
+#[async_trait::async_trait]
+pub trait Store: Send + Sync + std::fmt::Debug + 'static {
+    /// Records an upload; `false` when it was there already.
+    async fn put_upload(&self, upload: &UploadRow) -> Result<bool>;
+    /// An upload by digest.
+    async fn upload(&self, digest: &str) -> Result<Option<UploadRow>>;
+    /// Creates a bake and its jobs; jobs without dependencies start
+    /// `available`.
+    async fn create_bake(&self, bake: &NewBake) -> Result<BakeRow>;
+    /// A bake by id.
+    async fn bake(&self, id: i64) -> Result<Option<BakeRow>>;
+    /// The newest bake with this key that is done or still active.
+    async fn bake_for_key(&self, key: &str) -> Result<Option<BakeRow>>;
+    /// Bakes, newest first, optionally of one character and method.
+    async fn bakes(
+        &self,
+        character: Option<&str>,
+        method: Option<&str>,
+        limit: i64,
+    ) -> Result<Vec<BakeRow>>;
+    /// A bake's jobs in graph order.
+    async fn jobs(&self, bake: i64) -> Result<Vec<JobRow>>;
+    /// Leases the most urgent ready job for `worker`, if any.
+    async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>>;
+    /// Extends a lease and records progress; returns whether the job
+    /// should stop (its bake was cancelled or paused does not stop it).
+    async fn heartbeat(
+        &self,
+        job: i64,
+        token: &str,
+        progress: i64,
+        policy: &QueuePolicy,
+    ) -> Result<bool>;
+    /// Records a checkpoint for the next attempt.
+    async fn checkpoint(&self, job: i64, token: &str, checkpoint: &CheckpointRef) -> Result<()>;
+    /// Completes a job with its outputs; returns its bake afterwards.
+    async fn complete(&self, job: i64, token: &str, completion: &Completion) -> Result<BakeRow>;
+    /// Fails an attempt; `retryable` false kills the job at once.
+    async fn fail(
+        &self,
+        job: i64,
+        token: &str,
+        error: &str,
+        retryable: bool,
+        policy: &QueuePolicy,
+    ) -> Result<BakeRow>;
+    /// Gives a lease back without counting an attempt (graceful shutdown).
+    async fn release(&self, job: i64, token: &str) -> Result<()>;
+    /// Makes jobs whose leases expired retryable (or dead); returns how
+    /// many.
+    async fn reap(&self) -> Result<u64>;
+    /// Cancels, pauses, resumes or retries a bake.
+    async fn control(&self, bake: i64, action: Action) -> Result<BakeRow>;
+    /// Sets a bake's priority.
+    async fn set_priority(&self, bake: i64, priority: i64) -> Result<BakeRow>;
+    /// Records that a worker is alive (and what it runs).
+    async fn worker_seen(&self, worker: &str, state: &str, job: Option<i64>) -> Result<()>;
+    /// Every worker, most recently seen first.
+    async fn workers(&self) -> Result<Vec<WorkerRow>>;
+    /// Stores a token's hash.
+    async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()>;
+    /// A token by hash.
+    async fn token(&self, hash: &str) -> Result<Option<TokenRow>>;
+    /// Jobs per state, and lease expiries so far.
+    async fn queue_stats(&self) -> Result<(Vec<(JobState, i64)>, i64)>;
+    /// Whether the database answers.
+    async fn ping(&self) -> Result<()>;
+}

@@ -1,0 +1,254 @@
+//! The store's behaviour, written once and run against every backend
+//! (each backend's test module calls [`run_all`] on a fresh store).
+
+use serde_json::json;
+
+use super::{
+    Action, BakeState, CheckpointRef, Completion, JobState, NewBake, NewJob, OutputRef,
+    QueuePolicy, Store, StoreError, UploadRow,
+};
+
+fn policy() -> QueuePolicy {
+    QueuePolicy {
+        lease_ms: 60_000,
+        backoff_ms: 1,
+        max_backoff_ms: 2,
+        worker_failures: 100,
+        max_attempts: 2,
+    }
+}
+
+async fn character(store: &dyn Store) -> String {
+    let digest = "c".repeat(64);
+    store
+        .put_upload(&UploadRow {
+            digest: digest.clone(),
+            kind: "character".into(),
+            bundle: false,
+            bytes: 1,
+            summary: json!({}),
+        })
+        .await
+        .unwrap();
+    digest
+}
+
+/// Two samples → fit: the diamond every vertex bake has, in small.
+fn bake(character: &str, key: &str) -> NewBake {
+    let job = |kind: &str, deps: Vec<usize>| NewJob {
+        kind: kind.into(),
+        spec: json!({"kind": kind}),
+        work: 2,
+        deps,
+    };
+    NewBake {
+        key: key.into(),
+        character: character.into(),
+        clips: vec![],
+        method: "vertex-linear".into(),
+        params: json!({}),
+        priority: 0,
+        jobs: vec![
+            job("sample", vec![]),
+            job("sample", vec![]),
+            job("fit", vec![0, 1]),
+        ],
+        max_attempts: 2,
+    }
+}
+
+fn done(name: &str) -> Completion {
+    Completion {
+        outputs: vec![OutputRef {
+            name: name.into(),
+            digest: "d".repeat(64),
+        }],
+        timings: json!({"fit_s": 1.0}),
+    }
+}
+
+/// Runs every case.
+pub(crate) async fn run_all(store: &dyn Store) {
+    uploads_are_idempotent(store).await;
+    jobs_run_in_dependency_order_and_publish_the_asset(store).await;
+    stale_tokens_are_refused(store).await;
+    failures_retry_then_kill_the_bake(store).await;
+    cancel_pause_resume_retry(store).await;
+}
+
+async fn uploads_are_idempotent(store: &dyn Store) {
+    let d = character(store).await;
+    assert!(
+        !store
+            .put_upload(&store.upload(&d).await.unwrap().unwrap())
+            .await
+            .unwrap()
+    );
+    assert!(store.upload(&"e".repeat(64)).await.unwrap().is_none());
+}
+
+async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {
+    let c = character(store).await;
+    let b = store.create_bake(&bake(&c, &"1".repeat(64))).await.unwrap();
+    assert_eq!(
+        (b.state, b.total_work, b.jobs_total),
+        (BakeState::Queued, 6, 3)
+    );
+    let p = policy();
+    let a = store.lease("w1", &p).await.unwrap().unwrap();
+    let b2 = store.lease("w2", &p).await.unwrap().unwrap();
+    assert_eq!((a.job.index, b2.job.index), (0, 1));
+    assert!(store.lease("w3", &p).await.unwrap().is_none(), "fit waits");
+    assert_eq!(a.job.attempts, 1);
+    assert!(!store.heartbeat(a.job.id, &a.token, 1, &p).await.unwrap());
+    store
+        .checkpoint(
+            a.job.id,
+            &a.token,
+            &CheckpointRef {
+                step: "sample".into(),
+                cursor: 1,
+                blob: "e".repeat(64),
+            },
+        )
+        .await
+        .unwrap();
+    store
+        .complete(a.job.id, &a.token, &done("ao"))
+        .await
+        .unwrap();
+    let mid = store
+        .complete(b2.job.id, &b2.token, &done("ao"))
+        .await
+        .unwrap();
+    assert_eq!((mid.done_work, mid.jobs_done), (4, 2));
+    let fit = store.lease("w1", &p).await.unwrap().unwrap();
+    assert_eq!(fit.job.index, 2);
+    assert_eq!(fit.inputs.len(), 2, "one entry per dependency");
+    assert_eq!(fit.inputs[0].outputs[0].name, "ao");
+    assert_eq!(fit.uploads[0].digest, c);
+    let end = store
+        .complete(fit.job.id, &fit.token, &done("asset"))
+        .await
+        .unwrap();
+    assert_eq!(end.state, BakeState::Done);
+    assert_eq!(end.asset.as_deref(), Some("d".repeat(64).as_str()));
+    let found = store.bake_for_key(&"1".repeat(64)).await.unwrap().unwrap();
+    assert_eq!(found.id, end.id);
+    let jobs = store.jobs(end.id).await.unwrap();
+    assert!(jobs.iter().all(|j| j.state == JobState::Completed));
+    assert_eq!(jobs[2].deps, [0, 1]);
+    assert_eq!(jobs[0].checkpoint.as_ref().unwrap().cursor, 1);
+    let listed = store
+        .bakes(Some(&c), Some("vertex-linear"), 10)
+        .await
+        .unwrap();
+    assert!(listed.iter().any(|b| b.id == end.id));
+}
+
+async fn stale_tokens_are_refused(store: &dyn Store) {
+    let c = character(store).await;
+    let b = store.create_bake(&bake(&c, &"2".repeat(64))).await.unwrap();
+    let mut p = policy();
+    p.lease_ms = 1;
+    let first = store.lease("slow", &p).await.unwrap().unwrap();
+    assert_eq!(first.job.bake_id, b.id);
+    tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    assert!(store.reap().await.unwrap() >= 1);
+    let again = store.lease("fast", &policy()).await.unwrap().unwrap();
+    assert_eq!(
+        again.job.id, first.job.id,
+        "the expired job is leased again"
+    );
+    assert_eq!(again.job.attempts, 2);
+    for r in [
+        store
+            .complete(first.job.id, &first.token, &done("ao"))
+            .await
+            .map(|_| ()),
+        store
+            .heartbeat(first.job.id, &first.token, 0, &p)
+            .await
+            .map(|_| ()),
+    ] {
+        assert!(matches!(r, Err(StoreError::LeaseLost(_))), "{r:?}");
+    }
+    store
+        .complete(again.job.id, &again.token, &done("ao"))
+        .await
+        .unwrap();
+    let (states, expiries) = store.queue_stats().await.unwrap();
+    assert!(expiries >= 1);
+    assert!(
+        states
+            .iter()
+            .any(|(s, n)| *s == JobState::Completed && *n > 0)
+    );
+}
+
+async fn failures_retry_then_kill_the_bake(store: &dyn Store) {
+    let c = character(store).await;
+    let b = store.create_bake(&bake(&c, &"3".repeat(64))).await.unwrap();
+    let p = policy();
+    // Drain other bakes' jobs out of the way by leasing only this bake's.
+    let mut lease = store.lease("w", &p).await.unwrap().unwrap();
+    while lease.job.bake_id != b.id {
+        store
+            .complete(lease.job.id, &lease.token, &done("ao"))
+            .await
+            .unwrap();
+        lease = store.lease("w", &p).await.unwrap().unwrap();
+    }
+    let after = store
+        .fail(lease.job.id, &lease.token, "flaky", true, &p)
+        .await
+        .unwrap();
+    assert_eq!(after.state, BakeState::Running);
+    tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+    let mut again = store.lease("w", &p).await.unwrap().unwrap();
+    while again.job.id != lease.job.id {
+        store
+            .complete(again.job.id, &again.token, &done("ao"))
+            .await
+            .unwrap();
+        again = store.lease("w", &p).await.unwrap().unwrap();
+    }
+    let end = store
+        .fail(again.job.id, &again.token, "broken for good", true, &p)
+        .await
+        .unwrap();
+    assert_eq!(end.state, BakeState::Failed, "out of attempts");
+    assert!(
+        end.error.as_deref().unwrap().contains("broken for good"),
+        "{:?}",
+        end.error
+    );
+    let retried = store.control(b.id, Action::Retry).await.unwrap();
+    assert_eq!(retried.state, BakeState::Queued);
+}
+
+async fn cancel_pause_resume_retry(store: &dyn Store) {
+    let c = character(store).await;
+    let b = store.create_bake(&bake(&c, &"4".repeat(64))).await.unwrap();
+    let paused = store.control(b.id, Action::Pause).await.unwrap();
+    assert_eq!(paused.state, BakeState::Paused);
+    assert!(matches!(
+        store.control(b.id, Action::Pause).await,
+        Err(StoreError::Conflict(_))
+    ));
+    let resumed = store.control(b.id, Action::Resume).await.unwrap();
+    assert!(resumed.state.is_active());
+    let cancelled = store.control(b.id, Action::Cancel).await.unwrap();
+    assert_eq!(cancelled.state, BakeState::Cancelled);
+    assert!(
+        store
+            .jobs(b.id)
+            .await
+            .unwrap()
+            .iter()
+            .all(|j| j.state == JobState::Cancelled)
+    );
+    assert!(store.bake_for_key(&"4".repeat(64)).await.unwrap().is_none());
+    let p = store.set_priority(b.id, 7).await.unwrap();
+    assert_eq!(p.priority, 7);
+}

@@ -1,0 +1,320 @@
+//! The lease loop (DESIGN §8): lease, run, heartbeat, checkpoint, complete.
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use aobake_core::{
+    Limits,
+    bake::{
+        Bake, BakeInputs, BakeParams, Checkpoint, JobError, JobOutput, JobSink, JobSpec, Output,
+        Stop, UploadBytes,
+    },
+};
+
+use crate::client::{CheckpointRef, Client, ClientError, Lease, OutputRef};
+
+/// How a worker runs.
+#[derive(Debug, Clone)]
+pub struct WorkerConfig {
+    /// The server's base URL.
+    pub server: String,
+    /// A token with the `worker` scope.
+    pub token: String,
+    /// Jobs run at once (one thread each).
+    pub concurrency: usize,
+    /// This worker's id (host and process id by default).
+    pub id: String,
+    /// Seconds a lease request waits on the server for a job.
+    pub wait_secs: u64,
+    /// Seconds between heartbeats.
+    pub heartbeat_secs: f64,
+    /// On SIGTERM, a running job may take this long to finish before it is
+    /// stopped at its next checkpoint and its lease given back.
+    pub shutdown_secs: u64,
+    /// A fault to inject, for crash tests: `after_checkpoint` aborts the
+    /// process right after a checkpoint is saved (`AOBAKE_FAULT`).
+    pub fault: Option<String>,
+}
+
+/// Imported inputs of recent bakes, by bake id.
+type InputCache = Mutex<HashMap<i64, Arc<BakeInputs>>>;
+
+/// Runs until SIGTERM (or SIGINT): each of `concurrency` threads leases
+/// and runs jobs.
+pub fn run(config: WorkerConfig) -> Result<(), String> {
+    let shutdown = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
+        signal_hook::flag::register(signal, shutdown.clone())
+            .map_err(|e| format!("cannot handle signals: {e}"))?;
+    }
+    let client = Client::new(&config.server, &config.token);
+    let cache: Arc<InputCache> = Arc::default();
+    std::thread::scope(|scope| {
+        for slot in 0..config.concurrency.max(1) {
+            let (client, config, shutdown, cache) = (&client, &config, &shutdown, &cache);
+            scope.spawn(move || {
+                let id = if config.concurrency > 1 {
+                    format!("{}/{slot}", config.id)
+                } else {
+                    config.id.clone()
+                };
+                lease_loop(client, config, &id, shutdown, cache);
+            });
+        }
+    });
+    eprintln!("worker {}: stopped", config.id);
+    Ok(())
+}
+
+fn lease_loop(
+    client: &Client,
+    config: &WorkerConfig,
+    id: &str,
+    shutdown: &AtomicBool,
+    cache: &InputCache,
+) {
+    let mut failures = 0u32;
+    while !shutdown.load(Ordering::Relaxed) {
+        match client.lease(id, config.wait_secs) {
+            Ok(Some(lease)) => {
+                failures = 0;
+                run_leased(client, config, lease, shutdown, cache);
+            }
+            Ok(None) => {}
+            Err(e) => {
+                failures += 1;
+                let wait = Duration::from_millis(200 * u64::from(failures.min(25)));
+                eprintln!("worker {id}: cannot lease ({e}); retrying in {wait:?}");
+                std::thread::sleep(wait);
+            }
+        }
+    }
+}
+
+/// Stop requests shared by the compute and heartbeat threads.
+#[derive(Debug, Default)]
+struct Flags {
+    /// The lease is gone or the bake was cancelled: drop the job.
+    lost: AtomicBool,
+    /// Shutdown past its deadline: stop and give the lease back.
+    release: AtomicBool,
+    /// The job finished; the heartbeat thread ends.
+    done: AtomicBool,
+    progress: AtomicU64,
+}
+
+struct Sink<'a> {
+    client: &'a Client,
+    job: i64,
+    token: &'a str,
+    flags: &'a Flags,
+    fault: Option<&'a str>,
+}
+
+impl JobSink for Sink<'_> {
+    fn checkpoint(&mut self, checkpoint: Checkpoint) -> Result<(), Stop> {
+        let saved = self.client.put_blob(&checkpoint.data).and_then(|blob| {
+            self.client.checkpoint(
+                self.job,
+                self.token,
+                &CheckpointRef {
+                    step: checkpoint.step.clone(),
+                    cursor: checkpoint.cursor as i64,
+                    blob,
+                },
+            )
+        });
+        match saved {
+            Ok(()) => {
+                if self.fault == Some("after_checkpoint") {
+                    eprintln!("fault injected after checkpoint {}", checkpoint.cursor);
+                    std::process::abort();
+                }
+            }
+            Err(ClientError::LeaseLost(_)) => {
+                self.flags.lost.store(true, Ordering::Relaxed);
+            }
+            // A checkpoint that cannot be saved costs only the work since
+            // the last one; the job goes on.
+            Err(e) => eprintln!("job {}: checkpoint not saved: {e}", self.job),
+        }
+        if self.flags.lost.load(Ordering::Relaxed) {
+            return Err(Stop("the lease was lost".into()));
+        }
+        if self.flags.release.load(Ordering::Relaxed) {
+            return Err(Stop("shutting down".into()));
+        }
+        Ok(())
+    }
+
+    fn progress(&mut self, done: u64, _total: u64) {
+        self.flags.progress.store(done, Ordering::Relaxed);
+    }
+}
+
+fn inputs(client: &Client, lease: &Lease, cache: &InputCache) -> Result<Arc<BakeInputs>, JobError> {
+    if let Some(i) = cache.lock().expect("cache lock").get(&lease.bake.id) {
+        return Ok(i.clone());
+    }
+    let fetch = |i: usize| -> Result<UploadBytes, JobError> {
+        let u = &lease.uploads[i];
+        let blob = client
+            .get_blob(&u.digest)
+            .map_err(|e| JobError::Failed(format!("cannot fetch upload {}: {e}", u.digest)))?;
+        UploadBytes::from_blob(&blob, u.bundle).map_err(|e| JobError::Invalid(e.to_string()))
+    };
+    if lease.uploads.is_empty() {
+        return Err(JobError::Invalid("the lease names no character".into()));
+    }
+    let character = fetch(0)?;
+    let clips = (1..lease.uploads.len())
+        .map(fetch)
+        .collect::<Result<Vec<_>, _>>()?;
+    let loaded = BakeInputs::load(&character, &clips, &Limits::default())
+        .map_err(|e| JobError::Invalid(e.to_string()))?;
+    let loaded = Arc::new(loaded);
+    let mut c = cache.lock().expect("cache lock");
+    if c.len() >= 4 {
+        c.clear();
+    }
+    c.insert(lease.bake.id, loaded.clone());
+    Ok(loaded)
+}
+
+fn execute(
+    client: &Client,
+    config: &WorkerConfig,
+    lease: &Lease,
+    flags: &Flags,
+    cache: &InputCache,
+) -> Result<JobOutput, JobError> {
+    let spec: JobSpec = serde_json::from_value(lease.job.spec.clone())
+        .map_err(|e| JobError::Invalid(format!("job spec: {e}")))?;
+    let params: BakeParams = serde_json::from_value(lease.bake.params.clone())
+        .map_err(|e| JobError::Invalid(format!("bake params: {e}")))?;
+    let inputs = inputs(client, lease, cache)?;
+    let bake = Bake::new(&inputs, params)?;
+    let mut deps = Vec::with_capacity(lease.inputs.len());
+    for d in &lease.inputs {
+        let mut out = JobOutput {
+            timings: serde_json::from_value(d.timings.clone()).unwrap_or_default(),
+            outputs: Vec::new(),
+        };
+        for o in &d.outputs {
+            let bytes = client
+                .get_blob(&o.digest)
+                .map_err(|e| JobError::Failed(format!("cannot fetch {}: {e}", o.name)))?;
+            out.outputs.push(Output {
+                name: o.name.clone(),
+                bytes,
+            });
+        }
+        deps.push(out);
+    }
+    let resume = match &lease.job.checkpoint {
+        Some(c) => Some(Checkpoint {
+            step: c.step.clone(),
+            cursor: c.cursor as u64,
+            data: client
+                .get_blob(&c.blob)
+                .map_err(|e| JobError::Failed(format!("cannot fetch the checkpoint: {e}")))?,
+        }),
+        None => None,
+    };
+    let dep_refs: Vec<&JobOutput> = deps.iter().collect();
+    let mut sink = Sink {
+        client,
+        job: lease.job.id,
+        token: &lease.token,
+        flags,
+        fault: config.fault.as_deref(),
+    };
+    bake.run_job(&spec, &dep_refs, resume, &mut sink)
+}
+
+fn run_leased(
+    client: &Client,
+    config: &WorkerConfig,
+    lease: Lease,
+    shutdown: &AtomicBool,
+    cache: &InputCache,
+) {
+    let job = lease.job.id;
+    let flags = Flags::default();
+    let started = Instant::now();
+    let result = std::thread::scope(|scope| {
+        // Heartbeats run off the compute thread, so a long pose never
+        // starves the lease.
+        scope.spawn(|| {
+            let period = Duration::from_secs_f64(config.heartbeat_secs.max(0.05));
+            let mut shutdown_since: Option<Instant> = None;
+            while !flags.done.load(Ordering::Relaxed) {
+                let tick = Instant::now();
+                while tick.elapsed() < period && !flags.done.load(Ordering::Relaxed) {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                if flags.done.load(Ordering::Relaxed) {
+                    break;
+                }
+                if shutdown.load(Ordering::Relaxed) {
+                    let since = *shutdown_since.get_or_insert_with(Instant::now);
+                    if since.elapsed() > Duration::from_secs(config.shutdown_secs) {
+                        flags.release.store(true, Ordering::Relaxed);
+                    }
+                }
+                let progress = flags.progress.load(Ordering::Relaxed);
+                match client.heartbeat(job, &lease.token, progress) {
+                    Ok(stop) => {
+                        if stop {
+                            flags.lost.store(true, Ordering::Relaxed);
+                        }
+                    }
+                    Err(ClientError::LeaseLost(_)) => flags.lost.store(true, Ordering::Relaxed),
+                    Err(e) => eprintln!("job {job}: heartbeat failed: {e}"),
+                }
+            }
+        });
+        let r = execute(client, config, &lease, &flags, cache);
+        flags.done.store(true, Ordering::Relaxed);
+        r
+    });
+    let spec = &lease.job.spec;
+    match result {
+        Ok(out) => {
+            let uploaded: Result<Vec<OutputRef>, ClientError> = out
+                .outputs
+                .iter()
+                .map(|o| {
+                    client.put_blob(&o.bytes).map(|digest| OutputRef {
+                        name: o.name.clone(),
+                        digest,
+                    })
+                })
+                .collect();
+            let timings = serde_json::to_value(out.timings).unwrap_or_default();
+            let done = uploaded.and_then(|o| client.complete(job, &lease.token, &o, &timings));
+            match done {
+                Ok(()) => eprintln!(
+                    "job {job} ({}) done in {:.2} s",
+                    spec["kind"],
+                    started.elapsed().as_secs_f64()
+                ),
+                Err(e) => eprintln!("job {job}: completion refused: {e}"),
+            }
+        }
+        Err(JobError::Stopped(Stop(why))) => {
+            if flags.release.load(Ordering::Relaxed) && !flags.lost.load(Ordering::Relaxed) {
+                let _ = client.release(job, &lease.token);
+            }
+            eprintln!("job {job}: stopped ({why})");
+        }
+        Err(e) => {
+            eprintln!("job {job} failed: {e}");
+            if let Err(e) = client.fail(job, &lease.token, &e.to_string(), e.retryable()) {
+                eprintln!("job {job}: failure not recorded: {e}");
+            }
+        }
+    }
+}
