@@ -1,8 +1,332 @@
 //! # aobake-e2e
 //!
-//! End-to-end tests will live here: a `TestEnv` that owns a temporary
-//! directory, starts the real `aobake` server on port 0 and real worker
-//! processes, and kills them on drop (STYLE.md, "Tests").
+//! End-to-end tests of the service with real processes (STYLE.md,
+//! "Tests"). [`TestEnv`] owns a temporary data directory, starts the real
+//! `aobake serve` on a port the OS picks (reading the URL it writes), starts
+//! and kills real `aobake worker` processes, and kills everything on drop.
 //!
-//! The server and the workers do not exist yet; the command-line tool's tests
-//! live with it in `server/tests/`.
+//! The tests live in `tests/`; they need the `aobake` binary, which
+//! `cargo test --workspace` builds (or `cargo build --bin aobake`).
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// The admin token every test server starts with.
+pub const ADMIN: &str = "e2e-admin-token-0123456789abcdef";
+
+/// The `aobake` binary beside this test's executable (`target/<profile>`),
+/// or `AOBAKE_BIN`.
+pub fn binary() -> PathBuf {
+    if let Ok(p) = std::env::var("AOBAKE_BIN") {
+        return p.into();
+    }
+    let exe = std::env::current_exe().expect("test executable");
+    let dir = exe.parent().and_then(Path::parent).expect("target dir");
+    let bin = dir.join("aobake");
+    assert!(
+        bin.is_file(),
+        "{} is missing: run `cargo build --bin aobake` (cargo test --workspace builds it)",
+        bin.display()
+    );
+    bin
+}
+
+/// The repository's root.
+pub fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("repo")
+        .to_owned()
+}
+
+/// A bundled character.
+pub fn character(name: &str) -> PathBuf {
+    repo().join(format!("tests/data/characters/{name}/{name}.glb"))
+}
+
+/// How the test server runs.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Lease length.
+    pub lease_secs: f64,
+    /// Leases per job.
+    pub max_attempts: u32,
+    /// Largest body.
+    pub max_body_bytes: u64,
+    /// Requests per second per token.
+    pub rate: u32,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            lease_secs: 3.0,
+            max_attempts: 5,
+            max_body_bytes: 64 << 20,
+            rate: 10_000,
+        }
+    }
+}
+
+/// A running server, its workers and its data directory.
+#[derive(Debug)]
+pub struct TestEnv {
+    /// The data directory.
+    pub dir: tempfile::TempDir,
+    /// The server's URL.
+    pub url: String,
+    server: Option<Child>,
+    workers: Vec<Option<Child>>,
+    options: Options,
+}
+
+impl TestEnv {
+    /// Starts a server with no local workers.
+    pub fn start(options: Options) -> Self {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let mut env = Self {
+            dir,
+            url: String::new(),
+            server: None,
+            workers: Vec::new(),
+            options,
+        };
+        env.start_server();
+        env
+    }
+
+    /// The data directory's path.
+    pub fn data(&self) -> PathBuf {
+        self.dir.path().join("data")
+    }
+
+    /// (Re)starts the server on the same data directory.
+    pub fn start_server(&mut self) {
+        let url_file = self.data().join("server.url");
+        let _ = std::fs::remove_file(&url_file);
+        let log = std::fs::File::create(self.dir.path().join("server.log")).expect("log");
+        let o = &self.options;
+        let child = Command::new(binary())
+            .args(["serve", "--listen", "127.0.0.1:0", "--workers", "0"])
+            .arg("--data")
+            .arg(self.data())
+            .args(["--lease-secs", &o.lease_secs.to_string()])
+            .args(["--max-attempts", &o.max_attempts.to_string()])
+            .args(["--max-body-bytes", &o.max_body_bytes.to_string()])
+            .args(["--rate", &o.rate.to_string()])
+            .env("AOBAKE_ADMIN_TOKEN", ADMIN)
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("aobake serve starts");
+        self.server = Some(child);
+        let started = Instant::now();
+        loop {
+            if let Ok(url) = std::fs::read_to_string(&url_file) {
+                self.url = url.trim().to_owned();
+                break;
+            }
+            assert!(
+                started.elapsed() < Duration::from_secs(30),
+                "the server did not start: {}",
+                self.server_log()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// SIGKILLs the server.
+    pub fn kill_server(&mut self) {
+        if let Some(mut s) = self.server.take() {
+            let _ = s.kill();
+            let _ = s.wait();
+        }
+    }
+
+    /// The server's stderr so far.
+    pub fn server_log(&self) -> String {
+        std::fs::read_to_string(self.dir.path().join("server.log")).unwrap_or_default()
+    }
+
+    /// A token with these scopes.
+    pub fn token(&self, scopes: &[&str]) -> String {
+        let r = self
+            .request(
+                "POST",
+                "/v1/tokens",
+                ADMIN,
+                Some(serde_json::json!({"name": "test", "scopes": scopes})),
+            )
+            .expect("token");
+        r.1["token"].as_str().expect("token").to_owned()
+    }
+
+    /// Starts a worker process with extra environment; returns its index.
+    pub fn start_worker(&mut self, env: &[(&str, &str)]) -> usize {
+        let token = self.token(&["worker"]);
+        let i = self.workers.len();
+        let log =
+            std::fs::File::create(self.dir.path().join(format!("worker-{i}.log"))).expect("log");
+        let mut cmd = Command::new(binary());
+        cmd.args(["worker", "--server", &self.url, "--id", &format!("w{i}")])
+            .args([
+                "--heartbeat-secs",
+                &(self.options.lease_secs / 4.0).to_string(),
+            ])
+            .env("AOBAKE_TOKEN", token)
+            .env("RAYON_NUM_THREADS", "1")
+            .stdout(Stdio::null())
+            .stderr(log);
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        self.workers
+            .push(Some(cmd.spawn().expect("aobake worker starts")));
+        i
+    }
+
+    /// SIGKILLs worker `i`.
+    pub fn kill_worker(&mut self, i: usize) {
+        if let Some(mut w) = self.workers[i].take() {
+            let _ = w.kill();
+            let _ = w.wait();
+        }
+    }
+
+    /// The process id of worker `i`.
+    pub fn worker_pid(&self, i: usize) -> Option<u32> {
+        self.workers[i].as_ref().map(Child::id)
+    }
+
+    /// Whether worker `i` has exited (and reaps it).
+    pub fn worker_exited(&mut self, i: usize) -> bool {
+        match &mut self.workers[i] {
+            Some(c) => c.try_wait().ok().flatten().is_some(),
+            None => true,
+        }
+    }
+
+    /// Everything the workers printed.
+    pub fn worker_logs(&self) -> String {
+        (0..self.workers.len())
+            .map(|i| {
+                std::fs::read_to_string(self.dir.path().join(format!("worker-{i}.log")))
+                    .unwrap_or_default()
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    /// A request with a JSON body; returns the status and the JSON answer
+    /// (or the text as a JSON string).
+    pub fn request(
+        &self,
+        method: &str,
+        path: &str,
+        token: &str,
+        body: Option<Value>,
+    ) -> Result<(u16, Value), String> {
+        let agent: ureq::Agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .timeout_global(Some(Duration::from_secs(60)))
+            .build()
+            .into();
+        let uri = format!("{}{path}", self.url);
+        let req = ureq::http::Request::builder()
+            .method(method)
+            .uri(&uri)
+            .header("authorization", format!("Bearer {token}"));
+        let res = match body {
+            Some(b) => agent.run(
+                req.header("content-type", "application/json")
+                    .body(b.to_string())
+                    .map_err(|e| e.to_string())?,
+            ),
+            None => agent.run(req.body(()).map_err(|e| e.to_string())?),
+        };
+        let mut res = res.map_err(|e| e.to_string())?;
+        let status = res.status().as_u16();
+        let text = res.body_mut().read_to_string().unwrap_or_default();
+        Ok((
+            status,
+            serde_json::from_str(&text).unwrap_or(Value::String(text)),
+        ))
+    }
+
+    /// Posts raw bytes with a content type.
+    pub fn post_bytes(
+        &self,
+        path: &str,
+        token: &str,
+        content_type: &str,
+        bytes: &[u8],
+    ) -> (u16, Value, Vec<(String, String)>) {
+        let agent: ureq::Agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .build()
+            .into();
+        let mut res = agent
+            .post(format!("{}{path}", self.url))
+            .header("authorization", format!("Bearer {token}"))
+            .header("content-type", content_type)
+            .send(bytes)
+            .expect("request");
+        let headers = res
+            .headers()
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_str().unwrap_or("").to_owned()))
+            .collect();
+        let status = res.status().as_u16();
+        let text = res.body_mut().read_to_string().unwrap_or_default();
+        (
+            status,
+            serde_json::from_str(&text).unwrap_or(Value::String(text)),
+            headers,
+        )
+    }
+
+    /// Runs the `aobake` CLI against this server with the admin token.
+    pub fn aobake(&self, args: &[&str]) -> Output {
+        Command::new(binary())
+            .args(args)
+            .env("AOBAKE_SERVER", &self.url)
+            .env("AOBAKE_TOKEN", ADMIN)
+            .current_dir(self.dir.path())
+            .output()
+            .expect("aobake runs")
+    }
+
+    /// Waits until the bake ends (done, failed or cancelled), or panics
+    /// after `timeout`.
+    pub fn wait_bake(&self, id: i64, timeout: Duration) -> Value {
+        let started = Instant::now();
+        loop {
+            let (status, b) = self
+                .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+                .expect("status");
+            assert_eq!(status, 200, "{b}");
+            if matches!(b["state"].as_str(), Some("done" | "failed" | "cancelled")) {
+                return b;
+            }
+            assert!(
+                started.elapsed() < timeout,
+                "bake {id} did not finish in {timeout:?}: {b}\nserver: {}\nworkers: {}",
+                self.server_log(),
+                self.worker_logs()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+impl Drop for TestEnv {
+    fn drop(&mut self) {
+        for i in 0..self.workers.len() {
+            self.kill_worker(i);
+        }
+        self.kill_server();
+    }
+}

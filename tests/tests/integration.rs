@@ -1,0 +1,13 @@
+//! End-to-end tests of the service: real `aobake serve` and `aobake worker`
+//! processes on ports the OS picks (one binary, STYLE.md).
+
+#[path = "integration/auth.rs"]
+mod auth;
+#[path = "integration/bad_input.rs"]
+mod bad_input;
+#[path = "integration/crashes.rs"]
+mod crashes;
+#[path = "integration/service.rs"]
+mod service;
+#[path = "integration/util.rs"]
+mod util;

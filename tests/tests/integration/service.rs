@@ -1,0 +1,152 @@
+//! The happy path as a studio and its CI live it.
+
+use std::time::Duration;
+
+use aobake_e2e::{ADMIN, Options, TestEnv, character};
+
+use crate::util::{QUICK, asset, local_bake, submit, upload};
+
+#[test]
+fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
+    let mut env = TestEnv::start(Options::default());
+    env.start_worker(&[]);
+    env.start_worker(&[]);
+    let cm = character("CesiumMan");
+    let cm_arg = cm.to_str().unwrap();
+    let mut args = vec!["submit", cm_arg, "--poses", "24", "--wait"];
+    args.extend(QUICK);
+    let out = env.aobake(&args);
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.worker_logs()
+    );
+    // "bake 1: key K, queued", then the summary.
+    let key = stdout
+        .split("key ")
+        .nth(1)
+        .and_then(|s| s.split(',').next())
+        .unwrap()
+        .to_owned();
+    assert_eq!(key.len(), 64, "{stdout}");
+    assert!(stdout.contains("held-out clip frames"), "{stdout}");
+
+    let fetched = env.dir.path().join("svc.aob");
+    let out = env.aobake(&["fetch", "--key", &key, "--out", fetched.to_str().unwrap()]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let service = std::fs::read(&fetched).unwrap();
+    let local = local_bake(env.dir.path(), &cm, 24);
+    assert!(
+        service == local,
+        "the service's asset differs from aobake bake's"
+    );
+
+    // The same request again: 200 at once, the same asset.
+    let digest = upload(&env, &cm);
+    let (status, again) = submit(&env, &digest, 24);
+    assert_eq!(status, 200, "{again}");
+    assert_eq!(again["state"], "done");
+    assert_eq!(asset(&env, &again), local);
+    let (status, cached) = env
+        .request("GET", &format!("/v1/cache/{key}"), ADMIN, None)
+        .unwrap();
+    assert_eq!((status, &cached["id"]), (200, &again["id"]));
+
+    // No bake for a key: exit 4, so CI can branch.
+    let out = env.aobake(&["fetch", "--key", &"0".repeat(64), "--out", "x.aob"]);
+    assert_eq!(out.status.code(), Some(4));
+    assert!(!env.dir.path().join("x.aob").exists());
+
+    // Versions of the character, newest first.
+    let (_, versions) = env
+        .request(
+            "GET",
+            &format!("/v1/characters/{digest}/bakes?method=vertex-linear"),
+            ADMIN,
+            None,
+        )
+        .unwrap();
+    assert_eq!(versions[0]["id"], again["id"]);
+
+    // The report and the metrics.
+    let id = again["id"].as_i64().unwrap();
+    let (status, report) = env
+        .request("GET", &format!("/v1/bakes/{id}/report"), ADMIN, None)
+        .unwrap();
+    assert_eq!(status, 200);
+    assert_eq!(report["bake_key"], key.as_str());
+    let (_, metrics) = env.request("GET", "/metrics", ADMIN, None).unwrap();
+    let metrics = metrics.as_str().unwrap();
+    assert!(
+        metrics.contains("aobake_jobs{state=\"completed\"}"),
+        "{metrics}"
+    );
+    assert!(metrics.contains("aobake_request_seconds"), "{metrics}");
+
+    // The bake's jobs: every one completed once, by a worker, with its
+    // checkpointed sample jobs' cursors.
+    let (_, bake) = env
+        .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap();
+    let jobs = bake["jobs"].as_array().unwrap();
+    assert!(
+        jobs.iter()
+            .all(|j| j["state"] == "completed" && j["attempts"] == 1)
+    );
+    assert_eq!(bake["progress"]["done"], bake["progress"]["total"]);
+    let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
+    assert_eq!(workers.as_array().unwrap().len(), 2, "{workers}");
+    let _ = Duration::ZERO;
+}
+
+#[test]
+fn assets_are_served_with_etag_and_ranges() {
+    let mut env = TestEnv::start(Options::default());
+    env.start_worker(&[]);
+    let digest = upload(&env, &character("RiggedSimple"));
+    let (_, b) = submit(&env, &digest, 8);
+    let b = env.wait_bake(b["id"].as_i64().unwrap(), Duration::from_secs(120));
+    assert_eq!(b["state"], "done", "{b}");
+    let asset_digest = b["asset"].as_str().unwrap();
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .build()
+        .into();
+    let url = format!("{}/v1/assets/{asset_digest}", env.url);
+    let auth = format!("Bearer {ADMIN}");
+    let whole = asset(&env, &b);
+    let mut r = agent
+        .get(&url)
+        .header("authorization", &auth)
+        .header("if-none-match", format!("\"{asset_digest}\""))
+        .call()
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 304);
+    assert!(r.body_mut().read_to_vec().unwrap().is_empty());
+    let mut r = agent
+        .get(&url)
+        .header("authorization", &auth)
+        .header("range", "bytes=8-15")
+        .call()
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 206);
+    assert_eq!(
+        r.headers()["content-range"].to_str().unwrap(),
+        format!("bytes 8-15/{}", whole.len())
+    );
+    assert_eq!(r.body_mut().read_to_vec().unwrap(), &whole[8..16]);
+    let r = agent
+        .get(&url)
+        .header("authorization", &auth)
+        .header("range", "bytes=999999999-")
+        .call()
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 400);
+}
