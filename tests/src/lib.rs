@@ -103,14 +103,23 @@ impl TestEnv {
         self.dir.path().join("data")
     }
 
-    /// (Re)starts the server on the same data directory.
+    /// (Re)starts the server on the same data directory, on a free port.
     pub fn start_server(&mut self) {
+        self.start_server_on("127.0.0.1:0");
+    }
+
+    /// (Re)starts the server on the same data directory and `listen`.
+    pub fn start_server_on(&mut self, listen: &str) {
         let url_file = self.data().join("server.url");
         let _ = std::fs::remove_file(&url_file);
-        let log = std::fs::File::create(self.dir.path().join("server.log")).expect("log");
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(self.dir.path().join("server.log"))
+            .expect("log");
         let o = &self.options;
         let child = Command::new(binary())
-            .args(["serve", "--listen", "127.0.0.1:0", "--workers", "0"])
+            .args(["serve", "--listen", listen, "--workers", "0"])
             .arg("--data")
             .arg(self.data())
             .args(["--lease-secs", &o.lease_secs.to_string()])

@@ -1,1 +1,191 @@
+//! Crashes cost little and change nothing (DESIGN §8): workers SIGKILLed
+//! at random moments, a worker that aborts right after a checkpoint, a
+//! server SIGKILLed and restarted, a worker frozen past its lease.
 
+use std::time::{Duration, Instant};
+
+use aobake_e2e::{ADMIN, Options, TestEnv, character};
+use rand::RngExt as _;
+use serde_json::Value;
+
+use crate::util::{asset, local_bake, submit, upload};
+
+fn jobs(env: &TestEnv, id: i64) -> Vec<Value> {
+    let (_, b) = env
+        .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap();
+    b["jobs"].as_array().cloned().unwrap_or_default()
+}
+
+/// Every job completed exactly once and the bake's counts add up.
+fn assert_counted_once(bake: &Value, jobs: &[Value]) {
+    assert_eq!(bake["state"], "done", "{bake}");
+    assert_eq!(bake["jobs_done"], bake["jobs_total"]);
+    assert_eq!(
+        bake["done_work"], bake["total_work"],
+        "no work counted twice"
+    );
+    let work: i64 = jobs.iter().map(|j| j["work"].as_i64().unwrap()).sum();
+    assert_eq!(bake["total_work"].as_i64().unwrap(), work);
+    assert!(jobs.iter().all(|j| j["state"] == "completed"));
+}
+
+#[test]
+fn workers_killed_at_random_moments_change_no_byte() {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 1.5,
+        max_attempts: 30,
+        ..Options::default()
+    });
+    let cm = character("CesiumMan");
+    let digest = upload(&env, &cm);
+    // 256 reference poses in batches of 4 and the held-out poses: over 50
+    // jobs.
+    let (status, b) = submit(&env, &digest, 256);
+    assert_eq!(status, 202, "{b}");
+    let id = b["id"].as_i64().unwrap();
+    assert!(jobs(&env, id).len() >= 50);
+    // One worker aborts right after its first checkpoint; the others are
+    // killed at random.
+    env.start_worker(&[("AOBAKE_FAULT", "after_checkpoint")]);
+    let mut live: Vec<usize> = vec![env.start_worker(&[]), env.start_worker(&[])];
+    let mut rng = rand::rng();
+    let mut kills = 0;
+    let started = Instant::now();
+    loop {
+        std::thread::sleep(Duration::from_millis(rng.random_range(150..600)));
+        let (_, now) = env
+            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+            .unwrap();
+        if now["state"] != "queued" && now["state"] != "running" {
+            break;
+        }
+        assert!(started.elapsed() < Duration::from_secs(240), "{now}");
+        if kills < 8 {
+            let victim = live.remove(rng.random_range(0..live.len()));
+            env.kill_worker(victim);
+            kills += 1;
+            live.push(env.start_worker(&[]));
+        }
+    }
+    let bake = env.wait_bake(id, Duration::from_secs(60));
+    let jobs = jobs(&env, id);
+    assert_counted_once(&bake, &jobs);
+    assert!(kills >= 5, "only {kills} kills");
+    let logs = env.worker_logs();
+    assert!(logs.contains("fault injected after checkpoint"), "{logs}");
+    // The aborted job resumed from its checkpoint: some sample job took
+    // more than one attempt and kept a checkpoint cursor past 0.
+    let resumed = jobs
+        .iter()
+        .filter(|j| j["kind"] == "sample" && j["attempts"].as_i64().unwrap() > 1)
+        .filter(|j| j["checkpoint"]["cursor"].as_i64().unwrap_or(0) > 0)
+        .count();
+    assert!(resumed >= 1, "no sample job resumed from a checkpoint");
+    let retried: i64 = jobs
+        .iter()
+        .map(|j| j["attempts"].as_i64().unwrap() - 1)
+        .sum();
+    eprintln!(
+        "{} jobs, {kills} kills, {retried} extra attempts, {resumed} resumed from checkpoints",
+        jobs.len()
+    );
+    assert!(
+        asset(&env, &bake) == local_bake(env.dir.path(), &cm, 256),
+        "the disturbed bake's asset differs from an undisturbed one"
+    );
+}
+
+#[test]
+fn a_server_killed_mid_bake_restarts_and_finishes_the_same() {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 2.0,
+        ..Options::default()
+    });
+    let cm = character("CesiumMan");
+    let digest = upload(&env, &cm);
+    let (_, b) = submit(&env, &digest, 64);
+    let id = b["id"].as_i64().unwrap();
+    env.start_worker(&[]);
+    env.start_worker(&[]);
+    let started = Instant::now();
+    loop {
+        let (_, now) = env
+            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+            .unwrap();
+        if now["jobs_done"].as_i64().unwrap() >= 4 {
+            break;
+        }
+        assert!(started.elapsed() < Duration::from_secs(120), "{now}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let url = env.url.clone();
+    env.kill_server();
+    std::thread::sleep(Duration::from_millis(500));
+    // Same port, so the workers find it again.
+    env.start_server_on(url.trim_start_matches("http://"));
+    let bake = env.wait_bake(id, Duration::from_secs(180));
+    assert_counted_once(&bake, &jobs(&env, id));
+    assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
+}
+
+#[test]
+fn a_worker_frozen_past_its_lease_has_its_completion_refused() {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 1.0,
+        ..Options::default()
+    });
+    let cm = character("CesiumMan");
+    let digest = upload(&env, &cm);
+    let (_, b) = submit(&env, &digest, 16);
+    let id = b["id"].as_i64().unwrap();
+    let frozen = env.start_worker(&[]);
+    // Wait until it holds a job, then SIGSTOP it past its lease.
+    let started = Instant::now();
+    loop {
+        if jobs(&env, id).iter().any(|j| j["state"] == "running") {
+            break;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let pid = env.worker_pid(frozen).unwrap().to_string();
+    let stop = std::process::Command::new("kill")
+        .args(["-STOP", &pid])
+        .status();
+    assert!(stop.unwrap().success());
+    std::thread::sleep(Duration::from_millis(2500));
+    // Another worker takes the expired job over and finishes the bake.
+    env.start_worker(&[]);
+    let bake = env.wait_bake(id, Duration::from_secs(120));
+    assert_eq!(bake["state"], "done");
+    let cont = std::process::Command::new("kill")
+        .args(["-CONT", &pid])
+        .status();
+    assert!(cont.unwrap().success());
+    // Resumed, the frozen worker's checkpoint, heartbeat or completion
+    // meets 409: it notes the lost lease and goes on leasing.
+    let started = Instant::now();
+    loop {
+        let log = std::fs::read_to_string(env.dir.path().join("worker-0.log")).unwrap();
+        if log.contains("409")
+            || log.contains("lease was lost")
+            || log.contains("completion refused")
+        {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "the frozen worker's stale lease was not refused: {log}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert_counted_once(&bake, &jobs(&env, id));
+    let (_, metrics) = env.request("GET", "/metrics", ADMIN, None).unwrap();
+    assert!(
+        !metrics
+            .as_str()
+            .unwrap()
+            .contains("aobake_lease_expiries_total 0\n")
+    );
+}
