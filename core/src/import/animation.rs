@@ -116,11 +116,11 @@ pub(crate) fn read_clips(
                     "must be a non-empty SCALAR accessor of key times",
                 ));
             }
-            if let Some(k) = times.values.windows(2).position(|w| w[1] < w[0]) {
+            if let Some(k) = times.values.windows(2).position(|w| w[1] <= w[0]) {
                 return Err(ImportError::invalid(
                     format!("{spath}.input"),
                     format!(
-                        "key times must increase: key {} is {} after key {} at {}",
+                        "key times must strictly increase: key {} is {} after key {} at {}",
                         k + 1,
                         times.values[k + 1],
                         k,

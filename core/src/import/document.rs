@@ -24,6 +24,20 @@ const UNUSED_PARTS: &[&str] = &["materials", "textures", "images", "samplers", "
 /// Extensions whose data the accessor reader handles natively.
 const DECODED_EXTENSIONS: &[&str] = &["KHR_mesh_quantization"];
 
+/// Families of extensions that change only how a surface looks (materials,
+/// textures, lights, metadata), never where it is or how it moves: a file
+/// that requires one is accepted with a warning (docs/import-policy.md).
+/// Any other required extension is refused, as the glTF spec asks of a
+/// reader that does not know it.
+const APPEARANCE_EXTENSION_PREFIXES: &[&str] = &[
+    "KHR_materials_",
+    "KHR_texture_",
+    "EXT_texture_",
+    "KHR_lights_",
+    "EXT_lights_",
+    "KHR_xmp",
+];
+
 /// A parsed, validated glTF file with its buffers in memory.
 pub(crate) struct Document {
     pub(crate) root: json::Root,
@@ -120,8 +134,31 @@ fn validate(root: &json::Root, warnings: &mut Vec<String>) -> Result<(), ImportE
         if DECODED_EXTENSIONS.contains(&ext.as_str()) {
             continue;
         }
+        if !APPEARANCE_EXTENSION_PREFIXES
+            .iter()
+            .any(|p| ext.starts_with(p))
+        {
+            return Err(ImportError::UnsupportedExtension(ext.clone()));
+        }
         warnings.push(format!(
             "required extension {ext} is ignored: it does not change geometry or animation"
+        ));
+    }
+    // The major version must be 2 (spec §3.2: a reader refuses a major it
+    // does not know); `minVersion`, when present, must not ask for more.
+    let major = |v: &str| v.split('.').next().and_then(|m| m.parse::<u32>().ok());
+    if major(&root.asset.version) != Some(2) {
+        return Err(ImportError::invalid(
+            "asset.version",
+            format!("{:?} is not a glTF 2.x version", root.asset.version),
+        ));
+    }
+    if let Some(min) = &root.asset.min_version
+        && (major(min) != Some(2) || min.as_str() > "2.0")
+    {
+        return Err(ImportError::invalid(
+            "asset.minVersion",
+            format!("{min:?} asks for a newer glTF than 2.0"),
         ));
     }
     // gltf-json's validation indexes `accessors` with the POSITION index

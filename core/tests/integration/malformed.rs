@@ -306,7 +306,7 @@ fn decreasing_key_times() {
     let mut g = util::tiny_rig();
     let offset = g.accessor_offset(KEY_TIMES);
     g.bin[offset..offset + 4].copy_from_slice(&2.0f32.to_le_bytes());
-    expect_err(&g, "key times must increase");
+    expect_err(&g, "key times must strictly increase");
 }
 
 #[test]
@@ -331,4 +331,48 @@ fn position_accessor_index_out_of_range() {
         &g,
         "meshes[0].primitives[0].attributes[\"POSITION\"]: accessor 77 does not exist",
     );
+}
+
+/// What the Khronos validator reports as an error is refused
+/// (docs/import-policy.md): a major version other than 2, a required
+/// extension aobake does not know, key times that repeat, joint indices
+/// outside the skin (`joint_index_past_the_skin`).
+#[test]
+fn validator_errors_are_refused() {
+    for version in ["1.0", "3.0", "two", ""] {
+        let mut g = util::tiny_rig();
+        g.json["asset"]["version"] = json!(version);
+        expect_err(&g, "asset.version");
+    }
+    let mut g = util::tiny_rig();
+    g.json["asset"]["version"] = json!("2.1");
+    g.import().unwrap();
+    g.json["asset"]["minVersion"] = json!("2.1");
+    expect_err(&g, "asset.minVersion");
+
+    let mut g = util::tiny_rig();
+    g.json["extensionsUsed"] = json!(["ACME_teleport"]);
+    g.json["extensionsRequired"] = json!(["ACME_teleport"]);
+    assert!(matches!(
+        g.import(),
+        Err(ImportError::UnsupportedExtension(e)) if e == "ACME_teleport"
+    ));
+    // Appearance-only extensions are accepted with a warning.
+    g.json["extensionsUsed"] = json!(["KHR_materials_unlit"]);
+    g.json["extensionsRequired"] = json!(["KHR_materials_unlit"]);
+    let imported = g.import().unwrap();
+    assert!(
+        imported
+            .warnings
+            .iter()
+            .any(|w| w.contains("KHR_materials_unlit")),
+        "{:?}",
+        imported.warnings
+    );
+
+    let mut g = util::tiny_rig();
+    let offset = g.accessor_offset(KEY_TIMES);
+    let first = f32::from_le_bytes(g.bin[offset..offset + 4].try_into().unwrap());
+    g.bin[offset + 4..offset + 8].copy_from_slice(&first.to_le_bytes());
+    expect_err(&g, "key times must strictly increase");
 }
