@@ -49,9 +49,9 @@ impl Default for ServerLimits {
     fn default() -> Self {
         Self {
             max_body_bytes: 256 << 20,
-            // CesiumMan (3,273 vertices) at 100k poses × 1024 samples is
-            // 3.4e11; this allows ten times that.
-            max_bake_work: 4_000_000_000_000,
+            // About four hours of tracing on a 2-core machine (14 Mrays/s):
+            // CesiumMan's default bake is 2.6e8.
+            max_bake_work: 200_000_000_000,
             requests_per_second: 200,
             request_timeout: Duration::from_secs(120),
         }
@@ -204,6 +204,21 @@ async fn record_latency(
     res
 }
 
+/// Refuses a body whose declared length is over the limit before reading
+/// any of it; bodies without a declared length are cut off by the limit as
+/// they stream.
+async fn declared_length(State(limit): State<u64>, req: Request, next: Next) -> Response {
+    let declared = req
+        .headers()
+        .get(axum::http::header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    if declared.is_some_and(|n| n > limit) {
+        return axum::response::IntoResponse::into_response(ApiError::TooLarge(limit));
+    }
+    next.run(req).await
+}
+
 /// Every route, with request ids, limits and metrics.
 pub fn app(state: AppState) -> Router {
     let request_id = HeaderName::from_static("x-request-id");
@@ -213,6 +228,10 @@ pub fn app(state: AppState) -> Router {
         .merge(routes::router(limits.request_timeout))
         .layer(middleware::from_fn_with_state(metrics, record_latency))
         .layer(DefaultBodyLimit::max(limits.max_body_bytes as usize))
+        .layer(middleware::from_fn_with_state(
+            limits.max_body_bytes,
+            declared_length,
+        ))
         .layer(TimeoutLayer::with_status_code(
             axum::http::StatusCode::REQUEST_TIMEOUT,
             limits.request_timeout + Duration::from_secs(60),

@@ -101,3 +101,39 @@ impl FromRequestParts<AppState> for Caller {
         Ok(caller)
     }
 }
+
+/// A scope as a type, for [`Need`].
+pub trait NeedScope: Send + Sync + 'static {
+    /// The scope.
+    const SCOPE: Scope;
+}
+
+macro_rules! scope_marker {
+    ($name:ident, $scope:expr, $doc:literal) => {
+        #[doc = $doc]
+        #[derive(Debug)]
+        pub struct $name;
+        impl NeedScope for $name {
+            const SCOPE: Scope = $scope;
+        }
+    };
+}
+scope_marker!(Read, Scope::Read, "Needs the `read` scope.");
+scope_marker!(Submit, Scope::Submit, "Needs the `submit` scope.");
+scope_marker!(Worker, Scope::Worker, "Needs the `worker` scope.");
+scope_marker!(Admin, Scope::Admin, "Needs the `admin` scope.");
+
+/// A caller with scope `S`, checked while extracting, before the body is
+/// read: a token without the scope gets 403 whatever it sends.
+#[derive(Debug)]
+pub struct Need<S>(pub Caller, std::marker::PhantomData<S>);
+
+impl<S: NeedScope> FromRequestParts<AppState> for Need<S> {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, ApiError> {
+        let caller = Caller::from_request_parts(parts, state).await?;
+        caller.require(S::SCOPE)?;
+        Ok(Self(caller, std::marker::PhantomData))
+    }
+}

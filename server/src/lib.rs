@@ -25,6 +25,7 @@ pub mod auth;
 pub mod blobs;
 pub mod cli;
 pub mod error;
+mod extract;
 mod routes;
 pub mod serve;
 pub mod store;

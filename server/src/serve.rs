@@ -39,6 +39,10 @@ pub struct ServeArgs {
     /// Largest request body in bytes.
     #[arg(long, env = "AOBAKE_MAX_BODY_BYTES", default_value_t = 256 << 20)]
     pub max_body_bytes: u64,
+    /// Most ray-vertex pairs one bake may trace (poses × vertices ×
+    /// samples).
+    #[arg(long, env = "AOBAKE_MAX_BAKE_WORK", default_value_t = 200_000_000_000)]
+    pub max_bake_work: u128,
     /// Requests per second per token.
     #[arg(long, env = "AOBAKE_RATE", default_value_t = 200)]
     pub rate: u32,
@@ -78,6 +82,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let limits = ServerLimits {
         max_body_bytes: args.max_body_bytes,
         requests_per_second: args.rate,
+        max_bake_work: args.max_bake_work,
         ..ServerLimits::default()
     };
     let store: Arc<dyn Store> = Arc::new(store);

@@ -8,6 +8,8 @@
 //! The tests live in `tests/`; they need the `aobake` binary, which
 //! `cargo test --workspace` builds (or `cargo build --bin aobake`).
 
+pub mod hostile;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};

@@ -376,3 +376,17 @@ fn validator_errors_are_refused() {
     g.bin[offset + 4..offset + 8].copy_from_slice(&first.to_le_bytes());
     expect_err(&g, "key times must strictly increase");
 }
+
+/// The hostile corpus the service's tests upload (`aobake_e2e::hostile`)
+/// is refused here too, each file with an error and none with a panic.
+#[test]
+fn the_shared_hostile_corpus_is_refused() {
+    let valid = std::fs::read(util::character_path("RiggedSimple.glb").unwrap()).unwrap();
+    import(&valid).unwrap();
+    let corpus = aobake_e2e::hostile::corpus(&valid);
+    assert!(corpus.len() > 30);
+    for case in corpus {
+        let err = import(&case.bytes).err();
+        assert!(err.is_some(), "{} was accepted", case.name);
+    }
+}

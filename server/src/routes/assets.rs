@@ -4,7 +4,7 @@
 
 use axum::{
     Router,
-    extract::{Path, State},
+    extract::State,
     http::{HeaderMap, HeaderValue, StatusCode, header},
     response::{IntoResponse, Response},
     routing::get,
@@ -12,8 +12,9 @@ use axum::{
 
 use crate::{
     app::AppState,
-    auth::{Caller, Scope},
+    auth::{Need, Read},
     error::{ApiError, ApiResult},
+    extract::ApiPath,
 };
 
 pub(super) fn router() -> Router<AppState> {
@@ -22,11 +23,10 @@ pub(super) fn router() -> Router<AppState> {
 
 async fn asset(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(digest): Path<String>,
+    _caller: Need<Read>,
+    ApiPath(digest): ApiPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
-    caller.require(Scope::Read)?;
     crate::blobs::check_digest(&digest)?;
     let len = state
         .blobs

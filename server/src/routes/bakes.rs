@@ -11,7 +11,7 @@ use aobake_core::{
 };
 use axum::{
     Json, Router,
-    extract::{Path, Query, State},
+    extract::State,
     http::StatusCode,
     response::{
         IntoResponse, Response,
@@ -25,8 +25,9 @@ use tokio_stream::{Stream, StreamExt as _, wrappers::BroadcastStream};
 use super::uploads::load_upload;
 use crate::{
     app::AppState,
-    auth::{Caller, Scope},
+    auth::{Need, Read, Submit},
     error::{ApiError, ApiResult},
+    extract::{ApiPath, ApiQuery, Body},
     store::{Action, BakeRow, JobRow, NewBake, NewJob},
 };
 
@@ -91,11 +92,9 @@ fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
 
 async fn submit(
     State(state): State<AppState>,
-    caller: Caller,
-    body: Result<Json<BakeRequest>, axum::extract::rejection::JsonRejection>,
+    _caller: Need<Submit>,
+    Body(req): Body<BakeRequest>,
 ) -> ApiResult<Response> {
-    caller.require(Scope::Submit)?;
-    let Json(req) = body.map_err(|e| ApiError::bad("bad_json", e.body_text()))?;
     let method: Method = req
         .method
         .parse()
@@ -174,10 +173,9 @@ struct ListQuery {
 
 async fn list(
     State(state): State<AppState>,
-    caller: Caller,
-    Query(q): Query<ListQuery>,
+    _caller: Need<Read>,
+    ApiQuery(q): ApiQuery<ListQuery>,
 ) -> ApiResult<Json<Vec<BakeView>>> {
-    caller.require(Scope::Read)?;
     let limit = q.limit.unwrap_or(100).clamp(1, 1000);
     let bakes = state.store.bakes(None, q.method.as_deref(), limit).await?;
     Ok(Json(bakes.into_iter().map(|b| view(b, None)).collect()))
@@ -185,11 +183,10 @@ async fn list(
 
 async fn versions(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(digest): Path<String>,
-    Query(q): Query<ListQuery>,
+    _caller: Need<Read>,
+    ApiPath(digest): ApiPath<String>,
+    ApiQuery(q): ApiQuery<ListQuery>,
 ) -> ApiResult<Json<Vec<BakeView>>> {
-    caller.require(Scope::Read)?;
     crate::blobs::check_digest(&digest)?;
     let limit = q.limit.unwrap_or(100).clamp(1, 1000);
     let bakes = state
@@ -209,10 +206,9 @@ async fn find(state: &AppState, id: i64) -> ApiResult<BakeRow> {
 
 async fn show(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<i64>,
+    _caller: Need<Read>,
+    ApiPath(id): ApiPath<i64>,
 ) -> ApiResult<Json<BakeView>> {
-    caller.require(Scope::Read)?;
     let bake = find(&state, id).await?;
     let jobs = state.store.jobs(id).await?;
     Ok(Json(view(bake, Some(jobs))))
@@ -220,10 +216,9 @@ async fn show(
 
 async fn report(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<i64>,
+    _caller: Need<Read>,
+    ApiPath(id): ApiPath<i64>,
 ) -> ApiResult<Response> {
-    caller.require(Scope::Read)?;
     let bake = find(&state, id).await?;
     let digest = bake
         .report
@@ -247,12 +242,10 @@ struct PatchBody {
 
 async fn patch(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<i64>,
-    body: Result<Json<PatchBody>, axum::extract::rejection::JsonRejection>,
+    _caller: Need<Submit>,
+    ApiPath(id): ApiPath<i64>,
+    Body(body): Body<PatchBody>,
 ) -> ApiResult<Json<BakeView>> {
-    caller.require(Scope::Submit)?;
-    let Json(body) = body.map_err(|e| ApiError::bad("bad_json", e.body_text()))?;
     find(&state, id).await?;
     let bake = state.store.set_priority(id, body.priority).await?;
     Ok(Json(view(bake, None)))
@@ -260,10 +253,9 @@ async fn patch(
 
 async fn control(
     State(state): State<AppState>,
-    caller: Caller,
-    Path((id, action)): Path<(i64, String)>,
+    _caller: Need<Submit>,
+    ApiPath((id, action)): ApiPath<(i64, String)>,
 ) -> ApiResult<Json<BakeView>> {
-    caller.require(Scope::Submit)?;
     let action = match action.as_str() {
         "cancel" => Action::Cancel,
         "pause" => Action::Pause,
@@ -283,10 +275,9 @@ async fn control(
 
 async fn cache(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(key): Path<String>,
+    _caller: Need<Read>,
+    ApiPath(key): ApiPath<String>,
 ) -> ApiResult<Json<BakeView>> {
-    caller.require(Scope::Read)?;
     crate::blobs::check_digest(&key)?;
     match state.store.bake_for_key(&key).await? {
         Some(b) if b.state == crate::store::BakeState::Done => Ok(Json(view(b, None))),
@@ -298,10 +289,9 @@ async fn cache(
 
 async fn events(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<i64>,
+    _caller: Need<Read>,
+    ApiPath(id): ApiPath<i64>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
-    caller.require(Scope::Read)?;
     let rx = state.events.subscribe();
     let bake = find(&state, id).await?;
     let first = crate::app::BakeEvent {

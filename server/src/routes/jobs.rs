@@ -8,7 +8,7 @@ use std::time::Duration;
 use axum::{
     Json, Router,
     body::Bytes,
-    extract::{Path, State},
+    extract::State,
     http::StatusCode,
     response::{IntoResponse, Response},
     routing::{get, post},
@@ -17,8 +17,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::{
     app::AppState,
-    auth::{Caller, Scope},
+    auth::{Need, Worker},
     error::{ApiError, ApiResult},
+    extract::{ApiPath, Body},
     store::{CheckpointRef, Completion},
 };
 
@@ -45,10 +46,9 @@ pub(crate) struct LeaseRequest {
 
 async fn lease(
     State(state): State<AppState>,
-    caller: Caller,
-    Json(req): Json<LeaseRequest>,
+    _caller: Need<Worker>,
+    Body(req): Body<LeaseRequest>,
 ) -> ApiResult<Response> {
-    caller.require(Scope::Worker)?;
     if req.worker.is_empty() || req.worker.len() > 200 {
         return Err(ApiError::bad(
             "bad_worker",
@@ -97,11 +97,10 @@ pub(crate) struct HeartbeatReply {
 
 async fn heartbeat(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<i64>,
-    Json(req): Json<HeartbeatRequest>,
+    _caller: Need<Worker>,
+    ApiPath(id): ApiPath<i64>,
+    Body(req): Body<HeartbeatRequest>,
 ) -> ApiResult<Json<HeartbeatReply>> {
-    caller.require(Scope::Worker)?;
     let stop = state
         .store
         .heartbeat(id, &req.token, req.progress, &state.policy)
@@ -121,11 +120,10 @@ pub(crate) struct CheckpointRequest {
 
 async fn checkpoint(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<i64>,
-    Json(req): Json<CheckpointRequest>,
+    _caller: Need<Worker>,
+    ApiPath(id): ApiPath<i64>,
+    Body(req): Body<CheckpointRequest>,
 ) -> ApiResult<StatusCode> {
-    caller.require(Scope::Worker)?;
     require_blob(&state, &req.checkpoint.blob).await?;
     state
         .store
@@ -157,11 +155,10 @@ async fn require_blob(state: &AppState, digest: &str) -> ApiResult<()> {
 
 async fn complete(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<i64>,
-    Json(req): Json<CompleteRequest>,
+    _caller: Need<Worker>,
+    ApiPath(id): ApiPath<i64>,
+    Body(req): Body<CompleteRequest>,
 ) -> ApiResult<StatusCode> {
-    caller.require(Scope::Worker)?;
     for o in &req.completion.outputs {
         require_blob(&state, &o.digest).await?;
     }
@@ -186,11 +183,10 @@ pub(crate) struct FailRequest {
 
 async fn fail(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<i64>,
-    Json(req): Json<FailRequest>,
+    _caller: Need<Worker>,
+    ApiPath(id): ApiPath<i64>,
+    Body(req): Body<FailRequest>,
 ) -> ApiResult<StatusCode> {
-    caller.require(Scope::Worker)?;
     let error: String = req.error.chars().take(4000).collect();
     let bake = state
         .store
@@ -209,11 +205,10 @@ pub(crate) struct TokenRequest {
 
 async fn release(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<i64>,
-    Json(req): Json<TokenRequest>,
+    _caller: Need<Worker>,
+    ApiPath(id): ApiPath<i64>,
+    Body(req): Body<TokenRequest>,
 ) -> ApiResult<StatusCode> {
-    caller.require(Scope::Worker)?;
     state.store.release(id, &req.token).await?;
     state.jobs_ready.notify_waiters();
     Ok(StatusCode::NO_CONTENT)
@@ -221,10 +216,9 @@ async fn release(
 
 async fn get_blob(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(digest): Path<String>,
+    _caller: Need<Worker>,
+    ApiPath(digest): ApiPath<String>,
 ) -> ApiResult<Response> {
-    caller.require(Scope::Worker)?;
     let bytes = state
         .blobs
         .get(&digest)
@@ -235,11 +229,10 @@ async fn get_blob(
 
 async fn put_blob(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(digest): Path<String>,
+    _caller: Need<Worker>,
+    ApiPath(digest): ApiPath<String>,
     body: Result<Bytes, axum::extract::rejection::BytesRejection>,
 ) -> ApiResult<StatusCode> {
-    caller.require(Scope::Worker)?;
     let body = body.map_err(|_| ApiError::TooLarge(state.limits.max_body_bytes))?;
     state.blobs.put(&digest, &body).await?;
     Ok(StatusCode::NO_CONTENT)

@@ -12,8 +12,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::{
     app::AppState,
-    auth::{Caller, Scope, new_token, token_hash},
+    auth::{Admin, Need, Read, new_token, token_hash},
     error::{ApiError, ApiResult},
+    extract::Body,
     store::WorkerRow,
 };
 
@@ -26,8 +27,10 @@ pub(super) fn router() -> Router<AppState> {
         .route("/metrics", get(metrics))
 }
 
-async fn workers(State(state): State<AppState>, caller: Caller) -> ApiResult<Json<Vec<WorkerRow>>> {
-    caller.require(Scope::Read)?;
+async fn workers(
+    State(state): State<AppState>,
+    _caller: Need<Read>,
+) -> ApiResult<Json<Vec<WorkerRow>>> {
     Ok(Json(state.store.workers().await?))
 }
 
@@ -53,10 +56,9 @@ pub(crate) struct NewToken {
 
 async fn create_token(
     State(state): State<AppState>,
-    caller: Caller,
-    Json(req): Json<TokenRequest>,
+    _caller: Need<Admin>,
+    Body(req): Body<TokenRequest>,
 ) -> ApiResult<(StatusCode, Json<NewToken>)> {
-    caller.require(Scope::Admin)?;
     if let Some(bad) = req
         .scopes
         .iter()
@@ -91,7 +93,7 @@ async fn ready(State(state): State<AppState>) -> ApiResult<&'static str> {
     Ok("ready")
 }
 
-async fn metrics(State(state): State<AppState>) -> ApiResult<Response> {
+async fn metrics(State(state): State<AppState>, _caller: Need<Read>) -> ApiResult<Response> {
     let (jobs, expiries) = state.store.queue_stats().await?;
     let mut out = String::new();
     out.push_str("# HELP aobake_jobs Jobs by state.\n# TYPE aobake_jobs gauge\n");

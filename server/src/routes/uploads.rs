@@ -11,7 +11,7 @@ use aobake_core::{
 use axum::{
     Json, Router,
     body::Bytes,
-    extract::{FromRequest, Multipart, Path, Query, Request, State},
+    extract::{FromRequest, Multipart, Request, State},
     http::{StatusCode, header},
     routing::{get, post},
 };
@@ -19,8 +19,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::{
     app::AppState,
-    auth::{Caller, Scope},
+    auth::{Need, Read, Submit},
     error::{ApiError, ApiResult},
+    extract::{ApiPath, ApiQuery},
     store::UploadRow,
 };
 
@@ -135,10 +136,9 @@ async fn store_upload(
 
 async fn post_character(
     State(state): State<AppState>,
-    caller: Caller,
+    _caller: Need<Submit>,
     req: Request,
 ) -> ApiResult<(StatusCode, Json<Uploaded>)> {
-    caller.require(Scope::Submit)?;
     let upload = read_upload(&state, req).await?;
     let limits = state.import_limits.clone();
     let (summary, upload) = tokio::task::spawn_blocking(move || {
@@ -162,11 +162,10 @@ struct ClipsQuery {
 
 async fn post_clips(
     State(state): State<AppState>,
-    caller: Caller,
-    Query(q): Query<ClipsQuery>,
+    _caller: Need<Submit>,
+    ApiQuery(q): ApiQuery<ClipsQuery>,
     req: Request,
 ) -> ApiResult<(StatusCode, Json<Uploaded>)> {
-    caller.require(Scope::Submit)?;
     let character = load_upload(&state, &q.character, "character").await?;
     let upload = read_upload(&state, req).await?;
     let limits = state.import_limits.clone();
@@ -216,10 +215,9 @@ pub(crate) async fn load_upload(
 
 async fn get_upload(
     State(state): State<AppState>,
-    caller: Caller,
-    Path(digest): Path<String>,
+    _caller: Need<Read>,
+    ApiPath(digest): ApiPath<String>,
 ) -> ApiResult<Json<UploadRow>> {
-    caller.require(Scope::Read)?;
     crate::blobs::check_digest(&digest)?;
     Ok(Json(state.store.upload(&digest).await?.ok_or_else(
         || ApiError::NotFound(format!("no upload {digest}")),

@@ -1,1 +1,165 @@
+//! Bad input gets a clear 4xx problem+json, loses nothing and writes
+//! nothing: the shared hostile corpus, oversized bodies, bad JSON and
+//! parameters.
 
+use std::io::{Read as _, Write as _};
+use std::time::Duration;
+
+use aobake_e2e::{ADMIN, Options, TestEnv, character, hostile};
+use serde_json::json;
+
+use crate::util::upload;
+
+fn assert_problem(status: u16, body: &serde_json::Value, headers: &[(String, String)], what: &str) {
+    assert!((400..500).contains(&status), "{what}: {status} {body}");
+    let ct = headers
+        .iter()
+        .find(|(k, _)| k == "content-type")
+        .map(|(_, v)| v.as_str());
+    assert_eq!(ct, Some("application/problem+json"), "{what}");
+    assert_eq!(body["status"], status, "{what}: {body}");
+    assert!(
+        body["detail"].as_str().is_some_and(|d| !d.is_empty()),
+        "{what}: {body}"
+    );
+    assert!(body["type"].as_str().is_some() && body["code"].as_str().is_some());
+    assert!(
+        headers.iter().any(|(k, _)| k == "x-request-id"),
+        "{what}: no request id"
+    );
+}
+
+#[test]
+fn every_hostile_upload_is_refused_and_nothing_is_stored() {
+    let env = TestEnv::start(Options::default());
+    let valid = std::fs::read(character("RiggedSimple")).unwrap();
+    let corpus = hostile::corpus(&valid);
+    for case in &corpus {
+        for content_type in ["model/gltf-binary", "application/vnd.aobake.bundle"] {
+            let (status, body, headers) =
+                env.post_bytes("/v1/characters", ADMIN, content_type, &case.bytes);
+            assert_problem(status, &body, &headers, &case.name);
+        }
+    }
+    let (status, _) = env.request("GET", "/healthz", ADMIN, None).unwrap();
+    assert_eq!(status, 200, "the server stays up");
+    // Nothing was stored: no blob fan-out directory exists, no upload row.
+    let blobs: Vec<_> = std::fs::read_dir(env.data().join("blobs"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n != "tmp")
+        .collect();
+    assert!(blobs.is_empty(), "refused uploads left blobs: {blobs:?}");
+    // Nothing was written beside the data directory.
+    let mut beside: Vec<String> = std::fs::read_dir(env.dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    beside.sort();
+    assert_eq!(beside, ["data", "server.log"]);
+    // A valid upload still works, twice with the same digest.
+    let a = upload(&env, &character("RiggedSimple"));
+    let (status, body, _) = env.post_bytes("/v1/characters", ADMIN, "model/gltf-binary", &valid);
+    assert_eq!((status, body["digest"].as_str()), (200, Some(a.as_str())));
+}
+
+#[test]
+fn oversized_bodies_get_413_before_they_are_read() {
+    let env = TestEnv::start(Options {
+        max_body_bytes: 1 << 20,
+        ..Options::default()
+    });
+    // Declare 1 GiB, send 64 KiB, and read the answer: the server answers
+    // 413 without waiting for the rest.
+    let addr = env.url.trim_start_matches("http://");
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(
+        s,
+        "POST /v1/characters HTTP/1.1\r\nHost: {addr}\r\nAuthorization: Bearer {ADMIN}\r\nContent-Type: model/gltf-binary\r\nContent-Length: {}\r\n\r\n",
+        1u64 << 30
+    )
+    .unwrap();
+    s.write_all(&vec![0u8; 64 << 10]).unwrap();
+    let mut answer = vec![0u8; 4096];
+    let n = s.read(&mut answer).unwrap();
+    let head = String::from_utf8_lossy(&answer[..n]);
+    assert!(head.starts_with("HTTP/1.1 413"), "{head}");
+    // Without a declared length (chunked), the limit cuts the body off as
+    // it streams: a problem+json 413 comes back before 3 MiB are sent.
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(
+        s,
+        "POST /v1/characters HTTP/1.1\r\nHost: {addr}\r\nAuthorization: Bearer {ADMIN}\r\nContent-Type: model/gltf-binary\r\nTransfer-Encoding: chunked\r\n\r\n"
+    )
+    .unwrap();
+    let chunk = vec![7u8; 64 << 10];
+    let mut sent = 0;
+    while sent < 3 << 20 {
+        let ok = write!(s, "{:x}\r\n", chunk.len()).is_ok()
+            && s.write_all(&chunk).is_ok()
+            && s.write_all(b"\r\n").is_ok();
+        if !ok {
+            break;
+        }
+        sent += chunk.len();
+    }
+    let mut answer = Vec::new();
+    let _ = s.read_to_end(&mut answer);
+    let text = String::from_utf8_lossy(&answer);
+    assert!(text.starts_with("HTTP/1.1 413"), "{text}");
+    assert!(text.contains("application/problem+json"), "{text}");
+    assert!(text.contains("too_large"), "{text}");
+}
+
+#[test]
+fn bad_requests_name_what_is_wrong() {
+    let env = TestEnv::start(Options::default());
+    let digest = upload(&env, &character("RiggedSimple"));
+    let cases = [
+        (
+            json!({"character": digest, "method": "vertex-quadratic"}),
+            "unknown method",
+        ),
+        (
+            json!({"character": digest, "method": "vertex-linear", "params": {"posez": 3}}),
+            "unknown parameter \\\"posez\\\"",
+        ),
+        (
+            json!({"character": digest, "method": "vertex-linear", "params": {"samples": 0}}),
+            "samples must be between",
+        ),
+        (
+            json!({"character": digest, "method": "vertex-linear", "params": {"poses": 100000, "eval_poses": 100000, "samples": 65536}}),
+            "over the limit",
+        ),
+        (
+            json!({"character": "0".repeat(64), "method": "vertex-linear"}),
+            "no character upload",
+        ),
+        (
+            json!({"character": "../../etc/passwd", "method": "vertex-linear"}),
+            "is not a sha256 digest",
+        ),
+        (json!({"method": "vertex-linear"}), "character"),
+    ];
+    for (body, needle) in cases {
+        let (status, answer) = env
+            .request("POST", "/v1/bakes", ADMIN, Some(body.clone()))
+            .unwrap();
+        assert!((400..500).contains(&status), "{body}: {status} {answer}");
+        assert!(
+            answer.to_string().contains(needle),
+            "{body}: {answer} does not say {needle:?}"
+        );
+    }
+    let (status, answer) = env.request("GET", "/v1/bakes/999", ADMIN, None).unwrap();
+    assert_eq!((status, answer["code"].as_str()), (404, Some("not_found")));
+    let (status, _) = env
+        .request("POST", "/v1/bakes/999/explode", ADMIN, None)
+        .unwrap();
+    assert_eq!(status, 404);
+}
