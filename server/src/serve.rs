@@ -14,7 +14,7 @@ use crate::{
     app::{AppState, ServerLimits, app},
     auth::{Scope, new_token, token_hash},
     blobs::LocalBlobs,
-    store::{QueuePolicy, SqliteStore, Store},
+    store::{PgStore, QueuePolicy, SqliteStore, Store},
 };
 
 /// `aobake serve`'s settings.
@@ -23,6 +23,11 @@ pub struct ServeArgs {
     /// Where the database, the blobs, `server.url` and `admin.token` live.
     #[arg(long, env = "AOBAKE_DATA", default_value = "aobake-data")]
     pub data: PathBuf,
+    /// The metadata store: empty for SQLite in --data (the embedded
+    /// default), or a PostgreSQL URL (`postgres://user@host:port/db`) for
+    /// several servers and remote workers.
+    #[arg(long, env = "AOBAKE_DATABASE")]
+    pub database: Option<String>,
     /// Address to listen on; port 0 picks a free one.
     #[arg(long, env = "AOBAKE_LISTEN", default_value = "127.0.0.1:8080")]
     pub listen: SocketAddr,
@@ -70,9 +75,18 @@ fn write_private(path: &Path, text: &str) -> anyhow::Result<()> {
 pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.data)
         .with_context(|| format!("cannot create {}", args.data.display()))?;
-    let store = SqliteStore::open(&args.data.join("aobake.db"))
-        .await
-        .context("cannot open the database")?;
+    let store: Arc<dyn Store> = match &args.database {
+        Some(url) => Arc::new(
+            PgStore::connect(url)
+                .await
+                .context("cannot connect to PostgreSQL")?,
+        ),
+        None => Arc::new(
+            SqliteStore::open(&args.data.join("aobake.db"))
+                .await
+                .context("cannot open the database")?,
+        ),
+    };
     let blobs = LocalBlobs::open(&args.data.join("blobs"))?;
     let policy = QueuePolicy {
         lease_ms: (args.lease_secs * 1000.0) as i64,
@@ -85,7 +99,6 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         max_bake_work: args.max_bake_work,
         ..ServerLimits::default()
     };
-    let store: Arc<dyn Store> = Arc::new(store);
     let admin = match std::env::var("AOBAKE_ADMIN_TOKEN") {
         Ok(t) if !t.is_empty() => t,
         _ => {
@@ -112,6 +125,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         )
         .await?;
     let state = AppState::new(store.clone(), Arc::new(blobs), policy, limits);
+    store.listen(state.jobs_ready.clone()).await?;
     let listener = tokio::net::TcpListener::bind(args.listen)
         .await
         .with_context(|| format!("cannot listen on {}", args.listen))?;

@@ -15,10 +15,13 @@
 //! [`SqliteStore`] is the embedded default. Both backends run one shared
 //! test suite (`suite`).
 
+mod postgres;
+mod rows;
 mod sqlite;
 #[cfg(test)]
 pub(crate) mod suite;
 
+pub use postgres::PgStore;
 pub use sqlite::SqliteStore;
 
 use serde::{Deserialize, Serialize};
@@ -466,4 +469,10 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn queue_stats(&self) -> Result<(Vec<(JobState, i64)>, i64)>;
     /// Whether the database answers.
     async fn ping(&self) -> Result<()>;
+    /// Wakes `ready` whenever another process of the service may have
+    /// made jobs ready (PostgreSQL's LISTEN/NOTIFY); a store that only one
+    /// process uses needs nothing, since the server wakes its own waiters.
+    async fn listen(&self, _ready: std::sync::Arc<tokio::sync::Notify>) -> Result<()> {
+        Ok(())
+    }
 }

@@ -8,13 +8,14 @@ use std::time::Duration;
 
 use rand::RngExt as _;
 use sqlx::{
-    Row as _, SqliteConnection,
+    FromRow as _, Row as _, SqliteConnection,
     sqlite::{
         SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow,
         SqliteSynchronous,
     },
 };
 
+use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
 use super::{
     Action, BakeRow, BakeState, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
     QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow,
@@ -55,64 +56,11 @@ impl SqliteStore {
 }
 
 fn bake_row(r: &SqliteRow) -> Result<BakeRow> {
-    Ok(BakeRow {
-        id: r.try_get("id")?,
-        key: r.try_get("key")?,
-        character: r.try_get("character")?,
-        clips: serde_json::from_str(r.try_get("clips")?)?,
-        method: r.try_get("method")?,
-        params: serde_json::from_str(r.try_get("params")?)?,
-        state: BakeState::parse(r.try_get("state")?),
-        priority: r.try_get("priority")?,
-        total_work: r.try_get("total_work")?,
-        done_work: r.try_get("done_work")?,
-        jobs_total: r.try_get("jobs_total")?,
-        jobs_done: r.try_get("jobs_done")?,
-        asset: r.try_get("asset")?,
-        report: r.try_get("report")?,
-        plot: r.try_get("plot")?,
-        error: r.try_get("error")?,
-        created_at: r.try_get("created_at")?,
-        updated_at: r.try_get("updated_at")?,
-        finished_at: r.try_get("finished_at")?,
-    })
+    RawBake::from_row(r)?.cook()
 }
 
 fn job_row(r: &SqliteRow) -> Result<JobRow> {
-    let step: Option<String> = r.try_get("checkpoint_step")?;
-    let checkpoint = match step {
-        Some(step) => Some(CheckpointRef {
-            step,
-            cursor: r.try_get("checkpoint_cursor")?,
-            blob: r.try_get("checkpoint_blob")?,
-        }),
-        None => None,
-    };
-    let outputs: Option<String> = r.try_get("outputs")?;
-    let deps: Option<String> = r.try_get("deps")?;
-    Ok(JobRow {
-        id: r.try_get("id")?,
-        bake_id: r.try_get("bake_id")?,
-        index: r.try_get("idx")?,
-        kind: r.try_get("kind")?,
-        spec: serde_json::from_str(r.try_get("spec")?)?,
-        work: r.try_get("work")?,
-        state: JobState::parse(r.try_get("state")?),
-        attempts: r.try_get("attempts")?,
-        max_attempts: r.try_get("max_attempts")?,
-        worker: r.try_get("worker")?,
-        progress: r.try_get("progress")?,
-        checkpoint,
-        outputs: outputs.map(|o| serde_json::from_str(&o)).transpose()?,
-        error: r.try_get("error")?,
-        deps: deps
-            .map(|d| {
-                d.split(',')
-                    .filter_map(|x| x.parse().ok())
-                    .collect::<Vec<i64>>()
-            })
-            .unwrap_or_default(),
-    })
+    RawJob::from_row(r)?.cook()
 }
 
 /// Jobs with their dependencies' graph indices.
@@ -213,16 +161,7 @@ impl Store for SqliteStore {
             .bind(digest)
             .fetch_optional(&self.pool)
             .await?;
-        row.map(|r| {
-            Ok(UploadRow {
-                digest: r.try_get("digest")?,
-                kind: r.try_get("kind")?,
-                bundle: r.try_get("bundle")?,
-                bytes: r.try_get("bytes")?,
-                summary: serde_json::from_str(r.try_get("summary")?)?,
-            })
-        })
-        .transpose()
+        row.map(|r| RawUpload::from_row(&r)?.cook()).transpose()
     }
 
     async fn create_bake(&self, b: &NewBake) -> Result<BakeRow> {
@@ -686,15 +625,7 @@ impl Store for SqliteStore {
             .fetch_all(&self.pool)
             .await?;
         rows.iter()
-            .map(|r| {
-                Ok(WorkerRow {
-                    id: r.try_get("id")?,
-                    state: r.try_get("state")?,
-                    job_id: r.try_get("job_id")?,
-                    last_seen: r.try_get("last_seen")?,
-                    started_at: r.try_get("started_at")?,
-                })
-            })
+            .map(|r| Ok(RawWorker::from_row(r)?.cook()))
             .collect()
     }
 

@@ -252,3 +252,164 @@ async fn cancel_pause_resume_retry(store: &dyn Store) {
     let p = store.set_priority(b.id, 7).await.unwrap();
     assert_eq!(p.priority, 7);
 }
+
+/// A throwaway PostgreSQL server for tests: `initdb` into a temporary
+/// directory and `pg_ctl start` on a free port (as the `postgres` user
+/// when running as root, since PostgreSQL refuses to run as root).
+/// Stopped on drop.
+#[derive(Debug)]
+pub(crate) struct TestPostgres {
+    dir: tempfile::TempDir,
+    bin: std::path::PathBuf,
+    as_postgres: bool,
+    /// Connection URL.
+    pub(crate) url: String,
+}
+
+impl TestPostgres {
+    fn run(&self, program: &str, args: &[&str]) -> std::process::Output {
+        let exe = self.bin.join(program);
+        let mut cmd = if self.as_postgres {
+            let mut c = std::process::Command::new("runuser");
+            c.args(["-u", "postgres", "--"]).arg(&exe);
+            c
+        } else {
+            std::process::Command::new(&exe)
+        };
+        cmd.args(args)
+            .output()
+            .unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()))
+    }
+
+    /// Starts one. PostgreSQL 15's binaries must be installed (`.ci/run`
+    /// installs Debian's `postgresql`); their folder is `pg_config
+    /// --bindir`.
+    pub(crate) fn start() -> Self {
+        let bindir = std::process::Command::new("pg_config")
+            .arg("--bindir")
+            .output()
+            .expect("pg_config is missing: install PostgreSQL (apt-get install postgresql)");
+        let bin = std::path::PathBuf::from(String::from_utf8_lossy(&bindir.stdout).trim());
+        let as_postgres = std::process::Command::new("id")
+            .arg("-u")
+            .output()
+            .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+        let dir = tempfile::tempdir().unwrap();
+        if as_postgres {
+            let ids = |flag: &str| -> u32 {
+                let o = std::process::Command::new("id")
+                    .args([flag, "postgres"])
+                    .output()
+                    .unwrap();
+                String::from_utf8_lossy(&o.stdout).trim().parse().unwrap()
+            };
+            std::os::unix::fs::chown(dir.path(), Some(ids("-u")), Some(ids("-g"))).unwrap();
+        }
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let data = dir.path().join("pg");
+        let data = data.to_str().unwrap();
+        let mut pg = Self {
+            bin,
+            as_postgres,
+            url: format!("postgres://aobake@127.0.0.1:{port}/postgres"),
+            dir,
+        };
+        let out = pg.run(
+            "initdb",
+            &["-D", data, "-A", "trust", "-U", "aobake", "--no-sync"],
+        );
+        assert!(
+            out.status.success(),
+            "initdb: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let options = format!(
+            "-p {port} -k {} -c listen_addresses=127.0.0.1 -c fsync=off",
+            pg.dir.path().display()
+        );
+        let log = pg.dir.path().join("pg.log");
+        let out = pg.run(
+            "pg_ctl",
+            &[
+                "-D",
+                data,
+                "-o",
+                &options,
+                "-l",
+                log.to_str().unwrap(),
+                "-w",
+                "start",
+            ],
+        );
+        assert!(
+            out.status.success(),
+            "pg_ctl start: {}{}",
+            String::from_utf8_lossy(&out.stderr),
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+        pg.url = format!("postgres://aobake@127.0.0.1:{port}/postgres");
+        pg
+    }
+}
+
+impl Drop for TestPostgres {
+    fn drop(&mut self) {
+        let data = self.dir.path().join("pg");
+        let _ = self.run(
+            "pg_ctl",
+            &["-D", data.to_str().unwrap(), "-m", "immediate", "stop"],
+        );
+    }
+}
+
+/// Many workers claiming at once each get a different job, and every job
+/// is claimed once.
+pub(crate) async fn concurrent_claims_are_exclusive(store: std::sync::Arc<dyn Store>) {
+    let c = character(&*store).await;
+    let job = |i: usize| NewJob {
+        kind: "sample".into(),
+        spec: json!({"kind": "sample", "i": i}),
+        work: 1,
+        deps: vec![],
+    };
+    let mut b = bake(&c, &"5".repeat(64));
+    b.jobs = (0..40).map(job).collect();
+    b.priority = 100;
+    let created = store.create_bake(&b).await.unwrap();
+    let tasks: Vec<_> = (0..8)
+        .map(|w| {
+            let store = store.clone();
+            tokio::spawn(async move {
+                let mut got = Vec::new();
+                while let Some(l) = store.lease(&format!("w{w}"), &policy()).await.unwrap() {
+                    got.push((l.job.bake_id, l.job.id));
+                    store
+                        .complete(l.job.id, &l.token, &done("ao"))
+                        .await
+                        .unwrap();
+                }
+                got
+            })
+        })
+        .collect();
+    let mut all = Vec::new();
+    for t in tasks {
+        all.extend(t.await.unwrap());
+    }
+    let mine: Vec<i64> = all
+        .iter()
+        .filter(|(b, _)| *b == created.id)
+        .map(|(_, j)| *j)
+        .collect();
+    let mut unique = mine.clone();
+    unique.sort_unstable();
+    unique.dedup();
+    assert_eq!(unique.len(), mine.len(), "a job was claimed twice");
+    assert_eq!(mine.len(), 40);
+    let end = store.bake(created.id).await.unwrap().unwrap();
+    assert_eq!(end.state, BakeState::Done);
+}

@@ -1,0 +1,713 @@
+//! The scale-out store: PostgreSQL through sqlx, for several servers and
+//! many workers. It mirrors `sqlite.rs` statement for statement; the
+//! differences are the dialect, claims that lock the chosen row with `FOR
+//! UPDATE SKIP LOCKED` (concurrent claimers skip each other's rows instead
+//! of waiting), and `NOTIFY aobake_jobs` whenever jobs may have become
+//! ready, which every server `LISTEN`s to so its long-polling workers wake
+//! wherever the change was made.
+
+use std::sync::Arc;
+
+use rand::RngExt as _;
+use sqlx::{
+    FromRow as _, PgConnection, Row as _,
+    postgres::{PgListener, PgPool, PgPoolOptions, PgRow},
+};
+
+use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
+use super::{
+    Action, BakeRow, BakeState, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
+    QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow,
+};
+
+/// The database clock, in milliseconds since the epoch.
+const NOW: &str = "(extract(epoch FROM clock_timestamp()) * 1000)::bigint";
+
+/// PostgreSQL behind the [`Store`] trait.
+#[derive(Debug, Clone)]
+pub struct PgStore {
+    pool: PgPool,
+}
+
+impl PgStore {
+    /// Connects to `url` (`postgres://user@host:port/db`) and migrates.
+    pub async fn connect(url: &str) -> Result<Self> {
+        let pool = PgPoolOptions::new()
+            .max_connections(16)
+            .connect(url)
+            .await?;
+        sqlx::migrate!("migrations/postgres").run(&pool).await?;
+        Ok(Self { pool })
+    }
+
+    /// Tells every listening server that jobs may be ready.
+    async fn wake(conn: &mut PgConnection) -> Result<()> {
+        sqlx::query("SELECT pg_notify('aobake_jobs', '')")
+            .execute(conn)
+            .await?;
+        Ok(())
+    }
+
+    async fn now(conn: &mut PgConnection) -> Result<i64> {
+        Ok(sqlx::query_scalar(&format!("SELECT {NOW}"))
+            .fetch_one(conn)
+            .await?)
+    }
+}
+
+fn bake_row(r: &PgRow) -> Result<BakeRow> {
+    RawBake::from_row(r)?.cook()
+}
+
+fn job_row(r: &PgRow) -> Result<JobRow> {
+    RawJob::from_row(r)?.cook()
+}
+
+/// Jobs with their dependencies' graph indices.
+const JOB_SELECT: &str = "SELECT j.*, (SELECT string_agg(p.idx::text, ',' ORDER BY p.idx) FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = j.id) AS deps FROM jobs j";
+
+async fn bake_by_id(conn: &mut PgConnection, id: i64) -> Result<BakeRow> {
+    let row = sqlx::query("SELECT * FROM bakes WHERE id = $1")
+        .bind(id)
+        .fetch_optional(conn)
+        .await?
+        .ok_or_else(|| StoreError::NotFound(format!("bake {id}")))?;
+    bake_row(&row)
+}
+
+async fn job_by_id(conn: &mut PgConnection, id: i64) -> Result<JobRow> {
+    let row = sqlx::query(&format!("{JOB_SELECT} WHERE j.id = $1"))
+        .bind(id)
+        .fetch_optional(conn)
+        .await?
+        .ok_or_else(|| StoreError::NotFound(format!("job {id}")))?;
+    job_row(&row)
+}
+
+/// The job if `token` is its current lease, else `LeaseLost`.
+async fn leased(conn: &mut PgConnection, job: i64, token: &str) -> Result<JobRow> {
+    let held: Option<i64> = sqlx::query_scalar(
+        "SELECT id FROM jobs WHERE id = $1 AND lease_token = $2 AND state = 'running'",
+    )
+    .bind(job)
+    .bind(token)
+    .fetch_optional(&mut *conn)
+    .await?;
+    if held.is_none() {
+        return Err(StoreError::LeaseLost(format!(
+            "job {job} is not leased with this token"
+        )));
+    }
+    job_by_id(conn, job).await
+}
+
+/// Unblocks the bake's jobs whose dependencies have all completed.
+async fn unblock(conn: &mut PgConnection, bake: i64) -> Result<u64> {
+    Ok(sqlx::query(
+        "UPDATE jobs SET state = 'available' WHERE bake_id = $1 AND state = 'blocked' AND NOT EXISTS (SELECT 1 FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = jobs.id AND p.state != 'completed')",
+    )
+    .bind(bake)
+    .execute(conn)
+    .await?
+    .rows_affected())
+}
+
+/// Marks the bake failed when one of its jobs is dead.
+async fn fail_bake_if_dead(conn: &mut PgConnection, bake: i64) -> Result<()> {
+    sqlx::query(&format!(
+        "UPDATE bakes SET state = 'failed', updated_at = {NOW}, finished_at = {NOW}, error = (SELECT 'job ' || idx || ' (' || kind || ') died after ' || attempts || ' attempts: ' || COALESCE(error, 'lease expired') FROM jobs WHERE bake_id = bakes.id AND state = 'dead' ORDER BY idx LIMIT 1) WHERE id = $1 AND state IN ('queued', 'running', 'paused') AND EXISTS (SELECT 1 FROM jobs WHERE bake_id = bakes.id AND state = 'dead')"
+    ))
+    .bind(bake)
+    .execute(conn)
+    .await?;
+    Ok(())
+}
+
+/// The delay before retry `attempt` (1-based): doubling from the base, at
+/// most the cap, times a jitter in [0.5, 1.5).
+fn backoff_ms(policy: &QueuePolicy, attempt: i64) -> i64 {
+    let exp = attempt.clamp(1, 30) - 1;
+    let base = policy
+        .backoff_ms
+        .saturating_mul(1i64 << exp)
+        .min(policy.max_backoff_ms);
+    let jitter: f64 = rand::rng().random_range(0.5..1.5);
+    (base as f64 * jitter) as i64
+}
+
+fn token() -> String {
+    let bytes: [u8; 16] = rand::rng().random();
+    aobake_core::digest::hex(&bytes)
+}
+
+#[async_trait::async_trait]
+impl Store for PgStore {
+    async fn put_upload(&self, u: &UploadRow) -> Result<bool> {
+        let done = sqlx::query(&format!(
+            "INSERT INTO uploads (digest, kind, bundle, bytes, summary, created_at) VALUES ($1, $2, $3, $4, $5, {NOW}) ON CONFLICT (digest) DO NOTHING"
+        ))
+        .bind(&u.digest)
+        .bind(&u.kind)
+        .bind(u.bundle)
+        .bind(u.bytes)
+        .bind(u.summary.to_string())
+        .execute(&self.pool)
+        .await?;
+        Ok(done.rows_affected() == 1)
+    }
+
+    async fn upload(&self, digest: &str) -> Result<Option<UploadRow>> {
+        let row = sqlx::query("SELECT * FROM uploads WHERE digest = $1")
+            .bind(digest)
+            .fetch_optional(&self.pool)
+            .await?;
+        row.map(|r| RawUpload::from_row(&r)?.cook()).transpose()
+    }
+
+    async fn create_bake(&self, b: &NewBake) -> Result<BakeRow> {
+        let mut tx = self.pool.begin().await?;
+        let total: i64 = b.jobs.iter().map(|j| j.work).sum();
+        let id: i64 = sqlx::query_scalar(&format!(
+            "INSERT INTO bakes (key, character, clips, method, params, state, priority, total_work, jobs_total, created_at, updated_at) VALUES ($1, $2, $3, $4, $5, 'queued', $6, $7, $8, {NOW}, {NOW}) RETURNING id"
+        ))
+        .bind(&b.key)
+        .bind(&b.character)
+        .bind(serde_json::to_string(&b.clips)?)
+        .bind(&b.method)
+        .bind(b.params.to_string())
+        .bind(b.priority)
+        .bind(total)
+        .bind(b.jobs.len() as i64)
+        .fetch_one(&mut *tx)
+        .await?;
+        let mut ids = Vec::with_capacity(b.jobs.len());
+        for (i, j) in b.jobs.iter().enumerate() {
+            let state = if j.deps.is_empty() {
+                "available"
+            } else {
+                "blocked"
+            };
+            let job: i64 = sqlx::query_scalar(
+                "INSERT INTO jobs (bake_id, idx, kind, spec, work, state, max_attempts) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id",
+            )
+            .bind(id)
+            .bind(i as i64)
+            .bind(&j.kind)
+            .bind(j.spec.to_string())
+            .bind(j.work)
+            .bind(state)
+            .bind(b.max_attempts)
+            .fetch_one(&mut *tx)
+            .await?;
+            for &d in &j.deps {
+                let dep = *ids.get(d).ok_or_else(|| {
+                    StoreError::Conflict(format!("job {i} depends on a later job {d}"))
+                })?;
+                sqlx::query("INSERT INTO job_deps (job_id, dep_id) VALUES ($1, $2)")
+                    .bind(job)
+                    .bind(dep)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            ids.push(job);
+        }
+        let bake = bake_by_id(&mut tx, id).await?;
+        Self::wake(&mut tx).await?;
+        tx.commit().await?;
+        Ok(bake)
+    }
+
+    async fn bake(&self, id: i64) -> Result<Option<BakeRow>> {
+        let row = sqlx::query("SELECT * FROM bakes WHERE id = $1")
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?;
+        row.as_ref().map(bake_row).transpose()
+    }
+
+    async fn bake_for_key(&self, key: &str) -> Result<Option<BakeRow>> {
+        let row = sqlx::query(
+            "SELECT * FROM bakes WHERE key = $1 AND state IN ('done', 'queued', 'running', 'paused') ORDER BY state = 'done' DESC, id DESC LIMIT 1",
+        )
+        .bind(key)
+        .fetch_optional(&self.pool)
+        .await?;
+        row.as_ref().map(bake_row).transpose()
+    }
+
+    async fn bakes(
+        &self,
+        character: Option<&str>,
+        method: Option<&str>,
+        limit: i64,
+    ) -> Result<Vec<BakeRow>> {
+        let rows = sqlx::query(
+            "SELECT * FROM bakes WHERE ($1::text IS NULL OR character = $1) AND ($2::text IS NULL OR method = $2) ORDER BY id DESC LIMIT $3",
+        )
+        .bind(character)
+        .bind(method)
+        .bind(limit)
+        .fetch_all(&self.pool)
+        .await?;
+        rows.iter().map(bake_row).collect()
+    }
+
+    async fn jobs(&self, bake: i64) -> Result<Vec<JobRow>> {
+        let rows = sqlx::query(&format!("{JOB_SELECT} WHERE j.bake_id = $1 ORDER BY j.idx"))
+            .bind(bake)
+            .fetch_all(&self.pool)
+            .await?;
+        rows.iter().map(job_row).collect()
+    }
+
+    async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>> {
+        self.reap().await?;
+        let mut tx = self.pool.begin().await?;
+        let now = Self::now(&mut tx).await?;
+        let id: Option<i64> = sqlx::query_scalar(
+            "SELECT j.id FROM jobs j JOIN bakes b ON b.id = j.bake_id WHERE (j.state = 'available' OR (j.state = 'retryable' AND j.run_at <= $1)) AND b.state IN ('queued', 'running') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = j.bake_id AND f.worker = $2 AND f.failures >= $3) ORDER BY b.priority DESC, b.id, j.idx LIMIT 1 FOR UPDATE OF j SKIP LOCKED",
+        )
+        .bind(now)
+        .bind(worker)
+        .bind(policy.worker_failures)
+        .fetch_optional(&mut *tx)
+        .await?;
+        let Some(id) = id else {
+            tx.commit().await?;
+            return Ok(None);
+        };
+        let token = token();
+        let expires_at = now + policy.lease_ms;
+        sqlx::query(
+            "UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = $3, progress = 0 WHERE id = $4",
+        )
+        .bind(&token)
+        .bind(worker)
+        .bind(expires_at)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+        let job = job_by_id(&mut tx, id).await?;
+        sqlx::query(&format!(
+            "UPDATE bakes SET state = 'running', updated_at = {NOW} WHERE id = $1 AND state = 'queued'"
+        ))
+        .bind(job.bake_id)
+        .execute(&mut *tx)
+        .await?;
+        let bake = bake_by_id(&mut tx, job.bake_id).await?;
+        let deps = sqlx::query(
+            "SELECT p.outputs, p.timings FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = $1 ORDER BY p.idx",
+        )
+        .bind(id)
+        .fetch_all(&mut *tx)
+        .await?;
+        let mut inputs = Vec::new();
+        for d in &deps {
+            let outputs: Option<String> = d.try_get("outputs")?;
+            let timings: Option<String> = d.try_get("timings")?;
+            inputs.push(Completion {
+                outputs: serde_json::from_str(outputs.as_deref().unwrap_or("[]"))?,
+                timings: serde_json::from_str(timings.as_deref().unwrap_or("null"))?,
+            });
+        }
+        let mut uploads = Vec::new();
+        for digest in std::iter::once(&bake.character).chain(&bake.clips) {
+            let bundle: Option<bool> =
+                sqlx::query_scalar("SELECT bundle FROM uploads WHERE digest = $1")
+                    .bind(digest)
+                    .fetch_optional(&mut *tx)
+                    .await?;
+            uploads.push(UploadRef {
+                digest: digest.clone(),
+                bundle: bundle.unwrap_or(false),
+            });
+        }
+        sqlx::query(&format!(
+            "INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES ($1, 'busy', $2, {NOW}, {NOW}) ON CONFLICT (id) DO UPDATE SET state = 'busy', job_id = $2, last_seen = {NOW}"
+        ))
+        .bind(worker)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        Ok(Some(Lease {
+            job,
+            token,
+            expires_at,
+            bake,
+            inputs,
+            uploads,
+        }))
+    }
+
+    async fn heartbeat(
+        &self,
+        job: i64,
+        token: &str,
+        progress: i64,
+        policy: &QueuePolicy,
+    ) -> Result<bool> {
+        let mut tx = self.pool.begin().await?;
+        let j = leased(&mut tx, job, token).await?;
+        sqlx::query(&format!(
+            "UPDATE jobs SET lease_expires_at = {NOW} + $1, progress = $2 WHERE id = $3"
+        ))
+        .bind(policy.lease_ms)
+        .bind(progress.clamp(0, j.work))
+        .bind(job)
+        .execute(&mut *tx)
+        .await?;
+        let bake = bake_by_id(&mut tx, j.bake_id).await?;
+        sqlx::query(&format!(
+            "UPDATE workers SET last_seen = {NOW}, state = 'busy', job_id = $1 WHERE id = $2"
+        ))
+        .bind(job)
+        .bind(j.worker.as_deref().unwrap_or(""))
+        .execute(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        Ok(!bake.state.is_active())
+    }
+
+    async fn checkpoint(&self, job: i64, token: &str, c: &CheckpointRef) -> Result<()> {
+        let mut tx = self.pool.begin().await?;
+        leased(&mut tx, job, token).await?;
+        sqlx::query(
+            "UPDATE jobs SET checkpoint_step = $1, checkpoint_cursor = $2, checkpoint_blob = $3 WHERE id = $4",
+        )
+        .bind(&c.step)
+        .bind(c.cursor)
+        .bind(&c.blob)
+        .bind(job)
+        .execute(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    async fn complete(&self, job: i64, token: &str, c: &Completion) -> Result<BakeRow> {
+        let mut tx = self.pool.begin().await?;
+        let j = leased(&mut tx, job, token).await?;
+        sqlx::query(&format!(
+            "UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {NOW} WHERE id = $3"
+        ))
+        .bind(serde_json::to_string(&c.outputs)?)
+        .bind(c.timings.to_string())
+        .bind(job)
+        .execute(&mut *tx)
+        .await?;
+        sqlx::query(&format!(
+            "UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + 1, updated_at = {NOW} WHERE id = $2"
+        ))
+        .bind(j.work)
+        .bind(j.bake_id)
+        .execute(&mut *tx)
+        .await?;
+        unblock(&mut tx, j.bake_id).await?;
+        let bake = bake_by_id(&mut tx, j.bake_id).await?;
+        if bake.jobs_done == bake.jobs_total {
+            let digest = |name: &str| {
+                c.outputs
+                    .iter()
+                    .find(|o| o.name == name)
+                    .map(|o| o.digest.clone())
+            };
+            sqlx::query(&format!(
+                "UPDATE bakes SET state = 'done', asset = $1, report = $2, plot = $3, finished_at = {NOW}, updated_at = {NOW} WHERE id = $4"
+            ))
+            .bind(digest("asset"))
+            .bind(digest("report.json"))
+            .bind(digest("plot.png"))
+            .bind(j.bake_id)
+            .execute(&mut *tx)
+            .await?;
+        }
+        sqlx::query(&format!(
+            "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
+        ))
+        .bind(j.worker.as_deref().unwrap_or(""))
+        .execute(&mut *tx)
+        .await?;
+        let bake = bake_by_id(&mut tx, j.bake_id).await?;
+        Self::wake(&mut tx).await?;
+        tx.commit().await?;
+        Ok(bake)
+    }
+
+    async fn fail(
+        &self,
+        job: i64,
+        token: &str,
+        error: &str,
+        retryable: bool,
+        policy: &QueuePolicy,
+    ) -> Result<BakeRow> {
+        let mut tx = self.pool.begin().await?;
+        let j = leased(&mut tx, job, token).await?;
+        let dead = !retryable || j.attempts >= j.max_attempts;
+        let now = Self::now(&mut tx).await?;
+        sqlx::query(
+            "UPDATE jobs SET state = $1, lease_token = NULL, lease_expires_at = NULL, run_at = $2, error = $3 WHERE id = $4",
+        )
+        .bind(if dead { "dead" } else { "retryable" })
+        .bind(now + backoff_ms(policy, j.attempts))
+        .bind(error)
+        .bind(job)
+        .execute(&mut *tx)
+        .await?;
+        let worker = j.worker.as_deref().unwrap_or("");
+        sqlx::query(
+            "INSERT INTO worker_failures (bake_id, worker, failures) VALUES ($1, $2, 1) ON CONFLICT (bake_id, worker) DO UPDATE SET failures = worker_failures.failures + 1",
+        )
+        .bind(j.bake_id)
+        .bind(worker)
+        .execute(&mut *tx)
+        .await?;
+        sqlx::query(&format!(
+            "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
+        ))
+        .bind(worker)
+        .execute(&mut *tx)
+        .await?;
+        fail_bake_if_dead(&mut tx, j.bake_id).await?;
+        let bake = bake_by_id(&mut tx, j.bake_id).await?;
+        Self::wake(&mut tx).await?;
+        tx.commit().await?;
+        Ok(bake)
+    }
+
+    async fn release(&self, job: i64, token: &str) -> Result<()> {
+        let mut tx = self.pool.begin().await?;
+        let j = leased(&mut tx, job, token).await?;
+        sqlx::query(
+            "UPDATE jobs SET state = 'available', lease_token = NULL, lease_expires_at = NULL, attempts = attempts - 1 WHERE id = $1",
+        )
+        .bind(job)
+        .execute(&mut *tx)
+        .await?;
+        sqlx::query(&format!(
+            "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
+        ))
+        .bind(j.worker.as_deref().unwrap_or(""))
+        .execute(&mut *tx)
+        .await?;
+        Self::wake(&mut tx).await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    async fn reap(&self) -> Result<u64> {
+        let mut tx = self.pool.begin().await?;
+        let expired: Vec<(i64, i64)> = sqlx::query_as(&format!(
+            "SELECT id, bake_id FROM jobs WHERE state = 'running' AND lease_expires_at < {NOW}"
+        ))
+        .fetch_all(&mut *tx)
+        .await?;
+        if expired.is_empty() {
+            tx.commit().await?;
+            return Ok(0);
+        }
+        sqlx::query(&format!(
+            "UPDATE jobs SET state = CASE WHEN attempts >= max_attempts THEN 'dead' ELSE 'retryable' END, run_at = {NOW}, lease_token = NULL, lease_expires_at = NULL, error = COALESCE(error, 'lease expired') WHERE state = 'running' AND lease_expires_at < {NOW}"
+        ))
+        .execute(&mut *tx)
+        .await?;
+        sqlx::query("UPDATE counters SET value = value + $1 WHERE name = 'lease_expiries'")
+            .bind(expired.len() as i64)
+            .execute(&mut *tx)
+            .await?;
+        for &(_, bake) in &expired {
+            fail_bake_if_dead(&mut tx, bake).await?;
+        }
+        Self::wake(&mut tx).await?;
+        tx.commit().await?;
+        Ok(expired.len() as u64)
+    }
+
+    async fn control(&self, bake: i64, action: Action) -> Result<BakeRow> {
+        let mut tx = self.pool.begin().await?;
+        let b = bake_by_id(&mut tx, bake).await?;
+        let refuse = |why: &str| {
+            Err(StoreError::Conflict(format!(
+                "bake {bake} is {}: {why}",
+                b.state.as_str()
+            )))
+        };
+        match action {
+            Action::Cancel => {
+                if !b.state.is_active() {
+                    return refuse("only a queued, running or paused bake can be cancelled");
+                }
+                sqlx::query(
+                    "UPDATE jobs SET state = 'cancelled', lease_token = NULL, lease_expires_at = NULL WHERE bake_id = $1 AND state NOT IN ('completed', 'dead')",
+                )
+                .bind(bake)
+                .execute(&mut *tx)
+                .await?;
+                sqlx::query(&format!(
+                    "UPDATE bakes SET state = 'cancelled', finished_at = {NOW}, updated_at = {NOW} WHERE id = $1"
+                ))
+                .bind(bake)
+                .execute(&mut *tx)
+                .await?;
+            }
+            Action::Pause => {
+                if !matches!(b.state, BakeState::Queued | BakeState::Running) {
+                    return refuse("only a queued or running bake can be paused");
+                }
+                sqlx::query(&format!(
+                    "UPDATE bakes SET state = 'paused', updated_at = {NOW} WHERE id = $1"
+                ))
+                .bind(bake)
+                .execute(&mut *tx)
+                .await?;
+            }
+            Action::Resume => {
+                if b.state != BakeState::Paused {
+                    return refuse("only a paused bake can be resumed");
+                }
+                sqlx::query(&format!(
+                    "UPDATE bakes SET state = CASE WHEN jobs_done > 0 OR EXISTS (SELECT 1 FROM jobs WHERE bake_id = bakes.id AND state = 'running') THEN 'running' ELSE 'queued' END, updated_at = {NOW} WHERE id = $1"
+                ))
+                .bind(bake)
+                .execute(&mut *tx)
+                .await?;
+            }
+            Action::Retry => {
+                if !matches!(b.state, BakeState::Failed | BakeState::Cancelled) {
+                    return refuse("only a failed or cancelled bake can be retried");
+                }
+                sqlx::query(
+                    "UPDATE jobs SET state = 'blocked', attempts = 0, error = NULL, run_at = 0 WHERE bake_id = $1 AND state IN ('dead', 'cancelled', 'retryable', 'available')",
+                )
+                .bind(bake)
+                .execute(&mut *tx)
+                .await?;
+                sqlx::query("DELETE FROM worker_failures WHERE bake_id = $1")
+                    .bind(bake)
+                    .execute(&mut *tx)
+                    .await?;
+                unblock(&mut tx, bake).await?;
+                sqlx::query(&format!(
+                    "UPDATE bakes SET state = 'queued', error = NULL, finished_at = NULL, updated_at = {NOW} WHERE id = $1"
+                ))
+                .bind(bake)
+                .execute(&mut *tx)
+                .await?;
+            }
+        }
+        let b = bake_by_id(&mut tx, bake).await?;
+        Self::wake(&mut tx).await?;
+        tx.commit().await?;
+        Ok(b)
+    }
+
+    async fn set_priority(&self, bake: i64, priority: i64) -> Result<BakeRow> {
+        let mut conn = self.pool.acquire().await?;
+        sqlx::query(&format!(
+            "UPDATE bakes SET priority = $1, updated_at = {NOW} WHERE id = $2"
+        ))
+        .bind(priority)
+        .bind(bake)
+        .execute(&mut *conn)
+        .await?;
+        bake_by_id(&mut conn, bake).await
+    }
+
+    async fn worker_seen(&self, worker: &str, state: &str, job: Option<i64>) -> Result<()> {
+        sqlx::query(&format!(
+            "INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES ($1, $2, $3, {NOW}, {NOW}) ON CONFLICT (id) DO UPDATE SET state = $2, job_id = $3, last_seen = {NOW}"
+        ))
+        .bind(worker)
+        .bind(state)
+        .bind(job)
+        .execute(&self.pool)
+        .await?;
+        Ok(())
+    }
+
+    async fn workers(&self) -> Result<Vec<WorkerRow>> {
+        let rows = sqlx::query("SELECT * FROM workers ORDER BY last_seen DESC, id")
+            .fetch_all(&self.pool)
+            .await?;
+        rows.iter()
+            .map(|r| Ok(RawWorker::from_row(r)?.cook()))
+            .collect()
+    }
+
+    async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()> {
+        sqlx::query(&format!(
+            "INSERT INTO tokens (hash, name, scopes, created_at) VALUES ($1, $2, $3, {NOW}) ON CONFLICT (hash) DO UPDATE SET name = excluded.name, scopes = excluded.scopes"
+        ))
+        .bind(hash)
+        .bind(name)
+        .bind(scopes.join(","))
+        .execute(&self.pool)
+        .await?;
+        Ok(())
+    }
+
+    async fn token(&self, hash: &str) -> Result<Option<TokenRow>> {
+        let row: Option<(String, String)> =
+            sqlx::query_as("SELECT name, scopes FROM tokens WHERE hash = $1")
+                .bind(hash)
+                .fetch_optional(&self.pool)
+                .await?;
+        Ok(row.map(|(name, scopes)| TokenRow {
+            name,
+            scopes: scopes.split(',').map(str::to_owned).collect(),
+        }))
+    }
+
+    async fn queue_stats(&self) -> Result<(Vec<(JobState, i64)>, i64)> {
+        let rows: Vec<(String, i64)> =
+            sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state")
+                .fetch_all(&self.pool)
+                .await?;
+        let expiries: i64 =
+            sqlx::query_scalar("SELECT value FROM counters WHERE name = 'lease_expiries'")
+                .fetch_one(&self.pool)
+                .await?;
+        Ok((
+            rows.into_iter()
+                .map(|(s, n)| (JobState::parse(&s), n))
+                .collect(),
+            expiries,
+        ))
+    }
+
+    async fn ping(&self) -> Result<()> {
+        sqlx::query("SELECT 1").execute(&self.pool).await?;
+        Ok(())
+    }
+
+    async fn listen(&self, ready: Arc<tokio::sync::Notify>) -> Result<()> {
+        let mut listener = PgListener::connect_with(&self.pool).await?;
+        listener.listen("aobake_jobs").await?;
+        tokio::spawn(async move {
+            loop {
+                match listener.recv().await {
+                    Ok(_) => ready.notify_waiters(),
+                    Err(e) => {
+                        eprintln!("error: LISTEN aobake_jobs: {e}");
+                        tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+                    }
+                }
+            }
+        });
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[tokio::test]
+    async fn the_shared_store_suite_passes_on_postgres() {
+        let pg = super::super::suite::TestPostgres::start();
+        let store = super::PgStore::connect(&pg.url).await.unwrap();
+        super::super::suite::run_all(&store).await;
+        // Claims made at once by many connections never hand out one job
+        // twice (FOR UPDATE SKIP LOCKED).
+        super::super::suite::concurrent_claims_are_exclusive(std::sync::Arc::new(store)).await;
+    }
+}
