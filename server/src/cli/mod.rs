@@ -57,6 +57,8 @@ enum Command {
     Fetch(client::FetchArgs),
     /// Manage API tokens.
     Token(client::TokenArgs),
+    /// Print the HTTP API's OpenAPI 3.1 description (YAML).
+    Openapi,
     /// Measure speed: print figures for the benchmarks that issues and
     /// notes quote.
     Bench(bench::Args),
@@ -76,6 +78,10 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             tokio::runtime::Runtime::new()?.block_on(crate::serve::serve(*args))
         }
         Command::Worker(args) => client::worker(&args),
+        Command::Openapi => {
+            print!("{}", crate::openapi::yaml());
+            Ok(())
+        }
         Command::Submit(args) => client::submit(&args),
         Command::Status(args) => client::status(&args),
         Command::Fetch(args) => client::fetch(&args),

@@ -26,7 +26,7 @@ use super::uploads::load_upload;
 use crate::{
     app::AppState,
     auth::{Need, Read, Submit},
-    error::{ApiError, ApiResult},
+    error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery, Body},
     store::{Action, BakeRow, JobRow, NewBake, NewJob},
 };
@@ -43,28 +43,32 @@ pub(super) fn router() -> Router<AppState> {
 }
 
 /// `POST /v1/bakes`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct BakeRequest {
     character: String,
     #[serde(default)]
     clips: Vec<String>,
     method: String,
+    /// Overrides of the method's default parameters (`aobake params
+    /// --method M` lists them), by name; dotted names or nested objects
+    /// for method options.
     #[serde(default)]
+    #[schema(value_type = Object)]
     params: serde_json::Map<String, serde_json::Value>,
     #[serde(default)]
     priority: i64,
 }
 
 /// Progress of a bake in units of work.
-#[derive(Debug, Serialize, Deserialize)]
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
 pub(crate) struct Progress {
     done: i64,
     total: i64,
 }
 
 /// A bake as the API shows it.
-#[derive(Debug, Serialize, Deserialize)]
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
 pub(crate) struct BakeView {
     #[serde(flatten)]
     bake: BakeRow,
@@ -90,7 +94,10 @@ fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
     }
 }
 
-async fn submit(
+#[utoipa::path(post, path = "/v1/bakes", tag = "bakes", request_body = BakeRequest,
+    security(("bearer" = ["submit"])),
+    responses((status = 202, description = "Accepted (or already running)", body = BakeView), (status = 200, description = "Already baked: the finished bake", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn submit(
     State(state): State<AppState>,
     _caller: Need<Submit>,
     Body(req): Body<BakeRequest>,
@@ -165,13 +172,16 @@ async fn submit(
     Ok((StatusCode::ACCEPTED, Json(view(bake, None))).into_response())
 }
 
-#[derive(Debug, Deserialize)]
-struct ListQuery {
+#[derive(Debug, Deserialize, utoipa::ToSchema, utoipa::IntoParams)]
+pub(crate) struct ListQuery {
     method: Option<String>,
     limit: Option<i64>,
 }
 
-async fn list(
+#[utoipa::path(get, path = "/v1/bakes", tag = "bakes", params(ListQuery),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "Bakes, newest first", body = Vec<BakeView>), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn list(
     State(state): State<AppState>,
     _caller: Need<Read>,
     ApiQuery(q): ApiQuery<ListQuery>,
@@ -181,7 +191,10 @@ async fn list(
     Ok(Json(bakes.into_iter().map(|b| view(b, None)).collect()))
 }
 
-async fn versions(
+#[utoipa::path(get, path = "/v1/characters/{digest}/bakes", tag = "bakes", params(("digest" = String, Path, description = "Character digest"), ListQuery),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "Bakes of the character, newest first", body = Vec<BakeView>), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn versions(
     State(state): State<AppState>,
     _caller: Need<Read>,
     ApiPath(digest): ApiPath<String>,
@@ -204,7 +217,10 @@ async fn find(state: &AppState, id: i64) -> ApiResult<BakeRow> {
         .ok_or_else(|| ApiError::NotFound(format!("no bake {id}")))
 }
 
-async fn show(
+#[utoipa::path(get, path = "/v1/bakes/{id}", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "The bake with every job", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn show(
     State(state): State<AppState>,
     _caller: Need<Read>,
     ApiPath(id): ApiPath<i64>,
@@ -214,7 +230,10 @@ async fn show(
     Ok(Json(view(bake, Some(jobs))))
 }
 
-async fn report(
+#[utoipa::path(get, path = "/v1/bakes/{id}/report", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "The quality report (JSON)", body = Object), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn report(
     State(state): State<AppState>,
     _caller: Need<Read>,
     ApiPath(id): ApiPath<i64>,
@@ -235,12 +254,15 @@ async fn report(
         .into_response())
 }
 
-#[derive(Debug, Deserialize)]
-struct PatchBody {
+#[derive(Debug, Deserialize, utoipa::ToSchema)]
+pub(crate) struct PatchBody {
     priority: i64,
 }
 
-async fn patch(
+#[utoipa::path(patch, path = "/v1/bakes/{id}", tag = "bakes", params(("id" = i64, Path, description = "Bake id")), request_body = PatchBody,
+    security(("bearer" = ["submit"])),
+    responses((status = 200, description = "Priority set", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn patch(
     State(state): State<AppState>,
     _caller: Need<Submit>,
     ApiPath(id): ApiPath<i64>,
@@ -251,7 +273,10 @@ async fn patch(
     Ok(Json(view(bake, None)))
 }
 
-async fn control(
+#[utoipa::path(post, path = "/v1/bakes/{id}/{action}", tag = "bakes", params(("id" = i64, Path, description = "Bake id"), ("action" = String, Path, description = "cancel, pause, resume or retry")),
+    security(("bearer" = ["submit"])),
+    responses((status = 200, description = "Done", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn control(
     State(state): State<AppState>,
     _caller: Need<Submit>,
     ApiPath((id, action)): ApiPath<(i64, String)>,
@@ -273,7 +298,10 @@ async fn control(
     Ok(Json(view(bake, None)))
 }
 
-async fn cache(
+#[utoipa::path(get, path = "/v1/cache/{key}", tag = "bakes", params(("key" = String, Path, description = "Bake key")),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "The finished bake for this key", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn cache(
     State(state): State<AppState>,
     _caller: Need<Read>,
     ApiPath(key): ApiPath<String>,
@@ -287,7 +315,10 @@ async fn cache(
     }
 }
 
-async fn events(
+#[utoipa::path(get, path = "/v1/bakes/{id}/events", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "Server-sent events: `bake` events with id, state, done and total", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn events(
     State(state): State<AppState>,
     _caller: Need<Read>,
     ApiPath(id): ApiPath<i64>,

@@ -18,9 +18,9 @@ use serde::{Deserialize, Serialize};
 use crate::{
     app::AppState,
     auth::{Need, Worker},
-    error::{ApiError, ApiResult},
+    error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, Body},
-    store::{CheckpointRef, Completion},
+    store::{CheckpointRef, Completion, Lease},
 };
 
 pub(super) fn router() -> Router<AppState> {
@@ -35,7 +35,7 @@ pub(super) fn router() -> Router<AppState> {
 }
 
 /// `POST /v1/jobs/lease`.
-#[derive(Debug, Deserialize, Serialize)]
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
 pub(crate) struct LeaseRequest {
     /// The worker's id.
     pub worker: String,
@@ -44,7 +44,10 @@ pub(crate) struct LeaseRequest {
     pub wait_secs: u64,
 }
 
-async fn lease(
+#[utoipa::path(post, path = "/v1/jobs/lease", tag = "worker protocol", request_body = LeaseRequest,
+    security(("bearer" = ["worker"])),
+    responses((status = 200, description = "A leased job", body = Lease), (status = 204, description = "No job within wait_secs"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn lease(
     State(state): State<AppState>,
     _caller: Need<Worker>,
     Body(req): Body<LeaseRequest>,
@@ -79,7 +82,7 @@ async fn lease(
 }
 
 /// Token and progress.
-#[derive(Debug, Deserialize, Serialize)]
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
 pub(crate) struct HeartbeatRequest {
     /// The lease token.
     pub token: String,
@@ -89,13 +92,16 @@ pub(crate) struct HeartbeatRequest {
 }
 
 /// Whether the worker should stop.
-#[derive(Debug, Deserialize, Serialize)]
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
 pub(crate) struct HeartbeatReply {
     /// The bake was cancelled: stop and drop the job.
     pub stop: bool,
 }
 
-async fn heartbeat(
+#[utoipa::path(post, path = "/v1/jobs/{id}/heartbeat", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = HeartbeatRequest,
+    security(("bearer" = ["worker"])),
+    responses((status = 200, description = "Lease extended", body = HeartbeatReply), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn heartbeat(
     State(state): State<AppState>,
     _caller: Need<Worker>,
     ApiPath(id): ApiPath<i64>,
@@ -109,7 +115,7 @@ async fn heartbeat(
 }
 
 /// A checkpoint whose blob is stored.
-#[derive(Debug, Deserialize, Serialize)]
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
 pub(crate) struct CheckpointRequest {
     /// The lease token.
     pub token: String,
@@ -118,7 +124,10 @@ pub(crate) struct CheckpointRequest {
     pub checkpoint: CheckpointRef,
 }
 
-async fn checkpoint(
+#[utoipa::path(post, path = "/v1/jobs/{id}/checkpoint", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = CheckpointRequest,
+    security(("bearer" = ["worker"])),
+    responses((status = 204, description = "Saved"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn checkpoint(
     State(state): State<AppState>,
     _caller: Need<Worker>,
     ApiPath(id): ApiPath<i64>,
@@ -133,7 +142,7 @@ async fn checkpoint(
 }
 
 /// Outputs whose blobs are stored.
-#[derive(Debug, Deserialize, Serialize)]
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
 pub(crate) struct CompleteRequest {
     /// The lease token.
     pub token: String,
@@ -153,7 +162,10 @@ async fn require_blob(state: &AppState, digest: &str) -> ApiResult<()> {
     Ok(())
 }
 
-async fn complete(
+#[utoipa::path(post, path = "/v1/jobs/{id}/complete", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = CompleteRequest,
+    security(("bearer" = ["worker"])),
+    responses((status = 204, description = "Completed"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn complete(
     State(state): State<AppState>,
     _caller: Need<Worker>,
     ApiPath(id): ApiPath<i64>,
@@ -171,7 +183,7 @@ async fn complete(
 }
 
 /// Why an attempt failed.
-#[derive(Debug, Deserialize, Serialize)]
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
 pub(crate) struct FailRequest {
     /// The lease token.
     pub token: String,
@@ -181,7 +193,10 @@ pub(crate) struct FailRequest {
     pub retryable: bool,
 }
 
-async fn fail(
+#[utoipa::path(post, path = "/v1/jobs/{id}/fail", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = FailRequest,
+    security(("bearer" = ["worker"])),
+    responses((status = 204, description = "Recorded"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn fail(
     State(state): State<AppState>,
     _caller: Need<Worker>,
     ApiPath(id): ApiPath<i64>,
@@ -197,13 +212,16 @@ async fn fail(
 }
 
 /// The lease token alone.
-#[derive(Debug, Deserialize, Serialize)]
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
 pub(crate) struct TokenRequest {
     /// The lease token.
     pub token: String,
 }
 
-async fn release(
+#[utoipa::path(post, path = "/v1/jobs/{id}/release", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = TokenRequest,
+    security(("bearer" = ["worker"])),
+    responses((status = 204, description = "Given back"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn release(
     State(state): State<AppState>,
     _caller: Need<Worker>,
     ApiPath(id): ApiPath<i64>,
@@ -214,7 +232,10 @@ async fn release(
     Ok(StatusCode::NO_CONTENT)
 }
 
-async fn get_blob(
+#[utoipa::path(get, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = String, Path, description = "sha256 of the bytes")),
+    security(("bearer" = ["worker"])),
+    responses((status = 200, description = "The bytes", content_type = "application/octet-stream", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn get_blob(
     State(state): State<AppState>,
     _caller: Need<Worker>,
     ApiPath(digest): ApiPath<String>,
@@ -227,7 +248,10 @@ async fn get_blob(
     Ok(bytes.into_response())
 }
 
-async fn put_blob(
+#[utoipa::path(put, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = String, Path, description = "sha256 of the bytes")), request_body(content = Vec<u8>, content_type = "application/octet-stream"),
+    security(("bearer" = ["worker"])),
+    responses((status = 204, description = "Stored"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn put_blob(
     State(state): State<AppState>,
     _caller: Need<Worker>,
     ApiPath(digest): ApiPath<String>,

@@ -1,11 +1,11 @@
 //! The HTTP API under `/v1`, one file per resource, each route beside its
 //! handler (STYLE: axum examples).
 
-mod assets;
-mod bakes;
-mod jobs;
-mod system;
-mod uploads;
+pub(crate) mod assets;
+pub(crate) mod bakes;
+pub(crate) mod jobs;
+pub(crate) mod system;
+pub(crate) mod uploads;
 
 use std::time::Duration;
 

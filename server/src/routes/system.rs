@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use crate::{
     app::AppState,
     auth::{Admin, Need, Read, new_token, token_hash},
-    error::{ApiError, ApiResult},
+    error::{ApiError, ApiResult, Problem},
     extract::Body,
     store::WorkerRow,
 };
@@ -22,12 +22,15 @@ pub(super) fn router() -> Router<AppState> {
     Router::new()
         .route("/v1/workers", get(workers))
         .route("/v1/tokens", post(create_token))
-        .route("/healthz", get(|| async { "ok" }))
+        .route("/healthz", get(healthz))
         .route("/readyz", get(ready))
         .route("/metrics", get(metrics))
 }
 
-async fn workers(
+#[utoipa::path(get, path = "/v1/workers", tag = "system",
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "Workers, most recently seen first", body = Vec<WorkerRow>), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn workers(
     State(state): State<AppState>,
     _caller: Need<Read>,
 ) -> ApiResult<Json<Vec<WorkerRow>>> {
@@ -35,8 +38,8 @@ async fn workers(
 }
 
 /// `POST /v1/tokens`.
-#[derive(Debug, Deserialize, Serialize)]
-pub(crate) struct TokenRequest {
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
+pub(crate) struct NewTokenRequest {
     /// A name to recognise it by.
     pub name: String,
     /// Its scopes.
@@ -44,7 +47,7 @@ pub(crate) struct TokenRequest {
 }
 
 /// The new token: shown once, stored hashed.
-#[derive(Debug, Deserialize, Serialize)]
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
 pub(crate) struct NewToken {
     /// The secret.
     pub token: String,
@@ -54,10 +57,13 @@ pub(crate) struct NewToken {
     pub scopes: Vec<String>,
 }
 
-async fn create_token(
+#[utoipa::path(post, path = "/v1/tokens", tag = "system", request_body = NewTokenRequest,
+    security(("bearer" = ["admin"])),
+    responses((status = 201, description = "The token, shown once", body = NewToken), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn create_token(
     State(state): State<AppState>,
     _caller: Need<Admin>,
-    Body(req): Body<TokenRequest>,
+    Body(req): Body<NewTokenRequest>,
 ) -> ApiResult<(StatusCode, Json<NewToken>)> {
     if let Some(bad) = req
         .scopes
@@ -84,7 +90,15 @@ async fn create_token(
     ))
 }
 
-async fn ready(State(state): State<AppState>) -> ApiResult<&'static str> {
+/// Liveness: the process answers (no token: load balancers call it).
+#[utoipa::path(get, path = "/healthz", tag = "system", responses((status = 200, description = "Alive", body = String)))]
+pub(crate) async fn healthz() -> &'static str {
+    "ok"
+}
+
+/// Readiness: the database answers (no token).
+#[utoipa::path(get, path = "/readyz", tag = "system", responses((status = 200, description = "Ready", body = String), (status = 500, description = "The database does not answer", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn ready(State(state): State<AppState>) -> ApiResult<&'static str> {
     state
         .store
         .ping()
@@ -93,7 +107,13 @@ async fn ready(State(state): State<AppState>) -> ApiResult<&'static str> {
     Ok("ready")
 }
 
-async fn metrics(State(state): State<AppState>, _caller: Need<Read>) -> ApiResult<Response> {
+#[utoipa::path(get, path = "/metrics", tag = "system",
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "Prometheus text: jobs by state, lease expiries, request latencies", content_type = "application/openmetrics-text", body = String), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn metrics(
+    State(state): State<AppState>,
+    _caller: Need<Read>,
+) -> ApiResult<Response> {
     let (jobs, expiries) = state.store.queue_stats().await?;
     let mut out = String::new();
     out.push_str("# HELP aobake_jobs Jobs by state.\n# TYPE aobake_jobs gauge\n");

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use crate::{
     app::AppState,
     auth::{Need, Read, Submit},
-    error::{ApiError, ApiResult},
+    error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery},
     store::UploadRow,
 };
@@ -30,13 +30,15 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/characters", post(post_character))
         .route("/v1/characters/{digest}", get(get_upload))
         .route("/v1/clips", post(post_clips))
-        .route("/v1/clips/{digest}", get(get_upload))
+        .route("/v1/clips/{digest}", get(get_clips))
 }
 
 /// What an upload answers.
-#[derive(Debug, Serialize, Deserialize)]
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
 pub(crate) struct Uploaded {
     digest: String,
+    /// The `aobake inspect` summary (clips, vertices, joints, warnings).
+    #[schema(value_type = Object)]
     summary: serde_json::Value,
 }
 
@@ -134,7 +136,10 @@ async fn store_upload(
     Ok((status, Json(Uploaded { digest, summary })))
 }
 
-async fn post_character(
+#[utoipa::path(post, path = "/v1/characters", tag = "uploads", request_body(content = Vec<u8>, description = "A .glb (model/gltf-binary), a bundle (application/vnd.aobake.bundle) or multipart/form-data with a .gltf and its side files", content_type = "model/gltf-binary"),
+    security(("bearer" = ["submit"])),
+    responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn post_character(
     State(state): State<AppState>,
     _caller: Need<Submit>,
     req: Request,
@@ -154,13 +159,16 @@ async fn post_character(
     store_upload(&state, &upload, "character", summary).await
 }
 
-#[derive(Debug, Deserialize)]
-struct ClipsQuery {
+#[derive(Debug, Deserialize, utoipa::ToSchema)]
+pub(crate) struct ClipsQuery {
     /// The character whose skeleton the clips must drive.
     character: String,
 }
 
-async fn post_clips(
+#[utoipa::path(post, path = "/v1/clips", tag = "uploads", params(("character" = String, Query, description = "The character whose skeleton the clips drive")), request_body(content = Vec<u8>, description = "A glTF file of animations", content_type = "model/gltf-binary"),
+    security(("bearer" = ["submit"])),
+    responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn post_clips(
     State(state): State<AppState>,
     _caller: Need<Submit>,
     ApiQuery(q): ApiQuery<ClipsQuery>,
@@ -213,7 +221,10 @@ pub(crate) async fn load_upload(
     UploadBytes::from_blob(&blob, row.bundle).map_err(|e| ApiError::Internal(e.to_string()))
 }
 
-async fn get_upload(
+#[utoipa::path(get, path = "/v1/characters/{digest}", tag = "uploads", params(("digest" = String, Path, description = "sha256 of the upload")),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "The upload", body = UploadRow), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn get_upload(
     State(state): State<AppState>,
     _caller: Need<Read>,
     ApiPath(digest): ApiPath<String>,
@@ -222,4 +233,15 @@ async fn get_upload(
     Ok(Json(state.store.upload(&digest).await?.ok_or_else(
         || ApiError::NotFound(format!("no upload {digest}")),
     )?))
+}
+
+#[utoipa::path(get, path = "/v1/clips/{digest}", tag = "uploads", params(("digest" = String, Path, description = "sha256 of the upload")),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "The upload", body = UploadRow), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+pub(crate) async fn get_clips(
+    state: State<AppState>,
+    caller: Need<Read>,
+    digest: ApiPath<String>,
+) -> ApiResult<Json<UploadRow>> {
+    get_upload(state, caller, digest).await
 }

@@ -54,7 +54,7 @@ pub enum StoreError {
 pub type Result<T, E = StoreError> = std::result::Result<T, E>;
 
 /// A stored upload.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct UploadRow {
     /// sha256 of the upload (its blob's digest).
     pub digest: String,
@@ -65,11 +65,12 @@ pub struct UploadRow {
     /// Blob size.
     pub bytes: i64,
     /// The `inspect` summary.
+    #[schema(value_type = Object)]
     pub summary: serde_json::Value,
 }
 
 /// A bake's state.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum BakeState {
     /// Jobs wait for workers.
@@ -117,7 +118,7 @@ impl BakeState {
 }
 
 /// A job's state (River's names, with `dead` for discarded).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum JobState {
     /// Waiting for its dependencies.
@@ -170,7 +171,7 @@ impl JobState {
 }
 
 /// A bake as stored.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct BakeRow {
     /// Its id.
     pub id: i64,
@@ -183,6 +184,7 @@ pub struct BakeRow {
     /// Method name.
     pub method: String,
     /// Fully defaulted parameters.
+    #[schema(value_type = Object)]
     pub params: serde_json::Value,
     /// State.
     pub state: BakeState,
@@ -213,7 +215,7 @@ pub struct BakeRow {
 }
 
 /// A job as stored.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct JobRow {
     /// Its id.
     pub id: i64,
@@ -224,6 +226,7 @@ pub struct JobRow {
     /// `sample`, `fit`, …
     pub kind: String,
     /// The job spec (core's `JobSpec`).
+    #[schema(value_type = Object)]
     pub spec: serde_json::Value,
     /// Units of work.
     pub work: i64,
@@ -248,7 +251,7 @@ pub struct JobRow {
 }
 
 /// A checkpoint saved as a blob.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct CheckpointRef {
     /// Named step.
     pub step: String,
@@ -259,7 +262,7 @@ pub struct CheckpointRef {
 }
 
 /// A named output blob of a job.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct OutputRef {
     /// Output name.
     pub name: String,
@@ -302,7 +305,7 @@ pub struct NewBake {
 }
 
 /// A leased job and what the worker needs to run it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Lease {
     /// The job.
     pub job: JobRow,
@@ -319,7 +322,7 @@ pub struct Lease {
 }
 
 /// An upload a job reads.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct UploadRef {
     /// Blob digest.
     pub digest: String,
@@ -328,16 +331,17 @@ pub struct UploadRef {
 }
 
 /// What a completing worker hands in.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Completion {
     /// Output blobs, already stored.
     pub outputs: Vec<OutputRef>,
     /// Stage seconds, for the report.
+    #[schema(value_type = Object)]
     pub timings: serde_json::Value,
 }
 
 /// Changes to a bake's course.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Action {
     /// Stop it for good.
@@ -351,7 +355,7 @@ pub enum Action {
 }
 
 /// A worker as last seen.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct WorkerRow {
     /// Its id.
     pub id: String,

@@ -5,47 +5,97 @@
 use aobake_e2e::{Options, TestEnv};
 use serde_json::json;
 
-/// Every authenticated route, the scope it needs, and a body.
-fn routes() -> Vec<(&'static str, String, &'static str)> {
+/// Every authenticated operation of the API and the scope it needs.
+const ROUTES: &[(&str, &str, &str)] = &[
+    ("POST", "/v1/characters", "submit"),
+    ("GET", "/v1/characters/{digest}", "read"),
+    ("GET", "/v1/characters/{digest}/bakes", "read"),
+    ("POST", "/v1/clips", "submit"),
+    ("GET", "/v1/clips/{digest}", "read"),
+    ("POST", "/v1/bakes", "submit"),
+    ("GET", "/v1/bakes", "read"),
+    ("GET", "/v1/bakes/{id}", "read"),
+    ("PATCH", "/v1/bakes/{id}", "submit"),
+    ("GET", "/v1/bakes/{id}/report", "read"),
+    ("GET", "/v1/bakes/{id}/events", "read"),
+    ("POST", "/v1/bakes/{id}/{action}", "submit"),
+    ("GET", "/v1/cache/{key}", "read"),
+    ("GET", "/v1/assets/{digest}", "read"),
+    ("POST", "/v1/jobs/lease", "worker"),
+    ("POST", "/v1/jobs/{id}/heartbeat", "worker"),
+    ("POST", "/v1/jobs/{id}/checkpoint", "worker"),
+    ("POST", "/v1/jobs/{id}/complete", "worker"),
+    ("POST", "/v1/jobs/{id}/fail", "worker"),
+    ("POST", "/v1/jobs/{id}/release", "worker"),
+    ("GET", "/v1/blobs/{digest}", "worker"),
+    ("PUT", "/v1/blobs/{digest}", "worker"),
+    ("GET", "/v1/workers", "read"),
+    ("POST", "/v1/tokens", "admin"),
+    ("GET", "/metrics", "read"),
+];
+
+/// Unauthenticated on purpose: load balancers probe them.
+const PUBLIC: &[(&str, &str)] = &[("GET", "/healthz"), ("GET", "/readyz")];
+
+/// Concrete paths for a route template (every action of `{action}`).
+fn concrete(template: &str) -> Vec<String> {
     let d = "a".repeat(64);
-    vec![
-        ("POST", "/v1/characters".into(), "submit"),
-        ("GET", format!("/v1/characters/{d}"), "read"),
-        ("GET", format!("/v1/characters/{d}/bakes"), "read"),
-        ("POST", format!("/v1/clips?character={d}"), "submit"),
-        ("GET", format!("/v1/clips/{d}"), "read"),
-        ("POST", "/v1/bakes".into(), "submit"),
-        ("GET", "/v1/bakes".into(), "read"),
-        ("GET", "/v1/bakes/1".into(), "read"),
-        ("PATCH", "/v1/bakes/1".into(), "submit"),
-        ("GET", "/v1/bakes/1/report".into(), "read"),
-        ("GET", "/v1/bakes/1/events".into(), "read"),
-        ("POST", "/v1/bakes/1/cancel".into(), "submit"),
-        ("POST", "/v1/bakes/1/pause".into(), "submit"),
-        ("POST", "/v1/bakes/1/resume".into(), "submit"),
-        ("POST", "/v1/bakes/1/retry".into(), "submit"),
-        ("GET", format!("/v1/cache/{d}"), "read"),
-        ("GET", format!("/v1/assets/{d}"), "read"),
-        ("POST", "/v1/jobs/lease".into(), "worker"),
-        ("POST", "/v1/jobs/1/heartbeat".into(), "worker"),
-        ("POST", "/v1/jobs/1/checkpoint".into(), "worker"),
-        ("POST", "/v1/jobs/1/complete".into(), "worker"),
-        ("POST", "/v1/jobs/1/fail".into(), "worker"),
-        ("POST", "/v1/jobs/1/release".into(), "worker"),
-        ("GET", format!("/v1/blobs/{d}"), "worker"),
-        ("PUT", format!("/v1/blobs/{d}"), "worker"),
-        ("GET", "/v1/workers".into(), "read"),
-        ("POST", "/v1/tokens".into(), "admin"),
-        ("GET", "/metrics".into(), "read"),
-    ]
+    let p = template
+        .replace("{digest}", &d)
+        .replace("{key}", &d)
+        .replace("{id}", "1");
+    let p = if p == "/v1/clips" {
+        format!("/v1/clips?character={d}")
+    } else {
+        p
+    };
+    if p.contains("{action}") {
+        ["cancel", "pause", "resume", "retry"]
+            .iter()
+            .map(|a| p.replace("{action}", a))
+            .collect()
+    } else {
+        vec![p]
+    }
 }
 
-/// The route table of this test and of the spec agree.
-pub(crate) fn covered() -> Vec<(String, String)> {
-    routes()
-        .into_iter()
-        .map(|(m, p, _)| (m.to_owned(), p))
-        .collect()
+/// The operations `api-spec/openapi.yaml` lists (method, path).
+fn spec_operations() -> Vec<(String, String)> {
+    let spec = std::fs::read_to_string(aobake_e2e::repo().join("api-spec/openapi.yaml")).unwrap();
+    let mut out = Vec::new();
+    let mut in_paths = false;
+    let mut path = String::new();
+    for line in spec.lines() {
+        if !line.starts_with(' ') {
+            in_paths = line == "paths:";
+            continue;
+        }
+        if !in_paths {
+            continue;
+        }
+        if let Some(p) = line.strip_prefix("  /") {
+            path = format!("/{}", p.trim_end_matches(':'));
+        } else if let Some(m) = line.strip_prefix("    ")
+            && !m.starts_with(' ')
+            && ["get:", "post:", "put:", "patch:", "delete:"].contains(&m)
+        {
+            out.push((m.trim_end_matches(':').to_uppercase(), path.clone()));
+        }
+    }
+    out
+}
+
+#[test]
+fn the_table_covers_every_operation_of_the_spec() {
+    let mut spec = spec_operations();
+    spec.sort();
+    let mut table: Vec<(String, String)> = ROUTES
+        .iter()
+        .map(|(m, p, _)| (m.to_string(), p.to_string()))
+        .chain(PUBLIC.iter().map(|(m, p)| (m.to_string(), p.to_string())))
+        .collect();
+    table.sort();
+    assert_eq!(spec, table);
 }
 
 #[test]
@@ -56,30 +106,32 @@ fn every_route_refuses_missing_wrong_and_unscoped_tokens() {
         .map(|s| (s, env.token(&[s])))
         .collect();
     let body = json!({});
-    for (method, path, scope) in routes() {
-        for (token, what) in [("", "no token"), ("not-a-token", "a wrong token")] {
-            let (status, answer) = env
-                .request(method, &path, token, Some(body.clone()))
-                .unwrap();
-            assert_eq!(status, 401, "{method} {path} with {what}: {answer}");
-            assert_eq!(answer["code"], "unauthorized");
-        }
-        for (s, token) in &tokens {
-            let (status, answer) = env
-                .request(method, &path, token, Some(body.clone()))
-                .unwrap();
-            if *s == scope {
-                assert!(
-                    status != 401 && status != 403,
-                    "{method} {path} refused its own scope {s}: {status} {answer}"
-                );
-            } else {
-                assert_eq!(status, 403, "{method} {path} with a {s} token: {answer}");
-                assert_eq!(answer["code"], "forbidden");
+    for (method, template, scope) in ROUTES.iter().copied() {
+        for path in concrete(template) {
+            for (token, what) in [("", "no token"), ("not-a-token", "a wrong token")] {
+                let (status, answer) = env
+                    .request(method, &path, token, Some(body.clone()))
+                    .unwrap();
+                assert_eq!(status, 401, "{method} {path} with {what}: {answer}");
+                assert_eq!(answer["code"], "unauthorized");
+            }
+            for (s, token) in &tokens {
+                let (status, answer) = env
+                    .request(method, &path, token, Some(body.clone()))
+                    .unwrap();
+                if *s == scope {
+                    assert!(
+                        status != 401 && status != 403,
+                        "{method} {path} refused its own scope {s}: {status} {answer}"
+                    );
+                } else {
+                    assert_eq!(status, 403, "{method} {path} with a {s} token: {answer}");
+                    assert_eq!(answer["code"], "forbidden");
+                }
             }
         }
     }
-    for probe in ["/healthz", "/readyz"] {
-        assert_eq!(env.request("GET", probe, "", None).unwrap().0, 200);
+    for (method, probe) in PUBLIC {
+        assert_eq!(env.request(method, probe, "", None).unwrap().0, 200);
     }
 }
