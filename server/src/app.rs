@@ -219,6 +219,20 @@ async fn declared_length(State(limit): State<u64>, req: Request, next: Next) -> 
     next.run(req).await
 }
 
+/// Runs the handler on its own task, so that a client that disconnects
+/// (or a timeout) cannot cancel it half-way: a store operation cancelled
+/// inside `BEGIN` would leave its pooled connection in a transaction
+/// (sqlx's `begin` is not cancel-safe, transact-rs/sqlx#4385), and an
+/// accepted request must finish what it started.
+async fn to_completion(req: Request, next: Next) -> Response {
+    match tokio::spawn(next.run(req)).await {
+        Ok(res) => res,
+        Err(e) => axum::response::IntoResponse::into_response(ApiError::Internal(format!(
+            "the handler failed: {e}"
+        ))),
+    }
+}
+
 /// Every route, with request ids, limits and metrics.
 pub fn app(state: AppState) -> Router {
     let request_id = HeaderName::from_static("x-request-id");
@@ -226,6 +240,7 @@ pub fn app(state: AppState) -> Router {
     let metrics = state.metrics.clone();
     Router::new()
         .merge(routes::router(limits.request_timeout))
+        .layer(middleware::from_fn(to_completion))
         .layer(middleware::from_fn_with_state(metrics, record_latency))
         .layer(DefaultBodyLimit::max(limits.max_body_bytes as usize))
         .layer(middleware::from_fn_with_state(

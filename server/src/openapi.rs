@@ -10,6 +10,46 @@ use utoipa::{
 
 use crate::routes::{assets, bakes, jobs, system, uploads};
 
+/// A sha256 digest in lower-case hex: how uploads, blobs, assets and bake
+/// keys are named.
+#[derive(Debug)]
+pub(crate) struct Digest;
+
+impl utoipa::PartialSchema for Digest {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        utoipa::openapi::ObjectBuilder::new()
+            .schema_type(utoipa::openapi::schema::Type::String)
+            .pattern(Some("^[0-9a-f]{64}$"))
+            .description(Some("sha256, lower-case hex"))
+            .into()
+    }
+}
+
+impl utoipa::ToSchema for Digest {}
+
+/// The method names, from core's list.
+pub(crate) fn method_schema() -> utoipa::openapi::Object {
+    utoipa::openapi::ObjectBuilder::new()
+        .schema_type(utoipa::openapi::schema::Type::String)
+        .enum_values(Some(
+            aobake_core::method::Method::ALL.map(|m| m.name()).to_vec(),
+        ))
+        .description(Some("The method"))
+        .build()
+}
+
+/// Token scopes.
+pub(crate) fn scopes_schema() -> utoipa::openapi::Array {
+    utoipa::openapi::ArrayBuilder::new()
+        .items(
+            utoipa::openapi::ObjectBuilder::new()
+                .schema_type(utoipa::openapi::schema::Type::String)
+                .enum_values(Some(["read", "submit", "worker", "admin"])),
+        )
+        .min_items(Some(1))
+        .build()
+}
+
 struct BearerAuth;
 
 impl Modify for BearerAuth {
@@ -66,6 +106,7 @@ impl Modify for BearerAuth {
         system::ready,
         system::metrics,
     ),
+    components(schemas(Digest)),
     modifiers(&BearerAuth),
     tags(
         (name = "uploads", description = "Characters and clips, content-addressed"),

@@ -28,6 +28,7 @@ use crate::{
     auth::{Need, Read, Submit},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery, Body},
+    openapi::Digest,
     store::{Action, BakeRow, JobRow, NewBake, NewJob},
 };
 
@@ -46,9 +47,14 @@ pub(super) fn router() -> Router<AppState> {
 #[derive(Debug, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct BakeRequest {
+    /// The character's upload digest.
+    #[schema(value_type = String, pattern = "^[0-9a-f]{64}$")]
     character: String,
+    /// Clip upload digests.
     #[serde(default)]
+    #[schema(value_type = Vec<String>)]
     clips: Vec<String>,
+    #[schema(schema_with = crate::openapi::method_schema)]
     method: String,
     /// Overrides of the method's default parameters (`aobake params
     /// --method M` lists them), by name; dotted names or nested objects
@@ -172,10 +178,28 @@ pub(crate) async fn submit(
     Ok((StatusCode::ACCEPTED, Json(view(bake, None))).into_response())
 }
 
-#[derive(Debug, Deserialize, utoipa::ToSchema, utoipa::IntoParams)]
+/// Filters of bake lists.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(crate) struct ListQuery {
+    /// Only bakes of this method.
     method: Option<String>,
+    /// At most this many (1 to 1000, default 100).
+    #[param(minimum = 1, maximum = 1000)]
     limit: Option<i64>,
+}
+
+impl ListQuery {
+    fn limit(&self) -> ApiResult<i64> {
+        match self.limit {
+            None => Ok(100),
+            Some(n) if (1..=1000).contains(&n) => Ok(n),
+            Some(n) => Err(ApiError::bad(
+                "bad_query",
+                format!("limit must be between 1 and 1000, not {n}"),
+            )),
+        }
+    }
 }
 
 #[utoipa::path(get, path = "/v1/bakes", tag = "bakes", params(ListQuery),
@@ -186,12 +210,12 @@ pub(crate) async fn list(
     _caller: Need<Read>,
     ApiQuery(q): ApiQuery<ListQuery>,
 ) -> ApiResult<Json<Vec<BakeView>>> {
-    let limit = q.limit.unwrap_or(100).clamp(1, 1000);
+    let limit = q.limit()?;
     let bakes = state.store.bakes(None, q.method.as_deref(), limit).await?;
     Ok(Json(bakes.into_iter().map(|b| view(b, None)).collect()))
 }
 
-#[utoipa::path(get, path = "/v1/characters/{digest}/bakes", tag = "bakes", params(("digest" = String, Path, description = "Character digest"), ListQuery),
+#[utoipa::path(get, path = "/v1/characters/{digest}/bakes", tag = "bakes", params(("digest" = Digest, Path, description = "Character digest"), ListQuery),
     security(("bearer" = ["read"])),
     responses((status = 200, description = "Bakes of the character, newest first", body = Vec<BakeView>), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
 pub(crate) async fn versions(
@@ -201,7 +225,7 @@ pub(crate) async fn versions(
     ApiQuery(q): ApiQuery<ListQuery>,
 ) -> ApiResult<Json<Vec<BakeView>>> {
     crate::blobs::check_digest(&digest)?;
-    let limit = q.limit.unwrap_or(100).clamp(1, 1000);
+    let limit = q.limit()?;
     let bakes = state
         .store
         .bakes(Some(&digest), q.method.as_deref(), limit)
@@ -298,7 +322,7 @@ pub(crate) async fn control(
     Ok(Json(view(bake, None)))
 }
 
-#[utoipa::path(get, path = "/v1/cache/{key}", tag = "bakes", params(("key" = String, Path, description = "Bake key")),
+#[utoipa::path(get, path = "/v1/cache/{key}", tag = "bakes", params(("key" = Digest, Path, description = "Bake key")),
     security(("bearer" = ["read"])),
     responses((status = 200, description = "The finished bake for this key", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
 pub(crate) async fn cache(

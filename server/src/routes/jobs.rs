@@ -20,6 +20,7 @@ use crate::{
     auth::{Need, Worker},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, Body},
+    openapi::Digest,
     store::{CheckpointRef, Completion, Lease},
 };
 
@@ -38,9 +39,11 @@ pub(super) fn router() -> Router<AppState> {
 #[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
 pub(crate) struct LeaseRequest {
     /// The worker's id.
+    #[schema(min_length = 1, max_length = 200)]
     pub worker: String,
-    /// Seconds to wait for a job before answering 204.
+    /// Seconds to wait for a job before answering 204 (at most 60).
     #[serde(default)]
+    #[schema(maximum = 60)]
     pub wait_secs: u64,
 }
 
@@ -232,7 +235,7 @@ pub(crate) async fn release(
     Ok(StatusCode::NO_CONTENT)
 }
 
-#[utoipa::path(get, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = String, Path, description = "sha256 of the bytes")),
+#[utoipa::path(get, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = Digest, Path, description = "sha256 of the bytes")),
     security(("bearer" = ["worker"])),
     responses((status = 200, description = "The bytes", content_type = "application/octet-stream", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_blob(
@@ -248,7 +251,7 @@ pub(crate) async fn get_blob(
     Ok(bytes.into_response())
 }
 
-#[utoipa::path(put, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = String, Path, description = "sha256 of the bytes")), request_body(content = Vec<u8>, content_type = "application/octet-stream"),
+#[utoipa::path(put, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = Digest, Path, description = "sha256 of the bytes")), request_body(content = Vec<u8>, content_type = "application/octet-stream"),
     security(("bearer" = ["worker"])),
     responses((status = 204, description = "Stored"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
 pub(crate) async fn put_blob(

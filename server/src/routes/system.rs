@@ -43,6 +43,7 @@ pub(crate) struct NewTokenRequest {
     /// A name to recognise it by.
     pub name: String,
     /// Its scopes.
+    #[schema(schema_with = crate::openapi::scopes_schema)]
     pub scopes: Vec<String>,
 }
 
@@ -65,6 +66,12 @@ pub(crate) async fn create_token(
     _caller: Need<Admin>,
     Body(req): Body<NewTokenRequest>,
 ) -> ApiResult<(StatusCode, Json<NewToken>)> {
+    if req.scopes.is_empty() {
+        return Err(ApiError::bad(
+            "bad_scope",
+            "a token needs at least one scope",
+        ));
+    }
     if let Some(bad) = req
         .scopes
         .iter()

@@ -22,6 +22,7 @@ use crate::{
     auth::{Need, Read, Submit},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery},
+    openapi::Digest,
     store::UploadRow,
 };
 
@@ -221,7 +222,7 @@ pub(crate) async fn load_upload(
     UploadBytes::from_blob(&blob, row.bundle).map_err(|e| ApiError::Internal(e.to_string()))
 }
 
-#[utoipa::path(get, path = "/v1/characters/{digest}", tag = "uploads", params(("digest" = String, Path, description = "sha256 of the upload")),
+#[utoipa::path(get, path = "/v1/characters/{digest}", tag = "uploads", params(("digest" = Digest, Path, description = "sha256 of the upload")),
     security(("bearer" = ["read"])),
     responses((status = 200, description = "The upload", body = UploadRow), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_upload(
@@ -235,7 +236,7 @@ pub(crate) async fn get_upload(
     )?))
 }
 
-#[utoipa::path(get, path = "/v1/clips/{digest}", tag = "uploads", params(("digest" = String, Path, description = "sha256 of the upload")),
+#[utoipa::path(get, path = "/v1/clips/{digest}", tag = "uploads", params(("digest" = Digest, Path, description = "sha256 of the upload")),
     security(("bearer" = ["read"])),
     responses((status = 200, description = "The upload", body = UploadRow), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_clips(

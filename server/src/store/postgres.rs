@@ -20,6 +20,27 @@ use super::{
     QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow,
 };
 
+/// Runs `$body` (an async block that may `return` early) in the
+/// transaction `$begin`: commits when it returns `Ok`, rolls back
+/// explicitly when it fails, so the pooled connection never goes back to
+/// the pool inside a transaction.
+macro_rules! in_tx {
+    ($begin:expr, |$tx:ident| $body:block) => {{
+        let mut $tx = $begin;
+        let result: Result<_> = async { $body }.await;
+        match result {
+            Ok(value) => {
+                $tx.commit().await?;
+                Ok(value)
+            }
+            Err(e) => {
+                let _ = $tx.rollback().await;
+                Err(e)
+            }
+        }
+    }};
+}
+
 /// The database clock, in milliseconds since the epoch.
 const NOW: &str = "(extract(epoch FROM clock_timestamp()) * 1000)::bigint";
 
@@ -165,56 +186,56 @@ impl Store for PgStore {
     }
 
     async fn create_bake(&self, b: &NewBake) -> Result<BakeRow> {
-        let mut tx = self.pool.begin().await?;
-        let total: i64 = b.jobs.iter().map(|j| j.work).sum();
-        let id: i64 = sqlx::query_scalar(&format!(
-            "INSERT INTO bakes (key, character, clips, method, params, state, priority, total_work, jobs_total, created_at, updated_at) VALUES ($1, $2, $3, $4, $5, 'queued', $6, $7, $8, {NOW}, {NOW}) RETURNING id"
-        ))
-        .bind(&b.key)
-        .bind(&b.character)
-        .bind(serde_json::to_string(&b.clips)?)
-        .bind(&b.method)
-        .bind(b.params.to_string())
-        .bind(b.priority)
-        .bind(total)
-        .bind(b.jobs.len() as i64)
-        .fetch_one(&mut *tx)
-        .await?;
-        let mut ids = Vec::with_capacity(b.jobs.len());
-        for (i, j) in b.jobs.iter().enumerate() {
-            let state = if j.deps.is_empty() {
-                "available"
-            } else {
-                "blocked"
-            };
-            let job: i64 = sqlx::query_scalar(
-                "INSERT INTO jobs (bake_id, idx, kind, spec, work, state, max_attempts) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id",
-            )
-            .bind(id)
-            .bind(i as i64)
-            .bind(&j.kind)
-            .bind(j.spec.to_string())
-            .bind(j.work)
-            .bind(state)
-            .bind(b.max_attempts)
+        in_tx!(self.pool.begin().await?, |tx| {
+            let total: i64 = b.jobs.iter().map(|j| j.work).sum();
+            let id: i64 = sqlx::query_scalar(&format!(
+                "INSERT INTO bakes (key, character, clips, method, params, state, priority, total_work, jobs_total, created_at, updated_at) VALUES ($1, $2, $3, $4, $5, 'queued', $6, $7, $8, {NOW}, {NOW}) RETURNING id"
+            ))
+            .bind(&b.key)
+            .bind(&b.character)
+            .bind(serde_json::to_string(&b.clips)?)
+            .bind(&b.method)
+            .bind(b.params.to_string())
+            .bind(b.priority)
+            .bind(total)
+            .bind(b.jobs.len() as i64)
             .fetch_one(&mut *tx)
             .await?;
-            for &d in &j.deps {
-                let dep = *ids.get(d).ok_or_else(|| {
-                    StoreError::Conflict(format!("job {i} depends on a later job {d}"))
-                })?;
-                sqlx::query("INSERT INTO job_deps (job_id, dep_id) VALUES ($1, $2)")
-                    .bind(job)
-                    .bind(dep)
-                    .execute(&mut *tx)
-                    .await?;
+            let mut ids = Vec::with_capacity(b.jobs.len());
+            for (i, j) in b.jobs.iter().enumerate() {
+                let state = if j.deps.is_empty() {
+                    "available"
+                } else {
+                    "blocked"
+                };
+                let job: i64 = sqlx::query_scalar(
+                    "INSERT INTO jobs (bake_id, idx, kind, spec, work, state, max_attempts) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id",
+                )
+                .bind(id)
+                .bind(i as i64)
+                .bind(&j.kind)
+                .bind(j.spec.to_string())
+                .bind(j.work)
+                .bind(state)
+                .bind(b.max_attempts)
+                .fetch_one(&mut *tx)
+                .await?;
+                for &d in &j.deps {
+                    let dep = *ids.get(d).ok_or_else(|| {
+                        StoreError::Conflict(format!("job {i} depends on a later job {d}"))
+                    })?;
+                    sqlx::query("INSERT INTO job_deps (job_id, dep_id) VALUES ($1, $2)")
+                        .bind(job)
+                        .bind(dep)
+                        .execute(&mut *tx)
+                        .await?;
+                }
+                ids.push(job);
             }
-            ids.push(job);
-        }
-        let bake = bake_by_id(&mut tx, id).await?;
-        Self::wake(&mut tx).await?;
-        tx.commit().await?;
-        Ok(bake)
+            let bake = bake_by_id(&mut tx, id).await?;
+            Self::wake(&mut tx).await?;
+            Ok(bake)
+        })
     }
 
     async fn bake(&self, id: i64) -> Result<Option<BakeRow>> {
@@ -262,82 +283,81 @@ impl Store for PgStore {
 
     async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>> {
         self.reap().await?;
-        let mut tx = self.pool.begin().await?;
-        let now = Self::now(&mut tx).await?;
-        let id: Option<i64> = sqlx::query_scalar(
-            "SELECT j.id FROM jobs j JOIN bakes b ON b.id = j.bake_id WHERE (j.state = 'available' OR (j.state = 'retryable' AND j.run_at <= $1)) AND b.state IN ('queued', 'running') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = j.bake_id AND f.worker = $2 AND f.failures >= $3) ORDER BY b.priority DESC, b.id, j.idx LIMIT 1 FOR UPDATE OF j SKIP LOCKED",
-        )
-        .bind(now)
-        .bind(worker)
-        .bind(policy.worker_failures)
-        .fetch_optional(&mut *tx)
-        .await?;
-        let Some(id) = id else {
-            tx.commit().await?;
-            return Ok(None);
-        };
-        let token = token();
-        let expires_at = now + policy.lease_ms;
-        sqlx::query(
-            "UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = $3, progress = 0 WHERE id = $4",
-        )
-        .bind(&token)
-        .bind(worker)
-        .bind(expires_at)
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
-        let job = job_by_id(&mut tx, id).await?;
-        sqlx::query(&format!(
-            "UPDATE bakes SET state = 'running', updated_at = {NOW} WHERE id = $1 AND state = 'queued'"
-        ))
-        .bind(job.bake_id)
-        .execute(&mut *tx)
-        .await?;
-        let bake = bake_by_id(&mut tx, job.bake_id).await?;
-        let deps = sqlx::query(
-            "SELECT p.outputs, p.timings FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = $1 ORDER BY p.idx",
-        )
-        .bind(id)
-        .fetch_all(&mut *tx)
-        .await?;
-        let mut inputs = Vec::new();
-        for d in &deps {
-            let outputs: Option<String> = d.try_get("outputs")?;
-            let timings: Option<String> = d.try_get("timings")?;
-            inputs.push(Completion {
-                outputs: serde_json::from_str(outputs.as_deref().unwrap_or("[]"))?,
-                timings: serde_json::from_str(timings.as_deref().unwrap_or("null"))?,
-            });
-        }
-        let mut uploads = Vec::new();
-        for digest in std::iter::once(&bake.character).chain(&bake.clips) {
-            let bundle: Option<bool> =
-                sqlx::query_scalar("SELECT bundle FROM uploads WHERE digest = $1")
-                    .bind(digest)
-                    .fetch_optional(&mut *tx)
-                    .await?;
-            uploads.push(UploadRef {
-                digest: digest.clone(),
-                bundle: bundle.unwrap_or(false),
-            });
-        }
-        sqlx::query(&format!(
-            "INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES ($1, 'busy', $2, {NOW}, {NOW}) ON CONFLICT (id) DO UPDATE SET state = 'busy', job_id = $2, last_seen = {NOW}"
-        ))
-        .bind(worker)
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
-        tx.commit().await?;
-        Ok(Some(Lease {
-            job,
-            token,
-            expires_at,
-            bake,
-            inputs,
-            uploads,
-        }))
+        in_tx!(self.pool.begin().await?, |tx| {
+            let now = Self::now(&mut tx).await?;
+            let id: Option<i64> = sqlx::query_scalar(
+                "SELECT j.id FROM jobs j JOIN bakes b ON b.id = j.bake_id WHERE (j.state = 'available' OR (j.state = 'retryable' AND j.run_at <= $1)) AND b.state IN ('queued', 'running') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = j.bake_id AND f.worker = $2 AND f.failures >= $3) ORDER BY b.priority DESC, b.id, j.idx LIMIT 1 FOR UPDATE OF j SKIP LOCKED",
+            )
+            .bind(now)
+            .bind(worker)
+            .bind(policy.worker_failures)
+            .fetch_optional(&mut *tx)
+            .await?;
+            let Some(id) = id else {
+                return Ok(None);
+            };
+            let token = token();
+            let expires_at = now + policy.lease_ms;
+            sqlx::query(
+                "UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = $3, progress = 0 WHERE id = $4",
+            )
+            .bind(&token)
+            .bind(worker)
+            .bind(expires_at)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+            let job = job_by_id(&mut tx, id).await?;
+            sqlx::query(&format!(
+                "UPDATE bakes SET state = 'running', updated_at = {NOW} WHERE id = $1 AND state = 'queued'"
+            ))
+            .bind(job.bake_id)
+            .execute(&mut *tx)
+            .await?;
+            let bake = bake_by_id(&mut tx, job.bake_id).await?;
+            let deps = sqlx::query(
+                "SELECT p.outputs, p.timings FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = $1 ORDER BY p.idx",
+            )
+            .bind(id)
+            .fetch_all(&mut *tx)
+            .await?;
+            let mut inputs = Vec::new();
+            for d in &deps {
+                let outputs: Option<String> = d.try_get("outputs")?;
+                let timings: Option<String> = d.try_get("timings")?;
+                inputs.push(Completion {
+                    outputs: serde_json::from_str(outputs.as_deref().unwrap_or("[]"))?,
+                    timings: serde_json::from_str(timings.as_deref().unwrap_or("null"))?,
+                });
+            }
+            let mut uploads = Vec::new();
+            for digest in std::iter::once(&bake.character).chain(&bake.clips) {
+                let bundle: Option<bool> =
+                    sqlx::query_scalar("SELECT bundle FROM uploads WHERE digest = $1")
+                        .bind(digest)
+                        .fetch_optional(&mut *tx)
+                        .await?;
+                uploads.push(UploadRef {
+                    digest: digest.clone(),
+                    bundle: bundle.unwrap_or(false),
+                });
+            }
+            sqlx::query(&format!(
+                "INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES ($1, 'busy', $2, {NOW}, {NOW}) ON CONFLICT (id) DO UPDATE SET state = 'busy', job_id = $2, last_seen = {NOW}"
+            ))
+            .bind(worker)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+            Ok(Some(Lease {
+                job,
+                token,
+                expires_at,
+                bake,
+                inputs,
+                uploads,
+            }))
+        })
     }
 
     async fn heartbeat(
@@ -347,91 +367,91 @@ impl Store for PgStore {
         progress: i64,
         policy: &QueuePolicy,
     ) -> Result<bool> {
-        let mut tx = self.pool.begin().await?;
-        let j = leased(&mut tx, job, token).await?;
-        sqlx::query(&format!(
-            "UPDATE jobs SET lease_expires_at = {NOW} + $1, progress = $2 WHERE id = $3"
-        ))
-        .bind(policy.lease_ms)
-        .bind(progress.clamp(0, j.work))
-        .bind(job)
-        .execute(&mut *tx)
-        .await?;
-        let bake = bake_by_id(&mut tx, j.bake_id).await?;
-        sqlx::query(&format!(
-            "UPDATE workers SET last_seen = {NOW}, state = 'busy', job_id = $1 WHERE id = $2"
-        ))
-        .bind(job)
-        .bind(j.worker.as_deref().unwrap_or(""))
-        .execute(&mut *tx)
-        .await?;
-        tx.commit().await?;
-        Ok(!bake.state.is_active())
+        in_tx!(self.pool.begin().await?, |tx| {
+            let j = leased(&mut tx, job, token).await?;
+            sqlx::query(&format!(
+                "UPDATE jobs SET lease_expires_at = {NOW} + $1, progress = $2 WHERE id = $3"
+            ))
+            .bind(policy.lease_ms)
+            .bind(progress.clamp(0, j.work))
+            .bind(job)
+            .execute(&mut *tx)
+            .await?;
+            let bake = bake_by_id(&mut tx, j.bake_id).await?;
+            sqlx::query(&format!(
+                "UPDATE workers SET last_seen = {NOW}, state = 'busy', job_id = $1 WHERE id = $2"
+            ))
+            .bind(job)
+            .bind(j.worker.as_deref().unwrap_or(""))
+            .execute(&mut *tx)
+            .await?;
+            Ok(!bake.state.is_active())
+        })
     }
 
     async fn checkpoint(&self, job: i64, token: &str, c: &CheckpointRef) -> Result<()> {
-        let mut tx = self.pool.begin().await?;
-        leased(&mut tx, job, token).await?;
-        sqlx::query(
-            "UPDATE jobs SET checkpoint_step = $1, checkpoint_cursor = $2, checkpoint_blob = $3 WHERE id = $4",
-        )
-        .bind(&c.step)
-        .bind(c.cursor)
-        .bind(&c.blob)
-        .bind(job)
-        .execute(&mut *tx)
-        .await?;
-        tx.commit().await?;
-        Ok(())
+        in_tx!(self.pool.begin().await?, |tx| {
+            leased(&mut tx, job, token).await?;
+            sqlx::query(
+                "UPDATE jobs SET checkpoint_step = $1, checkpoint_cursor = $2, checkpoint_blob = $3 WHERE id = $4",
+            )
+            .bind(&c.step)
+            .bind(c.cursor)
+            .bind(&c.blob)
+            .bind(job)
+            .execute(&mut *tx)
+            .await?;
+            Ok(())
+        })
     }
 
     async fn complete(&self, job: i64, token: &str, c: &Completion) -> Result<BakeRow> {
-        let mut tx = self.pool.begin().await?;
-        let j = leased(&mut tx, job, token).await?;
-        sqlx::query(&format!(
-            "UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {NOW} WHERE id = $3"
-        ))
-        .bind(serde_json::to_string(&c.outputs)?)
-        .bind(c.timings.to_string())
-        .bind(job)
-        .execute(&mut *tx)
-        .await?;
-        sqlx::query(&format!(
-            "UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + 1, updated_at = {NOW} WHERE id = $2"
-        ))
-        .bind(j.work)
-        .bind(j.bake_id)
-        .execute(&mut *tx)
-        .await?;
-        unblock(&mut tx, j.bake_id).await?;
-        let bake = bake_by_id(&mut tx, j.bake_id).await?;
-        if bake.jobs_done == bake.jobs_total {
-            let digest = |name: &str| {
-                c.outputs
-                    .iter()
-                    .find(|o| o.name == name)
-                    .map(|o| o.digest.clone())
-            };
+        in_tx!(self.pool.begin().await?, |tx| {
+            let j = leased(&mut tx, job, token).await?;
             sqlx::query(&format!(
-                "UPDATE bakes SET state = 'done', asset = $1, report = $2, plot = $3, finished_at = {NOW}, updated_at = {NOW} WHERE id = $4"
+                "UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {NOW} WHERE id = $3"
             ))
-            .bind(digest("asset"))
-            .bind(digest("report.json"))
-            .bind(digest("plot.png"))
+            .bind(serde_json::to_string(&c.outputs)?)
+            .bind(c.timings.to_string())
+            .bind(job)
+            .execute(&mut *tx)
+            .await?;
+            sqlx::query(&format!(
+                "UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + 1, updated_at = {NOW} WHERE id = $2"
+            ))
+            .bind(j.work)
             .bind(j.bake_id)
             .execute(&mut *tx)
             .await?;
-        }
-        sqlx::query(&format!(
-            "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
-        ))
-        .bind(j.worker.as_deref().unwrap_or(""))
-        .execute(&mut *tx)
-        .await?;
-        let bake = bake_by_id(&mut tx, j.bake_id).await?;
-        Self::wake(&mut tx).await?;
-        tx.commit().await?;
-        Ok(bake)
+            unblock(&mut tx, j.bake_id).await?;
+            let bake = bake_by_id(&mut tx, j.bake_id).await?;
+            if bake.jobs_done == bake.jobs_total {
+                let digest = |name: &str| {
+                    c.outputs
+                        .iter()
+                        .find(|o| o.name == name)
+                        .map(|o| o.digest.clone())
+                };
+                sqlx::query(&format!(
+                    "UPDATE bakes SET state = 'done', asset = $1, report = $2, plot = $3, finished_at = {NOW}, updated_at = {NOW} WHERE id = $4"
+                ))
+                .bind(digest("asset"))
+                .bind(digest("report.json"))
+                .bind(digest("plot.png"))
+                .bind(j.bake_id)
+                .execute(&mut *tx)
+                .await?;
+            }
+            sqlx::query(&format!(
+                "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
+            ))
+            .bind(j.worker.as_deref().unwrap_or(""))
+            .execute(&mut *tx)
+            .await?;
+            let bake = bake_by_id(&mut tx, j.bake_id).await?;
+            Self::wake(&mut tx).await?;
+            Ok(bake)
+        })
     }
 
     async fn fail(
@@ -442,164 +462,163 @@ impl Store for PgStore {
         retryable: bool,
         policy: &QueuePolicy,
     ) -> Result<BakeRow> {
-        let mut tx = self.pool.begin().await?;
-        let j = leased(&mut tx, job, token).await?;
-        let dead = !retryable || j.attempts >= j.max_attempts;
-        let now = Self::now(&mut tx).await?;
-        sqlx::query(
-            "UPDATE jobs SET state = $1, lease_token = NULL, lease_expires_at = NULL, run_at = $2, error = $3 WHERE id = $4",
-        )
-        .bind(if dead { "dead" } else { "retryable" })
-        .bind(now + backoff_ms(policy, j.attempts))
-        .bind(error)
-        .bind(job)
-        .execute(&mut *tx)
-        .await?;
-        let worker = j.worker.as_deref().unwrap_or("");
-        sqlx::query(
-            "INSERT INTO worker_failures (bake_id, worker, failures) VALUES ($1, $2, 1) ON CONFLICT (bake_id, worker) DO UPDATE SET failures = worker_failures.failures + 1",
-        )
-        .bind(j.bake_id)
-        .bind(worker)
-        .execute(&mut *tx)
-        .await?;
-        sqlx::query(&format!(
-            "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
-        ))
-        .bind(worker)
-        .execute(&mut *tx)
-        .await?;
-        fail_bake_if_dead(&mut tx, j.bake_id).await?;
-        let bake = bake_by_id(&mut tx, j.bake_id).await?;
-        Self::wake(&mut tx).await?;
-        tx.commit().await?;
-        Ok(bake)
+        in_tx!(self.pool.begin().await?, |tx| {
+            let j = leased(&mut tx, job, token).await?;
+            let dead = !retryable || j.attempts >= j.max_attempts;
+            let now = Self::now(&mut tx).await?;
+            sqlx::query(
+                "UPDATE jobs SET state = $1, lease_token = NULL, lease_expires_at = NULL, run_at = $2, error = $3 WHERE id = $4",
+            )
+            .bind(if dead { "dead" } else { "retryable" })
+            .bind(now + backoff_ms(policy, j.attempts))
+            .bind(error)
+            .bind(job)
+            .execute(&mut *tx)
+            .await?;
+            let worker = j.worker.as_deref().unwrap_or("");
+            sqlx::query(
+                "INSERT INTO worker_failures (bake_id, worker, failures) VALUES ($1, $2, 1) ON CONFLICT (bake_id, worker) DO UPDATE SET failures = worker_failures.failures + 1",
+            )
+            .bind(j.bake_id)
+            .bind(worker)
+            .execute(&mut *tx)
+            .await?;
+            sqlx::query(&format!(
+                "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
+            ))
+            .bind(worker)
+            .execute(&mut *tx)
+            .await?;
+            fail_bake_if_dead(&mut tx, j.bake_id).await?;
+            let bake = bake_by_id(&mut tx, j.bake_id).await?;
+            Self::wake(&mut tx).await?;
+            Ok(bake)
+        })
     }
 
     async fn release(&self, job: i64, token: &str) -> Result<()> {
-        let mut tx = self.pool.begin().await?;
-        let j = leased(&mut tx, job, token).await?;
-        sqlx::query(
-            "UPDATE jobs SET state = 'available', lease_token = NULL, lease_expires_at = NULL, attempts = attempts - 1 WHERE id = $1",
-        )
-        .bind(job)
-        .execute(&mut *tx)
-        .await?;
-        sqlx::query(&format!(
-            "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
-        ))
-        .bind(j.worker.as_deref().unwrap_or(""))
-        .execute(&mut *tx)
-        .await?;
-        Self::wake(&mut tx).await?;
-        tx.commit().await?;
-        Ok(())
+        in_tx!(self.pool.begin().await?, |tx| {
+            let j = leased(&mut tx, job, token).await?;
+            sqlx::query(
+                "UPDATE jobs SET state = 'available', lease_token = NULL, lease_expires_at = NULL, attempts = attempts - 1 WHERE id = $1",
+            )
+            .bind(job)
+            .execute(&mut *tx)
+            .await?;
+            sqlx::query(&format!(
+                "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
+            ))
+            .bind(j.worker.as_deref().unwrap_or(""))
+            .execute(&mut *tx)
+            .await?;
+            Self::wake(&mut tx).await?;
+            Ok(())
+        })
     }
 
     async fn reap(&self) -> Result<u64> {
-        let mut tx = self.pool.begin().await?;
-        let expired: Vec<(i64, i64)> = sqlx::query_as(&format!(
-            "SELECT id, bake_id FROM jobs WHERE state = 'running' AND lease_expires_at < {NOW}"
-        ))
-        .fetch_all(&mut *tx)
-        .await?;
-        if expired.is_empty() {
-            tx.commit().await?;
-            return Ok(0);
-        }
-        sqlx::query(&format!(
-            "UPDATE jobs SET state = CASE WHEN attempts >= max_attempts THEN 'dead' ELSE 'retryable' END, run_at = {NOW}, lease_token = NULL, lease_expires_at = NULL, error = COALESCE(error, 'lease expired') WHERE state = 'running' AND lease_expires_at < {NOW}"
-        ))
-        .execute(&mut *tx)
-        .await?;
-        sqlx::query("UPDATE counters SET value = value + $1 WHERE name = 'lease_expiries'")
-            .bind(expired.len() as i64)
+        in_tx!(self.pool.begin().await?, |tx| {
+            let expired: Vec<(i64, i64)> = sqlx::query_as(&format!(
+                "SELECT id, bake_id FROM jobs WHERE state = 'running' AND lease_expires_at < {NOW}"
+            ))
+            .fetch_all(&mut *tx)
+            .await?;
+            if expired.is_empty() {
+                return Ok(0);
+            }
+            sqlx::query(&format!(
+                "UPDATE jobs SET state = CASE WHEN attempts >= max_attempts THEN 'dead' ELSE 'retryable' END, run_at = {NOW}, lease_token = NULL, lease_expires_at = NULL, error = COALESCE(error, 'lease expired') WHERE state = 'running' AND lease_expires_at < {NOW}"
+            ))
             .execute(&mut *tx)
             .await?;
-        for &(_, bake) in &expired {
-            fail_bake_if_dead(&mut tx, bake).await?;
-        }
-        Self::wake(&mut tx).await?;
-        tx.commit().await?;
-        Ok(expired.len() as u64)
+            sqlx::query("UPDATE counters SET value = value + $1 WHERE name = 'lease_expiries'")
+                .bind(expired.len() as i64)
+                .execute(&mut *tx)
+                .await?;
+            for &(_, bake) in &expired {
+                fail_bake_if_dead(&mut tx, bake).await?;
+            }
+            Self::wake(&mut tx).await?;
+            Ok(expired.len() as u64)
+        })
     }
 
     async fn control(&self, bake: i64, action: Action) -> Result<BakeRow> {
-        let mut tx = self.pool.begin().await?;
-        let b = bake_by_id(&mut tx, bake).await?;
-        let refuse = |why: &str| {
-            Err(StoreError::Conflict(format!(
-                "bake {bake} is {}: {why}",
-                b.state.as_str()
-            )))
-        };
-        match action {
-            Action::Cancel => {
-                if !b.state.is_active() {
-                    return refuse("only a queued, running or paused bake can be cancelled");
-                }
-                sqlx::query(
-                    "UPDATE jobs SET state = 'cancelled', lease_token = NULL, lease_expires_at = NULL WHERE bake_id = $1 AND state NOT IN ('completed', 'dead')",
-                )
-                .bind(bake)
-                .execute(&mut *tx)
-                .await?;
-                sqlx::query(&format!(
-                    "UPDATE bakes SET state = 'cancelled', finished_at = {NOW}, updated_at = {NOW} WHERE id = $1"
-                ))
-                .bind(bake)
-                .execute(&mut *tx)
-                .await?;
-            }
-            Action::Pause => {
-                if !matches!(b.state, BakeState::Queued | BakeState::Running) {
-                    return refuse("only a queued or running bake can be paused");
-                }
-                sqlx::query(&format!(
-                    "UPDATE bakes SET state = 'paused', updated_at = {NOW} WHERE id = $1"
-                ))
-                .bind(bake)
-                .execute(&mut *tx)
-                .await?;
-            }
-            Action::Resume => {
-                if b.state != BakeState::Paused {
-                    return refuse("only a paused bake can be resumed");
-                }
-                sqlx::query(&format!(
-                    "UPDATE bakes SET state = CASE WHEN jobs_done > 0 OR EXISTS (SELECT 1 FROM jobs WHERE bake_id = bakes.id AND state = 'running') THEN 'running' ELSE 'queued' END, updated_at = {NOW} WHERE id = $1"
-                ))
-                .bind(bake)
-                .execute(&mut *tx)
-                .await?;
-            }
-            Action::Retry => {
-                if !matches!(b.state, BakeState::Failed | BakeState::Cancelled) {
-                    return refuse("only a failed or cancelled bake can be retried");
-                }
-                sqlx::query(
-                    "UPDATE jobs SET state = 'blocked', attempts = 0, error = NULL, run_at = 0 WHERE bake_id = $1 AND state IN ('dead', 'cancelled', 'retryable', 'available')",
-                )
-                .bind(bake)
-                .execute(&mut *tx)
-                .await?;
-                sqlx::query("DELETE FROM worker_failures WHERE bake_id = $1")
+        in_tx!(self.pool.begin().await?, |tx| {
+            let b = bake_by_id(&mut tx, bake).await?;
+            let refuse = |why: &str| {
+                Err(StoreError::Conflict(format!(
+                    "bake {bake} is {}: {why}",
+                    b.state.as_str()
+                )))
+            };
+            match action {
+                Action::Cancel => {
+                    if !b.state.is_active() {
+                        return refuse("only a queued, running or paused bake can be cancelled");
+                    }
+                    sqlx::query(
+                        "UPDATE jobs SET state = 'cancelled', lease_token = NULL, lease_expires_at = NULL WHERE bake_id = $1 AND state NOT IN ('completed', 'dead')",
+                    )
                     .bind(bake)
                     .execute(&mut *tx)
                     .await?;
-                unblock(&mut tx, bake).await?;
-                sqlx::query(&format!(
-                    "UPDATE bakes SET state = 'queued', error = NULL, finished_at = NULL, updated_at = {NOW} WHERE id = $1"
-                ))
-                .bind(bake)
-                .execute(&mut *tx)
-                .await?;
+                    sqlx::query(&format!(
+                        "UPDATE bakes SET state = 'cancelled', finished_at = {NOW}, updated_at = {NOW} WHERE id = $1"
+                    ))
+                    .bind(bake)
+                    .execute(&mut *tx)
+                    .await?;
+                }
+                Action::Pause => {
+                    if !matches!(b.state, BakeState::Queued | BakeState::Running) {
+                        return refuse("only a queued or running bake can be paused");
+                    }
+                    sqlx::query(&format!(
+                        "UPDATE bakes SET state = 'paused', updated_at = {NOW} WHERE id = $1"
+                    ))
+                    .bind(bake)
+                    .execute(&mut *tx)
+                    .await?;
+                }
+                Action::Resume => {
+                    if b.state != BakeState::Paused {
+                        return refuse("only a paused bake can be resumed");
+                    }
+                    sqlx::query(&format!(
+                        "UPDATE bakes SET state = CASE WHEN jobs_done > 0 OR EXISTS (SELECT 1 FROM jobs WHERE bake_id = bakes.id AND state = 'running') THEN 'running' ELSE 'queued' END, updated_at = {NOW} WHERE id = $1"
+                    ))
+                    .bind(bake)
+                    .execute(&mut *tx)
+                    .await?;
+                }
+                Action::Retry => {
+                    if !matches!(b.state, BakeState::Failed | BakeState::Cancelled) {
+                        return refuse("only a failed or cancelled bake can be retried");
+                    }
+                    sqlx::query(
+                        "UPDATE jobs SET state = 'blocked', attempts = 0, error = NULL, run_at = 0 WHERE bake_id = $1 AND state IN ('dead', 'cancelled', 'retryable', 'available')",
+                    )
+                    .bind(bake)
+                    .execute(&mut *tx)
+                    .await?;
+                    sqlx::query("DELETE FROM worker_failures WHERE bake_id = $1")
+                        .bind(bake)
+                        .execute(&mut *tx)
+                        .await?;
+                    unblock(&mut tx, bake).await?;
+                    sqlx::query(&format!(
+                        "UPDATE bakes SET state = 'queued', error = NULL, finished_at = NULL, updated_at = {NOW} WHERE id = $1"
+                    ))
+                    .bind(bake)
+                    .execute(&mut *tx)
+                    .await?;
+                }
             }
-        }
-        let b = bake_by_id(&mut tx, bake).await?;
-        Self::wake(&mut tx).await?;
-        tx.commit().await?;
-        Ok(b)
+            let b = bake_by_id(&mut tx, bake).await?;
+            Self::wake(&mut tx).await?;
+            Ok(b)
+        })
     }
 
     async fn set_priority(&self, bake: i64, priority: i64) -> Result<BakeRow> {

@@ -173,6 +173,14 @@ async fn stale_tokens_are_refused(store: &dyn Store) {
     ] {
         assert!(matches!(r, Err(StoreError::LeaseLost(_))), "{r:?}");
     }
+    // Refused operations roll their transactions back: more refusals than
+    // the pool has connections leave every connection usable.
+    for _ in 0..40 {
+        let refused = store
+            .complete(first.job.id, &first.token, &done("ao"))
+            .await;
+        assert!(matches!(refused, Err(StoreError::LeaseLost(_))));
+    }
     store
         .complete(again.job.id, &again.token, &done("ao"))
         .await
