@@ -37,6 +37,12 @@ enum What {
     /// vertex-linear's ridge weight and sparsification threshold: error,
     /// size and multiply-adds on the same held-out clip frames.
     Linear(super::table::LinearArgs),
+    /// Jobs scheduled per second (lease + complete) on SQLite or
+    /// PostgreSQL, through the store and over HTTP.
+    Queue(super::bench_service::QueueArgs),
+    /// Status-request latency (p50, p99) under concurrent pollers, and the
+    /// server's memory.
+    Api(super::bench_service::ApiArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -104,6 +110,8 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         What::Trace(a) => trace(a),
         What::Clusters(a) => super::table::clusters(a),
         What::Linear(a) => super::table::linear(a),
+        What::Queue(a) => super::bench_service::queue(a),
+        What::Api(a) => super::bench_service::api(a),
     }
 }
 

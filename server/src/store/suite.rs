@@ -74,6 +74,41 @@ pub(crate) async fn run_all(store: &dyn Store) {
     stale_tokens_are_refused(store).await;
     failures_retry_then_kill_the_bake(store).await;
     cancel_pause_resume_retry(store).await;
+    a_worker_that_keeps_failing_a_bake_is_kept_off_it(store).await;
+}
+
+async fn a_worker_that_keeps_failing_a_bake_is_kept_off_it(store: &dyn Store) {
+    let c = character(store).await;
+    let mut b = bake(&c, &"6".repeat(64));
+    b.priority = 1000;
+    b.max_attempts = 10;
+    let created = store.create_bake(&b).await.unwrap();
+    let p = QueuePolicy {
+        worker_failures: 2,
+        ..policy()
+    };
+    for _ in 0..2 {
+        let l = store.lease("clumsy", &p).await.unwrap().unwrap();
+        assert_eq!(l.job.bake_id, created.id);
+        store
+            .fail(l.job.id, &l.token, "oops", true, &p)
+            .await
+            .unwrap();
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    }
+    // Kept off this bake (other bakes' jobs may still come its way).
+    while let Some(l) = store.lease("clumsy", &p).await.unwrap() {
+        assert_ne!(
+            l.job.bake_id, created.id,
+            "a banned worker got the bake's job"
+        );
+        store
+            .complete(l.job.id, &l.token, &done("ao"))
+            .await
+            .unwrap();
+    }
+    let other = store.lease("careful", &p).await.unwrap().unwrap();
+    assert_eq!(other.job.bake_id, created.id);
 }
 
 async fn uploads_are_idempotent(store: &dyn Store) {

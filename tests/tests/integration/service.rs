@@ -150,3 +150,134 @@ fn assets_are_served_with_etag_and_ranges() {
         .unwrap();
     assert_eq!(r.status().as_u16(), 400);
 }
+
+#[test]
+fn progress_arrives_as_server_sent_events() {
+    use std::io::BufRead as _;
+    let mut env = TestEnv::start(Options::default());
+    let digest = upload(&env, &character("RiggedSimple"));
+    let (_, b) = submit(&env, &digest, 16);
+    let id = b["id"].as_i64().unwrap();
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .timeout_global(Some(Duration::from_secs(120)))
+        .build()
+        .into();
+    let mut res = agent
+        .get(format!("{}/v1/bakes/{id}/events", env.url))
+        .header("authorization", format!("Bearer {ADMIN}"))
+        .call()
+        .unwrap();
+    assert_eq!(
+        res.headers()["content-type"].to_str().unwrap(),
+        "text/event-stream"
+    );
+    // The first event is the current state, before any worker runs.
+    env.start_worker(&[]);
+    let reader = std::io::BufReader::new(res.body_mut().as_reader());
+    let mut events = Vec::new();
+    for line in reader.lines() {
+        let line = line.unwrap();
+        if let Some(data) = line.strip_prefix("data: ") {
+            let e: serde_json::Value = serde_json::from_str(data).unwrap();
+            assert_eq!(e["id"], id);
+            let done = e["state"] == "done";
+            events.push(e);
+            if done {
+                break;
+            }
+        }
+    }
+    assert_eq!(events[0]["state"], "queued");
+    assert!(events.len() >= 3, "{events:?}");
+    let progress: Vec<i64> = events.iter().map(|e| e["done"].as_i64().unwrap()).collect();
+    assert!(progress.windows(2).all(|w| w[0] <= w[1]), "{progress:?}");
+    assert_eq!(
+        progress.last(),
+        events.last().unwrap()["total"].as_i64().as_ref()
+    );
+}
+
+#[test]
+fn requests_over_the_rate_get_429_with_retry_after() {
+    let env = TestEnv::start(Options {
+        rate: 5,
+        ..Options::default()
+    });
+    let mut limited = None;
+    for _ in 0..40 {
+        let agent: ureq::Agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .build()
+            .into();
+        let r = agent
+            .get(format!("{}/v1/bakes", env.url))
+            .header("authorization", format!("Bearer {ADMIN}"))
+            .call()
+            .unwrap();
+        if r.status().as_u16() == 429 {
+            limited = Some(r);
+            break;
+        }
+    }
+    let r = limited.expect("40 requests at once were never limited");
+    let wait: u64 = r.headers()["retry-after"]
+        .to_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(wait >= 1);
+    assert_eq!(
+        r.headers()["content-type"].to_str().unwrap(),
+        "application/problem+json"
+    );
+}
+
+#[test]
+fn a_worker_stopped_with_sigterm_finishes_its_job_and_leases_no_more() {
+    let mut env = TestEnv::start(Options::default());
+    let digest = upload(&env, &character("CesiumMan"));
+    let (_, b) = submit(&env, &digest, 64);
+    let id = b["id"].as_i64().unwrap();
+    let w = env.start_worker(&[]);
+    let started = std::time::Instant::now();
+    loop {
+        let (_, now) = env
+            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+            .unwrap();
+        if now["jobs_done"].as_i64().unwrap() >= 2 {
+            break;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let pid = env.worker_pid(w).unwrap().to_string();
+    assert!(
+        std::process::Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let started = std::time::Instant::now();
+    while !env.worker_exited(w) {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "the worker did not stop"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let (_, bake) = env
+        .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap();
+    let jobs = bake["jobs"].as_array().unwrap();
+    // Nothing left running: the job it held finished (or was given back).
+    assert!(jobs.iter().all(|j| j["state"] != "running"), "{bake}");
+    assert!(jobs.iter().all(|j| j["attempts"].as_i64().unwrap() <= 1));
+    assert!(bake["state"] != "done", "it stopped leasing");
+    let log = env.worker_logs();
+    assert!(log.contains("stopped"), "{log}");
+    // Another worker finishes the bake.
+    env.start_worker(&[]);
+    let end = env.wait_bake(id, Duration::from_secs(120));
+    assert_eq!(end["state"], "done");
+}

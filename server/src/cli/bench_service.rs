@@ -1,0 +1,369 @@
+//! `aobake bench queue` and `aobake bench api`: the service's own speed.
+//!
+//! * `queue`: jobs scheduled per second (lease + complete) on a store,
+//!   straight through the store trait with concurrent claimers, and through
+//!   HTTP against a real `aobake serve` process with worker threads.
+//! * `api`: latency of `GET /v1/bakes/{id}` (p50, p99) under concurrent
+//!   pollers, and the server process's memory.
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+use serde_json::json;
+
+use crate::store::{NewBake, NewJob, PgStore, QueuePolicy, SqliteStore, Store, UploadRow};
+
+/// Arguments of `aobake bench queue`.
+#[derive(Debug, clap::Args)]
+pub(super) struct QueueArgs {
+    /// A PostgreSQL URL to measure instead of SQLite in a temporary
+    /// directory.
+    #[arg(long)]
+    database: Option<String>,
+    /// Jobs to schedule.
+    #[arg(long, default_value_t = 20_000)]
+    jobs: usize,
+    /// Concurrent claimers (tasks through the store; threads over HTTP).
+    #[arg(long, default_value_t = 8)]
+    workers: usize,
+    /// Repetitions (medians are printed).
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+}
+
+/// Arguments of `aobake bench api`.
+#[derive(Debug, clap::Args)]
+pub(super) struct ApiArgs {
+    /// A PostgreSQL URL for the server instead of SQLite.
+    #[arg(long)]
+    database: Option<String>,
+    /// Concurrent pollers.
+    #[arg(long, default_value_t = 200)]
+    pollers: usize,
+    /// Seconds to poll.
+    #[arg(long, default_value_t = 10.0)]
+    secs: f64,
+    /// Pause between one poller's requests, in milliseconds (0: as fast
+    /// as the server answers).
+    #[arg(long, default_value_t = 500)]
+    interval_ms: u64,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+async fn open_store(database: Option<&str>, dir: &Path) -> anyhow::Result<Arc<dyn Store>> {
+    Ok(match database {
+        Some(url) => Arc::new(PgStore::connect(url).await?),
+        None => Arc::new(SqliteStore::open(&dir.join("bench.db")).await?),
+    })
+}
+
+fn new_bake(character: &str, key: String, jobs: usize) -> NewBake {
+    NewBake {
+        key,
+        character: character.into(),
+        clips: vec![],
+        method: "vertex-linear".into(),
+        params: json!({}),
+        priority: 0,
+        jobs: (0..jobs)
+            .map(|i| NewJob {
+                kind: "sample".into(),
+                spec: json!({"kind": "sample", "set": "reference", "first": 4 * i, "count": 4}),
+                work: 4,
+                deps: vec![],
+            })
+            .collect(),
+        max_attempts: 5,
+    }
+}
+
+pub(super) fn queue(args: &QueueArgs) -> anyhow::Result<()> {
+    let rt = tokio::runtime::Runtime::new()?;
+    let mut store_rates = Vec::new();
+    let mut http_rates = Vec::new();
+    for run in 0..args.repeat {
+        let dir = tempfile::tempdir()?;
+        let rate = rt.block_on(store_queue(args, dir.path(), run))?;
+        store_rates.push(rate);
+        let dir = tempfile::tempdir()?;
+        http_rates.push(http_queue(args, dir.path(), run)?);
+    }
+    let backend = if args.database.is_some() {
+        "PostgreSQL"
+    } else {
+        "SQLite"
+    };
+    println!(
+        "{backend}: {} jobs, {} claimers, {} runs: through the store {:.0} jobs/s (median; runs {:?}), over HTTP {:.0} jobs/s (median; runs {:?})",
+        args.jobs,
+        args.workers,
+        args.repeat,
+        median(store_rates.clone()),
+        store_rates.iter().map(|r| r.round()).collect::<Vec<_>>(),
+        median(http_rates.clone()),
+        http_rates.iter().map(|r| r.round()).collect::<Vec<_>>(),
+    );
+    Ok(())
+}
+
+/// Lease + complete through the store trait; returns jobs per second.
+async fn store_queue(args: &QueueArgs, dir: &Path, run: usize) -> anyhow::Result<f64> {
+    let store = open_store(args.database.as_deref(), dir).await?;
+    let character = format!("{:064x}", 0xc0ffee + run);
+    store
+        .put_upload(&UploadRow {
+            digest: character.clone(),
+            kind: "character".into(),
+            bundle: false,
+            bytes: 0,
+            summary: json!({}),
+        })
+        .await?;
+    let per_bake = 1000;
+    let bakes = args.jobs.div_ceil(per_bake);
+    for b in 0..bakes {
+        let n = per_bake.min(args.jobs - b * per_bake);
+        store
+            .create_bake(&new_bake(
+                &character,
+                format!("{run}-{b}-{}", std::process::id()),
+                n,
+            ))
+            .await?;
+    }
+    let policy = QueuePolicy::default();
+    let done = crate::store::Completion {
+        outputs: vec![],
+        timings: json!({}),
+    };
+    let started = Instant::now();
+    let tasks: Vec<_> = (0..args.workers)
+        .map(|w| {
+            let (store, done) = (store.clone(), done.clone());
+            tokio::spawn(async move {
+                let mut n = 0usize;
+                while let Some(l) = store.lease(&format!("bench-{w}"), &policy).await? {
+                    store.complete(l.job.id, &l.token, &done).await?;
+                    n += 1;
+                }
+                anyhow::Ok(n)
+            })
+        })
+        .collect();
+    let mut total = 0;
+    for t in tasks {
+        total += t.await??;
+    }
+    let secs = started.elapsed().as_secs_f64();
+    if total < args.jobs {
+        bail!("only {total} of {} jobs were scheduled", args.jobs);
+    }
+    Ok(total as f64 / secs)
+}
+
+/// A real `aobake serve` on a free port, killed on drop.
+struct Server {
+    child: Child,
+    url: String,
+    token: String,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Server {
+    fn start(dir: &Path, database: Option<&str>) -> anyhow::Result<Self> {
+        let token = crate::auth::new_token();
+        let mut cmd = Command::new(std::env::current_exe()?);
+        cmd.args(["serve", "--listen", "127.0.0.1:0", "--workers", "0"])
+            .args(["--rate", "1000000"])
+            .arg("--data")
+            .arg(dir)
+            .env("AOBAKE_ADMIN_TOKEN", &token)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null());
+        if let Some(url) = database {
+            cmd.args(["--database", url]);
+        }
+        let child = cmd.spawn().context("cannot start aobake serve")?;
+        let started = Instant::now();
+        let url = loop {
+            if let Ok(u) = std::fs::read_to_string(dir.join("server.url")) {
+                break u.trim().to_owned();
+            }
+            if started.elapsed() > Duration::from_secs(30) {
+                bail!("the server did not start");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        Ok(Self { child, url, token })
+    }
+
+    /// Resident and peak memory of the server process, in MiB.
+    fn memory_mib(&self) -> (f64, f64) {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id()))
+            .unwrap_or_default();
+        let field = |name: &str| {
+            status
+                .lines()
+                .find(|l| l.starts_with(name))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|v| v.parse::<f64>().ok())
+                .map_or(f64::NAN, |kb| kb / 1024.0)
+        };
+        (field("VmRSS:"), field("VmHWM:"))
+    }
+
+    fn api(&self) -> super::client::Api {
+        super::client::Api::new(&self.url, &self.token)
+    }
+}
+
+/// Submits a real bake of the bundled RiggedSimple with enough poses for
+/// `jobs` sample jobs; returns its id.
+fn big_bake(api: &super::client::Api, jobs: usize) -> anyhow::Result<i64> {
+    static RIGGED: &[u8] =
+        include_bytes!("../../../tests/data/characters/RiggedSimple/RiggedSimple.glb");
+    let c = api.upload(
+        "/v1/characters",
+        &aobake_core::bake::UploadBytes::single(RIGGED.to_vec()),
+    )?;
+    let b = api.post(
+        "/v1/bakes",
+        &json!({"character": c["digest"], "method": "vertex-linear",
+                "params": {"poses": 4 * jobs, "samples": 1, "eval_poses": 0, "seed": rand_seed()}}),
+    )?;
+    b["id"].as_i64().context("no bake id")
+}
+
+fn rand_seed() -> u64 {
+    use rand::RngExt as _;
+    rand::rng().random()
+}
+
+/// Lease + complete over HTTP with worker threads; returns jobs per
+/// second.
+fn http_queue(args: &QueueArgs, dir: &Path, _run: usize) -> anyhow::Result<f64> {
+    let server = Server::start(dir, args.database.as_deref())?;
+    let api = server.api();
+    let id = big_bake(&api, args.jobs)?;
+    let worker = api.post(
+        "/v1/tokens",
+        &json!({"name": "bench", "scopes": ["worker"]}),
+    )?;
+    let worker_token = worker["token"].as_str().context("token")?.to_owned();
+    let blob = aobake_worker::client::Client::new(&server.url, &worker_token).put_blob(b"x")?;
+    let started = Instant::now();
+    let counts: Vec<usize> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..args.workers)
+            .map(|w| {
+                let (url, token, blob) = (&server.url, &worker_token, &blob);
+                s.spawn(move || {
+                    let client = aobake_worker::client::Client::new(url, token);
+                    let mut n = 0;
+                    let outputs = [aobake_worker::client::OutputRef {
+                        name: "ao-reference".into(),
+                        digest: blob.clone(),
+                    }];
+                    while let Ok(Some(l)) = client.lease(&format!("bench-{w}"), 0) {
+                        if client
+                            .complete(l.job.id, &l.token, &outputs, &json!({}))
+                            .is_ok()
+                        {
+                            n += 1;
+                        }
+                    }
+                    n
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap_or(0)).collect()
+    });
+    let secs = started.elapsed().as_secs_f64();
+    let total: usize = counts.iter().sum();
+    let bake = api.get(&format!("/v1/bakes/{id}"))?;
+    if bake["jobs_done"].as_i64() != bake["jobs_total"].as_i64() {
+        bail!("the bake did not finish: {bake}");
+    }
+    Ok(total as f64 / secs)
+}
+
+pub(super) fn api(args: &ApiArgs) -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let server = Server::start(dir.path(), args.database.as_deref())?;
+    let api = server.api();
+    let id = big_bake(&api, 64)?;
+    let (rss_idle, _) = server.memory_mib();
+    let deadline = Instant::now() + Duration::from_secs_f64(args.secs);
+    let path = format!("{}/v1/bakes/{id}", server.url);
+    let auth = format!("Bearer {}", server.token);
+    let mut latencies: Vec<f64> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..args.pollers)
+            .map(|_| {
+                let (path, auth) = (&path, &auth);
+                s.spawn(move || {
+                    let agent: ureq::Agent = ureq::Agent::config_builder()
+                        .timeout_global(Some(Duration::from_secs(30)))
+                        .build()
+                        .into();
+                    let mut out = Vec::new();
+                    while Instant::now() < deadline {
+                        let t = Instant::now();
+                        let ok = agent
+                            .get(path)
+                            .header("authorization", auth)
+                            .call()
+                            .and_then(|mut r| r.body_mut().read_to_vec())
+                            .is_ok();
+                        if ok {
+                            out.push(t.elapsed().as_secs_f64() * 1000.0);
+                        }
+                        std::thread::sleep(Duration::from_millis(args.interval_ms));
+                    }
+                    out
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_default())
+            .collect()
+    });
+    let (rss, peak) = server.memory_mib();
+    if latencies.is_empty() {
+        bail!("no request succeeded");
+    }
+    latencies.sort_by(f64::total_cmp);
+    let q = |p: f64| latencies[((latencies.len() - 1) as f64 * p).round() as usize];
+    println!(
+        "{} pollers every {} ms for {:.0} s ({}): {} requests ({:.0}/s), latency p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; server memory {:.1} MiB idle, {:.1} MiB under load, peak {:.1} MiB",
+        args.pollers,
+        args.interval_ms,
+        args.secs,
+        if args.database.is_some() {
+            "PostgreSQL"
+        } else {
+            "SQLite"
+        },
+        latencies.len(),
+        latencies.len() as f64 / args.secs,
+        q(0.5),
+        q(0.99),
+        latencies[latencies.len() - 1],
+        rss_idle,
+        rss,
+        peak
+    );
+    Ok(())
+}
