@@ -46,6 +46,8 @@ CREATE TABLE jobs (
     attempts          BIGINT NOT NULL DEFAULT 0,
     max_attempts      BIGINT NOT NULL,
     run_at            BIGINT NOT NULL DEFAULT 0,
+    -- Dependencies not yet completed: the job becomes available at 0.
+    pending_deps      BIGINT NOT NULL DEFAULT 0,
     worker            TEXT,
     lease_token       TEXT,
     lease_expires_at  BIGINT,
@@ -61,10 +63,15 @@ CREATE TABLE jobs (
 );
 CREATE INDEX jobs_by_state ON jobs (state, run_at);
 CREATE INDEX jobs_by_bake ON jobs (bake_id, idx);
+-- The claim: the first available job of a bake, in graph order.
+CREATE INDEX jobs_ready_in_bake ON jobs (bake_id, state, idx);
 
 CREATE TABLE job_deps (
     job_id BIGINT NOT NULL REFERENCES jobs (id),
     dep_id BIGINT NOT NULL REFERENCES jobs (id),
+    -- The dependency's index in the bake's graph, so listing a job's
+    -- dependencies needs no join.
+    dep_idx BIGINT NOT NULL,
     PRIMARY KEY (job_id, dep_id)
 );
 CREATE INDEX job_deps_by_dep ON job_deps (dep_id);

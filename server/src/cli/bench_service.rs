@@ -318,6 +318,13 @@ pub(super) fn api(args: &ApiArgs) -> anyhow::Result<()> {
                         .build()
                         .into();
                     let mut out = Vec::new();
+                    // Pollers start spread over one interval, as clients
+                    // that started at different times do.
+                    if args.interval_ms > 0 {
+                        use rand::RngExt as _;
+                        let offset = rand::rng().random_range(0..args.interval_ms);
+                        std::thread::sleep(Duration::from_millis(offset));
+                    }
                     while Instant::now() < deadline {
                         let t = Instant::now();
                         let ok = agent

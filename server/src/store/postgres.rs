@@ -4,7 +4,9 @@
 //! UPDATE SKIP LOCKED` (concurrent claimers skip each other's rows instead
 //! of waiting), and `NOTIFY aobake_jobs` whenever jobs may have become
 //! ready, which every server `LISTEN`s to so its long-polling workers wake
-//! wherever the change was made.
+//! wherever the change was made. Leases, heartbeats, checkpoints and
+//! reaping commit with `synchronous_commit = off`; what a client is told
+//! is done (uploads, bakes, completions) waits for the WAL flush.
 
 use std::sync::Arc;
 
@@ -85,7 +87,11 @@ fn job_row(r: &PgRow) -> Result<JobRow> {
 }
 
 /// Jobs with their dependencies' graph indices.
-const JOB_SELECT: &str = "SELECT j.*, (SELECT string_agg(p.idx::text, ',' ORDER BY p.idx) FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = j.id) AS deps FROM jobs j";
+const JOB_SELECT: &str = "SELECT j.*, (SELECT string_agg(d.dep_idx::text, ',' ORDER BY d.dep_idx) FROM job_deps d WHERE d.job_id = j.id) AS deps FROM jobs j";
+
+/// In an `UPDATE jobs … RETURNING`: the graph indices of the job's
+/// dependencies, comma-separated.
+const DEPS: &str = "(SELECT string_agg(d.dep_idx::text, ',' ORDER BY d.dep_idx) FROM job_deps d WHERE d.job_id = jobs.id)";
 
 async fn bake_by_id(conn: &mut PgConnection, id: i64) -> Result<BakeRow> {
     let row = sqlx::query("SELECT * FROM bakes WHERE id = $1")
@@ -122,15 +128,36 @@ async fn leased(conn: &mut PgConnection, job: i64, token: &str) -> Result<JobRow
     job_by_id(conn, job).await
 }
 
-/// Unblocks the bake's jobs whose dependencies have all completed.
-async fn unblock(conn: &mut PgConnection, bake: i64) -> Result<u64> {
-    Ok(sqlx::query(
-        "UPDATE jobs SET state = 'available' WHERE bake_id = $1 AND state = 'blocked' AND NOT EXISTS (SELECT 1 FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = jobs.id AND p.state != 'completed')",
+/// After `job` completed: each dependent has one dependency fewer, and
+/// those with none left become available. Touches only the job's direct
+/// dependents, so a completion costs the same however large the bake.
+async fn release_dependents(conn: &mut PgConnection, job: i64) -> Result<()> {
+    // CASE sees the count before this update: 1 means this was the last.
+    sqlx::query(
+        "UPDATE jobs SET pending_deps = pending_deps - 1, state = CASE WHEN state = 'blocked' AND pending_deps = 1 THEN 'available' ELSE state END WHERE id IN (SELECT job_id FROM job_deps WHERE dep_id = $1)",
+    )
+    .bind(job)
+    .execute(conn)
+    .await?;
+    Ok(())
+}
+
+/// Recounts the pending dependencies of the bake's blocked jobs and makes
+/// those with none available (after a retry re-blocks jobs).
+async fn unblock(conn: &mut PgConnection, bake: i64) -> Result<()> {
+    sqlx::query(
+        "UPDATE jobs SET pending_deps = (SELECT COUNT(*) FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = jobs.id AND p.state != 'completed') WHERE bake_id = $1 AND state = 'blocked'",
+    )
+    .bind(bake)
+    .execute(&mut *conn)
+    .await?;
+    sqlx::query(
+        "UPDATE jobs SET state = 'available' WHERE bake_id = $1 AND state = 'blocked' AND pending_deps = 0",
     )
     .bind(bake)
     .execute(conn)
-    .await?
-    .rows_affected())
+    .await?;
+    Ok(())
 }
 
 /// Marks the bake failed when one of its jobs is dead.
@@ -209,7 +236,7 @@ impl Store for PgStore {
                     "blocked"
                 };
                 let job: i64 = sqlx::query_scalar(
-                    "INSERT INTO jobs (bake_id, idx, kind, spec, work, state, max_attempts) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id",
+                    "INSERT INTO jobs (bake_id, idx, kind, spec, work, state, max_attempts, pending_deps) VALUES ($1, $2, $3, $4, $5, $6, $7, $8) RETURNING id",
                 )
                 .bind(id)
                 .bind(i as i64)
@@ -218,17 +245,21 @@ impl Store for PgStore {
                 .bind(j.work)
                 .bind(state)
                 .bind(b.max_attempts)
+                .bind(j.deps.len() as i64)
                 .fetch_one(&mut *tx)
                 .await?;
                 for &d in &j.deps {
                     let dep = *ids.get(d).ok_or_else(|| {
                         StoreError::Conflict(format!("job {i} depends on a later job {d}"))
                     })?;
-                    sqlx::query("INSERT INTO job_deps (job_id, dep_id) VALUES ($1, $2)")
-                        .bind(job)
-                        .bind(dep)
-                        .execute(&mut *tx)
-                        .await?;
+                    sqlx::query(
+                        "INSERT INTO job_deps (job_id, dep_id, dep_idx) VALUES ($1, $2, $3)",
+                    )
+                    .bind(job)
+                    .bind(dep)
+                    .bind(d as i64)
+                    .execute(&mut *tx)
+                    .await?;
                 }
                 ids.push(job);
             }
@@ -282,39 +313,64 @@ impl Store for PgStore {
     }
 
     async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>> {
-        self.reap().await?;
         in_tx!(self.pool.begin().await?, |tx| {
-            let now = Self::now(&mut tx).await?;
-            let id: Option<i64> = sqlx::query_scalar(
-                "SELECT j.id FROM jobs j JOIN bakes b ON b.id = j.bake_id WHERE (j.state = 'available' OR (j.state = 'retryable' AND j.run_at <= $1)) AND b.state IN ('queued', 'running') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = j.bake_id AND f.worker = $2 AND f.failures >= $3) ORDER BY b.priority DESC, b.id, j.idx LIMIT 1 FOR UPDATE OF j SKIP LOCKED",
+            // The queue can lose this in a power cut without harm (a lost
+            // lease is re-leased, a lost checkpoint resumes from the one
+            // before): no need to wait for the WAL flush.
+            sqlx::query("SET LOCAL synchronous_commit TO OFF")
+                .execute(&mut *tx)
+                .await?;
+            // Retries whose delay has passed are ready again.
+            sqlx::query(&format!(
+                "UPDATE jobs SET state = 'available' WHERE state = 'retryable' AND run_at <= {NOW}"
+            ))
+            .execute(&mut *tx)
+            .await?;
+            // The most urgent bakes with a ready job that this worker is
+            // not kept off, then the first ready job of the first of them
+            // that other claimers have not locked: index lookups, however
+            // many jobs are queued.
+            let bakes: Vec<i64> = sqlx::query_scalar(
+                "SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = $1 AND f.failures >= $2) ORDER BY b.priority DESC, b.id LIMIT 8",
             )
-            .bind(now)
             .bind(worker)
             .bind(policy.worker_failures)
-            .fetch_optional(&mut *tx)
+            .fetch_all(&mut *tx)
             .await?;
+            let mut id: Option<i64> = None;
+            for bake in bakes {
+                id = sqlx::query_scalar(
+                    "SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' ORDER BY idx LIMIT 1 FOR UPDATE SKIP LOCKED",
+                )
+                .bind(bake)
+                .fetch_optional(&mut *tx)
+                .await?;
+                if id.is_some() {
+                    break;
+                }
+            }
             let Some(id) = id else {
                 return Ok(None);
             };
             let token = token();
-            let expires_at = now + policy.lease_ms;
-            sqlx::query(
-                "UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = $3, progress = 0 WHERE id = $4",
-            )
+            let job = sqlx::query_as::<_, RawJob>(&format!(
+                "UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {NOW} + $3, progress = 0 WHERE id = $4 RETURNING *, {DEPS} AS deps"
+            ))
             .bind(&token)
             .bind(worker)
-            .bind(expires_at)
+            .bind(policy.lease_ms)
             .bind(id)
-            .execute(&mut *tx)
+            .fetch_one(&mut *tx)
             .await?;
-            let job = job_by_id(&mut tx, id).await?;
-            sqlx::query(&format!(
-                "UPDATE bakes SET state = 'running', updated_at = {NOW} WHERE id = $1 AND state = 'queued'"
+            let expires_at = job.lease_expires_at.unwrap_or_default();
+            let job = job.cook()?;
+            let bake = sqlx::query_as::<_, RawBake>(&format!(
+                "UPDATE bakes SET state = CASE WHEN state = 'queued' THEN 'running' ELSE state END, updated_at = CASE WHEN state = 'queued' THEN {NOW} ELSE updated_at END WHERE id = $1 RETURNING *"
             ))
             .bind(job.bake_id)
-            .execute(&mut *tx)
-            .await?;
-            let bake = bake_by_id(&mut tx, job.bake_id).await?;
+            .fetch_one(&mut *tx)
+            .await?
+            .cook()?;
             let deps = sqlx::query(
                 "SELECT p.outputs, p.timings FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = $1 ORDER BY p.idx",
             )
@@ -322,7 +378,7 @@ impl Store for PgStore {
             .fetch_all(&mut *tx)
             .await?;
             let mut inputs = Vec::new();
-            for d in &deps {
+            for d in deps.iter().filter(|_| !job.deps.is_empty()) {
                 let outputs: Option<String> = d.try_get("outputs")?;
                 let timings: Option<String> = d.try_get("timings")?;
                 inputs.push(Completion {
@@ -368,6 +424,12 @@ impl Store for PgStore {
         policy: &QueuePolicy,
     ) -> Result<bool> {
         in_tx!(self.pool.begin().await?, |tx| {
+            // The queue can lose this in a power cut without harm (a lost
+            // lease is re-leased, a lost checkpoint resumes from the one
+            // before): no need to wait for the WAL flush.
+            sqlx::query("SET LOCAL synchronous_commit TO OFF")
+                .execute(&mut *tx)
+                .await?;
             let j = leased(&mut tx, job, token).await?;
             sqlx::query(&format!(
                 "UPDATE jobs SET lease_expires_at = {NOW} + $1, progress = $2 WHERE id = $3"
@@ -391,6 +453,12 @@ impl Store for PgStore {
 
     async fn checkpoint(&self, job: i64, token: &str, c: &CheckpointRef) -> Result<()> {
         in_tx!(self.pool.begin().await?, |tx| {
+            // The queue can lose this in a power cut without harm (a lost
+            // lease is re-leased, a lost checkpoint resumes from the one
+            // before): no need to wait for the WAL flush.
+            sqlx::query("SET LOCAL synchronous_commit TO OFF")
+                .execute(&mut *tx)
+                .await?;
             leased(&mut tx, job, token).await?;
             sqlx::query(
                 "UPDATE jobs SET checkpoint_step = $1, checkpoint_cursor = $2, checkpoint_blob = $3 WHERE id = $4",
@@ -406,49 +474,48 @@ impl Store for PgStore {
     }
 
     async fn complete(&self, job: i64, token: &str, c: &Completion) -> Result<BakeRow> {
+        let digest = |name: &str| {
+            c.outputs
+                .iter()
+                .find(|o| o.name == name)
+                .map(|o| o.digest.clone())
+        };
         in_tx!(self.pool.begin().await?, |tx| {
-            let j = leased(&mut tx, job, token).await?;
-            sqlx::query(&format!(
-                "UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {NOW} WHERE id = $3"
+            // Four statements: the completion (only with the current lease
+            // token), the bake's counts (publishing the asset with the
+            // last job), the dependents, the worker.
+            let done: Option<(i64, i64, Option<String>)> = sqlx::query_as(&format!(
+                "UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {NOW} WHERE id = $3 AND lease_token = $4 AND state = 'running' RETURNING bake_id, work, worker"
             ))
             .bind(serde_json::to_string(&c.outputs)?)
             .bind(c.timings.to_string())
             .bind(job)
-            .execute(&mut *tx)
+            .bind(token)
+            .fetch_optional(&mut *tx)
             .await?;
-            sqlx::query(&format!(
-                "UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + 1, updated_at = {NOW} WHERE id = $2"
+            let Some((bake_id, work, worker)) = done else {
+                return Err(StoreError::LeaseLost(format!(
+                    "job {job} is not leased with this token"
+                )));
+            };
+            let bake = sqlx::query_as::<_, RawBake>(&format!(
+                "UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + 1, updated_at = {NOW}, state = CASE WHEN jobs_done + 1 = jobs_total THEN 'done' ELSE state END, asset = CASE WHEN jobs_done + 1 = jobs_total THEN $2 ELSE asset END, report = CASE WHEN jobs_done + 1 = jobs_total THEN $3 ELSE report END, plot = CASE WHEN jobs_done + 1 = jobs_total THEN $4 ELSE plot END, finished_at = CASE WHEN jobs_done + 1 = jobs_total THEN {NOW} ELSE finished_at END WHERE id = $5 RETURNING *"
             ))
-            .bind(j.work)
-            .bind(j.bake_id)
-            .execute(&mut *tx)
-            .await?;
-            unblock(&mut tx, j.bake_id).await?;
-            let bake = bake_by_id(&mut tx, j.bake_id).await?;
-            if bake.jobs_done == bake.jobs_total {
-                let digest = |name: &str| {
-                    c.outputs
-                        .iter()
-                        .find(|o| o.name == name)
-                        .map(|o| o.digest.clone())
-                };
-                sqlx::query(&format!(
-                    "UPDATE bakes SET state = 'done', asset = $1, report = $2, plot = $3, finished_at = {NOW}, updated_at = {NOW} WHERE id = $4"
-                ))
-                .bind(digest("asset"))
-                .bind(digest("report.json"))
-                .bind(digest("plot.png"))
-                .bind(j.bake_id)
-                .execute(&mut *tx)
-                .await?;
-            }
+            .bind(work)
+            .bind(digest("asset"))
+            .bind(digest("report.json"))
+            .bind(digest("plot.png"))
+            .bind(bake_id)
+            .fetch_one(&mut *tx)
+            .await?
+            .cook()?;
+            release_dependents(&mut tx, job).await?;
             sqlx::query(&format!(
                 "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = $1"
             ))
-            .bind(j.worker.as_deref().unwrap_or(""))
+            .bind(worker.as_deref().unwrap_or(""))
             .execute(&mut *tx)
             .await?;
-            let bake = bake_by_id(&mut tx, j.bake_id).await?;
             Self::wake(&mut tx).await?;
             Ok(bake)
         })
@@ -518,6 +585,12 @@ impl Store for PgStore {
 
     async fn reap(&self) -> Result<u64> {
         in_tx!(self.pool.begin().await?, |tx| {
+            // The queue can lose this in a power cut without harm (a lost
+            // lease is re-leased, a lost checkpoint resumes from the one
+            // before): no need to wait for the WAL flush.
+            sqlx::query("SET LOCAL synchronous_commit TO OFF")
+                .execute(&mut *tx)
+                .await?;
             let expired: Vec<(i64, i64)> = sqlx::query_as(&format!(
                 "SELECT id, bake_id FROM jobs WHERE state = 'running' AND lease_expires_at < {NOW}"
             ))

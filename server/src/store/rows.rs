@@ -85,6 +85,7 @@ pub(super) struct RawJob {
     attempts: i64,
     max_attempts: i64,
     worker: Option<String>,
+    pub(super) lease_expires_at: Option<i64>,
     progress: i64,
     checkpoint_step: Option<String>,
     checkpoint_cursor: Option<i64>,

@@ -46,9 +46,28 @@ macro_rules! in_tx {
 const NOW: &str = "CAST(unixepoch('subsec') * 1000 AS INTEGER)";
 
 /// SQLite behind the [`Store`] trait.
+///
+/// SQLite has one writer at a time, so writes go through one connection
+/// in turn (a queue instead of busy-waiting) and reads through a pool.
+/// Writes that acknowledge something a client relies on (an upload, a
+/// bake, a completion, a failure, a control) commit with `synchronous =
+/// FULL`; leases, heartbeats, checkpoints and reaping, which the queue
+/// can lose in a power cut without harm (a lost lease is re-leased, a lost
+/// checkpoint resumes from the one before), commit with `NORMAL`.
 #[derive(Debug, Clone)]
 pub struct SqliteStore {
     pool: SqlitePool,
+    writer: SqlitePool,
+    write_turn: std::sync::Arc<tokio::sync::Mutex<()>>,
+}
+
+/// How durable a write must be.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Durability {
+    /// fsync before the commit returns.
+    Acknowledged,
+    /// Survives a crash of the process, maybe not of the machine.
+    Queue,
 }
 
 impl SqliteStore {
@@ -61,12 +80,32 @@ impl SqliteStore {
             .synchronous(SqliteSynchronous::Full)
             .busy_timeout(Duration::from_secs(10))
             .foreign_keys(true);
+        let writer = SqlitePoolOptions::new()
+            .max_connections(1)
+            .connect_with(options.clone())
+            .await?;
+        sqlx::migrate!("migrations/sqlite").run(&writer).await?;
         let pool = SqlitePoolOptions::new()
             .max_connections(8)
-            .connect_with(options)
+            .connect_with(options.read_only(true))
             .await?;
-        sqlx::migrate!("migrations/sqlite").run(&pool).await?;
-        Ok(Self { pool })
+        Ok(Self {
+            pool,
+            writer,
+            write_turn: Default::default(),
+        })
+    }
+
+    /// Waits for the writer's turn and sets its durability; the guard
+    /// holds the turn until it is dropped.
+    async fn turn(&self, durability: Durability) -> Result<tokio::sync::MutexGuard<'_, ()>> {
+        let guard = self.write_turn.lock().await;
+        let pragma = match durability {
+            Durability::Acknowledged => "PRAGMA synchronous = FULL",
+            Durability::Queue => "PRAGMA synchronous = NORMAL",
+        };
+        sqlx::query(pragma).execute(&self.writer).await?;
+        Ok(guard)
     }
 
     async fn now(conn: &mut SqliteConnection) -> Result<i64> {
@@ -85,7 +124,11 @@ fn job_row(r: &SqliteRow) -> Result<JobRow> {
 }
 
 /// Jobs with their dependencies' graph indices.
-const JOB_SELECT: &str = "SELECT j.*, (SELECT group_concat(p.idx) FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = j.id) AS deps FROM jobs j";
+const JOB_SELECT: &str = "SELECT j.*, (SELECT group_concat(d.dep_idx) FROM (SELECT dep_idx FROM job_deps WHERE job_id = j.id ORDER BY dep_idx) d) AS deps FROM jobs j";
+
+/// In an `UPDATE jobs … RETURNING`: the graph indices of the job's
+/// dependencies, comma-separated.
+const DEPS: &str = "(SELECT group_concat(d.dep_idx) FROM (SELECT dep_idx FROM job_deps WHERE job_id = jobs.id ORDER BY dep_idx) d)";
 
 async fn bake_by_id(conn: &mut SqliteConnection, id: i64) -> Result<BakeRow> {
     let row = sqlx::query("SELECT * FROM bakes WHERE id = ?")
@@ -122,15 +165,36 @@ async fn leased(conn: &mut SqliteConnection, job: i64, token: &str) -> Result<Jo
     job_by_id(conn, job).await
 }
 
-/// Unblocks the bake's jobs whose dependencies have all completed.
-async fn unblock(conn: &mut SqliteConnection, bake: i64) -> Result<u64> {
-    Ok(sqlx::query(
-        "UPDATE jobs SET state = 'available' WHERE bake_id = ? AND state = 'blocked' AND NOT EXISTS (SELECT 1 FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = jobs.id AND p.state != 'completed')",
+/// After `job` completed: each dependent has one dependency fewer, and
+/// those with none left become available. Touches only the job's direct
+/// dependents, so a completion costs the same however large the bake.
+async fn release_dependents(conn: &mut SqliteConnection, job: i64) -> Result<()> {
+    // CASE sees the count before this update: 1 means this was the last.
+    sqlx::query(
+        "UPDATE jobs SET pending_deps = pending_deps - 1, state = CASE WHEN state = 'blocked' AND pending_deps = 1 THEN 'available' ELSE state END WHERE id IN (SELECT job_id FROM job_deps WHERE dep_id = ?)",
+    )
+    .bind(job)
+    .execute(conn)
+    .await?;
+    Ok(())
+}
+
+/// Recounts the pending dependencies of the bake's blocked jobs and makes
+/// those with none available (after a retry re-blocks jobs).
+async fn unblock(conn: &mut SqliteConnection, bake: i64) -> Result<()> {
+    sqlx::query(
+        "UPDATE jobs SET pending_deps = (SELECT COUNT(*) FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = jobs.id AND p.state != 'completed') WHERE bake_id = ? AND state = 'blocked'",
+    )
+    .bind(bake)
+    .execute(&mut *conn)
+    .await?;
+    sqlx::query(
+        "UPDATE jobs SET state = 'available' WHERE bake_id = ? AND state = 'blocked' AND pending_deps = 0",
     )
     .bind(bake)
     .execute(conn)
-    .await?
-    .rows_affected())
+    .await?;
+    Ok(())
 }
 
 /// Marks the bake failed when one of its jobs is dead.
@@ -164,6 +228,7 @@ fn token() -> String {
 #[async_trait::async_trait]
 impl Store for SqliteStore {
     async fn put_upload(&self, u: &UploadRow) -> Result<bool> {
+        let _turn = self.turn(Durability::Acknowledged).await?;
         let done = sqlx::query(&format!(
             "INSERT INTO uploads (digest, kind, bundle, bytes, summary, created_at) VALUES (?, ?, ?, ?, ?, {NOW}) ON CONFLICT (digest) DO NOTHING"
         ))
@@ -172,7 +237,7 @@ impl Store for SqliteStore {
         .bind(u.bundle)
         .bind(u.bytes)
         .bind(u.summary.to_string())
-        .execute(&self.pool)
+        .execute(&self.writer)
         .await?;
         Ok(done.rows_affected() == 1)
     }
@@ -186,7 +251,8 @@ impl Store for SqliteStore {
     }
 
     async fn create_bake(&self, b: &NewBake) -> Result<BakeRow> {
-        in_tx!(self.pool.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+        let _turn = self.turn(Durability::Acknowledged).await?;
+        in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
             let total: i64 = b.jobs.iter().map(|j| j.work).sum();
             let id: i64 = sqlx::query_scalar(&format!(
                 "INSERT INTO bakes (key, character, clips, method, params, state, priority, total_work, jobs_total, created_at, updated_at) VALUES (?, ?, ?, ?, ?, 'queued', ?, ?, ?, {NOW}, {NOW}) RETURNING id"
@@ -209,7 +275,7 @@ impl Store for SqliteStore {
                     "blocked"
                 };
                 let job: i64 = sqlx::query_scalar(
-                    "INSERT INTO jobs (bake_id, idx, kind, spec, work, state, max_attempts) VALUES (?, ?, ?, ?, ?, ?, ?) RETURNING id",
+                    "INSERT INTO jobs (bake_id, idx, kind, spec, work, state, max_attempts, pending_deps) VALUES (?, ?, ?, ?, ?, ?, ?, ?) RETURNING id",
                 )
                 .bind(id)
                 .bind(i as i64)
@@ -218,15 +284,17 @@ impl Store for SqliteStore {
                 .bind(j.work)
                 .bind(state)
                 .bind(b.max_attempts)
+                .bind(j.deps.len() as i64)
                 .fetch_one(&mut *tx)
                 .await?;
                 for &d in &j.deps {
                     let dep = *ids.get(d).ok_or_else(|| {
                         StoreError::Conflict(format!("job {i} depends on a later job {d}"))
                     })?;
-                    sqlx::query("INSERT INTO job_deps (job_id, dep_id) VALUES (?, ?)")
+                    sqlx::query("INSERT INTO job_deps (job_id, dep_id, dep_idx) VALUES (?, ?, ?)")
                         .bind(job)
                         .bind(dep)
+                        .bind(d as i64)
                         .execute(&mut *tx)
                         .await?;
                 }
@@ -281,39 +349,57 @@ impl Store for SqliteStore {
     }
 
     async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>> {
-        self.reap().await?;
-        in_tx!(self.pool.begin_with("BEGIN IMMEDIATE").await?, |tx| {
-            let now = Self::now(&mut tx).await?;
-            let id: Option<i64> = sqlx::query_scalar(
-                "SELECT j.id FROM jobs j JOIN bakes b ON b.id = j.bake_id WHERE (j.state = 'available' OR (j.state = 'retryable' AND j.run_at <= ?1)) AND b.state IN ('queued', 'running') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = j.bake_id AND f.worker = ?2 AND f.failures >= ?3) ORDER BY b.priority DESC, b.id, j.idx LIMIT 1",
+        let _turn = self.turn(Durability::Queue).await?;
+        in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+            // Retries whose delay has passed are ready again.
+            sqlx::query(&format!(
+                "UPDATE jobs SET state = 'available' WHERE state = 'retryable' AND run_at <= {NOW}"
+            ))
+            .execute(&mut *tx)
+            .await?;
+            // The most urgent bake with a ready job that this worker is not
+            // kept off, then its first ready job: two index lookups, however
+            // many jobs are queued.
+            let bake: Option<i64> = sqlx::query_scalar(
+                "SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = ? AND f.failures >= ?) ORDER BY b.priority DESC, b.id LIMIT 1",
             )
-            .bind(now)
             .bind(worker)
             .bind(policy.worker_failures)
             .fetch_optional(&mut *tx)
             .await?;
+            let id: Option<i64> = match bake {
+                Some(bake) => {
+                    sqlx::query_scalar(
+                        "SELECT id FROM jobs WHERE bake_id = ? AND state = 'available' ORDER BY idx LIMIT 1",
+                    )
+                    .bind(bake)
+                    .fetch_optional(&mut *tx)
+                    .await?
+                }
+                None => None,
+            };
             let Some(id) = id else {
                 return Ok(None);
             };
             let token = token();
-            let expires_at = now + policy.lease_ms;
-            sqlx::query(
-                "UPDATE jobs SET state = 'running', lease_token = ?, worker = ?, attempts = attempts + 1, lease_expires_at = ?, progress = 0 WHERE id = ?",
-            )
+            let job = sqlx::query_as::<_, RawJob>(&format!(
+                "UPDATE jobs SET state = 'running', lease_token = ?, worker = ?, attempts = attempts + 1, lease_expires_at = {NOW} + ?, progress = 0 WHERE id = ? RETURNING *, {DEPS} AS deps"
+            ))
             .bind(&token)
             .bind(worker)
-            .bind(expires_at)
+            .bind(policy.lease_ms)
             .bind(id)
-            .execute(&mut *tx)
+            .fetch_one(&mut *tx)
             .await?;
-            let job = job_by_id(&mut tx, id).await?;
-            sqlx::query(&format!(
-                "UPDATE bakes SET state = 'running', updated_at = {NOW} WHERE id = ? AND state = 'queued'"
+            let expires_at = job.lease_expires_at.unwrap_or_default();
+            let job = job.cook()?;
+            let bake = sqlx::query_as::<_, RawBake>(&format!(
+                "UPDATE bakes SET state = CASE WHEN state = 'queued' THEN 'running' ELSE state END, updated_at = CASE WHEN state = 'queued' THEN {NOW} ELSE updated_at END WHERE id = ? RETURNING *"
             ))
             .bind(job.bake_id)
-            .execute(&mut *tx)
-            .await?;
-            let bake = bake_by_id(&mut tx, job.bake_id).await?;
+            .fetch_one(&mut *tx)
+            .await?
+            .cook()?;
             let deps = sqlx::query(
                 "SELECT p.outputs, p.timings FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = ? ORDER BY p.idx",
             )
@@ -321,7 +407,7 @@ impl Store for SqliteStore {
             .fetch_all(&mut *tx)
             .await?;
             let mut inputs = Vec::new();
-            for d in &deps {
+            for d in deps.iter().filter(|_| !job.deps.is_empty()) {
                 let outputs: Option<String> = d.try_get("outputs")?;
                 let timings: Option<String> = d.try_get("timings")?;
                 inputs.push(Completion {
@@ -366,7 +452,8 @@ impl Store for SqliteStore {
         progress: i64,
         policy: &QueuePolicy,
     ) -> Result<bool> {
-        in_tx!(self.pool.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+        let _turn = self.turn(Durability::Queue).await?;
+        in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
             let j = leased(&mut tx, job, token).await?;
             sqlx::query(&format!(
                 "UPDATE jobs SET lease_expires_at = {NOW} + ?, progress = ? WHERE id = ?"
@@ -389,7 +476,8 @@ impl Store for SqliteStore {
     }
 
     async fn checkpoint(&self, job: i64, token: &str, c: &CheckpointRef) -> Result<()> {
-        in_tx!(self.pool.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+        let _turn = self.turn(Durability::Queue).await?;
+        in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
             leased(&mut tx, job, token).await?;
             sqlx::query(
                 "UPDATE jobs SET checkpoint_step = ?, checkpoint_cursor = ?, checkpoint_blob = ? WHERE id = ?",
@@ -405,49 +493,49 @@ impl Store for SqliteStore {
     }
 
     async fn complete(&self, job: i64, token: &str, c: &Completion) -> Result<BakeRow> {
-        in_tx!(self.pool.begin_with("BEGIN IMMEDIATE").await?, |tx| {
-            let j = leased(&mut tx, job, token).await?;
-            sqlx::query(&format!(
-                "UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = ?, timings = ?, error = NULL, finished_at = {NOW} WHERE id = ?"
+        let _turn = self.turn(Durability::Acknowledged).await?;
+        let digest = |name: &str| {
+            c.outputs
+                .iter()
+                .find(|o| o.name == name)
+                .map(|o| o.digest.clone())
+        };
+        in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+            // Four statements: the completion (only with the current lease
+            // token), the bake's counts (publishing the asset with the
+            // last job), the dependents, the worker.
+            let done: Option<(i64, i64, Option<String>)> = sqlx::query_as(&format!(
+                "UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = ?, timings = ?, error = NULL, finished_at = {NOW} WHERE id = ? AND lease_token = ? AND state = 'running' RETURNING bake_id, work, worker"
             ))
             .bind(serde_json::to_string(&c.outputs)?)
             .bind(c.timings.to_string())
             .bind(job)
-            .execute(&mut *tx)
+            .bind(token)
+            .fetch_optional(&mut *tx)
             .await?;
-            sqlx::query(&format!(
-                "UPDATE bakes SET done_work = done_work + ?, jobs_done = jobs_done + 1, updated_at = {NOW} WHERE id = ?"
+            let Some((bake_id, work, worker)) = done else {
+                return Err(StoreError::LeaseLost(format!(
+                    "job {job} is not leased with this token"
+                )));
+            };
+            let bake = sqlx::query_as::<_, RawBake>(&format!(
+                "UPDATE bakes SET done_work = done_work + ?, jobs_done = jobs_done + 1, updated_at = {NOW}, state = CASE WHEN jobs_done + 1 = jobs_total THEN 'done' ELSE state END, asset = CASE WHEN jobs_done + 1 = jobs_total THEN ? ELSE asset END, report = CASE WHEN jobs_done + 1 = jobs_total THEN ? ELSE report END, plot = CASE WHEN jobs_done + 1 = jobs_total THEN ? ELSE plot END, finished_at = CASE WHEN jobs_done + 1 = jobs_total THEN {NOW} ELSE finished_at END WHERE id = ? RETURNING *"
             ))
-            .bind(j.work)
-            .bind(j.bake_id)
-            .execute(&mut *tx)
-            .await?;
-            unblock(&mut tx, j.bake_id).await?;
-            let bake = bake_by_id(&mut tx, j.bake_id).await?;
-            if bake.jobs_done == bake.jobs_total {
-                let digest = |name: &str| {
-                    c.outputs
-                        .iter()
-                        .find(|o| o.name == name)
-                        .map(|o| o.digest.clone())
-                };
-                sqlx::query(&format!(
-                    "UPDATE bakes SET state = 'done', asset = ?, report = ?, plot = ?, finished_at = {NOW}, updated_at = {NOW} WHERE id = ?"
-                ))
-                .bind(digest("asset"))
-                .bind(digest("report.json"))
-                .bind(digest("plot.png"))
-                .bind(j.bake_id)
-                .execute(&mut *tx)
-                .await?;
-            }
+            .bind(work)
+            .bind(digest("asset"))
+            .bind(digest("report.json"))
+            .bind(digest("plot.png"))
+            .bind(bake_id)
+            .fetch_one(&mut *tx)
+            .await?
+            .cook()?;
+            release_dependents(&mut tx, job).await?;
             sqlx::query(&format!(
                 "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {NOW} WHERE id = ?"
             ))
-            .bind(j.worker.as_deref().unwrap_or(""))
+            .bind(worker.as_deref().unwrap_or(""))
             .execute(&mut *tx)
             .await?;
-            let bake = bake_by_id(&mut tx, j.bake_id).await?;
             Ok(bake)
         })
     }
@@ -460,7 +548,8 @@ impl Store for SqliteStore {
         retryable: bool,
         policy: &QueuePolicy,
     ) -> Result<BakeRow> {
-        in_tx!(self.pool.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+        let _turn = self.turn(Durability::Acknowledged).await?;
+        in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
             let j = leased(&mut tx, job, token).await?;
             let dead = !retryable || j.attempts >= j.max_attempts;
             let now = Self::now(&mut tx).await?;
@@ -494,7 +583,8 @@ impl Store for SqliteStore {
     }
 
     async fn release(&self, job: i64, token: &str) -> Result<()> {
-        in_tx!(self.pool.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+        let _turn = self.turn(Durability::Acknowledged).await?;
+        in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
             let j = leased(&mut tx, job, token).await?;
             sqlx::query(
                 "UPDATE jobs SET state = 'available', lease_token = NULL, lease_expires_at = NULL, attempts = attempts - 1 WHERE id = ?",
@@ -513,7 +603,8 @@ impl Store for SqliteStore {
     }
 
     async fn reap(&self) -> Result<u64> {
-        in_tx!(self.pool.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+        let _turn = self.turn(Durability::Queue).await?;
+        in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
             let expired: Vec<(i64, i64)> = sqlx::query_as(&format!(
                 "SELECT id, bake_id FROM jobs WHERE state = 'running' AND lease_expires_at < {NOW}"
             ))
@@ -539,7 +630,8 @@ impl Store for SqliteStore {
     }
 
     async fn control(&self, bake: i64, action: Action) -> Result<BakeRow> {
-        in_tx!(self.pool.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+        let _turn = self.turn(Durability::Acknowledged).await?;
+        in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
             let b = bake_by_id(&mut tx, bake).await?;
             let refuse = |why: &str| {
                 Err(StoreError::Conflict(format!(
@@ -616,7 +708,8 @@ impl Store for SqliteStore {
     }
 
     async fn set_priority(&self, bake: i64, priority: i64) -> Result<BakeRow> {
-        let mut conn = self.pool.acquire().await?;
+        let _turn = self.turn(Durability::Acknowledged).await?;
+        let mut conn = self.writer.acquire().await?;
         sqlx::query(&format!(
             "UPDATE bakes SET priority = ?, updated_at = {NOW} WHERE id = ?"
         ))
@@ -628,13 +721,14 @@ impl Store for SqliteStore {
     }
 
     async fn worker_seen(&self, worker: &str, state: &str, job: Option<i64>) -> Result<()> {
+        let _turn = self.turn(Durability::Queue).await?;
         sqlx::query(&format!(
             "INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES (?1, ?2, ?3, {NOW}, {NOW}) ON CONFLICT (id) DO UPDATE SET state = ?2, job_id = ?3, last_seen = {NOW}"
         ))
         .bind(worker)
         .bind(state)
         .bind(job)
-        .execute(&self.pool)
+        .execute(&self.writer)
         .await?;
         Ok(())
     }
@@ -649,13 +743,14 @@ impl Store for SqliteStore {
     }
 
     async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()> {
+        let _turn = self.turn(Durability::Acknowledged).await?;
         sqlx::query(&format!(
             "INSERT INTO tokens (hash, name, scopes, created_at) VALUES (?, ?, ?, {NOW}) ON CONFLICT (hash) DO UPDATE SET name = excluded.name, scopes = excluded.scopes"
         ))
         .bind(hash)
         .bind(name)
         .bind(scopes.join(","))
-        .execute(&self.pool)
+        .execute(&self.writer)
         .await?;
         Ok(())
     }
