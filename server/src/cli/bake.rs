@@ -10,27 +10,17 @@ use aobake_core::{
     Limits,
     asset::report::Report,
     bake::{Bake, BakeInputs, Baked, GraphOptions, JobOutput, JobSpec, run_graph},
-    method::Method,
 };
 
-use super::params::ParamArgs;
+use super::params::BakeRequestArgs;
 use super::trace::{progress_bar, with_threads};
 
 /// Arguments of `aobake bake`.
 #[derive(Debug, clap::Args)]
+#[command(after_help = "Unset parameters keep the method's defaults; `aobake params --method M` prints them all, and `--param KEY=VALUE` sets any of them.")]
 pub(super) struct Args {
-    /// The character (.glb, or .gltf with its side files beside it).
-    file: PathBuf,
-    /// glTF files whose animations drive the character, bound to its nodes
-    /// by name; the character's own clips count too.
-    #[arg(long, num_args = 1..)]
-    clips: Vec<PathBuf>,
-    /// The method: vertex-linear (Kontkanen & Aila 2006), vertex-clustered
-    /// (Kirk & Arikan 2007) or static-average (the baseline alone).
-    #[arg(long)]
-    method: Method,
     #[command(flatten)]
-    params: ParamArgs,
+    request: BakeRequestArgs,
     /// Worker threads for tracing. Default: one per core.
     #[arg(long)]
     threads: Option<usize>,
@@ -98,11 +88,12 @@ fn write(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
 
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let limits = Limits::default();
-    let params = args.params.params(args.method)?;
+    let r = &args.request;
+    let params = r.params.params(r.method)?;
     if args.out == args.report {
         bail!("--out and --report must be different files");
     }
-    let inputs = load_inputs(&args.file, &args.clips, &limits)?;
+    let inputs = load_inputs(&r.file, &r.clips, &limits)?;
     let bake = Bake::new(&inputs, params)?;
     with_threads(args.threads, || run_bake(args, &bake))?
 }
@@ -115,7 +106,7 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
         |idx: &[usize]| -> Vec<&str> { idx.iter().map(|&i| clips[i].name.as_str()).collect() };
     eprintln!(
         "{}: {} vertices, {} triangles; {} joint-angle parameters, {} handle coordinates; training on {:?}, testing on {:?}",
-        args.file.display(),
+        args.request.file.display(),
         character.vertex_count(),
         character.triangles.len(),
         plan.joint_angles.len(),

@@ -12,7 +12,7 @@ use anyhow::{Context as _, bail};
 use aobake_core::{Limits, asset::report::Report, bake::UploadBytes, method::Method};
 use serde_json::{Value, json};
 
-use super::params::ParamArgs;
+use super::params::BakeRequestArgs;
 
 /// Where the service is.
 #[derive(Debug, Clone, clap::Args)]
@@ -159,17 +159,10 @@ impl Api {
 
 /// Arguments of `aobake submit`.
 #[derive(Debug, clap::Args)]
+#[command(after_help = "Unset parameters keep the method's defaults; `aobake params --method M` prints them all, and `--param KEY=VALUE` sets any of them.")]
 pub(super) struct SubmitArgs {
-    /// The character (.glb, or .gltf with its side files beside it).
-    file: PathBuf,
-    /// glTF files whose animations drive the character.
-    #[arg(long, num_args = 1..)]
-    clips: Vec<PathBuf>,
-    /// vertex-linear, vertex-clustered or static-average.
-    #[arg(long)]
-    method: Method,
     #[command(flatten)]
-    params: ParamArgs,
+    request: BakeRequestArgs,
     /// Higher runs first.
     #[arg(long, default_value_t = 0)]
     priority: i64,
@@ -219,17 +212,11 @@ pub(super) fn submit_files(
 
 pub(super) fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
     let api = args.conn.api()?;
-    let overrides = args.params.overrides(args.method)?;
+    let r = &args.request;
+    let overrides = r.params.overrides(r.method)?;
     // Validate here too, so a typo fails before the upload.
-    aobake_core::bake::BakeParams::with_overrides(args.method, &overrides)?;
-    let bake = submit_files(
-        &api,
-        &args.file,
-        &args.clips,
-        args.method,
-        overrides,
-        args.priority,
-    )?;
+    aobake_core::bake::BakeParams::with_overrides(r.method, &overrides)?;
+    let bake = submit_files(&api, &r.file, &r.clips, r.method, overrides, args.priority)?;
     let id = bake["id"].as_i64().context("no bake id")?;
     println!(
         "bake {id}: key {}, {}",

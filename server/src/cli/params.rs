@@ -9,6 +9,25 @@ use anyhow::{Context as _, bail};
 use aobake_core::{bake::BakeParams, method::Method};
 use serde_json::{Map, Value, json};
 
+/// What to bake: the files, the method and its parameters. `aobake bake`
+/// and `aobake submit` take the same, so a local bake and a service bake
+/// of one command line have one bake key.
+#[derive(Debug, Clone, clap::Args)]
+pub(super) struct BakeRequestArgs {
+    /// The character (.glb, or .gltf with its side files beside it).
+    pub file: std::path::PathBuf,
+    /// glTF files whose animations drive the character, bound to its nodes
+    /// by name; the character's own clips count too.
+    #[arg(long, num_args = 1..)]
+    pub clips: Vec<std::path::PathBuf>,
+    /// The method: vertex-linear (Kontkanen & Aila 2006), vertex-clustered
+    /// (Kirk & Arikan 2007) or static-average (the baseline alone).
+    #[arg(long)]
+    pub method: Method,
+    #[command(flatten)]
+    pub params: ParamArgs,
+}
+
 /// Flags that set bake parameters. Unset flags keep the method's default.
 #[derive(Debug, Clone, Default, clap::Args)]
 #[command(allow_negative_numbers = true)]
