@@ -120,6 +120,8 @@ pub struct AppState {
     pub import_limits: aobake_core::Limits,
     /// Woken when jobs may have become available.
     pub jobs_ready: Arc<Notify>,
+    /// Set when the server shuts down: long polls answer at once.
+    pub shutting_down: Arc<std::sync::atomic::AtomicBool>,
     /// Bake state and progress changes.
     pub events: broadcast::Sender<BakeEvent>,
     /// Per-token request rate.
@@ -167,10 +169,19 @@ impl AppState {
             limits,
             import_limits: aobake_core::Limits::default(),
             jobs_ready: Arc::new(Notify::new()),
+            shutting_down: Arc::default(),
             events: broadcast::channel(1024).0,
             limiter: Arc::new(Limiter::new(limits.requests_per_second)),
             metrics: Arc::new(Metrics::new()),
         }
+    }
+
+    /// Ends every long poll (they answer 204), so a graceful shutdown does
+    /// not wait for them.
+    pub fn shut_down(&self) {
+        self.shutting_down
+            .store(true, std::sync::atomic::Ordering::SeqCst);
+        self.jobs_ready.notify_waiters();
     }
 
     /// Tells listeners about a bake's state and wakes waiting workers.

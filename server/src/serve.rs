@@ -193,7 +193,8 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             drop(state);
         });
     }
-    let shutdown = async {
+    let stopping = state.clone();
+    let shutdown = async move {
         let ctrl_c = tokio::signal::ctrl_c();
         #[cfg(unix)]
         {
@@ -204,15 +205,19 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         }
         #[cfg(not(unix))]
         let _ = ctrl_c.await;
-        eprintln!("shutting down");
+        eprintln!("shutting down: ending long polls, stopping local workers");
+        // Long polls answer at once; local workers get SIGTERM, finish (or
+        // give back) their jobs while the API still serves their
+        // completions, and exit; then the API stops.
+        stopping.shut_down();
+        let _ = stop_tx.send(true);
+        for s in supervisors {
+            let _ = s.await;
+        }
     };
     axum::serve(listener, app(state))
         .with_graceful_shutdown(shutdown)
         .await?;
-    let _ = stop_tx.send(true);
-    for s in supervisors {
-        let _ = s.await;
-    }
     reaper.abort();
     Ok(())
 }

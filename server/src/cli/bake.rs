@@ -17,7 +17,9 @@ use super::trace::{progress_bar, with_threads};
 
 /// Arguments of `aobake bake`.
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Unset parameters keep the method's defaults; `aobake params --method M` prints them all, and `--param KEY=VALUE` sets any of them.")]
+#[command(
+    after_help = "Unset parameters keep the method's defaults; `aobake params --method M` prints them all, and `--param KEY=VALUE` sets any of them."
+)]
 pub(super) struct Args {
     #[command(flatten)]
     request: BakeRequestArgs,

@@ -159,7 +159,9 @@ impl Api {
 
 /// Arguments of `aobake submit`.
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Unset parameters keep the method's defaults; `aobake params --method M` prints them all, and `--param KEY=VALUE` sets any of them.")]
+#[command(
+    after_help = "Unset parameters keep the method's defaults; `aobake params --method M` prints them all, and `--param KEY=VALUE` sets any of them."
+)]
 pub(super) struct SubmitArgs {
     #[command(flatten)]
     request: BakeRequestArgs,

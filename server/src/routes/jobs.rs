@@ -74,7 +74,10 @@ pub(crate) async fn lease(
         }
         state.store.worker_seen(&req.worker, "idle", None).await?;
         let now = tokio::time::Instant::now();
-        if now >= deadline {
+        let stopping = state
+            .shutting_down
+            .load(std::sync::atomic::Ordering::SeqCst);
+        if now >= deadline || stopping {
             return Ok(StatusCode::NO_CONTENT.into_response());
         }
         // Retry delays and lease expiries free jobs without a notification:
