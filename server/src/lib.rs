@@ -26,6 +26,7 @@ pub mod blobs;
 pub mod cli;
 pub mod error;
 mod extract;
+pub mod listen;
 pub mod openapi;
 mod routes;
 pub mod serve;

@@ -51,6 +51,9 @@ pub struct ServeArgs {
     /// Requests per second per token.
     #[arg(long, env = "AOBAKE_RATE", default_value_t = 200)]
     pub rate: u32,
+    /// A client must send its request headers within this many seconds.
+    #[arg(long, env = "AOBAKE_HEADER_TIMEOUT_SECS", default_value_t = 10.0)]
+    pub header_timeout_secs: f64,
     /// Also upload the bundled Fox and bake it, and say where to watch.
     #[arg(long)]
     pub demo: bool,
@@ -215,9 +218,13 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             let _ = s.await;
         }
     };
-    axum::serve(listener, app(state))
-        .with_graceful_shutdown(shutdown)
-        .await?;
+    crate::listen::serve(
+        listener,
+        app(state),
+        Duration::from_secs_f64(args.header_timeout_secs),
+        shutdown,
+    )
+    .await?;
     reaper.abort();
     Ok(())
 }

@@ -60,6 +60,8 @@ pub struct Options {
     pub max_body_bytes: u64,
     /// Requests per second per token.
     pub rate: u32,
+    /// Seconds a client has to send its request headers.
+    pub header_timeout_secs: f64,
 }
 
 impl Default for Options {
@@ -69,6 +71,7 @@ impl Default for Options {
             max_attempts: 5,
             max_body_bytes: 64 << 20,
             rate: 10_000,
+            header_timeout_secs: 10.0,
         }
     }
 }
@@ -128,6 +131,7 @@ impl TestEnv {
             .args(["--max-attempts", &o.max_attempts.to_string()])
             .args(["--max-body-bytes", &o.max_body_bytes.to_string()])
             .args(["--rate", &o.rate.to_string()])
+            .args(["--header-timeout-secs", &o.header_timeout_secs.to_string()])
             .env("AOBAKE_ADMIN_TOKEN", ADMIN)
             .stdout(Stdio::null())
             .stderr(log)

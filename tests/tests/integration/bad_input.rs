@@ -163,3 +163,29 @@ fn bad_requests_name_what_is_wrong() {
         .unwrap();
     assert_eq!(status, 404);
 }
+
+#[test]
+fn a_client_that_trickles_its_headers_is_cut_off() {
+    let env = TestEnv::start(Options {
+        header_timeout_secs: 1.0,
+        ..Options::default()
+    });
+    let addr = env.url.trim_start_matches("http://");
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    // Half a request, then nothing.
+    write!(s, "GET /v1/bakes HTTP/1.1\r\nHost: {addr}\r\n").unwrap();
+    let started = std::time::Instant::now();
+    let mut buf = [0u8; 256];
+    let n = s.read(&mut buf).unwrap_or(0);
+    let waited = started.elapsed();
+    assert!(
+        waited >= Duration::from_millis(900) && waited < Duration::from_secs(5),
+        "cut off after {waited:?}"
+    );
+    // Closed (hyper may first answer 408).
+    let text = String::from_utf8_lossy(&buf[..n]);
+    assert!(n == 0 || text.starts_with("HTTP/1.1 408"), "{text}");
+    // Other clients are served meanwhile and after.
+    assert_eq!(env.request("GET", "/healthz", "", None).unwrap().0, 200);
+}
