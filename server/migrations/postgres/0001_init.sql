@@ -3,18 +3,20 @@
 -- the Unix epoch, read from the database clock.
 
 CREATE TABLE uploads (
-    digest     TEXT PRIMARY KEY,
+    -- The same file may be uploaded as a character and as clips.
+    digest     TEXT NOT NULL,
     kind       TEXT NOT NULL CHECK (kind IN ('character', 'clips')),
     bundle     BOOLEAN NOT NULL,
     bytes      BIGINT NOT NULL,
     summary    TEXT NOT NULL,
-    created_at BIGINT NOT NULL
+    created_at BIGINT NOT NULL,
+    PRIMARY KEY (digest, kind)
 );
 
 CREATE TABLE bakes (
     id          BIGSERIAL PRIMARY KEY,
     key         TEXT NOT NULL,
-    character   TEXT NOT NULL REFERENCES uploads (digest),
+    character   TEXT NOT NULL,
     clips       TEXT NOT NULL,
     method      TEXT NOT NULL,
     params      TEXT NOT NULL,

@@ -2,18 +2,20 @@
 -- the Unix epoch, read from the database clock.
 
 CREATE TABLE uploads (
-    digest     TEXT PRIMARY KEY,
+    -- The same file may be uploaded as a character and as clips.
+    digest     TEXT NOT NULL,
     kind       TEXT NOT NULL CHECK (kind IN ('character', 'clips')),
     bundle     INTEGER NOT NULL,
     bytes      INTEGER NOT NULL,
     summary    TEXT NOT NULL,
-    created_at INTEGER NOT NULL
+    created_at INTEGER NOT NULL,
+    PRIMARY KEY (digest, kind)
 );
 
 CREATE TABLE bakes (
     id          INTEGER PRIMARY KEY AUTOINCREMENT,
     key         TEXT NOT NULL,
-    character   TEXT NOT NULL REFERENCES uploads (digest),
+    character   TEXT NOT NULL,
     clips       TEXT NOT NULL,
     method      TEXT NOT NULL,
     params      TEXT NOT NULL,

@@ -210,9 +210,8 @@ pub(crate) async fn load_upload(
     crate::blobs::check_digest(digest)?;
     let row = state
         .store
-        .upload(digest)
+        .upload(digest, kind)
         .await?
-        .filter(|u| u.kind == kind)
         .ok_or_else(|| ApiError::NotFound(format!("no {kind} upload {digest}")))?;
     let blob = state
         .blobs
@@ -230,9 +229,13 @@ pub(crate) async fn get_upload(
     _caller: Need<Read>,
     ApiPath(digest): ApiPath<String>,
 ) -> ApiResult<Json<UploadRow>> {
-    crate::blobs::check_digest(&digest)?;
-    Ok(Json(state.store.upload(&digest).await?.ok_or_else(
-        || ApiError::NotFound(format!("no upload {digest}")),
+    find_upload(&state, &digest, "character").await
+}
+
+async fn find_upload(state: &AppState, digest: &str, kind: &str) -> ApiResult<Json<UploadRow>> {
+    crate::blobs::check_digest(digest)?;
+    Ok(Json(state.store.upload(digest, kind).await?.ok_or_else(
+        || ApiError::NotFound(format!("no {kind} upload {digest}")),
     )?))
 }
 
@@ -244,5 +247,6 @@ pub(crate) async fn get_clips(
     caller: Need<Read>,
     digest: ApiPath<String>,
 ) -> ApiResult<Json<UploadRow>> {
-    get_upload(state, caller, digest).await
+    let (State(state), ApiPath(digest), _) = (state, digest, caller);
+    find_upload(&state, &digest, "clips").await
 }

@@ -410,8 +410,8 @@ impl Default for QueuePolicy {
 pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// Records an upload; `false` when it was there already.
     async fn put_upload(&self, upload: &UploadRow) -> Result<bool>;
-    /// An upload by digest.
-    async fn upload(&self, digest: &str) -> Result<Option<UploadRow>>;
+    /// An upload by digest and kind (`character` or `clips`).
+    async fn upload(&self, digest: &str, kind: &str) -> Result<Option<UploadRow>>;
     /// Creates a bake and its jobs; jobs without dependencies start
     /// `available`.
     async fn create_bake(&self, bake: &NewBake) -> Result<BakeRow>;

@@ -192,7 +192,7 @@ fn token() -> String {
 impl Store for PgStore {
     async fn put_upload(&self, u: &UploadRow) -> Result<bool> {
         let done = sqlx::query(&format!(
-            "INSERT INTO uploads (digest, kind, bundle, bytes, summary, created_at) VALUES ($1, $2, $3, $4, $5, {NOW}) ON CONFLICT (digest) DO NOTHING"
+            "INSERT INTO uploads (digest, kind, bundle, bytes, summary, created_at) VALUES ($1, $2, $3, $4, $5, {NOW}) ON CONFLICT (digest, kind) DO NOTHING"
         ))
         .bind(&u.digest)
         .bind(&u.kind)
@@ -204,9 +204,10 @@ impl Store for PgStore {
         Ok(done.rows_affected() == 1)
     }
 
-    async fn upload(&self, digest: &str) -> Result<Option<UploadRow>> {
-        let row = sqlx::query("SELECT * FROM uploads WHERE digest = $1")
+    async fn upload(&self, digest: &str, kind: &str) -> Result<Option<UploadRow>> {
+        let row = sqlx::query("SELECT * FROM uploads WHERE digest = $1 AND kind = $2")
             .bind(digest)
+            .bind(kind)
             .fetch_optional(&self.pool)
             .await?;
         row.map(|r| RawUpload::from_row(&r)?.cook()).transpose()
@@ -389,7 +390,7 @@ impl Store for PgStore {
             let mut uploads = Vec::new();
             for digest in std::iter::once(&bake.character).chain(&bake.clips) {
                 let bundle: Option<bool> =
-                    sqlx::query_scalar("SELECT bundle FROM uploads WHERE digest = $1")
+                    sqlx::query_scalar("SELECT bundle FROM uploads WHERE digest = $1 LIMIT 1")
                         .bind(digest)
                         .fetch_optional(&mut *tx)
                         .await?;

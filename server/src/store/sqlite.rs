@@ -230,7 +230,7 @@ impl Store for SqliteStore {
     async fn put_upload(&self, u: &UploadRow) -> Result<bool> {
         let _turn = self.turn(Durability::Acknowledged).await?;
         let done = sqlx::query(&format!(
-            "INSERT INTO uploads (digest, kind, bundle, bytes, summary, created_at) VALUES (?, ?, ?, ?, ?, {NOW}) ON CONFLICT (digest) DO NOTHING"
+            "INSERT INTO uploads (digest, kind, bundle, bytes, summary, created_at) VALUES (?, ?, ?, ?, ?, {NOW}) ON CONFLICT (digest, kind) DO NOTHING"
         ))
         .bind(&u.digest)
         .bind(&u.kind)
@@ -242,9 +242,10 @@ impl Store for SqliteStore {
         Ok(done.rows_affected() == 1)
     }
 
-    async fn upload(&self, digest: &str) -> Result<Option<UploadRow>> {
-        let row = sqlx::query("SELECT * FROM uploads WHERE digest = ?")
+    async fn upload(&self, digest: &str, kind: &str) -> Result<Option<UploadRow>> {
+        let row = sqlx::query("SELECT * FROM uploads WHERE digest = ? AND kind = ?")
             .bind(digest)
+            .bind(kind)
             .fetch_optional(&self.pool)
             .await?;
         row.map(|r| RawUpload::from_row(&r)?.cook()).transpose()
@@ -418,7 +419,7 @@ impl Store for SqliteStore {
             let mut uploads = Vec::new();
             for digest in std::iter::once(&bake.character).chain(&bake.clips) {
                 let bundle: Option<bool> =
-                    sqlx::query_scalar("SELECT bundle FROM uploads WHERE digest = ?")
+                    sqlx::query_scalar("SELECT bundle FROM uploads WHERE digest = ? LIMIT 1")
                         .bind(digest)
                         .fetch_optional(&mut *tx)
                         .await?;

@@ -115,11 +115,26 @@ async fn uploads_are_idempotent(store: &dyn Store) {
     let d = character(store).await;
     assert!(
         !store
-            .put_upload(&store.upload(&d).await.unwrap().unwrap())
+            .put_upload(&store.upload(&d, "character").await.unwrap().unwrap())
             .await
             .unwrap()
     );
-    assert!(store.upload(&"e".repeat(64)).await.unwrap().is_none());
+    assert!(
+        store
+            .upload(&"e".repeat(64), "character")
+            .await
+            .unwrap()
+            .is_none()
+    );
+    // The same bytes as clips are another upload.
+    assert!(store.upload(&d, "clips").await.unwrap().is_none());
+    let mut as_clips = store.upload(&d, "character").await.unwrap().unwrap();
+    as_clips.kind = "clips".into();
+    assert!(store.put_upload(&as_clips).await.unwrap());
+    assert_eq!(
+        store.upload(&d, "clips").await.unwrap().unwrap().kind,
+        "clips"
+    );
 }
 
 async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {

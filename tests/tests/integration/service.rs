@@ -281,3 +281,102 @@ fn a_worker_stopped_with_sigterm_finishes_its_job_and_leases_no_more() {
     let end = env.wait_bake(id, Duration::from_secs(120));
     assert_eq!(end["state"], "done");
 }
+
+#[test]
+fn clips_and_multi_file_characters_upload_and_bake() {
+    let mut env = TestEnv::start(Options::default());
+    env.start_worker(&[]);
+    // A .gltf with its buffer as a side file, as multipart/form-data.
+    let glb = std::fs::read(character("RiggedSimple")).unwrap();
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let mut json: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    let bin_len =
+        u32::from_le_bytes(glb[20 + json_len..24 + json_len].try_into().unwrap()) as usize;
+    let bin = &glb[28 + json_len..28 + json_len + bin_len];
+    json["buffers"][0]["uri"] = serde_json::json!("rig.bin");
+    let boundary = "aobake-test-boundary";
+    let mut body = Vec::new();
+    for (name, file, bytes) in [
+        ("main", "rig.gltf", json.to_string().into_bytes()),
+        ("rig.bin", "rig.bin", bin.to_vec()),
+    ] {
+        body.extend(format!(
+            "--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"; filename=\"{file}\"\r\nContent-Type: application/octet-stream\r\n\r\n"
+        ).bytes());
+        body.extend(bytes);
+        body.extend(b"\r\n");
+    }
+    body.extend(format!("--{boundary}--\r\n").bytes());
+    let (status, uploaded, _) = env.post_bytes(
+        "/v1/characters",
+        ADMIN,
+        &format!("multipart/form-data; boundary={boundary}"),
+        &body,
+    );
+    assert_eq!(status, 201, "{uploaded}");
+    let (_, glb_upload, _) = env.post_bytes("/v1/characters", ADMIN, "model/gltf-binary", &glb);
+    assert_ne!(
+        uploaded["digest"], glb_upload["digest"],
+        "another upload, another digest"
+    );
+    assert_eq!(
+        uploaded["summary"], glb_upload["summary"],
+        "the same character"
+    );
+    // Without its side file the .gltf is refused by name.
+    let (status, refused, _) = env.post_bytes(
+        "/v1/characters",
+        ADMIN,
+        "model/gltf-binary",
+        json.to_string().as_bytes(),
+    );
+    assert_eq!(status, 422, "{refused}");
+    assert!(
+        refused["detail"].as_str().unwrap().contains("rig.bin"),
+        "{refused}"
+    );
+
+    // Clips for a character, from a second file: the Fox's own clips.
+    let fox = upload(&env, &character("Fox"));
+    let fox_bytes = std::fs::read(character("Fox")).unwrap();
+    let (status, clips, _) = env.post_bytes(
+        &format!("/v1/clips?character={fox}"),
+        ADMIN,
+        "model/gltf-binary",
+        &fox_bytes,
+    );
+    assert_eq!(status, 201, "{clips}");
+    let names: Vec<&str> = clips["summary"]["clips"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["Survey", "Walk", "Run"]);
+    // Clips for a skeleton they do not drive are refused.
+    let rigged = upload(&env, &character("RiggedSimple"));
+    let (status, _, _) = env.post_bytes(
+        &format!("/v1/clips?character={rigged}"),
+        ADMIN,
+        "model/gltf-binary",
+        &fox_bytes,
+    );
+    assert_eq!(status, 422);
+    // A bake with the clip file: another key than without it, and done.
+    let with = |clips: serde_json::Value| {
+        env.request(
+            "POST",
+            "/v1/bakes",
+            ADMIN,
+            Some(serde_json::json!({"character": fox, "clips": clips, "method": "static-average",
+                "params": {"poses": 8, "samples": 16, "eval_poses": 1, "eval_fps": 2.0, "test_clips": ["Run"]}})),
+        )
+        .unwrap()
+        .1
+    };
+    let a = with(serde_json::json!([clips["digest"]]));
+    let b = with(serde_json::json!([]));
+    assert_ne!(a["key"], b["key"]);
+    let a = env.wait_bake(a["id"].as_i64().unwrap(), Duration::from_secs(120));
+    assert_eq!(a["state"], "done", "{a}");
+}
