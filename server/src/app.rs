@@ -126,6 +126,9 @@ pub struct AppState {
     pub events: broadcast::Sender<BakeEvent>,
     /// Per-token request rate.
     pub limiter: Arc<Limiter>,
+    /// Whole blobs read into memory at once (each may be as large as the
+    /// body limit): a bound on what concurrent downloads can allocate.
+    pub blob_reads: Arc<tokio::sync::Semaphore>,
     /// Request metrics.
     pub metrics: Arc<Metrics>,
 }
@@ -172,6 +175,7 @@ impl AppState {
             shutting_down: Arc::default(),
             events: broadcast::channel(1024).0,
             limiter: Arc::new(Limiter::new(limits.requests_per_second)),
+            blob_reads: Arc::new(tokio::sync::Semaphore::new(8)),
             metrics: Arc::new(Metrics::new()),
         }
     }

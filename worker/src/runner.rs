@@ -80,6 +80,11 @@ fn lease_loop(
         match client.lease(id, config.wait_secs) {
             Ok(Some(lease)) => {
                 failures = 0;
+                if shutdown.load(Ordering::Relaxed) {
+                    // Leased while we were told to stop: give it back.
+                    let _ = client.release(lease.job.id, &lease.token);
+                    break;
+                }
                 run_leased(client, config, lease, shutdown, cache);
             }
             Ok(None) => {}
@@ -234,6 +239,25 @@ fn execute(
     bake.run_job(&spec, &dep_refs, resume, &mut sink)
 }
 
+/// Retries a call that failed on the network or with a 5xx (three tries,
+/// 0.5 s then 1 s apart): finished work is worth a second try. A 409 after
+/// a retry means an earlier try went through, or the lease is gone.
+fn with_retries<T>(mut call: impl FnMut() -> Result<T, ClientError>) -> Result<T, ClientError> {
+    let mut wait = Duration::from_millis(500);
+    for _ in 0..2 {
+        match call() {
+            Err(ClientError::Transport(e)) => eprintln!("retrying after: {e}"),
+            Err(ClientError::Status { status, body }) if status >= 500 => {
+                eprintln!("retrying after {status}: {body}");
+            }
+            other => return other,
+        }
+        std::thread::sleep(wait);
+        wait *= 2;
+    }
+    call()
+}
+
 fn run_leased(
     client: &Client,
     config: &WorkerConfig,
@@ -276,7 +300,19 @@ fn run_leased(
                 }
             }
         });
-        let r = execute(client, config, &lease, &flags, cache);
+        // A panic in a job must not leave the heartbeat thread extending
+        // the lease forever: it becomes a retryable failure.
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            execute(client, config, &lease, &flags, cache)
+        }))
+        .unwrap_or_else(|panic| {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_owned())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            Err(JobError::Failed(format!("the job panicked: {what}")))
+        });
         flags.done.store(true, Ordering::Relaxed);
         r
     });
@@ -287,14 +323,15 @@ fn run_leased(
                 .outputs
                 .iter()
                 .map(|o| {
-                    client.put_blob(&o.bytes).map(|digest| OutputRef {
+                    with_retries(|| client.put_blob(&o.bytes)).map(|digest| OutputRef {
                         name: o.name.clone(),
                         digest,
                     })
                 })
                 .collect();
             let timings = serde_json::to_value(out.timings).unwrap_or_default();
-            let done = uploaded.and_then(|o| client.complete(job, &lease.token, &o, &timings));
+            let done = uploaded
+                .and_then(|o| with_retries(|| client.complete(job, &lease.token, &o, &timings)));
             match done {
                 Ok(()) => eprintln!(
                     "job {job} ({}) done in {:.2} s",
@@ -305,9 +342,9 @@ fn run_leased(
             }
         }
         Err(JobError::Stopped(Stop(why))) => {
-            if flags.release.load(Ordering::Relaxed) && !flags.lost.load(Ordering::Relaxed) {
-                let _ = client.release(job, &lease.token);
-            }
+            // Give the lease back if it is still ours (a stop asked by the
+            // server or by shutdown); a lost lease answers 409, harmlessly.
+            let _ = client.release(job, &lease.token);
             eprintln!("job {job}: stopped ({why})");
         }
         Err(e) => {

@@ -85,6 +85,11 @@ pub(crate) async fn asset(
                 .into_response());
         }
     }
+    let _permit = state
+        .blob_reads
+        .acquire()
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))?;
     let bytes = state
         .blobs
         .get(&digest)

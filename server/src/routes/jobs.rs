@@ -246,6 +246,11 @@ pub(crate) async fn get_blob(
     _caller: Need<Worker>,
     ApiPath(digest): ApiPath<String>,
 ) -> ApiResult<Response> {
+    let _permit = state
+        .blob_reads
+        .acquire()
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))?;
     let bytes = state
         .blobs
         .get(&digest)

@@ -114,7 +114,7 @@ async fn job_by_id(conn: &mut PgConnection, id: i64) -> Result<JobRow> {
 /// The job if `token` is its current lease, else `LeaseLost`.
 async fn leased(conn: &mut PgConnection, job: i64, token: &str) -> Result<JobRow> {
     let held: Option<i64> = sqlx::query_scalar(
-        "SELECT id FROM jobs WHERE id = $1 AND lease_token = $2 AND state = 'running'",
+        "SELECT id FROM jobs WHERE id = $1 AND lease_token = $2 AND state = 'running' FOR UPDATE",
     )
     .bind(job)
     .bind(token)
@@ -331,9 +331,9 @@ impl Store for PgStore {
             // not kept off, then the first ready job of the first of them
             // that other claimers have not locked: index lookups, however
             // many jobs are queued.
-            let bakes: Vec<i64> = sqlx::query_scalar(
-                "SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = $1 AND f.failures >= $2) ORDER BY b.priority DESC, b.id LIMIT 8",
-            )
+            let bakes: Vec<i64> = sqlx::query_scalar(&format!(
+                "SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = $1 AND f.failures >= $2 AND EXISTS (SELECT 1 FROM workers o WHERE o.id != $1 AND o.last_seen > {NOW} - 60000 AND NOT EXISTS (SELECT 1 FROM worker_failures g WHERE g.bake_id = b.id AND g.worker = o.id AND g.failures >= $2))) ORDER BY b.priority DESC, b.id LIMIT 8"
+            ))
             .bind(worker)
             .bind(policy.worker_failures)
             .fetch_all(&mut *tx)
@@ -592,19 +592,16 @@ impl Store for PgStore {
             sqlx::query("SET LOCAL synchronous_commit TO OFF")
                 .execute(&mut *tx)
                 .await?;
+            // One statement decides which leases expired and frees them,
+            // so a lease expiring meanwhile is either in both or in neither.
             let expired: Vec<(i64, i64)> = sqlx::query_as(&format!(
-                "SELECT id, bake_id FROM jobs WHERE state = 'running' AND lease_expires_at < {NOW}"
+                "UPDATE jobs SET state = CASE WHEN attempts >= max_attempts THEN 'dead' ELSE 'retryable' END, run_at = {NOW}, lease_token = NULL, lease_expires_at = NULL, error = COALESCE(error, 'lease expired') WHERE state = 'running' AND lease_expires_at < {NOW} RETURNING id, bake_id"
             ))
             .fetch_all(&mut *tx)
             .await?;
             if expired.is_empty() {
                 return Ok(0);
             }
-            sqlx::query(&format!(
-                "UPDATE jobs SET state = CASE WHEN attempts >= max_attempts THEN 'dead' ELSE 'retryable' END, run_at = {NOW}, lease_token = NULL, lease_expires_at = NULL, error = COALESCE(error, 'lease expired') WHERE state = 'running' AND lease_expires_at < {NOW}"
-            ))
-            .execute(&mut *tx)
-            .await?;
             sqlx::query("UPDATE counters SET value = value + $1 WHERE name = 'lease_expiries'")
                 .bind(expired.len() as i64)
                 .execute(&mut *tx)
@@ -619,7 +616,14 @@ impl Store for PgStore {
 
     async fn control(&self, bake: i64, action: Action) -> Result<BakeRow> {
         in_tx!(self.pool.begin().await?, |tx| {
-            let b = bake_by_id(&mut tx, bake).await?;
+            // Lock the bake: its state is read, checked and written back, and
+            // a completion or another control must not slip in between.
+            let b = sqlx::query_as::<_, RawBake>("SELECT * FROM bakes WHERE id = $1 FOR UPDATE")
+                .bind(bake)
+                .fetch_optional(&mut *tx)
+                .await?
+                .ok_or_else(|| StoreError::NotFound(format!("bake {bake}")))?
+                .cook()?;
             let refuse = |why: &str| {
                 Err(StoreError::Conflict(format!(
                     "bake {bake} is {}: {why}",

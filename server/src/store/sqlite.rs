@@ -361,9 +361,9 @@ impl Store for SqliteStore {
             // The most urgent bake with a ready job that this worker is not
             // kept off, then its first ready job: two index lookups, however
             // many jobs are queued.
-            let bake: Option<i64> = sqlx::query_scalar(
-                "SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = ? AND f.failures >= ?) ORDER BY b.priority DESC, b.id LIMIT 1",
-            )
+            let bake: Option<i64> = sqlx::query_scalar(&format!(
+                "SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = ?1 AND f.failures >= ?2 AND EXISTS (SELECT 1 FROM workers o WHERE o.id != ?1 AND o.last_seen > {NOW} - 60000 AND NOT EXISTS (SELECT 1 FROM worker_failures g WHERE g.bake_id = b.id AND g.worker = o.id AND g.failures >= ?2))) ORDER BY b.priority DESC, b.id LIMIT 1"
+            ))
             .bind(worker)
             .bind(policy.worker_failures)
             .fetch_optional(&mut *tx)
@@ -606,19 +606,16 @@ impl Store for SqliteStore {
     async fn reap(&self) -> Result<u64> {
         let _turn = self.turn(Durability::Queue).await?;
         in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
+            // One statement decides which leases expired and frees them,
+            // so a lease expiring meanwhile is either in both or in neither.
             let expired: Vec<(i64, i64)> = sqlx::query_as(&format!(
-                "SELECT id, bake_id FROM jobs WHERE state = 'running' AND lease_expires_at < {NOW}"
+                "UPDATE jobs SET state = CASE WHEN attempts >= max_attempts THEN 'dead' ELSE 'retryable' END, run_at = {NOW}, lease_token = NULL, lease_expires_at = NULL, error = COALESCE(error, 'lease expired') WHERE state = 'running' AND lease_expires_at < {NOW} RETURNING id, bake_id"
             ))
             .fetch_all(&mut *tx)
             .await?;
             if expired.is_empty() {
                 return Ok(0);
             }
-            sqlx::query(&format!(
-                "UPDATE jobs SET state = CASE WHEN attempts >= max_attempts THEN 'dead' ELSE 'retryable' END, run_at = {NOW}, lease_token = NULL, lease_expires_at = NULL, error = COALESCE(error, 'lease expired') WHERE state = 'running' AND lease_expires_at < {NOW}"
-            ))
-            .execute(&mut *tx)
-            .await?;
             sqlx::query("UPDATE counters SET value = value + ? WHERE name = 'lease_expiries'")
                 .bind(expired.len() as i64)
                 .execute(&mut *tx)
