@@ -186,14 +186,11 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         }));
     }
     if args.demo {
-        let state = state.clone();
-        let url = url.clone();
-        let admin = admin.clone();
+        let (url, admin) = (url.clone(), admin.clone());
         tokio::spawn(async move {
             if let Err(e) = crate::cli::client::demo(&url, &admin).await {
                 eprintln!("error: the demo bake could not be submitted: {e:#}");
             }
-            drop(state);
         });
     }
     let stopping = state.clone();
@@ -251,10 +248,9 @@ fn spawn_worker(
 
 async fn terminate(child: &mut Child) {
     #[cfg(unix)]
-    if let Some(pid) = child.id() {
-        let _ = std::process::Command::new("kill")
-            .args(["-TERM", &pid.to_string()])
-            .status();
+    if let Some(pid) = child.id().and_then(|p| i32::try_from(p).ok()) {
+        use nix::sys::signal::{Signal, kill};
+        let _ = kill(nix::unistd::Pid::from_raw(pid), Signal::SIGTERM);
         if tokio::time::timeout(Duration::from_secs(30), child.wait())
             .await
             .is_ok()

@@ -211,9 +211,11 @@ impl TestEnv {
         }
     }
 
-    /// The process id of worker `i`.
-    pub fn worker_pid(&self, i: usize) -> Option<u32> {
-        self.workers[i].as_ref().map(Child::id)
+    /// Sends `signal` to worker `i` (SIGSTOP, SIGCONT, SIGTERM).
+    pub fn signal_worker(&self, i: usize, signal: nix::sys::signal::Signal) {
+        let child = self.workers[i].as_ref().expect("a running worker");
+        let pid = nix::unistd::Pid::from_raw(i32::try_from(child.id()).expect("a pid"));
+        nix::sys::signal::kill(pid, signal).expect("the signal is sent");
     }
 
     /// Whether worker `i` has exited (and reaps it).

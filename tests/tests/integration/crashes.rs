@@ -149,20 +149,13 @@ fn a_worker_frozen_past_its_lease_has_its_completion_refused() {
         assert!(started.elapsed() < Duration::from_secs(60));
         std::thread::sleep(Duration::from_millis(20));
     }
-    let pid = env.worker_pid(frozen).unwrap().to_string();
-    let stop = std::process::Command::new("kill")
-        .args(["-STOP", &pid])
-        .status();
-    assert!(stop.unwrap().success());
+    env.signal_worker(frozen, nix::sys::signal::Signal::SIGSTOP);
     std::thread::sleep(Duration::from_millis(2500));
     // Another worker takes the expired job over and finishes the bake.
     env.start_worker(&[]);
     let bake = env.wait_bake(id, Duration::from_secs(120));
     assert_eq!(bake["state"], "done");
-    let cont = std::process::Command::new("kill")
-        .args(["-CONT", &pid])
-        .status();
-    assert!(cont.unwrap().success());
+    env.signal_worker(frozen, nix::sys::signal::Signal::SIGCONT);
     // Resumed, the frozen worker's checkpoint, heartbeat or completion
     // meets 409: it notes the lost lease and goes on leasing.
     let started = Instant::now();
