@@ -180,6 +180,24 @@ impl AppState {
         }
     }
 
+    /// Bytes `range` (or all) of a blob, read into memory under the bound
+    /// on concurrent whole-blob reads.
+    pub async fn read_blob(
+        &self,
+        digest: &str,
+        range: Option<(u64, u64)>,
+    ) -> Result<Option<Vec<u8>>, ApiError> {
+        let _permit = self
+            .blob_reads
+            .acquire()
+            .await
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        Ok(match range {
+            Some((start, end)) => self.blobs.get_range(digest, start, end).await?,
+            None => self.blobs.get(digest).await?,
+        })
+    }
+
     /// Ends every long poll (they answer 204), so a graceful shutdown does
     /// not wait for them.
     pub fn shut_down(&self) {
@@ -254,7 +272,7 @@ pub fn app(state: AppState) -> Router {
     let limits = state.limits;
     let metrics = state.metrics.clone();
     Router::new()
-        .merge(routes::router(limits.request_timeout))
+        .merge(routes::router())
         .layer(middleware::from_fn(to_completion))
         .layer(middleware::from_fn_with_state(metrics, record_latency))
         .layer(DefaultBodyLimit::max(limits.max_body_bytes as usize))

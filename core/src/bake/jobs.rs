@@ -16,6 +16,7 @@
 //! Outputs are named blobs; a job finds its inputs by name in its
 //! dependencies' outputs.
 
+use std::ops::Range;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
@@ -305,17 +306,24 @@ impl<'a> Bake<'a> {
         })
     }
 
-    /// The poses of a set, seeded: the same request gives the same poses.
-    pub fn poses(&self, set: PoseSet) -> Vec<Pose> {
+    /// Poses `range` of a set, seeded: the same request gives the same
+    /// poses; only those in the range are built.
+    pub fn poses(&self, set: PoseSet, range: Range<usize>) -> Vec<Pose> {
         match set {
-            PoseSet::Reference => self.plan.reference_poses(),
-            PoseSet::HeldOut => self.plan.test_poses().into_iter().map(|t| t.pose).collect(),
+            PoseSet::Reference => self.plan.reference_poses_in(range),
+            PoseSet::HeldOut => self
+                .plan
+                .test_poses_in(range)
+                .into_iter()
+                .map(|t| t.pose)
+                .collect(),
             PoseSet::Noise => {
-                let tests = self.plan.test_poses();
-                self.plan
-                    .noise_sample(&tests)
-                    .into_iter()
-                    .map(|i| tests[i].pose.clone())
+                let rows = self.plan.noise_rows();
+                rows.get(range)
+                    .unwrap_or_default()
+                    .iter()
+                    .flat_map(|&r| self.plan.test_poses_in(r..r + 1))
+                    .map(|t| t.pose)
                     .collect()
             }
         }
@@ -349,16 +357,15 @@ impl<'a> Bake<'a> {
         sink: &mut dyn JobSink,
     ) -> Result<JobOutput, JobError> {
         let started = Instant::now();
-        let all = self.poses(set);
-        let end = first.checked_add(count).filter(|&e| e <= all.len());
+        let total = self.poses_in(set);
+        let end = first.checked_add(count).filter(|&e| e <= total);
         let Some(end) = end else {
             return Err(JobError::Invalid(format!(
-                "poses {first}..{} are outside the set's {} poses",
+                "poses {first}..{} are outside the set's {total} poses",
                 first.saturating_add(count),
-                all.len()
             )));
         };
-        let poses = &all[first..end];
+        let poses = self.poses(set, first..end);
         let vertices = self.inputs.character.vertex_count();
         let mut done = IndexedBlock {
             first,
@@ -456,8 +463,8 @@ impl<'a> Bake<'a> {
     pub fn poses_in(&self, set: PoseSet) -> usize {
         match set {
             PoseSet::Reference => self.plan.params.poses,
-            PoseSet::HeldOut => self.plan.test_poses().len(),
-            PoseSet::Noise => self.plan.noise_sample(&self.plan.test_poses()).len(),
+            PoseSet::HeldOut => self.plan.test_count(),
+            PoseSet::Noise => self.plan.noise_rows().len(),
         }
     }
 
@@ -469,7 +476,7 @@ impl<'a> Bake<'a> {
     fn fit(&self, deps: &[&JobOutput]) -> Result<JobOutput, JobError> {
         let reference = self.stack(PoseSet::Reference, deps)?;
         let started = Instant::now();
-        let poses = self.poses(PoseSet::Reference);
+        let poses = self.plan.reference_poses();
         let (model, fit) = self.plan.fit(&poses, &reference)?;
         let baseline = Model::StaticAverage(StaticAverage::fit(&reference));
         let mut out = JobOutput::default();
@@ -494,7 +501,7 @@ impl<'a> Bake<'a> {
         let started = Instant::now();
         let tests = self.plan.test_poses();
         let evaluation = self.plan.evaluate(&model, &baseline, &tests, &truth);
-        let noise_rows = self.plan.noise_sample(&tests);
+        let noise_rows = self.plan.noise_rows();
         let ground_truth_noise = NoiseEstimate::of(&noise_rows, &truth, &again);
         let vertices = self.inputs.character.vertex_count() as u64;
         let rays = (self.plan.params.poses + tests.len()) as u64

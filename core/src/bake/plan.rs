@@ -2,6 +2,8 @@
 //! joint-angle layout and the handles, and from them the seeded
 //! reference, held-out and noise poses that `sample` jobs trace.
 
+use std::ops::Range;
+
 use crate::{
     Character, Clip,
     method::vertex::{AssetHeaderFields, FitStats, Model},
@@ -106,9 +108,13 @@ impl<'a> Plan<'a> {
         })
     }
 
-    fn random_poses(&self, count: usize, seed: u64) -> Vec<Pose> {
-        self.joint_angles
-            .sample_uniform(count, seed)
+    /// Poses `range` of `count` random joint-angle poses: every vector is
+    /// drawn (the sequence is seeded), only those in `range` are built.
+    fn random_poses(&self, count: usize, seed: u64, range: Range<usize>) -> Vec<Pose> {
+        let vectors = self.joint_angles.sample_uniform(count, seed);
+        vectors
+            .get(range)
+            .unwrap_or_default()
             .iter()
             .map(|q| {
                 self.joint_angles
@@ -118,8 +124,12 @@ impl<'a> Plan<'a> {
             .collect()
     }
 
-    fn clip_poses(&self, count: usize, seed: u64) -> Vec<Pose> {
-        random_clip_frames(&self.train_clips, count, seed)
+    /// Poses `range` of `count` random training-clip frames.
+    fn clip_poses(&self, count: usize, seed: u64, range: Range<usize>) -> Vec<Pose> {
+        let frames = random_clip_frames(&self.train_clips, count, seed);
+        frames
+            .get(range)
+            .unwrap_or_default()
             .iter()
             .map(|f| Pose::sample(&self.character.skeleton, &self.train_clips[f.clip], f.time))
             .collect()
@@ -127,43 +137,81 @@ impl<'a> Plan<'a> {
 
     /// The reference poses, seeded: what `sample` jobs trace, in batches.
     pub fn reference_poses(&self) -> Vec<Pose> {
+        self.reference_poses_in(0..self.params.poses)
+    }
+
+    /// Reference poses `range` (random poses first, then clip frames), built
+    /// alone: a `sample` job builds only its batch.
+    pub fn reference_poses_in(&self, range: Range<usize>) -> Vec<Pose> {
         let (n, seed) = (self.params.poses, self.params.seed);
-        match self.params.reference {
-            ReferenceSource::Random => self.random_poses(n, seed),
-            ReferenceSource::Clips => self.clip_poses(n, seed),
-            ReferenceSource::Mixed => {
-                let mut poses = self.random_poses(n / 2, seed);
-                poses.extend(self.clip_poses(n - n / 2, seed));
-                poses
-            }
+        let random = match self.params.reference {
+            ReferenceSource::Random => n,
+            ReferenceSource::Clips => 0,
+            ReferenceSource::Mixed => n / 2,
+        };
+        let end = range.end.min(n);
+        let mut poses = Vec::new();
+        if range.start < random {
+            poses.extend(self.random_poses(random, seed, range.start..end.min(random)));
         }
+        if end > random {
+            let from = range.start.max(random) - random;
+            poses.extend(self.clip_poses(n - random, seed, from..end - random));
+        }
+        poses
+    }
+
+    /// Every frame of every test clip at `eval_fps`, in order.
+    fn test_frames(&self) -> Vec<ClipFrame> {
+        self.test
+            .iter()
+            .flat_map(|&clip| {
+                self.clips[clip]
+                    .frame_times(self.params.eval_fps)
+                    .into_iter()
+                    .map(move |time| ClipFrame { clip, time })
+            })
+            .collect()
     }
 
     /// Held-out poses: random poses from another seed, then every frame of
     /// every test clip at `eval_fps`.
     pub fn test_poses(&self) -> Vec<TestPose> {
+        self.test_poses_in(0..usize::MAX)
+    }
+
+    /// Held-out poses `range`, built alone.
+    pub fn test_poses_in(&self, range: Range<usize>) -> Vec<TestPose> {
+        let e = self.params.eval_poses;
         let seed = self.params.seed ^ HELD_OUT_SEED;
         let mut poses: Vec<TestPose> = self
-            .random_poses(self.params.eval_poses, seed)
+            .random_poses(e, seed, range.start.min(e)..range.end.min(e))
             .into_iter()
             .map(|pose| TestPose { frame: None, pose })
             .collect();
-        for &c in &self.test {
-            let clip = &self.clips[c];
-            for time in clip.frame_times(self.params.eval_fps) {
-                poses.push(TestPose {
-                    frame: Some(ClipFrame { clip: c, time }),
-                    pose: Pose::sample(&self.character.skeleton, clip, time),
-                });
-            }
+        let frames = self.test_frames();
+        let (from, to) = (range.start.saturating_sub(e), range.end.saturating_sub(e));
+        for &f in frames
+            .get(from.min(frames.len())..to.min(frames.len()))
+            .unwrap_or_default()
+        {
+            poses.push(TestPose {
+                frame: Some(f),
+                pose: Pose::sample(&self.character.skeleton, &self.clips[f.clip], f.time),
+            });
         }
         poses
     }
 
-    /// Indices of up to 8 test poses, evenly spread, to trace a second time
-    /// for the ground truth's noise (see `report::NoiseEstimate`).
-    pub fn noise_sample(&self, tests: &[TestPose]) -> Vec<usize> {
-        let n = tests.len();
+    /// How many held-out poses there are, without building them.
+    pub fn test_count(&self) -> usize {
+        self.params.eval_poses + self.test_frames().len()
+    }
+
+    /// Indices of up to 8 held-out poses, evenly spread, to trace a second
+    /// time for the ground truth's noise (see `report::NoiseEstimate`).
+    pub fn noise_rows(&self) -> Vec<usize> {
+        let n = self.test_count();
         let k = n.min(NOISE_POSES);
         (0..k).map(|i| i * n / k).collect()
     }

@@ -155,6 +155,18 @@ fn the_graph_lists_dependencies_first_and_covers_every_pose() {
         assert_eq!(covered, bake.poses_in(set), "{set:?}");
     }
     assert_eq!(bake.poses_in(PoseSet::Reference), 12);
+    // A batch's poses are built alone, equal to the whole set's slice
+    // (across the mixed set's boundary between random poses and clip
+    // frames, at 6).
+    let all = bake.plan.reference_poses();
+    for range in [0..5, 4..9, 6..12, 11..12] {
+        assert_eq!(bake.poses(PoseSet::Reference, range.clone()), all[range]);
+    }
+    let tests: Vec<_> = bake.plan.test_poses().into_iter().map(|t| t.pose).collect();
+    assert_eq!(tests.len(), bake.plan.test_count());
+    for range in [0..1, 1..4, 2..tests.len()] {
+        assert_eq!(bake.poses(PoseSet::HeldOut, range.clone()), tests[range]);
+    }
     assert_eq!(
         graph.total_work(),
         (bake.poses_in(PoseSet::Reference)

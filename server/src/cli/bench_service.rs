@@ -93,7 +93,7 @@ pub(super) fn queue(args: &QueueArgs) -> anyhow::Result<()> {
         let rate = rt.block_on(store_queue(args, dir.path(), run))?;
         store_rates.push(rate);
         let dir = tempfile::tempdir()?;
-        http_rates.push(http_queue(args, dir.path(), run)?);
+        http_rates.push(http_queue(args, dir.path())?);
     }
     let backend = if args.database.is_some() {
         "PostgreSQL"
@@ -254,7 +254,7 @@ fn rand_seed() -> u64 {
 
 /// Lease + complete over HTTP with worker threads; returns jobs per
 /// second.
-fn http_queue(args: &QueueArgs, dir: &Path, _run: usize) -> anyhow::Result<f64> {
+fn http_queue(args: &QueueArgs, dir: &Path) -> anyhow::Result<f64> {
     let server = Server::start(dir, args.database.as_deref())?;
     let api = server.api();
     let id = big_bake(&api, args.jobs)?;

@@ -71,8 +71,7 @@ pub(crate) async fn asset(
         if let [r] = ranges.as_slice() {
             let (start, end) = (*r.start(), *r.end() + 1);
             let bytes = state
-                .blobs
-                .get_range(&digest, start, end)
+                .read_blob(&digest, Some((start, end)))
                 .await?
                 .ok_or_else(|| ApiError::NotFound(format!("no asset {digest}")))?;
             let content_range = format!("bytes {start}-{}/{len}", end - 1);
@@ -85,14 +84,8 @@ pub(crate) async fn asset(
                 .into_response());
         }
     }
-    let _permit = state
-        .blob_reads
-        .acquire()
-        .await
-        .map_err(|e| ApiError::Internal(e.to_string()))?;
     let bytes = state
-        .blobs
-        .get(&digest)
+        .read_blob(&digest, None)
         .await?
         .ok_or_else(|| ApiError::NotFound(format!("no asset {digest}")))?;
     Ok((

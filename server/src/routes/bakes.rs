@@ -266,14 +266,8 @@ pub(crate) async fn report(
     let digest = bake
         .report
         .ok_or_else(|| ApiError::NotFound(format!("bake {id} has no report yet")))?;
-    let _permit = state
-        .blob_reads
-        .acquire()
-        .await
-        .map_err(|e| ApiError::Internal(e.to_string()))?;
     let bytes = state
-        .blobs
-        .get(&digest)
+        .read_blob(&digest, None)
         .await?
         .ok_or_else(|| ApiError::Internal(format!("report {digest} has no blob")))?;
     Ok((

@@ -246,14 +246,8 @@ pub(crate) async fn get_blob(
     _caller: Need<Worker>,
     ApiPath(digest): ApiPath<String>,
 ) -> ApiResult<Response> {
-    let _permit = state
-        .blob_reads
-        .acquire()
-        .await
-        .map_err(|e| ApiError::Internal(e.to_string()))?;
     let bytes = state
-        .blobs
-        .get(&digest)
+        .read_blob(&digest, None)
         .await?
         .ok_or_else(|| ApiError::NotFound(format!("no blob {digest}")))?;
     Ok(bytes.into_response())

@@ -7,14 +7,12 @@ pub(crate) mod jobs;
 pub(crate) mod system;
 pub(crate) mod uploads;
 
-use std::time::Duration;
-
 use axum::Router;
 
 use crate::app::AppState;
 
 /// Every route.
-pub(crate) fn router(_request_timeout: Duration) -> Router<AppState> {
+pub(crate) fn router() -> Router<AppState> {
     Router::new()
         .merge(uploads::router())
         .merge(bakes::router())

@@ -214,8 +214,7 @@ pub(crate) async fn load_upload(
         .await?
         .ok_or_else(|| ApiError::NotFound(format!("no {kind} upload {digest}")))?;
     let blob = state
-        .blobs
-        .get(digest)
+        .read_blob(digest, None)
         .await?
         .ok_or_else(|| ApiError::Internal(format!("upload {digest} has no blob")))?;
     UploadBytes::from_blob(&blob, row.bundle).map_err(|e| ApiError::Internal(e.to_string()))
@@ -243,10 +242,9 @@ async fn find_upload(state: &AppState, digest: &str, kind: &str) -> ApiResult<Js
     security(("bearer" = ["read"])),
     responses((status = 200, description = "The upload", body = UploadRow), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
 pub(crate) async fn get_clips(
-    state: State<AppState>,
-    caller: Need<Read>,
-    digest: ApiPath<String>,
+    State(state): State<AppState>,
+    _caller: Need<Read>,
+    ApiPath(digest): ApiPath<String>,
 ) -> ApiResult<Json<UploadRow>> {
-    let (State(state), ApiPath(digest), _) = (state, digest, caller);
     find_upload(&state, &digest, "clips").await
 }

@@ -67,14 +67,41 @@ fn done(name: &str) -> Completion {
     }
 }
 
-/// Runs every case.
+/// Runs every case. `store` must be new: the first case needs a store
+/// that has seen no worker.
 pub(crate) async fn run_all(store: &dyn Store) {
+    a_lone_worker_is_never_kept_off(store).await;
     uploads_are_idempotent(store).await;
     jobs_run_in_dependency_order_and_publish_the_asset(store).await;
     stale_tokens_are_refused(store).await;
     failures_retry_then_kill_the_bake(store).await;
     cancel_pause_resume_retry(store).await;
     a_worker_that_keeps_failing_a_bake_is_kept_off_it(store).await;
+}
+
+/// With no other worker to take its jobs, a failing worker goes on
+/// getting them until their attempts run out, so the bake fails with the
+/// reason instead of waiting forever.
+async fn a_lone_worker_is_never_kept_off(store: &dyn Store) {
+    let c = character(store).await;
+    let mut b = bake(&c, &"7".repeat(64));
+    b.max_attempts = 4;
+    let created = store.create_bake(&b).await.unwrap();
+    let p = QueuePolicy {
+        worker_failures: 1,
+        ..policy()
+    };
+    for attempt in 1..=4 {
+        let l = store.lease("alone", &p).await.unwrap();
+        let l = l.unwrap_or_else(|| panic!("attempt {attempt}: the lone worker was kept off"));
+        store
+            .fail(l.job.id, &l.token, "broken", true, &p)
+            .await
+            .unwrap();
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    }
+    let end = store.bake(created.id).await.unwrap().unwrap();
+    assert_eq!(end.state, BakeState::Failed);
 }
 
 async fn a_worker_that_keeps_failing_a_bake_is_kept_off_it(store: &dyn Store) {
