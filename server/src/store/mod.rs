@@ -15,6 +15,27 @@
 //! [`SqliteStore`] is the embedded default. Both backends run one shared
 //! test suite (`suite`).
 
+/// Runs `$body` (an async block that may `return` early) in the
+/// transaction `$begin`: commits when it returns `Ok`, rolls back
+/// explicitly when it fails, so the pooled connection never goes back to
+/// the pool inside a transaction.
+macro_rules! in_tx {
+    ($begin:expr, |$tx:ident| $body:block) => {{
+        let mut $tx = $begin;
+        let result: Result<_> = async { $body }.await;
+        match result {
+            Ok(value) => {
+                $tx.commit().await?;
+                Ok(value)
+            }
+            Err(e) => {
+                let _ = $tx.rollback().await;
+                Err(e)
+            }
+        }
+    }};
+}
+
 mod postgres;
 mod rows;
 mod sqlite;
@@ -393,6 +414,29 @@ pub struct QueuePolicy {
     pub max_attempts: i64,
 }
 
+impl QueuePolicy {
+    /// The delay before retry `attempt` (1-based): doubling from the base,
+    /// at most the cap, times a jitter in [0.5, 1.5) so that jobs failed
+    /// together do not come back together.
+    pub fn backoff_ms(&self, attempt: i64) -> i64 {
+        use rand::RngExt as _;
+        let exp = attempt.clamp(1, 30) - 1;
+        let base = self
+            .backoff_ms
+            .saturating_mul(1i64 << exp)
+            .min(self.max_backoff_ms);
+        let jitter: f64 = rand::rng().random_range(0.5..1.5);
+        (base as f64 * jitter) as i64
+    }
+}
+
+/// A new lease token: 128 random bits in hex.
+fn lease_token() -> String {
+    use rand::RngExt as _;
+    let bytes: [u8; 16] = rand::rng().random();
+    aobake_core::digest::hex(&bytes)
+}
+
 impl Default for QueuePolicy {
     fn default() -> Self {
         Self {
@@ -478,5 +522,25 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// process uses needs nothing, since the server wakes its own waiters.
     async fn listen(&self, _ready: std::sync::Arc<tokio::sync::Notify>) -> Result<()> {
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::QueuePolicy;
+
+    #[test]
+    fn backoff_doubles_up_to_the_cap_with_jitter() {
+        let p = QueuePolicy {
+            backoff_ms: 1000,
+            max_backoff_ms: 60_000,
+            ..QueuePolicy::default()
+        };
+        for (attempt, base) in [(1, 1000), (2, 2000), (3, 4000), (7, 60_000), (99, 60_000)] {
+            for _ in 0..50 {
+                let d = p.backoff_ms(attempt);
+                assert!(d >= base / 2 && d < base * 3 / 2, "attempt {attempt}: {d}");
+            }
+        }
     }
 }

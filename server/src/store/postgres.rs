@@ -10,7 +10,6 @@
 
 use std::sync::Arc;
 
-use rand::RngExt as _;
 use sqlx::{
     FromRow as _, PgConnection, Row as _,
     postgres::{PgListener, PgPool, PgPoolOptions, PgRow},
@@ -19,29 +18,8 @@ use sqlx::{
 use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
 use super::{
     Action, BakeRow, BakeState, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
-    QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow,
+    QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow, lease_token,
 };
-
-/// Runs `$body` (an async block that may `return` early) in the
-/// transaction `$begin`: commits when it returns `Ok`, rolls back
-/// explicitly when it fails, so the pooled connection never goes back to
-/// the pool inside a transaction.
-macro_rules! in_tx {
-    ($begin:expr, |$tx:ident| $body:block) => {{
-        let mut $tx = $begin;
-        let result: Result<_> = async { $body }.await;
-        match result {
-            Ok(value) => {
-                $tx.commit().await?;
-                Ok(value)
-            }
-            Err(e) => {
-                let _ = $tx.rollback().await;
-                Err(e)
-            }
-        }
-    }};
-}
 
 /// The database clock, in milliseconds since the epoch.
 const NOW: &str = "(extract(epoch FROM clock_timestamp()) * 1000)::bigint";
@@ -169,23 +147,6 @@ async fn fail_bake_if_dead(conn: &mut PgConnection, bake: i64) -> Result<()> {
     .execute(conn)
     .await?;
     Ok(())
-}
-
-/// The delay before retry `attempt` (1-based): doubling from the base, at
-/// most the cap, times a jitter in [0.5, 1.5).
-fn backoff_ms(policy: &QueuePolicy, attempt: i64) -> i64 {
-    let exp = attempt.clamp(1, 30) - 1;
-    let base = policy
-        .backoff_ms
-        .saturating_mul(1i64 << exp)
-        .min(policy.max_backoff_ms);
-    let jitter: f64 = rand::rng().random_range(0.5..1.5);
-    (base as f64 * jitter) as i64
-}
-
-fn token() -> String {
-    let bytes: [u8; 16] = rand::rng().random();
-    aobake_core::digest::hex(&bytes)
 }
 
 #[async_trait::async_trait]
@@ -353,7 +314,7 @@ impl Store for PgStore {
             let Some(id) = id else {
                 return Ok(None);
             };
-            let token = token();
+            let token = lease_token();
             let job = sqlx::query_as::<_, RawJob>(&format!(
                 "UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {NOW} + $3, progress = 0 WHERE id = $4 RETURNING *, {DEPS} AS deps"
             ))
@@ -538,7 +499,7 @@ impl Store for PgStore {
                 "UPDATE jobs SET state = $1, lease_token = NULL, lease_expires_at = NULL, run_at = $2, error = $3 WHERE id = $4",
             )
             .bind(if dead { "dead" } else { "retryable" })
-            .bind(now + backoff_ms(policy, j.attempts))
+            .bind(now + policy.backoff_ms(j.attempts))
             .bind(error)
             .bind(job)
             .execute(&mut *tx)

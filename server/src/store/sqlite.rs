@@ -6,7 +6,6 @@
 use std::str::FromStr as _;
 use std::time::Duration;
 
-use rand::RngExt as _;
 use sqlx::{
     FromRow as _, Row as _, SqliteConnection,
     sqlite::{
@@ -18,29 +17,8 @@ use sqlx::{
 use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
 use super::{
     Action, BakeRow, BakeState, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
-    QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow,
+    QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow, lease_token,
 };
-
-/// Runs `$body` (an async block that may `return` early) in the
-/// transaction `$begin`: commits when it returns `Ok`, rolls back
-/// explicitly when it fails, so the pooled connection never goes back to
-/// the pool inside a transaction.
-macro_rules! in_tx {
-    ($begin:expr, |$tx:ident| $body:block) => {{
-        let mut $tx = $begin;
-        let result: Result<_> = async { $body }.await;
-        match result {
-            Ok(value) => {
-                $tx.commit().await?;
-                Ok(value)
-            }
-            Err(e) => {
-                let _ = $tx.rollback().await;
-                Err(e)
-            }
-        }
-    }};
-}
 
 /// The database clock, in milliseconds since the epoch.
 const NOW: &str = "CAST(unixepoch('subsec') * 1000 AS INTEGER)";
@@ -208,23 +186,6 @@ async fn fail_bake_if_dead(conn: &mut SqliteConnection, bake: i64) -> Result<()>
     Ok(())
 }
 
-/// The delay before retry `attempt` (1-based): doubling from the base, at
-/// most the cap, times a jitter in [0.5, 1.5).
-fn backoff_ms(policy: &QueuePolicy, attempt: i64) -> i64 {
-    let exp = attempt.clamp(1, 30) - 1;
-    let base = policy
-        .backoff_ms
-        .saturating_mul(1i64 << exp)
-        .min(policy.max_backoff_ms);
-    let jitter: f64 = rand::rng().random_range(0.5..1.5);
-    (base as f64 * jitter) as i64
-}
-
-fn token() -> String {
-    let bytes: [u8; 16] = rand::rng().random();
-    aobake_core::digest::hex(&bytes)
-}
-
 #[async_trait::async_trait]
 impl Store for SqliteStore {
     async fn put_upload(&self, u: &UploadRow) -> Result<bool> {
@@ -382,7 +343,7 @@ impl Store for SqliteStore {
             let Some(id) = id else {
                 return Ok(None);
             };
-            let token = token();
+            let token = lease_token();
             let job = sqlx::query_as::<_, RawJob>(&format!(
                 "UPDATE jobs SET state = 'running', lease_token = ?, worker = ?, attempts = attempts + 1, lease_expires_at = {NOW} + ?, progress = 0 WHERE id = ? RETURNING *, {DEPS} AS deps"
             ))
@@ -558,7 +519,7 @@ impl Store for SqliteStore {
                 "UPDATE jobs SET state = ?, lease_token = NULL, lease_expires_at = NULL, run_at = ?, error = ? WHERE id = ?",
             )
             .bind(if dead { "dead" } else { "retryable" })
-            .bind(now + backoff_ms(policy, j.attempts))
+            .bind(now + policy.backoff_ms(j.attempts))
             .bind(error)
             .bind(job)
             .execute(&mut *tx)
