@@ -16,7 +16,7 @@ use axum::{
 use governor::{DefaultKeyedRateLimiter, Quota, RateLimiter};
 use prometheus_client::{
     encoding::EncodeLabelSet,
-    metrics::{family::Family, histogram::Histogram},
+    metrics::{counter::Counter, family::Family, gauge::Gauge, histogram::Histogram},
     registry::Registry,
 };
 use tokio::sync::{Notify, broadcast};
@@ -77,12 +77,19 @@ struct RouteLabels {
     route: String,
 }
 
-/// Request metrics.
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct StateLabels {
+    state: &'static str,
+}
+
+/// The service's metrics: request latencies, jobs by state, lease
+/// expiries.
 #[derive(Debug)]
 pub struct Metrics {
-    /// The registry `/metrics` encodes.
-    pub registry: std::sync::Mutex<Registry>,
+    registry: std::sync::Mutex<Registry>,
     latency: Family<RouteLabels, Histogram>,
+    jobs: Family<StateLabels, Gauge>,
+    lease_expiries: Counter,
 }
 
 impl Metrics {
@@ -98,10 +105,50 @@ impl Metrics {
             "HTTP request latency by method and route",
             latency.clone(),
         );
+        let jobs = Family::<StateLabels, Gauge>::default();
+        registry.register("aobake_jobs", "Jobs by state", jobs.clone());
+        let lease_expiries = Counter::default();
+        registry.register(
+            "aobake_lease_expiries",
+            "Leases that expired without a heartbeat",
+            lease_expiries.clone(),
+        );
         Self {
             registry: std::sync::Mutex::new(registry),
             latency,
+            jobs,
+            lease_expiries,
         }
+    }
+
+    /// The OpenMetrics text, with the queue's figures as the store counts
+    /// them now.
+    pub fn encode(
+        &self,
+        jobs: &[(crate::store::JobState, i64)],
+        lease_expiries: i64,
+    ) -> Result<String, ApiError> {
+        for s in crate::store::JobState::ALL {
+            let n = jobs.iter().find(|(x, _)| *x == s).map_or(0, |(_, n)| *n);
+            self.jobs
+                .get_or_create(&StateLabels { state: s.as_str() })
+                .set(n);
+        }
+        // The store keeps the total; the counter catches up with it.
+        let seen = self.lease_expiries.get();
+        self.lease_expiries.inc_by(
+            u64::try_from(lease_expiries)
+                .unwrap_or(0)
+                .saturating_sub(seen),
+        );
+        let registry = self
+            .registry
+            .lock()
+            .map_err(|_| ApiError::Internal("metrics lock poisoned".into()))?;
+        let mut out = String::new();
+        prometheus_client::encoding::text::encode(&mut out, &registry)
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        Ok(out)
     }
 }
 

@@ -7,7 +7,6 @@ use axum::{
     response::{IntoResponse, Response},
     routing::{get, post},
 };
-use prometheus_client::encoding::text::encode;
 use serde::{Deserialize, Serialize};
 
 use crate::{
@@ -122,23 +121,7 @@ pub(crate) async fn metrics(
     _caller: Need<Read>,
 ) -> ApiResult<Response> {
     let (jobs, expiries) = state.store.queue_stats().await?;
-    let mut out = String::new();
-    out.push_str("# HELP aobake_jobs Jobs by state.\n# TYPE aobake_jobs gauge\n");
-    for s in crate::store::JobState::ALL {
-        let n = jobs.iter().find(|(x, _)| *x == s).map_or(0, |(_, n)| *n);
-        out.push_str(&format!("aobake_jobs{{state=\"{}\"}} {n}\n", s.as_str()));
-    }
-    out.push_str(&format!(
-        "# HELP aobake_lease_expiries_total Leases that expired without a heartbeat.\n# TYPE aobake_lease_expiries_total counter\naobake_lease_expiries_total {expiries}\n"
-    ));
-    {
-        let registry = state
-            .metrics
-            .registry
-            .lock()
-            .map_err(|_| ApiError::Internal("metrics lock poisoned".into()))?;
-        encode(&mut out, &registry).map_err(|e| ApiError::Internal(e.to_string()))?;
-    }
+    let out = state.metrics.encode(&jobs, expiries)?;
     Ok((
         [(
             header::CONTENT_TYPE,
