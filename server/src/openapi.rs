@@ -38,6 +38,42 @@ pub(crate) fn method_schema() -> utoipa::openapi::Object {
         .build()
 }
 
+/// What every authenticated operation may answer besides its own
+/// responses: a malformed request, a missing or unknown token, a token
+/// without the scope, too many requests.
+#[derive(Debug, utoipa::IntoResponses)]
+#[expect(dead_code, reason = "a type for the spec; handlers answer ApiError")]
+pub(crate) enum Refusals {
+    /// Bad request.
+    #[response(
+        status = 400,
+        description = "Bad request",
+        content_type = "application/problem+json"
+    )]
+    BadRequest(crate::error::Problem),
+    /// No or unknown token.
+    #[response(
+        status = 401,
+        description = "No or unknown token",
+        content_type = "application/problem+json"
+    )]
+    Unauthorized(crate::error::Problem),
+    /// The token lacks the scope.
+    #[response(
+        status = 403,
+        description = "The token lacks the scope",
+        content_type = "application/problem+json"
+    )]
+    Forbidden(crate::error::Problem),
+    /// Too many requests.
+    #[response(
+        status = 429,
+        description = "Too many requests",
+        content_type = "application/problem+json"
+    )]
+    RateLimited(crate::error::Problem),
+}
+
 /// Token scopes.
 pub(crate) fn scopes_schema() -> utoipa::openapi::Array {
     utoipa::openapi::ArrayBuilder::new()

@@ -29,6 +29,7 @@ use crate::{
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery, Body},
     openapi::Digest,
+    openapi::Refusals,
     store::{Action, BakeRow, JobRow, NewBake, NewJob},
 };
 
@@ -102,7 +103,7 @@ fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
 
 #[utoipa::path(post, path = "/v1/bakes", tag = "bakes", request_body = BakeRequest,
     security(("bearer" = ["submit"])),
-    responses((status = 202, description = "Accepted (or already running)", body = BakeView), (status = 200, description = "Already baked: the finished bake", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 202, description = "Accepted (or already running)", body = BakeView), (status = 200, description = "Already baked: the finished bake", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn submit(
     State(state): State<AppState>,
     _caller: Need<Submit>,
@@ -204,7 +205,7 @@ impl ListQuery {
 
 #[utoipa::path(get, path = "/v1/bakes", tag = "bakes", params(ListQuery),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Bakes, newest first", body = Vec<BakeView>), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "Bakes, newest first", body = Vec<BakeView>), Refusals))]
 pub(crate) async fn list(
     State(state): State<AppState>,
     _caller: Need<Read>,
@@ -217,7 +218,7 @@ pub(crate) async fn list(
 
 #[utoipa::path(get, path = "/v1/characters/{digest}/bakes", tag = "bakes", params(("digest" = Digest, Path, description = "Character digest"), ListQuery),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Bakes of the character, newest first", body = Vec<BakeView>), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "Bakes of the character, newest first", body = Vec<BakeView>), Refusals))]
 pub(crate) async fn versions(
     State(state): State<AppState>,
     _caller: Need<Read>,
@@ -243,7 +244,7 @@ async fn find(state: &AppState, id: i64) -> ApiResult<BakeRow> {
 
 #[utoipa::path(get, path = "/v1/bakes/{id}", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The bake with every job", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "The bake with every job", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn show(
     State(state): State<AppState>,
     _caller: Need<Read>,
@@ -256,7 +257,7 @@ pub(crate) async fn show(
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/report", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The quality report (JSON)", body = Object), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "The quality report (JSON)", body = Object), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn report(
     State(state): State<AppState>,
     _caller: Need<Read>,
@@ -284,7 +285,7 @@ pub(crate) struct PatchBody {
 
 #[utoipa::path(patch, path = "/v1/bakes/{id}", tag = "bakes", params(("id" = i64, Path, description = "Bake id")), request_body = PatchBody,
     security(("bearer" = ["submit"])),
-    responses((status = 200, description = "Priority set", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "Priority set", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn patch(
     State(state): State<AppState>,
     _caller: Need<Submit>,
@@ -298,7 +299,7 @@ pub(crate) async fn patch(
 
 #[utoipa::path(post, path = "/v1/bakes/{id}/{action}", tag = "bakes", params(("id" = i64, Path, description = "Bake id"), ("action" = String, Path, description = "cancel, pause, resume or retry")),
     security(("bearer" = ["submit"])),
-    responses((status = 200, description = "Done", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "Done", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn control(
     State(state): State<AppState>,
     _caller: Need<Submit>,
@@ -323,7 +324,7 @@ pub(crate) async fn control(
 
 #[utoipa::path(get, path = "/v1/cache/{key}", tag = "bakes", params(("key" = Digest, Path, description = "Bake key")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The finished bake for this key", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "The finished bake for this key", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn cache(
     State(state): State<AppState>,
     _caller: Need<Read>,
@@ -340,7 +341,7 @@ pub(crate) async fn cache(
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/events", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Server-sent events: `bake` events with id, state, done and total", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "Server-sent events: `bake` events with id, state, done and total", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn events(
     State(state): State<AppState>,
     _caller: Need<Read>,

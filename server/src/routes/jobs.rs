@@ -21,6 +21,7 @@ use crate::{
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, Body},
     openapi::Digest,
+    openapi::Refusals,
     store::{CheckpointRef, Completion, Lease},
 };
 
@@ -49,7 +50,7 @@ pub(crate) struct LeaseRequest {
 
 #[utoipa::path(post, path = "/v1/jobs/lease", tag = "worker protocol", request_body = LeaseRequest,
     security(("bearer" = ["worker"])),
-    responses((status = 200, description = "A leased job", body = Lease), (status = 204, description = "No job within wait_secs"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "A leased job", body = Lease), (status = 204, description = "No job within wait_secs"), Refusals))]
 pub(crate) async fn lease(
     State(state): State<AppState>,
     _caller: Need<Worker>,
@@ -106,7 +107,7 @@ pub(crate) struct HeartbeatReply {
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/heartbeat", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = HeartbeatRequest,
     security(("bearer" = ["worker"])),
-    responses((status = 200, description = "Lease extended", body = HeartbeatReply), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "Lease extended", body = HeartbeatReply), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn heartbeat(
     State(state): State<AppState>,
     _caller: Need<Worker>,
@@ -132,7 +133,7 @@ pub(crate) struct CheckpointRequest {
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/checkpoint", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = CheckpointRequest,
     security(("bearer" = ["worker"])),
-    responses((status = 204, description = "Saved"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 204, description = "Saved"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn checkpoint(
     State(state): State<AppState>,
     _caller: Need<Worker>,
@@ -170,7 +171,7 @@ async fn require_blob(state: &AppState, digest: &str) -> ApiResult<()> {
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/complete", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = CompleteRequest,
     security(("bearer" = ["worker"])),
-    responses((status = 204, description = "Completed"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 204, description = "Completed"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn complete(
     State(state): State<AppState>,
     _caller: Need<Worker>,
@@ -201,7 +202,7 @@ pub(crate) struct FailRequest {
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/fail", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = FailRequest,
     security(("bearer" = ["worker"])),
-    responses((status = 204, description = "Recorded"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 204, description = "Recorded"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn fail(
     State(state): State<AppState>,
     _caller: Need<Worker>,
@@ -226,7 +227,7 @@ pub(crate) struct TokenRequest {
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/release", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = TokenRequest,
     security(("bearer" = ["worker"])),
-    responses((status = 204, description = "Given back"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 204, description = "Given back"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn release(
     State(state): State<AppState>,
     _caller: Need<Worker>,
@@ -240,7 +241,7 @@ pub(crate) async fn release(
 
 #[utoipa::path(get, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = Digest, Path, description = "sha256 of the bytes")),
     security(("bearer" = ["worker"])),
-    responses((status = 200, description = "The bytes", content_type = "application/octet-stream", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "The bytes", content_type = "application/octet-stream", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn get_blob(
     State(state): State<AppState>,
     _caller: Need<Worker>,
@@ -255,7 +256,7 @@ pub(crate) async fn get_blob(
 
 #[utoipa::path(put, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = Digest, Path, description = "sha256 of the bytes")), request_body(content = Vec<u8>, content_type = "application/octet-stream"),
     security(("bearer" = ["worker"])),
-    responses((status = 204, description = "Stored"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 204, description = "Stored"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn put_blob(
     State(state): State<AppState>,
     _caller: Need<Worker>,

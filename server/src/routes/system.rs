@@ -14,6 +14,7 @@ use crate::{
     auth::{Admin, Need, Read, new_token, token_hash},
     error::{ApiError, ApiResult, Problem},
     extract::Body,
+    openapi::Refusals,
     store::WorkerRow,
 };
 
@@ -28,7 +29,7 @@ pub(super) fn router() -> Router<AppState> {
 
 #[utoipa::path(get, path = "/v1/workers", tag = "system",
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Workers, most recently seen first", body = Vec<WorkerRow>), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "Workers, most recently seen first", body = Vec<WorkerRow>), Refusals))]
 pub(crate) async fn workers(
     State(state): State<AppState>,
     _caller: Need<Read>,
@@ -59,7 +60,7 @@ pub(crate) struct NewToken {
 
 #[utoipa::path(post, path = "/v1/tokens", tag = "system", request_body = NewTokenRequest,
     security(("bearer" = ["admin"])),
-    responses((status = 201, description = "The token, shown once", body = NewToken), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 201, description = "The token, shown once", body = NewToken), Refusals))]
 pub(crate) async fn create_token(
     State(state): State<AppState>,
     _caller: Need<Admin>,
@@ -115,7 +116,7 @@ pub(crate) async fn ready(State(state): State<AppState>) -> ApiResult<&'static s
 
 #[utoipa::path(get, path = "/metrics", tag = "system",
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Prometheus text: jobs by state, lease expiries, request latencies", content_type = "application/openmetrics-text", body = String), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "Prometheus text: jobs by state, lease expiries, request latencies", content_type = "application/openmetrics-text", body = String), Refusals))]
 pub(crate) async fn metrics(
     State(state): State<AppState>,
     _caller: Need<Read>,

@@ -23,6 +23,7 @@ use crate::{
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery},
     openapi::Digest,
+    openapi::Refusals,
     store::UploadRow,
 };
 
@@ -139,7 +140,7 @@ async fn store_upload(
 
 #[utoipa::path(post, path = "/v1/characters", tag = "uploads", request_body(content = Vec<u8>, description = "A .glb (model/gltf-binary), a bundle (application/vnd.aobake.bundle) or multipart/form-data with a .gltf and its side files", content_type = "model/gltf-binary"),
     security(("bearer" = ["submit"])),
-    responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn post_character(
     State(state): State<AppState>,
     _caller: Need<Submit>,
@@ -168,7 +169,7 @@ pub(crate) struct ClipsQuery {
 
 #[utoipa::path(post, path = "/v1/clips", tag = "uploads", params(("character" = String, Query, description = "The character whose skeleton the clips drive")), request_body(content = Vec<u8>, description = "A glTF file of animations", content_type = "model/gltf-binary"),
     security(("bearer" = ["submit"])),
-    responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn post_clips(
     State(state): State<AppState>,
     _caller: Need<Submit>,
@@ -222,7 +223,7 @@ pub(crate) async fn load_upload(
 
 #[utoipa::path(get, path = "/v1/characters/{digest}", tag = "uploads", params(("digest" = Digest, Path, description = "sha256 of the upload")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The upload", body = UploadRow), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "The upload", body = UploadRow), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn get_upload(
     State(state): State<AppState>,
     _caller: Need<Read>,
@@ -240,7 +241,7 @@ async fn find_upload(state: &AppState, digest: &str, kind: &str) -> ApiResult<Js
 
 #[utoipa::path(get, path = "/v1/clips/{digest}", tag = "uploads", params(("digest" = Digest, Path, description = "sha256 of the upload")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The upload", body = UploadRow), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 400, description = "Bad request", body = Problem, content_type = "application/problem+json"), (status = 401, description = "No or unknown token", body = Problem, content_type = "application/problem+json"), (status = 403, description = "The token lacks the scope", body = Problem, content_type = "application/problem+json"), (status = 429, description = "Too many requests", body = Problem, content_type = "application/problem+json")))]
+    responses((status = 200, description = "The upload", body = UploadRow), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn get_clips(
     State(state): State<AppState>,
     _caller: Need<Read>,
