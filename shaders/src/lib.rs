@@ -9,6 +9,14 @@
 //! * [`VERTEX_AO`]: run-time per-vertex AO of the vertex methods
 //!   (`cs_main` for dense coefficients, `cs_sparse` for CSR), the
 //!   evaluation an engine runs per frame.
+//! * [`PREVIEW`]: the preview raster (`vs_main`, `fs_main`).
+//!
+//! The Rust mirrors of the uniforms and storage structs are in [`mirror`],
+//! field for field with size assertions.
+
+pub mod mirror;
+
+pub use mirror::{BlockInfo, PreviewUniforms, VertexAoParams};
 
 /// Half-float decoding shared by the pipelines.
 pub const COMMON_F16: &str = include_str!("../wgsl/common/f16.wgsl");
@@ -21,9 +29,12 @@ pub const VERTEX_AO: &str = concat!(
     include_str!("../wgsl/vertex_ao.wgsl")
 );
 
+/// The preview raster shader.
+pub const PREVIEW: &str = include_str!("../wgsl/preview.wgsl");
+
 /// Every composed pipeline source, by file name.
-pub fn sources() -> [(&'static str, &'static str); 1] {
-    [("vertex_ao.wgsl", VERTEX_AO)]
+pub fn sources() -> [(&'static str, &'static str); 2] {
+    [("vertex_ao.wgsl", VERTEX_AO), ("preview.wgsl", PREVIEW)]
 }
 
 /// Workgroup size of the compute entry points (`@workgroup_size(64)`).
@@ -87,5 +98,46 @@ mod tests {
         for e in &module.entry_points {
             assert_eq!(e.workgroup_size, [WORKGROUP_SIZE, 1, 1]);
         }
+    }
+
+    /// The size naga computes for a WGSL struct.
+    fn wgsl_size(src: &str, name: &str) -> u32 {
+        let module = naga::front::wgsl::parse_str(src).unwrap();
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).unwrap();
+        let (handle, _) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("no struct {name}"));
+        layouter[handle].size
+    }
+
+    #[test]
+    fn the_rust_mirrors_have_the_wgsl_sizes() {
+        use std::mem::size_of;
+        assert_eq!(
+            wgsl_size(PREVIEW, "Uniforms") as usize,
+            size_of::<PreviewUniforms>()
+        );
+        assert_eq!(
+            wgsl_size(VERTEX_AO, "Params") as usize,
+            size_of::<VertexAoParams>()
+        );
+        assert_eq!(
+            wgsl_size(VERTEX_AO, "BlockInfo") as usize,
+            size_of::<BlockInfo>()
+        );
+    }
+
+    #[test]
+    fn preview_has_its_entry_points() {
+        let module = naga::front::wgsl::parse_str(PREVIEW).unwrap();
+        let names: Vec<&str> = module
+            .entry_points
+            .iter()
+            .map(|e| e.name.as_str())
+            .collect();
+        assert_eq!(names, ["vs_main", "fs_main"]);
     }
 }

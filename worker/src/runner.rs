@@ -236,7 +236,16 @@ fn execute(
         flags,
         fault: config.fault.as_deref(),
     };
-    bake.run_job(&spec, &dep_refs, resume, &mut sink)
+    match spec {
+        JobSpec::Preview => {
+            let gpu = crate::gpu::Gpu::shared()
+                .map_err(|e| JobError::Failed(format!("no GPU for previews: {e}")))?;
+            let mut renderer = crate::gpu::PreviewRenderer::new(gpu)
+                .map_err(|e| JobError::Failed(format!("the preview renderer: {e}")))?;
+            bake.preview(&dep_refs, &mut renderer)
+        }
+        _ => bake.run_job(&spec, &dep_refs, resume, &mut sink),
+    }
 }
 
 /// Retries a call that failed on the network or with a 5xx (three tries,

@@ -2,4 +2,5 @@
 
 mod integration {
     mod gpu;
+    mod preview;
 }

@@ -18,7 +18,7 @@ use crate::{
 /// The font of the plot's labels (DejaVu Sans, Bitstream Vera licence:
 /// `assets/DejaVuSans-LICENSE.txt`), so that plotting needs no system
 /// fonts.
-static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+pub(crate) static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// Wall-clock seconds of each stage.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]

@@ -13,14 +13,20 @@ use super::{Bake, JobSpec, PoseSet};
 pub struct GraphOptions {
     /// Poses per `sample` job.
     pub sample_batch: usize,
+    /// Whether the graph ends with a `preview` job (it needs a GPU
+    /// renderer; benches and core's tests leave it out).
+    pub previews: bool,
 }
 
 impl Default for GraphOptions {
     /// Four poses per `sample` job: a fraction of a second to a few seconds
     /// each on a typical character, so a lost job costs little and a
-    /// bake's progress moves steadily.
+    /// bake's progress moves steadily. Previews included.
     fn default() -> Self {
-        Self { sample_batch: 4 }
+        Self {
+            sample_batch: 4,
+            previews: true,
+        }
     }
 }
 
@@ -34,7 +40,7 @@ pub struct PlannedJob {
     pub deps: Vec<usize>,
 }
 
-/// A bake's jobs in dependency order; the last one produces the asset.
+/// A bake's jobs in dependency order.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct JobGraph {
     /// The jobs.
@@ -58,7 +64,7 @@ impl Bake<'_> {
     }
 
     /// `sample` (reference) → `fit`; `sample` (held-out, noise) and `fit`
-    /// → `evaluate`; `fit` and `evaluate` → `assemble`.
+    /// → `evaluate`; `fit` and `evaluate` → `assemble` → `preview`.
     fn vertex_graph(&self, options: GraphOptions) -> JobGraph {
         let batch = options.sample_batch.max(1);
         let mut jobs: Vec<PlannedJob> = Vec::new();
@@ -98,6 +104,13 @@ impl Bake<'_> {
             spec: JobSpec::Assemble,
             deps: vec![fit, evaluate],
         });
+        if options.previews {
+            let assemble = jobs.len() - 1;
+            jobs.push(PlannedJob {
+                spec: JobSpec::Preview,
+                deps: vec![assemble],
+            });
+        }
         JobGraph { jobs }
     }
 }

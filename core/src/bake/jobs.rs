@@ -31,7 +31,10 @@ use crate::{
     trace::{AoBlock, SceneOptions, no_progress, trace_poses},
 };
 
-use super::{BakeError, BakeInputs, BakeParams, Evaluation, Plan};
+use super::{
+    BakeError, BakeInputs, BakeParams, Evaluation, Plan,
+    preview::{PreviewInfo, Renderer, STILL_FRACTIONS, Subject, preview_clip},
+};
 
 /// Which poses a `sample` job traces.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -75,6 +78,8 @@ pub enum JobSpec {
     Evaluate,
     /// Pack the asset, the report and the plot.
     Assemble,
+    /// Render the asset's previews (needs a [`Renderer`]).
+    Preview,
 }
 
 impl JobSpec {
@@ -85,6 +90,7 @@ impl JobSpec {
             Self::Fit => "fit",
             Self::Evaluate => "evaluate",
             Self::Assemble => "assemble",
+            Self::Preview => "preview",
         }
     }
 
@@ -345,7 +351,44 @@ impl<'a> Bake<'a> {
             JobSpec::Fit => self.fit(deps),
             JobSpec::Evaluate => self.evaluate(deps),
             JobSpec::Assemble => self.assemble(deps),
+            JobSpec::Preview => Err(JobError::Invalid(
+                "a preview job needs a renderer: run it with Bake::preview".into(),
+            )),
         }
+    }
+
+    /// Runs a `preview` job: the stills and the animation of the asset
+    /// that `assemble` produced, on `renderer`, and `previews.json`
+    /// listing them.
+    pub fn preview(
+        &self,
+        deps: &[&JobOutput],
+        renderer: &mut dyn Renderer,
+    ) -> Result<JobOutput, JobError> {
+        let assembled = find(deps, "asset")?;
+        let model = decode(named(assembled, "asset")?)?;
+        let subject = Subject {
+            character: &self.inputs.character,
+            model: &model,
+            surface: self.plan.params.held_out_surface(),
+        };
+        let clips = &self.inputs.clips;
+        let clip = preview_clip(clips, &self.plan.test).map(|i| &clips[i]);
+        let times: Vec<f32> = clip.map_or_else(Vec::new, |c| {
+            STILL_FRACTIONS.iter().map(|f| f * c.duration).collect()
+        });
+        let mut previews = subject.stills(clip, &times, renderer)?;
+        if let Some(c) = clip {
+            previews.push(subject.animation(c, renderer)?);
+        }
+        let mut out = JobOutput::default();
+        let infos: Vec<&PreviewInfo> = previews.iter().map(|p| &p.info).collect();
+        out.push("previews.json", json(&infos));
+        for p in previews {
+            out.push(&p.info.name, p.png);
+        }
+        out.timings = assembled.timings;
+        Ok(out)
     }
 
     fn sample(

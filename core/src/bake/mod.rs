@@ -8,7 +8,8 @@
 //!    held-out and noise poses.
 //! 4. [`JobGraph`] ([`graph`]): the bake cut into jobs.
 //! 5. The job functions ([`jobs`]): `sample`, `fit`, `evaluate`,
-//!    `assemble`, each `(spec, dependency outputs, checkpoint?) → outputs`.
+//!    `assemble`, each `(spec, dependency outputs, checkpoint?) → outputs`,
+//!    and `preview` ([`preview`]), which also needs a [`Renderer`].
 //! 6. [`run_graph`] ([`runner`]): the whole graph in this process.
 //!
 //! Everything is seeded from [`BakeParams::seed`]: the same request gives
@@ -22,6 +23,7 @@ pub mod inputs;
 pub mod jobs;
 pub mod params;
 pub mod plan;
+pub mod preview;
 pub mod runner;
 
 pub use evaluation::{ClipEvaluation, Comparison, Evaluation};
@@ -33,6 +35,7 @@ pub use jobs::{
 };
 pub use params::{BakeError, BakeParams, ReferenceSource, bake_key};
 pub use plan::{Plan, TestPose};
+pub use preview::{Camera, Image, Panel, Preview, PreviewInfo, RenderFrame, RenderScene, Renderer};
 pub use runner::{Baked, bake_in_process, run_graph};
 
 pub use crate::digest::sha256_hex;

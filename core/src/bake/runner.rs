@@ -7,7 +7,10 @@ use std::collections::HashMap;
 
 use crate::asset::report::Report;
 
-use super::{Bake, GraphOptions, JobError, JobGraph, JobOutput, JobSpec, NoSink, PlannedJob};
+use super::{
+    Bake, GraphOptions, JobError, JobGraph, JobOutput, JobSpec, NoSink, PlannedJob,
+    preview::{PreviewInfo, Renderer},
+};
 
 /// What a finished bake publishes.
 #[derive(Debug, Clone)]
@@ -20,35 +23,52 @@ pub struct Baked {
     pub report_json: Vec<u8>,
     /// The PSNR-per-frame plot (PNG).
     pub plot: Vec<u8>,
+    /// The previews (PNG or APNG) and how each was made, when the graph
+    /// had a `preview` job.
+    pub previews: Vec<(PreviewInfo, Vec<u8>)>,
 }
 
 impl Baked {
-    /// Reads the published outputs from the last job's output.
-    pub fn from_output(out: &JobOutput) -> Result<Self, JobError> {
+    /// Collects the published outputs from the outputs of a graph's jobs.
+    pub fn from_outputs(outputs: &[JobOutput]) -> Result<Self, JobError> {
         let get = |name: &str| {
-            out.get(name)
+            outputs
+                .iter()
+                .find_map(|o| o.get(name))
                 .map(<[u8]>::to_vec)
                 .ok_or_else(|| JobError::Invalid(format!("the bake produced no {name}")))
         };
         let report_json = get("report.json")?;
+        let mut previews = Vec::new();
+        if let Ok(list) = get("previews.json") {
+            let infos: Vec<PreviewInfo> = serde_json::from_slice(&list)
+                .map_err(|e| JobError::Invalid(format!("previews.json: {e}")))?;
+            for info in infos {
+                let png = get(&info.name)?;
+                previews.push((info, png));
+            }
+        }
         Ok(Self {
             asset: get("asset")?,
             report: serde_json::from_slice(&report_json)
                 .map_err(|e| JobError::Invalid(format!("report.json: {e}")))?,
             report_json,
             plot: get("plot.png")?,
+            previews,
         })
     }
 }
 
 /// Runs every job of `graph` in order. Jobs whose spec is in `known` are
 /// not run again: their output is taken from there (a bench that fits many
-/// variants to one traced set passes the `sample` outputs). `on_done` is
-/// called after each job with its index.
+/// variants to one traced set passes the `sample` outputs). A `preview`
+/// job needs `renderer`. `on_done` is called after each job with its
+/// index.
 pub fn run_graph(
     bake: &Bake<'_>,
     graph: &JobGraph,
     known: &HashMap<JobSpec, JobOutput>,
+    mut renderer: Option<&mut dyn Renderer>,
     on_done: &mut dyn FnMut(usize, &PlannedJob, &JobOutput),
 ) -> Result<Vec<JobOutput>, JobError> {
     let mut outputs: Vec<JobOutput> = Vec::with_capacity(graph.jobs.len());
@@ -57,7 +77,10 @@ pub fn run_graph(
             Some(o) => o.clone(),
             None => {
                 let deps: Vec<&JobOutput> = job.deps.iter().map(|&d| &outputs[d]).collect();
-                bake.run_job(&job.spec, &deps, None, &mut NoSink)?
+                match (&job.spec, renderer.as_deref_mut()) {
+                    (JobSpec::Preview, Some(r)) => bake.preview(&deps, r)?,
+                    (spec, _) => bake.run_job(spec, &deps, None, &mut NoSink)?,
+                }
             }
         };
         on_done(i, job, &out);
@@ -66,9 +89,16 @@ pub fn run_graph(
     Ok(outputs)
 }
 
-/// A whole bake in this process with the default cutting.
-pub fn bake_in_process(bake: &Bake<'_>) -> Result<Baked, JobError> {
-    let graph = bake.graph(GraphOptions::default());
-    let outputs = run_graph(bake, &graph, &HashMap::new(), &mut |_, _, _| {})?;
-    Baked::from_output(outputs.last().expect("a graph has jobs"))
+/// A whole bake in this process with the default cutting; previews when
+/// a renderer is given.
+pub fn bake_in_process(
+    bake: &Bake<'_>,
+    renderer: Option<&mut dyn Renderer>,
+) -> Result<Baked, JobError> {
+    let graph = bake.graph(GraphOptions {
+        previews: renderer.is_some(),
+        ..GraphOptions::default()
+    });
+    let outputs = run_graph(bake, &graph, &HashMap::new(), renderer, &mut |_, _, _| {})?;
+    Baked::from_outputs(&outputs)
 }

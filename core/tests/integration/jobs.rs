@@ -113,12 +113,14 @@ fn cutting_the_bake_into_other_batches_changes_no_byte() {
     let inputs = util::inputs(&imported.character, &imported.clips);
     for method in [Method::VertexLinear, Method::VertexClustered] {
         let bake = Bake::new(&inputs, quick(method)).unwrap();
-        let reference = bake_in_process(&bake).unwrap();
+        let reference = bake_in_process(&bake, None).unwrap();
         for batch in [1, 5, 100] {
             let graph = bake.graph(GraphOptions {
                 sample_batch: batch,
+                previews: false,
             });
-            let out = run_graph(&bake, &graph, &HashMap::new(), &mut |_, _, _| {}).unwrap();
+            let out =
+                run_graph(&bake, &graph, &HashMap::new(), None, &mut |_, _, _| {}).unwrap();
             let asset = out.last().unwrap().get("asset").unwrap();
             assert_eq!(asset, reference.asset.as_slice(), "{method} batch {batch}");
             let report: Report =
@@ -137,12 +139,18 @@ fn the_graph_lists_dependencies_first_and_covers_every_pose() {
     let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
     let inputs = util::inputs(&imported.character, &imported.clips);
     let bake = Bake::new(&inputs, quick(Method::VertexLinear)).unwrap();
-    let graph = bake.graph(GraphOptions { sample_batch: 5 });
+    let graph = bake.graph(GraphOptions {
+        sample_batch: 5,
+        previews: true,
+    });
     for (i, job) in graph.jobs.iter().enumerate() {
         assert!(job.deps.iter().all(|&d| d < i), "{i}: {:?}", job.deps);
     }
     let kinds: Vec<&str> = graph.jobs.iter().map(|j| j.spec.kind()).collect();
-    assert_eq!(&kinds[kinds.len() - 3..], ["fit", "evaluate", "assemble"]);
+    assert_eq!(
+        &kinds[kinds.len() - 4..],
+        ["fit", "evaluate", "assemble", "preview"]
+    );
     for set in [PoseSet::Reference, PoseSet::HeldOut, PoseSet::Noise] {
         let covered: usize = graph
             .jobs

@@ -20,7 +20,7 @@ struct Baked {
 /// The whole bake in process: what `aobake bake` and the service's jobs do.
 fn bake(character: &Character, clips: &[Clip], params: BakeParams) -> Baked {
     let inputs = util::inputs(character, clips);
-    let baked = bake_in_process(&Bake::new(&inputs, params).unwrap()).unwrap();
+    let baked = bake_in_process(&Bake::new(&inputs, params).unwrap(), None).unwrap();
     let container = Container::from_bytes(&baked.asset).unwrap();
     Baked {
         model: Model::from_container(&container).unwrap().0,

@@ -9,7 +9,7 @@ use anyhow::{Context as _, bail};
 use aobake_core::{
     Limits,
     asset::report::Report,
-    bake::{Bake, BakeInputs, Baked, GraphOptions, JobOutput, JobSpec, run_graph},
+    bake::{Bake, BakeInputs, Baked, GraphOptions, JobOutput, JobSpec, Renderer, run_graph},
 };
 
 use super::params::BakeRequestArgs;
@@ -73,10 +73,14 @@ pub(super) fn load_inputs(
 pub(super) fn run_with_progress(
     bake: &Bake<'_>,
     known: &HashMap<JobSpec, JobOutput>,
+    renderer: Option<&mut dyn Renderer>,
 ) -> anyhow::Result<Vec<JobOutput>> {
-    let graph = bake.graph(GraphOptions::default());
+    let graph = bake.graph(GraphOptions {
+        previews: renderer.is_some(),
+        ..GraphOptions::default()
+    });
     let bar = progress_bar(graph.total_work(), "baking");
-    let outputs = run_graph(bake, &graph, known, &mut |_, job, _| {
+    let outputs = run_graph(bake, &graph, known, renderer, &mut |_, job, _| {
         bar.inc(job.spec.work());
         bar.set_message(job.spec.to_string());
     })?;
@@ -116,8 +120,8 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
         names(&plan.train),
         names(&plan.test),
     );
-    let outputs = run_with_progress(bake, &HashMap::new())?;
-    let baked = Baked::from_output(outputs.last().expect("a graph has jobs"))?;
+    let outputs = run_with_progress(bake, &HashMap::new(), None)?;
+    let baked = Baked::from_outputs(&outputs)?;
     write(&args.out, &baked.asset)?;
     write(&args.report, &baked.report_json)?;
     let plot_path = args

@@ -15,7 +15,7 @@ use std::time::Instant;
 use aobake_core::{
     Limits,
     asset::report::Report,
-    bake::{Bake, BakeInputs, BakeParams, Baked, JobOutput, JobSpec, ReferenceSource},
+    bake::{Bake, BakeInputs, BakeParams, Baked, GraphOptions, JobOutput, JobSpec, ReferenceSource},
     method::Method,
 };
 
@@ -100,8 +100,11 @@ impl<'a> Traced<'a> {
     fn new(inputs: &'a BakeInputs, common: &Common, params: BakeParams) -> anyhow::Result<Self> {
         let bake = Bake::new(inputs, params.clone())?;
         let started = Instant::now();
-        let outputs = with_threads(common.threads, || run_with_progress(&bake, &HashMap::new()))??;
-        let graph = bake.graph(Default::default());
+        let outputs = with_threads(common.threads, || run_with_progress(&bake, &HashMap::new(), None))??;
+        let graph = bake.graph(GraphOptions {
+            previews: false,
+            ..GraphOptions::default()
+        });
         let samples = graph
             .jobs
             .iter()
@@ -109,7 +112,7 @@ impl<'a> Traced<'a> {
             .filter(|(j, _)| j.spec.kind() == "sample")
             .map(|(j, o)| (j.spec.clone(), o.clone()))
             .collect();
-        let first = Baked::from_output(outputs.last().expect("a graph has jobs"))?.report;
+        let first = Baked::from_outputs(&outputs)?.report;
         println!(
             "{}: {} vertices, {} reference poses ({:?}), {} held-out clip frames, {} rays per vertex; baking took {:.1} s",
             common.file.display(),
@@ -136,8 +139,8 @@ impl<'a> Traced<'a> {
     /// time.
     fn row(&self, labels: &[String], params: &BakeParams) -> anyhow::Result<()> {
         let bake = Bake::new(self.inputs, params.clone())?;
-        let outputs = with_threads(self.threads, || run_with_progress(&bake, &self.samples))??;
-        let r = Baked::from_output(outputs.last().expect("a graph has jobs"))?.report;
+        let outputs = with_threads(self.threads, || run_with_progress(&bake, &self.samples, None))??;
+        let r = Baked::from_outputs(&outputs)?.report;
         let c = &r.evaluation.clip_frames.model.mean;
         println!(
             "| {} | {:.4} | {:.2} | {} | {:.1} | {:.2} |",

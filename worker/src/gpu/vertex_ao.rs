@@ -1,119 +1,13 @@
-//! wgpu on whatever adapter the machine has: a real GPU, or without one
-//! Mesa's llvmpipe through EGL/GL or lavapipe through Vulkan (DESIGN §10).
-//!
 //! [`VertexAo`] runs `shaders/wgsl/vertex_ao.wgsl`, the run-time evaluation
 //! of the vertex methods, so that what engines will run is tested against
-//! core's CPU evaluation.
+//! core's CPU evaluation, and the previews shade with the model's AO as
+//! the GPU computes it.
 
 use aobake_core::method::vertex::{FormRef, LinearForm, Model, SparseForm};
+use aobake_shaders::{BlockInfo, VertexAoParams};
 use wgpu::util::DeviceExt as _;
 
-/// Why the GPU could not be used.
-#[derive(Debug, thiserror::Error)]
-pub enum GpuError {
-    /// No adapter (no GPU and no software driver).
-    #[error("no GPU adapter: {0}")]
-    NoAdapter(String),
-    /// The adapter cannot run compute shaders.
-    #[error("the adapter {0} has no compute shaders")]
-    NoCompute(String),
-    /// Device creation failed.
-    #[error("cannot open the GPU device: {0}")]
-    Device(String),
-    /// A shader or pipeline was rejected.
-    #[error("the GPU rejected a pipeline: {0}")]
-    Pipeline(String),
-    /// The model does not fit this adapter's limits.
-    #[error("the model does not fit the GPU: {0}")]
-    TooLarge(String),
-    /// Reading results back failed.
-    #[error("cannot read results back from the GPU: {0}")]
-    Readback(String),
-}
-
-/// An adapter, its device and queue.
-#[derive(Debug)]
-pub struct Gpu {
-    /// The adapter's description (name, backend, driver).
-    pub info: wgpu::AdapterInfo,
-    device: wgpu::Device,
-    queue: wgpu::Queue,
-}
-
-impl Gpu {
-    /// Opens the best adapter over Vulkan and GL (a real GPU before a
-    /// software one).
-    pub fn new() -> Result<Self, GpuError> {
-        pollster::block_on(Self::open())
-    }
-
-    async fn open() -> Result<Self, GpuError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
-            backends: wgpu::Backends::VULKAN | wgpu::Backends::GL,
-            flags: wgpu::InstanceFlags::empty(),
-            ..wgpu::InstanceDescriptor::new_without_display_handle()
-        });
-        let adapter = instance
-            .request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter: false,
-                compatible_surface: None,
-                ..Default::default()
-            })
-            .await
-            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
-        let info = adapter.get_info();
-        let label = format!("{} ({:?})", info.name, info.backend);
-        if !adapter
-            .get_downlevel_capabilities()
-            .flags
-            .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
-        {
-            return Err(GpuError::NoCompute(label));
-        }
-        let (device, queue) = adapter
-            .request_device(&wgpu::DeviceDescriptor {
-                label: Some("aobake"),
-                required_features: wgpu::Features::empty(),
-                required_limits: adapter.limits(),
-                ..Default::default()
-            })
-            .await
-            .map_err(|e| GpuError::Device(format!("{label}: {e}")))?;
-        Ok(Self {
-            info,
-            device,
-            queue,
-        })
-    }
-}
-
-/// `Params` of vertex_ao.wgsl, field for field.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct Params {
-    vertices: u32,
-    blocks: u32,
-    row_stride: u32,
-    _pad: u32,
-}
-
-/// `BlockInfo` of vertex_ao.wgsl, field for field.
-#[repr(C)]
-#[derive(Debug, Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct BlockInfo {
-    rows: u32,
-    columns: u32,
-    coef_offset: u32,
-    map_offset: u32,
-    weight_offset: u32,
-    _pad: [u32; 3],
-}
-
-const _: () = assert!(std::mem::size_of::<Params>() == 16);
-const _: () = assert!(std::mem::size_of::<BlockInfo>() == 32);
-
-const NO_MAP: u32 = u32::MAX;
+use super::{Gpu, GpuError};
 
 /// Most workgroups per dispatch dimension (WebGPU's minimum limit).
 const MAX_GROUPS: u32 = 65_535;
@@ -188,7 +82,7 @@ impl<'g> VertexAo<'g> {
             groups_needed.min(MAX_GROUPS),
             groups_needed.div_ceil(MAX_GROUPS),
         );
-        let params = Params {
+        let params = VertexAoParams {
             vertices,
             blocks: to_u32(blocks.len(), "blocks")?,
             row_stride: groups.0 * aobake_shaders::WORKGROUP_SIZE,
@@ -278,7 +172,7 @@ impl<'g> VertexAo<'g> {
                     maps.extend_from_slice(m);
                     at
                 }
-                None => NO_MAP,
+                None => BlockInfo::NO_MAP,
             };
             blocks.push(BlockInfo {
                 rows: to_u32(b.rows, "rows")?,
@@ -321,11 +215,29 @@ impl<'g> VertexAo<'g> {
         })
     }
 
-    /// AO of every vertex for one pose's weights ([`Model::weights`]).
-    pub fn evaluate(&self, weights: &[f32]) -> Result<Vec<f32>, GpuError> {
-        assert_eq!(weights.len(), self.weights, "one weight per row");
+    /// Vertices the model evaluates.
+    pub fn vertices(&self) -> u32 {
+        self.vertices
+    }
+
+    /// Records the evaluation of one pose's weights ([`Model::weights`])
+    /// into `encoder`, writing one f32 per vertex to `ao` (a buffer with
+    /// `STORAGE` usage of at least `4 × vertices` bytes), where a render
+    /// pass can read it as a vertex buffer without a round trip.
+    pub fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        weights: &[f32],
+        ao: &wgpu::Buffer,
+    ) -> Result<(), GpuError> {
+        if weights.len() != self.weights {
+            return Err(GpuError::TooLarge(format!(
+                "{} weights given, the model takes {}",
+                weights.len(),
+                self.weights
+            )));
+        }
         let device = &self.gpu.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let weights = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("weights"),
             contents: bytemuck::cast_slice(if weights.is_empty() {
@@ -334,19 +246,6 @@ impl<'g> VertexAo<'g> {
                 weights
             }),
             usage: wgpu::BufferUsages::STORAGE,
-        });
-        let size = 4 * u64::from(self.vertices.max(1));
-        let ao = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("ao"),
-            size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("ao readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
         });
         let layout = self.pipeline.get_bind_group_layout(0);
         fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
@@ -362,7 +261,7 @@ impl<'g> VertexAo<'g> {
                 entry(2, &self.coefficients),
                 entry(3, &self.maps),
                 entry(4, &weights),
-                entry(5, &ao),
+                entry(5, ao),
                 entry(6, &self.sparse_rows),
             ]
         } else {
@@ -372,7 +271,7 @@ impl<'g> VertexAo<'g> {
                 entry(2, &self.coefficients),
                 entry(3, &self.maps),
                 entry(4, &weights),
-                entry(5, &ao),
+                entry(5, ao),
             ]
         };
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -380,43 +279,44 @@ impl<'g> VertexAo<'g> {
             layout: &layout,
             entries: &entries,
         });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("vertex ao"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups(self.groups.0, self.groups.1, 1);
+        Ok(())
+    }
+
+    /// AO of every vertex for one pose's weights ([`Model::weights`]),
+    /// read back.
+    pub fn evaluate(&self, weights: &[f32]) -> Result<Vec<f32>, GpuError> {
+        assert_eq!(weights.len(), self.weights, "one weight per row");
+        let device = &self.gpu.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let size = 4 * u64::from(self.vertices.max(1));
+        let ao = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ao"),
+            size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ao readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: None,
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(self.groups.0, self.groups.1, 1);
-        }
+        self.record(&mut encoder, weights, &ao)?;
         encoder.copy_buffer_to_buffer(&ao, 0, &staging, 0, size);
         let submission = self.gpu.queue.submit(Some(encoder.finish()));
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
-        let slice = staging.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        device
-            .poll(wgpu::PollType::Wait {
-                submission_index: Some(submission),
-                timeout: None,
-            })
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let values = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| GpuError::Readback(e.to_string()))?;
-            bytemuck::cast_slice::<u8, f32>(&view)[..self.vertices as usize].to_vec()
-        };
-        staging.unmap();
-        Ok(values)
+        let bytes = self.gpu.read(&staging, submission)?;
+        Ok(bytemuck::cast_slice::<u8, f32>(&bytes)[..self.vertices as usize].to_vec())
     }
 }

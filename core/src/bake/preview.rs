@@ -1,0 +1,686 @@
+//! Previews: what a person looks at to judge a bake. Core prepares the
+//! frames (the posed character, its ray-traced ground truth, the model's
+//! per-pose weights, one camera framed on the whole clip) and lays the
+//! rendered panels out into PNGs; the drawing itself, and the model's AO
+//! on the GPU, belong to a [`Renderer`], which the worker implements with
+//! wgpu (core knows no GPU, DESIGN §2).
+//!
+//! * A **still** is one clip time as a row of three panels: the ray-traced
+//!   ground truth, the baked model, and the error (model − truth: too dark
+//!   in red, too bright in blue, as Kroon shows it) with its legend.
+//! * An **animation** is an APNG of a whole clip, the model beside the
+//!   ground truth.
+//!
+//! The images depend only on the inputs (no jitter, no clock): the same
+//! adapter draws the same bytes. Render times go into [`PreviewInfo`],
+//! never into an image.
+
+use std::sync::OnceLock;
+use std::time::Instant;
+
+use glam::{Mat4, Vec3};
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    Character,
+    method::vertex::Model,
+    rig::{clip::Clip, pose::Pose},
+    trace::{SceneOptions, SurfaceParams, no_progress, trace_poses},
+};
+
+use super::JobError;
+
+/// Side of a still's panels in pixels.
+pub const STILL_PANEL: u32 = 360;
+/// Side of an animation's panels in pixels.
+pub const ANIMATION_PANEL: u32 = 240;
+/// Frames per second of an animation (at most [`ANIMATION_MAX_FRAMES`]).
+pub const ANIMATION_FPS: f32 = 24.0;
+/// Most frames in an animation: a longer clip is sampled more sparsely.
+pub const ANIMATION_MAX_FRAMES: usize = 48;
+/// Where in a clip a bake's stills are taken, as fractions of its length.
+pub const STILL_FRACTIONS: [f32; 3] = [0.15, 0.5, 0.85];
+
+/// What a panel shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Panel {
+    /// Shaded with the ray-traced AO.
+    Truth,
+    /// Shaded with the model's AO, evaluated by the renderer.
+    Model,
+    /// The model's AO minus the ray-traced AO through [`HeatMap`].
+    Error,
+}
+
+/// The error colour ramp, written once here: the renderer gets these
+/// numbers as uniforms and the legend is drawn from them. Colours are
+/// linear RGB; an error `e = model − truth` (occlusion) maps to
+/// `mix(neutral, too_dark, e / range)` above zero and
+/// `mix(neutral, too_bright, −e / range)` below, clamped at `range`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeatMap {
+    /// Error magnitude that saturates the colour.
+    pub range: f32,
+    /// Colour of no error.
+    pub neutral: [f32; 3],
+    /// Colour of a model darker than the truth (more occlusion).
+    pub too_dark: [f32; 3],
+    /// Colour of a model brighter than the truth.
+    pub too_bright: [f32; 3],
+}
+
+/// The ramp every preview uses: ±0.2 occlusion saturates.
+pub const HEAT_MAP: HeatMap = HeatMap {
+    range: 0.2,
+    neutral: [0.9, 0.9, 0.9],
+    too_dark: [0.8, 0.02, 0.01],
+    too_bright: [0.01, 0.1, 0.8],
+};
+
+impl HeatMap {
+    /// The linear colour of an error.
+    pub fn color(&self, error: f32) -> [f32; 3] {
+        let s = (error / self.range).clamp(-1.0, 1.0);
+        let (to, f) = if s >= 0.0 {
+            (self.too_dark, s)
+        } else {
+            (self.too_bright, -s)
+        };
+        std::array::from_fn(|i| self.neutral[i] + (to[i] - self.neutral[i]) * f)
+    }
+}
+
+/// The camera and the ground of a preview, the same for every frame of a
+/// clip so that an animation does not jitter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    /// Where the eye is (world space).
+    pub eye: Vec3,
+    /// What it looks at: the centre of the clip's bounding box.
+    pub target: Vec3,
+    /// Vertical field of view in radians.
+    pub fov_y: f32,
+    /// Near and far plane distances.
+    pub near: f32,
+    /// Far plane distance.
+    pub far: f32,
+    /// Height of the ground plane: the lowest point over the clip.
+    pub ground_y: f32,
+    /// Half the side of the ground square around the target.
+    pub ground_half_extent: f32,
+}
+
+impl Camera {
+    /// Frames the box `(min, max)` (world space, y up as glTF has it)
+    /// from the front right and a little above: the glTF front is +z.
+    pub fn framing(min: Vec3, max: Vec3) -> Self {
+        let target = 0.5 * (min + max);
+        let radius = (0.5 * (max - min).length()).max(1e-3);
+        let (azimuth, elevation) = (35f32.to_radians(), 15f32.to_radians());
+        let direction = Vec3::new(
+            azimuth.sin() * elevation.cos(),
+            elevation.sin(),
+            azimuth.cos() * elevation.cos(),
+        );
+        let fov_y = 30f32.to_radians();
+        let distance = radius / (0.5 * fov_y).sin();
+        Self {
+            eye: target + distance * direction,
+            target,
+            fov_y,
+            near: (distance - 4.0 * radius).max(0.02 * distance),
+            far: distance + 4.0 * radius,
+            ground_y: min.y,
+            ground_half_extent: 3.0 * radius,
+        }
+    }
+
+    /// Clip space (wgpu's, which is Direct3D's: y up, depth 0..1) from
+    /// world space.
+    pub fn clip_from_world(&self, aspect: f32) -> Mat4 {
+        use glam::camera::rh::{proj::directx, view};
+        directx::perspective(self.fov_y, aspect, self.near, self.far)
+            * view::look_at_mat4(self.eye, self.target, Vec3::Y)
+    }
+}
+
+/// What stays the same over the frames of one render call.
+#[derive(Debug, Clone, Copy)]
+pub struct RenderScene<'a> {
+    /// The character's triangles (counter-clockwise fronts).
+    pub triangles: &'a [[u32; 3]],
+    /// The model whose AO the renderer evaluates.
+    pub model: &'a Model,
+    /// Camera and ground.
+    pub camera: Camera,
+    /// Panel size in pixels.
+    pub size: (u32, u32),
+    /// The error colours.
+    pub heat_map: HeatMap,
+}
+
+/// One posed frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderFrame {
+    /// World-space positions.
+    pub positions: Vec<Vec3>,
+    /// World-space unit normals.
+    pub normals: Vec<Vec3>,
+    /// Ray-traced occlusion per vertex.
+    pub truth: Vec<f32>,
+    /// The model's weights for this pose ([`Model::weights`]).
+    pub weights: Vec<f32>,
+}
+
+/// An sRGB-encoded RGBA8 image, rows top to bottom.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `4 × width × height` bytes.
+    pub rgba: Vec<u8>,
+}
+
+/// Draws frames: implemented by the worker on wgpu.
+pub trait Renderer {
+    /// The adapter that draws, such as `llvmpipe (LLVM 15.0.6, 256 bits)
+    /// (Gl)`.
+    fn adapter(&self) -> String;
+
+    /// Renders every panel of every frame, frame-major: `frames.len() ×
+    /// panels.len()` images of `scene.size`.
+    fn render(
+        &mut self,
+        scene: &RenderScene<'_>,
+        frames: &[RenderFrame],
+        panels: &[Panel],
+    ) -> Result<Vec<Image>, String>;
+}
+
+/// How a preview was made, as listed in `previews.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PreviewInfo {
+    /// The output's name, such as `still-0.png`.
+    pub name: String,
+    /// `still` or `animation`.
+    pub kind: String,
+    /// The clip, if any (a character without clips is shown at rest).
+    pub clip: Option<String>,
+    /// Clip times shown, in seconds.
+    pub times: Vec<f32>,
+    /// Image size.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// The adapter that rendered it.
+    pub adapter: String,
+    /// Milliseconds per rendered panel (GPU evaluation of the model,
+    /// drawing and readback), over the render call.
+    pub frame_ms: f64,
+    /// Seconds spent ray tracing its ground truth.
+    pub trace_s: f64,
+}
+
+/// A rendered preview.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Preview {
+    /// PNG (an APNG for an animation).
+    pub png: Vec<u8>,
+    /// How it was made.
+    pub info: PreviewInfo,
+}
+
+/// The character and model a preview shows, and how its truth is traced.
+#[derive(Debug, Clone, Copy)]
+pub struct Subject<'a> {
+    /// The character.
+    pub character: &'a Character,
+    /// The baked model.
+    pub model: &'a Model,
+    /// The ray tracing of the ground truth (the bake's held-out seed).
+    pub surface: SurfaceParams,
+}
+
+impl Subject<'_> {
+    /// The camera for a clip (the box over all its frames at 30 fps, at
+    /// most 240 of them) or for the rest pose.
+    pub fn camera(&self, clip: Option<&Clip>) -> Camera {
+        let poses: Vec<Pose> = match clip {
+            Some(c) => c
+                .sample_times(30.0, 240)
+                .into_iter()
+                .map(|t| Pose::sample(&self.character.skeleton, c, t))
+                .collect(),
+            None => vec![Pose::rest(&self.character.skeleton)],
+        };
+        let (mut min, mut max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for pose in &poses {
+            for p in self.character.skin(pose).positions {
+                min = min.min(p);
+                max = max.max(p);
+            }
+        }
+        if !min.is_finite() {
+            (min, max) = (Vec3::ZERO, Vec3::ONE);
+        }
+        Camera::framing(min, max)
+    }
+
+    fn frames(&self, clip: Option<&Clip>, times: &[f32]) -> Result<Vec<RenderFrame>, JobError> {
+        let skeleton = &self.character.skeleton;
+        let poses: Vec<Pose> = times
+            .iter()
+            .map(|&t| match clip {
+                Some(c) => Pose::sample(skeleton, c, t),
+                None => Pose::rest(skeleton),
+            })
+            .collect();
+        let truth = trace_poses(
+            self.character,
+            &poses,
+            &SceneOptions::default(),
+            &self.surface,
+            &no_progress,
+        )
+        .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let vertices = self.character.vertex_count();
+        Ok(poses
+            .iter()
+            .enumerate()
+            .map(|(i, pose)| {
+                let posed = self.character.skin(pose);
+                RenderFrame {
+                    positions: posed.positions,
+                    normals: posed.normals,
+                    truth: truth.values[i * vertices..(i + 1) * vertices].to_vec(),
+                    weights: self.model.weights(skeleton, pose),
+                }
+            })
+            .collect())
+    }
+
+    /// Stills at `times` of `clip` (or one of the rest pose without a
+    /// clip), named `still-{i}.png`.
+    pub fn stills(
+        &self,
+        clip: Option<&Clip>,
+        times: &[f32],
+        renderer: &mut dyn Renderer,
+    ) -> Result<Vec<Preview>, JobError> {
+        let times: Vec<f32> = if clip.is_some() { times.to_vec() } else { vec![0.0] };
+        let traced = Instant::now();
+        let frames = self.frames(clip, &times)?;
+        let trace_s = traced.elapsed().as_secs_f64();
+        let scene = RenderScene {
+            triangles: &self.character.triangles,
+            model: self.model,
+            camera: self.camera(clip),
+            size: (STILL_PANEL, STILL_PANEL),
+            heat_map: HEAT_MAP,
+        };
+        let panels = [Panel::Truth, Panel::Model, Panel::Error];
+        let (images, frame_ms) = render(renderer, &scene, &frames, &panels)?;
+        let method = self.model.method().name();
+        times
+            .iter()
+            .zip(images.chunks_exact(panels.len()))
+            .enumerate()
+            .map(|(i, (&t, row))| {
+                let when = match clip {
+                    Some(c) => format!("{} at {t:.2} s", c.name),
+                    None => "rest pose".to_owned(),
+                };
+                let titles = [
+                    format!("ray-traced: {when}"),
+                    format!("baked: {method}"),
+                    "error: baked − ray-traced".to_owned(),
+                ];
+                let image = compose_still(row, &titles)?;
+                Ok(Preview {
+                    info: PreviewInfo {
+                        name: format!("still-{i}.png"),
+                        kind: "still".into(),
+                        clip: clip.map(|c| c.name.clone()),
+                        times: vec![t],
+                        width: image.width,
+                        height: image.height,
+                        adapter: renderer.adapter(),
+                        frame_ms,
+                        trace_s: trace_s / times.len() as f64,
+                    },
+                    png: encode_png(&image, None)?,
+                })
+            })
+            .collect()
+    }
+
+    /// The whole clip as an APNG, the model beside the ground truth,
+    /// named `animation.png`.
+    pub fn animation(&self, clip: &Clip, renderer: &mut dyn Renderer) -> Result<Preview, JobError> {
+        // Evenly spaced frames: fewer per second for a long clip.
+        let fps = if clip.duration > 0.0 {
+            ANIMATION_FPS.min((ANIMATION_MAX_FRAMES - 1) as f32 / clip.duration)
+        } else {
+            ANIMATION_FPS
+        };
+        let mut times = clip.frame_times(fps);
+        times.truncate(ANIMATION_MAX_FRAMES);
+        let traced = Instant::now();
+        let frames = self.frames(Some(clip), &times)?;
+        let trace_s = traced.elapsed().as_secs_f64();
+        let scene = RenderScene {
+            triangles: &self.character.triangles,
+            model: self.model,
+            camera: self.camera(Some(clip)),
+            size: (ANIMATION_PANEL, ANIMATION_PANEL),
+            heat_map: HEAT_MAP,
+        };
+        let panels = [Panel::Truth, Panel::Model];
+        let (images, frame_ms) = render(renderer, &scene, &frames, &panels)?;
+        let method = self.model.method().name();
+        let composed = times
+            .iter()
+            .zip(images.chunks_exact(panels.len()))
+            .map(|(&t, pair)| {
+                compose_row(
+                    pair,
+                    &[
+                        format!("ray-traced  {t:.2} s"),
+                        format!("baked: {method}"),
+                    ],
+                    false,
+                )
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let png = encode_apng(&composed, 1.0 / fps)?;
+        let first = &composed[0];
+        Ok(Preview {
+            info: PreviewInfo {
+                name: "animation.png".into(),
+                kind: "animation".into(),
+                clip: Some(clip.name.clone()),
+                times,
+                width: first.width,
+                height: first.height,
+                adapter: renderer.adapter(),
+                frame_ms,
+                trace_s,
+            },
+            png,
+        })
+    }
+}
+
+/// Renders and times the call: milliseconds per panel.
+fn render(
+    renderer: &mut dyn Renderer,
+    scene: &RenderScene<'_>,
+    frames: &[RenderFrame],
+    panels: &[Panel],
+) -> Result<(Vec<Image>, f64), JobError> {
+    let started = Instant::now();
+    let images = renderer
+        .render(scene, frames, panels)
+        .map_err(|e| JobError::Failed(format!("the preview renderer failed: {e}")))?;
+    let ms = 1e3 * started.elapsed().as_secs_f64() / (frames.len() * panels.len()).max(1) as f64;
+    let want = frames.len() * panels.len();
+    if images.len() != want
+        || images.iter().any(|i| {
+            (i.width, i.height) != scene.size || i.rgba.len() != 4 * (i.width * i.height) as usize
+        })
+    {
+        return Err(JobError::Failed(format!(
+            "the renderer returned {} images, not {want} of {}×{}",
+            images.len(),
+            scene.size.0,
+            scene.size.1
+        )));
+    }
+    Ok((images, ms))
+}
+
+/// The font of titles and legends (the report's, DejaVu Sans).
+fn font() -> Result<(), JobError> {
+    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
+    REGISTERED
+        .get_or_init(|| {
+            register_font(
+                "sans-serif",
+                FontStyle::Normal,
+                crate::asset::report::FONT,
+            )
+            .map_err(|_| "the bundled font is invalid".to_owned())
+        })
+        .clone()
+        .map_err(JobError::Failed)
+}
+
+const TITLE_HEIGHT: u32 = 30;
+const LEGEND_HEIGHT: u32 = 46;
+const BACKGROUND: u8 = 255;
+
+fn draw_error(e: impl std::fmt::Display) -> JobError {
+    JobError::Failed(format!("cannot lay out a preview: {e}"))
+}
+
+/// Panels side by side under their titles, and the heat map's legend under
+/// the last panel when `legend`.
+fn compose_row(panels: &[Image], titles: &[String], legend: bool) -> Result<Image, JobError> {
+    font()?;
+    let (pw, ph) = (panels[0].width, panels[0].height);
+    let width = pw * panels.len() as u32;
+    let height = TITLE_HEIGHT + ph + if legend { LEGEND_HEIGHT } else { 0 };
+    let mut rgb = vec![BACKGROUND; (3 * width * height) as usize];
+    for (k, panel) in panels.iter().enumerate() {
+        for y in 0..ph {
+            for x in 0..pw {
+                let from = (4 * (y * pw + x)) as usize;
+                let to = (3 * ((TITLE_HEIGHT + y) * width + k as u32 * pw + x)) as usize;
+                rgb[to..to + 3].copy_from_slice(&panel.rgba[from..from + 3]);
+            }
+        }
+    }
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area();
+        let style = TextStyle::from(("sans-serif", 15).into_font()).color(&BLACK);
+        for (k, title) in titles.iter().enumerate() {
+            root.draw(&Text::new(
+                title.clone(),
+                (k as i32 * pw as i32 + 8, 8),
+                style.clone(),
+            ))
+            .map_err(draw_error)?;
+        }
+        if legend {
+            let heat = HEAT_MAP;
+            let x0 = (panels.len() as i32 - 1) * pw as i32 + 20;
+            let bar = (pw as i32 - 40).max(2);
+            let y0 = (TITLE_HEIGHT + ph) as i32 + 6;
+            for i in 0..bar {
+                let e = heat.range * (2.0 * i as f32 / (bar - 1) as f32 - 1.0);
+                let [r, g, b] = heat.color(e).map(srgb_byte);
+                root.draw(&Rectangle::new(
+                    [(x0 + i, y0), (x0 + i + 1, y0 + 14)],
+                    RGBColor(r, g, b).filled(),
+                ))
+                .map_err(draw_error)?;
+            }
+            let small = TextStyle::from(("sans-serif", 12).into_font()).color(&BLACK);
+            for (x, label) in [
+                (x0, format!("−{} too bright", heat.range)),
+                (x0 + bar / 2 - 4, "0".to_owned()),
+                (x0 + bar - 78, format!("+{} too dark", heat.range)),
+            ] {
+                root.draw(&Text::new(label, (x, y0 + 20), small.clone()))
+                    .map_err(draw_error)?;
+            }
+        }
+        root.present().map_err(draw_error)?;
+    }
+    let rgba = rgb
+        .chunks_exact(3)
+        .flat_map(|p| [p[0], p[1], p[2], 255])
+        .collect();
+    Ok(Image {
+        width,
+        height,
+        rgba,
+    })
+}
+
+/// Three panels (truth, model, error) with the legend.
+fn compose_still(panels: &[Image], titles: &[String; 3]) -> Result<Image, JobError> {
+    compose_row(panels, titles, true)
+}
+
+/// The sRGB byte of a linear value.
+pub fn srgb_byte(linear: f32) -> u8 {
+    let c = linear.clamp(0.0, 1.0);
+    let s = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0).round() as u8
+}
+
+fn png_error(e: png::EncodingError) -> JobError {
+    JobError::Failed(format!("cannot encode a PNG: {e}"))
+}
+
+fn encoder<'o>(image: &Image, out: &'o mut Vec<u8>) -> png::Encoder<'static, &'o mut Vec<u8>> {
+    let mut e = png::Encoder::new(out, image.width, image.height);
+    e.set_color(png::ColorType::Rgba);
+    e.set_depth(png::BitDepth::Eight);
+    e.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+    e
+}
+
+/// A PNG of one image; `animation` makes it an APNG of several.
+fn encode_png(image: &Image, animation: Option<(&[Image], f32)>) -> Result<Vec<u8>, JobError> {
+    let mut out = Vec::new();
+    {
+        let mut e = encoder(image, &mut out);
+        if let Some((frames, delay)) = animation {
+            e.set_animated(frames.len() as u32, 0).map_err(png_error)?;
+            let ms = (1000.0 * delay).round().clamp(1.0, 65_535.0) as u16;
+            e.set_frame_delay(ms, 1000).map_err(png_error)?;
+        }
+        let mut w = e.write_header().map_err(png_error)?;
+        match animation {
+            Some((frames, _)) => {
+                for f in frames {
+                    w.write_image_data(&f.rgba).map_err(png_error)?;
+                }
+            }
+            None => w.write_image_data(&image.rgba).map_err(png_error)?,
+        }
+        w.finish().map_err(png_error)?;
+    }
+    Ok(out)
+}
+
+/// An APNG that loops forever, `delay` seconds per frame.
+pub fn encode_apng(frames: &[Image], delay: f32) -> Result<Vec<u8>, JobError> {
+    let first = frames
+        .first()
+        .ok_or_else(|| JobError::Invalid("an animation needs frames".into()))?;
+    encode_png(first, Some((frames, delay)))
+}
+
+/// A PNG of one image.
+pub fn encode_image(image: &Image) -> Result<Vec<u8>, JobError> {
+    encode_png(image, None)
+}
+
+/// The clip a bake's previews show: its first held-out clip, else its
+/// first clip.
+pub fn preview_clip(clips: &[Clip], test: &[usize]) -> Option<usize> {
+    test.first().copied().or(if clips.is_empty() { None } else { Some(0) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_heat_map_is_neutral_at_zero_and_saturates_at_its_range() {
+        let h = HEAT_MAP;
+        assert_eq!(h.color(0.0), h.neutral);
+        assert_eq!(h.color(h.range), h.too_dark);
+        assert_eq!(h.color(10.0), h.too_dark);
+        assert_eq!(h.color(-h.range), h.too_bright);
+        let half = h.color(0.5 * h.range);
+        assert!(half[0] > half[2], "too dark leans red: {half:?}");
+        let half = h.color(-0.5 * h.range);
+        assert!(half[2] > half[0], "too bright leans blue: {half:?}");
+    }
+
+    #[test]
+    fn the_camera_sees_the_whole_box() {
+        let (min, max) = (Vec3::new(-0.3, 0.0, -0.2), Vec3::new(0.3, 1.8, 0.2));
+        let cam = Camera::framing(min, max);
+        let m = cam.clip_from_world(1.0);
+        for i in 0..8 {
+            let corner = Vec3::new(
+                if i & 1 == 0 { min.x } else { max.x },
+                if i & 2 == 0 { min.y } else { max.y },
+                if i & 4 == 0 { min.z } else { max.z },
+            );
+            let c = m * corner.extend(1.0);
+            let ndc = c.truncate() / c.w;
+            assert!(ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0, "{corner} → {ndc}");
+            assert!((0.0..=1.0).contains(&ndc.z), "{corner} depth {}", ndc.z);
+        }
+        assert_eq!(cam.ground_y, 0.0);
+    }
+
+    #[test]
+    fn an_apng_holds_every_frame_and_loops() {
+        let frame = |v: u8| Image {
+            width: 4,
+            height: 3,
+            rgba: vec![v; 48],
+        };
+        let frames = [frame(0), frame(100), frame(200)];
+        let bytes = encode_apng(&frames, 0.04).unwrap();
+        let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
+            .read_info()
+            .unwrap();
+        let control = reader.info().animation_control.unwrap();
+        assert_eq!((control.num_frames, control.num_plays), (3, 0));
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        for want in [0u8, 100, 200] {
+            reader.next_frame(&mut buf).unwrap();
+            assert!(buf[..48].iter().all(|&b| b == want));
+            let fc = reader.info().frame_control.unwrap();
+            assert_eq!((fc.delay_num, fc.delay_den), (40, 1000));
+        }
+    }
+
+    #[test]
+    fn a_still_row_has_its_panels_titles_and_legend() {
+        let panel = |v: u8| Image {
+            width: 40,
+            height: 40,
+            rgba: [v, v, v, 255].repeat(1600),
+        };
+        let titles = ["a".to_owned(), "b".to_owned(), "c".to_owned()];
+        let row = compose_still(&[panel(10), panel(20), panel(30)], &titles).unwrap();
+        assert_eq!(
+            (row.width, row.height),
+            (120, 40 + TITLE_HEIGHT + LEGEND_HEIGHT)
+        );
+        let at = |x: u32, y: u32| row.rgba[(4 * (y * row.width + x)) as usize];
+        assert_eq!(at(20, TITLE_HEIGHT + 20), 10);
+        assert_eq!(at(60, TITLE_HEIGHT + 20), 20);
+        assert_eq!(at(100, TITLE_HEIGHT + 20), 30);
+        let encoded = encode_image(&row).unwrap();
+        assert!(encoded.starts_with(b"\x89PNG"));
+    }
+}

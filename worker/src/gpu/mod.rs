@@ -1,0 +1,152 @@
+//! wgpu on whatever adapter the machine has: a real GPU, or without one
+//! Mesa's llvmpipe through EGL/GL or lavapipe through Vulkan (DESIGN §10).
+//!
+//! * [`Gpu`]: the adapter, device and queue (one per process, shared).
+//! * [`VertexAo`] ([`vertex_ao`]): the vertex methods' run-time evaluation.
+//! * [`PreviewRenderer`] ([`preview`]): core's preview [`Renderer`]
+//!   (aobake_core::bake::Renderer) on wgpu.
+//!
+//! `WGPU_BACKEND` (`vulkan`, `gl`) picks the backend when set, as in
+//! every wgpu program; by default Vulkan and GL are both tried and the
+//! best adapter wins (a real GPU before a software one).
+
+use std::sync::OnceLock;
+
+pub mod preview;
+pub mod vertex_ao;
+
+pub use preview::PreviewRenderer;
+pub use vertex_ao::VertexAo;
+
+/// Why the GPU could not be used.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter (no GPU and no software driver).
+    #[error("no GPU adapter: {0}")]
+    NoAdapter(String),
+    /// The adapter cannot run compute shaders.
+    #[error("the adapter {0} has no compute shaders")]
+    NoCompute(String),
+    /// Device creation failed.
+    #[error("cannot open the GPU device: {0}")]
+    Device(String),
+    /// A shader or pipeline was rejected.
+    #[error("the GPU rejected a pipeline: {0}")]
+    Pipeline(String),
+    /// The model does not fit this adapter's limits.
+    #[error("the model does not fit the GPU: {0}")]
+    TooLarge(String),
+    /// Reading results back failed.
+    #[error("cannot read results back from the GPU: {0}")]
+    Readback(String),
+}
+
+/// An adapter, its device and queue.
+#[derive(Debug)]
+pub struct Gpu {
+    /// The adapter's description (name, backend, driver).
+    pub info: wgpu::AdapterInfo,
+    adapter: wgpu::Adapter,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+}
+
+impl Gpu {
+    /// Opens the best adapter over Vulkan and GL (a real GPU before a
+    /// software one), or over the backends `WGPU_BACKEND` names.
+    pub fn new() -> Result<Self, GpuError> {
+        pollster::block_on(Self::open())
+    }
+
+    /// The process's adapter, opened on first use: a worker renders many
+    /// previews and opening a device costs tens of milliseconds (seconds
+    /// on some drivers).
+    pub fn shared() -> Result<&'static Self, GpuError> {
+        static GPU: OnceLock<Result<Gpu, GpuError>> = OnceLock::new();
+        GPU.get_or_init(Self::new).as_ref().map_err(Clone::clone)
+    }
+
+    /// The adapter as a person reads it: name, backend and driver.
+    pub fn label(&self) -> String {
+        let i = &self.info;
+        let driver = if i.driver_info.is_empty() {
+            String::new()
+        } else {
+            format!(", {}", i.driver_info)
+        };
+        format!("{} ({:?}{driver})", i.name, i.backend)
+    }
+
+    async fn open() -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::from_env()
+                .unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::GL),
+            flags: wgpu::InstanceFlags::empty(),
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let label = format!("{} ({:?})", info.name, info.backend);
+        if !adapter
+            .get_downlevel_capabilities()
+            .flags
+            .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+        {
+            return Err(GpuError::NoCompute(label));
+        }
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("aobake"),
+                required_features: wgpu::Features::empty(),
+                required_limits: adapter.limits(),
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| GpuError::Device(format!("{label}: {e}")))?;
+        Ok(Self {
+            info,
+            adapter,
+            device,
+            queue,
+        })
+    }
+}
+
+
+impl Gpu {
+    /// Waits for `submission` and copies a `MAP_READ` buffer out.
+    pub(crate) fn read(
+        &self,
+        staging: &wgpu::Buffer,
+        submission: wgpu::SubmissionIndex,
+    ) -> Result<Vec<u8>, GpuError> {
+        let slice = staging.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(submission),
+                timeout: None,
+            })
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let bytes = slice
+            .get_mapped_range()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .to_vec();
+        staging.unmap();
+        Ok(bytes)
+    }
+}

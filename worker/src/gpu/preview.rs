@@ -1,0 +1,415 @@
+//! Core's preview [`Renderer`] on wgpu: `shaders/wgsl/preview.wgsl` draws
+//! the posed character and a ground plane into a multisampled sRGB target,
+//! the model's AO computed per frame by [`VertexAo`] into a buffer that
+//! the raster reads as a vertex attribute (the AO never leaves the GPU),
+//! and the resolved image read back.
+
+use aobake_core::bake::{Image, Panel, RenderFrame, RenderScene, Renderer};
+use aobake_shaders::PreviewUniforms;
+use glam::Vec3;
+use wgpu::util::DeviceExt as _;
+
+use super::{Gpu, GpuError, VertexAo};
+
+const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// Lighting, in linear units: the look of every preview.
+mod look {
+    /// Towards the key light: from the front left, above.
+    pub(super) const LIGHT: [f32; 3] = [-0.45, 0.8, 0.4];
+    pub(super) const KEY: f32 = 0.45;
+    /// The key light wraps half way round (a soft light).
+    pub(super) const WRAP: f32 = 0.5;
+    pub(super) const AMBIENT: f32 = 0.75;
+    pub(super) const CHARACTER: [f32; 3] = [0.8, 0.8, 0.8];
+    pub(super) const GROUND: [f32; 3] = [0.55, 0.55, 0.55];
+    pub(super) const BACKGROUND: [f32; 3] = [0.32, 0.36, 0.42];
+}
+
+/// The preview pipeline on one [`Gpu`].
+#[derive(Debug)]
+pub struct PreviewRenderer<'g> {
+    gpu: &'g Gpu,
+    pipeline: wgpu::RenderPipeline,
+    samples: u32,
+}
+
+impl<'g> PreviewRenderer<'g> {
+    /// Builds the pipeline: 4× multisampling where the adapter has it for
+    /// both the colour and the depth format, else none.
+    pub fn new(gpu: &'g Gpu) -> Result<Self, GpuError> {
+        let supports = |f: wgpu::TextureFormat| {
+            gpu.adapter
+                .get_texture_format_features(f)
+                .flags
+                .sample_count_supported(4)
+        };
+        let samples = if supports(COLOR) && supports(DEPTH) {
+            4
+        } else {
+            1
+        };
+        let device = &gpu.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("preview.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(aobake_shaders::PREVIEW.into()),
+        });
+        let attribute = |location, format| {
+            [wgpu::VertexAttribute {
+                format,
+                offset: 0,
+                shader_location: location,
+            }]
+        };
+        let attributes = [
+            attribute(0, wgpu::VertexFormat::Float32x3),
+            attribute(1, wgpu::VertexFormat::Float32x3),
+            attribute(2, wgpu::VertexFormat::Float32),
+            attribute(3, wgpu::VertexFormat::Float32),
+        ];
+        let buffers: Vec<Option<wgpu::VertexBufferLayout<'_>>> = attributes
+            .iter()
+            .enumerate()
+            .map(|(i, a)| {
+                Some(wgpu::VertexBufferLayout {
+                    array_stride: if i < 2 { 12 } else { 4 },
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: a,
+                })
+            })
+            .collect();
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("preview"),
+            layout: None,
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &buffers,
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                front_face: wgpu::FrontFace::Ccw,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: wgpu::MultisampleState {
+                count: samples,
+                ..Default::default()
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(COLOR.into())],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline(e.to_string()));
+        }
+        Ok(Self {
+            gpu,
+            pipeline,
+            samples,
+        })
+    }
+
+    /// Samples per pixel of the target (4, or 1 where the adapter cannot).
+    pub fn samples(&self) -> u32 {
+        self.samples
+    }
+
+    fn uniforms(scene: &RenderScene<'_>, panel: Panel, ground: bool) -> PreviewUniforms {
+        let c = &scene.camera;
+        let h = &scene.heat_map;
+        let aspect = scene.size.0 as f32 / scene.size.1.max(1) as f32;
+        let v4 = |v: [f32; 3], w: f32| [v[0], v[1], v[2], w];
+        let light = Vec3::from(look::LIGHT).normalize().to_array();
+        PreviewUniforms {
+            clip_from_world: c.clip_from_world(aspect).to_cols_array_2d(),
+            eye: c.eye.extend(1.0).to_array(),
+            light: v4(light, look::KEY),
+            ambient: v4([look::AMBIENT; 3], look::WRAP),
+            albedo: v4(
+                if ground {
+                    look::GROUND
+                } else {
+                    look::CHARACTER
+                },
+                1.0,
+            ),
+            neutral: v4(h.neutral, h.range),
+            too_dark: v4(h.too_dark, 0.0),
+            too_bright: v4(h.too_bright, 0.0),
+            ground: [c.target.x, c.ground_y, c.target.z, c.ground_half_extent],
+            background: v4(look::BACKGROUND, 1.0),
+            panel: match panel {
+                Panel::Truth => 0,
+                Panel::Model => 1,
+                Panel::Error => 2,
+            },
+            surface: u32::from(ground),
+            _pad: [0; 2],
+        }
+    }
+}
+
+/// Vertex buffers of one surface.
+struct Mesh {
+    positions: wgpu::Buffer,
+    normals: wgpu::Buffer,
+    truth: wgpu::Buffer,
+    model: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+}
+
+impl Mesh {
+    fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
+        pass.set_vertex_buffer(0, self.positions.slice(..));
+        pass.set_vertex_buffer(1, self.normals.slice(..));
+        pass.set_vertex_buffer(2, self.truth.slice(..));
+        pass.set_vertex_buffer(3, self.model.slice(..));
+        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.draw_indexed(0..self.index_count, 0, 0..1);
+    }
+}
+
+fn init(device: &wgpu::Device, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: bytes,
+        usage,
+    })
+}
+
+impl PreviewRenderer<'_> {
+    fn render_frames(
+        &self,
+        scene: &RenderScene<'_>,
+        frames: &[RenderFrame],
+        panels: &[Panel],
+    ) -> Result<Vec<Image>, GpuError> {
+        let gpu = self.gpu;
+        let device = &gpu.device;
+        let (width, height) = scene.size;
+        let vertices = scene.model.vertices();
+        for f in frames {
+            if f.positions.len() != vertices
+                || f.normals.len() != vertices
+                || f.truth.len() != vertices
+            {
+                return Err(GpuError::TooLarge(format!(
+                    "a frame has {} positions for a model of {vertices} vertices",
+                    f.positions.len()
+                )));
+            }
+        }
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let evaluator = VertexAo::new(gpu, scene.model)?;
+        use wgpu::BufferUsages as U;
+        let dynamic = U::VERTEX | U::COPY_DST;
+        let n = vertices.max(1) as u64;
+        let buffer = |label, size, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let indices: Vec<u32> = scene.triangles.iter().flatten().copied().collect();
+        let character = Mesh {
+            positions: buffer("positions", 12 * n, dynamic),
+            normals: buffer("normals", 12 * n, dynamic),
+            truth: buffer("truth", 4 * n, dynamic),
+            model: buffer("model ao", 4 * n, U::VERTEX | U::STORAGE),
+            indices: init(
+                device,
+                "indices",
+                bytemuck::cast_slice(if indices.is_empty() { &[0u32; 3] } else { &indices }),
+                U::INDEX,
+            ),
+            index_count: indices.len() as u32,
+        };
+        let c = &scene.camera;
+        let e = c.ground_half_extent;
+        let corners: Vec<Vec3> = [(-e, -e), (e, -e), (e, e), (-e, e)]
+            .iter()
+            .map(|&(x, z)| Vec3::new(c.target.x + x, c.ground_y, c.target.z + z))
+            .collect();
+        let zeros = [0f32; 4];
+        let ground = Mesh {
+            positions: init(device, "ground", bytemuck::cast_slice(&corners), U::VERTEX),
+            normals: init(device, "ground normals", bytemuck::cast_slice(&[Vec3::Y; 4]), U::VERTEX),
+            truth: init(device, "ground ao", bytemuck::cast_slice(&zeros), U::VERTEX),
+            model: init(device, "ground model ao", bytemuck::cast_slice(&zeros), U::VERTEX),
+            indices: init(device, "ground indices", bytemuck::cast_slice(&[0u32, 2, 1, 0, 3, 2]), U::INDEX),
+            index_count: 6,
+        };
+        let layout = self.pipeline.get_bind_group_layout(0);
+        let bind = |panel: Panel, on_ground: bool| {
+            let u = init(
+                device,
+                "uniforms",
+                bytemuck::bytes_of(&Self::uniforms(scene, panel, on_ground)),
+                U::UNIFORM,
+            );
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("preview"),
+                layout: &layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: u.as_entire_binding(),
+                }],
+            })
+        };
+        let groups: Vec<(wgpu::BindGroup, wgpu::BindGroup)> =
+            panels.iter().map(|&p| (bind(p, false), bind(p, true))).collect();
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        let texture = |label, format, samples, usage| {
+            device
+                .create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: samples,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats: &[],
+                })
+        };
+        use wgpu::TextureUsages as T;
+        let resolved = texture("resolved", COLOR, 1, T::RENDER_ATTACHMENT | T::COPY_SRC);
+        let resolved_view = resolved.create_view(&Default::default());
+        let msaa = (self.samples > 1)
+            .then(|| texture("msaa", COLOR, self.samples, T::RENDER_ATTACHMENT))
+            .map(|t| t.create_view(&Default::default()));
+        let depth = texture("depth", DEPTH, self.samples, T::RENDER_ATTACHMENT)
+            .create_view(&Default::default());
+        let row = (4 * width).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let panel_bytes = u64::from(row) * u64::from(height);
+        let staging = buffer(
+            "preview readback",
+            panel_bytes * panels.len().max(1) as u64,
+            U::MAP_READ | U::COPY_DST,
+        );
+        let bg = look::BACKGROUND.map(f64::from);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline(e.to_string()));
+        }
+        let mut images = Vec::with_capacity(frames.len() * panels.len());
+        for frame in frames {
+            let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+            gpu.queue.write_buffer(&character.positions, 0, bytemuck::cast_slice(&frame.positions));
+            gpu.queue.write_buffer(&character.normals, 0, bytemuck::cast_slice(&frame.normals));
+            gpu.queue.write_buffer(&character.truth, 0, bytemuck::cast_slice(&frame.truth));
+            let mut encoder =
+                device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+            evaluator.record(&mut encoder, &frame.weights, &character.model)?;
+            for (k, (on_character, on_ground)) in groups.iter().enumerate() {
+                {
+                    let (view, resolve_target) = match &msaa {
+                        Some(m) => (m, Some(&resolved_view)),
+                        None => (&resolved_view, None),
+                    };
+                    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                        label: Some("preview"),
+                        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                            view,
+                            depth_slice: None,
+                            resolve_target,
+                            ops: wgpu::Operations {
+                                load: wgpu::LoadOp::Clear(wgpu::Color {
+                                    r: bg[0],
+                                    g: bg[1],
+                                    b: bg[2],
+                                    a: 1.0,
+                                }),
+                                store: wgpu::StoreOp::Store,
+                            },
+                        })],
+                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                            view: &depth,
+                            depth_ops: Some(wgpu::Operations {
+                                load: wgpu::LoadOp::Clear(1.0),
+                                store: wgpu::StoreOp::Discard,
+                            }),
+                            stencil_ops: None,
+                        }),
+                        timestamp_writes: None,
+                        occlusion_query_set: None,
+                        multiview_mask: None,
+                    });
+                    pass.set_pipeline(&self.pipeline);
+                    pass.set_bind_group(0, on_ground, &[]);
+                    ground.draw(&mut pass);
+                    pass.set_bind_group(0, on_character, &[]);
+                    character.draw(&mut pass);
+                }
+                encoder.copy_texture_to_buffer(
+                    resolved.as_image_copy(),
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: &staging,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: k as u64 * panel_bytes,
+                            bytes_per_row: Some(row),
+                            rows_per_image: Some(height),
+                        },
+                    },
+                    size,
+                );
+            }
+            let submission = gpu.queue.submit(Some(encoder.finish()));
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(GpuError::Pipeline(e.to_string()));
+            }
+            let bytes = gpu.read(&staging, submission)?;
+            for k in 0..panels.len() {
+                let mut rgba = Vec::with_capacity((4 * width * height) as usize);
+                for y in 0..height as usize {
+                    let at = k * panel_bytes as usize + y * row as usize;
+                    rgba.extend_from_slice(&bytes[at..at + 4 * width as usize]);
+                }
+                images.push(Image {
+                    width,
+                    height,
+                    rgba,
+                });
+            }
+        }
+        Ok(images)
+    }
+}
+
+impl Renderer for PreviewRenderer<'_> {
+    fn adapter(&self) -> String {
+        self.gpu.label()
+    }
+
+    fn render(
+        &mut self,
+        scene: &RenderScene<'_>,
+        frames: &[RenderFrame],
+        panels: &[Panel],
+    ) -> Result<Vec<Image>, String> {
+        self.render_frames(scene, frames, panels)
+            .map_err(|e| e.to_string())
+    }
+}

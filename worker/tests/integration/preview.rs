@@ -1,0 +1,226 @@
+//! The preview renderer on this machine's adapter (llvmpipe or lavapipe
+//! without a GPU): small offscreen renders read back and compared with
+//! golden PNGs, and the properties a person relies on when looking at a
+//! preview (the model's AO comes from the GPU; the error panel is neutral
+//! where the model is right and red where it is too dark).
+//!
+//! Goldens live in `worker/tests/golden/`; `AOBAKE_BLESS=1` rewrites them
+//! (look at them before committing).
+
+use aobake_core::{
+    Limits, Pose, Upload,
+    bake::{BakeParams, Camera, Image, Panel, Plan, RenderFrame, RenderScene, Renderer},
+    bake::preview::HEAT_MAP,
+    import_character,
+    method::Method,
+    method::vertex::{Model, StaticAverage},
+    trace::{AoBlock, SceneOptions, no_progress, trace_poses},
+};
+use aobake_worker::gpu::{Gpu, PreviewRenderer};
+use glam::Vec3;
+
+const SIZE: u32 = 128;
+
+/// Per-channel difference allowed at a pixel, and the share of pixels that
+/// may exceed it by up to [`EDGE_TOLERANCE`]. Adapters differ in the last
+/// bit of shading (fused multiply-adds, sRGB encoding tables) and in the
+/// coverage of multisampled edge pixels (sample positions and rasterisation
+/// rules are not the same on GL and Vulkan); a wrong camera, light, AO or
+/// colour ramp moves whole regions far past both.
+const TOLERANCE: u8 = 6;
+const EDGE_SHARE: f64 = 0.03;
+const EDGE_TOLERANCE: u8 = 96;
+
+fn renderer() -> PreviewRenderer<'static> {
+    let gpu = Gpu::shared().expect("a wgpu adapter (llvmpipe or lavapipe without a GPU)");
+    eprintln!("adapter: {}", gpu.label());
+    PreviewRenderer::new(gpu).unwrap()
+}
+
+/// RiggedFigure at the middle of its clip, a vertex-linear model fitted to
+/// a few poses: the scene of the goldens.
+struct Fixture {
+    character: aobake_core::Character,
+    model: Model,
+    frame: RenderFrame,
+    camera: Camera,
+}
+
+fn fixture() -> Fixture {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/data/characters/RiggedFigure/RiggedFigure.glb"
+    );
+    let bytes = std::fs::read(path).unwrap();
+    let imported = import_character(Upload::single(&bytes), &Limits::default()).unwrap();
+    let c = imported.character;
+    let mut params = BakeParams::new(Method::VertexLinear);
+    params.poses = 48;
+    params.samples = 64;
+    let plan = Plan::new(&c, &imported.clips, params.clone()).unwrap();
+    let poses = plan.reference_poses();
+    let surface = params.surface();
+    let ao = trace_poses(&c, &poses, &SceneOptions::default(), &surface, &no_progress).unwrap();
+    let (model, _) = plan.fit(&poses, &ao).unwrap();
+    let clip = &imported.clips[0];
+    let pose = Pose::sample(&c.skeleton, clip, 0.5 * clip.duration);
+    let truth = trace_poses(
+        &c,
+        std::slice::from_ref(&pose),
+        &SceneOptions::default(),
+        &params.held_out_surface(),
+        &no_progress,
+    )
+    .unwrap();
+    let posed = c.skin(&pose);
+    let (mut min, mut max) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for &p in &posed.positions {
+        min = min.min(p);
+        max = max.max(p);
+    }
+    let frame = RenderFrame {
+        weights: model.weights(&c.skeleton, &pose),
+        positions: posed.positions,
+        normals: posed.normals,
+        truth: truth.values,
+    };
+    Fixture {
+        character: c,
+        model,
+        frame,
+        camera: Camera::framing(min, max),
+    }
+}
+
+fn scene<'a>(f: &'a Fixture, model: &'a Model) -> RenderScene<'a> {
+    RenderScene {
+        triangles: &f.character.triangles,
+        model,
+        camera: f.camera,
+        size: (SIZE, SIZE),
+        heat_map: HEAT_MAP,
+    }
+}
+
+fn golden_path(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/golden")
+        .join(name)
+}
+
+fn read_png(path: &std::path::Path) -> Image {
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+    ));
+    let mut reader = decoder.read_info().unwrap();
+    let mut rgba = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut rgba).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgba);
+    Image {
+        width: info.width,
+        height: info.height,
+        rgba,
+    }
+}
+
+/// Compares with the golden (or writes it when blessing), and writes the
+/// render beside the test's artifacts for a person to look at.
+fn check_golden(name: &str, image: &Image) {
+    let artifacts = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("previews");
+    std::fs::create_dir_all(&artifacts).unwrap();
+    let png = aobake_core::bake::preview::encode_image(image).unwrap();
+    std::fs::write(artifacts.join(name), &png).unwrap();
+    let path = golden_path(name);
+    if std::env::var_os("AOBAKE_BLESS").is_some() {
+        std::fs::write(&path, &png).unwrap();
+        return;
+    }
+    let golden = read_png(&path);
+    assert_eq!((golden.width, golden.height), (image.width, image.height));
+    let mut over = 0usize;
+    let mut worst = 0u8;
+    for (a, b) in golden.rgba.iter().zip(&image.rgba) {
+        let d = a.abs_diff(*b);
+        worst = worst.max(d);
+        if d > TOLERANCE {
+            over += 1;
+        }
+    }
+    let share = over as f64 / image.rgba.len() as f64;
+    eprintln!("{name}: {over} channels over ±{TOLERANCE} ({share:.4}), worst {worst}");
+    assert!(
+        share <= EDGE_SHARE && worst <= EDGE_TOLERANCE,
+        "{name} differs from its golden: {share:.4} of channels over ±{TOLERANCE}, worst {worst} (render in {})",
+        artifacts.display()
+    );
+}
+
+fn pixel(image: &Image, x: u32, y: u32) -> [u8; 4] {
+    let i = (4 * (y * image.width + x)) as usize;
+    image.rgba[i..i + 4].try_into().unwrap()
+}
+
+#[test]
+fn panels_match_their_goldens() {
+    let f = fixture();
+    let mut r = renderer();
+    let panels = [Panel::Truth, Panel::Model, Panel::Error];
+    let images = r
+        .render(&scene(&f, &f.model), std::slice::from_ref(&f.frame), &panels)
+        .unwrap();
+    assert_eq!(images.len(), 3);
+    for (image, name) in images.iter().zip(["truth.png", "model.png", "error.png"]) {
+        check_golden(name, image);
+    }
+    // Rendering again gives the same bytes: nothing jitters.
+    let again = r
+        .render(&scene(&f, &f.model), std::slice::from_ref(&f.frame), &panels)
+        .unwrap();
+    assert_eq!(again, images, "a second render differs");
+}
+
+#[test]
+fn the_model_panel_shades_with_the_gpu_evaluation_of_the_model() {
+    let f = fixture();
+    let mut r = renderer();
+    // A model that is fully open everywhere and one fully occluded: the
+    // model panel follows the model, not the ground truth.
+    let constant = |value: f32| {
+        let vertices = f.character.vertex_count();
+        Model::StaticAverage(StaticAverage::fit(&AoBlock {
+            vertices,
+            values: vec![value; vertices],
+        }))
+    };
+    let (open, closed) = (constant(0.0), constant(1.0));
+    let mut frame = f.frame.clone();
+    frame.weights = vec![1.0];
+    let render = |r: &mut PreviewRenderer<'_>, m: &Model, panel| {
+        r.render(&scene(&f, m), std::slice::from_ref(&frame), &[panel])
+            .unwrap()
+            .remove(0)
+    };
+    let bright = render(&mut r, &open, Panel::Model);
+    let dark = render(&mut r, &closed, Panel::Model);
+    let truth = render(&mut r, &open, Panel::Truth);
+    let centre = (SIZE / 2, SIZE / 2);
+    let lum = |i: &Image| pixel(i, centre.0, centre.1)[1];
+    assert!(
+        lum(&bright) > lum(&dark) + 40,
+        "open {} vs closed {}",
+        lum(&bright),
+        lum(&dark)
+    );
+    assert_eq!(
+        truth,
+        render(&mut r, &closed, Panel::Truth),
+        "the truth panel ignores the model"
+    );
+    // Error: the closed model is far too dark (red), the open one too
+    // bright (blue) wherever the truth has occlusion.
+    let red = render(&mut r, &closed, Panel::Error);
+    let [rr, _, rb, _] = pixel(&red, centre.0, centre.1);
+    assert!(rr > rb + 60, "too dark is red: {rr} vs {rb}");
+    let bg = pixel(&red, 0, 0);
+    assert!(bg[2] > bg[0], "the corner is background");
+}
