@@ -123,6 +123,8 @@ impl Modify for BearerAuth {
         bakes::versions,
         bakes::show,
         bakes::report,
+        bakes::previews,
+        assets::preview,
         bakes::patch,
         bakes::control,
         bakes::cache,

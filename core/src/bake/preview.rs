@@ -72,9 +72,10 @@ pub struct HeatMap {
     pub too_bright: [f32; 3],
 }
 
-/// The ramp every preview uses: ±0.2 occlusion saturates.
+/// The ramp every preview uses: ±0.1 occlusion saturates (a good bake's
+/// errors are a few hundredths; a tenth is plainly wrong).
 pub const HEAT_MAP: HeatMap = HeatMap {
-    range: 0.2,
+    range: 0.1,
     neutral: [0.9, 0.9, 0.9],
     too_dark: [0.8, 0.02, 0.01],
     too_bright: [0.01, 0.1, 0.8],

@@ -10,6 +10,7 @@ mod load;
 mod params;
 mod pose;
 mod posing;
+mod preview;
 mod table;
 mod trace;
 
@@ -43,6 +44,9 @@ enum Command {
     Params(params::Args),
     /// Evaluate a baked asset at a pose and write per-vertex AO as CSV.
     Eval(eval::Args),
+    /// Render a baked asset with wgpu: a still at a clip time (ground
+    /// truth, model, error) or an animated PNG of a whole clip.
+    Preview(preview::Args),
     /// Run the bake service: the HTTP API on SQLite and local disk under
     /// --data, with local worker processes.
     Serve(Box<crate::serve::ServeArgs>),
@@ -74,6 +78,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bake(args) => bake::run(&args),
         Command::Params(args) => params::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::Preview(args) => preview::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Serve(args) => {
             tokio::runtime::Runtime::new()?.block_on(crate::serve::serve(*args))

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::bail;
-use aobake_core::{Character, Limits, Pose, PosedMesh};
+use aobake_core::{Character, Clip, Limits, Pose, PosedMesh};
 
 /// Which pose of a character: a clip time, or the bind pose.
 #[derive(Debug, clap::Args)]
@@ -31,11 +31,15 @@ pub(super) struct Posed {
     pub pose: Pose,
 }
 
-/// Imports `file` and skins it in the pose `args` selects.
-pub(super) fn pose(file: &Path, args: &PoseArgs, limits: &Limits) -> anyhow::Result<Posed> {
+/// Imports `file` and the clips of `clips` (searched first) and its own.
+pub(super) fn character_and_clips(
+    file: &Path,
+    clips_file: Option<&Path>,
+    limits: &Limits,
+) -> anyhow::Result<(Character, Vec<Clip>)> {
     let imported = super::load::character(file, limits)?;
     let mut clips = Vec::new();
-    if let Some(path) = &args.clips {
+    if let Some(path) = clips_file {
         let (extra, warnings) = super::load::clips(path, &imported, limits)?;
         for w in warnings {
             eprintln!("warning: {}: {w}", path.display());
@@ -43,24 +47,33 @@ pub(super) fn pose(file: &Path, args: &PoseArgs, limits: &Limits) -> anyhow::Res
         clips.extend(extra);
     }
     clips.extend(imported.clips.iter().cloned());
-    let character = imported.character;
+    Ok((imported.character, clips))
+}
+
+/// The clip named `name`, or an error that lists the clips.
+pub(super) fn find_clip<'c>(clips: &'c [Clip], name: &str) -> anyhow::Result<&'c Clip> {
+    clips.iter().find(|c| c.name == name).ok_or_else(|| {
+        let names: Vec<&str> = clips.iter().map(|c| c.name.as_str()).collect();
+        anyhow::anyhow!(
+            "no clip named {name:?}; the clips are: {}",
+            if names.is_empty() {
+                "none".to_owned()
+            } else {
+                names.join(", ")
+            }
+        )
+    })
+}
+
+/// Imports `file` and skins it in the pose `args` selects.
+pub(super) fn pose(file: &Path, args: &PoseArgs, limits: &Limits) -> anyhow::Result<Posed> {
+    let (character, clips) = character_and_clips(file, args.clips.as_deref(), limits)?;
     let pose = match (&args.clip, args.time) {
         (Some(name), Some(time)) => {
             if !time.is_finite() {
                 bail!("--time must be a finite number of seconds");
             }
-            let Some(clip) = clips.iter().find(|c| &c.name == name) else {
-                let names: Vec<&str> = clips.iter().map(|c| c.name.as_str()).collect();
-                bail!(
-                    "no clip named {name:?}; the clips are: {}",
-                    if names.is_empty() {
-                        "none".to_owned()
-                    } else {
-                        names.join(", ")
-                    }
-                );
-            };
-            Pose::sample(&character.skeleton, clip, time)
+            Pose::sample(&character.skeleton, find_clip(&clips, name)?, time)
         }
         _ => Pose::bind(&character),
     };

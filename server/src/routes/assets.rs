@@ -1,5 +1,6 @@
 //! `GET /v1/assets/{digest}`: published bytes (assets, reports, plots) by
-//! content digest. The digest is the strong `ETag`, so `If-None-Match`
+//! content digest, and `GET /v1/previews/{digest}`: a preview PNG, served
+//! as an image. The digest is the strong `ETag`, so `If-None-Match`
 //! answers 304, and a single `Range` answers 206 with those bytes.
 
 use axum::{
@@ -20,7 +21,9 @@ use crate::{
 };
 
 pub(super) fn router() -> Router<AppState> {
-    Router::new().route("/v1/assets/{digest}", get(asset))
+    Router::new()
+        .route("/v1/assets/{digest}", get(asset))
+        .route("/v1/previews/{digest}", get(preview))
 }
 
 #[utoipa::path(get, path = "/v1/assets/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the bytes"), ("If-None-Match" = Option<String>, Header, description = "An ETag"), ("Range" = Option<String>, Header, description = "One byte range")),
@@ -32,6 +35,36 @@ pub(crate) async fn asset(
     ApiPath(digest): ApiPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
+    serve(&state, &digest, &headers, "application/octet-stream").await
+}
+
+#[utoipa::path(get, path = "/v1/previews/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the PNG, from GET /v1/bakes/{id}/previews"), ("If-None-Match" = Option<String>, Header, description = "An ETag")),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "The PNG (an APNG for an animation)", content_type = "image/png", body = Vec<u8>), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "No such preview", body = Problem, content_type = "application/problem+json"), Refusals))]
+pub(crate) async fn preview(
+    State(state): State<AppState>,
+    _caller: Need<Read>,
+    ApiPath(digest): ApiPath<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    crate::blobs::check_digest(&digest)?;
+    // Only PNGs are served as images: another blob under this route would
+    // be a lie about its type.
+    let head = state.read_blob(&digest, Some((0, 8))).await?;
+    if head.as_deref() != Some(b"\x89PNG\r\n\x1a\n".as_slice()) {
+        return Err(ApiError::NotFound(format!("no preview {digest}")));
+    }
+    serve(&state, &digest, &headers, "image/png").await
+}
+
+/// A blob by digest with its content type, `ETag`, and ranges.
+async fn serve(
+    state: &AppState,
+    digest: &str,
+    headers: &HeaderMap,
+    content_type: &'static str,
+) -> ApiResult<Response> {
+    let digest = digest.to_owned();
     crate::blobs::check_digest(&digest)?;
     let len = state
         .blobs
@@ -92,7 +125,7 @@ pub(crate) async fn asset(
     Ok((
         StatusCode::OK,
         common,
-        [(header::CONTENT_TYPE, "application/octet-stream")],
+        [(header::CONTENT_TYPE, content_type)],
         bytes,
     )
         .into_response())

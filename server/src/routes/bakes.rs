@@ -38,6 +38,7 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/bakes", post(submit).get(list))
         .route("/v1/bakes/{id}", get(show).patch(patch))
         .route("/v1/bakes/{id}/report", get(report))
+        .route("/v1/bakes/{id}/previews", get(previews))
         .route("/v1/bakes/{id}/events", get(events))
         .route("/v1/bakes/{id}/{action}", post(control))
         .route("/v1/cache/{key}", get(cache))
@@ -253,6 +254,83 @@ pub(crate) async fn show(
     let bake = find(&state, id).await?;
     let jobs = state.store.jobs(id).await?;
     Ok(Json(view(bake, Some(jobs))))
+}
+
+/// One preview image of a bake.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub(crate) struct PreviewItem {
+    /// Output name, such as `still-0.png` or `animation.png`.
+    name: String,
+    /// `still` (truth, model and error side by side) or `animation` (an
+    /// APNG of a whole clip, model beside truth).
+    kind: String,
+    /// The clip shown, if any.
+    clip: Option<String>,
+    /// Clip times shown, in seconds.
+    times: Vec<f32>,
+    /// Image width in pixels.
+    width: u32,
+    /// Image height in pixels.
+    height: u32,
+    /// The adapter that rendered it (name, backend, driver).
+    adapter: String,
+    /// Milliseconds per rendered panel.
+    frame_ms: f64,
+    /// Seconds spent ray tracing its ground truth.
+    trace_s: f64,
+    /// sha256 of the PNG: `GET /v1/previews/{digest}`.
+    #[serde(default)]
+    #[schema(value_type = String, pattern = "^[0-9a-f]{64}$")]
+    digest: String,
+}
+
+/// `GET /v1/bakes/{id}/previews`.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub(crate) struct PreviewList {
+    /// The state of the bake's `preview` job (none for a graph without
+    /// one).
+    state: Option<crate::store::JobState>,
+    /// The images, once the job has completed.
+    previews: Vec<PreviewItem>,
+}
+
+#[utoipa::path(get, path = "/v1/bakes/{id}/previews", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "The bake's preview images (empty until its preview job has completed)", body = PreviewList), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
+pub(crate) async fn previews(
+    State(state): State<AppState>,
+    _caller: Need<Read>,
+    ApiPath(id): ApiPath<i64>,
+) -> ApiResult<Json<PreviewList>> {
+    find(&state, id).await?;
+    let jobs = state.store.jobs(id).await?;
+    let Some(job) = jobs.iter().find(|j| j.kind == "preview") else {
+        return Ok(Json(PreviewList {
+            state: None,
+            previews: Vec::new(),
+        }));
+    };
+    let outputs = job.outputs.as_deref().unwrap_or_default();
+    let digest_of = |name: &str| outputs.iter().find(|o| o.name == name).map(|o| o.digest.clone());
+    let mut previews = Vec::new();
+    if let Some(list) = digest_of("previews.json") {
+        let bytes = state
+            .read_blob(&list, None)
+            .await?
+            .ok_or_else(|| ApiError::Internal(format!("previews.json {list} has no blob")))?;
+        let items: Vec<PreviewItem> = serde_json::from_slice(&bytes)
+            .map_err(|e| ApiError::Internal(format!("previews.json {list}: {e}")))?;
+        for mut item in items {
+            item.digest = digest_of(&item.name).ok_or_else(|| {
+                ApiError::Internal(format!("preview {} has no output", item.name))
+            })?;
+            previews.push(item);
+        }
+    }
+    Ok(Json(PreviewList {
+        state: Some(job.state),
+        previews,
+    }))
 }
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/report", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),

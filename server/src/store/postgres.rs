@@ -444,8 +444,8 @@ impl Store for PgStore {
         };
         in_tx!(self.pool.begin().await?, |tx| {
             // Four statements: the completion (only with the current lease
-            // token), the bake's counts (publishing the asset with the
-            // last job), the dependents, the worker.
+            // token), the bake's counts (publishing the asset, report
+            // and plot when this job produced them), the dependents, the worker.
             let done: Option<(i64, i64, Option<String>)> = sqlx::query_as(&format!(
                 "UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {NOW} WHERE id = $3 AND lease_token = $4 AND state = 'running' RETURNING bake_id, work, worker"
             ))
@@ -461,7 +461,7 @@ impl Store for PgStore {
                 )));
             };
             let bake = sqlx::query_as::<_, RawBake>(&format!(
-                "UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + 1, updated_at = {NOW}, state = CASE WHEN jobs_done + 1 = jobs_total THEN 'done' ELSE state END, asset = CASE WHEN jobs_done + 1 = jobs_total THEN $2 ELSE asset END, report = CASE WHEN jobs_done + 1 = jobs_total THEN $3 ELSE report END, plot = CASE WHEN jobs_done + 1 = jobs_total THEN $4 ELSE plot END, finished_at = CASE WHEN jobs_done + 1 = jobs_total THEN {NOW} ELSE finished_at END WHERE id = $5 RETURNING *"
+                "UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + 1, updated_at = {NOW}, state = CASE WHEN jobs_done + 1 = jobs_total THEN 'done' ELSE state END, asset = COALESCE($2, asset), report = COALESCE($3, report), plot = COALESCE($4, plot), finished_at = CASE WHEN jobs_done + 1 = jobs_total THEN {NOW} ELSE finished_at END WHERE id = $5 RETURNING *"
             ))
             .bind(work)
             .bind(digest("asset"))

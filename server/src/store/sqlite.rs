@@ -464,8 +464,8 @@ impl Store for SqliteStore {
         };
         in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
             // Four statements: the completion (only with the current lease
-            // token), the bake's counts (publishing the asset with the
-            // last job), the dependents, the worker.
+            // token), the bake's counts (publishing the asset, report
+            // and plot when this job produced them), the dependents, the worker.
             let done: Option<(i64, i64, Option<String>)> = sqlx::query_as(&format!(
                 "UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = ?, timings = ?, error = NULL, finished_at = {NOW} WHERE id = ? AND lease_token = ? AND state = 'running' RETURNING bake_id, work, worker"
             ))
@@ -481,7 +481,7 @@ impl Store for SqliteStore {
                 )));
             };
             let bake = sqlx::query_as::<_, RawBake>(&format!(
-                "UPDATE bakes SET done_work = done_work + ?, jobs_done = jobs_done + 1, updated_at = {NOW}, state = CASE WHEN jobs_done + 1 = jobs_total THEN 'done' ELSE state END, asset = CASE WHEN jobs_done + 1 = jobs_total THEN ? ELSE asset END, report = CASE WHEN jobs_done + 1 = jobs_total THEN ? ELSE report END, plot = CASE WHEN jobs_done + 1 = jobs_total THEN ? ELSE plot END, finished_at = CASE WHEN jobs_done + 1 = jobs_total THEN {NOW} ELSE finished_at END WHERE id = ? RETURNING *"
+                "UPDATE bakes SET done_work = done_work + ?, jobs_done = jobs_done + 1, updated_at = {NOW}, state = CASE WHEN jobs_done + 1 = jobs_total THEN 'done' ELSE state END, asset = COALESCE(?, asset), report = COALESCE(?, report), plot = COALESCE(?, plot), finished_at = CASE WHEN jobs_done + 1 = jobs_total THEN {NOW} ELSE finished_at END WHERE id = ? RETURNING *"
             ))
             .bind(work)
             .bind(digest("asset"))

@@ -14,16 +14,18 @@ use super::{Gpu, GpuError, VertexAo};
 const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
-/// Lighting, in linear units: the look of every preview.
+/// Lighting, in linear units: the look of every preview. Ambient light
+/// dominates so that the AO, which only darkens the ambient term, reads
+/// clearly; the key light is weak and wrapped, enough to show the form.
 mod look {
     /// Towards the key light: from the front left, above.
     pub(super) const LIGHT: [f32; 3] = [-0.45, 0.8, 0.4];
-    pub(super) const KEY: f32 = 0.45;
+    pub(super) const KEY: f32 = 0.12;
     /// The key light wraps half way round (a soft light).
     pub(super) const WRAP: f32 = 0.5;
-    pub(super) const AMBIENT: f32 = 0.75;
-    pub(super) const CHARACTER: [f32; 3] = [0.8, 0.8, 0.8];
-    pub(super) const GROUND: [f32; 3] = [0.55, 0.55, 0.55];
+    pub(super) const AMBIENT: f32 = 1.0;
+    pub(super) const CHARACTER: [f32; 3] = [0.6, 0.6, 0.6];
+    pub(super) const GROUND: [f32; 3] = [0.4, 0.4, 0.4];
     pub(super) const BACKGROUND: [f32; 3] = [0.32, 0.36, 0.42];
 }
 
