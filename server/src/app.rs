@@ -320,6 +320,7 @@ pub fn app(state: AppState) -> Router {
     let metrics = state.metrics.clone();
     Router::new()
         .merge(routes::router())
+        .merge(crate::dashboard::router())
         .layer(middleware::from_fn(to_completion))
         .layer(middleware::from_fn_with_state(metrics, record_latency))
         .layer(DefaultBodyLimit::max(limits.max_body_bytes as usize))

@@ -12,18 +12,22 @@
 //!   error type, problem+json on the wire.
 //! * [`serve`]: `aobake serve`, the API on the embedded defaults with
 //!   supervised local worker processes.
+//! * `dashboard`: the browser pages at `/` (plain files in the binary),
+//!   live over the API's server-sent events.
 //! * [`cli`]: every `aobake` command; thin, it parses, calls and prints.
 //!
 //! A bake's life: `POST /v1/bakes` imports the inputs, plans core's job
 //! graph and stores it; workers long-poll `POST /v1/jobs/lease`, run
 //! core's job function, upload outputs and checkpoints as blobs and
-//! complete with their lease token; the last job's completion publishes
-//! the asset, and `GET /v1/cache/{key}` finds it from then on.
+//! complete with their lease token; `assemble` publishes the asset,
+//! `preview` renders its images, the last completion finishes the bake,
+//! and `GET /v1/cache/{key}` finds it from then on.
 
 pub mod app;
 pub mod auth;
 pub mod blobs;
 pub mod cli;
+mod dashboard;
 pub mod error;
 mod extract;
 pub mod listen;

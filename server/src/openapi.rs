@@ -129,6 +129,8 @@ impl Modify for BearerAuth {
         bakes::control,
         bakes::cache,
         bakes::events,
+        bakes::all_events,
+        system::whoami,
         assets::asset,
         jobs::lease,
         jobs::heartbeat,

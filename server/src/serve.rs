@@ -54,7 +54,9 @@ pub struct ServeArgs {
     /// A client must send its request headers within this many seconds.
     #[arg(long, env = "AOBAKE_HEADER_TIMEOUT_SECS", default_value_t = 10.0)]
     pub header_timeout_secs: f64,
-    /// Also upload the bundled Fox and bake it, and say where to watch.
+    /// Also upload the bundled Fox, start a fresh bake of it (a new seed
+    /// each time, so it is never a cached result), and print a dashboard
+    /// URL that signs in with a new read-and-submit token.
     #[arg(long)]
     pub demo: bool,
 }
@@ -135,6 +137,11 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let url = format!("http://{}", listener.local_addr()?);
     std::fs::write(args.data.join("server.url"), &url)?;
     println!("listening on {url}");
+    if !args.demo {
+        println!(
+            "dashboard: {url}/ (sign in with a token from `aobake token create --scope read`)"
+        );
+    }
 
     // Leases that expire without a heartbeat free their jobs.
     let reaper = {

@@ -313,7 +313,11 @@ impl Subject<'_> {
         times: &[f32],
         renderer: &mut dyn Renderer,
     ) -> Result<Vec<Preview>, JobError> {
-        let times: Vec<f32> = if clip.is_some() { times.to_vec() } else { vec![0.0] };
+        let times: Vec<f32> = if clip.is_some() {
+            times.to_vec()
+        } else {
+            vec![0.0]
+        };
         let traced = Instant::now();
         let frames = self.frames(clip, &times)?;
         let trace_s = traced.elapsed().as_secs_f64();
@@ -390,10 +394,7 @@ impl Subject<'_> {
             .map(|(&t, pair)| {
                 compose_row(
                     pair,
-                    &[
-                        format!("ray-traced  {t:.2} s"),
-                        format!("baked: {method}"),
-                    ],
+                    &[format!("ray-traced  {t:.2} s"), format!("baked: {method}")],
                     false,
                 )
             })
@@ -450,12 +451,8 @@ fn font() -> Result<(), JobError> {
     static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
     REGISTERED
         .get_or_init(|| {
-            register_font(
-                "sans-serif",
-                FontStyle::Normal,
-                crate::asset::report::FONT,
-            )
-            .map_err(|_| "the bundled font is invalid".to_owned())
+            register_font("sans-serif", FontStyle::Normal, crate::asset::report::FONT)
+                .map_err(|_| "the bundled font is invalid".to_owned())
         })
         .clone()
         .map_err(JobError::Failed)
@@ -602,7 +599,9 @@ pub fn encode_image(image: &Image) -> Result<Vec<u8>, JobError> {
 /// The clip a bake's previews show: its first held-out clip, else its
 /// first clip.
 pub fn preview_clip(clips: &[Clip], test: &[usize]) -> Option<usize> {
-    test.first().copied().or(if clips.is_empty() { None } else { Some(0) })
+    test.first()
+        .copied()
+        .or(if clips.is_empty() { None } else { Some(0) })
 }
 
 #[cfg(test)]

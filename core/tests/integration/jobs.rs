@@ -119,8 +119,7 @@ fn cutting_the_bake_into_other_batches_changes_no_byte() {
                 sample_batch: batch,
                 previews: false,
             });
-            let out =
-                run_graph(&bake, &graph, &HashMap::new(), None, &mut |_, _, _| {}).unwrap();
+            let out = run_graph(&bake, &graph, &HashMap::new(), None, &mut |_, _, _| {}).unwrap();
             let asset = out.last().unwrap().get("asset").unwrap();
             assert_eq!(asset, reference.asset.as_slice(), "{method} batch {batch}");
             let report: Report =

@@ -464,13 +464,21 @@ pub async fn demo(url: &str, token: &str) -> anyhow::Result<()> {
     tokio::task::spawn_blocking(move || {
         let api = Api::new(&url, &token);
         let c = api.upload("/v1/characters", &UploadBytes::single(FOX.to_vec()))?;
+        let seed = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
         let bake = api.post(
             "/v1/bakes",
-            &json!({"character": c["digest"], "method": "vertex-clustered", "params": {}}),
+            &json!({"character": c["digest"], "method": "vertex-clustered", "params": {"seed": seed}}),
         )?;
+        let dashboard = api.post(
+            "/v1/tokens",
+            &json!({"name": "demo dashboard", "scopes": ["read", "submit"]}),
+        )?;
+        let id = &bake["id"];
         println!(
-            "demo: baking the bundled Fox (vertex-clustered) as bake {}; watch it with `aobake status {}` or GET {url}/v1/bakes/{}/events",
-            bake["id"], bake["id"], bake["id"]
+            "demo: baking the bundled Fox (vertex-clustered) as bake {id}\n\n  open {url}/#token={}\n\nto watch it in the dashboard (or `aobake status {id}`)",
+            dashboard["token"].as_str().unwrap_or_default()
         );
         anyhow::Ok(())
     })

@@ -15,7 +15,9 @@ use std::time::Instant;
 use aobake_core::{
     Limits,
     asset::report::Report,
-    bake::{Bake, BakeInputs, BakeParams, Baked, GraphOptions, JobOutput, JobSpec, ReferenceSource},
+    bake::{
+        Bake, BakeInputs, BakeParams, Baked, GraphOptions, JobOutput, JobSpec, ReferenceSource,
+    },
     method::Method,
 };
 
@@ -100,7 +102,9 @@ impl<'a> Traced<'a> {
     fn new(inputs: &'a BakeInputs, common: &Common, params: BakeParams) -> anyhow::Result<Self> {
         let bake = Bake::new(inputs, params.clone())?;
         let started = Instant::now();
-        let outputs = with_threads(common.threads, || run_with_progress(&bake, &HashMap::new(), None))??;
+        let outputs = with_threads(common.threads, || {
+            run_with_progress(&bake, &HashMap::new(), None)
+        })??;
         let graph = bake.graph(GraphOptions {
             previews: false,
             ..GraphOptions::default()
@@ -139,7 +143,9 @@ impl<'a> Traced<'a> {
     /// time.
     fn row(&self, labels: &[String], params: &BakeParams) -> anyhow::Result<()> {
         let bake = Bake::new(self.inputs, params.clone())?;
-        let outputs = with_threads(self.threads, || run_with_progress(&bake, &self.samples, None))??;
+        let outputs = with_threads(self.threads, || {
+            run_with_progress(&bake, &self.samples, None)
+        })??;
         let r = Baked::from_outputs(&outputs)?.report;
         let c = &r.evaluation.clip_frames.model.mean;
         println!(

@@ -40,6 +40,7 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/bakes/{id}/report", get(report))
         .route("/v1/bakes/{id}/previews", get(previews))
         .route("/v1/bakes/{id}/events", get(events))
+        .route("/v1/events", get(all_events))
         .route("/v1/bakes/{id}/{action}", post(control))
         .route("/v1/cache/{key}", get(cache))
         .route("/v1/characters/{digest}/bakes", get(versions))
@@ -311,7 +312,12 @@ pub(crate) async fn previews(
         }));
     };
     let outputs = job.outputs.as_deref().unwrap_or_default();
-    let digest_of = |name: &str| outputs.iter().find(|o| o.name == name).map(|o| o.digest.clone());
+    let digest_of = |name: &str| {
+        outputs
+            .iter()
+            .find(|o| o.name == name)
+            .map(|o| o.digest.clone())
+    };
     let mut previews = Vec::new();
     if let Some(list) = digest_of("previews.json") {
         let bytes = state
@@ -417,6 +423,28 @@ pub(crate) async fn cache(
     }
 }
 
+#[utoipa::path(get, path = "/v1/events", tag = "bakes",
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "Server-sent events: `bake` with {id, state, done, total} whenever any bake changes (a dashboard's bakes list)", content_type = "text/event-stream", body = String), Refusals))]
+pub(crate) async fn all_events(
+    State(state): State<AppState>,
+    _caller: Need<Read>,
+) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
+    let updates = BroadcastStream::new(state.events.subscribe()).filter_map(|e| match e {
+        Ok(e) => Some(Ok(bake_event(&e))),
+        // A slow listener that missed events is told to reload.
+        Err(_) => Some(Ok(Event::default().event("lagged").data("reload"))),
+    });
+    Sse::new(updates).keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
+}
+
+fn bake_event(e: &crate::app::BakeEvent) -> Event {
+    Event::default()
+        .event("bake")
+        .json_data(e)
+        .expect("events serialise")
+}
+
 #[utoipa::path(get, path = "/v1/bakes/{id}/events", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["read"])),
     responses((status = 200, description = "Server-sent events: `bake` events with id, state, done and total", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
@@ -433,15 +461,9 @@ pub(crate) async fn events(
         done: bake.done_work,
         total: bake.total_work,
     };
-    let event = |e: &crate::app::BakeEvent| {
-        Event::default()
-            .event("bake")
-            .json_data(e)
-            .expect("events serialise")
-    };
-    let initial = tokio_stream::once(Ok(event(&first)));
+    let initial = tokio_stream::once(Ok(bake_event(&first)));
     let updates = BroadcastStream::new(rx).filter_map(move |e| match e {
-        Ok(e) if e.id == id => Some(Ok(event(&e))),
+        Ok(e) if e.id == id => Some(Ok(bake_event(&e))),
         _ => None,
     });
     Ok(Sse::new(initial.chain(updates))

@@ -21,6 +21,7 @@ use crate::{
 pub(super) fn router() -> Router<AppState> {
     Router::new()
         .route("/v1/workers", get(workers))
+        .route("/v1/whoami", get(whoami))
         .route("/v1/tokens", post(create_token))
         .route("/healthz", get(healthz))
         .route("/readyz", get(ready))
@@ -35,6 +36,25 @@ pub(crate) async fn workers(
     _caller: Need<Read>,
 ) -> ApiResult<Json<Vec<WorkerRow>>> {
     Ok(Json(state.store.workers().await?))
+}
+
+/// The caller's token, as `GET /v1/whoami` shows it.
+#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
+pub(crate) struct Whoami {
+    /// The token's name.
+    pub name: String,
+    /// Its scopes (`admin` implies every other).
+    pub scopes: Vec<String>,
+}
+
+#[utoipa::path(get, path = "/v1/whoami", tag = "system",
+    security(("bearer" = [])),
+    responses((status = 200, description = "The caller's token name and scopes: what a dashboard may offer", body = Whoami), Refusals))]
+pub(crate) async fn whoami(caller: crate::auth::Caller) -> Json<Whoami> {
+    Json(Whoami {
+        name: caller.name,
+        scopes: caller.scopes.iter().map(|s| s.name().to_owned()).collect(),
+    })
 }
 
 /// `POST /v1/tokens`.

@@ -103,6 +103,63 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
     assert_eq!(bake["progress"]["done"], bake["progress"]["total"]);
     let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
     assert_eq!(workers.as_array().unwrap().len(), 2, "{workers}");
+    assert_eq!(jobs.last().unwrap()["kind"], "preview");
+
+    // The previews: three stills and an animation of the held-out clip,
+    // each a PNG served as an image under its digest, and each naming the
+    // adapter that drew it.
+    let (status, previews) = env
+        .request("GET", &format!("/v1/bakes/{id}/previews"), ADMIN, None)
+        .unwrap();
+    assert_eq!(status, 200, "{previews}");
+    assert_eq!(previews["state"], "completed");
+    let items = previews["previews"].as_array().unwrap();
+    let kinds: Vec<&str> = items.iter().map(|p| p["kind"].as_str().unwrap()).collect();
+    assert_eq!(
+        kinds,
+        ["still", "still", "still", "animation"],
+        "{previews}"
+    );
+    for p in items {
+        assert!(p["adapter"].as_str().unwrap().len() > 3, "{p}");
+        assert!(p["frame_ms"].as_f64().unwrap() > 0.0, "{p}");
+        let digest = p["digest"].as_str().unwrap();
+        let (content_type, bytes) = get_bytes(&env, &format!("/v1/previews/{digest}"));
+        assert_eq!(content_type, "image/png");
+        assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"));
+        assert_eq!(aobake_core::bake::sha256_hex(&bytes), digest);
+    }
+    let animation = &items[3];
+    assert!(animation["times"].as_array().unwrap().len() > 10);
+    // Only PNGs are images: the asset's digest is no preview.
+    let asset_digest = again["asset"].as_str().unwrap();
+    let (status, problem) = env
+        .request("GET", &format!("/v1/previews/{asset_digest}"), ADMIN, None)
+        .unwrap();
+    assert_eq!(status, 404, "{problem}");
+}
+
+/// A GET's content type and body bytes.
+fn get_bytes(env: &TestEnv, path: &str) -> (String, Vec<u8>) {
+    let agent: ureq::Agent = ureq::Agent::config_builder().build().into();
+    let mut response = agent
+        .get(format!("{}{path}", env.url))
+        .header("authorization", format!("Bearer {ADMIN}"))
+        .call()
+        .unwrap();
+    let content_type = response
+        .headers()
+        .get("content-type")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or_default()
+        .to_owned();
+    let bytes = response
+        .body_mut()
+        .with_config()
+        .limit(64 << 20)
+        .read_to_vec()
+        .unwrap();
+    (content_type, bytes)
 }
 
 #[test]

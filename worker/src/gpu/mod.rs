@@ -120,7 +120,6 @@ impl Gpu {
     }
 }
 
-
 impl Gpu {
     /// Waits for `submission` and copies a `MAP_READ` buffer out.
     pub(crate) fn read(

@@ -188,7 +188,12 @@ impl Mesh {
     }
 }
 
-fn init(device: &wgpu::Device, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+fn init(
+    device: &wgpu::Device,
+    label: &str,
+    bytes: &[u8],
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
     device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some(label),
         contents: bytes,
@@ -240,7 +245,11 @@ impl PreviewRenderer<'_> {
             indices: init(
                 device,
                 "indices",
-                bytemuck::cast_slice(if indices.is_empty() { &[0u32; 3] } else { &indices }),
+                bytemuck::cast_slice(if indices.is_empty() {
+                    &[0u32; 3]
+                } else {
+                    &indices
+                }),
                 U::INDEX,
             ),
             index_count: indices.len() as u32,
@@ -254,10 +263,25 @@ impl PreviewRenderer<'_> {
         let zeros = [0f32; 4];
         let ground = Mesh {
             positions: init(device, "ground", bytemuck::cast_slice(&corners), U::VERTEX),
-            normals: init(device, "ground normals", bytemuck::cast_slice(&[Vec3::Y; 4]), U::VERTEX),
+            normals: init(
+                device,
+                "ground normals",
+                bytemuck::cast_slice(&[Vec3::Y; 4]),
+                U::VERTEX,
+            ),
             truth: init(device, "ground ao", bytemuck::cast_slice(&zeros), U::VERTEX),
-            model: init(device, "ground model ao", bytemuck::cast_slice(&zeros), U::VERTEX),
-            indices: init(device, "ground indices", bytemuck::cast_slice(&[0u32, 2, 1, 0, 3, 2]), U::INDEX),
+            model: init(
+                device,
+                "ground model ao",
+                bytemuck::cast_slice(&zeros),
+                U::VERTEX,
+            ),
+            indices: init(
+                device,
+                "ground indices",
+                bytemuck::cast_slice(&[0u32, 2, 1, 0, 3, 2]),
+                U::INDEX,
+            ),
             index_count: 6,
         };
         let layout = self.pipeline.get_bind_group_layout(0);
@@ -277,25 +301,26 @@ impl PreviewRenderer<'_> {
                 }],
             })
         };
-        let groups: Vec<(wgpu::BindGroup, wgpu::BindGroup)> =
-            panels.iter().map(|&p| (bind(p, false), bind(p, true))).collect();
+        let groups: Vec<(wgpu::BindGroup, wgpu::BindGroup)> = panels
+            .iter()
+            .map(|&p| (bind(p, false), bind(p, true)))
+            .collect();
         let size = wgpu::Extent3d {
             width,
             height,
             depth_or_array_layers: 1,
         };
         let texture = |label, format, samples, usage| {
-            device
-                .create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size,
-                    mip_level_count: 1,
-                    sample_count: samples,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage,
-                    view_formats: &[],
-                })
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: samples,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
         };
         use wgpu::TextureUsages as T;
         let resolved = texture("resolved", COLOR, 1, T::RENDER_ATTACHMENT | T::COPY_SRC);
@@ -319,9 +344,15 @@ impl PreviewRenderer<'_> {
         let mut images = Vec::with_capacity(frames.len() * panels.len());
         for frame in frames {
             let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-            gpu.queue.write_buffer(&character.positions, 0, bytemuck::cast_slice(&frame.positions));
-            gpu.queue.write_buffer(&character.normals, 0, bytemuck::cast_slice(&frame.normals));
-            gpu.queue.write_buffer(&character.truth, 0, bytemuck::cast_slice(&frame.truth));
+            gpu.queue.write_buffer(
+                &character.positions,
+                0,
+                bytemuck::cast_slice(&frame.positions),
+            );
+            gpu.queue
+                .write_buffer(&character.normals, 0, bytemuck::cast_slice(&frame.normals));
+            gpu.queue
+                .write_buffer(&character.truth, 0, bytemuck::cast_slice(&frame.truth));
             let mut encoder =
                 device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
             evaluator.record(&mut encoder, &frame.weights, &character.model)?;

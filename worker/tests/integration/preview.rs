@@ -9,8 +9,8 @@
 
 use aobake_core::{
     Limits, Pose, Upload,
-    bake::{BakeParams, Camera, Image, Panel, Plan, RenderFrame, RenderScene, Renderer},
     bake::preview::HEAT_MAP,
+    bake::{BakeParams, Camera, Image, Panel, Plan, RenderFrame, RenderScene, Renderer},
     import_character,
     method::Method,
     method::vertex::{Model, StaticAverage},
@@ -166,7 +166,11 @@ fn panels_match_their_goldens() {
     let mut r = renderer();
     let panels = [Panel::Truth, Panel::Model, Panel::Error];
     let images = r
-        .render(&scene(&f, &f.model), std::slice::from_ref(&f.frame), &panels)
+        .render(
+            &scene(&f, &f.model),
+            std::slice::from_ref(&f.frame),
+            &panels,
+        )
         .unwrap();
     assert_eq!(images.len(), 3);
     for (image, name) in images.iter().zip(["truth.png", "model.png", "error.png"]) {
@@ -174,7 +178,11 @@ fn panels_match_their_goldens() {
     }
     // Rendering again gives the same bytes: nothing jitters.
     let again = r
-        .render(&scene(&f, &f.model), std::slice::from_ref(&f.frame), &panels)
+        .render(
+            &scene(&f, &f.model),
+            std::slice::from_ref(&f.frame),
+            &panels,
+        )
         .unwrap();
     assert_eq!(again, images, "a second render differs");
 }

@@ -1,0 +1,504 @@
+// The aobake dashboard: plain JavaScript against the HTTP API, no build
+// step. Live updates come from the API's server-sent events (read with
+// fetch, so the bearer token travels in a header, never in a URL); pages
+// re-read what an event says has changed and never poll.
+//
+// The token comes from the URL fragment (`#token=…`, which browsers do not
+// send to servers; `aobake serve --demo` prints such a URL) or from the
+// sign-in form, and is kept in this browser's localStorage.
+
+const TOKEN_KEY = "aobake.token";
+const main = document.getElementById("main");
+let token = localStorage.getItem(TOKEN_KEY);
+let me = null; // {name, scopes}
+let page = null; // AbortController of the page on screen
+const blobUrls = new Map(); // digest -> object URL (digests are immutable)
+
+// ---------- helpers ----------
+
+function h(tag, attrs = {}, ...children) {
+  const el = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (v === null || v === undefined || v === false) continue;
+    if (k === "class") el.className = v;
+    else if (k.startsWith("on")) el.addEventListener(k.slice(2), v);
+    else if (k === "text") el.textContent = v;
+    else el.setAttribute(k, v === true ? "" : v);
+  }
+  for (const c of children.flat()) {
+    if (c === null || c === undefined || c === false) continue;
+    el.append(c instanceof Node ? c : document.createTextNode(String(c)));
+  }
+  return el;
+}
+
+const short = (d) => (d ? d.slice(0, 12) : "");
+const when = (ms) => (ms ? new Date(ms).toLocaleString() : "");
+const ago = (ms) => {
+  const s = Math.max(0, Math.round((Date.now() - ms) / 1000));
+  return s < 60 ? `${s} s ago` : s < 3600 ? `${Math.round(s / 60)} min ago` : when(ms);
+};
+const fmt = (x, digits = 4) => (typeof x === "number" && isFinite(x) ? x.toFixed(digits) : "—");
+const can = (scope) => !!me && (me.scopes.includes(scope) || me.scopes.includes("admin"));
+const finished = (state) => ["done", "failed", "cancelled"].includes(state);
+
+class ApiError extends Error {
+  constructor(status, problem) {
+    super(problem.detail || problem.title || `HTTP ${status}`);
+    this.status = status;
+    this.problem = problem;
+  }
+}
+
+async function api(path, options = {}) {
+  const res = await fetch(path, {
+    ...options,
+    headers: { authorization: `Bearer ${token}`, ...(options.headers || {}) },
+  });
+  if (res.status === 401) {
+    signOut("The server did not accept this token.");
+    throw new ApiError(401, { title: "unauthorized" });
+  }
+  if (!res.ok) {
+    let problem = {};
+    try { problem = await res.json(); } catch (_) { /* not JSON */ }
+    throw new ApiError(res.status, problem);
+  }
+  return res;
+}
+const json = async (path, options) => (await api(path, options)).json();
+
+// An image by digest as an object URL: images need the token too.
+async function imageUrl(path, digest) {
+  if (!blobUrls.has(digest)) {
+    const blob = await (await api(path)).blob();
+    blobUrls.set(digest, URL.createObjectURL(blob));
+  }
+  return blobUrls.get(digest);
+}
+
+// Server-sent events over fetch; reconnects until the page goes away.
+async function events(path, signal, onEvent) {
+  const live = document.getElementById("live");
+  let wait = 500;
+  while (!signal.aborted) {
+    try {
+      const res = await fetch(path, {
+        headers: { authorization: `Bearer ${token}`, accept: "text/event-stream" },
+        signal,
+      });
+      if (!res.ok) throw new Error(`HTTP ${res.status}`);
+      live.textContent = "live";
+      live.classList.add("on");
+      wait = 500;
+      const reader = res.body.pipeThrough(new TextDecoderStream()).getReader();
+      let buffer = "";
+      for (;;) {
+        const { value, done } = await reader.read();
+        if (done) break;
+        buffer += value;
+        let end;
+        while ((end = buffer.indexOf("\n\n")) >= 0) {
+          const block = buffer.slice(0, end);
+          buffer = buffer.slice(end + 2);
+          let type = "message";
+          const data = [];
+          for (const line of block.split("\n")) {
+            if (line.startsWith("event:")) type = line.slice(6).trim();
+            else if (line.startsWith("data:")) data.push(line.slice(5).replace(/^ /, ""));
+          }
+          if (data.length) onEvent(type, data.join("\n"));
+        }
+      }
+    } catch (e) {
+      if (signal.aborted) return;
+    }
+    live.textContent = "reconnecting";
+    live.classList.remove("on");
+    await new Promise((r) => setTimeout(r, wait));
+    wait = Math.min(wait * 2, 10000);
+  }
+}
+
+// Calls `f` at most once per `ms`, the last call winning.
+function throttle(f, ms) {
+  let timer = null;
+  return () => {
+    if (timer) return;
+    timer = setTimeout(() => { timer = null; f(); }, ms);
+  };
+}
+
+// Widths are set through the CSSOM: the Content-Security-Policy forbids
+// inline style attributes.
+function progressBar(done, total, state) {
+  const bar = h("div", { role: "progressbar", "aria-valuemin": 0, "aria-valuemax": 100 }, h("div"));
+  setBar(bar, done, total, state);
+  return bar;
+}
+
+function setBar(bar, done, total, state) {
+  const pct = total > 0 ? Math.min(100, (100 * done) / total) : 0;
+  bar.className = `bar ${state}`;
+  bar.setAttribute("aria-valuenow", Math.round(pct));
+  bar.dataset.done = done;
+  bar.dataset.total = total;
+  bar.firstChild.style.width = `${pct.toFixed(1)}%`;
+}
+
+const badge = (state) => h("span", { class: `badge ${state}`, "data-state": state }, state);
+
+// replaceChildren without the nulls that conditional parts leave.
+function fill(el, ...nodes) {
+  el.replaceChildren(...nodes.flat().filter((n) => n !== null && n !== undefined && n !== false));
+}
+
+function show(...nodes) {
+  fill(main, ...nodes);
+}
+
+function failure(e) {
+  return h("div", { class: "error" }, e instanceof ApiError ? `${e.status}: ${e.message}` : String(e));
+}
+
+// ---------- sign-in ----------
+
+function signOut(message) {
+  localStorage.removeItem(TOKEN_KEY);
+  token = null;
+  me = null;
+  signIn(message);
+}
+
+function signIn(message) {
+  document.getElementById("who").textContent = "";
+  const input = h("input", { name: "token", autocomplete: "off", placeholder: "64 hex digits",
+    "aria-label": "API token" });
+  show(
+    h("h1", {}, "Sign in"),
+    message ? h("div", { class: "error" }, message) : null,
+    h("form", { class: "login", onsubmit: (ev) => {
+      ev.preventDefault();
+      token = input.value.trim();
+      localStorage.setItem(TOKEN_KEY, token);
+      start();
+    } },
+      h("label", {}, "An API token (", h("code", {}, "aobake token create --scope read"),
+        "; a read token sees everything, actions need the submit scope):"),
+      input,
+      h("button", { type: "submit" }, "Sign in")),
+  );
+}
+
+// ---------- pages ----------
+
+async function bakesPage(signal) {
+  const bakes = await json("/v1/bakes?limit=100");
+  const rows = new Map();
+  const tbody = h("tbody");
+  for (const b of bakes) {
+    const bar = progressBar(b.progress.done, b.progress.total, b.state);
+    const state = h("td", {}, badge(b.state));
+    const count = h("td", { class: "num mono" }, `${b.progress.done}/${b.progress.total}`);
+    rows.set(b.id, { bar, state, count });
+    tbody.append(h("tr", { "data-bake": b.id },
+      h("td", {}, h("a", { href: `#/bakes/${b.id}` }, `#${b.id}`)),
+      h("td", {}, b.method),
+      h("td", { class: "mono", title: b.character }, short(b.character)),
+      state,
+      h("td", {}, bar),
+      count,
+      h("td", { class: "muted" }, when(b.created_at))));
+  }
+  show(
+    h("h1", {}, "Bakes"),
+    bakes.length === 0
+      ? h("p", { class: "muted" }, "No bakes yet: ", h("code", {}, "aobake submit CHARACTER.glb"), ".")
+      : h("table", {},
+        h("thead", {}, h("tr", {}, ...["Bake", "Method", "Character", "State", "Progress", "", "Created"]
+          .map((t) => h("th", {}, t)))),
+        tbody),
+  );
+  const reload = throttle(() => { if (!signal.aborted) route(); }, 1000);
+  events("/v1/events", signal, (type, data) => {
+    if (type === "lagged") return reload();
+    if (type !== "bake") return;
+    const e = JSON.parse(data);
+    const row = rows.get(e.id);
+    if (!row) return reload(); // a new bake
+    setBar(row.bar, e.done, e.total, e.state);
+    fill(row.state, badge(e.state));
+    row.count.textContent = `${e.done}/${e.total}`;
+  });
+}
+
+function jobLabel(j) {
+  const s = j.spec || {};
+  if (j.kind === "sample") return `sample ${s.set} ${s.first}..${s.first + s.count}`;
+  return j.kind;
+}
+
+function jobsTable(jobs) {
+  return h("table", { id: "jobs" },
+    h("thead", {}, h("tr", {}, ...["#", "Job", "State", "Attempts", "Worker", "Checkpoint", "Progress", "Needs", "Error"]
+      .map((t) => h("th", {}, t)))),
+    h("tbody", {}, ...jobs.map((j) => h("tr", { "data-job": j.index },
+      h("td", { class: "num" }, j.index),
+      h("td", {}, jobLabel(j)),
+      h("td", {}, badge(j.state)),
+      h("td", { class: "num" }, `${j.attempts}/${j.max_attempts}`),
+      h("td", { class: "mono" }, j.worker || ""),
+      h("td", { class: "mono" }, j.checkpoint ? `${j.checkpoint.step} ${j.checkpoint.cursor}` : ""),
+      h("td", { class: "num" }, `${j.state === "completed" ? j.work : j.progress}/${j.work}`),
+      h("td", { class: "muted" }, j.deps.length > 6 ? `${j.deps.length} jobs` : j.deps.join(", ")),
+      h("td", { class: "muted" }, j.error || "")))));
+}
+
+function reportSection(report, plotUrl) {
+  const ev = report.evaluation;
+  const rows = [["held-out clip frames", ev.clip_frames], ["held-out random poses", ev.random_poses]];
+  return h("section", { id: "report" },
+    h("h2", {}, "Quality"),
+    h("table", {},
+      h("thead", {}, h("tr", {}, ...["Poses", "Frames", "Model MAE", "Model RMSE", "Model PSNR",
+        "Static MAE", "Static RMSE", "Static PSNR", "Gain"].map((t) => h("th", {}, t)))),
+      h("tbody", {}, ...rows.map(([name, c]) => h("tr", {},
+        h("td", {}, name),
+        h("td", { class: "num" }, c.model.frames),
+        h("td", { class: "num" }, fmt(c.model.mean.mae)),
+        h("td", { class: "num" }, fmt(c.model.mean.rmse)),
+        h("td", { class: "num" }, `${fmt(c.model.mean.psnr_db, 2)} dB`),
+        h("td", { class: "num" }, fmt(c.baseline.mean.mae)),
+        h("td", { class: "num" }, fmt(c.baseline.mean.rmse)),
+        h("td", { class: "num" }, `${fmt(c.baseline.mean.psnr_db, 2)} dB`),
+        h("td", { class: "num" }, `${c.psnr_gain_db >= 0 ? "+" : ""}${fmt(c.psnr_gain_db, 2)} dB`))))),
+    h("p", { class: "muted" },
+      `Ground truth's own noise: RMSE ${fmt(report.ground_truth_noise?.rmse)}. `,
+      `Asset ${report.sizes.asset_bytes} bytes; ${fmt(ev.multiply_adds_per_vertex, 1)} multiply-adds per vertex.`),
+    plotUrl ? h("figure", { class: "wide" }, h("img", { src: plotUrl, alt: "PSNR per frame" }),
+      h("figcaption", {}, "PSNR per held-out clip frame, model against the static average")) : null);
+}
+
+function previewFigure(p, url) {
+  const times = p.kind === "animation"
+    ? `${p.times.length} frames`
+    : `t = ${p.times.map((t) => t.toFixed(2)).join(", ")} s`;
+  return h("figure", { class: p.kind === "still" ? "wide preview" : "preview", "data-kind": p.kind },
+    h("img", { src: url, alt: `${p.kind} ${p.name}`, width: p.width, height: p.height }),
+    h("figcaption", {}, `${p.kind}${p.clip ? ` of ${p.clip}` : ""}, ${times}; `,
+      `${fmt(p.frame_ms, 1)} ms per panel on ${p.adapter}`));
+}
+
+async function bakePage(signal, id) {
+  let bake = await json(`/v1/bakes/${id}`);
+  const bar = progressBar(bake.progress.done, bake.progress.total, bake.state);
+  const state = h("span", { id: "state" }, badge(bake.state));
+  const count = h("span", { class: "mono", id: "count" }, `${bake.progress.done}/${bake.progress.total}`);
+  const jobs = h("div", {}, jobsTable(bake.jobs));
+  const results = h("div", { id: "results" });
+  const status = h("div");
+  let loadedResults = false;
+
+  const act = (action) => async () => {
+    fill(status);
+    try {
+      await api(`/v1/bakes/${id}/${action}`, { method: "POST" });
+      await refresh();
+    } catch (e) {
+      fill(status, failure(e));
+    }
+  };
+  const mayAct = can("submit");
+  const button = (label, action, enabled) => h("button", {
+    "data-action": action, disabled: !mayAct || !enabled,
+    title: mayAct ? null : "needs a token with the submit scope", onclick: act(action),
+  }, label);
+  const actions = h("div", { class: "actions" });
+  const download = async () => {
+    const res = await api(`/v1/assets/${bake.asset}`);
+    const a = h("a", { href: URL.createObjectURL(await res.blob()),
+      download: `bake-${id}-${bake.method}.aobake` });
+    document.body.append(a);
+    a.click();
+    a.remove();
+  };
+  const drawActions = () => {
+    const s = bake.state;
+    fill(actions, [
+      button("Cancel", "cancel", !finished(s)),
+      button("Pause", "pause", s === "queued" || s === "running"),
+      button("Resume", "resume", s === "paused"),
+      button("Retry", "retry", s === "failed" || s === "cancelled"),
+      h("button", { "data-action": "download", disabled: !bake.asset, onclick: download }, "Download asset"),
+      mayAct ? null : h("span", { class: "note", id: "read-only" },
+        `Your token “${me.name}” can read only: cancel, pause, resume and retry need the submit scope.`),
+    ].filter(Boolean));
+  };
+
+  async function loadResults() {
+    if (loadedResults || !bake.report) return;
+    loadedResults = true;
+    try {
+      const report = await json(`/v1/bakes/${id}/report`);
+      const plot = bake.plot ? await imageUrl(`/v1/assets/${bake.plot}`, bake.plot) : null;
+      const list = await json(`/v1/bakes/${id}/previews`);
+      const figures = [];
+      for (const p of list.previews) {
+        figures.push(previewFigure(p, await imageUrl(`/v1/previews/${p.digest}`, p.digest)));
+      }
+      fill(results,
+        h("h2", {}, "Previews"),
+        figures.length
+          ? h("div", { class: "grid", id: "previews" }, figures)
+          : h("p", { class: "muted" }, list.state ? `The preview job is ${list.state}.` : "No previews."),
+        reportSection(report, plot));
+      if (list.state && list.state !== "completed") loadedResults = false;
+    } catch (e) {
+      loadedResults = false;
+      fill(results, failure(e));
+    }
+  }
+
+  async function refresh() {
+    bake = await json(`/v1/bakes/${id}`);
+    setBar(bar, bake.progress.done, bake.progress.total, bake.state);
+    fill(state, badge(bake.state));
+    count.textContent = `${bake.progress.done}/${bake.progress.total}`;
+    fill(jobs, jobsTable(bake.jobs));
+    drawDetails();
+    drawActions();
+    loadResults();
+  }
+
+  const details = h("dl", { class: "kv" });
+  const drawDetails = () => fill(details,
+    h("dt", {}, "Bake key"), h("dd", { class: "mono" }, bake.key),
+    h("dt", {}, "Character"), h("dd", { class: "mono" }, bake.character, " ",
+      h("a", { href: `#/versions/${bake.character}/${bake.method}` }, "versions")),
+    h("dt", {}, "Clips"), h("dd", { class: "mono" }, bake.clips.map(short).join(", ") || "in the character file"),
+    h("dt", {}, "Created"), h("dd", {}, when(bake.created_at)),
+    h("dt", {}, "Finished"), h("dd", {}, when(bake.finished_at) || "—"),
+    bake.error ? h("dt", {}, "Error") : null, bake.error ? h("dd", { class: "error" }, bake.error) : null);
+  drawDetails();
+  drawActions();
+  show(
+    h("h1", {}, `Bake #${id} `, h("span", { class: "muted" }, bake.method), " ", state),
+    h("div", { class: "actions" }, bar, count),
+    actions,
+    status,
+    details,
+    results,
+    h("h2", {}, "Jobs"),
+    jobs,
+    h("h2", {}, "Parameters"),
+    h("pre", { class: "mono" }, JSON.stringify(bake.params, null, 2)),
+  );
+  loadResults();
+  const later = throttle(() => refresh().catch(() => {}), 400);
+  events(`/v1/bakes/${id}/events`, signal, (type, data) => {
+    if (type !== "bake") return;
+    const e = JSON.parse(data);
+    setBar(bar, e.done, e.total, e.state);
+    fill(state, badge(e.state));
+    count.textContent = `${e.done}/${e.total}`;
+    later();
+  });
+}
+
+async function workersPage(signal) {
+  const tbody = h("tbody");
+  const draw = async () => {
+    const workers = await json("/v1/workers");
+    fill(tbody, ...workers.map((w) => h("tr", { "data-worker": w.id },
+      h("td", { class: "mono" }, w.id),
+      h("td", {}, badge(w.state)),
+      h("td", { class: "num" }, w.job_id ?? ""),
+      h("td", { "data-seen": w.last_seen }, ago(w.last_seen)),
+      h("td", { class: "muted" }, when(w.started_at)))));
+  };
+  await draw();
+  show(h("h1", {}, "Workers"),
+    h("table", {}, h("thead", {}, h("tr", {}, ...["Worker", "State", "Job", "Last heartbeat", "Started"]
+      .map((t) => h("th", {}, t)))), tbody));
+  // Relative times tick locally; the list is re-read when a bake changes.
+  const tick = setInterval(() => {
+    for (const td of tbody.querySelectorAll("[data-seen]")) td.textContent = ago(Number(td.dataset.seen));
+  }, 1000);
+  signal.addEventListener("abort", () => clearInterval(tick));
+  const later = throttle(() => draw().catch(() => {}), 1000);
+  events("/v1/events", signal, () => later());
+}
+
+async function versionsPage(signal, character, method) {
+  if (!character) {
+    const bakes = await json("/v1/bakes?limit=100");
+    const groups = new Map();
+    for (const b of bakes) {
+      const k = `${b.character}/${b.method}`;
+      if (!groups.has(k)) groups.set(k, { character: b.character, method: b.method, count: 0 });
+      groups.get(k).count += 1;
+    }
+    show(h("h1", {}, "Versions"),
+      h("table", {}, h("thead", {}, h("tr", {}, ...["Character", "Method", "Bakes"].map((t) => h("th", {}, t)))),
+        h("tbody", {}, ...[...groups.values()].map((g) => h("tr", {},
+          h("td", { class: "mono" }, h("a", { href: `#/versions/${g.character}/${g.method}` }, short(g.character))),
+          h("td", {}, g.method),
+          h("td", { class: "num" }, g.count))))));
+    return;
+  }
+  const list = await json(`/v1/characters/${character}/bakes?method=${encodeURIComponent(method)}`);
+  show(h("h1", {}, "Versions of ", h("span", { class: "mono" }, short(character)), ` (${method})`),
+    h("table", {}, h("thead", {}, h("tr", {}, ...["Version", "Bake", "State", "Bake key", "Asset", "Finished"]
+      .map((t) => h("th", {}, t)))),
+      h("tbody", {}, ...list.map((b, i) => h("tr", {},
+        h("td", { class: "num" }, list.length - i),
+        h("td", {}, h("a", { href: `#/bakes/${b.id}` }, `#${b.id}`)),
+        h("td", {}, badge(b.state)),
+        h("td", { class: "mono" }, short(b.key)),
+        h("td", { class: "mono" }, short(b.asset) || "—"),
+        h("td", {}, when(b.finished_at)))))));
+}
+
+// ---------- routing ----------
+
+async function route() {
+  if (/^#token=/.test(location.hash)) return start(); // signing in with another token
+  if (page) page.abort();
+  page = new AbortController();
+  const signal = page.signal;
+  const path = location.hash.replace(/^#/, "") || "/";
+  const parts = path.split("/").filter(Boolean);
+  for (const a of document.querySelectorAll("[data-nav]")) {
+    a.classList.toggle("active", a.dataset.nav === (parts[0] || "bakes"));
+  }
+  try {
+    if (parts[0] === "bakes" && parts[1]) await bakePage(signal, Number(parts[1]));
+    else if (parts[0] === "workers") await workersPage(signal);
+    else if (parts[0] === "versions") await versionsPage(signal, parts[1], parts[2]);
+    else await bakesPage(signal);
+  } catch (e) {
+    if (!signal.aborted && !(e instanceof ApiError && e.status === 401)) show(failure(e));
+  }
+}
+
+async function start() {
+  const fragment = location.hash.match(/^#token=([0-9a-fA-F]+)/);
+  if (fragment) {
+    token = fragment[1];
+    localStorage.setItem(TOKEN_KEY, token);
+    history.replaceState(null, "", `${location.pathname}#/`);
+  }
+  if (!token) return signIn();
+  try {
+    me = await json("/v1/whoami");
+  } catch (e) {
+    if (!(e instanceof ApiError && e.status === 401)) show(failure(e));
+    return;
+  }
+  fill(document.getElementById("who"), `${me.name} (${me.scopes.join(", ")}) `,
+    h("a", { href: "#/", onclick: (ev) => { ev.preventDefault(); signOut(); } }, "sign out"));
+  window.onhashchange = () => route();
+  route();
+}
+
+start();

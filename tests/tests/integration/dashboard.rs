@@ -1,0 +1,267 @@
+//! The dashboard in a real headless Chromium, driven over WebDriver
+//! (Debian's `chromium` and `chromium-driver`, which `.ci/run` installs):
+//! a bake's progress bar advances without a reload, the finished bake
+//! shows its report and previews, cancel works, and a read-only token sees
+//! the actions disabled with a note saying why. Screenshots are written
+//! under `target/tmp/dashboard/` (the path is printed).
+
+use std::net::TcpListener;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use aobake_e2e::{ADMIN, Options, TestEnv, character};
+use fantoccini::{Client, ClientBuilder, Locator};
+use serde_json::{Value, json};
+
+use crate::util::{quick_params, upload};
+
+/// chromedriver on a free port, killed on drop.
+struct Driver {
+    child: Child,
+    url: String,
+}
+
+impl Driver {
+    fn start() -> Self {
+        let port = TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let binary = ["chromedriver", "/usr/bin/chromedriver"]
+            .into_iter()
+            .find(|b| Command::new(b).arg("--version").output().is_ok())
+            .expect(
+                "the dashboard test needs Chromium's WebDriver: apt-get install chromium chromium-driver",
+            );
+        let child = Command::new(binary)
+            .arg(format!("--port={port}"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let url = format!("http://127.0.0.1:{port}");
+        let started = Instant::now();
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(
+                started.elapsed() < Duration::from_secs(20),
+                "chromedriver did not start"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Self { child, url }
+    }
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn artifacts() -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("dashboard");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+async fn browser(driver: &Driver) -> Client {
+    let mut caps = serde_json::Map::new();
+    let chromium = ["/usr/bin/chromium", "/usr/bin/chromium-browser"]
+        .into_iter()
+        .find(|p| std::path::Path::new(p).exists());
+    let mut options = json!({
+        "args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                 "--window-size=1280,1100", "--no-first-run"],
+    });
+    if let Some(c) = chromium {
+        options["binary"] = json!(c);
+    }
+    caps.insert("goog:chromeOptions".into(), options);
+    ClientBuilder::new(hyper_util::client::legacy::connect::HttpConnector::new())
+        .capabilities(caps)
+        .connect(&driver.url)
+        .await
+        .expect("a Chromium session")
+}
+
+async fn eval(c: &Client, script: &str) -> Value {
+    c.execute(script, vec![]).await.unwrap()
+}
+
+/// Waits until `script` (a JavaScript expression) is truthy.
+async fn wait_for(c: &Client, what: &str, script: &str, timeout: Duration) -> Value {
+    let started = Instant::now();
+    let body = format!("return ({script}) || null;");
+    loop {
+        let v = eval(c, &body).await;
+        if !v.is_null() && v != json!(false) {
+            return v;
+        }
+        if started.elapsed() > timeout {
+            let page = eval(c, "return document.body.innerText").await;
+            let _ = shot(c, &format!("timeout-{}", what.replace(' ', "-"))).await;
+            panic!("timed out waiting for {what}; the page says:\n{page}");
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+async fn shot(c: &Client, name: &str) -> PathBuf {
+    let png = c.screenshot().await.unwrap();
+    let path = artifacts().join(format!("{name}.png"));
+    std::fs::write(&path, png).unwrap();
+    eprintln!("screenshot: {}", path.display());
+    path
+}
+
+fn submit(env: &TestEnv, token: &str, character: &str, poses: usize) -> i64 {
+    let (status, b) = env
+        .request(
+            "POST",
+            "/v1/bakes",
+            token,
+            Some(json!({"character": character, "method": "vertex-linear", "params": quick_params(poses)})),
+        )
+        .unwrap();
+    assert_eq!(status, 202, "{b}");
+    b["id"].as_i64().unwrap()
+}
+
+#[test]
+fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
+    let mut env = TestEnv::start(Options::default());
+    let driver = Driver::start();
+    let submitter = env.token(&["read", "submit"]);
+    let reader = env.token(&["read"]);
+    let digest = upload(&env, &character("CesiumMan"));
+    // Queued with no worker yet: the page sees it at 0 first.
+    let id = submit(&env, ADMIN, &digest, 24);
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let c = browser(&driver).await;
+        // The token travels in the fragment and leaves the address bar.
+        c.goto(&format!("{}/#token={submitter}", env.url))
+            .await
+            .unwrap();
+        let row = format!("document.querySelector('tr[data-bake=\"{id}\"] .bar')");
+        wait_for(&c, "the bakes list", &row, Duration::from_secs(20)).await;
+        let url = c.current_url().await.unwrap();
+        assert!(!url.as_str().contains(&submitter), "{url}");
+        let text = eval(&c, "return document.body.innerText").await;
+        assert!(!text.as_str().unwrap().contains("null"), "{text}");
+        let done0 = eval(&c, &format!("return Number({row}.dataset.done)")).await;
+        assert_eq!(done0, json!(0));
+        // What a person sees: an empty bar (its width is 0 px).
+        let width = eval(&c, &format!("return {row}.firstChild.getBoundingClientRect().width")).await;
+        assert_eq!(width.as_f64(), Some(0.0), "a queued bake's bar is empty");
+        shot(&c, "1-bakes-queued").await;
+
+        // The bake page: a marker on the window survives only if the page
+        // is never reloaded.
+        c.goto(&format!("{}/#/bakes/{id}", env.url)).await.unwrap();
+        wait_for(&c, "the bake page", "document.querySelector('#jobs')", Duration::from_secs(20)).await;
+        wait_for(&c, "the live stream", "document.querySelector('#live.on')", Duration::from_secs(20)).await;
+        eval(&c, "window.__notReloaded = true; return null").await;
+        let bar = "document.querySelector('main .bar')";
+        env.start_worker(&[]);
+        let mid = wait_for(
+            &c,
+            "progress",
+            &format!("Number({bar}.dataset.done) > 0 && Number({bar}.dataset.done) < Number({bar}.dataset.total) && Number({bar}.dataset.done)"),
+            Duration::from_secs(120),
+        )
+        .await;
+        eprintln!("progress bar at {mid} without a reload");
+        wait_for(
+            &c,
+            "the jobs table to follow",
+            "document.querySelector('#jobs [data-state=\"completed\"]')",
+            Duration::from_secs(60),
+        )
+        .await;
+        shot(&c, "2-bake-running").await;
+        wait_for(
+            &c,
+            "the finished bake",
+            "document.querySelector('#state [data-state=\"done\"]')",
+            Duration::from_secs(300),
+        )
+        .await;
+        // Report and previews, their images decoded.
+        wait_for(&c, "the report", "document.querySelector('#report table')", Duration::from_secs(30)).await;
+        let images = "[...document.querySelectorAll('#previews img')]";
+        let loaded = wait_for(
+            &c,
+            "the previews",
+            &format!("{images}.length >= 4 && {images}.every(i => i.complete && i.naturalWidth > 0) && {images}.length"),
+            Duration::from_secs(30),
+        )
+        .await;
+        assert_eq!(loaded, json!(4), "three stills and an animation");
+        let kinds = eval(&c, &format!("return {images}.map(i => i.closest('figure').dataset.kind)")).await;
+        assert_eq!(kinds, json!(["still", "still", "still", "animation"]));
+        let plot = eval(&c, "const i = document.querySelector('#report img'); return i && i.naturalWidth").await;
+        assert!(plot.as_u64().unwrap_or(0) > 100, "the PSNR plot shows: {plot}");
+        assert_eq!(eval(&c, "return window.__notReloaded === true").await, json!(true));
+        let jobs = eval(&c, "return [...document.querySelectorAll('#jobs [data-state]')].every(b => b.dataset.state === 'completed')").await;
+        assert_eq!(jobs, json!(true), "every job shows completed");
+        // No leaked "null" (the parameters' JSON may hold real nulls).
+        let text = eval(&c, "return [...document.querySelectorAll('main > :not(pre)')].map(e => e.innerText).join('\\n')").await;
+        assert!(!text.as_str().unwrap().contains("null"), "{text}");
+        shot(&c, "3-bake-done").await;
+        eval(&c, "document.querySelector('#report').scrollIntoView(); return null").await;
+        shot(&c, "3b-bake-report").await;
+
+        // Cancel: a second bake, cancelled from its page.
+        let other = submit(&env, ADMIN, &digest, 40);
+        c.goto(&format!("{}/#/bakes/{other}", env.url)).await.unwrap();
+        let cancel = "document.querySelector('button[data-action=\"cancel\"]')";
+        wait_for(&c, "the cancel button", &format!("{cancel} && !{cancel}.disabled"), Duration::from_secs(20)).await;
+        c.find(Locator::Css("button[data-action=\"cancel\"]"))
+            .await
+            .unwrap()
+            .click()
+            .await
+            .unwrap();
+        wait_for(
+            &c,
+            "the cancelled state",
+            "document.querySelector('#state [data-state=\"cancelled\"]')",
+            Duration::from_secs(20),
+        )
+        .await;
+        let (_, b) = env
+            .request("GET", &format!("/v1/bakes/{other}"), ADMIN, None)
+            .unwrap();
+        assert_eq!(b["state"], "cancelled", "the server agrees");
+        shot(&c, "4-bake-cancelled").await;
+
+        // Workers: the one worker, with its last heartbeat.
+        c.goto(&format!("{}/#/workers", env.url)).await.unwrap();
+        wait_for(&c, "the workers", "document.querySelectorAll('tr[data-worker]').length === 1", Duration::from_secs(20)).await;
+        shot(&c, "5-workers").await;
+
+        // A read-only token sees everything, the actions disabled and why.
+        c.goto(&format!("{}/#token={reader}", env.url)).await.unwrap();
+        wait_for(&c, "the bakes list", &row, Duration::from_secs(20)).await;
+        c.goto(&format!("{}/#/bakes/{id}", env.url)).await.unwrap();
+        wait_for(&c, "the read-only note", "document.querySelector('#read-only')", Duration::from_secs(20)).await;
+        let disabled = eval(
+            &c,
+            "return ['cancel','pause','resume','retry'].map(a => document.querySelector(`button[data-action=\"${a}\"]`).disabled)",
+        )
+        .await;
+        assert_eq!(disabled, json!([true, true, true, true]));
+        let download = eval(&c, "return document.querySelector('button[data-action=\"download\"]').disabled").await;
+        assert_eq!(download, json!(false), "reading the asset needs only read");
+        wait_for(&c, "the previews", &format!("{images}.length === 4"), Duration::from_secs(30)).await;
+        shot(&c, "6-read-only").await;
+        c.close().await.unwrap();
+    });
+}
