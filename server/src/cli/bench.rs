@@ -43,6 +43,9 @@ enum What {
     /// Status-request latency (p50, p99) under concurrent pollers, and the
     /// server's memory.
     Api(super::bench_service::ApiArgs),
+    /// Preview render time per panel (the model's AO on the GPU, raster,
+    /// readback) on every adapter among Vulkan and GL.
+    Preview(super::preview::BenchArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -112,6 +115,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         What::Linear(a) => super::table::linear(a),
         What::Queue(a) => super::bench_service::queue(a),
         What::Api(a) => super::bench_service::api(a),
+        What::Preview(a) => super::preview::bench(a),
     }
 }
 

@@ -3,11 +3,11 @@
 //! ray-traced ground truth, the model, and the error) or an animated PNG
 //! of a whole clip (the model beside the ground truth).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use aobake_core::{
-    Limits,
+    Character, Clip, Limits,
     asset::Container,
     bake::{BakeParams, preview::Subject},
     method::vertex::Model,
@@ -44,34 +44,57 @@ pub(super) struct Args {
     out: PathBuf,
 }
 
-pub(super) fn run(args: &Args) -> anyhow::Result<()> {
-    let bytes = std::fs::read(&args.asset)
-        .with_context(|| format!("cannot read {}", args.asset.display()))?;
-    let container = Container::from_bytes(&bytes)
-        .with_context(|| format!("cannot read {}", args.asset.display()))?;
-    let (model, header) = Model::from_container(&container)
-        .with_context(|| format!("cannot read {}", args.asset.display()))?;
-    // The ground truth is traced as the bake traced its held-out poses.
-    let params: BakeParams = serde_json::from_value(header.params.clone())
-        .unwrap_or_else(|_| BakeParams::new(header.method));
-    let (character, clips) =
-        character_and_clips(&args.file, args.clips.as_deref(), &Limits::default())?;
-    if let Err(e) = model.check_character(&character) {
-        bail!(
-            "{} does not fit {}: {e} (character {})",
-            args.asset.display(),
-            args.file.display(),
-            header.character
-        );
+/// An asset and the character it was baked for, loaded and checked.
+struct Loaded {
+    model: Model,
+    params: BakeParams,
+    character: Character,
+    clips: Vec<Clip>,
+}
+
+impl Loaded {
+    fn new(asset: &Path, file: &Path, clips: Option<&Path>) -> anyhow::Result<Self> {
+        let bytes =
+            std::fs::read(asset).with_context(|| format!("cannot read {}", asset.display()))?;
+        let container = Container::from_bytes(&bytes)
+            .with_context(|| format!("cannot read {}", asset.display()))?;
+        let (model, header) = Model::from_container(&container)
+            .with_context(|| format!("cannot read {}", asset.display()))?;
+        // The ground truth is traced as the bake traced its held-out poses.
+        let params: BakeParams = serde_json::from_value(header.params.clone())
+            .unwrap_or_else(|_| BakeParams::new(header.method));
+        let (character, clips) = character_and_clips(file, clips, &Limits::default())?;
+        if let Err(e) = model.check_character(&character) {
+            bail!(
+                "{} does not fit {}: {e} (character {})",
+                asset.display(),
+                file.display(),
+                header.character
+            );
+        }
+        Ok(Self {
+            model,
+            params,
+            character,
+            clips,
+        })
     }
-    let clip = find_clip(&clips, &args.clip)?;
+
+    fn subject(&self) -> Subject<'_> {
+        Subject {
+            character: &self.character,
+            model: &self.model,
+            surface: self.params.held_out_surface(),
+        }
+    }
+}
+
+pub(super) fn run(args: &Args) -> anyhow::Result<()> {
+    let loaded = Loaded::new(&args.asset, &args.file, args.clips.as_deref())?;
+    let clip = find_clip(&loaded.clips, &args.clip)?;
     let gpu = Gpu::shared().context("no GPU adapter for the preview")?;
     let mut renderer = PreviewRenderer::new(gpu)?;
-    let subject = Subject {
-        character: &character,
-        model: &model,
-        surface: params.held_out_surface(),
-    };
+    let subject = loaded.subject();
     let preview = match args.time {
         Some(t) if !t.is_finite() => bail!("--time must be a finite number of seconds"),
         Some(t) => subject.stills(Some(clip), &[t], &mut renderer)?.remove(0),
@@ -97,4 +120,95 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         i.trace_s
     );
     Ok(())
+}
+
+/// Arguments of `aobake bench preview`.
+#[derive(Debug, clap::Args)]
+pub(super) struct BenchArgs {
+    /// The asset.
+    asset: PathBuf,
+    /// The character it was baked for.
+    file: PathBuf,
+    /// A second glTF file with clips.
+    #[arg(long)]
+    clips: Option<PathBuf>,
+    /// The clip (default: the first).
+    #[arg(long)]
+    clip: Option<String>,
+    /// Timed runs per adapter (medians are quoted).
+    #[arg(long, default_value_t = 5)]
+    runs: usize,
+}
+
+/// Milliseconds per rendered panel of a still (3 panels) and of an
+/// animation, on every adapter the machine has among Vulkan and GL, runs
+/// interleaved so that drift in machine speed hits all alike.
+pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
+    let loaded = Loaded::new(&args.asset, &args.file, args.clips.as_deref())?;
+    let clip = match &args.clip {
+        Some(name) => find_clip(&loaded.clips, name)?,
+        None => loaded.clips.first().context("the character has no clips")?,
+    };
+    let subject = loaded.subject();
+    let mut adapters = Vec::new();
+    for backends in [wgpu_backends::VULKAN, wgpu_backends::GL] {
+        match Gpu::with_backends(backends) {
+            Ok(gpu) => adapters.push(gpu),
+            Err(e) => eprintln!("{backends:?}: {e}"),
+        }
+    }
+    if adapters.is_empty() {
+        bail!("no adapter to render with");
+    }
+    let renderers = adapters
+        .iter()
+        .map(PreviewRenderer::new)
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut renderers = renderers;
+    let mut stills = vec![Vec::new(); renderers.len()];
+    let mut frames = vec![Vec::new(); renderers.len()];
+    let still_time = 0.5 * clip.duration;
+    for run in 0..args.runs.max(1) {
+        for (i, r) in renderers.iter_mut().enumerate() {
+            let s = subject.stills(Some(clip), &[still_time], r)?.remove(0);
+            let a = subject.animation(clip, r)?;
+            // The first run includes shader compilation and warm-up.
+            if run > 0 || args.runs <= 1 {
+                stills[i].push(s.info.frame_ms);
+                frames[i].push(a.info.frame_ms);
+            }
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    println!(
+        "{}: {} vertices, {} triangles; clip {} ({} animation frames); medians of {} runs after one warm-up",
+        args.file.display(),
+        loaded.character.vertex_count(),
+        loaded.character.triangles.len(),
+        clip.name,
+        subject.animation_times(clip).len(),
+        args.runs.saturating_sub(1).max(1)
+    );
+    println!("| adapter | MSAA | still panel 360² (ms) | animation panel 240² (ms) |");
+    println!("|---|---|---|---|");
+    for (i, r) in renderers.iter().enumerate() {
+        println!(
+            "| {} | {}× | {:.1} | {:.1} |",
+            adapters[i].label(),
+            r.samples(),
+            median(&mut stills[i]),
+            median(&mut frames[i])
+        );
+    }
+    Ok(())
+}
+
+/// wgpu's backend flags, without a direct dependency on wgpu here.
+mod wgpu_backends {
+    pub(super) use aobake_worker::gpu::Backends;
+    pub(super) const VULKAN: Backends = Backends::VULKAN;
+    pub(super) const GL: Backends = Backends::GL;
 }

@@ -17,6 +17,7 @@ pub mod vertex_ao;
 
 pub use preview::PreviewRenderer;
 pub use vertex_ao::VertexAo;
+pub use wgpu::Backends;
 
 /// Why the GPU could not be used.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -55,7 +56,14 @@ impl Gpu {
     /// Opens the best adapter over Vulkan and GL (a real GPU before a
     /// software one), or over the backends `WGPU_BACKEND` names.
     pub fn new() -> Result<Self, GpuError> {
-        pollster::block_on(Self::open())
+        let backends =
+            wgpu::Backends::from_env().unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::GL);
+        pollster::block_on(Self::open(backends))
+    }
+
+    /// The best adapter of these backends only (benches compare them).
+    pub fn with_backends(backends: wgpu::Backends) -> Result<Self, GpuError> {
+        pollster::block_on(Self::open(backends))
     }
 
     /// The process's adapter, opened on first use: a worker renders many
@@ -77,10 +85,9 @@ impl Gpu {
         format!("{} ({:?}{driver})", i.name, i.backend)
     }
 
-    async fn open() -> Result<Self, GpuError> {
+    async fn open(backends: wgpu::Backends) -> Result<Self, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
-            backends: wgpu::Backends::from_env()
-                .unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::GL),
+            backends,
             flags: wgpu::InstanceFlags::empty(),
             ..wgpu::InstanceDescriptor::new_without_display_handle()
         });
