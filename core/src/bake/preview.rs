@@ -27,7 +27,7 @@ use crate::{
     Character,
     method::vertex::Model,
     rig::{clip::Clip, pose::Pose},
-    trace::{SceneOptions, SurfaceParams, no_progress, trace_poses},
+    trace::{Scene, SceneOptions, SurfaceParams, no_progress, surface_occlusion, trace_poses},
 };
 
 use super::JobError;
@@ -42,6 +42,13 @@ pub const ANIMATION_FPS: f32 = 24.0;
 pub const ANIMATION_MAX_FRAMES: usize = 48;
 /// Where in a clip a bake's stills are taken, as fractions of its length.
 pub const STILL_FRACTIONS: [f32; 3] = [0.15, 0.5, 0.85];
+/// Vertices per side of the ground grid.
+pub const GROUND_GRID: usize = 64;
+/// Most rays per ground point (the bake's count when lower).
+pub const GROUND_SAMPLES: u32 = 128;
+/// What the stills say about the ground.
+const GROUND_NOTE: &str =
+    "ground: ray-traced in every panel (the vertex methods bake the character only)";
 
 /// What a panel shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -164,6 +171,52 @@ impl Camera {
     }
 }
 
+/// The ground plane as a grid, denser near the centre where the contact
+/// shadows are, so that its ray-traced occlusion is drawn per vertex.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ground {
+    /// Grid vertices (world space), row-major.
+    pub positions: Vec<Vec3>,
+    /// Two triangles per cell.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Camera {
+    /// The ground square under the camera's target as a
+    /// [`GROUND_GRID`]² grid; spacing grows as |u|^1.8 from the centre.
+    pub fn ground(&self) -> Ground {
+        let n = GROUND_GRID;
+        let e = self.ground_half_extent;
+        let coord = |i: usize| {
+            let u = 2.0 * i as f32 / (n - 1) as f32 - 1.0;
+            u.signum() * u.abs().powf(1.8) * e
+        };
+        let mut positions = Vec::with_capacity(n * n);
+        for j in 0..n {
+            for i in 0..n {
+                positions.push(Vec3::new(
+                    self.target.x + coord(i),
+                    self.ground_y,
+                    self.target.z + coord(j),
+                ));
+            }
+        }
+        let mut triangles = Vec::with_capacity(2 * (n - 1) * (n - 1));
+        let at = |i: usize, j: usize| (j * n + i) as u32;
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                // Counter-clockwise seen from above (+y).
+                triangles.push([at(i, j), at(i, j + 1), at(i + 1, j)]);
+                triangles.push([at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)]);
+            }
+        }
+        Ground {
+            positions,
+            triangles,
+        }
+    }
+}
+
 /// What stays the same over the frames of one render call.
 #[derive(Debug, Clone, Copy)]
 pub struct RenderScene<'a> {
@@ -173,6 +226,8 @@ pub struct RenderScene<'a> {
     pub model: &'a Model,
     /// Camera and ground.
     pub camera: Camera,
+    /// The ground grid ([`Camera::ground`]).
+    pub ground: &'a Ground,
     /// Panel size in pixels.
     pub size: (u32, u32),
     /// The error colours.
@@ -190,6 +245,9 @@ pub struct RenderFrame {
     pub truth: Vec<f32>,
     /// The model's weights for this pose ([`Model::weights`]).
     pub weights: Vec<f32>,
+    /// Ray-traced occlusion of each ground vertex by the character, drawn
+    /// in every panel (no vertex method bakes it).
+    pub ground_ao: Vec<f32>,
 }
 
 /// An sRGB-encoded RGBA8 image, rows top to bottom.
@@ -239,7 +297,7 @@ pub struct PreviewInfo {
     /// Milliseconds per rendered panel (GPU evaluation of the model,
     /// drawing and readback), over the render call.
     pub frame_ms: f64,
-    /// Seconds spent ray tracing its ground truth.
+    /// Seconds spent ray tracing its ground truth (character and ground).
     pub trace_s: f64,
 }
 
@@ -288,7 +346,15 @@ impl Subject<'_> {
         Camera::framing(min, max)
     }
 
-    fn frames(&self, clip: Option<&Clip>, times: &[f32]) -> Result<Vec<RenderFrame>, JobError> {
+    /// The posed frames at `times` (the rest pose without a clip): the
+    /// character's ray-traced occlusion, the model's weights, and the
+    /// occlusion the character casts on `ground`.
+    pub fn frames(
+        &self,
+        clip: Option<&Clip>,
+        times: &[f32],
+        ground: &Ground,
+    ) -> Result<Vec<RenderFrame>, JobError> {
         let skeleton = &self.character.skeleton;
         let poses: Vec<Pose> = times
             .iter()
@@ -306,19 +372,40 @@ impl Subject<'_> {
         )
         .map_err(|e| JobError::Invalid(e.to_string()))?;
         let vertices = self.character.vertex_count();
-        Ok(poses
+        let up = vec![Vec3::Y; ground.positions.len()];
+        let ground_surface = SurfaceParams {
+            samples: self.surface.samples.min(GROUND_SAMPLES),
+            ..self.surface
+        };
+        let invalid = |e: crate::trace::TraceError| JobError::Invalid(e.to_string());
+        poses
             .iter()
             .enumerate()
             .map(|(i, pose)| {
                 let posed = self.character.skin(pose);
-                RenderFrame {
+                let scene = Scene::new(
+                    &posed.positions,
+                    &self.character.triangles,
+                    &SceneOptions::default(),
+                )
+                .map_err(invalid)?;
+                let ground_ao = surface_occlusion(
+                    &scene,
+                    &ground.positions,
+                    &up,
+                    &ground_surface,
+                    &no_progress,
+                )
+                .map_err(invalid)?;
+                Ok(RenderFrame {
                     positions: posed.positions,
                     normals: posed.normals,
                     truth: truth.values[i * vertices..(i + 1) * vertices].to_vec(),
                     weights: self.model.weights(skeleton, pose),
-                }
+                    ground_ao,
+                })
             })
-            .collect())
+            .collect()
     }
 
     /// Stills at `times` of `clip` (or one of the rest pose without a
@@ -334,13 +421,16 @@ impl Subject<'_> {
         } else {
             vec![0.0]
         };
+        let camera = self.camera(clip);
+        let ground = camera.ground();
         let traced = Instant::now();
-        let frames = self.frames(clip, &times)?;
+        let frames = self.frames(clip, &times, &ground)?;
         let trace_s = traced.elapsed().as_secs_f64();
         let scene = RenderScene {
             triangles: &self.character.triangles,
             model: self.model,
-            camera: self.camera(clip),
+            camera,
+            ground: &ground,
             size: (STILL_PANEL, STILL_PANEL),
             heat_map: HEAT_MAP,
         };
@@ -393,13 +483,16 @@ impl Subject<'_> {
     pub fn animation(&self, clip: &Clip, renderer: &mut dyn Renderer) -> Result<Preview, JobError> {
         let fps = animation_fps(clip);
         let times = self.animation_times(clip);
+        let camera = self.camera(Some(clip));
+        let ground = camera.ground();
         let traced = Instant::now();
-        let frames = self.frames(Some(clip), &times)?;
+        let frames = self.frames(Some(clip), &times, &ground)?;
         let trace_s = traced.elapsed().as_secs_f64();
         let scene = RenderScene {
             triangles: &self.character.triangles,
             model: self.model,
-            camera: self.camera(Some(clip)),
+            camera,
+            ground: &ground,
             size: (ANIMATION_PANEL, ANIMATION_PANEL),
             heat_map: HEAT_MAP,
         };
@@ -535,6 +628,8 @@ fn compose_row(panels: &[Image], titles: &[String], legend: bool) -> Result<Imag
                 .map_err(draw_error)?;
             }
             let small = TextStyle::from(("sans-serif", 12).into_font()).color(&BLACK);
+            root.draw(&Text::new(GROUND_NOTE, (8, y0 + 20), small.clone()))
+                .map_err(draw_error)?;
             for (x, label) in [
                 (x0, format!("−{} too bright", heat.range)),
                 (x0 + bar / 2 - 4, "0".to_owned()),

@@ -179,7 +179,7 @@ fn the_graph_lists_dependencies_first_and_covers_every_pose() {
         (bake.poses_in(PoseSet::Reference)
             + bake.poses_in(PoseSet::HeldOut)
             + bake.poses_in(PoseSet::Noise)
-            + 3) as u64
+            + 4) as u64
     );
     // Specs travel through the queue as JSON.
     for job in &graph.jobs {

@@ -254,35 +254,34 @@ impl PreviewRenderer<'_> {
             ),
             index_count: indices.len() as u32,
         };
-        let c = &scene.camera;
-        let e = c.ground_half_extent;
-        let corners: Vec<Vec3> = [(-e, -e), (e, -e), (e, e), (-e, e)]
-            .iter()
-            .map(|&(x, z)| Vec3::new(c.target.x + x, c.ground_y, c.target.z + z))
-            .collect();
-        let zeros = [0f32; 4];
+        // The ground's occlusion is the same buffer in both AO slots: no
+        // vertex method bakes it, so every panel shows the ray-traced one.
+        let g = scene.ground;
+        let ground_n = g.positions.len().max(1) as u64;
+        let ground_ao = buffer("ground ao", 4 * ground_n, dynamic);
+        let ground_indices: Vec<u32> = g.triangles.iter().flatten().copied().collect();
         let ground = Mesh {
-            positions: init(device, "ground", bytemuck::cast_slice(&corners), U::VERTEX),
+            positions: init(
+                device,
+                "ground",
+                bytemuck::cast_slice(&g.positions),
+                U::VERTEX,
+            ),
             normals: init(
                 device,
                 "ground normals",
-                bytemuck::cast_slice(&[Vec3::Y; 4]),
+                bytemuck::cast_slice(&vec![Vec3::Y; g.positions.len()]),
                 U::VERTEX,
             ),
-            truth: init(device, "ground ao", bytemuck::cast_slice(&zeros), U::VERTEX),
-            model: init(
-                device,
-                "ground model ao",
-                bytemuck::cast_slice(&zeros),
-                U::VERTEX,
-            ),
+            truth: ground_ao.clone(),
+            model: ground_ao.clone(),
             indices: init(
                 device,
                 "ground indices",
-                bytemuck::cast_slice(&[0u32, 2, 1, 0, 3, 2]),
+                bytemuck::cast_slice(&ground_indices),
                 U::INDEX,
             ),
-            index_count: 6,
+            index_count: ground_indices.len() as u32,
         };
         let layout = self.pipeline.get_bind_group_layout(0);
         let bind = |panel: Panel, on_ground: bool| {
@@ -353,6 +352,15 @@ impl PreviewRenderer<'_> {
                 .write_buffer(&character.normals, 0, bytemuck::cast_slice(&frame.normals));
             gpu.queue
                 .write_buffer(&character.truth, 0, bytemuck::cast_slice(&frame.truth));
+            if frame.ground_ao.len() != g.positions.len() {
+                return Err(GpuError::TooLarge(format!(
+                    "{} ground values for {} ground vertices",
+                    frame.ground_ao.len(),
+                    g.positions.len()
+                )));
+            }
+            gpu.queue
+                .write_buffer(&ground_ao, 0, bytemuck::cast_slice(&frame.ground_ao));
             let mut encoder =
                 device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
             evaluator.record(&mut encoder, &frame.weights, &character.model)?;

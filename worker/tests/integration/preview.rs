@@ -8,8 +8,8 @@
 //! (look at them before committing).
 
 use aobake_core::{
-    Limits, Pose, Upload,
-    bake::preview::HEAT_MAP,
+    Limits, Upload,
+    bake::preview::{Ground, HEAT_MAP, Subject},
     bake::{BakeParams, Camera, Image, Panel, Plan, RenderFrame, RenderScene, Renderer},
     import_character,
     method::Method,
@@ -17,7 +17,6 @@ use aobake_core::{
     trace::{AoBlock, SceneOptions, no_progress, trace_poses},
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
-use glam::Vec3;
 
 const SIZE: u32 = 128;
 
@@ -44,6 +43,7 @@ struct Fixture {
     model: Model,
     frame: RenderFrame,
     camera: Camera,
+    ground: Ground,
 }
 
 fn fixture() -> Fixture {
@@ -63,32 +63,25 @@ fn fixture() -> Fixture {
     let ao = trace_poses(&c, &poses, &SceneOptions::default(), &surface, &no_progress).unwrap();
     let (model, _) = plan.fit(&poses, &ao).unwrap();
     let clip = &imported.clips[0];
-    let pose = Pose::sample(&c.skeleton, clip, 0.5 * clip.duration);
-    let truth = trace_poses(
-        &c,
-        std::slice::from_ref(&pose),
-        &SceneOptions::default(),
-        &params.held_out_surface(),
-        &no_progress,
-    )
-    .unwrap();
-    let posed = c.skin(&pose);
-    let (mut min, mut max) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for &p in &posed.positions {
-        min = min.min(p);
-        max = max.max(p);
-    }
-    let frame = RenderFrame {
-        weights: model.weights(&c.skeleton, &pose),
-        positions: posed.positions,
-        normals: posed.normals,
-        truth: truth.values,
+    let subject = Subject {
+        character: &c,
+        model: &model,
+        surface: params.held_out_surface(),
     };
+    let camera = subject.camera(Some(clip));
+    let ground = camera.ground();
+    let frame = subject
+        .frames(Some(clip), &[0.5 * clip.duration], &ground)
+        .unwrap()
+        .remove(0);
+    // The figure casts occlusion on the ground under it.
+    assert!(frame.ground_ao.iter().any(|&a| a > 0.2), "contact shadow");
     Fixture {
         character: c,
         model,
         frame,
-        camera: Camera::framing(min, max),
+        camera,
+        ground,
     }
 }
 
@@ -97,6 +90,7 @@ fn scene<'a>(f: &'a Fixture, model: &'a Model) -> RenderScene<'a> {
         triangles: &f.character.triangles,
         model,
         camera: f.camera,
+        ground: &f.ground,
         size: (SIZE, SIZE),
         heat_map: HEAT_MAP,
     }
