@@ -421,21 +421,10 @@ impl Subject<'_> {
         } else {
             vec![0.0]
         };
-        let camera = self.camera(clip);
-        let ground = camera.ground();
-        let traced = Instant::now();
-        let frames = self.frames(clip, &times, &ground)?;
-        let trace_s = traced.elapsed().as_secs_f64();
-        let scene = RenderScene {
-            triangles: &self.character.triangles,
-            model: self.model,
-            camera,
-            ground: &ground,
-            size: (STILL_PANEL, STILL_PANEL),
-            heat_map: HEAT_MAP,
-        };
+        let prepared = self.prepare(clip, &times)?;
+        let trace_s = prepared.trace_s;
         let panels = [Panel::Truth, Panel::Model, Panel::Error];
-        let (images, frame_ms) = render(renderer, &scene, &frames, &panels)?;
+        let (images, frame_ms) = self.render(&prepared, STILL_PANEL, &panels, renderer)?;
         let method = self.model.method().name();
         times
             .iter()
@@ -470,6 +459,40 @@ impl Subject<'_> {
             .collect()
     }
 
+    /// The camera, the ground and the traced frames of `times`.
+    fn prepare(&self, clip: Option<&Clip>, times: &[f32]) -> Result<Prepared, JobError> {
+        let camera = self.camera(clip);
+        let ground = camera.ground();
+        let traced = Instant::now();
+        let frames = self.frames(clip, times, &ground)?;
+        Ok(Prepared {
+            camera,
+            ground,
+            frames,
+            trace_s: traced.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Renders prepared frames in square panels of `side` pixels; the
+    /// images and the milliseconds per panel.
+    fn render(
+        &self,
+        prepared: &Prepared,
+        side: u32,
+        panels: &[Panel],
+        renderer: &mut dyn Renderer,
+    ) -> Result<(Vec<Image>, f64), JobError> {
+        let scene = RenderScene {
+            triangles: &self.character.triangles,
+            model: self.model,
+            camera: prepared.camera,
+            ground: &prepared.ground,
+            size: (side, side),
+            heat_map: HEAT_MAP,
+        };
+        render(renderer, &scene, &prepared.frames, panels)
+    }
+
     /// The clip times of an animation: evenly spaced, fewer per second
     /// for a long clip.
     pub fn animation_times(&self, clip: &Clip) -> Vec<f32> {
@@ -483,21 +506,10 @@ impl Subject<'_> {
     pub fn animation(&self, clip: &Clip, renderer: &mut dyn Renderer) -> Result<Preview, JobError> {
         let fps = animation_fps(clip);
         let times = self.animation_times(clip);
-        let camera = self.camera(Some(clip));
-        let ground = camera.ground();
-        let traced = Instant::now();
-        let frames = self.frames(Some(clip), &times, &ground)?;
-        let trace_s = traced.elapsed().as_secs_f64();
-        let scene = RenderScene {
-            triangles: &self.character.triangles,
-            model: self.model,
-            camera,
-            ground: &ground,
-            size: (ANIMATION_PANEL, ANIMATION_PANEL),
-            heat_map: HEAT_MAP,
-        };
+        let prepared = self.prepare(Some(clip), &times)?;
+        let trace_s = prepared.trace_s;
         let panels = [Panel::Truth, Panel::Model];
-        let (images, frame_ms) = render(renderer, &scene, &frames, &panels)?;
+        let (images, frame_ms) = self.render(&prepared, ANIMATION_PANEL, &panels, renderer)?;
         let method = self.model.method().name();
         let composed = times
             .iter()
@@ -527,6 +539,14 @@ impl Subject<'_> {
             png,
         })
     }
+}
+
+/// What a render call draws: frames traced under one camera.
+struct Prepared {
+    camera: Camera,
+    ground: Ground,
+    frames: Vec<RenderFrame>,
+    trace_s: f64,
 }
 
 fn animation_fps(clip: &Clip) -> f32 {
