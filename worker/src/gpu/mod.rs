@@ -17,7 +17,7 @@ pub mod vertex_ao;
 
 pub use preview::PreviewRenderer;
 pub use vertex_ao::VertexAo;
-pub use wgpu::Backends;
+pub use wgpu::{Backends, DeviceType};
 
 /// Why the GPU could not be used.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -56,14 +56,20 @@ impl Gpu {
     /// Opens the best adapter over Vulkan and GL (a real GPU before a
     /// software one), or over the backends `WGPU_BACKEND` names.
     pub fn new() -> Result<Self, GpuError> {
-        let backends =
-            wgpu::Backends::from_env().unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::GL);
-        pollster::block_on(Self::open(backends))
+        pollster::block_on(Self::open(default_backends(), false))
     }
 
     /// The best adapter of these backends only (benches compare them).
     pub fn with_backends(backends: wgpu::Backends) -> Result<Self, GpuError> {
-        pollster::block_on(Self::open(backends))
+        pollster::block_on(Self::open(backends, false))
+    }
+
+    /// The software rasteriser only (lavapipe or llvmpipe), even on a
+    /// machine with a GPU: the deterministic mode of the render tests,
+    /// whose golden images were made on it, so that they compare the same
+    /// rasterisation rules and arithmetic wherever they run.
+    pub fn software() -> Result<Self, GpuError> {
+        pollster::block_on(Self::open(default_backends(), true))
     }
 
     /// The process's adapter, opened on first use: a worker renders many
@@ -85,7 +91,7 @@ impl Gpu {
         format!("{} ({:?}{driver})", i.name, i.backend)
     }
 
-    async fn open(backends: wgpu::Backends) -> Result<Self, GpuError> {
+    async fn open(backends: wgpu::Backends, software: bool) -> Result<Self, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
             backends,
             flags: wgpu::InstanceFlags::empty(),
@@ -94,7 +100,7 @@ impl Gpu {
         let adapter = instance
             .request_adapter(&wgpu::RequestAdapterOptions {
                 power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter: false,
+                force_fallback_adapter: software,
                 compatible_surface: None,
                 ..Default::default()
             })
@@ -125,6 +131,11 @@ impl Gpu {
             queue,
         })
     }
+}
+
+/// Vulkan and GL, or what `WGPU_BACKEND` names.
+fn default_backends() -> wgpu::Backends {
+    wgpu::Backends::from_env().unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::GL)
 }
 
 impl Gpu {

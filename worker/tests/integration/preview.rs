@@ -30,10 +30,19 @@ const TOLERANCE: u8 = 6;
 const EDGE_SHARE: f64 = 0.03;
 const EDGE_TOLERANCE: u8 = 96;
 
+/// The deterministic mode: the software rasteriser the goldens were made
+/// on, even on a machine with a GPU.
 fn renderer() -> PreviewRenderer<'static> {
-    let gpu = Gpu::shared().expect("a wgpu adapter (llvmpipe or lavapipe without a GPU)");
-    eprintln!("adapter: {}", gpu.label());
+    static GPU: std::sync::OnceLock<Gpu> = std::sync::OnceLock::new();
+    let gpu = GPU
+        .get_or_init(|| Gpu::software().expect("a software wgpu adapter (llvmpipe or lavapipe)"));
+    eprintln!("adapter: {} ({:?})", gpu.label(), gpu.info.device_type);
+    assert_eq!(gpu.info.device_type, wgpu_types_cpu(), "a software adapter");
     PreviewRenderer::new(gpu).unwrap()
+}
+
+fn wgpu_types_cpu() -> aobake_worker::gpu::DeviceType {
+    aobake_worker::gpu::DeviceType::Cpu
 }
 
 /// RiggedFigure at the middle of its clip, a vertex-linear model fitted to
