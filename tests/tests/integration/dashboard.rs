@@ -247,6 +247,19 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         wait_for(&c, "the workers", "document.querySelectorAll('tr[data-worker]').length === 1", Duration::from_secs(20)).await;
         shot(&c, "5-workers").await;
 
+        // Versions of the character and method: both bakes, newest first.
+        c.goto(&format!("{}/#/versions/{digest}/vertex-linear", env.url))
+            .await
+            .unwrap();
+        let versions = wait_for(
+            &c,
+            "the versions",
+            "document.querySelectorAll('main tbody tr').length === 2 && [...document.querySelectorAll('main tbody tr a')].map(a => a.textContent)",
+            Duration::from_secs(20),
+        )
+        .await;
+        assert_eq!(versions, json!([format!("#{other}"), format!("#{id}")]));
+
         // A read-only token sees everything, the actions disabled and why.
         c.goto(&format!("{}/#token={reader}", env.url)).await.unwrap();
         wait_for(&c, "the bakes list", &row, Duration::from_secs(20)).await;
