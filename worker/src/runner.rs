@@ -237,13 +237,22 @@ fn execute(
         fault: config.fault.as_deref(),
     };
     match spec {
-        JobSpec::Preview => {
-            let gpu = crate::gpu::Gpu::shared()
-                .map_err(|e| JobError::Failed(format!("no GPU for previews: {e}")))?;
-            let mut renderer = crate::gpu::PreviewRenderer::new(gpu)
-                .map_err(|e| JobError::Failed(format!("the preview renderer: {e}")))?;
-            bake.preview(&dep_refs, &mut renderer)
-        }
+        JobSpec::Preview => match crate::gpu::Gpu::shared() {
+            // A machine with no adapter at all (no GPU, no Mesa) cannot
+            // draw, and another attempt there will not either: the bake's
+            // asset is good, so the job ends saying why there are no
+            // previews rather than failing the bake.
+            Err(e @ crate::gpu::GpuError::NoAdapter(_)) => {
+                eprintln!("no previews: {e}");
+                Ok(aobake_core::bake::preview::unavailable(&e.to_string()))
+            }
+            Err(e) => Err(JobError::Failed(format!("no GPU for previews: {e}"))),
+            Ok(gpu) => {
+                let mut renderer = crate::gpu::PreviewRenderer::new(gpu)
+                    .map_err(|e| JobError::Failed(format!("the preview renderer: {e}")))?;
+                bake.preview(&dep_refs, &mut renderer)
+            }
+        },
         _ => bake.run_job(&spec, &dep_refs, resume, &mut sink),
     }
 }

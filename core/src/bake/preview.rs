@@ -737,6 +737,28 @@ pub fn encode_image(image: &Image) -> Result<Vec<u8>, JobError> {
     encode_png(image, None)
 }
 
+/// Output of a `preview` job that could not render (no adapter on the
+/// worker's machine): an empty `previews.json` and, in
+/// `previews-unavailable.txt`, the reason.
+pub fn unavailable(reason: &str) -> super::JobOutput {
+    super::JobOutput {
+        outputs: vec![
+            super::Output {
+                name: "previews.json".into(),
+                bytes: b"[]".to_vec(),
+            },
+            super::Output {
+                name: UNAVAILABLE.into(),
+                bytes: reason.as_bytes().to_vec(),
+            },
+        ],
+        timings: Default::default(),
+    }
+}
+
+/// The name of the output that says why a bake has no previews.
+pub const UNAVAILABLE: &str = "previews-unavailable.txt";
+
 /// The clip a bake's previews show: its first held-out clip, else its
 /// first clip.
 pub fn preview_clip(clips: &[Clip], test: &[usize]) -> Option<usize> {

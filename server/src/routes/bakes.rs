@@ -293,6 +293,10 @@ pub(crate) struct PreviewList {
     state: Option<crate::store::JobState>,
     /// The images, once the job has completed.
     previews: Vec<PreviewItem>,
+    /// Why the job completed without images (its worker had no GPU
+    /// adapter, not even a software one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    unavailable: Option<String>,
 }
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/previews", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
@@ -309,6 +313,7 @@ pub(crate) async fn previews(
         return Ok(Json(PreviewList {
             state: None,
             previews: Vec::new(),
+            unavailable: None,
         }));
     };
     let outputs = job.outputs.as_deref().unwrap_or_default();
@@ -333,9 +338,17 @@ pub(crate) async fn previews(
             previews.push(item);
         }
     }
+    let unavailable = match digest_of(aobake_core::bake::preview::UNAVAILABLE) {
+        Some(d) => state
+            .read_blob(&d, None)
+            .await?
+            .map(|b| String::from_utf8_lossy(&b).into_owned()),
+        None => None,
+    };
     Ok(Json(PreviewList {
         state: Some(job.state),
         previews,
+        unavailable,
     }))
 }
 

@@ -429,3 +429,25 @@ fn clips_and_multi_file_characters_upload_and_bake() {
     let a = env.wait_bake(a["id"].as_i64().unwrap(), Duration::from_secs(120));
     assert_eq!(a["state"], "done", "{a}");
 }
+
+#[test]
+fn a_worker_without_any_gpu_adapter_finishes_the_bake_and_says_why_there_are_no_previews() {
+    let mut env = TestEnv::start(Options::default());
+    // A backend this platform does not have: no adapter at all.
+    env.start_worker(&[("WGPU_BACKEND", "metal")]);
+    let digest = upload(&env, &character("CesiumMan"));
+    let (status, b) = submit(&env, &digest, 8);
+    assert_eq!(status, 202, "{b}");
+    let id = b["id"].as_i64().unwrap();
+    let done = env.wait_bake(id, Duration::from_secs(120));
+    assert_eq!(done["state"], "done", "{done}\n{}", env.worker_logs());
+    assert!(done["asset"].is_string());
+    let (status, previews) = env
+        .request("GET", &format!("/v1/bakes/{id}/previews"), ADMIN, None)
+        .unwrap();
+    assert_eq!(status, 200);
+    assert_eq!(previews["state"], "completed");
+    assert_eq!(previews["previews"], serde_json::json!([]));
+    let why = previews["unavailable"].as_str().unwrap();
+    assert!(why.contains("no GPU adapter"), "{why}");
+}

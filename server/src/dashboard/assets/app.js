@@ -350,7 +350,9 @@ async function bakePage(signal, id) {
         h("h2", {}, "Previews"),
         figures.length
           ? h("div", { class: "grid", id: "previews" }, figures)
-          : h("p", { class: "muted" }, list.state ? `The preview job is ${list.state}.` : "No previews."),
+          : h("p", { class: "muted", id: "no-previews" }, list.unavailable
+            ? `No previews: ${list.unavailable}`
+            : list.state ? `The preview job is ${list.state}.` : "No previews."),
         reportSection(report, plot));
       if (list.state && list.state !== "completed") loadedResults = false;
     } catch (e) {
