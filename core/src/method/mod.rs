@@ -7,6 +7,7 @@
 //! with `slab` jobs, cubemap with `face` jobs) will live beside it, so the
 //! queue and the runner never change when a method arrives.
 
+pub mod cubemap;
 pub mod vertex;
 
 use serde::{Deserialize, Serialize};

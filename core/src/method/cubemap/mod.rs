@@ -1,0 +1,11 @@
+//! Kroon's cubemaps (Kroon 2023; DESIGN §5): the occlusion an animated
+//! character casts into the space around it over a cyclic clip, stored in
+//! nested spheroidal cubemaps. This room grows with the method:
+//!
+//! * [`geometry`]: the spheroid, its shells and the cube-face texels.
+//!
+//! Still to come (issue 12): the per-face field (`face` jobs, Eq. 3.1 at
+//! every texel, shell and time sample), the discrete and continuous
+//! encodings, the run-time decoding (CPU and WGSL) and the evaluation.
+
+pub mod geometry;
