@@ -3,9 +3,12 @@
 //! nested spheroidal cubemaps. This room grows with the method:
 //!
 //! * [`geometry`]: the spheroid, its shells and the cube-face texels.
+//! * [`field`]: Eq. 3.1 at every texel and shell of a face, one time
+//!   sample at a time (what a `face` job computes).
 //!
 //! Still to come (issue 12): the per-face field (`face` jobs, Eq. 3.1 at
 //! every texel, shell and time sample), the discrete and continuous
 //! encodings, the run-time decoding (CPU and WGSL) and the evaluation.
 
+pub mod field;
 pub mod geometry;
