@@ -7,11 +7,19 @@
 //!   sample at a time (what a `face` job computes).
 //! * [`discrete`]: the discrete-radial-distance encoding of one texel's
 //!   time curve (Algorithm 1, bounded quadratics, 16 bytes).
+//! * [`continuous`]: the continuous-radial-distance encoding of one
+//!   texel's (time × distance) field (5 × 5 cosine basis and two residual
+//!   cubics, 64 bytes over four cubemaps).
+//! * [`model`]: a baked cubemap at run time: the texel layout an engine
+//!   uploads and the CPU lookup (bilinear over texels, linear over shells,
+//!   continuous in time).
 //!
-//! Still to come (issue 12): the per-face field (`face` jobs, Eq. 3.1 at
-//! every texel, shell and time sample), the discrete and continuous
-//! encodings, the run-time decoding (CPU and WGSL) and the evaluation.
+//! Still to come (issue 12): the `face` jobs with incremental checkpoints,
+//! `assemble` into the asset container, the WGSL lookup, the evaluation
+//! and previews.
 
+pub mod continuous;
 pub mod discrete;
 pub mod field;
 pub mod geometry;
+pub mod model;
