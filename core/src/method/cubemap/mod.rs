@@ -10,6 +10,9 @@
 //! * [`continuous`]: the continuous-radial-distance encoding of one
 //!   texel's (time × distance) field (5 × 5 cosine basis and two residual
 //!   cubics, 64 bytes over four cubemaps).
+//! * [`face`]: one face's raw field (a byte per texel, shell and time
+//!   sample) and the parts and manifest its incremental checkpoints are
+//!   made of.
 //! * [`model`]: a baked cubemap at run time: the texel layout an engine
 //!   uploads and the CPU lookup (bilinear over texels, linear over shells,
 //!   continuous in time).
@@ -20,6 +23,7 @@
 
 pub mod continuous;
 pub mod discrete;
+pub mod face;
 pub mod field;
 pub mod geometry;
 pub mod model;

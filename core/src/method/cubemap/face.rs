@@ -1,0 +1,246 @@
+//! The raw field of one cube face, as a `face` job builds it and the
+//! encodings read it, and the pieces its checkpoints are made of.
+//!
+//! * [`FaceField`]: occlusion at every texel, shell and time sample of a
+//!   face, one byte each (`round(255 · v)`: a step of 0.004, below both
+//!   the ray noise at the default 64 rays and the encodings' own
+//!   coefficient steps), texel-major (`[texel][shell][time]`) so that each
+//!   texel's (shell × time) block is contiguous for the encoders. At the
+//!   defaults (128², 8 shells, 255 times) that is 33 MiB, the bulk of a
+//!   face job's memory.
+//! * [`Part`]: the slices of a run of consecutive time samples, as
+//!   computed (`[time][shell][texel]`). A checkpoint stores only the parts
+//!   made since the one before, as blobs, and a small [`Manifest`] listing
+//!   every part's digest; a new attempt fetches the parts and goes on at
+//!   the first missing time sample. Parts are content-addressed and the
+//!   slices are a pure function of (seed, face, time), so the field, and
+//!   the asset, do not depend on where the job was interrupted.
+
+use serde::{Deserialize, Serialize};
+
+/// One face's field.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FaceField {
+    /// Texels per face edge.
+    pub resolution: usize,
+    /// Shells.
+    pub shells: usize,
+    /// Time samples.
+    pub times: usize,
+    /// `resolution² × shells × times` bytes, texel-major.
+    pub values: Vec<u8>,
+}
+
+/// Occlusion in [0, 1] as a field byte.
+pub fn quantise(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// A field byte as occlusion.
+pub fn dequantise(b: u8) -> f32 {
+    f32::from(b) / 255.0
+}
+
+/// Time samples per checkpoint: about 32 checkpoints a face whatever
+/// `S_t` is (8 time samples, about 1 MiB, at the defaults).
+pub fn checkpoint_batch(times: usize) -> usize {
+    times.div_ceil(32).max(1)
+}
+
+impl FaceField {
+    /// An all-zero field.
+    pub fn new(resolution: usize, shells: usize, times: usize) -> Self {
+        Self {
+            resolution,
+            shells,
+            times,
+            values: vec![0; resolution * resolution * shells * times],
+        }
+    }
+
+    /// Points per time slice (shells × texels).
+    pub fn slice_len(&self) -> usize {
+        self.shells * self.resolution * self.resolution
+    }
+
+    /// Stores time sample `time`'s slice (`[shell][texel]` bytes, the
+    /// order of `field::face_points`).
+    pub fn insert(&mut self, time: usize, slice: &[u8]) {
+        let texels = self.resolution * self.resolution;
+        debug_assert_eq!(slice.len(), self.slice_len());
+        for k in 0..self.shells {
+            for t in 0..texels {
+                self.values[(t * self.shells + k) * self.times + time] = slice[k * texels + t];
+            }
+        }
+    }
+
+    /// Texel `t`'s (shell × time) block, shell-major.
+    pub fn texel(&self, t: usize) -> &[u8] {
+        let n = self.shells * self.times;
+        &self.values[t * n..(t + 1) * n]
+    }
+
+    /// The field as a blob: `AOFF`, format 1, resolution, shells, times
+    /// (u32 each), then the bytes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(20 + self.values.len());
+        out.extend(FIELD_MAGIC);
+        for v in [1, self.resolution, self.shells, self.times] {
+            out.extend((v as u32).to_le_bytes());
+        }
+        out.extend(&self.values);
+        out
+    }
+
+    /// Reads a blob back, checking it against the expected shape.
+    pub fn from_bytes(bytes: &[u8], shape: (usize, usize, usize)) -> Result<Self, String> {
+        let head = read_head(bytes, FIELD_MAGIC, 20)?;
+        if (head[1], head[2], head[3]) != shape || head[0] != 1 {
+            return Err("a face field has another shape than the bake's".into());
+        }
+        let (resolution, shells, times) = shape;
+        let values = bytes[20..].to_vec();
+        if values.len() != resolution * resolution * shells * times {
+            return Err("a face field's length does not match its header".into());
+        }
+        Ok(Self {
+            resolution,
+            shells,
+            times,
+            values,
+        })
+    }
+}
+
+const FIELD_MAGIC: &[u8; 4] = b"AOFF";
+const PART_MAGIC: &[u8; 4] = b"AOFP";
+
+fn read_head(bytes: &[u8], magic: &[u8; 4], len: usize) -> Result<[usize; 4], String> {
+    if bytes.len() < len || &bytes[..4] != magic {
+        return Err(format!(
+            "not a {} blob",
+            String::from_utf8_lossy(&magic[..])
+        ));
+    }
+    Ok(std::array::from_fn(|i| {
+        u32::from_le_bytes(bytes[4 + 4 * i..8 + 4 * i].try_into().expect("4 bytes")) as usize
+    }))
+}
+
+/// Consecutive time slices of one face.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Part {
+    /// The first time sample.
+    pub first: usize,
+    /// Slices of `slice_len` bytes each.
+    pub slices: Vec<u8>,
+}
+
+impl Part {
+    /// As a blob: `AOFP`, format 1, face, first time, slices (u32 each),
+    /// then the bytes.
+    pub fn to_bytes(&self, face: usize, slice_len: usize) -> Vec<u8> {
+        let mut out = Vec::with_capacity(20 + self.slices.len());
+        out.extend(PART_MAGIC);
+        for v in [1, face, self.first, self.slices.len() / slice_len.max(1)] {
+            out.extend((v as u32).to_le_bytes());
+        }
+        out.extend(&self.slices);
+        out
+    }
+
+    /// Reads a part of `face` back.
+    pub fn from_bytes(bytes: &[u8], face: usize, slice_len: usize) -> Result<Self, String> {
+        let [version, f, first, count] = read_head(bytes, PART_MAGIC, 20)?;
+        if version != 1 || f != face {
+            return Err("a checkpoint part belongs to another face".into());
+        }
+        if bytes.len() - 20 != count * slice_len {
+            return Err("a checkpoint part's length does not match its header".into());
+        }
+        Ok(Self {
+            first,
+            slices: bytes[20..].to_vec(),
+        })
+    }
+
+    /// Writes its slices into `field`; they must continue it at `next`.
+    pub fn apply(&self, field: &mut FaceField, next: usize) -> Result<usize, String> {
+        let n = field.slice_len();
+        let count = self.slices.len() / n.max(1);
+        if self.first != next || next + count > field.times {
+            return Err(format!(
+                "a checkpoint part starts at time {} where {next} was expected",
+                self.first
+            ));
+        }
+        for (i, slice) in self.slices.chunks_exact(n).enumerate() {
+            field.insert(next + i, slice);
+        }
+        Ok(next + count)
+    }
+}
+
+/// A face job's checkpoint: the digests of its parts, in time order.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Manifest {
+    /// sha256 of each part blob.
+    pub parts: Vec<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slices_land_texel_major_and_parts_rebuild_the_field() {
+        let (res, shells, times) = (3, 2, 5);
+        let mut whole = FaceField::new(res, shells, times);
+        let n = whole.slice_len();
+        let slice =
+            |time: usize| -> Vec<u8> { (0..n).map(|p| (p * 7 + time * 31) as u8).collect() };
+        for t in 0..times {
+            whole.insert(t, &slice(t));
+        }
+        // Texel 4, shell 1, time 3 is slice 3's point 1·9 + 4.
+        assert_eq!(whole.texel(4)[times + 3], slice(3)[9 + 4]);
+        // Parts of 2, 2 and 1 slices through their blobs.
+        let mut rebuilt = FaceField::new(res, shells, times);
+        let mut next = 0;
+        for (first, count) in [(0, 2), (2, 2), (4, 1)] {
+            let part = Part {
+                first,
+                slices: (first..first + count).flat_map(slice).collect(),
+            };
+            let back = Part::from_bytes(&part.to_bytes(5, n), 5, n).unwrap();
+            next = back.apply(&mut rebuilt, next).unwrap();
+        }
+        assert_eq!(next, times);
+        assert_eq!(rebuilt, whole);
+        let blob = whole.to_bytes();
+        assert_eq!(
+            FaceField::from_bytes(&blob, (res, shells, times)).unwrap(),
+            whole
+        );
+        assert!(FaceField::from_bytes(&blob, (res, shells, 4)).is_err());
+        // A part out of order or of another face is refused.
+        let part = Part {
+            first: 3,
+            slices: slice(3),
+        };
+        assert!(part.apply(&mut rebuilt, 2).is_err());
+        assert!(Part::from_bytes(&part.to_bytes(1, n), 2, n).is_err());
+    }
+
+    #[test]
+    fn quantisation_is_within_half_a_step_and_batches_cover_the_cycle() {
+        for v in [0.0, 0.1234, 0.5, 0.999, 1.0] {
+            assert!((dequantise(quantise(v)) - v).abs() <= 0.5 / 255.0 + 1e-7);
+        }
+        assert_eq!(quantise(-1.0), 0);
+        assert_eq!(quantise(f32::NAN), 0);
+        assert_eq!(checkpoint_batch(255), 8);
+        assert_eq!(checkpoint_batch(16), 1);
+    }
+}
