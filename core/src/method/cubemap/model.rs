@@ -27,8 +27,11 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+use rayon::prelude::*;
+
 use super::{
     continuous, discrete,
+    face::{FaceField, dequantise},
     geometry::{FACES, Spheroid, face_of},
 };
 
@@ -164,6 +167,59 @@ impl CubemapModel {
         fade * (top + fy * (bottom - top))
     }
 
+    /// Encodes the six faces' fields (in face order) into a model: the
+    /// `assemble` job's work. `continuous` says how the continuous
+    /// encoding weighs its residuals (unused by the discrete one).
+    pub fn encode(
+        layout: CubemapLayout,
+        faces: &[FaceField],
+        continuous: continuous::Encoding,
+    ) -> Result<Self, String> {
+        let (res, shells, times) = (layout.resolution, layout.spheroid.shells, layout.times);
+        if faces.len() != FACES
+            || faces
+                .iter()
+                .any(|f| (f.resolution, f.shells, f.times) != (res, shells, times))
+        {
+            return Err("the face fields do not match the cubemap's layout".into());
+        }
+        let tables = continuous::Tables::new(times, shells);
+        let texels = res * res;
+        // Every texel's bytes for every cubemap, texel-major, in parallel.
+        let cubemaps = layout.cubemaps();
+        let per_texel: Vec<Vec<u8>> = (0..FACES * texels)
+            .into_par_iter()
+            .map(|n| {
+                let block: Vec<f32> = faces[n / texels]
+                    .texel(n % texels)
+                    .iter()
+                    .map(|&b| dequantise(b))
+                    .collect();
+                match layout.encoding {
+                    Encoding::Discrete => block
+                        .chunks_exact(times)
+                        .flat_map(discrete::encode)
+                        .collect(),
+                    Encoding::Continuous => {
+                        continuous::encode(&block, &tables, continuous).to_vec()
+                    }
+                }
+            })
+            .collect();
+        let mut bytes = vec![0u8; layout.texel_bytes()];
+        for (n, texel) in per_texel.iter().enumerate() {
+            let (face, t) = (n / texels, n % texels);
+            for c in 0..cubemaps {
+                let o = layout.offset(c, face, t % res, t / res);
+                bytes[o..o + 16].copy_from_slice(&texel[16 * c..16 * c + 16]);
+            }
+        }
+        Ok(Self {
+            layout,
+            texels: bytes,
+        })
+    }
+
     /// Bytes of the texels: what a renderer keeps in memory.
     pub fn bytes(&self) -> usize {
         self.texels.len()
@@ -221,6 +277,79 @@ mod tests {
         assert!((q(1.125) - 0.1).abs() < step, "half faded");
         assert_eq!(q(1.3), 0.0);
         assert_eq!(m.occlusion(Vec3::NAN, 0.0), 0.0);
+    }
+
+    /// A smooth field on every face: darker towards the inner shells and
+    /// towards +y, varying over the cycle.
+    fn smooth_faces(l: &CubemapLayout) -> Vec<FaceField> {
+        use super::super::geometry::texel_direction;
+        let (res, shells, times) = (l.resolution, l.spheroid.shells, l.times);
+        (0..FACES)
+            .map(|face| {
+                let mut f = FaceField::new(res, shells, times);
+                for t in 0..times {
+                    let phase = t as f32 / times as f32;
+                    let slice: Vec<u8> = (0..shells * res * res)
+                        .map(|p| {
+                            let (k, texel) = (p / (res * res), p % (res * res));
+                            let d = texel_direction(face, texel % res, texel / res, res);
+                            let v = (0.5 - 0.1 * k as f32)
+                                * (0.6 + 0.3 * d.y)
+                                * (0.8 + 0.2 * (std::f32::consts::TAU * phase).cos());
+                            super::super::face::quantise(v)
+                        })
+                        .collect();
+                    f.insert(t, &slice);
+                }
+                f
+            })
+            .collect()
+    }
+
+    #[test]
+    fn both_encodings_give_back_a_smooth_field_at_its_sample_points() {
+        use super::super::geometry::texel_direction;
+        for (encoding, tolerance) in [(Encoding::Discrete, 0.025), (Encoding::Continuous, 0.01)] {
+            let l = layout(encoding);
+            let faces = smooth_faces(&l);
+            let m = CubemapModel::encode(
+                l,
+                &faces,
+                continuous::Encoding {
+                    bright_weight: 0.6,
+                    residuals: true,
+                },
+            )
+            .unwrap();
+            assert_eq!(m.bytes(), l.texel_bytes());
+            let mut worst = 0.0f32;
+            for (face, field) in faces.iter().enumerate() {
+                for texel in [0, 5, 10, 15] {
+                    let (i, j) = (texel % 4, texel / 4);
+                    let d = texel_direction(face, i, j, 4);
+                    for k in 0..4 {
+                        for t in [0, 17, 40, 63] {
+                            let p = l.spheroid.point(d, k);
+                            let got = m.occlusion(p, t as f32 / 64.0);
+                            let want = dequantise(field.texel(texel)[k * 64 + t]);
+                            worst = worst.max((got - want).abs());
+                        }
+                    }
+                }
+            }
+            assert!(worst < tolerance, "{encoding:?}: worst {worst}");
+        }
+        assert!(
+            CubemapModel::encode(
+                layout(Encoding::Discrete),
+                &[],
+                continuous::Encoding {
+                    bright_weight: 0.6,
+                    residuals: true,
+                }
+            )
+            .is_err()
+        );
     }
 
     #[test]
