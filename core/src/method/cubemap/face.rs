@@ -16,7 +16,15 @@
 //!   slices are a pure function of (seed, face, time), so the field, and
 //!   the asset, do not depend on where the job was interrupted.
 
+use glam::Vec3;
 use serde::{Deserialize, Serialize};
+
+use crate::trace::{KroonParams, TraceError};
+
+use super::{
+    field::{face_points, face_slice},
+    geometry::Spheroid,
+};
 
 /// One face's field.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -189,9 +197,150 @@ pub struct Manifest {
     pub parts: Vec<String>,
 }
 
+/// What a face's sampling needs besides the mesh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FaceSampling {
+    /// The spheroid and its shells.
+    pub spheroid: Spheroid,
+    /// Texels per face edge.
+    pub resolution: usize,
+    /// Eq. 3.1's parameters (its seed is scrambled per face).
+    pub kroon: KroonParams,
+}
+
+/// Why computing a face stopped.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FaceError<E> {
+    /// The tracer refused the input.
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    /// Saving a part asked the computation to stop.
+    #[error("stopped after a checkpoint")]
+    Stopped(E),
+}
+
+/// Computes time samples `next..field.times` of `face` into `field`:
+/// `positions(m)` is the posed mesh at time sample `m`. After every
+/// [`checkpoint_batch`] time samples (and at the end) the new slices go to
+/// `save` as a [`Part`]; an `Err` from it stops the computation, keeping
+/// what was saved.
+pub fn compute_face<E>(
+    sampling: &FaceSampling,
+    face: usize,
+    triangles: &[[u32; 3]],
+    positions: &mut dyn FnMut(usize) -> Vec<Vec3>,
+    field: &mut FaceField,
+    next: usize,
+    save: &mut dyn FnMut(Part, usize) -> Result<(), E>,
+) -> Result<(), FaceError<E>> {
+    let points = face_points(&sampling.spheroid, face, sampling.resolution);
+    let batch = checkpoint_batch(field.times);
+    let mut part = Part {
+        first: next,
+        slices: Vec::with_capacity(batch * points.len()),
+    };
+    for m in next..field.times {
+        let ao = face_slice(&positions(m), triangles, &points, face, &sampling.kroon)?;
+        let slice: Vec<u8> = ao.into_iter().map(quantise).collect();
+        field.insert(m, &slice);
+        part.slices.extend(slice);
+        let done = m + 1;
+        if done - part.first == batch || done == field.times {
+            let full = std::mem::replace(
+                &mut part,
+                Part {
+                    first: done,
+                    slices: Vec::with_capacity(batch * points.len()),
+                },
+            );
+            save(full, done).map_err(FaceError::Stopped)?;
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_interrupted_face_resumed_from_its_parts_equals_an_uninterrupted_one() {
+        use crate::trace::shapes::icosphere;
+        let sphere = icosphere(2, 0.5, Vec3::ZERO);
+        // The sphere orbits the centre over the cycle.
+        let times = 12;
+        let mut positions = |m: usize| -> Vec<Vec3> {
+            let a = std::f32::consts::TAU * m as f32 / times as f32;
+            let offset = 0.4 * Vec3::new(a.cos(), 0.0, a.sin());
+            sphere.positions.iter().map(|&p| p + offset).collect()
+        };
+        let sampling = FaceSampling {
+            spheroid: Spheroid {
+                centre: Vec3::ZERO,
+                radii: Vec3::splat(1.0),
+                outer: 1.5,
+                inner: 0.3,
+                shells: 3,
+            },
+            resolution: 4,
+            kroon: KroonParams {
+                samples: 32,
+                max_distance: 2.0,
+                alpha: 1.0,
+                weight: 1.0,
+                seed: 3,
+            },
+        };
+        let run = |field: &mut FaceField,
+                   next: usize,
+                   stop_after: Option<usize>,
+                   parts: &mut Vec<Vec<u8>>,
+                   positions: &mut dyn FnMut(usize) -> Vec<Vec3>| {
+            let n = field.slice_len();
+            compute_face(
+                &sampling,
+                0,
+                &sphere.triangles,
+                positions,
+                field,
+                next,
+                &mut |part: Part, done: usize| {
+                    parts.push(part.to_bytes(0, n));
+                    if stop_after.is_some_and(|s| done >= s) {
+                        Err(())
+                    } else {
+                        Ok(())
+                    }
+                },
+            )
+        };
+        let mut whole = FaceField::new(4, 3, times);
+        let mut parts = Vec::new();
+        run(&mut whole, 0, None, &mut parts, &mut positions).unwrap();
+        assert_eq!(parts.len(), times, "a part per time sample at 12 samples");
+        assert!(whole.values.iter().any(|&v| v > 0));
+        // Stopped after 5 samples, then resumed from the saved parts only.
+        let mut first = FaceField::new(4, 3, times);
+        let mut saved = Vec::new();
+        let stopped = run(&mut first, 0, Some(5), &mut saved, &mut positions);
+        assert!(matches!(stopped, Err(FaceError::Stopped(()))));
+        let mut resumed = FaceField::new(4, 3, times);
+        let n = resumed.slice_len();
+        let mut next = 0;
+        for blob in &saved {
+            next = Part::from_bytes(blob, 0, n)
+                .unwrap()
+                .apply(&mut resumed, next)
+                .unwrap();
+        }
+        assert_eq!(next, 5);
+        run(&mut resumed, next, None, &mut saved, &mut positions).unwrap();
+        assert_eq!(resumed, whole, "the same bytes however it was interrupted");
+        // The occlusion follows the sphere: the +x texels are darkest when
+        // it is at +x (time 0) and lightest when it is at −x (time 6).
+        let centre_texel = whole.texel(4 + 1);
+        assert!(centre_texel[2 * times] > centre_texel[2 * times + 6]);
+    }
 
     #[test]
     fn slices_land_texel_major_and_parts_rebuild_the_field() {
