@@ -11,15 +11,17 @@
 //!   texel's (time × distance) field (5 × 5 cosine basis and two residual
 //!   cubics, 64 bytes over four cubemaps).
 //! * [`face`]: one face's raw field (a byte per texel, shell and time
-//!   sample) and the parts and manifest its incremental checkpoints are
-//!   made of.
+//!   sample), [`face::compute_face`] (the `face` job's loop) and the parts
+//!   and manifest its incremental checkpoints are made of.
 //! * [`model`]: a baked cubemap at run time: the texel layout an engine
 //!   uploads and the CPU lookup (bilinear over texels, linear over shells,
 //!   continuous in time).
 //!
-//! Still to come (issue 12): the `face` jobs with incremental checkpoints,
-//! `assemble` into the asset container, the WGSL lookup, the evaluation
-//! and previews.
+//! Still to come (issue 12): the methods' names and options in
+//! `BakeParams`, the `face` → `assemble` → `evaluate` → `preview` graph in
+//! `bake/` (with `JobSink` saving and loading checkpoint parts), the asset
+//! container sections, the WGSL lookup, the evaluation and previews, the
+//! EXR export.
 
 pub mod continuous;
 pub mod discrete;
