@@ -46,6 +46,9 @@ enum What {
     /// Preview render time per panel (the model's AO on the GPU, raster,
     /// readback) on every adapter among Vulkan and GL.
     Preview(super::preview::BenchArgs),
+    /// A cubemap face job's tracing rate (Kroon's Eq. 3.1 from points in
+    /// space) beside the per-vertex tracer's on the same posed meshes.
+    Cubemap(super::bench_cubemap::Args),
 }
 
 #[derive(Debug, clap::Args)]
@@ -116,10 +119,11 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         What::Queue(a) => super::bench_service::queue(a),
         What::Api(a) => super::bench_service::api(a),
         What::Preview(a) => super::preview::bench(a),
+        What::Cubemap(a) => super::bench_cubemap::run(a),
     }
 }
 
-fn median(v: &[f64]) -> f64 {
+pub(super) fn median(v: &[f64]) -> f64 {
     let mut s = v.to_vec();
     s.sort_by(f64::total_cmp);
     let n = s.len();
