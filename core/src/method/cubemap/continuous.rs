@@ -66,16 +66,11 @@ pub struct Tables {
 impl Tables {
     /// Tables for `times` time samples and `shells` shells.
     pub fn new(times: usize, shells: usize) -> Self {
-        let row = |x: f32| std::array::from_fn(|i| (std::f32::consts::PI * i as f32 * x).cos());
         Self {
             times,
             shells,
-            time: (0..times)
-                .map(|t| row((t as f32 + 0.5) / times as f32))
-                .collect(),
-            distance: (0..shells)
-                .map(|k| row((k as f32 + 0.5) / shells as f32))
-                .collect(),
+            time: (0..times).map(|t| basis_row(times, t as f32)).collect(),
+            distance: (0..shells).map(|k| basis_row(shells, k as f32)).collect(),
         }
     }
 }
@@ -253,6 +248,13 @@ mod tests {
     const T: usize = 255;
     const S: usize = 8;
 
+    fn encoding(bright_weight: f32, residuals: bool) -> Encoding {
+        Encoding {
+            bright_weight,
+            residuals,
+        }
+    }
+
     /// A smooth field: dark near the character (small k), a dip in time.
     fn smooth(k: usize, tau: usize) -> f32 {
         let x = tau as f32 / T as f32;
@@ -288,14 +290,7 @@ mod tests {
                 0.4 + 0.2 * t[2] * d[1] + 0.1 * t[1]
             })
             .collect();
-        let bytes = encode(
-            &field,
-            &tables,
-            Encoding {
-                bright_weight: 0.6,
-                residuals: false,
-            },
-        );
+        let bytes = encode(&field, &tables, encoding(0.6, false));
         let (_, _, worst) = errors(&field, &bytes);
         assert!(worst < 1e-3, "worst {worst}");
         assert!(bytes[58..].iter().all(|&b| b == 0));
@@ -317,22 +312,8 @@ mod tests {
                 }
             })
             .collect();
-        let plain = encode(
-            &field,
-            &tables,
-            Encoding {
-                bright_weight: 0.6,
-                residuals: false,
-            },
-        );
-        let curves = encode(
-            &field,
-            &tables,
-            Encoding {
-                bright_weight: 0.6,
-                residuals: true,
-            },
-        );
+        let plain = encode(&field, &tables, encoding(0.6, false));
+        let curves = encode(&field, &tables, encoding(0.6, true));
         let (dark_plain, bright_plain, _) = errors(&field, &plain);
         let (dark_curves, bright_curves, _) = errors(&field, &curves);
         assert!(
@@ -343,14 +324,7 @@ mod tests {
         // less darkness; weighted evenly, the curves are a least-squares
         // correction and cannot raise the total squared error (beyond
         // quantisation and the clamp to [0, 1]).
-        let even = encode(
-            &field,
-            &tables,
-            Encoding {
-                bright_weight: 1.0,
-                residuals: true,
-            },
-        );
+        let even = encode(&field, &tables, encoding(1.0, true));
         let (dark_even, bright_even, _) = errors(&field, &even);
         assert!(
             dark_even + bright_even <= dark_plain + bright_plain + 1e-3,
@@ -366,14 +340,7 @@ mod tests {
     fn decoding_interpolates_between_samples_and_wraps_in_time() {
         let tables = Tables::new(T, S);
         let field: Vec<f32> = (0..S * T).map(|s| smooth(s / T, s % T)).collect();
-        let bytes = encode(
-            &field,
-            &tables,
-            Encoding {
-                bright_weight: 0.6,
-                residuals: true,
-            },
-        );
+        let bytes = encode(&field, &tables, encoding(0.6, true));
         let (_, _, worst) = errors(&field, &bytes);
         assert!(worst < 0.05, "worst {worst}");
         let a = decode(&bytes, T, S, 10.0, 3.0);
