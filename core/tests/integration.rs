@@ -3,6 +3,8 @@
 #[path = "integration/util.rs"]
 mod util;
 
+#[path = "integration/cubemap.rs"]
+mod cubemap;
 #[path = "integration/jobs.rs"]
 mod jobs;
 #[path = "integration/malformed.rs"]

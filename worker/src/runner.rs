@@ -157,6 +157,23 @@ impl JobSink for Sink<'_> {
     fn progress(&mut self, done: u64, _total: u64) {
         self.flags.progress.store(done, Ordering::Relaxed);
     }
+
+    fn save_part(&mut self, bytes: &[u8]) -> Option<String> {
+        match self.client.put_blob(bytes) {
+            Ok(digest) => Some(digest),
+            // The job keeps the part and offers it again at its next
+            // checkpoint; until then no checkpoint is recorded.
+            Err(e) => {
+                eprintln!("job {}: checkpoint part not saved: {e}", self.job);
+                None
+            }
+        }
+    }
+
+    fn load_part(&mut self, digest: &str) -> Result<Vec<u8>, JobError> {
+        with_retries(|| self.client.get_blob(digest))
+            .map_err(|e| JobError::Failed(format!("cannot fetch checkpoint part {digest}: {e}")))
+    }
 }
 
 fn inputs(client: &Client, lease: &Lease, cache: &InputCache) -> Result<Arc<BakeInputs>, JobError> {

@@ -1,6 +1,9 @@
-//! The report every per-vertex bake carries (DESIGN §6): a JSON document
-//! and a PNG plot of PSNR per frame over each test clip for the model and
-//! the static-average baseline, as Kontkanen & Aila plot it (Fig. 3).
+//! The report every bake carries (DESIGN §6): a JSON document and a PNG.
+//! A per-vertex bake's [`Report`] plots PSNR per frame over each test clip
+//! for the model and the static-average baseline, as Kontkanen & Aila plot
+//! it (Fig. 3); a cubemap bake's [`CubemapReport`] gives every encoding's
+//! errors in space and on the ground and Kroon's time × distance charts.
+//! [`BakeReport`] is either, told apart by the method.
 
 use std::sync::OnceLock;
 
@@ -11,7 +14,10 @@ use serde::{Deserialize, Serialize};
 use crate::{
     asset::metrics::psnr,
     bake::{BakeParams, Evaluation, FitStats},
-    method::Method,
+    method::{
+        Family, Method,
+        cubemap::{evaluate::CubemapEvaluation, model::CubemapLayout},
+    },
     trace::AoBlock,
 };
 
@@ -20,14 +26,15 @@ use crate::{
 /// fonts.
 pub(crate) static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
-/// Wall-clock seconds of each stage.
+/// Wall-clock seconds of each stage (summed over jobs).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Timings {
-    /// Ray tracing the reference poses.
+    /// Ray tracing the reference poses (a cubemap: its six faces).
     pub reference_trace_s: f64,
-    /// Fitting the model (and the baseline).
+    /// Fitting the model and the baseline (a cubemap: encoding it).
     pub fit_s: f64,
-    /// Ray tracing the held-out poses.
+    /// Ray tracing the held-out poses (a cubemap: the evaluation's ground
+    /// truth).
     pub test_trace_s: f64,
     /// Evaluating the model on them.
     pub evaluate_s: f64,
@@ -90,6 +97,108 @@ pub struct Report {
     pub ground_truth_noise: NoiseEstimate,
 }
 
+/// A cubemap bake's report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CubemapReport {
+    /// The method.
+    pub method: Method,
+    /// The bake key.
+    pub bake_key: String,
+    /// The parameters.
+    pub params: BakeParams,
+    /// The character (its train and test clips are the baked clip).
+    pub character: CharacterInfo,
+    /// The baked clip.
+    pub clip: String,
+    /// Where the cubemaps sit.
+    pub layout: CubemapLayout,
+    /// Rays traced: the faces' sample points and the ground truth.
+    pub rays: u64,
+    /// Stage times.
+    pub timings: Timings,
+    /// Sizes: the asset, its texels, and the static baseline (a byte per
+    /// texel and shell).
+    pub sizes: Sizes,
+    /// Every encoding and reference against the ground truth.
+    pub evaluation: CubemapEvaluation,
+    /// The texels the charts (`plot.png`) show, with each encoding's
+    /// summed squared errors there.
+    pub charts: Vec<ChartTexel>,
+}
+
+/// A texel of the charts and each encoding's squared errors summed over
+/// its (time × distance) chart against the input, as Kroon's Tables
+/// 5.1–5.3 give them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChartTexel {
+    /// Why it was chosen: `worst`, `90th percentile` or `median`.
+    pub name: String,
+    /// Its face.
+    pub face: usize,
+    /// Its texel in the face (`j · resolution + i`).
+    pub texel: usize,
+    /// Per encoding: (too dark, too bright, total).
+    pub sums: Vec<(String, [f64; 3])>,
+}
+
+/// Either kind of report, told apart by its method's family.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum BakeReport {
+    /// A per-vertex bake's.
+    Vertex(Box<Report>),
+    /// A cubemap bake's.
+    Cubemap(Box<CubemapReport>),
+}
+
+impl<'de> Deserialize<'de> for BakeReport {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error as _;
+        let value = serde_json::Value::deserialize(d)?;
+        let method: Method = serde_json::from_value(value["method"].clone())
+            .map_err(|e| D::Error::custom(format!("report.method: {e}")))?;
+        match method.family() {
+            Family::Vertex => serde_json::from_value(value).map(Self::Vertex),
+            Family::Cubemap => serde_json::from_value(value).map(Self::Cubemap),
+        }
+        .map_err(D::Error::custom)
+    }
+}
+
+impl BakeReport {
+    /// The method.
+    pub fn method(&self) -> Method {
+        match self {
+            Self::Vertex(r) => r.method,
+            Self::Cubemap(r) => r.method,
+        }
+    }
+
+    /// The bake key.
+    pub fn bake_key(&self) -> &str {
+        match self {
+            Self::Vertex(r) => &r.bake_key,
+            Self::Cubemap(r) => &r.bake_key,
+        }
+    }
+
+    /// The sizes.
+    pub fn sizes(&self) -> Sizes {
+        match self {
+            Self::Vertex(r) => r.sizes,
+            Self::Cubemap(r) => r.sizes,
+        }
+    }
+
+    /// The per-vertex report, if it is one.
+    pub fn vertex(&self) -> Option<&Report> {
+        match self {
+            Self::Vertex(r) => Some(r),
+            Self::Cubemap(_) => None,
+        }
+    }
+}
+
 /// The Monte Carlo noise of the ground truth: some held-out poses traced a
 /// second time with independent rays. The difference of two independent
 /// estimates has twice the variance of one, so the figures are the
@@ -135,13 +244,7 @@ impl NoiseEstimate {
 /// Draws PSNR per frame over each test clip (one panel per clip, the model
 /// and the baseline in each) as PNG bytes.
 pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
-    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
-    REGISTERED
-        .get_or_init(|| {
-            register_font("sans-serif", FontStyle::Normal, FONT)
-                .map_err(|_| "the bundled font is invalid".to_owned())
-        })
-        .clone()?;
+    register_plot_font()?;
     let clips = &report.evaluation.clips;
     let (width, panel) = (900u32, 280u32);
     let height = 50 + panel * clips.len().max(1) as u32;
@@ -220,13 +323,29 @@ pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
         }
         root.present().map_err(e)?;
     }
+    encode_rgb_png(&rgb, width, height)
+}
+
+/// Registers the bundled font as plotters' `sans-serif` (once).
+pub(crate) fn register_plot_font() -> Result<(), String> {
+    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
+    REGISTERED
+        .get_or_init(|| {
+            register_font("sans-serif", FontStyle::Normal, FONT)
+                .map_err(|_| "the bundled font is invalid".to_owned())
+        })
+        .clone()
+}
+
+/// An RGB8 image as PNG bytes.
+pub(crate) fn encode_rgb_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>, String> {
     let mut png = Vec::new();
     {
         let mut encoder = png::Encoder::new(&mut png, width, height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
         let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
-        writer.write_image_data(&rgb).map_err(|e| e.to_string())?;
+        writer.write_image_data(rgb).map_err(|e| e.to_string())?;
     }
     Ok(png)
 }

@@ -60,6 +60,7 @@ impl Bake<'_> {
     pub fn graph(&self, options: GraphOptions) -> JobGraph {
         match self.plan.params.method.family() {
             Family::Vertex => self.vertex_graph(options),
+            Family::Cubemap => self.cubemap_graph(options),
         }
     }
 

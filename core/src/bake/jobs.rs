@@ -26,7 +26,10 @@ use crate::{
         Container,
         report::{CharacterInfo, NoiseEstimate, Report, Sizes, Timings, psnr_plot_png},
     },
-    method::vertex::{FitStats, Model, StaticAverage},
+    method::{
+        Family,
+        vertex::{FitStats, Model, StaticAverage},
+    },
     rig::pose::Pose,
     trace::{AoBlock, SceneOptions, no_progress, trace_poses},
 };
@@ -74,6 +77,14 @@ pub enum JobSpec {
     },
     /// Fit the model and the baseline to the reference blocks.
     Fit,
+    /// Trace every shell and time sample of one cubemap face
+    /// (checkpointed after every batch of time samples).
+    Face {
+        /// The face: 0..6 in the order +x, −x, +y, −y, +z, −z.
+        face: usize,
+        /// Its time samples (the units of its progress).
+        times: usize,
+    },
     /// Judge the model on the held-out poses.
     Evaluate,
     /// Pack the asset, the report and the plot.
@@ -88,16 +99,19 @@ impl JobSpec {
         match self {
             Self::Sample { .. } => "sample",
             Self::Fit => "fit",
+            Self::Face { .. } => "face",
             Self::Evaluate => "evaluate",
             Self::Assemble => "assemble",
             Self::Preview => "preview",
         }
     }
 
-    /// Units of progress the job is worth (poses for `sample`, 1 else).
+    /// Units of progress the job is worth (poses for `sample`, time
+    /// samples for `face`, 1 else).
     pub fn work(&self) -> u64 {
         match self {
             Self::Sample { count, .. } => *count as u64,
+            Self::Face { times, .. } => *times as u64,
             _ => 1,
         }
     }
@@ -112,6 +126,12 @@ impl std::fmt::Display for JobSpec {
                 set.output().trim_start_matches("ao-"),
                 first + count
             ),
+            Self::Face { face, .. } => {
+                let name = ["+x", "-x", "+y", "-y", "+z", "-z"]
+                    .get(*face)
+                    .unwrap_or(&"?");
+                write!(f, "face {name}")
+            }
             other => f.write_str(other.kind()),
         }
     }
@@ -146,7 +166,7 @@ impl JobOutput {
             .map(|o| o.bytes.as_slice())
     }
 
-    fn push(&mut self, name: &str, bytes: Vec<u8>) {
+    pub(super) fn push(&mut self, name: &str, bytes: Vec<u8>) {
         self.outputs.push(Output {
             name: name.to_owned(),
             bytes,
@@ -173,12 +193,23 @@ pub struct Stop(pub String);
 
 /// Where a running job reports: checkpoints and progress. The in-process
 /// runner ignores checkpoints; a worker saves them as blobs.
+///
+/// A job whose partial result grows large (a cubemap face: 33 MiB at the
+/// defaults) checkpoints incrementally: it saves each new piece once with
+/// [`JobSink::save_part`] and its checkpoint's data lists the pieces'
+/// digests, so a checkpoint writes only what is new since the last one.
 pub trait JobSink {
     /// Saves a checkpoint. `Err` asks the job to stop now; what it saved
     /// is kept for the next attempt.
     fn checkpoint(&mut self, checkpoint: Checkpoint) -> Result<(), Stop>;
     /// `done` of `total` units of the job's work are done.
     fn progress(&mut self, done: u64, total: u64);
+    /// Stores a piece of a checkpoint; its sha256 (hex), or `None` when it
+    /// could not be stored (the job then keeps it and tries again at its
+    /// next checkpoint).
+    fn save_part(&mut self, bytes: &[u8]) -> Option<String>;
+    /// A piece stored by an earlier attempt, by its sha256.
+    fn load_part(&mut self, digest: &str) -> Result<Vec<u8>, JobError>;
 }
 
 /// A sink that keeps nothing: for runs that are never resumed.
@@ -191,6 +222,16 @@ impl JobSink for NoSink {
     }
 
     fn progress(&mut self, _: u64, _: u64) {}
+
+    fn save_part(&mut self, bytes: &[u8]) -> Option<String> {
+        Some(crate::digest::sha256_hex(bytes))
+    }
+
+    fn load_part(&mut self, digest: &str) -> Result<Vec<u8>, JobError> {
+        Err(JobError::Invalid(format!(
+            "checkpoint part {digest} was never kept: this run is not resumable"
+        )))
+    }
 }
 
 /// Why a job failed, and whether trying again can help.
@@ -306,10 +347,25 @@ pub struct Bake<'a> {
 impl<'a> Bake<'a> {
     /// Checks the parameters against the inputs.
     pub fn new(inputs: &'a BakeInputs, params: BakeParams) -> Result<Self, BakeError> {
-        Ok(Self {
+        let bake = Self {
             inputs,
             plan: Plan::new(&inputs.character, &inputs.clips, params)?,
-        })
+        };
+        if let Some(name) = &bake.plan.params.cubemap.clip
+            && bake.plan.params.method.family() == Family::Cubemap
+            && !inputs.clips.iter().any(|c| &c.name == name)
+        {
+            return Err(BakeError::UnknownClip {
+                name: name.clone(),
+                known: inputs
+                    .clips
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            });
+        }
+        Ok(bake)
     }
 
     /// Poses `range` of a set, seeded: the same request gives the same
@@ -344,13 +400,24 @@ impl<'a> Bake<'a> {
         resume: Option<Checkpoint>,
         sink: &mut dyn JobSink,
     ) -> Result<JobOutput, JobError> {
+        let cubemap = self.plan.params.method.family() == Family::Cubemap;
         match spec {
-            JobSpec::Sample { set, first, count } => {
+            JobSpec::Sample { set, first, count } if !cubemap => {
                 self.sample(*set, *first, *count, resume, sink)
             }
-            JobSpec::Fit => self.fit(deps),
+            JobSpec::Fit if !cubemap => self.fit(deps),
+            JobSpec::Face { face, times } if cubemap => self.face(*face, *times, resume, sink),
+            JobSpec::Evaluate if cubemap => self.cubemap_evaluate(deps),
+            JobSpec::Assemble if cubemap => self.cubemap_assemble(deps),
             JobSpec::Evaluate => self.evaluate(deps),
             JobSpec::Assemble => self.assemble(deps),
+            JobSpec::Sample { .. } | JobSpec::Fit | JobSpec::Face { .. } => {
+                Err(JobError::Invalid(format!(
+                    "a {} job is not part of a {} bake",
+                    spec.kind(),
+                    self.plan.params.method
+                )))
+            }
             JobSpec::Preview => Err(JobError::Invalid(
                 "a preview job needs a renderer: run it with Bake::preview".into(),
             )),
@@ -511,7 +578,7 @@ impl<'a> Bake<'a> {
         }
     }
 
-    fn header(&self) -> crate::method::vertex::AssetHeaderFields {
+    pub(super) fn header(&self) -> crate::method::vertex::AssetHeaderFields {
         self.plan
             .header(&self.inputs.character_digest, &self.inputs.clip_digests)
     }
@@ -619,22 +686,22 @@ impl<'a> Bake<'a> {
     }
 }
 
-fn json(value: &impl Serialize) -> Vec<u8> {
+pub(super) fn json(value: &impl Serialize) -> Vec<u8> {
     serde_json::to_vec(value).expect("job documents serialise")
 }
 
-fn parse<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, JobError> {
+pub(super) fn parse<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, JobError> {
     serde_json::from_slice(bytes).map_err(|e| JobError::Invalid(format!("a job document: {e}")))
 }
 
-fn find<'o>(deps: &[&'o JobOutput], name: &str) -> Result<&'o JobOutput, JobError> {
+pub(super) fn find<'o>(deps: &[&'o JobOutput], name: &str) -> Result<&'o JobOutput, JobError> {
     deps.iter()
         .copied()
         .find(|d| d.get(name).is_some())
         .ok_or_else(|| JobError::Invalid(format!("no dependency produced {name}")))
 }
 
-fn named<'o>(output: &'o JobOutput, name: &str) -> Result<&'o [u8], JobError> {
+pub(super) fn named<'o>(output: &'o JobOutput, name: &str) -> Result<&'o [u8], JobError> {
     output
         .get(name)
         .ok_or_else(|| JobError::Invalid(format!("no output named {name}")))

@@ -9,7 +9,8 @@
 //! 4. [`JobGraph`] ([`graph`]): the bake cut into jobs.
 //! 5. The job functions ([`jobs`]): `sample`, `fit`, `evaluate`,
 //!    `assemble`, each `(spec, dependency outputs, checkpoint?) → outputs`,
-//!    and `preview` ([`preview`]), which also needs a [`Renderer`].
+//!    and `preview` ([`preview`]), which also needs a [`Renderer`]; a
+//!    cubemap bake's `face`, `assemble` and `evaluate` are in [`cubemap`].
 //! 6. [`run_graph`] ([`runner`]): the whole graph in this process.
 //!
 //! Everything is seeded from [`BakeParams::seed`]: the same request gives
@@ -17,6 +18,7 @@
 //! however the bake was cut into jobs and however often a job was
 //! interrupted.
 
+pub mod cubemap;
 pub mod evaluation;
 pub mod graph;
 pub mod inputs;

@@ -11,8 +11,9 @@ use serde_json::{Map, Value};
 use crate::{
     digest::sha256_hex,
     method::{
-        Method,
-        vertex::{ALGORITHM_VERSION, ClusteredOptions, LinearOptions},
+        Family, Method,
+        cubemap::CubemapOptions,
+        vertex::{ClusteredOptions, LinearOptions},
     },
     pose_space::ParamError,
     trace::{Falloff, SurfaceParams},
@@ -36,7 +37,7 @@ pub enum ReferenceSource {
     Mixed,
 }
 
-/// Everything that determines a per-vertex bake besides its inputs. The
+/// Everything that determines a bake besides its inputs. The
 /// fully defaulted value goes into the bake key and the asset header.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -71,6 +72,8 @@ pub struct BakeParams {
     pub linear: LinearOptions,
     /// vertex-clustered options.
     pub clustered: ClusteredOptions,
+    /// Cubemap options (both cubemap methods).
+    pub cubemap: CubemapOptions,
 }
 
 impl BakeParams {
@@ -97,6 +100,7 @@ impl BakeParams {
             range_margin: 0.1,
             linear: LinearOptions::default(),
             clustered: ClusteredOptions::default(),
+            cubemap: CubemapOptions::default(),
         }
     }
 
@@ -140,6 +144,9 @@ impl BakeParams {
         }
         if self.method != Method::VertexClustered {
             map.remove("clustered");
+        }
+        if self.method.family() != Family::Cubemap {
+            map.remove("cubemap");
         }
         v
     }
@@ -263,13 +270,18 @@ impl BakeParams {
         if !(c.clamp >= 0.0 && c.clamp.is_finite()) {
             return Err(BakeError::Param("clamp must be a finite number ≥ 0".into()));
         }
+        p.cubemap.validate().map_err(BakeError::Param)?;
         Ok(())
     }
 
     /// Ray-vertex pairs the bake traces for a character of `vertices`
-    /// vertices with `test_frames` clip frames held out: what the service
+    /// vertices with `test_frames` clip frames held out (a cubemap bake:
+    /// the rays of its sample points and its evaluation): what the service
     /// bounds per request.
     pub fn work(&self, vertices: usize, test_frames: usize) -> u128 {
+        if self.method.family() == Family::Cubemap {
+            return self.cubemap.rays_total();
+        }
         let poses = self.poses + self.eval_poses + test_frames + NOISE_POSES;
         poses as u128 * vertices as u128 * u128::from(self.samples)
     }
@@ -307,7 +319,7 @@ fn merge(value: &mut Value, path: &[&str], v: Value, key: &str) -> Result<(), Ba
 /// parameters and the algorithm version.
 pub fn bake_key(character: &str, clips: &[String], params: &BakeParams) -> String {
     let request = serde_json::json!({
-        "algorithm_version": ALGORITHM_VERSION,
+        "algorithm_version": params.method.algorithm_version(),
         "character": character,
         "clips": clips,
         "method": params.method,

@@ -6,7 +6,9 @@ use std::ops::Range;
 
 use crate::{
     Character, Clip,
+    method::Family,
     method::vertex::{AssetHeaderFields, FitStats, Model},
+    pose_space::ParamError,
     pose_space::{ClipFrame, Handles, JointAngles, LayoutOptions, random_clip_frames},
     rig::pose::Pose,
     trace::AoBlock,
@@ -88,14 +90,23 @@ impl<'a> Plan<'a> {
         let train = select(clips, &p.train_clips)?;
         let test = select(clips, &p.test_clips)?;
         let train_clips: Vec<Clip> = train.iter().map(|&i| clips[i].clone()).collect();
-        let joint_angles = JointAngles::from_clips(
+        let joint_angles = match JointAngles::from_clips(
             character,
             &train_clips,
             LayoutOptions {
                 margin: p.range_margin,
                 ..LayoutOptions::default()
             },
-        )?;
+        ) {
+            Ok(layout) => layout,
+            // A cubemap bakes the world around the clip as it plays, root
+            // motion included (Kroon's spinning cube has nothing else), so
+            // it needs no joint angles.
+            Err(ParamError::NothingAnimated) if p.method.family() == Family::Cubemap => {
+                JointAngles::default()
+            }
+            Err(e) => return Err(e.into()),
+        };
         Ok(Self {
             character,
             clips,

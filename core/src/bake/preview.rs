@@ -15,12 +15,10 @@
 //! adapter draws the same bytes. Render times go into [`PreviewInfo`],
 //! never into an image.
 
-use std::sync::OnceLock;
 use std::time::Instant;
 
 use glam::{Mat4, Vec3};
 use plotters::prelude::*;
-use plotters::style::{FontStyle, register_font};
 use serde::{Deserialize, Serialize};
 
 use crate::{
@@ -587,14 +585,7 @@ fn render(
 
 /// The font of titles and legends (the report's, DejaVu Sans).
 fn font() -> Result<(), JobError> {
-    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
-    REGISTERED
-        .get_or_init(|| {
-            register_font("sans-serif", FontStyle::Normal, crate::asset::report::FONT)
-                .map_err(|_| "the bundled font is invalid".to_owned())
-        })
-        .clone()
-        .map_err(JobError::Failed)
+    crate::asset::report::register_plot_font().map_err(JobError::Failed)
 }
 
 const TITLE_HEIGHT: u32 = 30;

@@ -5,7 +5,7 @@
 
 use std::collections::HashMap;
 
-use crate::asset::report::Report;
+use crate::asset::report::BakeReport;
 
 use super::{
     Bake, GraphOptions, JobError, JobGraph, JobOutput, JobSpec, NoSink, PlannedJob,
@@ -18,7 +18,7 @@ pub struct Baked {
     /// The asset bytes.
     pub asset: Vec<u8>,
     /// The report.
-    pub report: Report,
+    pub report: BakeReport,
     /// The report as the JSON document the service serves.
     pub report_json: Vec<u8>,
     /// The PSNR-per-frame plot (PNG).

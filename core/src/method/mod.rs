@@ -3,9 +3,10 @@
 //! A [`Method`] names what a bake fits and what an asset holds. Each
 //! method belongs to a [`Family`] that decides the shape of its job graph
 //! (`bake::graph`): the per-vertex family (`sample` jobs → `fit` →
-//! `evaluate` → `assemble`) lives in [`vertex`]; the volume methods (grid
-//! with `slab` jobs, cubemap with `face` jobs) will live beside it, so the
-//! queue and the runner never change when a method arrives.
+//! `evaluate` → `assemble`) lives in [`vertex`]; Kroon's cubemaps (`face`
+//! jobs → `assemble` → `evaluate`) in [`cubemap`]; the grid method (`slab`
+//! jobs) will live beside them, so the queue and the runner never change
+//! when a method arrives.
 
 pub mod cubemap;
 pub mod vertex;
@@ -24,6 +25,12 @@ pub enum Method {
     VertexLinear = 2,
     /// Kirk & Arikan 2007: pose clusters, PCA, moving least squares.
     VertexClustered = 3,
+    /// Kroon 2023: nested cubemaps around the character, one per shell,
+    /// each texel's time curve in four quadratic segments.
+    CubemapDiscrete = 4,
+    /// Kroon 2023: four cubemaps, each texel's (time × distance) field in
+    /// a cosine basis with residual curves.
+    CubemapContinuous = 5,
 }
 
 /// How a method's bake is split into jobs.
@@ -31,14 +38,18 @@ pub enum Method {
 pub enum Family {
     /// Per-vertex AO fitted to traced reference poses.
     Vertex,
+    /// Occlusion cast into space over a cyclic clip, one job per face.
+    Cubemap,
 }
 
 impl Method {
     /// Every method, in code order.
-    pub const ALL: [Self; 3] = [
+    pub const ALL: [Self; 5] = [
         Self::StaticAverage,
         Self::VertexLinear,
         Self::VertexClustered,
+        Self::CubemapDiscrete,
+        Self::CubemapContinuous,
     ];
 
     /// The method's name, as the CLI and the API spell it.
@@ -47,6 +58,8 @@ impl Method {
             Self::StaticAverage => "static-average",
             Self::VertexLinear => "vertex-linear",
             Self::VertexClustered => "vertex-clustered",
+            Self::CubemapDiscrete => "cubemap-discrete",
+            Self::CubemapContinuous => "cubemap-continuous",
         }
     }
 
@@ -69,6 +82,25 @@ impl Method {
     pub fn family(self) -> Family {
         match self {
             Self::StaticAverage | Self::VertexLinear | Self::VertexClustered => Family::Vertex,
+            Self::CubemapDiscrete | Self::CubemapContinuous => Family::Cubemap,
+        }
+    }
+
+    /// The version of the method's algorithm, part of the bake key: a
+    /// change that alters a method's bytes bumps its family's version.
+    pub fn algorithm_version(self) -> u32 {
+        match self.family() {
+            Family::Vertex => vertex::ALGORITHM_VERSION,
+            Family::Cubemap => cubemap::ALGORITHM_VERSION,
+        }
+    }
+
+    /// The cubemap encoding of a cubemap method.
+    pub fn cubemap_encoding(self) -> Option<cubemap::model::Encoding> {
+        match self {
+            Self::CubemapDiscrete => Some(cubemap::model::Encoding::Discrete),
+            Self::CubemapContinuous => Some(cubemap::model::Encoding::Continuous),
+            _ => None,
         }
     }
 }

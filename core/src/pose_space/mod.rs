@@ -78,7 +78,7 @@ pub enum ParamError {
 /// Rotations of the body root (the joints' lowest common ancestor) and of
 /// its ancestors are left out: they turn the whole mesh, which changes no
 /// self-occlusion.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct JointAngles {
     /// Nodes with 3 rotation-vector parameters each, in node order.
     pub joints: Vec<usize>,

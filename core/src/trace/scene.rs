@@ -358,6 +358,22 @@ impl Scene {
         d * self.scale
     }
 
+    /// Whether a surface crosses the segment from `p − reach·dir` to
+    /// `p + reach·dir` (world units; `dir` need not be unit length): a
+    /// point lying on a surface counts, which a ray starting there would
+    /// miss.
+    pub fn surface_near(&self, p: Vec3, dir: Vec3, reach: f32) -> bool {
+        let d = dir.normalize_or_zero();
+        if d == Vec3::ZERO || !p.is_finite() || reach.is_nan() || reach <= 0.0 {
+            return false;
+        }
+        self.tracer().occluded(
+            self.to_local(p - reach * d),
+            Vec3A::from(d),
+            self.local_distance(2.0 * reach),
+        )
+    }
+
     /// A ray-query context for one thread (it owns the traversal stack).
     pub(crate) fn tracer(&self) -> Tracer<'_> {
         Tracer {

@@ -24,7 +24,7 @@ fn bake(character: &Character, clips: &[Clip], params: BakeParams) -> Baked {
     let container = Container::from_bytes(&baked.asset).unwrap();
     Baked {
         model: Model::from_container(&container).unwrap().0,
-        evaluation: baked.report.evaluation,
+        evaluation: baked.report.vertex().unwrap().evaluation.clone(),
         bytes: baked.asset,
     }
 }

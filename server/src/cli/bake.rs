@@ -1,6 +1,7 @@
-//! `aobake bake`: a whole per-vertex bake on this machine, stage by stage
-//! as the service's jobs run it (reference AO → fit → held-out AO →
-//! evaluate), writing the asset, the JSON report and the PSNR plot.
+//! `aobake bake`: a whole bake on this machine, stage by stage as the
+//! service's jobs run it (per-vertex: reference AO → fit → held-out AO →
+//! evaluate; cubemap: six faces → encode → evaluate), writing the asset,
+//! the JSON report and its plot.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -8,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, bail};
 use aobake_core::{
     Limits,
-    asset::report::Report,
+    asset::report::{BakeReport, CubemapReport, Report},
     bake::{Bake, BakeInputs, Baked, GraphOptions, JobOutput, JobSpec, Renderer, run_graph},
 };
 
@@ -33,8 +34,8 @@ pub(super) struct Args {
     /// static-average baseline, sizes, timings.
     #[arg(long)]
     report: PathBuf,
-    /// The PSNR-per-frame plot (PNG). Default: the report's path with
-    /// `.png`.
+    /// The report's plot (PNG): PSNR per frame, or a cubemap's time ×
+    /// distance charts. Default: the report's path with `.png`.
     #[arg(long)]
     plot: Option<PathBuf>,
 }
@@ -110,16 +111,34 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
     let clips = &bake.inputs.clips;
     let names =
         |idx: &[usize]| -> Vec<&str> { idx.iter().map(|&i| clips[i].name.as_str()).collect() };
-    eprintln!(
-        "{}: {} vertices, {} triangles; {} joint-angle parameters, {} handle coordinates; training on {:?}, testing on {:?}",
-        args.request.file.display(),
-        character.vertex_count(),
-        character.triangles.len(),
-        plan.joint_angles.len(),
-        plan.handles.len(),
-        names(&plan.train),
-        names(&plan.test),
-    );
+    if let Some(encoding) = plan.params.method.cubemap_encoding() {
+        let setup = bake.cubemap_setup()?;
+        let o = &setup.options;
+        eprintln!(
+            "{}: {} vertices, {} triangles; clip {} ({:.2} s); {encoding:?} cubemaps of {}² texels, {} shells, {} time samples, {} rays per point ({:.2} G rays)",
+            args.request.file.display(),
+            character.vertex_count(),
+            character.triangles.len(),
+            setup.clip.name,
+            setup.clip.duration,
+            o.resolution,
+            o.shells,
+            o.times,
+            o.rays,
+            (o.points() * u64::from(o.rays)) as f64 / 1e9,
+        );
+    } else {
+        eprintln!(
+            "{}: {} vertices, {} triangles; {} joint-angle parameters, {} handle coordinates; training on {:?}, testing on {:?}",
+            args.request.file.display(),
+            character.vertex_count(),
+            character.triangles.len(),
+            plan.joint_angles.len(),
+            plan.handles.len(),
+            names(&plan.train),
+            names(&plan.test),
+        );
+    }
     let outputs = run_with_progress(bake, &HashMap::new(), None)?;
     let baked = Baked::from_outputs(&outputs)?;
     write(&args.out, &baked.asset)?;
@@ -142,7 +161,61 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
 
 /// The lines `aobake bake` and `aobake submit --wait` print about a
 /// finished bake.
-pub(super) fn summary(report: &Report) -> String {
+pub(super) fn summary(report: &BakeReport) -> String {
+    match report {
+        BakeReport::Vertex(r) => vertex_summary(r),
+        BakeReport::Cubemap(r) => cubemap_summary(r),
+    }
+}
+
+/// A cubemap bake's lines: every encoding and reference against the
+/// ground truth, in space and on the ground.
+fn cubemap_summary(report: &CubemapReport) -> String {
+    let e = &report.evaluation;
+    let l = &report.layout;
+    let t = &report.timings;
+    let mut out = format!(
+        "{} on clip {}: {}² texels, {} shells, {} time samples; {} bytes of texels
+ground truth at {} random times: {} points in space ({} inside the mesh left out), {} on the ground ({} under the character left out), {} rays each; its own noise RMSE {:.4}
+| variant | bytes | space RMSE | space too dark MSE | space too bright MSE | ground RMSE | ground too dark MSE | ground too bright MSE | fit RMSE |
+|---|---|---|---|---|---|---|---|---|
+",
+        report.method,
+        report.clip,
+        l.resolution,
+        l.spheroid.shells,
+        l.times,
+        report.sizes.model_bytes,
+        e.times.len(),
+        e.space_points * e.times.len(),
+        e.space_hidden,
+        e.ground_points * e.times.len(),
+        e.ground_hidden,
+        e.rays_per_point,
+        e.ground_truth_noise_rmse,
+    );
+    for v in &e.variants {
+        out.push_str(&format!(
+            "| {} | {} | {:.4} | {:.6} | {:.6} | {:.4} | {:.6} | {:.6} | {} |\n",
+            v.name,
+            v.bytes,
+            v.space.mean.rmse,
+            v.space.mean.too_dark_mse,
+            v.space.mean.too_bright_mse,
+            v.ground.mean.rmse,
+            v.ground.mean.too_dark_mse,
+            v.ground.mean.too_bright_mse,
+            v.fit.map_or("-".to_owned(), |f| format!("{:.4}", f.rmse)),
+        ));
+    }
+    out.push_str(&format!(
+        "times: faces {:.1} s, encode {:.2} s, ground truth {:.1} s, evaluate {:.1} s\n",
+        t.reference_trace_s, t.fit_s, t.test_trace_s, t.evaluate_s
+    ));
+    out
+}
+
+fn vertex_summary(report: &Report) -> String {
     let e = &report.evaluation;
     let n = &report.ground_truth_noise;
     let t = &report.timings;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{Context as _, bail};
-use aobake_core::{Limits, asset::report::Report, bake::UploadBytes, method::Method};
+use aobake_core::{Limits, asset::report::BakeReport, bake::UploadBytes, method::Method};
 use serde_json::{Value, json};
 
 use super::params::BakeRequestArgs;
@@ -245,7 +245,7 @@ fn wait(api: &Api, id: i64) -> anyhow::Result<()> {
         match b["state"].as_str().unwrap_or("") {
             "done" => {
                 bar.finish_and_clear();
-                let report: Report =
+                let report: BakeReport =
                     serde_json::from_slice(&api.get_bytes(&format!("/v1/bakes/{id}/report"))?)?;
                 println!(
                     "bake {id} done: asset {}",

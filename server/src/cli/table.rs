@@ -88,6 +88,9 @@ pub(super) struct LinearArgs {
 
 /// Reference and held-out AO, traced once: the `sample` jobs' outputs,
 /// which every setting's `fit` and `evaluate` jobs reuse.
+///
+/// The tables compare per-vertex settings; a cubemap bake's report has
+/// its own table (`aobake bake` prints it).
 struct Traced<'a> {
     inputs: &'a BakeInputs,
     params: BakeParams,
@@ -116,7 +119,7 @@ impl<'a> Traced<'a> {
             .filter(|(j, _)| j.spec.kind() == "sample")
             .map(|(j, o)| (j.spec.clone(), o.clone()))
             .collect();
-        let first = Baked::from_outputs(&outputs)?.report;
+        let first = vertex_report(Baked::from_outputs(&outputs)?)?;
         println!(
             "{}: {} vertices, {} reference poses ({:?}), {} held-out clip frames, {} rays per vertex; baking took {:.1} s",
             common.file.display(),
@@ -146,7 +149,7 @@ impl<'a> Traced<'a> {
         let outputs = with_threads(self.threads, || {
             run_with_progress(&bake, &self.samples, None)
         })??;
-        let r = Baked::from_outputs(&outputs)?.report;
+        let r = vertex_report(Baked::from_outputs(&outputs)?)?;
         let c = &r.evaluation.clip_frames.model.mean;
         println!(
             "| {} | {:.4} | {:.2} | {} | {:.1} | {:.2} |",
@@ -246,4 +249,13 @@ pub(super) fn linear(args: &LinearArgs) -> anyhow::Result<()> {
     }
     t.baseline_row(1);
     Ok(())
+}
+
+fn vertex_report(baked: Baked) -> anyhow::Result<Report> {
+    match baked.report {
+        aobake_core::asset::report::BakeReport::Vertex(r) => Ok(*r),
+        aobake_core::asset::report::BakeReport::Cubemap(_) => {
+            anyhow::bail!("the tables compare per-vertex methods, not cubemaps")
+        }
+    }
 }

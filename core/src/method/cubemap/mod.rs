@@ -17,18 +17,27 @@
 //!   uploads and the CPU lookup (bilinear over texels, linear over shells,
 //!   continuous in time).
 //!
-//! Still to come (issue 12): the methods' names and options in
-//! `BakeParams`, the `face` → `assemble` → `evaluate` → `preview` graph in
-//! `bake/` (with `JobSink` saving and loading checkpoint parts), the asset
-//! container sections, the WGSL lookup, the evaluation and previews, the
-//! EXR export.
+//! * [`setup`]: what every job of a cubemap bake derives alike from the
+//!   inputs: the clip, its time samples, the posed meshes and the spheroid.
+//! * [`codec`]: the model in the asset container.
+//! * [`evaluate`]: ground truth at random points and on the ground, and
+//!   the errors of every encoding against it (DESIGN §6).
+//!
+//! The jobs themselves (`face` → `assemble` → `evaluate` → `preview`) are
+//! in `bake::cubemap`.
 
+pub mod codec;
 pub mod continuous;
 pub mod discrete;
+pub mod evaluate;
 pub mod face;
 pub mod field;
 pub mod geometry;
 pub mod model;
+pub mod setup;
+
+/// The version of the cubemap bake's algorithm, part of the bake key.
+pub const ALGORITHM_VERSION: u32 = 1;
 
 use serde::{Deserialize, Serialize};
 
@@ -70,9 +79,17 @@ pub struct CubemapOptions {
     pub bright_weight: f32,
     /// Whether the continuous encoding fits its residual curves.
     pub residuals: bool,
-    /// The clip to bake (`None`: the first training clip, else the first
-    /// clip).
+    /// The clip to bake (`None`: the first training clip).
     pub clip: Option<String>,
+    /// Random clip times at which `evaluate` traces ground truth.
+    pub eval_times: usize,
+    /// Random points in the spheroid per evaluation time.
+    pub eval_points: usize,
+    /// Points on the ground plane under the character (the receiver) per
+    /// evaluation time.
+    pub eval_ground: usize,
+    /// Rays per ground-truth point (independent of the bake's rays).
+    pub eval_rays: u32,
 }
 
 impl Default for CubemapOptions {
@@ -90,6 +107,10 @@ impl Default for CubemapOptions {
             bright_weight: 0.6,
             residuals: true,
             clip: None,
+            eval_times: 16,
+            eval_points: 2048,
+            eval_ground: 1024,
+            eval_rays: 256,
         }
     }
 }
@@ -140,6 +161,26 @@ impl CubemapOptions {
         if !(0.0..=1.0).contains(&o.bright_weight) {
             return Err("cubemap.bright_weight must be in [0, 1]".into());
         }
+        if !(1..=1024).contains(&o.eval_times) {
+            return Err(format!(
+                "cubemap.eval_times must be between 1 and 1024, not {}",
+                o.eval_times
+            ));
+        }
+        if o.eval_points > 1 << 20 || o.eval_ground > 1 << 20 {
+            return Err(
+                "cubemap.eval_points and cubemap.eval_ground must be at most 1048576".into(),
+            );
+        }
+        if o.eval_points + o.eval_ground == 0 {
+            return Err("cubemap.eval_points and cubemap.eval_ground cannot both be 0".into());
+        }
+        if o.eval_rays == 0 || o.eval_rays > MAX_SAMPLES {
+            return Err(format!(
+                "cubemap.eval_rays must be between 1 and {MAX_SAMPLES}, not {}",
+                o.eval_rays
+            ));
+        }
         Ok(())
     }
 
@@ -159,6 +200,14 @@ impl CubemapOptions {
     /// Sample points of a whole bake (6 faces × texels × shells × times).
     pub fn points(&self) -> u64 {
         6 * (self.resolution * self.resolution * self.shells * self.times) as u64
+    }
+
+    /// Rays a whole bake traces: its sample points and the evaluation's
+    /// ground truth (what the service bounds per request).
+    pub fn rays_total(&self) -> u128 {
+        u128::from(self.points()) * u128::from(self.rays)
+            + (self.eval_times * (self.eval_points + self.eval_ground)) as u128
+                * u128::from(self.eval_rays)
     }
 }
 

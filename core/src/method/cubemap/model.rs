@@ -86,6 +86,46 @@ impl CubemapLayout {
         (((c * FACES + face) * self.resolution + j) * self.resolution + i) * 16
     }
 
+    /// The run-time lookup of a point `p` at phase `phase` (see the
+    /// module's text), with `texel(face, i, j, tau, k)` the value of a
+    /// texel at time `tau` (samples) on fractional shell `k`: the model
+    /// decodes its bytes there, the evaluation's uncompressed references
+    /// read the raw field.
+    pub fn lookup(
+        &self,
+        p: Vec3,
+        phase: f32,
+        texel: impl Fn(usize, usize, usize, f32, f32) -> f32,
+    ) -> f32 {
+        let s = &self.spheroid;
+        let (dir, rho) = s.locate(p);
+        let shells = s.shells as f32;
+        let k = (rho - s.inner) * shells / (1.0 - s.inner) - 1.0;
+        let fade = (shells - k).clamp(0.0, 1.0);
+        if fade == 0.0 || !p.is_finite() {
+            return 0.0;
+        }
+        let k = k.clamp(0.0, shells - 1.0);
+        let tau = phase.rem_euclid(1.0) * self.times as f32;
+        let (face, u, v) = face_of(dir);
+        let res = self.resolution;
+        let last = (res - 1) as f32;
+        let x = (u * res as f32 - 0.5).clamp(0.0, last);
+        let y = (v * res as f32 - 0.5).clamp(0.0, last);
+        let (i0, j0) = (x.floor() as usize, y.floor() as usize);
+        let (i1, j1) = ((i0 + 1).min(res - 1), (j0 + 1).min(res - 1));
+        let (fx, fy) = (x - i0 as f32, y - j0 as f32);
+        let top = {
+            let a = texel(face, i0, j0, tau, k);
+            a + fx * (texel(face, i1, j0, tau, k) - a)
+        };
+        let bottom = {
+            let a = texel(face, i0, j1, tau, k);
+            a + fx * (texel(face, i1, j1, tau, k) - a)
+        };
+        fade * (top + fy * (bottom - top))
+    }
+
     /// The phase of clip time `t` (seconds), cyclic.
     pub fn phase(&self, t: f32) -> f32 {
         if self.duration > 0.0 {
@@ -107,8 +147,8 @@ pub struct CubemapModel {
 
 impl CubemapModel {
     /// The decoded value of texel `(i, j)` of `face` at time `tau`
-    /// (samples) on fractional shell `k`.
-    fn texel(&self, face: usize, i: usize, j: usize, tau: f32, k: f32) -> f32 {
+    /// (samples) on fractional shell `k` (in `0..=S_d − 1`).
+    pub fn decode_texel(&self, face: usize, i: usize, j: usize, tau: f32, k: f32) -> f32 {
         let l = &self.layout;
         let shells = l.spheroid.shells;
         match l.encoding {
@@ -137,34 +177,9 @@ impl CubemapModel {
 
     /// Occlusion at `p` at phase `phase` of the cycle.
     pub fn occlusion(&self, p: Vec3, phase: f32) -> f32 {
-        let l = &self.layout;
-        let s = &l.spheroid;
-        let (dir, rho) = s.locate(p);
-        let shells = s.shells as f32;
-        let k = (rho - s.inner) * shells / (1.0 - s.inner) - 1.0;
-        let fade = (shells - k).clamp(0.0, 1.0);
-        if fade == 0.0 || !p.is_finite() {
-            return 0.0;
-        }
-        let k = k.clamp(0.0, shells - 1.0);
-        let tau = phase.rem_euclid(1.0) * l.times as f32;
-        let (face, u, v) = face_of(dir);
-        let res = l.resolution;
-        let last = (res - 1) as f32;
-        let x = (u * res as f32 - 0.5).clamp(0.0, last);
-        let y = (v * res as f32 - 0.5).clamp(0.0, last);
-        let (i0, j0) = (x.floor() as usize, y.floor() as usize);
-        let (i1, j1) = ((i0 + 1).min(res - 1), (j0 + 1).min(res - 1));
-        let (fx, fy) = (x - i0 as f32, y - j0 as f32);
-        let top = {
-            let a = self.texel(face, i0, j0, tau, k);
-            a + fx * (self.texel(face, i1, j0, tau, k) - a)
-        };
-        let bottom = {
-            let a = self.texel(face, i0, j1, tau, k);
-            a + fx * (self.texel(face, i1, j1, tau, k) - a)
-        };
-        fade * (top + fy * (bottom - top))
+        self.layout.lookup(p, phase, |face, i, j, tau, k| {
+            self.decode_texel(face, i, j, tau, k)
+        })
     }
 
     /// Encodes the six faces' fields (in face order) into a model: the

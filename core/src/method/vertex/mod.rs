@@ -227,5 +227,8 @@ pub fn fit(
                 FitStats::VertexClustered(stats),
             )
         }
+        Method::CubemapDiscrete | Method::CubemapContinuous => {
+            return Err(format!("{method} is not a per-vertex method"));
+        }
     })
 }

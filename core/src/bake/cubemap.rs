@@ -1,0 +1,451 @@
+//! The jobs of a cubemap bake (Kroon 2023; DESIGN §1.3, §5):
+//!
+//! * `face` (six of them, one per cube face): Eq. 3.1 at every texel,
+//!   shell and time sample of the face ([`face::compute_face`]). It saves
+//!   a checkpoint after every batch of time samples
+//!   ([`face::checkpoint_batch`]: 8 at the defaults, about 32 a face);
+//!   each checkpoint stores only the new slices, as a part blob through
+//!   [`JobSink::save_part`], and its data is a small manifest of every
+//!   part's digest. A new attempt loads the parts and goes on at the first
+//!   missing time sample; since a slice is a pure function of (seed, face,
+//!   time sample), the face's field does not depend on interruptions.
+//!   Output: `face-{n}`, the raw field.
+//! * `assemble`: the six fields encoded in the bake's encoding → `asset`.
+//! * `evaluate`: ground truth at random clip times, in space and on the
+//!   ground ([`GroundTruth`]); every encoding and the references judged
+//!   against it; Kroon's charts → `report.json`, `plot.png`.
+//! * `preview`: as for every method (`bake::preview`), with the ground
+//!   shaded by the cubemap in the model's panel.
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    asset::{
+        Container,
+        report::{CharacterInfo, ChartTexel, CubemapReport, Sizes},
+    },
+    digest::sha256_hex,
+    method::cubemap::{
+        continuous,
+        evaluate::{
+            CubemapEvaluation, GroundTruth, Lookup, RawCubemap, StaticCubemap, VariantErrors,
+            chart_sums, chart_texels, charts_png, fit_error,
+        },
+        face::{FaceError, FaceField, Manifest, Part, checkpoint_batch, compute_face},
+        geometry::FACES,
+        model::{CubemapModel, Encoding},
+        setup::Setup,
+    },
+};
+
+use super::{
+    Bake, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec, PlannedJob,
+    jobs::{find, json, named, parse},
+};
+
+/// The step name of a face job's checkpoints.
+const FACE_STEP: &str = "face";
+
+/// How a face job checkpointed, as `face-{n}.json`: what the note on
+/// checkpoint sizes reads.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FaceInfo {
+    /// Time samples per checkpoint.
+    pub batch: usize,
+    /// Checkpoints a whole face saves.
+    pub checkpoints: usize,
+    /// Bytes of one full part (a batch of slices and its 20-byte head).
+    pub part_bytes: usize,
+    /// Bytes of the face's raw field.
+    pub field_bytes: usize,
+    /// Time samples this attempt computed (the rest came from parts).
+    pub computed: usize,
+}
+
+impl Bake<'_> {
+    /// The cubemap bake's clip, time samples and spheroid.
+    pub fn cubemap_setup(&self) -> Result<Setup<'_>, JobError> {
+        let clip = self.cubemap_clip()?;
+        Ok(Setup::new(
+            &self.inputs.character,
+            &self.inputs.clips[clip],
+            &self.plan.params.cubemap,
+        ))
+    }
+
+    /// The index of the clip a cubemap bake bakes: `cubemap.clip`, or
+    /// the first training clip.
+    pub fn cubemap_clip(&self) -> Result<usize, JobError> {
+        let clips = &self.inputs.clips;
+        match &self.plan.params.cubemap.clip {
+            Some(name) => clips.iter().position(|c| &c.name == name).ok_or_else(|| {
+                let known: Vec<&str> = clips.iter().map(|c| c.name.as_str()).collect();
+                JobError::Invalid(format!(
+                    "cubemap.clip: no clip named {name:?}; the clips are: {}",
+                    known.join(", ")
+                ))
+            }),
+            None => self
+                .plan
+                .train
+                .first()
+                .copied()
+                .ok_or_else(|| JobError::Invalid("the bake has no clip".into())),
+        }
+    }
+
+    fn encoding(&self) -> Result<Encoding, JobError> {
+        self.plan.params.method.cubemap_encoding().ok_or_else(|| {
+            JobError::Invalid(format!(
+                "{} is not a cubemap method",
+                self.plan.params.method
+            ))
+        })
+    }
+
+    /// Six `face` jobs → `assemble` → `evaluate` → `preview`.
+    pub(super) fn cubemap_graph(&self, options: GraphOptions) -> JobGraph {
+        let times = self.plan.params.cubemap.times;
+        let mut jobs: Vec<PlannedJob> = (0..FACES)
+            .map(|face| PlannedJob {
+                spec: JobSpec::Face { face, times },
+                deps: Vec::new(),
+            })
+            .collect();
+        let faces: Vec<usize> = (0..FACES).collect();
+        jobs.push(PlannedJob {
+            spec: JobSpec::Assemble,
+            deps: faces.clone(),
+        });
+        let assemble = jobs.len() - 1;
+        let mut deps = vec![assemble];
+        deps.extend(faces);
+        jobs.push(PlannedJob {
+            spec: JobSpec::Evaluate,
+            deps,
+        });
+        if options.previews {
+            let evaluate = jobs.len() - 1;
+            jobs.push(PlannedJob {
+                spec: JobSpec::Preview,
+                deps: vec![assemble, evaluate],
+            });
+        }
+        JobGraph { jobs }
+    }
+
+    /// A `face` job: resumes from `resume`'s parts, traces the remaining
+    /// time samples, checkpointing after every batch.
+    pub(super) fn face(
+        &self,
+        face: usize,
+        times: usize,
+        resume: Option<Checkpoint>,
+        sink: &mut dyn JobSink,
+    ) -> Result<JobOutput, JobError> {
+        let started = Instant::now();
+        let setup = self.cubemap_setup()?;
+        let (res, shells, t) = setup.shape();
+        if face >= FACES || times != t {
+            return Err(JobError::Invalid(format!(
+                "face {face} with {times} time samples is not a face of this bake"
+            )));
+        }
+        let mut field = FaceField::new(res, shells, times);
+        let n = field.slice_len();
+        let mut manifest = Manifest::default();
+        let mut next = 0;
+        if let Some(cp) = resume.filter(|cp| cp.step == FACE_STEP) {
+            manifest = parse(&cp.data)?;
+            for digest in &manifest.parts {
+                let bytes = sink.load_part(digest)?;
+                if sha256_hex(&bytes) != *digest {
+                    return Err(JobError::Failed(format!(
+                        "checkpoint part {digest} came back with other bytes"
+                    )));
+                }
+                next = Part::from_bytes(&bytes, face, n)
+                    .and_then(|p| p.apply(&mut field, next))
+                    .map_err(JobError::Invalid)?;
+            }
+            if next as u64 != cp.cursor {
+                return Err(JobError::Invalid(
+                    "the checkpoint's parts do not reach its cursor".into(),
+                ));
+            }
+        }
+        let resumed_at = next;
+        sink.progress(next as u64, times as u64);
+        let sampling = setup.sampling(self.plan.params.seed);
+        // Parts not stored yet (a failed upload): tried again, in order,
+        // at the next checkpoint, so a manifest never has a gap.
+        let mut pending: Vec<Vec<u8>> = Vec::new();
+        let result = compute_face(
+            &sampling,
+            face,
+            &self.inputs.character.triangles,
+            &mut |m| setup.positions(m),
+            &mut field,
+            next,
+            &mut |part: Part, done: usize| {
+                sink.progress(done as u64, times as u64);
+                if done == times {
+                    return Ok(());
+                }
+                pending.push(part.to_bytes(face, n));
+                while let Some(bytes) = pending.first() {
+                    match sink.save_part(bytes) {
+                        Some(digest) => {
+                            manifest.parts.push(digest);
+                            pending.remove(0);
+                        }
+                        None => return Ok(()),
+                    }
+                }
+                sink.checkpoint(Checkpoint {
+                    step: FACE_STEP.into(),
+                    cursor: done as u64,
+                    data: json(&manifest),
+                })
+            },
+        );
+        match result {
+            Ok(()) => {}
+            Err(FaceError::Stopped(stop)) => return Err(JobError::Stopped(stop)),
+            Err(FaceError::Trace(e)) => return Err(JobError::Invalid(e.to_string())),
+        }
+        let batch = checkpoint_batch(times);
+        let info = FaceInfo {
+            batch,
+            checkpoints: times.div_ceil(batch) - 1,
+            part_bytes: 20 + batch * n,
+            field_bytes: field.values.len(),
+            computed: times - resumed_at,
+        };
+        let mut out = JobOutput::default();
+        out.push(&format!("face-{face}"), field.to_bytes());
+        out.push(&format!("face-{face}.json"), json(&info));
+        out.timings.reference_trace_s = started.elapsed().as_secs_f64();
+        Ok(out)
+    }
+
+    /// The six raw fields from the face jobs' outputs.
+    fn faces(&self, setup: &Setup<'_>, deps: &[&JobOutput]) -> Result<Vec<FaceField>, JobError> {
+        (0..FACES)
+            .map(|face| {
+                let name = format!("face-{face}");
+                let bytes = named(find(deps, &name)?, &name)?;
+                FaceField::from_bytes(bytes, setup.shape()).map_err(JobError::Invalid)
+            })
+            .collect()
+    }
+
+    fn encode(
+        &self,
+        setup: &Setup<'_>,
+        faces: &[FaceField],
+        encoding: Encoding,
+        residuals: bool,
+    ) -> Result<CubemapModel, JobError> {
+        let o = &setup.options;
+        CubemapModel::encode(
+            setup.layout(encoding),
+            faces,
+            continuous::Encoding {
+                bright_weight: o.bright_weight,
+                residuals,
+            },
+        )
+        .map_err(JobError::Invalid)
+    }
+
+    /// `assemble`: the six fields encoded → `asset`.
+    pub(super) fn cubemap_assemble(&self, deps: &[&JobOutput]) -> Result<JobOutput, JobError> {
+        let setup = self.cubemap_setup()?;
+        let faces = self.faces(&setup, deps)?;
+        let started = Instant::now();
+        let model = self.encode(&setup, &faces, self.encoding()?, setup.options.residuals)?;
+        let asset = model
+            .to_container(self.header(), &setup.clip.name)
+            .to_bytes();
+        let mut out = JobOutput::default();
+        out.push("asset", asset);
+        out.timings.reference_trace_s = deps.iter().map(|d| d.timings.reference_trace_s).sum();
+        out.timings.fit_s = started.elapsed().as_secs_f64();
+        Ok(out)
+    }
+
+    /// `evaluate`: ground truth, every variant's errors, the charts and
+    /// the report.
+    pub(super) fn cubemap_evaluate(&self, deps: &[&JobOutput]) -> Result<JobOutput, JobError> {
+        let setup = self.cubemap_setup()?;
+        let faces = self.faces(&setup, deps)?;
+        let assembled = find(deps, "asset")?;
+        let asset = named(assembled, "asset")?;
+        let container =
+            Container::from_bytes(asset).map_err(|e| JobError::Invalid(e.to_string()))?;
+        let (model, _) = CubemapModel::from_container(&container)
+            .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let traced = Instant::now();
+        let truth = GroundTruth::trace(&setup, self.plan.params.seed)
+            .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let trace_s = traced.elapsed().as_secs_f64();
+        let started = Instant::now();
+        // The baked encoding first, then the others from the same fields.
+        let baked = model.layout.encoding;
+        let residuals = setup.options.residuals;
+        let mut encoded: Vec<(String, String, CubemapModel)> = Vec::new();
+        let describe = |e: Encoding, r: bool| match (e, r) {
+            (Encoding::Discrete, _) => (
+                "cubemap-discrete".to_owned(),
+                "one cubemap per shell; 4 bounded quadratic segments per texel (16 B)".to_owned(),
+            ),
+            (Encoding::Continuous, true) => (
+                "cubemap-continuous".to_owned(),
+                "4 cubemaps; 5×5 cosine basis + residual cubics along distance and time (64 B)"
+                    .to_owned(),
+            ),
+            (Encoding::Continuous, false) => (
+                "cubemap-continuous without residuals".to_owned(),
+                "4 cubemaps; the 5×5 cosine basis alone (Kroon's plain Blurhash)".to_owned(),
+            ),
+        };
+        let (name, text) = describe(baked, residuals);
+        encoded.push((name, text, model.clone()));
+        for (e, r) in [
+            (Encoding::Discrete, true),
+            (Encoding::Continuous, true),
+            (Encoding::Continuous, false),
+        ] {
+            if e == baked && (e == Encoding::Discrete || r == residuals) {
+                continue;
+            }
+            let (name, text) = describe(e, r);
+            encoded.push((name, text, self.encode(&setup, &faces, e, r)?));
+        }
+        let layout = model.layout;
+        let mut variants: Vec<VariantErrors> = Vec::new();
+        let mut per_texel = Vec::new();
+        for (i, (name, description, m)) in encoded.iter().enumerate() {
+            let (space, ground) = truth.errors(m, &layout);
+            let (texels, fit) = fit_error(m, &faces);
+            if i == 0 {
+                per_texel = texels;
+            }
+            variants.push(VariantErrors {
+                name: name.clone(),
+                description: description.clone(),
+                bytes: m.bytes(),
+                space,
+                ground,
+                fit: Some(fit),
+            });
+        }
+        let raw = RawCubemap {
+            layout,
+            faces: &faces,
+        };
+        let still = StaticCubemap::of(layout, &faces);
+        let references: [(&str, &str, &dyn Lookup, usize); 2] = [
+            (
+                "uncompressed",
+                "the traced fields as they are (a byte per texel, shell and time sample), interpolated: what sampling alone loses",
+                &raw,
+                faces.iter().map(|f| f.values.len()).sum(),
+            ),
+            (
+                "static (time average)",
+                "each texel's field averaged over the cycle: the pose-independent baseline",
+                &still,
+                still.bytes(),
+            ),
+        ];
+        for (name, description, lookup, bytes) in references {
+            let (space, ground) = truth.errors(lookup, &layout);
+            variants.push(VariantErrors {
+                name: name.into(),
+                description: description.into(),
+                bytes,
+                space,
+                ground,
+                fit: None,
+            });
+        }
+        let chosen = chart_texels(&per_texel);
+        let models: Vec<(&str, &CubemapModel)> =
+            encoded.iter().map(|(n, _, m)| (n.as_str(), m)).collect();
+        let charts = chosen
+            .iter()
+            .map(|&(name, texel, _)| ChartTexel {
+                name: name.into(),
+                face: texel.0,
+                texel: texel.1,
+                sums: models
+                    .iter()
+                    .map(|&(n, m)| (n.to_owned(), chart_sums(m, &faces, texel)))
+                    .collect(),
+            })
+            .collect();
+        let plot = charts_png(
+            &faces,
+            &models,
+            &chosen,
+            &format!(
+                "{}: time × distance at chosen texels of clip {} (input, decoded, error)",
+                self.plan.params.method, setup.clip.name
+            ),
+        )
+        .map_err(|e| JobError::Failed(format!("cannot draw the charts: {e}")))?;
+        let evaluation = CubemapEvaluation {
+            times: truth.times.clone(),
+            space_points: truth.space,
+            ground_points: truth.ground,
+            space_hidden: truth.hidden().0,
+            ground_hidden: truth.hidden().1,
+            rays_per_point: setup.options.eval_rays,
+            ground_truth_noise_rmse: truth.noise_rmse(),
+            variants,
+        };
+        let mut timings = assembled.timings;
+        timings.test_trace_s = trace_s;
+        timings.evaluate_s = started.elapsed().as_secs_f64();
+        let character = &self.inputs.character;
+        let clips = &self.inputs.clips;
+        let report = CubemapReport {
+            method: self.plan.params.method,
+            bake_key: self.header().bake_key,
+            params: self.plan.params.clone(),
+            character: CharacterInfo {
+                digest: self.inputs.character_digest.clone(),
+                vertices: character.vertex_count(),
+                triangles: character.triangles.len(),
+                clips: clips.iter().map(|c| c.name.clone()).collect(),
+                train_clips: vec![setup.clip.name.clone()],
+                test_clips: vec![setup.clip.name.clone()],
+                joint_angle_parameters: self.plan.joint_angles.len(),
+                handle_coordinates: self.plan.handles.len(),
+            },
+            clip: setup.clip.name.clone(),
+            layout,
+            rays: setup.options.points() * u64::from(setup.options.rays) + truth.rays,
+            timings,
+            sizes: Sizes {
+                asset_bytes: asset.len(),
+                model_bytes: model.bytes(),
+                baseline_bytes: still.bytes(),
+            },
+            evaluation,
+            charts,
+        };
+        let mut out = JobOutput::default();
+        out.push(
+            "report.json",
+            serde_json::to_vec_pretty(&report).expect("reports serialise"),
+        );
+        out.push("plot.png", plot);
+        out.timings = timings;
+        Ok(out)
+    }
+}

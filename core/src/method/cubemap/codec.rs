@@ -1,0 +1,213 @@
+//! A baked cubemap in the asset container (DESIGN §7): the JSON header
+//! carries the [`CubemapLayout`] (spheroid, resolution, time samples,
+//! encoding, the clip's duration) and one section, `TEXL`, holds the
+//! texels exactly as an engine uploads them (layer-major, 16 bytes a
+//! texel; `model` describes the layout). Reading checks every number of
+//! the layout and the section's length, so a hostile file with valid
+//! checksums is refused with a message.
+
+use serde::{Deserialize, Serialize};
+
+use super::{
+    ALGORITHM_VERSION,
+    geometry::FACES,
+    model::{CubemapLayout, CubemapModel, Encoding},
+};
+use crate::{
+    asset::{AssetError, Container, Data, Section},
+    method::{Method, vertex::AssetHeaderFields},
+};
+
+/// What the stored values mean, written into every header.
+pub const UNITS: &str = "occlusion cast into space by the character: 0 = open, 1 = blocked";
+
+/// A cubemap asset's JSON header.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CubemapHeader {
+    /// The program that wrote it.
+    pub generator: String,
+    /// The method.
+    pub method: Method,
+    /// [`ALGORITHM_VERSION`] of the writer.
+    pub algorithm_version: u32,
+    /// The bake key.
+    pub bake_key: String,
+    /// sha256 of the character upload.
+    pub character: String,
+    /// sha256 of each clip upload.
+    pub clips: Vec<String>,
+    /// The baked clip's name.
+    pub clip: String,
+    /// What the values mean.
+    pub units: String,
+    /// The bake's fully defaulted parameters.
+    pub params: serde_json::Value,
+    /// Where the cubemaps sit and how the texels are laid out.
+    pub layout: CubemapLayout,
+}
+
+impl CubemapModel {
+    /// The method this model's encoding is.
+    pub fn method(&self) -> Method {
+        match self.layout.encoding {
+            Encoding::Discrete => Method::CubemapDiscrete,
+            Encoding::Continuous => Method::CubemapContinuous,
+        }
+    }
+
+    /// The asset: header and the texel section.
+    pub fn to_container(&self, fields: AssetHeaderFields, clip: &str) -> Container {
+        let header = CubemapHeader {
+            generator: fields.generator,
+            method: self.method(),
+            algorithm_version: ALGORITHM_VERSION,
+            bake_key: fields.bake_key,
+            character: fields.character,
+            clips: fields.clips,
+            clip: clip.to_owned(),
+            units: UNITS.to_owned(),
+            params: fields.params,
+            layout: self.layout,
+        };
+        Container::new(
+            self.method(),
+            &header,
+            vec![Section {
+                tag: *b"TEXL",
+                data: Data::U8(self.texels.clone()),
+            }],
+        )
+    }
+
+    /// Reads a model back, checking the layout and the section's length.
+    pub fn from_container(container: &Container) -> Result<(Self, CubemapHeader), AssetError> {
+        let header: CubemapHeader = container.header()?;
+        if header.method != container.method {
+            return Err(bad("the header's method differs from the preamble's"));
+        }
+        let layout = header.layout;
+        validate(&layout)?;
+        if Some(layout.encoding) != header.method.cubemap_encoding() {
+            return Err(bad("the layout's encoding is not the method's"));
+        }
+        let Data::U8(texels) = container.section(b"TEXL")? else {
+            return Err(bad("TEXL must be bytes"));
+        };
+        if texels.len() != layout.texel_bytes() {
+            return Err(bad(&format!(
+                "TEXL holds {} bytes where the layout needs {}",
+                texels.len(),
+                layout.texel_bytes()
+            )));
+        }
+        Ok((
+            Self {
+                layout,
+                texels: texels.clone(),
+            },
+            header,
+        ))
+    }
+}
+
+/// Checks a layout's numbers before anything is computed from them.
+fn validate(l: &CubemapLayout) -> Result<(), AssetError> {
+    let s = &l.spheroid;
+    if !(1..=1024).contains(&l.resolution) {
+        return Err(bad("the resolution must be between 1 and 1024"));
+    }
+    if !(1..=64).contains(&s.shells) {
+        return Err(bad("the shell count must be between 1 and 64"));
+    }
+    if !(2..=256).contains(&l.times) {
+        return Err(bad("the time sample count must be between 2 and 256"));
+    }
+    let finite = s.centre.is_finite() && s.radii.is_finite();
+    if !finite || s.radii.min_element() <= 0.0 {
+        return Err(bad(
+            "the spheroid's centre or radii are not finite and positive",
+        ));
+    }
+    if !(s.outer.is_finite() && s.outer > 0.0 && s.inner >= 0.0 && s.inner < 1.0) {
+        return Err(bad("the spheroid's scaling is out of range"));
+    }
+    if !(l.duration.is_finite() && l.duration >= 0.0) {
+        return Err(bad("the clip's duration is not a finite number ≥ 0"));
+    }
+    debug_assert!(l.cubemaps() * FACES * l.resolution * l.resolution <= 64 * 6 * 1024 * 1024);
+    Ok(())
+}
+
+fn bad(what: &str) -> AssetError {
+    AssetError::Malformed(what.to_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::*;
+    use crate::method::cubemap::geometry::Spheroid;
+
+    fn model(encoding: Encoding) -> CubemapModel {
+        let layout = CubemapLayout {
+            spheroid: Spheroid {
+                centre: Vec3::new(0.0, 1.0, 0.0),
+                radii: Vec3::new(0.4, 1.0, 0.3),
+                outer: 1.1,
+                inner: 0.25,
+                shells: 3,
+            },
+            resolution: 2,
+            times: 16,
+            encoding,
+            duration: 1.5,
+        };
+        let texels = (0..layout.texel_bytes()).map(|i| (i * 37) as u8).collect();
+        CubemapModel { layout, texels }
+    }
+
+    fn fields() -> AssetHeaderFields {
+        AssetHeaderFields {
+            generator: "test".into(),
+            bake_key: "k".into(),
+            character: "c".into(),
+            clips: vec![],
+            params: serde_json::json!({}),
+        }
+    }
+
+    #[test]
+    fn a_model_round_trips_through_its_container_bit_for_bit() {
+        for encoding in [Encoding::Discrete, Encoding::Continuous] {
+            let m = model(encoding);
+            let bytes = m.to_container(fields(), "walk").to_bytes();
+            let (back, header) =
+                CubemapModel::from_container(&Container::from_bytes(&bytes).unwrap()).unwrap();
+            assert_eq!(back, m);
+            assert_eq!(header.clip, "walk");
+            assert_eq!(header.method, m.method());
+        }
+    }
+
+    #[test]
+    fn a_hostile_layout_is_refused_by_name() {
+        type Break = fn(&mut CubemapModel);
+        let cases: [(&str, Break); 5] = [
+            ("resolution", |m| m.layout.resolution = 0),
+            ("shell count", |m| m.layout.spheroid.shells = 1000),
+            ("radii", |m| m.layout.spheroid.radii.x = -1.0),
+            ("duration", |m| m.layout.duration = -1.0),
+            ("TEXL holds", |m| {
+                m.texels.pop();
+            }),
+        ];
+        for (what, break_it) in cases {
+            let mut m = model(Encoding::Discrete);
+            break_it(&mut m);
+            let c = Container::from_bytes(&m.to_container(fields(), "walk").to_bytes()).unwrap();
+            let e = CubemapModel::from_container(&c).unwrap_err().to_string();
+            assert!(e.contains(what), "{what}: {e}");
+        }
+    }
+}
