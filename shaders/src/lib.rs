@@ -9,6 +9,8 @@
 //! * [`VERTEX_AO`]: run-time per-vertex AO of the vertex methods
 //!   (`cs_main` for dense coefficients, `cs_sparse` for CSR), the
 //!   evaluation an engine runs per frame.
+//! * [`CUBEMAP_AO`]: run-time lookup of Kroon's cubemaps at points in
+//!   space (`cubemap_occlusion`, and `cs_main` over a batch of points).
 //! * [`PREVIEW`]: the preview raster (`vs_main`, `fs_main`).
 //!
 //! The Rust mirrors of the uniforms and storage structs are in [`mirror`],
@@ -16,7 +18,7 @@
 
 pub mod mirror;
 
-pub use mirror::{BlockInfo, PreviewUniforms, VertexAoParams};
+pub use mirror::{BlockInfo, CubemapAoParams, PreviewUniforms, VertexAoParams};
 
 /// Half-float decoding shared by the pipelines.
 pub const COMMON_F16: &str = include_str!("../wgsl/common/f16.wgsl");
@@ -29,12 +31,24 @@ pub const VERTEX_AO: &str = concat!(
     include_str!("../wgsl/vertex_ao.wgsl")
 );
 
+/// The cubemap lookup shader, composed: [`COMMON_F16`] then
+/// `cubemap_ao.wgsl`.
+pub const CUBEMAP_AO: &str = concat!(
+    include_str!("../wgsl/common/f16.wgsl"),
+    "\n",
+    include_str!("../wgsl/cubemap_ao.wgsl")
+);
+
 /// The preview raster shader.
 pub const PREVIEW: &str = include_str!("../wgsl/preview.wgsl");
 
 /// Every composed pipeline source, by file name.
-pub fn sources() -> [(&'static str, &'static str); 2] {
-    [("vertex_ao.wgsl", VERTEX_AO), ("preview.wgsl", PREVIEW)]
+pub fn sources() -> [(&'static str, &'static str); 3] {
+    [
+        ("vertex_ao.wgsl", VERTEX_AO),
+        ("cubemap_ao.wgsl", CUBEMAP_AO),
+        ("preview.wgsl", PREVIEW),
+    ]
 }
 
 /// Workgroup size of the compute entry points (`@workgroup_size(64)`).
@@ -127,6 +141,10 @@ mod tests {
         assert_eq!(
             wgsl_size(VERTEX_AO, "BlockInfo") as usize,
             size_of::<BlockInfo>()
+        );
+        assert_eq!(
+            wgsl_size(CUBEMAP_AO, "Params") as usize,
+            size_of::<CubemapAoParams>()
         );
     }
 

@@ -41,6 +41,32 @@ impl BlockInfo {
     pub const NO_MAP: u32 = u32::MAX;
 }
 
+/// `Params` of cubemap_ao.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct CubemapAoParams {
+    /// xyz: the spheroid's centre; w: the outer scaling.
+    pub centre: [f32; 4],
+    /// xyz: the spheroid's radii; w: the inner scaling.
+    pub radii: [f32; 4],
+    /// Texels per face edge.
+    pub resolution: u32,
+    /// Shells, `S_d`.
+    pub shells: u32,
+    /// Time samples, `S_t`.
+    pub times: u32,
+    /// 0 discrete, 1 continuous.
+    pub encoding: u32,
+    /// Points to evaluate.
+    pub points: u32,
+    /// The phase of the cycle in [0, 1).
+    pub phase: f32,
+    /// Points per row of the dispatch grid (workgroups in x × 64).
+    pub row_stride: u32,
+    /// Padding.
+    pub _pad: u32,
+}
+
 /// `Uniforms` of preview.wgsl: one per (panel, surface) draw.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
@@ -75,4 +101,5 @@ pub struct PreviewUniforms {
 
 const _: () = assert!(size_of::<VertexAoParams>() == 16);
 const _: () = assert!(size_of::<BlockInfo>() == 32);
+const _: () = assert!(size_of::<CubemapAoParams>() == 64);
 const _: () = assert!(size_of::<PreviewUniforms>() == 224);

@@ -3,6 +3,7 @@
 //!
 //! * [`Gpu`]: the adapter, device and queue (one per process, shared).
 //! * [`VertexAo`] ([`vertex_ao`]): the vertex methods' run-time evaluation.
+//! * [`CubemapAo`] ([`cubemap_ao`]): the cubemap methods' run-time lookup.
 //! * [`PreviewRenderer`] ([`preview`]): core's preview [`Renderer`]
 //!   (aobake_core::bake::Renderer) on wgpu.
 //!
@@ -12,9 +13,11 @@
 
 use std::sync::OnceLock;
 
+pub mod cubemap_ao;
 pub mod preview;
 pub mod vertex_ao;
 
+pub use cubemap_ao::CubemapAo;
 pub use preview::PreviewRenderer;
 pub use vertex_ao::VertexAo;
 pub use wgpu::{Backends, DeviceType};

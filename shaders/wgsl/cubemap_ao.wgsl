@@ -1,0 +1,231 @@
+// Run-time lookup of Kroon's cubemaps (aobake's cubemap-discrete and
+// cubemap-continuous): the occlusion a character casts at points in space
+// at one phase of its cycle. The GPU twin of
+// aobake_core::method::cubemap::model::CubemapModel::occlusion, step for
+// step:
+//
+// * the point's direction and normalised radius through the spheroid;
+// * the direction picks a face and texel coordinates; the four nearest
+//   texel centres (clamped to the face) are decoded and blended
+//   bilinearly: decoded values are blended, never coefficients;
+// * the radius gives a fractional shell k; inside the innermost shell its
+//   value holds, beyond the outermost the occlusion fades to 0 over one
+//   shell spacing;
+// * time is phase × S_t samples, decoded continuously and cyclically.
+//
+// Texels are 16 bytes (a vec4<u32>, little-endian bytes), layer-major:
+// index ((layer · res + j) · res + i) with layer = cubemap · 6 + face,
+// the same bytes an engine uploads as a cube-map array of RGBA32Uint. The
+// discrete encoding has one cubemap per shell; the continuous one spreads
+// a texel's 64 bytes over four cubemaps (bytes 16c..16c+16 in cubemap c).
+//
+// An engine uses cubemap_occlusion(p, phase) in its own shaders; cs_main
+// evaluates a batch of points (what the tests and the previews run).
+
+struct Params {
+    // xyz: the spheroid's centre; w: the outer scaling.
+    centre: vec4<f32>,
+    // xyz: the spheroid's radii; w: the inner scaling.
+    radii: vec4<f32>,
+    resolution: u32,
+    shells: u32,
+    times: u32,
+    // 0 discrete, 1 continuous.
+    encoding: u32,
+    points: u32,
+    phase: f32,
+    // Points per row of the dispatch grid (workgroups in x × 64).
+    row_stride: u32,
+    _pad: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> texels: array<vec4<u32>>;
+// Points as packed xyz floats (a vertex buffer of vec3<f32>).
+@group(0) @binding(2) var<storage, read> points: array<f32>;
+@group(0) @binding(3) var<storage, read_write> occlusion: array<f32>;
+
+const PI: f32 = 3.14159265358979;
+
+// Byte `b` (0..16) of a texel.
+fn texel_byte(t: vec4<u32>, b: u32) -> u32 {
+    return (t[b / 4u] >> ((b % 4u) * 8u)) & 0xffu;
+}
+
+fn texel_at(layer: u32, i: u32, j: u32) -> vec4<u32> {
+    let res = params.resolution;
+    return texels[(layer * res + j) * res + i];
+}
+
+// x mod n for n > 0, into [0, n).
+fn wrap(x: f32, n: f32) -> f32 {
+    return x - n * floor(x / n);
+}
+
+// One texel's time curve (16 bytes) at time tau (samples).
+fn decode_discrete(t: vec4<u32>, tau_in: f32) -> f32 {
+    let n = f32(params.times);
+    let tau = wrap(tau_in, n);
+    var seg = 3u;
+    for (var s = 0u; s < 4u; s++) {
+        if (f32(texel_byte(t, 4u * s)) <= tau) {
+            seg = s;
+        }
+    }
+    let start = f32(texel_byte(t, 4u * seg));
+    let x = wrap(tau - start, n) / n;
+    let c0 = f32(texel_byte(t, 4u * seg + 1u)) * (8.0 / 255.0) - 4.0;
+    let c1 = f32(texel_byte(t, 4u * seg + 2u)) * (8.0 / 255.0) - 4.0;
+    let c2 = f32(texel_byte(t, 4u * seg + 3u)) * (8.0 / 255.0) - 4.0;
+    return clamp(c0 + c1 * x + c2 * x * x, 0.0, 1.0);
+}
+
+// Word `w` (0..16) of a continuous texel's 64 bytes.
+fn continuous_word(face: u32, i: u32, j: u32, w: u32) -> u32 {
+    return texel_at((w / 4u) * 6u + face, i, j)[w % 4u];
+}
+
+// Byte `b` (0..64) of a continuous texel's 64 bytes, as a signed byte.
+fn continuous_node(face: u32, i: u32, j: u32, b: u32) -> f32 {
+    let byte = (continuous_word(face, i, j, b / 4u) >> ((b % 4u) * 8u)) & 0xffu;
+    return f32(bitcast<i32>(byte << 24u) >> 24u) * (0.5 / 127.0);
+}
+
+fn lagrange(u: f32) -> vec4<f32> {
+    let n = vec4<f32>(0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0);
+    var w = vec4<f32>(1.0);
+    for (var a = 0u; a < 4u; a++) {
+        for (var b = 0u; b < 4u; b++) {
+            if (b != a) {
+                w[a] *= (u - n[b]) / (n[a] - n[b]);
+            }
+        }
+    }
+    return w;
+}
+
+// The texel's (time × distance) field at time tau and shell k.
+fn decode_continuous(face: u32, i: u32, j: u32, tau_in: f32, k: f32) -> f32 {
+    let times = f32(params.times);
+    let shells = f32(params.shells);
+    let tau = wrap(tau_in, times);
+    let xt = (tau + 0.5) / times;
+    let xd = (k + 0.5) / shells;
+    var v = 0.0;
+    for (var a = 0u; a < 5u; a++) {
+        var row = 0.0;
+        for (var b = 0u; b < 5u; b++) {
+            let q = 5u * a + b;
+            let bits = half_of(continuous_word(face, i, j, q / 2u), q);
+            row += f16_bits_to_f32(bits) * cos(PI * f32(b) * xd);
+        }
+        v += row * cos(PI * f32(a) * xt);
+    }
+    var du = 0.0;
+    if (params.shells > 1u) {
+        du = clamp(k / (shells - 1.0), 0.0, 1.0);
+    }
+    let ld = lagrange(du);
+    let lt = lagrange(wrap(tau / times, 1.0));
+    for (var n = 0u; n < 4u; n++) {
+        v += ld[n] * continuous_node(face, i, j, 50u + n);
+        v += lt[n] * continuous_node(face, i, j, 54u + n);
+    }
+    return clamp(v, 0.0, 1.0);
+}
+
+// The decoded value of texel (i, j) of `face` at time tau on shell k.
+fn decode_texel(face: u32, i: u32, j: u32, tau: f32, k: f32) -> f32 {
+    if (params.encoding == 1u) {
+        return decode_continuous(face, i, j, tau, k);
+    }
+    let last = params.shells - 1u;
+    let k0 = min(u32(floor(k)), last);
+    let k1 = min(k0 + 1u, last);
+    let f = clamp(k - f32(k0), 0.0, 1.0);
+    let a = decode_discrete(texel_at(k0 * 6u + face, i, j), tau);
+    if (f == 0.0) {
+        return a;
+    }
+    return a + f * (decode_discrete(texel_at(k1 * 6u + face, i, j), tau) - a);
+}
+
+// The face of a direction and its texel coordinates (s, t) in [0, 1]².
+fn face_of(d: vec3<f32>) -> vec3<f32> {
+    let a = abs(d);
+    var face = 0.0;
+    var sc = 0.0;
+    var tc = 0.0;
+    var ma = 0.0;
+    if (a.x >= a.y && a.x >= a.z) {
+        ma = a.x;
+        if (d.x >= 0.0) {
+            face = 0.0; sc = -d.z; tc = -d.y;
+        } else {
+            face = 1.0; sc = d.z; tc = -d.y;
+        }
+    } else if (a.y >= a.z) {
+        ma = a.y;
+        if (d.y >= 0.0) {
+            face = 2.0; sc = d.x; tc = d.z;
+        } else {
+            face = 3.0; sc = d.x; tc = -d.z;
+        }
+    } else {
+        ma = a.z;
+        if (d.z >= 0.0) {
+            face = 4.0; sc = d.x; tc = -d.y;
+        } else {
+            face = 5.0; sc = -d.x; tc = -d.y;
+        }
+    }
+    ma = max(ma, 1.17549435e-38);
+    return vec3<f32>(face, 0.5 * (sc / ma + 1.0), 0.5 * (tc / ma + 1.0));
+}
+
+// Occlusion cast by the character at world point p at `phase` in [0, 1).
+fn cubemap_occlusion(p: vec3<f32>, phase: f32) -> f32 {
+    let q = (p - params.centre.xyz) / params.radii.xyz;
+    let len = length(q);
+    var dir = vec3<f32>(0.0, 1.0, 0.0);
+    if (len > 0.0) {
+        dir = q / len;
+    }
+    let rho = len / params.centre.w;
+    let inner = params.radii.w;
+    let shells = f32(params.shells);
+    var k = (rho - inner) * shells / (1.0 - inner) - 1.0;
+    let fade = clamp(shells - k, 0.0, 1.0);
+    if (!(fade > 0.0)) {
+        return 0.0;
+    }
+    k = clamp(k, 0.0, shells - 1.0);
+    let tau = wrap(phase, 1.0) * f32(params.times);
+    let f = face_of(dir);
+    let face = u32(f.x);
+    let res = params.resolution;
+    let last = f32(res - 1u);
+    let x = clamp(f.y * f32(res) - 0.5, 0.0, last);
+    let y = clamp(f.z * f32(res) - 0.5, 0.0, last);
+    let i0 = u32(floor(x));
+    let j0 = u32(floor(y));
+    let i1 = min(i0 + 1u, res - 1u);
+    let j1 = min(j0 + 1u, res - 1u);
+    let fx = x - f32(i0);
+    let fy = y - f32(j0);
+    let a = decode_texel(face, i0, j0, tau, k);
+    let top = a + fx * (decode_texel(face, i1, j0, tau, k) - a);
+    let c = decode_texel(face, i0, j1, tau, k);
+    let bottom = c + fx * (decode_texel(face, i1, j1, tau, k) - c);
+    return fade * (top + fy * (bottom - top));
+}
+
+@compute @workgroup_size(64)
+fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let n = id.y * params.row_stride + id.x;
+    if (n >= params.points) {
+        return;
+    }
+    let p = vec3<f32>(points[3u * n], points[3u * n + 1u], points[3u * n + 2u]);
+    occlusion[n] = cubemap_occlusion(p, params.phase);
+}

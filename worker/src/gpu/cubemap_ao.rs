@@ -1,0 +1,190 @@
+//! [`CubemapAo`] runs `shaders/wgsl/cubemap_ao.wgsl`, the run-time lookup
+//! of Kroon's cubemaps, so that what engines run is tested against core's
+//! CPU lookup, and the previews shade the ground with the cubemap as the
+//! GPU evaluates it.
+
+use aobake_core::method::cubemap::model::{CubemapModel, Encoding};
+use aobake_shaders::CubemapAoParams;
+use wgpu::util::DeviceExt as _;
+
+use super::{Gpu, GpuError};
+
+/// Most workgroups per dispatch dimension (WebGPU's minimum limit).
+const MAX_GROUPS: u32 = 65_535;
+
+/// A cubemap's texels uploaded once; each [`CubemapAo::record`] then costs
+/// one small uniform and one dispatch.
+#[derive(Debug)]
+pub struct CubemapAo<'g> {
+    gpu: &'g Gpu,
+    pipeline: wgpu::ComputePipeline,
+    texels: wgpu::Buffer,
+    base: CubemapAoParams,
+}
+
+impl<'g> CubemapAo<'g> {
+    /// Uploads the model's texels and builds the pipeline.
+    pub fn new(gpu: &'g Gpu, model: &CubemapModel) -> Result<Self, GpuError> {
+        let device = &gpu.device;
+        let l = &model.layout;
+        let limit = device.limits().max_storage_buffer_binding_size;
+        if model.texels.len() as u64 > limit {
+            return Err(GpuError::TooLarge(format!(
+                "{} bytes of texels, over the adapter's storage binding limit of {limit}",
+                model.texels.len()
+            )));
+        }
+        let s = &l.spheroid;
+        let to_u32 = |n: usize, what: &str| {
+            u32::try_from(n).map_err(|_| GpuError::TooLarge(format!("{what}: {n}")))
+        };
+        let base = CubemapAoParams {
+            centre: [s.centre.x, s.centre.y, s.centre.z, s.outer],
+            radii: [s.radii.x, s.radii.y, s.radii.z, s.inner],
+            resolution: to_u32(l.resolution, "resolution")?,
+            shells: to_u32(s.shells, "shells")?,
+            times: to_u32(l.times, "times")?,
+            encoding: match l.encoding {
+                Encoding::Discrete => 0,
+                Encoding::Continuous => 1,
+            },
+            points: 0,
+            phase: 0.0,
+            row_stride: 0,
+            _pad: 0,
+        };
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("cubemap_ao.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(aobake_shaders::CUBEMAP_AO.into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("cubemap ao"),
+            layout: None,
+            module: &module,
+            entry_point: Some("cs_main"),
+            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            cache: None,
+        });
+        let texels = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("cubemap texels"),
+            contents: if model.texels.is_empty() {
+                &[0u8; 16]
+            } else {
+                &model.texels
+            },
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline(e.to_string()));
+        }
+        Ok(Self {
+            gpu,
+            pipeline,
+            texels,
+            base,
+        })
+    }
+
+    /// Records the lookup of `count` points (`points`: packed xyz f32, a
+    /// `STORAGE` buffer) at `phase` into `encoder`, one f32 each into `out`
+    /// (a `STORAGE` buffer a render pass can then read as a vertex
+    /// buffer).
+    pub fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        points: &wgpu::Buffer,
+        count: u32,
+        phase: f32,
+        out: &wgpu::Buffer,
+    ) -> Result<(), GpuError> {
+        let device = &self.gpu.device;
+        let needed = count.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1);
+        let groups = (needed.min(MAX_GROUPS), needed.div_ceil(MAX_GROUPS));
+        if groups.1 > MAX_GROUPS {
+            return Err(GpuError::TooLarge(format!("{count} points")));
+        }
+        let params = CubemapAoParams {
+            points: count,
+            phase,
+            row_stride: groups.0 * aobake_shaders::WORKGROUP_SIZE,
+            ..self.base
+        };
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("cubemap params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let layout = self.pipeline.get_bind_group_layout(0);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("cubemap ao"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: self.texels.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: points.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: out.as_entire_binding(),
+                },
+            ],
+        });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("cubemap ao"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups(groups.0, groups.1, 1);
+        Ok(())
+    }
+
+    /// Occlusion at every point at `phase`, read back.
+    pub fn evaluate(&self, points: &[glam::Vec3], phase: f32) -> Result<Vec<f32>, GpuError> {
+        let device = &self.gpu.device;
+        let count = u32::try_from(points.len())
+            .map_err(|_| GpuError::TooLarge(format!("{} points", points.len())))?;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("points"),
+            contents: if points.is_empty() {
+                &[0u8; 12]
+            } else {
+                bytemuck::cast_slice(points)
+            },
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let size = 4 * u64::from(count.max(1));
+        let out = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("occlusion"),
+            size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("occlusion readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        self.record(&mut encoder, &input, count, phase, &out)?;
+        encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, size);
+        let submission = self.gpu.queue.submit(Some(encoder.finish()));
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline(e.to_string()));
+        }
+        let bytes = self.gpu.read(&staging, submission)?;
+        Ok(bytemuck::cast_slice::<u8, f32>(&bytes)[..points.len()].to_vec())
+    }
+}
