@@ -36,7 +36,7 @@ use crate::{
 
 use super::{
     BakeError, BakeInputs, BakeParams, Evaluation, Plan,
-    preview::{PreviewInfo, Renderer, STILL_FRACTIONS, Subject, preview_clip},
+    preview::{PreviewInfo, PreviewModel, Renderer, STILL_FRACTIONS, Subject, preview_clip},
 };
 
 /// Which poses a `sample` job traces.
@@ -433,14 +433,35 @@ impl<'a> Bake<'a> {
         renderer: &mut dyn Renderer,
     ) -> Result<JobOutput, JobError> {
         let assembled = find(deps, "asset")?;
-        let model = decode(named(assembled, "asset")?)?;
+        let asset = named(assembled, "asset")?;
+        let clips = &self.inputs.clips;
+        let vertex_model;
+        let cubemap_model;
+        let (model, clip) = if self.plan.params.method.family() == Family::Cubemap {
+            let setup = self.cubemap_setup()?;
+            let container =
+                Container::from_bytes(asset).map_err(|e| JobError::Invalid(e.to_string()))?;
+            cubemap_model = crate::method::cubemap::model::CubemapModel::from_container(&container)
+                .map_err(|e| JobError::Invalid(e.to_string()))?
+                .0;
+            // The ground's truth is what the cubemap stores: Eq. 3.1.
+            let kroon = self.plan.params.cubemap_truth(&setup.spheroid);
+            (
+                PreviewModel::Cubemap(&cubemap_model, kroon),
+                Some(&clips[self.cubemap_clip()?]),
+            )
+        } else {
+            vertex_model = decode(asset)?;
+            (
+                PreviewModel::Vertex(&vertex_model),
+                preview_clip(clips, &self.plan.test).map(|i| &clips[i]),
+            )
+        };
         let subject = Subject {
             character: &self.inputs.character,
-            model: &model,
+            model,
             surface: self.plan.params.held_out_surface(),
         };
-        let clips = &self.inputs.clips;
-        let clip = preview_clip(clips, &self.plan.test).map(|i| &clips[i]);
         let times: Vec<f32> = clip.map_or_else(Vec::new, |c| {
             STILL_FRACTIONS.iter().map(|f| f * c.duration).collect()
         });

@@ -37,7 +37,9 @@ pub use jobs::{
 };
 pub use params::{BakeError, BakeParams, ReferenceSource, bake_key};
 pub use plan::{Plan, TestPose};
-pub use preview::{Camera, Image, Panel, Preview, PreviewInfo, RenderFrame, RenderScene, Renderer};
+pub use preview::{
+    Camera, Image, Panel, Preview, PreviewInfo, PreviewModel, RenderFrame, RenderScene, Renderer,
+};
 pub use runner::{Baked, bake_in_process, run_graph};
 
 pub use crate::digest::sha256_hex;

@@ -134,6 +134,19 @@ impl BakeParams {
         }
     }
 
+    /// Eq. 3.1's parameters of a cubemap's ground truth around
+    /// `spheroid` (the previews' ground): the evaluation's rays, the
+    /// held-out seed.
+    pub fn cubemap_truth(
+        &self,
+        spheroid: &crate::method::cubemap::geometry::Spheroid,
+    ) -> crate::trace::KroonParams {
+        crate::trace::KroonParams {
+            samples: self.cubemap.eval_rays,
+            ..self.cubemap.kroon(spheroid, self.seed ^ HELD_OUT_SEED)
+        }
+    }
+
     /// The parameters as they enter the key: only the chosen method's
     /// options.
     pub(crate) fn canonical(&self) -> serde_json::Value {

@@ -23,9 +23,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::{
     Character,
-    method::vertex::Model,
+    method::{Method, cubemap::model::CubemapModel, vertex::Model},
     rig::{clip::Clip, pose::Pose},
-    trace::{Scene, SceneOptions, SurfaceParams, no_progress, surface_occlusion, trace_poses},
+    trace::{
+        KroonParams, Scene, SceneOptions, SurfaceParams, kroon_occlusion, no_progress,
+        surface_occlusion, trace_poses,
+    },
 };
 
 use super::JobError;
@@ -44,9 +47,39 @@ pub const STILL_FRACTIONS: [f32; 3] = [0.15, 0.5, 0.85];
 pub const GROUND_GRID: usize = 64;
 /// Most rays per ground point (the bake's count when lower).
 pub const GROUND_SAMPLES: u32 = 128;
-/// What the stills say about the ground.
-const GROUND_NOTE: &str =
-    "ground: ray-traced in every panel (the vertex methods bake the character only)";
+/// The baked model a preview shows, and what its panels shade with it.
+#[derive(Debug, Clone, Copy)]
+pub enum PreviewModel<'a> {
+    /// A per-vertex model: the renderer evaluates it on the character
+    /// (the ground is ray-traced in every panel).
+    Vertex(&'a Model),
+    /// A cubemap: the renderer looks it up on the ground at each frame's
+    /// phase (the character is ray-traced in every panel); its ground
+    /// truth is Eq. 3.1 with these parameters, what the cubemap stores.
+    Cubemap(&'a CubemapModel, KroonParams),
+}
+
+impl PreviewModel<'_> {
+    /// The method.
+    pub fn method(&self) -> Method {
+        match self {
+            Self::Vertex(m) => m.method(),
+            Self::Cubemap(m, _) => m.method(),
+        }
+    }
+
+    /// What the stills say about the surface the model does not shade.
+    fn note(&self) -> &'static str {
+        match self {
+            Self::Vertex(_) => {
+                "ground: ray-traced in every panel (the vertex methods bake the character only)"
+            }
+            Self::Cubemap(..) => {
+                "character: ray-traced in every panel (the cubemap bakes the occlusion it casts)"
+            }
+        }
+    }
+}
 
 /// What a panel shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -221,7 +254,7 @@ pub struct RenderScene<'a> {
     /// The character's triangles (counter-clockwise fronts).
     pub triangles: &'a [[u32; 3]],
     /// The model whose AO the renderer evaluates.
-    pub model: &'a Model,
+    pub model: PreviewModel<'a>,
     /// Camera and ground.
     pub camera: Camera,
     /// The ground grid ([`Camera::ground`]).
@@ -241,11 +274,15 @@ pub struct RenderFrame {
     pub normals: Vec<Vec3>,
     /// Ray-traced occlusion per vertex.
     pub truth: Vec<f32>,
-    /// The model's weights for this pose ([`Model::weights`]).
+    /// The model's weights for this pose ([`Model::weights`]; empty for a
+    /// cubemap).
     pub weights: Vec<f32>,
-    /// Ray-traced occlusion of each ground vertex by the character, drawn
-    /// in every panel (no vertex method bakes it).
+    /// Ray-traced occlusion of each ground vertex by the character: the
+    /// truth of a cubemap's ground, drawn in every panel of a vertex
+    /// method's (no vertex method bakes it).
     pub ground_ao: Vec<f32>,
+    /// The frame's phase of the clip's cycle (a cubemap's lookup).
+    pub phase: f32,
 }
 
 /// An sRGB-encoded RGBA8 image, rows top to bottom.
@@ -314,7 +351,7 @@ pub struct Subject<'a> {
     /// The character.
     pub character: &'a Character,
     /// The baked model.
-    pub model: &'a Model,
+    pub model: PreviewModel<'a>,
     /// The ray tracing of the ground truth (the bake's held-out seed).
     pub surface: SurfaceParams,
 }
@@ -387,20 +424,33 @@ impl Subject<'_> {
                     &SceneOptions::default(),
                 )
                 .map_err(invalid)?;
-                let ground_ao = surface_occlusion(
-                    &scene,
-                    &ground.positions,
-                    &up,
-                    &ground_surface,
-                    &no_progress,
-                )
-                .map_err(invalid)?;
+                let (ground_ao, weights, phase) = match self.model {
+                    PreviewModel::Vertex(model) => (
+                        surface_occlusion(
+                            &scene,
+                            &ground.positions,
+                            &up,
+                            &ground_surface,
+                            &no_progress,
+                        )
+                        .map_err(invalid)?,
+                        model.weights(skeleton, pose),
+                        0.0,
+                    ),
+                    PreviewModel::Cubemap(model, kroon) => (
+                        kroon_occlusion(&scene, &ground.positions, None, &kroon, &no_progress)
+                            .map_err(invalid)?,
+                        Vec::new(),
+                        model.layout.phase(times[i]),
+                    ),
+                };
                 Ok(RenderFrame {
                     positions: posed.positions,
                     normals: posed.normals,
                     truth: truth.values[i * vertices..(i + 1) * vertices].to_vec(),
-                    weights: self.model.weights(skeleton, pose),
+                    weights,
                     ground_ao,
+                    phase,
                 })
             })
             .collect()
@@ -438,7 +488,7 @@ impl Subject<'_> {
                     format!("baked: {method}"),
                     "error: baked − ray-traced".to_owned(),
                 ];
-                let image = compose_still(row, &titles)?;
+                let image = compose_row(row, &titles, Some(self.model.note()))?;
                 Ok(Preview {
                     info: PreviewInfo {
                         name: format!("still-{i}.png"),
@@ -516,7 +566,7 @@ impl Subject<'_> {
                 compose_row(
                     pair,
                     &[format!("ray-traced  {t:.2} s"), format!("baked: {method}")],
-                    false,
+                    None,
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -598,11 +648,15 @@ fn draw_error(e: impl std::fmt::Display) -> JobError {
 
 /// Panels side by side under their titles, and the heat map's legend under
 /// the last panel when `legend`.
-fn compose_row(panels: &[Image], titles: &[String], legend: bool) -> Result<Image, JobError> {
+fn compose_row(
+    panels: &[Image],
+    titles: &[String],
+    legend: Option<&str>,
+) -> Result<Image, JobError> {
     font()?;
     let (pw, ph) = (panels[0].width, panels[0].height);
     let width = pw * panels.len() as u32;
-    let height = TITLE_HEIGHT + ph + if legend { LEGEND_HEIGHT } else { 0 };
+    let height = TITLE_HEIGHT + ph + if legend.is_some() { LEGEND_HEIGHT } else { 0 };
     let mut rgb = vec![BACKGROUND; (3 * width * height) as usize];
     for (k, panel) in panels.iter().enumerate() {
         for y in 0..ph {
@@ -624,7 +678,7 @@ fn compose_row(panels: &[Image], titles: &[String], legend: bool) -> Result<Imag
             ))
             .map_err(draw_error)?;
         }
-        if legend {
+        if let Some(note) = legend {
             let heat = HEAT_MAP;
             let x0 = (panels.len() as i32 - 1) * pw as i32 + 20;
             let bar = (pw as i32 - 40).max(2);
@@ -639,7 +693,7 @@ fn compose_row(panels: &[Image], titles: &[String], legend: bool) -> Result<Imag
                 .map_err(draw_error)?;
             }
             let small = TextStyle::from(("sans-serif", 12).into_font()).color(&BLACK);
-            root.draw(&Text::new(GROUND_NOTE, (8, y0 + 20), small.clone()))
+            root.draw(&Text::new(note, (8, y0 + 20), small.clone()))
                 .map_err(draw_error)?;
             for (x, label) in [
                 (x0, format!("−{} too bright", heat.range)),
@@ -664,10 +718,6 @@ fn compose_row(panels: &[Image], titles: &[String], legend: bool) -> Result<Imag
 }
 
 /// Three panels (truth, model, error) with the legend.
-fn compose_still(panels: &[Image], titles: &[String; 3]) -> Result<Image, JobError> {
-    compose_row(panels, titles, true)
-}
-
 /// The sRGB byte of a linear value.
 pub fn srgb_byte(linear: f32) -> u8 {
     let c = linear.clamp(0.0, 1.0);
@@ -826,7 +876,7 @@ mod tests {
             rgba: [v, v, v, 255].repeat(1600),
         };
         let titles = ["a".to_owned(), "b".to_owned(), "c".to_owned()];
-        let row = compose_still(&[panel(10), panel(20), panel(30)], &titles).unwrap();
+        let row = compose_row(&[panel(10), panel(20), panel(30)], &titles, Some("note")).unwrap();
         assert_eq!(
             (row.width, row.height),
             (120, 40 + TITLE_HEIGHT + LEGEND_HEIGHT)

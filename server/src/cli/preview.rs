@@ -9,8 +9,8 @@ use anyhow::{Context as _, bail};
 use aobake_core::{
     Character, Clip, Limits,
     asset::Container,
-    bake::{BakeParams, preview::Subject},
-    method::vertex::Model,
+    bake::{BakeParams, PreviewModel, preview::Subject},
+    method::{Family, cubemap::model::CubemapModel, vertex::Model},
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
 
@@ -44,9 +44,15 @@ pub(super) struct Args {
     out: PathBuf,
 }
 
+/// The model an asset holds.
+enum Baked {
+    Vertex(Model),
+    Cubemap(CubemapModel),
+}
+
 /// An asset and the character it was baked for, loaded and checked.
 struct Loaded {
-    model: Model,
+    model: Baked,
     params: BakeParams,
     character: Character,
     clips: Vec<Clip>,
@@ -58,20 +64,30 @@ impl Loaded {
             std::fs::read(asset).with_context(|| format!("cannot read {}", asset.display()))?;
         let container = Container::from_bytes(&bytes)
             .with_context(|| format!("cannot read {}", asset.display()))?;
-        let (model, header) = Model::from_container(&container)
-            .with_context(|| format!("cannot read {}", asset.display()))?;
-        // The ground truth is traced as the bake traced its held-out poses.
-        let params: BakeParams = serde_json::from_value(header.params.clone())
-            .unwrap_or_else(|_| BakeParams::new(header.method));
         let (character, clips) = character_and_clips(file, clips, &Limits::default())?;
-        if let Err(e) = model.check_character(&character) {
-            bail!(
-                "{} does not fit {}: {e} (character {})",
-                asset.display(),
-                file.display(),
-                header.character
-            );
-        }
+        let (model, params) = if container.method.family() == Family::Cubemap {
+            let (model, header) = CubemapModel::from_container(&container)
+                .with_context(|| format!("cannot read {}", asset.display()))?;
+            let params: BakeParams = serde_json::from_value(header.params.clone())
+                .unwrap_or_else(|_| BakeParams::new(header.method));
+            (Baked::Cubemap(model), params)
+        } else {
+            let (model, header) = Model::from_container(&container)
+                .with_context(|| format!("cannot read {}", asset.display()))?;
+            // The ground truth is traced as the bake traced its held-out
+            // poses.
+            let params: BakeParams = serde_json::from_value(header.params.clone())
+                .unwrap_or_else(|_| BakeParams::new(header.method));
+            if let Err(e) = model.check_character(&character) {
+                bail!(
+                    "{} does not fit {}: {e} (character {})",
+                    asset.display(),
+                    file.display(),
+                    header.character
+                );
+            }
+            (Baked::Vertex(model), params)
+        };
         Ok(Self {
             model,
             params,
@@ -83,7 +99,12 @@ impl Loaded {
     fn subject(&self) -> Subject<'_> {
         Subject {
             character: &self.character,
-            model: &self.model,
+            model: match &self.model {
+                Baked::Vertex(m) => PreviewModel::Vertex(m),
+                Baked::Cubemap(m) => {
+                    PreviewModel::Cubemap(m, self.params.cubemap_truth(&m.layout.spheroid))
+                }
+            },
             surface: self.params.held_out_surface(),
         }
     }

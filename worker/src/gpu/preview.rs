@@ -1,15 +1,17 @@
 //! Core's preview [`Renderer`] on wgpu: `shaders/wgsl/preview.wgsl` draws
 //! the posed character and a ground plane into a multisampled sRGB target,
-//! the model's AO computed per frame by [`VertexAo`] into a buffer that
-//! the raster reads as a vertex attribute (the AO never leaves the GPU),
-//! and the resolved image read back.
+//! the model's AO computed per frame into a buffer that the raster reads
+//! as a vertex attribute (the AO never leaves the GPU), and the resolved
+//! image read back. A vertex model is evaluated on the character by
+//! [`VertexAo`]; a cubemap is looked up on the ground's vertices by
+//! [`CubemapAo`] at the frame's phase.
 
-use aobake_core::bake::{Image, Panel, RenderFrame, RenderScene, Renderer};
+use aobake_core::bake::{Image, Panel, PreviewModel, RenderFrame, RenderScene, Renderer};
 use aobake_shaders::PreviewUniforms;
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;
 
-use super::{Gpu, GpuError, VertexAo};
+use super::{CubemapAo, Gpu, GpuError, VertexAo};
 
 const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -167,6 +169,12 @@ impl<'g> PreviewRenderer<'g> {
     }
 }
 
+/// What computes a panel's model AO on the GPU.
+enum Evaluator<'g> {
+    Vertex(VertexAo<'g>),
+    Cubemap(CubemapAo<'g>),
+}
+
 /// Vertex buffers of one surface.
 struct Mesh {
     positions: wgpu::Buffer,
@@ -211,7 +219,10 @@ impl PreviewRenderer<'_> {
         let gpu = self.gpu;
         let device = &gpu.device;
         let (width, height) = scene.size;
-        let vertices = scene.model.vertices();
+        let vertices = match scene.model {
+            PreviewModel::Vertex(m) => m.vertices(),
+            PreviewModel::Cubemap(..) => frames.first().map_or(0, |f| f.positions.len()),
+        };
         for f in frames {
             if f.positions.len() != vertices
                 || f.normals.len() != vertices
@@ -224,7 +235,11 @@ impl PreviewRenderer<'_> {
             }
         }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let evaluator = VertexAo::new(gpu, scene.model)?;
+        let evaluator = match scene.model {
+            PreviewModel::Vertex(m) => Evaluator::Vertex(VertexAo::new(gpu, m)?),
+            PreviewModel::Cubemap(m, _) => Evaluator::Cubemap(CubemapAo::new(gpu, m)?),
+        };
+        let cubemap = matches!(evaluator, Evaluator::Cubemap(_));
         use wgpu::BufferUsages as U;
         let dynamic = U::VERTEX | U::COPY_DST;
         let n = vertices.max(1) as u64;
@@ -237,11 +252,17 @@ impl PreviewRenderer<'_> {
             })
         };
         let indices: Vec<u32> = scene.triangles.iter().flatten().copied().collect();
+        let truth = buffer("truth", 4 * n, dynamic);
         let character = Mesh {
             positions: buffer("positions", 12 * n, dynamic),
             normals: buffer("normals", 12 * n, dynamic),
-            truth: buffer("truth", 4 * n, dynamic),
-            model: buffer("model ao", 4 * n, U::VERTEX | U::STORAGE),
+            // A cubemap does not shade the character: ray-traced in both.
+            model: if cubemap {
+                truth.clone()
+            } else {
+                buffer("model ao", 4 * n, U::VERTEX | U::STORAGE)
+            },
+            truth,
             indices: init(
                 device,
                 "indices",
@@ -254,19 +275,26 @@ impl PreviewRenderer<'_> {
             ),
             index_count: indices.len() as u32,
         };
-        // The ground's occlusion is the same buffer in both AO slots: no
-        // vertex method bakes it, so every panel shows the ray-traced one.
+        // A vertex method's ground shows the ray-traced occlusion in both
+        // AO slots (no vertex method bakes it); a cubemap's is looked up
+        // into its own buffer.
         let g = scene.ground;
         let ground_n = g.positions.len().max(1) as u64;
         let ground_ao = buffer("ground ao", 4 * ground_n, dynamic);
+        let ground_model = if cubemap {
+            buffer("ground model ao", 4 * ground_n, U::VERTEX | U::STORAGE)
+        } else {
+            ground_ao.clone()
+        };
         let ground_indices: Vec<u32> = g.triangles.iter().flatten().copied().collect();
+        let ground_positions = init(
+            device,
+            "ground",
+            bytemuck::cast_slice(&g.positions),
+            U::VERTEX | U::STORAGE,
+        );
         let ground = Mesh {
-            positions: init(
-                device,
-                "ground",
-                bytemuck::cast_slice(&g.positions),
-                U::VERTEX,
-            ),
+            positions: ground_positions.clone(),
             normals: init(
                 device,
                 "ground normals",
@@ -274,7 +302,7 @@ impl PreviewRenderer<'_> {
                 U::VERTEX,
             ),
             truth: ground_ao.clone(),
-            model: ground_ao.clone(),
+            model: ground_model.clone(),
             indices: init(
                 device,
                 "ground indices",
@@ -363,7 +391,16 @@ impl PreviewRenderer<'_> {
                 .write_buffer(&ground_ao, 0, bytemuck::cast_slice(&frame.ground_ao));
             let mut encoder =
                 device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-            evaluator.record(&mut encoder, &frame.weights, &character.model)?;
+            match &evaluator {
+                Evaluator::Vertex(e) => e.record(&mut encoder, &frame.weights, &character.model)?,
+                Evaluator::Cubemap(e) => e.record(
+                    &mut encoder,
+                    &ground_positions,
+                    g.positions.len() as u32,
+                    frame.phase,
+                    &ground_model,
+                )?,
+            }
             for (k, (on_character, on_ground)) in groups.iter().enumerate() {
                 {
                     let (view, resolve_target) = match &msaa {

@@ -74,7 +74,7 @@ fn fixture() -> Fixture {
     let clip = &imported.clips[0];
     let subject = Subject {
         character: &c,
-        model: &model,
+        model: aobake_core::bake::PreviewModel::Vertex(&model),
         surface: params.held_out_surface(),
     };
     let camera = subject.camera(Some(clip));
@@ -97,7 +97,7 @@ fn fixture() -> Fixture {
 fn scene<'a>(f: &'a Fixture, model: &'a Model) -> RenderScene<'a> {
     RenderScene {
         triangles: &f.character.triangles,
-        model,
+        model: aobake_core::bake::PreviewModel::Vertex(model),
         camera: f.camera,
         ground: &f.ground,
         size: (SIZE, SIZE),
@@ -234,4 +234,103 @@ fn the_model_panel_shades_with_the_gpu_evaluation_of_the_model() {
     assert!(rr > rb + 60, "too dark is red: {rr} vs {rb}");
     let bg = pixel(&red, 0, 0);
     assert!(bg[2] > bg[0], "the corner is background");
+}
+
+/// Mean brightness (0..255) of an image's RGB.
+fn mean_brightness(image: &Image) -> f64 {
+    let sum: u64 = image
+        .rgba
+        .chunks_exact(4)
+        .map(|p| u64::from(p[0]) + u64::from(p[1]) + u64::from(p[2]))
+        .sum();
+    sum as f64 / (3 * image.rgba.len() / 4) as f64
+}
+
+#[test]
+fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its_previews() {
+    use aobake_core::{
+        asset::Container,
+        bake::{Bake, BakeInputs, PreviewModel, UploadBytes, bake_in_process},
+        method::cubemap::model::CubemapModel,
+    };
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/data/scenes/SpinningCube/SpinningCube.gltf"
+    );
+    let inputs = BakeInputs::load(
+        &UploadBytes::single(std::fs::read(path).unwrap()),
+        &[],
+        &Limits::default(),
+    )
+    .unwrap();
+    let mut p = BakeParams::new(Method::CubemapContinuous);
+    p.cubemap.resolution = 16;
+    p.cubemap.shells = 4;
+    p.cubemap.times = 32;
+    p.cubemap.rays = 32;
+    p.cubemap.eval_times = 2;
+    p.cubemap.eval_points = 64;
+    p.cubemap.eval_ground = 64;
+    p.cubemap.eval_rays = 32;
+    let bake = Bake::new(&inputs, p.clone()).unwrap();
+    let mut r = renderer();
+    let baked = bake_in_process(&bake, Some(&mut r)).unwrap();
+    let names: Vec<&str> = baked
+        .previews
+        .iter()
+        .map(|(i, _)| i.name.as_str())
+        .collect();
+    assert_eq!(
+        names,
+        ["still-0.png", "still-1.png", "still-2.png", "animation.png"]
+    );
+    assert_eq!(baked.previews[0].0.clip.as_deref(), Some("spin"));
+    // The model panel's ground comes from the cubemap: the baked one
+    // darkens it around the cube, an all-open one (zero texels) does not.
+    let (model, _) =
+        CubemapModel::from_container(&Container::from_bytes(&baked.asset).unwrap()).unwrap();
+    let open = CubemapModel {
+        texels: vec![0; model.texels.len()],
+        layout: aobake_core::method::cubemap::model::CubemapLayout {
+            encoding: aobake_core::method::cubemap::model::Encoding::Discrete,
+            ..model.layout
+        },
+    };
+    let kroon = p.cubemap_truth(&model.layout.spheroid);
+    let clip = &inputs.clips[0];
+    let render = |m: &CubemapModel, r: &mut PreviewRenderer<'_>| {
+        let subject = Subject {
+            character: &inputs.character,
+            model: PreviewModel::Cubemap(m, kroon),
+            surface: p.held_out_surface(),
+        };
+        let camera = subject.camera(Some(clip));
+        let ground = camera.ground();
+        let frames = subject.frames(Some(clip), &[0.5], &ground).unwrap();
+        let scene = RenderScene {
+            triangles: &inputs.character.triangles,
+            model: PreviewModel::Cubemap(m, kroon),
+            camera,
+            ground: &ground,
+            size: (SIZE, SIZE),
+            heat_map: HEAT_MAP,
+        };
+        r.render(&scene, &frames, &[Panel::Truth, Panel::Model])
+            .unwrap()
+    };
+    let baked_panels = render(&model, &mut r);
+    let open_panels = render(&open, &mut r);
+    // The truth panels are the same ray-traced image either way.
+    assert_eq!(baked_panels[0], open_panels[0]);
+    let (truth, with, without) = (
+        mean_brightness(&baked_panels[0]),
+        mean_brightness(&baked_panels[1]),
+        mean_brightness(&open_panels[1]),
+    );
+    eprintln!("mean brightness: truth {truth:.2}, cubemap {with:.2}, open {without:.2}");
+    assert!(with < without - 0.5, "the cubemap darkens the ground");
+    assert!(
+        (with - truth).abs() < (without - truth).abs(),
+        "and brings it closer to the truth"
+    );
 }
