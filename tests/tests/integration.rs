@@ -7,6 +7,8 @@ mod auth;
 mod bad_input;
 #[path = "integration/crashes.rs"]
 mod crashes;
+#[path = "integration/cubemap.rs"]
+mod cubemap;
 #[path = "integration/dashboard.rs"]
 mod dashboard;
 #[path = "integration/service.rs"]

@@ -62,6 +62,8 @@ pub struct FaceInfo {
     pub field_bytes: usize,
     /// Time samples this attempt computed (the rest came from parts).
     pub computed: usize,
+    /// The time sample this attempt started at: its checkpoint's cursor.
+    pub resumed_at: usize,
 }
 
 impl Bake<'_> {
@@ -223,6 +225,7 @@ impl Bake<'_> {
             part_bytes: 20 + batch * n,
             field_bytes: field.values.len(),
             computed: times - resumed_at,
+            resumed_at,
         };
         let mut out = JobOutput::default();
         out.push(&format!("face-{face}"), field.to_bytes());

@@ -54,7 +54,10 @@ fn a_face_job_resumed_from_its_parts_gives_the_same_bytes_and_saves_only_what_is
     let whole = bake.run_job(&spec, &[], None, &mut NoSink).unwrap();
     let info: FaceInfo = serde_json::from_slice(whole.get("face-3.json").unwrap()).unwrap();
     // 16 time samples: a checkpoint after each but the last.
-    assert_eq!((info.batch, info.checkpoints, info.computed), (1, 15, 16));
+    assert_eq!(
+        (info.batch, info.checkpoints, info.computed, info.resumed_at),
+        (1, 15, 16, 0)
+    );
     let slice = 8 * 8 * 4;
     assert_eq!(info.part_bytes, 20 + slice);
     for stop_after in [1, 6, 15] {
@@ -91,7 +94,10 @@ fn a_face_job_resumed_from_its_parts_gives_the_same_bytes_and_saves_only_what_is
             "stopped after {stop_after}"
         );
         let info: FaceInfo = serde_json::from_slice(resumed.get("face-3.json").unwrap()).unwrap();
-        assert_eq!(info.computed, 16 - stop_after);
+        assert_eq!(
+            (info.computed, info.resumed_at),
+            (16 - stop_after, stop_after)
+        );
     }
     // A part that comes back altered is refused, not mixed in.
     let mut first = Interrupting {

@@ -1,0 +1,179 @@
+//! A cubemap bake through the service (issue 12): six face jobs on local
+//! workers, the worker holding a face killed mid-face, another aborting
+//! right after a checkpoint; the successors resume from the faces'
+//! incremental checkpoints, lose at most one checkpoint interval, and the
+//! asset equals `aobake bake`'s byte for byte.
+
+use std::time::{Duration, Instant};
+
+use aobake_e2e::{ADMIN, Options, TestEnv, binary, character};
+use serde_json::{Value, json};
+
+use crate::util::{asset, upload};
+
+/// 48² texels, 6 shells, 64 time samples, 32 rays: a face is a few
+/// seconds of tracing with 31 checkpoints (2 time samples each).
+const FLAGS: &[&str] = &[
+    "--param",
+    "cubemap.resolution=48",
+    "--param",
+    "cubemap.shells=6",
+    "--param",
+    "cubemap.times=64",
+    "--param",
+    "cubemap.rays=32",
+    "--param",
+    "cubemap.eval_times=2",
+    "--param",
+    "cubemap.eval_points=256",
+    "--param",
+    "cubemap.eval_ground=128",
+    "--param",
+    "cubemap.eval_rays=64",
+];
+
+fn params() -> Value {
+    json!({"cubemap": {"resolution": 48, "shells": 6, "times": 64, "rays": 32,
+        "eval_times": 2, "eval_points": 256, "eval_ground": 128, "eval_rays": 64}})
+}
+
+fn bake(env: &TestEnv, id: i64) -> Value {
+    env.request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap()
+        .1
+}
+
+#[test]
+fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 1.5,
+        max_attempts: 30,
+        ..Options::default()
+    });
+    let cm = character("CesiumMan");
+    let digest = upload(&env, &cm);
+    let (status, b) = env
+        .request(
+            "POST",
+            "/v1/bakes",
+            ADMIN,
+            Some(json!({"character": digest, "method": "cubemap-discrete", "params": params()})),
+        )
+        .unwrap();
+    assert_eq!(status, 202, "{b}");
+    let id = b["id"].as_i64().unwrap();
+    let kinds: Vec<String> = bake(&env, id)["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| j["kind"].as_str().unwrap().to_owned())
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            "face", "face", "face", "face", "face", "face", "assemble", "evaluate", "preview"
+        ]
+    );
+    // One worker aborts right after its first checkpoint.
+    env.start_worker(&[("AOBAKE_FAULT", "after_checkpoint")]);
+    let victim = env.start_worker(&[]);
+    // Kill the other as soon as a face it runs is well under way (the
+    // aborting worker never gets past its first checkpoint).
+    let started = Instant::now();
+    let (killed_job, cursor_at_kill) = loop {
+        let now = bake(&env, id);
+        let deep = now["jobs"].as_array().unwrap().iter().find_map(|j| {
+            let cursor = j["checkpoint"]["cursor"].as_i64().unwrap_or(0);
+            (j["kind"] == "face" && j["state"] == "running" && cursor >= 10)
+                .then(|| (j["id"].as_i64().unwrap(), cursor))
+        });
+        if let Some(d) = deep {
+            break d;
+        }
+        assert!(started.elapsed() < Duration::from_secs(120), "{now}");
+        std::thread::sleep(Duration::from_millis(30));
+    };
+    env.kill_worker(victim);
+    env.start_worker(&[]);
+    env.start_worker(&[]);
+    let done = env.wait_bake(id, Duration::from_secs(300));
+    assert_eq!(done["state"], "done", "{done}");
+    let jobs = done["jobs"].as_array().unwrap().clone();
+    let logs = env.worker_logs();
+    assert!(logs.contains("fault injected after checkpoint"), "{logs}");
+    // Every face's last attempt computed only the time samples after the
+    // checkpoint it resumed from; the killed face resumed at or after the
+    // checkpoint seen just before the kill, so the kill lost at most the
+    // samples since its last checkpoint: one interval (2 time samples).
+    let mut resumed = 0;
+    for j in jobs.iter().filter(|j| j["kind"] == "face") {
+        let attempts = j["attempts"].as_i64().unwrap();
+        let info = j["outputs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|o| o["name"].as_str().unwrap().ends_with(".json"))
+            .unwrap();
+        let (_, info) = env
+            .request(
+                "GET",
+                &format!("/v1/blobs/{}", info["digest"].as_str().unwrap()),
+                ADMIN,
+                None,
+            )
+            .unwrap();
+        let resumed_at = info["resumed_at"].as_i64().unwrap();
+        assert_eq!(
+            info["computed"].as_i64().unwrap(),
+            64 - resumed_at,
+            "{info}"
+        );
+        if j["id"].as_i64() == Some(killed_job) {
+            assert!(attempts > 1, "{j}");
+            assert!(
+                resumed_at >= cursor_at_kill,
+                "the killed face resumed at {resumed_at}, before its checkpoint at {cursor_at_kill}"
+            );
+        }
+        if attempts > 1 && resumed_at > 0 {
+            resumed += 1;
+        }
+    }
+    assert!(
+        resumed >= 2,
+        "the killed and the aborted faces resumed: {jobs:?}"
+    );
+    // The same request through `aobake bake`, undisturbed.
+    let out = env.dir.path().join("local.aob");
+    let run = std::process::Command::new(binary())
+        .args(["bake", cm.to_str().unwrap(), "--method", "cubemap-discrete"])
+        .args(FLAGS)
+        .arg("--out")
+        .arg(&out)
+        .arg("--report")
+        .arg(env.dir.path().join("local.json"))
+        .env("RAYON_NUM_THREADS", "2")
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(
+        asset(&env, &done) == std::fs::read(out).unwrap(),
+        "the disturbed bake's asset differs from an undisturbed one"
+    );
+    // The report is a cubemap report, with both encodings.
+    let (_, report) = env
+        .request("GET", &format!("/v1/bakes/{id}/report"), ADMIN, None)
+        .unwrap();
+    let names: Vec<&str> = report["evaluation"]["variants"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names[0], "cubemap-discrete");
+    assert!(names.contains(&"cubemap-continuous"), "{names:?}");
+}
