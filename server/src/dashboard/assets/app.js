@@ -254,7 +254,32 @@ function jobsTable(jobs) {
       h("td", { class: "muted" }, j.error || "")))));
 }
 
+function cubemapReportSection(report, plotUrl) {
+  const ev = report.evaluation;
+  const l = report.layout;
+  const err = (e) => [fmt(e.mean.rmse), fmt(e.mean.too_dark_mse, 6), fmt(e.mean.too_bright_mse, 6)];
+  return h("section", { id: "report" },
+    h("h2", {}, "Quality"),
+    h("p", { class: "muted" },
+      `Clip ${report.clip}: ${l.resolution}² texels, ${l.spheroid.shells} shells, ${l.times} time samples. `,
+      `Ground truth at ${ev.times.length} random times: ${ev.space_points} points in space and `,
+      `${ev.ground_points} on the ground each, ${ev.rays_per_point} rays per point `,
+      `(${ev.space_hidden} inside the mesh and ${ev.ground_hidden} under the character left out); `,
+      `its own noise RMSE ${fmt(ev.ground_truth_noise_rmse)}.`),
+    h("table", {},
+      h("thead", {}, h("tr", {}, ...["Variant", "Bytes", "Space RMSE", "too dark", "too bright",
+        "Ground RMSE", "too dark", "too bright"].map((t) => h("th", {}, t)))),
+      h("tbody", {}, ...ev.variants.map((v) => h("tr", { title: v.description },
+        h("td", {}, v.name),
+        h("td", { class: "num" }, v.bytes),
+        ...[...err(v.space), ...err(v.ground)].map((x) => h("td", { class: "num" }, x)))))),
+    h("p", { class: "muted" }, `Asset ${report.sizes.asset_bytes} bytes.`),
+    plotUrl ? h("figure", { class: "wide" }, h("img", { src: plotUrl, alt: "time × distance charts" }),
+      h("figcaption", {}, "Time × distance at the worst, a 90th-percentile and the median texel: input, then each encoding decoded and its error")) : null);
+}
+
 function reportSection(report, plotUrl) {
+  if (report.layout) return cubemapReportSection(report, plotUrl);
   const ev = report.evaluation;
   const rows = [["held-out clip frames", ev.clip_frames], ["held-out random poses", ev.random_poses]];
   return h("section", { id: "report" },
