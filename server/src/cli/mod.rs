@@ -6,6 +6,7 @@ mod bench_cubemap;
 mod bench_service;
 pub mod client;
 mod eval;
+mod export;
 mod inspect;
 mod load;
 mod params;
@@ -36,15 +37,20 @@ enum Command {
     /// Ray-trace ground-truth ambient occlusion at every vertex of a posed
     /// character or a PLY mesh and write it as CSV.
     Trace(trace::Args),
-    /// Bake pose-dependent per-vertex AO: trace reference poses, fit the
-    /// method, judge it on held-out poses against the static average, and
-    /// write the asset, a JSON report and a PSNR plot.
+    /// Bake pose-dependent AO: per vertex (trace reference poses, fit the
+    /// method, judge it on held-out poses against the static average) or
+    /// Kroon's cubemaps around a clip (six faces traced, encoded, judged
+    /// against fresh ground truth), and write the asset, a JSON report and
+    /// its plot.
     Bake(Box<bake::Args>),
     /// Print a method's bake parameters with their defaults (and any
     /// flags applied) as JSON: the names `--param` and the API take.
     Params(params::Args),
     /// Evaluate a baked asset at a pose and write per-vertex AO as CSV.
     Eval(eval::Args),
+    /// Write a baked asset's data for other tools: a cubemap's decoded
+    /// faces as OpenEXR (--exr DIR).
+    Export(export::Args),
     /// Render a baked asset with wgpu: a still at a clip time (ground
     /// truth, model, error) or an animated PNG of a whole clip.
     Preview(preview::Args),
@@ -79,6 +85,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bake(args) => bake::run(&args),
         Command::Params(args) => params::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::Export(args) => export::run(&args),
         Command::Preview(args) => preview::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Serve(args) => {

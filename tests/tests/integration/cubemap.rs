@@ -164,6 +164,48 @@ fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
         asset(&env, &done) == std::fs::read(out).unwrap(),
         "the disturbed bake's asset differs from an undisturbed one"
     );
+    // `aobake export --exr` writes the decoded faces; read back with the
+    // exr crate's reader, each file holds exactly the run time's values.
+    let served = env.dir.path().join("served.aob");
+    std::fs::write(&served, asset(&env, &done)).unwrap();
+    let exr_dir = env.dir.path().join("exr");
+    let out = env.aobake(&[
+        "export",
+        served.to_str().unwrap(),
+        "--exr",
+        exr_dir.to_str().unwrap(),
+        "--times",
+        "0.25",
+        "1.5",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (model, _) = aobake_core::method::cubemap::model::CubemapModel::from_container(
+        &aobake_core::asset::Container::from_bytes(&std::fs::read(&served).unwrap()).unwrap(),
+    )
+    .unwrap();
+    for (t, shell) in [(0.25f32, 0usize), (1.5, 5)] {
+        let path = exr_dir.join(format!("t{t:.3}-shell{shell}.exr"));
+        let image = exr::prelude::read_first_flat_layer_from_file(&path).unwrap();
+        let layer = &image.layer_data;
+        assert_eq!((layer.size.width(), layer.size.height()), (6 * 48, 48));
+        let y = layer.channel_data.list[0]
+            .sample_data
+            .values_as_f32()
+            .collect::<Vec<f32>>();
+        let phase = model.layout.phase(t);
+        for face in 0..6 {
+            let want = model.decode_face(face, shell, phase);
+            for j in 0..48 {
+                for i in 0..48 {
+                    assert_eq!(y[j * 6 * 48 + face * 48 + i], want[j * 48 + i]);
+                }
+            }
+        }
+    }
     // The report is a cubemap report, with both encodings.
     let (_, report) = env
         .request("GET", &format!("/v1/bakes/{id}/report"), ADMIN, None)

@@ -235,6 +235,18 @@ impl CubemapModel {
         })
     }
 
+    /// One face on shell `shell` at `phase`, decoded at every texel
+    /// centre, rows `j` top to bottom, columns `i`: what an export writes.
+    pub fn decode_face(&self, face: usize, shell: usize, phase: f32) -> Vec<f32> {
+        let l = &self.layout;
+        let res = l.resolution;
+        let tau = phase.rem_euclid(1.0) * l.times as f32;
+        let k = shell.min(l.spheroid.shells - 1) as f32;
+        (0..res * res)
+            .map(|t| self.decode_texel(face, t % res, t / res, tau, k))
+            .collect()
+    }
+
     /// Bytes of the texels: what a renderer keeps in memory.
     pub fn bytes(&self) -> usize {
         self.texels.len()
