@@ -28,6 +28,13 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
     let container = Container::from_bytes(&bytes)
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    if container.method.family() == aobake_core::method::Family::Cubemap {
+        bail!(
+            "{} is a {} asset: it holds the occlusion cast into space, not per-vertex AO; `aobake preview` renders it on the ground and `aobake export --exr` writes its faces",
+            args.asset.display(),
+            container.method
+        );
+    }
     let (model, header) = Model::from_container(&container)
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
     let limits = Limits::default();
