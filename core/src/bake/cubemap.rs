@@ -30,8 +30,8 @@ use crate::{
     method::cubemap::{
         continuous,
         evaluate::{
-            CubemapEvaluation, GroundTruth, Lookup, RawCubemap, StaticCubemap, VariantErrors,
-            chart_sums, chart_texels, charts_png, fit_error,
+            BlurhashCubemap, CubemapEvaluation, GroundTruth, Lookup, RawCubemap, StaticCubemap,
+            VariantErrors, chart_sums, chart_texels, charts_png, fit_error,
         },
         face::{FaceError, FaceField, Manifest, Part, checkpoint_batch, compute_face},
         geometry::FACES,
@@ -346,6 +346,25 @@ impl Bake<'_> {
                 fit: Some(fit),
             });
         }
+        // Kroon's own continuous layout (three thirds of the cycle as
+        // Blurhash channels), to measure aobake's one-channel basis against.
+        let kroon = BlurhashCubemap::encode(
+            layout,
+            &faces,
+            continuous::Encoding {
+                bright_weight: setup.options.bright_weight,
+                residuals: true,
+            },
+        );
+        let (space, ground) = truth.errors(&kroon, &layout);
+        variants.push(VariantErrors {
+            name: "kroon-blurhash".into(),
+            description: "Kroon's continuous layout: the cycle in three thirds as the channels of a 5×5 Blurhash (its quantisation), with the same residual cubics (51 of 64 B); evaluated for comparison, not an asset encoding".into(),
+            bytes: kroon.bytes(),
+            space,
+            ground,
+            fit: Some(kroon.fit_error(&faces)),
+        });
         let raw = RawCubemap {
             layout,
             faces: &faces,

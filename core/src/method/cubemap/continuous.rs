@@ -171,23 +171,40 @@ pub fn encode(field: &[f32], tables: &Tables, encoding: Encoding) -> [u8; BYTES]
             out[2 * (BASIS * i + j)..][..2].copy_from_slice(&q.to_le_bytes());
         }
     }
-    for b in &mut out[DISTANCE_NODES..TIME_NODES + 4] {
-        *b = node_byte(0.0);
-    }
-    if !encoding.residuals {
-        return out;
-    }
     // What the quantised basis decodes at every sample.
-    let mut residual = vec![0.0f32; times * shells];
+    let mut decoded = vec![0.0f32; times * shells];
     for k in 0..shells {
         let d = &tables.distance[k];
         let row: [f32; BASIS] =
             std::array::from_fn(|i| (0..BASIS).map(|j| coefficients[i][j] * d[j]).sum());
         for (tau, t) in tables.time.iter().enumerate() {
-            let decoded: f32 = (0..BASIS).map(|i| row[i] * t[i]).sum();
-            residual[k * times + tau] = field[k * times + tau] - decoded;
+            decoded[k * times + tau] = (0..BASIS).map(|i| row[i] * t[i]).sum();
         }
     }
+    fit_residuals(field, &decoded, times, shells, encoding, &mut out);
+    out
+}
+
+/// Fits the residual cubics of `field` (`[k · times + τ]`) left by what a
+/// basis decodes there (`decoded`, same layout): along distance, then
+/// along time after the quantised distance curve; too-bright residuals
+/// weigh `encoding.bright_weight`. Writes their nodes into bytes 50..58
+/// of `out` (zeros without `encoding.residuals`).
+pub(super) fn fit_residuals(
+    field: &[f32],
+    decoded: &[f32],
+    times: usize,
+    shells: usize,
+    encoding: Encoding,
+    out: &mut [u8; BYTES],
+) {
+    for b in &mut out[DISTANCE_NODES..TIME_NODES + 4] {
+        *b = node_byte(0.0);
+    }
+    if !encoding.residuals {
+        return;
+    }
+    let mut residual: Vec<f32> = field.iter().zip(decoded).map(|(f, d)| f - d).collect();
     let weight = |r: f32| if r > 0.0 { encoding.bright_weight } else { 1.0 };
     let distance = fit_cubic((0..shells * times).map(|s| {
         let r = residual[s];
@@ -212,7 +229,18 @@ pub fn encode(field: &[f32], tables: &Tables, encoding: Encoding) -> [u8; BYTES]
     for (n, v) in time.iter().enumerate() {
         out[TIME_NODES + n] = node_byte(*v);
     }
-    out
+}
+
+/// The two residual cubics stored in bytes 50..58, at time `tau` (in
+/// `0..times`) and shell `k`.
+pub(super) fn residuals(bytes: &[u8; BYTES], times: usize, shells: usize, tau: f32, k: f32) -> f32 {
+    let ld = lagrange(distance_axis(shells, k));
+    let lt = lagrange(time_axis(times, tau));
+    (0..4)
+        .map(|n| {
+            ld[n] * byte_node(bytes[DISTANCE_NODES + n]) + lt[n] * byte_node(bytes[TIME_NODES + n])
+        })
+        .sum()
 }
 
 /// The value of an [`encode`]d texel at time `tau` (time samples, cyclic)
@@ -232,13 +260,7 @@ pub fn decode(bytes: &[u8; BYTES], times: usize, shells: usize, tau: f32, k: f32
         }
         v += row * t[i];
     }
-    let ld = lagrange(distance_axis(shells, k));
-    let lt = lagrange(time_axis(times, tau));
-    for n in 0..4 {
-        v += ld[n] * byte_node(bytes[DISTANCE_NODES + n]);
-        v += lt[n] * byte_node(bytes[TIME_NODES + n]);
-    }
-    v.clamp(0.0, 1.0)
+    (v + residuals(bytes, times, shells, tau, k)).clamp(0.0, 1.0)
 }
 
 #[cfg(test)]

@@ -89,6 +89,78 @@ impl Lookup for RawCubemap<'_> {
     }
 }
 
+/// Kroon's own continuous layout ([`super::blurhash`]), encoded from the
+/// same fields: what aobake's one-channel basis is measured against.
+#[derive(Debug, Clone)]
+pub struct BlurhashCubemap {
+    /// Where the fields sit (its encoding is ignored).
+    pub layout: CubemapLayout,
+    /// `[face][texel]` encodings, 64 bytes each.
+    pub texels: Vec<[u8; super::continuous::BYTES]>,
+}
+
+impl BlurhashCubemap {
+    /// Encodes every texel of `faces`.
+    pub fn encode(
+        layout: CubemapLayout,
+        faces: &[FaceField],
+        encoding: super::continuous::Encoding,
+    ) -> Self {
+        let (res, shells, times) = (layout.resolution, layout.spheroid.shells, layout.times);
+        let texels = (0..FACES * res * res)
+            .into_par_iter()
+            .map(|n| {
+                let block = input_block(faces, n / (res * res), n % (res * res));
+                super::blurhash::encode(&block, times, shells, encoding)
+            })
+            .collect();
+        Self { layout, texels }
+    }
+
+    fn texel(&self, face: usize, i: usize, j: usize, tau: f32, k: f32) -> f32 {
+        let l = &self.layout;
+        let bytes = &self.texels[(face * l.resolution + j) * l.resolution + i];
+        super::blurhash::decode(bytes, l.times, l.spheroid.shells, tau, k)
+    }
+
+    /// Its error against the input at the sample points of the sampled
+    /// texels.
+    pub fn fit_error(&self, faces: &[FaceField]) -> FrameError {
+        let l = &self.layout;
+        let (res, shells, times) = (l.resolution, l.spheroid.shells, l.times);
+        let (got, want): (Vec<Vec<f32>>, Vec<Vec<f32>>) = sampled_texels(res)
+            .into_par_iter()
+            .map(|(face, texel)| {
+                let got = (0..shells * times)
+                    .map(|n| {
+                        self.texel(
+                            face,
+                            texel % res,
+                            texel / res,
+                            (n % times) as f32,
+                            (n / times) as f32,
+                        )
+                    })
+                    .collect();
+                (got, input_block(faces, face, texel))
+            })
+            .unzip();
+        FrameError::of(&got.concat(), &want.concat())
+    }
+
+    /// Bytes of its texels.
+    pub fn bytes(&self) -> usize {
+        self.texels.len() * super::continuous::BYTES
+    }
+}
+
+impl Lookup for BlurhashCubemap {
+    fn occlusion(&self, p: Vec3, phase: f32) -> f32 {
+        self.layout
+            .lookup(p, phase, |f, i, j, tau, k| self.texel(f, i, j, tau, k))
+    }
+}
+
 /// The fields averaged over the cycle: one value per texel and shell.
 #[derive(Debug, Clone)]
 pub struct StaticCubemap {

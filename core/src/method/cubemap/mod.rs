@@ -10,6 +10,8 @@
 //! * [`continuous`]: the continuous-radial-distance encoding of one
 //!   texel's (time × distance) field (5 × 5 cosine basis and two residual
 //!   cubics, 64 bytes over four cubemaps).
+//! * [`blurhash`]: Kroon's own layout of the continuous encoding (three
+//!   thirds of the cycle as Blurhash channels), evaluated beside it.
 //! * [`face`]: one face's raw field (a byte per texel, shell and time
 //!   sample), [`face::compute_face`] (the `face` job's loop) and the parts
 //!   and manifest its incremental checkpoints are made of.
@@ -26,6 +28,7 @@
 //! The jobs themselves (`face` → `assemble` → `evaluate` → `preview`) are
 //! in `bake::cubemap`.
 
+pub mod blurhash;
 pub mod codec;
 pub mod continuous;
 pub mod discrete;
