@@ -143,7 +143,8 @@ mod tests {
         let field: Vec<f32> = (0..times * shells)
             .map(|s| {
                 let (k, tau) = (s / times, s % times);
-                0.5 - 0.04 * k as f32 + 0.1 * (tau as f32 / times as f32 * 6.28).sin()
+                0.5 - 0.04 * k as f32
+                    + 0.1 * (tau as f32 / times as f32 * std::f32::consts::TAU).sin()
             })
             .collect();
         let bytes = encode(

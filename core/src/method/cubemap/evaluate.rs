@@ -28,6 +28,8 @@
 
 use glam::Vec3;
 use plotters::prelude::*;
+
+use crate::bake::preview::srgb_byte;
 use rand::{RngExt as _, SeedableRng as _};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -576,7 +578,7 @@ pub fn charts_png(
                         .zip(&input)
                         .map(|(&got, &want)| {
                             let c = heat.color(got - want);
-                            RGBColor(srgb(c[0]), srgb(c[1]), srgb(c[2]))
+                            RGBColor(srgb_byte(c[0]), srgb_byte(c[1]), srgb_byte(c[2]))
                         })
                         .collect(),
                 ));
@@ -606,18 +608,8 @@ pub fn charts_png(
 
 /// Occlusion as a grey: 0 white, 1 black.
 fn grey(v: f32) -> RGBColor {
-    let g = srgb(1.0 - v.clamp(0.0, 1.0));
+    let g = srgb_byte(1.0 - v.clamp(0.0, 1.0));
     RGBColor(g, g, g)
-}
-
-fn srgb(linear: f32) -> u8 {
-    let c = linear.clamp(0.0, 1.0);
-    let s = if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0).round() as u8
 }
 
 #[cfg(test)]
