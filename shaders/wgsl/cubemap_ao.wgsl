@@ -16,8 +16,9 @@
 // Texels are 16 bytes (a vec4<u32>, little-endian bytes), layer-major:
 // index ((layer · res + j) · res + i) with layer = cubemap · 6 + face,
 // the same bytes an engine uploads as a cube-map array of RGBA32Uint. The
-// discrete encoding has one cubemap per shell; the continuous one spreads
-// a texel's 64 bytes over four cubemaps (bytes 16c..16c+16 in cubemap c).
+// discrete encoding has one cubemap per shell; the continuous layouts
+// spread a texel's 64 bytes over four cubemaps (bytes 16c..16c+16 in
+// cubemap c).
 //
 // An engine uses cubemap_occlusion(p, phase) in its own shaders; cs_main
 // evaluates a batch of points (what the tests and the previews run).
@@ -30,7 +31,8 @@ struct Params {
     resolution: u32,
     shells: u32,
     times: u32,
-    // 0 discrete, 1 continuous.
+    // 0 discrete, 1 continuous (cosine layout), 2 continuous (Kroon's
+    // thirds layout).
     encoding: u32,
     points: u32,
     phase: f32,
@@ -85,10 +87,67 @@ fn continuous_word(face: u32, i: u32, j: u32, w: u32) -> u32 {
     return texel_at((w / 4u) * 6u + face, i, j)[w % 4u];
 }
 
-// Byte `b` (0..64) of a continuous texel's 64 bytes, as a signed byte.
+// Byte `b` (0..64) of a continuous texel's 64 bytes.
+fn continuous_byte(face: u32, i: u32, j: u32, b: u32) -> u32 {
+    return (continuous_word(face, i, j, b / 4u) >> ((b % 4u) * 8u)) & 0xffu;
+}
+
+// Byte `b` (0..64) of a continuous texel's 64 bytes, as a residual node.
 fn continuous_node(face: u32, i: u32, j: u32, b: u32) -> f32 {
-    let byte = (continuous_word(face, i, j, b / 4u) >> ((b % 4u) * 8u)) & 0xffu;
+    let byte = continuous_byte(face, i, j, b);
     return f32(bitcast<i32>(byte << 24u) >> 24u) * (0.5 / 127.0);
+}
+
+// The two residual cubics (bytes 50..58) at time tau and shell k.
+fn residual_curves(face: u32, i: u32, j: u32, tau: f32, k: f32) -> f32 {
+    let times = f32(params.times);
+    let shells = f32(params.shells);
+    var du = 0.0;
+    if (params.shells > 1u) {
+        du = clamp(k / (shells - 1.0), 0.0, 1.0);
+    }
+    let ld = lagrange(du);
+    let lt = lagrange(wrap(tau / times, 1.0));
+    var v = 0.0;
+    for (var n = 0u; n < 4u; n++) {
+        v += ld[n] * continuous_node(face, i, j, 50u + n);
+        v += lt[n] * continuous_node(face, i, j, 54u + n);
+    }
+    return v;
+}
+
+// Kroon's layout: the third of the cycle tau falls in is a channel of a
+// 5 × 5 Blurhash (DC bytes 0..3, the AC maximum at byte 3, 24 × 13 bits of
+// three 19-level values from byte 4), plus the residual cubics.
+fn decode_thirds(face: u32, i: u32, j: u32, tau_in: f32, k: f32) -> f32 {
+    let times = f32(params.times);
+    let shells = f32(params.shells);
+    let tau = wrap(tau_in, times);
+    let len = times / 3.0;
+    let c = min(u32(floor(tau / len)), 2u);
+    let x = (tau - f32(c) * len + 0.5) / len;
+    let y = (k + 0.5) / shells;
+    let actual_max = (f32(continuous_byte(face, i, j, 3u)) + 1.0) / 166.0;
+    var divisor = 1u;
+    if (c == 0u) {
+        divisor = 361u;
+    } else if (c == 1u) {
+        divisor = 19u;
+    }
+    var v = f32(continuous_byte(face, i, j, c)) / 255.0;
+    for (var n = 1u; n < 25u; n++) {
+        let bit = 13u * (n - 1u);
+        var packed = 0u;
+        for (var b = 0u; b < 13u; b++) {
+            let at = bit + b;
+            packed |= ((continuous_byte(face, i, j, 4u + at / 8u) >> (at % 8u)) & 1u) << b;
+        }
+        let q = f32((packed / divisor) % 19u);
+        let s = (q - 9.0) / 9.0;
+        let value = sign(s) * s * s * actual_max;
+        v += value * cos(PI * f32(n / 5u) * x) * cos(PI * f32(n % 5u) * y);
+    }
+    return clamp(v + residual_curves(face, i, j, tau, k), 0.0, 1.0);
 }
 
 fn lagrange(u: f32) -> vec4<f32> {
@@ -121,23 +180,16 @@ fn decode_continuous(face: u32, i: u32, j: u32, tau_in: f32, k: f32) -> f32 {
         }
         v += row * cos(PI * f32(a) * xt);
     }
-    var du = 0.0;
-    if (params.shells > 1u) {
-        du = clamp(k / (shells - 1.0), 0.0, 1.0);
-    }
-    let ld = lagrange(du);
-    let lt = lagrange(wrap(tau / times, 1.0));
-    for (var n = 0u; n < 4u; n++) {
-        v += ld[n] * continuous_node(face, i, j, 50u + n);
-        v += lt[n] * continuous_node(face, i, j, 54u + n);
-    }
-    return clamp(v, 0.0, 1.0);
+    return clamp(v + residual_curves(face, i, j, tau, k), 0.0, 1.0);
 }
 
 // The decoded value of texel (i, j) of `face` at time tau on shell k.
 fn decode_texel(face: u32, i: u32, j: u32, tau: f32, k: f32) -> f32 {
     if (params.encoding == 1u) {
         return decode_continuous(face, i, j, tau, k);
+    }
+    if (params.encoding == 2u) {
+        return decode_thirds(face, i, j, tau, k);
     }
     let last = params.shells - 1u;
     let k0 = min(u32(floor(k)), last);

@@ -30,8 +30,8 @@ use crate::{
     method::cubemap::{
         continuous,
         evaluate::{
-            BlurhashCubemap, CubemapEvaluation, GroundTruth, Lookup, RawCubemap, StaticCubemap,
-            VariantErrors, chart_sums, chart_texels, charts_png, fit_error,
+            CubemapEvaluation, GroundTruth, Lookup, RawCubemap, StaticCubemap, VariantErrors,
+            chart_sums, chart_texels, charts_png, fit_error,
         },
         face::{FaceError, FaceField, Manifest, Part, checkpoint_batch, compute_face},
         geometry::FACES,
@@ -99,12 +99,15 @@ impl Bake<'_> {
     }
 
     fn encoding(&self) -> Result<Encoding, JobError> {
-        self.plan.params.method.cubemap_encoding().ok_or_else(|| {
-            JobError::Invalid(format!(
-                "{} is not a cubemap method",
-                self.plan.params.method
-            ))
-        })
+        let p = &self.plan.params;
+        p.method
+            .cubemap_encoding(p.cubemap.continuous_layout)
+            .ok_or_else(|| {
+                JobError::Invalid(format!(
+                    "{} is not a cubemap method",
+                    self.plan.params.method
+                ))
+            })
     }
 
     /// Six `face` jobs → `assemble` → `evaluate` → `preview`.
@@ -300,7 +303,8 @@ impl Bake<'_> {
         let baked = model.layout.encoding;
         let residuals = setup.options.residuals;
         let mut encoded: Vec<(String, String, CubemapModel)> = Vec::new();
-        let describe = |e: Encoding, r: bool| match (e, r) {
+        let describe = |e: Encoding, r: bool| {
+            match (e, r) {
             (Encoding::Discrete, _) => (
                 "cubemap-discrete".to_owned(),
                 "one cubemap per shell; 4 bounded quadratic segments per texel (16 B)".to_owned(),
@@ -314,6 +318,15 @@ impl Bake<'_> {
                 "cubemap-continuous without residuals".to_owned(),
                 "4 cubemaps; the 5×5 cosine basis alone (Kroon's plain Blurhash)".to_owned(),
             ),
+            (Encoding::Thirds, true) => (
+                "cubemap-continuous (thirds)".to_owned(),
+                "4 cubemaps in Kroon's layout: the cycle in three thirds as the channels of a 5×5 Blurhash (its quantisation) + the same residual cubics (51 of 64 B)".to_owned(),
+            ),
+            (Encoding::Thirds, false) => (
+                "cubemap-continuous (thirds) without residuals".to_owned(),
+                "Kroon's layout, the Blurhash alone".to_owned(),
+            ),
+        }
         };
         let (name, text) = describe(baked, residuals);
         encoded.push((name, text, model.clone()));
@@ -321,6 +334,7 @@ impl Bake<'_> {
             (Encoding::Discrete, true),
             (Encoding::Continuous, true),
             (Encoding::Continuous, false),
+            (Encoding::Thirds, true),
         ] {
             if e == baked && (e == Encoding::Discrete || r == residuals) {
                 continue;
@@ -346,25 +360,6 @@ impl Bake<'_> {
                 fit: Some(fit),
             });
         }
-        // Kroon's own continuous layout (three thirds of the cycle as
-        // Blurhash channels), to measure aobake's one-channel basis against.
-        let kroon = BlurhashCubemap::encode(
-            layout,
-            &faces,
-            continuous::Encoding {
-                bright_weight: setup.options.bright_weight,
-                residuals: true,
-            },
-        );
-        let (space, ground) = truth.errors(&kroon, &layout);
-        variants.push(VariantErrors {
-            name: "kroon-blurhash".into(),
-            description: "Kroon's continuous layout: the cycle in three thirds as the channels of a 5×5 Blurhash (its quantisation), with the same residual cubics (51 of 64 B); evaluated for comparison, not an asset encoding".into(),
-            bytes: kroon.bytes(),
-            space,
-            ground,
-            fit: Some(kroon.fit_error(&faces)),
-        });
         let raw = RawCubemap {
             layout,
             faces: &faces,

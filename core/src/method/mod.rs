@@ -95,11 +95,17 @@ impl Method {
         }
     }
 
-    /// The cubemap encoding of a cubemap method.
-    pub fn cubemap_encoding(self) -> Option<cubemap::model::Encoding> {
-        match self {
-            Self::CubemapDiscrete => Some(cubemap::model::Encoding::Discrete),
-            Self::CubemapContinuous => Some(cubemap::model::Encoding::Continuous),
+    /// The cubemap encoding of a cubemap method with the continuous
+    /// encoding's `layout`.
+    pub fn cubemap_encoding(
+        self,
+        layout: cubemap::ContinuousLayout,
+    ) -> Option<cubemap::model::Encoding> {
+        use cubemap::{ContinuousLayout, model::Encoding};
+        match (self, layout) {
+            (Self::CubemapDiscrete, _) => Some(Encoding::Discrete),
+            (Self::CubemapContinuous, ContinuousLayout::Cosine) => Some(Encoding::Continuous),
+            (Self::CubemapContinuous, ContinuousLayout::Thirds) => Some(Encoding::Thirds),
             _ => None,
         }
     }

@@ -11,7 +11,7 @@ use aobake_core::{
     bake::{Bake, BakeParams, JobError, JobSpec, NoSink, bake_in_process, cubemap::FaceInfo},
     method::{
         Method,
-        cubemap::{CubemapOptions, model::CubemapModel},
+        cubemap::{ContinuousLayout, CubemapOptions, model::CubemapModel},
     },
 };
 
@@ -130,8 +130,14 @@ fn both_encodings_bake_in_process_and_beat_the_static_cubemap_on_unseen_points()
         ("SpinningCube", spinning_cube()),
     ] {
         let inputs = util::inputs(&imported.character, &imported.clips);
-        for method in [Method::CubemapDiscrete, Method::CubemapContinuous] {
-            let bake = Bake::new(&inputs, quick(method)).unwrap();
+        for (method, layout) in [
+            (Method::CubemapDiscrete, ContinuousLayout::Cosine),
+            (Method::CubemapContinuous, ContinuousLayout::Cosine),
+            (Method::CubemapContinuous, ContinuousLayout::Thirds),
+        ] {
+            let mut params = quick(method);
+            params.cubemap.continuous_layout = layout;
+            let bake = Bake::new(&inputs, params).unwrap();
             let baked = bake_in_process(&bake, None).unwrap();
             let r = report(&baked);
             let container = Container::from_bytes(&baked.asset).unwrap();
@@ -143,11 +149,16 @@ fn both_encodings_bake_in_process_and_beat_the_static_cubemap_on_unseen_points()
             assert_eq!(model.bytes(), 4 * 6 * 16 * 16 * 16);
             let v = &r.evaluation.variants;
             let names: Vec<&str> = v.iter().map(|v| v.name.as_str()).collect();
-            assert_eq!(names[0], method.name(), "the baked encoding first");
+            let baked_name = match layout {
+                ContinuousLayout::Thirds => "cubemap-continuous (thirds)",
+                ContinuousLayout::Cosine => method.name(),
+            };
+            assert_eq!(names[0], baked_name, "the baked encoding first");
             for want in [
                 "cubemap-discrete",
                 "cubemap-continuous",
                 "cubemap-continuous without residuals",
+                "cubemap-continuous (thirds)",
                 "uncompressed",
                 "static (time average)",
             ] {
@@ -157,7 +168,7 @@ fn both_encodings_bake_in_process_and_beat_the_static_cubemap_on_unseen_points()
             let still = get("static (time average)");
             let baked_v = &v[0];
             eprintln!(
-                "{name} {method}: space RMSE {:.4} (static {:.4}, uncompressed {:.4}), ground RMSE {:.4} (static {:.4}), noise {:.4}",
+                "{name} {method} {layout:?}: space RMSE {:.4} (static {:.4}, uncompressed {:.4}), ground RMSE {:.4} (static {:.4}), noise {:.4}",
                 baked_v.space.mean.rmse,
                 still.space.mean.rmse,
                 get("uncompressed").space.mean.rmse,

@@ -47,6 +47,7 @@ impl<'g> CubemapAo<'g> {
             encoding: match l.encoding {
                 Encoding::Discrete => 0,
                 Encoding::Continuous => 1,
+                Encoding::Thirds => 2,
             },
             points: 0,
             phase: 0.0,

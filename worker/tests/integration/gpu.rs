@@ -162,8 +162,12 @@ fn the_shader_decodes_every_finite_half_exactly() {
     }
 }
 
-/// A small cubemap bake of CesiumMan's walk in `method`'s encoding.
-fn cubemap(method: Method) -> aobake_core::method::cubemap::model::CubemapModel {
+/// A small cubemap bake of CesiumMan's walk in `method`'s encoding with
+/// the continuous `layout`.
+fn cubemap(
+    method: Method,
+    layout: aobake_core::method::cubemap::ContinuousLayout,
+) -> aobake_core::method::cubemap::model::CubemapModel {
     use aobake_core::{
         asset::Container,
         bake::{Bake, BakeInputs, UploadBytes, bake_in_process},
@@ -184,6 +188,7 @@ fn cubemap(method: Method) -> aobake_core::method::cubemap::model::CubemapModel 
     p.cubemap.eval_points = 16;
     p.cubemap.eval_ground = 16;
     p.cubemap.eval_rays = 16;
+    p.cubemap.continuous_layout = layout;
     let baked = bake_in_process(&Bake::new(&inputs, p).unwrap(), None).unwrap();
     CubemapModel::from_container(&Container::from_bytes(&baked.asset).unwrap())
         .unwrap()
@@ -191,12 +196,18 @@ fn cubemap(method: Method) -> aobake_core::method::cubemap::model::CubemapModel 
 }
 
 #[test]
-fn the_wgsl_cubemap_lookup_matches_the_cpu_for_both_encodings() {
+fn the_wgsl_cubemap_lookup_matches_the_cpu_for_every_encoding() {
     use aobake_worker::gpu::CubemapAo;
     use glam::Vec3;
     let gpu = gpu();
-    for method in [Method::CubemapDiscrete, Method::CubemapContinuous] {
-        let model = cubemap(method);
+    use aobake_core::method::cubemap::ContinuousLayout;
+    for (method, layout) in [
+        (Method::CubemapDiscrete, ContinuousLayout::Cosine),
+        (Method::CubemapContinuous, ContinuousLayout::Cosine),
+        (Method::CubemapContinuous, ContinuousLayout::Thirds),
+    ] {
+        let model = cubemap(method, layout);
+        let method = format!("{:?}", model.layout.encoding);
         let s = model.layout.spheroid;
         // Points over the whole spheroid and a little beyond (where the
         // fade-out applies), on a deterministic spiral.

@@ -8,8 +8,9 @@
 //! [`super::continuous`]. Blurhash's base-83 text becomes bits: 3 DC
 //! bytes, the maximum's byte and 24 × 13 bits (three 19-level values per
 //! component, 19³ < 2¹³), 43 bytes; the residual nodes at bytes 50..58 as
-//! in the continuous layout. It is evaluated in every cubemap report; it
-//! is not an asset encoding.
+//! in the continuous layout. `cubemap-continuous` bakes it with
+//! `cubemap.continuous_layout = "thirds"`, and every cubemap report
+//! evaluates it beside the cosine layout.
 
 use super::continuous::{self, BYTES, Encoding};
 

@@ -51,7 +51,7 @@ impl CubemapModel {
     pub fn method(&self) -> Method {
         match self.layout.encoding {
             Encoding::Discrete => Method::CubemapDiscrete,
-            Encoding::Continuous => Method::CubemapContinuous,
+            Encoding::Continuous | Encoding::Thirds => Method::CubemapContinuous,
         }
     }
 
@@ -87,7 +87,12 @@ impl CubemapModel {
         }
         let layout = header.layout;
         validate(&layout)?;
-        if Some(layout.encoding) != header.method.cubemap_encoding() {
+        let method_of = Self {
+            layout,
+            texels: Vec::new(),
+        }
+        .method();
+        if method_of != header.method {
             return Err(bad("the layout's encoding is not the method's"));
         }
         let Data::U8(texels) = container.section(b"TEXL")? else {
@@ -179,7 +184,7 @@ mod tests {
 
     #[test]
     fn a_model_round_trips_through_its_container_bit_for_bit() {
-        for encoding in [Encoding::Discrete, Encoding::Continuous] {
+        for encoding in [Encoding::Discrete, Encoding::Continuous, Encoding::Thirds] {
             let m = model(encoding);
             let bytes = m.to_container(fields(), "walk").to_bytes();
             let (back, header) =

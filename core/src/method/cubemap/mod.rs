@@ -46,6 +46,17 @@ use serde::{Deserialize, Serialize};
 
 use crate::trace::{KroonParams, MAX_SAMPLES};
 
+/// The layout of the continuous encoding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ContinuousLayout {
+    /// One 5 × 5 cosine channel over the whole cycle ([`continuous`]).
+    Cosine,
+    /// Kroon's three thirds of the cycle as Blurhash channels
+    /// ([`blurhash`]).
+    Thirds,
+}
+
 /// A cubemap bake's options (DESIGN §5), with the choices the thesis
 /// leaves open.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -82,6 +93,12 @@ pub struct CubemapOptions {
     pub bright_weight: f32,
     /// Whether the continuous encoding fits its residual curves.
     pub residuals: bool,
+    /// The continuous encoding's layout: `cosine` (aobake's one 5 × 5
+    /// cosine channel over the whole cycle, f16) or `thirds` (Kroon's: the
+    /// cycle in three thirds as the channels of a 5 × 5 Blurhash). Every
+    /// report measures both; neither is better everywhere (the README
+    /// gives the figures).
+    pub continuous_layout: ContinuousLayout,
     /// The clip to bake (`None`: the first training clip).
     pub clip: Option<String>,
     /// Random clip times at which `evaluate` traces ground truth.
@@ -109,6 +126,7 @@ impl Default for CubemapOptions {
             weight: 1.0,
             bright_weight: 0.6,
             residuals: true,
+            continuous_layout: ContinuousLayout::Cosine,
             clip: None,
             eval_times: 16,
             eval_points: 2048,

@@ -43,6 +43,10 @@ pub enum Encoding {
     Discrete,
     /// Four cubemaps, a 5 × 5 cosine basis plus residual cubics.
     Continuous,
+    /// Four cubemaps in Kroon's own continuous layout: the cycle in three
+    /// thirds as the channels of a 5 × 5 Blurhash plus the same residual
+    /// cubics ([`super::blurhash`]).
+    Thirds,
 }
 
 impl Encoding {
@@ -50,7 +54,7 @@ impl Encoding {
     pub fn cubemaps(self, shells: usize) -> usize {
         match self {
             Self::Discrete => shells,
-            Self::Continuous => continuous::CUBEMAPS,
+            Self::Continuous | Self::Thirds => continuous::CUBEMAPS,
         }
     }
 }
@@ -164,13 +168,17 @@ impl CubemapModel {
                 let a = at(k0);
                 if f == 0.0 { a } else { a + f * (at(k1) - a) }
             }
-            Encoding::Continuous => {
+            Encoding::Continuous | Encoding::Thirds => {
                 let mut bytes = [0u8; continuous::BYTES];
                 for c in 0..continuous::CUBEMAPS {
                     let o = l.offset(c, face, i, j);
                     bytes[16 * c..16 * c + 16].copy_from_slice(&self.texels[o..o + 16]);
                 }
-                continuous::decode(&bytes, l.times, shells, tau, k)
+                if l.encoding == Encoding::Thirds {
+                    super::blurhash::decode(&bytes, l.times, shells, tau, k)
+                } else {
+                    continuous::decode(&bytes, l.times, shells, tau, k)
+                }
             }
         }
     }
@@ -217,6 +225,9 @@ impl CubemapModel {
                         .collect(),
                     Encoding::Continuous => {
                         continuous::encode(&block, &tables, continuous).to_vec()
+                    }
+                    Encoding::Thirds => {
+                        super::blurhash::encode(&block, times, shells, continuous).to_vec()
                     }
                 }
             })
@@ -336,7 +347,12 @@ mod tests {
     #[test]
     fn both_encodings_give_back_a_smooth_field_at_its_sample_points() {
         use super::super::geometry::texel_direction;
-        for (encoding, tolerance) in [(Encoding::Discrete, 0.025), (Encoding::Continuous, 0.01)] {
+        for (encoding, tolerance) in [
+            (Encoding::Discrete, 0.025),
+            (Encoding::Continuous, 0.01),
+            // Blurhash quantises AC terms to 19 levels: coarser.
+            (Encoding::Thirds, 0.045),
+        ] {
             let l = layout(encoding);
             let faces = smooth_faces(&l);
             let m = CubemapModel::encode(
