@@ -166,30 +166,6 @@ impl<'de> Deserialize<'de> for BakeReport {
 }
 
 impl BakeReport {
-    /// The method.
-    pub fn method(&self) -> Method {
-        match self {
-            Self::Vertex(r) => r.method,
-            Self::Cubemap(r) => r.method,
-        }
-    }
-
-    /// The bake key.
-    pub fn bake_key(&self) -> &str {
-        match self {
-            Self::Vertex(r) => &r.bake_key,
-            Self::Cubemap(r) => &r.bake_key,
-        }
-    }
-
-    /// The sizes.
-    pub fn sizes(&self) -> Sizes {
-        match self {
-            Self::Vertex(r) => r.sizes,
-            Self::Cubemap(r) => r.sizes,
-        }
-    }
-
     /// The per-vertex report, if it is one.
     pub fn vertex(&self) -> Option<&Report> {
         match self {

@@ -22,10 +22,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    asset::{
-        Container,
-        report::{CharacterInfo, ChartTexel, CubemapReport, Sizes},
-    },
+    asset::report::{CharacterInfo, ChartTexel, CubemapReport, Sizes},
     digest::sha256_hex,
     method::cubemap::{
         continuous,
@@ -42,7 +39,7 @@ use crate::{
 
 use super::{
     Bake, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec, PlannedJob,
-    jobs::{find, json, named, parse},
+    jobs::{decode_cubemap, find, json, named, parse},
 };
 
 /// The step name of a face job's checkpoints.
@@ -80,15 +77,8 @@ impl Bake<'_> {
     /// The index of the clip a cubemap bake bakes: `cubemap.clip`, or
     /// the first training clip.
     pub fn cubemap_clip(&self) -> Result<usize, JobError> {
-        let clips = &self.inputs.clips;
         match &self.plan.params.cubemap.clip {
-            Some(name) => clips.iter().position(|c| &c.name == name).ok_or_else(|| {
-                let known: Vec<&str> = clips.iter().map(|c| c.name.as_str()).collect();
-                JobError::Invalid(format!(
-                    "cubemap.clip: no clip named {name:?}; the clips are: {}",
-                    known.join(", ")
-                ))
-            }),
+            Some(name) => Ok(super::plan::clip_index(&self.inputs.clips, name)?),
             None => self
                 .plan
                 .train
@@ -290,10 +280,7 @@ impl Bake<'_> {
         let faces = self.faces(&setup, deps)?;
         let assembled = find(deps, "asset")?;
         let asset = named(assembled, "asset")?;
-        let container =
-            Container::from_bytes(asset).map_err(|e| JobError::Invalid(e.to_string()))?;
-        let (model, _) = CubemapModel::from_container(&container)
-            .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let model = decode_cubemap(asset)?;
         let traced = Instant::now();
         let truth = GroundTruth::trace(&setup, self.plan.params.seed)
             .map_err(|e| JobError::Invalid(e.to_string()))?;

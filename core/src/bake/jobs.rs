@@ -127,7 +127,7 @@ impl std::fmt::Display for JobSpec {
                 first + count
             ),
             Self::Face { face, .. } => {
-                let name = ["+x", "-x", "+y", "-y", "+z", "-z"]
+                let name = crate::method::cubemap::geometry::FACE_NAMES
                     .get(*face)
                     .unwrap_or(&"?");
                 write!(f, "face {name}")
@@ -353,17 +353,8 @@ impl<'a> Bake<'a> {
         };
         if let Some(name) = &bake.plan.params.cubemap.clip
             && bake.plan.params.method.family() == Family::Cubemap
-            && !inputs.clips.iter().any(|c| &c.name == name)
         {
-            return Err(BakeError::UnknownClip {
-                name: name.clone(),
-                known: inputs
-                    .clips
-                    .iter()
-                    .map(|c| c.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-            });
+            super::plan::clip_index(&inputs.clips, name)?;
         }
         Ok(bake)
     }
@@ -438,14 +429,12 @@ impl<'a> Bake<'a> {
         let vertex_model;
         let cubemap_model;
         let (model, clip) = if self.plan.params.method.family() == Family::Cubemap {
-            let setup = self.cubemap_setup()?;
-            let container =
-                Container::from_bytes(asset).map_err(|e| JobError::Invalid(e.to_string()))?;
-            cubemap_model = crate::method::cubemap::model::CubemapModel::from_container(&container)
-                .map_err(|e| JobError::Invalid(e.to_string()))?
-                .0;
+            cubemap_model = decode_cubemap(asset)?;
             // The ground's truth is what the cubemap stores: Eq. 3.1.
-            let kroon = self.plan.params.cubemap_truth(&setup.spheroid);
+            let kroon = self
+                .plan
+                .params
+                .cubemap_truth(&cubemap_model.layout.spheroid);
             (
                 PreviewModel::Cubemap(&cubemap_model, kroon),
                 Some(&clips[self.cubemap_clip()?]),
@@ -731,6 +720,16 @@ pub(super) fn named<'o>(output: &'o JobOutput, name: &str) -> Result<&'o [u8], J
 fn decode(bytes: &[u8]) -> Result<Model, JobError> {
     let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
     Model::from_container(&container)
+        .map(|(m, _)| m)
+        .map_err(|e| JobError::Invalid(e.to_string()))
+}
+
+/// A cubemap asset's model.
+pub(super) fn decode_cubemap(
+    bytes: &[u8],
+) -> Result<crate::method::cubemap::model::CubemapModel, JobError> {
+    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
+    crate::method::cubemap::model::CubemapModel::from_container(&container)
         .map(|(m, _)| m)
         .map_err(|e| JobError::Invalid(e.to_string()))
 }

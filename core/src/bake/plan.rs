@@ -46,22 +46,22 @@ fn select(clips: &[Clip], names: &[String]) -> Result<Vec<usize>, BakeError> {
     if names.is_empty() {
         return Ok((0..clips.len()).collect());
     }
-    names
+    names.iter().map(|name| clip_index(clips, name)).collect()
+}
+
+/// The index of the clip named `name`; the error lists the clips there are.
+pub(crate) fn clip_index(clips: &[Clip], name: &str) -> Result<usize, BakeError> {
+    clips
         .iter()
-        .map(|name| {
-            clips
+        .position(|c| c.name == name)
+        .ok_or_else(|| BakeError::UnknownClip {
+            name: name.to_owned(),
+            known: clips
                 .iter()
-                .position(|c| &c.name == name)
-                .ok_or_else(|| BakeError::UnknownClip {
-                    name: name.clone(),
-                    known: clips
-                        .iter()
-                        .map(|c| c.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", "),
-                })
+                .map(|c| c.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
         })
-        .collect()
 }
 
 /// A held-out pose and where it came from.

@@ -162,6 +162,30 @@ fn the_shader_decodes_every_finite_half_exactly() {
     }
 }
 
+/// Parameters of a small cubemap bake: `resolution`² texels, `shells`,
+/// `times` time samples, `rays` per point, a token evaluation.
+pub(crate) fn small_cubemap(
+    method: Method,
+    resolution: usize,
+    shells: usize,
+    times: usize,
+    rays: u32,
+) -> BakeParams {
+    let mut p = BakeParams::new(method);
+    p.cubemap = aobake_core::method::cubemap::CubemapOptions {
+        resolution,
+        shells,
+        times,
+        rays,
+        eval_times: 1,
+        eval_points: 16,
+        eval_ground: 16,
+        eval_rays: 16,
+        ..Default::default()
+    };
+    p
+}
+
 /// A small cubemap bake of CesiumMan's walk in `method`'s encoding with
 /// the continuous `layout`.
 fn cubemap(
@@ -179,15 +203,7 @@ fn cubemap(
     );
     let bytes = std::fs::read(path).unwrap();
     let inputs = BakeInputs::load(&UploadBytes::single(bytes), &[], &Limits::default()).unwrap();
-    let mut p = BakeParams::new(method);
-    p.cubemap.resolution = 8;
-    p.cubemap.shells = 3;
-    p.cubemap.times = 24;
-    p.cubemap.rays = 16;
-    p.cubemap.eval_times = 1;
-    p.cubemap.eval_points = 16;
-    p.cubemap.eval_ground = 16;
-    p.cubemap.eval_rays = 16;
+    let mut p = small_cubemap(method, 8, 3, 24, 16);
     p.cubemap.continuous_layout = layout;
     let baked = bake_in_process(&Bake::new(&inputs, p).unwrap(), None).unwrap();
     CubemapModel::from_container(&Container::from_bytes(&baked.asset).unwrap())

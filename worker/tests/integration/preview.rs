@@ -263,14 +263,8 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
         &Limits::default(),
     )
     .unwrap();
-    let mut p = BakeParams::new(Method::CubemapContinuous);
-    p.cubemap.resolution = 16;
-    p.cubemap.shells = 4;
-    p.cubemap.times = 32;
-    p.cubemap.rays = 32;
-    p.cubemap.eval_times = 2;
-    p.cubemap.eval_points = 64;
-    p.cubemap.eval_ground = 64;
+    let mut p = super::gpu::small_cubemap(Method::CubemapContinuous, 16, 4, 32, 32);
+    // The previews' ground truth traces this many rays per ground point.
     p.cubemap.eval_rays = 32;
     let bake = Bake::new(&inputs, p.clone()).unwrap();
     let mut r = renderer();

@@ -30,6 +30,9 @@ use serde::{Deserialize, Serialize};
 /// Cube faces in the standard order: +x, −x, +y, −y, +z, −z.
 pub const FACES: usize = 6;
 
+/// The faces' names, in that order.
+pub const FACE_NAMES: [&str; FACES] = ["+x", "-x", "+y", "-y", "+z", "-z"];
+
 /// The spheroid and its shells.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Spheroid {
