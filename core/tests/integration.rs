@@ -5,6 +5,8 @@ mod util;
 
 #[path = "integration/cubemap.rs"]
 mod cubemap;
+#[path = "integration/grid.rs"]
+mod grid;
 #[path = "integration/jobs.rs"]
 mod jobs;
 #[path = "integration/malformed.rs"]

@@ -126,6 +126,55 @@ pub struct CubemapReport {
     pub charts: Vec<ChartTexel>,
 }
 
+/// A grid bake's report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GridReport {
+    /// The method.
+    pub method: Method,
+    /// The bake key.
+    pub bake_key: String,
+    /// The parameters.
+    pub params: BakeParams,
+    /// The character.
+    pub character: CharacterInfo,
+    /// Every part's grid.
+    pub parts: Vec<PartReport>,
+    /// Rays traced: the cells and the ground truth.
+    pub rays: u64,
+    /// Stage times (`reference_trace_s`: the slabs, summed).
+    pub timings: Timings,
+    /// Sizes: the asset, its cells (and `T_clip`), and the static average
+    /// (one f16 per vertex).
+    pub sizes: Sizes,
+    /// Every variant against the ground truth.
+    pub evaluation: crate::method::grid::evaluate::GridEvaluation,
+}
+
+/// One part's grid in a report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PartReport {
+    /// The part (its node's name).
+    pub name: String,
+    /// Its node.
+    pub node: usize,
+    /// Vertices it carries.
+    pub vertices: usize,
+    /// Its triangles.
+    pub triangles: usize,
+    /// Cells per grid edge.
+    pub resolution: usize,
+    /// The grid's half extent per axis (Eq. 4), bind space.
+    pub half_extent: [f32; 3],
+    /// V_M, the boundary maximum the cells were rescaled by.
+    pub boundary_max: f32,
+    /// Cells inside the part, filled from their neighbours.
+    pub inside_cells: usize,
+    /// Bytes its cells take with cones (RGBA) and without (one byte).
+    pub bytes: [usize; 2],
+    /// Seconds its slabs traced (summed over slab jobs).
+    pub bake_s: f64,
+}
+
 /// A texel of the charts and each encoding's squared errors summed over
 /// its (time × distance) chart against the input, as Kroon's Tables
 /// 5.1–5.3 give them.
@@ -149,6 +198,8 @@ pub enum BakeReport {
     Vertex(Box<Report>),
     /// A cubemap bake's.
     Cubemap(Box<CubemapReport>),
+    /// A grid bake's.
+    Grid(Box<GridReport>),
 }
 
 impl<'de> Deserialize<'de> for BakeReport {
@@ -160,6 +211,7 @@ impl<'de> Deserialize<'de> for BakeReport {
         match method.family() {
             Family::Vertex => serde_json::from_value(value).map(Self::Vertex),
             Family::Cubemap => serde_json::from_value(value).map(Self::Cubemap),
+            Family::Grid => serde_json::from_value(value).map(Self::Grid),
         }
         .map_err(D::Error::custom)
     }
@@ -170,7 +222,7 @@ impl BakeReport {
     pub fn vertex(&self) -> Option<&Report> {
         match self {
             Self::Vertex(r) => Some(r),
-            Self::Cubemap(_) => None,
+            Self::Cubemap(_) | Self::Grid(_) => None,
         }
     }
 }

@@ -13,6 +13,8 @@ use super::{Bake, JobSpec, PoseSet};
 pub struct GraphOptions {
     /// Poses per `sample` job.
     pub sample_batch: usize,
+    /// Grid layers per `slab` job.
+    pub slab_layers: usize,
     /// Whether the graph ends with a `preview` job (it needs a GPU
     /// renderer; benches and core's tests leave it out).
     pub previews: bool,
@@ -21,10 +23,12 @@ pub struct GraphOptions {
 impl Default for GraphOptions {
     /// Four poses per `sample` job: a fraction of a second to a few seconds
     /// each on a typical character, so a lost job costs little and a
-    /// bake's progress moves steadily. Previews included.
+    /// bake's progress moves steadily. Eight layers per `slab` job (four
+    /// slabs for a grid of 32). Previews included.
     fn default() -> Self {
         Self {
             sample_batch: 4,
+            slab_layers: 8,
             previews: true,
         }
     }
@@ -61,6 +65,7 @@ impl Bake<'_> {
         match self.plan.params.method.family() {
             Family::Vertex => self.vertex_graph(options),
             Family::Cubemap => self.cubemap_graph(options),
+            Family::Grid => self.grid_graph(options),
         }
     }
 

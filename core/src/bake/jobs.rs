@@ -85,6 +85,16 @@ pub enum JobSpec {
         /// Its time samples (the units of its progress).
         times: usize,
     },
+    /// Trace z-layers `first..first + count` of one part's grid
+    /// (checkpointed after every layer).
+    Slab {
+        /// The part.
+        part: usize,
+        /// The first layer.
+        first: usize,
+        /// Layers in this slab (the units of its progress).
+        count: usize,
+    },
     /// Judge the model on the held-out poses.
     Evaluate,
     /// Pack the asset, the report and the plot.
@@ -100,6 +110,7 @@ impl JobSpec {
             Self::Sample { .. } => "sample",
             Self::Fit => "fit",
             Self::Face { .. } => "face",
+            Self::Slab { .. } => "slab",
             Self::Evaluate => "evaluate",
             Self::Assemble => "assemble",
             Self::Preview => "preview",
@@ -107,10 +118,10 @@ impl JobSpec {
     }
 
     /// Units of progress the job is worth (poses for `sample`, time
-    /// samples for `face`, 1 else).
+    /// samples for `face`, layers for `slab`, 1 else).
     pub fn work(&self) -> u64 {
         match self {
-            Self::Sample { count, .. } => *count as u64,
+            Self::Sample { count, .. } | Self::Slab { count, .. } => *count as u64,
             Self::Face { times, .. } => *times as u64,
             _ => 1,
         }
@@ -131,6 +142,9 @@ impl std::fmt::Display for JobSpec {
                     .get(*face)
                     .unwrap_or(&"?");
                 write!(f, "face {name}")
+            }
+            Self::Slab { part, first, count } => {
+                write!(f, "slab part {part} layers {first}..{}", first + count)
             }
             other => f.write_str(other.kind()),
         }
@@ -255,6 +269,12 @@ impl JobError {
     }
 }
 
+impl From<crate::trace::TraceError> for JobError {
+    fn from(e: crate::trace::TraceError) -> Self {
+        Self::Invalid(e.to_string())
+    }
+}
+
 impl From<BakeError> for JobError {
     fn from(e: BakeError) -> Self {
         Self::Invalid(e.to_string())
@@ -356,7 +376,28 @@ impl<'a> Bake<'a> {
         {
             super::plan::clip_index(&inputs.clips, name)?;
         }
+        if bake.plan.params.method.family() == Family::Grid {
+            crate::method::grid::parts::parts(&inputs.character, bake.plan.params.grid.parts)
+                .map_err(|e| BakeError::Param(e.to_string()))?;
+        }
         Ok(bake)
+    }
+
+    /// Ray-point pairs the whole bake traces: what the service bounds per
+    /// request.
+    pub fn work(&self) -> u128 {
+        let p = &self.plan.params;
+        let vertices = self.inputs.character.vertex_count();
+        match p.method.family() {
+            Family::Grid => {
+                let parts = self.grid_parts().map_or(0, |p| p.len());
+                p.grid.rays_total(parts, vertices)
+            }
+            _ => {
+                let frames = self.poses_in(PoseSet::HeldOut).saturating_sub(p.eval_poses);
+                p.work(vertices, frames)
+            }
+        }
     }
 
     /// Poses `range` of a set, seeded: the same request gives the same
@@ -391,25 +432,33 @@ impl<'a> Bake<'a> {
         resume: Option<Checkpoint>,
         sink: &mut dyn JobSink,
     ) -> Result<JobOutput, JobError> {
-        let cubemap = self.plan.params.method.family() == Family::Cubemap;
-        match spec {
-            JobSpec::Sample { set, first, count } if !cubemap => {
+        let family = self.plan.params.method.family();
+        match (spec, family) {
+            (JobSpec::Sample { set, first, count }, Family::Vertex) => {
                 self.sample(*set, *first, *count, resume, sink)
             }
-            JobSpec::Fit if !cubemap => self.fit(deps),
-            JobSpec::Face { face, times } if cubemap => self.face(*face, *times, resume, sink),
-            JobSpec::Evaluate if cubemap => self.cubemap_evaluate(deps),
-            JobSpec::Assemble if cubemap => self.cubemap_assemble(deps),
-            JobSpec::Evaluate => self.evaluate(deps),
-            JobSpec::Assemble => self.assemble(deps),
-            JobSpec::Sample { .. } | JobSpec::Fit | JobSpec::Face { .. } => {
-                Err(JobError::Invalid(format!(
-                    "a {} job is not part of a {} bake",
-                    spec.kind(),
-                    self.plan.params.method
-                )))
+            (JobSpec::Fit, Family::Vertex) => self.fit(deps),
+            (JobSpec::Evaluate, Family::Vertex) => self.evaluate(deps),
+            (JobSpec::Assemble, Family::Vertex) => self.assemble(deps),
+            (JobSpec::Face { face, times }, Family::Cubemap) => {
+                self.face(*face, *times, resume, sink)
             }
-            JobSpec::Preview => Err(JobError::Invalid(
+            (JobSpec::Evaluate, Family::Cubemap) => self.cubemap_evaluate(deps),
+            (JobSpec::Assemble, Family::Cubemap) => self.cubemap_assemble(deps),
+            (JobSpec::Slab { part, first, count }, Family::Grid) => {
+                self.slab(*part, *first, *count, resume, sink)
+            }
+            (JobSpec::Evaluate, Family::Grid) => self.grid_evaluate(deps),
+            (JobSpec::Assemble, Family::Grid) => self.grid_assemble(deps),
+            (
+                JobSpec::Sample { .. } | JobSpec::Fit | JobSpec::Face { .. } | JobSpec::Slab { .. },
+                _,
+            ) => Err(JobError::Invalid(format!(
+                "a {} job is not part of a {} bake",
+                spec.kind(),
+                self.plan.params.method
+            ))),
+            (JobSpec::Preview, _) => Err(JobError::Invalid(
                 "a preview job needs a renderer: run it with Bake::preview".into(),
             )),
         }
@@ -428,23 +477,43 @@ impl<'a> Bake<'a> {
         let clips = &self.inputs.clips;
         let vertex_model;
         let cubemap_model;
-        let (model, clip) = if self.plan.params.method.family() == Family::Cubemap {
-            cubemap_model = decode_cubemap(asset)?;
-            // The ground's truth is what the cubemap stores: Eq. 3.1.
-            let kroon = self
-                .plan
-                .params
-                .cubemap_truth(&cubemap_model.layout.spheroid);
-            (
-                PreviewModel::Cubemap(&cubemap_model, kroon),
-                Some(&clips[self.cubemap_clip()?]),
-            )
-        } else {
-            vertex_model = decode(asset)?;
-            (
-                PreviewModel::Vertex(&vertex_model),
-                preview_clip(clips, &self.plan.test).map(|i| &clips[i]),
-            )
+        let grid_model;
+        let owners: Vec<u32>;
+        let (model, clip) = match self.plan.params.method.family() {
+            Family::Cubemap => {
+                cubemap_model = decode_cubemap(asset)?;
+                // The ground's truth is what the cubemap stores: Eq. 3.1.
+                let kroon = self
+                    .plan
+                    .params
+                    .cubemap_truth(&cubemap_model.layout.spheroid);
+                (
+                    PreviewModel::Cubemap(&cubemap_model, kroon),
+                    Some(&clips[self.cubemap_clip()?]),
+                )
+            }
+            Family::Grid => {
+                grid_model = decode_grid(asset)?;
+                let parts = self.grid_parts()?;
+                owners = crate::method::grid::parts::owners(
+                    &parts,
+                    self.inputs.character.vertex_count(),
+                )
+                .into_iter()
+                .map(|o| o.map_or(u32::MAX, |p| p as u32))
+                .collect();
+                (
+                    PreviewModel::Grid(&grid_model, &owners),
+                    preview_clip(clips, &self.plan.test).map(|i| &clips[i]),
+                )
+            }
+            Family::Vertex => {
+                vertex_model = decode(asset)?;
+                (
+                    PreviewModel::Vertex(&vertex_model),
+                    preview_clip(clips, &self.plan.test).map(|i| &clips[i]),
+                )
+            }
         };
         let subject = Subject {
             character: &self.inputs.character,
@@ -720,6 +789,14 @@ pub(super) fn named<'o>(output: &'o JobOutput, name: &str) -> Result<&'o [u8], J
 fn decode(bytes: &[u8]) -> Result<Model, JobError> {
     let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
     Model::from_container(&container)
+        .map(|(m, _)| m)
+        .map_err(|e| JobError::Invalid(e.to_string()))
+}
+
+/// A grid asset's model.
+pub(super) fn decode_grid(bytes: &[u8]) -> Result<crate::method::grid::model::GridModel, JobError> {
+    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
+    crate::method::grid::model::GridModel::from_container(&container)
         .map(|(m, _)| m)
         .map_err(|e| JobError::Invalid(e.to_string()))
 }

@@ -10,7 +10,8 @@
 //! 5. The job functions ([`jobs`]): `sample`, `fit`, `evaluate`,
 //!    `assemble`, each `(spec, dependency outputs, checkpoint?) → outputs`,
 //!    and `preview` ([`preview`]), which also needs a [`Renderer`]; a
-//!    cubemap bake's `face`, `assemble` and `evaluate` are in [`cubemap`].
+//!    cubemap bake's `face`, `assemble` and `evaluate` are in [`cubemap`],
+//!    a grid bake's `slab`, `assemble` and `evaluate` in [`grid`].
 //! 6. [`run_graph`] ([`runner`]): the whole graph in this process.
 //!
 //! Everything is seeded from [`BakeParams::seed`]: the same request gives
@@ -21,6 +22,7 @@
 pub mod cubemap;
 pub mod evaluation;
 pub mod graph;
+pub mod grid;
 pub mod inputs;
 pub mod jobs;
 pub mod params;

@@ -13,6 +13,7 @@ use crate::{
     method::{
         Family, Method,
         cubemap::CubemapOptions,
+        grid::GridOptions,
         vertex::{ClusteredOptions, LinearOptions},
     },
     pose_space::ParamError,
@@ -74,6 +75,8 @@ pub struct BakeParams {
     pub clustered: ClusteredOptions,
     /// Cubemap options (both cubemap methods).
     pub cubemap: CubemapOptions,
+    /// Grid options.
+    pub grid: GridOptions,
 }
 
 impl BakeParams {
@@ -101,6 +104,7 @@ impl BakeParams {
             linear: LinearOptions::default(),
             clustered: ClusteredOptions::default(),
             cubemap: CubemapOptions::default(),
+            grid: GridOptions::default(),
         }
     }
 
@@ -160,6 +164,9 @@ impl BakeParams {
         }
         if self.method.family() != Family::Cubemap {
             map.remove("cubemap");
+        }
+        if self.method.family() != Family::Grid {
+            map.remove("grid");
         }
         v
     }
@@ -284,16 +291,21 @@ impl BakeParams {
             return Err(BakeError::Param("clamp must be a finite number ≥ 0".into()));
         }
         p.cubemap.validate().map_err(BakeError::Param)?;
+        p.grid.validate().map_err(BakeError::Param)?;
         Ok(())
     }
 
     /// Ray-vertex pairs the bake traces for a character of `vertices`
     /// vertices with `test_frames` clip frames held out (a cubemap bake:
-    /// the rays of its sample points and its evaluation): what the service
-    /// bounds per request.
+    /// the rays of its sample points and its evaluation; a grid bake's
+    /// depend on its parts: `Bake::work`): what the service bounds per
+    /// request.
     pub fn work(&self, vertices: usize, test_frames: usize) -> u128 {
         if self.method.family() == Family::Cubemap {
             return self.cubemap.rays_total();
+        }
+        if self.method.family() == Family::Grid {
+            return self.grid.rays_total(1, vertices);
         }
         let poses = self.poses + self.eval_poses + test_frames + NOISE_POSES;
         poses as u128 * vertices as u128 * u128::from(self.samples)

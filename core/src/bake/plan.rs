@@ -100,9 +100,9 @@ impl<'a> Plan<'a> {
         ) {
             Ok(layout) => layout,
             // A cubemap bakes the world around the clip as it plays, root
-            // motion included (Kroon's spinning cube has nothing else), so
-            // it needs no joint angles.
-            Err(ParamError::NothingAnimated) if p.method.family() == Family::Cubemap => {
+            // motion included (Kroon's spinning cube has nothing else), and
+            // a grid is baked per part, so neither needs joint angles.
+            Err(ParamError::NothingAnimated) if p.method.family() != Family::Vertex => {
                 JointAngles::default()
             }
             Err(e) => return Err(e.into()),

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::{
     Character,
-    method::{Method, cubemap::model::CubemapModel, vertex::Model},
+    method::{Method, cubemap::model::CubemapModel, grid::model::GridModel, vertex::Model},
     rig::{clip::Clip, pose::Pose},
     trace::{
         KroonParams, Scene, SceneOptions, SurfaceParams, kroon_occlusion, no_progress,
@@ -57,6 +57,29 @@ pub enum PreviewModel<'a> {
     /// phase (the character is ray-traced in every panel); its ground
     /// truth is Eq. 3.1 with these parameters, what the cubemap stores.
     Cubemap(&'a CubemapModel, KroonParams),
+    /// Grids: the renderer looks each part's grid up through the part's
+    /// pose (the frame's weights, [`grid_weights`]) at the character's
+    /// vertices (each on its own part: the owners, `u32::MAX` for none)
+    /// and on the ground.
+    Grid(&'a GridModel, &'a [u32]),
+}
+
+/// Floats per part in a grid frame's weights: `grid_from_world` then
+/// `world_from_bind`, each a column-major 4 × 4 matrix.
+pub const GRID_POSE_FLOATS: usize = 32;
+
+/// A grid frame's weights: every part's pose ([`GRID_POSE_FLOATS`] each).
+pub fn grid_weights(model: &GridModel, palette: &[Mat4]) -> Vec<f32> {
+    model
+        .poses(palette)
+        .iter()
+        .flat_map(|p| {
+            p.grid_from_world
+                .to_cols_array()
+                .into_iter()
+                .chain(p.world_from_bind.to_cols_array())
+        })
+        .collect()
 }
 
 impl PreviewModel<'_> {
@@ -65,6 +88,7 @@ impl PreviewModel<'_> {
         match self {
             Self::Vertex(m) => m.method(),
             Self::Cubemap(m, _) => m.method(),
+            Self::Grid(m, _) => m.method(),
         }
     }
 
@@ -77,6 +101,7 @@ impl PreviewModel<'_> {
             Self::Cubemap(..) => {
                 "character: ray-traced in every panel (the cubemap bakes the occlusion it casts)"
             }
+            Self::Grid(..) => "parts and ground shaded by the grids in the model panel",
         }
     }
 }
@@ -435,6 +460,18 @@ impl Subject<'_> {
                         )
                         .map_err(invalid)?,
                         model.weights(skeleton, pose),
+                        0.0,
+                    ),
+                    PreviewModel::Grid(model, _) => (
+                        surface_occlusion(
+                            &scene,
+                            &ground.positions,
+                            &up,
+                            &ground_surface,
+                            &no_progress,
+                        )
+                        .map_err(invalid)?,
+                        grid_weights(model, &self.character.joint_matrices(pose)),
                         0.0,
                     ),
                     PreviewModel::Cubemap(model, kroon) => (

@@ -4,11 +4,12 @@
 //! method belongs to a [`Family`] that decides the shape of its job graph
 //! (`bake::graph`): the per-vertex family (`sample` jobs → `fit` →
 //! `evaluate` → `assemble`) lives in [`vertex`]; Kroon's cubemaps (`face`
-//! jobs → `assemble` → `evaluate`) in [`cubemap`]; the grid method (`slab`
-//! jobs) will live beside them, so the queue and the runner never change
-//! when a method arrives.
+//! jobs → `assemble` → `evaluate`) in [`cubemap`]; Malmer et al.'s grids
+//! (`slab` jobs → `assemble` → `evaluate`) in [`grid`]. The queue and the
+//! runner never change when a method arrives.
 
 pub mod cubemap;
+pub mod grid;
 pub mod vertex;
 
 use serde::{Deserialize, Serialize};
@@ -31,6 +32,9 @@ pub enum Method {
     /// Kroon 2023: four cubemaps, each texel's (time × distance) field in
     /// a cosine basis with residual curves.
     CubemapContinuous = 5,
+    /// Malmer et al. 2005: a 3D grid of the occlusion each rigid part
+    /// casts into space, moved with the part.
+    Grid = 6,
 }
 
 /// How a method's bake is split into jobs.
@@ -40,16 +44,19 @@ pub enum Family {
     Vertex,
     /// Occlusion cast into space over a cyclic clip, one job per face.
     Cubemap,
+    /// Occlusion cast into space by each rigid part, `slab` jobs per part.
+    Grid,
 }
 
 impl Method {
     /// Every method, in code order.
-    pub const ALL: [Self; 5] = [
+    pub const ALL: [Self; 6] = [
         Self::StaticAverage,
         Self::VertexLinear,
         Self::VertexClustered,
         Self::CubemapDiscrete,
         Self::CubemapContinuous,
+        Self::Grid,
     ];
 
     /// The method's name, as the CLI and the API spell it.
@@ -60,6 +67,7 @@ impl Method {
             Self::VertexClustered => "vertex-clustered",
             Self::CubemapDiscrete => "cubemap-discrete",
             Self::CubemapContinuous => "cubemap-continuous",
+            Self::Grid => "grid",
         }
     }
 
@@ -83,6 +91,7 @@ impl Method {
         match self {
             Self::StaticAverage | Self::VertexLinear | Self::VertexClustered => Family::Vertex,
             Self::CubemapDiscrete | Self::CubemapContinuous => Family::Cubemap,
+            Self::Grid => Family::Grid,
         }
     }
 
@@ -92,6 +101,7 @@ impl Method {
         match self.family() {
             Family::Vertex => vertex::ALGORITHM_VERSION,
             Family::Cubemap => cubemap::ALGORITHM_VERSION,
+            Family::Grid => grid::ALGORITHM_VERSION,
         }
     }
 

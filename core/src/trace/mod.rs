@@ -134,6 +134,10 @@ pub struct VolumeSample {
     /// Unit average occluded direction (the cone axis), zero when nothing
     /// is occluded.
     pub direction: Vec3,
+    /// The point is inside the mesh: more than half of its rays (traced
+    /// without the distance limit) first meet the back of a triangle, as
+    /// in [`kroon_occlusion`].
+    pub inside: bool,
 }
 
 fn check_samples(samples: u32) -> Result<(), TraceError> {
@@ -403,6 +407,9 @@ fn surface_from(
 /// distance (the paper's V is visibility). Directions are uniform on the
 /// sphere; the average occluded direction is the normalised mean of the
 /// directions that hit (§5's cone axis; its aperture follows from ao′).
+/// Each ray finds its closest hit without the distance limit, so that the
+/// sample also says whether the point is inside the mesh (§3.3.3's cells
+/// "inside the occluder").
 pub fn volume_occlusion(
     scene: &Scene,
     points: &[Vec3],
@@ -417,11 +424,15 @@ pub fn volume_occlusion(
     Ok(par_points(scene, points, progress, |tracer, dirs, i| {
         let origin = scene.to_local(points[i as usize]);
         let seed = point_seed(params.seed, i);
-        let mut hits = 0u32;
+        let (mut hits, mut back) = (0u32, 0u32);
         let mut sum = Vec3A::ZERO;
         sphere_directions(samples, seed, dirs);
         for &d in dirs.iter() {
-            if tracer.occluded(origin, d, tmax) {
+            let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
+                continue;
+            };
+            back += u32::from(hit.back_face);
+            if hit.t < tmax {
                 hits += 1;
                 sum += d;
             }
@@ -429,6 +440,7 @@ pub fn volume_occlusion(
         VolumeSample {
             occlusion: 2.0 * hits as f32 / samples as f32,
             direction: Vec3::from(sum.normalize_or_zero()),
+            inside: 2 * back > samples,
         }
     }))
 }

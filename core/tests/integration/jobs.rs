@@ -139,6 +139,7 @@ fn cutting_the_bake_into_other_batches_changes_no_byte() {
             let graph = bake.graph(GraphOptions {
                 sample_batch: batch,
                 previews: false,
+                ..GraphOptions::default()
             });
             let out = run_graph(&bake, &graph, &HashMap::new(), None, &mut |_, _, _| {}).unwrap();
             let asset = out.last().unwrap().get("asset").unwrap();
@@ -160,6 +161,7 @@ fn the_graph_lists_dependencies_first_and_covers_every_pose() {
     let graph = bake.graph(GraphOptions {
         sample_batch: 5,
         previews: true,
+        ..GraphOptions::default()
     });
     for (i, job) in graph.jobs.iter().enumerate() {
         assert!(job.deps.iter().all(|&d| d < i), "{i}: {:?}", job.deps);

@@ -289,6 +289,7 @@ fn volume_occlusion_on_the_ground_is_one_and_enclosed_is_two() {
     ];
     let v = volume_occlusion(&scene, &points, &params, &no_progress).unwrap();
     assert_eq!(v[0].occlusion, 2.0);
+    assert!(v[0].inside && !v[1].inside && !v[2].inside);
     // Exactly half the (stratified) directions point down.
     assert_eq!(v[1].occlusion, 1.0);
     assert!(

@@ -227,7 +227,7 @@ pub fn fit(
                 FitStats::VertexClustered(stats),
             )
         }
-        Method::CubemapDiscrete | Method::CubemapContinuous => {
+        Method::CubemapDiscrete | Method::CubemapContinuous | Method::Grid => {
             return Err(format!("{method} is not a per-vertex method"));
         }
     })

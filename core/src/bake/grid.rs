@@ -1,0 +1,532 @@
+//! The jobs of a grid bake (Malmer et al. 2005; DESIGN §1.3, §5):
+//!
+//! * `slab` (per part, per run of z-layers of its grid): Eq. 5 at every
+//!   cell of the layers, the part alone in bind space. It checkpoints after
+//!   every layer (the layers done so far, a few tens of KiB); a layer's
+//!   rays depend on the seed, the part and the layer alone, so the cells do
+//!   not depend on how the grid was cut or how often a slab was
+//!   interrupted. Output: `slab-{part}-{first}` (raw cells) and a small
+//!   `.json` of how it ran.
+//! * `assemble`: every part's slabs stacked, finished (§3.3: boundary
+//!   rescale, inside cells filled, ×2 in a byte, cones), `T_clip` with
+//!   cones → `asset`.
+//! * `evaluate`: ray-traced truth on clip frames at the parts' vertices
+//!   and on the ground; the grids with and without cones and the
+//!   baselines against it → `report.json`, `plot.png` (slices of every
+//!   part's grid).
+//! * `preview`: as for every method (`bake::preview`), the grids shading
+//!   the parts and the ground.
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    asset::report::{CharacterInfo, GridReport, PartReport, Sizes, encode_rgb_png},
+    method::grid::{
+        evaluate::{GridEvaluation, GridVariant, GroundTruth, Inputs},
+        field::{GridBox, RawCell, Slab, finish, part_scene, trace_layers},
+        model::{GridModel, PartGrid, Terms},
+        parts::{Part, parts},
+        tclip::TClip,
+    },
+    trace::VolumeParams,
+};
+
+use super::{
+    Bake, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec, PlannedJob,
+    jobs::{find, json, named, parse},
+};
+
+/// The step name of a slab job's checkpoints.
+const SLAB_STEP: &str = "slab";
+
+/// How a slab job ran, as `slab-{part}-{first}.json`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SlabInfo {
+    /// Seconds this attempt traced.
+    pub seconds: f64,
+    /// Layers this attempt computed (the rest came from its checkpoint).
+    pub computed: usize,
+    /// The layer it started at, relative to the slab's first.
+    pub resumed_at: usize,
+}
+
+fn slab_name(part: usize, first: usize) -> String {
+    format!("slab-{part}-{first}")
+}
+
+impl Bake<'_> {
+    /// The parts of a grid bake.
+    pub fn grid_parts(&self) -> Result<Vec<Part>, JobError> {
+        parts(&self.inputs.character, self.plan.params.grid.parts)
+            .map_err(|e| JobError::Invalid(e.to_string()))
+    }
+
+    /// The distance limit of every trace: `grid.max_distance`, or the
+    /// largest part's Eq. 4 reach.
+    pub fn grid_distance(&self, parts: &[Part]) -> f32 {
+        let o = &self.plan.params.grid;
+        o.max_distance.unwrap_or_else(|| {
+            parts
+                .iter()
+                .map(|p| GridBox::reach(&p.mesh(&self.inputs.character).1, o.epsilon))
+                .fold(0.0f32, f32::max)
+                .max(f32::MIN_POSITIVE)
+        })
+    }
+
+    /// A part's mesh and grid box.
+    fn part_grid(&self, part: &Part) -> (Vec<glam::Vec3>, Vec<[u32; 3]>, GridBox) {
+        let o = &self.plan.params.grid;
+        let (_, positions, triangles) = part.mesh(&self.inputs.character);
+        let grid = GridBox::around(&positions, o.epsilon, o.resolution);
+        (positions, triangles, grid)
+    }
+
+    /// `slab` jobs (per part, `options.slab_layers` layers each) →
+    /// `assemble` → `evaluate` → `preview`.
+    pub(super) fn grid_graph(&self, options: GraphOptions) -> JobGraph {
+        let n = self.plan.params.grid.resolution;
+        let step = options.slab_layers.clamp(1, n);
+        let count = self.grid_parts().map_or(0, |p| p.len());
+        let mut jobs: Vec<PlannedJob> = Vec::new();
+        for part in 0..count {
+            for first in (0..n).step_by(step) {
+                jobs.push(PlannedJob {
+                    spec: JobSpec::Slab {
+                        part,
+                        first,
+                        count: step.min(n - first),
+                    },
+                    deps: Vec::new(),
+                });
+            }
+        }
+        let slabs: Vec<usize> = (0..jobs.len()).collect();
+        jobs.push(PlannedJob {
+            spec: JobSpec::Assemble,
+            deps: slabs.clone(),
+        });
+        let assemble = jobs.len() - 1;
+        let mut deps = vec![assemble];
+        deps.extend(slabs);
+        jobs.push(PlannedJob {
+            spec: JobSpec::Evaluate,
+            deps,
+        });
+        if options.previews {
+            let evaluate = jobs.len() - 1;
+            jobs.push(PlannedJob {
+                spec: JobSpec::Preview,
+                deps: vec![assemble, evaluate],
+            });
+        }
+        JobGraph { jobs }
+    }
+
+    /// A `slab` job: layers `first..first + count` of part `part`'s grid,
+    /// resumed from `resume`, checkpointed after every layer.
+    pub(super) fn slab(
+        &self,
+        part: usize,
+        first: usize,
+        count: usize,
+        resume: Option<Checkpoint>,
+        sink: &mut dyn JobSink,
+    ) -> Result<JobOutput, JobError> {
+        let started = Instant::now();
+        let o = &self.plan.params.grid;
+        let n = o.resolution;
+        let all = self.grid_parts()?;
+        let end = first.checked_add(count).filter(|&e| e <= n && count > 0);
+        let (Some(p), Some(end)) = (all.get(part), end) else {
+            return Err(JobError::Invalid(format!(
+                "layers {first}..{} of part {part} are not a slab of this bake",
+                first.saturating_add(count)
+            )));
+        };
+        let (positions, triangles, grid) = self.part_grid(p);
+        let mut done = Slab {
+            part,
+            resolution: n,
+            first,
+            cells: Vec::with_capacity(count * n * n),
+        };
+        if let Some(cp) = resume.filter(|cp| cp.step == SLAB_STEP) {
+            let saved = Slab::from_bytes(&cp.data, n).map_err(JobError::Invalid)?;
+            let ok = saved.part == part
+                && saved.first == first
+                && saved.layers() as u64 == cp.cursor
+                && saved.layers() <= count;
+            if !ok {
+                return Err(JobError::Invalid(
+                    "the checkpoint does not belong to this job".into(),
+                ));
+            }
+            done = saved;
+        }
+        let resumed_at = done.layers();
+        sink.progress(resumed_at as u64, count as u64);
+        let scene =
+            part_scene(&positions, &triangles).map_err(|e| JobError::Invalid(e.to_string()))?;
+        let params = VolumeParams {
+            samples: o.rays,
+            max_distance: self.grid_distance(&all),
+            seed: self.plan.params.seed,
+        };
+        trace_layers::<JobError>(
+            &scene,
+            &grid,
+            part,
+            first + resumed_at..end,
+            params,
+            &mut |_, cells| {
+                done.cells.extend(cells);
+                let layers = done.layers() as u64;
+                sink.progress(layers, count as u64);
+                if layers < count as u64 {
+                    sink.checkpoint(Checkpoint {
+                        step: SLAB_STEP.into(),
+                        cursor: layers,
+                        data: done.to_bytes(),
+                    })
+                    .map_err(JobError::Stopped)?;
+                }
+                Ok(())
+            },
+        )?;
+        let seconds = started.elapsed().as_secs_f64();
+        let mut out = JobOutput::default();
+        let name = slab_name(part, first);
+        out.push(&name, done.to_bytes());
+        out.push(
+            &format!("{name}.json"),
+            json(&SlabInfo {
+                seconds,
+                computed: count - resumed_at,
+                resumed_at,
+            }),
+        );
+        out.timings.reference_trace_s = seconds;
+        Ok(out)
+    }
+
+    /// Every part's traced cells from the slab jobs' outputs, each grid
+    /// covered exactly once, and the seconds its slabs took.
+    fn raw_cells(
+        &self,
+        parts: &[Part],
+        deps: &[&JobOutput],
+    ) -> Result<Vec<(Vec<RawCell>, f64)>, JobError> {
+        let n = self.plan.params.grid.resolution;
+        let mut slabs: Vec<Vec<Slab>> = vec![Vec::new(); parts.len()];
+        let mut seconds = vec![0.0; parts.len()];
+        for d in deps {
+            for o in d
+                .outputs
+                .iter()
+                .filter(|o| o.name.starts_with("slab-") && !o.name.ends_with(".json"))
+            {
+                let slab = Slab::from_bytes(&o.bytes, n).map_err(JobError::Invalid)?;
+                let Some(list) = slabs.get_mut(slab.part) else {
+                    return Err(JobError::Invalid(format!(
+                        "a slab of part {} of {}",
+                        slab.part,
+                        parts.len()
+                    )));
+                };
+                if let Some(info) = d.get(&format!("{}.json", o.name)) {
+                    seconds[slab.part] += parse::<SlabInfo>(info)?.seconds;
+                }
+                list.push(slab);
+            }
+        }
+        slabs
+            .into_iter()
+            .zip(seconds)
+            .enumerate()
+            .map(|(p, (mut list, s))| {
+                list.sort_by_key(|s| s.first);
+                let mut cells = Vec::with_capacity(n * n * n);
+                let mut next = 0;
+                for slab in list {
+                    if slab.first != next {
+                        return Err(JobError::Invalid(format!(
+                            "the slabs of part {p} do not cover its layers in order (expected layer {next}, got {})",
+                            slab.first
+                        )));
+                    }
+                    next += slab.layers();
+                    cells.extend(slab.cells);
+                }
+                if next != n {
+                    return Err(JobError::Invalid(format!(
+                        "the slabs of part {p} hold {next} layers, not {n}"
+                    )));
+                }
+                Ok((cells, s))
+            })
+            .collect()
+    }
+
+    /// The model finished from raw cells, with or without cones.
+    fn finish_model(&self, parts: &[Part], raw: &[(Vec<RawCell>, f64)], cones: bool) -> GridModel {
+        let o = &self.plan.params.grid;
+        let grids = parts
+            .iter()
+            .zip(raw)
+            .map(|(part, (cells, _))| {
+                let (_, _, grid) = self.part_grid(part);
+                let f = finish(cells, o.resolution, cones);
+                PartGrid {
+                    name: part.name.clone(),
+                    joint: part.joint,
+                    node: part.node,
+                    grid,
+                    boundary_max: f.boundary_max,
+                    inside: f.inside,
+                    occlusion: f.occlusion,
+                    directions: f.directions,
+                }
+            })
+            .collect();
+        GridModel {
+            parts: grids,
+            tclip: cones.then(|| TClip::compute(o.tclip_resolution)),
+        }
+    }
+
+    /// `assemble`: the finished grids → `asset`.
+    pub(super) fn grid_assemble(&self, deps: &[&JobOutput]) -> Result<JobOutput, JobError> {
+        let parts = self.grid_parts()?;
+        let raw = self.raw_cells(&parts, deps)?;
+        let started = Instant::now();
+        let model = self.finish_model(&parts, &raw, self.plan.params.grid.cones);
+        let mut out = JobOutput::default();
+        out.push("asset", model.to_container(self.header()).to_bytes());
+        out.timings.reference_trace_s = raw.iter().map(|(_, s)| s).sum();
+        out.timings.fit_s = started.elapsed().as_secs_f64();
+        Ok(out)
+    }
+
+    /// `evaluate`: the ground truth, every variant's errors, the slices
+    /// and the report.
+    pub(super) fn grid_evaluate(&self, deps: &[&JobOutput]) -> Result<JobOutput, JobError> {
+        let parts = self.grid_parts()?;
+        let raw = self.raw_cells(&parts, deps)?;
+        let assembled = find(deps, "asset")?;
+        let asset = named(assembled, "asset")?;
+        let model = super::jobs::decode_grid(asset)?;
+        let o = &self.plan.params.grid;
+        let character = &self.inputs.character;
+        let clips = &self.inputs.clips;
+        let traced = Instant::now();
+        let truth = GroundTruth::trace(&Inputs {
+            character,
+            clips,
+            train: &self.plan.train,
+            test: &self.plan.test,
+            parts: &parts,
+            options: o,
+            max_distance: self.grid_distance(&parts),
+            seed: self.plan.params.seed,
+        })
+        .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let trace_s = traced.elapsed().as_secs_f64();
+        let started = Instant::now();
+        let other = self.finish_model(&parts, &raw, !o.cones);
+        let (with, without) = if o.cones {
+            (&model, &other)
+        } else {
+            (&other, &model)
+        };
+        let named_models = [
+            (
+                "grids (cones)",
+                with,
+                "every part's grid through T_clip: its cone clipped by the receiver's tangent plane (§5.1), its own part included; parts combined 1 − Π(1 − aᵢ)",
+            ),
+            (
+                "grids",
+                without,
+                "every part's grid: ao_grid for other parts, (ao_grid − 1)/2 for the receiver's own (§4.2); parts combined 1 − Π(1 − aᵢ)",
+            ),
+        ];
+        let mut variants: Vec<GridVariant> = Vec::new();
+        let ordered: Vec<_> = if o.cones {
+            named_models.to_vec()
+        } else {
+            named_models.iter().rev().copied().collect()
+        };
+        for (name, m, description) in &ordered {
+            let (vertices, ground) = truth.errors(&|f| truth.predict(m, f, Terms::All, false));
+            variants.push(GridVariant {
+                name: (*name).into(),
+                description: (*description).into(),
+                bytes: m.bytes(),
+                vertices,
+                ground,
+            });
+        }
+        for (name, m) in [("own grid only (cones)", with), ("own grid only", without)] {
+            let (vertices, ground) = truth.errors(&|f| truth.predict(m, f, Terms::Own, false));
+            variants.push(GridVariant {
+                name: name.into(),
+                description: "no occlusion between parts: each vertex shaded by its own part's grid alone, the ground by nothing".into(),
+                bytes: m.bytes(),
+                vertices,
+                ground,
+            });
+        }
+        let self_bytes = 2 * character.vertex_count();
+        for (name, m, description) in [
+            (
+                "traced self + grids (cones)",
+                with,
+                "each vertex's exact self-occlusion (its part traced alone, as a per-vertex bake stores it: a rigid part's never changes) combined with the other parts' grids through their cones",
+            ),
+            (
+                "traced self + grids",
+                without,
+                "each vertex's exact self-occlusion combined with the other parts' grids (ao_grid)",
+            ),
+        ] {
+            let (vertices, ground) = truth.errors(&|f| truth.predict(m, f, Terms::Others, true));
+            variants.push(GridVariant {
+                name: name.into(),
+                description: description.into(),
+                bytes: m.bytes() + self_bytes,
+                vertices,
+                ground,
+            });
+        }
+        let (vertices, ground) = truth.errors(&|f| truth.predict(without, f, Terms::Own, true));
+        variants.push(GridVariant {
+            name: "traced self only".into(),
+            description:
+                "no occlusion between parts: each vertex's exact self-occlusion, the ground open"
+                    .into(),
+            bytes: self_bytes,
+            vertices,
+            ground,
+        });
+        let (average_v, average_g) = &truth.average;
+        let (vertices, ground) = truth.errors(&|_| (average_v.clone(), average_g.clone()));
+        variants.push(GridVariant {
+            name: "static average".into(),
+            description: format!(
+                "per receiver, the mean ray-traced occlusion over {} random frames of the training clips (other frames than those evaluated)",
+                o.average_frames
+            ),
+            bytes: 2 * (character.vertex_count() + truth.ground.len()),
+            vertices,
+            ground,
+        });
+        let plot = slices_png(&model)
+            .map_err(|e| JobError::Failed(format!("cannot draw the slices: {e}")))?;
+        let evaluation = GridEvaluation {
+            frames: truth
+                .frames
+                .iter()
+                .map(|f| (f.frame.clip.map(|c| clips[c].name.clone()), f.frame.time))
+                .collect(),
+            vertices: truth.owner.iter().filter(|o| o.is_some()).count(),
+            ground_points: truth.ground.len(),
+            ground_hidden: truth.ground_hidden(),
+            rays_per_point: o.eval_rays,
+            noise_rmse_vertices: truth.noise_rmse.0,
+            noise_rmse_ground: truth.noise_rmse.1,
+            variants,
+        };
+        let mut timings = assembled.timings;
+        timings.test_trace_s = trace_s;
+        timings.evaluate_s = started.elapsed().as_secs_f64();
+        let plan = &self.plan;
+        let names =
+            |idx: &[usize]| -> Vec<String> { idx.iter().map(|&i| clips[i].name.clone()).collect() };
+        let part_reports = parts
+            .iter()
+            .zip(&model.parts)
+            .zip(&raw)
+            .map(|((part, grid), (_, seconds))| PartReport {
+                name: part.name.clone(),
+                node: part.node,
+                vertices: part.vertices.len(),
+                triangles: part.triangles.len(),
+                resolution: grid.grid.resolution,
+                half_extent: grid.grid.half.to_array(),
+                boundary_max: grid.boundary_max,
+                inside_cells: grid.inside,
+                bytes: [4 * grid.occlusion.len(), grid.occlusion.len()],
+                bake_s: *seconds,
+            })
+            .collect();
+        let cells: u64 = model.parts.iter().map(|p| p.occlusion.len() as u64).sum();
+        let report = GridReport {
+            method: plan.params.method,
+            bake_key: self.header().bake_key,
+            params: plan.params.clone(),
+            character: CharacterInfo {
+                digest: self.inputs.character_digest.clone(),
+                vertices: character.vertex_count(),
+                triangles: character.triangles.len(),
+                clips: clips.iter().map(|c| c.name.clone()).collect(),
+                train_clips: names(&plan.train),
+                test_clips: names(&plan.test),
+                joint_angle_parameters: plan.joint_angles.len(),
+                handle_coordinates: plan.handles.len(),
+            },
+            parts: part_reports,
+            rays: cells * u64::from(o.rays) + truth.rays,
+            timings,
+            sizes: Sizes {
+                asset_bytes: asset.len(),
+                model_bytes: model.bytes(),
+                baseline_bytes: 2 * character.vertex_count(),
+            },
+            evaluation,
+        };
+        let mut out = JobOutput::default();
+        out.push(
+            "report.json",
+            serde_json::to_vec_pretty(&report).expect("reports serialise"),
+        );
+        out.push("plot.png", plot);
+        out.timings = timings;
+        Ok(out)
+    }
+}
+
+/// Each part's grid as three slices through its middle (x, y and z
+/// constant), dark where occluded, a row per part.
+fn slices_png(model: &GridModel) -> Result<Vec<u8>, String> {
+    const SIDE: usize = 128;
+    const GAP: usize = 8;
+    let rows = model.parts.len();
+    let width = 3 * SIDE + 4 * GAP;
+    let height = rows * SIDE + (rows + 1) * GAP;
+    let mut rgb = vec![255u8; 3 * width * height];
+    for (r, part) in model.parts.iter().enumerate() {
+        let n = part.grid.resolution;
+        let mid = n / 2;
+        for axis in 0..3 {
+            for py in 0..SIDE {
+                for px in 0..SIDE {
+                    let (a, b) = (px * n / SIDE, (SIDE - 1 - py) * n / SIDE);
+                    let (x, y, z) = match axis {
+                        0 => (mid, b, a),
+                        1 => (a, mid, b),
+                        _ => (a, b, mid),
+                    };
+                    let v = part.occlusion[(z * n + y) * n + x];
+                    let shade = 255 - v;
+                    let (ox, oy) = (GAP + axis * (SIDE + GAP) + px, GAP + r * (SIDE + GAP) + py);
+                    let i = 3 * (oy * width + ox);
+                    rgb[i..i + 3].copy_from_slice(&[shade, shade, shade]);
+                }
+            }
+        }
+    }
+    encode_rgb_png(&rgb, width as u32, height as u32)
+}

@@ -1,0 +1,448 @@
+//! How good a grid bake is (DESIGN §6), against ray-traced ground truth of
+//! the whole posed object on clip frames the bake never looked at:
+//!
+//! * **receivers**: every vertex of every part (its posed normal; the
+//!   whole object occludes, as a vertex bake would trace it) and points on
+//!   a ground plane at the lowest vertex under the object (normal up; the
+//!   ground itself occludes nothing, so the truth is what the parts cast);
+//!   ground points with a surface straight above within a hair (under a
+//!   tyre's contact) are left out and counted;
+//! * **frames**: random times of the test clips, another seed than the
+//!   static average's frames of the training clips;
+//! * **variants**: the grids as engines use them (with and without cones),
+//!   each part's grid alone (no occlusion between parts), each part's
+//!   exact self-occlusion (traced on the part alone: a rigid part's never
+//!   changes) with and without the other parts' grids, and the static
+//!   average (per receiver, the mean truth over the training frames).
+
+use glam::{Mat4, Vec3};
+use rand::{RngExt as _, SeedableRng as _};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::{
+    GridOptions,
+    model::{GridModel, PartPose, Terms},
+    parts::Part,
+};
+use crate::{
+    Character, Clip,
+    asset::metrics::{Errors, FrameError},
+    rig::pose::Pose,
+    trace::{
+        Scene, SceneOptions, SurfaceMesh, SurfaceParams, TraceError, no_progress,
+        surface_occlusion, vertex_occlusion,
+    },
+};
+
+/// Ground points with a surface this close straight above (a fraction of
+/// the object's diagonal) are under its contact.
+pub const CONTACT: f32 = 0.005;
+
+/// Seeds of the evaluation ("grideval", "gridavrg", "gridnois").
+const EVAL_SEED: u64 = 0x6772_6964_6576_616c;
+const AVERAGE_SEED: u64 = 0x6772_6964_6176_7267;
+const NOISE_SEED: u64 = 0x6772_6964_6e6f_6973;
+
+/// A clip frame: the clip (an index into the bake's clips; `None`: the
+/// rest pose of a character without clips) and the time.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Frame {
+    /// The clip.
+    pub clip: Option<usize>,
+    /// Seconds into it.
+    pub time: f32,
+}
+
+impl Frame {
+    /// The pose at this frame.
+    pub fn pose(&self, character: &Character, clips: &[Clip]) -> Pose {
+        match self.clip {
+            Some(c) => Pose::sample(&character.skeleton, &clips[c], self.time),
+            None => Pose::rest(&character.skeleton),
+        }
+    }
+}
+
+/// `count` random frames of `clips` (indices into `all`), seeded.
+pub fn random_frames(all: &[Clip], clips: &[usize], count: usize, seed: u64) -> Vec<Frame> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..count)
+        .map(|_| match clips {
+            [] => Frame {
+                clip: None,
+                time: 0.0,
+            },
+            _ => {
+                let c = clips[rng.random_range(0..clips.len())];
+                Frame {
+                    clip: Some(c),
+                    time: rng.random_range(0.0..1.0f32) * all[c].duration,
+                }
+            }
+        })
+        .collect()
+}
+
+/// A variant's prediction at a frame: its vertex values, then its ground
+/// values.
+pub type Predictor<'a> = dyn Fn(&FrameTruth) -> (Vec<f32>, Vec<f32>) + Sync + 'a;
+
+/// One frame's receivers and their truth.
+#[derive(Debug, Clone)]
+pub struct FrameTruth {
+    /// The frame.
+    pub frame: Frame,
+    /// Palette matrices (`world_from_bind`).
+    pub palette: Vec<Mat4>,
+    /// Posed vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Posed vertex normals.
+    pub normals: Vec<Vec3>,
+    /// Surface AO at each vertex.
+    pub vertices: Vec<f32>,
+    /// Surface AO at each ground point.
+    pub ground: Vec<f32>,
+}
+
+/// The ground truth of an evaluation and the references it needs.
+#[derive(Debug, Clone)]
+pub struct GroundTruth {
+    /// The evaluated frames.
+    pub frames: Vec<FrameTruth>,
+    /// The ground points (one plane for every frame).
+    pub ground: Vec<Vec3>,
+    /// Whether each ground point is seen (not under a contact in any
+    /// evaluated frame).
+    pub ground_seen: Vec<bool>,
+    /// The vertices each part carries (the receivers on parts).
+    pub owner: Vec<Option<usize>>,
+    /// Each vertex's occlusion by its own part alone.
+    pub self_ao: Vec<f32>,
+    /// The static average: mean truth over the training frames, per
+    /// vertex, then per ground point.
+    pub average: (Vec<f32>, Vec<f32>),
+    /// RMSE of one truth estimate at the vertices and on the ground (the
+    /// first frame traced again with independent rays, the difference
+    /// over √2): what a perfect model would still score.
+    pub noise_rmse: (f64, f64),
+    /// Rays traced.
+    pub rays: u64,
+}
+
+/// What the evaluation traces with.
+#[derive(Debug, Clone, Copy)]
+pub struct Inputs<'a> {
+    /// The character.
+    pub character: &'a Character,
+    /// All the bake's clips.
+    pub clips: &'a [Clip],
+    /// Its training clips (the static average's frames).
+    pub train: &'a [usize],
+    /// Its test clips (the evaluated frames).
+    pub test: &'a [usize],
+    /// The parts.
+    pub parts: &'a [Part],
+    /// The options.
+    pub options: &'a GridOptions,
+    /// The distance limit of the truth (the grids' own).
+    pub max_distance: f32,
+    /// The bake's seed.
+    pub seed: u64,
+}
+
+struct Traced {
+    vertices: Vec<f32>,
+    ground: Vec<f32>,
+    scene: Scene,
+    palette: Vec<Mat4>,
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+}
+
+impl Inputs<'_> {
+    fn surface(&self, seed: u64) -> SurfaceParams {
+        SurfaceParams {
+            samples: self.options.eval_rays,
+            max_distance: self.max_distance,
+            seed,
+            falloff: crate::trace::Falloff::None,
+        }
+    }
+
+    fn trace(&self, frame: &Frame, ground: &[Vec3], seed: u64) -> Result<Traced, TraceError> {
+        let c = self.character;
+        let pose = frame.pose(c, self.clips);
+        let posed = c.skin(&pose);
+        let scene = Scene::new(&posed.positions, &c.triangles, &SceneOptions::default())?;
+        let params = self.surface(seed);
+        let vertices = vertex_occlusion(
+            &scene,
+            &SurfaceMesh {
+                positions: &posed.positions,
+                normals: &posed.normals,
+                triangles: &c.triangles,
+            },
+            &params,
+            &no_progress,
+        )?;
+        let up = vec![Vec3::Y; ground.len()];
+        let ground = surface_occlusion(&scene, ground, &up, &params, &no_progress)?;
+        Ok(Traced {
+            vertices,
+            ground,
+            scene,
+            palette: c.joint_matrices(&pose),
+            positions: posed.positions,
+            normals: posed.normals,
+        })
+    }
+
+    /// Each vertex's occlusion by its own part alone, in bind space.
+    fn self_occlusion(&self) -> Result<Vec<f32>, TraceError> {
+        let c = self.character;
+        let mut out = vec![0.0; c.vertex_count()];
+        for part in self.parts {
+            let (globals, positions, triangles) = part.mesh(c);
+            let normals: Vec<Vec3> = globals.iter().map(|&v| c.normals[v as usize]).collect();
+            let scene = Scene::new(&positions, &triangles, &SceneOptions::default())?;
+            let values = vertex_occlusion(
+                &scene,
+                &SurfaceMesh {
+                    positions: &positions,
+                    normals: &normals,
+                    triangles: &triangles,
+                },
+                &self.surface(self.seed ^ EVAL_SEED),
+                &no_progress,
+            )?;
+            for (&v, &a) in globals.iter().zip(&values) {
+                if part.vertices.binary_search(&v).is_ok() {
+                    out[v as usize] = a;
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+impl GroundTruth {
+    /// Draws the frames and the ground (seeded by `inputs.seed`) and
+    /// traces them.
+    pub fn trace(inputs: &Inputs<'_>) -> Result<Self, TraceError> {
+        let o = inputs.options;
+        let c = inputs.character;
+        let seed = inputs.seed;
+        let eval = random_frames(inputs.clips, inputs.test, o.eval_frames, seed ^ EVAL_SEED);
+        let average = random_frames(
+            inputs.clips,
+            inputs.train,
+            o.average_frames,
+            seed ^ AVERAGE_SEED,
+        );
+        // The ground: a disc under every frame's vertices, at the lowest.
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for f in eval.iter().chain(&average) {
+            for p in c.skin(&f.pose(c, inputs.clips)).positions {
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        if !lo.is_finite() {
+            (lo, hi) = (Vec3::ZERO, Vec3::ONE);
+        }
+        let centre = (lo + hi) * 0.5;
+        let radius = 1.5 * 0.5 * (hi - lo).x.max((hi - lo).z).max(1e-6);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ EVAL_SEED ^ 1);
+        let mut ground = Vec::with_capacity(o.eval_ground);
+        while ground.len() < o.eval_ground {
+            let (x, z) = (
+                rng.random_range(-1.0..1.0f32),
+                rng.random_range(-1.0..1.0f32),
+            );
+            if x * x + z * z <= 1.0 {
+                ground.push(Vec3::new(
+                    centre.x + radius * x,
+                    lo.y,
+                    centre.z + radius * z,
+                ));
+            }
+        }
+        let reach = CONTACT * (hi - lo).length();
+        let held_out = seed ^ crate::bake::params::HELD_OUT_SEED;
+        let mut ground_seen = vec![true; ground.len()];
+        let mut frames = Vec::with_capacity(eval.len());
+        let mut noise_rmse = (0.0, 0.0);
+        for (k, frame) in eval.iter().enumerate() {
+            let t = inputs.trace(frame, &ground, held_out)?;
+            for (seen, &p) in ground_seen.iter_mut().zip(&ground) {
+                *seen &= !t.scene.surface_near(p, Vec3::Y, reach);
+            }
+            if k == 0 {
+                let again = inputs.trace(frame, &ground, seed ^ NOISE_SEED)?;
+                noise_rmse = (
+                    rmse(&t.vertices, &again.vertices) / 2f64.sqrt(),
+                    rmse(&t.ground, &again.ground) / 2f64.sqrt(),
+                );
+            }
+            frames.push(FrameTruth {
+                frame: *frame,
+                palette: t.palette,
+                positions: t.positions,
+                normals: t.normals,
+                vertices: t.vertices,
+                ground: t.ground,
+            });
+        }
+        let mut sum_v = vec![0.0f64; c.vertex_count()];
+        let mut sum_g = vec![0.0f64; ground.len()];
+        for frame in &average {
+            let t = inputs.trace(frame, &ground, seed)?;
+            for (s, &v) in sum_v.iter_mut().zip(&t.vertices) {
+                *s += f64::from(v);
+            }
+            for (s, &v) in sum_g.iter_mut().zip(&t.ground) {
+                *s += f64::from(v);
+            }
+        }
+        let mean = |s: Vec<f64>| -> Vec<f32> {
+            s.into_iter()
+                .map(|v| (v / average.len().max(1) as f64) as f32)
+                .collect()
+        };
+        let traced_frames = (eval.len() + average.len() + 1) as u64;
+        let self_ao = inputs.self_occlusion()?;
+        let rays = (traced_frames * (c.vertex_count() + ground.len()) as u64
+            + c.vertex_count() as u64)
+            * u64::from(o.eval_rays);
+        Ok(Self {
+            frames,
+            ground,
+            ground_seen,
+            owner: super::parts::owners(inputs.parts, c.vertex_count()),
+            self_ao,
+            average: (mean(sum_v), mean(sum_g)),
+            noise_rmse,
+            rays,
+        })
+    }
+
+    /// Ground points left out (under a contact).
+    pub fn ground_hidden(&self) -> usize {
+        self.ground_seen.iter().filter(|&&s| !s).count()
+    }
+
+    /// The errors of `predict` (per frame: its vertex values, then its
+    /// ground values) against the truth: (at the vertices of parts, on
+    /// the ground).
+    pub fn errors(
+        &self,
+        predict: &Predictor<'_>,
+    ) -> (Errors, Errors) {
+        let frames: Vec<(FrameError, FrameError)> = self
+            .frames
+            .par_iter()
+            .map(|f| {
+                let (v, g) = predict(f);
+                let (vp, vt): (Vec<f32>, Vec<f32>) = (0..v.len())
+                    .filter(|&i| self.owner[i].is_some())
+                    .map(|i| (v[i], f.vertices[i]))
+                    .unzip();
+                let (gp, gt): (Vec<f32>, Vec<f32>) = (0..g.len())
+                    .filter(|&i| self.ground_seen[i])
+                    .map(|i| (g[i], f.ground[i]))
+                    .unzip();
+                (FrameError::of(&vp, &vt), FrameError::of(&gp, &gt))
+            })
+            .collect();
+        let (v, g): (Vec<_>, Vec<_>) = frames.into_iter().unzip();
+        (Errors::of(&v), Errors::of(&g))
+    }
+
+    /// A grid model's prediction at a frame's receivers, from the parts
+    /// `terms` names; with `exact_self`, each vertex's own part is its
+    /// traced self-occlusion instead of its grid.
+    pub fn predict(
+        &self,
+        model: &GridModel,
+        frame: &FrameTruth,
+        terms: Terms,
+        exact_self: bool,
+    ) -> (Vec<f32>, Vec<f32>) {
+        let poses: Vec<PartPose> = model.poses(&frame.palette);
+        let vertices = frame
+            .positions
+            .iter()
+            .zip(&frame.normals)
+            .enumerate()
+            .map(|(i, (&p, &n))| {
+                let own = self.owner[i];
+                if exact_self {
+                    let others = model.occlusion(&poses, p, n, own, Terms::Others);
+                    match terms {
+                        Terms::Own => self.self_ao[i],
+                        _ => 1.0 - (1.0 - self.self_ao[i]) * (1.0 - others),
+                    }
+                } else {
+                    model.occlusion(&poses, p, n, own, terms)
+                }
+            })
+            .collect();
+        let ground = self
+            .ground
+            .iter()
+            .map(|&p| match terms {
+                Terms::Own => 0.0,
+                _ => model.occlusion(&poses, p, Vec3::Y, None, Terms::All),
+            })
+            .collect();
+        (vertices, ground)
+    }
+}
+
+fn rmse(a: &[f32], b: &[f32]) -> f64 {
+    let n = a.len().max(1) as f64;
+    let se: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2))
+        .sum();
+    (se / n).sqrt()
+}
+
+/// One variant's figures.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GridVariant {
+    /// Its name, such as `grids (cones)`.
+    pub name: String,
+    /// What it is.
+    pub description: String,
+    /// Bytes a renderer keeps for it.
+    pub bytes: usize,
+    /// Against the truth at the vertices of the parts.
+    pub vertices: Errors,
+    /// Against the truth on the ground plane.
+    pub ground: Errors,
+}
+
+/// A grid bake's evaluation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GridEvaluation {
+    /// The evaluated frames, as (clip name, seconds).
+    pub frames: Vec<(Option<String>, f32)>,
+    /// Receivers on parts per frame.
+    pub vertices: usize,
+    /// Ground points per frame.
+    pub ground_points: usize,
+    /// Ground points left out (under a contact).
+    pub ground_hidden: usize,
+    /// Rays per ground-truth point.
+    pub rays_per_point: u32,
+    /// RMSE of one truth estimate at the vertices.
+    pub noise_rmse_vertices: f64,
+    /// RMSE of one truth estimate on the ground.
+    pub noise_rmse_ground: f64,
+    /// Every variant, the baked one first.
+    pub variants: Vec<GridVariant>,
+}
