@@ -11,6 +11,8 @@
 //!   evaluation an engine runs per frame.
 //! * [`CUBEMAP_AO`]: run-time lookup of Kroon's cubemaps at points in
 //!   space (`cubemap_occlusion`, and `cs_main` over a batch of points).
+//! * [`GRID_AO`]: run-time lookup of Malmer et al.'s grids at receivers
+//!   (`grid_occlusion`, and `cs_main` over a batch).
 //! * [`PREVIEW`]: the preview raster (`vs_main`, `fs_main`).
 //!
 //! The Rust mirrors of the uniforms and storage structs are in [`mirror`],
@@ -18,7 +20,10 @@
 
 pub mod mirror;
 
-pub use mirror::{BlockInfo, CubemapAoParams, PreviewUniforms, VertexAoParams};
+pub use mirror::{
+    BlockInfo, CubemapAoParams, GridAoParams, GridPartInfo, GridReceiver, PreviewUniforms,
+    VertexAoParams,
+};
 
 /// Half-float decoding shared by the pipelines.
 pub const COMMON_F16: &str = include_str!("../wgsl/common/f16.wgsl");
@@ -39,14 +44,18 @@ pub const CUBEMAP_AO: &str = concat!(
     include_str!("../wgsl/cubemap_ao.wgsl")
 );
 
+/// The grid lookup shader.
+pub const GRID_AO: &str = include_str!("../wgsl/grid_ao.wgsl");
+
 /// The preview raster shader.
 pub const PREVIEW: &str = include_str!("../wgsl/preview.wgsl");
 
 /// Every composed pipeline source, by file name.
-pub fn sources() -> [(&'static str, &'static str); 3] {
+pub fn sources() -> [(&'static str, &'static str); 4] {
     [
         ("vertex_ao.wgsl", VERTEX_AO),
         ("cubemap_ao.wgsl", CUBEMAP_AO),
+        ("grid_ao.wgsl", GRID_AO),
         ("preview.wgsl", PREVIEW),
     ]
 }
@@ -146,6 +155,14 @@ mod tests {
             wgsl_size(CUBEMAP_AO, "Params") as usize,
             size_of::<CubemapAoParams>()
         );
+        for (name, size) in [
+            ("Params", size_of::<GridAoParams>()),
+            ("PartInfo", size_of::<GridPartInfo>()),
+            ("Receiver", size_of::<GridReceiver>()),
+            ("PartPose", 4 * 32),
+        ] {
+            assert_eq!(wgsl_size(GRID_AO, name) as usize, size, "{name}");
+        }
     }
 
     #[test]

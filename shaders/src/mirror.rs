@@ -67,6 +67,62 @@ pub struct CubemapAoParams {
     pub _pad: u32,
 }
 
+/// `Params` of grid_ao.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GridAoParams {
+    /// Parts.
+    pub parts: u32,
+    /// Receivers to evaluate.
+    pub points: u32,
+    /// Receivers per row of the dispatch grid (workgroups in x × 64).
+    pub row_stride: u32,
+    /// 1 when the cones are baked.
+    pub cones: u32,
+    /// `T_clip`'s samples per axis.
+    pub tclip_resolution: u32,
+    /// Index in `cells` of `T_clip`'s first f32.
+    pub tclip_offset: u32,
+    /// Padding.
+    pub _pad: [u32; 2],
+}
+
+/// `PartInfo` of grid_ao.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GridPartInfo {
+    /// Cells per grid edge.
+    pub resolution: u32,
+    /// Index in `cells` of the part's first cell.
+    pub offset: u32,
+    /// Padding.
+    pub _pad: [u32; 2],
+}
+
+/// `Receiver` of grid_ao.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GridReceiver {
+    /// xyz: the position; w: the bits of its part's index
+    /// ([`GridReceiver::NO_PART`] for none).
+    pub position: [f32; 4],
+    /// xyz: the unit normal.
+    pub normal: [f32; 4],
+}
+
+impl GridReceiver {
+    /// The part index of a receiver of no part.
+    pub const NO_PART: u32 = u32::MAX;
+
+    /// A receiver at `p` with normal `n` on part `own`.
+    pub fn new(p: [f32; 3], n: [f32; 3], own: u32) -> Self {
+        Self {
+            position: [p[0], p[1], p[2], f32::from_bits(own)],
+            normal: [n[0], n[1], n[2], 0.0],
+        }
+    }
+}
+
 /// `Uniforms` of preview.wgsl: one per (panel, surface) draw.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
@@ -103,3 +159,6 @@ const _: () = assert!(size_of::<VertexAoParams>() == 16);
 const _: () = assert!(size_of::<BlockInfo>() == 32);
 const _: () = assert!(size_of::<CubemapAoParams>() == 64);
 const _: () = assert!(size_of::<PreviewUniforms>() == 224);
+const _: () = assert!(size_of::<GridAoParams>() == 32);
+const _: () = assert!(size_of::<GridPartInfo>() == 16);
+const _: () = assert!(size_of::<GridReceiver>() == 32);

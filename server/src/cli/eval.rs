@@ -35,6 +35,9 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             container.method
         );
     }
+    if container.method.family() == aobake_core::method::Family::Grid {
+        return grid(args, &container);
+    }
     let (model, header) = Model::from_container(&container)
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
     let limits = Limits::default();
@@ -61,6 +64,70 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         args.out.display(),
         values.len(),
         header.method.name(),
+        container.version.0,
+        container.version.1
+    );
+    Ok(())
+}
+
+/// A grid asset at the vertices of the posed character: each vertex a
+/// receiver on its own part, shaded by every part's grid (the run-time
+/// lookup engines run).
+fn grid(args: &Args, container: &Container) -> anyhow::Result<()> {
+    use aobake_core::method::grid::{
+        model::{GridModel, Terms},
+        parts::{owners, parts},
+    };
+    let (model, header) = GridModel::from_container(container)
+        .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    let posed = pose(&args.file, &args.pose, &Limits::default())?;
+    let character = &posed.character;
+    model
+        .check_palette(character.joints.len())
+        .with_context(|| {
+            format!(
+                "{} does not fit {}",
+                args.asset.display(),
+                args.file.display()
+            )
+        })?;
+    let params: aobake_core::bake::BakeParams = serde_json::from_value(header.params.clone())
+        .context("the asset's parameters are unreadable")?;
+    let found = parts(character, params.grid.parts)?;
+    if found.len() != model.parts.len()
+        || found
+            .iter()
+            .zip(&model.parts)
+            .any(|(a, b)| a.joint != b.joint)
+    {
+        bail!(
+            "{} does not fit {}: its parts are not the character's (character {})",
+            args.asset.display(),
+            args.file.display(),
+            header.character
+        );
+    }
+    let owner = owners(&found, character.vertex_count());
+    let poses = model.poses(&character.joint_matrices(&posed.pose));
+    let mut csv = String::with_capacity(character.vertex_count() * 16 + 16);
+    csv.push_str("index,occlusion\n");
+    for (i, (p, n)) in posed
+        .mesh
+        .positions
+        .iter()
+        .zip(&posed.mesh.normals)
+        .enumerate()
+    {
+        let v = model.occlusion(&poses, *p, *n, owner[i], Terms::All);
+        let _ = writeln!(csv, "{i},{v}");
+    }
+    std::fs::write(&args.out, csv)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    eprintln!(
+        "wrote {}: {} vertices, grid asset of {} parts (format {}.{})",
+        args.out.display(),
+        character.vertex_count(),
+        model.parts.len(),
         container.version.0,
         container.version.1
     );

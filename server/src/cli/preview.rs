@@ -10,7 +10,7 @@ use aobake_core::{
     Character, Clip, Limits,
     asset::Container,
     bake::{BakeParams, PreviewModel, preview::Subject},
-    method::{Family, cubemap::model::CubemapModel, vertex::Model},
+    method::{Family, cubemap::model::CubemapModel, grid::model::GridModel, vertex::Model},
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
 
@@ -48,6 +48,8 @@ pub(super) struct Args {
 enum Baked {
     Vertex(Model),
     Cubemap(CubemapModel),
+    /// The grids and each vertex's part.
+    Grid(GridModel, Vec<u32>),
 }
 
 /// An asset and the character it was baked for, loaded and checked.
@@ -65,7 +67,21 @@ impl Loaded {
         let container = Container::from_bytes(&bytes)
             .with_context(|| format!("cannot read {}", asset.display()))?;
         let (character, clips) = character_and_clips(file, clips, &Limits::default())?;
-        let (model, params) = if container.method.family() == Family::Cubemap {
+        let (model, params) = if container.method.family() == Family::Grid {
+            let (model, header) = GridModel::from_container(&container)
+                .with_context(|| format!("cannot read {}", asset.display()))?;
+            model
+                .check_palette(character.joints.len())
+                .with_context(|| format!("{} does not fit {}", asset.display(), file.display()))?;
+            let params: BakeParams = serde_json::from_value(header.params.clone())
+                .unwrap_or_else(|_| BakeParams::new(header.method));
+            let found = aobake_core::method::grid::parts::parts(&character, params.grid.parts)?;
+            let owners = aobake_core::method::grid::parts::owners(&found, character.vertex_count())
+                .into_iter()
+                .map(|o| o.map_or(u32::MAX, |p| p as u32))
+                .collect();
+            (Baked::Grid(model, owners), params)
+        } else if container.method.family() == Family::Cubemap {
             let (model, header) = CubemapModel::from_container(&container)
                 .with_context(|| format!("cannot read {}", asset.display()))?;
             let params: BakeParams = serde_json::from_value(header.params.clone())
@@ -104,6 +120,7 @@ impl Loaded {
                 Baked::Cubemap(m) => {
                     PreviewModel::Cubemap(m, self.params.cubemap_truth(&m.layout.spheroid))
                 }
+                Baked::Grid(m, owners) => PreviewModel::Grid(m, owners),
             },
             surface: self.params.held_out_surface(),
         }

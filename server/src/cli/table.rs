@@ -254,8 +254,6 @@ pub(super) fn linear(args: &LinearArgs) -> anyhow::Result<()> {
 fn vertex_report(baked: Baked) -> anyhow::Result<Report> {
     match baked.report {
         aobake_core::asset::report::BakeReport::Vertex(r) => Ok(*r),
-        aobake_core::asset::report::BakeReport::Cubemap(_) => {
-            anyhow::bail!("the tables compare per-vertex methods, not cubemaps")
-        }
+        _ => anyhow::bail!("the tables compare per-vertex methods"),
     }
 }

@@ -6,7 +6,7 @@ use std::convert::Infallible;
 use std::time::Duration;
 
 use aobake_core::{
-    bake::{Bake, BakeInputs, BakeParams, GraphOptions, PoseSet, bake_key},
+    bake::{Bake, BakeInputs, BakeParams, GraphOptions, bake_key},
     method::Method,
 };
 use axum::{
@@ -129,8 +129,7 @@ pub(crate) async fn submit(
             .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
         let bake = Bake::new(&inputs, params.clone())
             .map_err(|e| ApiError::bad("bad_params", e.to_string()))?;
-        let frames = bake.poses_in(PoseSet::HeldOut).saturating_sub(params.eval_poses);
-        let work = params.work(inputs.character.vertex_count(), frames);
+        let work = bake.work();
         if work > max_work {
             return Err(ApiError::bad(
                 "too_much_work",

@@ -4,6 +4,7 @@
 //! * [`Gpu`]: the adapter, device and queue (one per process, shared).
 //! * [`VertexAo`] ([`vertex_ao`]): the vertex methods' run-time evaluation.
 //! * [`CubemapAo`] ([`cubemap_ao`]): the cubemap methods' run-time lookup.
+//! * [`GridAo`] ([`grid_ao`]): the grid method's run-time lookup.
 //! * [`PreviewRenderer`] ([`preview`]): core's preview [`Renderer`]
 //!   (aobake_core::bake::Renderer) on wgpu.
 //!
@@ -14,10 +15,12 @@
 use std::sync::OnceLock;
 
 pub mod cubemap_ao;
+pub mod grid_ao;
 pub mod preview;
 pub mod vertex_ao;
 
 pub use cubemap_ao::CubemapAo;
+pub use grid_ao::GridAo;
 pub use preview::PreviewRenderer;
 pub use vertex_ao::VertexAo;
 pub use wgpu::{Backends, DeviceType};

@@ -7,11 +7,11 @@
 //! [`CubemapAo`] at the frame's phase.
 
 use aobake_core::bake::{Image, Panel, PreviewModel, RenderFrame, RenderScene, Renderer};
-use aobake_shaders::PreviewUniforms;
+use aobake_shaders::{GridReceiver, PreviewUniforms};
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;
 
-use super::{CubemapAo, Gpu, GpuError, VertexAo};
+use super::{CubemapAo, Gpu, GpuError, GridAo, VertexAo};
 
 const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -173,6 +173,8 @@ impl<'g> PreviewRenderer<'g> {
 enum Evaluator<'g> {
     Vertex(VertexAo<'g>),
     Cubemap(CubemapAo<'g>),
+    /// The grids and each character vertex's part.
+    Grid(GridAo<'g>, &'g [u32]),
 }
 
 /// Vertex buffers of one surface.
@@ -221,7 +223,9 @@ impl PreviewRenderer<'_> {
         let (width, height) = scene.size;
         let vertices = match scene.model {
             PreviewModel::Vertex(m) => m.vertices(),
-            PreviewModel::Cubemap(..) => frames.first().map_or(0, |f| f.positions.len()),
+            PreviewModel::Cubemap(..) | PreviewModel::Grid(..) => {
+                frames.first().map_or(0, |f| f.positions.len())
+            }
         };
         for f in frames {
             if f.positions.len() != vertices
@@ -238,8 +242,18 @@ impl PreviewRenderer<'_> {
         let evaluator = match scene.model {
             PreviewModel::Vertex(m) => Evaluator::Vertex(VertexAo::new(gpu, m)?),
             PreviewModel::Cubemap(m, _) => Evaluator::Cubemap(CubemapAo::new(gpu, m)?),
+            PreviewModel::Grid(m, owners) => {
+                if owners.len() != vertices {
+                    return Err(GpuError::TooLarge(format!(
+                        "{} vertex parts for {vertices} vertices",
+                        owners.len()
+                    )));
+                }
+                Evaluator::Grid(GridAo::new(gpu, m)?, owners)
+            }
         };
         let cubemap = matches!(evaluator, Evaluator::Cubemap(_));
+        let grid = matches!(evaluator, Evaluator::Grid(..));
         use wgpu::BufferUsages as U;
         let dynamic = U::VERTEX | U::COPY_DST;
         let n = vertices.max(1) as u64;
@@ -276,16 +290,35 @@ impl PreviewRenderer<'_> {
             index_count: indices.len() as u32,
         };
         // A vertex method's ground shows the ray-traced occlusion in both
-        // AO slots (no vertex method bakes it); a cubemap's is looked up
-        // into its own buffer.
+        // AO slots (no vertex method bakes it); a cubemap's and the grids'
+        // are looked up into their own buffer.
         let g = scene.ground;
         let ground_n = g.positions.len().max(1) as u64;
         let ground_ao = buffer("ground ao", 4 * ground_n, dynamic);
-        let ground_model = if cubemap {
+        let ground_model = if cubemap || grid {
             buffer("ground model ao", 4 * ground_n, U::VERTEX | U::STORAGE)
         } else {
             ground_ao.clone()
         };
+        // The grids' receivers: the character's (rewritten every frame)
+        // and the ground's (fixed).
+        let receivers = grid.then(|| {
+            let up = [0.0, 1.0, 0.0];
+            let ground: Vec<GridReceiver> = g
+                .positions
+                .iter()
+                .map(|p| GridReceiver::new(p.to_array(), up, GridReceiver::NO_PART))
+                .collect();
+            (
+                buffer("character receivers", 32 * n, U::STORAGE | U::COPY_DST),
+                init(
+                    device,
+                    "ground receivers",
+                    bytemuck::cast_slice(&ground),
+                    U::STORAGE,
+                ),
+            )
+        });
         let ground_indices: Vec<u32> = g.triangles.iter().flatten().copied().collect();
         let ground_positions = init(
             device,
@@ -400,6 +433,34 @@ impl PreviewRenderer<'_> {
                     frame.phase,
                     &ground_model,
                 )?,
+                Evaluator::Grid(e, owners) => {
+                    let (on_character, on_ground) = receivers
+                        .as_ref()
+                        .expect("grid receivers are made for grids");
+                    let mine: Vec<GridReceiver> = frame
+                        .positions
+                        .iter()
+                        .zip(&frame.normals)
+                        .zip(owners.iter())
+                        .map(|((p, n), &o)| GridReceiver::new(p.to_array(), n.to_array(), o))
+                        .collect();
+                    gpu.queue
+                        .write_buffer(on_character, 0, bytemuck::cast_slice(&mine));
+                    e.record(
+                        &mut encoder,
+                        &frame.weights,
+                        on_character,
+                        vertices as u32,
+                        &character.model,
+                    )?;
+                    e.record(
+                        &mut encoder,
+                        &frame.weights,
+                        on_ground,
+                        g.positions.len() as u32,
+                        &ground_model,
+                    )?;
+                }
             }
             for (k, (on_character, on_ground)) in groups.iter().enumerate() {
                 {

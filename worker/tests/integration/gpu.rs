@@ -255,3 +255,122 @@ fn the_wgsl_cubemap_lookup_matches_the_cpu_for_every_encoding() {
         assert!(nonzero > 1000, "the test points see occlusion: {nonzero}");
     }
 }
+
+/// A small grid bake of the rigid robot, with or without cones.
+fn grid(
+    cones: bool,
+) -> (
+    aobake_core::Imported,
+    aobake_core::method::grid::model::GridModel,
+) {
+    use aobake_core::{
+        Upload,
+        asset::Container,
+        bake::{Bake, bake_in_process},
+        method::grid::{GridOptions, model::GridModel},
+    };
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/data/scenes/RigidRobot/RigidRobot.gltf"
+    );
+    let bytes = std::fs::read(path).unwrap();
+    let imported = import_character(Upload::single(&bytes), &Limits::default()).unwrap();
+    let inputs = aobake_core::bake::BakeInputs {
+        character: imported.character.clone(),
+        clips: imported.clips.clone(),
+        character_digest: "robot".into(),
+        clip_digests: Vec::new(),
+        warnings: Vec::new(),
+    };
+    let mut p = BakeParams::new(Method::Grid);
+    p.grid = GridOptions {
+        resolution: 8,
+        rays: 32,
+        cones,
+        tclip_resolution: 16,
+        eval_frames: 1,
+        eval_ground: 16,
+        eval_rays: 16,
+        average_frames: 1,
+        ..GridOptions::default()
+    };
+    let baked = bake_in_process(&Bake::new(&inputs, p).unwrap(), None).unwrap();
+    let model = GridModel::from_container(&Container::from_bytes(&baked.asset).unwrap())
+        .unwrap()
+        .0;
+    (imported, model)
+}
+
+#[test]
+fn the_wgsl_grid_lookup_matches_the_cpu_with_and_without_cones() {
+    use aobake_core::{
+        bake::preview::grid_weights,
+        method::grid::{
+            model::Terms,
+            parts::{owners, parts},
+        },
+    };
+    use aobake_shaders::GridReceiver;
+    use aobake_worker::gpu::GridAo;
+    use glam::Vec3;
+    let gpu = gpu();
+    for cones in [false, true] {
+        let (imported, model) = grid(cones);
+        let c = &imported.character;
+        let owner = owners(
+            &parts(c, aobake_core::method::grid::PartsMode::Rigid).unwrap(),
+            c.vertex_count(),
+        );
+        let evaluator = GridAo::new(&gpu, &model).unwrap();
+        let mut nonzero = 0;
+        for (clip, time) in [(0, 0.3), (1, 1.1)] {
+            let pose = Pose::sample(&c.skeleton, &imported.clips[clip], time);
+            let posed = c.skin(&pose);
+            let palette = c.joint_matrices(&pose);
+            let poses = model.poses(&palette);
+            // The vertices on their parts, then points around the robot
+            // (on no part) with normals on a spiral.
+            let mut receivers: Vec<(Vec3, Vec3, Option<usize>)> = posed
+                .positions
+                .iter()
+                .zip(&posed.normals)
+                .zip(&owner)
+                .map(|((&p, &n), &o)| (p, n, o))
+                .collect();
+            for k in 0..2000 {
+                let f = k as f32;
+                let p = Vec3::new(
+                    (f * 0.731).sin() * 0.6,
+                    1.0 + (f * 0.377).cos(),
+                    (f * 1.913).cos() * 0.6,
+                );
+                let n = Vec3::new((f * 0.51).cos(), (f * 0.23).sin(), (f * 0.87).sin()).normalize();
+                receivers.push((p, n, None));
+            }
+            let on_cpu: Vec<f32> = receivers
+                .iter()
+                .map(|&(p, n, o)| model.occlusion(&poses, p, n, o, Terms::All))
+                .collect();
+            let packed: Vec<GridReceiver> = receivers
+                .iter()
+                .map(|&(p, n, o)| {
+                    GridReceiver::new(
+                        p.to_array(),
+                        n.to_array(),
+                        o.map_or(GridReceiver::NO_PART, |o| o as u32),
+                    )
+                })
+                .collect();
+            let on_gpu = evaluator
+                .evaluate(&packed, &grid_weights(&model, &palette))
+                .unwrap();
+            nonzero += on_cpu.iter().filter(|&&v| v > 0.01).count();
+            // The same bytes, trilinear weights and table on both sides;
+            // they differ by f32 rounding and fused multiply-adds.
+            let w = worst(&on_gpu, &on_cpu);
+            eprintln!("cones {cones}, clip {clip}: worst difference {w:e}");
+            assert!(w < 1e-5, "cones {cones}, clip {clip}: {w}");
+        }
+        assert!(nonzero > 500, "the receivers see occlusion: {nonzero}");
+    }
+}

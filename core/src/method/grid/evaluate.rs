@@ -336,10 +336,7 @@ impl GroundTruth {
     /// The errors of `predict` (per frame: its vertex values, then its
     /// ground values) against the truth: (at the vertices of parts, on
     /// the ground).
-    pub fn errors(
-        &self,
-        predict: &Predictor<'_>,
-    ) -> (Errors, Errors) {
+    pub fn errors(&self, predict: &Predictor<'_>) -> (Errors, Errors) {
         let frames: Vec<(FrameError, FrameError)> = self
             .frames
             .par_iter()
