@@ -11,6 +11,8 @@ mod crashes;
 mod cubemap;
 #[path = "integration/dashboard.rs"]
 mod dashboard;
+#[path = "integration/grid.rs"]
+mod grid;
 #[path = "integration/service.rs"]
 mod service;
 #[path = "integration/util.rs"]

@@ -6,13 +6,25 @@
 //! convention has them) in one 32-bit float channel `Y`: the occlusion,
 //! 0 open and 1 blocked, decoded at each texel's centre exactly as the
 //! run time decodes it.
+//!
+//! A grid asset's parts are written as one file per part,
+//! `part{k}-{name}.exr`, its z-slices stacked top to bottom (slice z in
+//! rows z·n .. (z + 1)·n, +y up within a slice, +x left to right), in the
+//! channel `ao_grid` (the stored 2·ao′, 0..2) and, with cones, `axis.x`,
+//! `axis.y`, `axis.z` (the average occluded direction in the part's bind
+//! space), each exactly the value the run time reads at the cell.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use aobake_core::{
     asset::Container,
-    method::{Family, cubemap::geometry::FACES, cubemap::model::CubemapModel},
+    method::{
+        Family,
+        cubemap::geometry::FACES,
+        cubemap::model::CubemapModel,
+        grid::model::{GridModel, PartGrid},
+    },
 };
 use exr::prelude::{
     Encoding, Image, Layer, LayerAttributes, SpecificChannels, Text, WritableImage as _,
@@ -23,8 +35,8 @@ use exr::prelude::{
 pub(super) struct Args {
     /// The asset (from `aobake bake` or `aobake fetch`).
     asset: PathBuf,
-    /// Write a cubemap asset's decoded faces as OpenEXR files into this
-    /// folder (created if missing).
+    /// Write a cubemap asset's decoded faces, or a grid asset's parts as
+    /// z-slices, as OpenEXR files into this folder (created if missing).
     #[arg(long)]
     exr: PathBuf,
     /// Clip times (seconds) to decode at; default: the start of the
@@ -38,9 +50,12 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
     let container = Container::from_bytes(&bytes)
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    if container.method.family() == Family::Grid {
+        return grids(args, &container);
+    }
     if container.method.family() != Family::Cubemap {
         bail!(
-            "{} holds a {} asset: --exr exports cubemap assets (per-vertex AO has no image to export)",
+            "{} holds a {} asset: --exr exports cubemap and grid assets (per-vertex AO has no image to export)",
             args.asset.display(),
             container.method
         );
@@ -107,4 +122,94 @@ fn write_strip(
         .write()
         .to_file(path)
         .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Every part of a grid asset as a file of z-slices.
+fn grids(args: &Args, container: &Container) -> anyhow::Result<()> {
+    let (model, _) = GridModel::from_container(container)
+        .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    std::fs::create_dir_all(&args.exr)
+        .with_context(|| format!("cannot create {}", args.exr.display()))?;
+    for (k, part) in model.parts.iter().enumerate() {
+        let path = args.exr.join(grid_file_name(k, &part.name));
+        write_slices(part, &path)?;
+    }
+    eprintln!(
+        "wrote {} OpenEXR files (one per part, z-slices top to bottom{}) into {}",
+        model.parts.len(),
+        if model.cones() {
+            ", with the cone axes"
+        } else {
+            ""
+        },
+        args.exr.display()
+    );
+    Ok(())
+}
+
+/// `part{k}-{name}.exr`, the name reduced to letters, digits, `-` and `_`.
+fn grid_file_name(k: usize, name: &str) -> String {
+    let safe: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(64)
+        .collect();
+    format!("part{k}-{safe}.exr")
+}
+
+/// One part's cells as stacked z-slices.
+fn write_slices(part: &PartGrid, path: &Path) -> anyhow::Result<()> {
+    let n = part.grid.resolution;
+    let cell = |x: usize, y: usize| {
+        let (z, row) = (y / n, y % n);
+        (z * n + (n - 1 - row)) * n + x
+    };
+    let occlusion = |i: usize| 2.0 * f32::from(part.occlusion[i]) / 255.0;
+    let mut attributes = LayerAttributes::named(part.name.as_str());
+    attributes.comments = Some(Text::from(
+        format!(
+            "aobake grid: part {} ({n}^3 cells); ao_grid = 2 x occluded fraction of the sphere; z-slices top to bottom, +y up, +x right; axis in the part's bind space",
+            part.name
+        )
+        .as_str(),
+    ));
+    let size = (n, n * n);
+    let written = match &part.directions {
+        None => Image::from_layer(Layer::new(
+            size,
+            attributes,
+            Encoding::FAST_LOSSLESS,
+            SpecificChannels::build()
+                .with_channel("ao_grid")
+                .with_pixel_fn(|p| (occlusion(cell(p.x(), p.y())),)),
+        ))
+        .write()
+        .to_file(path),
+        Some(d) => {
+            let axis = |i: usize, c: usize| f32::from(d[i][c]) / 255.0 * 2.0 - 1.0;
+            Image::from_layer(Layer::new(
+                size,
+                attributes,
+                Encoding::FAST_LOSSLESS,
+                SpecificChannels::build()
+                    .with_channel("ao_grid")
+                    .with_channel("axis.x")
+                    .with_channel("axis.y")
+                    .with_channel("axis.z")
+                    .with_pixel_fn(|p| {
+                        let i = cell(p.x(), p.y());
+                        (occlusion(i), axis(i, 0), axis(i, 1), axis(i, 2))
+                    }),
+            ))
+            .write()
+            .to_file(path)
+        }
+    };
+    written.with_context(|| format!("cannot write {}", path.display()))
 }
