@@ -438,6 +438,7 @@ impl Bake<'_> {
             noise_rmse_vertices: truth.noise_rmse.0,
             noise_rmse_ground: truth.noise_rmse.1,
             variants,
+            lookup_ns_per_receiver: truth.lookup_cost(&model),
         };
         let mut timings = assembled.timings;
         timings.test_trace_s = trace_s;

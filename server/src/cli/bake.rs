@@ -239,7 +239,9 @@ fn grid_summary(report: &GridReport) -> String {
         ));
     }
     out.push_str(&format!(
-        "times: slabs {:.1} s, assemble {:.2} s, ground truth {:.1} s, evaluate {:.1} s\n",
+        "run time: {:.0} ns per receiver on one CPU thread over {} parts\ntimes: slabs {:.1} s, assemble {:.2} s, ground truth {:.1} s, evaluate {:.1} s\n",
+        e.lookup_ns_per_receiver,
+        report.parts.len(),
         t.reference_trace_s, t.fit_s, t.test_trace_s, t.evaluate_s
     ));
     out

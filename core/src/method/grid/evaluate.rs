@@ -398,6 +398,26 @@ impl GroundTruth {
     }
 }
 
+impl GroundTruth {
+    /// Nanoseconds per receiver of `model`'s lookup at every receiver of a
+    /// frame, on one thread: the median over the frames.
+    pub fn lookup_cost(&self, model: &GridModel) -> f64 {
+        let mut ns: Vec<f64> = self
+            .frames
+            .iter()
+            .map(|f| {
+                let started = std::time::Instant::now();
+                let (v, g) = self.predict(model, f, Terms::All, false);
+                let n = (v.len() + g.len()).max(1) as f64;
+                std::hint::black_box((v, g));
+                started.elapsed().as_secs_f64() * 1e9 / n
+            })
+            .collect();
+        ns.sort_by(f64::total_cmp);
+        ns.get(ns.len() / 2).copied().unwrap_or(0.0)
+    }
+}
+
 fn rmse(a: &[f32], b: &[f32]) -> f64 {
     let n = a.len().max(1) as f64;
     let se: f64 = a
@@ -442,4 +462,8 @@ pub struct GridEvaluation {
     pub noise_rmse_ground: f64,
     /// Every variant, the baked one first.
     pub variants: Vec<GridVariant>,
+    /// Run-time cost of the baked model on this machine's CPU: nanoseconds
+    /// per receiver of one thread's lookup over every part (the median of
+    /// the evaluated frames).
+    pub lookup_ns_per_receiver: f64,
 }
