@@ -275,6 +275,46 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert_eq!(download, json!(false), "reading the asset needs only read");
         wait_for(&c, "the previews", &format!("{images}.length === 4"), Duration::from_secs(30)).await;
         shot(&c, "6-read-only").await;
+
+        // A grid bake's page: its parts, every variant and the slices.
+        let truck = upload(&env, &character("CesiumMilkTruck"));
+        let (status, b) = env
+            .request(
+                "POST",
+                "/v1/bakes",
+                ADMIN,
+                Some(json!({"character": truck, "method": "grid", "params": {"grid": {
+                    "resolution": 16, "rays": 64, "eval_frames": 2, "eval_ground": 64,
+                    "eval_rays": 32, "average_frames": 2}}})),
+            )
+            .unwrap();
+        assert_eq!(status, 202, "{b}");
+        let grid = b["id"].as_i64().unwrap();
+        c.goto(&format!("{}/#/bakes/{grid}", env.url)).await.unwrap();
+        wait_for(
+            &c,
+            "the finished grid bake",
+            "document.querySelector('#state [data-state=\"done\"]')",
+            Duration::from_secs(300),
+        )
+        .await;
+        let rows = wait_for(
+            &c,
+            "the grid report",
+            "document.querySelectorAll('#report table').length === 2 && [...document.querySelectorAll('#report table')].map(t => t.tBodies[0].rows.length)",
+            Duration::from_secs(30),
+        )
+        .await;
+        assert_eq!(rows, json!([3, 8]), "three parts, eight variants");
+        let first = eval(&c, "return document.querySelectorAll('#report table')[1].tBodies[0].rows[0].cells[0].textContent").await;
+        assert_eq!(first, json!("grids (cones)"));
+        let plot = eval(&c, "const i = document.querySelector('#report img'); return i && i.complete && i.naturalWidth").await;
+        assert!(plot.as_u64().unwrap_or(0) > 100, "the slices show: {plot}");
+        wait_for(&c, "the grid previews", &format!("{images}.length === 4"), Duration::from_secs(30)).await;
+        let text = eval(&c, "return [...document.querySelectorAll('main > :not(pre)')].map(e => e.innerText).join('\\n')").await;
+        assert!(!text.as_str().unwrap().contains("null") && !text.as_str().unwrap().contains("undefined"), "{text}");
+        eval(&c, "document.querySelector('#report').scrollIntoView(); return null").await;
+        shot(&c, "7-grid-report").await;
         c.close().await.unwrap();
     });
 }

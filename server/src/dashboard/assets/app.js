@@ -278,8 +278,42 @@ function cubemapReportSection(report, plotUrl) {
       h("figcaption", {}, "Time × distance at the worst, a 90th-percentile and the median texel: input, then each encoding decoded and its error")) : null);
 }
 
+function gridReportSection(report, plotUrl) {
+  const ev = report.evaluation;
+  const err = (e) => [fmt(e.mean.rmse), fmt(e.mean.too_dark_mse, 6), fmt(e.mean.too_bright_mse, 6)];
+  return h("section", { id: "report" },
+    h("h2", {}, "Quality"),
+    h("table", {},
+      h("thead", {}, h("tr", {}, ...["Part", "Vertices", "Grid", "V_M", "Inside cells", "Bytes",
+        "Bake (s)"].map((t) => h("th", {}, t)))),
+      h("tbody", {}, ...report.parts.map((p) => h("tr", {},
+        h("td", {}, p.name),
+        h("td", { class: "num" }, p.vertices),
+        h("td", { class: "num" }, `${p.resolution}³`),
+        h("td", { class: "num" }, fmt(p.boundary_max)),
+        h("td", { class: "num" }, p.inside_cells),
+        h("td", { class: "num" }, p.bytes[report.params.grid.cones ? 0 : 1]),
+        h("td", { class: "num" }, fmt(p.bake_s, 2)))))),
+    h("p", { class: "muted" },
+      `Ground truth at ${ev.frames.length} random clip frames: ${ev.vertices} vertices of parts and `,
+      `${ev.ground_points} ground points (${ev.ground_hidden} under a contact left out), `,
+      `${ev.rays_per_point} rays each; its own noise RMSE ${fmt(ev.noise_rmse_vertices)} (vertices), `,
+      `${fmt(ev.noise_rmse_ground)} (ground). Run time ${fmt(ev.lookup_ns_per_receiver, 0)} ns per receiver on one CPU thread.`),
+    h("table", {},
+      h("thead", {}, h("tr", {}, ...["Variant", "Bytes", "Vertices RMSE", "too dark", "too bright",
+        "Ground RMSE", "too dark", "too bright"].map((t) => h("th", {}, t)))),
+      h("tbody", {}, ...ev.variants.map((v) => h("tr", { title: v.description },
+        h("td", {}, v.name),
+        h("td", { class: "num" }, v.bytes),
+        ...[...err(v.vertices), ...err(v.ground)].map((x) => h("td", { class: "num" }, x)))))),
+    h("p", { class: "muted" }, `Asset ${report.sizes.asset_bytes} bytes.`),
+    plotUrl ? h("figure", { class: "wide" }, h("img", { src: plotUrl, alt: "grid slices" }),
+      h("figcaption", {}, "Every part's grid through its middle (x, y and z constant), dark where occluded")) : null);
+}
+
 function reportSection(report, plotUrl) {
   if (report.layout) return cubemapReportSection(report, plotUrl);
+  if (report.parts) return gridReportSection(report, plotUrl);
   const ev = report.evaluation;
   const rows = [["held-out clip frames", ev.clip_frames], ["held-out random poses", ev.random_poses]];
   return h("section", { id: "report" },
