@@ -66,14 +66,10 @@ impl Bake<'_> {
     /// The distance limit of every trace: `grid.max_distance`, or the
     /// largest part's Eq. 4 reach.
     pub fn grid_distance(&self, parts: &[Part]) -> f32 {
-        let o = &self.plan.params.grid;
-        o.max_distance.unwrap_or_else(|| {
-            parts
-                .iter()
-                .map(|p| GridBox::reach(&p.mesh(&self.inputs.character).1, o.epsilon))
-                .fold(0.0f32, f32::max)
-                .max(f32::MIN_POSITIVE)
-        })
+        self.plan
+            .params
+            .grid
+            .distance(&self.inputs.character, parts)
     }
 
     /// A part's mesh and grid box.

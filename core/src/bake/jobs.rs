@@ -515,10 +515,18 @@ impl<'a> Bake<'a> {
                 )
             }
         };
+        let surface = match self.plan.params.method.family() {
+            // The grids' truth is traced as their evaluation traces it.
+            Family::Grid => self.plan.params.grid.truth(
+                self.grid_distance(&self.grid_parts()?),
+                self.plan.params.held_out_surface().seed,
+            ),
+            _ => self.plan.params.held_out_surface(),
+        };
         let subject = Subject {
             character: &self.inputs.character,
             model,
-            surface: self.plan.params.held_out_surface(),
+            surface,
         };
         let times: Vec<f32> = clip.map_or_else(Vec::new, |c| {
             STILL_FRACTIONS.iter().map(|f| f * c.duration).collect()

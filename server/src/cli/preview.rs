@@ -73,9 +73,13 @@ impl Loaded {
             model
                 .check_palette(character.joints.len())
                 .with_context(|| format!("{} does not fit {}", asset.display(), file.display()))?;
-            let params: BakeParams = serde_json::from_value(header.params.clone())
+            let mut params: BakeParams = serde_json::from_value(header.params.clone())
                 .unwrap_or_else(|_| BakeParams::new(header.method));
             let found = aobake_core::method::grid::parts::parts(&character, params.grid.parts)?;
+            // The truth is traced as the bake's evaluation traced it.
+            let distance = params.grid.distance(&character, &found);
+            params.max_distance = Some(distance);
+            params.samples = params.grid.eval_rays;
             let owners = aobake_core::method::grid::parts::owners(&found, character.vertex_count())
                 .into_iter()
                 .map(|o| o.map_or(u32::MAX, |p| p as u32))

@@ -163,12 +163,7 @@ struct Traced {
 
 impl Inputs<'_> {
     fn surface(&self, seed: u64) -> SurfaceParams {
-        SurfaceParams {
-            samples: self.options.eval_rays,
-            max_distance: self.max_distance,
-            seed,
-            falloff: crate::trace::Falloff::None,
-        }
+        self.options.truth(self.max_distance, seed)
     }
 
     fn trace(&self, frame: &Frame, ground: &[Vec3], seed: u64) -> Result<Traced, TraceError> {

@@ -156,6 +156,30 @@ impl GridOptions {
         Ok(())
     }
 
+    /// The distance limit of every trace of a bake of `parts` of
+    /// `character`: `max_distance`, or the farthest any part's grid
+    /// reaches beyond its part by Eq. 4.
+    pub fn distance(&self, character: &crate::Character, parts: &[parts::Part]) -> f32 {
+        self.max_distance.unwrap_or_else(|| {
+            parts
+                .iter()
+                .map(|p| field::GridBox::reach(&p.mesh(character).1, self.epsilon))
+                .fold(0.0f32, f32::max)
+                .max(f32::MIN_POSITIVE)
+        })
+    }
+
+    /// The tracing parameters of a grid bake's ground truth (its
+    /// evaluation and its previews), with the held-out `seed`.
+    pub fn truth(&self, distance: f32, seed: u64) -> crate::trace::SurfaceParams {
+        crate::trace::SurfaceParams {
+            samples: self.eval_rays,
+            max_distance: distance,
+            seed,
+            falloff: crate::trace::Falloff::None,
+        }
+    }
+
     /// Cells of one part's grid.
     pub fn cells(&self) -> u64 {
         (self.resolution as u64).pow(3)
