@@ -328,3 +328,92 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
         "and brings it closer to the truth"
     );
 }
+
+#[test]
+fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
+    use aobake_core::{
+        asset::Container,
+        bake::{Bake, BakeInputs, PreviewModel, UploadBytes, bake_in_process},
+        method::grid::{
+            GridOptions,
+            model::GridModel,
+            parts::{owners, parts},
+        },
+    };
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/data/scenes/RigidRobot/RigidRobot.gltf"
+    );
+    let inputs = BakeInputs::load(
+        &UploadBytes::single(std::fs::read(path).unwrap()),
+        &[],
+        &Limits::default(),
+    )
+    .unwrap();
+    let mut p = aobake_core::bake::BakeParams::new(Method::Grid);
+    p.grid = GridOptions {
+        resolution: 16,
+        rays: 64,
+        eval_frames: 1,
+        eval_ground: 16,
+        eval_rays: 32,
+        average_frames: 1,
+        ..GridOptions::default()
+    };
+    let bake = Bake::new(&inputs, p.clone()).unwrap();
+    let mut r = renderer();
+    let baked = bake_in_process(&bake, Some(&mut r)).unwrap();
+    assert_eq!(baked.previews.len(), 4, "three stills and an animation");
+    // The model panel comes from the grids: the baked ones darken the
+    // parts and the ground towards the truth, all-open ones (zero cells)
+    // do not.
+    let (model, _) =
+        GridModel::from_container(&Container::from_bytes(&baked.asset).unwrap()).unwrap();
+    let mut open = model.clone();
+    for part in &mut open.parts {
+        part.occlusion.fill(0);
+    }
+    let c = &inputs.character;
+    let owner: Vec<u32> = owners(&parts(c, p.grid.parts).unwrap(), c.vertex_count())
+        .into_iter()
+        .map(|o| o.map_or(u32::MAX, |k| k as u32))
+        .collect();
+    let surface = p
+        .grid
+        .truth(bake.grid_distance(&bake.grid_parts().unwrap()), 99);
+    let clip = &inputs.clips[0];
+    let render = |m: &GridModel, r: &mut PreviewRenderer<'_>| {
+        let subject = Subject {
+            character: c,
+            model: PreviewModel::Grid(m, &owner),
+            surface,
+        };
+        let camera = subject.camera(Some(clip));
+        let ground = camera.ground();
+        let frames = subject.frames(Some(clip), &[0.4], &ground).unwrap();
+        let scene = RenderScene {
+            triangles: &c.triangles,
+            model: PreviewModel::Grid(m, &owner),
+            camera,
+            ground: &ground,
+            size: (SIZE, SIZE),
+            heat_map: HEAT_MAP,
+        };
+        r.render(&scene, &frames, &[Panel::Truth, Panel::Model])
+            .unwrap()
+    };
+    let baked_panels = render(&model, &mut r);
+    let open_panels = render(&open, &mut r);
+    assert_eq!(baked_panels[0], open_panels[0], "the same ray-traced truth");
+    let (truth, with, without) = (
+        mean_brightness(&baked_panels[0]),
+        mean_brightness(&baked_panels[1]),
+        mean_brightness(&open_panels[1]),
+    );
+    eprintln!("mean brightness: truth {truth:.2}, grids {with:.2}, open {without:.2}");
+    assert!(with < without - 0.2, "the grids darken the scene");
+    assert!(
+        (with - truth).abs() < (without - truth).abs(),
+        "and bring it closer to the truth"
+    );
+}
