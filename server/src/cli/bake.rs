@@ -34,8 +34,9 @@ pub(super) struct Args {
     /// static-average baseline, sizes, timings.
     #[arg(long)]
     report: PathBuf,
-    /// The report's plot (PNG): PSNR per frame, or a cubemap's time ×
-    /// distance charts. Default: the report's path with `.png`.
+    /// The report's plot (PNG): PSNR per frame, a cubemap's time ×
+    /// distance charts, or slices of every part's grid. Default: the
+    /// report's path with `.png`.
     #[arg(long)]
     plot: Option<PathBuf>,
 }

@@ -38,18 +38,20 @@ enum Command {
     /// character or a PLY mesh and write it as CSV.
     Trace(trace::Args),
     /// Bake pose-dependent AO: per vertex (trace reference poses, fit the
-    /// method, judge it on held-out poses against the static average) or
+    /// method, judge it on held-out poses against the static average),
     /// Kroon's cubemaps around a clip (six faces traced, encoded, judged
-    /// against fresh ground truth), and write the asset, a JSON report and
-    /// its plot.
+    /// against fresh ground truth) or Malmer's grids around every rigid
+    /// part (traced slab by slab, judged on clip frames), and write the
+    /// asset, a JSON report and its plot.
     Bake(Box<bake::Args>),
     /// Print a method's bake parameters with their defaults (and any
     /// flags applied) as JSON: the names `--param` and the API take.
     Params(params::Args),
-    /// Evaluate a baked asset at a pose and write per-vertex AO as CSV.
+    /// Evaluate a baked asset (per-vertex or grid) at a pose and write
+    /// per-vertex AO as CSV.
     Eval(eval::Args),
     /// Write a baked asset's data for other tools: a cubemap's decoded
-    /// faces as OpenEXR (--exr DIR).
+    /// faces, or a grid asset's parts as z-slices, as OpenEXR (--exr DIR).
     Export(export::Args),
     /// Render a baked asset with wgpu: a still at a clip time (ground
     /// truth, model, error) or an animated PNG of a whole clip.

@@ -21,7 +21,9 @@ pub(super) struct BakeRequestArgs {
     #[arg(long, num_args = 1..)]
     pub clips: Vec<std::path::PathBuf>,
     /// The method: vertex-linear (Kontkanen & Aila 2006), vertex-clustered
-    /// (Kirk & Arikan 2007) or static-average (the baseline alone).
+    /// (Kirk & Arikan 2007), static-average (the baseline alone),
+    /// cubemap-discrete or cubemap-continuous (Kroon 2023), or grid
+    /// (Malmer et al. 2005).
     #[arg(long)]
     pub method: Method,
     #[command(flatten)]
