@@ -1,16 +1,21 @@
 //! The `evaluate` job's work (DESIGN §6): the model and the static-average
 //! baseline against ray-traced ground truth on held-out poses, per clip
-//! and over random poses.
+//! and over random poses, and on clips the model never saw: each of up to
+//! `eval_folds` clips left out of a refit in turn (leave one clip out).
+//!
+//! The baseline is the strongest static average: the mean over training
+//! clip frames ([`Plan::baseline_rows`]), not over random poses.
 
 use serde::{Deserialize, Serialize};
 
 use crate::{
     asset::metrics::{Errors, FrameError},
     method::vertex::{Model, StaticAverage},
+    rig::pose::Pose,
     trace::AoBlock,
 };
 
-use super::{Plan, TestPose};
+use super::{BakeError, Plan, TestPose};
 
 impl Plan<'_> {
     /// Compares the model and the baseline with ground truth on the
@@ -80,8 +85,132 @@ impl Plan<'_> {
                     errors: Comparison::new(Errors::of(&c.model), Errors::of(&c.baseline)),
                 })
                 .collect(),
-            clip_frames,
+            training_clip_frames: clip_frames,
+            unseen_clips: None,
             multiply_adds_per_vertex: multiply_adds / tests.len().max(1) as f64,
+        }
+    }
+
+    /// The clips an unseen-clips evaluation leaves out in turn: up to
+    /// `eval_folds` clips that both train and test, evenly spread; none
+    /// when fewer than two.
+    pub fn fold_clips(&self) -> Vec<usize> {
+        let eligible: Vec<usize> = self
+            .train
+            .iter()
+            .copied()
+            .filter(|c| self.test.contains(c))
+            .collect();
+        let k = self.params.eval_folds.min(eligible.len());
+        if eligible.len() < 2 || k == 0 {
+            return Vec::new();
+        }
+        (0..k).map(|i| eligible[i * eligible.len() / k]).collect()
+    }
+
+    /// Leave one clip out: for each of [`Plan::fold_clips`], the method
+    /// refitted to the reference poses not drawn from that clip (the
+    /// traced AO of the rest, so no new rays), and the static average of
+    /// the other clips' frames, judged on every held-out frame of the
+    /// left-out clip. `poses` and `reference` are the reference poses and
+    /// their AO; `tests` and `truth` the held-out poses and theirs. The
+    /// joint-angle ranges stay those of all training clips.
+    pub fn unseen_clips(
+        &self,
+        poses: &[Pose],
+        reference: &AoBlock,
+        tests: &[TestPose],
+        truth: &AoBlock,
+    ) -> Result<Option<UnseenClips>, BakeError> {
+        let clips = self.fold_clips();
+        if clips.is_empty() {
+            return Ok(None);
+        }
+        let sources = self.reference_sources();
+        let skeleton = &self.character.skeleton;
+        let mut folds = Vec::with_capacity(clips.len());
+        for c in clips {
+            let keep: Vec<usize> = (0..sources.len())
+                .filter(|&i| sources[i] != Some(c))
+                .collect();
+            let fold_poses: Vec<Pose> = keep.iter().map(|&i| poses[i].clone()).collect();
+            let groups: Vec<Option<usize>> = keep.iter().map(|&i| sources[i]).collect();
+            let (model, _) = self.fit(
+                &fold_poses,
+                &reference.select(keep.iter().copied()),
+                &groups,
+            )?;
+            let frames: Vec<usize> = keep
+                .iter()
+                .copied()
+                .filter(|&i| sources[i].is_some())
+                .collect();
+            let baseline = StaticAverage::fit(&reference.select(if frames.is_empty() {
+                keep.clone()
+            } else {
+                frames
+            }))
+            .evaluate();
+            let (mut m, mut b) = (Vec::new(), Vec::new());
+            for (i, t) in tests.iter().enumerate() {
+                if t.frame.is_some_and(|f| f.clip == c) {
+                    let predicted = model.evaluate(skeleton, &t.pose);
+                    m.push(FrameError::of(&predicted, truth.row(i)));
+                    b.push(FrameError::of(&baseline, truth.row(i)));
+                }
+            }
+            folds.push(UnseenFold {
+                clip: self.clips[c].name.clone(),
+                reference_poses: keep.len(),
+                errors: Comparison::new(Errors::of(&m), Errors::of(&b)),
+            });
+        }
+        Ok(Some(UnseenClips::of(folds)))
+    }
+}
+
+/// One left-out clip of the unseen-clips evaluation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UnseenFold {
+    /// The clip left out.
+    pub clip: String,
+    /// Reference poses the fold's model was fitted to (none from the
+    /// clip).
+    pub reference_poses: usize,
+    /// The fold's model and the other clips' static average on every
+    /// frame of the clip.
+    pub errors: Comparison,
+}
+
+/// Leave one clip out (see [`Plan::unseen_clips`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UnseenClips {
+    /// One per left-out clip.
+    pub folds: Vec<UnseenFold>,
+    /// Mean over the folds of the model's mean PSNR (dB).
+    pub model_psnr_db: f64,
+    /// Mean over the folds of the baseline's mean PSNR (dB).
+    pub baseline_psnr_db: f64,
+    /// Mean over the folds of the PSNR gain (dB).
+    pub mean_psnr_gain_db: f64,
+    /// The smallest gain of any fold (dB).
+    pub min_psnr_gain_db: f64,
+}
+
+impl UnseenClips {
+    /// Summarises folds.
+    pub fn of(folds: Vec<UnseenFold>) -> Self {
+        let n = folds.len().max(1) as f64;
+        let mean = |f: &dyn Fn(&UnseenFold) -> f64| folds.iter().map(f).sum::<f64>() / n;
+        Self {
+            model_psnr_db: mean(&|f| f.errors.model.mean.psnr_db),
+            baseline_psnr_db: mean(&|f| f.errors.baseline.mean.psnr_db),
+            mean_psnr_gain_db: mean(&|f| f.errors.psnr_gain_db),
+            min_psnr_gain_db: folds
+                .iter()
+                .map(|f| f.errors.psnr_gain_db)
+                .fold(f64::INFINITY, f64::min),
+            folds,
         }
     }
 }
@@ -134,8 +263,15 @@ pub struct ClipEvaluation {
 pub struct Evaluation {
     /// Random poses not in the training set.
     pub random_poses: Comparison,
-    /// Every test clip frame together.
-    pub clip_frames: Comparison,
+    /// Every frame of the test clips together. By default the test clips
+    /// are the training clips: these are poses between training poses,
+    /// traced with fresh rays (interpolation); [`Evaluation::unseen_clips`]
+    /// measures motion the model never saw.
+    #[serde(alias = "clip_frames")]
+    pub training_clip_frames: Comparison,
+    /// Leave one clip out: clips the model was refitted without.
+    #[serde(default)]
+    pub unseen_clips: Option<UnseenClips>,
     /// Per test clip.
     pub clips: Vec<ClipEvaluation>,
     /// Multiply-adds per vertex at run time, mean over the test poses.

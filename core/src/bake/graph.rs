@@ -69,8 +69,9 @@ impl Bake<'_> {
         }
     }
 
-    /// `sample` (reference) → `fit`; `sample` (held-out, noise) and `fit`
-    /// → `evaluate`; `fit` and `evaluate` → `assemble` → `preview`.
+    /// `sample` (reference) → `fit`; `sample` (held-out, noise, reference)
+    /// and `fit` → `evaluate`; `fit` and `evaluate` → `assemble` →
+    /// `preview`.
     fn vertex_graph(&self, options: GraphOptions) -> JobGraph {
         let batch = options.sample_batch.max(1);
         let mut jobs: Vec<PlannedJob> = Vec::new();
@@ -96,11 +97,13 @@ impl Bake<'_> {
         held_out.extend(samples(PoseSet::Noise, &mut jobs));
         jobs.push(PlannedJob {
             spec: JobSpec::Fit,
-            deps: reference,
+            deps: reference.clone(),
         });
         let fit = jobs.len() - 1;
+        // The unseen-clips evaluation refits to the reference AO.
         let mut deps = vec![fit];
         deps.extend(held_out);
+        deps.extend(reference);
         jobs.push(PlannedJob {
             spec: JobSpec::Evaluate,
             deps,

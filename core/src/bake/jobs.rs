@@ -674,8 +674,12 @@ impl<'a> Bake<'a> {
         let reference = self.stack(PoseSet::Reference, deps)?;
         let started = Instant::now();
         let poses = self.plan.reference_poses();
-        let (model, fit) = self.plan.fit(&poses, &reference)?;
-        let baseline = Model::StaticAverage(StaticAverage::fit(&reference));
+        let (model, fit) = self
+            .plan
+            .fit(&poses, &reference, &self.plan.reference_sources())?;
+        let baseline = Model::StaticAverage(StaticAverage::fit(
+            &reference.select(self.plan.baseline_rows()),
+        ));
         let mut out = JobOutput::default();
         out.push("model", model.to_container(self.header()).to_bytes());
         out.push("baseline", baseline.to_container(self.header()).to_bytes());
@@ -697,7 +701,12 @@ impl<'a> Bake<'a> {
         let again = self.stack(PoseSet::Noise, deps)?;
         let started = Instant::now();
         let tests = self.plan.test_poses();
-        let evaluation = self.plan.evaluate(&model, &baseline, &tests, &truth);
+        let mut evaluation = self.plan.evaluate(&model, &baseline, &tests, &truth);
+        if !self.plan.fold_clips().is_empty() {
+            let reference = self.stack(PoseSet::Reference, deps)?;
+            let poses = self.plan.reference_poses();
+            evaluation.unseen_clips = self.plan.unseen_clips(&poses, &reference, &tests, &truth)?;
+        }
         let noise_rows = self.plan.noise_rows();
         let ground_truth_noise = NoiseEstimate::of(&noise_rows, &truth, &again);
         let vertices = self.inputs.character.vertex_count() as u64;

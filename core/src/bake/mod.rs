@@ -30,7 +30,7 @@ pub mod plan;
 pub mod preview;
 pub mod runner;
 
-pub use evaluation::{ClipEvaluation, Comparison, Evaluation};
+pub use evaluation::{ClipEvaluation, Comparison, Evaluation, UnseenClips, UnseenFold};
 pub use graph::{GraphOptions, JobGraph, PlannedJob};
 pub use inputs::{BakeInputs, BundleError, InputError, UploadBytes};
 pub use jobs::{

@@ -146,6 +146,16 @@ impl<'a> Plan<'a> {
             .collect()
     }
 
+    /// How many reference poses are random (they come first).
+    fn random_reference_count(&self) -> usize {
+        let n = self.params.poses;
+        match self.params.reference {
+            ReferenceSource::Random => n,
+            ReferenceSource::Clips => 0,
+            ReferenceSource::Mixed => n / 2,
+        }
+    }
+
     /// The reference poses, seeded: what `sample` jobs trace, in batches.
     pub fn reference_poses(&self) -> Vec<Pose> {
         self.reference_poses_in(0..self.params.poses)
@@ -155,11 +165,7 @@ impl<'a> Plan<'a> {
     /// alone: a `sample` job builds only its batch.
     pub fn reference_poses_in(&self, range: Range<usize>) -> Vec<Pose> {
         let (n, seed) = (self.params.poses, self.params.seed);
-        let random = match self.params.reference {
-            ReferenceSource::Random => n,
-            ReferenceSource::Clips => 0,
-            ReferenceSource::Mixed => n / 2,
-        };
+        let random = self.random_reference_count();
         let end = range.end.min(n);
         let mut poses = Vec::new();
         if range.start < random {
@@ -170,6 +176,33 @@ impl<'a> Plan<'a> {
             poses.extend(self.clip_poses(n - random, seed, from..end - random));
         }
         poses
+    }
+
+    /// Where each reference pose comes from, in order: `None` for a random
+    /// pose, the clip's index (into [`Plan::clips`]) for a clip frame.
+    pub fn reference_sources(&self) -> Vec<Option<usize>> {
+        let (n, seed) = (self.params.poses, self.params.seed);
+        let random = self.random_reference_count();
+        let frames = random_clip_frames(&self.train_clips, n - random, seed);
+        std::iter::repeat_n(None, random)
+            .chain(frames.iter().map(|f| Some(self.train[f.clip])))
+            .collect()
+    }
+
+    /// The reference rows that are clip frames, or every row when none
+    /// is: what the static average is fitted to (the mean over training
+    /// clip frames, the strongest static baseline; the mean over random
+    /// poses is weaker).
+    pub fn baseline_rows(&self) -> Vec<usize> {
+        let sources = self.reference_sources();
+        let frames: Vec<usize> = (0..sources.len())
+            .filter(|&i| sources[i].is_some())
+            .collect();
+        if frames.is_empty() {
+            (0..sources.len()).collect()
+        } else {
+            frames
+        }
     }
 
     /// Every frame of every test clip at `eval_fps`, in order.
@@ -229,7 +262,14 @@ impl<'a> Plan<'a> {
 
     /// Fits the method to the reference poses' AO (the `fit` job's work;
     /// the dispatch on the method is [`crate::method::vertex::fit`]).
-    pub fn fit(&self, poses: &[Pose], ao: &AoBlock) -> Result<(Model, FitStats), BakeError> {
+    /// `groups` is each pose's clip (`None`: a random pose; see
+    /// [`Plan::reference_sources`]).
+    pub fn fit(
+        &self,
+        poses: &[Pose],
+        ao: &AoBlock,
+        groups: &[Option<usize>],
+    ) -> Result<(Model, FitStats), BakeError> {
         let p = &self.params;
         crate::method::vertex::fit(
             p.method,
@@ -239,6 +279,7 @@ impl<'a> Plan<'a> {
             (&self.joint_angles, &self.handles),
             poses,
             ao,
+            groups,
         )
         .map_err(BakeError::Fit)
     }

@@ -38,7 +38,10 @@ pub struct Range {
 /// How a joint-angle layout is derived from clips.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LayoutOptions {
-    /// Add the translation of the topmost animated nodes (3 numbers each).
+    /// Add the translation of the topmost animated nodes below the body
+    /// root (3 numbers each): parts that slide against the rest of the
+    /// mesh (the body root's own translation moves the whole mesh and
+    /// changes no AO, so it is never a parameter).
     pub root_translation: bool,
     /// Widen each range by this fraction of its span on both sides.
     pub margin: f32,
@@ -50,7 +53,7 @@ pub struct LayoutOptions {
 impl Default for LayoutOptions {
     fn default() -> Self {
         Self {
-            root_translation: false,
+            root_translation: true,
             margin: 0.1,
             fps: 30.0,
         }
@@ -134,7 +137,10 @@ impl JointAngles {
             return Err(ParamError::NothingAnimated);
         }
         let translations = if options.root_translation {
-            let moved = animated(Property::Translation);
+            let moved: Vec<usize> = animated(Property::Translation)
+                .into_iter()
+                .filter(|&n| !rigid[n])
+                .collect();
             let mut is_animated = vec![false; skeleton.nodes.len()];
             for &n in joints.iter().chain(&moved) {
                 is_animated[n] = true;
@@ -186,6 +192,37 @@ impl JointAngles {
                     range.max = range.max.max(v);
                 }
             }
+        }
+        // A translation channel that never moves its node (many exporters
+        // key every bone's rest offset) carries nothing: left out.
+        let r = layout.joints.len() * 3;
+        let moving: Vec<bool> = layout
+            .translations
+            .iter()
+            .enumerate()
+            .map(|(k, _)| {
+                layout.ranges[r + 3 * k..r + 3 * k + 3]
+                    .iter()
+                    .any(|x| x.max - x.min > 1e-6 * x.max.abs().max(x.min.abs()).max(1.0))
+            })
+            .collect();
+        if moving.iter().any(|m| !m) {
+            let keep = |i: usize| i < r || moving[(i - r) / 3];
+            let mut i = 0;
+            layout.names.retain(|_| {
+                i += 1;
+                keep(i - 1)
+            });
+            let mut i = 0;
+            layout.ranges.retain(|_| {
+                i += 1;
+                keep(i - 1)
+            });
+            let mut k = 0;
+            layout.translations.retain(|_| {
+                k += 1;
+                moving[k - 1]
+            });
         }
         for range in &mut layout.ranges {
             let pad = (range.max - range.min) * options.margin;

@@ -20,6 +20,17 @@ pub struct AoBlock {
 }
 
 impl AoBlock {
+    /// The rows `rows`, in that order.
+    pub fn select(&self, rows: impl IntoIterator<Item = usize>) -> Self {
+        Self {
+            vertices: self.vertices,
+            values: rows
+                .into_iter()
+                .flat_map(|r| self.row(r).iter().copied())
+                .collect(),
+        }
+    }
+
     /// Number of poses.
     pub fn poses(&self) -> usize {
         self.values.len().checked_div(self.vertices).unwrap_or(0)

@@ -41,7 +41,7 @@ fn quick(method: Method) -> BakeParams {
 /// Model and baseline on held-out clip frames: the model must have the
 /// higher mean PSNR and the lower mean MAE.
 fn assert_beats_baseline(name: &str, method: Method, e: &Evaluation) {
-    let c = &e.clip_frames;
+    let c = &e.training_clip_frames;
     eprintln!(
         "{name} {}: {:.2} dB vs {:.2} dB ({:+.2} dB), MAE {:.4} vs {:.4} (×{:.2}), {} frames",
         method.name(),
@@ -70,12 +70,15 @@ fn methods_beat_the_static_average_on_held_out_clip_frames() {
         }
         for method in [Method::VertexLinear, Method::VertexClustered] {
             let baked = bake(&imported.character, &imported.clips, quick(method));
-            let base = &baked.evaluation.clip_frames.baseline.mean;
+            let base = &baked.evaluation.training_clip_frames.baseline.mean;
             if base.mae < 1e-6 {
                 // SimpleSkin's strip never occludes itself: AO is 0 in
                 // every pose and nothing can beat an exact baseline; the
                 // model must be exact too.
-                assert!(baked.evaluation.clip_frames.model.mean.mae < 1e-6, "{name}");
+                assert!(
+                    baked.evaluation.training_clip_frames.model.mean.mae < 1e-6,
+                    "{name}"
+                );
                 continue;
             }
             assert_beats_baseline(&name, method, &baked.evaluation);
@@ -290,4 +293,65 @@ fn hostile_assets_with_valid_checksums_are_refused() {
     assert!(matches!(err, Err(AssetError::Malformed(m)) if m.contains("finite")));
     // Unedited, both read back.
     assert!(edit(&linear, &|_| {}).is_ok() && edit(&clustered, &|_| {}).is_ok());
+}
+
+#[test]
+fn the_report_measures_clips_the_model_never_saw() {
+    use aobake_core::bake::Plan;
+    let imported = util::load(&util::character_path("Fox.glb").unwrap());
+    let params = quick(Method::VertexLinear);
+    let plan = Plan::new(&imported.character, &imported.clips, params.clone()).unwrap();
+    // Mixed reference poses: random ones first, then clip frames; the
+    // static average is fitted to the clip frames alone.
+    let sources = plan.reference_sources();
+    assert_eq!(sources.len(), 96);
+    assert!(sources[..48].iter().all(Option::is_none));
+    assert!(sources[48..].iter().all(Option::is_some));
+    assert_eq!(plan.baseline_rows(), (48..96).collect::<Vec<_>>());
+    let baked = bake(&imported.character, &imported.clips, params);
+    let unseen = baked
+        .evaluation
+        .unseen_clips
+        .as_ref()
+        .expect("three clips, three folds");
+    let names: Vec<&str> = unseen.folds.iter().map(|f| f.clip.as_str()).collect();
+    assert_eq!(names, ["Survey", "Walk", "Run"]);
+    for (k, fold) in unseen.folds.iter().enumerate() {
+        // Refitted without a single reference pose of its clip, judged on
+        // every held-out frame of that clip.
+        let from_clip = sources.iter().filter(|s| **s == Some(k)).count();
+        assert!(from_clip > 0);
+        assert_eq!(fold.reference_poses, 96 - from_clip);
+        let frames = baked
+            .evaluation
+            .clips
+            .iter()
+            .find(|c| c.clip == fold.clip)
+            .unwrap()
+            .times
+            .len();
+        assert_eq!(fold.errors.model.frames, frames);
+        eprintln!(
+            "Fox without {}: {:.2} dB against {:.2} dB ({:+.2} dB)",
+            fold.clip,
+            fold.errors.model.mean.psnr_db,
+            fold.errors.baseline.mean.psnr_db,
+            fold.errors.psnr_gain_db
+        );
+    }
+    let mean = unseen
+        .folds
+        .iter()
+        .map(|f| f.errors.psnr_gain_db)
+        .sum::<f64>()
+        / 3.0;
+    assert!((unseen.mean_psnr_gain_db - mean).abs() < 1e-9);
+    // One clip: nothing to leave out.
+    let cesium = util::load(&util::character_path("CesiumMan.glb").unwrap());
+    let one = bake(
+        &cesium.character,
+        &cesium.clips,
+        quick(Method::VertexLinear),
+    );
+    assert!(one.evaluation.unseen_clips.is_none());
 }

@@ -299,19 +299,42 @@ fn vertex_summary(report: &Report) -> String {
     let e = &report.evaluation;
     let n = &report.ground_truth_noise;
     let t = &report.timings;
-    format!(
-        "held-out clip frames ({}): {} PSNR {:.2} dB, MAE {:.4}; static average {:.2} dB, MAE {:.4} ({:+.2} dB, MAE ×{:.2})
+    let c = &e.training_clip_frames;
+    let mut out = String::new();
+    if let Some(u) = &e.unseen_clips {
+        out.push_str(&format!(
+            "unseen clips (leave one clip out, {} folds): {} PSNR {:.2} dB; static average of the other clips' frames {:.2} dB ({:+.2} dB, worst fold {:+.2} dB)\n",
+            u.folds.len(),
+            report.method,
+            u.model_psnr_db,
+            u.baseline_psnr_db,
+            u.mean_psnr_gain_db,
+            u.min_psnr_gain_db,
+        ));
+        for f in &u.folds {
+            out.push_str(&format!(
+                "  {}: {:.2} dB against {:.2} dB ({:+.2} dB) over {} frames\n",
+                f.clip,
+                f.errors.model.mean.psnr_db,
+                f.errors.baseline.mean.psnr_db,
+                f.errors.psnr_gain_db,
+                f.errors.model.frames,
+            ));
+        }
+    }
+    out.push_str(&format!(
+        "frames of the training clips, fresh rays ({}): {} PSNR {:.2} dB, MAE {:.4}; static average of training clip frames {:.2} dB, MAE {:.4} ({:+.2} dB, MAE ×{:.2})
 ground truth's own noise ({} poses traced twice): RMSE {:.4}, MAE {:.4} (PSNR {:.2} dB): model errors near it are noise
 held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:.1} s, fit {:.2} s
 ",
-        e.clip_frames.model.frames,
+        c.model.frames,
         report.method,
-        e.clip_frames.model.mean.psnr_db,
-        e.clip_frames.model.mean.mae,
-        e.clip_frames.baseline.mean.psnr_db,
-        e.clip_frames.baseline.mean.mae,
-        e.clip_frames.psnr_gain_db,
-        e.clip_frames.mae_ratio,
+        c.model.mean.psnr_db,
+        c.model.mean.mae,
+        c.baseline.mean.psnr_db,
+        c.baseline.mean.mae,
+        c.psnr_gain_db,
+        c.mae_ratio,
         n.frames,
         n.rmse,
         n.mae,
@@ -322,5 +345,6 @@ held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:
         t.reference_trace_s,
         t.test_trace_s,
         t.fit_s,
-    )
+    ));
+    out
 }

@@ -126,7 +126,7 @@ impl<'a> Traced<'a> {
             inputs.character.vertex_count(),
             params.poses,
             params.reference,
-            first.evaluation.clip_frames.model.frames,
+            first.evaluation.training_clip_frames.model.frames,
             params.samples,
             started.elapsed().as_secs_f64()
         );
@@ -150,7 +150,7 @@ impl<'a> Traced<'a> {
             run_with_progress(&bake, &self.samples, None)
         })??;
         let r = vertex_report(Baked::from_outputs(&outputs)?)?;
-        let c = &r.evaluation.clip_frames.model.mean;
+        let c = &r.evaluation.training_clip_frames.model.mean;
         println!(
             "| {} | {:.4} | {:.2} | {} | {:.1} | {:.2} |",
             labels.join(" | "),
@@ -165,7 +165,7 @@ impl<'a> Traced<'a> {
 
     /// The static average's row.
     fn baseline_row(&self, blank: usize) {
-        let c = &self.first.evaluation.clip_frames.baseline.mean;
+        let c = &self.first.evaluation.training_clip_frames.baseline.mean;
         println!(
             "| static average |{} {:.4} | {:.2} | {} | 1 | - |",
             " - |".repeat(blank),

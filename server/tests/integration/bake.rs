@@ -52,7 +52,7 @@ fn bake_writes_a_deterministic_asset_a_report_and_a_plot() {
         .unwrap();
         assert_eq!(report["method"], method);
         assert_eq!(report["sizes"]["asset_bytes"], bytes.len());
-        let clips = &report["evaluation"]["clip_frames"];
+        let clips = &report["evaluation"]["training_clip_frames"];
         for who in ["model", "baseline"] {
             for field in ["mae", "rmse", "psnr_db", "too_dark_mse", "too_bright_mse"] {
                 assert!(clips[who]["mean"][field].is_number(), "{who}.{field}");
@@ -88,7 +88,7 @@ fn bake_writes_a_deterministic_asset_a_report_and_a_plot() {
         }
         let png = std::fs::read(dir.path().join(format!("{name}.png"))).unwrap();
         assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
-        assert!(stderr(&first).contains("held-out clip frames"));
+        assert!(stderr(&first).contains("frames of the training clips"));
     }
 }
 
@@ -161,6 +161,8 @@ fn eval_refuses_damaged_newer_and_foreign_assets() {
     newer[8..10].copy_from_slice(&7u16.to_le_bytes());
     std::fs::write(&bad, &newer).unwrap();
     let out = eval(&bad, "RiggedFigure/RiggedFigure.glb");
+    assert!(!out.status.success(), "a newer asset must fail");
+    assert_eq!(out.status.code(), Some(1));
     assert!(
         stderr(&out).contains("asset format 7.0 is newer"),
         "{}",

@@ -315,6 +315,49 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert!(!text.as_str().unwrap().contains("null") && !text.as_str().unwrap().contains("undefined"), "{text}");
         eval(&c, "document.querySelector('#report').scrollIntoView(); return null").await;
         shot(&c, "7-grid-report").await;
+
+        // A character with three clips: its report leads with the clips
+        // the model never saw (leave one clip out), then the frames of
+        // its training clips.
+        let fox = upload(&env, &character("Fox"));
+        let (status, b) = env
+            .request(
+                "POST",
+                "/v1/bakes",
+                ADMIN,
+                Some(json!({"character": fox, "method": "vertex-linear", "params": quick_params(24)})),
+            )
+            .unwrap();
+        assert_eq!(status, 202, "{b}");
+        let fox_bake = b["id"].as_i64().unwrap();
+        c.goto(&format!("{}/#/bakes/{fox_bake}", env.url)).await.unwrap();
+        wait_for(
+            &c,
+            "the finished Fox bake",
+            "document.querySelector('#state [data-state=\"done\"]')",
+            Duration::from_secs(300),
+        )
+        .await;
+        let rows = wait_for(
+            &c,
+            "the unseen clips",
+            "document.querySelector('#unseen') && [...document.querySelectorAll('#report tbody tr')].map(r => r.cells[0].textContent)",
+            Duration::from_secs(30),
+        )
+        .await;
+        assert_eq!(
+            rows,
+            json!([
+                "unseen clip Survey (refitted without it)",
+                "unseen clip Walk (refitted without it)",
+                "unseen clip Run (refitted without it)",
+                "frames of the training clips, fresh rays",
+                "held-out random poses"
+            ])
+        );
+        let note = eval(&c, "return document.querySelector('#unseen').textContent").await;
+        assert!(note.as_str().unwrap().contains("3 folds"), "{note}");
+        shot(&c, "8-unseen-clips").await;
         c.close().await.unwrap();
     });
 }

@@ -31,7 +31,7 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
         .unwrap()
         .to_owned();
     assert_eq!(key.len(), 64, "{stdout}");
-    assert!(stdout.contains("held-out clip frames"), "{stdout}");
+    assert!(stdout.contains("frames of the training clips"), "{stdout}");
 
     let fetched = env.dir.path().join("svc.aob");
     let out = env.aobake(&["fetch", "--key", &key, "--out", fetched.to_str().unwrap()]);

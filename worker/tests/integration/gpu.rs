@@ -14,9 +14,7 @@ use aobake_core::{
 use aobake_worker::gpu::{Gpu, VertexAo};
 use half::f16;
 
-/// f16's machine epsilon: both sides decode the same f16 coefficients and
-/// sum in f32, so they may differ only by f32 rounding (and fused
-/// multiply-adds on the GPU), far below this.
+/// f16's machine epsilon.
 const F16_EPSILON: f32 = 1.0 / 1024.0;
 
 fn gpu() -> Gpu {
@@ -71,7 +69,7 @@ fn every_vertex_method_matches_the_cpu() {
             &aobake_core::trace::no_progress,
         )
         .unwrap();
-        let (model, _) = plan.fit(&poses, &ao).unwrap();
+        let (model, _) = plan.fit(&poses, &ao, &plan.reference_sources()).unwrap();
         let models = [model, Model::StaticAverage(StaticAverage::fit(&ao))];
         for model in &models {
             let on_gpu = VertexAo::new(&gpu, model).unwrap();
@@ -93,7 +91,17 @@ fn every_vertex_method_matches_the_cpu() {
                 assert!(worst(&outputs[0], &outputs[outputs.len() - 1]) > 0.01);
             }
             eprintln!("{:?}: worst |GPU − CPU| = {max:e}", model.method());
-            assert!(max < F16_EPSILON, "{:?}: {max}", model.method());
+            // Both sides decode the same f16 coefficients and sum the same
+            // products in the same order in f32: on a software adapter
+            // (llvmpipe, lavapipe: no fused multiply-adds) the results are
+            // the same bits. A hardware GPU may fuse multiply-adds, which
+            // moves the last bit of the f32 sum: bounded there far below
+            // an f16 step.
+            if gpu.info.device_type == aobake_worker::gpu::DeviceType::Cpu {
+                assert_eq!(max, 0.0, "{:?}: not bit for bit", model.method());
+            } else {
+                assert!(max < F16_EPSILON / 64.0, "{:?}: {max}", model.method());
+            }
         }
     }
 }

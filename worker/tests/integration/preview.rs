@@ -70,7 +70,7 @@ fn fixture() -> Fixture {
     let poses = plan.reference_poses();
     let surface = params.surface();
     let ao = trace_poses(&c, &poses, &SceneOptions::default(), &surface, &no_progress).unwrap();
-    let (model, _) = plan.fit(&poses, &ao).unwrap();
+    let (model, _) = plan.fit(&poses, &ao, &plan.reference_sources()).unwrap();
     let clip = &imported.clips[0];
     let subject = Subject {
         character: &c,

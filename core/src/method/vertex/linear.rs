@@ -30,6 +30,13 @@ pub struct LinearOptions {
     /// dropped and the rest stored sparse (CSR per vertex). 0 keeps the
     /// dense matrix.
     pub threshold: f32,
+    /// Choose the ridge weight by cross-validation over clips: each
+    /// candidate of [`RIDGE_CANDIDATES`] is fitted without the reference
+    /// frames of one group of clips at a time and scored on them (up to
+    /// [`CV_FOLDS`] groups); the one with the least squared error wins.
+    /// `ridge` is used when the reference frames come from fewer than two
+    /// clips.
+    pub ridge_cv: bool,
 }
 
 impl Default for LinearOptions {
@@ -37,8 +44,94 @@ impl Default for LinearOptions {
         Self {
             ridge: DEFAULT_RIDGE,
             threshold: 0.0,
+            ridge_cv: true,
         }
     }
+}
+
+/// The ridge weights cross-validation chooses from.
+pub const RIDGE_CANDIDATES: [f64; 6] = [1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0];
+
+/// Most groups of clips the cross-validation leaves out in turn.
+pub const CV_FOLDS: usize = 8;
+
+/// What the ridge's cross-validation found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RidgeChoice {
+    /// The chosen weight.
+    pub ridge: f64,
+    /// Per candidate: (weight, RMSE over the left-out clips' frames).
+    pub scores: Vec<(f64, f64)>,
+    /// Groups of clips left out in turn.
+    pub folds: usize,
+}
+
+/// Chooses the ridge weight by leaving groups of clips out: `groups` is
+/// each row's clip (`None`: a random pose, always trained on). `None`
+/// when the rows come from fewer than two clips.
+pub fn choose_ridge(
+    poses: &[Vec<f32>],
+    ranges: &[Range],
+    ao: &AoBlock,
+    groups: &[Option<usize>],
+    options: &LinearOptions,
+) -> Option<RidgeChoice> {
+    let mut clips: Vec<usize> = groups.iter().flatten().copied().collect();
+    clips.sort_unstable();
+    clips.dedup();
+    if clips.len() < 2 {
+        return None;
+    }
+    let folds = clips.len().min(CV_FOLDS);
+    let fold_of = |c: usize| clips.binary_search(&c).map_or(0, |i| i % folds);
+    let mut sse = vec![0.0f64; RIDGE_CANDIDATES.len()];
+    let mut count = 0usize;
+    for f in 0..folds {
+        let held = |g: &Option<usize>| g.is_some_and(|c| fold_of(c) == f);
+        let train: Vec<usize> = (0..groups.len()).filter(|&r| !held(&groups[r])).collect();
+        let test: Vec<usize> = (0..groups.len()).filter(|&r| held(&groups[r])).collect();
+        if train.is_empty() || test.is_empty() {
+            continue;
+        }
+        let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
+        let block = ao.select(train.iter().copied());
+        count += test.len() * ao.vertices;
+        for (k, &ridge) in RIDGE_CANDIDATES.iter().enumerate() {
+            let o = LinearOptions {
+                ridge,
+                ridge_cv: false,
+                ..*options
+            };
+            let Ok((model, _)) = VertexLinear::fit(&q, ranges, &block, &o) else {
+                sse[k] = f64::INFINITY;
+                continue;
+            };
+            for &r in &test {
+                let predicted = model.evaluate(&poses[r]);
+                sse[k] += predicted
+                    .iter()
+                    .zip(ao.row(r))
+                    .map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2))
+                    .sum::<f64>();
+            }
+        }
+    }
+    let n = count.max(1) as f64;
+    let scores: Vec<(f64, f64)> = RIDGE_CANDIDATES
+        .iter()
+        .zip(&sse)
+        .map(|(&r, &e)| (r, (e / n).sqrt()))
+        .collect();
+    let best = scores
+        .iter()
+        .copied()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(options.ridge, |(r, _)| r);
+    Some(RidgeChoice {
+        ridge: best,
+        scores,
+        folds,
+    })
 }
 
 /// The stored coefficients: dense `(N+1) × V`, or sparse per vertex.
@@ -91,6 +184,12 @@ pub struct LinearFitStats {
     pub stored_training_rmse: f64,
     /// Coefficients kept / all coefficients.
     pub kept_fraction: f64,
+    /// The ridge weight fitted with.
+    #[serde(default)]
+    pub ridge: f64,
+    /// How cross-validation over clips chose it, when it did.
+    #[serde(default)]
+    pub ridge_cv: Option<RidgeChoice>,
 }
 
 /// A fit whose coefficients f16 cannot hold.
@@ -206,6 +305,8 @@ impl VertexLinear {
             training_rmse: (exact / count).sqrt(),
             stored_training_rmse: (rounded / count).sqrt(),
             kept_fraction,
+            ridge: options.ridge,
+            ridge_cv: None,
         };
         Ok((model, stats))
     }

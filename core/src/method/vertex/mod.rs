@@ -27,7 +27,8 @@ pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
 pub use form::{Block, LinearForm, SparseForm};
 pub use linalg::SolveStats;
 pub use linear::{
-    Coefficients, DEFAULT_RIDGE, FitOverflow, LinearFitStats, LinearOptions, VertexLinear,
+    CV_FOLDS, Coefficients, DEFAULT_RIDGE, FitOverflow, LinearFitStats, LinearOptions,
+    RIDGE_CANDIDATES, RidgeChoice, VertexLinear, choose_ridge,
 };
 
 use serde::{Deserialize, Serialize};
@@ -41,7 +42,7 @@ use crate::{
 
 /// Version of the fitting algorithms, part of the bake key: bump it when a
 /// change to fitting changes the coefficients a bake produces.
-pub const ALGORITHM_VERSION: u32 = 1;
+pub const ALGORITHM_VERSION: u32 = 2;
 
 /// A fitted model and the pose features it reads.
 #[derive(Debug, Clone, PartialEq)]
@@ -189,7 +190,10 @@ pub enum FitStats {
 
 /// Fits `method` to the AO of the reference `poses` (the `fit` job's
 /// work): the one place that turns a method name into a fitted model.
-/// `seed` seeds k-means. The error says what to change.
+/// `seed` seeds k-means; `groups` is each pose's clip (`None` for a random
+/// pose), what cross-validation over clips leaves out. The error says
+/// what to change.
+#[allow(clippy::too_many_arguments)]
 pub fn fit(
     method: Method,
     options: (&LinearOptions, &ClusteredOptions),
@@ -198,6 +202,7 @@ pub fn fit(
     spaces: (&JointAngles, &Handles),
     poses: &[Pose],
     ao: &AoBlock,
+    groups: &[Option<usize>],
 ) -> Result<(Model, FitStats), String> {
     let (linear, clustered) = options;
     let (joint_angles, handles) = spaces;
@@ -211,8 +216,17 @@ pub fn fit(
                 .iter()
                 .map(|p| joint_angles.params(skeleton, p))
                 .collect();
-            let (m, stats) = VertexLinear::fit(&q, &joint_angles.ranges, ao, linear)
+            let choice = linear
+                .ridge_cv
+                .then(|| linear::choose_ridge(&q, &joint_angles.ranges, ao, groups, linear))
+                .flatten();
+            let chosen = LinearOptions {
+                ridge: choice.as_ref().map_or(linear.ridge, |c| c.ridge),
+                ..*linear
+            };
+            let (m, mut stats) = VertexLinear::fit(&q, &joint_angles.ranges, ao, &chosen)
                 .map_err(|e| e.to_string())?;
+            stats.ridge_cv = choice;
             (
                 Model::VertexLinear(joint_angles.clone(), m),
                 FitStats::VertexLinear(stats),

@@ -315,7 +315,12 @@ function reportSection(report, plotUrl) {
   if (report.layout) return cubemapReportSection(report, plotUrl);
   if (report.parts) return gridReportSection(report, plotUrl);
   const ev = report.evaluation;
-  const rows = [["held-out clip frames", ev.clip_frames], ["held-out random poses", ev.random_poses]];
+  const unseen = ev.unseen_clips;
+  const rows = [
+    ...(unseen ? unseen.folds.map((f) => [`unseen clip ${f.clip} (refitted without it)`, f.errors]) : []),
+    ["frames of the training clips, fresh rays", ev.training_clip_frames || ev.clip_frames],
+    ["held-out random poses", ev.random_poses],
+  ];
   return h("section", { id: "report" },
     h("h2", {}, "Quality"),
     h("table", {},
@@ -331,6 +336,11 @@ function reportSection(report, plotUrl) {
         h("td", { class: "num" }, fmt(c.baseline.mean.rmse)),
         h("td", { class: "num" }, `${fmt(c.baseline.mean.psnr_db, 2)} dB`),
         h("td", { class: "num" }, `${c.psnr_gain_db >= 0 ? "+" : ""}${fmt(c.psnr_gain_db, 2)} dB`))))),
+    unseen ? h("p", { id: "unseen" },
+      `Unseen clips (leave one clip out, ${unseen.folds.length} folds): ${fmt(unseen.model_psnr_db, 2)} dB against `,
+      `${fmt(unseen.baseline_psnr_db, 2)} dB, ${unseen.mean_psnr_gain_db >= 0 ? "+" : ""}${fmt(unseen.mean_psnr_gain_db, 2)} dB `,
+      `on average (worst fold ${unseen.min_psnr_gain_db >= 0 ? "+" : ""}${fmt(unseen.min_psnr_gain_db, 2)} dB). `,
+      "The static average is the mean over training clip frames.") : null,
     h("p", { class: "muted" },
       `Ground truth's own noise: RMSE ${fmt(report.ground_truth_noise?.rmse)}. `,
       `Asset ${report.sizes.asset_bytes} bytes; ${fmt(ev.multiply_adds_per_vertex, 1)} multiply-adds per vertex.`),
