@@ -6,6 +6,7 @@ use faer::Mat;
 use half::f16;
 use serde::{Deserialize, Serialize};
 
+use super::cv::RidgeChoice;
 use super::form::{Block, LinearForm, SparseForm};
 use super::linalg::{SolveStats, ridge_lstsq};
 use crate::{pose_space::Range, trace::AoBlock};
@@ -33,9 +34,9 @@ pub struct LinearOptions {
     /// Choose the ridge weight by cross-validation over clips: each
     /// candidate of [`RIDGE_CANDIDATES`] is fitted without the reference
     /// frames of one group of clips at a time and scored on them (up to
-    /// [`CV_FOLDS`] groups); the one with the least squared error wins.
-    /// `ridge` is used when the reference frames come from fewer than two
-    /// clips.
+    /// [`super::cv::CV_FOLDS`] groups); the one with the least squared
+    /// error wins. `ridge` is used when the reference frames come from
+    /// fewer than two clips.
     pub ridge_cv: bool,
 }
 
@@ -52,23 +53,9 @@ impl Default for LinearOptions {
 /// The ridge weights cross-validation chooses from.
 pub const RIDGE_CANDIDATES: [f64; 6] = [1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0];
 
-/// Most groups of clips the cross-validation leaves out in turn.
-pub const CV_FOLDS: usize = 8;
-
-/// What the ridge's cross-validation found.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RidgeChoice {
-    /// The chosen weight.
-    pub ridge: f64,
-    /// Per candidate: (weight, RMSE over the left-out clips' frames).
-    pub scores: Vec<(f64, f64)>,
-    /// Groups of clips left out in turn.
-    pub folds: usize,
-}
-
-/// Chooses the ridge weight by leaving groups of clips out: `groups` is
-/// each row's clip (`None`: a random pose, always trained on). `None`
-/// when the rows come from fewer than two clips.
+/// Chooses vertex-linear's ridge weight by leaving groups of clips out
+/// (see [`super::cv::choose_by_clips`]); `None` when the rows come from
+/// fewer than two clips.
 pub fn choose_ridge(
     poses: &[Vec<f32>],
     ranges: &[Range],
@@ -76,62 +63,23 @@ pub fn choose_ridge(
     groups: &[Option<usize>],
     options: &LinearOptions,
 ) -> Option<RidgeChoice> {
-    let mut clips: Vec<usize> = groups.iter().flatten().copied().collect();
-    clips.sort_unstable();
-    clips.dedup();
-    if clips.len() < 2 {
-        return None;
-    }
-    let folds = clips.len().min(CV_FOLDS);
-    let fold_of = |c: usize| clips.binary_search(&c).map_or(0, |i| i % folds);
-    let mut sse = vec![0.0f64; RIDGE_CANDIDATES.len()];
-    let mut count = 0usize;
-    for f in 0..folds {
-        let held = |g: &Option<usize>| g.is_some_and(|c| fold_of(c) == f);
-        let train: Vec<usize> = (0..groups.len()).filter(|&r| !held(&groups[r])).collect();
-        let test: Vec<usize> = (0..groups.len()).filter(|&r| held(&groups[r])).collect();
-        if train.is_empty() || test.is_empty() {
-            continue;
-        }
-        let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
-        let block = ao.select(train.iter().copied());
-        count += test.len() * ao.vertices;
-        for (k, &ridge) in RIDGE_CANDIDATES.iter().enumerate() {
+    super::cv::choose_by_clips(
+        groups,
+        ao,
+        &RIDGE_CANDIDATES,
+        |ridge, train| {
+            let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
             let o = LinearOptions {
                 ridge,
                 ridge_cv: false,
                 ..*options
             };
-            let Ok((model, _)) = VertexLinear::fit(&q, ranges, &block, &o) else {
-                sse[k] = f64::INFINITY;
-                continue;
-            };
-            for &r in &test {
-                let predicted = model.evaluate(&poses[r]);
-                sse[k] += predicted
-                    .iter()
-                    .zip(ao.row(r))
-                    .map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2))
-                    .sum::<f64>();
-            }
-        }
-    }
-    let n = count.max(1) as f64;
-    let scores: Vec<(f64, f64)> = RIDGE_CANDIDATES
-        .iter()
-        .zip(&sse)
-        .map(|(&r, &e)| (r, (e / n).sqrt()))
-        .collect();
-    let best = scores
-        .iter()
-        .copied()
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(options.ridge, |(r, _)| r);
-    Some(RidgeChoice {
-        ridge: best,
-        scores,
-        folds,
-    })
+            VertexLinear::fit(&q, ranges, &ao.select(train.iter().copied()), &o)
+                .ok()
+                .map(|(m, _)| m)
+        },
+        |model, r| model.evaluate(&poses[r]),
+    )
 }
 
 /// The stored coefficients: dense `(N+1) × V`, or sparse per vertex.
@@ -189,7 +137,7 @@ pub struct LinearFitStats {
     pub ridge: f64,
     /// How cross-validation over clips chose it, when it did.
     #[serde(default)]
-    pub ridge_cv: Option<RidgeChoice>,
+    pub ridge_cv: Option<super::cv::RidgeChoice>,
 }
 
 /// A fit whose coefficients f16 cannot hold.

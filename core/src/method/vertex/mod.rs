@@ -14,6 +14,7 @@
 mod average;
 mod clustered;
 mod codec;
+pub mod cv;
 mod form;
 mod kmeans;
 mod linalg;
@@ -27,8 +28,8 @@ pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
 pub use form::{Block, LinearForm, SparseForm};
 pub use linalg::SolveStats;
 pub use linear::{
-    CV_FOLDS, Coefficients, DEFAULT_RIDGE, FitOverflow, LinearFitStats, LinearOptions,
-    RIDGE_CANDIDATES, RidgeChoice, VertexLinear, choose_ridge,
+    Coefficients, DEFAULT_RIDGE, FitOverflow, LinearFitStats, LinearOptions, RIDGE_CANDIDATES,
+    VertexLinear, choose_ridge,
 };
 
 use serde::{Deserialize, Serialize};
@@ -234,8 +235,35 @@ pub fn fit(
         }
         Method::VertexClustered => {
             let h: Vec<Vec<f32>> = poses.iter().map(|p| handles.handles(skeleton, p)).collect();
-            let (m, stats) =
-                VertexClustered::fit(&h, ao, clustered, seed).map_err(|e| e.to_string())?;
+            let choice = clustered
+                .ridge_cv
+                .then(|| {
+                    cv::choose_by_clips(
+                        groups,
+                        ao,
+                        &linear::RIDGE_CANDIDATES,
+                        |ridge, train| {
+                            let hs: Vec<Vec<f32>> = train.iter().map(|&r| h[r].clone()).collect();
+                            let o = ClusteredOptions {
+                                ridge,
+                                ridge_cv: false,
+                                ..*clustered
+                            };
+                            VertexClustered::fit(&hs, &ao.select(train.iter().copied()), &o, seed)
+                                .ok()
+                                .map(|(m, _)| m)
+                        },
+                        |model, r| model.evaluate(&h[r]),
+                    )
+                })
+                .flatten();
+            let chosen = ClusteredOptions {
+                ridge: choice.as_ref().map_or(clustered.ridge, |c| c.ridge),
+                ..*clustered
+            };
+            let (m, mut stats) =
+                VertexClustered::fit(&h, ao, &chosen, seed).map_err(|e| e.to_string())?;
+            stats.ridge_cv = choice;
             (
                 Model::VertexClustered(handles.clone(), m),
                 FitStats::VertexClustered(stats),

@@ -1,0 +1,113 @@
+//! Cross-validation over clips: what the pose-dependent methods choose
+//! their regularisation by, so that it is judged on motion the fit did
+//! not see (frames of clips left out), not on poses between training
+//! poses.
+
+use serde::{Deserialize, Serialize};
+
+use crate::trace::AoBlock;
+
+/// Most groups of clips the cross-validation leaves out in turn.
+pub const CV_FOLDS: usize = 8;
+
+/// What a cross-validation over clips found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RidgeChoice {
+    /// The chosen value.
+    pub ridge: f64,
+    /// Per candidate: (value, RMSE over the left-out clips' frames).
+    pub scores: Vec<(f64, f64)>,
+    /// Groups of clips left out in turn.
+    pub folds: usize,
+}
+
+/// Chooses among `candidates` by leaving groups of clips out: `groups` is
+/// each row of `ao`'s clip (`None`: a random pose, always trained on);
+/// the clips are dealt into up to [`CV_FOLDS`] groups, and for each group
+/// and candidate, `fit(candidate, training rows)` is scored by
+/// `predict(model, row)` on the group's rows. The candidate with the
+/// least squared error over all left-out rows wins (the first on a tie).
+/// `None` when the rows come from fewer than two clips.
+pub fn choose_by_clips<M>(
+    groups: &[Option<usize>],
+    ao: &AoBlock,
+    candidates: &[f64],
+    fit: impl Fn(f64, &[usize]) -> Option<M>,
+    predict: impl Fn(&M, usize) -> Vec<f32>,
+) -> Option<RidgeChoice> {
+    let mut clips: Vec<usize> = groups.iter().flatten().copied().collect();
+    clips.sort_unstable();
+    clips.dedup();
+    if clips.len() < 2 || candidates.is_empty() {
+        return None;
+    }
+    let folds = clips.len().min(CV_FOLDS);
+    let fold_of = |c: usize| clips.binary_search(&c).map_or(0, |i| i % folds);
+    let mut sse = vec![0.0f64; candidates.len()];
+    let mut count = 0usize;
+    for f in 0..folds {
+        let held = |g: &Option<usize>| g.is_some_and(|c| fold_of(c) == f);
+        let train: Vec<usize> = (0..groups.len()).filter(|&r| !held(&groups[r])).collect();
+        let test: Vec<usize> = (0..groups.len()).filter(|&r| held(&groups[r])).collect();
+        if train.is_empty() || test.is_empty() {
+            continue;
+        }
+        count += test.len() * ao.vertices;
+        for (k, &c) in candidates.iter().enumerate() {
+            let Some(model) = fit(c, &train) else {
+                sse[k] = f64::INFINITY;
+                continue;
+            };
+            for &r in &test {
+                sse[k] += predict(&model, r)
+                    .iter()
+                    .zip(ao.row(r))
+                    .map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2))
+                    .sum::<f64>();
+            }
+        }
+    }
+    let n = count.max(1) as f64;
+    let scores: Vec<(f64, f64)> = candidates
+        .iter()
+        .zip(&sse)
+        .map(|(&c, &e)| (c, (e / n).sqrt()))
+        .collect();
+    let best = scores.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1))?.0;
+    Some(RidgeChoice {
+        ridge: best,
+        scores,
+        folds,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_candidate_that_predicts_left_out_clips_best_wins() {
+        // Two clips; the "model" predicts the candidate itself everywhere.
+        // Clip 0's rows are 0.2, clip 1's 0.4; random rows are ignored.
+        let ao = AoBlock {
+            vertices: 1,
+            values: vec![0.9, 0.2, 0.2, 0.4, 0.4],
+        };
+        let groups = [None, Some(0), Some(0), Some(1), Some(1)];
+        let c = choose_by_clips(
+            &groups,
+            &ao,
+            &[0.0, 0.3, 1.0],
+            |v, _| Some(v),
+            |&v, _| vec![v as f32],
+        )
+        .unwrap();
+        assert_eq!((c.ridge, c.folds), (0.3, 2));
+        assert!((c.scores[1].1 - 0.1).abs() < 1e-6);
+        // One clip: nothing to leave out.
+        let one = [None, Some(0), Some(0), Some(0), Some(0)];
+        assert!(
+            choose_by_clips(&one, &ao, &[0.0], |v, _| Some(v), |&v, _| vec![v as f32]).is_none()
+        );
+    }
+}
