@@ -367,7 +367,7 @@ pub fn bake_key(character: &str, clips: &[String], params: &BakeParams) -> Strin
 mod tests {
     use super::*;
 
-    const GOLDEN_KEY: &str = "2499f2e174945755b66933eb03d8462cd2b8e7f28ae6e6c193ad11d4378424b0";
+    const GOLDEN_KEY: &str = "1dd4063a0b7a8e56f42ade9c834f19f013a6766db43a399163eaf97dc48d6c8c";
 
     #[test]
     fn key_depends_on_what_matters_only() {

@@ -275,7 +275,7 @@ impl<'a> Plan<'a> {
             p.method,
             (&p.linear, &p.clustered),
             p.seed,
-            &self.character.skeleton,
+            self.character,
             (&self.joint_angles, &self.handles),
             poses,
             ao,

@@ -232,6 +232,52 @@ impl JointAngles {
         Ok(layout)
     }
 
+    /// For every vertex of `character`, the parameters that can move
+    /// geometry near it (in increasing order): those of the nodes that skin
+    /// it and of their parents and children on the skeleton (the joints
+    /// next to a vertex's bones are where the occluders that move relative
+    /// to it hang).
+    pub fn local_parameters(&self, character: &Character) -> Vec<Vec<usize>> {
+        let skeleton = &character.skeleton;
+        let nodes = skeleton.nodes.len();
+        // Parameters of each node.
+        let mut of_node: Vec<Vec<usize>> = vec![Vec::new(); nodes];
+        for (k, &j) in self.joints.iter().enumerate() {
+            of_node[j].extend(3 * k..3 * k + 3);
+        }
+        let r = 3 * self.joints.len();
+        for (k, &t) in self.translations.iter().enumerate() {
+            of_node[t].extend(r + 3 * k..r + 3 * k + 3);
+        }
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); nodes];
+        for (n, node) in skeleton.nodes.iter().enumerate() {
+            if let Some(p) = node.parent {
+                children[p].push(n);
+            }
+        }
+        let k = character.influences;
+        (0..character.vertex_count())
+            .map(|v| {
+                let mut params = Vec::new();
+                for i in v * k..(v + 1) * k {
+                    if character.joint_weights[i] <= 0.0 {
+                        continue;
+                    }
+                    let node = character.joints[character.joint_indices[i] as usize].node;
+                    let ring = std::iter::once(node)
+                        .chain(skeleton.nodes[node].parent)
+                        .chain(children[node].iter().copied());
+                    for n in ring {
+                        params.extend(&of_node[n]);
+                    }
+                }
+                params.sort_unstable();
+                params.dedup();
+                params
+            })
+            .collect()
+    }
+
     /// Number of parameters.
     pub fn len(&self) -> usize {
         self.names.len()

@@ -21,6 +21,16 @@ pub struct RidgeChoice {
     pub folds: usize,
 }
 
+impl RidgeChoice {
+    /// The chosen value's RMSE over the left-out clips.
+    pub fn score(&self) -> f64 {
+        self.scores
+            .iter()
+            .find(|(c, _)| *c == self.ridge)
+            .map_or(f64::INFINITY, |s| s.1)
+    }
+}
+
 /// Chooses among `candidates` by leaving groups of clips out: `groups` is
 /// each row of `ao`'s clip (`None`: a random pose, always trained on);
 /// the clips are dealt into up to [`CV_FOLDS`] groups, and for each group

@@ -38,6 +38,26 @@ pub struct LinearOptions {
     /// error wins. `ridge` is used when the reference frames come from
     /// fewer than two clips.
     pub ridge_cv: bool,
+    /// Locality: with `on`, each vertex depends only on the parameters of
+    /// the joints that skin it and their neighbours on the skeleton
+    /// (`JointAngles::local_parameters`), the others' coefficients are
+    /// zero and the model is stored sparse; `cv` lets the cross-validation
+    /// over clips choose between that and every parameter (`off`).
+    pub locality: Locality,
+}
+
+/// Whether vertex-linear's vertices see every parameter or only their
+/// joints' neighbourhood.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Locality {
+    /// Every parameter (Kontkanen & Aila).
+    Off,
+    /// The parameters of the joints near each vertex.
+    On,
+    /// Whichever scores better over left-out clips (`off` when the
+    /// reference frames come from fewer than two clips).
+    Cv,
 }
 
 impl Default for LinearOptions {
@@ -46,6 +66,7 @@ impl Default for LinearOptions {
             ridge: DEFAULT_RIDGE,
             threshold: 0.0,
             ridge_cv: true,
+            locality: Locality::Cv,
         }
     }
 }
@@ -62,6 +83,7 @@ pub fn choose_ridge(
     ao: &AoBlock,
     groups: &[Option<usize>],
     options: &LinearOptions,
+    local: Option<&[Vec<usize>]>,
 ) -> Option<RidgeChoice> {
     super::cv::choose_by_clips(
         groups,
@@ -74,7 +96,7 @@ pub fn choose_ridge(
                 ridge_cv: false,
                 ..*options
             };
-            VertexLinear::fit(&q, ranges, &ao.select(train.iter().copied()), &o)
+            VertexLinear::fit(&q, ranges, &ao.select(train.iter().copied()), &o, local)
                 .ok()
                 .map(|(m, _)| m)
         },
@@ -138,6 +160,9 @@ pub struct LinearFitStats {
     /// How cross-validation over clips chose it, when it did.
     #[serde(default)]
     pub ridge_cv: Option<super::cv::RidgeChoice>,
+    /// Whether the model is local (each vertex on its joints' parameters).
+    #[serde(default)]
+    pub local: bool,
 }
 
 /// A fit whose coefficients f16 cannot hold.
@@ -165,6 +190,7 @@ impl VertexLinear {
         ranges: &[Range],
         ao: &AoBlock,
         options: &LinearOptions,
+        local: Option<&[Vec<usize>]>,
     ) -> Result<(Self, LinearFitStats), FitOverflow> {
         let p = poses.len();
         assert_eq!(p, ao.poses(), "one pose per AO row");
@@ -195,7 +221,29 @@ impl VertexLinear {
             (f64::from(poses[r][k]) - mean_j[k]) * inv_std[k]
         });
         let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
-        let (t, solve) = ridge_lstsq(js.as_ref(), ac.as_ref(), options.ridge * p as f64);
+        let (mut t, solve) = ridge_lstsq(js.as_ref(), ac.as_ref(), options.ridge * p as f64);
+        if let Some(local) = local {
+            // One solve per distinct set of local parameters, over the
+            // vertices that share it.
+            let mut sets: std::collections::BTreeMap<&[usize], Vec<usize>> = Default::default();
+            for (i, params) in local.iter().enumerate().take(v) {
+                sets.entry(params.as_slice()).or_default().push(i);
+            }
+            t = Mat::zeros(n, v);
+            for (params, vertices) in sets {
+                if params.is_empty() {
+                    continue;
+                }
+                let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
+                let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
+                let (x, _) = ridge_lstsq(d.as_ref(), y.as_ref(), options.ridge * p as f64);
+                for (c, &i) in vertices.iter().enumerate() {
+                    for (row, &k) in params.iter().enumerate() {
+                        t[(k, i)] = x[(row, c)];
+                    }
+                }
+            }
+        }
         let largest = (0..n)
             .flat_map(|k| (0..v).map(move |i| (k, i)))
             .map(|(k, i)| t[(k, i)].abs())
@@ -217,8 +265,14 @@ impl VertexLinear {
             coefficients,
             map: None,
         };
-        let (stored, kept_fraction) = if options.threshold > 0.0 {
-            let sparse = SparseForm::from_dense(&block, v, options.threshold, &[n]);
+        let threshold = match (local.is_some(), options.threshold > 0.0) {
+            (_, true) => options.threshold,
+            // Locality: the coefficients outside a vertex's set are zero.
+            (true, false) => f32::MIN_POSITIVE,
+            (false, false) => 0.0,
+        };
+        let (stored, kept_fraction) = if threshold > 0.0 {
+            let sparse = SparseForm::from_dense(&block, v, threshold, &[n]);
             let kept = sparse.values.len() as f64 / ((n + 1) * v).max(1) as f64;
             (Coefficients::Sparse(sparse), kept)
         } else {
@@ -255,6 +309,7 @@ impl VertexLinear {
             kept_fraction,
             ridge: options.ridge,
             ridge_cv: None,
+            local: local.is_some(),
         };
         Ok((model, stats))
     }
@@ -345,7 +400,7 @@ mod tests {
             ridge: 0.0,
             ..LinearOptions::default()
         };
-        let (model, stats) = VertexLinear::fit(&q, &wide(), &ao, &exact).unwrap();
+        let (model, stats) = VertexLinear::fit(&q, &wide(), &ao, &exact, None).unwrap();
         assert_eq!(stats.solve.rank, 3);
         assert!(stats.training_rmse < 1e-6, "{stats:?}");
         assert!(
@@ -373,7 +428,7 @@ mod tests {
             threshold: 0.01,
             ..LinearOptions::default()
         };
-        let (model, stats) = VertexLinear::fit(&q, &wide(), &ao, &options).unwrap();
+        let (model, stats) = VertexLinear::fit(&q, &wide(), &ao, &options, None).unwrap();
         // 3 of the 9 angle coefficients are non-zero, plus 3 constants.
         let Coefficients::Sparse(s) = &model.coefficients else {
             panic!("sparse expected")
@@ -389,6 +444,7 @@ mod tests {
                 ridge: 1.0,
                 ..LinearOptions::default()
             },
+            None,
         )
         .unwrap();
         assert!(rs.training_rmse > 1e-3, "ridge trades fit for smaller T");

@@ -28,8 +28,8 @@ pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
 pub use form::{Block, LinearForm, SparseForm};
 pub use linalg::SolveStats;
 pub use linear::{
-    Coefficients, DEFAULT_RIDGE, FitOverflow, LinearFitStats, LinearOptions, RIDGE_CANDIDATES,
-    VertexLinear, choose_ridge,
+    Coefficients, DEFAULT_RIDGE, FitOverflow, LinearFitStats, LinearOptions, Locality,
+    RIDGE_CANDIDATES, VertexLinear, choose_ridge,
 };
 
 use serde::{Deserialize, Serialize};
@@ -199,12 +199,13 @@ pub fn fit(
     method: Method,
     options: (&LinearOptions, &ClusteredOptions),
     seed: u64,
-    skeleton: &Skeleton,
+    character: &crate::Character,
     spaces: (&JointAngles, &Handles),
     poses: &[Pose],
     ao: &AoBlock,
     groups: &[Option<usize>],
 ) -> Result<(Model, FitStats), String> {
+    let skeleton = &character.skeleton;
     let (linear, clustered) = options;
     let (joint_angles, handles) = spaces;
     Ok(match method {
@@ -217,15 +218,31 @@ pub fn fit(
                 .iter()
                 .map(|p| joint_angles.params(skeleton, p))
                 .collect();
-            let choice = linear
-                .ridge_cv
-                .then(|| linear::choose_ridge(&q, &joint_angles.ranges, ao, groups, linear))
-                .flatten();
+            let sets = (linear.locality != Locality::Off)
+                .then(|| joint_angles.local_parameters(character));
+            let ranges = &joint_angles.ranges;
+            let cv = |local: Option<&[Vec<usize>]>| {
+                linear
+                    .ridge_cv
+                    .then(|| linear::choose_ridge(&q, ranges, ao, groups, linear, local))
+                    .flatten()
+            };
+            let (local, choice) = match linear.locality {
+                Locality::Off => (None, cv(None)),
+                Locality::On => (sets.as_deref(), cv(sets.as_deref())),
+                Locality::Cv => {
+                    let (global, near) = (cv(None), cv(sets.as_deref()));
+                    match (global, near) {
+                        (Some(g), Some(l)) if l.score() < g.score() => (sets.as_deref(), Some(l)),
+                        (g, _) => (None, g),
+                    }
+                }
+            };
             let chosen = LinearOptions {
                 ridge: choice.as_ref().map_or(linear.ridge, |c| c.ridge),
                 ..*linear
             };
-            let (m, mut stats) = VertexLinear::fit(&q, &joint_angles.ranges, ao, &chosen)
+            let (m, mut stats) = VertexLinear::fit(&q, &joint_angles.ranges, ao, &chosen, local)
                 .map_err(|e| e.to_string())?;
             stats.ridge_cv = choice;
             (
