@@ -22,7 +22,8 @@ mod linear;
 
 pub use average::StaticAverage;
 pub use clustered::{
-    Centering, ClusteredFitStats, ClusteredOptions, MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
+    CLAMP_CANDIDATES, Centering, ClusteredFitStats, ClusteredOptions, MIN_BLEND_WEIGHT,
+    PoseCluster, VertexClustered,
 };
 pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
 pub use form::{Block, LinearForm, SparseForm};
@@ -274,13 +275,38 @@ pub fn fit(
                     )
                 })
                 .flatten();
-            let chosen = ClusteredOptions {
+            let mut chosen = ClusteredOptions {
                 ridge: choice.as_ref().map_or(clustered.ridge, |c| c.ridge),
                 ..*clustered
             };
+            let clamp = clustered
+                .clamp_cv
+                .then(|| {
+                    cv::choose_by_clips(
+                        groups,
+                        ao,
+                        &clustered::CLAMP_CANDIDATES,
+                        |clamp, train| {
+                            let hs: Vec<Vec<f32>> = train.iter().map(|&r| h[r].clone()).collect();
+                            let o = ClusteredOptions {
+                                clamp: clamp as f32,
+                                ..chosen
+                            };
+                            VertexClustered::fit(&hs, &ao.select(train.iter().copied()), &o, seed)
+                                .ok()
+                                .map(|(m, _)| m)
+                        },
+                        |model, r| model.evaluate(&h[r]),
+                    )
+                })
+                .flatten();
+            if let Some(c) = &clamp {
+                chosen.clamp = c.ridge as f32;
+            }
             let (m, mut stats) =
                 VertexClustered::fit(&h, ao, &chosen, seed).map_err(|e| e.to_string())?;
             stats.ridge_cv = choice;
+            stats.clamp_cv = clamp;
             (
                 Model::VertexClustered(handles.clone(), m),
                 FitStats::VertexClustered(stats),
