@@ -103,32 +103,13 @@ impl Bake<'_> {
     /// Six `face` jobs → `assemble` → `evaluate` → `preview`.
     pub(super) fn cubemap_graph(&self, options: GraphOptions) -> JobGraph {
         let times = self.plan.params.cubemap.times;
-        let mut jobs: Vec<PlannedJob> = (0..FACES)
+        let jobs: Vec<PlannedJob> = (0..FACES)
             .map(|face| PlannedJob {
                 spec: JobSpec::Face { face, times },
                 deps: Vec::new(),
             })
             .collect();
-        let faces: Vec<usize> = (0..FACES).collect();
-        jobs.push(PlannedJob {
-            spec: JobSpec::Assemble,
-            deps: faces.clone(),
-        });
-        let assemble = jobs.len() - 1;
-        let mut deps = vec![assemble];
-        deps.extend(faces);
-        jobs.push(PlannedJob {
-            spec: JobSpec::Evaluate,
-            deps,
-        });
-        if options.previews {
-            let evaluate = jobs.len() - 1;
-            jobs.push(PlannedJob {
-                spec: JobSpec::Preview,
-                deps: vec![assemble, evaluate],
-            });
-        }
-        JobGraph { jobs }
+        JobGraph::assemble_evaluate_preview(jobs, options.previews)
     }
 
     /// A `face` job: resumes from `resume`'s parts, traces the remaining

@@ -58,6 +58,36 @@ impl JobGraph {
     }
 }
 
+impl JobGraph {
+    /// The stages after a volume method's tracing jobs (`producers`):
+    /// `assemble` after them, `evaluate` after `assemble` and them (it
+    /// judges the encoding against the raw fields), and, with `previews`,
+    /// `preview` after `assemble` and `evaluate`.
+    pub(super) fn assemble_evaluate_preview(jobs: Vec<PlannedJob>, previews: bool) -> Self {
+        let mut jobs = jobs;
+        let producers: Vec<usize> = (0..jobs.len()).collect();
+        jobs.push(PlannedJob {
+            spec: JobSpec::Assemble,
+            deps: producers.clone(),
+        });
+        let assemble = jobs.len() - 1;
+        let mut deps = vec![assemble];
+        deps.extend(producers);
+        jobs.push(PlannedJob {
+            spec: JobSpec::Evaluate,
+            deps,
+        });
+        if previews {
+            let evaluate = jobs.len() - 1;
+            jobs.push(PlannedJob {
+                spec: JobSpec::Preview,
+                deps: vec![assemble, evaluate],
+            });
+        }
+        Self { jobs }
+    }
+}
+
 impl Bake<'_> {
     /// The job graph of this bake; the one place that knows each method
     /// family's stages.

@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 use crate::{
     asset::report::{CharacterInfo, GridReport, PartReport, Sizes, encode_rgb_png},
     method::grid::{
-        evaluate::{GridEvaluation, GridVariant, GroundTruth, Inputs},
+        evaluate::{GridEvaluation, GridVariant, GroundTruth, Inputs, Predictor},
         field::{GridBox, RawCell, Slab, finish, part_scene, trace_layers},
         model::{GridModel, PartGrid, Terms},
         parts::{Part, parts},
@@ -99,26 +99,7 @@ impl Bake<'_> {
                 });
             }
         }
-        let slabs: Vec<usize> = (0..jobs.len()).collect();
-        jobs.push(PlannedJob {
-            spec: JobSpec::Assemble,
-            deps: slabs.clone(),
-        });
-        let assemble = jobs.len() - 1;
-        let mut deps = vec![assemble];
-        deps.extend(slabs);
-        jobs.push(PlannedJob {
-            spec: JobSpec::Evaluate,
-            deps,
-        });
-        if options.previews {
-            let evaluate = jobs.len() - 1;
-            jobs.push(PlannedJob {
-                spec: JobSpec::Preview,
-                deps: vec![assemble, evaluate],
-            });
-        }
-        JobGraph { jobs }
+        JobGraph::assemble_evaluate_preview(jobs, options.previews)
     }
 
     /// A `slab` job: layers `first..first + count` of part `part`'s grid,
@@ -337,43 +318,39 @@ impl Bake<'_> {
         } else {
             (&other, &model)
         };
-        let named_models = [
-            (
+        let variant = |name: &str, description: &str, bytes: usize, predict: &Predictor<'_>| {
+            let (vertices, ground) = truth.errors(predict);
+            GridVariant {
+                name: name.into(),
+                description: description.into(),
+                bytes,
+                vertices,
+                ground,
+            }
+        };
+        let mut grids = [
+            variant(
                 "grids (cones)",
-                with,
                 "every part's grid through T_clip: its cone clipped by the receiver's tangent plane (§5.1), its own part included; parts combined 1 − Π(1 − aᵢ)",
+                with.bytes(),
+                &|f| truth.predict(with, f, Terms::All, false),
             ),
-            (
+            variant(
                 "grids",
-                without,
                 "every part's grid: ao_grid for other parts, (ao_grid − 1)/2 for the receiver's own (§4.2); parts combined 1 − Π(1 − aᵢ)",
+                without.bytes(),
+                &|f| truth.predict(without, f, Terms::All, false),
             ),
         ];
-        let mut variants: Vec<GridVariant> = Vec::new();
-        let ordered: Vec<_> = if o.cones {
-            named_models.to_vec()
-        } else {
-            named_models.iter().rev().copied().collect()
-        };
-        for (name, m, description) in &ordered {
-            let (vertices, ground) = truth.errors(&|f| truth.predict(m, f, Terms::All, false));
-            variants.push(GridVariant {
-                name: (*name).into(),
-                description: (*description).into(),
-                bytes: m.bytes(),
-                vertices,
-                ground,
-            });
+        if !o.cones {
+            grids.swap(0, 1); // the baked variant first
         }
+        let mut variants: Vec<GridVariant> = grids.into();
+        let alone = "no occlusion between parts: each vertex shaded by its own part's grid alone, the ground by nothing";
         for (name, m) in [("own grid only (cones)", with), ("own grid only", without)] {
-            let (vertices, ground) = truth.errors(&|f| truth.predict(m, f, Terms::Own, false));
-            variants.push(GridVariant {
-                name: name.into(),
-                description: "no occlusion between parts: each vertex shaded by its own part's grid alone, the ground by nothing".into(),
-                bytes: m.bytes(),
-                vertices,
-                ground,
-            });
+            variants.push(variant(name, alone, m.bytes(), &|f| {
+                truth.predict(m, f, Terms::Own, false)
+            }));
         }
         let self_bytes = 2 * character.vertex_count();
         for (name, m, description) in [
@@ -388,37 +365,26 @@ impl Bake<'_> {
                 "each vertex's exact self-occlusion combined with the other parts' grids (ao_grid)",
             ),
         ] {
-            let (vertices, ground) = truth.errors(&|f| truth.predict(m, f, Terms::Others, true));
-            variants.push(GridVariant {
-                name: name.into(),
-                description: description.into(),
-                bytes: m.bytes() + self_bytes,
-                vertices,
-                ground,
-            });
+            variants.push(variant(name, description, m.bytes() + self_bytes, &|f| {
+                truth.predict(m, f, Terms::Others, true)
+            }));
         }
-        let (vertices, ground) = truth.errors(&|f| truth.predict(without, f, Terms::Own, true));
-        variants.push(GridVariant {
-            name: "traced self only".into(),
-            description:
-                "no occlusion between parts: each vertex's exact self-occlusion, the ground open"
-                    .into(),
-            bytes: self_bytes,
-            vertices,
-            ground,
-        });
+        variants.push(variant(
+            "traced self only",
+            "no occlusion between parts: each vertex's exact self-occlusion, the ground open",
+            self_bytes,
+            &|f| truth.predict(without, f, Terms::Own, true),
+        ));
         let (average_v, average_g) = &truth.average;
-        let (vertices, ground) = truth.errors(&|_| (average_v.clone(), average_g.clone()));
-        variants.push(GridVariant {
-            name: "static average".into(),
-            description: format!(
+        variants.push(variant(
+            "static average",
+            &format!(
                 "per receiver, the mean ray-traced occlusion over {} random frames of the training clips (other frames than those evaluated)",
                 o.average_frames
             ),
-            bytes: 2 * (character.vertex_count() + truth.ground.len()),
-            vertices,
-            ground,
-        });
+            2 * (character.vertex_count() + truth.ground.len()),
+            &|_| (average_v.clone(), average_g.clone()),
+        ));
         let plot = slices_png(&model)
             .map_err(|e| JobError::Failed(format!("cannot draw the slices: {e}")))?;
         let evaluation = GridEvaluation {

@@ -387,17 +387,12 @@ impl<'a> Bake<'a> {
     /// request.
     pub fn work(&self) -> u128 {
         let p = &self.plan.params;
-        let vertices = self.inputs.character.vertex_count();
-        match p.method.family() {
-            Family::Grid => {
-                let parts = self.grid_parts().map_or(0, |p| p.len());
-                p.grid.rays_total(parts, vertices)
-            }
-            _ => {
-                let frames = self.poses_in(PoseSet::HeldOut).saturating_sub(p.eval_poses);
-                p.work(vertices, frames)
-            }
-        }
+        let frames = self.poses_in(PoseSet::HeldOut).saturating_sub(p.eval_poses);
+        let parts = match p.method.family() {
+            Family::Grid => self.grid_parts().map_or(0, |p| p.len()),
+            _ => 0,
+        };
+        p.work(self.inputs.character.vertex_count(), frames, parts)
     }
 
     /// Poses `range` of a set, seeded: the same request gives the same
@@ -479,6 +474,7 @@ impl<'a> Bake<'a> {
         let cubemap_model;
         let grid_model;
         let owners: Vec<u32>;
+        let mut grid_truth = None;
         let (model, clip) = match self.plan.params.method.family() {
             Family::Cubemap => {
                 cubemap_model = decode_cubemap(asset)?;
@@ -495,13 +491,15 @@ impl<'a> Bake<'a> {
             Family::Grid => {
                 grid_model = decode_grid(asset)?;
                 let parts = self.grid_parts()?;
-                owners = crate::method::grid::parts::owners(
+                owners = crate::method::grid::parts::owner_indices(
                     &parts,
                     self.inputs.character.vertex_count(),
-                )
-                .into_iter()
-                .map(|o| o.map_or(u32::MAX, |p| p as u32))
-                .collect();
+                );
+                // The grids' truth is traced as their evaluation traces it.
+                grid_truth = Some(self.plan.params.grid.truth(
+                    self.grid_distance(&parts),
+                    self.plan.params.held_out_surface().seed,
+                ));
                 (
                     PreviewModel::Grid(&grid_model, &owners),
                     preview_clip(clips, &self.plan.test).map(|i| &clips[i]),
@@ -515,14 +513,7 @@ impl<'a> Bake<'a> {
                 )
             }
         };
-        let surface = match self.plan.params.method.family() {
-            // The grids' truth is traced as their evaluation traces it.
-            Family::Grid => self.plan.params.grid.truth(
-                self.grid_distance(&self.grid_parts()?),
-                self.plan.params.held_out_surface().seed,
-            ),
-            _ => self.plan.params.held_out_surface(),
-        };
+        let surface = grid_truth.unwrap_or_else(|| self.plan.params.held_out_surface());
         let subject = Subject {
             character: &self.inputs.character,
             model,

@@ -305,20 +305,20 @@ impl BakeParams {
         Ok(())
     }
 
-    /// Ray-vertex pairs the bake traces for a character of `vertices`
-    /// vertices with `test_frames` clip frames held out (a cubemap bake:
-    /// the rays of its sample points and its evaluation; a grid bake's
-    /// depend on its parts: `Bake::work`): what the service bounds per
-    /// request.
-    pub fn work(&self, vertices: usize, test_frames: usize) -> u128 {
-        if self.method.family() == Family::Cubemap {
-            return self.cubemap.rays_total();
+    /// Ray-point pairs the bake traces for a character of `vertices`
+    /// vertices with `test_frames` clip frames held out and `parts` rigid
+    /// parts (a cubemap bake: the rays of its sample points and its
+    /// evaluation; a grid bake: its cells and its evaluation): what the
+    /// service bounds per request (`Bake::work` counts the inputs).
+    pub fn work(&self, vertices: usize, test_frames: usize, parts: usize) -> u128 {
+        match self.method.family() {
+            Family::Cubemap => self.cubemap.rays_total(),
+            Family::Grid => self.grid.rays_total(parts, vertices),
+            Family::Vertex => {
+                let poses = self.poses + self.eval_poses + test_frames + NOISE_POSES;
+                poses as u128 * vertices as u128 * u128::from(self.samples)
+            }
         }
-        if self.method.family() == Family::Grid {
-            return self.grid.rays_total(1, vertices);
-        }
-        let poses = self.poses + self.eval_poses + test_frames + NOISE_POSES;
-        poses as u128 * vertices as u128 * u128::from(self.samples)
     }
 }
 

@@ -449,37 +449,28 @@ impl Subject<'_> {
                     &SceneOptions::default(),
                 )
                 .map_err(invalid)?;
-                let (ground_ao, weights, phase) = match self.model {
-                    PreviewModel::Vertex(model) => (
-                        surface_occlusion(
-                            &scene,
-                            &ground.positions,
-                            &up,
-                            &ground_surface,
-                            &no_progress,
-                        )
-                        .map_err(invalid)?,
-                        model.weights(skeleton, pose),
-                        0.0,
+                // The ground's truth: what the cubemap stores (Eq. 3.1),
+                // else surface AO under the character.
+                let ground_ao = match self.model {
+                    PreviewModel::Cubemap(_, kroon) => {
+                        kroon_occlusion(&scene, &ground.positions, None, &kroon, &no_progress)
+                    }
+                    PreviewModel::Vertex(_) | PreviewModel::Grid(..) => surface_occlusion(
+                        &scene,
+                        &ground.positions,
+                        &up,
+                        &ground_surface,
+                        &no_progress,
                     ),
+                }
+                .map_err(invalid)?;
+                let (weights, phase) = match self.model {
+                    PreviewModel::Vertex(model) => (model.weights(skeleton, pose), 0.0),
                     PreviewModel::Grid(model, _) => (
-                        surface_occlusion(
-                            &scene,
-                            &ground.positions,
-                            &up,
-                            &ground_surface,
-                            &no_progress,
-                        )
-                        .map_err(invalid)?,
                         grid_weights(model, &self.character.joint_matrices(pose)),
                         0.0,
                     ),
-                    PreviewModel::Cubemap(model, kroon) => (
-                        kroon_occlusion(&scene, &ground.positions, None, &kroon, &no_progress)
-                            .map_err(invalid)?,
-                        Vec::new(),
-                        model.layout.phase(times[i]),
-                    ),
+                    PreviewModel::Cubemap(model, _) => (Vec::new(), model.layout.phase(times[i])),
                 };
                 Ok(RenderFrame {
                     positions: posed.positions,

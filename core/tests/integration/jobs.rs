@@ -296,7 +296,7 @@ fn parameters_come_from_one_schema_with_named_errors() {
         Err(BakeError::Param(_))
     ));
     // The work bound the service checks grows with every factor.
-    let w = defaults.work(1000, 10);
+    let w = defaults.work(1000, 10, 0);
     assert_eq!(
         w,
         (256 + 32 + 10 + 8) as u128 * 1000 * 256,

@@ -80,10 +80,8 @@ impl Loaded {
             let distance = params.grid.distance(&character, &found);
             params.max_distance = Some(distance);
             params.samples = params.grid.eval_rays;
-            let owners = aobake_core::method::grid::parts::owners(&found, character.vertex_count())
-                .into_iter()
-                .map(|o| o.map_or(u32::MAX, |p| p as u32))
-                .collect();
+            let owners =
+                aobake_core::method::grid::parts::owner_indices(&found, character.vertex_count());
             (Baked::Grid(model, owners), params)
         } else if container.method.family() == Family::Cubemap {
             let (model, header) = CubemapModel::from_container(&container)

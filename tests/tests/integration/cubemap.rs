@@ -4,12 +4,12 @@
 //! incremental checkpoints, lose at most one checkpoint interval, and the
 //! asset equals `aobake bake`'s byte for byte.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use aobake_e2e::{ADMIN, Options, TestEnv, binary, character};
+use aobake_e2e::{ADMIN, Options, TestEnv, character};
 use serde_json::{Value, json};
 
-use crate::util::{asset, upload};
+use crate::util::{aobake_bake, asset, bake_view, deep_running_job, job_info, upload};
 
 /// 48² texels, 6 shells, 64 time samples, 32 rays: a face is a few
 /// seconds of tracing with 31 checkpoints (2 time samples each).
@@ -37,12 +37,6 @@ fn params() -> Value {
         "eval_times": 2, "eval_points": 256, "eval_ground": 128, "eval_rays": 64}})
 }
 
-fn bake(env: &TestEnv, id: i64) -> Value {
-    env.request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
-        .unwrap()
-        .1
-}
-
 #[test]
 fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
     let mut env = TestEnv::start(Options {
@@ -62,7 +56,7 @@ fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
         .unwrap();
     assert_eq!(status, 202, "{b}");
     let id = b["id"].as_i64().unwrap();
-    let kinds: Vec<String> = bake(&env, id)["jobs"]
+    let kinds: Vec<String> = bake_view(&env, id)["jobs"]
         .as_array()
         .unwrap()
         .iter()
@@ -79,20 +73,7 @@ fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
     let victim = env.start_worker(&[]);
     // Kill the other as soon as a face it runs is well under way (the
     // aborting worker never gets past its first checkpoint).
-    let started = Instant::now();
-    let (killed_job, cursor_at_kill) = loop {
-        let now = bake(&env, id);
-        let deep = now["jobs"].as_array().unwrap().iter().find_map(|j| {
-            let cursor = j["checkpoint"]["cursor"].as_i64().unwrap_or(0);
-            (j["kind"] == "face" && j["state"] == "running" && cursor >= 10)
-                .then(|| (j["id"].as_i64().unwrap(), cursor))
-        });
-        if let Some(d) = deep {
-            break d;
-        }
-        assert!(started.elapsed() < Duration::from_secs(120), "{now}");
-        std::thread::sleep(Duration::from_millis(30));
-    };
+    let (killed_job, cursor_at_kill) = deep_running_job(&env, id, "face", 10);
     env.kill_worker(victim);
     env.start_worker(&[]);
     env.start_worker(&[]);
@@ -108,20 +89,7 @@ fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
     let mut resumed = 0;
     for j in jobs.iter().filter(|j| j["kind"] == "face") {
         let attempts = j["attempts"].as_i64().unwrap();
-        let info = j["outputs"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|o| o["name"].as_str().unwrap().ends_with(".json"))
-            .unwrap();
-        let (_, info) = env
-            .request(
-                "GET",
-                &format!("/v1/blobs/{}", info["digest"].as_str().unwrap()),
-                ADMIN,
-                None,
-            )
-            .unwrap();
+        let info = job_info(&env, j);
         let resumed_at = info["resumed_at"].as_i64().unwrap();
         assert_eq!(
             info["computed"].as_i64().unwrap(),
@@ -144,24 +112,11 @@ fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
         "the killed and the aborted faces resumed: {jobs:?}"
     );
     // The same request through `aobake bake`, undisturbed.
-    let out = env.dir.path().join("local.aob");
-    let run = std::process::Command::new(binary())
-        .args(["bake", cm.to_str().unwrap(), "--method", "cubemap-discrete"])
-        .args(FLAGS)
-        .arg("--out")
-        .arg(&out)
-        .arg("--report")
-        .arg(env.dir.path().join("local.json"))
-        .env("RAYON_NUM_THREADS", "2")
-        .output()
-        .unwrap();
+    let mut args = vec!["--method", "cubemap-discrete"];
+    args.extend(FLAGS);
+    let local = aobake_bake(env.dir.path(), &cm, &args, "local");
     assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    assert!(
-        asset(&env, &done) == std::fs::read(out).unwrap(),
+        asset(&env, &done) == local,
         "the disturbed bake's asset differs from an undisturbed one"
     );
     // `aobake export --exr` writes the decoded faces; read back with the

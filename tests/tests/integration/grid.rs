@@ -5,12 +5,12 @@
 //! byte for byte. `aobake export --exr` writes every part's grid, read
 //! back here with the exr crate's reader.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use aobake_e2e::{ADMIN, Options, TestEnv, binary, character};
+use aobake_e2e::{ADMIN, Options, TestEnv, character};
 use serde_json::{Value, json};
 
-use crate::util::{asset, upload};
+use crate::util::{aobake_bake, asset, bake_view, deep_running_job, job_info, upload};
 
 /// 32³ cells with 512 rays: a slab of 8 layers is a few seconds of
 /// tracing with a checkpoint after each layer; a token evaluation.
@@ -32,12 +32,6 @@ fn params() -> Value {
         "average_frames": 2}})
 }
 
-fn bake(env: &TestEnv, id: i64) -> Value {
-    env.request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
-        .unwrap()
-        .1
-}
-
 #[test]
 fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
     let mut env = TestEnv::start(Options {
@@ -57,7 +51,7 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
         .unwrap();
     assert_eq!(status, 202, "{b}");
     let id = b["id"].as_i64().unwrap();
-    let kinds: Vec<String> = bake(&env, id)["jobs"]
+    let kinds: Vec<String> = bake_view(&env, id)["jobs"]
         .as_array()
         .unwrap()
         .iter()
@@ -69,20 +63,7 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
     assert_eq!(kinds, want);
     env.start_worker(&[("AOBAKE_FAULT", "after_checkpoint")]);
     let victim = env.start_worker(&[]);
-    let started = Instant::now();
-    let (killed_job, cursor_at_kill) = loop {
-        let now = bake(&env, id);
-        let deep = now["jobs"].as_array().unwrap().iter().find_map(|j| {
-            let cursor = j["checkpoint"]["cursor"].as_i64().unwrap_or(0);
-            (j["kind"] == "slab" && j["state"] == "running" && cursor >= 2)
-                .then(|| (j["id"].as_i64().unwrap(), cursor))
-        });
-        if let Some(d) = deep {
-            break d;
-        }
-        assert!(started.elapsed() < Duration::from_secs(120), "{now}");
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let (killed_job, cursor_at_kill) = deep_running_job(&env, id, "slab", 2);
     env.kill_worker(victim);
     env.start_worker(&[]);
     env.start_worker(&[]);
@@ -98,20 +79,7 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
         .find(|j| j["id"].as_i64() == Some(killed_job))
         .unwrap();
     assert!(killed["attempts"].as_i64().unwrap() > 1, "{killed}");
-    let info = killed["outputs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|o| o["name"].as_str().unwrap().ends_with(".json"))
-        .unwrap();
-    let (_, info) = env
-        .request(
-            "GET",
-            &format!("/v1/blobs/{}", info["digest"].as_str().unwrap()),
-            ADMIN,
-            None,
-        )
-        .unwrap();
+    let info = job_info(&env, killed);
     let resumed_at = info["resumed_at"].as_i64().unwrap();
     assert!(
         resumed_at >= cursor_at_kill,
@@ -119,25 +87,12 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
     );
     assert_eq!(info["computed"].as_i64().unwrap(), 8 - resumed_at);
     // The same request through `aobake bake`, undisturbed.
-    let out = env.dir.path().join("local.aob");
-    let run = std::process::Command::new(binary())
-        .args(["bake", truck.to_str().unwrap(), "--method", "grid"])
-        .args(FLAGS)
-        .arg("--out")
-        .arg(&out)
-        .arg("--report")
-        .arg(env.dir.path().join("local.json"))
-        .env("RAYON_NUM_THREADS", "2")
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let mut args = vec!["--method", "grid"];
+    args.extend(FLAGS);
+    let local = aobake_bake(env.dir.path(), &truck, &args, "local");
     let served = asset(&env, &done);
     assert!(
-        served == std::fs::read(out).unwrap(),
+        served == local,
         "the disturbed bake's asset differs from an undisturbed one"
     );
     // `aobake export --exr`: one file per part, read back cell for cell.

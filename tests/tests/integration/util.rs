@@ -44,28 +44,80 @@ pub(crate) fn submit(env: &TestEnv, character: &str, poses: usize) -> (u16, Valu
 /// `aobake bake` of the same request in this process's temp dir; returns
 /// the asset bytes.
 pub(crate) fn local_bake(dir: &Path, character: &Path, poses: usize) -> Vec<u8> {
-    let out = dir.join(format!("local-{poses}.aob"));
     let poses = poses.to_string();
-    let mut args: Vec<&str> = vec!["bake"];
-    let c = character.to_str().unwrap();
-    args.push(c);
-    args.extend(QUICK);
+    let mut args: Vec<&str> = QUICK.to_vec();
     args.extend(["--poses", &poses]);
-    let status = std::process::Command::new(binary())
-        .args(&args)
+    aobake_bake(dir, character, &args, &format!("local-{poses}"))
+}
+
+/// `aobake bake CHARACTER ARGS…` into `dir/{name}.aob` (two tracing
+/// threads, as the workers have); returns the asset bytes.
+pub(crate) fn aobake_bake(dir: &Path, character: &Path, args: &[&str], name: &str) -> Vec<u8> {
+    let out = dir.join(format!("{name}.aob"));
+    let run = std::process::Command::new(binary())
+        .arg("bake")
+        .arg(character)
+        .args(args)
         .arg("--out")
         .arg(&out)
         .arg("--report")
-        .arg(dir.join("local.json"))
+        .arg(dir.join(format!("{name}.json")))
         .env("RAYON_NUM_THREADS", "2")
         .output()
         .unwrap();
     assert!(
-        status.status.success(),
+        run.status.success(),
         "{}",
-        String::from_utf8_lossy(&status.stderr)
+        String::from_utf8_lossy(&run.stderr)
     );
     std::fs::read(out).unwrap()
+}
+
+/// A bake as `GET /v1/bakes/{id}` shows it.
+pub(crate) fn bake_view(env: &TestEnv, id: i64) -> Value {
+    env.request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap()
+        .1
+}
+
+/// Waits (up to two minutes) for a running job of `kind` whose checkpoint
+/// cursor has reached `cursor`; its id and cursor.
+pub(crate) fn deep_running_job(env: &TestEnv, id: i64, kind: &str, cursor: i64) -> (i64, i64) {
+    let started = std::time::Instant::now();
+    loop {
+        let now = bake_view(env, id);
+        let deep = now["jobs"].as_array().unwrap().iter().find_map(|j| {
+            let c = j["checkpoint"]["cursor"].as_i64().unwrap_or(0);
+            (j["kind"] == kind && j["state"] == "running" && c >= cursor)
+                .then(|| (j["id"].as_i64().unwrap(), c))
+        });
+        if let Some(d) = deep {
+            return d;
+        }
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(120),
+            "{now}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+/// The JSON output (`*.json`) of a finished job: how it ran.
+pub(crate) fn job_info(env: &TestEnv, job: &Value) -> Value {
+    let info = job["outputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|o| o["name"].as_str().unwrap().ends_with(".json"))
+        .unwrap();
+    env.request(
+        "GET",
+        &format!("/v1/blobs/{}", info["digest"].as_str().unwrap()),
+        ADMIN,
+        None,
+    )
+    .unwrap()
+    .1
 }
 
 /// The asset bytes of a finished bake.

@@ -151,41 +151,12 @@ impl<'g> CubemapAo<'g> {
 
     /// Occlusion at every point at `phase`, read back.
     pub fn evaluate(&self, points: &[glam::Vec3], phase: f32) -> Result<Vec<f32>, GpuError> {
-        let device = &self.gpu.device;
         let count = u32::try_from(points.len())
             .map_err(|_| GpuError::TooLarge(format!("{} points", points.len())))?;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("points"),
-            contents: if points.is_empty() {
-                &[0u8; 12]
-            } else {
-                bytemuck::cast_slice(points)
-            },
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let size = 4 * u64::from(count.max(1));
-        let out = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("occlusion"),
-            size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("occlusion readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        self.record(&mut encoder, &input, count, phase, &out)?;
-        encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, size);
-        let submission = self.gpu.queue.submit(Some(encoder.finish()));
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Pipeline(e.to_string()));
-        }
-        let bytes = self.gpu.read(&staging, submission)?;
-        Ok(bytemuck::cast_slice::<u8, f32>(&bytes)[..points.len()].to_vec())
+        self.gpu.evaluate_batch(
+            bytemuck::cast_slice(points),
+            points.len(),
+            |encoder, input, out| self.record(encoder, input, count, phase, out),
+        )
     }
 }

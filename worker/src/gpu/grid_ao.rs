@@ -179,41 +179,12 @@ impl<'g> GridAo<'g> {
         receivers: &[GridReceiver],
         poses: &[f32],
     ) -> Result<Vec<f32>, GpuError> {
-        let device = &self.gpu.device;
         let count = u32::try_from(receivers.len())
             .map_err(|_| GpuError::TooLarge(format!("{} receivers", receivers.len())))?;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("receivers"),
-            contents: if receivers.is_empty() {
-                &[0u8; 32]
-            } else {
-                bytemuck::cast_slice(receivers)
-            },
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let size = 4 * u64::from(count.max(1));
-        let out = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("occlusion"),
-            size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("occlusion readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        self.record(&mut encoder, poses, &input, count, &out)?;
-        encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, size);
-        let submission = self.gpu.queue.submit(Some(encoder.finish()));
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Pipeline(e.to_string()));
-        }
-        let bytes = self.gpu.read(&staging, submission)?;
-        Ok(bytemuck::cast_slice::<u8, f32>(&bytes)[..receivers.len()].to_vec())
+        self.gpu.evaluate_batch(
+            bytemuck::cast_slice(receivers),
+            receivers.len(),
+            |encoder, input, out| self.record(encoder, poses, input, count, out),
+        )
     }
 }

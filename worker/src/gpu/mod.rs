@@ -145,6 +145,51 @@ fn default_backends() -> wgpu::Backends {
 }
 
 impl Gpu {
+    /// A batch lookup: uploads `input` as a storage buffer, lets `record`
+    /// write `count` f32 into an output storage buffer, and reads them
+    /// back (what the lookups' `evaluate` does for tests and tools).
+    pub(crate) fn evaluate_batch(
+        &self,
+        input: &[u8],
+        count: usize,
+        record: impl FnOnce(
+            &mut wgpu::CommandEncoder,
+            &wgpu::Buffer,
+            &wgpu::Buffer,
+        ) -> Result<(), GpuError>,
+    ) -> Result<Vec<f32>, GpuError> {
+        use wgpu::util::DeviceExt as _;
+        let device = &self.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("lookup input"),
+            contents: if input.is_empty() { &[0u8; 32] } else { input },
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let size = 4 * count.max(1) as u64;
+        let buffer = |label, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as U;
+        let out = buffer("occlusion", U::STORAGE | U::COPY_SRC);
+        let staging = buffer("occlusion readback", U::MAP_READ | U::COPY_DST);
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        record(&mut encoder, &input, &out)?;
+        encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, size);
+        let submission = self.queue.submit(Some(encoder.finish()));
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline(e.to_string()));
+        }
+        let bytes = self.read(&staging, submission)?;
+        Ok(bytemuck::cast_slice::<u8, f32>(&bytes)[..count].to_vec())
+    }
+
     /// Waits for `submission` and copies a `MAP_READ` buffer out.
     pub(crate) fn read(
         &self,

@@ -246,6 +246,41 @@ fn mean_brightness(image: &Image) -> f64 {
     sum as f64 / (3 * image.rgba.len() / 4) as f64
 }
 
+/// The truth and model panels of one frame of `clip` at `time`, the model
+/// given as `subject.model`.
+fn truth_and_model(
+    subject: &Subject<'_>,
+    clip: &aobake_core::Clip,
+    time: f32,
+    r: &mut PreviewRenderer<'_>,
+) -> Vec<Image> {
+    let camera = subject.camera(Some(clip));
+    let ground = camera.ground();
+    let frames = subject.frames(Some(clip), &[time], &ground).unwrap();
+    let scene = RenderScene {
+        triangles: &subject.character.triangles,
+        model: subject.model,
+        camera,
+        ground: &ground,
+        size: (SIZE, SIZE),
+        heat_map: HEAT_MAP,
+    };
+    r.render(&scene, &frames, &[Panel::Truth, Panel::Model])
+        .unwrap()
+}
+
+/// Mean brightness of (truth, baked model, all-open model) from two
+/// renders of the same frame, after checking that their truth panels are
+/// the same ray-traced image.
+fn brightness(baked: &[Image], open: &[Image]) -> (f64, f64, f64) {
+    assert_eq!(baked[0], open[0], "the same ray-traced truth");
+    (
+        mean_brightness(&baked[0]),
+        mean_brightness(&baked[1]),
+        mean_brightness(&open[1]),
+    )
+}
+
 #[test]
 fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its_previews() {
     use aobake_core::{
@@ -298,29 +333,9 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
             model: PreviewModel::Cubemap(m, kroon),
             surface: p.held_out_surface(),
         };
-        let camera = subject.camera(Some(clip));
-        let ground = camera.ground();
-        let frames = subject.frames(Some(clip), &[0.5], &ground).unwrap();
-        let scene = RenderScene {
-            triangles: &inputs.character.triangles,
-            model: PreviewModel::Cubemap(m, kroon),
-            camera,
-            ground: &ground,
-            size: (SIZE, SIZE),
-            heat_map: HEAT_MAP,
-        };
-        r.render(&scene, &frames, &[Panel::Truth, Panel::Model])
-            .unwrap()
+        truth_and_model(&subject, clip, 0.5, r)
     };
-    let baked_panels = render(&model, &mut r);
-    let open_panels = render(&open, &mut r);
-    // The truth panels are the same ray-traced image either way.
-    assert_eq!(baked_panels[0], open_panels[0]);
-    let (truth, with, without) = (
-        mean_brightness(&baked_panels[0]),
-        mean_brightness(&baked_panels[1]),
-        mean_brightness(&open_panels[1]),
-    );
+    let (truth, with, without) = brightness(&render(&model, &mut r), &render(&open, &mut r));
     eprintln!("mean brightness: truth {truth:.2}, cubemap {with:.2}, open {without:.2}");
     assert!(with < without - 0.5, "the cubemap darkens the ground");
     assert!(
@@ -337,7 +352,7 @@ fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
         method::grid::{
             GridOptions,
             model::GridModel,
-            parts::{owners, parts},
+            parts::{owner_indices, parts},
         },
     };
     let path = concat!(
@@ -374,10 +389,7 @@ fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
         part.occlusion.fill(0);
     }
     let c = &inputs.character;
-    let owner: Vec<u32> = owners(&parts(c, p.grid.parts).unwrap(), c.vertex_count())
-        .into_iter()
-        .map(|o| o.map_or(u32::MAX, |k| k as u32))
-        .collect();
+    let owner = owner_indices(&parts(c, p.grid.parts).unwrap(), c.vertex_count());
     let surface = p
         .grid
         .truth(bake.grid_distance(&bake.grid_parts().unwrap()), 99);
@@ -388,28 +400,9 @@ fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
             model: PreviewModel::Grid(m, &owner),
             surface,
         };
-        let camera = subject.camera(Some(clip));
-        let ground = camera.ground();
-        let frames = subject.frames(Some(clip), &[0.4], &ground).unwrap();
-        let scene = RenderScene {
-            triangles: &c.triangles,
-            model: PreviewModel::Grid(m, &owner),
-            camera,
-            ground: &ground,
-            size: (SIZE, SIZE),
-            heat_map: HEAT_MAP,
-        };
-        r.render(&scene, &frames, &[Panel::Truth, Panel::Model])
-            .unwrap()
+        truth_and_model(&subject, clip, 0.4, r)
     };
-    let baked_panels = render(&model, &mut r);
-    let open_panels = render(&open, &mut r);
-    assert_eq!(baked_panels[0], open_panels[0], "the same ray-traced truth");
-    let (truth, with, without) = (
-        mean_brightness(&baked_panels[0]),
-        mean_brightness(&baked_panels[1]),
-        mean_brightness(&open_panels[1]),
-    );
+    let (truth, with, without) = brightness(&render(&model, &mut r), &render(&open, &mut r));
     eprintln!("mean brightness: truth {truth:.2}, grids {with:.2}, open {without:.2}");
     assert!(with < without - 0.2, "the grids darken the scene");
     assert!(

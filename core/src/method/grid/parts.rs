@@ -142,3 +142,15 @@ pub fn owners(parts: &[Part], vertices: usize) -> Vec<Option<usize>> {
     }
     owner
 }
+
+/// [`owners`] as a renderer takes them: each vertex's part index,
+/// [`NO_PART`] for none.
+pub fn owner_indices(parts: &[Part], vertices: usize) -> Vec<u32> {
+    owners(parts, vertices)
+        .into_iter()
+        .map(|o| o.map_or(NO_PART, |p| p as u32))
+        .collect()
+}
+
+/// The part index of a vertex of no part (the WGSL's `NO_PART`).
+pub const NO_PART: u32 = u32::MAX;

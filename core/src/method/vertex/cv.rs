@@ -34,15 +34,17 @@ impl RidgeChoice {
 /// Chooses among `candidates` by leaving groups of clips out: `groups` is
 /// each row of `ao`'s clip (`None`: a random pose, always trained on);
 /// the clips are dealt into up to [`CV_FOLDS`] groups, and for each group
-/// and candidate, `fit(candidate, training rows)` is scored by
-/// `predict(model, row)` on the group's rows. The candidate with the
-/// least squared error over all left-out rows wins (the first on a tie).
-/// `None` when the rows come from fewer than two clips.
+/// `fit(training rows)` gives one model per candidate (`None`: that
+/// candidate cannot be fitted), each scored by `predict(model, row)` on
+/// the group's rows. A candidate that changes only how a model runs can
+/// share one fit. The candidate with the least squared error over all
+/// left-out rows wins (the first on a tie). `None` when the rows come
+/// from fewer than two clips.
 pub fn choose_by_clips<M>(
     groups: &[Option<usize>],
     ao: &AoBlock,
     candidates: &[f64],
-    fit: impl Fn(f64, &[usize]) -> Option<M>,
+    fit: impl Fn(&[usize]) -> Vec<Option<M>>,
     predict: impl Fn(&M, usize) -> Vec<f32>,
 ) -> Option<RidgeChoice> {
     let mut clips: Vec<usize> = groups.iter().flatten().copied().collect();
@@ -63,13 +65,14 @@ pub fn choose_by_clips<M>(
             continue;
         }
         count += test.len() * ao.vertices;
-        for (k, &c) in candidates.iter().enumerate() {
-            let Some(model) = fit(c, &train) else {
-                sse[k] = f64::INFINITY;
+        let models = fit(&train);
+        for (k, e) in sse.iter_mut().enumerate() {
+            let Some(model) = models.get(k).and_then(Option::as_ref) else {
+                *e = f64::INFINITY;
                 continue;
             };
             for &r in &test {
-                sse[k] += predict(&model, r)
+                *e += predict(model, r)
                     .iter()
                     .zip(ao.row(r))
                     .map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2))
@@ -104,20 +107,13 @@ mod tests {
             values: vec![0.9, 0.2, 0.2, 0.4, 0.4],
         };
         let groups = [None, Some(0), Some(0), Some(1), Some(1)];
-        let c = choose_by_clips(
-            &groups,
-            &ao,
-            &[0.0, 0.3, 1.0],
-            |v, _| Some(v),
-            |&v, _| vec![v as f32],
-        )
-        .unwrap();
+        let candidates = [0.0, 0.3, 1.0];
+        let each = |_: &[usize]| candidates.iter().map(|&v| Some(v)).collect();
+        let c = choose_by_clips(&groups, &ao, &candidates, each, |&v, _| vec![v as f32]).unwrap();
         assert_eq!((c.ridge, c.folds), (0.3, 2));
         assert!((c.scores[1].1 - 0.1).abs() < 1e-6);
         // One clip: nothing to leave out.
         let one = [None, Some(0), Some(0), Some(0), Some(0)];
-        assert!(
-            choose_by_clips(&one, &ao, &[0.0], |v, _| Some(v), |&v, _| vec![v as f32]).is_none()
-        );
+        assert!(choose_by_clips(&one, &ao, &candidates, each, |&v, _| vec![v as f32]).is_none());
     }
 }

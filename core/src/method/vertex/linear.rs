@@ -89,16 +89,22 @@ pub fn choose_ridge(
         groups,
         ao,
         &RIDGE_CANDIDATES,
-        |ridge, train| {
+        |train| {
             let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
-            let o = LinearOptions {
-                ridge,
-                ridge_cv: false,
-                ..*options
-            };
-            VertexLinear::fit(&q, ranges, &ao.select(train.iter().copied()), &o, local)
-                .ok()
-                .map(|(m, _)| m)
+            let block = ao.select(train.iter().copied());
+            RIDGE_CANDIDATES
+                .iter()
+                .map(|&ridge| {
+                    let o = LinearOptions {
+                        ridge,
+                        ridge_cv: false,
+                        ..*options
+                    };
+                    VertexLinear::fit(&q, ranges, &block, &o, local)
+                        .ok()
+                        .map(|(m, _)| m)
+                })
+                .collect()
         },
         |model, r| model.evaluate(&poses[r]),
     )
@@ -221,29 +227,32 @@ impl VertexLinear {
             (f64::from(poses[r][k]) - mean_j[k]) * inv_std[k]
         });
         let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
-        let (mut t, solve) = ridge_lstsq(js.as_ref(), ac.as_ref(), options.ridge * p as f64);
-        if let Some(local) = local {
-            // One solve per distinct set of local parameters, over the
-            // vertices that share it.
-            let mut sets: std::collections::BTreeMap<&[usize], Vec<usize>> = Default::default();
-            for (i, params) in local.iter().enumerate().take(v) {
-                sets.entry(params.as_slice()).or_default().push(i);
-            }
-            t = Mat::zeros(n, v);
-            for (params, vertices) in sets {
-                if params.is_empty() {
-                    continue;
+        let lambda = options.ridge * p as f64;
+        let (t, solve) = match local {
+            None => ridge_lstsq(js.as_ref(), ac.as_ref(), lambda),
+            Some(local) => {
+                // The whole design's conditioning for the report (an SVD
+                // with no targets), then one solve per distinct set of
+                // local parameters over the vertices that share it.
+                let (_, solve) = ridge_lstsq(js.as_ref(), Mat::<f64>::zeros(p, 0).as_ref(), lambda);
+                let mut sets: std::collections::BTreeMap<&[usize], Vec<usize>> = Default::default();
+                for (i, params) in local.iter().enumerate().take(v) {
+                    sets.entry(params.as_slice()).or_default().push(i);
                 }
-                let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
-                let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
-                let (x, _) = ridge_lstsq(d.as_ref(), y.as_ref(), options.ridge * p as f64);
-                for (c, &i) in vertices.iter().enumerate() {
-                    for (row, &k) in params.iter().enumerate() {
-                        t[(k, i)] = x[(row, c)];
+                let mut t = Mat::zeros(n, v);
+                for (params, vertices) in sets.into_iter().filter(|(s, _)| !s.is_empty()) {
+                    let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
+                    let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
+                    let (x, _) = ridge_lstsq(d.as_ref(), y.as_ref(), lambda);
+                    for (c, &i) in vertices.iter().enumerate() {
+                        for (row, &k) in params.iter().enumerate() {
+                            t[(k, i)] = x[(row, c)];
+                        }
                     }
                 }
+                (t, solve)
             }
-        }
+        };
         let largest = (0..n)
             .flat_map(|k| (0..v).map(move |i| (k, i)))
             .map(|(k, i)| t[(k, i)].abs())

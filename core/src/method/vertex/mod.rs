@@ -253,50 +253,60 @@ pub fn fit(
         }
         Method::VertexClustered => {
             let h: Vec<Vec<f32>> = poses.iter().map(|p| handles.handles(skeleton, p)).collect();
+            let fit_on = |o: &ClusteredOptions, train: &[usize]| {
+                let hs: Vec<Vec<f32>> = train.iter().map(|&r| h[r].clone()).collect();
+                VertexClustered::fit(&hs, &ao.select(train.iter().copied()), o, seed)
+                    .ok()
+                    .map(|(m, _)| m)
+            };
+            let predict = |m: &VertexClustered, r: usize| m.evaluate(&h[r]);
             let choice = clustered
                 .ridge_cv
                 .then(|| {
-                    cv::choose_by_clips(
-                        groups,
-                        ao,
-                        &linear::RIDGE_CANDIDATES,
-                        |ridge, train| {
-                            let hs: Vec<Vec<f32>> = train.iter().map(|&r| h[r].clone()).collect();
-                            let o = ClusteredOptions {
-                                ridge,
-                                ridge_cv: false,
-                                ..*clustered
-                            };
-                            VertexClustered::fit(&hs, &ao.select(train.iter().copied()), &o, seed)
-                                .ok()
-                                .map(|(m, _)| m)
-                        },
-                        |model, r| model.evaluate(&h[r]),
-                    )
+                    let each_ridge = |train: &[usize]| {
+                        linear::RIDGE_CANDIDATES
+                            .iter()
+                            .map(|&ridge| {
+                                fit_on(
+                                    &ClusteredOptions {
+                                        ridge,
+                                        ..*clustered
+                                    },
+                                    train,
+                                )
+                            })
+                            .collect()
+                    };
+                    cv::choose_by_clips(groups, ao, &linear::RIDGE_CANDIDATES, each_ridge, predict)
                 })
                 .flatten();
             let mut chosen = ClusteredOptions {
                 ridge: choice.as_ref().map_or(clustered.ridge, |c| c.ridge),
                 ..*clustered
             };
+            // The clamp only changes how a fitted model runs: one fit per
+            // fold serves every candidate.
             let clamp = clustered
                 .clamp_cv
                 .then(|| {
+                    let each_clamp = |train: &[usize]| {
+                        let fitted = fit_on(&chosen, train);
+                        clustered::CLAMP_CANDIDATES
+                            .iter()
+                            .map(|&c| {
+                                fitted.clone().map(|m| VertexClustered {
+                                    clamp: c as f32,
+                                    ..m
+                                })
+                            })
+                            .collect()
+                    };
                     cv::choose_by_clips(
                         groups,
                         ao,
                         &clustered::CLAMP_CANDIDATES,
-                        |clamp, train| {
-                            let hs: Vec<Vec<f32>> = train.iter().map(|&r| h[r].clone()).collect();
-                            let o = ClusteredOptions {
-                                clamp: clamp as f32,
-                                ..chosen
-                            };
-                            VertexClustered::fit(&hs, &ao.select(train.iter().copied()), &o, seed)
-                                .ok()
-                                .map(|(m, _)| m)
-                        },
-                        |model, r| model.evaluate(&h[r]),
+                        each_clamp,
+                        predict,
                     )
                 })
                 .flatten();
