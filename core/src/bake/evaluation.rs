@@ -127,6 +127,7 @@ impl Plan<'_> {
             return Ok(None);
         }
         let sources = self.reference_sources();
+        let plain: std::collections::BTreeSet<usize> = self.baseline_rows().into_iter().collect();
         let skeleton = &self.character.skeleton;
         let mut folds = Vec::with_capacity(clips.len());
         for c in clips {
@@ -140,11 +141,7 @@ impl Plan<'_> {
                 &reference.select(keep.iter().copied()),
                 &groups,
             )?;
-            let frames: Vec<usize> = keep
-                .iter()
-                .copied()
-                .filter(|&i| sources[i].is_some())
-                .collect();
+            let frames: Vec<usize> = keep.iter().copied().filter(|i| plain.contains(i)).collect();
             let baseline = StaticAverage::fit(&reference.select(if frames.is_empty() {
                 keep.clone()
             } else {

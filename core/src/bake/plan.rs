@@ -4,6 +4,9 @@
 
 use std::ops::Range;
 
+use rand::SeedableRng as _;
+use rand_chacha::ChaCha8Rng;
+
 use crate::{
     Character, Clip,
     method::Family,
@@ -18,6 +21,9 @@ use super::{
     BakeError, BakeParams, ReferenceSource,
     params::{HELD_OUT_SEED, NOISE_POSES, bake_key},
 };
+
+/// Mixed into the seed of perturbed reference poses ("perturb!").
+const PERTURBED_SEED: u64 = 0x7065_7274_7572_6221;
 
 /// The pose spaces of a bake: the training and test clips, the joint-angle
 /// layout (ranges from the training clips) and the handles.
@@ -146,14 +152,47 @@ impl<'a> Plan<'a> {
             .collect()
     }
 
-    /// How many reference poses are random (they come first).
-    fn random_reference_count(&self) -> usize {
+    /// How many reference poses are random, clip frames and perturbed
+    /// clip frames, in that order.
+    fn reference_counts(&self) -> [usize; 3] {
         let n = self.params.poses;
         match self.params.reference {
-            ReferenceSource::Random => n,
-            ReferenceSource::Clips => 0,
-            ReferenceSource::Mixed => n / 2,
+            ReferenceSource::Random => [n, 0, 0],
+            ReferenceSource::Clips => [0, n, 0],
+            ReferenceSource::Mixed => [n / 2, n - n / 2, 0],
+            ReferenceSource::Perturbed => [0, n - n / 2, n / 2],
         }
+    }
+
+    /// Poses `range` of `count` perturbed training-clip frames: random
+    /// frames (another seed than the plain ones) with every joint
+    /// parameter moved at random (see [`JointAngles::perturb`]).
+    fn perturbed_poses(&self, count: usize, seed: u64, range: Range<usize>) -> Vec<Pose> {
+        let seed = seed ^ PERTURBED_SEED;
+        let frames = random_clip_frames(&self.train_clips, count, seed);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        // Another stream than the one that drew the frames.
+        rng.set_stream(1);
+        let skeleton = &self.character.skeleton;
+        let mut poses = Vec::new();
+        for (i, f) in frames.iter().enumerate() {
+            // Every pose's offsets are drawn, so a batch's poses are those
+            // of the whole set.
+            let mut q = self.joint_angles.params(
+                skeleton,
+                &Pose::sample(skeleton, &self.train_clips[f.clip], f.time),
+            );
+            self.joint_angles
+                .perturb(&mut q, self.params.perturbation, &mut rng);
+            if range.contains(&i) {
+                poses.push(
+                    self.joint_angles
+                        .pose(skeleton, &q)
+                        .expect("the parameters have the layout's length"),
+                );
+            }
+        }
+        poses
     }
 
     /// The reference poses, seeded: what `sample` jobs trace, in batches.
@@ -161,47 +200,53 @@ impl<'a> Plan<'a> {
         self.reference_poses_in(0..self.params.poses)
     }
 
-    /// Reference poses `range` (random poses first, then clip frames), built
-    /// alone: a `sample` job builds only its batch.
+    /// Reference poses `range` (random poses, then clip frames, then
+    /// perturbed clip frames), built alone: a `sample` job builds only its
+    /// batch.
     pub fn reference_poses_in(&self, range: Range<usize>) -> Vec<Pose> {
-        let (n, seed) = (self.params.poses, self.params.seed);
-        let random = self.random_reference_count();
-        let end = range.end.min(n);
+        let seed = self.params.seed;
+        let counts = self.reference_counts();
+        let end = range.end.min(self.params.poses);
         let mut poses = Vec::new();
-        if range.start < random {
-            poses.extend(self.random_poses(random, seed, range.start..end.min(random)));
-        }
-        if end > random {
-            let from = range.start.max(random) - random;
-            poses.extend(self.clip_poses(n - random, seed, from..end - random));
+        let mut first = 0;
+        for (kind, &count) in counts.iter().enumerate() {
+            let (from, to) = (range.start.max(first), end.min(first + count));
+            if from < to {
+                let part = from - first..to - first;
+                poses.extend(match kind {
+                    0 => self.random_poses(count, seed, part),
+                    1 => self.clip_poses(count, seed, part),
+                    _ => self.perturbed_poses(count, seed, part),
+                });
+            }
+            first += count;
         }
         poses
     }
 
     /// Where each reference pose comes from, in order: `None` for a random
-    /// pose, the clip's index (into [`Plan::clips`]) for a clip frame.
+    /// pose, the clip's index (into [`Plan::clips`]) for a clip frame,
+    /// perturbed or not.
     pub fn reference_sources(&self) -> Vec<Option<usize>> {
-        let (n, seed) = (self.params.poses, self.params.seed);
-        let random = self.random_reference_count();
-        let frames = random_clip_frames(&self.train_clips, n - random, seed);
+        let seed = self.params.seed;
+        let [random, frames, perturbed] = self.reference_counts();
+        let plain = random_clip_frames(&self.train_clips, frames, seed);
+        let moved = random_clip_frames(&self.train_clips, perturbed, seed ^ PERTURBED_SEED);
         std::iter::repeat_n(None, random)
-            .chain(frames.iter().map(|f| Some(self.train[f.clip])))
+            .chain(plain.iter().chain(&moved).map(|f| Some(self.train[f.clip])))
             .collect()
     }
 
-    /// The reference rows that are clip frames, or every row when none
-    /// is: what the static average is fitted to (the mean over training
-    /// clip frames, the strongest static baseline; the mean over random
-    /// poses is weaker).
+    /// The reference rows that are plain clip frames, or every row when
+    /// none is: what the static average is fitted to (the mean over
+    /// training clip frames, the strongest static baseline; the mean over
+    /// random or perturbed poses is weaker).
     pub fn baseline_rows(&self) -> Vec<usize> {
-        let sources = self.reference_sources();
-        let frames: Vec<usize> = (0..sources.len())
-            .filter(|&i| sources[i].is_some())
-            .collect();
-        if frames.is_empty() {
-            (0..sources.len()).collect()
+        let [random, frames, _] = self.reference_counts();
+        if frames == 0 {
+            (0..self.params.poses).collect()
         } else {
-            frames
+            (random..random + frames).collect()
         }
     }
 

@@ -325,6 +325,20 @@ impl JointAngles {
         Ok(pose)
     }
 
+    /// Moves every parameter of `params` by a uniform offset of up to
+    /// ±`fraction` of its range, clamped to the range.
+    pub fn perturb(&self, params: &mut [f32], fraction: f32, rng: &mut ChaCha8Rng) {
+        for (v, r) in params.iter_mut().zip(&self.ranges) {
+            let reach = fraction * (r.max - r.min);
+            // Drawn for every parameter, so that a pose's offsets do not
+            // depend on which ranges are empty.
+            let u: f32 = rng.random_range(-1.0..=1.0);
+            if reach > 0.0 && reach.is_finite() {
+                *v = (*v + u * reach).clamp(r.min, r.max);
+            }
+        }
+    }
+
     /// `count` parameter vectors, each parameter uniform in its range
     /// (Kontkanen & Aila's random reference poses). Same seed, same poses.
     pub fn sample_uniform(&self, count: usize, seed: u64) -> Vec<Vec<f32>> {

@@ -38,9 +38,11 @@ pub(super) struct ParamArgs {
     #[arg(long)]
     poses: Option<usize>,
     /// Where reference poses come from: random joint angles in the clips'
-    /// ranges, random clip frames, or half each. Default: mixed for
-    /// vertex-linear, clips otherwise.
-    #[arg(long, value_parser = ["random", "clips", "mixed"])]
+    /// ranges, random clip frames, half each (mixed), or half clip frames
+    /// and half clip frames with every joint moved at random (perturbed,
+    /// by up to `--param perturbation=F` of each range). Default: mixed
+    /// for vertex-linear, clips otherwise.
+    #[arg(long, value_parser = ["random", "clips", "mixed", "perturbed"])]
     reference: Option<String>,
     /// Rays per vertex and pose.
     #[arg(long)]

@@ -14,6 +14,7 @@ use super::{
 use crate::{
     asset::{AssetError, Container, Data, Section},
     method::Method,
+    method::vertex::linear::Features,
     pose_space::{Handles, JointAngles},
 };
 
@@ -31,6 +32,15 @@ pub enum Layout {
         joint_angles: JointAngles,
         /// Whether coefficients are sparse.
         sparse: bool,
+        /// What the model is linear in (absent in assets written before
+        /// there was a choice: rotation vectors).
+        #[serde(default)]
+        features: Features,
+        /// With a projection (`PROJ`: `components × features` f32,
+        /// row-major): the principal directions the model is linear in;
+        /// 0: none, the model is linear in the features.
+        #[serde(default)]
+        components: usize,
     },
     /// `COEF`: the mean block then one block per pose cluster;
     /// `CENT`: `m × H` centres; `AXES`: `m × n × H` projections; `VMAP`:
@@ -102,10 +112,15 @@ impl Model {
                     *b"NORM",
                     Data::F32(m.mean.iter().chain(&m.inv_std).copied().collect()),
                 ));
+                if let Some(d) = &m.projection {
+                    sections.push(section(*b"PROJ", Data::F32(d.clone())));
+                }
                 (
                     Layout::VertexLinear {
                         joint_angles: joint_angles.clone(),
                         sparse,
+                        features: m.features,
+                        components: m.projection.as_ref().map_or(0, |_| m.parameters),
                     },
                     sections,
                 )
@@ -168,8 +183,27 @@ impl Model {
             Layout::VertexLinear {
                 joint_angles,
                 sparse,
+                features,
+                components,
             } => {
-                let rows = joint_angles.len() + 1;
+                let rotations = joint_angles.joints.len();
+                let n = features.count(joint_angles.len(), rotations);
+                if *components > n {
+                    return Err(bad("more principal directions than features"));
+                }
+                let projection = if *components > 0 {
+                    let Data::F32(d) = container.section(b"PROJ")? else {
+                        return Err(bad("PROJ must be f32"));
+                    };
+                    if d.len() != components * n || d.iter().any(|x| !x.is_finite()) {
+                        return Err(bad("PROJ does not match the header or is not finite"));
+                    }
+                    Some(d.clone())
+                } else {
+                    None
+                };
+                let parameters = if *components > 0 { *components } else { n };
+                let rows = parameters + 1;
                 let coefficients = if *sparse {
                     let Data::U32(offsets) = container.section(b"CSRO")? else {
                         return Err(bad("CSRO must be u32"));
@@ -198,7 +232,6 @@ impl Model {
                 } else {
                     Coefficients::Dense(read_form(v, rows, coef)?)
                 };
-                let n = joint_angles.len();
                 let Data::F32(norm) = container.section(b"NORM")? else {
                     return Err(bad("NORM must be f32"));
                 };
@@ -208,7 +241,10 @@ impl Model {
                 Self::VertexLinear(
                     joint_angles.clone(),
                     VertexLinear {
-                        parameters: n,
+                        parameters,
+                        features: *features,
+                        rotations,
+                        projection,
                         mean: norm[..n].to_vec(),
                         inv_std: norm[n..].to_vec(),
                         ranges: joint_angles.ranges.clone(),

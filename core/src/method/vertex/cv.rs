@@ -31,32 +31,42 @@ impl RidgeChoice {
     }
 }
 
-/// Chooses among `candidates` by leaving groups of clips out: `groups` is
-/// each row of `ao`'s clip (`None`: a random pose, always trained on);
-/// the clips are dealt into up to [`CV_FOLDS`] groups, and for each group
-/// `fit(training rows)` gives one model per candidate (`None`: that
-/// candidate cannot be fitted), each scored by `predict(model, row)` on
-/// the group's rows. A candidate that changes only how a model runs can
-/// share one fit. The candidate with the least squared error over all
-/// left-out rows wins (the first on a tie). `None` when the rows come
-/// from fewer than two clips.
-pub fn choose_by_clips<M>(
+/// Squared errors over left-out clips, per candidate and vertex, from
+/// [`sse_by_clips`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClipErrors {
+    /// `sse[candidate][vertex]`: summed over every left-out row.
+    pub sse: Vec<Vec<f64>>,
+    /// Left-out rows summed over.
+    pub rows: usize,
+    /// Groups of clips left out in turn.
+    pub folds: usize,
+}
+
+/// Leaves groups of clips out: `groups` is each row of `ao`'s clip
+/// (`None`: a random pose, always trained on); the clips are dealt into up
+/// to [`CV_FOLDS`] groups, and for each group `fit(training rows)` gives
+/// one model per candidate (`None`: that candidate cannot be fitted, its
+/// errors are infinite), each scored by `predict(model, row)` on the
+/// group's rows. A candidate that changes only how a model runs can share
+/// one fit. `None` when the rows come from fewer than two clips.
+pub fn sse_by_clips<M>(
     groups: &[Option<usize>],
     ao: &AoBlock,
-    candidates: &[f64],
+    candidates: usize,
     fit: impl Fn(&[usize]) -> Vec<Option<M>>,
     predict: impl Fn(&M, usize) -> Vec<f32>,
-) -> Option<RidgeChoice> {
+) -> Option<ClipErrors> {
     let mut clips: Vec<usize> = groups.iter().flatten().copied().collect();
     clips.sort_unstable();
     clips.dedup();
-    if clips.len() < 2 || candidates.is_empty() {
+    if clips.len() < 2 || candidates == 0 {
         return None;
     }
     let folds = clips.len().min(CV_FOLDS);
     let fold_of = |c: usize| clips.binary_search(&c).map_or(0, |i| i % folds);
-    let mut sse = vec![0.0f64; candidates.len()];
-    let mut count = 0usize;
+    let mut sse = vec![vec![0.0f64; ao.vertices]; candidates];
+    let mut rows = 0usize;
     for f in 0..folds {
         let held = |g: &Option<usize>| g.is_some_and(|c| fold_of(c) == f);
         let train: Vec<usize> = (0..groups.len()).filter(|&r| !held(&groups[r])).collect();
@@ -64,33 +74,46 @@ pub fn choose_by_clips<M>(
         if train.is_empty() || test.is_empty() {
             continue;
         }
-        count += test.len() * ao.vertices;
+        rows += test.len();
         let models = fit(&train);
         for (k, e) in sse.iter_mut().enumerate() {
             let Some(model) = models.get(k).and_then(Option::as_ref) else {
-                *e = f64::INFINITY;
+                e.iter_mut().for_each(|x| *x = f64::INFINITY);
                 continue;
             };
             for &r in &test {
-                *e += predict(model, r)
-                    .iter()
-                    .zip(ao.row(r))
-                    .map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2))
-                    .sum::<f64>();
+                for ((x, &a), &b) in e.iter_mut().zip(&predict(model, r)).zip(ao.row(r)) {
+                    *x += (f64::from(a) - f64::from(b)).powi(2);
+                }
             }
         }
     }
-    let n = count.max(1) as f64;
+    Some(ClipErrors { sse, rows, folds })
+}
+
+/// Chooses among `candidates` by leaving groups of clips out (see
+/// [`sse_by_clips`]): the candidate with the least squared error over
+/// all left-out rows and vertices wins (the first on a tie). `None` when
+/// the rows come from fewer than two clips.
+pub fn choose_by_clips<M>(
+    groups: &[Option<usize>],
+    ao: &AoBlock,
+    candidates: &[f64],
+    fit: impl Fn(&[usize]) -> Vec<Option<M>>,
+    predict: impl Fn(&M, usize) -> Vec<f32>,
+) -> Option<RidgeChoice> {
+    let errors = sse_by_clips(groups, ao, candidates.len(), fit, predict)?;
+    let n = (errors.rows * ao.vertices).max(1) as f64;
     let scores: Vec<(f64, f64)> = candidates
         .iter()
-        .zip(&sse)
-        .map(|(&c, &e)| (c, (e / n).sqrt()))
+        .zip(&errors.sse)
+        .map(|(&c, e)| (c, (e.iter().sum::<f64>() / n).sqrt()))
         .collect();
     let best = scores.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1))?.0;
     Some(RidgeChoice {
         ridge: best,
         scores,
-        folds,
+        folds: errors.folds,
     })
 }
 

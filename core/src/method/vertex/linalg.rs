@@ -18,7 +18,7 @@ pub struct SolveStats {
 /// Singular values below this fraction of the largest are treated as zero
 /// (rank deficiency: a parameter that never moves, two that always move
 /// together).
-const RANK_TOLERANCE: f64 = 1e-9;
+pub(crate) const RANK_TOLERANCE: f64 = 1e-9;
 
 /// `X = argmin ‖D X − Y‖² + λ‖X‖²` for a `p × k` design `D` and `p × v`
 /// targets `Y`, by the thin SVD `D = U S Vᵀ`: `X = V diag(s / (s² + λ)) Uᵀ

@@ -44,6 +44,101 @@ pub struct LinearOptions {
     /// zero and the model is stored sparse; `cv` lets the cross-validation
     /// over clips choose between that and every parameter (`off`).
     pub locality: Locality,
+    /// Let the cross-validation over clips choose per vertex: its ridge
+    /// weight, whether it is local (with `locality = cv`), or no pose
+    /// dependence at all (the static average of the training clip frames),
+    /// each vertex by its own error over the left-out clips.
+    pub per_vertex: bool,
+    /// What the model is linear in: each rotated joint's rotation vector
+    /// (Kontkanen & Aila), or the 9 entries of its rotation matrix
+    /// (smooth where rotation vectors wrap, and with the cosines an angle's
+    /// even, symmetric effects).
+    pub features: Features,
+    /// With matrix features and a global model: how many principal
+    /// directions of the standardised features the model is linear in, as
+    /// a multiple of the number of joint angles (1: as many as rotation
+    /// vectors have, so run-time cost and size stay Kontkanen & Aila's);
+    /// 0 keeps every feature.
+    pub components: f32,
+}
+
+/// What vertex-linear is linear in, per rotated joint (translations are
+/// always their 3 offsets).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Features {
+    /// Its rotation vector r (3 numbers).
+    #[default]
+    RotationVector,
+    /// Its rotation matrix R(r) − I, column-major (9 numbers).
+    Matrix,
+}
+
+/// The joint angles a vertex-linear model reads: their ranges (rotation
+/// vectors first, 3 numbers per rotated joint, then translations).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Angles<'a> {
+    /// The range of every angle.
+    pub ranges: &'a [Range],
+    /// Rotated joints: the first `3 × rotations` angles.
+    pub rotations: usize,
+}
+
+impl Features {
+    /// Features per rotated joint.
+    fn per_rotation(self) -> usize {
+        match self {
+            Self::RotationVector => 3,
+            Self::Matrix => 9,
+        }
+    }
+
+    /// How many features `angles` angles with `rotations` rotated joints
+    /// give.
+    pub fn count(self, angles: usize, rotations: usize) -> usize {
+        angles - 3 * rotations + self.per_rotation() * rotations
+    }
+
+    /// The features of a joint-angle vector.
+    pub fn expand(self, angles: &[f32], rotations: usize) -> Vec<f32> {
+        match self {
+            Self::RotationVector => angles.to_vec(),
+            Self::Matrix => {
+                let (rot, rest) = angles.split_at(3 * rotations);
+                let mut out = Vec::with_capacity(self.count(angles.len(), rotations));
+                for r in rot.chunks_exact(3) {
+                    let m = glam::Mat3::from_quat(glam::Quat::from_scaled_axis(
+                        glam::Vec3::from_slice(r),
+                    )) - glam::Mat3::IDENTITY;
+                    out.extend(m.to_cols_array());
+                }
+                out.extend_from_slice(rest);
+                out
+            }
+        }
+    }
+
+    /// The features that angles `params` (sorted) drive, sorted.
+    pub fn expand_indices(self, params: &[usize], rotations: usize) -> Vec<usize> {
+        let k = self.per_rotation();
+        let mut out: Vec<usize> = params
+            .iter()
+            .flat_map(|&p| {
+                if p < 3 * rotations {
+                    let j = p / 3;
+                    match self {
+                        Self::RotationVector => p..p + 1,
+                        Self::Matrix => k * j..k * j + k,
+                    }
+                } else {
+                    let f = p - 3 * rotations + k * rotations;
+                    f..f + 1
+                }
+            })
+            .collect();
+        out.dedup();
+        out
+    }
 }
 
 /// Whether vertex-linear's vertices see every parameter or only their
@@ -67,6 +162,9 @@ impl Default for LinearOptions {
             threshold: 0.0,
             ridge_cv: true,
             locality: Locality::Cv,
+            per_vertex: false,
+            features: Features::Matrix,
+            components: 1.5,
         }
     }
 }
@@ -79,7 +177,7 @@ pub const RIDGE_CANDIDATES: [f64; 6] = [1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0];
 /// fewer than two clips.
 pub fn choose_ridge(
     poses: &[Vec<f32>],
-    ranges: &[Range],
+    angles: Angles<'_>,
     ao: &AoBlock,
     groups: &[Option<usize>],
     options: &LinearOptions,
@@ -100,7 +198,7 @@ pub fn choose_ridge(
                         ridge_cv: false,
                         ..*options
                     };
-                    VertexLinear::fit(&q, ranges, &block, &o, local)
+                    VertexLinear::fit(&q, angles, &block, &o, local)
                         .ok()
                         .map(|(m, _)| m)
                 })
@@ -108,6 +206,98 @@ pub fn choose_ridge(
         },
         |model, r| model.evaluate(&poses[r]),
     )
+}
+
+/// Chooses each vertex's [`Column`] by leaving groups of clips out (see
+/// [`super::cv::sse_by_clips`]): every ridge of [`RIDGE_CANDIDATES`] in
+/// every scope of `scopes` (`local` gives the local sets), and the
+/// constant `baseline(rows)`,
+/// the static average of the training rows `rows`. `None` when the rows
+/// come from fewer than two clips.
+pub fn choose_columns(
+    poses: &[Vec<f32>],
+    angles: Angles<'_>,
+    options: &LinearOptions,
+    ao: &AoBlock,
+    groups: &[Option<usize>],
+    scopes: &[Scope],
+    local: Option<&[Vec<usize>]>,
+    baseline: impl Fn(&[usize]) -> Vec<f32>,
+) -> Option<(Vec<Column>, super::cv::ClipErrors)> {
+    let mut candidates: Vec<Column> = Vec::new();
+    for &scope in scopes {
+        if scope == Scope::Constant || (scope == Scope::Local && local.is_none()) {
+            continue;
+        }
+        candidates.extend(
+            RIDGE_CANDIDATES
+                .iter()
+                .map(|&ridge| Column { ridge, scope }),
+        );
+    }
+    candidates.push(Column {
+        ridge: 0.0,
+        scope: Scope::Constant,
+    });
+    enum Fitted {
+        Model(VertexLinear),
+        Constant(Vec<f32>),
+    }
+    let errors = super::cv::sse_by_clips(
+        groups,
+        ao,
+        candidates.len(),
+        |train| {
+            let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
+            let block = ao.select(train.iter().copied());
+            candidates
+                .iter()
+                .map(|c| match c.scope {
+                    Scope::Constant => Some(Fitted::Constant(baseline(train))),
+                    scope => {
+                        let o = LinearOptions {
+                            ridge: c.ridge,
+                            ridge_cv: false,
+                            per_vertex: false,
+                            ..*options
+                        };
+                        let sets = (scope == Scope::Local).then_some(local).flatten();
+                        VertexLinear::fit(&q, angles, &block, &o, sets)
+                            .ok()
+                            .map(|(m, _)| Fitted::Model(m))
+                    }
+                })
+                .collect()
+        },
+        |fitted, r| match fitted {
+            Fitted::Model(m) => m.evaluate(&poses[r]),
+            Fitted::Constant(c) => c.clone(),
+        },
+    )?;
+    let columns = (0..ao.vertices)
+        .map(|i| {
+            let best = (0..candidates.len())
+                .min_by(|&a, &b| errors.sse[a][i].total_cmp(&errors.sse[b][i]))
+                .unwrap_or(0);
+            candidates[best]
+        })
+        .collect();
+    Some((columns, errors))
+}
+
+/// How many vertices took each way of `columns`, in the order first seen.
+pub fn count_columns(columns: &[Column]) -> Vec<ColumnCount> {
+    let mut counts: Vec<ColumnCount> = Vec::new();
+    for &column in columns {
+        match counts.iter_mut().find(|c| c.column == column) {
+            Some(c) => c.vertices += 1,
+            None => counts.push(ColumnCount {
+                column,
+                vertices: 1,
+            }),
+        }
+    }
+    counts
 }
 
 /// The stored coefficients: dense `(N+1) × V`, or sparse per vertex.
@@ -131,18 +321,28 @@ pub enum Coefficients {
 /// AO.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VertexLinear {
-    /// Joint-angle parameters (N).
+    /// Features (N) the model is linear in.
     pub parameters: usize,
-    /// μ_k: mean of each angle over the reference poses.
+    /// What they are.
+    pub features: Features,
+    /// Rotated joints among the angles.
+    pub rotations: usize,
+    /// With matrix features: the leading principal directions of the
+    /// standardised features, row-major `parameters × features`; the
+    /// model is linear in the projections onto them.
+    pub projection: Option<Vec<f32>>,
+    /// μ_k: mean of each feature over the reference poses.
     pub mean: Vec<f32>,
-    /// 1/σ_k, or 0 for an angle that never moved (its column is left out).
+    /// 1/σ_k, or 0 for a feature that never moved (its column is left
+    /// out).
     pub inv_std: Vec<f32>,
     /// The valid range of each angle (from the clips, with the margin):
     /// angles are clamped to it at run time, so a pose outside what the
     /// model was fitted on does not extrapolate a linear function without
     /// bound.
     pub ranges: Vec<Range>,
-    /// `T` in f16: N+1 rows (the standardised angles, then the constant).
+    /// `T` in f16: N+1 rows (the standardised features, then the
+    /// constant).
     pub coefficients: Coefficients,
 }
 
@@ -169,6 +369,39 @@ pub struct LinearFitStats {
     /// Whether the model is local (each vertex on its joints' parameters).
     #[serde(default)]
     pub local: bool,
+    /// With `per_vertex`: how many vertices took each choice.
+    #[serde(default)]
+    pub per_vertex: Option<Vec<ColumnCount>>,
+}
+
+/// How one vertex is fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Column {
+    /// Its ridge weight.
+    pub ridge: f64,
+    /// Which parameters it sees.
+    pub scope: Scope,
+}
+
+/// Which parameters a vertex sees.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Scope {
+    /// Every parameter.
+    Global,
+    /// Its joints' neighbourhood (`JointAngles::local_parameters`).
+    Local,
+    /// None: a constant (the static average of the training clip frames).
+    Constant,
+}
+
+/// How many vertices were fitted one way.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ColumnCount {
+    /// The way.
+    pub column: Column,
+    /// Vertices fitted so.
+    pub vertices: usize,
 }
 
 /// A fit whose coefficients f16 cannot hold.
@@ -193,16 +426,64 @@ impl VertexLinear {
     /// [`ridge_lstsq`]).
     pub fn fit(
         poses: &[Vec<f32>],
-        ranges: &[Range],
+        angles: Angles<'_>,
         ao: &AoBlock,
         options: &LinearOptions,
         local: Option<&[Vec<usize>]>,
     ) -> Result<(Self, LinearFitStats), FitOverflow> {
+        let column = Column {
+            ridge: options.ridge,
+            scope: if local.is_some() {
+                Scope::Local
+            } else {
+                Scope::Global
+            },
+        };
+        Self::fit_columns(
+            poses,
+            angles,
+            ao,
+            &vec![column; ao.vertices],
+            local,
+            options,
+            None,
+        )
+    }
+
+    /// [`VertexLinear::fit`] with every vertex fitted its own way
+    /// (`columns`, one per vertex): its ridge weight and which parameters
+    /// it sees. A [`Scope::Constant`] vertex gets `constants[vertex]`
+    /// (default: its mean over the poses) and no coefficients.
+    /// `options.ridge` is only reported.
+    pub fn fit_columns(
+        poses: &[Vec<f32>],
+        angles: Angles<'_>,
+        ao: &AoBlock,
+        columns: &[Column],
+        local: Option<&[Vec<usize>]>,
+        options: &LinearOptions,
+        constants: Option<&[f32]>,
+    ) -> Result<(Self, LinearFitStats), FitOverflow> {
         let p = poses.len();
         assert_eq!(p, ao.poses(), "one pose per AO row");
         assert!(p > 0, "at least one reference pose");
-        let n = poses[0].len();
-        assert_eq!(ranges.len(), n, "one range per parameter");
+        assert!(
+            poses.iter().all(|q| q.len() == angles.ranges.len()),
+            "one range per angle"
+        );
+        let (features, rotations) = (options.features, angles.rotations);
+        let raw = poses;
+        let poses: Vec<Vec<f32>> = poses
+            .iter()
+            .map(|q| features.expand(q, rotations))
+            .collect();
+        let local: Option<Vec<Vec<usize>>> = local.map(|sets| {
+            sets.iter()
+                .map(|s| features.expand_indices(s, rotations))
+                .collect()
+        });
+        let local = local.as_deref();
+        let n = features.count(angles.ranges.len(), rotations);
         let v = ao.vertices;
         let mean_j: Vec<f64> = (0..n)
             .map(|k| poses.iter().map(|q| f64::from(q[k])).sum::<f64>() / p as f64)
@@ -226,63 +507,96 @@ impl VertexLinear {
         let js = Mat::from_fn(p, n, |r, k| {
             (f64::from(poses[r][k]) - mean_j[k]) * inv_std[k]
         });
-        let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
-        let lambda = options.ridge * p as f64;
-        let (t, solve) = match local {
-            None => ridge_lstsq(js.as_ref(), ac.as_ref(), lambda),
-            Some(local) => {
-                // The whole design's conditioning for the report (an SVD
-                // with no targets), then one solve per distinct set of
-                // local parameters over the vertices that share it.
-                let (_, solve) = ridge_lstsq(js.as_ref(), Mat::<f64>::zeros(p, 0).as_ref(), lambda);
-                let mut sets: std::collections::BTreeMap<&[usize], Vec<usize>> = Default::default();
-                for (i, params) in local.iter().enumerate().take(v) {
-                    sets.entry(params.as_slice()).or_default().push(i);
-                }
-                let mut t = Mat::zeros(n, v);
-                for (params, vertices) in sets.into_iter().filter(|(s, _)| !s.is_empty()) {
-                    let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
-                    let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
-                    let (x, _) = ridge_lstsq(d.as_ref(), y.as_ref(), lambda);
-                    for (c, &i) in vertices.iter().enumerate() {
-                        for (row, &k) in params.iter().enumerate() {
-                            t[(k, i)] = x[(row, c)];
-                        }
-                    }
-                }
-                (t, solve)
-            }
+        // Matrix features of a global model: projected onto their leading
+        // principal directions (see `LinearOptions::components`).
+        let components = (options.features == Features::Matrix
+            && rotations > 0
+            && options.components > 0.0
+            && columns.iter().all(|c| c.scope != Scope::Local))
+        .then(|| {
+            let k = (options.components * angles.ranges.len() as f32).round() as usize;
+            principal_directions(js.as_ref(), k.max(1))
+        });
+        let js = match &components {
+            Some(d) => &js * d,
+            None => js,
         };
-        let largest = (0..n)
+        let local = if components.is_some() { None } else { local };
+        let m = js.ncols();
+        let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
+        assert_eq!(columns.len(), v, "one column per vertex");
+        // The whole design's conditioning for the report (an SVD with no
+        // targets).
+        let (_, solve) = ridge_lstsq(
+            js.as_ref(),
+            Mat::<f64>::zeros(p, 0).as_ref(),
+            options.ridge * p as f64,
+        );
+        // One solve per ridge weight and set of parameters, over the
+        // vertices that share them.
+        let all: Vec<usize> = (0..m).collect();
+        let mut sets: std::collections::BTreeMap<(u64, &[usize]), Vec<usize>> = Default::default();
+        for (i, c) in columns.iter().enumerate() {
+            let params = match c.scope {
+                Scope::Constant => continue,
+                Scope::Global => all.as_slice(),
+                Scope::Local => local.map_or(all.as_slice(), |l| l[i].as_slice()),
+            };
+            if !params.is_empty() {
+                sets.entry((c.ridge.to_bits(), params)).or_default().push(i);
+            }
+        }
+        let mut t = Mat::zeros(m, v);
+        for ((ridge, params), vertices) in sets {
+            let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
+            let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
+            let (x, _) = ridge_lstsq(d.as_ref(), y.as_ref(), f64::from_bits(ridge) * p as f64);
+            for (c, &i) in vertices.iter().enumerate() {
+                for (row, &k) in params.iter().enumerate() {
+                    t[(k, i)] = x[(row, c)];
+                }
+            }
+        }
+        let mut mean_a = mean_a;
+        if let Some(constants) = constants {
+            for (i, c) in columns.iter().enumerate() {
+                if c.scope == Scope::Constant {
+                    mean_a[i] = f64::from(constants[i]);
+                }
+            }
+        }
+        let largest = (0..m)
             .flat_map(|k| (0..v).map(move |i| (k, i)))
             .map(|(k, i)| t[(k, i)].abs())
             .fold(0.0f64, f64::max);
         if largest.is_nan() || largest > F16_MAX {
             return Err(FitOverflow {
                 largest,
-                parameters: n,
+                parameters: m,
             });
         }
-        let mut coefficients = Vec::with_capacity((n + 1) * v);
-        for k in 0..n {
+        let mut coefficients = Vec::with_capacity((m + 1) * v);
+        for k in 0..m {
             coefficients.extend((0..v).map(|i| f16::from_f64(t[(k, i)])));
         }
         coefficients.extend(mean_a.iter().map(|&c| f16::from_f64(c)));
         let block = Block {
-            rows: n + 1,
+            rows: m + 1,
             columns: v,
             coefficients,
             map: None,
         };
-        let threshold = match (local.is_some(), options.threshold > 0.0) {
+        let uniform = columns.iter().all(|c| c.scope == Scope::Global);
+        let threshold = match (!uniform, options.threshold > 0.0) {
             (_, true) => options.threshold,
-            // Locality: the coefficients outside a vertex's set are zero.
+            // Locality or constant vertices: the coefficients outside a
+            // vertex's set are zero.
             (true, false) => f32::MIN_POSITIVE,
             (false, false) => 0.0,
         };
         let (stored, kept_fraction) = if threshold > 0.0 {
-            let sparse = SparseForm::from_dense(&block, v, threshold, &[n]);
-            let kept = sparse.values.len() as f64 / ((n + 1) * v).max(1) as f64;
+            let sparse = SparseForm::from_dense(&block, v, threshold, &[m]);
+            let kept = sparse.values.len() as f64 / ((m + 1) * v).max(1) as f64;
             (Coefficients::Sparse(sparse), kept)
         } else {
             (
@@ -294,17 +608,26 @@ impl VertexLinear {
             )
         };
         let model = Self {
-            parameters: n,
+            parameters: m,
+            projection: components.map(|d| {
+                // Row-major k × n: row c is direction c.
+                (0..m)
+                    .flat_map(|c| (0..n).map(move |k| (k, c)))
+                    .map(|(k, c)| d[(k, c)] as f32)
+                    .collect()
+            }),
+            features,
+            rotations,
             mean: mean_j.iter().map(|&x| x as f32).collect(),
             inv_std: inv_std.iter().map(|&x| x as f32).collect(),
-            ranges: ranges.to_vec(),
+            ranges: angles.ranges.to_vec(),
             coefficients: stored,
         };
         let (mut exact, mut rounded) = (0.0f64, 0.0f64);
-        for (r, q) in poses.iter().enumerate() {
+        for (r, q) in raw.iter().enumerate() {
             let predicted = model.evaluate(q);
             for (i, (&truth, &pred)) in ao.row(r).iter().zip(&predicted).enumerate() {
-                let f = mean_a[i] + (0..n).map(|k| js[(r, k)] * t[(k, i)]).sum::<f64>();
+                let f = mean_a[i] + (0..m).map(|k| js[(r, k)] * t[(k, i)]).sum::<f64>();
                 exact += (f - f64::from(truth)).powi(2);
                 rounded += (f64::from(pred) - f64::from(truth)).powi(2);
             }
@@ -318,21 +641,35 @@ impl VertexLinear {
             kept_fraction,
             ridge: options.ridge,
             ridge_cv: None,
-            local: local.is_some(),
+            local: columns.iter().any(|c| c.scope == Scope::Local),
+            per_vertex: None,
         };
         Ok((model, stats))
     }
 
-    /// The weights of a pose: its joint angles clamped to their ranges and
-    /// standardised, and a 1.
+    /// The weights of a pose: its joint angles clamped to their ranges,
+    /// turned into features and standardised, and a 1.
     pub fn weights(&self, angles: &[f32]) -> Vec<f32> {
-        assert_eq!(angles.len(), self.parameters, "one number per parameter");
-        let mut w: Vec<f32> = angles
+        assert_eq!(angles.len(), self.ranges.len(), "one number per angle");
+        let clamped: Vec<f32> = angles
             .iter()
             .zip(&self.ranges)
-            .zip(self.mean.iter().zip(&self.inv_std))
-            .map(|((&x, r), (&m, &s))| (x.clamp(r.min, r.max) - m) * s)
+            .map(|(&x, r)| x.clamp(r.min, r.max))
             .collect();
+        let standard: Vec<f32> = self
+            .features
+            .expand(&clamped, self.rotations)
+            .iter()
+            .zip(self.mean.iter().zip(&self.inv_std))
+            .map(|(&x, (&m, &s))| (x - m) * s)
+            .collect();
+        let mut w = match &self.projection {
+            Some(d) => d
+                .chunks_exact(standard.len())
+                .map(|row| row.iter().zip(&standard).map(|(a, b)| a * b).sum())
+                .collect(),
+            None => standard,
+        };
         w.push(1.0);
         w
     }
@@ -356,12 +693,30 @@ impl VertexLinear {
 
     /// Coefficient bytes and the angles' means and scales.
     pub fn bytes(&self) -> usize {
-        8 * self.parameters
+        8 * self.mean.len()
+            + 4 * self.projection.as_ref().map_or(0, Vec::len)
             + match &self.coefficients {
                 Coefficients::Dense(f) => f.bytes(),
                 Coefficients::Sparse(s) => s.bytes(),
             }
     }
+}
+
+/// The first `k` (at most) right singular vectors of `d` with non-zero
+/// singular values, as columns.
+fn principal_directions(d: faer::MatRef<'_, f64>, k: usize) -> Mat<f64> {
+    if d.nrows() == 0 || d.ncols() == 0 {
+        return Mat::zeros(d.ncols(), 0);
+    }
+    let svd = d.thin_svd().expect("SVD of a finite matrix converges");
+    let s = svd.S().column_vector();
+    let s_max = s.iter().copied().fold(0.0f64, f64::max);
+    let rank = s
+        .iter()
+        .take_while(|&&x| x > super::linalg::RANK_TOLERANCE * s_max && x > 0.0)
+        .count();
+    let k = k.min(rank);
+    Mat::from_fn(d.ncols(), k, |r, c| svd.V()[(r, c)])
 }
 
 #[cfg(test)]
@@ -370,14 +725,17 @@ mod tests {
     use rand::{RngExt as _, SeedableRng as _};
     use rand_chacha::ChaCha8Rng;
 
-    fn wide() -> Vec<Range> {
-        vec![
-            Range {
-                min: -2.0,
-                max: 2.0
-            };
-            3
-        ]
+    const WIDE: [Range; 3] = [Range {
+        min: -2.0,
+        max: 2.0,
+    }; 3];
+
+    /// Three translations (no rotated joints), each in [-2, 2].
+    fn wide() -> Angles<'static> {
+        Angles {
+            ranges: &WIDE,
+            rotations: 0,
+        }
     }
 
     /// AO that is exactly linear in 3 parameters, plus a vertex that
@@ -407,9 +765,10 @@ mod tests {
         let (q, ao) = linear_data(40);
         let exact = LinearOptions {
             ridge: 0.0,
+            features: Features::RotationVector,
             ..LinearOptions::default()
         };
-        let (model, stats) = VertexLinear::fit(&q, &wide(), &ao, &exact, None).unwrap();
+        let (model, stats) = VertexLinear::fit(&q, wide(), &ao, &exact, None).unwrap();
         assert_eq!(stats.solve.rank, 3);
         assert!(stats.training_rmse < 1e-6, "{stats:?}");
         assert!(
@@ -437,7 +796,7 @@ mod tests {
             threshold: 0.01,
             ..LinearOptions::default()
         };
-        let (model, stats) = VertexLinear::fit(&q, &wide(), &ao, &options, None).unwrap();
+        let (model, stats) = VertexLinear::fit(&q, wide(), &ao, &options, None).unwrap();
         // 3 of the 9 angle coefficients are non-zero, plus 3 constants.
         let Coefficients::Sparse(s) = &model.coefficients else {
             panic!("sparse expected")
@@ -447,7 +806,7 @@ mod tests {
         assert!(stats.stored_training_rmse < 1e-3);
         let (ridged, rs) = VertexLinear::fit(
             &q,
-            &wide(),
+            wide(),
             &ao,
             &LinearOptions {
                 ridge: 1.0,
@@ -459,5 +818,31 @@ mod tests {
         assert!(rs.training_rmse > 1e-3, "ridge trades fit for smaller T");
         let slope = ridged.evaluate(&[1.0, 0.0, 0.0])[0] - ridged.evaluate(&[0.0, 0.0, 0.0])[0];
         assert!(slope > 0.0 && slope < 0.1, "{slope}");
+    }
+
+    #[test]
+    fn matrix_features_are_the_rotation_matrix_and_follow_a_whole_turn() {
+        // One joint turned by θ about x, then one translation (3 angles).
+        let f = |theta: f32| Features::Matrix.expand(&[theta, 0.0, 0.0, 0.5, 0.0, -1.0], 1);
+        assert_eq!(Features::Matrix.count(6, 1), 12);
+        let a = f(0.7);
+        assert_eq!(a.len(), 12);
+        // Column-major R − I: R[1][1] − 1 = cos θ − 1, R[1][2] = sin θ.
+        assert!((a[4] - (0.7f32.cos() - 1.0)).abs() < 1e-6, "{a:?}");
+        assert!((a[5] - 0.7f32.sin()).abs() < 1e-6, "{a:?}");
+        assert_eq!(&a[9..], &[0.5, 0.0, -1.0]);
+        // Rotation vectors wrap at π; the matrix is continuous through it.
+        let (below, above) = (f(3.1), f(3.1 - std::f32::consts::TAU));
+        assert!(below.iter().zip(&above).all(|(x, y)| (x - y).abs() < 1e-5));
+        // Angle 4 (x of the translation) drives feature 9; angle 1 (the
+        // joint) drives the joint's 9.
+        assert_eq!(
+            Features::Matrix.expand_indices(&[1, 4], 1),
+            vec![0, 1, 2, 3, 4, 5, 6, 7, 8, 10]
+        );
+        assert_eq!(
+            Features::RotationVector.expand_indices(&[1, 4], 1),
+            vec![1, 4]
+        );
     }
 }

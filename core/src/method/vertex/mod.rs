@@ -29,8 +29,9 @@ pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
 pub use form::{Block, LinearForm, SparseForm};
 pub use linalg::SolveStats;
 pub use linear::{
-    Coefficients, DEFAULT_RIDGE, FitOverflow, LinearFitStats, LinearOptions, Locality,
-    RIDGE_CANDIDATES, VertexLinear, choose_ridge,
+    Angles, Coefficients, Column, ColumnCount, DEFAULT_RIDGE, Features, FitOverflow,
+    LinearFitStats, LinearOptions, Locality, RIDGE_CANDIDATES, Scope, VertexLinear, choose_columns,
+    choose_ridge, count_columns,
 };
 
 use serde::{Deserialize, Serialize};
@@ -44,7 +45,7 @@ use crate::{
 
 /// Version of the fitting algorithms, part of the bake key: bump it when a
 /// change to fitting changes the coefficients a bake produces.
-pub const ALGORITHM_VERSION: u32 = 2;
+pub const ALGORITHM_VERSION: u32 = 3;
 
 /// A fitted model and the pose features it reads.
 #[derive(Debug, Clone, PartialEq)]
@@ -221,7 +222,20 @@ pub fn fit(
                 .collect();
             let sets = (linear.locality != Locality::Off)
                 .then(|| joint_angles.local_parameters(character));
-            let ranges = &joint_angles.ranges;
+            let ranges = linear::Angles {
+                ranges: &joint_angles.ranges,
+                rotations: joint_angles.joints.len(),
+            };
+            if linear.per_vertex
+                && let Some(fitted) =
+                    fit_linear_per_vertex(&q, ranges, ao, groups, linear, sets.as_deref())
+            {
+                let (m, stats) = fitted.map_err(|e| e.to_string())?;
+                return Ok((
+                    Model::VertexLinear(joint_angles.clone(), m),
+                    FitStats::VertexLinear(stats),
+                ));
+            }
             let cv = |local: Option<&[Vec<usize>]>| {
                 linear
                     .ridge_cv
@@ -243,8 +257,8 @@ pub fn fit(
                 ridge: choice.as_ref().map_or(linear.ridge, |c| c.ridge),
                 ..*linear
             };
-            let (m, mut stats) = VertexLinear::fit(&q, &joint_angles.ranges, ao, &chosen, local)
-                .map_err(|e| e.to_string())?;
+            let (m, mut stats) =
+                VertexLinear::fit(&q, ranges, ao, &chosen, local).map_err(|e| e.to_string())?;
             stats.ridge_cv = choice;
             (
                 Model::VertexLinear(joint_angles.clone(), m),
@@ -326,4 +340,45 @@ pub fn fit(
             return Err(format!("{method} is not a per-vertex method"));
         }
     })
+}
+
+/// vertex-linear with every vertex's ridge, scope and pose dependence
+/// chosen by cross-validation over clips ([`linear::choose_columns`]);
+/// `None` when the rows come from fewer than two clips. The constant
+/// vertices get the mean over the rows drawn from clips (every row when
+/// none is): the static average a report compares with.
+fn fit_linear_per_vertex(
+    q: &[Vec<f32>],
+    ranges: linear::Angles<'_>,
+    ao: &AoBlock,
+    groups: &[Option<usize>],
+    options: &LinearOptions,
+    sets: Option<&[Vec<usize>]>,
+) -> Option<Result<(VertexLinear, linear::LinearFitStats), linear::FitOverflow>> {
+    let baseline = |rows: &[usize]| {
+        let frames: Vec<usize> = rows
+            .iter()
+            .copied()
+            .filter(|&r| groups[r].is_some())
+            .collect();
+        let rows = if frames.is_empty() { rows } else { &frames };
+        StaticAverage::fit(&ao.select(rows.iter().copied())).evaluate()
+    };
+    let scopes: &[Scope] = match options.locality {
+        Locality::Off => &[Scope::Global],
+        Locality::On => &[Scope::Local],
+        Locality::Cv => &[Scope::Global, Scope::Local],
+    };
+    let (columns, _) =
+        linear::choose_columns(q, ranges, options, ao, groups, scopes, sets, baseline)?;
+    let all: Vec<usize> = (0..groups.len()).collect();
+    let constants = baseline(&all);
+    Some(
+        VertexLinear::fit_columns(q, ranges, ao, &columns, sets, options, Some(&constants)).map(
+            |(m, mut stats)| {
+                stats.per_vertex = Some(linear::count_columns(&columns));
+                (m, stats)
+            },
+        ),
+    )
 }
