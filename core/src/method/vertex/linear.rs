@@ -351,7 +351,7 @@ pub struct VertexLinear {
 pub struct LinearFitStats {
     /// The solve of the standardised joint-angle matrix.
     pub solve: SolveStats,
-    /// Angles that never moved over the reference poses (left out).
+    /// Features that never moved over the reference poses (left out).
     pub constant_parameters: usize,
     /// RMSE over the training poses of the f64 fit, before f16 rounding
     /// and sparsification.
