@@ -46,7 +46,7 @@ pub(super) struct Args {
 
 /// The model an asset holds.
 enum Baked {
-    Vertex(Model),
+    Vertex(Box<Model>),
     Cubemap(CubemapModel),
     /// The grids and each vertex's part.
     Grid(GridModel, Vec<u32>),
@@ -104,7 +104,7 @@ impl Loaded {
                     header.character
                 );
             }
-            (Baked::Vertex(model), params)
+            (Baked::Vertex(Box::new(model)), params)
         };
         Ok(Self {
             model,

@@ -214,6 +214,7 @@ pub fn choose_ridge(
 /// constant `baseline(rows)`,
 /// the static average of the training rows `rows`. `None` when the rows
 /// come from fewer than two clips.
+#[allow(clippy::too_many_arguments)]
 pub fn choose_columns(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
