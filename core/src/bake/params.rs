@@ -99,15 +99,16 @@ impl BakeParams {
             // rotation vectors did (Fox's unseen clips: +2.6 dB over the
             // static average with 256, +3.2 with 512).
             poses: match method {
-                Method::VertexLinear => 512,
+                Method::VertexLinear | Method::VertexClustered => 512,
                 _ => 256,
             },
             // Random joint angles alone combine every joint's extremes and
             // fit clip poses poorly (Fox: +0.5 dB over the baseline on
             // clip frames against +9 dB with half clip frames); clip frames
             // alone leave correlated angles that random poses decorrelate.
+            // vertex-clustered's linear base is fitted to them too.
             reference: match method {
-                Method::VertexLinear => ReferenceSource::Mixed,
+                Method::VertexLinear | Method::VertexClustered => ReferenceSource::Mixed,
                 _ => ReferenceSource::Clips,
             },
             perturbation: 0.25,

@@ -34,14 +34,15 @@ pub(super) struct BakeRequestArgs {
 #[derive(Debug, Clone, Default, clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub(super) struct ParamArgs {
-    /// Reference poses to fit to.
+    /// Reference poses to fit to. Default: 512 for the vertex methods,
+    /// 256 for the static average.
     #[arg(long)]
     poses: Option<usize>,
     /// Where reference poses come from: random joint angles in the clips'
     /// ranges, random clip frames, half each (mixed), or half clip frames
     /// and half clip frames with every joint moved at random (perturbed,
     /// by up to `--param perturbation=F` of each range). Default: mixed
-    /// for vertex-linear, clips otherwise.
+    /// for vertex-linear and vertex-clustered, clips otherwise.
     #[arg(long, value_parser = ["random", "clips", "mixed", "perturbed"])]
     reference: Option<String>,
     /// Rays per vertex and pose.

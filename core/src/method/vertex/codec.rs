@@ -8,8 +8,8 @@ use half::f16;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    ALGORITHM_VERSION, Block, Centering, Coefficients, LinearForm, Model, PoseCluster, SparseForm,
-    StaticAverage, VertexClustered, VertexLinear, form,
+    ALGORITHM_VERSION, Block, Centering, Coefficients, LinearBase, LinearForm, Model, PoseCluster,
+    SparseForm, StaticAverage, VertexClustered, VertexLinear, form,
 };
 use crate::{
     asset::{AssetError, Container, Data, Section},
@@ -58,7 +58,23 @@ pub enum Layout {
         clamp: f32,
         /// Columns of each pose cluster's block (V when unmapped).
         columns: Vec<usize>,
+        /// A vertex-linear base (`BNRM`, `BPRJ` as vertex-linear's `NORM`
+        /// and `PROJ`): block 0 of `COEF` is then its coefficients, a row
+        /// per weight, instead of the mean.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        base: Option<BaseLayout>,
     },
+}
+
+/// vertex-clustered's linear base in the header.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BaseLayout {
+    /// The joint angles it reads.
+    pub joint_angles: JointAngles,
+    /// Its features.
+    pub features: Features,
+    /// Its principal directions (0: none).
+    pub components: usize,
 }
 
 /// The asset's JSON header (DESIGN §7).
@@ -108,13 +124,7 @@ impl Model {
                         ],
                     ),
                 };
-                sections.push(section(
-                    *b"NORM",
-                    Data::F32(m.mean.iter().chain(&m.inv_std).copied().collect()),
-                ));
-                if let Some(d) = &m.projection {
-                    sections.push(section(*b"PROJ", Data::F32(d.clone())));
-                }
+                sections.extend(linear_weight_sections(m, LINEAR_TAGS));
                 (
                     Layout::VertexLinear {
                         joint_angles: joint_angles.clone(),
@@ -135,6 +145,9 @@ impl Model {
                     *b"AXES",
                     Data::F32(m.clusters.iter().flat_map(|c| c.axes.clone()).collect()),
                 ));
+                if let Some(b) = &m.base {
+                    sections.extend(linear_weight_sections(&b.weights, BASE_TAGS));
+                }
                 (
                     Layout::VertexClustered {
                         handles: handles.clone(),
@@ -143,6 +156,15 @@ impl Model {
                         centering: m.centering,
                         clamp: m.clamp,
                         columns: m.form.blocks[1..].iter().map(|b| b.columns).collect(),
+                        base: m.base.as_ref().map(|b| BaseLayout {
+                            joint_angles: b.joint_angles.clone(),
+                            features: b.weights.features,
+                            components: b
+                                .weights
+                                .projection
+                                .as_ref()
+                                .map_or(0, |_| b.weights.parameters),
+                        }),
                     },
                     sections,
                 )
@@ -186,23 +208,14 @@ impl Model {
                 features,
                 components,
             } => {
-                let rotations = joint_angles.joints.len();
-                let n = features.count(joint_angles.len(), rotations);
-                if *components > n {
-                    return Err(bad("more principal directions than features"));
-                }
-                let projection = if *components > 0 {
-                    let Data::F32(d) = container.section(b"PROJ")? else {
-                        return Err(bad("PROJ must be f32"));
-                    };
-                    if d.len() != components * n || d.iter().any(|x| !x.is_finite()) {
-                        return Err(bad("PROJ does not match the header or is not finite"));
-                    }
-                    Some(d.clone())
-                } else {
-                    None
-                };
-                let parameters = if *components > 0 { *components } else { n };
+                let weights = read_linear_weights(
+                    container,
+                    joint_angles,
+                    *features,
+                    *components,
+                    LINEAR_TAGS,
+                )?;
+                let parameters = weights.parameters;
                 let rows = parameters + 1;
                 let coefficients = if *sparse {
                     let Data::U32(offsets) = container.section(b"CSRO")? else {
@@ -232,23 +245,11 @@ impl Model {
                 } else {
                     Coefficients::Dense(read_form(v, rows, coef)?)
                 };
-                let Data::F32(norm) = container.section(b"NORM")? else {
-                    return Err(bad("NORM must be f32"));
-                };
-                if norm.len() != 2 * n || norm.iter().any(|x| !x.is_finite()) {
-                    return Err(bad("NORM does not match the header or is not finite"));
-                }
                 Self::VertexLinear(
                     joint_angles.clone(),
                     VertexLinear {
-                        parameters,
-                        features: *features,
-                        rotations,
-                        projection,
-                        mean: norm[..n].to_vec(),
-                        inv_std: norm[n..].to_vec(),
-                        ranges: joint_angles.ranges.clone(),
                         coefficients,
+                        ..weights
                     },
                 )
             }
@@ -259,10 +260,25 @@ impl Model {
                 centering,
                 clamp,
                 columns,
+                base,
             } => {
                 let (m, n, h) = (columns.len(), *dimensions, handles.len());
                 let rows = n + usize::from(*centering == Centering::Cluster);
-                let form = read_clustered_form(container, v, rows, columns, coef)?;
+                let base = match base {
+                    Some(b) => Some(Box::new(LinearBase {
+                        joint_angles: b.joint_angles.clone(),
+                        weights: read_linear_weights(
+                            container,
+                            &b.joint_angles,
+                            b.features,
+                            b.components,
+                            BASE_TAGS,
+                        )?,
+                    })),
+                    None => None,
+                };
+                let base_rows = base.as_ref().map_or(1, |b| b.weights.parameters + 1);
+                let form = read_clustered_form(container, v, base_rows, rows, columns, coef)?;
                 let Data::F32(centers) = container.section(b"CENT")? else {
                     return Err(bad("CENT must be f32"));
                 };
@@ -294,12 +310,85 @@ impl Model {
                         clamp: *clamp,
                         clusters,
                         form,
+                        base,
                     },
                 )
             }
         };
         Ok((model, header))
     }
+}
+
+/// The section tags of a vertex-linear model's weights: means and scales,
+/// principal directions.
+const LINEAR_TAGS: [[u8; 4]; 2] = [*b"NORM", *b"PROJ"];
+/// The same for vertex-clustered's linear base.
+const BASE_TAGS: [[u8; 4]; 2] = [*b"BNRM", *b"BPRJ"];
+
+/// Reads what turns joint angles into a vertex-linear model's weights
+/// (`tags`: the means-and-scales and projection sections), checked against
+/// the header; the coefficients are left empty.
+fn read_linear_weights(
+    container: &Container,
+    joint_angles: &JointAngles,
+    features: Features,
+    components: usize,
+    tags: [[u8; 4]; 2],
+) -> Result<VertexLinear, AssetError> {
+    let rotations = joint_angles.joints.len();
+    let n = features.count(joint_angles.len(), rotations);
+    if components > n {
+        return Err(bad("more principal directions than features"));
+    }
+    let name = |t: [u8; 4]| String::from_utf8_lossy(&t).into_owned();
+    let projection = if components > 0 {
+        let Data::F32(d) = container.section(&tags[1])? else {
+            return Err(bad(&format!("{} must be f32", name(tags[1]))));
+        };
+        if d.len() != components * n || d.iter().any(|x| !x.is_finite()) {
+            return Err(bad(&format!(
+                "{} does not match the header or is not finite",
+                name(tags[1])
+            )));
+        }
+        Some(d.clone())
+    } else {
+        None
+    };
+    let Data::F32(norm) = container.section(&tags[0])? else {
+        return Err(bad(&format!("{} must be f32", name(tags[0]))));
+    };
+    if norm.len() != 2 * n || norm.iter().any(|x| !x.is_finite()) {
+        return Err(bad(&format!(
+            "{} does not match the header or is not finite",
+            name(tags[0])
+        )));
+    }
+    Ok(VertexLinear {
+        parameters: if components > 0 { components } else { n },
+        features,
+        rotations,
+        projection,
+        mean: norm[..n].to_vec(),
+        inv_std: norm[n..].to_vec(),
+        ranges: joint_angles.ranges.clone(),
+        coefficients: Coefficients::Dense(LinearForm {
+            vertices: 0,
+            blocks: Vec::new(),
+        }),
+    })
+}
+
+/// The sections of a vertex-linear model's weights.
+fn linear_weight_sections(m: &VertexLinear, tags: [[u8; 4]; 2]) -> Vec<Section> {
+    let mut sections = vec![section(
+        tags[0],
+        Data::F32(m.mean.iter().chain(&m.inv_std).copied().collect()),
+    )];
+    if let Some(d) = &m.projection {
+        sections.push(section(tags[1], Data::F32(d.clone())));
+    }
+    sections
 }
 
 /// The parts of the header that come from the bake rather than the model.
@@ -325,6 +414,24 @@ const MAX_JOINTS: usize = 1 << 12;
 const MAX_POSE_CLUSTERS: usize = 1024;
 const MAX_DIMENSIONS: usize = 256;
 
+/// Checks a joint-angle layout's lengths and ranges.
+fn validate_joint_angles(ja: &JointAngles) -> Result<(), AssetError> {
+    let count = ja.joints.len() + ja.translations.len();
+    if count > MAX_JOINTS || ja.names.len() != 3 * count || ja.ranges.len() != 3 * count {
+        return Err(bad(
+            "the joint-angle layout's names and ranges do not match its joints",
+        ));
+    }
+    if ja
+        .ranges
+        .iter()
+        .any(|r| !(r.min.is_finite() && r.max.is_finite() && r.min <= r.max))
+    {
+        return Err(bad("a joint-angle range is not finite or is reversed"));
+    }
+    Ok(())
+}
+
 /// Checks that the header's layout is self-consistent and within bounds
 /// before any section is interpreted with it, so that a file that passes
 /// its checksums but was written by someone hostile is refused with a
@@ -336,30 +443,19 @@ fn validate_layout(header: &AssetHeader) -> Result<(), AssetError> {
     }
     match &header.layout {
         Layout::StaticAverage => {}
-        Layout::VertexLinear { joint_angles, .. } => {
-            let ja = joint_angles;
-            let count = ja.joints.len() + ja.translations.len();
-            if count > MAX_JOINTS || ja.names.len() != 3 * count || ja.ranges.len() != 3 * count {
-                return Err(bad(
-                    "the joint-angle layout's names and ranges do not match its joints",
-                ));
-            }
-            if ja
-                .ranges
-                .iter()
-                .any(|r| !(r.min.is_finite() && r.max.is_finite() && r.min <= r.max))
-            {
-                return Err(bad("a joint-angle range is not finite or is reversed"));
-            }
-        }
+        Layout::VertexLinear { joint_angles, .. } => validate_joint_angles(joint_angles)?,
         Layout::VertexClustered {
             handles,
             dimensions,
             alpha,
             clamp,
             columns,
+            base,
             ..
         } => {
+            if let Some(b) = base {
+                validate_joint_angles(&b.joint_angles)?;
+            }
             if handles.joints.is_empty()
                 || handles.joints.len() > MAX_JOINTS
                 || handles.offsets.len() != handles.joints.len()
@@ -453,6 +549,7 @@ fn read_form(v: usize, rows: usize, coef: Vec<f16>) -> Result<LinearForm, AssetE
 fn read_clustered_form(
     container: &Container,
     v: usize,
+    base_rows: usize,
     rows: usize,
     columns: &[usize],
     coef: Vec<f16>,
@@ -463,7 +560,7 @@ fn read_clustered_form(
         ));
     }
     // Bounded by validate_layout: v ≤ 2^26, rows ≤ 257, ≤ 1024 clusters.
-    let want = v + columns.iter().map(|c| c * rows).sum::<usize>();
+    let want = v * base_rows + columns.iter().map(|c| c * rows).sum::<usize>();
     if coef.len() != want {
         return Err(bad("COEF length does not match the header"));
     }
@@ -481,12 +578,12 @@ fn read_clustered_form(
         return Err(bad("VMAP length does not match the header"));
     }
     let mut blocks = vec![Block {
-        rows: 1,
+        rows: base_rows,
         columns: v,
-        coefficients: coef[..v].to_vec(),
+        coefficients: coef[..v * base_rows].to_vec(),
         map: None,
     }];
-    let (mut at, mut map_at) = (v, 0);
+    let (mut at, mut map_at) = (v * base_rows, 0);
     for &c in columns {
         let map = if c < v {
             let m = maps[map_at..map_at + v].to_vec();

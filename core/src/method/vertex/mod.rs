@@ -22,8 +22,8 @@ mod linear;
 
 pub use average::StaticAverage;
 pub use clustered::{
-    CLAMP_CANDIDATES, Centering, ClusteredFitStats, ClusteredOptions, MIN_BLEND_WEIGHT,
-    PoseCluster, VertexClustered,
+    Base, CLAMP_CANDIDATES, Centering, ClusteredFitStats, ClusteredOptions, LinearBase,
+    MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
 };
 pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
 pub use form::{Block, LinearForm, SparseForm};
@@ -109,8 +109,13 @@ impl Model {
                 .iter()
                 .chain(&layout.translations)
                 .all(|&n| n < nodes),
-            Self::VertexClustered(handles, _) => {
-                handles.root.is_none_or(|r| r < nodes) && handles.joints.iter().all(|&n| n < nodes)
+            Self::VertexClustered(handles, m) => {
+                handles.root.is_none_or(|r| r < nodes)
+                    && handles.joints.iter().all(|&n| n < nodes)
+                    && m.base.as_ref().is_none_or(|b| {
+                        let ja = &b.joint_angles;
+                        ja.joints.iter().chain(&ja.translations).all(|&n| n < nodes)
+                    })
             }
         };
         if ok {
@@ -149,7 +154,14 @@ impl Model {
         match self {
             Self::StaticAverage(_) => vec![1.0],
             Self::VertexLinear(layout, m) => m.weights(&layout.params(skeleton, pose)),
-            Self::VertexClustered(handles, m) => m.weights(&handles.handles(skeleton, pose)),
+            Self::VertexClustered(handles, m) => {
+                let angles = m
+                    .base
+                    .as_ref()
+                    .map(|b| b.joint_angles.params(skeleton, pose))
+                    .unwrap_or_default();
+                m.weights_with(&handles.handles(skeleton, pose), &angles)
+            }
         }
     }
 
@@ -267,6 +279,50 @@ pub fn fit(
         }
         Method::VertexClustered => {
             let h: Vec<Vec<f32>> = poses.iter().map(|p| handles.handles(skeleton, p)).collect();
+            // A linear base is fitted first (global and dense, so that its
+            // block can stand in the clustered form); the clusters then
+            // model what it leaves.
+            let base = match clustered.base {
+                clustered::Base::Mean => None,
+                clustered::Base::Linear => {
+                    let dense = LinearOptions {
+                        locality: Locality::Off,
+                        per_vertex: false,
+                        threshold: 0.0,
+                        ..*linear
+                    };
+                    let fitted = fit(
+                        Method::VertexLinear,
+                        (&dense, clustered),
+                        seed,
+                        character,
+                        spaces,
+                        poses,
+                        ao,
+                        groups,
+                    )?;
+                    let (Model::VertexLinear(_, m), FitStats::VertexLinear(stats)) = fitted else {
+                        unreachable!("vertex-linear fits a vertex-linear model")
+                    };
+                    Some((m, stats))
+                }
+            };
+            let leftover;
+            let ao = match &base {
+                Some((m, _)) => {
+                    let mut values = Vec::with_capacity(ao.values.len());
+                    for (r, pose) in poses.iter().enumerate() {
+                        let predicted = m.evaluate(&joint_angles.params(skeleton, pose));
+                        values.extend(ao.row(r).iter().zip(&predicted).map(|(a, b)| a - b));
+                    }
+                    leftover = AoBlock {
+                        vertices: ao.vertices,
+                        values,
+                    };
+                    &leftover
+                }
+                None => ao,
+            };
             let fit_on = |o: &ClusteredOptions, train: &[usize]| {
                 let hs: Vec<Vec<f32>> = train.iter().map(|&r| h[r].clone()).collect();
                 VertexClustered::fit(&hs, &ao.select(train.iter().copied()), o, seed)
@@ -331,6 +387,13 @@ pub fn fit(
                 VertexClustered::fit(&h, ao, &chosen, seed).map_err(|e| e.to_string())?;
             stats.ridge_cv = choice;
             stats.clamp_cv = clamp;
+            let m = match base {
+                Some((linear_model, linear_stats)) => {
+                    stats.base = Some(linear_stats);
+                    m.with_base(joint_angles.clone(), linear_model)
+                }
+                None => m,
+            };
             (
                 Model::VertexClustered(handles.clone(), m),
                 FitStats::VertexClustered(stats),
