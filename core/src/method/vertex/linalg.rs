@@ -31,43 +31,70 @@ pub(crate) fn ridge_lstsq(
     y: MatRef<'_, f64>,
     lambda: f64,
 ) -> (Mat<f64>, SolveStats) {
-    let k = d.ncols();
-    if d.nrows() == 0 || k == 0 {
-        return (
-            Mat::zeros(k, y.ncols()),
-            SolveStats {
-                rank: 0,
-                columns: k,
-                condition: 1.0,
-            },
-        );
-    }
-    let svd = d.thin_svd().expect("SVD of a finite matrix converges");
-    let s: Vec<f64> = svd.S().column_vector().iter().copied().collect();
-    let s_max = s.first().copied().unwrap_or(0.0);
-    // Singular values come sorted, largest first: the kept ones are a
-    // prefix.
-    let rank = s
-        .iter()
-        .take_while(|&&x| x > RANK_TOLERANCE * s_max && x > 0.0)
-        .count();
-    let uty = svd.U().transpose() * y;
-    let filtered = Mat::from_fn(s.len(), y.ncols(), |i, c| {
-        if i < rank {
-            uty[(i, c)] * s[i] / (s[i] * s[i] + lambda)
-        } else {
-            0.0
+    let solver = RidgeSolver::new(d);
+    (solver.solve(y, lambda), solver.stats)
+}
+
+/// The SVD of a design matrix, kept to solve [`ridge_lstsq`] for many
+/// targets and ridge weights without factorising it again.
+pub(crate) struct RidgeSolver {
+    u: Mat<f64>,
+    s: Vec<f64>,
+    v: Mat<f64>,
+    /// The design's rank and conditioning.
+    pub(crate) stats: SolveStats,
+}
+
+impl RidgeSolver {
+    /// Factorises `d` (`p × k`).
+    pub(crate) fn new(d: MatRef<'_, f64>) -> Self {
+        let k = d.ncols();
+        if d.nrows() == 0 || k == 0 {
+            return Self {
+                u: Mat::zeros(d.nrows(), 0),
+                s: Vec::new(),
+                v: Mat::zeros(k, 0),
+                stats: SolveStats {
+                    rank: 0,
+                    columns: k,
+                    condition: 1.0,
+                },
+            };
         }
-    });
-    let x = svd.V() * &filtered;
-    (
-        x,
-        SolveStats {
-            rank,
-            columns: k,
-            condition: if rank == 0 { 1.0 } else { s_max / s[rank - 1] },
-        },
-    )
+        let svd = d.thin_svd().expect("SVD of a finite matrix converges");
+        let s: Vec<f64> = svd.S().column_vector().iter().copied().collect();
+        let s_max = s.first().copied().unwrap_or(0.0);
+        // Singular values come sorted, largest first: the kept ones are a
+        // prefix.
+        let rank = s
+            .iter()
+            .take_while(|&&x| x > RANK_TOLERANCE * s_max && x > 0.0)
+            .count();
+        Self {
+            u: svd.U().to_owned(),
+            v: svd.V().to_owned(),
+            stats: SolveStats {
+                rank,
+                columns: k,
+                condition: if rank == 0 { 1.0 } else { s_max / s[rank - 1] },
+            },
+            s,
+        }
+    }
+
+    /// `X = V diag(s / (s² + λ)) Uᵀ Y` over the kept singular values.
+    pub(crate) fn solve(&self, y: MatRef<'_, f64>, lambda: f64) -> Mat<f64> {
+        let rank = self.stats.rank;
+        let uty = self.u.transpose() * y;
+        let filtered = Mat::from_fn(self.s.len(), y.ncols(), |i, c| {
+            if i < rank {
+                uty[(i, c)] * self.s[i] / (self.s[i] * self.s[i] + lambda)
+            } else {
+                0.0
+            }
+        });
+        &self.v * &filtered
+    }
 }
 
 /// The top `n` principal axes of the rows of a centred `p × d` matrix, as

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::cv::RidgeChoice;
 use super::form::{Block, LinearForm, SparseForm};
-use super::linalg::{SolveStats, ridge_lstsq};
+use super::linalg::{RidgeSolver, SolveStats};
 use crate::{pose_space::Range, trace::AoBlock};
 
 /// The default ridge weight: on standardised angles it shrinks directions
@@ -190,18 +190,20 @@ pub fn choose_ridge(
         |train| {
             let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
             let block = ao.select(train.iter().copied());
-            RIDGE_CANDIDATES
+            // Every candidate from one factorisation per design.
+            let scope = if local.is_some() {
+                Scope::Local
+            } else {
+                Scope::Global
+            };
+            let models: Vec<Vec<Column>> = RIDGE_CANDIDATES
                 .iter()
-                .map(|&ridge| {
-                    let o = LinearOptions {
-                        ridge,
-                        ridge_cv: false,
-                        ..*options
-                    };
-                    VertexLinear::fit(&q, angles, &block, &o, local)
-                        .ok()
-                        .map(|(m, _)| m)
-                })
+                .map(|&ridge| vec![Column { ridge, scope }; block.vertices])
+                .collect();
+            let models: Vec<&[Column]> = models.iter().map(Vec::as_slice).collect();
+            VertexLinear::fit_many(&q, angles, &block, &models, local, options, None)
+                .into_iter()
+                .map(|fitted| fitted.ok().map(|(m, _)| m))
                 .collect()
         },
         |model, r| model.evaluate(&poses[r]),
@@ -465,6 +467,26 @@ impl VertexLinear {
         options: &LinearOptions,
         constants: Option<&[f32]>,
     ) -> Result<(Self, LinearFitStats), FitOverflow> {
+        Self::fit_many(poses, angles, ao, &[columns], local, options, constants)
+            .pop()
+            .expect("one model")
+    }
+
+    /// [`VertexLinear::fit_columns`] for several models at once (one per
+    /// entry of `models`): the features are built, standardised and
+    /// projected once, and each design matrix factorised once, whatever
+    /// the ridge weights (what cross-validation fits candidates with).
+    /// The models are projected only when none of them has a local
+    /// vertex.
+    pub fn fit_many(
+        poses: &[Vec<f32>],
+        angles: Angles<'_>,
+        ao: &AoBlock,
+        models: &[&[Column]],
+        local: Option<&[Vec<usize>]>,
+        options: &LinearOptions,
+        constants: Option<&[f32]>,
+    ) -> Vec<Result<(Self, LinearFitStats), FitOverflow>> {
         let p = poses.len();
         assert_eq!(p, ao.poses(), "one pose per AO row");
         assert!(p > 0, "at least one reference pose");
@@ -513,7 +535,10 @@ impl VertexLinear {
         let components = (options.features == Features::Matrix
             && rotations > 0
             && options.components > 0.0
-            && columns.iter().all(|c| c.scope != Scope::Local))
+            && models
+                .iter()
+                .flat_map(|columns| columns.iter())
+                .all(|c| c.scope != Scope::Local))
         .then(|| {
             let k = (options.components * angles.ranges.len() as f32).round() as usize;
             principal_directions(js.as_ref(), k.max(1))
@@ -525,127 +550,142 @@ impl VertexLinear {
         let local = if components.is_some() { None } else { local };
         let m = js.ncols();
         let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
-        assert_eq!(columns.len(), v, "one column per vertex");
-        // The whole design's conditioning for the report (an SVD with no
-        // targets).
-        let (_, solve) = ridge_lstsq(
-            js.as_ref(),
-            Mat::<f64>::zeros(p, 0).as_ref(),
-            options.ridge * p as f64,
-        );
-        // One solve per ridge weight and set of parameters, over the
-        // vertices that share them.
+        // The whole design's factorisation: the report's conditioning and
+        // every global vertex's solve; one more per set of local
+        // parameters.
+        let whole = RidgeSolver::new(js.as_ref());
+        let solve = whole.stats;
         let all: Vec<usize> = (0..m).collect();
-        let mut sets: std::collections::BTreeMap<(u64, &[usize]), Vec<usize>> = Default::default();
-        for (i, c) in columns.iter().enumerate() {
-            let params = match c.scope {
-                Scope::Constant => continue,
-                Scope::Global => all.as_slice(),
-                Scope::Local => local.map_or(all.as_slice(), |l| l[i].as_slice()),
-            };
-            if !params.is_empty() {
-                sets.entry((c.ridge.to_bits(), params)).or_default().push(i);
-            }
-        }
-        let mut t = Mat::zeros(m, v);
-        for ((ridge, params), vertices) in sets {
-            let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
-            let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
-            let (x, _) = ridge_lstsq(d.as_ref(), y.as_ref(), f64::from_bits(ridge) * p as f64);
-            for (c, &i) in vertices.iter().enumerate() {
-                for (row, &k) in params.iter().enumerate() {
-                    t[(k, i)] = x[(row, c)];
-                }
-            }
-        }
-        let mut mean_a = mean_a;
-        if let Some(constants) = constants {
+        let mut solvers: std::collections::BTreeMap<Vec<usize>, RidgeSolver> = Default::default();
+        let mut out = Vec::with_capacity(models.len());
+        for columns in models {
+            assert_eq!(columns.len(), v, "one column per vertex");
+            // One solve per ridge weight and set of parameters, over the
+            // vertices that share them.
+            let mut sets: std::collections::BTreeMap<(u64, &[usize]), Vec<usize>> =
+                Default::default();
             for (i, c) in columns.iter().enumerate() {
-                if c.scope == Scope::Constant {
-                    mean_a[i] = f64::from(constants[i]);
+                let params = match c.scope {
+                    Scope::Constant => continue,
+                    Scope::Global => all.as_slice(),
+                    Scope::Local => local.map_or(all.as_slice(), |l| l[i].as_slice()),
+                };
+                if !params.is_empty() {
+                    sets.entry((c.ridge.to_bits(), params)).or_default().push(i);
                 }
             }
-        }
-        let largest = (0..m)
-            .flat_map(|k| (0..v).map(move |i| (k, i)))
-            .map(|(k, i)| t[(k, i)].abs())
-            .fold(0.0f64, f64::max);
-        if largest.is_nan() || largest > F16_MAX {
-            return Err(FitOverflow {
-                largest,
-                parameters: m,
-            });
-        }
-        let mut coefficients = Vec::with_capacity((m + 1) * v);
-        for k in 0..m {
-            coefficients.extend((0..v).map(|i| f16::from_f64(t[(k, i)])));
-        }
-        coefficients.extend(mean_a.iter().map(|&c| f16::from_f64(c)));
-        let block = Block {
-            rows: m + 1,
-            columns: v,
-            coefficients,
-            map: None,
-        };
-        let uniform = columns.iter().all(|c| c.scope == Scope::Global);
-        let threshold = match (!uniform, options.threshold > 0.0) {
-            (_, true) => options.threshold,
-            // Locality or constant vertices: the coefficients outside a
-            // vertex's set are zero.
-            (true, false) => f32::MIN_POSITIVE,
-            (false, false) => 0.0,
-        };
-        let (stored, kept_fraction) = if threshold > 0.0 {
-            let sparse = SparseForm::from_dense(&block, v, threshold, &[m]);
-            let kept = sparse.values.len() as f64 / ((m + 1) * v).max(1) as f64;
-            (Coefficients::Sparse(sparse), kept)
-        } else {
-            (
-                Coefficients::Dense(LinearForm {
-                    vertices: v,
-                    blocks: vec![block],
-                }),
-                1.0,
-            )
-        };
-        let model = Self {
-            parameters: m,
-            projection: components.map(|d| {
-                // Row-major k × n: row c is direction c.
-                (0..m)
-                    .flat_map(|c| (0..n).map(move |k| (k, c)))
-                    .map(|(k, c)| d[(k, c)] as f32)
-                    .collect()
-            }),
-            features,
-            rotations,
-            mean: mean_j.iter().map(|&x| x as f32).collect(),
-            inv_std: inv_std.iter().map(|&x| x as f32).collect(),
-            ranges: angles.ranges.to_vec(),
-            coefficients: stored,
-        };
-        let (mut exact, mut rounded) = (0.0f64, 0.0f64);
-        for (r, q) in raw.iter().enumerate() {
-            let predicted = model.evaluate(q);
-            for (i, (&truth, &pred)) in ao.row(r).iter().zip(&predicted).enumerate() {
-                let f = mean_a[i] + (0..m).map(|k| js[(r, k)] * t[(k, i)]).sum::<f64>();
-                exact += (f - f64::from(truth)).powi(2);
-                rounded += (f64::from(pred) - f64::from(truth)).powi(2);
+            let mut t = Mat::zeros(m, v);
+            for ((ridge, params), vertices) in sets {
+                let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
+                let lambda = f64::from_bits(ridge) * p as f64;
+                let x = if params.len() == m {
+                    whole.solve(y.as_ref(), lambda)
+                } else {
+                    solvers
+                        .entry(params.to_vec())
+                        .or_insert_with(|| {
+                            let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
+                            RidgeSolver::new(d.as_ref())
+                        })
+                        .solve(y.as_ref(), lambda)
+                };
+                for (c, &i) in vertices.iter().enumerate() {
+                    for (row, &k) in params.iter().enumerate() {
+                        t[(k, i)] = x[(row, c)];
+                    }
+                }
             }
+            let mut mean_a = mean_a.clone();
+            if let Some(constants) = constants {
+                for (i, c) in columns.iter().enumerate() {
+                    if c.scope == Scope::Constant {
+                        mean_a[i] = f64::from(constants[i]);
+                    }
+                }
+            }
+            let largest = (0..m)
+                .flat_map(|k| (0..v).map(move |i| (k, i)))
+                .map(|(k, i)| t[(k, i)].abs())
+                .fold(0.0f64, f64::max);
+            if largest.is_nan() || largest > F16_MAX {
+                out.push(Err(FitOverflow {
+                    largest,
+                    parameters: m,
+                }));
+                continue;
+            }
+            let mut coefficients = Vec::with_capacity((m + 1) * v);
+            for k in 0..m {
+                coefficients.extend((0..v).map(|i| f16::from_f64(t[(k, i)])));
+            }
+            coefficients.extend(mean_a.iter().map(|&c| f16::from_f64(c)));
+            let block = Block {
+                rows: m + 1,
+                columns: v,
+                coefficients,
+                map: None,
+            };
+            let uniform = columns.iter().all(|c| c.scope == Scope::Global);
+            let threshold = match (!uniform, options.threshold > 0.0) {
+                (_, true) => options.threshold,
+                // Locality or constant vertices: the coefficients outside a
+                // vertex's set are zero.
+                (true, false) => f32::MIN_POSITIVE,
+                (false, false) => 0.0,
+            };
+            let (stored, kept_fraction) = if threshold > 0.0 {
+                let sparse = SparseForm::from_dense(&block, v, threshold, &[m]);
+                let kept = sparse.values.len() as f64 / ((m + 1) * v).max(1) as f64;
+                (Coefficients::Sparse(sparse), kept)
+            } else {
+                (
+                    Coefficients::Dense(LinearForm {
+                        vertices: v,
+                        blocks: vec![block],
+                    }),
+                    1.0,
+                )
+            };
+            let model = Self {
+                parameters: m,
+                projection: components.as_ref().map(|d| {
+                    // Row-major k × n: row c is direction c.
+                    (0..m)
+                        .flat_map(|c| (0..n).map(move |k| (k, c)))
+                        .map(|(k, c)| d[(k, c)] as f32)
+                        .collect()
+                }),
+                features,
+                rotations,
+                mean: mean_j.iter().map(|&x| x as f32).collect(),
+                inv_std: inv_std.iter().map(|&x| x as f32).collect(),
+                ranges: angles.ranges.to_vec(),
+                coefficients: stored,
+            };
+            let (mut exact, mut rounded) = (0.0f64, 0.0f64);
+            for (r, q) in raw.iter().enumerate() {
+                let predicted = model.evaluate(q);
+                for (i, (&truth, &pred)) in ao.row(r).iter().zip(&predicted).enumerate() {
+                    let f = mean_a[i] + (0..m).map(|k| js[(r, k)] * t[(k, i)]).sum::<f64>();
+                    exact += (f - f64::from(truth)).powi(2);
+                    rounded += (f64::from(pred) - f64::from(truth)).powi(2);
+                }
+            }
+            let count = (p * v).max(1) as f64;
+            let stats = LinearFitStats {
+                solve,
+                constant_parameters: inv_std.iter().filter(|&&s| s == 0.0).count(),
+                training_rmse: (exact / count).sqrt(),
+                stored_training_rmse: (rounded / count).sqrt(),
+                kept_fraction,
+                ridge: options.ridge,
+                ridge_cv: None,
+                local: columns.iter().any(|c| c.scope == Scope::Local),
+                per_vertex: None,
+            };
+            out.push(Ok((model, stats)));
         }
-        let count = (p * v).max(1) as f64;
-        let stats = LinearFitStats {
-            solve,
-            constant_parameters: inv_std.iter().filter(|&&s| s == 0.0).count(),
-            training_rmse: (exact / count).sqrt(),
-            stored_training_rmse: (rounded / count).sqrt(),
-            kept_fraction,
-            ridge: options.ridge,
-            ridge_cv: None,
-            local: columns.iter().any(|c| c.scope == Scope::Local),
-            per_vertex: None,
-        };
-        Ok((model, stats))
+        out
     }
 
     /// The weights of a pose: its joint angles clamped to their ranges,
