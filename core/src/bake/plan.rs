@@ -175,13 +175,18 @@ impl<'a> Plan<'a> {
         rng.set_stream(1);
         let skeleton = &self.character.skeleton;
         let mut poses = Vec::new();
-        for (i, f) in frames.iter().enumerate() {
-            // Every pose's offsets are drawn, so a batch's poses are those
-            // of the whole set.
-            let mut q = self.joint_angles.params(
-                skeleton,
-                &Pose::sample(skeleton, &self.train_clips[f.clip], f.time),
-            );
+        for (i, f) in frames.iter().enumerate().take(range.end) {
+            // Every earlier pose's offsets are drawn (on a stand-in), so a
+            // batch's poses are those of the whole set; only the batch's
+            // frames are sampled.
+            let mut q = if range.contains(&i) {
+                self.joint_angles.params(
+                    skeleton,
+                    &Pose::sample(skeleton, &self.train_clips[f.clip], f.time),
+                )
+            } else {
+                vec![0.0; self.joint_angles.len()]
+            };
             self.joint_angles
                 .perturb(&mut q, self.params.perturbation, &mut rng);
             if range.contains(&i) {

@@ -82,11 +82,10 @@ pub struct ClusteredOptions {
 }
 
 /// What vertex-clustered's pose clusters add to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Base {
     /// The global mean AO (Kirk & Arikan).
-    #[default]
     Mean,
     /// A vertex-linear model (the default in [`ClusteredOptions`]: on
     /// unseen clips it lifted Fox from +0.1 to +3.2 dB over the static
@@ -403,12 +402,6 @@ impl VertexClustered {
     /// AO of every vertex for a handle vector (Eq. 4).
     pub fn evaluate(&self, h: &[f32]) -> Vec<f32> {
         self.form.evaluate(&self.weights(h))
-    }
-
-    /// AO of every vertex for a handle vector and the joint angles a
-    /// linear base reads.
-    pub fn evaluate_with(&self, h: &[f32], angles: &[f32]) -> Vec<f32> {
-        self.form.evaluate(&self.weights_with(h, angles))
     }
 
     /// Puts a fitted linear base under a model fitted to what the base

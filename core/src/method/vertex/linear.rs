@@ -191,27 +191,38 @@ pub fn choose_ridge(
         groups,
         ao,
         &RIDGE_CANDIDATES,
-        |train| {
-            let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
-            let block = ao.select(train.iter().copied());
-            // Every candidate from one factorisation per design.
-            let scope = if local.is_some() {
-                Scope::Local
-            } else {
-                Scope::Global
-            };
-            let models: Vec<Vec<Column>> = RIDGE_CANDIDATES
-                .iter()
-                .map(|&ridge| vec![Column { ridge, scope }; block.vertices])
-                .collect();
-            let models: Vec<&[Column]> = models.iter().map(Vec::as_slice).collect();
-            VertexLinear::fit_many(&q, angles, &block, &models, local, options, None)
-                .into_iter()
-                .map(|fitted| fitted.ok().map(|(m, _)| m))
-                .collect()
-        },
+        |train| fit_ridges(poses, angles, ao, train, options, local),
         |model, r| model.evaluate(&poses[r]),
     )
+}
+
+/// One model per ridge weight of [`RIDGE_CANDIDATES`] (`None` where the
+/// fit overflows), fitted to `rows` of `poses` and `ao`, local with
+/// `local`: one factorisation per design serves every candidate.
+fn fit_ridges(
+    poses: &[Vec<f32>],
+    angles: Angles<'_>,
+    ao: &AoBlock,
+    rows: &[usize],
+    options: &LinearOptions,
+    local: Option<&[Vec<usize>]>,
+) -> Vec<Option<VertexLinear>> {
+    let q: Vec<Vec<f32>> = rows.iter().map(|&r| poses[r].clone()).collect();
+    let block = ao.select(rows.iter().copied());
+    let scope = if local.is_some() {
+        Scope::Local
+    } else {
+        Scope::Global
+    };
+    let models: Vec<Vec<Column>> = RIDGE_CANDIDATES
+        .iter()
+        .map(|&ridge| vec![Column { ridge, scope }; block.vertices])
+        .collect();
+    let models: Vec<&[Column]> = models.iter().map(Vec::as_slice).collect();
+    VertexLinear::fit_many(&q, angles, &block, &models, local, options, None)
+        .into_iter()
+        .map(|fitted| fitted.ok().map(|(m, _)| m))
+        .collect()
 }
 
 /// Chooses each vertex's [`Column`] by leaving groups of clips out (see
@@ -230,12 +241,14 @@ pub fn choose_columns(
     scopes: &[Scope],
     local: Option<&[Vec<usize>]>,
     baseline: impl Fn(&[usize]) -> Vec<f32>,
-) -> Option<(Vec<Column>, super::cv::ClipErrors)> {
+) -> Option<Vec<Column>> {
+    let scopes: Vec<Scope> = scopes
+        .iter()
+        .copied()
+        .filter(|&s| s == Scope::Global || (s == Scope::Local && local.is_some()))
+        .collect();
     let mut candidates: Vec<Column> = Vec::new();
-    for &scope in scopes {
-        if scope == Scope::Constant || (scope == Scope::Local && local.is_none()) {
-            continue;
-        }
+    for &scope in &scopes {
         candidates.extend(
             RIDGE_CANDIDATES
                 .iter()
@@ -255,41 +268,34 @@ pub fn choose_columns(
         ao,
         candidates.len(),
         |train| {
-            let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
-            let block = ao.select(train.iter().copied());
-            candidates
-                .iter()
-                .map(|c| match c.scope {
-                    Scope::Constant => Some(Fitted::Constant(baseline(train))),
-                    scope => {
-                        let o = LinearOptions {
-                            ridge: c.ridge,
-                            ridge_cv: false,
-                            per_vertex: false,
-                            ..*options
-                        };
-                        let sets = (scope == Scope::Local).then_some(local).flatten();
-                        VertexLinear::fit(&q, angles, &block, &o, sets)
-                            .ok()
-                            .map(|(m, _)| Fitted::Model(m))
-                    }
-                })
-                .collect()
+            // The candidates' order: each scope's ridges, then the constant.
+            let mut fitted: Vec<Option<Fitted>> = Vec::with_capacity(candidates.len());
+            for &scope in &scopes {
+                let sets = (scope == Scope::Local).then_some(local).flatten();
+                fitted.extend(
+                    fit_ridges(poses, angles, ao, train, options, sets)
+                        .into_iter()
+                        .map(|m| m.map(Fitted::Model)),
+                );
+            }
+            fitted.push(Some(Fitted::Constant(baseline(train))));
+            fitted
         },
         |fitted, r| match fitted {
             Fitted::Model(m) => m.evaluate(&poses[r]),
             Fitted::Constant(c) => c.clone(),
         },
     )?;
-    let columns = (0..ao.vertices)
-        .map(|i| {
-            let best = (0..candidates.len())
-                .min_by(|&a, &b| errors.sse[a][i].total_cmp(&errors.sse[b][i]))
-                .unwrap_or(0);
-            candidates[best]
-        })
-        .collect();
-    Some((columns, errors))
+    Some(
+        (0..ao.vertices)
+            .map(|i| {
+                let best = (0..candidates.len())
+                    .min_by(|&a, &b| errors.sse[a][i].total_cmp(&errors.sse[b][i]))
+                    .unwrap_or(0);
+                candidates[best]
+            })
+            .collect(),
+    )
 }
 
 /// How many vertices took each way of `columns`, in the order first seen.
@@ -561,6 +567,13 @@ impl VertexLinear {
         let solve = whole.stats;
         let all: Vec<usize> = (0..m).collect();
         let mut solvers: std::collections::BTreeMap<Vec<usize>, RidgeSolver> = Default::default();
+        // Row-major k × n: row c is direction c.
+        let projection: Option<Vec<f32>> = components.as_ref().map(|d| {
+            (0..m)
+                .flat_map(|c| (0..n).map(move |k| (k, c)))
+                .map(|(k, c)| d[(k, c)] as f32)
+                .collect()
+        });
         let mut out = Vec::with_capacity(models.len());
         for columns in models {
             assert_eq!(columns.len(), v, "one column per vertex");
@@ -652,13 +665,7 @@ impl VertexLinear {
             };
             let model = Self {
                 parameters: m,
-                projection: components.as_ref().map(|d| {
-                    // Row-major k × n: row c is direction c.
-                    (0..m)
-                        .flat_map(|c| (0..n).map(move |k| (k, c)))
-                        .map(|(k, c)| d[(k, c)] as f32)
-                        .collect()
-                }),
+                projection: projection.clone(),
                 features,
                 rotations,
                 mean: mean_j.iter().map(|&x| x as f32).collect(),

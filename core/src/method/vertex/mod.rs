@@ -232,46 +232,7 @@ pub fn fit(
                 .iter()
                 .map(|p| joint_angles.params(skeleton, p))
                 .collect();
-            let sets = (linear.locality != Locality::Off)
-                .then(|| joint_angles.local_parameters(character));
-            let ranges = linear::Angles {
-                ranges: &joint_angles.ranges,
-                rotations: joint_angles.joints.len(),
-            };
-            if linear.per_vertex
-                && let Some(fitted) =
-                    fit_linear_per_vertex(&q, ranges, ao, groups, linear, sets.as_deref())
-            {
-                let (m, stats) = fitted.map_err(|e| e.to_string())?;
-                return Ok((
-                    Model::VertexLinear(joint_angles.clone(), m),
-                    FitStats::VertexLinear(stats),
-                ));
-            }
-            let cv = |local: Option<&[Vec<usize>]>| {
-                linear
-                    .ridge_cv
-                    .then(|| linear::choose_ridge(&q, ranges, ao, groups, linear, local))
-                    .flatten()
-            };
-            let (local, choice) = match linear.locality {
-                Locality::Off => (None, cv(None)),
-                Locality::On => (sets.as_deref(), cv(sets.as_deref())),
-                Locality::Cv => {
-                    let (global, near) = (cv(None), cv(sets.as_deref()));
-                    match (global, near) {
-                        (Some(g), Some(l)) if l.score() < g.score() => (sets.as_deref(), Some(l)),
-                        (g, _) => (None, g),
-                    }
-                }
-            };
-            let chosen = LinearOptions {
-                ridge: choice.as_ref().map_or(linear.ridge, |c| c.ridge),
-                ..*linear
-            };
-            let (m, mut stats) =
-                VertexLinear::fit(&q, ranges, ao, &chosen, local).map_err(|e| e.to_string())?;
-            stats.ridge_cv = choice;
+            let (m, stats) = fit_linear(character, joint_angles, &q, ao, groups, linear)?;
             (
                 Model::VertexLinear(joint_angles.clone(), m),
                 FitStats::VertexLinear(stats),
@@ -291,28 +252,20 @@ pub fn fit(
                         threshold: 0.0,
                         ..*linear
                     };
-                    let fitted = fit(
-                        Method::VertexLinear,
-                        (&dense, clustered),
-                        seed,
-                        character,
-                        spaces,
-                        poses,
-                        ao,
-                        groups,
-                    )?;
-                    let (Model::VertexLinear(_, m), FitStats::VertexLinear(stats)) = fitted else {
-                        unreachable!("vertex-linear fits a vertex-linear model")
-                    };
-                    Some((m, stats))
+                    let q: Vec<Vec<f32>> = poses
+                        .iter()
+                        .map(|p| joint_angles.params(skeleton, p))
+                        .collect();
+                    let (m, stats) = fit_linear(character, joint_angles, &q, ao, groups, &dense)?;
+                    Some((m, stats, q))
                 }
             };
             let leftover;
             let ao = match &base {
-                Some((m, _)) => {
+                Some((m, _, q)) => {
                     let mut values = Vec::with_capacity(ao.values.len());
-                    for (r, pose) in poses.iter().enumerate() {
-                        let predicted = m.evaluate(&joint_angles.params(skeleton, pose));
+                    for (r, angles) in q.iter().enumerate() {
+                        let predicted = m.evaluate(angles);
                         values.extend(ao.row(r).iter().zip(&predicted).map(|(a, b)| a - b));
                     }
                     leftover = AoBlock {
@@ -388,7 +341,7 @@ pub fn fit(
             stats.ridge_cv = choice;
             stats.clamp_cv = clamp;
             let m = match base {
-                Some((linear_model, linear_stats)) => {
+                Some((linear_model, linear_stats, _)) => {
                     stats.base = Some(linear_stats);
                     m.with_base(joint_angles.clone(), linear_model)
                 }
@@ -432,8 +385,7 @@ fn fit_linear_per_vertex(
         Locality::On => &[Scope::Local],
         Locality::Cv => &[Scope::Global, Scope::Local],
     };
-    let (columns, _) =
-        linear::choose_columns(q, ranges, options, ao, groups, scopes, sets, baseline)?;
+    let columns = linear::choose_columns(q, ranges, options, ao, groups, scopes, sets, baseline)?;
     let all: Vec<usize> = (0..groups.len()).collect();
     let constants = baseline(&all);
     Some(
@@ -444,4 +396,52 @@ fn fit_linear_per_vertex(
             },
         ),
     )
+}
+
+/// vertex-linear over the joint angles `q` of every reference pose: the
+/// locality, ridge (or per-vertex choice) by cross-validation over clips
+/// as `linear` asks. vertex-clustered's linear base is one too.
+fn fit_linear(
+    character: &crate::Character,
+    joint_angles: &JointAngles,
+    q: &[Vec<f32>],
+    ao: &AoBlock,
+    groups: &[Option<usize>],
+    linear: &LinearOptions,
+) -> Result<(VertexLinear, linear::LinearFitStats), String> {
+    let sets = (linear.locality != Locality::Off).then(|| joint_angles.local_parameters(character));
+    let ranges = linear::Angles {
+        ranges: &joint_angles.ranges,
+        rotations: joint_angles.joints.len(),
+    };
+    if linear.per_vertex
+        && let Some(fitted) = fit_linear_per_vertex(q, ranges, ao, groups, linear, sets.as_deref())
+    {
+        return fitted.map_err(|e| e.to_string());
+    }
+    let cv = |local: Option<&[Vec<usize>]>| {
+        linear
+            .ridge_cv
+            .then(|| linear::choose_ridge(q, ranges, ao, groups, linear, local))
+            .flatten()
+    };
+    let (local, choice) = match linear.locality {
+        Locality::Off => (None, cv(None)),
+        Locality::On => (sets.as_deref(), cv(sets.as_deref())),
+        Locality::Cv => {
+            let (global, near) = (cv(None), cv(sets.as_deref()));
+            match (global, near) {
+                (Some(g), Some(l)) if l.score() < g.score() => (sets.as_deref(), Some(l)),
+                (g, _) => (None, g),
+            }
+        }
+    };
+    let chosen = LinearOptions {
+        ridge: choice.as_ref().map_or(linear.ridge, |c| c.ridge),
+        ..*linear
+    };
+    let (m, mut stats) =
+        VertexLinear::fit(q, ranges, ao, &chosen, local).map_err(|e| e.to_string())?;
+    stats.ridge_cv = choice;
+    Ok((m, stats))
 }
