@@ -101,6 +101,7 @@ impl<'a> Plan<'a> {
             &train_clips,
             LayoutOptions {
                 margin: p.range_margin,
+                scales: p.scale_parameters,
                 ..LayoutOptions::default()
             },
         ) {

@@ -43,6 +43,8 @@ pub struct LayoutOptions {
     /// mesh (the body root's own translation moves the whole mesh and
     /// changes no AO, so it is never a parameter).
     pub root_translation: bool,
+    /// Animated scales of nodes that move the mesh are parameters too.
+    pub scales: bool,
     /// Widen each range by this fraction of its span on both sides.
     pub margin: f32,
     /// Frame rate at which clips are sampled to find the ranges, besides
@@ -54,6 +56,7 @@ impl Default for LayoutOptions {
     fn default() -> Self {
         Self {
             root_translation: true,
+            scales: true,
             margin: 0.1,
             fps: 30.0,
         }
@@ -87,9 +90,15 @@ pub struct JointAngles {
     pub joints: Vec<usize>,
     /// Nodes with 3 translation parameters each (offset from rest).
     pub translations: Vec<usize>,
-    /// Range per parameter: joints first, then translations.
+    /// Nodes with 3 scale parameters each: the scale over the rest scale,
+    /// minus 1, per axis (linear, not logarithmic: a node scaled to zero is
+    /// a plain end of the range, and the geometry moves linearly with it;
+    /// absent in layouts written before there were any).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub scales: Vec<usize>,
+    /// Range per parameter: joints first, then translations, then scales.
     pub ranges: Vec<Range>,
-    /// Name per parameter, such as `Hips.rx` or `Root.ty`.
+    /// Name per parameter, such as `Hips.rx`, `Root.ty` or `Cube.sx`.
     pub names: Vec<String>,
 }
 
@@ -161,6 +170,16 @@ impl JointAngles {
         } else {
             Vec::new()
         };
+        // A scaled node (grown, squashed, shrunk to nothing) moves geometry
+        // the rotations and translations do not describe.
+        let scales: Vec<usize> = if options.scales {
+            animated(Property::Scale)
+                .into_iter()
+                .filter(|&n| !rigid[n])
+                .collect()
+        } else {
+            Vec::new()
+        };
         let mut names = Vec::new();
         for &j in &joints {
             for axis in ["rx", "ry", "rz"] {
@@ -169,6 +188,11 @@ impl JointAngles {
         }
         for &t in &translations {
             for axis in ["tx", "ty", "tz"] {
+                names.push(format!("{}.{axis}", skeleton.label(t)));
+            }
+        }
+        for &t in &scales {
+            for axis in ["sx", "sy", "sz"] {
                 names.push(format!("{}.{axis}", skeleton.label(t)));
             }
         }
@@ -182,6 +206,7 @@ impl JointAngles {
             ],
             joints,
             translations,
+            scales,
             names,
         };
         for clip in clips {
@@ -193,14 +218,13 @@ impl JointAngles {
                 }
             }
         }
-        // A translation channel that never moves its node (many exporters
-        // key every bone's rest offset) carries nothing: left out.
+        // A translation or scale channel that never moves its node (many
+        // exporters key every bone's rest offset and scale) carries
+        // nothing: left out.
         let r = layout.joints.len() * 3;
-        let moving: Vec<bool> = layout
-            .translations
-            .iter()
-            .enumerate()
-            .map(|(k, _)| {
+        let t = layout.translations.len();
+        let moving: Vec<bool> = (0..t + layout.scales.len())
+            .map(|k| {
                 layout.ranges[r + 3 * k..r + 3 * k + 3]
                     .iter()
                     .any(|x| x.max - x.min > 1e-6 * x.max.abs().max(x.min.abs()).max(1.0))
@@ -220,6 +244,10 @@ impl JointAngles {
             });
             let mut k = 0;
             layout.translations.retain(|_| {
+                k += 1;
+                moving[k - 1]
+            });
+            layout.scales.retain(|_| {
                 k += 1;
                 moving[k - 1]
             });
@@ -246,7 +274,7 @@ impl JointAngles {
             of_node[j].extend(3 * k..3 * k + 3);
         }
         let r = 3 * self.joints.len();
-        for (k, &t) in self.translations.iter().enumerate() {
+        for (k, &t) in self.translations.iter().chain(&self.scales).enumerate() {
             of_node[t].extend(r + 3 * k..r + 3 * k + 3);
         }
         let mut children: Vec<Vec<usize>> = vec![Vec::new(); nodes];
@@ -300,11 +328,21 @@ impl JointAngles {
                 (pose.locals[t].translation - skeleton.nodes[t].rest.translation).to_array(),
             );
         }
+        for &t in &self.scales {
+            let (now, rest) = (pose.locals[t].scale, skeleton.nodes[t].rest.scale);
+            out.extend((0..3).map(|a| {
+                if rest[a] != 0.0 {
+                    now[a] / rest[a] - 1.0
+                } else {
+                    0.0
+                }
+            }));
+        }
         out
     }
 
-    /// Parameters → pose: the rest pose with the parameterised rotations
-    /// and translations set.
+    /// Parameters → pose: the rest pose with the parameterised rotations,
+    /// translations and scales set.
     pub fn pose(&self, skeleton: &Skeleton, params: &[f32]) -> Result<Pose, ParamError> {
         if params.len() != self.len() {
             return Err(ParamError::Length {
@@ -313,7 +351,8 @@ impl JointAngles {
             });
         }
         let mut pose = Pose::rest(skeleton);
-        let (rot, trans) = params.split_at(3 * self.joints.len());
+        let (rot, rest) = params.split_at(3 * self.joints.len());
+        let (trans, scales) = rest.split_at(3 * self.translations.len());
         for (&j, r) in self.joints.iter().zip(rot.chunks_exact(3)) {
             let rest = skeleton.nodes[j].rest.rotation;
             pose.locals[j].rotation =
@@ -321,6 +360,9 @@ impl JointAngles {
         }
         for (&t, d) in self.translations.iter().zip(trans.chunks_exact(3)) {
             pose.locals[t].translation = skeleton.nodes[t].rest.translation + Vec3::from_slice(d);
+        }
+        for (&t, s) in self.scales.iter().zip(scales.chunks_exact(3)) {
+            pose.locals[t].scale = skeleton.nodes[t].rest.scale * (Vec3::ONE + Vec3::from_slice(s));
         }
         Ok(pose)
     }

@@ -144,3 +144,56 @@ fn clip_frame_samplers() {
             .all(|f| f.time >= 0.0 && f.time <= imported.clips[0].duration)
     );
 }
+
+#[test]
+fn animated_scales_are_pose_parameters_down_to_zero() {
+    // Three of InterpolationTest's clips only scale a cube, down to 0.
+    let imported = util::load(&util::character_path("InterpolationTest.glb").unwrap());
+    let c = &imported.character;
+    let without = JointAngles::from_clips(
+        c,
+        &imported.clips,
+        LayoutOptions {
+            scales: false,
+            ..LayoutOptions::default()
+        },
+    )
+    .unwrap();
+    let layout = JointAngles::from_clips(c, &imported.clips, LayoutOptions::default()).unwrap();
+    assert!(without.scales.is_empty());
+    assert_eq!(layout.scales.len(), 3, "{:?}", layout.names);
+    assert_eq!(layout.len(), without.len() + 9);
+    assert!(layout.names.iter().any(|n| n.ends_with(".sx")));
+    // Scale over rest minus 1: a cube scaled to nothing is −1, widened by
+    // the margin; at rest 0.
+    let first_scale = 3 * (layout.joints.len() + layout.translations.len());
+    let r = layout.ranges[first_scale];
+    assert!(r.min < -1.0 && r.min > -1.2 && r.max >= 0.0, "{r:?}");
+    let rest = Pose::rest(&c.skeleton);
+    assert!(
+        layout.params(&c.skeleton, &rest)[first_scale..]
+            .iter()
+            .all(|&x| x == 0.0)
+    );
+    // Every clip's frames survive params → pose → params, scales included,
+    // and the posed mesh is the clip's.
+    for clip in &imported.clips {
+        for t in [0.3f32, 0.9, 1.5] {
+            let pose = Pose::sample(&c.skeleton, clip, t);
+            let params = layout.params(&c.skeleton, &pose);
+            let back = layout.pose(&c.skeleton, &params).unwrap();
+            let again = layout.params(&c.skeleton, &back);
+            for (a, b) in params.iter().zip(&again) {
+                assert!((a - b).abs() < 1e-5, "{}: {a} vs {b}", clip.name);
+            }
+            let (direct, via) = (c.skin(&pose), c.skin(&back));
+            let worst = direct
+                .positions
+                .iter()
+                .zip(&via.positions)
+                .map(|(a, b)| a.distance(*b))
+                .fold(0.0f32, f32::max);
+            assert!(worst < 1e-4, "{} at {t}: {worst}", clip.name);
+        }
+    }
+}

@@ -8,8 +8,8 @@ use half::f16;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    ALGORITHM_VERSION, Block, Centering, Coefficients, LinearBase, LinearForm, Model, PoseCluster,
-    SparseForm, StaticAverage, VertexClustered, VertexLinear, form,
+    ALGORITHM_VERSION, Basis, Block, Centering, Coefficients, LinearBase, LinearForm, Model,
+    PoseCluster, SparseForm, StaticAverage, VertexClustered, VertexLinear, form,
 };
 use crate::{
     asset::{AssetError, Container, Data, Section},
@@ -41,6 +41,11 @@ pub enum Layout {
         /// 0: none, the model is linear in the features.
         #[serde(default)]
         components: usize,
+        /// Eigen-AO basis rows (`BMIX`: the `(N+1) × basis` mix, row-major,
+        /// then `basis` offsets, f32); `COEF` is then `(basis+1) × V`. 0:
+        /// none.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        basis: usize,
     },
     /// `COEF`: the mean block then one block per pose cluster;
     /// `CENT`: `m × H` centres; `AXES`: `m × n × H` projections; `VMAP`:
@@ -63,7 +68,16 @@ pub enum Layout {
         /// per weight, instead of the mean.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         base: Option<BaseLayout>,
+        /// Eigen-AO basis rows (`BMIX` as vertex-linear's, its inputs the
+        /// weights of every block above); `COEF` is then one `(basis+1) ×
+        /// V` block, and there is no `VMAP`. 0: none.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        basis: usize,
     },
+}
+
+fn is_zero(x: &usize) -> bool {
+    *x == 0
 }
 
 /// vertex-clustered's linear base in the header.
@@ -125,12 +139,14 @@ impl Model {
                     ),
                 };
                 sections.extend(linear_weight_sections(m, LINEAR_TAGS));
+                sections.extend(m.basis.as_ref().map(basis_section));
                 (
                     Layout::VertexLinear {
                         joint_angles: joint_angles.clone(),
                         sparse,
                         features: m.features,
                         components: m.projection.as_ref().map_or(0, |_| m.parameters),
+                        basis: m.basis.as_ref().map_or(0, |b| b.rank),
                     },
                     sections,
                 )
@@ -148,6 +164,13 @@ impl Model {
                 if let Some(b) = &m.base {
                     sections.extend(linear_weight_sections(&b.weights, BASE_TAGS));
                 }
+                sections.extend(m.basis.as_ref().map(basis_section));
+                // With a basis the clusters' blocks are gone into it: each
+                // counts as unmapped.
+                let columns = match &m.basis {
+                    Some(_) => vec![m.form.vertices; m.clusters.len()],
+                    None => m.form.blocks[1..].iter().map(|b| b.columns).collect(),
+                };
                 (
                     Layout::VertexClustered {
                         handles: handles.clone(),
@@ -155,7 +178,7 @@ impl Model {
                         alpha: m.alpha,
                         centering: m.centering,
                         clamp: m.clamp,
-                        columns: m.form.blocks[1..].iter().map(|b| b.columns).collect(),
+                        columns,
                         base: m.base.as_ref().map(|b| BaseLayout {
                             joint_angles: b.joint_angles.clone(),
                             features: b.weights.features,
@@ -165,6 +188,7 @@ impl Model {
                                 .as_ref()
                                 .map_or(0, |_| b.weights.parameters),
                         }),
+                        basis: m.basis.as_ref().map_or(0, |b| b.rank),
                     },
                     sections,
                 )
@@ -207,6 +231,7 @@ impl Model {
                 sparse,
                 features,
                 components,
+                basis,
             } => {
                 let weights = read_linear_weights(
                     container,
@@ -217,7 +242,14 @@ impl Model {
                 )?;
                 let parameters = weights.parameters;
                 let rows = parameters + 1;
-                let coefficients = if *sparse {
+                let mix = match basis {
+                    0 => None,
+                    _ if *sparse => return Err(bad("a sparse model has no basis")),
+                    &r => Some(read_basis(container, rows, r)?),
+                };
+                let coefficients = if let Some(b) = &mix {
+                    Coefficients::Dense(read_form(v, b.rank + 1, coef)?)
+                } else if *sparse {
                     let Data::U32(offsets) = container.section(b"CSRO")? else {
                         return Err(bad("CSRO must be u32"));
                     };
@@ -249,6 +281,7 @@ impl Model {
                     joint_angles.clone(),
                     VertexLinear {
                         coefficients,
+                        basis: mix,
                         ..weights
                     },
                 )
@@ -261,6 +294,7 @@ impl Model {
                 clamp,
                 columns,
                 base,
+                basis,
             } => {
                 let (m, n, h) = (columns.len(), *dimensions, handles.len());
                 let rows = n + usize::from(*centering == Centering::Cluster);
@@ -278,7 +312,20 @@ impl Model {
                     None => None,
                 };
                 let base_rows = base.as_ref().map_or(1, |b| b.weights.parameters + 1);
-                let form = read_clustered_form(container, v, base_rows, rows, columns, coef)?;
+                let (form, basis) = match basis {
+                    0 => (
+                        read_clustered_form(container, v, base_rows, rows, columns, coef)?,
+                        None,
+                    ),
+                    &r => {
+                        if columns.iter().any(|&c| c != v) {
+                            return Err(bad("a model with a basis has no vertex clusters"));
+                        }
+                        // Bounded by validate_layout.
+                        let b = read_basis(container, base_rows + m * rows, r)?;
+                        (read_form(v, b.rank + 1, coef)?, Some(b))
+                    }
+                };
                 let Data::F32(centers) = container.section(b"CENT")? else {
                     return Err(bad("CENT must be f32"));
                 };
@@ -311,6 +358,7 @@ impl Model {
                         clusters,
                         form,
                         base,
+                        basis,
                     },
                 )
             }
@@ -376,6 +424,32 @@ fn read_linear_weights(
             vertices: 0,
             blocks: Vec::new(),
         }),
+        basis: None,
+    })
+}
+
+/// `BMIX`: a basis's mix, then its offsets.
+fn basis_section(b: &Basis) -> Section {
+    section(
+        *b"BMIX",
+        Data::F32(b.mix.iter().chain(&b.offset).copied().collect()),
+    )
+}
+
+/// Reads a basis of `rank` rows over `inputs` weights from `BMIX`.
+fn read_basis(container: &Container, inputs: usize, rank: usize) -> Result<Basis, AssetError> {
+    let Data::F32(d) = container.section(b"BMIX")? else {
+        return Err(bad("BMIX must be f32"));
+    };
+    // rank ≤ MAX_BASIS and inputs are bounded by validate_layout.
+    if d.len() != (inputs + 1) * rank || d.iter().any(|x| !x.is_finite()) {
+        return Err(bad("BMIX does not match the header or is not finite"));
+    }
+    Ok(Basis {
+        inputs,
+        rank,
+        mix: d[..inputs * rank].to_vec(),
+        offset: d[inputs * rank..].to_vec(),
     })
 }
 
@@ -413,10 +487,11 @@ const MAX_VERTICES: usize = 1 << 26;
 const MAX_JOINTS: usize = 1 << 12;
 const MAX_POSE_CLUSTERS: usize = 1024;
 const MAX_DIMENSIONS: usize = 256;
+const MAX_BASIS: usize = 4096;
 
 /// Checks a joint-angle layout's lengths and ranges.
 fn validate_joint_angles(ja: &JointAngles) -> Result<(), AssetError> {
-    let count = ja.joints.len() + ja.translations.len();
+    let count = ja.joints.len() + ja.translations.len() + ja.scales.len();
     if count > MAX_JOINTS || ja.names.len() != 3 * count || ja.ranges.len() != 3 * count {
         return Err(bad(
             "the joint-angle layout's names and ranges do not match its joints",
@@ -443,7 +518,16 @@ fn validate_layout(header: &AssetHeader) -> Result<(), AssetError> {
     }
     match &header.layout {
         Layout::StaticAverage => {}
-        Layout::VertexLinear { joint_angles, .. } => validate_joint_angles(joint_angles)?,
+        Layout::VertexLinear {
+            joint_angles,
+            basis,
+            ..
+        } => {
+            validate_joint_angles(joint_angles)?;
+            if *basis > MAX_BASIS {
+                return Err(bad("the basis has more than 4096 rows"));
+            }
+        }
         Layout::VertexClustered {
             handles,
             dimensions,
@@ -451,8 +535,12 @@ fn validate_layout(header: &AssetHeader) -> Result<(), AssetError> {
             clamp,
             columns,
             base,
+            basis,
             ..
         } => {
+            if *basis > MAX_BASIS {
+                return Err(bad("the basis has more than 4096 rows"));
+            }
             if let Some(b) = base {
                 validate_joint_angles(&b.joint_angles)?;
             }

@@ -12,6 +12,7 @@
 //! reads (joint angles or handles) and to the asset container.
 
 mod average;
+mod basis;
 mod clustered;
 mod codec;
 pub mod cv;
@@ -21,6 +22,7 @@ mod linalg;
 mod linear;
 
 pub use average::StaticAverage;
+pub use basis::{Basis, BasisStats};
 pub use clustered::{
     Base, CLAMP_CANDIDATES, Centering, ClusteredFitStats, ClusteredOptions, LinearBase,
     MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
@@ -45,7 +47,7 @@ use crate::{
 
 /// Version of the fitting algorithms, part of the bake key: bump it when a
 /// change to fitting changes the coefficients a bake produces.
-pub const ALGORITHM_VERSION: u32 = 3;
+pub const ALGORITHM_VERSION: u32 = 4;
 
 /// A fitted model and the pose features it reads.
 #[derive(Debug, Clone, PartialEq)]
@@ -108,13 +110,18 @@ impl Model {
                 .joints
                 .iter()
                 .chain(&layout.translations)
+                .chain(&layout.scales)
                 .all(|&n| n < nodes),
             Self::VertexClustered(handles, m) => {
                 handles.root.is_none_or(|r| r < nodes)
                     && handles.joints.iter().all(|&n| n < nodes)
                     && m.base.as_ref().is_none_or(|b| {
                         let ja = &b.joint_angles;
-                        ja.joints.iter().chain(&ja.translations).all(|&n| n < nodes)
+                        ja.joints
+                            .iter()
+                            .chain(&ja.translations)
+                            .chain(&ja.scales)
+                            .all(|&n| n < nodes)
                     })
             }
         };
@@ -136,6 +143,37 @@ impl Model {
             },
             Self::VertexClustered(_, m) => FormRef::Dense(&m.form),
         }
+    }
+
+    /// Compresses a fitted vertex-linear or vertex-clustered model into at
+    /// most `rank` eigen-AO basis rows ([`basis`]), found over the
+    /// reference `poses` it was fitted to. `None` (and the model as it
+    /// was) for the static average or when there is nothing to compress.
+    pub fn compress(
+        &mut self,
+        skeleton: &Skeleton,
+        poses: &[Pose],
+        rank: usize,
+    ) -> Option<BasisStats> {
+        if matches!(self, Self::StaticAverage(_)) {
+            return None;
+        }
+        let weights: Vec<Vec<f32>> = poses.iter().map(|p| self.weights(skeleton, p)).collect();
+        let (basis, form, stats) = basis::compress(self.form(), &weights, rank)?;
+        match self {
+            Self::StaticAverage(_) => unreachable!("returned above"),
+            Self::VertexLinear(_, m) => {
+                assert!(m.basis.is_none(), "compressed once");
+                m.coefficients = Coefficients::Dense(form);
+                m.basis = Some(basis);
+            }
+            Self::VertexClustered(_, m) => {
+                assert!(m.basis.is_none(), "compressed once");
+                m.form = form;
+                m.basis = Some(basis);
+            }
+        }
+        Some(stats)
     }
 
     /// Bytes of the model's numbers: coefficients, maps, cluster centres
@@ -232,11 +270,12 @@ pub fn fit(
                 .iter()
                 .map(|p| joint_angles.params(skeleton, p))
                 .collect();
-            let (m, stats) = fit_linear(character, joint_angles, &q, ao, groups, linear)?;
-            (
-                Model::VertexLinear(joint_angles.clone(), m),
-                FitStats::VertexLinear(stats),
-            )
+            let (m, mut stats) = fit_linear(character, joint_angles, &q, ao, groups, linear)?;
+            let mut model = Model::VertexLinear(joint_angles.clone(), m);
+            if linear.basis > 0 {
+                stats.basis = model.compress(skeleton, poses, linear.basis);
+            }
+            (model, FitStats::VertexLinear(stats))
         }
         Method::VertexClustered => {
             let h: Vec<Vec<f32>> = poses.iter().map(|p| handles.handles(skeleton, p)).collect();
@@ -250,6 +289,7 @@ pub fn fit(
                         locality: Locality::Off,
                         per_vertex: false,
                         threshold: 0.0,
+                        basis: 0,
                         ..*linear
                     };
                     let q: Vec<Vec<f32>> = poses
@@ -347,10 +387,11 @@ pub fn fit(
                 }
                 None => m,
             };
-            (
-                Model::VertexClustered(handles.clone(), m),
-                FitStats::VertexClustered(stats),
-            )
+            let mut model = Model::VertexClustered(handles.clone(), m);
+            if clustered.basis > 0 {
+                stats.basis = model.compress(skeleton, poses, clustered.basis);
+            }
+            (model, FitStats::VertexClustered(stats))
         }
         Method::CubemapDiscrete | Method::CubemapContinuous | Method::Grid => {
             return Err(format!("{method} is not a per-vertex method"));

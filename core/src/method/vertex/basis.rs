@@ -1,0 +1,254 @@
+//! Eigen-AO: a shared basis over the vertices that a fitted vertex model
+//! is compressed into.
+//!
+//! Across a character's vertices the AO a model predicts moves together: an
+//! arm lifting lightens the armpit, the flank and the inner arm at once.
+//! Over the reference poses the model's predictions `F = W C` (`P` poses ×
+//! `V` vertices, `W` the poses' weights, `C` the model's coefficients) have
+//! most of their variance in a few directions `R` (the leading right
+//! singular vectors of `F` minus its mean `c`). Projecting the model onto
+//! them,
+//!
+//! ```text
+//! ao ≈ c + R Rᵀ (Cᵀ w − c)
+//! ```
+//!
+//! keeps the same per-pose weights `w` but moves the product `Cᵀ w` from
+//! every vertex into a small per-pose step: the CPU computes `w' = Mᵀ w −
+//! o` (`M = C R / σ`, `o = Rᵀ c / σ`, `r` numbers) once per pose, and each
+//! vertex takes `r + 1` multiply-adds with `[σ R; c]` instead of one per
+//! weight. It is reduced-rank regression for vertex-linear, and for
+//! vertex-clustered it puts every pose cluster's blend into one basis, so
+//! the per-vertex cost no longer grows with the clusters MLS blends.
+//!
+//! The basis rows are in AO units (`σ_j R_j`, the AO change over one
+//! standard deviation of its weight), like every other block, so f16
+//! holds them as well.
+
+use faer::Mat;
+use half::f16;
+use serde::{Deserialize, Serialize};
+
+use super::{Block, FormRef, LinearForm, linalg::principal_axes};
+
+/// The per-pose step of an eigen-AO model: its `inputs` weights in, `rank`
+/// basis weights (and a 1) out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Basis {
+    /// Weights the model computes per pose (W).
+    pub inputs: usize,
+    /// Basis rows (r).
+    pub rank: usize,
+    /// `M`: `inputs × rank`, row-major.
+    pub mix: Vec<f32>,
+    /// `o`: one per basis row.
+    pub offset: Vec<f32>,
+}
+
+/// How the compression went, for the report.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BasisStats {
+    /// Basis rows kept.
+    pub rank: usize,
+    /// Weights per pose of the model before it.
+    pub inputs: usize,
+    /// RMS over the reference poses and vertices of what the basis leaves
+    /// out of the model's predictions.
+    pub rmse: f64,
+    /// Fraction of the predictions' variance the basis keeps.
+    pub kept_variance: f64,
+}
+
+impl Basis {
+    /// The basis weights of one pose's model weights, then a 1 (the mean's
+    /// row).
+    pub fn apply(&self, weights: &[f32]) -> Vec<f32> {
+        assert_eq!(weights.len(), self.inputs, "one weight per input");
+        let mut out: Vec<f32> = self.offset.iter().map(|&o| -o).collect();
+        for (row, &w) in self.mix.chunks_exact(self.rank).zip(weights) {
+            if w != 0.0 {
+                out.iter_mut().zip(row).for_each(|(o, &m)| *o += w * m);
+            }
+        }
+        out.push(1.0);
+        out
+    }
+
+    /// Bytes of the mix and offsets (f32).
+    pub fn bytes(&self) -> usize {
+        4 * (self.mix.len() + self.offset.len())
+    }
+}
+
+/// Compresses `form` (read with the per-pose `weights` of the reference
+/// poses) into at most `rank` basis rows: the basis, the one-block form of
+/// `rank + 1` rows that replaces `form`, and how much was lost. `None` when
+/// there are no poses or vertices, or when the basis would not cost a
+/// vertex fewer multiply-adds than the form does.
+pub(super) fn compress(
+    form: FormRef<'_>,
+    weights: &[Vec<f32>],
+    rank: usize,
+) -> Option<(Basis, LinearForm, BasisStats)> {
+    let c = dense(form);
+    let (inputs, v, p) = (c.nrows(), c.ncols(), weights.len());
+    if p == 0 || v == 0 || rank == 0 {
+        return None;
+    }
+    assert!(
+        weights.iter().all(|w| w.len() == inputs),
+        "one weight per row of the form"
+    );
+    let w = Mat::from_fn(p, inputs, |r, k| f64::from(weights[r][k]));
+    let f = &w * &c;
+    let mean: Vec<f64> = (0..v)
+        .map(|i| (0..p).map(|r| f[(r, i)]).sum::<f64>() / p as f64)
+        .collect();
+    let centred = Mat::from_fn(p, v, |r, i| f[(r, i)] - mean[i]);
+    // Rows R_j / σ_j, σ_j the predictions' standard deviation along R_j.
+    let axes = principal_axes(centred.as_ref(), rank);
+    let r = axes.nrows();
+    // What a vertex costs now: a multiply-add per non-zero weight (MLS
+    // leaves most clusters out), or per stored coefficient when sparse.
+    let cost = match form {
+        FormRef::Dense(_) => {
+            weights
+                .iter()
+                .map(|w| w.iter().filter(|&&x| x != 0.0).count())
+                .sum::<usize>() as f64
+                / p as f64
+        }
+        FormRef::Sparse(s) => s.values.len() as f64 / v as f64,
+    };
+    if (r + 1) as f64 >= cost {
+        return None;
+    }
+    let total: f64 = centred.norm_l2().powi(2);
+    let kept: f64 = (0..r)
+        .map(|j| p as f64 / axes.row(j).norm_l2().powi(2))
+        .sum();
+    let mix = &c * axes.transpose();
+    let offset: Vec<f32> = (0..r)
+        .map(|j| (0..v).map(|i| mean[i] * axes[(j, i)]).sum::<f64>() as f32)
+        .collect();
+    let mut coefficients = Vec::with_capacity((r + 1) * v);
+    for j in 0..r {
+        // σ_j R_j = (R_j / σ_j) · σ_j², and σ_j² = 1 / ‖R_j / σ_j‖².
+        let s2 = 1.0 / axes.row(j).norm_l2().powi(2);
+        coefficients.extend((0..v).map(|i| f16::from_f64(axes[(j, i)] * s2)));
+    }
+    coefficients.extend(mean.iter().map(|&m| f16::from_f64(m)));
+    let basis = Basis {
+        inputs,
+        rank: r,
+        mix: (0..inputs)
+            .flat_map(|k| (0..r).map(move |j| (k, j)))
+            .map(|(k, j)| mix[(k, j)] as f32)
+            .collect(),
+        offset,
+    };
+    let form = LinearForm {
+        vertices: v,
+        blocks: vec![Block {
+            rows: r + 1,
+            columns: v,
+            coefficients,
+            map: None,
+        }],
+    };
+    let lost = (total - kept).max(0.0);
+    let stats = BasisStats {
+        rank: r,
+        inputs,
+        rmse: (lost / (p * v) as f64).sqrt(),
+        kept_variance: if total > 0.0 { kept / total } else { 1.0 },
+    };
+    Some((basis, form, stats))
+}
+
+/// The form's coefficients as a dense `weights × vertices` matrix (vertex
+/// clusters expanded).
+fn dense(form: FormRef<'_>) -> Mat<f64> {
+    match form {
+        FormRef::Dense(f) => {
+            let mut c = Mat::zeros(f.weight_count(), f.vertices);
+            let mut row0 = 0;
+            for block in &f.blocks {
+                for k in 0..block.rows {
+                    let row = &block.coefficients[k * block.columns..(k + 1) * block.columns];
+                    for i in 0..f.vertices {
+                        let col = block.map.as_ref().map_or(i, |m| m[i] as usize);
+                        c[(row0 + k, i)] = row[col].to_f64();
+                    }
+                }
+                row0 += block.rows;
+            }
+            c
+        }
+        FormRef::Sparse(s) => {
+            let mut c = Mat::zeros(s.rows, s.vertices);
+            for (i, w) in s.offsets.windows(2).enumerate() {
+                for e in w[0] as usize..w[1] as usize {
+                    c[(usize::from(s.rows_of[e]), i)] = s.values[e].to_f64();
+                }
+            }
+            c
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A form whose predictions over the poses span two directions: with
+    /// rank 2 the compression is exact (to f16), with rank 1 it keeps the
+    /// larger direction.
+    #[test]
+    fn a_rank_two_model_compresses_exactly_into_two_rows() {
+        let v = 50;
+        let (a, b): (Vec<f64>, Vec<f64>) = (0..v)
+            // Multiples of 1/64 hold a + b exactly in f16.
+            .map(|i| (((i * 7) % 11) as f64 / 64.0, ((i * 3) % 5) as f64 / 64.0))
+            .unzip();
+        // Weights [x, y, z, 1]; z moves AO along a + b.
+        let mut coefficients = Vec::new();
+        for k in 0..4 {
+            coefficients.extend((0..v).map(|i| {
+                f16::from_f64(match k {
+                    0 => a[i],
+                    1 => b[i],
+                    2 => a[i] + b[i],
+                    _ => 0.5,
+                })
+            }));
+        }
+        let form = LinearForm {
+            vertices: v,
+            blocks: vec![Block {
+                rows: 4,
+                columns: v,
+                coefficients,
+                map: None,
+            }],
+        };
+        let poses: Vec<Vec<f32>> = (0..40)
+            .map(|r| {
+                let t = r as f32;
+                vec![(t * 0.37).sin(), (t * 1.3).cos(), (t * 0.11).sin(), 1.0]
+            })
+            .collect();
+        let (basis, small, stats) = compress(FormRef::Dense(&form), &poses, 5).unwrap();
+        assert_eq!((stats.rank, basis.rank, small.weight_count()), (2, 2, 3));
+        assert!(stats.rmse < 1e-9 && (stats.kept_variance - 1.0).abs() < 1e-9);
+        for w in &poses {
+            let (full, compressed) = (form.evaluate(w), small.evaluate(&basis.apply(w)));
+            for (x, y) in full.iter().zip(&compressed) {
+                assert!((x - y).abs() < 2e-3, "{x} vs {y}");
+            }
+        }
+        let (_, _, one) = compress(FormRef::Dense(&form), &poses, 1).unwrap();
+        assert_eq!(one.rank, 1);
+        assert!(one.rmse > 1e-3 && one.kept_variance > 0.5 && one.kept_variance < 1.0);
+    }
+}
