@@ -83,8 +83,9 @@ impl Basis {
 /// Compresses `form` (read with the per-pose `weights` of the reference
 /// poses) into at most `rank` basis rows: the basis, the one-block form of
 /// `rank + 1` rows that replaces `form`, and how much was lost. `None` when
-/// there are no poses or vertices, or when the basis would not cost a
-/// vertex fewer multiply-adds than the form does.
+/// there are no poses or vertices, when the predictions do not vary, or
+/// when the basis would not cost a vertex fewer multiply-adds than the form
+/// does.
 pub(super) fn compress(
     form: FormRef<'_>,
     weights: &[Vec<f32>],
@@ -108,6 +109,11 @@ pub(super) fn compress(
     // Rows R_j / σ_j, σ_j the predictions' standard deviation along R_j.
     let axes = principal_axes(centred.as_ref(), rank);
     let r = axes.nrows();
+    if r == 0 {
+        // The predictions never move (AO 0 everywhere, say): nothing to
+        // compress.
+        return None;
+    }
     // What a vertex costs now: a multiply-add per non-zero weight (MLS
     // leaves most clusters out), or per stored coefficient when sparse.
     let cost = match form {

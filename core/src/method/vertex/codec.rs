@@ -318,12 +318,12 @@ impl Model {
                         None,
                     ),
                     &r => {
+                        let form = read_form(v, r + 1, coef)?;
                         if columns.iter().any(|&c| c != v) {
                             return Err(bad("a model with a basis has no vertex clusters"));
                         }
                         // Bounded by validate_layout.
-                        let b = read_basis(container, base_rows + m * rows, r)?;
-                        (read_form(v, b.rank + 1, coef)?, Some(b))
+                        (form, Some(read_basis(container, base_rows + m * rows, r)?))
                     }
                 };
                 let Data::F32(centers) = container.section(b"CENT")? else {

@@ -270,7 +270,7 @@ pub fn choose_columns(
         scope: Scope::Constant,
     });
     enum Fitted {
-        Model(VertexLinear),
+        Model(Box<VertexLinear>),
         Constant(Vec<f32>),
     }
     let errors = super::cv::sse_by_clips(
@@ -285,7 +285,7 @@ pub fn choose_columns(
                 fitted.extend(
                     fit_ridges(poses, angles, ao, train, options, sets)
                         .into_iter()
-                        .map(|m| m.map(Fitted::Model)),
+                        .map(|m| m.map(|m| Fitted::Model(Box::new(m)))),
                 );
             }
             fitted.push(Some(Fitted::Constant(baseline(train))));
