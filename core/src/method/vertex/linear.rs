@@ -690,11 +690,15 @@ impl VertexLinear {
                 coefficients: stored,
                 basis: None,
             };
+            // The f64 fit's predictions in one product, not a dot product
+            // per pose and vertex (every cross-validation candidate pays
+            // this).
+            let fitted = &js * &t;
             let (mut exact, mut rounded) = (0.0f64, 0.0f64);
             for (r, q) in raw.iter().enumerate() {
                 let predicted = model.evaluate(q);
                 for (i, (&truth, &pred)) in ao.row(r).iter().zip(&predicted).enumerate() {
-                    let f = mean_a[i] + (0..m).map(|k| js[(r, k)] * t[(k, i)]).sum::<f64>();
+                    let f = mean_a[i] + fitted[(r, i)];
                     exact += (f - f64::from(truth)).powi(2);
                     rounded += (f64::from(pred) - f64::from(truth)).powi(2);
                 }
