@@ -34,7 +34,7 @@ pub(super) struct BakeRequestArgs {
 #[derive(Debug, Clone, Default, clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub(super) struct ParamArgs {
-    /// Reference poses to fit to. Default: 512 for the vertex methods,
+    /// Reference poses to fit to. Default: 1024 for the vertex methods,
     /// 256 for the static average.
     #[arg(long)]
     poses: Option<usize>,
