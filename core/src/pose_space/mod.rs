@@ -252,9 +252,18 @@ impl JointAngles {
                 moving[k - 1]
             });
         }
-        for range in &mut layout.ranges {
+        let scales = r + 3 * layout.translations.len();
+        for (i, range) in layout.ranges.iter_mut().enumerate() {
             let pad = (range.max - range.min) * options.margin;
-            range.min -= pad;
+            // The margin does not take a scale through zero (parameter
+            // −1) that the clips never took there: a node turned inside
+            // out is no pose of the character.
+            let floor = if i >= scales && range.min >= -1.0 {
+                -1.0
+            } else {
+                f32::NEG_INFINITY
+            };
+            range.min = (range.min - pad).max(floor);
             range.max += pad;
         }
         Ok(layout)

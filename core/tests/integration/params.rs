@@ -164,11 +164,23 @@ fn animated_scales_are_pose_parameters_down_to_zero() {
     assert_eq!(layout.scales.len(), 3, "{:?}", layout.names);
     assert_eq!(layout.len(), without.len() + 9);
     assert!(layout.names.iter().any(|n| n.ends_with(".sx")));
-    // Scale over rest minus 1: a cube scaled to nothing is −1, widened by
-    // the margin; at rest 0.
+    // Scale over rest minus 1: a cube scaled to nothing is −1; at rest 0.
+    // The margin widens each range (the clips scale between 0 and 1, so
+    // the top goes to 1.1) but does not take a scale through zero, which
+    // would turn the cube inside out.
     let first_scale = 3 * (layout.joints.len() + layout.translations.len());
-    let r = layout.ranges[first_scale];
-    assert!(r.min < -1.0 && r.min > -1.2 && r.max >= 0.0, "{r:?}");
+    for r in &layout.ranges[first_scale..] {
+        assert_eq!(r.min, -1.0, "{r:?}");
+        assert!((r.max - 0.1).abs() < 1e-4, "{r:?}");
+    }
+    // The rotations' ranges are still widened below the clips' half turn.
+    assert!(
+        layout.ranges[..first_scale]
+            .iter()
+            .any(|r| r.min < -std::f32::consts::PI - 0.2),
+        "{:?}",
+        &layout.ranges[..first_scale]
+    );
     let rest = Pose::rest(&c.skeleton);
     assert!(
         layout.params(&c.skeleton, &rest)[first_scale..]

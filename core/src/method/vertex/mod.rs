@@ -47,7 +47,7 @@ use crate::{
 
 /// Version of the fitting algorithms, part of the bake key: bump it when a
 /// change to fitting changes the coefficients a bake produces.
-pub const ALGORITHM_VERSION: u32 = 4;
+pub const ALGORITHM_VERSION: u32 = 5;
 
 /// A fitted model and the pose features it reads.
 #[derive(Debug, Clone, PartialEq)]
