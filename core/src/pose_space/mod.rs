@@ -252,13 +252,13 @@ impl JointAngles {
                 moving[k - 1]
             });
         }
-        let scales = r + 3 * layout.translations.len();
+        let first_scale = r + 3 * layout.translations.len();
         for (i, range) in layout.ranges.iter_mut().enumerate() {
             let pad = (range.max - range.min) * options.margin;
             // The margin does not take a scale through zero (parameter
             // −1) that the clips never took there: a node turned inside
             // out is no pose of the character.
-            let floor = if i >= scales && range.min >= -1.0 {
+            let floor = if i >= first_scale && range.min >= -1.0 {
                 -1.0
             } else {
                 f32::NEG_INFINITY
@@ -313,6 +313,16 @@ impl JointAngles {
                 params
             })
             .collect()
+    }
+
+    /// The nodes the parameters move: rotated joints, then translated
+    /// nodes, then scaled ones.
+    pub fn nodes(&self) -> impl Iterator<Item = usize> + '_ {
+        self.joints
+            .iter()
+            .chain(&self.translations)
+            .chain(&self.scales)
+            .copied()
     }
 
     /// Number of parameters.

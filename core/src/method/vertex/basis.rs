@@ -84,12 +84,13 @@ impl Basis {
 /// poses) into at most `rank` basis rows: the basis, the one-block form of
 /// `rank + 1` rows that replaces `form`, and how much was lost. `None` when
 /// there are no poses or vertices, when the predictions do not vary, or
-/// when the basis would not cost a vertex fewer multiply-adds than the form
-/// does.
+/// when the basis would not cost a vertex fewer multiply-adds than `cost`,
+/// what the form costs it now.
 pub(super) fn compress(
     form: FormRef<'_>,
     weights: &[Vec<f32>],
     rank: usize,
+    cost: f64,
 ) -> Option<(Basis, LinearForm, BasisStats)> {
     let c = dense(form);
     let (inputs, v, p) = (c.nrows(), c.ncols(), weights.len());
@@ -114,18 +115,6 @@ pub(super) fn compress(
         // compress.
         return None;
     }
-    // What a vertex costs now: a multiply-add per non-zero weight (MLS
-    // leaves most clusters out), or per stored coefficient when sparse.
-    let cost = match form {
-        FormRef::Dense(_) => {
-            weights
-                .iter()
-                .map(|w| w.iter().filter(|&&x| x != 0.0).count())
-                .sum::<usize>() as f64
-                / p as f64
-        }
-        FormRef::Sparse(s) => s.values.len() as f64 / v as f64,
-    };
     if (r + 1) as f64 >= cost {
         return None;
     }
@@ -244,7 +233,7 @@ mod tests {
                 vec![(t * 0.37).sin(), (t * 1.3).cos(), (t * 0.11).sin(), 1.0]
             })
             .collect();
-        let (basis, small, stats) = compress(FormRef::Dense(&form), &poses, 5).unwrap();
+        let (basis, small, stats) = compress(FormRef::Dense(&form), &poses, 5, 4.0).unwrap();
         assert_eq!((stats.rank, basis.rank, small.weight_count()), (2, 2, 3));
         assert!(stats.rmse < 1e-9 && (stats.kept_variance - 1.0).abs() < 1e-9);
         for w in &poses {
@@ -253,7 +242,7 @@ mod tests {
                 assert!((x - y).abs() < 2e-3, "{x} vs {y}");
             }
         }
-        let (_, _, one) = compress(FormRef::Dense(&form), &poses, 1).unwrap();
+        let (_, _, one) = compress(FormRef::Dense(&form), &poses, 1, 4.0).unwrap();
         assert_eq!(one.rank, 1);
         assert!(one.rmse > 1e-3 && one.kept_variance > 0.5 && one.kept_variance < 1.0);
     }

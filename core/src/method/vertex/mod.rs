@@ -106,23 +106,13 @@ impl Model {
         let nodes = character.skeleton.nodes.len();
         let ok = match self {
             Self::StaticAverage(_) => true,
-            Self::VertexLinear(layout, _) => layout
-                .joints
-                .iter()
-                .chain(&layout.translations)
-                .chain(&layout.scales)
-                .all(|&n| n < nodes),
+            Self::VertexLinear(layout, _) => layout.nodes().all(|n| n < nodes),
             Self::VertexClustered(handles, m) => {
                 handles.root.is_none_or(|r| r < nodes)
                     && handles.joints.iter().all(|&n| n < nodes)
-                    && m.base.as_ref().is_none_or(|b| {
-                        let ja = &b.joint_angles;
-                        ja.joints
-                            .iter()
-                            .chain(&ja.translations)
-                            .chain(&ja.scales)
-                            .all(|&n| n < nodes)
-                    })
+                    && m.base
+                        .as_ref()
+                        .is_none_or(|b| b.joint_angles.nodes().all(|n| n < nodes))
             }
         };
         if ok {
@@ -147,19 +137,17 @@ impl Model {
 
     /// Compresses a fitted vertex-linear or vertex-clustered model into at
     /// most `rank` eigen-AO basis rows ([`basis`]), found over the
-    /// reference `poses` it was fitted to. `None` (and the model as it
-    /// was) for the static average or when there is nothing to compress.
-    pub fn compress(
-        &mut self,
-        skeleton: &Skeleton,
-        poses: &[Pose],
-        rank: usize,
-    ) -> Option<BasisStats> {
-        if matches!(self, Self::StaticAverage(_)) {
+    /// per-pose `weights` ([`Model::weights`]) of the reference poses it
+    /// was fitted to. `None` (and the model as it was) for the static
+    /// average, or when there is nothing to compress or the basis would
+    /// not cost a vertex fewer multiply-adds than the model does now.
+    pub fn compress(&mut self, weights: &[Vec<f32>], rank: usize) -> Option<BasisStats> {
+        if matches!(self, Self::StaticAverage(_)) || weights.is_empty() {
             return None;
         }
-        let weights: Vec<Vec<f32>> = poses.iter().map(|p| self.weights(skeleton, p)).collect();
-        let (basis, form, stats) = basis::compress(self.form(), &weights, rank)?;
+        let cost =
+            weights.iter().map(|w| self.multiply_adds(w)).sum::<f64>() / weights.len() as f64;
+        let (basis, form, stats) = basis::compress(self.form(), weights, rank, cost)?;
         match self {
             Self::StaticAverage(_) => unreachable!("returned above"),
             Self::VertexLinear(_, m) => {
@@ -271,10 +259,13 @@ pub fn fit(
                 .map(|p| joint_angles.params(skeleton, p))
                 .collect();
             let (m, mut stats) = fit_linear(character, joint_angles, &q, ao, groups, linear)?;
+            let weights: Vec<Vec<f32>> = if linear.basis > 0 {
+                q.iter().map(|a| m.weights(a)).collect()
+            } else {
+                Vec::new()
+            };
             let mut model = Model::VertexLinear(joint_angles.clone(), m);
-            if linear.basis > 0 {
-                stats.basis = model.compress(skeleton, poses, linear.basis);
-            }
+            stats.basis = model.compress(&weights, linear.basis);
             (model, FitStats::VertexLinear(stats))
         }
         Method::VertexClustered => {
@@ -282,6 +273,14 @@ pub fn fit(
             // A linear base is fitted first (global and dense, so that its
             // block can stand in the clustered form); the clusters then
             // model what it leaves.
+            // The base's joint angles per pose (none without a base).
+            let q: Vec<Vec<f32>> = match clustered.base {
+                clustered::Base::Mean => vec![Vec::new(); poses.len()],
+                clustered::Base::Linear => poses
+                    .iter()
+                    .map(|p| joint_angles.params(skeleton, p))
+                    .collect(),
+            };
             let base = match clustered.base {
                 clustered::Base::Mean => None,
                 clustered::Base::Linear => {
@@ -292,17 +291,12 @@ pub fn fit(
                         basis: 0,
                         ..*linear
                     };
-                    let q: Vec<Vec<f32>> = poses
-                        .iter()
-                        .map(|p| joint_angles.params(skeleton, p))
-                        .collect();
-                    let (m, stats) = fit_linear(character, joint_angles, &q, ao, groups, &dense)?;
-                    Some((m, stats, q))
+                    Some(fit_linear(character, joint_angles, &q, ao, groups, &dense)?)
                 }
             };
             let leftover;
             let ao = match &base {
-                Some((m, _, q)) => {
+                Some((m, _)) => {
                     let mut values = Vec::with_capacity(ao.values.len());
                     for (r, angles) in q.iter().enumerate() {
                         let predicted = m.evaluate(angles);
@@ -381,16 +375,22 @@ pub fn fit(
             stats.ridge_cv = choice;
             stats.clamp_cv = clamp;
             let m = match base {
-                Some((linear_model, linear_stats, _)) => {
+                Some((linear_model, linear_stats)) => {
                     stats.base = Some(linear_stats);
                     m.with_base(joint_angles.clone(), linear_model)
                 }
                 None => m,
             };
+            let weights: Vec<Vec<f32>> = if clustered.basis > 0 {
+                h.iter()
+                    .zip(&q)
+                    .map(|(h, a)| m.weights_with(h, a))
+                    .collect()
+            } else {
+                Vec::new()
+            };
             let mut model = Model::VertexClustered(handles.clone(), m);
-            if clustered.basis > 0 {
-                stats.basis = model.compress(skeleton, poses, clustered.basis);
-            }
+            stats.basis = model.compress(&weights, clustered.basis);
             (model, FitStats::VertexClustered(stats))
         }
         Method::CubemapDiscrete | Method::CubemapContinuous | Method::Grid => {
