@@ -132,14 +132,14 @@ impl Plan<'_> {
         let mut folds = Vec::with_capacity(clips.len());
         for c in clips {
             let keep: Vec<usize> = (0..sources.len())
-                .filter(|&i| sources[i] != Some(c))
+                .filter(|&i| sources[i].clip() != Some(c))
                 .collect();
             let fold_poses: Vec<Pose> = keep.iter().map(|&i| poses[i].clone()).collect();
-            let groups: Vec<Option<usize>> = keep.iter().map(|&i| sources[i]).collect();
+            let fold_sources: Vec<_> = keep.iter().map(|&i| sources[i]).collect();
             let (model, _) = self.fit(
                 &fold_poses,
                 &reference.select(keep.iter().copied()),
-                &groups,
+                &fold_sources,
             )?;
             let frames: Vec<usize> = keep.iter().copied().filter(|i| plain.contains(i)).collect();
             let baseline = StaticAverage::fit(&reference.select(if frames.is_empty() {

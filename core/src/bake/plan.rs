@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::{
     Character, Clip,
     method::Family,
-    method::vertex::{AssetHeaderFields, FitStats, Model},
+    method::vertex::{AssetHeaderFields, FitStats, Model, Source},
     pose_space::ParamError,
     pose_space::{ClipFrame, Handles, JointAngles, LayoutOptions, random_clip_frames},
     rig::pose::Pose,
@@ -162,6 +162,7 @@ impl<'a> Plan<'a> {
             ReferenceSource::Clips => [0, n, 0],
             ReferenceSource::Mixed => [n / 2, n - n / 2, 0],
             ReferenceSource::Perturbed => [0, n - n / 2, n / 2],
+            ReferenceSource::Cv => [n / 3, n / 3, n - 2 * (n / 3)],
         }
     }
 
@@ -230,16 +231,16 @@ impl<'a> Plan<'a> {
         poses
     }
 
-    /// Where each reference pose comes from, in order: `None` for a random
-    /// pose, the clip's index (into [`Plan::clips`]) for a clip frame,
-    /// perturbed or not.
-    pub fn reference_sources(&self) -> Vec<Option<usize>> {
+    /// Where each reference pose comes from, in order (clips are indices
+    /// into [`Plan::clips`]).
+    pub fn reference_sources(&self) -> Vec<Source> {
         let seed = self.params.seed;
         let [random, frames, perturbed] = self.reference_counts();
         let plain = random_clip_frames(&self.train_clips, frames, seed);
         let moved = random_clip_frames(&self.train_clips, perturbed, seed ^ PERTURBED_SEED);
-        std::iter::repeat_n(None, random)
-            .chain(plain.iter().chain(&moved).map(|f| Some(self.train[f.clip])))
+        std::iter::repeat_n(Source::Random, random)
+            .chain(plain.iter().map(|f| Source::Frame(self.train[f.clip])))
+            .chain(moved.iter().map(|f| Source::Perturbed(self.train[f.clip])))
             .collect()
     }
 
@@ -313,13 +314,13 @@ impl<'a> Plan<'a> {
 
     /// Fits the method to the reference poses' AO (the `fit` job's work;
     /// the dispatch on the method is [`crate::method::vertex::fit`]).
-    /// `groups` is each pose's clip (`None`: a random pose; see
+    /// `sources` says where each pose comes from (see
     /// [`Plan::reference_sources`]).
     pub fn fit(
         &self,
         poses: &[Pose],
         ao: &AoBlock,
-        groups: &[Option<usize>],
+        sources: &[Source],
     ) -> Result<(Model, FitStats), BakeError> {
         let p = &self.params;
         crate::method::vertex::fit(
@@ -330,7 +331,7 @@ impl<'a> Plan<'a> {
             (&self.joint_angles, &self.handles),
             poses,
             ao,
-            groups,
+            sources,
         )
         .map_err(BakeError::Fit)
     }

@@ -366,18 +366,90 @@ fn hostile_assets_with_valid_checksums_are_refused() {
 }
 
 #[test]
+fn cross_validation_over_clips_chooses_the_reference_rows() {
+    // `reference = cv` traces random poses, clip frames and perturbed clip
+    // frames, a third each; the fit uses the rows that score best on the
+    // clips its cross-validation leaves out. The same seeds draw the same
+    // poses for `mixed` and `perturbed` with two thirds as many, so the
+    // chosen model is, bit for bit, the one those bakes fit.
+    use aobake_core::{
+        bake::ReferenceSource,
+        method::vertex::{FitStats, Rows},
+    };
+    let mut chosen = Vec::new();
+    for name in ["InterpolationTest.glb", "Fox.glb"] {
+        let imported = util::load(&util::character_path(name).unwrap());
+        let mut params = quick(Method::VertexLinear);
+        params.eval_folds = 0;
+        params.poses = 384;
+        assert_eq!(params.reference, ReferenceSource::Cv, "the default");
+        let inputs = util::inputs(&imported.character, &imported.clips);
+        let report = bake_in_process(&Bake::new(&inputs, params.clone()).unwrap(), None)
+            .unwrap()
+            .report;
+        let FitStats::VertexLinear(stats) = &report.vertex().unwrap().fit else {
+            panic!("{name}: a vertex-linear fit");
+        };
+        let choice = stats.reference.clone().expect("a choice");
+        eprintln!("{name}: {choice:?}");
+        let best = choice
+            .scores
+            .iter()
+            .map(|s| s.1)
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert_eq!(choice.scores.len(), 3);
+        assert!(choice.scores.iter().all(|s| s.1.is_finite()));
+        assert_eq!(
+            choice.scores.iter().find(|s| s.0 == choice.rows).unwrap().1,
+            best
+        );
+        let model = bake(&imported.character, &imported.clips, params.clone()).model;
+        let alone = match choice.rows {
+            Rows::Mixed => Some(ReferenceSource::Mixed),
+            Rows::Perturbed => Some(ReferenceSource::Perturbed),
+            Rows::All => None,
+        };
+        if let Some(reference) = alone {
+            let mut p = params.clone();
+            p.reference = reference;
+            p.poses = 256;
+            let other = bake(&imported.character, &imported.clips, p).model;
+            assert!(model == other, "{name}: the {reference:?} rows alone");
+        }
+        chosen.push(choice.rows);
+    }
+    // Cubes scaled, turned and moved one at a time gain from perturbed
+    // frames; the fox needs random poses (here all three rows, with the
+    // default 1536 poses random poses and frames; perturbed frames alone
+    // score over a dB worse).
+    assert_eq!(chosen[0], Rows::Perturbed);
+    assert_ne!(chosen[1], Rows::Perturbed);
+}
+
+#[test]
 fn the_report_measures_clips_the_model_never_saw() {
     use aobake_core::bake::Plan;
     let imported = util::load(&util::character_path("Fox.glb").unwrap());
     let params = quick(Method::VertexLinear);
     let plan = Plan::new(&imported.character, &imported.clips, params.clone()).unwrap();
-    // Mixed reference poses: random ones first, then clip frames; the
-    // static average is fitted to the clip frames alone.
+    // The default reference poses (`cv`): random ones first, then clip
+    // frames, then perturbed clip frames, a third each; the static average
+    // is fitted to the plain clip frames alone.
     let sources = plan.reference_sources();
     assert_eq!(sources.len(), 96);
-    assert!(sources[..48].iter().all(Option::is_none));
-    assert!(sources[48..].iter().all(Option::is_some));
-    assert_eq!(plan.baseline_rows(), (48..96).collect::<Vec<_>>());
+    use aobake_core::method::vertex::Source;
+    assert!(sources[..32].iter().all(|s| *s == Source::Random));
+    assert!(
+        sources[32..64]
+            .iter()
+            .all(|s| matches!(s, Source::Frame(_)))
+    );
+    assert!(
+        sources[64..]
+            .iter()
+            .all(|s| matches!(s, Source::Perturbed(_)))
+    );
+    assert_eq!(plan.baseline_rows(), (32..64).collect::<Vec<_>>());
     let baked = bake(&imported.character, &imported.clips, params);
     let unseen = baked
         .evaluation
@@ -389,7 +461,7 @@ fn the_report_measures_clips_the_model_never_saw() {
     for (k, fold) in unseen.folds.iter().enumerate() {
         // Refitted without a single reference pose of its clip, judged on
         // every held-out frame of that clip.
-        let from_clip = sources.iter().filter(|s| **s == Some(k)).count();
+        let from_clip = sources.iter().filter(|s| s.clip() == Some(k)).count();
         assert!(from_clip > 0);
         assert_eq!(fold.reference_poses, 96 - from_clip);
         let frames = baked

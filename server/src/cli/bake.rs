@@ -11,6 +11,7 @@ use aobake_core::{
     Limits,
     asset::report::{BakeReport, CubemapReport, GridReport, Report},
     bake::{Bake, BakeInputs, Baked, GraphOptions, JobOutput, JobSpec, Renderer, run_graph},
+    method::vertex::{FitStats, Rows, RowsChoice},
 };
 
 use super::params::BakeRequestArgs;
@@ -346,5 +347,33 @@ held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:
         t.test_trace_s,
         t.fit_s,
     ));
+    if let Some(c) = reference_choice(&report.fit) {
+        out.push_str(&format!(
+            "reference rows: {} (cross-validation over clips, mean PSNR on left-out clips: {})\n",
+            rows_name(c.rows),
+            c.scores
+                .iter()
+                .map(|(rows, db)| format!("{} {db:.2} dB", rows_name(*rows)))
+                .collect::<Vec<_>>()
+                .join(", "),
+        ));
+    }
     out
+}
+
+/// How the fit chose its reference rows, when it did (`reference = cv`).
+fn reference_choice(fit: &FitStats) -> Option<&RowsChoice> {
+    match fit {
+        FitStats::VertexLinear(s) => s.reference.as_ref(),
+        FitStats::VertexClustered(s) => s.reference.as_ref(),
+        FitStats::StaticAverage => None,
+    }
+}
+
+fn rows_name(rows: Rows) -> &'static str {
+    match rows {
+        Rows::Mixed => "random poses and clip frames",
+        Rows::Perturbed => "clip frames and perturbed frames",
+        Rows::All => "all three",
+    }
 }

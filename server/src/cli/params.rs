@@ -34,16 +34,19 @@ pub(super) struct BakeRequestArgs {
 #[derive(Debug, Clone, Default, clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub(super) struct ParamArgs {
-    /// Reference poses to fit to. Default: 1024 for the vertex methods,
-    /// 256 for the static average.
+    /// Reference poses to trace. Default: 1536 for the vertex methods,
+    /// 256 otherwise.
     #[arg(long)]
     poses: Option<usize>,
     /// Where reference poses come from: random joint angles in the clips'
-    /// ranges, random clip frames, half each (mixed), or half clip frames
-    /// and half clip frames with every joint moved at random (perturbed,
-    /// by up to `--param perturbation=F` of each range). Default: mixed
-    /// for vertex-linear and vertex-clustered, clips otherwise.
-    #[arg(long, value_parser = ["random", "clips", "mixed", "perturbed"])]
+    /// ranges, random clip frames, half each (mixed), half clip frames and
+    /// half clip frames with every joint moved at random (perturbed, by up
+    /// to `--param perturbation=F` of each range, default 0.75), or a
+    /// third of each of random poses, clip frames and perturbed frames,
+    /// the fit using the ones that predict left-out clips best (cv: mixed,
+    /// perturbed or all). Default: cv for vertex-linear and
+    /// vertex-clustered, clips otherwise.
+    #[arg(long, value_parser = ["random", "clips", "mixed", "perturbed", "cv"])]
     reference: Option<String>,
     /// Rays per vertex and pose.
     #[arg(long)]

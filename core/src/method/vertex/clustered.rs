@@ -198,6 +198,11 @@ pub struct ClusteredFitStats {
     /// The eigen-AO compression, when there was one.
     #[serde(default)]
     pub basis: Option<super::basis::BasisStats>,
+    /// How cross-validation over clips chose the reference rows, when it
+    /// did (`reference = cv`; the linear base and the clusters use the
+    /// same rows).
+    #[serde(default)]
+    pub reference: Option<super::cv::RowsChoice>,
 }
 
 impl VertexClustered {
@@ -244,6 +249,7 @@ impl VertexClustered {
             clamp_cv: None,
             base: None,
             basis: None,
+            reference: None,
         };
         for j in 0..m {
             let members: Vec<usize> = (0..p).filter(|&r| km.assignment[r] == j).collect();

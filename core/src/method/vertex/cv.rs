@@ -10,6 +10,29 @@ use crate::trace::AoBlock;
 /// Most groups of clips the cross-validation leaves out in turn.
 pub const CV_FOLDS: usize = 8;
 
+/// Where a reference row comes from: what cross-validation over clips
+/// leaves out with a clip, and what it scores.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Source {
+    /// A random pose: always trained on, never scored.
+    Random,
+    /// A frame of this clip: left out with the clip and scored (motion).
+    Frame(usize),
+    /// A perturbed frame of this clip: left out with the clip, not scored
+    /// (it is no motion anybody animated).
+    Perturbed(usize),
+}
+
+impl Source {
+    /// The clip the row comes from (`None`: a random pose).
+    pub fn clip(self) -> Option<usize> {
+        match self {
+            Self::Random => None,
+            Self::Frame(c) | Self::Perturbed(c) => Some(c),
+        }
+    }
+}
+
 /// What a cross-validation over clips found.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RidgeChoice {
@@ -22,6 +45,22 @@ pub struct RidgeChoice {
 }
 
 impl RidgeChoice {
+    /// The candidate of `candidates` with the least RMSE in `errors` (the
+    /// first on a tie).
+    pub fn of(candidates: &[f64], errors: &ClipErrors) -> Option<Self> {
+        let scores: Vec<(f64, f64)> = candidates
+            .iter()
+            .enumerate()
+            .map(|(k, &c)| (c, errors.rmse(k)))
+            .collect();
+        let ridge = scores.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1))?.0;
+        Some(Self {
+            ridge,
+            scores,
+            folds: errors.folds,
+        })
+    }
+
     /// The chosen value's RMSE over the left-out clips.
     pub fn score(&self) -> f64 {
         self.scores
@@ -29,6 +68,72 @@ impl RidgeChoice {
             .find(|(c, _)| *c == self.ridge)
             .map_or(f64::INFINITY, |s| s.1)
     }
+}
+
+/// Which reference rows a fit uses when it has random poses, clip frames
+/// and perturbed clip frames (`reference = cv`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Rows {
+    /// Random poses and clip frames (`reference = mixed`).
+    Mixed,
+    /// Clip frames and perturbed clip frames (`reference = perturbed`).
+    Perturbed,
+    /// All three.
+    All,
+}
+
+impl Rows {
+    /// The candidates, in the order a tie goes.
+    pub const CANDIDATES: [Self; 3] = [Self::Mixed, Self::Perturbed, Self::All];
+
+    /// Whether a row from `source` is in the set.
+    pub fn keeps(self, source: Source) -> bool {
+        match (self, source) {
+            (Self::All, _) | (_, Source::Frame(_)) => true,
+            (Self::Mixed, s) => s == Source::Random,
+            (Self::Perturbed, s) => s != Source::Random,
+        }
+    }
+
+    /// The indices of `sources` in the set.
+    pub fn select(self, sources: &[Source]) -> Vec<usize> {
+        (0..sources.len())
+            .filter(|&r| self.keeps(sources[r]))
+            .collect()
+    }
+}
+
+/// How cross-validation over clips chose the reference rows.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RowsChoice {
+    /// The rows the model was fitted to.
+    pub rows: Rows,
+    /// Per candidate: its mean PSNR over the left-out clips' frames (dB,
+    /// see [`ClipErrors::psnr`]).
+    pub scores: Vec<(Rows, f64)>,
+}
+
+/// Chooses the reference rows by cross-validation over clips: `score(rows)`
+/// is a candidate's mean PSNR over the left-out clips' frames (the frames,
+/// and so the scored rows and folds, are in every candidate), and the
+/// highest wins, [`Rows::Mixed`] on a tie. `None` unless there are random poses
+/// and perturbed frames to choose between, or when a score is `None`
+/// (frames of fewer than two clips).
+pub fn choose_rows(
+    sources: &[Source],
+    score: impl Fn(&[usize]) -> Option<f64>,
+) -> Option<RowsChoice> {
+    let has = |f: fn(&Source) -> bool| sources.iter().any(f);
+    if !has(|s| *s == Source::Random) || !has(|s| matches!(s, Source::Perturbed(_))) {
+        return None;
+    }
+    let scores: Vec<(Rows, f64)> = Rows::CANDIDATES
+        .iter()
+        .map(|&rows| Some((rows, score(&rows.select(sources))?)))
+        .collect::<Option<_>>()?;
+    let rows = scores.iter().rev().max_by(|a, b| a.1.total_cmp(&b.1))?.0;
+    Some(RowsChoice { rows, scores })
 }
 
 /// Squared errors over left-out clips, per candidate and vertex, from
@@ -41,80 +146,106 @@ pub struct ClipErrors {
     pub rows: usize,
     /// Groups of clips left out in turn.
     pub folds: usize,
+    /// `psnr[candidate]`: over the groups, the mean of each group's mean
+    /// per-frame PSNR (dB), the figure the report's unseen clips give.
+    pub psnr: Vec<f64>,
 }
 
-/// Leaves groups of clips out: `groups` is each row of `ao`'s clip
-/// (`None`: a random pose, always trained on); the clips are dealt into up
-/// to [`CV_FOLDS`] groups, and for each group `fit(training rows)` gives
-/// one model per candidate (`None`: that candidate cannot be fitted, its
+impl ClipErrors {
+    /// A candidate's RMSE over every left-out row and vertex.
+    pub fn rmse(&self, candidate: usize) -> f64 {
+        let n = (self.rows * self.sse[candidate].len()).max(1) as f64;
+        (self.sse[candidate].iter().sum::<f64>() / n).sqrt()
+    }
+}
+
+/// Leaves groups of clips out: `sources` says where each row of `ao`
+/// comes from (see [`Source`]); the clips are dealt into up to
+/// [`CV_FOLDS`] groups, and for each group `fit(training rows)` gives one
+/// model per candidate (`None`: that candidate cannot be fitted, its
 /// errors are infinite), each scored by `predict(model, row)` on the
-/// group's rows. A candidate that changes only how a model runs can share
-/// one fit. `None` when the rows come from fewer than two clips.
+/// group's frames. A candidate that changes only how a model runs can
+/// share one fit. `None` when the frames come from fewer than two clips.
 pub fn sse_by_clips<M>(
-    groups: &[Option<usize>],
+    sources: &[Source],
     ao: &AoBlock,
     candidates: usize,
     fit: impl Fn(&[usize]) -> Vec<Option<M>>,
     predict: impl Fn(&M, usize) -> Vec<f32>,
 ) -> Option<ClipErrors> {
-    let mut clips: Vec<usize> = groups.iter().flatten().copied().collect();
+    let mut clips: Vec<usize> = sources
+        .iter()
+        .filter_map(|s| match s {
+            Source::Frame(c) => Some(*c),
+            _ => None,
+        })
+        .collect();
     clips.sort_unstable();
     clips.dedup();
     if clips.len() < 2 || candidates == 0 {
         return None;
     }
     let folds = clips.len().min(CV_FOLDS);
-    let fold_of = |c: usize| clips.binary_search(&c).map_or(0, |i| i % folds);
+    let fold_of = |c: usize| clips.binary_search(&c).ok().map(|i| i % folds);
     let mut sse = vec![vec![0.0f64; ao.vertices]; candidates];
+    let mut psnr = vec![0.0f64; candidates];
     let mut rows = 0usize;
+    let mut scored = 0usize;
     for f in 0..folds {
-        let held = |g: &Option<usize>| g.is_some_and(|c| fold_of(c) == f);
-        let train: Vec<usize> = (0..groups.len()).filter(|&r| !held(&groups[r])).collect();
-        let test: Vec<usize> = (0..groups.len()).filter(|&r| held(&groups[r])).collect();
+        let held = |s: Source| s.clip().and_then(fold_of) == Some(f);
+        let train: Vec<usize> = (0..sources.len()).filter(|&r| !held(sources[r])).collect();
+        let test: Vec<usize> = (0..sources.len())
+            .filter(|&r| matches!(sources[r], Source::Frame(_)) && held(sources[r]))
+            .collect();
         if train.is_empty() || test.is_empty() {
             continue;
         }
         rows += test.len();
+        scored += 1;
         let models = fit(&train);
-        for (k, e) in sse.iter_mut().enumerate() {
+        for (k, (e, p)) in sse.iter_mut().zip(&mut psnr).enumerate() {
             let Some(model) = models.get(k).and_then(Option::as_ref) else {
                 e.iter_mut().for_each(|x| *x = f64::INFINITY);
+                *p = f64::NEG_INFINITY;
                 continue;
             };
+            let mut frames = 0.0;
             for &r in &test {
+                let mut frame = 0.0;
                 for ((x, &a), &b) in e.iter_mut().zip(&predict(model, r)).zip(ao.row(r)) {
-                    *x += (f64::from(a) - f64::from(b)).powi(2);
+                    let d = (f64::from(a) - f64::from(b)).powi(2);
+                    *x += d;
+                    frame += d;
                 }
+                frames += crate::asset::metrics::psnr(frame / ao.vertices.max(1) as f64);
             }
+            *p += frames / test.len() as f64;
         }
     }
-    Some(ClipErrors { sse, rows, folds })
+    psnr.iter_mut().for_each(|p| *p /= scored.max(1) as f64);
+    Some(ClipErrors {
+        sse,
+        rows,
+        folds,
+        psnr,
+    })
 }
 
 /// Chooses among `candidates` by leaving groups of clips out (see
 /// [`sse_by_clips`]): the candidate with the least squared error over
-/// all left-out rows and vertices wins (the first on a tie). `None` when
-/// the rows come from fewer than two clips.
+/// all left-out frames and vertices wins (the first on a tie). `None` when
+/// the frames come from fewer than two clips.
 pub fn choose_by_clips<M>(
-    groups: &[Option<usize>],
+    sources: &[Source],
     ao: &AoBlock,
     candidates: &[f64],
     fit: impl Fn(&[usize]) -> Vec<Option<M>>,
     predict: impl Fn(&M, usize) -> Vec<f32>,
 ) -> Option<RidgeChoice> {
-    let errors = sse_by_clips(groups, ao, candidates.len(), fit, predict)?;
-    let n = (errors.rows * ao.vertices).max(1) as f64;
-    let scores: Vec<(f64, f64)> = candidates
-        .iter()
-        .zip(&errors.sse)
-        .map(|(&c, e)| (c, (e.iter().sum::<f64>() / n).sqrt()))
-        .collect();
-    let best = scores.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1))?.0;
-    Some(RidgeChoice {
-        ridge: best,
-        scores,
-        folds: errors.folds,
-    })
+    RidgeChoice::of(
+        candidates,
+        &sse_by_clips(sources, ao, candidates.len(), fit, predict)?,
+    )
 }
 
 #[cfg(test)]
@@ -124,19 +255,52 @@ mod tests {
     #[test]
     fn the_candidate_that_predicts_left_out_clips_best_wins() {
         // Two clips; the "model" predicts the candidate itself everywhere.
-        // Clip 0's rows are 0.2, clip 1's 0.4; random rows are ignored.
+        // Clip 0's frames are 0.2, clip 1's 0.4; random and perturbed rows
+        // are not scored.
         let ao = AoBlock {
             vertices: 1,
-            values: vec![0.9, 0.2, 0.2, 0.4, 0.4],
+            values: vec![0.9, 0.2, 0.2, 0.4, 0.4, 0.9],
         };
-        let groups = [None, Some(0), Some(0), Some(1), Some(1)];
+        use Source::{Frame, Perturbed, Random};
+        let sources = [Random, Frame(0), Frame(0), Frame(1), Frame(1), Perturbed(1)];
         let candidates = [0.0, 0.3, 1.0];
-        let each = |_: &[usize]| candidates.iter().map(|&v| Some(v)).collect();
-        let c = choose_by_clips(&groups, &ao, &candidates, each, |&v, _| vec![v as f32]).unwrap();
+        let trained = std::cell::RefCell::new(Vec::new());
+        let each = |train: &[usize]| {
+            trained.borrow_mut().push(train.to_vec());
+            candidates.iter().map(|&v| Some(v)).collect()
+        };
+        let c = choose_by_clips(&sources, &ao, &candidates, each, |&v, _| vec![v as f32]).unwrap();
         assert_eq!((c.ridge, c.folds), (0.3, 2));
         assert!((c.scores[1].1 - 0.1).abs() < 1e-6);
-        // One clip: nothing to leave out.
-        let one = [None, Some(0), Some(0), Some(0), Some(0)];
+        // A perturbed frame leaves with its clip; a random pose never does.
+        assert_eq!(*trained.borrow(), [vec![0, 3, 4, 5], vec![0, 1, 2]]);
+        // Frames of one clip: nothing to leave out.
+        let one = [Random, Frame(0), Frame(0), Frame(0), Frame(0), Perturbed(1)];
         assert!(choose_by_clips(&one, &ao, &candidates, each, |&v, _| vec![v as f32]).is_none());
+    }
+
+    #[test]
+    fn the_reference_rows_that_score_best_win() {
+        use Source::{Frame, Perturbed, Random};
+        let sources = [Random, Frame(0), Perturbed(0), Frame(1), Perturbed(1)];
+        assert_eq!(Rows::Mixed.select(&sources), [0, 1, 3]);
+        assert_eq!(Rows::Perturbed.select(&sources), [1, 2, 3, 4]);
+        assert_eq!(Rows::All.select(&sources), [0, 1, 2, 3, 4]);
+        // The score here: fewer rows, more dB.
+        let c = choose_rows(&sources, |rows| Some(-(rows.len() as f64))).unwrap();
+        assert_eq!(c.rows, Rows::Mixed);
+        assert_eq!(c.scores[2], (Rows::All, -5.0));
+        let c = choose_rows(&sources, |rows| Some(rows.len() as f64)).unwrap();
+        assert_eq!(c.rows, Rows::All);
+        // A tie goes to the first.
+        assert_eq!(
+            choose_rows(&sources, |_| Some(1.0)).unwrap().rows,
+            Rows::Mixed
+        );
+        // Nothing to choose without random poses or perturbed frames, and
+        // no choice without a score.
+        assert!(choose_rows(&sources[1..], |_| Some(0.0)).is_none());
+        assert!(choose_rows(&[Random, Frame(0), Frame(1)], |_| Some(0.0)).is_none());
+        assert!(choose_rows(&sources, |_| None).is_none());
     }
 }

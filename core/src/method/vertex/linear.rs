@@ -193,14 +193,31 @@ pub fn choose_ridge(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
     ao: &AoBlock,
-    groups: &[Option<usize>],
+    sources: &[super::cv::Source],
     options: &LinearOptions,
     local: Option<&[Vec<usize>]>,
 ) -> Option<RidgeChoice> {
-    super::cv::choose_by_clips(
-        groups,
-        ao,
+    RidgeChoice::of(
         &RIDGE_CANDIDATES,
+        &ridge_errors(poses, angles, ao, sources, options, local)?,
+    )
+}
+
+/// The errors over left-out clips of every ridge weight of
+/// [`RIDGE_CANDIDATES`] (see [`super::cv::sse_by_clips`]), what
+/// [`choose_ridge`] chooses by.
+pub(super) fn ridge_errors(
+    poses: &[Vec<f32>],
+    angles: Angles<'_>,
+    ao: &AoBlock,
+    sources: &[super::cv::Source],
+    options: &LinearOptions,
+    local: Option<&[Vec<usize>]>,
+) -> Option<super::cv::ClipErrors> {
+    super::cv::sse_by_clips(
+        sources,
+        ao,
+        RIDGE_CANDIDATES.len(),
         |train| fit_ridges(poses, angles, ao, train, options, local),
         |model, r| model.evaluate(&poses[r]),
     )
@@ -247,7 +264,7 @@ pub fn choose_columns(
     angles: Angles<'_>,
     options: &LinearOptions,
     ao: &AoBlock,
-    groups: &[Option<usize>],
+    sources: &[super::cv::Source],
     scopes: &[Scope],
     local: Option<&[Vec<usize>]>,
     baseline: impl Fn(&[usize]) -> Vec<f32>,
@@ -274,7 +291,7 @@ pub fn choose_columns(
         Constant(Vec<f32>),
     }
     let errors = super::cv::sse_by_clips(
-        groups,
+        sources,
         ao,
         candidates.len(),
         |train| {
@@ -401,6 +418,10 @@ pub struct LinearFitStats {
     /// The eigen-AO compression, when there was one.
     #[serde(default)]
     pub basis: Option<super::basis::BasisStats>,
+    /// How cross-validation over clips chose the reference rows, when it
+    /// did (`reference = cv`).
+    #[serde(default)]
+    pub reference: Option<super::cv::RowsChoice>,
 }
 
 /// How one vertex is fitted.
@@ -715,6 +736,7 @@ impl VertexLinear {
                 local: columns.iter().any(|c| c.scope == Scope::Local),
                 per_vertex: None,
                 basis: None,
+                reference: None,
             };
             out.push(Ok((model, stats)));
         }

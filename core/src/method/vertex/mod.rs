@@ -28,6 +28,7 @@ pub use clustered::{
     MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
 };
 pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
+pub use cv::{Rows, RowsChoice, Source};
 pub use form::{Block, LinearForm, SparseForm};
 pub use linalg::SolveStats;
 pub use linear::{
@@ -47,7 +48,7 @@ use crate::{
 
 /// Version of the fitting algorithms, part of the bake key: bump it when a
 /// change to fitting changes the coefficients a bake produces.
-pub const ALGORITHM_VERSION: u32 = 5;
+pub const ALGORITHM_VERSION: u32 = 6;
 
 /// A fitted model and the pose features it reads.
 #[derive(Debug, Clone, PartialEq)]
@@ -226,14 +227,19 @@ pub enum FitStats {
     /// vertex-linear.
     VertexLinear(LinearFitStats),
     /// vertex-clustered.
-    VertexClustered(ClusteredFitStats),
+    VertexClustered(Box<ClusteredFitStats>),
 }
 
 /// Fits `method` to the AO of the reference `poses` (the `fit` job's
 /// work): the one place that turns a method name into a fitted model.
-/// `seed` seeds k-means; `groups` is each pose's clip (`None` for a random
-/// pose), what cross-validation over clips leaves out. The error says
-/// what to change.
+/// `seed` seeds k-means; `sources` says where each pose comes from, what
+/// cross-validation over clips leaves out and scores. With random poses
+/// and perturbed clip frames both there (`reference = cv`), a
+/// vertex method is fitted to the rows [`cv::choose_rows`] chooses, each
+/// candidate scored by vertex-linear over every parameter with the ridge
+/// its cross-validation chooses;
+/// the rows of random poses and clip frames when there are too few clips
+/// to choose. The error says what to change.
 #[allow(clippy::too_many_arguments)]
 pub fn fit(
     method: Method,
@@ -243,7 +249,69 @@ pub fn fit(
     spaces: (&JointAngles, &Handles),
     poses: &[Pose],
     ao: &AoBlock,
-    groups: &[Option<usize>],
+    sources: &[Source],
+) -> Result<(Model, FitStats), String> {
+    let choice = match method {
+        Method::VertexLinear | Method::VertexClustered => {
+            let (joint_angles, _) = spaces;
+            let q: Vec<Vec<f32>> = poses
+                .iter()
+                .map(|p| joint_angles.params(&character.skeleton, p))
+                .collect();
+            let ranges = linear::Angles {
+                ranges: &joint_angles.ranges,
+                rotations: joint_angles.joints.len(),
+            };
+            cv::choose_rows(sources, |rows| {
+                let q: Vec<Vec<f32>> = rows.iter().map(|&r| q[r].clone()).collect();
+                let s: Vec<Source> = rows.iter().map(|&r| sources[r]).collect();
+                let block = ao.select(rows.iter().copied());
+                let errors = linear::ridge_errors(&q, ranges, &block, &s, options.0, None)?;
+                let chosen = cv::RidgeChoice::of(&RIDGE_CANDIDATES, &errors)?;
+                let k = RIDGE_CANDIDATES.iter().position(|&r| r == chosen.ridge)?;
+                Some(errors.psnr[k])
+            })
+        }
+        _ => None,
+    };
+    let has = |f: fn(&Source) -> bool| sources.iter().any(f);
+    let rows = match &choice {
+        Some(c) => c.rows,
+        None if has(|s| *s == Source::Random) && has(|s| matches!(s, Source::Perturbed(_))) => {
+            Rows::Mixed
+        }
+        None => Rows::All,
+    };
+    let (model, mut stats) = if rows == Rows::All {
+        fit_rows(method, options, seed, character, spaces, poses, ao, sources)?
+    } else {
+        let keep = rows.select(sources);
+        let poses: Vec<Pose> = keep.iter().map(|&r| poses[r].clone()).collect();
+        let sources: Vec<Source> = keep.iter().map(|&r| sources[r]).collect();
+        let ao = ao.select(keep.iter().copied());
+        fit_rows(
+            method, options, seed, character, spaces, &poses, &ao, &sources,
+        )?
+    };
+    match &mut stats {
+        FitStats::VertexLinear(s) => s.reference = choice,
+        FitStats::VertexClustered(s) => s.reference = choice,
+        FitStats::StaticAverage => {}
+    }
+    Ok((model, stats))
+}
+
+/// [`fit`] to every row given.
+#[allow(clippy::too_many_arguments)]
+fn fit_rows(
+    method: Method,
+    options: (&LinearOptions, &ClusteredOptions),
+    seed: u64,
+    character: &crate::Character,
+    spaces: (&JointAngles, &Handles),
+    poses: &[Pose],
+    ao: &AoBlock,
+    sources: &[Source],
 ) -> Result<(Model, FitStats), String> {
     let skeleton = &character.skeleton;
     let (linear, clustered) = options;
@@ -258,7 +326,7 @@ pub fn fit(
                 .iter()
                 .map(|p| joint_angles.params(skeleton, p))
                 .collect();
-            let (m, mut stats) = fit_linear(character, joint_angles, &q, ao, groups, linear)?;
+            let (m, mut stats) = fit_linear(character, joint_angles, &q, ao, sources, linear)?;
             let weights: Vec<Vec<f32>> = if linear.basis > 0 {
                 q.iter().map(|a| m.weights(a)).collect()
             } else {
@@ -291,7 +359,14 @@ pub fn fit(
                         basis: 0,
                         ..*linear
                     };
-                    Some(fit_linear(character, joint_angles, &q, ao, groups, &dense)?)
+                    Some(fit_linear(
+                        character,
+                        joint_angles,
+                        &q,
+                        ao,
+                        sources,
+                        &dense,
+                    )?)
                 }
             };
             let leftover;
@@ -334,7 +409,7 @@ pub fn fit(
                             })
                             .collect()
                     };
-                    cv::choose_by_clips(groups, ao, &linear::RIDGE_CANDIDATES, each_ridge, predict)
+                    cv::choose_by_clips(sources, ao, &linear::RIDGE_CANDIDATES, each_ridge, predict)
                 })
                 .flatten();
             let mut chosen = ClusteredOptions {
@@ -359,7 +434,7 @@ pub fn fit(
                             .collect()
                     };
                     cv::choose_by_clips(
-                        groups,
+                        sources,
                         ao,
                         &clustered::CLAMP_CANDIDATES,
                         each_clamp,
@@ -391,7 +466,7 @@ pub fn fit(
             };
             let mut model = Model::VertexClustered(handles.clone(), m);
             stats.basis = model.compress(&weights, clustered.basis);
-            (model, FitStats::VertexClustered(stats))
+            (model, FitStats::VertexClustered(Box::new(stats)))
         }
         Method::CubemapDiscrete | Method::CubemapContinuous | Method::Grid => {
             return Err(format!("{method} is not a per-vertex method"));
@@ -408,7 +483,7 @@ fn fit_linear_per_vertex(
     q: &[Vec<f32>],
     ranges: linear::Angles<'_>,
     ao: &AoBlock,
-    groups: &[Option<usize>],
+    sources: &[Source],
     options: &LinearOptions,
     sets: Option<&[Vec<usize>]>,
 ) -> Option<Result<(VertexLinear, linear::LinearFitStats), linear::FitOverflow>> {
@@ -416,7 +491,7 @@ fn fit_linear_per_vertex(
         let frames: Vec<usize> = rows
             .iter()
             .copied()
-            .filter(|&r| groups[r].is_some())
+            .filter(|&r| matches!(sources[r], Source::Frame(_)))
             .collect();
         let rows = if frames.is_empty() { rows } else { &frames };
         StaticAverage::fit(&ao.select(rows.iter().copied())).evaluate()
@@ -426,8 +501,8 @@ fn fit_linear_per_vertex(
         Locality::On => &[Scope::Local],
         Locality::Cv => &[Scope::Global, Scope::Local],
     };
-    let columns = linear::choose_columns(q, ranges, options, ao, groups, scopes, sets, baseline)?;
-    let all: Vec<usize> = (0..groups.len()).collect();
+    let columns = linear::choose_columns(q, ranges, options, ao, sources, scopes, sets, baseline)?;
+    let all: Vec<usize> = (0..sources.len()).collect();
     let constants = baseline(&all);
     Some(
         VertexLinear::fit_columns(q, ranges, ao, &columns, sets, options, Some(&constants)).map(
@@ -447,7 +522,7 @@ fn fit_linear(
     joint_angles: &JointAngles,
     q: &[Vec<f32>],
     ao: &AoBlock,
-    groups: &[Option<usize>],
+    sources: &[Source],
     linear: &LinearOptions,
 ) -> Result<(VertexLinear, linear::LinearFitStats), String> {
     let sets = (linear.locality != Locality::Off).then(|| joint_angles.local_parameters(character));
@@ -456,14 +531,14 @@ fn fit_linear(
         rotations: joint_angles.joints.len(),
     };
     if linear.per_vertex
-        && let Some(fitted) = fit_linear_per_vertex(q, ranges, ao, groups, linear, sets.as_deref())
+        && let Some(fitted) = fit_linear_per_vertex(q, ranges, ao, sources, linear, sets.as_deref())
     {
         return fitted.map_err(|e| e.to_string());
     }
     let cv = |local: Option<&[Vec<usize>]>| {
         linear
             .ridge_cv
-            .then(|| linear::choose_ridge(q, ranges, ao, groups, linear, local))
+            .then(|| linear::choose_ridge(q, ranges, ao, sources, linear, local))
             .flatten()
     };
     let (local, choice) = match linear.locality {
