@@ -105,6 +105,52 @@ fn bake_writes_a_deterministic_asset_a_report_and_a_plot() {
 }
 
 #[test]
+fn the_summary_names_the_reference_rows_cross_validation_chose() {
+    // InterpolationTest has nine clips: `cv` (the default) chooses the
+    // rows, and the summary and the report say which and why.
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("r.json");
+    let cubes = sample("InterpolationTest/InterpolationTest.glb");
+    let out = aobake(&[
+        "bake",
+        cubes.to_str().unwrap(),
+        "--method",
+        "vertex-linear",
+        "--poses",
+        "96",
+        "--samples",
+        "32",
+        "--eval-poses",
+        "4",
+        "--param",
+        "eval_folds=0",
+        "--out",
+        dir.path().join("r.aob").to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let choice = &report["fit"]["reference"];
+    let scores = choice["scores"].as_array().unwrap();
+    let names: Vec<&str> = scores.iter().map(|s| s[0].as_str().unwrap()).collect();
+    assert_eq!(names, ["mixed", "perturbed", "all"]);
+    let named = match choice["rows"].as_str().unwrap() {
+        "mixed" => "reference rows: random poses and clip frames (",
+        "perturbed" => "reference rows: clip frames and perturbed frames (",
+        "all" => "reference rows: all three (",
+        other => panic!("{other}"),
+    };
+    assert!(stderr(&out).contains(named), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("mean PSNR on left-out clips: random poses and clip frames "),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
 fn eval_gives_per_vertex_ao_at_a_pose() {
     let dir = tempfile::tempdir().unwrap();
     let baked = run_bake(dir.path(), "m", &["--method", "vertex-linear"]);
