@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::{
     asset::metrics::{Errors, FrameError},
-    method::vertex::{Model, StaticAverage},
+    method::vertex::{Model, Rows, StaticAverage},
     rig::pose::Pose,
     trace::AoBlock,
 };
@@ -136,7 +136,7 @@ impl Plan<'_> {
                 .collect();
             let fold_poses: Vec<Pose> = keep.iter().map(|&i| poses[i].clone()).collect();
             let fold_sources: Vec<_> = keep.iter().map(|&i| sources[i]).collect();
-            let (model, _) = self.fit(
+            let (model, stats) = self.fit(
                 &fold_poses,
                 &reference.select(keep.iter().copied()),
                 &fold_sources,
@@ -159,6 +159,7 @@ impl Plan<'_> {
             folds.push(UnseenFold {
                 clip: self.clips[c].name.clone(),
                 reference_poses: keep.len(),
+                rows: stats.reference().map(|r| r.rows),
                 errors: Comparison::new(Errors::of(&m), Errors::of(&b)),
             });
         }
@@ -171,9 +172,13 @@ impl Plan<'_> {
 pub struct UnseenFold {
     /// The clip left out.
     pub clip: String,
-    /// Reference poses the fold's model was fitted to (none from the
-    /// clip).
+    /// Reference poses the fold's fit was given (none from the clip;
+    /// with `reference = cv` it uses the rows its own cross-validation
+    /// chooses among them).
     pub reference_poses: usize,
+    /// The rows its cross-validation chose, when it did.
+    #[serde(default)]
+    pub rows: Option<Rows>,
     /// The fold's model and the other clips' static average on every
     /// frame of the clip.
     pub errors: Comparison,

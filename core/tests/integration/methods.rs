@@ -464,6 +464,8 @@ fn the_report_measures_clips_the_model_never_saw() {
         let from_clip = sources.iter().filter(|s| s.clip() == Some(k)).count();
         assert!(from_clip > 0);
         assert_eq!(fold.reference_poses, 96 - from_clip);
+        // Two clips left: the fold's own cross-validation chose its rows.
+        assert!(fold.rows.is_some(), "{fold:?}");
         let frames = baked
             .evaluation
             .clips

@@ -11,7 +11,7 @@ use aobake_core::{
     Limits,
     asset::report::{BakeReport, CubemapReport, GridReport, Report},
     bake::{Bake, BakeInputs, Baked, GraphOptions, JobOutput, JobSpec, Renderer, run_graph},
-    method::vertex::{FitStats, Rows, RowsChoice},
+    method::vertex::Rows,
 };
 
 use super::params::BakeRequestArgs;
@@ -314,12 +314,15 @@ fn vertex_summary(report: &Report) -> String {
         ));
         for f in &u.folds {
             out.push_str(&format!(
-                "  {}: {:.2} dB against {:.2} dB ({:+.2} dB) over {} frames\n",
+                "  {}: {:.2} dB against {:.2} dB ({:+.2} dB) over {} frames{}\n",
                 f.clip,
                 f.errors.model.mean.psnr_db,
                 f.errors.baseline.mean.psnr_db,
                 f.errors.psnr_gain_db,
                 f.errors.model.frames,
+                f.rows
+                    .map(|r| format!("; fitted to {}", rows_name(r)))
+                    .unwrap_or_default(),
             ));
         }
     }
@@ -347,7 +350,7 @@ held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:
         t.test_trace_s,
         t.fit_s,
     ));
-    if let Some(c) = reference_choice(&report.fit) {
+    if let Some(c) = report.fit.reference() {
         out.push_str(&format!(
             "reference rows: {} (cross-validation over clips, mean PSNR on left-out clips: {})\n",
             rows_name(c.rows),
@@ -359,15 +362,6 @@ held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:
         ));
     }
     out
-}
-
-/// How the fit chose its reference rows, when it did (`reference = cv`).
-fn reference_choice(fit: &FitStats) -> Option<&RowsChoice> {
-    match fit {
-        FitStats::VertexLinear(s) => s.reference.as_ref(),
-        FitStats::VertexClustered(s) => s.reference.as_ref(),
-        FitStats::StaticAverage => None,
-    }
 }
 
 fn rows_name(rows: Rows) -> &'static str {

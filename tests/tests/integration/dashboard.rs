@@ -357,6 +357,19 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         );
         let note = eval(&c, "return document.querySelector('#unseen').textContent").await;
         assert!(note.as_str().unwrap().contains("3 folds"), "{note}");
+        // The default reference poses: the fit chose its rows, and says
+        // which, with the three scores.
+        let reference = eval(&c, "return document.querySelector('#reference').textContent").await;
+        let reference = reference.as_str().unwrap();
+        assert!(
+            reference.starts_with("Reference poses: ")
+                && reference.contains("chosen by cross-validation over clips")
+                && reference.contains("random poses and clip frames ")
+                && reference.contains("clip frames and perturbed frames ")
+                && reference.contains("all three ")
+                && reference.matches(" dB").count() == 3,
+            "{reference}"
+        );
         shot(&c, "8-unseen-clips").await;
         c.close().await.unwrap();
     });

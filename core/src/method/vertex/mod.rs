@@ -230,6 +230,18 @@ pub enum FitStats {
     VertexClustered(Box<ClusteredFitStats>),
 }
 
+impl FitStats {
+    /// How cross-validation over clips chose the reference rows, when it
+    /// did (`reference = cv`).
+    pub fn reference(&self) -> Option<&cv::RowsChoice> {
+        match self {
+            Self::VertexLinear(s) => s.reference.as_ref(),
+            Self::VertexClustered(s) => s.reference.as_ref(),
+            Self::StaticAverage => None,
+        }
+    }
+}
+
 /// Fits `method` to the AO of the reference `poses` (the `fit` job's
 /// work): the one place that turns a method name into a fitted model.
 /// `seed` seeds k-means; `sources` says where each pose comes from, what

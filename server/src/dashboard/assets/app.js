@@ -311,11 +311,19 @@ function gridReportSection(report, plotUrl) {
       h("figcaption", {}, "Every part's grid through its middle (x, y and z constant), dark where occluded")) : null);
 }
 
+// The reference rows a fit can choose (`reference = cv`).
+const ROWS = {
+  mixed: "random poses and clip frames",
+  perturbed: "clip frames and perturbed frames",
+  all: "all three",
+};
+
 function reportSection(report, plotUrl) {
   if (report.layout) return cubemapReportSection(report, plotUrl);
   if (report.parts) return gridReportSection(report, plotUrl);
   const ev = report.evaluation;
   const unseen = ev.unseen_clips;
+  const reference = report.fit?.reference;
   const rows = [
     ...(unseen ? unseen.folds.map((f) => [`unseen clip ${f.clip} (refitted without it)`, f.errors]) : []),
     ["frames of the training clips, fresh rays", ev.training_clip_frames || ev.clip_frames],
@@ -341,6 +349,9 @@ function reportSection(report, plotUrl) {
       `${fmt(unseen.baseline_psnr_db, 2)} dB, ${unseen.mean_psnr_gain_db >= 0 ? "+" : ""}${fmt(unseen.mean_psnr_gain_db, 2)} dB `,
       `on average (worst fold ${unseen.min_psnr_gain_db >= 0 ? "+" : ""}${fmt(unseen.min_psnr_gain_db, 2)} dB). `,
       "The static average is the mean over training clip frames.") : null,
+    reference ? h("p", { id: "reference" },
+      `Reference poses: ${ROWS[reference.rows] || reference.rows}, chosen by cross-validation over clips `,
+      `(mean PSNR on left-out clips: ${reference.scores.map(([r, db]) => `${ROWS[r] || r} ${fmt(db, 2)} dB`).join(", ")}).`) : null,
     h("p", { class: "muted" },
       `Ground truth's own noise: RMSE ${fmt(report.ground_truth_noise?.rmse)}. `,
       `Asset ${report.sizes.asset_bytes} bytes; ${fmt(ev.multiply_adds_per_vertex, 1)} multiply-adds per vertex.`),
