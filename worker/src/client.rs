@@ -5,6 +5,10 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 
+/// The longest a call waits in all on a server that answers 429 before it
+/// fails with that status.
+const MAX_RATE_WAIT: Duration = Duration::from_secs(300);
+
 /// A failed call.
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
@@ -126,11 +130,37 @@ impl Client {
         }
     }
 
+    /// Sends `request` until the server stops answering 429 (over its
+    /// request rate), waiting what each answer's `Retry-After` asks (1 to
+    /// 30 s) and at most [`MAX_RATE_WAIT`] in all, then checks the status.
+    /// A busy server slows a job down; it does not fail it.
+    fn send(
+        &self,
+        request: impl Fn() -> Result<ureq::http::Response<ureq::Body>, ureq::Error>,
+    ) -> Result<ureq::http::Response<ureq::Body>, ClientError> {
+        let mut waited = Duration::ZERO;
+        loop {
+            let res = request().map_err(|e| ClientError::Transport(e.to_string()))?;
+            if res.status().as_u16() != 429 || waited >= MAX_RATE_WAIT {
+                return self.check(res);
+            }
+            let wait = Duration::from_secs(
+                res.headers()
+                    .get("retry-after")
+                    .and_then(|v| v.to_str().ok())
+                    .and_then(|v| v.trim().parse::<u64>().ok())
+                    .unwrap_or(1)
+                    .clamp(1, 30),
+            );
+            std::thread::sleep(wait);
+            waited += wait;
+        }
+    }
+
     fn check(
         &self,
-        res: Result<ureq::http::Response<ureq::Body>, ureq::Error>,
+        mut res: ureq::http::Response<ureq::Body>,
     ) -> Result<ureq::http::Response<ureq::Body>, ClientError> {
-        let mut res = res.map_err(|e| ClientError::Transport(e.to_string()))?;
         let status = res.status().as_u16();
         if status < 300 {
             return Ok(res);
@@ -147,12 +177,12 @@ impl Client {
         path: &str,
         body: &T,
     ) -> Result<Option<R>, ClientError> {
-        let res = self.check(
+        let res = self.send(|| {
             self.agent
                 .post(format!("{}{path}", self.base))
                 .header("authorization", &self.auth)
-                .send_json(body),
-        )?;
+                .send_json(body)
+        })?;
         if res.status().as_u16() == 204 {
             return Ok(None);
         }
@@ -234,12 +264,12 @@ impl Client {
 
     /// A blob's bytes.
     pub fn get_blob(&self, digest: &str) -> Result<Vec<u8>, ClientError> {
-        let mut res = self.check(
+        let mut res = self.send(|| {
             self.agent
                 .get(format!("{}/v1/blobs/{digest}", self.base))
                 .header("authorization", &self.auth)
-                .call(),
-        )?;
+                .call()
+        })?;
         res.body_mut()
             .with_config()
             .limit(u64::MAX)
@@ -250,12 +280,58 @@ impl Client {
     /// Stores a blob; returns its digest.
     pub fn put_blob(&self, bytes: &[u8]) -> Result<String, ClientError> {
         let digest = aobake_core::digest::sha256_hex(bytes);
-        self.check(
+        self.send(|| {
             self.agent
                 .put(format!("{}/v1/blobs/{digest}", self.base))
                 .header("authorization", &self.auth)
-                .send(bytes),
-        )?;
+                .send(bytes)
+        })?;
         Ok(digest)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::{BufRead as _, BufReader, Write as _};
+
+    use super::*;
+
+    /// A server on a free port that answers its connections, one request
+    /// each, with `answers` in turn; returns its address.
+    fn serve(answers: Vec<&'static str>) -> String {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = listener.local_addr().unwrap();
+        std::thread::spawn(move || {
+            for answer in answers {
+                let (mut stream, _) = listener.accept().unwrap();
+                let mut reader = BufReader::new(stream.try_clone().unwrap());
+                let mut line = String::new();
+                while reader.read_line(&mut line).unwrap() > 0 && line != "\r\n" {
+                    line.clear();
+                }
+                stream.write_all(answer.as_bytes()).unwrap();
+            }
+        });
+        format!("http://{addr}")
+    }
+
+    #[test]
+    fn a_rate_limited_call_waits_and_is_sent_again() {
+        let base = serve(vec![
+            "HTTP/1.1 429 Too Many Requests\r\nRetry-After: 1\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+            "HTTP/1.1 200 OK\r\nContent-Length: 3\r\nConnection: close\r\n\r\nabc",
+        ]);
+        let started = std::time::Instant::now();
+        let bytes = Client::new(&base, "t").get_blob("d").unwrap();
+        assert_eq!(bytes, b"abc");
+        assert!(started.elapsed() >= Duration::from_secs(1), "it waited");
+        // Other failures are not retried.
+        let base = serve(vec![
+            "HTTP/1.1 503 Service Unavailable\r\nContent-Length: 4\r\nConnection: close\r\n\r\ndown",
+        ]);
+        match Client::new(&base, "t").get_blob("d") {
+            Err(ClientError::Status { status: 503, body }) => assert_eq!(body, "down"),
+            other => panic!("{other:?}"),
+        }
     }
 }

@@ -289,6 +289,51 @@ fn requests_over_the_rate_get_429_with_retry_after() {
 }
 
 #[test]
+fn a_worker_over_the_rate_waits_and_fails_no_job() {
+    // 10 requests a second: the evaluate job alone fetches more blobs
+    // than the burst allows. Rate-limited calls wait (Retry-After) and
+    // are sent again; no attempt is used up.
+    let mut env = TestEnv::start(Options {
+        rate: 10,
+        ..Options::default()
+    });
+    let digest = upload(&env, &character("Fox"));
+    let (status, b) = submit(&env, &digest, 24);
+    assert_eq!(status, 202, "{b}");
+    let id = b["id"].as_i64().unwrap();
+    env.start_worker(&[]);
+    let started = std::time::Instant::now();
+    let bake = loop {
+        // Slow polls, 429s allowed: the test's token has its own rate.
+        std::thread::sleep(Duration::from_secs(1));
+        let (status, b) = env
+            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+            .unwrap();
+        if status == 200 && matches!(b["state"].as_str(), Some("done" | "failed")) {
+            break b;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(240),
+            "{b}\n{}",
+            env.worker_logs()
+        );
+    };
+    assert_eq!(bake["state"], "done", "{bake}\n{}", env.worker_logs());
+    let jobs = bake["jobs"].as_array().unwrap();
+    assert!(jobs.len() > 20, "{bake}");
+    assert!(
+        jobs.iter().all(|j| j["attempts"] == 1),
+        "{bake}\n{}",
+        env.worker_logs()
+    );
+    assert!(
+        !env.worker_logs().contains("failed"),
+        "{}",
+        env.worker_logs()
+    );
+}
+
+#[test]
 fn a_worker_stopped_with_sigterm_finishes_its_job_and_leases_no_more() {
     let mut env = TestEnv::start(Options::default());
     let digest = upload(&env, &character("CesiumMan"));
