@@ -53,9 +53,8 @@ impl RidgeChoice {
             .enumerate()
             .map(|(k, &c)| (c, errors.rmse(k)))
             .collect();
-        let ridge = scores.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1))?.0;
         Some(Self {
-            ridge,
+            ridge: candidates[errors.best()?],
             scores,
             folds: errors.folds,
         })
@@ -114,6 +113,29 @@ pub struct RowsChoice {
     pub scores: Vec<(Rows, f64)>,
 }
 
+/// The rows a fit to `sources` uses: every row unless there are random
+/// poses and perturbed frames both; then the ones [`choose_rows`] chooses,
+/// or [`Rows::Mixed`]'s when it cannot choose (frames of fewer than two
+/// clips). The choice comes along when there was one.
+pub fn rows_to_fit(
+    sources: &[Source],
+    score: impl Fn(&[usize]) -> Option<f64>,
+) -> (Rows, Option<RowsChoice>) {
+    if !offers_choice(sources) {
+        return (Rows::All, None);
+    }
+    match choose_rows(sources, score) {
+        Some(c) => (c.rows, Some(c)),
+        None => (Rows::Mixed, None),
+    }
+}
+
+/// Whether `sources` has random poses and perturbed frames to choose
+/// between.
+fn offers_choice(sources: &[Source]) -> bool {
+    sources.contains(&Source::Random) && sources.iter().any(|s| matches!(s, Source::Perturbed(_)))
+}
+
 /// Chooses the reference rows by cross-validation over clips: `score(rows)`
 /// is a candidate's mean PSNR over the left-out clips' frames (the frames,
 /// and so the scored rows and folds, are in every candidate), and the
@@ -124,8 +146,7 @@ pub fn choose_rows(
     sources: &[Source],
     score: impl Fn(&[usize]) -> Option<f64>,
 ) -> Option<RowsChoice> {
-    let has = |f: fn(&Source) -> bool| sources.iter().any(f);
-    if !has(|s| *s == Source::Random) || !has(|s| matches!(s, Source::Perturbed(_))) {
+    if !offers_choice(sources) {
         return None;
     }
     let scores: Vec<(Rows, f64)> = Rows::CANDIDATES
@@ -156,6 +177,12 @@ impl ClipErrors {
     pub fn rmse(&self, candidate: usize) -> f64 {
         let n = (self.rows * self.sse[candidate].len()).max(1) as f64;
         (self.sse[candidate].iter().sum::<f64>() / n).sqrt()
+    }
+
+    /// The candidate with the least RMSE (the first on a tie); `None`
+    /// without candidates.
+    pub fn best(&self) -> Option<usize> {
+        (0..self.sse.len()).min_by(|&a, &b| self.rmse(a).total_cmp(&self.rmse(b)))
     }
 }
 
@@ -302,5 +329,11 @@ mod tests {
         assert!(choose_rows(&sources[1..], |_| Some(0.0)).is_none());
         assert!(choose_rows(&[Random, Frame(0), Frame(1)], |_| Some(0.0)).is_none());
         assert!(choose_rows(&sources, |_| None).is_none());
+        // What a fit uses: every row without a choice to make, mixed's
+        // rows when it cannot choose.
+        assert_eq!(rows_to_fit(&sources[1..], |_| Some(0.0)), (Rows::All, None));
+        assert_eq!(rows_to_fit(&sources, |_| None), (Rows::Mixed, None));
+        let (rows, choice) = rows_to_fit(&sources, |rows| Some(rows.len() as f64));
+        assert_eq!((rows, choice.map(|c| c.rows)), (Rows::All, Some(Rows::All)));
     }
 }

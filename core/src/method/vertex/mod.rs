@@ -263,46 +263,45 @@ pub fn fit(
     ao: &AoBlock,
     sources: &[Source],
 ) -> Result<(Model, FitStats), String> {
-    let choice = match method {
-        Method::VertexLinear | Method::VertexClustered => {
-            let (joint_angles, _) = spaces;
-            let q: Vec<Vec<f32>> = poses
-                .iter()
-                .map(|p| joint_angles.params(&character.skeleton, p))
-                .collect();
-            let ranges = linear::Angles {
-                ranges: &joint_angles.ranges,
-                rotations: joint_angles.joints.len(),
-            };
-            cv::choose_rows(sources, |rows| {
-                let q: Vec<Vec<f32>> = rows.iter().map(|&r| q[r].clone()).collect();
-                let s: Vec<Source> = rows.iter().map(|&r| sources[r]).collect();
-                let block = ao.select(rows.iter().copied());
-                let errors = linear::ridge_errors(&q, ranges, &block, &s, options.0, None)?;
-                let chosen = cv::RidgeChoice::of(&RIDGE_CANDIDATES, &errors)?;
-                let k = RIDGE_CANDIDATES.iter().position(|&r| r == chosen.ridge)?;
-                Some(errors.psnr[k])
-            })
-        }
-        _ => None,
+    let (joint_angles, _) = spaces;
+    let pose_dependent = matches!(method, Method::VertexLinear | Method::VertexClustered);
+    // The joint angles of every pose: what vertex-linear (and
+    // vertex-clustered's linear base) reads, and what scores the rows.
+    let q: Vec<Vec<f32>> = if pose_dependent {
+        poses
+            .iter()
+            .map(|p| joint_angles.params(&character.skeleton, p))
+            .collect()
+    } else {
+        vec![Vec::new(); poses.len()]
     };
-    let has = |f: fn(&Source) -> bool| sources.iter().any(f);
-    let rows = match &choice {
-        Some(c) => c.rows,
-        None if has(|s| *s == Source::Random) && has(|s| matches!(s, Source::Perturbed(_))) => {
-            Rows::Mixed
-        }
-        None => Rows::All,
+    let (rows, choice) = if pose_dependent {
+        let ranges = linear::Angles {
+            ranges: &joint_angles.ranges,
+            rotations: joint_angles.joints.len(),
+        };
+        cv::rows_to_fit(sources, |rows| {
+            let q: Vec<Vec<f32>> = rows.iter().map(|&r| q[r].clone()).collect();
+            let s: Vec<Source> = rows.iter().map(|&r| sources[r]).collect();
+            let block = ao.select(rows.iter().copied());
+            let errors = linear::ridge_errors(&q, ranges, &block, &s, options.0, None)?;
+            Some(errors.psnr[errors.best()?])
+        })
+    } else {
+        (Rows::All, None)
     };
     let (model, mut stats) = if rows == Rows::All {
-        fit_rows(method, options, seed, character, spaces, poses, ao, sources)?
+        fit_rows(
+            method, options, seed, character, spaces, poses, &q, ao, sources,
+        )?
     } else {
         let keep = rows.select(sources);
-        let poses: Vec<Pose> = keep.iter().map(|&r| poses[r].clone()).collect();
+        let pick = |r: &usize| (poses[*r].clone(), q[*r].clone());
+        let (poses, q): (Vec<Pose>, Vec<Vec<f32>>) = keep.iter().map(pick).unzip();
         let sources: Vec<Source> = keep.iter().map(|&r| sources[r]).collect();
         let ao = ao.select(keep.iter().copied());
         fit_rows(
-            method, options, seed, character, spaces, &poses, &ao, &sources,
+            method, options, seed, character, spaces, &poses, &q, &ao, &sources,
         )?
     };
     match &mut stats {
@@ -313,7 +312,8 @@ pub fn fit(
     Ok((model, stats))
 }
 
-/// [`fit`] to every row given.
+/// [`fit`] to every row given; `q` holds the poses' joint angles (empty
+/// for the static average).
 #[allow(clippy::too_many_arguments)]
 fn fit_rows(
     method: Method,
@@ -322,6 +322,7 @@ fn fit_rows(
     character: &crate::Character,
     spaces: (&JointAngles, &Handles),
     poses: &[Pose],
+    q: &[Vec<f32>],
     ao: &AoBlock,
     sources: &[Source],
 ) -> Result<(Model, FitStats), String> {
@@ -334,11 +335,7 @@ fn fit_rows(
             FitStats::StaticAverage,
         ),
         Method::VertexLinear => {
-            let q: Vec<Vec<f32>> = poses
-                .iter()
-                .map(|p| joint_angles.params(skeleton, p))
-                .collect();
-            let (m, mut stats) = fit_linear(character, joint_angles, &q, ao, sources, linear)?;
+            let (m, mut stats) = fit_linear(character, joint_angles, q, ao, sources, linear)?;
             let weights: Vec<Vec<f32>> = if linear.basis > 0 {
                 q.iter().map(|a| m.weights(a)).collect()
             } else {
@@ -354,12 +351,10 @@ fn fit_rows(
             // block can stand in the clustered form); the clusters then
             // model what it leaves.
             // The base's joint angles per pose (none without a base).
-            let q: Vec<Vec<f32>> = match clustered.base {
-                clustered::Base::Mean => vec![Vec::new(); poses.len()],
-                clustered::Base::Linear => poses
-                    .iter()
-                    .map(|p| joint_angles.params(skeleton, p))
-                    .collect(),
+            let none = vec![Vec::new(); poses.len()];
+            let q: &[Vec<f32>] = match clustered.base {
+                clustered::Base::Mean => &none,
+                clustered::Base::Linear => q,
             };
             let base = match clustered.base {
                 clustered::Base::Mean => None,
@@ -371,14 +366,7 @@ fn fit_rows(
                         basis: 0,
                         ..*linear
                     };
-                    Some(fit_linear(
-                        character,
-                        joint_angles,
-                        &q,
-                        ao,
-                        sources,
-                        &dense,
-                    )?)
+                    Some(fit_linear(character, joint_angles, q, ao, sources, &dense)?)
                 }
             };
             let leftover;
@@ -470,7 +458,7 @@ fn fit_rows(
             };
             let weights: Vec<Vec<f32>> = if clustered.basis > 0 {
                 h.iter()
-                    .zip(&q)
+                    .zip(q)
                     .map(|(h, a)| m.weights_with(h, a))
                     .collect()
             } else {
