@@ -160,6 +160,7 @@ impl Plan<'_> {
                 clip: self.clips[c].name.clone(),
                 reference_poses: keep.len(),
                 rows: stats.reference().map(|r| r.rows),
+                basis: stats.basis().map(|b| b.rank),
                 errors: Comparison::new(Errors::of(&m), Errors::of(&b)),
             });
         }
@@ -179,6 +180,10 @@ pub struct UnseenFold {
     /// The rows its cross-validation chose, when it did.
     #[serde(default)]
     pub rows: Option<Rows>,
+    /// The eigen-AO basis rows of the fold's model, when it has a basis
+    /// (with `basis_cv`, the rank its own cross-validation chose).
+    #[serde(default)]
+    pub basis: Option<usize>,
     /// The fold's model and the other clips' static average on every
     /// frame of the clip.
     pub errors: Comparison,

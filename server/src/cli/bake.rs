@@ -322,7 +322,10 @@ fn vertex_summary(report: &Report) -> String {
                 f.errors.model.frames,
                 f.rows
                     .map(|r| format!("; fitted to {}", rows_name(r)))
-                    .unwrap_or_default(),
+                    .unwrap_or_default()
+                    + &f.basis
+                        .map(|r| format!("; basis of {r} rows"))
+                        .unwrap_or_default(),
             ));
         }
     }
@@ -359,6 +362,18 @@ held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:
                 .map(|(rows, db)| format!("{} {db:.2} dB", rows_name(*rows)))
                 .collect::<Vec<_>>()
                 .join(", "),
+        ));
+    }
+    if let (Some(b), Some(c)) = (report.fit.basis(), report.fit.basis_cv()) {
+        let best = c.scores.iter().max_by(|a, b| a.1.total_cmp(&b.1));
+        out.push_str(&format!(
+            "eigen-AO basis: {} rows of {} tried, the fewest within {} dB of the best on left-out clips (cross-validation over clips: {:.2} dB; the best, {} rows, {:.2} dB)\n",
+            b.rank,
+            c.scores.len(),
+            c.tolerance_db,
+            c.score(),
+            best.map_or(0, |s| s.0),
+            best.map_or(f64::NAN, |s| s.1),
         ));
     }
     out

@@ -370,6 +370,20 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
                 && reference.matches(" dB").count() == 3,
             "{reference}"
         );
+        // And the basis rank its cross-validation chose, among 1 to 32.
+        let basis = eval(&c, "return document.querySelector('#basis').textContent").await;
+        let basis = basis.as_str().unwrap();
+        let rank: usize = basis
+            .strip_prefix("Eigen-AO basis: ")
+            .and_then(|b| b.split(' ').next())
+            .and_then(|r| r.parse().ok())
+            .unwrap_or_else(|| panic!("{basis}"));
+        assert!(
+            (1..=32).contains(&rank)
+                && basis.contains("the fewest of 1 to 32 within 0.1 dB of the best on left-out clips")
+                && basis.ends_with(" dB at best)."),
+            "{basis}"
+        );
         shot(&c, "8-unseen-clips").await;
         c.close().await.unwrap();
     });

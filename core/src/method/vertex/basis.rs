@@ -97,16 +97,7 @@ pub(super) fn compress(
     if p == 0 || v == 0 || rank == 0 {
         return None;
     }
-    assert!(
-        weights.iter().all(|w| w.len() == inputs),
-        "one weight per row of the form"
-    );
-    let w = Mat::from_fn(p, inputs, |r, k| f64::from(weights[r][k]));
-    let f = &w * &c;
-    let mean: Vec<f64> = (0..v)
-        .map(|i| (0..p).map(|r| f[(r, i)]).sum::<f64>() / p as f64)
-        .collect();
-    let centred = Mat::from_fn(p, v, |r, i| f[(r, i)] - mean[i]);
+    let (mean, centred) = predictions(&c, weights);
     // Rows R_j / σ_j, σ_j the predictions' standard deviation along R_j.
     let axes = principal_axes(centred.as_ref(), rank);
     let r = axes.nrows();
@@ -159,6 +150,84 @@ pub(super) fn compress(
         kept_variance: if total > 0.0 { kept / total } else { 1.0 },
     };
     Some((basis, form, stats))
+}
+
+/// The predictions `W C` of the coefficients `c` for the per-pose
+/// `weights`: their mean over the poses (per vertex), and the predictions
+/// less it (poses × vertices).
+fn predictions(c: &Mat<f64>, weights: &[Vec<f32>]) -> (Vec<f64>, Mat<f64>) {
+    let (inputs, v, p) = (c.nrows(), c.ncols(), weights.len());
+    assert!(
+        weights.iter().all(|w| w.len() == inputs),
+        "one weight per row of the form"
+    );
+    let w = Mat::from_fn(p, inputs, |r, k| f64::from(weights[r][k]));
+    let f = &w * c;
+    let mean: Vec<f64> = (0..v)
+        .map(|i| (0..p).map(|r| f[(r, i)]).sum::<f64>() / p.max(1) as f64)
+        .collect();
+    let centred = Mat::from_fn(p, v, |r, i| f[(r, i)] - mean[i]);
+    (mean, centred)
+}
+
+/// The eigen-AO bases of every rank up to some most at once, for judging
+/// ranks against each other: what [`compress`] would keep of a
+/// prediction with `r` rows is `c + Σ_{j<r} (R_j · (f − c)) R_j`, and the
+/// axes `R_j` of the smaller ranks are the first of the larger.
+#[derive(Debug, Clone)]
+pub(super) struct Truncations {
+    /// `c`: the mean prediction over the poses.
+    mean: Vec<f64>,
+    /// `R`: unit axes, one per row, the largest variance first.
+    axes: Mat<f64>,
+}
+
+impl Truncations {
+    /// The axes of `form`'s predictions for the per-pose `weights`, at
+    /// most `rank` of them (fewer when the predictions span fewer); `None`
+    /// without poses or vertices.
+    pub(super) fn new(form: FormRef<'_>, weights: &[Vec<f32>], rank: usize) -> Option<Self> {
+        let c = dense(form);
+        if weights.is_empty() || c.ncols() == 0 {
+            return None;
+        }
+        let (mean, centred) = predictions(&c, weights);
+        let mut axes = principal_axes(centred.as_ref(), rank);
+        for j in 0..axes.nrows() {
+            let n = axes.row(j).norm_l2();
+            axes.row_mut(j).iter_mut().for_each(|x| *x /= n);
+        }
+        Some(Self { mean, axes })
+    }
+
+    /// Axes there are.
+    pub(super) fn rank(&self) -> usize {
+        self.axes.nrows()
+    }
+
+    /// A prediction's coordinates along every axis.
+    pub(super) fn coordinates(&self, prediction: &[f32]) -> Vec<f64> {
+        assert_eq!(prediction.len(), self.mean.len(), "one AO per vertex");
+        (0..self.rank())
+            .map(|j| {
+                let axis = self.axes.row(j);
+                (0..self.mean.len())
+                    .map(|i| axis[i] * (f64::from(prediction[i]) - self.mean[i]))
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// The prediction with those `coordinates` kept to its first `rank`
+    /// axes (all there are, when fewer).
+    pub(super) fn truncate(&self, coordinates: &[f64], rank: usize) -> Vec<f32> {
+        let mut out = self.mean.clone();
+        for (j, &a) in coordinates.iter().enumerate().take(rank.min(self.rank())) {
+            let axis = self.axes.row(j);
+            out.iter_mut().enumerate().for_each(|(i, o)| *o += a * axis[i]);
+        }
+        out.into_iter().map(|x| x as f32).collect()
+    }
 }
 
 /// The form's coefficients as a dense `weights × vertices` matrix (vertex

@@ -82,8 +82,11 @@ pub struct ClusteredOptions {
     pub base: Base,
     /// Eigen-AO basis rows the whole fitted model (base and every pose
     /// cluster) is compressed into ([`super::basis`]); 0 keeps it as
-    /// fitted.
+    /// fitted. With `basis_cv`, the most.
     pub basis: usize,
+    /// Choose the basis rows by cross-validation over clips, as
+    /// vertex-linear does ([`super::cv::choose_rank`]).
+    pub basis_cv: bool,
 }
 
 /// What vertex-clustered's pose clusters add to.
@@ -127,6 +130,7 @@ impl Default for ClusteredOptions {
             // cost no longer grows with the clusters MLS blends (Fox: 144
             // → 33 multiply-adds, unseen clips +3.23 → +3.43 dB; README).
             basis: 32,
+            basis_cv: true,
         }
     }
 }
@@ -198,6 +202,9 @@ pub struct ClusteredFitStats {
     /// The eigen-AO compression, when there was one.
     #[serde(default)]
     pub basis: Option<super::basis::BasisStats>,
+    /// How cross-validation over clips chose its rank, when it did.
+    #[serde(default)]
+    pub basis_cv: Option<super::cv::RankChoice>,
     /// How cross-validation over clips chose the reference rows, when it
     /// did (`reference = cv`; the linear base and the clusters use the
     /// same rows).
@@ -249,6 +256,7 @@ impl VertexClustered {
             clamp_cv: None,
             base: None,
             basis: None,
+            basis_cv: None,
             reference: None,
         };
         for j in 0..m {

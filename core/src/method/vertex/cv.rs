@@ -69,6 +69,55 @@ impl RidgeChoice {
     }
 }
 
+/// Decibels a smaller eigen-AO basis may lose on left-out clips against
+/// the best rank and still be chosen ([`choose_rank`]): a tenth of a
+/// decibel is 2.3 % of the error, less than the spread between bakes with
+/// other seeds, so the rows past it buy run-time cost, not quality.
+pub const RANK_TOLERANCE_DB: f64 = 0.1;
+
+/// How cross-validation over clips chose an eigen-AO basis's rank.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RankChoice {
+    /// The chosen rank.
+    pub rank: usize,
+    /// Per candidate rank: its mean PSNR over the left-out clips' frames
+    /// (dB, see [`ClipErrors::psnr`]).
+    pub scores: Vec<(usize, f64)>,
+    /// How far below the best score the chosen rank may be (dB).
+    pub tolerance_db: f64,
+    /// Groups of clips left out in turn.
+    pub folds: usize,
+}
+
+impl RankChoice {
+    /// The chosen rank's score.
+    pub fn score(&self) -> f64 {
+        self.scores
+            .iter()
+            .find(|s| s.0 == self.rank)
+            .map_or(f64::NEG_INFINITY, |s| s.1)
+    }
+}
+
+/// Chooses among the basis `ranks` (ascending) scored in `errors`: the
+/// fewest rows whose mean PSNR over the left-out clips is within
+/// [`RANK_TOLERANCE_DB`] of the best. `None` without a finite score.
+pub fn choose_rank(ranks: &[usize], errors: &ClipErrors) -> Option<RankChoice> {
+    let scores: Vec<(usize, f64)> = ranks.iter().copied().zip(errors.psnr.iter().copied()).collect();
+    let best = scores
+        .iter()
+        .map(|s| s.1)
+        .filter(|x| x.is_finite())
+        .max_by(f64::total_cmp)?;
+    let rank = scores.iter().find(|s| s.1 >= best - RANK_TOLERANCE_DB)?.0;
+    Some(RankChoice {
+        rank,
+        scores,
+        tolerance_db: RANK_TOLERANCE_DB,
+        folds: errors.folds,
+    })
+}
+
 /// Which reference rows a fit uses when it has random poses, clip frames
 /// and perturbed clip frames (`reference = cv`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -64,8 +64,14 @@ pub struct LinearOptions {
     /// Eigen-AO basis rows the fitted model is compressed into
     /// ([`super::basis`]): each vertex then costs `basis + 1` multiply-adds
     /// whatever the features (a model that costs no more is kept as
-    /// fitted); 0 keeps the model as fitted.
+    /// fitted); 0 keeps the model as fitted. With `basis_cv`, the most.
     pub basis: usize,
+    /// Choose the basis rows by cross-validation over clips
+    /// ([`super::cv::choose_rank`]): the fewest, up to `basis`, whose
+    /// mean PSNR on left-out clips is within
+    /// [`super::cv::RANK_TOLERANCE_DB`] of the best; `basis` when the
+    /// reference frames come from fewer than two clips.
+    pub basis_cv: bool,
 }
 
 /// What vertex-linear is linear in, per rotated joint (translations are
@@ -179,6 +185,7 @@ impl Default for LinearOptions {
             // full model (Fox +3.20 → +3.26 dB, Kenney +3.84 → +3.85) at
             // a third to four fifths of its run-time cost (README).
             basis: 32,
+            basis_cv: true,
         }
     }
 }
@@ -418,6 +425,9 @@ pub struct LinearFitStats {
     /// The eigen-AO compression, when there was one.
     #[serde(default)]
     pub basis: Option<super::basis::BasisStats>,
+    /// How cross-validation over clips chose its rank, when it did.
+    #[serde(default)]
+    pub basis_cv: Option<super::cv::RankChoice>,
     /// How cross-validation over clips chose the reference rows, when it
     /// did (`reference = cv`).
     #[serde(default)]
@@ -736,6 +746,7 @@ impl VertexLinear {
                 local: columns.iter().any(|c| c.scope == Scope::Local),
                 per_vertex: None,
                 basis: None,
+                basis_cv: None,
                 reference: None,
             };
             out.push(Ok((model, stats)));

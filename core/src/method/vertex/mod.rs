@@ -28,7 +28,7 @@ pub use clustered::{
     MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
 };
 pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
-pub use cv::{Rows, RowsChoice, Source};
+pub use cv::{RankChoice, Rows, RowsChoice, Source};
 pub use form::{Block, LinearForm, SparseForm};
 pub use linalg::SolveStats;
 pub use linear::{
@@ -48,7 +48,7 @@ use crate::{
 
 /// Version of the fitting algorithms, part of the bake key: bump it when a
 /// change to fitting changes the coefficients a bake produces.
-pub const ALGORITHM_VERSION: u32 = 6;
+pub const ALGORITHM_VERSION: u32 = 7;
 
 /// A fitted model and the pose features it reads.
 #[derive(Debug, Clone, PartialEq)]
@@ -240,6 +240,24 @@ impl FitStats {
             Self::StaticAverage => None,
         }
     }
+
+    /// The eigen-AO compression, when there was one.
+    pub fn basis(&self) -> Option<&BasisStats> {
+        match self {
+            Self::VertexLinear(s) => s.basis.as_ref(),
+            Self::VertexClustered(s) => s.basis.as_ref(),
+            Self::StaticAverage => None,
+        }
+    }
+
+    /// How cross-validation over clips chose the basis rank, when it did.
+    pub fn basis_cv(&self) -> Option<&RankChoice> {
+        match self {
+            Self::VertexLinear(s) => s.basis_cv.as_ref(),
+            Self::VertexClustered(s) => s.basis_cv.as_ref(),
+            Self::StaticAverage => None,
+        }
+    }
 }
 
 /// Fits `method` to the AO of the reference `poses` (the `fit` job's
@@ -329,21 +347,17 @@ fn fit_rows(
     let skeleton = &character.skeleton;
     let (linear, clustered) = options;
     let (joint_angles, handles) = spaces;
-    Ok(match method {
+    let (mut model, mut stats) = match method {
         Method::StaticAverage => (
             Model::StaticAverage(StaticAverage::fit(ao)),
             FitStats::StaticAverage,
         ),
         Method::VertexLinear => {
-            let (m, mut stats) = fit_linear(character, joint_angles, q, ao, sources, linear)?;
-            let weights: Vec<Vec<f32>> = if linear.basis > 0 {
-                q.iter().map(|a| m.weights(a)).collect()
-            } else {
-                Vec::new()
-            };
-            let mut model = Model::VertexLinear(joint_angles.clone(), m);
-            stats.basis = model.compress(&weights, linear.basis);
-            (model, FitStats::VertexLinear(stats))
+            let (m, stats) = fit_linear(character, joint_angles, q, ao, sources, linear)?;
+            (
+                Model::VertexLinear(joint_angles.clone(), m),
+                FitStats::VertexLinear(stats),
+            )
         }
         Method::VertexClustered => {
             let h: Vec<Vec<f32>> = poses.iter().map(|p| handles.handles(skeleton, p)).collect();
@@ -456,22 +470,160 @@ fn fit_rows(
                 }
                 None => m,
             };
-            let weights: Vec<Vec<f32>> = if clustered.basis > 0 {
-                h.iter()
-                    .zip(q)
-                    .map(|(h, a)| m.weights_with(h, a))
-                    .collect()
-            } else {
-                Vec::new()
-            };
-            let mut model = Model::VertexClustered(handles.clone(), m);
-            stats.basis = model.compress(&weights, clustered.basis);
-            (model, FitStats::VertexClustered(Box::new(stats)))
+            (
+                Model::VertexClustered(handles.clone(), m),
+                FitStats::VertexClustered(Box::new(stats)),
+            )
         }
         Method::CubemapDiscrete | Method::CubemapContinuous | Method::Grid => {
             return Err(format!("{method} is not a per-vertex method"));
         }
-    })
+    };
+    let (most, basis_cv) = match method {
+        Method::VertexLinear => (linear.basis, linear.basis_cv),
+        Method::VertexClustered => (clustered.basis, clustered.basis_cv),
+        _ => (0, false),
+    };
+    if most > 0 {
+        let weights: Vec<Vec<f32>> = poses.iter().map(|p| model.weights(skeleton, p)).collect();
+        let choice = if basis_cv {
+            let settled = settled(options, &stats);
+            let fit = |train: &[usize]| {
+                let pick = |r: &usize| (poses[*r].clone(), q[*r].clone());
+                let (poses, q): (Vec<Pose>, Vec<Vec<f32>>) = train.iter().map(pick).unzip();
+                let sources: Vec<Source> = train.iter().map(|&r| sources[r]).collect();
+                let ao = ao.select(train.iter().copied());
+                let fitted = fit_rows(
+                    method,
+                    (&settled.0, &settled.1),
+                    seed,
+                    character,
+                    spaces,
+                    &poses,
+                    &q,
+                    &ao,
+                    &sources,
+                );
+                fitted.ok().map(|(m, _)| m)
+            };
+            rank_by_clips(skeleton, poses, ao, sources, most, fit)
+        } else {
+            None
+        };
+        let rank = choice.as_ref().map_or(most, |c| c.rank);
+        let basis = model.compress(&weights, rank);
+        match &mut stats {
+            FitStats::VertexLinear(s) => (s.basis, s.basis_cv) = (basis, choice),
+            FitStats::VertexClustered(s) => (s.basis, s.basis_cv) = (basis, choice),
+            FitStats::StaticAverage => {}
+        }
+    }
+    Ok((model, stats))
+}
+
+/// `options` with what a fit chose (its `stats`) settled, and no basis:
+/// the fit that cross-validation over clips repeats per fold to judge a
+/// basis rank. A per-vertex vertex-linear still chooses its columns.
+fn settled(
+    options: (&LinearOptions, &ClusteredOptions),
+    stats: &FitStats,
+) -> (LinearOptions, ClusteredOptions) {
+    let (linear, clustered) = options;
+    let settle = |o: &LinearOptions, s: &linear::LinearFitStats| LinearOptions {
+        ridge: s.ridge,
+        ridge_cv: o.per_vertex && o.ridge_cv,
+        locality: match (o.per_vertex, s.local) {
+            (true, _) => o.locality,
+            (false, true) => Locality::On,
+            (false, false) => Locality::Off,
+        },
+        basis: 0,
+        basis_cv: false,
+        ..*o
+    };
+    let clustered = ClusteredOptions {
+        basis: 0,
+        basis_cv: false,
+        ..*clustered
+    };
+    match stats {
+        FitStats::VertexLinear(s) => (settle(linear, s), clustered),
+        FitStats::VertexClustered(s) => (
+            s.base.as_ref().map_or(*linear, |b| settle(linear, b)),
+            ClusteredOptions {
+                ridge: s.ridge_cv.as_ref().map_or(clustered.ridge, |c| c.ridge),
+                ridge_cv: false,
+                clamp: s.clamp_cv.as_ref().map_or(clustered.clamp, |c| c.ridge as f32),
+                clamp_cv: false,
+                ..clustered
+            },
+        ),
+        FitStats::StaticAverage => (*linear, clustered),
+    }
+}
+
+/// Chooses an eigen-AO basis rank from 1 to `most` by cross-validation
+/// over clips ([`cv::choose_rank`]): per group of clips, `fit(training
+/// rows)` fits the model without a basis, and every rank's truncation of
+/// its predictions is scored on the left-out frames (a rank that would not
+/// save the fold's model a multiply-add scores it as fitted). `None` when
+/// the frames come from fewer than two clips.
+fn rank_by_clips(
+    skeleton: &Skeleton,
+    poses: &[Pose],
+    ao: &AoBlock,
+    sources: &[Source],
+    most: usize,
+    fit: impl Fn(&[usize]) -> Option<Model>,
+) -> Option<RankChoice> {
+    use std::{collections::HashMap, rc::Rc};
+    /// A fold's model: its predictions of the left-out frames, as fitted
+    /// and as coordinates along its basis axes.
+    struct Fold {
+        truncations: basis::Truncations,
+        cost: f64,
+        fitted: HashMap<usize, Vec<f32>>,
+        coordinates: HashMap<usize, Vec<f64>>,
+    }
+    let ranks: Vec<usize> = (1..=most).collect();
+    let each = |train: &[usize]| -> Vec<Option<(Rc<Fold>, usize)>> {
+        let fold = fit(train).and_then(|model| {
+            let weights: Vec<Vec<f32>> = train
+                .iter()
+                .map(|&r| model.weights(skeleton, &poses[r]))
+                .collect();
+            let cost = weights.iter().map(|w| model.multiply_adds(w)).sum::<f64>()
+                / weights.len().max(1) as f64;
+            let truncations = basis::Truncations::new(model.form(), &weights, most)?;
+            let mut trained = vec![false; poses.len()];
+            train.iter().for_each(|&r| trained[r] = true);
+            let (mut fitted, mut coordinates) = (HashMap::new(), HashMap::new());
+            for r in (0..poses.len()).filter(|&r| !trained[r]) {
+                let f = model.evaluate(skeleton, &poses[r]);
+                coordinates.insert(r, truncations.coordinates(&f));
+                fitted.insert(r, f);
+            }
+            Some(Rc::new(Fold {
+                truncations,
+                cost,
+                fitted,
+                coordinates,
+            }))
+        });
+        ranks
+            .iter()
+            .map(|&k| fold.clone().map(|f| (f, k)))
+            .collect()
+    };
+    let predict = |(fold, rank): &(Rc<Fold>, usize), r: usize| {
+        if (rank + 1) as f64 >= fold.cost {
+            fold.fitted[&r].clone()
+        } else {
+            fold.truncations.truncate(&fold.coordinates[&r], *rank)
+        }
+    };
+    let errors = cv::sse_by_clips(sources, ao, ranks.len(), each, predict)?;
+    cv::choose_rank(&ranks, &errors)
 }
 
 /// vertex-linear with every vertex's ridge, scope and pose dependence

@@ -324,6 +324,8 @@ function reportSection(report, plotUrl) {
   const ev = report.evaluation;
   const unseen = ev.unseen_clips;
   const reference = report.fit?.reference;
+  const basis = report.fit?.basis;
+  const basisCv = report.fit?.basis_cv;
   const rows = [
     ...(unseen ? unseen.folds.map((f) => [`unseen clip ${f.clip} (refitted without it)`, f.errors]) : []),
     ["frames of the training clips, fresh rays", ev.training_clip_frames || ev.clip_frames],
@@ -352,6 +354,10 @@ function reportSection(report, plotUrl) {
     reference ? h("p", { id: "reference" },
       `Reference poses: ${ROWS[reference.rows] || reference.rows}, chosen by cross-validation over clips `,
       `(mean PSNR on left-out clips: ${reference.scores.map(([r, db]) => `${ROWS[r] || r} ${fmt(db, 2)} dB`).join(", ")}).`) : null,
+    basis && basisCv ? h("p", { id: "basis" },
+      `Eigen-AO basis: ${basis.rank} rows, the fewest of 1 to ${basisCv.scores.length} within ${basisCv.tolerance_db} dB `,
+      `of the best on left-out clips (cross-validation over clips: `,
+      `${fmt(Math.max(...basisCv.scores.map(([, db]) => db)), 2)} dB at best).`) : null,
     h("p", { class: "muted" },
       `Ground truth's own noise: RMSE ${fmt(report.ground_truth_noise?.rmse)}. `,
       `Asset ${report.sizes.asset_bytes} bytes; ${fmt(ev.multiply_adds_per_vertex, 1)} multiply-adds per vertex.`),
