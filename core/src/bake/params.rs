@@ -411,7 +411,7 @@ pub fn bake_key(character: &str, clips: &[String], params: &BakeParams) -> Strin
 mod tests {
     use super::*;
 
-    const GOLDEN_KEY: &str = "024e3ef27e1cb3689e2f459b18efcda1c0260f6da68b7469712e31567e8ed15a";
+    const GOLDEN_KEY: &str = "2110bd295edb2258f8c7d5b9da7aa88764fb22c09d2b2579a4a50dad8678378a";
 
     #[test]
     fn key_depends_on_what_matters_only() {

@@ -427,6 +427,72 @@ fn cross_validation_over_clips_chooses_the_reference_rows() {
 }
 
 #[test]
+fn cross_validation_over_clips_chooses_the_basis_rank() {
+    // With `basis_cv` (the default) the fit keeps the fewest eigen-AO
+    // basis rows whose left-out clips score within a tenth of a decibel of
+    // the best rank's: the model is, bit for bit, the one a bake asking
+    // for that many rows fits, and costs a vertex one multiply-add more.
+    use aobake_core::method::vertex::{FitStats, RankChoice, cv::RANK_TOLERANCE_DB};
+    let imported = util::load(&util::character_path("InterpolationTest.glb").unwrap());
+    for method in [Method::VertexLinear, Method::VertexClustered] {
+        let mut params = quick(method);
+        params.eval_folds = 0;
+        params.poses = 192;
+        assert!(
+            params.linear.basis_cv && params.clustered.basis_cv,
+            "the default"
+        );
+        let inputs = util::inputs(&imported.character, &imported.clips);
+        let baked = bake_in_process(&Bake::new(&inputs, params.clone()).unwrap(), None).unwrap();
+        let report = baked.report.vertex().unwrap();
+        let fit = &report.fit;
+        let choice: &RankChoice = fit.basis_cv().expect("a choice");
+        eprintln!("{method}: rank {} of {:?}", choice.rank, choice.scores);
+        assert_eq!(
+            choice.scores.iter().map(|s| s.0).collect::<Vec<_>>(),
+            (1..=32).collect::<Vec<_>>()
+        );
+        assert!(choice.scores.iter().all(|s| s.1.is_finite()));
+        assert_eq!(choice.fold_scores.len(), 32);
+        let best = choice
+            .scores
+            .iter()
+            .map(|s| s.1)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let fewest = choice
+            .scores
+            .iter()
+            .find(|s| s.1 >= best - RANK_TOLERANCE_DB)
+            .unwrap();
+        assert_eq!(choice.rank, fewest.0);
+        // The cubes need fewer rows than the most.
+        assert!(choice.rank < 32, "{method}: {}", choice.rank);
+        assert_eq!(fit.basis().map(|b| b.rank), Some(choice.rank));
+        assert!(matches!(
+            (method, fit),
+            (Method::VertexLinear, FitStats::VertexLinear(_))
+                | (Method::VertexClustered, FitStats::VertexClustered(_))
+        ));
+        assert_eq!(
+            report.evaluation.multiply_adds_per_vertex,
+            (choice.rank + 1) as f64
+        );
+        let model = Model::from_container(&Container::from_bytes(&baked.asset).unwrap())
+            .unwrap()
+            .0;
+        let mut fixed = params.clone();
+        (fixed.linear.basis, fixed.linear.basis_cv) = (choice.rank, false);
+        (fixed.clustered.basis, fixed.clustered.basis_cv) = (choice.rank, false);
+        let other = bake(&imported.character, &imported.clips, fixed);
+        assert!(
+            model == other.model,
+            "{method}: {} rows asked for",
+            choice.rank
+        );
+    }
+}
+
+#[test]
 fn the_report_measures_clips_the_model_never_saw() {
     use aobake_core::bake::Plan;
     let imported = util::load(&util::character_path("Fox.glb").unwrap());

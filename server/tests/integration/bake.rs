@@ -105,7 +105,7 @@ fn bake_writes_a_deterministic_asset_a_report_and_a_plot() {
 }
 
 #[test]
-fn the_summary_names_the_reference_rows_cross_validation_chose() {
+fn the_summary_names_the_reference_rows_and_basis_rank_cross_validation_chose() {
     // InterpolationTest has nine clips: `cv` (the default) chooses the
     // rows, and the summary and the report say which and why.
     let dir = tempfile::tempdir().unwrap();
@@ -145,6 +145,16 @@ fn the_summary_names_the_reference_rows_cross_validation_chose() {
     assert!(stderr(&out).contains(named), "{}", stderr(&out));
     assert!(
         stderr(&out).contains("mean PSNR on left-out clips: random poses and clip frames "),
+        "{}",
+        stderr(&out)
+    );
+    // And the basis rank its cross-validation chose.
+    let rank = report["fit"]["basis_cv"]["rank"].as_u64().unwrap();
+    assert_eq!(report["fit"]["basis"]["rank"].as_u64(), Some(rank));
+    assert!(
+        stderr(&out).contains(&format!(
+            "eigen-AO basis: {rank} rows of 32 tried, the fewest within 0.1 dB of the best on left-out clips ("
+        )),
         "{}",
         stderr(&out)
     );

@@ -224,7 +224,9 @@ impl Truncations {
         let mut out = self.mean.clone();
         for (j, &a) in coordinates.iter().enumerate().take(rank.min(self.rank())) {
             let axis = self.axes.row(j);
-            out.iter_mut().enumerate().for_each(|(i, o)| *o += a * axis[i]);
+            out.iter_mut()
+                .enumerate()
+                .for_each(|(i, o)| *o += a * axis[i]);
         }
         out.into_iter().map(|x| x as f32).collect()
     }
@@ -311,8 +313,25 @@ mod tests {
                 assert!((x - y).abs() < 2e-3, "{x} vs {y}");
             }
         }
-        let (_, _, one) = compress(FormRef::Dense(&form), &poses, 1, 4.0).unwrap();
+        let (one_basis, one_form, one) = compress(FormRef::Dense(&form), &poses, 1, 4.0).unwrap();
         assert_eq!(one.rank, 1);
         assert!(one.rmse > 1e-3 && one.kept_variance > 0.5 && one.kept_variance < 1.0);
+        // The truncations of every rank at once keep what compress keeps.
+        let t = Truncations::new(FormRef::Dense(&form), &poses, 5).unwrap();
+        assert_eq!(t.rank(), 2);
+        let new_pose = [0.3, -0.8, 0.5, 1.0];
+        let full = form.evaluate(&new_pose);
+        let coordinates = t.coordinates(&full);
+        for (rank, (b, f)) in [(1, (&one_basis, &one_form)), (2, (&basis, &small))] {
+            let kept = t.truncate(&coordinates, rank);
+            let compressed = f.evaluate(&b.apply(&new_pose));
+            for (x, y) in kept.iter().zip(&compressed) {
+                assert!((x - y).abs() < 2e-3, "rank {rank}: {x} vs {y}");
+            }
+        }
+        // Past the axes there are: the prediction itself.
+        for (x, y) in t.truncate(&coordinates, 5).iter().zip(&full) {
+            assert!((x - y).abs() < 1e-5, "{x} vs {y}");
+        }
     }
 }

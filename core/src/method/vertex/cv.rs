@@ -83,6 +83,8 @@ pub struct RankChoice {
     /// Per candidate rank: its mean PSNR over the left-out clips' frames
     /// (dB, see [`ClipErrors::psnr`]).
     pub scores: Vec<(usize, f64)>,
+    /// Per candidate rank, each group of clips' mean PSNR (dB).
+    pub fold_scores: Vec<Vec<f64>>,
     /// How far below the best score the chosen rank may be (dB).
     pub tolerance_db: f64,
     /// Groups of clips left out in turn.
@@ -103,7 +105,11 @@ impl RankChoice {
 /// fewest rows whose mean PSNR over the left-out clips is within
 /// [`RANK_TOLERANCE_DB`] of the best. `None` without a finite score.
 pub fn choose_rank(ranks: &[usize], errors: &ClipErrors) -> Option<RankChoice> {
-    let scores: Vec<(usize, f64)> = ranks.iter().copied().zip(errors.psnr.iter().copied()).collect();
+    let scores: Vec<(usize, f64)> = ranks
+        .iter()
+        .copied()
+        .zip(errors.psnr.iter().copied())
+        .collect();
     let best = scores
         .iter()
         .map(|s| s.1)
@@ -113,6 +119,7 @@ pub fn choose_rank(ranks: &[usize], errors: &ClipErrors) -> Option<RankChoice> {
     Some(RankChoice {
         rank,
         scores,
+        fold_scores: errors.fold_psnr.clone(),
         tolerance_db: RANK_TOLERANCE_DB,
         folds: errors.folds,
     })
@@ -219,6 +226,8 @@ pub struct ClipErrors {
     /// `psnr[candidate]`: over the groups, the mean of each group's mean
     /// per-frame PSNR (dB), the figure the report's unseen clips give.
     pub psnr: Vec<f64>,
+    /// `fold_psnr[candidate][group]`: each group's mean per-frame PSNR.
+    pub fold_psnr: Vec<Vec<f64>>,
 }
 
 impl ClipErrors {
@@ -264,9 +273,8 @@ pub fn sse_by_clips<M>(
     let folds = clips.len().min(CV_FOLDS);
     let fold_of = |c: usize| clips.binary_search(&c).ok().map(|i| i % folds);
     let mut sse = vec![vec![0.0f64; ao.vertices]; candidates];
-    let mut psnr = vec![0.0f64; candidates];
+    let mut fold_psnr = vec![Vec::new(); candidates];
     let mut rows = 0usize;
-    let mut scored = 0usize;
     for f in 0..folds {
         let held = |s: Source| s.clip().and_then(fold_of) == Some(f);
         let train: Vec<usize> = (0..sources.len()).filter(|&r| !held(sources[r])).collect();
@@ -277,12 +285,11 @@ pub fn sse_by_clips<M>(
             continue;
         }
         rows += test.len();
-        scored += 1;
         let models = fit(&train);
-        for (k, (e, p)) in sse.iter_mut().zip(&mut psnr).enumerate() {
+        for (k, (e, p)) in sse.iter_mut().zip(&mut fold_psnr).enumerate() {
             let Some(model) = models.get(k).and_then(Option::as_ref) else {
                 e.iter_mut().for_each(|x| *x = f64::INFINITY);
-                *p = f64::NEG_INFINITY;
+                p.push(f64::NEG_INFINITY);
                 continue;
             };
             let mut frames = 0.0;
@@ -295,15 +302,19 @@ pub fn sse_by_clips<M>(
                 }
                 frames += crate::asset::metrics::psnr(frame / ao.vertices.max(1) as f64);
             }
-            *p += frames / test.len() as f64;
+            p.push(frames / test.len() as f64);
         }
     }
-    psnr.iter_mut().for_each(|p| *p /= scored.max(1) as f64);
+    let psnr = fold_psnr
+        .iter()
+        .map(|f| f.iter().sum::<f64>() / f.len().max(1) as f64)
+        .collect();
     Some(ClipErrors {
         sse,
         rows,
         folds,
         psnr,
+        fold_psnr,
     })
 }
 
@@ -353,6 +364,30 @@ mod tests {
         // Frames of one clip: nothing to leave out.
         let one = [Random, Frame(0), Frame(0), Frame(0), Frame(0), Perturbed(1)];
         assert!(choose_by_clips(&one, &ao, &candidates, each, |&v, _| vec![v as f32]).is_none());
+    }
+
+    #[test]
+    fn the_fewest_basis_rows_within_the_tolerance_of_the_best_win() {
+        let errors = |psnr: Vec<f64>| ClipErrors {
+            sse: vec![Vec::new(); psnr.len()],
+            rows: 1,
+            folds: 2,
+            fold_psnr: psnr.iter().map(|&p| vec![p, p]).collect(),
+            psnr,
+        };
+        let ranks = [1, 2, 3, 4, 5];
+        // The best is rank 4 (30 dB); rank 3 is within a tenth of a
+        // decibel of it, rank 2 just outside.
+        let c = choose_rank(&ranks, &errors(vec![20.0, 29.89, 29.95, 30.0, 29.99])).unwrap();
+        assert_eq!((c.rank, c.folds, c.score()), (3, 2, 29.95));
+        assert_eq!(c.scores[3], (4, 30.0));
+        assert_eq!(c.fold_scores[1], [29.89, 29.89]);
+        assert_eq!(c.tolerance_db, RANK_TOLERANCE_DB);
+        // A rank that could not be fitted never wins; with none that
+        // could, there is no choice.
+        let c = choose_rank(&ranks, &errors(vec![f64::NEG_INFINITY, 1.0, 2.0, 2.0, 2.0])).unwrap();
+        assert_eq!(c.rank, 3);
+        assert!(choose_rank(&ranks, &errors(vec![f64::NEG_INFINITY; 5])).is_none());
     }
 
     #[test]

@@ -225,7 +225,7 @@ pub enum FitStats {
     /// Nothing to report.
     StaticAverage,
     /// vertex-linear.
-    VertexLinear(LinearFitStats),
+    VertexLinear(Box<LinearFitStats>),
     /// vertex-clustered.
     VertexClustered(Box<ClusteredFitStats>),
 }
@@ -356,7 +356,7 @@ fn fit_rows(
             let (m, stats) = fit_linear(character, joint_angles, q, ao, sources, linear)?;
             (
                 Model::VertexLinear(joint_angles.clone(), m),
-                FitStats::VertexLinear(stats),
+                FitStats::VertexLinear(Box::new(stats)),
             )
         }
         Method::VertexClustered => {
@@ -553,7 +553,10 @@ fn settled(
             ClusteredOptions {
                 ridge: s.ridge_cv.as_ref().map_or(clustered.ridge, |c| c.ridge),
                 ridge_cv: false,
-                clamp: s.clamp_cv.as_ref().map_or(clustered.clamp, |c| c.ridge as f32),
+                clamp: s
+                    .clamp_cv
+                    .as_ref()
+                    .map_or(clustered.clamp, |c| c.ridge as f32),
                 clamp_cv: false,
                 ..clustered
             },
