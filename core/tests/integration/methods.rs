@@ -6,7 +6,10 @@ use aobake_core::{
     Character, Clip, Pose,
     asset::{AssetError, Container},
     bake::{Bake, BakeParams, Evaluation, Plan, bake_in_process},
-    method::{Method, vertex::Model},
+    method::{
+        Method,
+        vertex::{FormRef, Model},
+    },
 };
 
 use crate::util;
@@ -230,7 +233,9 @@ fn hostile_assets_with_valid_checksums_are_refused() {
     use serde_json::{Value, json};
     let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
     let c = &imported.character;
-    let linear = bake(c, &imported.clips, quick(Method::VertexLinear)).bytes;
+    let mut linear_params = quick(Method::VertexLinear);
+    linear_params.linear.basis_cv = false;
+    let linear = bake(c, &imported.clips, linear_params).bytes;
     let mut clustered_params = quick(Method::VertexClustered);
     clustered_params.clustered.vertex_clusters = 30;
     clustered_params.clustered.basis = 0;
@@ -309,6 +314,10 @@ fn hostile_assets_with_valid_checksums_are_refused() {
             "unmapped columns",
             Box::new(|h| h["layout"]["columns"][0] = json!(370)),
         ),
+        (
+            "sparse without a basis",
+            Box::new(|h| h["layout"]["sparse"] = json!(true)),
+        ),
     ];
     for (what, f) in &clustered_edits {
         assert!(edit(&clustered, f.as_ref()).is_err(), "clustered: {what}");
@@ -326,11 +335,15 @@ fn hostile_assets_with_valid_checksums_are_refused() {
     assert!(edit(&linear, &|_| {}).is_ok() && edit(&clustered, &|_| {}).is_ok());
     // Eigen-AO bases whose header disagrees with BMIX and COEF.
     let mut p = quick(Method::VertexLinear);
-    p.linear.basis = 4;
-    let linear = bake(c, &imported.clips, p).bytes;
+    (p.linear.basis, p.linear.basis_cv) = (4, false);
+    let linear = bake(c, &imported.clips, p.clone()).bytes;
+    p.linear.basis_threshold = 1.0 / 512.0;
+    let sparse_linear = bake(c, &imported.clips, p).bytes;
     let mut p = quick(Method::VertexClustered);
-    p.clustered.basis = 4;
-    let clustered = bake(c, &imported.clips, p).bytes;
+    (p.clustered.basis, p.clustered.basis_cv) = (4, false);
+    let clustered = bake(c, &imported.clips, p.clone()).bytes;
+    p.clustered.basis_threshold = 1.0 / 512.0;
+    let sparse_clustered = bake(c, &imported.clips, p).bytes;
     let basis_edits: Vec<(&str, Edit)> = vec![
         ("basis grown", Box::new(|h| h["layout"]["basis"] = json!(5))),
         (
@@ -346,23 +359,46 @@ fn hostile_assets_with_valid_checksums_are_refused() {
             Box::new(|h| h["layout"]["basis"] = json!(0)),
         ),
     ];
+    let bases = [
+        ("linear", &linear),
+        ("clustered", &clustered),
+        ("sparse linear", &sparse_linear),
+        ("sparse clustered", &sparse_clustered),
+    ];
     for (what, f) in &basis_edits {
-        for (name, bytes) in [("linear", &linear), ("clustered", &clustered)] {
+        for (name, bytes) in bases {
             assert!(
                 matches!(edit(bytes, f.as_ref()), Err(AssetError::Malformed(_))),
                 "{name}: {what}"
             );
         }
     }
-    assert!(
-        edit(&linear, &|h| h["layout"]["sparse"] = json!(true)).is_err(),
-        "a sparse basis"
-    );
+    // Dense rows claimed sparse, and sparse ones claimed dense.
+    for (name, bytes) in bases {
+        let sparse = name.starts_with("sparse");
+        assert!(
+            edit(bytes, &|h| h["layout"]["sparse"] = json!(!sparse)).is_err(),
+            "{name}: sparse flipped"
+        );
+        let model = edit(bytes, &|_| {}).unwrap();
+        assert_eq!(matches!(model.form(), FormRef::Sparse(_)), sparse, "{name}");
+    }
     assert!(
         edit(&clustered, &|h| h["layout"]["columns"][0] = json!(100)).is_err(),
         "vertex clusters under a basis"
     );
     assert!(edit(&linear, &|_| {}).is_ok() && edit(&clustered, &|_| {}).is_ok());
+    // A sparse basis's rows point past the basis: refused.
+    let mut container = Container::from_bytes(&sparse_clustered).unwrap();
+    for s in &mut container.sections {
+        if s.tag == *b"CSRR"
+            && let aobake_core::asset::Data::U16(rows) = &mut s.data
+        {
+            rows[0] = 5;
+        }
+    }
+    let err = Model::from_container(&Container::from_bytes(&container.to_bytes()).unwrap());
+    assert!(matches!(err, Err(AssetError::Malformed(m)) if m.contains("sparse")));
 }
 
 #[test]
@@ -427,12 +463,16 @@ fn cross_validation_over_clips_chooses_the_reference_rows() {
 }
 
 #[test]
-fn cross_validation_over_clips_chooses_the_basis_rank() {
-    // With `basis_cv` (the default) the fit keeps the fewest eigen-AO
-    // basis rows whose left-out clips score within a tenth of a decibel of
-    // the best rank's: the model is, bit for bit, the one a bake asking
-    // for that many rows fits, and costs a vertex one multiply-add more.
-    use aobake_core::method::vertex::{FitStats, RankChoice, cv::RANK_TOLERANCE_DB};
+fn cross_validation_over_clips_chooses_the_basis() {
+    // With `basis_cv` (the default) the fit keeps the cheapest eigen-AO
+    // basis (rows, and a threshold below which entries are dropped) whose
+    // left-out clips score within a tenth of a decibel of the best
+    // candidate's: the model is, bit for bit, the one a bake asking for
+    // that basis fits, and costs a vertex what the choice says.
+    use aobake_core::method::vertex::{
+        BasisChoice, Coefficients,
+        cv::{BASIS_THRESHOLDS, BASIS_TOLERANCE_DB},
+    };
     let imported = util::load(&util::character_path("InterpolationTest.glb").unwrap());
     for method in [Method::VertexLinear, Method::VertexClustered] {
         let mut params = quick(method);
@@ -446,49 +486,49 @@ fn cross_validation_over_clips_chooses_the_basis_rank() {
         let baked = bake_in_process(&Bake::new(&inputs, params.clone()).unwrap(), None).unwrap();
         let report = baked.report.vertex().unwrap();
         let fit = &report.fit;
-        let choice: &RankChoice = fit.basis_cv().expect("a choice");
-        eprintln!("{method}: rank {} of {:?}", choice.rank, choice.scores);
-        assert_eq!(
-            choice.scores.iter().map(|s| s.0).collect::<Vec<_>>(),
-            (1..=32).collect::<Vec<_>>()
-        );
-        assert!(choice.scores.iter().all(|s| s.1.is_finite()));
-        assert_eq!(choice.fold_scores.len(), 32);
-        let best = choice
-            .scores
+        let choice: &BasisChoice = fit.basis_cv().expect("a choice");
+        let chosen = *choice.chosen().unwrap();
+        eprintln!("{method}: {chosen:?}; best {:?}", choice.best().unwrap());
+        // Every rank from 1 to 32 at every threshold.
+        assert_eq!(choice.candidates.len(), 32 * BASIS_THRESHOLDS.len());
+        for (k, c) in choice.candidates.iter().enumerate() {
+            assert_eq!(
+                (c.rank, c.threshold),
+                (k % 32 + 1, BASIS_THRESHOLDS[k / 32])
+            );
+            assert!(c.psnr_db.is_finite() && c.multiply_adds >= 1.0);
+        }
+        let best = choice.best().unwrap().psnr_db;
+        let cheapest = choice
+            .candidates
             .iter()
-            .map(|s| s.1)
-            .fold(f64::NEG_INFINITY, f64::max);
-        let fewest = choice
-            .scores
-            .iter()
-            .find(|s| s.1 >= best - RANK_TOLERANCE_DB)
-            .unwrap();
-        assert_eq!(choice.rank, fewest.0);
-        // The cubes need fewer rows than the most.
-        assert!(choice.rank < 32, "{method}: {}", choice.rank);
-        assert_eq!(fit.basis().map(|b| b.rank), Some(choice.rank));
-        assert!(matches!(
-            (method, fit),
-            (Method::VertexLinear, FitStats::VertexLinear(_))
-                | (Method::VertexClustered, FitStats::VertexClustered(_))
-        ));
+            .filter(|c| c.psnr_db >= best - BASIS_TOLERANCE_DB)
+            .map(|c| c.multiply_adds)
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(chosen.multiply_adds, cheapest);
+        // The cubes cost a vertex fewer multiply-adds than 32 dense rows.
+        assert!(chosen.multiply_adds < 20.0, "{method}: {chosen:?}");
+        let basis = fit.basis().unwrap();
         assert_eq!(
-            report.evaluation.multiply_adds_per_vertex,
-            (choice.rank + 1) as f64
+            (basis.rank, basis.threshold),
+            (chosen.rank, chosen.threshold)
         );
+        assert!((report.evaluation.multiply_adds_per_vertex - chosen.multiply_adds).abs() < 1e-9);
         let model = Model::from_container(&Container::from_bytes(&baked.asset).unwrap())
             .unwrap()
             .0;
+        let sparse = match &model {
+            Model::VertexLinear(_, m) => matches!(m.coefficients, Coefficients::Sparse(_)),
+            Model::VertexClustered(_, m) => matches!(m.form, Coefficients::Sparse(_)),
+            Model::StaticAverage(_) => unreachable!(),
+        };
+        assert_eq!(sparse, chosen.threshold > 0.0);
         let mut fixed = params.clone();
-        (fixed.linear.basis, fixed.linear.basis_cv) = (choice.rank, false);
-        (fixed.clustered.basis, fixed.clustered.basis_cv) = (choice.rank, false);
+        (fixed.linear.basis, fixed.linear.basis_threshold) = (chosen.rank, chosen.threshold);
+        (fixed.clustered.basis, fixed.clustered.basis_threshold) = (chosen.rank, chosen.threshold);
+        (fixed.linear.basis_cv, fixed.clustered.basis_cv) = (false, false);
         let other = bake(&imported.character, &imported.clips, fixed);
-        assert!(
-            model == other.model,
-            "{method}: {} rows asked for",
-            choice.rank
-        );
+        assert!(model == other.model, "{method}: {chosen:?} asked for");
     }
 }
 

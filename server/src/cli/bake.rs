@@ -364,19 +364,33 @@ held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:
                 .join(", "),
         ));
     }
-    if let (Some(b), Some(c)) = (report.fit.basis(), report.fit.basis_cv()) {
-        let best = c.scores.iter().max_by(|a, b| a.1.total_cmp(&b.1));
+    if let (Some(b), Some(c)) = (report.fit.basis(), report.fit.basis_cv())
+        && let (Some(chosen), Some(best)) = (c.chosen(), c.best())
+    {
         out.push_str(&format!(
-            "eigen-AO basis: {} rows of {} tried, the fewest within {} dB of the best on left-out clips (cross-validation over clips: {:.2} dB; the best, {} rows, {:.2} dB)\n",
-            b.rank,
-            c.scores.len(),
+            "eigen-AO basis: {} ({:.1} multiply-adds a vertex), the cheapest of {} candidates within {} dB of the best on left-out clips (cross-validation over clips: {:.2} dB; the best, {}, {:.2} dB)\n",
+            basis_name(b.rank, b.threshold),
+            b.multiply_adds,
+            c.candidates.len(),
             c.tolerance_db,
-            c.score(),
-            best.map_or(0, |s| s.0),
-            best.map_or(f64::NAN, |s| s.1),
+            chosen.psnr_db,
+            basis_name(best.rank, best.threshold),
+            best.psnr_db,
         ));
     }
     out
+}
+
+/// "12 rows" or "12 rows, entries under 1/1024 dropped".
+fn basis_name(rank: usize, threshold: f32) -> String {
+    if threshold > 0.0 {
+        format!(
+            "{rank} rows, entries under 1/{} dropped",
+            (1.0 / threshold).round()
+        )
+    } else {
+        format!("{rank} rows")
+    }
 }
 
 fn rows_name(rows: Rows) -> &'static str {

@@ -105,7 +105,7 @@ fn bake_writes_a_deterministic_asset_a_report_and_a_plot() {
 }
 
 #[test]
-fn the_summary_names_the_reference_rows_and_basis_rank_cross_validation_chose() {
+fn the_summary_names_the_reference_rows_and_basis_cross_validation_chose() {
     // InterpolationTest has nine clips: `cv` (the default) chooses the
     // rows, and the summary and the report say which and why.
     let dir = tempfile::tempdir().unwrap();
@@ -148,16 +148,25 @@ fn the_summary_names_the_reference_rows_and_basis_rank_cross_validation_chose() 
         "{}",
         stderr(&out)
     );
-    // And the basis rank its cross-validation chose.
-    let rank = report["fit"]["basis_cv"]["rank"].as_u64().unwrap();
-    assert_eq!(report["fit"]["basis"]["rank"].as_u64(), Some(rank));
-    assert!(
-        stderr(&out).contains(&format!(
-            "eigen-AO basis: {rank} rows of 32 tried, the fewest within 0.1 dB of the best on left-out clips ("
-        )),
-        "{}",
-        stderr(&out)
+    // And the basis its cross-validation chose.
+    let (basis, choice) = (&report["fit"]["basis"], &report["fit"]["basis_cv"]);
+    let rank = choice["rank"].as_u64().unwrap();
+    let threshold = choice["threshold"].as_f64().unwrap();
+    assert_eq!(basis["rank"].as_u64(), Some(rank));
+    assert_eq!(basis["threshold"].as_f64(), Some(threshold));
+    let named = if threshold > 0.0 {
+        format!(
+            "{rank} rows, entries under 1/{} dropped (",
+            (1.0 / threshold).round()
+        )
+    } else {
+        format!("{rank} rows (")
+    };
+    let line = format!(
+        "eigen-AO basis: {named}{:.1} multiply-adds a vertex), the cheapest of 160 candidates within 0.1 dB of the best on left-out clips (",
+        basis["multiply_adds"].as_f64().unwrap()
     );
+    assert!(stderr(&out).contains(&line), "{line}\n{}", stderr(&out));
 }
 
 #[test]

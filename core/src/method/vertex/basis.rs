@@ -57,6 +57,13 @@ pub struct BasisStats {
     pub rmse: f64,
     /// Fraction of the predictions' variance the basis keeps.
     pub kept_variance: f64,
+    /// Basis entries smaller than this were dropped (0: none, the rows
+    /// stored dense).
+    #[serde(default)]
+    pub threshold: f32,
+    /// Coefficients a vertex reads: its multiply-adds.
+    #[serde(default)]
+    pub multiply_adds: f64,
 }
 
 impl Basis {
@@ -83,14 +90,11 @@ impl Basis {
 /// Compresses `form` (read with the per-pose `weights` of the reference
 /// poses) into at most `rank` basis rows: the basis, the one-block form of
 /// `rank + 1` rows that replaces `form`, and how much was lost. `None` when
-/// there are no poses or vertices, when the predictions do not vary, or
-/// when the basis would not cost a vertex fewer multiply-adds than `cost`,
-/// what the form costs it now.
+/// there are no poses or vertices, or when the predictions do not vary.
 pub(super) fn compress(
     form: FormRef<'_>,
     weights: &[Vec<f32>],
     rank: usize,
-    cost: f64,
 ) -> Option<(Basis, LinearForm, BasisStats)> {
     let c = dense(form);
     let (inputs, v, p) = (c.nrows(), c.ncols(), weights.len());
@@ -104,9 +108,6 @@ pub(super) fn compress(
     if r == 0 {
         // The predictions never move (AO 0 everywhere, say): nothing to
         // compress.
-        return None;
-    }
-    if (r + 1) as f64 >= cost {
         return None;
     }
     let total: f64 = centred.norm_l2().powi(2);
@@ -148,6 +149,8 @@ pub(super) fn compress(
         inputs,
         rmse: (lost / (p * v) as f64).sqrt(),
         kept_variance: if total > 0.0 { kept / total } else { 1.0 },
+        threshold: 0.0,
+        multiply_adds: (r + 1) as f64,
     };
     Some((basis, form, stats))
 }
@@ -171,15 +174,19 @@ fn predictions(c: &Mat<f64>, weights: &[Vec<f32>]) -> (Vec<f64>, Mat<f64>) {
 }
 
 /// The eigen-AO bases of every rank up to some most at once, for judging
-/// ranks against each other: what [`compress`] would keep of a
-/// prediction with `r` rows is `c + Σ_{j<r} (R_j · (f − c)) R_j`, and the
-/// axes `R_j` of the smaller ranks are the first of the larger.
+/// ranks (and thresholds) against each other: what [`compress`] keeps of
+/// a prediction `f` with `r` rows is `c + Σ_{j<r} a_j σ_j R_j`, `a_j =
+/// (R_j / σ_j) · (f − c)`, and the axes of the smaller ranks are the first
+/// of the larger. A threshold drops the entries of `σ_j R_j` (the stored
+/// coefficients) below it.
 #[derive(Debug, Clone)]
 pub(super) struct Truncations {
     /// `c`: the mean prediction over the poses.
     mean: Vec<f64>,
-    /// `R`: unit axes, one per row, the largest variance first.
+    /// `R_j / σ_j`, one per row, the largest variance first.
     axes: Mat<f64>,
+    /// `σ_j R_j`, rounded to f16 as stored.
+    rows: Mat<f64>,
 }
 
 impl Truncations {
@@ -192,12 +199,12 @@ impl Truncations {
             return None;
         }
         let (mean, centred) = predictions(&c, weights);
-        let mut axes = principal_axes(centred.as_ref(), rank);
-        for j in 0..axes.nrows() {
-            let n = axes.row(j).norm_l2();
-            axes.row_mut(j).iter_mut().for_each(|x| *x /= n);
-        }
-        Some(Self { mean, axes })
+        let axes = principal_axes(centred.as_ref(), rank);
+        let rows = Mat::from_fn(axes.nrows(), axes.ncols(), |j, i| {
+            let s2 = 1.0 / axes.row(j).norm_l2().powi(2);
+            f16::from_f64(axes[(j, i)] * s2).to_f64()
+        });
+        Some(Self { mean, axes, rows })
     }
 
     /// Axes there are.
@@ -205,7 +212,7 @@ impl Truncations {
         self.axes.nrows()
     }
 
-    /// A prediction's coordinates along every axis.
+    /// A prediction's coordinates `a_j` along every axis.
     pub(super) fn coordinates(&self, prediction: &[f32]) -> Vec<f64> {
         assert_eq!(prediction.len(), self.mean.len(), "one AO per vertex");
         (0..self.rank())
@@ -219,16 +226,31 @@ impl Truncations {
     }
 
     /// The prediction with those `coordinates` kept to its first `rank`
-    /// axes (all there are, when fewer).
-    pub(super) fn truncate(&self, coordinates: &[f64], rank: usize) -> Vec<f32> {
+    /// axes (all there are, when fewer), entries below `threshold`
+    /// dropped.
+    pub(super) fn truncate(&self, coordinates: &[f64], rank: usize, threshold: f32) -> Vec<f32> {
         let mut out = self.mean.clone();
+        let t = f64::from(threshold);
         for (j, &a) in coordinates.iter().enumerate().take(rank.min(self.rank())) {
-            let axis = self.axes.row(j);
-            out.iter_mut()
-                .enumerate()
-                .for_each(|(i, o)| *o += a * axis[i]);
+            let row = self.rows.row(j);
+            for (i, o) in out.iter_mut().enumerate() {
+                if row[i].abs() >= t {
+                    *o += a * row[i];
+                }
+            }
         }
         out.into_iter().map(|x| x as f32).collect()
+    }
+
+    /// Coefficients per vertex a basis of `rank` rows keeps at
+    /// `threshold`, its mean's included.
+    pub(super) fn multiply_adds(&self, rank: usize, threshold: f32) -> f64 {
+        let t = f64::from(threshold);
+        let v = self.mean.len().max(1) as f64;
+        let kept: usize = (0..rank.min(self.rank()))
+            .map(|j| self.rows.row(j).iter().filter(|x| x.abs() >= t).count())
+            .sum();
+        1.0 + kept as f64 / v
     }
 }
 
@@ -304,7 +326,7 @@ mod tests {
                 vec![(t * 0.37).sin(), (t * 1.3).cos(), (t * 0.11).sin(), 1.0]
             })
             .collect();
-        let (basis, small, stats) = compress(FormRef::Dense(&form), &poses, 5, 4.0).unwrap();
+        let (basis, small, stats) = compress(FormRef::Dense(&form), &poses, 5).unwrap();
         assert_eq!((stats.rank, basis.rank, small.weight_count()), (2, 2, 3));
         assert!(stats.rmse < 1e-9 && (stats.kept_variance - 1.0).abs() < 1e-9);
         for w in &poses {
@@ -313,7 +335,7 @@ mod tests {
                 assert!((x - y).abs() < 2e-3, "{x} vs {y}");
             }
         }
-        let (one_basis, one_form, one) = compress(FormRef::Dense(&form), &poses, 1, 4.0).unwrap();
+        let (one_basis, one_form, one) = compress(FormRef::Dense(&form), &poses, 1).unwrap();
         assert_eq!(one.rank, 1);
         assert!(one.rmse > 1e-3 && one.kept_variance > 0.5 && one.kept_variance < 1.0);
         // The truncations of every rank at once keep what compress keeps.
@@ -323,14 +345,14 @@ mod tests {
         let full = form.evaluate(&new_pose);
         let coordinates = t.coordinates(&full);
         for (rank, (b, f)) in [(1, (&one_basis, &one_form)), (2, (&basis, &small))] {
-            let kept = t.truncate(&coordinates, rank);
+            let kept = t.truncate(&coordinates, rank, 0.0);
             let compressed = f.evaluate(&b.apply(&new_pose));
             for (x, y) in kept.iter().zip(&compressed) {
                 assert!((x - y).abs() < 2e-3, "rank {rank}: {x} vs {y}");
             }
         }
         // Past the axes there are: the prediction itself.
-        for (x, y) in t.truncate(&coordinates, 5).iter().zip(&full) {
+        for (x, y) in t.truncate(&coordinates, 5, 0.0).iter().zip(&full) {
             assert!((x - y).abs() < 1e-5, "{x} vs {y}");
         }
     }

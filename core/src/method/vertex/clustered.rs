@@ -15,7 +15,7 @@ use half::f16;
 use serde::{Deserialize, Serialize};
 
 use super::basis::Basis;
-use super::form::{Block, LinearForm};
+use super::form::{Block, Coefficients, LinearForm};
 use super::kmeans::kmeans;
 use super::linalg::{principal_axes, ridge_lstsq};
 use super::linear::{F16_MAX, FitOverflow, VertexLinear};
@@ -84,8 +84,11 @@ pub struct ClusteredOptions {
     /// cluster) is compressed into ([`super::basis`]); 0 keeps it as
     /// fitted. With `basis_cv`, the most.
     pub basis: usize,
-    /// Choose the basis rows by cross-validation over clips, as
-    /// vertex-linear does ([`super::cv::choose_rank`]).
+    /// Basis entries below this are dropped, as vertex-linear's
+    /// `basis_threshold`.
+    pub basis_threshold: f32,
+    /// Choose the basis rows and threshold by cross-validation over clips,
+    /// as vertex-linear does ([`super::cv::choose_basis`]).
     pub basis_cv: bool,
 }
 
@@ -130,6 +133,7 @@ impl Default for ClusteredOptions {
             // cost no longer grows with the clusters MLS blends (Fox: 144
             // → 33 multiply-adds, unseen clips +3.23 → +3.43 dB; README).
             basis: 32,
+            basis_threshold: 0.0,
             basis_cv: true,
         }
     }
@@ -168,12 +172,13 @@ pub struct VertexClustered {
     /// Block 0: the global mean AO (or with a linear base, its
     /// coefficients: a row per weight, the last the constant); block 1 + j:
     /// pose cluster j's coefficients (`n` rows, plus the constant row with
-    /// [`Centering::Cluster`]), per vertex or per vertex cluster.
-    pub form: LinearForm,
+    /// [`Centering::Cluster`]), per vertex or per vertex cluster. With a
+    /// basis, its one block, dense or with small entries dropped.
+    pub form: Coefficients,
     /// The vertex-linear base, if any (see [`Base`]).
     pub base: Option<Box<LinearBase>>,
     /// The eigen-AO basis the model was compressed into, if any: the
-    /// weights above go through it, and `form` is its one block.
+    /// weights above go through it, and `form` is its rows.
     pub basis: Option<Basis>,
 }
 
@@ -204,7 +209,7 @@ pub struct ClusteredFitStats {
     pub basis: Option<super::basis::BasisStats>,
     /// How cross-validation over clips chose its rank, when it did.
     #[serde(default)]
-    pub basis_cv: Option<super::cv::RankChoice>,
+    pub basis_cv: Option<super::cv::BasisChoice>,
     /// How cross-validation over clips chose the reference rows, when it
     /// did (`reference = cv`; the linear base and the clusters use the
     /// same rows).
@@ -336,10 +341,10 @@ impl VertexClustered {
             centering: options.centering,
             clamp: options.clamp,
             clusters,
-            form: LinearForm {
+            form: Coefficients::Dense(LinearForm {
                 vertices: v,
                 blocks,
-            },
+            }),
             base: None,
             basis: None,
         };
@@ -442,21 +447,24 @@ impl VertexClustered {
     /// leaves: block 0 (the leftover's mean) is added to the base's
     /// constant row and replaced by the base's block.
     pub fn with_base(mut self, joint_angles: JointAngles, base: VertexLinear) -> Self {
-        let super::linear::Coefficients::Dense(form) = &base.coefficients else {
+        let Coefficients::Dense(form) = &base.coefficients else {
             panic!("a linear base is dense")
+        };
+        let Coefficients::Dense(own) = &mut self.form else {
+            panic!("a base goes under a model as fitted, before a basis")
         };
         let mut block = form.blocks[0].clone();
         let last = (block.rows - 1) * block.columns;
         for (c, m) in block.coefficients[last..]
             .iter_mut()
-            .zip(&self.form.blocks[0].coefficients)
+            .zip(&own.blocks[0].coefficients)
         {
             *c = f16::from_f32(c.to_f32() + m.to_f32());
         }
-        self.form.blocks[0] = block;
+        own.blocks[0] = block;
         let weights = VertexLinear {
-            coefficients: super::linear::Coefficients::Dense(LinearForm {
-                vertices: self.form.vertices,
+            coefficients: Coefficients::Dense(LinearForm {
+                vertices: own.vertices,
                 blocks: Vec::new(),
             }),
             ..base
@@ -644,7 +652,10 @@ mod tests {
         let (model, stats) = VertexClustered::fit(&h, &ao, &options, 1).unwrap();
         assert_eq!(stats.vertex_clusters, vec![3, 3]);
         // Vertices 0 and 3 move together (offset 0.01): one cluster.
-        for block in &model.form.blocks[1..] {
+        let Coefficients::Dense(form) = &model.form else {
+            panic!("dense as fitted")
+        };
+        for block in &form.blocks[1..] {
             let map = block.map.as_ref().unwrap();
             assert_eq!(map[0], map[3]);
             assert_ne!(map[0], map[1]);

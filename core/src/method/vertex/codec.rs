@@ -42,8 +42,8 @@ pub enum Layout {
         #[serde(default)]
         components: usize,
         /// Eigen-AO basis rows (`BMIX`: the `(N+1) × basis` mix, row-major,
-        /// then `basis` offsets, f32); `COEF` is then `(basis+1) × V`. 0:
-        /// none.
+        /// then `basis` offsets, f32); `COEF` is then `(basis+1) × V`, or
+        /// with `sparse` the CSR of those rows. 0: none.
         #[serde(default, skip_serializing_if = "is_zero")]
         basis: usize,
     },
@@ -73,7 +73,15 @@ pub enum Layout {
         /// V` block, and there is no `VMAP`. 0: none.
         #[serde(default, skip_serializing_if = "is_zero")]
         basis: usize,
+        /// With a basis: its rows stored sparse (`COEF`, `CSRO`, `CSRR` as
+        /// vertex-linear's), small entries dropped.
+        #[serde(default, skip_serializing_if = "is_false")]
+        sparse: bool,
     },
+}
+
+fn is_false(x: &bool) -> bool {
+    !*x
 }
 
 fn is_zero(x: &usize) -> bool {
@@ -127,17 +135,7 @@ impl Model {
         let (layout, sections) = match self {
             Self::StaticAverage(m) => (Layout::StaticAverage, form_sections(&m.form)),
             Self::VertexLinear(joint_angles, m) => {
-                let (sparse, mut sections) = match &m.coefficients {
-                    Coefficients::Dense(f) => (false, form_sections(f)),
-                    Coefficients::Sparse(s) => (
-                        true,
-                        vec![
-                            section(*b"COEF", Data::F16(s.values.clone())),
-                            section(*b"CSRO", Data::U32(s.offsets.clone())),
-                            section(*b"CSRR", Data::U16(s.rows_of.clone())),
-                        ],
-                    ),
-                };
+                let (sparse, mut sections) = coefficient_sections(&m.coefficients);
                 sections.extend(linear_weight_sections(m, LINEAR_TAGS));
                 sections.extend(m.basis.as_ref().map(basis_section));
                 (
@@ -152,7 +150,7 @@ impl Model {
                 )
             }
             Self::VertexClustered(handles, m) => {
-                let mut sections = form_sections(&m.form);
+                let (sparse, mut sections) = coefficient_sections(&m.form);
                 sections.push(section(
                     *b"CENT",
                     Data::F32(m.clusters.iter().flat_map(|c| c.center.clone()).collect()),
@@ -167,9 +165,11 @@ impl Model {
                 sections.extend(m.basis.as_ref().map(basis_section));
                 // With a basis the clusters' blocks are gone into it: each
                 // counts as unmapped.
-                let columns = match &m.basis {
-                    Some(_) => vec![m.form.vertices; m.clusters.len()],
-                    None => m.form.blocks[1..].iter().map(|b| b.columns).collect(),
+                let columns = match &m.form {
+                    Coefficients::Dense(f) if m.basis.is_none() => {
+                        f.blocks[1..].iter().map(|b| b.columns).collect()
+                    }
+                    _ => vec![m.form.vertices(); m.clusters.len()],
                 };
                 (
                     Layout::VertexClustered {
@@ -189,6 +189,7 @@ impl Model {
                                 .map_or(0, |_| b.weights.parameters),
                         }),
                         basis: m.basis.as_ref().map_or(0, |b| b.rank),
+                        sparse,
                     },
                     sections,
                 )
@@ -243,37 +244,15 @@ impl Model {
                 let parameters = weights.parameters;
                 let rows = parameters + 1;
                 let mix = match basis {
+                    0 if container.section(b"BMIX").is_ok() => {
+                        return Err(bad("a BMIX section without a basis"));
+                    }
                     0 => None,
-                    _ if *sparse => return Err(bad("a sparse model has no basis")),
                     &r => Some(read_basis(container, rows, r)?),
                 };
-                let coefficients = if let Some(b) = &mix {
-                    Coefficients::Dense(read_form(v, b.rank + 1, coef)?)
-                } else if *sparse {
-                    let Data::U32(offsets) = container.section(b"CSRO")? else {
-                        return Err(bad("CSRO must be u32"));
-                    };
-                    let Data::U16(rows_of) = container.section(b"CSRR")? else {
-                        return Err(bad("CSRR must be u16"));
-                    };
-                    let nnz = coef.len();
-                    let monotone = offsets.windows(2).all(|w| w[0] <= w[1]);
-                    if offsets.len() != v + 1
-                        || offsets.first() != Some(&0)
-                        || offsets.last().map(|&o| o as usize) != Some(nnz)
-                        || !monotone
-                        || rows_of.len() != nnz
-                        || rows_of.iter().any(|&r| usize::from(r) >= rows)
-                    {
-                        return Err(bad("sparse coefficients do not match the header"));
-                    }
-                    Coefficients::Sparse(SparseForm {
-                        vertices: v,
-                        rows,
-                        offsets: offsets.clone(),
-                        rows_of: rows_of.clone(),
-                        values: coef,
-                    })
+                let rows = mix.as_ref().map_or(rows, |b| b.rank + 1);
+                let coefficients = if *sparse {
+                    Coefficients::Sparse(read_sparse(container, v, rows, coef)?)
                 } else {
                     Coefficients::Dense(read_form(v, rows, coef)?)
                 };
@@ -295,6 +274,7 @@ impl Model {
                 columns,
                 base,
                 basis,
+                sparse,
             } => {
                 let (m, n, h) = (columns.len(), *dimensions, handles.len());
                 let rows = n + usize::from(*centering == Centering::Cluster);
@@ -313,15 +293,22 @@ impl Model {
                 };
                 let base_rows = base.as_ref().map_or(1, |b| b.weights.parameters + 1);
                 let (form, basis) = match basis {
+                    0 if *sparse => return Err(bad("a sparse vertex-clustered model has a basis")),
                     0 => (
-                        read_clustered_form(container, v, base_rows, rows, columns, coef)?,
+                        Coefficients::Dense(read_clustered_form(
+                            container, v, base_rows, rows, columns, coef,
+                        )?),
                         None,
                     ),
                     &r => {
-                        let form = read_form(v, r + 1, coef)?;
                         if columns.iter().any(|&c| c != v) {
                             return Err(bad("a model with a basis has no vertex clusters"));
                         }
+                        let form = if *sparse {
+                            Coefficients::Sparse(read_sparse(container, v, r + 1, coef)?)
+                        } else {
+                            Coefficients::Dense(read_form(v, r + 1, coef)?)
+                        };
                         // Bounded by validate_layout.
                         (form, Some(read_basis(container, base_rows + m * rows, r)?))
                     }
@@ -365,6 +352,56 @@ impl Model {
         };
         Ok((model, header))
     }
+}
+
+/// The sections of stored coefficients, and whether they are sparse
+/// (`COEF` values, `CSRO` offsets, `CSRR` rows).
+fn coefficient_sections(c: &Coefficients) -> (bool, Vec<Section>) {
+    match c {
+        Coefficients::Dense(f) => (false, form_sections(f)),
+        Coefficients::Sparse(s) => (
+            true,
+            vec![
+                section(*b"COEF", Data::F16(s.values.clone())),
+                section(*b"CSRO", Data::U32(s.offsets.clone())),
+                section(*b"CSRR", Data::U16(s.rows_of.clone())),
+            ],
+        ),
+    }
+}
+
+/// Reads sparse coefficients of `rows` rows (`coef` their values),
+/// checking the offsets and rows against them.
+fn read_sparse(
+    container: &Container,
+    v: usize,
+    rows: usize,
+    coef: Vec<f16>,
+) -> Result<SparseForm, AssetError> {
+    let Data::U32(offsets) = container.section(b"CSRO")? else {
+        return Err(bad("CSRO must be u32"));
+    };
+    let Data::U16(rows_of) = container.section(b"CSRR")? else {
+        return Err(bad("CSRR must be u16"));
+    };
+    let nnz = coef.len();
+    let monotone = offsets.windows(2).all(|w| w[0] <= w[1]);
+    if offsets.len() != v + 1
+        || offsets.first() != Some(&0)
+        || offsets.last().map(|&o| o as usize) != Some(nnz)
+        || !monotone
+        || rows_of.len() != nnz
+        || rows_of.iter().any(|&r| usize::from(r) >= rows)
+    {
+        return Err(bad("sparse coefficients do not match the header"));
+    }
+    Ok(SparseForm {
+        vertices: v,
+        rows,
+        offsets: offsets.clone(),
+        rows_of: rows_of.clone(),
+        values: coef,
+    })
 }
 
 /// The section tags of a vertex-linear model's weights: means and scales,

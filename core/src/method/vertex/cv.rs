@@ -69,59 +69,101 @@ impl RidgeChoice {
     }
 }
 
-/// Decibels a smaller eigen-AO basis may lose on left-out clips against
-/// the best rank and still be chosen ([`choose_rank`]): a tenth of a
-/// decibel is 2.3 % of the error, less than the spread between bakes with
-/// other seeds, so the rows past it buy run-time cost, not quality.
-pub const RANK_TOLERANCE_DB: f64 = 0.1;
+/// Decibels a cheaper eigen-AO basis may lose on left-out clips against
+/// the best and still be chosen ([`choose_basis`]): a tenth of a decibel
+/// is 2.3 % of the error, less than the spread between bakes with other
+/// seeds, so what costs more past it buys run-time cost, not quality.
+pub const BASIS_TOLERANCE_DB: f64 = 0.1;
 
-/// How cross-validation over clips chose an eigen-AO basis's rank.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RankChoice {
-    /// The chosen rank.
+/// The thresholds below which a basis's entries are dropped that
+/// [`choose_basis`] chooses among (AO per standard deviation of a basis
+/// weight; 0 keeps the rows dense).
+pub const BASIS_THRESHOLDS: [f32; 5] = [0.0, 1.0 / 2048.0, 1.0 / 1024.0, 1.0 / 512.0, 1.0 / 256.0];
+
+/// One eigen-AO basis cross-validation over clips judged.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BasisCandidate {
+    /// Basis rows.
     pub rank: usize,
-    /// Per candidate rank: its mean PSNR over the left-out clips' frames
-    /// (dB, see [`ClipErrors::psnr`]).
-    pub scores: Vec<(usize, f64)>,
-    /// Per candidate rank, each group of clips' mean PSNR (dB).
-    pub fold_scores: Vec<Vec<f64>>,
-    /// How far below the best score the chosen rank may be (dB).
+    /// Entries below this dropped.
+    pub threshold: f32,
+    /// Mean PSNR over the left-out clips' frames (dB, see
+    /// [`ClipErrors::psnr`]).
+    pub psnr_db: f64,
+    /// What it costs the model fitted to every row, per vertex.
+    pub multiply_adds: f64,
+}
+
+/// How cross-validation over clips chose an eigen-AO basis: its rows and
+/// threshold.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BasisChoice {
+    /// The chosen rows.
+    pub rank: usize,
+    /// The chosen threshold.
+    pub threshold: f32,
+    /// Every candidate.
+    pub candidates: Vec<BasisCandidate>,
+    /// How far below the best score the chosen one may be (dB).
     pub tolerance_db: f64,
     /// Groups of clips left out in turn.
     pub folds: usize,
 }
 
-impl RankChoice {
-    /// The chosen rank's score.
-    pub fn score(&self) -> f64 {
-        self.scores
+impl BasisChoice {
+    /// The chosen candidate.
+    pub fn chosen(&self) -> Option<&BasisCandidate> {
+        self.candidates
             .iter()
-            .find(|s| s.0 == self.rank)
-            .map_or(f64::NEG_INFINITY, |s| s.1)
+            .find(|c| c.rank == self.rank && c.threshold == self.threshold)
+    }
+
+    /// The best-scoring candidate.
+    pub fn best(&self) -> Option<&BasisCandidate> {
+        self.candidates
+            .iter()
+            .max_by(|a, b| a.psnr_db.total_cmp(&b.psnr_db))
     }
 }
 
-/// Chooses among the basis `ranks` (ascending) scored in `errors`: the
-/// fewest rows whose mean PSNR over the left-out clips is within
-/// [`RANK_TOLERANCE_DB`] of the best. `None` without a finite score.
-pub fn choose_rank(ranks: &[usize], errors: &ClipErrors) -> Option<RankChoice> {
-    let scores: Vec<(usize, f64)> = ranks
+/// Chooses among basis `candidates` (rank, threshold, multiply-adds),
+/// scored in that order in `errors`: the cheapest whose mean PSNR over the
+/// left-out clips is within [`BASIS_TOLERANCE_DB`] of the best (on a tie,
+/// the better scored, then the fewer rows). `None` without a finite
+/// score.
+pub fn choose_basis(candidates: &[(usize, f32, f64)], errors: &ClipErrors) -> Option<BasisChoice> {
+    let candidates: Vec<BasisCandidate> = candidates
         .iter()
-        .copied()
-        .zip(errors.psnr.iter().copied())
+        .zip(&errors.psnr)
+        .map(
+            |(&(rank, threshold, multiply_adds), &psnr_db)| BasisCandidate {
+                rank,
+                threshold,
+                psnr_db,
+                multiply_adds,
+            },
+        )
         .collect();
-    let best = scores
+    let best = candidates
         .iter()
-        .map(|s| s.1)
+        .map(|c| c.psnr_db)
         .filter(|x| x.is_finite())
         .max_by(f64::total_cmp)?;
-    let rank = scores.iter().find(|s| s.1 >= best - RANK_TOLERANCE_DB)?.0;
-    Some(RankChoice {
-        rank,
-        scores,
-        fold_scores: errors.fold_psnr.clone(),
-        tolerance_db: RANK_TOLERANCE_DB,
+    let chosen = candidates
+        .iter()
+        .filter(|c| c.psnr_db >= best - BASIS_TOLERANCE_DB)
+        .min_by(|a, b| {
+            a.multiply_adds
+                .total_cmp(&b.multiply_adds)
+                .then(b.psnr_db.total_cmp(&a.psnr_db))
+                .then(a.rank.cmp(&b.rank))
+        })?;
+    Some(BasisChoice {
+        rank: chosen.rank,
+        threshold: chosen.threshold,
+        tolerance_db: BASIS_TOLERANCE_DB,
         folds: errors.folds,
+        candidates,
     })
 }
 
@@ -367,7 +409,7 @@ mod tests {
     }
 
     #[test]
-    fn the_fewest_basis_rows_within_the_tolerance_of_the_best_win() {
+    fn the_cheapest_basis_within_the_tolerance_of_the_best_wins() {
         let errors = |psnr: Vec<f64>| ClipErrors {
             sse: vec![Vec::new(); psnr.len()],
             rows: 1,
@@ -375,19 +417,37 @@ mod tests {
             fold_psnr: psnr.iter().map(|&p| vec![p, p]).collect(),
             psnr,
         };
-        let ranks = [1, 2, 3, 4, 5];
-        // The best is rank 4 (30 dB); rank 3 is within a tenth of a
-        // decibel of it, rank 2 just outside.
-        let c = choose_rank(&ranks, &errors(vec![20.0, 29.89, 29.95, 30.0, 29.99])).unwrap();
-        assert_eq!((c.rank, c.folds, c.score()), (3, 2, 29.95));
-        assert_eq!(c.scores[3], (4, 30.0));
-        assert_eq!(c.fold_scores[1], [29.89, 29.89]);
-        assert_eq!(c.tolerance_db, RANK_TOLERANCE_DB);
-        // A rank that could not be fitted never wins; with none that
+        // (rank, threshold, multiply-adds)
+        let candidates = [
+            (1, 0.0, 2.0),
+            (2, 0.0, 3.0),
+            (3, 0.0, 4.0),
+            (3, 0.01, 2.5),
+            (4, 0.0, 5.0),
+        ];
+        // The best is rank 4 (30 dB); rank 3 with its small entries
+        // dropped is within a tenth of a decibel and cheaper than rank 3
+        // dense; rank 2 is just outside.
+        let c = choose_basis(&candidates, &errors(vec![20.0, 29.89, 29.95, 29.91, 30.0])).unwrap();
+        assert_eq!((c.rank, c.threshold, c.folds), (3, 0.01, 2));
+        assert_eq!(c.chosen().unwrap().psnr_db, 29.91);
+        assert_eq!(c.best().unwrap().rank, 4);
+        assert_eq!(c.tolerance_db, BASIS_TOLERANCE_DB);
+        // A tie on cost goes to the better scored.
+        let tie = [(1, 0.0, 2.0), (2, 0.01, 2.0)];
+        assert_eq!(
+            choose_basis(&tie, &errors(vec![1.0, 1.05])).unwrap().rank,
+            2
+        );
+        // A candidate that could not be fitted never wins; with none that
         // could, there is no choice.
-        let c = choose_rank(&ranks, &errors(vec![f64::NEG_INFINITY, 1.0, 2.0, 2.0, 2.0])).unwrap();
+        let c = choose_basis(
+            &candidates,
+            &errors(vec![f64::NEG_INFINITY, 1.0, 2.0, 1.0, 2.0]),
+        )
+        .unwrap();
         assert_eq!(c.rank, 3);
-        assert!(choose_rank(&ranks, &errors(vec![f64::NEG_INFINITY; 5])).is_none());
+        assert!(choose_basis(&candidates, &errors(vec![f64::NEG_INFINITY; 5])).is_none());
     }
 
     #[test]

@@ -165,6 +165,65 @@ impl SparseForm {
     pub fn bytes(&self) -> usize {
         4 * self.offsets.len() + 2 * self.rows_of.len() + 2 * self.values.len()
     }
+
+    /// Stored coefficients per vertex: its multiply-adds.
+    pub fn multiply_adds(&self) -> f64 {
+        self.values.len() as f64 / self.vertices.max(1) as f64
+    }
+}
+
+/// Stored coefficients: a dense form, or a sparse one (vertex-linear with
+/// small coefficients dropped, or an eigen-AO basis with small entries
+/// dropped).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Coefficients {
+    /// All coefficients.
+    Dense(LinearForm),
+    /// The coefficients kept, per vertex.
+    Sparse(SparseForm),
+}
+
+/// A model's coefficients, borrowed.
+#[derive(Debug, Clone, Copy)]
+pub enum FormRef<'a> {
+    /// Blocks of dense coefficients.
+    Dense(&'a LinearForm),
+    /// Sparse coefficients per vertex.
+    Sparse(&'a SparseForm),
+}
+
+impl Coefficients {
+    /// Borrowed.
+    pub fn as_ref(&self) -> FormRef<'_> {
+        match self {
+            Self::Dense(f) => FormRef::Dense(f),
+            Self::Sparse(s) => FormRef::Sparse(s),
+        }
+    }
+
+    /// Vertices.
+    pub fn vertices(&self) -> usize {
+        match self {
+            Self::Dense(f) => f.vertices,
+            Self::Sparse(s) => s.vertices,
+        }
+    }
+
+    /// AO of every vertex for one pose's weights.
+    pub fn evaluate(&self, weights: &[f32]) -> Vec<f32> {
+        match self {
+            Self::Dense(f) => f.evaluate(weights),
+            Self::Sparse(s) => s.evaluate(weights),
+        }
+    }
+
+    /// Bytes of the coefficients (and maps or offsets).
+    pub fn bytes(&self) -> usize {
+        match self {
+            Self::Dense(f) => f.bytes(),
+            Self::Sparse(s) => s.bytes(),
+        }
+    }
 }
 
 #[cfg(test)]

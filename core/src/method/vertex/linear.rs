@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::basis::Basis;
 use super::cv::RidgeChoice;
-use super::form::{Block, LinearForm, SparseForm};
+use super::form::{Block, Coefficients, LinearForm, SparseForm};
 use super::linalg::{RidgeSolver, SolveStats};
 use crate::{pose_space::Range, trace::AoBlock};
 
@@ -66,11 +66,18 @@ pub struct LinearOptions {
     /// whatever the features (a model that costs no more is kept as
     /// fitted); 0 keeps the model as fitted. With `basis_cv`, the most.
     pub basis: usize,
-    /// Choose the basis rows by cross-validation over clips
-    /// ([`super::cv::choose_rank`]): the fewest, up to `basis`, whose
-    /// mean PSNR on left-out clips is within
-    /// [`super::cv::RANK_TOLERANCE_DB`] of the best; `basis` when the
-    /// reference frames come from fewer than two clips.
+    /// Basis entries (AO per standard deviation of a basis weight) below
+    /// this are dropped and the rows stored sparse, so that a vertex reads
+    /// only the rows that move it; 0 keeps them dense. With `basis_cv`,
+    /// chosen.
+    pub basis_threshold: f32,
+    /// Choose the basis rows and threshold by cross-validation over clips
+    /// ([`super::cv::choose_basis`]): of every rank up to `basis` and
+    /// every threshold of [`super::cv::BASIS_THRESHOLDS`], the cheapest
+    /// whose mean PSNR on left-out clips is within
+    /// [`super::cv::BASIS_TOLERANCE_DB`] of the best; `basis` rows and
+    /// `basis_threshold` when the reference frames come from fewer than
+    /// two clips.
     pub basis_cv: bool,
 }
 
@@ -185,6 +192,7 @@ impl Default for LinearOptions {
             // full model (Fox +3.20 → +3.26 dB, Kenney +3.84 → +3.85) at
             // a third to four fifths of its run-time cost (README).
             basis: 32,
+            basis_threshold: 0.0,
             basis_cv: true,
         }
     }
@@ -347,15 +355,6 @@ pub fn count_columns(columns: &[Column]) -> Vec<ColumnCount> {
     counts
 }
 
-/// The stored coefficients: dense `(N+1) × V`, or sparse per vertex.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Coefficients {
-    /// All coefficients.
-    Dense(LinearForm),
-    /// Coefficients over the threshold, and every constant term.
-    Sparse(SparseForm),
-}
-
 /// A fitted vertex-linear model.
 ///
 /// The joint angles enter standardised, `(j_k − μ_k) / σ_k` over the
@@ -427,7 +426,7 @@ pub struct LinearFitStats {
     pub basis: Option<super::basis::BasisStats>,
     /// How cross-validation over clips chose its rank, when it did.
     #[serde(default)]
-    pub basis_cv: Option<super::cv::RankChoice>,
+    pub basis_cv: Option<super::cv::BasisChoice>,
     /// How cross-validation over clips chose the reference rows, when it
     /// did (`reference = cv`).
     #[serde(default)]
@@ -797,7 +796,7 @@ impl VertexLinear {
     pub fn multiply_adds(&self) -> f64 {
         match &self.coefficients {
             Coefficients::Dense(f) => f.weight_count() as f64,
-            Coefficients::Sparse(s) => s.values.len() as f64 / s.vertices.max(1) as f64,
+            Coefficients::Sparse(s) => s.multiply_adds(),
         }
     }
 
@@ -806,10 +805,7 @@ impl VertexLinear {
         8 * self.mean.len()
             + 4 * self.projection.as_ref().map_or(0, Vec::len)
             + self.basis.as_ref().map_or(0, Basis::bytes)
-            + match &self.coefficients {
-                Coefficients::Dense(f) => f.bytes(),
-                Coefficients::Sparse(s) => s.bytes(),
-            }
+            + self.coefficients.bytes()
     }
 }
 

@@ -28,13 +28,13 @@ pub use clustered::{
     MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
 };
 pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
-pub use cv::{RankChoice, Rows, RowsChoice, Source};
-pub use form::{Block, LinearForm, SparseForm};
+pub use cv::{BasisCandidate, BasisChoice, Rows, RowsChoice, Source};
+pub use form::{Block, Coefficients, FormRef, LinearForm, SparseForm};
 pub use linalg::SolveStats;
 pub use linear::{
-    Angles, Coefficients, Column, ColumnCount, DEFAULT_RIDGE, Features, FitOverflow,
-    LinearFitStats, LinearOptions, Locality, RIDGE_CANDIDATES, Scope, VertexLinear, choose_columns,
-    choose_ridge, count_columns,
+    Angles, Column, ColumnCount, DEFAULT_RIDGE, Features, FitOverflow, LinearFitStats,
+    LinearOptions, Locality, RIDGE_CANDIDATES, Scope, VertexLinear, choose_columns, choose_ridge,
+    count_columns,
 };
 
 use serde::{Deserialize, Serialize};
@@ -61,15 +61,6 @@ pub enum Model {
     VertexClustered(Handles, VertexClustered),
 }
 
-/// A model's coefficients, borrowed.
-#[derive(Debug, Clone, Copy)]
-pub enum FormRef<'a> {
-    /// Blocks of dense coefficients.
-    Dense(&'a LinearForm),
-    /// Sparse coefficients per vertex.
-    Sparse(&'a SparseForm),
-}
-
 impl Model {
     /// The method.
     pub fn method(&self) -> Method {
@@ -84,11 +75,8 @@ impl Model {
     pub fn vertices(&self) -> usize {
         match self {
             Self::StaticAverage(m) => m.form.vertices,
-            Self::VertexLinear(_, m) => match &m.coefficients {
-                Coefficients::Dense(f) => f.vertices,
-                Coefficients::Sparse(s) => s.vertices,
-            },
-            Self::VertexClustered(_, m) => m.form.vertices,
+            Self::VertexLinear(_, m) => m.coefficients.vertices(),
+            Self::VertexClustered(_, m) => m.form.vertices(),
         }
     }
 
@@ -128,32 +116,54 @@ impl Model {
     pub fn form(&self) -> FormRef<'_> {
         match self {
             Self::StaticAverage(m) => FormRef::Dense(&m.form),
-            Self::VertexLinear(_, m) => match &m.coefficients {
-                Coefficients::Dense(f) => FormRef::Dense(f),
-                Coefficients::Sparse(s) => FormRef::Sparse(s),
-            },
-            Self::VertexClustered(_, m) => FormRef::Dense(&m.form),
+            Self::VertexLinear(_, m) => m.coefficients.as_ref(),
+            Self::VertexClustered(_, m) => m.form.as_ref(),
         }
     }
 
     /// Compresses a fitted vertex-linear or vertex-clustered model into at
     /// most `rank` eigen-AO basis rows ([`basis`]), found over the
     /// per-pose `weights` ([`Model::weights`]) of the reference poses it
-    /// was fitted to. `None` (and the model as it was) for the static
-    /// average, or when there is nothing to compress or the basis would
-    /// not cost a vertex fewer multiply-adds than the model does now.
-    pub fn compress(&mut self, weights: &[Vec<f32>], rank: usize) -> Option<BasisStats> {
+    /// was fitted to. With a `threshold`, each vertex keeps only the basis
+    /// entries whose magnitude reaches it (and its mean), stored sparse.
+    /// `None` (and the model as it was) for the static average, or when
+    /// there is nothing to compress or the basis would not cost a vertex
+    /// fewer multiply-adds than the model does now.
+    pub fn compress(
+        &mut self,
+        weights: &[Vec<f32>],
+        rank: usize,
+        threshold: f32,
+    ) -> Option<BasisStats> {
         if matches!(self, Self::StaticAverage(_)) || weights.is_empty() {
             return None;
         }
         let cost =
             weights.iter().map(|w| self.multiply_adds(w)).sum::<f64>() / weights.len() as f64;
-        let (basis, form, stats) = basis::compress(self.form(), weights, rank, cost)?;
+        let (basis, dense, mut stats) = basis::compress(self.form(), weights, rank)?;
+        let form = if threshold > 0.0 {
+            Coefficients::Sparse(SparseForm::from_dense(
+                &dense.blocks[0],
+                dense.vertices,
+                threshold,
+                &[basis.rank],
+            ))
+        } else {
+            Coefficients::Dense(dense)
+        };
+        stats.threshold = threshold;
+        stats.multiply_adds = match &form {
+            Coefficients::Dense(f) => f.weight_count() as f64,
+            Coefficients::Sparse(s) => s.multiply_adds(),
+        };
+        if stats.multiply_adds >= cost {
+            return None;
+        }
         match self {
             Self::StaticAverage(_) => unreachable!("returned above"),
             Self::VertexLinear(_, m) => {
                 assert!(m.basis.is_none(), "compressed once");
-                m.coefficients = Coefficients::Dense(form);
+                m.coefficients = form;
                 m.basis = Some(basis);
             }
             Self::VertexClustered(_, m) => {
@@ -209,11 +219,9 @@ impl Model {
     /// (clusters that MLS leaves out cost nothing), or the mean number of
     /// stored coefficients per vertex for a sparse model.
     pub fn multiply_adds(&self, weights: &[f32]) -> f64 {
-        match self {
-            Self::VertexLinear(_, m) if matches!(m.coefficients, Coefficients::Sparse(_)) => {
-                m.multiply_adds()
-            }
-            _ => weights.iter().filter(|&&w| w != 0.0).count() as f64,
+        match self.form() {
+            FormRef::Sparse(s) => s.multiply_adds(),
+            FormRef::Dense(_) => weights.iter().filter(|&&w| w != 0.0).count() as f64,
         }
     }
 }
@@ -251,7 +259,7 @@ impl FitStats {
     }
 
     /// How cross-validation over clips chose the basis rank, when it did.
-    pub fn basis_cv(&self) -> Option<&RankChoice> {
+    pub fn basis_cv(&self) -> Option<&BasisChoice> {
         match self {
             Self::VertexLinear(s) => s.basis_cv.as_ref(),
             Self::VertexClustered(s) => s.basis_cv.as_ref(),
@@ -479,10 +487,14 @@ fn fit_rows(
             return Err(format!("{method} is not a per-vertex method"));
         }
     };
-    let (most, basis_cv) = match method {
-        Method::VertexLinear => (linear.basis, linear.basis_cv),
-        Method::VertexClustered => (clustered.basis, clustered.basis_cv),
-        _ => (0, false),
+    let (most, threshold, basis_cv) = match method {
+        Method::VertexLinear => (linear.basis, linear.basis_threshold, linear.basis_cv),
+        Method::VertexClustered => (
+            clustered.basis,
+            clustered.basis_threshold,
+            clustered.basis_cv,
+        ),
+        _ => (0, 0.0, false),
     };
     if most > 0 {
         let weights: Vec<Vec<f32>> = poses.iter().map(|p| model.weights(skeleton, p)).collect();
@@ -506,12 +518,14 @@ fn fit_rows(
                 );
                 fitted.ok().map(|(m, _)| m)
             };
-            rank_by_clips(skeleton, poses, ao, sources, most, fit)
+            basis_by_clips(skeleton, poses, ao, sources, (&model, &weights), most, fit)
         } else {
             None
         };
-        let rank = choice.as_ref().map_or(most, |c| c.rank);
-        let basis = model.compress(&weights, rank);
+        let (rank, threshold) = choice
+            .as_ref()
+            .map_or((most, threshold), |c| (c.rank, c.threshold));
+        let basis = model.compress(&weights, rank, threshold);
         match &mut stats {
             FitStats::VertexLinear(s) => (s.basis, s.basis_cv) = (basis, choice),
             FitStats::VertexClustered(s) => (s.basis, s.basis_cv) = (basis, choice),
@@ -538,11 +552,13 @@ fn settled(
             (false, false) => Locality::Off,
         },
         basis: 0,
+        basis_threshold: 0.0,
         basis_cv: false,
         ..*o
     };
     let clustered = ClusteredOptions {
         basis: 0,
+        basis_threshold: 0.0,
         basis_cv: false,
         ..*clustered
     };
@@ -565,38 +581,52 @@ fn settled(
     }
 }
 
-/// Chooses an eigen-AO basis rank from 1 to `most` by cross-validation
-/// over clips ([`cv::choose_rank`]): per group of clips, `fit(training
-/// rows)` fits the model without a basis, and every rank's truncation of
-/// its predictions is scored on the left-out frames (a rank that would not
-/// save the fold's model a multiply-add scores it as fitted). `None` when
-/// the frames come from fewer than two clips.
-fn rank_by_clips(
+/// What a model costs a vertex over the per-pose `weights`, on average.
+fn mean_multiply_adds(model: &Model, weights: &[Vec<f32>]) -> f64 {
+    weights.iter().map(|w| model.multiply_adds(w)).sum::<f64>() / weights.len().max(1) as f64
+}
+
+/// Chooses an eigen-AO basis (rows from 1 to `most`, a threshold of
+/// [`cv::BASIS_THRESHOLDS`]) for `fitted` (the model fitted to every row,
+/// and its weights per row) by cross-validation over clips
+/// ([`cv::choose_basis`]): per group of clips, `fit(training rows)` fits
+/// the model without a basis, and every candidate's truncation of its
+/// predictions is scored on the left-out frames (one that would not save
+/// the fold's model a multiply-add scores it as fitted); each candidate
+/// costs what it would cost `fitted`. `None` when the frames come from
+/// fewer than two clips.
+fn basis_by_clips(
     skeleton: &Skeleton,
     poses: &[Pose],
     ao: &AoBlock,
     sources: &[Source],
+    fitted: (&Model, &[Vec<f32>]),
     most: usize,
     fit: impl Fn(&[usize]) -> Option<Model>,
-) -> Option<RankChoice> {
+) -> Option<BasisChoice> {
     use std::{collections::HashMap, rc::Rc};
-    /// A fold's model: its predictions of the left-out frames, as fitted
-    /// and as coordinates along its basis axes.
+    /// A fold's model: its cost, and its predictions of the left-out
+    /// frames, as fitted and as coordinates along its basis axes.
     struct Fold {
         truncations: basis::Truncations,
         cost: f64,
         fitted: HashMap<usize, Vec<f32>>,
         coordinates: HashMap<usize, Vec<f64>>,
     }
-    let ranks: Vec<usize> = (1..=most).collect();
-    let each = |train: &[usize]| -> Vec<Option<(Rc<Fold>, usize)>> {
+    let (model, weights) = fitted;
+    let whole = basis::Truncations::new(model.form(), weights, most)?;
+    let cost = mean_multiply_adds(model, weights);
+    let candidates: Vec<(usize, f32, f64)> = cv::BASIS_THRESHOLDS
+        .iter()
+        .flat_map(|&t| (1..=most).map(move |r| (r, t)))
+        .map(|(r, t)| (r, t, whole.multiply_adds(r, t).min(cost)))
+        .collect();
+    let each = |train: &[usize]| -> Vec<Option<(Rc<Fold>, usize, f32)>> {
         let fold = fit(train).and_then(|model| {
             let weights: Vec<Vec<f32>> = train
                 .iter()
                 .map(|&r| model.weights(skeleton, &poses[r]))
                 .collect();
-            let cost = weights.iter().map(|w| model.multiply_adds(w)).sum::<f64>()
-                / weights.len().max(1) as f64;
             let truncations = basis::Truncations::new(model.form(), &weights, most)?;
             let mut trained = vec![false; poses.len()];
             train.iter().for_each(|&r| trained[r] = true);
@@ -608,25 +638,26 @@ fn rank_by_clips(
             }
             Some(Rc::new(Fold {
                 truncations,
-                cost,
+                cost: mean_multiply_adds(&model, &weights),
                 fitted,
                 coordinates,
             }))
         });
-        ranks
+        candidates
             .iter()
-            .map(|&k| fold.clone().map(|f| (f, k)))
+            .map(|&(r, t, _)| fold.clone().map(|f| (f, r, t)))
             .collect()
     };
-    let predict = |(fold, rank): &(Rc<Fold>, usize), r: usize| {
-        if (rank + 1) as f64 >= fold.cost {
+    let predict = |(fold, rank, threshold): &(Rc<Fold>, usize, f32), r: usize| {
+        if fold.truncations.multiply_adds(*rank, *threshold) >= fold.cost {
             fold.fitted[&r].clone()
         } else {
-            fold.truncations.truncate(&fold.coordinates[&r], *rank)
+            fold.truncations
+                .truncate(&fold.coordinates[&r], *rank, *threshold)
         }
     };
-    let errors = cv::sse_by_clips(sources, ao, ranks.len(), each, predict)?;
-    cv::choose_rank(&ranks, &errors)
+    let errors = cv::sse_by_clips(sources, ao, candidates.len(), each, predict)?;
+    cv::choose_basis(&candidates, &errors)
 }
 
 /// vertex-linear with every vertex's ridge, scope and pose dependence

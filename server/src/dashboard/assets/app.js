@@ -355,6 +355,72 @@ function reportSection(report, plotUrl) {
       `Reference poses: ${ROWS[reference.rows] || reference.rows}, chosen by cross-validation over clips `,
       `(mean PSNR on left-out clips: ${reference.scores.map(([r, db]) => `${ROWS[r] || r} ${fmt(db, 2)} dB`).join(", ")}).`) : null,
     basis && basisCv ? h("p", { id: "basis" },
+      `Eigen-AO basis: ${basis.rank} rows`,
+      basis.threshold > 0 ? `, entries under 1/${Math.round(1 / basis.threshold)} dropped` : "",
+      ` (${fmt(basis.multiply_adds, 1)} multiply-adds a vertex), the cheapest of ${basisCv.candidates.length} `,
+      `candidates within ${basisCv.tolerance_db} dB of the best on left-out clips (cross-validation over clips: `,
+      `${fmt(Math.max(...basisCv.candidates.map((c) => c.psnr_db)), 2)} dB at best).`) : null,
+    h("p", { class: "muted" },
+      `Ground truth at ${ev.frames.length} random clip frames: ${ev.vertices} vertices of parts and `,
+      `${ev.ground_points} ground points (${ev.ground_hidden} under a contact left out), `,
+      `${ev.rays_per_point} rays each; its own noise RMSE ${fmt(ev.noise_rmse_vertices)} (vertices), `,
+      `${fmt(ev.noise_rmse_ground)} (ground). Run time ${fmt(ev.lookup_ns_per_receiver, 0)} ns per receiver on one CPU thread.`),
+    h("table", {},
+      h("thead", {}, h("tr", {}, ...["Variant", "Bytes", "Vertices RMSE", "too dark", "too bright",
+        "Ground RMSE", "too dark", "too bright"].map((t) => h("th", {}, t)))),
+      h("tbody", {}, ...ev.variants.map((v) => h("tr", { title: v.description },
+        h("td", {}, v.name),
+        h("td", { class: "num" }, v.bytes),
+        ...[...err(v.vertices), ...err(v.ground)].map((x) => h("td", { class: "num" }, x)))))),
+    h("p", { class: "muted" }, `Asset ${report.sizes.asset_bytes} bytes.`),
+    plotUrl ? h("figure", { class: "wide" }, h("img", { src: plotUrl, alt: "grid slices" }),
+      h("figcaption", {}, "Every part's grid through its middle (x, y and z constant), dark where occluded")) : null);
+}
+
+// The reference rows a fit can choose (`reference = cv`).
+const ROWS = {
+  mixed: "random poses and clip frames",
+  perturbed: "clip frames and perturbed frames",
+  all: "all three",
+};
+
+function reportSection(report, plotUrl) {
+  if (report.layout) return cubemapReportSection(report, plotUrl);
+  if (report.parts) return gridReportSection(report, plotUrl);
+  const ev = report.evaluation;
+  const unseen = ev.unseen_clips;
+  const reference = report.fit?.reference;
+  const basis = report.fit?.basis;
+  const basisCv = report.fit?.basis_cv;
+  const rows = [
+    ...(unseen ? unseen.folds.map((f) => [`unseen clip ${f.clip} (refitted without it)`, f.errors]) : []),
+    ["frames of the training clips, fresh rays", ev.training_clip_frames || ev.clip_frames],
+    ["held-out random poses", ev.random_poses],
+  ];
+  return h("section", { id: "report" },
+    h("h2", {}, "Quality"),
+    h("table", {},
+      h("thead", {}, h("tr", {}, ...["Poses", "Frames", "Model MAE", "Model RMSE", "Model PSNR",
+        "Static MAE", "Static RMSE", "Static PSNR", "Gain"].map((t) => h("th", {}, t)))),
+      h("tbody", {}, ...rows.map(([name, c]) => h("tr", {},
+        h("td", {}, name),
+        h("td", { class: "num" }, c.model.frames),
+        h("td", { class: "num" }, fmt(c.model.mean.mae)),
+        h("td", { class: "num" }, fmt(c.model.mean.rmse)),
+        h("td", { class: "num" }, `${fmt(c.model.mean.psnr_db, 2)} dB`),
+        h("td", { class: "num" }, fmt(c.baseline.mean.mae)),
+        h("td", { class: "num" }, fmt(c.baseline.mean.rmse)),
+        h("td", { class: "num" }, `${fmt(c.baseline.mean.psnr_db, 2)} dB`),
+        h("td", { class: "num" }, `${c.psnr_gain_db >= 0 ? "+" : ""}${fmt(c.psnr_gain_db, 2)} dB`))))),
+    unseen ? h("p", { id: "unseen" },
+      `Unseen clips (leave one clip out, ${unseen.folds.length} folds): ${fmt(unseen.model_psnr_db, 2)} dB against `,
+      `${fmt(unseen.baseline_psnr_db, 2)} dB, ${unseen.mean_psnr_gain_db >= 0 ? "+" : ""}${fmt(unseen.mean_psnr_gain_db, 2)} dB `,
+      `on average (worst fold ${unseen.min_psnr_gain_db >= 0 ? "+" : ""}${fmt(unseen.min_psnr_gain_db, 2)} dB). `,
+      "The static average is the mean over training clip frames.") : null,
+    reference ? h("p", { id: "reference" },
+      `Reference poses: ${ROWS[reference.rows] || reference.rows}, chosen by cross-validation over clips `,
+      `(mean PSNR on left-out clips: ${reference.scores.map(([r, db]) => `${ROWS[r] || r} ${fmt(db, 2)} dB`).join(", ")}).`) : null,
+    basis && basisCv ? h("p", { id: "basis" },
       `Eigen-AO basis: ${basis.rank} rows, the fewest of 1 to ${basisCv.scores.length} within ${basisCv.tolerance_db} dB `,
       `of the best on left-out clips (cross-validation over clips: `,
       `${fmt(Math.max(...basisCv.scores.map(([, db]) => db)), 2)} dB at best).`) : null,
