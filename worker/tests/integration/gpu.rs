@@ -7,7 +7,7 @@ use aobake_core::{
     bake::{BakeParams, Plan},
     import_character,
     method::Method,
-    method::vertex::{Block, LinearForm, Model, StaticAverage},
+    method::vertex::{Block, FormRef, LinearForm, Model, StaticAverage},
     trace::SceneOptions,
     trace::trace_poses,
 };
@@ -47,6 +47,11 @@ fn every_vertex_method_matches_the_cpu() {
     linear.poses = 96;
     linear.samples = 32;
     variants.push(linear.clone());
+    // An eigen-AO basis with its small entries dropped (sparse rows).
+    let mut sparse_basis = linear.clone();
+    (sparse_basis.linear.basis, sparse_basis.linear.basis_cv) = (8, false);
+    sparse_basis.linear.basis_threshold = 1.0 / 512.0;
+    variants.push(sparse_basis);
     linear.linear.threshold = 0.01;
     variants.push(linear);
     let mut clustered = BakeParams::new(Method::VertexClustered);
@@ -55,7 +60,15 @@ fn every_vertex_method_matches_the_cpu() {
     clustered.clustered.pose_clusters = 4;
     clustered.clustered.dimensions = 5;
     variants.push(clustered.clone());
+    let mut sparse_basis = clustered.clone();
+    (
+        sparse_basis.clustered.basis,
+        sparse_basis.clustered.basis_cv,
+    ) = (8, false);
+    sparse_basis.clustered.basis_threshold = 1.0 / 512.0;
+    variants.push(sparse_basis);
     clustered.clustered.vertex_clusters = 40;
+    clustered.clustered.basis = 0;
     variants.push(clustered);
 
     for params in variants {
@@ -70,6 +83,16 @@ fn every_vertex_method_matches_the_cpu() {
         )
         .unwrap();
         let (model, _) = plan.fit(&poses, &ao, &plan.reference_sources()).unwrap();
+        let sparse_basis = params.linear.basis_threshold > 0.0
+            && params.method == Method::VertexLinear
+            || params.clustered.basis_threshold > 0.0 && params.method == Method::VertexClustered;
+        if sparse_basis {
+            assert!(
+                matches!(model.form(), FormRef::Sparse(_)),
+                "{:?}",
+                params.method
+            );
+        }
         let models = [model, Model::StaticAverage(StaticAverage::fit(&ao))];
         for model in &models {
             let on_gpu = VertexAo::new(&gpu, model).unwrap();

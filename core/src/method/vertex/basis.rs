@@ -227,7 +227,8 @@ impl Truncations {
 
     /// The prediction with those `coordinates` kept to its first `rank`
     /// axes (all there are, when fewer), entries below `threshold`
-    /// dropped.
+    /// dropped: what [`Truncations::sweep`] scores.
+    #[cfg(test)]
     pub(super) fn truncate(&self, coordinates: &[f64], rank: usize, threshold: f32) -> Vec<f32> {
         let mut out = self.mean.clone();
         let t = f64::from(threshold);
@@ -244,13 +245,58 @@ impl Truncations {
 
     /// Coefficients per vertex a basis of `rank` rows keeps at
     /// `threshold`, its mean's included.
+    #[cfg(test)]
     pub(super) fn multiply_adds(&self, rank: usize, threshold: f32) -> f64 {
+        self.costs(threshold, rank).last().copied().unwrap_or(1.0)
+    }
+
+    /// [`Truncations::multiply_adds`] of every rank from 1 to `most`.
+    pub(super) fn costs(&self, threshold: f32, most: usize) -> Vec<f64> {
         let t = f64::from(threshold);
         let v = self.mean.len().max(1) as f64;
-        let kept: usize = (0..rank.min(self.rank()))
-            .map(|j| self.rows.row(j).iter().filter(|x| x.abs() >= t).count())
-            .sum();
-        1.0 + kept as f64 / v
+        let mut kept = 0usize;
+        (0..most)
+            .map(|j| {
+                if j < self.rank() {
+                    kept += self.rows.row(j).iter().filter(|x| x.abs() >= t).count();
+                }
+                1.0 + kept as f64 / v
+            })
+            .collect()
+    }
+
+    /// The squared error against `truth`, summed over the vertices, of
+    /// [`Truncations::truncate`] at `threshold` for every rank from 1 to
+    /// `most`, in one pass.
+    pub(super) fn sweep(
+        &self,
+        coordinates: &[f64],
+        threshold: f32,
+        truth: &[f32],
+        most: usize,
+    ) -> Vec<f64> {
+        let t = f64::from(threshold);
+        let mut out = self.mean.clone();
+        let mut errors = Vec::with_capacity(most);
+        let axes = coordinates.iter().take(self.rank()).map(Some);
+        for (j, a) in axes.chain(std::iter::repeat(None)).take(most).enumerate() {
+            if let Some(&a) = a {
+                let row = self.rows.row(j);
+                for (i, o) in out.iter_mut().enumerate() {
+                    if row[i].abs() >= t {
+                        *o += a * row[i];
+                    }
+                }
+            }
+            // As `truncate` rounds: to f32.
+            errors.push(
+                out.iter()
+                    .zip(truth)
+                    .map(|(&x, &y)| (f64::from(x as f32) - f64::from(y)).powi(2))
+                    .sum(),
+            );
+        }
+        errors
     }
 }
 
@@ -360,6 +406,24 @@ mod tests {
         // are what a vertex reads, its mean's included.
         assert_eq!(t.multiply_adds(2, 0.0), 3.0);
         assert_eq!(t.multiply_adds(2, 1e3), 1.0);
+        // One pass scores every rank as truncating to each would.
+        let truth: Vec<f32> = (0..v).map(|i| (i % 3) as f32 / 4.0).collect();
+        let sse = |p: &[f32]| -> f64 {
+            p.iter()
+                .zip(&truth)
+                .map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2))
+                .sum()
+        };
+        for threshold in [0.0, 0.02] {
+            let swept = t.sweep(&coordinates, threshold, &truth, 4);
+            let one_by_one: Vec<f64> = (1..=4)
+                .map(|r| sse(&t.truncate(&coordinates, r, threshold)))
+                .collect();
+            assert_eq!(swept, one_by_one);
+            let costs = t.costs(threshold, 4);
+            assert_eq!(costs[3], costs[1], "two axes");
+            assert_eq!(costs[1], t.multiply_adds(2, threshold));
+        }
         let mean = t.truncate(&coordinates, 2, 1e3);
         assert!(mean.iter().zip(&t.mean).all(|(&x, &m)| x == m as f32));
     }

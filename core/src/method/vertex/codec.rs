@@ -301,14 +301,14 @@ impl Model {
                         None,
                     ),
                     &r => {
-                        if columns.iter().any(|&c| c != v) {
-                            return Err(bad("a model with a basis has no vertex clusters"));
-                        }
                         let form = if *sparse {
                             Coefficients::Sparse(read_sparse(container, v, r + 1, coef)?)
                         } else {
                             Coefficients::Dense(read_form(v, r + 1, coef)?)
                         };
+                        if columns.iter().any(|&c| c != v) {
+                            return Err(bad("a model with a basis has no vertex clusters"));
+                        }
                         // Bounded by validate_layout.
                         (form, Some(read_basis(container, base_rows + m * rows, r)?))
                     }

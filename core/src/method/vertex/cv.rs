@@ -300,34 +300,16 @@ pub fn sse_by_clips<M>(
     fit: impl Fn(&[usize]) -> Vec<Option<M>>,
     predict: impl Fn(&M, usize) -> Vec<f32>,
 ) -> Option<ClipErrors> {
-    let mut clips: Vec<usize> = sources
-        .iter()
-        .filter_map(|s| match s {
-            Source::Frame(c) => Some(*c),
-            _ => None,
-        })
-        .collect();
-    clips.sort_unstable();
-    clips.dedup();
-    if clips.len() < 2 || candidates == 0 {
+    let (folds, groups) = clip_folds(sources)?;
+    if candidates == 0 {
         return None;
     }
-    let folds = clips.len().min(CV_FOLDS);
-    let fold_of = |c: usize| clips.binary_search(&c).ok().map(|i| i % folds);
     let mut sse = vec![vec![0.0f64; ao.vertices]; candidates];
     let mut fold_psnr = vec![Vec::new(); candidates];
     let mut rows = 0usize;
-    for f in 0..folds {
-        let held = |s: Source| s.clip().and_then(fold_of) == Some(f);
-        let train: Vec<usize> = (0..sources.len()).filter(|&r| !held(sources[r])).collect();
-        let test: Vec<usize> = (0..sources.len())
-            .filter(|&r| matches!(sources[r], Source::Frame(_)) && held(sources[r]))
-            .collect();
-        if train.is_empty() || test.is_empty() {
-            continue;
-        }
+    for (train, test) in &groups {
         rows += test.len();
-        let models = fit(&train);
+        let models = fit(train);
         for (k, (e, p)) in sse.iter_mut().zip(&mut fold_psnr).enumerate() {
             let Some(model) = models.get(k).and_then(Option::as_ref) else {
                 e.iter_mut().for_each(|x| *x = f64::INFINITY);
@@ -335,7 +317,7 @@ pub fn sse_by_clips<M>(
                 continue;
             };
             let mut frames = 0.0;
-            for &r in &test {
+            for &r in test {
                 let mut frame = 0.0;
                 for ((x, &a), &b) in e.iter_mut().zip(&predict(model, r)).zip(ao.row(r)) {
                     let d = (f64::from(a) - f64::from(b)).powi(2);
@@ -347,15 +329,99 @@ pub fn sse_by_clips<M>(
             p.push(frames / test.len() as f64);
         }
     }
-    let psnr = fold_psnr
-        .iter()
-        .map(|f| f.iter().sum::<f64>() / f.len().max(1) as f64)
-        .collect();
     Some(ClipErrors {
         sse,
         rows,
         folds,
-        psnr,
+        psnr: mean_over_folds(&fold_psnr),
+        fold_psnr,
+    })
+}
+
+/// Per candidate, the mean of its per-group figures.
+fn mean_over_folds(fold_psnr: &[Vec<f64>]) -> Vec<f64> {
+    fold_psnr
+        .iter()
+        .map(|f| f.iter().sum::<f64>() / f.len().max(1) as f64)
+        .collect()
+}
+
+/// The groups of clips cross-validation over clips leaves out in turn:
+/// how many groups the clips are dealt into (at most [`CV_FOLDS`]), and
+/// per group with rows on both sides its training rows (every row not
+/// from its clips) and its test rows (its clips' plain frames). `None`
+/// when the frames come from fewer than two clips.
+#[allow(clippy::type_complexity)]
+fn clip_folds(sources: &[Source]) -> Option<(usize, Vec<(Vec<usize>, Vec<usize>)>)> {
+    let mut clips: Vec<usize> = sources
+        .iter()
+        .filter_map(|s| match s {
+            Source::Frame(c) => Some(*c),
+            _ => None,
+        })
+        .collect();
+    clips.sort_unstable();
+    clips.dedup();
+    if clips.len() < 2 {
+        return None;
+    }
+    let folds = clips.len().min(CV_FOLDS);
+    let fold_of = |c: usize| clips.binary_search(&c).ok().map(|i| i % folds);
+    let groups = (0..folds)
+        .map(|f| {
+            let held = |s: Source| s.clip().and_then(fold_of) == Some(f);
+            let train: Vec<usize> = (0..sources.len()).filter(|&r| !held(sources[r])).collect();
+            let test: Vec<usize> = (0..sources.len())
+                .filter(|&r| matches!(sources[r], Source::Frame(_)) && held(sources[r]))
+                .collect();
+            (train, test)
+        })
+        .filter(|(train, test)| !train.is_empty() && !test.is_empty())
+        .collect();
+    Some((folds, groups))
+}
+
+/// Like [`sse_by_clips`], for candidates that one fit per group serves
+/// and one pass over a frame scores together: `fit(training rows)` gives
+/// the group's model (`None`: every candidate's errors are infinite), and
+/// `frame_sse(model, row)` each candidate's squared error summed over the
+/// vertices of that frame. Only the PSNRs are kept (`sse` is empty).
+pub fn psnr_by_clips<M>(
+    sources: &[Source],
+    ao: &AoBlock,
+    candidates: usize,
+    fit: impl Fn(&[usize]) -> Option<M>,
+    frame_sse: impl Fn(&M, usize) -> Vec<f64>,
+) -> Option<ClipErrors> {
+    let (folds, groups) = clip_folds(sources)?;
+    if candidates == 0 {
+        return None;
+    }
+    let mut fold_psnr = vec![Vec::new(); candidates];
+    let mut rows = 0usize;
+    for (train, test) in &groups {
+        rows += test.len();
+        let Some(model) = fit(train) else {
+            fold_psnr.iter_mut().for_each(|p| p.push(f64::NEG_INFINITY));
+            continue;
+        };
+        let mut frames = vec![0.0f64; candidates];
+        for &r in test {
+            let sse = frame_sse(&model, r);
+            assert_eq!(sse.len(), candidates, "one error per candidate");
+            for (f, e) in frames.iter_mut().zip(sse) {
+                *f += crate::asset::metrics::psnr(e / ao.vertices.max(1) as f64);
+            }
+        }
+        for (p, f) in fold_psnr.iter_mut().zip(frames) {
+            p.push(f / test.len() as f64);
+        }
+    }
+    Some(ClipErrors {
+        sse: Vec::new(),
+        rows,
+        folds,
+        psnr: mean_over_folds(&fold_psnr),
         fold_psnr,
     })
 }

@@ -604,59 +604,82 @@ fn basis_by_clips(
     most: usize,
     fit: impl Fn(&[usize]) -> Option<Model>,
 ) -> Option<BasisChoice> {
-    use std::{collections::HashMap, rc::Rc};
-    /// A fold's model: its cost, and its predictions of the left-out
-    /// frames, as fitted and as coordinates along its basis axes.
+    use std::collections::HashMap;
+    /// A fold's model: its basis axes, what each candidate would cost it,
+    /// and its predictions of the left-out frames as coordinates along
+    /// the axes, with the squared error of the model as fitted.
     struct Fold {
         truncations: basis::Truncations,
-        cost: f64,
-        fitted: HashMap<usize, Vec<f32>>,
-        coordinates: HashMap<usize, Vec<f64>>,
+        /// Per threshold, per rank: whether the basis would save the
+        /// model a multiply-add.
+        saves: Vec<Vec<bool>>,
+        predictions: HashMap<usize, (Vec<f64>, f64)>,
     }
     let (model, weights) = fitted;
     let whole = basis::Truncations::new(model.form(), weights, most)?;
     let cost = mean_multiply_adds(model, weights);
-    let candidates: Vec<(usize, f32, f64)> = cv::BASIS_THRESHOLDS
+    let thresholds = cv::BASIS_THRESHOLDS;
+    let candidates: Vec<(usize, f32, f64)> = thresholds
         .iter()
-        .flat_map(|&t| (1..=most).map(move |r| (r, t)))
-        .map(|(r, t)| (r, t, whole.multiply_adds(r, t).min(cost)))
+        .flat_map(|&t| {
+            let costs = whole.costs(t, most);
+            (1..=most).map(move |r| (r, t, costs[r - 1].min(cost)))
+        })
         .collect();
-    let each = |train: &[usize]| -> Vec<Option<(Rc<Fold>, usize, f32)>> {
-        let fold = fit(train).and_then(|model| {
-            let weights: Vec<Vec<f32>> = train
-                .iter()
-                .map(|&r| model.weights(skeleton, &poses[r]))
-                .collect();
-            let truncations = basis::Truncations::new(model.form(), &weights, most)?;
-            let mut trained = vec![false; poses.len()];
-            train.iter().for_each(|&r| trained[r] = true);
-            let (mut fitted, mut coordinates) = (HashMap::new(), HashMap::new());
-            for r in (0..poses.len()).filter(|&r| !trained[r]) {
-                let f = model.evaluate(skeleton, &poses[r]);
-                coordinates.insert(r, truncations.coordinates(&f));
-                fitted.insert(r, f);
-            }
-            Some(Rc::new(Fold {
-                truncations,
-                cost: mean_multiply_adds(&model, &weights),
-                fitted,
-                coordinates,
-            }))
-        });
-        candidates
+    let fold = |train: &[usize]| -> Option<Fold> {
+        let model = fit(train)?;
+        let weights: Vec<Vec<f32>> = train
             .iter()
-            .map(|&(r, t, _)| fold.clone().map(|f| (f, r, t)))
+            .map(|&r| model.weights(skeleton, &poses[r]))
+            .collect();
+        let truncations = basis::Truncations::new(model.form(), &weights, most)?;
+        let cost = mean_multiply_adds(&model, &weights);
+        let saves = thresholds
+            .iter()
+            .map(|&t| {
+                truncations
+                    .costs(t, most)
+                    .iter()
+                    .map(|&c| c < cost)
+                    .collect()
+            })
+            .collect();
+        let mut trained = vec![false; poses.len()];
+        train.iter().for_each(|&r| trained[r] = true);
+        let predictions = (0..poses.len())
+            .filter(|&r| !trained[r] && matches!(sources[r], Source::Frame(_)))
+            .map(|r| {
+                let f = model.evaluate(skeleton, &poses[r]);
+                let sse = f
+                    .iter()
+                    .zip(ao.row(r))
+                    .map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2))
+                    .sum();
+                (r, (truncations.coordinates(&f), sse))
+            })
+            .collect();
+        Some(Fold {
+            truncations,
+            saves,
+            predictions,
+        })
+    };
+    let frame_sse = |fold: &Fold, r: usize| -> Vec<f64> {
+        let (coordinates, fitted) = &fold.predictions[&r];
+        thresholds
+            .iter()
+            .zip(&fold.saves)
+            .flat_map(|(&t, saves)| {
+                let swept = fold.truncations.sweep(coordinates, t, ao.row(r), most);
+                swept
+                    .into_iter()
+                    .zip(saves)
+                    .map(|(e, &saves)| if saves { e } else { *fitted })
+                    .collect::<Vec<_>>()
+            })
             .collect()
     };
-    let predict = |(fold, rank, threshold): &(Rc<Fold>, usize, f32), r: usize| {
-        if fold.truncations.multiply_adds(*rank, *threshold) >= fold.cost {
-            fold.fitted[&r].clone()
-        } else {
-            fold.truncations
-                .truncate(&fold.coordinates[&r], *rank, *threshold)
-        }
-    };
-    let errors = cv::sse_by_clips(sources, ao, candidates.len(), each, predict)?;
+    let errors = cv::psnr_by_clips(sources, ao, candidates.len(), fold, frame_sse)?;
     cv::choose_basis(&candidates, &errors)
 }
 
