@@ -138,8 +138,7 @@ impl Model {
         if matches!(self, Self::StaticAverage(_)) || weights.is_empty() {
             return None;
         }
-        let cost =
-            weights.iter().map(|w| self.multiply_adds(w)).sum::<f64>() / weights.len() as f64;
+        let cost = mean_multiply_adds(self, weights);
         let (basis, dense, mut stats) = basis::compress(self.form(), weights, rank)?;
         let form = if threshold > 0.0 {
             Coefficients::Sparse(SparseForm::from_dense(
