@@ -29,7 +29,7 @@ use faer::Mat;
 use half::f16;
 use serde::{Deserialize, Serialize};
 
-use super::{Block, FormRef, LinearForm, linalg::principal_axes};
+use super::{Block, FormRef, LinearForm, linalg::principal_axes_of_factor};
 
 /// The per-pose step of an eigen-AO model: its `inputs` weights in, `rank`
 /// basis weights (and a 1) out.
@@ -101,16 +101,14 @@ pub(super) fn compress(
     if p == 0 || v == 0 || rank == 0 {
         return None;
     }
-    let (mean, centred) = predictions(&c, weights);
     // Rows R_j / σ_j, σ_j the predictions' standard deviation along R_j.
-    let axes = principal_axes(centred.as_ref(), rank);
+    let (mean, axes, total) = prediction_axes(&c, weights, rank);
     let r = axes.nrows();
     if r == 0 {
         // The predictions never move (AO 0 everywhere, say): nothing to
         // compress.
         return None;
     }
-    let total: f64 = centred.norm_l2().powi(2);
     let kept: f64 = (0..r)
         .map(|j| p as f64 / axes.row(j).norm_l2().powi(2))
         .sum();
@@ -155,22 +153,37 @@ pub(super) fn compress(
     Some((basis, form, stats))
 }
 
-/// The predictions `W C` of the coefficients `c` for the per-pose
-/// `weights`: their mean over the poses (per vertex), and the predictions
-/// less it (poses × vertices).
-fn predictions(c: &Mat<f64>, weights: &[Vec<f32>]) -> (Vec<f64>, Mat<f64>) {
-    let (inputs, v, p) = (c.nrows(), c.ncols(), weights.len());
+/// The predictions `F = W C` of the coefficients `c` for the per-pose
+/// `weights`: their mean over the poses (per vertex), their leading
+/// `rank` principal axes (see `linalg::principal_axes`) and their total
+/// variance `‖F − mean‖²`. `F` (poses × vertices) is never formed: with
+/// the weights centred and factored, `W − w̄ = Q R`, the centred
+/// predictions are `Q (R C)`, and `R C` (weights × vertices) has their
+/// singular values and right singular vectors.
+fn prediction_axes(c: &Mat<f64>, weights: &[Vec<f32>], rank: usize) -> (Vec<f64>, Mat<f64>, f64) {
+    let (inputs, p) = (c.nrows(), weights.len());
     assert!(
         weights.iter().all(|w| w.len() == inputs),
         "one weight per row of the form"
     );
-    let w = Mat::from_fn(p, inputs, |r, k| f64::from(weights[r][k]));
-    let f = &w * c;
-    let mean: Vec<f64> = (0..v)
-        .map(|i| (0..p).map(|r| f[(r, i)]).sum::<f64>() / p.max(1) as f64)
+    let means: Vec<f64> = (0..inputs)
+        .map(|k| weights.iter().map(|w| f64::from(w[k])).sum::<f64>() / p.max(1) as f64)
         .collect();
-    let centred = Mat::from_fn(p, v, |r, i| f[(r, i)] - mean[i]);
-    (mean, centred)
+    let centred = Mat::from_fn(p, inputs, |r, k| f64::from(weights[r][k]) - means[k]);
+    let w_bar = Mat::from_fn(1, inputs, |_, k| means[k]);
+    let mean_row = &w_bar * c;
+    let mean: Vec<f64> = (0..c.ncols()).map(|i| mean_row[(0, i)]).collect();
+    let small = if p > inputs {
+        centred.qr().thin_R() * c
+    } else {
+        &centred * c
+    };
+    let total = small.norm_l2().powi(2);
+    (
+        mean,
+        principal_axes_of_factor(small.as_ref(), p, rank),
+        total,
+    )
 }
 
 /// The eigen-AO bases of every rank up to some most at once, for judging
@@ -198,8 +211,7 @@ impl Truncations {
         if weights.is_empty() || c.ncols() == 0 {
             return None;
         }
-        let (mean, centred) = predictions(&c, weights);
-        let axes = principal_axes(centred.as_ref(), rank);
+        let (mean, axes, _) = prediction_axes(&c, weights, rank);
         let rows = Mat::from_fn(axes.nrows(), axes.ncols(), |j, i| {
             let s2 = 1.0 / axes.row(j).norm_l2().powi(2);
             f16::from_f64(axes[(j, i)] * s2).to_f64()

@@ -105,13 +105,18 @@ impl RidgeSolver {
 /// axis's sign is fixed (its largest component positive) so the result
 /// does not depend on the SVD's arbitrary signs.
 pub(crate) fn principal_axes(centred: MatRef<'_, f64>, n: usize) -> Mat<f64> {
-    let d = centred.ncols();
-    if centred.nrows() == 0 || d == 0 || n == 0 {
+    principal_axes_of_factor(centred, centred.nrows(), n)
+}
+
+/// [`principal_axes`] of a centred `rows × d` matrix `Q m` given only `m`
+/// (`Q` with orthonormal columns): `m` has the same singular values and
+/// right singular vectors, and may be far smaller.
+pub(crate) fn principal_axes_of_factor(m: MatRef<'_, f64>, rows: usize, n: usize) -> Mat<f64> {
+    let d = m.ncols();
+    if rows == 0 || m.nrows() == 0 || d == 0 || n == 0 {
         return Mat::zeros(0, d);
     }
-    let svd = centred
-        .thin_svd()
-        .expect("SVD of a finite matrix converges");
+    let svd = m.thin_svd().expect("SVD of a finite matrix converges");
     let s: Vec<f64> = svd.S().column_vector().iter().copied().collect();
     let s_max = s.first().copied().unwrap_or(0.0);
     let keep = s
@@ -120,7 +125,7 @@ pub(crate) fn principal_axes(centred: MatRef<'_, f64>, n: usize) -> Mat<f64> {
         .take_while(|&&x| x > RANK_TOLERANCE * s_max && x > 0.0)
         .count();
     let v = svd.V();
-    let rows = centred.nrows() as f64;
+    let rows = rows as f64;
     // Per axis: its sign (largest component positive) over the standard
     // deviation of the projections along it.
     let scale: Vec<f64> = (0..keep)
