@@ -386,7 +386,12 @@ mod tests {
             .collect();
         let (basis, small, stats) = compress(FormRef::Dense(&form), &poses, 5).unwrap();
         assert_eq!((stats.rank, basis.rank, small.weight_count()), (2, 2, 3));
-        assert!(stats.rmse < 1e-9 && (stats.kept_variance - 1.0).abs() < 1e-9);
+        // (The RMSE is the square root of a difference of sums: rounding
+        // leaves its square root.)
+        assert!(
+            stats.rmse < 1e-7 && (stats.kept_variance - 1.0).abs() < 1e-9,
+            "{stats:?}"
+        );
         for w in &poses {
             let (full, compressed) = (form.evaluate(w), small.evaluate(&basis.apply(w)));
             for (x, y) in full.iter().zip(&compressed) {
