@@ -17,7 +17,8 @@
 //! every vertex into a small per-pose step: the CPU computes `w' = Mᵀ w −
 //! o` (`M = C R / σ`, `o = Rᵀ c / σ`, `r` numbers) once per pose, and each
 //! vertex takes `r + 1` multiply-adds with `[σ R; c]` instead of one per
-//! weight. It is reduced-rank regression for vertex-linear, and for
+//! weight (fewer with a threshold: each vertex then keeps only the entries
+//! of `σ R` that reach it, stored sparse). It is reduced-rank regression for vertex-linear, and for
 //! vertex-clustered it puts every pose cluster's blend into one basis, so
 //! the per-vertex cost no longer grows with the clusters MLS blends.
 //!
@@ -53,9 +54,11 @@ pub struct BasisStats {
     /// Weights per pose of the model before it.
     pub inputs: usize,
     /// RMS over the reference poses and vertices of what the basis leaves
-    /// out of the model's predictions.
+    /// out of the model's predictions (its dense rows: before any
+    /// threshold).
     pub rmse: f64,
-    /// Fraction of the predictions' variance the basis keeps.
+    /// Fraction of the predictions' variance the basis keeps (its dense
+    /// rows).
     pub kept_variance: f64,
     /// Basis entries smaller than this were dropped (0: none, the rows
     /// stored dense).
@@ -196,8 +199,11 @@ fn prediction_axes(c: &Mat<f64>, weights: &[Vec<f32>], rank: usize) -> (Vec<f64>
 pub(super) struct Truncations {
     /// `c`: the mean prediction over the poses.
     mean: Vec<f64>,
-    /// `R_j / σ_j`, one per row, the largest variance first.
-    axes: Mat<f64>,
+    /// `M = C (R / σ)ᵀ`: a pose's weights to its coordinates (with
+    /// `offset`), as the basis's own mix turns them.
+    mix: Mat<f64>,
+    /// `(R_j / σ_j) · c`.
+    offset: Vec<f64>,
     /// `σ_j R_j`, rounded to f16 as stored.
     rows: Mat<f64>,
 }
@@ -216,30 +222,42 @@ impl Truncations {
             let s2 = 1.0 / axes.row(j).norm_l2().powi(2);
             f16::from_f64(axes[(j, i)] * s2).to_f64()
         });
-        Some(Self { mean, axes, rows })
+        let mix = &c * axes.transpose();
+        let offset = (0..axes.nrows())
+            .map(|j| (0..mean.len()).map(|i| axes[(j, i)] * mean[i]).sum())
+            .collect();
+        Some(Self {
+            mean,
+            mix,
+            offset,
+            rows,
+        })
     }
 
     /// Axes there are.
     pub(super) fn rank(&self) -> usize {
-        self.axes.nrows()
+        self.rows.nrows()
     }
 
-    /// A prediction's coordinates `a_j` along every axis.
-    pub(super) fn coordinates(&self, prediction: &[f32]) -> Vec<f64> {
-        assert_eq!(prediction.len(), self.mean.len(), "one AO per vertex");
+    /// The coordinates `a_j` along every axis of a pose's prediction
+    /// before the clamp to [0, 1], from its weights (what the basis
+    /// projects at run time).
+    pub(super) fn coordinates(&self, weights: &[f32]) -> Vec<f64> {
+        assert_eq!(weights.len(), self.mix.nrows(), "one weight per input");
         (0..self.rank())
             .map(|j| {
-                let axis = self.axes.row(j);
-                (0..self.mean.len())
-                    .map(|i| axis[i] * (f64::from(prediction[i]) - self.mean[i]))
-                    .sum()
+                (0..weights.len())
+                    .map(|k| f64::from(weights[k]) * self.mix[(k, j)])
+                    .sum::<f64>()
+                    - self.offset[j]
             })
             .collect()
     }
 
     /// The prediction with those `coordinates` kept to its first `rank`
     /// axes (all there are, when fewer), entries below `threshold`
-    /// dropped: what [`Truncations::sweep`] scores.
+    /// dropped, clamped to [0, 1] as the run time does: what
+    /// [`Truncations::sweep`] scores.
     #[cfg(test)]
     pub(super) fn truncate(&self, coordinates: &[f64], rank: usize, threshold: f32) -> Vec<f32> {
         let mut out = self.mean.clone();
@@ -252,7 +270,9 @@ impl Truncations {
                 }
             }
         }
-        out.into_iter().map(|x| x as f32).collect()
+        out.into_iter()
+            .map(|x| (x as f32).clamp(0.0, 1.0))
+            .collect()
     }
 
     /// Coefficients per vertex a basis of `rank` rows keeps at
@@ -300,11 +320,11 @@ impl Truncations {
                     }
                 }
             }
-            // As `truncate` rounds: to f32.
+            // As `truncate` rounds and clamps.
             errors.push(
                 out.iter()
                     .zip(truth)
-                    .map(|(&x, &y)| (f64::from(x as f32) - f64::from(y)).powi(2))
+                    .map(|(&x, &y)| (f64::from((x as f32).clamp(0.0, 1.0)) - f64::from(y)).powi(2))
                     .sum(),
             );
         }
@@ -406,7 +426,7 @@ mod tests {
         assert_eq!(t.rank(), 2);
         let new_pose = [0.3, -0.8, 0.5, 1.0];
         let full = form.evaluate(&new_pose);
-        let coordinates = t.coordinates(&full);
+        let coordinates = t.coordinates(&new_pose);
         for (rank, (b, f)) in [(1, (&one_basis, &one_form)), (2, (&basis, &small))] {
             let kept = t.truncate(&coordinates, rank, 0.0);
             let compressed = f.evaluate(&b.apply(&new_pose));

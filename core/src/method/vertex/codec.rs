@@ -293,7 +293,12 @@ impl Model {
                 };
                 let base_rows = base.as_ref().map_or(1, |b| b.weights.parameters + 1);
                 let (form, basis) = match basis {
-                    0 if *sparse => return Err(bad("a sparse vertex-clustered model has a basis")),
+                    0 if *sparse => {
+                        return Err(bad("a sparse vertex-clustered model has no basis"));
+                    }
+                    0 if container.section(b"BMIX").is_ok() => {
+                        return Err(bad("a BMIX section without a basis"));
+                    }
                     0 => (
                         Coefficients::Dense(read_clustered_form(
                             container, v, base_rows, rows, columns, coef,

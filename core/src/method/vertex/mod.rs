@@ -542,6 +542,11 @@ fn settled(
     stats: &FitStats,
 ) -> (LinearOptions, ClusteredOptions) {
     let (linear, clustered) = options;
+    // (vertex-clustered's linear base is never per vertex.)
+    let base = LinearOptions {
+        per_vertex: false,
+        ..*linear
+    };
     let settle = |o: &LinearOptions, s: &linear::LinearFitStats| LinearOptions {
         ridge: s.ridge,
         ridge_cv: o.per_vertex && o.ridge_cv,
@@ -564,7 +569,7 @@ fn settled(
     match stats {
         FitStats::VertexLinear(s) => (settle(linear, s), clustered),
         FitStats::VertexClustered(s) => (
-            s.base.as_ref().map_or(*linear, |b| settle(linear, b)),
+            s.base.as_ref().map_or(*linear, |b| settle(&base, b)),
             ClusteredOptions {
                 ridge: s.ridge_cv.as_ref().map_or(clustered.ridge, |c| c.ridge),
                 ridge_cv: false,
@@ -590,9 +595,10 @@ fn mean_multiply_adds(model: &Model, weights: &[Vec<f32>]) -> f64 {
 /// and its weights per row) by cross-validation over clips
 /// ([`cv::choose_basis`]): per group of clips, `fit(training rows)` fits
 /// the model without a basis, and every candidate's truncation of its
-/// predictions is scored on the left-out frames (one that would not save
-/// the fold's model a multiply-add scores it as fitted); each candidate
-/// costs what it would cost `fitted`. `None` when the frames come from
+/// predictions is scored on the left-out frames, clamped as the run time
+/// clamps; each candidate costs what it would cost `fitted`, and one that
+/// would not save `fitted` a multiply-add (so that it ships as fitted) is
+/// scored as each fold's model as fitted. `None` when the frames come from
 /// fewer than two clips.
 fn basis_by_clips(
     skeleton: &Skeleton,
@@ -609,9 +615,6 @@ fn basis_by_clips(
     /// the axes, with the squared error of the model as fitted.
     struct Fold {
         truncations: basis::Truncations,
-        /// Per threshold, per rank: whether the basis would save the
-        /// model a multiply-add.
-        saves: Vec<Vec<bool>>,
         predictions: HashMap<usize, (Vec<f64>, f64)>,
     }
     let (model, weights) = fitted;
@@ -625,6 +628,13 @@ fn basis_by_clips(
             (1..=most).map(move |r| (r, t, costs[r - 1].min(cost)))
         })
         .collect();
+    // Per threshold, per rank: whether the basis saves the model that
+    // ships a multiply-add (else it ships as fitted, and each fold is
+    // scored so).
+    let saves: Vec<Vec<bool>> = thresholds
+        .iter()
+        .map(|&t| whole.costs(t, most).iter().map(|&c| c < cost).collect())
+        .collect();
     let fold = |train: &[usize]| -> Option<Fold> {
         let model = fit(train)?;
         let weights: Vec<Vec<f32>> = train
@@ -632,34 +642,23 @@ fn basis_by_clips(
             .map(|&r| model.weights(skeleton, &poses[r]))
             .collect();
         let truncations = basis::Truncations::new(model.form(), &weights, most)?;
-        let cost = mean_multiply_adds(&model, &weights);
-        let saves = thresholds
-            .iter()
-            .map(|&t| {
-                truncations
-                    .costs(t, most)
-                    .iter()
-                    .map(|&c| c < cost)
-                    .collect()
-            })
-            .collect();
         let mut trained = vec![false; poses.len()];
         train.iter().for_each(|&r| trained[r] = true);
         let predictions = (0..poses.len())
             .filter(|&r| !trained[r] && matches!(sources[r], Source::Frame(_)))
             .map(|r| {
-                let f = model.evaluate(skeleton, &poses[r]);
-                let sse = f
+                let w = model.weights(skeleton, &poses[r]);
+                let sse = model
+                    .evaluate_weights(&w)
                     .iter()
                     .zip(ao.row(r))
                     .map(|(&x, &y)| (f64::from(x) - f64::from(y)).powi(2))
                     .sum();
-                (r, (truncations.coordinates(&f), sse))
+                (r, (truncations.coordinates(&w), sse))
             })
             .collect();
         Some(Fold {
             truncations,
-            saves,
             predictions,
         })
     };
@@ -667,7 +666,7 @@ fn basis_by_clips(
         let (coordinates, fitted) = &fold.predictions[&r];
         thresholds
             .iter()
-            .zip(&fold.saves)
+            .zip(&saves)
             .flat_map(|(&t, saves)| {
                 let swept = fold.truncations.sweep(coordinates, t, ao.row(r), most);
                 swept
