@@ -268,8 +268,6 @@ pub struct ClipErrors {
     /// `psnr[candidate]`: over the groups, the mean of each group's mean
     /// per-frame PSNR (dB), the figure the report's unseen clips give.
     pub psnr: Vec<f64>,
-    /// `fold_psnr[candidate][group]`: each group's mean per-frame PSNR.
-    pub fold_psnr: Vec<Vec<f64>>,
 }
 
 impl ClipErrors {
@@ -334,7 +332,6 @@ pub fn sse_by_clips<M>(
         rows,
         folds,
         psnr: mean_over_folds(&fold_psnr),
-        fold_psnr,
     })
 }
 
@@ -422,7 +419,6 @@ pub fn psnr_by_clips<M>(
         rows,
         folds,
         psnr: mean_over_folds(&fold_psnr),
-        fold_psnr,
     })
 }
 
@@ -480,7 +476,6 @@ mod tests {
             sse: vec![Vec::new(); psnr.len()],
             rows: 1,
             folds: 2,
-            fold_psnr: psnr.iter().map(|&p| vec![p, p]).collect(),
             psnr,
         };
         // (rank, threshold, multiply-adds)
