@@ -6,11 +6,12 @@
 //! The baseline is the strongest static average: the mean over training
 //! clip frames ([`Plan::baseline_rows`]), not over random poses.
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::{
     asset::metrics::{Errors, FrameError},
-    method::vertex::{Model, Rows, StaticAverage},
+    method::vertex::{Model, Rows, Source, StaticAverage},
     rig::pose::Pose,
     trace::AoBlock,
 };
@@ -127,44 +128,61 @@ impl Plan<'_> {
             return Ok(None);
         }
         let sources = self.reference_sources();
+        // Each fold on its own thread (its fit sequential but for its own
+        // cross-validation's threads), gathered in the folds' order.
+        let folds: Vec<UnseenFold> = clips
+            .par_iter()
+            .map(|&c| self.unseen_fold(c, poses, reference, &sources, tests, truth))
+            .collect::<Result<_, _>>()?;
+        Ok(Some(UnseenClips::of(folds)))
+    }
+}
+
+impl Plan<'_> {
+    /// One fold of [`Plan::unseen_clips`]: clip `c` left out of the refit.
+    pub fn unseen_fold(
+        &self,
+        c: usize,
+        poses: &[Pose],
+        reference: &AoBlock,
+        sources: &[Source],
+        tests: &[TestPose],
+        truth: &AoBlock,
+    ) -> Result<UnseenFold, BakeError> {
         let plain: std::collections::BTreeSet<usize> = self.baseline_rows().into_iter().collect();
         let skeleton = &self.character.skeleton;
-        let mut folds = Vec::with_capacity(clips.len());
-        for c in clips {
-            let keep: Vec<usize> = (0..sources.len())
-                .filter(|&i| sources[i].clip() != Some(c))
-                .collect();
-            let fold_poses: Vec<Pose> = keep.iter().map(|&i| poses[i].clone()).collect();
-            let fold_sources: Vec<_> = keep.iter().map(|&i| sources[i]).collect();
-            let (model, stats) = self.fit(
-                &fold_poses,
-                &reference.select(keep.iter().copied()),
-                &fold_sources,
-            )?;
-            let frames: Vec<usize> = keep.iter().copied().filter(|i| plain.contains(i)).collect();
-            let baseline = StaticAverage::fit(&reference.select(if frames.is_empty() {
-                keep.clone()
-            } else {
-                frames
-            }))
-            .evaluate();
-            let (mut m, mut b) = (Vec::new(), Vec::new());
-            for (i, t) in tests.iter().enumerate() {
-                if t.frame.is_some_and(|f| f.clip == c) {
-                    let predicted = model.evaluate(skeleton, &t.pose);
-                    m.push(FrameError::of(&predicted, truth.row(i)));
-                    b.push(FrameError::of(&baseline, truth.row(i)));
-                }
+        let keep: Vec<usize> = (0..sources.len())
+            .filter(|&i| sources[i].clip() != Some(c))
+            .collect();
+        let fold_poses: Vec<Pose> = keep.iter().map(|&i| poses[i].clone()).collect();
+        let fold_sources: Vec<_> = keep.iter().map(|&i| sources[i]).collect();
+        let (model, stats) = self.fit(
+            &fold_poses,
+            &reference.select(keep.iter().copied()),
+            &fold_sources,
+        )?;
+        let frames: Vec<usize> = keep.iter().copied().filter(|i| plain.contains(i)).collect();
+        let baseline = StaticAverage::fit(&reference.select(if frames.is_empty() {
+            keep.clone()
+        } else {
+            frames
+        }))
+        .evaluate();
+        let (mut m, mut b) = (Vec::new(), Vec::new());
+        for (i, t) in tests.iter().enumerate() {
+            if t.frame.is_some_and(|f| f.clip == c) {
+                let predicted = model.evaluate(skeleton, &t.pose);
+                m.push(FrameError::of(&predicted, truth.row(i)));
+                b.push(FrameError::of(&baseline, truth.row(i)));
             }
-            folds.push(UnseenFold {
-                clip: self.clips[c].name.clone(),
-                reference_poses: keep.len(),
-                rows: stats.reference().map(|r| r.rows),
-                basis: stats.basis().map(|b| b.rank),
-                errors: Comparison::new(Errors::of(&m), Errors::of(&b)),
-            });
         }
-        Ok(Some(UnseenClips::of(folds)))
+        Ok(UnseenFold {
+            clip: self.clips[c].name.clone(),
+            reference_poses: keep.len(),
+            rows: stats.reference().map(|r| r.rows),
+            basis: stats.basis().map(|b| b.rank),
+            errors: Comparison::new(Errors::of(&m), Errors::of(&b)),
+        })
     }
 }
 

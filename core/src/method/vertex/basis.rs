@@ -218,9 +218,13 @@ impl Truncations {
             return None;
         }
         let (mean, axes, _) = prediction_axes(&c, weights, rank);
+        // σ_j² per axis, once per row (not once per entry: that was rank ×
+        // vertices² work).
+        let s2: Vec<f64> = (0..axes.nrows())
+            .map(|j| 1.0 / axes.row(j).norm_l2().powi(2))
+            .collect();
         let rows = Mat::from_fn(axes.nrows(), axes.ncols(), |j, i| {
-            let s2 = 1.0 / axes.row(j).norm_l2().powi(2);
-            f16::from_f64(axes[(j, i)] * s2).to_f64()
+            f16::from_f64(axes[(j, i)] * s2[j]).to_f64()
         });
         let mix = &c * axes.transpose();
         let offset = (0..axes.nrows())

@@ -12,6 +12,7 @@
 
 use faer::Mat;
 use half::f16;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::basis::Basis;
@@ -264,75 +265,90 @@ impl VertexClustered {
             basis_cv: None,
             reference: None,
         };
-        for j in 0..m {
-            let members: Vec<usize> = (0..p).filter(|&r| km.assignment[r] == j).collect();
-            let k = members.len();
-            let center = &km.centers[j * dim..(j + 1) * dim];
-            let xc = Mat::from_fn(k, dim, |r, c| points[members[r] * dim + c] - center[c]);
-            let axes = principal_axes(xc.as_ref(), n);
-            let rank = axes.nrows();
-            let scores = &xc * axes.transpose();
-            let q = Mat::from_fn(k, rank + usize::from(offset), |r, c| {
-                if c < rank { scores[(r, c)] } else { 1.0 }
-            });
-            let y = Mat::from_fn(k, v, |r, i| f64::from(ao.row(members[r])[i]) - mean[i]);
-            let (targets, map) = if options.vertex_clusters > 0 && options.vertex_clusters < v {
-                let groups = vertex_clusters(
-                    y.as_ref(),
-                    options.vertex_clusters,
-                    f64::from(options.vertex_tolerance),
-                );
-                let count = groups.count;
-                let mut sums = Mat::<f64>::zeros(k, count);
-                let mut sizes = vec![0usize; count];
-                for (i, &g) in groups.map.iter().enumerate() {
-                    sizes[g as usize] += 1;
-                    for r in 0..k {
-                        sums[(r, g as usize)] += y[(r, i)];
+        // The pose clusters are fitted side by side, each on its own
+        // thread, and gathered in their order.
+        let fitted: Vec<Result<(Block, PoseCluster, usize, usize), FitOverflow>> = (0..m)
+            .into_par_iter()
+            .map(|j| {
+                let members: Vec<usize> = (0..p).filter(|&r| km.assignment[r] == j).collect();
+                let k = members.len();
+                let center = &km.centers[j * dim..(j + 1) * dim];
+                let xc = Mat::from_fn(k, dim, |r, c| points[members[r] * dim + c] - center[c]);
+                let axes = principal_axes(xc.as_ref(), n);
+                let rank = axes.nrows();
+                let scores = &xc * axes.transpose();
+                let q = Mat::from_fn(k, rank + usize::from(offset), |r, c| {
+                    if c < rank { scores[(r, c)] } else { 1.0 }
+                });
+                let y = Mat::from_fn(k, v, |r, i| f64::from(ao.row(members[r])[i]) - mean[i]);
+                let (targets, map) = if options.vertex_clusters > 0 && options.vertex_clusters < v {
+                    let groups = vertex_clusters(
+                        y.as_ref(),
+                        options.vertex_clusters,
+                        f64::from(options.vertex_tolerance),
+                    );
+                    let count = groups.count;
+                    let mut sums = Mat::<f64>::zeros(k, count);
+                    let mut sizes = vec![0usize; count];
+                    for (i, &g) in groups.map.iter().enumerate() {
+                        sizes[g as usize] += 1;
+                        for r in 0..k {
+                            sums[(r, g as usize)] += y[(r, i)];
+                        }
+                    }
+                    let means = Mat::from_fn(k, count, |r, g| sums[(r, g)] / sizes[g] as f64);
+                    (means, Some(groups.map))
+                } else {
+                    (y, None)
+                };
+                let (x, _) = ridge_lstsq(q.as_ref(), targets.as_ref(), options.ridge * k as f64);
+                let largest = x.norm_max();
+                if largest.is_nan() || largest > F16_MAX {
+                    return Err(FitOverflow {
+                        largest,
+                        parameters: x.nrows(),
+                    });
+                }
+                let columns = targets.ncols();
+                // Rows past the cluster's rank stay zero; the constant, if
+                // any, is always the last row.
+                let mut coefficients = vec![f16::ZERO; rows * columns];
+                for r in 0..x.nrows() {
+                    let dst = if r < rank { r } else { n };
+                    for c in 0..columns {
+                        coefficients[dst * columns + c] = f16::from_f64(x[(r, c)]);
                     }
                 }
-                let means = Mat::from_fn(k, count, |r, g| sums[(r, g)] / sizes[g] as f64);
-                (means, Some(groups.map))
-            } else {
-                (y, None)
-            };
-            let (x, _) = ridge_lstsq(q.as_ref(), targets.as_ref(), options.ridge * k as f64);
-            let largest = x.norm_max();
-            if largest.is_nan() || largest > F16_MAX {
-                return Err(FitOverflow {
-                    largest,
-                    parameters: x.nrows(),
-                });
-            }
-            let columns = targets.ncols();
-            // Rows past the cluster's rank stay zero; the constant, if any,
-            // is always the last row.
-            let mut coefficients = vec![f16::ZERO; rows * columns];
-            for r in 0..x.nrows() {
-                let dst = if r < rank { r } else { n };
-                for c in 0..columns {
-                    coefficients[dst * columns + c] = f16::from_f64(x[(r, c)]);
+                let mut axes_f32 = vec![0.0f32; n * dim];
+                for r in 0..rank {
+                    for c in 0..dim {
+                        axes_f32[r * dim + c] = axes[(r, c)] as f32;
+                    }
                 }
-            }
-            let mut axes_f32 = vec![0.0f32; n * dim];
-            for r in 0..rank {
-                for c in 0..dim {
-                    axes_f32[r * dim + c] = axes[(r, c)] as f32;
-                }
-            }
+                Ok((
+                    Block {
+                        rows,
+                        columns,
+                        coefficients,
+                        map,
+                    },
+                    PoseCluster {
+                        center: center.iter().map(|&x| x as f32).collect(),
+                        axes: axes_f32,
+                    },
+                    rank,
+                    k,
+                ))
+            })
+            .collect();
+        for fit in fitted {
+            // The first cluster that overflows is the one reported.
+            let (block, cluster, rank, k) = fit?;
             stats.cluster_sizes.push(k);
             stats.cluster_ranks.push(rank);
-            stats.vertex_clusters.push(columns);
-            blocks.push(Block {
-                rows,
-                columns,
-                coefficients,
-                map,
-            });
-            clusters.push(PoseCluster {
-                center: center.iter().map(|&x| x as f32).collect(),
-                axes: axes_f32,
-            });
+            stats.vertex_clusters.push(block.columns);
+            blocks.push(block);
+            clusters.push(cluster);
         }
         let model = Self {
             handles: dim,

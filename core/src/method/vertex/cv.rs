@@ -3,6 +3,7 @@
 //! not see (frames of clips left out), not on poses between training
 //! poses.
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::trace::AoBlock;
@@ -217,7 +218,7 @@ pub struct RowsChoice {
 /// clips). The choice comes along when there was one.
 pub fn rows_to_fit(
     sources: &[Source],
-    score: impl Fn(&[usize]) -> Option<f64>,
+    score: impl Fn(&[usize]) -> Option<f64> + Sync,
 ) -> (Rows, Option<RowsChoice>) {
     if !offers_choice(sources) {
         return (Rows::All, None);
@@ -242,14 +243,17 @@ fn offers_choice(sources: &[Source]) -> bool {
 /// (frames of fewer than two clips).
 pub fn choose_rows(
     sources: &[Source],
-    score: impl Fn(&[usize]) -> Option<f64>,
+    score: impl Fn(&[usize]) -> Option<f64> + Sync,
 ) -> Option<RowsChoice> {
     if !offers_choice(sources) {
         return None;
     }
+    // The candidates are scored side by side, each on its own thread.
     let scores: Vec<(Rows, f64)> = Rows::CANDIDATES
-        .iter()
+        .par_iter()
         .map(|&rows| Some((rows, score(&rows.select(sources))?)))
+        .collect::<Vec<_>>()
+        .into_iter()
         .collect::<Option<_>>()?;
     let rows = scores.iter().rev().max_by(|a, b| a.1.total_cmp(&b.1))?.0;
     Some(RowsChoice { rows, scores })
@@ -291,45 +295,59 @@ impl ClipErrors {
 /// errors are infinite), each scored by `predict(model, row)` on the
 /// group's frames. A candidate that changes only how a model runs can
 /// share one fit. `None` when the frames come from fewer than two clips.
-pub fn sse_by_clips<M>(
+pub fn sse_by_clips<M: Send>(
     sources: &[Source],
     ao: &AoBlock,
     candidates: usize,
-    fit: impl Fn(&[usize]) -> Vec<Option<M>>,
-    predict: impl Fn(&M, usize) -> Vec<f32>,
+    fit: impl Fn(&[usize]) -> Vec<Option<M>> + Sync,
+    predict: impl Fn(&M, usize) -> Vec<f32> + Sync,
 ) -> Option<ClipErrors> {
     let (folds, groups) = clip_folds(sources)?;
     if candidates == 0 {
         return None;
     }
+    // Each group is fitted and scored on its own thread, its sums started
+    // from zero; the groups are then added in their order, so the result
+    // is the same bits on any number of threads.
+    let per_group: Vec<(Vec<Vec<f64>>, Vec<f64>)> = groups
+        .par_iter()
+        .map(|(train, test)| {
+            let models = fit(train);
+            let mut sse = vec![vec![0.0f64; ao.vertices]; candidates];
+            let mut psnr = vec![f64::NEG_INFINITY; candidates];
+            for (k, (e, p)) in sse.iter_mut().zip(&mut psnr).enumerate() {
+                let Some(model) = models.get(k).and_then(Option::as_ref) else {
+                    e.iter_mut().for_each(|x| *x = f64::INFINITY);
+                    continue;
+                };
+                let mut frames = 0.0;
+                for &r in test {
+                    let mut frame = 0.0;
+                    for ((x, &a), &b) in e.iter_mut().zip(&predict(model, r)).zip(ao.row(r)) {
+                        let d = (f64::from(a) - f64::from(b)).powi(2);
+                        *x += d;
+                        frame += d;
+                    }
+                    frames += crate::asset::metrics::psnr(frame / ao.vertices.max(1) as f64);
+                }
+                *p = frames / test.len() as f64;
+            }
+            (sse, psnr)
+        })
+        .collect();
     let mut sse = vec![vec![0.0f64; ao.vertices]; candidates];
     let mut fold_psnr = vec![Vec::new(); candidates];
-    let mut rows = 0usize;
-    for (train, test) in &groups {
-        rows += test.len();
-        let models = fit(train);
-        for (k, (e, p)) in sse.iter_mut().zip(&mut fold_psnr).enumerate() {
-            let Some(model) = models.get(k).and_then(Option::as_ref) else {
-                e.iter_mut().for_each(|x| *x = f64::INFINITY);
-                p.push(f64::NEG_INFINITY);
-                continue;
-            };
-            let mut frames = 0.0;
-            for &r in test {
-                let mut frame = 0.0;
-                for ((x, &a), &b) in e.iter_mut().zip(&predict(model, r)).zip(ao.row(r)) {
-                    let d = (f64::from(a) - f64::from(b)).powi(2);
-                    *x += d;
-                    frame += d;
-                }
-                frames += crate::asset::metrics::psnr(frame / ao.vertices.max(1) as f64);
-            }
-            p.push(frames / test.len() as f64);
+    for (group_sse, group_psnr) in per_group {
+        for (total, e) in sse.iter_mut().zip(group_sse) {
+            total.iter_mut().zip(e).for_each(|(t, x)| *t += x);
+        }
+        for (p, x) in fold_psnr.iter_mut().zip(group_psnr) {
+            p.push(x);
         }
     }
     Some(ClipErrors {
         sse,
-        rows,
+        rows: groups.iter().map(|(_, test)| test.len()).sum(),
         folds,
         psnr: mean_over_folds(&fold_psnr),
     })
@@ -387,36 +405,41 @@ pub fn psnr_by_clips<M>(
     sources: &[Source],
     ao: &AoBlock,
     candidates: usize,
-    fit: impl Fn(&[usize]) -> Option<M>,
-    frame_sse: impl Fn(&M, usize) -> Vec<f64>,
+    fit: impl Fn(&[usize]) -> Option<M> + Sync,
+    frame_sse: impl Fn(&M, usize) -> Vec<f64> + Sync,
 ) -> Option<ClipErrors> {
     let (folds, groups) = clip_folds(sources)?;
     if candidates == 0 {
         return None;
     }
-    let mut fold_psnr = vec![Vec::new(); candidates];
-    let mut rows = 0usize;
-    for (train, test) in &groups {
-        rows += test.len();
-        let Some(model) = fit(train) else {
-            fold_psnr.iter_mut().for_each(|p| p.push(f64::NEG_INFINITY));
-            continue;
-        };
-        let mut frames = vec![0.0f64; candidates];
-        for &r in test {
-            let sse = frame_sse(&model, r);
-            assert_eq!(sse.len(), candidates, "one error per candidate");
-            for (f, e) in frames.iter_mut().zip(sse) {
-                *f += crate::asset::metrics::psnr(e / ao.vertices.max(1) as f64);
+    // One group per thread, each group's figures its own (see
+    // `sse_by_clips`).
+    let per_group: Vec<Vec<f64>> = groups
+        .par_iter()
+        .map(|(train, test)| {
+            let Some(model) = fit(train) else {
+                return vec![f64::NEG_INFINITY; candidates];
+            };
+            let mut frames = vec![0.0f64; candidates];
+            for &r in test {
+                let sse = frame_sse(&model, r);
+                assert_eq!(sse.len(), candidates, "one error per candidate");
+                for (f, e) in frames.iter_mut().zip(sse) {
+                    *f += crate::asset::metrics::psnr(e / ao.vertices.max(1) as f64);
+                }
             }
-        }
-        for (p, f) in fold_psnr.iter_mut().zip(frames) {
-            p.push(f / test.len() as f64);
+            frames.iter().map(|f| f / test.len() as f64).collect()
+        })
+        .collect();
+    let mut fold_psnr = vec![Vec::new(); candidates];
+    for group in per_group {
+        for (p, x) in fold_psnr.iter_mut().zip(group) {
+            p.push(x);
         }
     }
     Some(ClipErrors {
         sse: Vec::new(),
-        rows,
+        rows: groups.iter().map(|(_, test)| test.len()).sum(),
         folds,
         psnr: mean_over_folds(&fold_psnr),
     })
@@ -426,12 +449,12 @@ pub fn psnr_by_clips<M>(
 /// [`sse_by_clips`]): the candidate with the least squared error over
 /// all left-out frames and vertices wins (the first on a tie). `None` when
 /// the frames come from fewer than two clips.
-pub fn choose_by_clips<M>(
+pub fn choose_by_clips<M: Send>(
     sources: &[Source],
     ao: &AoBlock,
     candidates: &[f64],
-    fit: impl Fn(&[usize]) -> Vec<Option<M>>,
-    predict: impl Fn(&M, usize) -> Vec<f32>,
+    fit: impl Fn(&[usize]) -> Vec<Option<M>> + Sync,
+    predict: impl Fn(&M, usize) -> Vec<f32> + Sync,
 ) -> Option<RidgeChoice> {
     RidgeChoice::of(
         candidates,
@@ -455,16 +478,18 @@ mod tests {
         use Source::{Frame, Perturbed, Random};
         let sources = [Random, Frame(0), Frame(0), Frame(1), Frame(1), Perturbed(1)];
         let candidates = [0.0, 0.3, 1.0];
-        let trained = std::cell::RefCell::new(Vec::new());
+        let trained = std::sync::Mutex::new(Vec::new());
         let each = |train: &[usize]| {
-            trained.borrow_mut().push(train.to_vec());
+            trained.lock().unwrap().push(train.to_vec());
             candidates.iter().map(|&v| Some(v)).collect()
         };
         let c = choose_by_clips(&sources, &ao, &candidates, each, |&v, _| vec![v as f32]).unwrap();
         assert_eq!((c.ridge, c.folds), (0.3, 2));
         assert!((c.scores[1].1 - 0.1).abs() < 1e-6);
         // A perturbed frame leaves with its clip; a random pose never does.
-        assert_eq!(*trained.borrow(), [vec![0, 3, 4, 5], vec![0, 1, 2]]);
+        let mut trained = trained.lock().unwrap().clone();
+        trained.sort();
+        assert_eq!(trained, [vec![0, 1, 2], vec![0, 3, 4, 5]]);
         // Frames of one clip: nothing to leave out.
         let one = [Random, Frame(0), Frame(0), Frame(0), Frame(0), Perturbed(1)];
         assert!(choose_by_clips(&one, &ao, &candidates, each, |&v, _| vec![v as f32]).is_none());

@@ -84,9 +84,22 @@ impl RidgeSolver {
 
     /// `X = V diag(s / (s² + λ)) Uᵀ Y` over the kept singular values.
     pub(crate) fn solve(&self, y: MatRef<'_, f64>, lambda: f64) -> Mat<f64> {
+        self.solve_projected(&self.project(y), lambda)
+    }
+
+    /// `Uᵀ Y`: the part of [`RidgeSolver::solve`] that does not depend on
+    /// λ (and the costly one: design rows × columns × targets), to be
+    /// shared by every ridge weight.
+    pub(crate) fn project(&self, y: MatRef<'_, f64>) -> Mat<f64> {
+        self.u.transpose() * y
+    }
+
+    /// [`RidgeSolver::solve`] given `uty` = [`RidgeSolver::project`]`(Y)`:
+    /// the same bits.
+    pub(crate) fn solve_projected(&self, uty: &Mat<f64>, lambda: f64) -> Mat<f64> {
         let rank = self.stats.rank;
-        let uty = self.u.transpose() * y;
-        let filtered = Mat::from_fn(self.s.len(), y.ncols(), |i, c| {
+        let y_cols = uty.ncols();
+        let filtered = Mat::from_fn(self.s.len(), y_cols, |i, c| {
             if i < rank {
                 uty[(i, c)] * self.s[i] / (self.s[i] * self.s[i] + lambda)
             } else {

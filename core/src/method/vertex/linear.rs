@@ -4,6 +4,7 @@
 
 use faer::Mat;
 use half::f16;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::basis::Basis;
@@ -261,7 +262,7 @@ fn fit_ridges(
         .map(|&ridge| vec![Column { ridge, scope }; block.vertices])
         .collect();
     let models: Vec<&[Column]> = models.iter().map(Vec::as_slice).collect();
-    VertexLinear::fit_many(&q, angles, &block, &models, local, options, None)
+    VertexLinear::fit_many(&q, angles, &block, &models, local, options, None, false)
         .into_iter()
         .map(|fitted| fitted.ok().map(|(m, _)| m))
         .collect()
@@ -282,7 +283,7 @@ pub fn choose_columns(
     sources: &[super::cv::Source],
     scopes: &[Scope],
     local: Option<&[Vec<usize>]>,
-    baseline: impl Fn(&[usize]) -> Vec<f32>,
+    baseline: impl Fn(&[usize]) -> Vec<f32> + Sync,
 ) -> Option<Vec<Column>> {
     let scopes: Vec<Scope> = scopes
         .iter()
@@ -523,9 +524,18 @@ impl VertexLinear {
         options: &LinearOptions,
         constants: Option<&[f32]>,
     ) -> Result<(Self, LinearFitStats), FitOverflow> {
-        Self::fit_many(poses, angles, ao, &[columns], local, options, constants)
-            .pop()
-            .expect("one model")
+        Self::fit_many(
+            poses,
+            angles,
+            ao,
+            &[columns],
+            local,
+            options,
+            constants,
+            true,
+        )
+        .pop()
+        .expect("one model")
     }
 
     /// [`VertexLinear::fit_columns`] for several models at once (one per
@@ -533,7 +543,9 @@ impl VertexLinear {
     /// projected once, and each design matrix factorised once, whatever
     /// the ridge weights (what cross-validation fits candidates with).
     /// The models are projected only when none of them has a local
-    /// vertex.
+    /// vertex. Without `training_errors` the statistics' training RMSEs
+    /// are NaN (not measured: cross-validation keeps only the models).
+    #[allow(clippy::too_many_arguments)]
     pub fn fit_many(
         poses: &[Vec<f32>],
         angles: Angles<'_>,
@@ -542,6 +554,7 @@ impl VertexLinear {
         local: Option<&[Vec<usize>]>,
         options: &LinearOptions,
         constants: Option<&[f32]>,
+        training_errors: bool,
     ) -> Vec<Result<(Self, LinearFitStats), FitOverflow>> {
         let p = poses.len();
         assert_eq!(p, ao.poses(), "one pose per AO row");
@@ -612,7 +625,6 @@ impl VertexLinear {
         let whole = RidgeSolver::new(js.as_ref());
         let solve = whole.stats;
         let all: Vec<usize> = (0..m).collect();
-        let mut solvers: std::collections::BTreeMap<Vec<usize>, RidgeSolver> = Default::default();
         // Row-major k × n: row c is direction c.
         let projection: Option<Vec<f32>> = components.as_ref().map(|d| {
             (0..m)
@@ -620,137 +632,174 @@ impl VertexLinear {
                 .map(|(k, c)| d[(k, c)] as f32)
                 .collect()
         });
-        let mut out = Vec::with_capacity(models.len());
-        for columns in models {
-            assert_eq!(columns.len(), v, "one column per vertex");
-            // One solve per ridge weight and set of parameters, over the
-            // vertices that share them.
-            let mut sets: std::collections::BTreeMap<(u64, &[usize]), Vec<usize>> =
-                Default::default();
-            for (i, c) in columns.iter().enumerate() {
-                let params = match c.scope {
-                    Scope::Constant => continue,
-                    Scope::Global => all.as_slice(),
-                    Scope::Local => local.map_or(all.as_slice(), |l| l[i].as_slice()),
-                };
-                if !params.is_empty() {
-                    sets.entry((c.ridge.to_bits(), params)).or_default().push(i);
-                }
-            }
-            let mut t = Mat::zeros(m, v);
-            for ((ridge, params), vertices) in sets {
-                let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
-                let lambda = f64::from_bits(ridge) * p as f64;
-                let x = if params.len() == m {
-                    whole.solve(y.as_ref(), lambda)
-                } else {
-                    solvers
-                        .entry(params.to_vec())
-                        .or_insert_with(|| {
-                            let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
-                            RidgeSolver::new(d.as_ref())
-                        })
-                        .solve(y.as_ref(), lambda)
-                };
-                for (c, &i) in vertices.iter().enumerate() {
-                    for (row, &k) in params.iter().enumerate() {
-                        t[(k, i)] = x[(row, c)];
-                    }
-                }
-            }
-            let mut mean_a = mean_a.clone();
-            if let Some(constants) = constants {
+        // Per model, one solve per ridge weight and set of parameters, over
+        // the vertices that share them.
+        type Sets<'c> = std::collections::BTreeMap<(u64, &'c [usize]), Vec<usize>>;
+        let model_sets: Vec<Sets<'_>> = models
+            .iter()
+            .map(|columns| {
+                assert_eq!(columns.len(), v, "one column per vertex");
+                let mut sets: Sets<'_> = Default::default();
                 for (i, c) in columns.iter().enumerate() {
-                    if c.scope == Scope::Constant {
-                        mean_a[i] = f64::from(constants[i]);
+                    let params = match c.scope {
+                        Scope::Constant => continue,
+                        Scope::Global => all.as_slice(),
+                        Scope::Local => local.map_or(all.as_slice(), |l| l[i].as_slice()),
+                    };
+                    if !params.is_empty() {
+                        sets.entry((c.ridge.to_bits(), params)).or_default().push(i);
                     }
                 }
-            }
-            let largest = (0..m)
-                .flat_map(|k| (0..v).map(move |i| (k, i)))
-                .map(|(k, i)| t[(k, i)].abs())
-                .fold(0.0f64, f64::max);
-            if largest.is_nan() || largest > F16_MAX {
-                out.push(Err(FitOverflow {
-                    largest,
-                    parameters: m,
-                }));
-                continue;
-            }
-            let mut coefficients = Vec::with_capacity((m + 1) * v);
-            for k in 0..m {
-                coefficients.extend((0..v).map(|i| f16::from_f64(t[(k, i)])));
-            }
-            coefficients.extend(mean_a.iter().map(|&c| f16::from_f64(c)));
-            let block = Block {
-                rows: m + 1,
-                columns: v,
-                coefficients,
-                map: None,
-            };
-            let uniform = columns.iter().all(|c| c.scope == Scope::Global);
-            let threshold = match (!uniform, options.threshold > 0.0) {
-                (_, true) => options.threshold,
-                // Locality or constant vertices: the coefficients outside a
-                // vertex's set are zero.
-                (true, false) => f32::MIN_POSITIVE,
-                (false, false) => 0.0,
-            };
-            let (stored, kept_fraction) = if threshold > 0.0 {
-                let sparse = SparseForm::from_dense(&block, v, threshold, &[m]);
-                let kept = sparse.values.len() as f64 / ((m + 1) * v).max(1) as f64;
-                (Coefficients::Sparse(sparse), kept)
+                sets
+            })
+            .collect();
+        // The factorisation of each set of parameters, and `Uᵀ Y` of each
+        // (parameters, vertices) pair: what every ridge weight shares, so
+        // cross-validation's candidates cost one projection, not one each.
+        let mut keys: Vec<(&[usize], &[usize])> = model_sets
+            .iter()
+            .flat_map(|sets| {
+                sets.iter()
+                    .map(|((_, params), vs)| (*params, vs.as_slice()))
+            })
+            .collect();
+        keys.sort_unstable();
+        keys.dedup();
+        let mut designs: Vec<&[usize]> = keys.iter().map(|(params, _)| *params).collect();
+        designs.dedup();
+        let solvers: std::collections::BTreeMap<&[usize], RidgeSolver> = designs
+            .par_iter()
+            .filter(|params| params.len() != m)
+            .map(|&params| {
+                let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
+                (params, RidgeSolver::new(d.as_ref()))
+            })
+            .collect();
+        let solver = |params: &[usize]| -> &RidgeSolver {
+            if params.len() == m {
+                &whole
             } else {
-                (
-                    Coefficients::Dense(LinearForm {
-                        vertices: v,
-                        blocks: vec![block],
-                    }),
-                    1.0,
-                )
-            };
-            let model = Self {
-                parameters: m,
-                projection: projection.clone(),
-                features,
-                rotations,
-                mean: mean_j.iter().map(|&x| x as f32).collect(),
-                inv_std: inv_std.iter().map(|&x| x as f32).collect(),
-                ranges: angles.ranges.to_vec(),
-                coefficients: stored,
-                basis: None,
-            };
-            // The f64 fit's predictions in one product, not a dot product
-            // per pose and vertex (every cross-validation candidate pays
-            // this).
-            let fitted = &js * &t;
-            let (mut exact, mut rounded) = (0.0f64, 0.0f64);
-            for (r, q) in raw.iter().enumerate() {
-                let predicted = model.evaluate(q);
-                for (i, (&truth, &pred)) in ao.row(r).iter().zip(&predicted).enumerate() {
-                    let f = mean_a[i] + fitted[(r, i)];
-                    exact += (f - f64::from(truth)).powi(2);
-                    rounded += (f64::from(pred) - f64::from(truth)).powi(2);
-                }
+                &solvers[params]
             }
-            let count = (p * v).max(1) as f64;
-            let stats = LinearFitStats {
-                solve,
-                constant_parameters: inv_std.iter().filter(|&&s| s == 0.0).count(),
-                training_rmse: (exact / count).sqrt(),
-                stored_training_rmse: (rounded / count).sqrt(),
-                kept_fraction,
-                ridge: options.ridge,
-                ridge_cv: None,
-                local: columns.iter().any(|c| c.scope == Scope::Local),
-                per_vertex: None,
-                basis: None,
-                basis_cv: None,
-                reference: None,
-            };
-            out.push(Ok((model, stats)));
-        }
-        out
+        };
+        let projections: std::collections::BTreeMap<(&[usize], &[usize]), Mat<f64>> = keys
+            .par_iter()
+            .map(|&(params, vertices)| {
+                let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
+                ((params, vertices), solver(params).project(y.as_ref()))
+            })
+            .collect();
+        // The models side by side, each on its own thread.
+        models
+            .par_iter()
+            .zip(&model_sets)
+            .map(|(columns, sets)| {
+                let mut t = Mat::zeros(m, v);
+                for (&(ridge, params), vertices) in sets {
+                    let lambda = f64::from_bits(ridge) * p as f64;
+                    let uty = &projections[&(params, vertices.as_slice())];
+                    let x = solver(params).solve_projected(uty, lambda);
+                    for (c, &i) in vertices.iter().enumerate() {
+                        for (row, &k) in params.iter().enumerate() {
+                            t[(k, i)] = x[(row, c)];
+                        }
+                    }
+                }
+                let mut mean_a = mean_a.clone();
+                if let Some(constants) = constants {
+                    for (i, c) in columns.iter().enumerate() {
+                        if c.scope == Scope::Constant {
+                            mean_a[i] = f64::from(constants[i]);
+                        }
+                    }
+                }
+                let largest = (0..m)
+                    .flat_map(|k| (0..v).map(move |i| (k, i)))
+                    .map(|(k, i)| t[(k, i)].abs())
+                    .fold(0.0f64, f64::max);
+                if largest.is_nan() || largest > F16_MAX {
+                    return Err(FitOverflow {
+                        largest,
+                        parameters: m,
+                    });
+                }
+                let mut coefficients = Vec::with_capacity((m + 1) * v);
+                for k in 0..m {
+                    coefficients.extend((0..v).map(|i| f16::from_f64(t[(k, i)])));
+                }
+                coefficients.extend(mean_a.iter().map(|&c| f16::from_f64(c)));
+                let block = Block {
+                    rows: m + 1,
+                    columns: v,
+                    coefficients,
+                    map: None,
+                };
+                let uniform = columns.iter().all(|c| c.scope == Scope::Global);
+                let threshold = match (!uniform, options.threshold > 0.0) {
+                    (_, true) => options.threshold,
+                    // Locality or constant vertices: the coefficients outside a
+                    // vertex's set are zero.
+                    (true, false) => f32::MIN_POSITIVE,
+                    (false, false) => 0.0,
+                };
+                let (stored, kept_fraction) = if threshold > 0.0 {
+                    let sparse = SparseForm::from_dense(&block, v, threshold, &[m]);
+                    let kept = sparse.values.len() as f64 / ((m + 1) * v).max(1) as f64;
+                    (Coefficients::Sparse(sparse), kept)
+                } else {
+                    (
+                        Coefficients::Dense(LinearForm {
+                            vertices: v,
+                            blocks: vec![block],
+                        }),
+                        1.0,
+                    )
+                };
+                let model = Self {
+                    parameters: m,
+                    projection: projection.clone(),
+                    features,
+                    rotations,
+                    mean: mean_j.iter().map(|&x| x as f32).collect(),
+                    inv_std: inv_std.iter().map(|&x| x as f32).collect(),
+                    ranges: angles.ranges.to_vec(),
+                    coefficients: stored,
+                    basis: None,
+                };
+                // The f64 fit's predictions in one product, not a dot product
+                // per pose and vertex. Cross-validation's candidates skip this
+                // (their statistics are not kept).
+                let (mut exact, mut rounded) = (f64::NAN, f64::NAN);
+                if training_errors {
+                    let fitted = &js * &t;
+                    (exact, rounded) = (0.0, 0.0);
+                    for (r, q) in raw.iter().enumerate() {
+                        let predicted = model.evaluate(q);
+                        for (i, (&truth, &pred)) in ao.row(r).iter().zip(&predicted).enumerate() {
+                            let f = mean_a[i] + fitted[(r, i)];
+                            exact += (f - f64::from(truth)).powi(2);
+                            rounded += (f64::from(pred) - f64::from(truth)).powi(2);
+                        }
+                    }
+                }
+                let count = (p * v).max(1) as f64;
+                let stats = LinearFitStats {
+                    solve,
+                    constant_parameters: inv_std.iter().filter(|&&s| s == 0.0).count(),
+                    training_rmse: (exact / count).sqrt(),
+                    stored_training_rmse: (rounded / count).sqrt(),
+                    kept_fraction,
+                    ridge: options.ridge,
+                    ridge_cv: None,
+                    local: columns.iter().any(|c| c.scope == Scope::Local),
+                    per_vertex: None,
+                    basis: None,
+                    basis_cv: None,
+                    reference: None,
+                };
+                Ok((model, stats))
+            })
+            .collect()
     }
 
     /// The weights of a pose: its joint angles clamped to their ranges,

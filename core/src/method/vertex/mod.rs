@@ -37,6 +37,7 @@ pub use linear::{
     count_columns,
 };
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::{
@@ -418,7 +419,7 @@ fn fit_rows(
                 .then(|| {
                     let each_ridge = |train: &[usize]| {
                         linear::RIDGE_CANDIDATES
-                            .iter()
+                            .par_iter()
                             .map(|&ridge| {
                                 fit_on(
                                     &ClusteredOptions {
@@ -607,7 +608,7 @@ fn basis_by_clips(
     sources: &[Source],
     fitted: (&Model, &[Vec<f32>]),
     most: usize,
-    fit: impl Fn(&[usize]) -> Option<Model>,
+    fit: impl Fn(&[usize]) -> Option<Model> + Sync,
 ) -> Option<BasisChoice> {
     use std::collections::HashMap;
     /// A fold's model: its basis axes, what each candidate would cost it,
