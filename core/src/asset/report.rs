@@ -38,6 +38,10 @@ pub struct Timings {
     pub test_trace_s: f64,
     /// Evaluating the model on them.
     pub evaluate_s: f64,
+    /// The unseen-clip folds' refits and judgements (summed over the
+    /// folds, which run side by side as jobs of their own).
+    #[serde(default)]
+    pub unseen_s: f64,
 }
 
 /// Sizes of the model and the baseline.

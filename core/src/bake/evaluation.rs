@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::{
     asset::metrics::{Errors, FrameError},
-    method::vertex::{Model, Rows, Source, StaticAverage},
+    method::vertex::{FitStep, Model, Rows, Source, StaticAverage},
     rig::pose::Pose,
     trace::AoBlock,
 };
@@ -38,13 +38,23 @@ impl Plan<'_> {
             baseline: Vec<FrameError>,
         }
         let mut per_clip: Vec<PerClip> = Vec::new();
+        // Every pose on its own thread; the figures gathered in order.
+        let judged: Vec<(f64, FrameError, FrameError)> = tests
+            .par_iter()
+            .enumerate()
+            .map(|(i, t)| {
+                let w = model.weights(skeleton, &t.pose);
+                let predicted = model.evaluate_weights(&w);
+                (
+                    model.multiply_adds(&w),
+                    FrameError::of(&predicted, truth.row(i)),
+                    FrameError::of(&base, truth.row(i)),
+                )
+            })
+            .collect();
         let mut multiply_adds = 0.0;
-        for (i, t) in tests.iter().enumerate() {
-            let w = model.weights(skeleton, &t.pose);
-            multiply_adds += model.multiply_adds(&w);
-            let predicted = model.evaluate_weights(&w);
-            let e_model = FrameError::of(&predicted, truth.row(i));
-            let e_base = FrameError::of(&base, truth.row(i));
+        for (t, (cost, e_model, e_base)) in tests.iter().zip(judged) {
+            multiply_adds += cost;
             match t.frame {
                 None => {
                     random.0.push(e_model);
@@ -109,37 +119,17 @@ impl Plan<'_> {
         (0..k).map(|i| eligible[i * eligible.len() / k]).collect()
     }
 
-    /// Leave one clip out: for each of [`Plan::fold_clips`], the method
-    /// refitted to the reference poses not drawn from that clip (the
-    /// traced AO of the rest, so no new rays), and the static average of
-    /// the other clips' frames, judged on every held-out frame of the
-    /// left-out clip. `poses` and `reference` are the reference poses and
-    /// their AO; `tests` and `truth` the held-out poses and theirs. The
-    /// joint-angle ranges stay those of all training clips.
-    pub fn unseen_clips(
-        &self,
-        poses: &[Pose],
-        reference: &AoBlock,
-        tests: &[TestPose],
-        truth: &AoBlock,
-    ) -> Result<Option<UnseenClips>, BakeError> {
-        let clips = self.fold_clips();
-        if clips.is_empty() {
-            return Ok(None);
-        }
-        let sources = self.reference_sources();
-        // Each fold on its own thread (its fit sequential but for its own
-        // cross-validation's threads), gathered in the folds' order.
-        let folds: Vec<UnseenFold> = clips
-            .par_iter()
-            .map(|&c| self.unseen_fold(c, poses, reference, &sources, tests, truth))
-            .collect::<Result<_, _>>()?;
-        Ok(Some(UnseenClips::of(folds)))
-    }
-}
-
-impl Plan<'_> {
-    /// One fold of [`Plan::unseen_clips`]: clip `c` left out of the refit.
+    /// Leave one clip out, one fold of it: clip `c` (one of
+    /// [`Plan::fold_clips`]) left out, the method refitted to the
+    /// reference poses not drawn from it (the traced AO of the rest, so
+    /// no new rays), and the static average of the other clips' frames,
+    /// both judged on every held-out frame of the clip. `poses`,
+    /// `reference` and `sources` are the reference poses, their AO and
+    /// where each comes from; `tests` and `truth` the held-out poses and
+    /// theirs. The joint-angle ranges stay those of all training clips.
+    /// `on_step` is called as each step of the refit ends. Each fold is a
+    /// job of its own (`unseen`), so folds run side by side on workers.
+    #[allow(clippy::too_many_arguments)]
     pub fn unseen_fold(
         &self,
         c: usize,
@@ -148,6 +138,7 @@ impl Plan<'_> {
         sources: &[Source],
         tests: &[TestPose],
         truth: &AoBlock,
+        on_step: &mut dyn FnMut(FitStep),
     ) -> Result<UnseenFold, BakeError> {
         let plain: std::collections::BTreeSet<usize> = self.baseline_rows().into_iter().collect();
         let skeleton = &self.character.skeleton;
@@ -156,10 +147,11 @@ impl Plan<'_> {
             .collect();
         let fold_poses: Vec<Pose> = keep.iter().map(|&i| poses[i].clone()).collect();
         let fold_sources: Vec<_> = keep.iter().map(|&i| sources[i]).collect();
-        let (model, stats) = self.fit(
+        let (model, stats) = self.fit_stepwise(
             &fold_poses,
             &reference.select(keep.iter().copied()),
             &fold_sources,
+            on_step,
         )?;
         let frames: Vec<usize> = keep.iter().copied().filter(|i| plain.contains(i)).collect();
         let baseline = StaticAverage::fit(&reference.select(if frames.is_empty() {
@@ -168,14 +160,19 @@ impl Plan<'_> {
             frames
         }))
         .evaluate();
-        let (mut m, mut b) = (Vec::new(), Vec::new());
-        for (i, t) in tests.iter().enumerate() {
-            if t.frame.is_some_and(|f| f.clip == c) {
+        let judged: Vec<(FrameError, FrameError)> = tests
+            .par_iter()
+            .enumerate()
+            .filter(|(_, t)| t.frame.is_some_and(|f| f.clip == c))
+            .map(|(i, t)| {
                 let predicted = model.evaluate(skeleton, &t.pose);
-                m.push(FrameError::of(&predicted, truth.row(i)));
-                b.push(FrameError::of(&baseline, truth.row(i)));
-            }
-        }
+                (
+                    FrameError::of(&predicted, truth.row(i)),
+                    FrameError::of(&baseline, truth.row(i)),
+                )
+            })
+            .collect();
+        let (m, b): (Vec<FrameError>, Vec<FrameError>) = judged.into_iter().unzip();
         Ok(UnseenFold {
             clip: self.clips[c].name.clone(),
             reference_poses: keep.len(),
@@ -207,7 +204,7 @@ pub struct UnseenFold {
     pub errors: Comparison,
 }
 
-/// Leave one clip out (see [`Plan::unseen_clips`]).
+/// Leave one clip out (see [`Plan::unseen_fold`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct UnseenClips {
     /// One per left-out clip.

@@ -99,9 +99,10 @@ impl Bake<'_> {
         }
     }
 
-    /// `sample` (reference) → `fit`; `sample` (held-out, noise, reference)
-    /// and `fit` → `evaluate`; `fit` and `evaluate` → `assemble` →
-    /// `preview`.
+    /// `sample` (reference) → `fit`; `sample` (reference, held-out) →
+    /// one `unseen` per unseen-clips fold; `fit`, the `unseen` folds and
+    /// `sample` (held-out, noise) → `evaluate`; `fit` and `evaluate` →
+    /// `assemble` → `preview`.
     fn vertex_graph(&self, options: GraphOptions) -> JobGraph {
         let batch = options.sample_batch.max(1);
         let mut jobs: Vec<PlannedJob> = Vec::new();
@@ -123,17 +124,25 @@ impl Bake<'_> {
                 .collect()
         };
         let reference = samples(PoseSet::Reference, &mut jobs);
-        let mut held_out = samples(PoseSet::HeldOut, &mut jobs);
-        held_out.extend(samples(PoseSet::Noise, &mut jobs));
+        let held_out = samples(PoseSet::HeldOut, &mut jobs);
+        let noise = samples(PoseSet::Noise, &mut jobs);
         jobs.push(PlannedJob {
             spec: JobSpec::Fit,
             deps: reference.clone(),
         });
         let fit = jobs.len() - 1;
-        // The unseen-clips evaluation refits to the reference AO.
+        // The unseen-clips folds refit to the reference AO without one
+        // clip each, beside the fit (they do not need it).
         let mut deps = vec![fit];
+        for fold in 0..self.plan.fold_clips().len() {
+            jobs.push(PlannedJob {
+                spec: JobSpec::Unseen { fold },
+                deps: reference.iter().chain(&held_out).copied().collect(),
+            });
+            deps.push(jobs.len() - 1);
+        }
         deps.extend(held_out);
-        deps.extend(reference);
+        deps.extend(noise);
         jobs.push(PlannedJob {
             spec: JobSpec::Evaluate,
             deps,

@@ -3,14 +3,19 @@
 //! run it anywhere, a retry can resume it, and its outputs are the same
 //! bytes however often it was interrupted.
 //!
-//! Per-vertex bakes have four kinds of job:
+//! Per-vertex bakes have five kinds of job:
 //!
 //! * `sample`: a batch of poses of one set (reference, held-out, or the
 //!   noise re-trace) → their AO block; checkpointed after every pose.
 //! * `fit`: the reference blocks → the model and the baseline (each as an
-//!   asset container) and the fit's statistics.
-//! * `evaluate`: the model, the held-out blocks and the noise re-trace →
-//!   the evaluation and the ground truth's noise estimate.
+//!   asset container) and the fit's statistics; its progress counts the
+//!   fit's steps ([`FitStep`]).
+//! * `unseen`: one fold of the unseen-clips evaluation: the reference and
+//!   held-out blocks → the method refitted without one clip, judged on its
+//!   frames. The folds need not wait for `fit`, so workers run them beside
+//!   it and beside each other.
+//! * `evaluate`: the model, the held-out blocks, the noise re-trace and
+//!   the folds → the evaluation and the ground truth's noise estimate.
 //! * `assemble`: → the asset, the JSON report and the PSNR plot.
 //!
 //! Outputs are named blobs; a job finds its inputs by name in its
@@ -28,14 +33,14 @@ use crate::{
     },
     method::{
         Family,
-        vertex::{FitStats, Model, StaticAverage},
+        vertex::{FitStats, FitStep, Model, StaticAverage},
     },
     rig::pose::Pose,
     trace::{AoBlock, SceneOptions, no_progress, trace_poses},
 };
 
 use super::{
-    BakeError, BakeInputs, BakeParams, Evaluation, Plan,
+    BakeError, BakeInputs, BakeParams, Evaluation, Plan, UnseenClips, UnseenFold,
     preview::{PreviewInfo, PreviewModel, Renderer, STILL_FRACTIONS, Subject, preview_clip},
 };
 
@@ -95,6 +100,13 @@ pub enum JobSpec {
         /// Layers in this slab (the units of its progress).
         count: usize,
     },
+    /// One fold of the unseen-clips evaluation: the method refitted
+    /// without one clip and judged on its held-out frames (see
+    /// [`Plan::unseen_fold`]).
+    Unseen {
+        /// The fold: the clip's index in [`Plan::fold_clips`].
+        fold: usize,
+    },
     /// Judge the model on the held-out poses.
     Evaluate,
     /// Pack the asset, the report and the plot.
@@ -111,6 +123,7 @@ impl JobSpec {
             Self::Fit => "fit",
             Self::Face { .. } => "face",
             Self::Slab { .. } => "slab",
+            Self::Unseen { .. } => "unseen",
             Self::Evaluate => "evaluate",
             Self::Assemble => "assemble",
             Self::Preview => "preview",
@@ -118,11 +131,13 @@ impl JobSpec {
     }
 
     /// Units of progress the job is worth (poses for `sample`, time
-    /// samples for `face`, layers for `slab`, 1 else).
+    /// samples for `face`, layers for `slab`, the steps of a fit for `fit`
+    /// and `unseen`, 1 else).
     pub fn work(&self) -> u64 {
         match self {
             Self::Sample { count, .. } | Self::Slab { count, .. } => *count as u64,
             Self::Face { times, .. } => *times as u64,
+            Self::Fit | Self::Unseen { .. } => FitStep::ALL.len() as u64,
             _ => 1,
         }
     }
@@ -146,6 +161,7 @@ impl std::fmt::Display for JobSpec {
             Self::Slab { part, first, count } => {
                 write!(f, "slab part {part} layers {first}..{}", first + count)
             }
+            Self::Unseen { fold } => write!(f, "unseen fold {fold}"),
             other => f.write_str(other.kind()),
         }
     }
@@ -432,7 +448,8 @@ impl<'a> Bake<'a> {
             (JobSpec::Sample { set, first, count }, Family::Vertex) => {
                 self.sample(*set, *first, *count, resume, sink)
             }
-            (JobSpec::Fit, Family::Vertex) => self.fit(deps),
+            (JobSpec::Fit, Family::Vertex) => self.fit(deps, sink),
+            (JobSpec::Unseen { fold }, Family::Vertex) => self.unseen(*fold, deps, sink),
             (JobSpec::Evaluate, Family::Vertex) => self.evaluate(deps),
             (JobSpec::Assemble, Family::Vertex) => self.assemble(deps),
             (JobSpec::Face { face, times }, Family::Cubemap) => {
@@ -446,7 +463,11 @@ impl<'a> Bake<'a> {
             (JobSpec::Evaluate, Family::Grid) => self.grid_evaluate(deps),
             (JobSpec::Assemble, Family::Grid) => self.grid_assemble(deps),
             (
-                JobSpec::Sample { .. } | JobSpec::Fit | JobSpec::Face { .. } | JobSpec::Slab { .. },
+                JobSpec::Sample { .. }
+                | JobSpec::Fit
+                | JobSpec::Unseen { .. }
+                | JobSpec::Face { .. }
+                | JobSpec::Slab { .. },
                 _,
             ) => Err(JobError::Invalid(format!(
                 "a {} job is not part of a {} bake",
@@ -661,13 +682,18 @@ impl<'a> Bake<'a> {
             .header(&self.inputs.character_digest, &self.inputs.clip_digests)
     }
 
-    fn fit(&self, deps: &[&JobOutput]) -> Result<JobOutput, JobError> {
+    fn fit(&self, deps: &[&JobOutput], sink: &mut dyn JobSink) -> Result<JobOutput, JobError> {
         let reference = self.stack(PoseSet::Reference, deps)?;
         let started = Instant::now();
         let poses = self.plan.reference_poses();
-        let (model, fit) = self
-            .plan
-            .fit(&poses, &reference, &self.plan.reference_sources())?;
+        let steps = FitStep::ALL.len() as u64;
+        sink.progress(0, steps);
+        let (model, fit) = self.plan.fit_stepwise(
+            &poses,
+            &reference,
+            &self.plan.reference_sources(),
+            &mut |step| sink.progress(step.done(), steps),
+        )?;
         let baseline = Model::StaticAverage(StaticAverage::fit(
             &reference.select(self.plan.baseline_rows()),
         ));
@@ -677,6 +703,41 @@ impl<'a> Bake<'a> {
         out.push("fit.json", json(&FitInfo { fit }));
         out.timings.reference_trace_s = deps.iter().map(|d| d.timings.reference_trace_s).sum();
         out.timings.fit_s = started.elapsed().as_secs_f64();
+        Ok(out)
+    }
+
+    /// One fold of the unseen-clips evaluation (an `unseen` job): its
+    /// [`UnseenFold`] as `unseen-{fold}.json`.
+    fn unseen(
+        &self,
+        fold: usize,
+        deps: &[&JobOutput],
+        sink: &mut dyn JobSink,
+    ) -> Result<JobOutput, JobError> {
+        let clips = self.plan.fold_clips();
+        let Some(&clip) = clips.get(fold) else {
+            return Err(JobError::Invalid(format!(
+                "fold {fold} is outside the bake's {} unseen-clip folds",
+                clips.len()
+            )));
+        };
+        let reference = self.stack(PoseSet::Reference, deps)?;
+        let truth = self.stack(PoseSet::HeldOut, deps)?;
+        let started = Instant::now();
+        let steps = FitStep::ALL.len() as u64;
+        sink.progress(0, steps);
+        let result = self.plan.unseen_fold(
+            clip,
+            &self.plan.reference_poses(),
+            &reference,
+            &self.plan.reference_sources(),
+            &self.plan.test_poses(),
+            &truth,
+            &mut |step| sink.progress(step.done(), steps),
+        )?;
+        let mut out = JobOutput::default();
+        out.push(&unseen_output(fold), json(&result));
+        out.timings.unseen_s = started.elapsed().as_secs_f64();
         Ok(out)
     }
 
@@ -693,10 +754,15 @@ impl<'a> Bake<'a> {
         let started = Instant::now();
         let tests = self.plan.test_poses();
         let mut evaluation = self.plan.evaluate(&model, &baseline, &tests, &truth);
-        if !self.plan.fold_clips().is_empty() {
-            let reference = self.stack(PoseSet::Reference, deps)?;
-            let poses = self.plan.reference_poses();
-            evaluation.unseen_clips = self.plan.unseen_clips(&poses, &reference, &tests, &truth)?;
+        // The folds, in their order, from the `unseen` jobs.
+        let folds = (0..self.plan.fold_clips().len())
+            .map(|fold| {
+                let name = unseen_output(fold);
+                parse::<UnseenFold>(named(find(deps, &name)?, &name)?)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        if !folds.is_empty() {
+            evaluation.unseen_clips = Some(UnseenClips::of(folds));
         }
         let noise_rows = self.plan.noise_rows();
         let ground_truth_noise = NoiseEstimate::of(&noise_rows, &truth, &again);
@@ -715,6 +781,7 @@ impl<'a> Bake<'a> {
         );
         out.timings = Timings {
             test_trace_s: deps.iter().map(|d| d.timings.test_trace_s).sum(),
+            unseen_s: deps.iter().map(|d| d.timings.unseen_s).sum(),
             evaluate_s: started.elapsed().as_secs_f64(),
             ..fit.timings
         };
@@ -771,6 +838,11 @@ impl<'a> Bake<'a> {
         out.timings = evaluated.timings;
         Ok(out)
     }
+}
+
+/// The output of the `unseen` job of `fold`.
+fn unseen_output(fold: usize) -> String {
+    format!("unseen-{fold}.json")
 }
 
 pub(super) fn json(value: &impl Serialize) -> Vec<u8> {

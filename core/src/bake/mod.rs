@@ -7,8 +7,9 @@
 //! 3. [`Plan`] ([`plan`]): the pose spaces and the seeded reference,
 //!    held-out and noise poses.
 //! 4. [`JobGraph`] ([`graph`]): the bake cut into jobs.
-//! 5. The job functions ([`jobs`]): `sample`, `fit`, `evaluate`,
-//!    `assemble`, each `(spec, dependency outputs, checkpoint?) → outputs`,
+//! 5. The job functions ([`jobs`]): `sample`, `fit`, `unseen` (one fold
+//!    of the unseen-clips evaluation), `evaluate`, `assemble`, each
+//!    `(spec, dependency outputs, checkpoint?) → outputs`,
 //!    and `preview` ([`preview`]), which also needs a [`Renderer`]; a
 //!    cubemap bake's `face`, `assemble` and `evaluate` are in [`cubemap`],
 //!    a grid bake's `slab`, `assemble` and `evaluate` in [`grid`].
@@ -42,7 +43,7 @@ pub use plan::{Plan, TestPose};
 pub use preview::{
     Camera, Image, Panel, Preview, PreviewInfo, PreviewModel, RenderFrame, RenderScene, Renderer,
 };
-pub use runner::{Baked, bake_in_process, run_graph};
+pub use runner::{Baked, JobEvent, bake_in_process, run_graph};
 
 pub use crate::digest::sha256_hex;
 pub use crate::method::vertex::FitStats;

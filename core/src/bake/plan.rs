@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::{
     Character, Clip,
     method::Family,
-    method::vertex::{AssetHeaderFields, FitStats, Model, Source},
+    method::vertex::{AssetHeaderFields, FitStats, FitStep, Model, Source},
     pose_space::ParamError,
     pose_space::{ClipFrame, Handles, JointAngles, LayoutOptions, random_clip_frames},
     rig::pose::Pose,
@@ -322,6 +322,18 @@ impl<'a> Plan<'a> {
         ao: &AoBlock,
         sources: &[Source],
     ) -> Result<(Model, FitStats), BakeError> {
+        self.fit_stepwise(poses, ao, sources, &mut |_| {})
+    }
+
+    /// [`Plan::fit`], calling `on_step` (on this thread) as each step of
+    /// the fit ends.
+    pub fn fit_stepwise(
+        &self,
+        poses: &[Pose],
+        ao: &AoBlock,
+        sources: &[Source],
+        on_step: &mut dyn FnMut(FitStep),
+    ) -> Result<(Model, FitStats), BakeError> {
         let p = &self.params;
         crate::method::vertex::fit(
             p.method,
@@ -332,6 +344,7 @@ impl<'a> Plan<'a> {
             poses,
             ao,
             sources,
+            on_step,
         )
         .map_err(BakeError::Fit)
     }

@@ -8,7 +8,8 @@ use std::collections::HashMap;
 use crate::asset::report::BakeReport;
 
 use super::{
-    Bake, GraphOptions, JobError, JobGraph, JobOutput, JobSpec, NoSink, PlannedJob,
+    Bake, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec, NoSink,
+    PlannedJob, Stop,
     preview::{PreviewInfo, Renderer},
 };
 
@@ -59,17 +60,33 @@ impl Baked {
     }
 }
 
-/// Runs every job of `graph` in order. Jobs whose spec is in `known` are
-/// not run again: their output is taken from there (a bench that fits many
-/// variants to one traced set passes the `sample` outputs). A `preview`
-/// job needs `renderer`. `on_done` is called after each job with its
-/// index.
+/// What [`run_graph`] tells its caller about a job.
+#[derive(Debug, Clone, Copy)]
+pub enum JobEvent<'o> {
+    /// `done` of the job's `total` units of work are done (a `sample` job
+    /// after each pose, a fit after each step).
+    Progress {
+        /// Units done.
+        done: u64,
+        /// Units in all.
+        total: u64,
+    },
+    /// The job finished with this output.
+    Done(&'o JobOutput),
+}
+
+/// Runs every job of `graph` in order (each job spreads its own work over
+/// the threads). Jobs whose spec is in `known` are not run again: their
+/// output is taken from there (a bench that fits many variants to one
+/// traced set passes the `sample` outputs). A `preview` job needs
+/// `renderer`. `on_event` hears each job's progress and its end, with
+/// the job's index.
 pub fn run_graph(
     bake: &Bake<'_>,
     graph: &JobGraph,
     known: &HashMap<JobSpec, JobOutput>,
     mut renderer: Option<&mut dyn Renderer>,
-    on_done: &mut dyn FnMut(usize, &PlannedJob, &JobOutput),
+    on_event: &mut dyn FnMut(usize, &PlannedJob, JobEvent<'_>),
 ) -> Result<Vec<JobOutput>, JobError> {
     let mut outputs: Vec<JobOutput> = Vec::with_capacity(graph.jobs.len());
     for (i, job) in graph.jobs.iter().enumerate() {
@@ -79,14 +96,45 @@ pub fn run_graph(
                 let deps: Vec<&JobOutput> = job.deps.iter().map(|&d| &outputs[d]).collect();
                 match (&job.spec, renderer.as_deref_mut()) {
                     (JobSpec::Preview, Some(r)) => bake.preview(&deps, r)?,
-                    (spec, _) => bake.run_job(spec, &deps, None, &mut NoSink)?,
+                    (spec, _) => {
+                        let mut sink = Reporting {
+                            report: &mut |done, total| {
+                                on_event(i, job, JobEvent::Progress { done, total });
+                            },
+                        };
+                        bake.run_job(spec, &deps, None, &mut sink)?
+                    }
                 }
             }
         };
-        on_done(i, job, &out);
+        on_event(i, job, JobEvent::Done(&out));
         outputs.push(out);
     }
     Ok(outputs)
+}
+
+/// The in-process runner's sink: no checkpoints (nothing resumes), progress
+/// passed on.
+struct Reporting<'a> {
+    report: &'a mut dyn FnMut(u64, u64),
+}
+
+impl JobSink for Reporting<'_> {
+    fn checkpoint(&mut self, checkpoint: Checkpoint) -> Result<(), Stop> {
+        NoSink.checkpoint(checkpoint)
+    }
+
+    fn progress(&mut self, done: u64, total: u64) {
+        (self.report)(done, total);
+    }
+
+    fn save_part(&mut self, bytes: &[u8]) -> Option<String> {
+        NoSink.save_part(bytes)
+    }
+
+    fn load_part(&mut self, digest: &str) -> Result<Vec<u8>, JobError> {
+        NoSink.load_part(digest)
+    }
 }
 
 /// A whole bake in this process with the default cutting; previews when

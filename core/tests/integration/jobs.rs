@@ -6,11 +6,12 @@ use std::collections::HashMap;
 
 use aobake_core::{
     asset::report::Report,
+    bake::JobEvent,
     bake::{
         Bake, BakeError, BakeParams, Checkpoint, GraphOptions, JobError, JobOutput, JobSink,
         JobSpec, NoSink, PoseSet, Stop, bake_in_process, run_graph,
     },
-    method::Method,
+    method::{Method, vertex::FitStep},
 };
 use serde_json::json;
 
@@ -195,12 +196,16 @@ fn the_graph_lists_dependencies_first_and_covers_every_pose() {
     for range in [0..1, 1..4, 2..tests.len()] {
         assert_eq!(bake.poses(PoseSet::HeldOut, range.clone()), tests[range]);
     }
+    // One clip: no unseen-clips folds. The fit is worth its steps; the
+    // evaluate, assemble and preview jobs one each.
+    assert!(bake.plan.fold_clips().is_empty());
     assert_eq!(
         graph.total_work(),
         (bake.poses_in(PoseSet::Reference)
             + bake.poses_in(PoseSet::HeldOut)
             + bake.poses_in(PoseSet::Noise)
-            + 4) as u64
+            + FitStep::ALL.len()
+            + 3) as u64
     );
     // Specs travel through the queue as JSON.
     for job in &graph.jobs {
@@ -302,4 +307,89 @@ fn parameters_come_from_one_schema_with_named_errors() {
         (1536 + 32 + 10 + 8) as u128 * 1000 * 256,
         "reference, random held-out, clip frames and the noise re-trace"
     );
+}
+
+#[test]
+fn unseen_clip_folds_are_jobs_of_their_own_and_threads_change_no_byte() {
+    let imported = util::load(&util::character_path("InterpolationTest.glb").unwrap());
+    let inputs = util::inputs(&imported.character, &imported.clips);
+    for method in [Method::VertexLinear, Method::VertexClustered] {
+        let mut params = quick(method);
+        params.poses = 48;
+        params.samples = 16;
+        let bake = Bake::new(&inputs, params).unwrap();
+        let folds = bake.plan.fold_clips().len();
+        assert!(folds >= 2, "{folds} folds");
+        let graph = bake.graph(GraphOptions {
+            previews: false,
+            ..GraphOptions::default()
+        });
+        let index = |spec: &JobSpec| graph.jobs.iter().position(|j| j.spec == *spec).unwrap();
+        let evaluate = &graph.jobs[index(&JobSpec::Evaluate)];
+        for fold in 0..folds {
+            let i = index(&JobSpec::Unseen { fold });
+            // A fold needs traced poses only (not the fit), so workers run
+            // it beside the fit; evaluate gathers every fold.
+            assert!(
+                graph.jobs[i]
+                    .deps
+                    .iter()
+                    .all(|&d| matches!(graph.jobs[d].spec, JobSpec::Sample { .. })),
+                "{method} fold {fold}"
+            );
+            assert!(evaluate.deps.contains(&i));
+        }
+        assert!(
+            !graph
+                .jobs
+                .iter()
+                .any(|j| j.spec == JobSpec::Unseen { fold: folds })
+        );
+
+        // The same bytes and the same evaluation on 1 and on 3 threads.
+        let mut events: Vec<(String, u64, u64)> = Vec::new();
+        let run = |threads: usize, events: &mut Vec<(String, u64, u64)>| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| {
+                    run_graph(&bake, &graph, &HashMap::new(), None, &mut |_, job, e| {
+                        if let JobEvent::Progress { done, total } = e
+                            && matches!(job.spec, JobSpec::Fit | JobSpec::Unseen { .. })
+                        {
+                            events.push((job.spec.to_string(), done, total));
+                        }
+                    })
+                    .unwrap()
+                })
+        };
+        let one = run(1, &mut events);
+        let three = run(3, &mut Vec::new());
+        let asset = |out: &[JobOutput]| out.last().unwrap().get("asset").unwrap().to_vec();
+        assert!(asset(&one) == asset(&three), "{method}: the assets differ");
+        let report = |out: &[JobOutput]| -> Report {
+            serde_json::from_slice(out.last().unwrap().get("report.json").unwrap()).unwrap()
+        };
+        let (a, b) = (report(&one), report(&three));
+        assert_eq!(a.evaluation, b.evaluation, "{method}");
+        assert_eq!(a.fit, b.fit, "{method}");
+        let unseen = a.evaluation.unseen_clips.as_ref().unwrap();
+        assert_eq!(unseen.folds.len(), folds);
+        assert!(a.timings.unseen_s > 0.0);
+        // Every fit job's progress counts its steps in order: 0, 1, …, 4
+        // of 4, for the fit and for each fold.
+        let steps = FitStep::ALL.len() as u64;
+        for name in
+            std::iter::once("fit".to_owned()).chain((0..folds).map(|f| format!("unseen fold {f}")))
+        {
+            let seen: Vec<(u64, u64)> = events
+                .iter()
+                .filter(|(n, ..)| *n == name)
+                .map(|&(_, d, t)| (d, t))
+                .collect();
+            let want: Vec<(u64, u64)> = (0..=steps).map(|d| (d, steps)).collect();
+            assert_eq!(seen, want, "{method} {name}");
+        }
+    }
 }

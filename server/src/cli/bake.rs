@@ -10,7 +10,9 @@ use anyhow::{Context as _, bail};
 use aobake_core::{
     Limits,
     asset::report::{BakeReport, CubemapReport, GridReport, Report},
-    bake::{Bake, BakeInputs, Baked, GraphOptions, JobOutput, JobSpec, Renderer, run_graph},
+    bake::{
+        Bake, BakeInputs, Baked, GraphOptions, JobEvent, JobOutput, JobSpec, Renderer, run_graph,
+    },
     method::vertex::Rows,
 };
 
@@ -83,9 +85,24 @@ pub(super) fn run_with_progress(
         ..GraphOptions::default()
     });
     let bar = progress_bar(graph.total_work(), "baking");
-    let outputs = run_graph(bake, &graph, known, renderer, &mut |_, job, _| {
-        bar.inc(job.spec.work());
-        bar.set_message(job.spec.to_string());
+    // Units of the running job already on the bar: the bar moves inside a
+    // job (a sample's poses, a fit's steps) and catches up at its end.
+    let mut shown = 0u64;
+    let outputs = run_graph(bake, &graph, known, renderer, &mut |_, job, event| {
+        let work = job.spec.work();
+        let done = match event {
+            JobEvent::Progress { done, total } => {
+                bar.set_message(format!("{} ({done}/{total})", job.spec));
+                done.min(work)
+            }
+            JobEvent::Done(_) => work,
+        };
+        bar.inc(done.saturating_sub(shown));
+        shown = if matches!(event, JobEvent::Done(_)) {
+            0
+        } else {
+            shown.max(done)
+        };
     })?;
     bar.finish_and_clear();
     Ok(outputs)

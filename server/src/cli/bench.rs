@@ -49,6 +49,11 @@ enum What {
     /// A cubemap face job's tracing rate (Kroon's Eq. 3.1 from points in
     /// space) beside the per-vertex tracer's on the same posed meshes.
     Cubemap(super::bench_cubemap::Args),
+    /// A whole bake here, stage by stage: the seconds and peak memory of
+    /// tracing, each step of the fit and of the unseen-clip folds
+    /// (cross-validation of the reference rows, of the ridge, of the
+    /// basis), evaluation, assembly and previews.
+    Bake(super::bench_bake::Args),
 }
 
 #[derive(Debug, clap::Args)]
@@ -120,6 +125,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         What::Api(a) => super::bench_service::api(a),
         What::Preview(a) => super::preview::bench(a),
         What::Cubemap(a) => super::bench_cubemap::run(a),
+        What::Bake(a) => super::bench_bake::run(a),
     }
 }
 

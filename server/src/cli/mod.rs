@@ -2,6 +2,7 @@
 
 mod bake;
 mod bench;
+mod bench_bake;
 mod bench_cubemap;
 mod bench_service;
 pub mod client;

@@ -268,6 +268,51 @@ impl FitStats {
     }
 }
 
+/// The steps of a fit, reported in this order as each ends (what a fit
+/// job's progress counts and `aobake bench bake` times). A step with
+/// nothing to do ends at once.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FitStep {
+    /// Cross-validation over clips of the reference rows (`reference = cv`).
+    ReferenceRows,
+    /// The model: its ridge, locality (or per-vertex columns) and clamp by
+    /// cross-validation over clips, and the fit to every row.
+    Model,
+    /// Cross-validation over clips of the eigen-AO basis.
+    Basis,
+    /// The compression into the chosen basis.
+    Compress,
+}
+
+impl FitStep {
+    /// Every step, in order.
+    pub const ALL: [Self; 4] = [
+        Self::ReferenceRows,
+        Self::Model,
+        Self::Basis,
+        Self::Compress,
+    ];
+
+    /// Steps done once this one has ended.
+    pub fn done(self) -> u64 {
+        Self::ALL
+            .iter()
+            .position(|&s| s == self)
+            .map_or(0, |i| i as u64 + 1)
+    }
+
+    /// Its name, as benches and progress lines print it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::ReferenceRows => "reference rows cv",
+            Self::Model => "ridge cv and fit",
+            Self::Basis => "basis cv",
+            Self::Compress => "compress",
+        }
+    }
+}
+
 /// Fits `method` to the AO of the reference `poses` (the `fit` job's
 /// work): the one place that turns a method name into a fitted model.
 /// `seed` seeds k-means; `sources` says where each pose comes from, what
@@ -277,7 +322,8 @@ impl FitStats {
 /// candidate scored by vertex-linear over every parameter with the ridge
 /// its cross-validation chooses;
 /// the rows of random poses and clip frames when there are too few clips
-/// to choose. The error says what to change.
+/// to choose. The error says what to change. `on_step` is called on
+/// this thread as each [`FitStep`] ends.
 #[allow(clippy::too_many_arguments)]
 pub fn fit(
     method: Method,
@@ -288,6 +334,7 @@ pub fn fit(
     poses: &[Pose],
     ao: &AoBlock,
     sources: &[Source],
+    on_step: &mut dyn FnMut(FitStep),
 ) -> Result<(Model, FitStats), String> {
     let (joint_angles, _) = spaces;
     let pose_dependent = matches!(method, Method::VertexLinear | Method::VertexClustered);
@@ -316,9 +363,10 @@ pub fn fit(
     } else {
         (Rows::All, None)
     };
+    on_step(FitStep::ReferenceRows);
     let (model, mut stats) = if rows == Rows::All {
         fit_rows(
-            method, options, seed, character, spaces, poses, &q, ao, sources,
+            method, options, seed, character, spaces, poses, &q, ao, sources, on_step,
         )?
     } else {
         let keep = rows.select(sources);
@@ -327,7 +375,7 @@ pub fn fit(
         let sources: Vec<Source> = keep.iter().map(|&r| sources[r]).collect();
         let ao = ao.select(keep.iter().copied());
         fit_rows(
-            method, options, seed, character, spaces, &poses, &q, &ao, &sources,
+            method, options, seed, character, spaces, &poses, &q, &ao, &sources, on_step,
         )?
     };
     match &mut stats {
@@ -351,6 +399,7 @@ fn fit_rows(
     q: &[Vec<f32>],
     ao: &AoBlock,
     sources: &[Source],
+    on_step: &mut dyn FnMut(FitStep),
 ) -> Result<(Model, FitStats), String> {
     let skeleton = &character.skeleton;
     let (linear, clustered) = options;
@@ -487,6 +536,7 @@ fn fit_rows(
             return Err(format!("{method} is not a per-vertex method"));
         }
     };
+    on_step(FitStep::Model);
     let (most, threshold, basis_cv) = match method {
         Method::VertexLinear => (linear.basis, linear.basis_threshold, linear.basis_cv),
         Method::VertexClustered => (
@@ -515,6 +565,7 @@ fn fit_rows(
                     &q,
                     &ao,
                     &sources,
+                    &mut |_| {},
                 );
                 fitted.ok().map(|(m, _)| m)
             };
@@ -522,6 +573,7 @@ fn fit_rows(
         } else {
             None
         };
+        on_step(FitStep::Basis);
         let (rank, threshold) = choice
             .as_ref()
             .map_or((most, threshold), |c| (c.rank, c.threshold));
@@ -531,7 +583,10 @@ fn fit_rows(
             FitStats::VertexClustered(s) => (s.basis, s.basis_cv) = (basis, choice),
             FitStats::StaticAverage => {}
         }
+    } else {
+        on_step(FitStep::Basis);
     }
+    on_step(FitStep::Compress);
     Ok((model, stats))
 }
 
