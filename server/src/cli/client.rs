@@ -242,6 +242,7 @@ fn wait(api: &Api, id: i64) -> anyhow::Result<()> {
         );
         bar.set_length(total);
         bar.set_position(done);
+        bar.set_message(running_jobs(&b));
         match b["state"].as_str().unwrap_or("") {
             "done" => {
                 bar.finish_and_clear();
@@ -264,6 +265,30 @@ fn wait(api: &Api, id: i64) -> anyhow::Result<()> {
             }
             _ => std::thread::sleep(Duration::from_millis(500)),
         }
+    }
+}
+
+/// The running jobs of a bake view and how far each is (`fit 2/4,
+/// unseen 1/4`), or the bake's state when none runs.
+fn running_jobs(bake: &serde_json::Value) -> String {
+    let running: Vec<String> = bake["jobs"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|j| j["state"] == "running")
+        .map(|j| {
+            format!(
+                "{} {}/{}",
+                j["kind"].as_str().unwrap_or("job"),
+                j["progress"].as_i64().unwrap_or(0),
+                j["work"].as_i64().unwrap_or(1)
+            )
+        })
+        .collect();
+    if running.is_empty() {
+        bake["state"].as_str().unwrap_or("").to_owned()
+    } else {
+        running.join(", ")
     }
 }
 

@@ -114,11 +114,16 @@ pub(crate) async fn heartbeat(
     ApiPath(id): ApiPath<i64>,
     Body(req): Body<HeartbeatRequest>,
 ) -> ApiResult<Json<HeartbeatReply>> {
-    let stop = state
+    let beat = state
         .store
         .heartbeat(id, &req.token, req.progress, &state.policy)
         .await?;
-    Ok(Json(HeartbeatReply { stop }))
+    // Progress inside a job (a sample's poses, a fit's steps) reaches the
+    // bake's listeners, whose views add running jobs' progress.
+    if beat.moved {
+        state.announce(&beat.bake);
+    }
+    Ok(Json(HeartbeatReply { stop: beat.stop }))
 }
 
 /// A checkpoint whose blob is stored.

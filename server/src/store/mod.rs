@@ -325,6 +325,17 @@ pub struct NewBake {
     pub max_attempts: i64,
 }
 
+/// What a heartbeat found.
+#[derive(Debug, Clone)]
+pub struct Beat {
+    /// The job should stop: its bake is no longer active.
+    pub stop: bool,
+    /// The job's progress changed (its bake's listeners are told).
+    pub moved: bool,
+    /// The job's bake.
+    pub bake: BakeRow,
+}
+
 /// A leased job and what the worker needs to run it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Lease {
@@ -474,15 +485,16 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn jobs(&self, bake: i64) -> Result<Vec<JobRow>>;
     /// Leases the most urgent ready job for `worker`, if any.
     async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>>;
-    /// Extends a lease and records progress; returns whether the job
-    /// should stop (its bake was cancelled or paused does not stop it).
+    /// Extends a lease and records progress; says whether the job should
+    /// stop (its bake was cancelled; paused does not stop it) and whether
+    /// its progress moved.
     async fn heartbeat(
         &self,
         job: i64,
         token: &str,
         progress: i64,
         policy: &QueuePolicy,
-    ) -> Result<bool>;
+    ) -> Result<Beat>;
     /// Records a checkpoint for the next attempt.
     async fn checkpoint(&self, job: i64, token: &str, checkpoint: &CheckpointRef) -> Result<()>;
     /// Completes a job with its outputs; returns its bake afterwards.

@@ -17,7 +17,7 @@ use sqlx::{
 
 use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
 use super::{
-    Action, BakeRow, BakeState, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
+    Action, BakeRow, BakeState, Beat, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
     QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow, lease_token,
 };
 
@@ -384,7 +384,7 @@ impl Store for PgStore {
         token: &str,
         progress: i64,
         policy: &QueuePolicy,
-    ) -> Result<bool> {
+    ) -> Result<Beat> {
         in_tx!(self.pool.begin().await?, |tx| {
             // The queue can lose this in a power cut without harm (a lost
             // lease is re-leased, a lost checkpoint resumes from the one
@@ -409,7 +409,11 @@ impl Store for PgStore {
             .bind(j.worker.as_deref().unwrap_or(""))
             .execute(&mut *tx)
             .await?;
-            Ok(!bake.state.is_active())
+            Ok(Beat {
+                stop: !bake.state.is_active(),
+                moved: progress.clamp(0, j.work) != j.progress,
+                bake,
+            })
         })
     }
 

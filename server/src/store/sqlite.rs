@@ -16,7 +16,7 @@ use sqlx::{
 
 use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
 use super::{
-    Action, BakeRow, BakeState, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
+    Action, BakeRow, BakeState, Beat, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
     QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow, lease_token,
 };
 
@@ -413,7 +413,7 @@ impl Store for SqliteStore {
         token: &str,
         progress: i64,
         policy: &QueuePolicy,
-    ) -> Result<bool> {
+    ) -> Result<Beat> {
         let _turn = self.turn(Durability::Queue).await?;
         in_tx!(self.writer.begin_with("BEGIN IMMEDIATE").await?, |tx| {
             let j = leased(&mut tx, job, token).await?;
@@ -433,7 +433,11 @@ impl Store for SqliteStore {
             .bind(j.worker.as_deref().unwrap_or(""))
             .execute(&mut *tx)
             .await?;
-            Ok(!bake.state.is_active())
+            Ok(Beat {
+                stop: !bake.state.is_active(),
+                moved: progress.clamp(0, j.work) != j.progress,
+                bake,
+            })
         })
     }
 

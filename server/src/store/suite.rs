@@ -177,7 +177,12 @@ async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {
     assert_eq!((a.job.index, b2.job.index), (0, 1));
     assert!(store.lease("w3", &p).await.unwrap().is_none(), "fit waits");
     assert_eq!(a.job.attempts, 1);
-    assert!(!store.heartbeat(a.job.id, &a.token, 1, &p).await.unwrap());
+    let beat = store.heartbeat(a.job.id, &a.token, 1, &p).await.unwrap();
+    assert!(!beat.stop && beat.moved);
+    assert_eq!(beat.bake.id, a.job.bake_id);
+    // The same progress again: nothing moved.
+    let beat = store.heartbeat(a.job.id, &a.token, 1, &p).await.unwrap();
+    assert!(!beat.stop && !beat.moved);
     store
         .checkpoint(
             a.job.id,

@@ -285,3 +285,60 @@ fn bake_names_what_is_wrong() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("--out"), "{}", stderr(&out));
 }
+
+#[test]
+fn bench_bake_times_every_stage_and_each_step_of_the_fits() {
+    // InterpolationTest's nine clips: a fit with cross-validation and
+    // unseen-clip folds, each step its own line.
+    let cubes = sample("InterpolationTest/InterpolationTest.glb");
+    let out = aobake(&[
+        "bench",
+        "bake",
+        cubes.to_str().unwrap(),
+        "--method",
+        "vertex-linear",
+        "--poses",
+        "48",
+        "--samples",
+        "16",
+        "--eval-poses",
+        "2",
+        "--param",
+        "eval_folds=2",
+        "--threads",
+        "2",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("2 threads"), "{stdout}");
+    // (stage, jobs): every trace set, each fit step once, each fold's
+    // steps twice (two folds).
+    let jobs = |stage: &str| -> Option<usize> {
+        stdout
+            .lines()
+            .find(|l| l.starts_with(&format!("| {stage} |")))
+            .and_then(|l| l.split('|').nth(2))
+            .and_then(|c| c.trim().parse().ok())
+    };
+    for stage in ["trace reference", "trace held-out", "trace noise"] {
+        assert!(jobs(stage).is_some_and(|n| n > 0), "{stage}\n{stdout}");
+    }
+    for step in [
+        "reference rows cv",
+        "ridge cv and fit",
+        "basis cv",
+        "compress",
+    ] {
+        assert_eq!(jobs(&format!("fit: {step}")), Some(1), "{step}\n{stdout}");
+        assert_eq!(
+            jobs(&format!("unseen: {step}")),
+            Some(2),
+            "{step}\n{stdout}"
+        );
+    }
+    assert_eq!(jobs("evaluate"), Some(1), "{stdout}");
+    assert_eq!(jobs("assemble"), Some(1), "{stdout}");
+    assert!(stdout.contains("| whole bake |"), "{stdout}");
+    assert!(stdout.contains("MB |"), "peak memory\n{stdout}");
+    assert!(stdout.contains("× the reference trace"), "{stdout}");
+}

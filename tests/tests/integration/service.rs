@@ -496,3 +496,51 @@ fn a_worker_without_any_gpu_adapter_finishes_the_bake_and_says_why_there_are_no_
     let why = previews["unavailable"].as_str().unwrap();
     assert!(why.contains("no GPU adapter"), "{why}");
 }
+
+#[test]
+fn workers_share_a_bakes_fit_work_and_the_asset_is_byte_identical() {
+    // Fox has three clips: three unseen-clips folds, each a job of its
+    // own that needs only traced poses, so two workers run folds beside
+    // the fit. The asset and the folds' figures equal aobake bake's.
+    let mut env = TestEnv::start(Options::default());
+    env.start_worker(&[]);
+    env.start_worker(&[]);
+    let fox = character("Fox");
+    let digest = upload(&env, &fox);
+    let (status, b) = submit(&env, &digest, 24);
+    assert_eq!(status, 202, "{b}");
+    let id = b["id"].as_i64().unwrap();
+    let bake = env.wait_bake(id, Duration::from_secs(240));
+    assert_eq!(bake["state"], "done", "{bake}\n{}", env.worker_logs());
+    let jobs = bake["jobs"].as_array().unwrap();
+    let unseen: Vec<&serde_json::Value> = jobs.iter().filter(|j| j["kind"] == "unseen").collect();
+    assert_eq!(unseen.len(), 3, "{bake}");
+    // A fit job is worth its four steps, and completes with all of them.
+    for j in unseen.iter().chain(
+        jobs.iter()
+            .filter(|j| j["kind"] == "fit")
+            .collect::<Vec<_>>()
+            .iter(),
+    ) {
+        assert_eq!(
+            (j["state"].as_str(), j["work"].as_i64()),
+            (Some("completed"), Some(4)),
+            "{j}"
+        );
+    }
+    let local = local_bake(env.dir.path(), &fox, 24);
+    assert!(
+        asset(&env, &bake) == local,
+        "the service's asset differs from aobake bake's"
+    );
+    let (status, report) = env
+        .request("GET", &format!("/v1/bakes/{id}/report"), ADMIN, None)
+        .unwrap();
+    assert_eq!(status, 200, "{report}");
+    let local_report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(env.dir.path().join("local-24.json")).unwrap())
+            .unwrap();
+    let folds = &report["evaluation"]["unseen_clips"];
+    assert_eq!(folds["folds"].as_array().map(Vec::len), Some(3), "{report}");
+    assert_eq!(folds, &local_report["evaluation"]["unseen_clips"]);
+}

@@ -204,8 +204,9 @@ pub(super) struct Truncations {
     mix: Mat<f64>,
     /// `(R_j / σ_j) · c`.
     offset: Vec<f64>,
-    /// `σ_j R_j`, rounded to f16 as stored.
-    rows: Mat<f64>,
+    /// `σ_j R_j`, rounded to f16 as stored, one row per axis (row-major:
+    /// the sweeps read a row at a time).
+    rows: Vec<Vec<f64>>,
 }
 
 impl Truncations {
@@ -223,9 +224,13 @@ impl Truncations {
         let s2: Vec<f64> = (0..axes.nrows())
             .map(|j| 1.0 / axes.row(j).norm_l2().powi(2))
             .collect();
-        let rows = Mat::from_fn(axes.nrows(), axes.ncols(), |j, i| {
-            f16::from_f64(axes[(j, i)] * s2[j]).to_f64()
-        });
+        let rows = (0..axes.nrows())
+            .map(|j| {
+                (0..axes.ncols())
+                    .map(|i| f16::from_f64(axes[(j, i)] * s2[j]).to_f64())
+                    .collect()
+            })
+            .collect();
         let mix = &c * axes.transpose();
         let offset = (0..axes.nrows())
             .map(|j| (0..mean.len()).map(|i| axes[(j, i)] * mean[i]).sum())
@@ -240,7 +245,7 @@ impl Truncations {
 
     /// Axes there are.
     pub(super) fn rank(&self) -> usize {
-        self.rows.nrows()
+        self.rows.len()
     }
 
     /// The coordinates `a_j` along every axis of a pose's prediction
@@ -267,7 +272,7 @@ impl Truncations {
         let mut out = self.mean.clone();
         let t = f64::from(threshold);
         for (j, &a) in coordinates.iter().enumerate().take(rank.min(self.rank())) {
-            let row = self.rows.row(j);
+            let row = &self.rows[j];
             for (i, o) in out.iter_mut().enumerate() {
                 if row[i].abs() >= t {
                     *o += a * row[i];
@@ -294,7 +299,7 @@ impl Truncations {
         (0..most)
             .map(|j| {
                 if j < self.rank() {
-                    kept += self.rows.row(j).iter().filter(|x| x.abs() >= t).count();
+                    kept += self.rows[j].iter().filter(|x| x.abs() >= t).count();
                 }
                 1.0 + kept as f64 / v
             })
@@ -317,7 +322,7 @@ impl Truncations {
         let axes = coordinates.iter().take(self.rank()).map(Some);
         for (j, a) in axes.chain(std::iter::repeat(None)).take(most).enumerate() {
             if let Some(&a) = a {
-                let row = self.rows.row(j);
+                let row = &self.rows[j];
                 for (i, o) in out.iter_mut().enumerate() {
                     if row[i].abs() >= t {
                         *o += a * row[i];
