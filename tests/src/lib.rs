@@ -193,6 +193,8 @@ impl TestEnv {
             ])
             .env("AOBAKE_TOKEN", token)
             .env("RAYON_NUM_THREADS", "1")
+            // Every checkpoint saved: the crash tests resume from them.
+            .env("AOBAKE_CHECKPOINT_SECS", "0")
             .stdout(Stdio::null())
             .stderr(log);
         for (k, v) in env {

@@ -30,6 +30,10 @@ pub struct WorkerConfig {
     pub wait_secs: u64,
     /// Seconds between heartbeats.
     pub heartbeat_secs: f64,
+    /// Seconds of work between saved checkpoints: a checkpoint offered
+    /// sooner after the last saved one (or the job's start) is skipped,
+    /// so a crash costs at most this much work. 0 saves every one.
+    pub checkpoint_secs: f64,
     /// On SIGTERM, a running job may take this long to finish before it is
     /// stopped at its next checkpoint and its lease given back.
     pub shutdown_secs: u64,
@@ -116,10 +120,35 @@ struct Sink<'a> {
     token: &'a str,
     flags: &'a Flags,
     fault: Option<&'a str>,
+    /// Checkpoints are saved at most this often.
+    every: Duration,
+    /// When the last checkpoint was saved (the job's start before any).
+    last_saved: Instant,
+}
+
+impl Sink<'_> {
+    /// Whether to stop now: the lease is lost or shutdown asks for it.
+    fn stop(&self) -> Result<(), Stop> {
+        if self.flags.lost.load(Ordering::Relaxed) {
+            return Err(Stop("the lease was lost".into()));
+        }
+        if self.flags.release.load(Ordering::Relaxed) {
+            return Err(Stop("shutting down".into()));
+        }
+        Ok(())
+    }
 }
 
 impl JobSink for Sink<'_> {
     fn checkpoint(&mut self, checkpoint: Checkpoint) -> Result<(), Stop> {
+        // Too soon after the last one: not worth a save (the next attempt
+        // resumes from the last saved checkpoint, with the same result).
+        // A stop asked for is saved first, so the work is kept.
+        let asked_to_stop = self.stop().is_err();
+        if self.last_saved.elapsed() < self.every && !asked_to_stop {
+            return Ok(());
+        }
+        self.last_saved = Instant::now();
         let saved = self.client.put_blob(&checkpoint.data).and_then(|blob| {
             self.client.checkpoint(
                 self.job,
@@ -145,13 +174,7 @@ impl JobSink for Sink<'_> {
             // the last one; the job goes on.
             Err(e) => eprintln!("job {}: checkpoint not saved: {e}", self.job),
         }
-        if self.flags.lost.load(Ordering::Relaxed) {
-            return Err(Stop("the lease was lost".into()));
-        }
-        if self.flags.release.load(Ordering::Relaxed) {
-            return Err(Stop("shutting down".into()));
-        }
-        Ok(())
+        self.stop()
     }
 
     fn progress(&mut self, done: u64, _total: u64) {
@@ -252,6 +275,8 @@ fn execute(
         token: &lease.token,
         flags,
         fault: config.fault.as_deref(),
+        every: Duration::from_secs_f64(config.checkpoint_secs.max(0.0)),
+        last_saved: Instant::now(),
     };
     match spec {
         JobSpec::Preview => match crate::gpu::Gpu::shared() {

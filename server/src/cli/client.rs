@@ -453,6 +453,12 @@ pub(super) struct WorkerArgs {
     /// Seconds between heartbeats (well under the server's lease).
     #[arg(long, default_value_t = 5.0)]
     heartbeat_secs: f64,
+    /// A job's checkpoints are saved at most this often (seconds of work
+    /// since its last saved one): a crash costs at most this much work,
+    /// and fast steps (a pose of a small character) do not spend the
+    /// server's time on saves. 0 saves every checkpoint a job offers.
+    #[arg(long, env = "AOBAKE_CHECKPOINT_SECS", default_value_t = 2.0)]
+    checkpoint_secs: f64,
     /// On SIGTERM, seconds a running job may take to finish before it
     /// stops at its next checkpoint and gives its lease back.
     #[arg(long, default_value_t = 20)]
@@ -473,6 +479,7 @@ pub(super) fn worker(args: &WorkerArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|| format!("{host}-{}", std::process::id())),
         wait_secs: 20,
         heartbeat_secs: args.heartbeat_secs,
+        checkpoint_secs: args.checkpoint_secs,
         shutdown_secs: args.shutdown_secs,
         fault: std::env::var("AOBAKE_FAULT").ok(),
     })

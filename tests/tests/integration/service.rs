@@ -503,8 +503,11 @@ fn workers_share_a_bakes_fit_work_and_the_asset_is_byte_identical() {
     // own that needs only traced poses, so two workers run folds beside
     // the fit. The asset and the folds' figures equal aobake bake's.
     let mut env = TestEnv::start(Options::default());
-    env.start_worker(&[]);
-    env.start_worker(&[]);
+    // Checkpoints at most every 60 s of work: none of this bake's jobs
+    // runs that long, so none saves one (fast poses cost the server no
+    // saves).
+    env.start_worker(&[("AOBAKE_CHECKPOINT_SECS", "60")]);
+    env.start_worker(&[("AOBAKE_CHECKPOINT_SECS", "60")]);
     let fox = character("Fox");
     let digest = upload(&env, &fox);
     let (status, b) = submit(&env, &digest, 24);
@@ -513,6 +516,11 @@ fn workers_share_a_bakes_fit_work_and_the_asset_is_byte_identical() {
     let bake = env.wait_bake(id, Duration::from_secs(240));
     assert_eq!(bake["state"], "done", "{bake}\n{}", env.worker_logs());
     let jobs = bake["jobs"].as_array().unwrap();
+    let samples = jobs.iter().filter(|j| j["kind"] == "sample");
+    assert!(
+        samples.clone().count() > 10 && samples.clone().all(|j| j["checkpoint"].is_null()),
+        "{bake}"
+    );
     let unseen: Vec<&serde_json::Value> = jobs.iter().filter(|j| j["kind"] == "unseen").collect();
     assert_eq!(unseen.len(), 3, "{bake}");
     // A fit job is worth its four steps, and completes with all of them.
