@@ -198,24 +198,36 @@ impl Inputs<'_> {
     fn self_occlusion(&self) -> Result<Vec<f32>, TraceError> {
         let c = self.character;
         let mut out = vec![0.0; c.vertex_count()];
-        for part in self.parts {
-            let (globals, positions, triangles) = part.mesh(c);
-            let normals: Vec<Vec3> = globals.iter().map(|&v| c.normals[v as usize]).collect();
-            let scene = Scene::new(&positions, &triangles, &SceneOptions::default())?;
-            let values = vertex_occlusion(
-                &scene,
-                &SurfaceMesh {
-                    positions: &positions,
-                    normals: &normals,
-                    triangles: &triangles,
-                },
-                &self.surface(self.seed ^ EVAL_SEED),
-                &no_progress,
-            )?;
-            for (&v, &a) in globals.iter().zip(&values) {
-                if part.vertices.binary_search(&v).is_ok() {
-                    out[v as usize] = a;
-                }
+        // Each part on its own thread, written in the parts' order.
+        let traced: Vec<(Vec<u32>, Vec<f32>)> = self
+            .parts
+            .par_iter()
+            .map(|part| {
+                let (globals, positions, triangles) = part.mesh(c);
+                let normals: Vec<Vec3> = globals.iter().map(|&v| c.normals[v as usize]).collect();
+                let scene = Scene::new(&positions, &triangles, &SceneOptions::default())?;
+                let values = vertex_occlusion(
+                    &scene,
+                    &SurfaceMesh {
+                        positions: &positions,
+                        normals: &normals,
+                        triangles: &triangles,
+                    },
+                    &self.surface(self.seed ^ EVAL_SEED),
+                    &no_progress,
+                )?;
+                let own: (Vec<u32>, Vec<f32>) = globals
+                    .iter()
+                    .zip(&values)
+                    .filter(|(v, _)| part.vertices.binary_search(*v).is_ok())
+                    .map(|(&v, &a)| (v, a))
+                    .unzip();
+                Ok(own)
+            })
+            .collect::<Result<_, TraceError>>()?;
+        for (vertices, values) in traced {
+            for (v, a) in vertices.into_iter().zip(values) {
+                out[v as usize] = a;
             }
         }
         Ok(out)
@@ -266,38 +278,59 @@ impl GroundTruth {
         }
         let reach = CONTACT * (hi - lo).length();
         let held_out = seed ^ crate::bake::params::HELD_OUT_SEED;
+        // The frames are traced side by side (each its own skinning and
+        // BVH, the serial part of a small mesh's trace) and gathered in
+        // order: the same values on any number of threads. A frame's BVH
+        // is dropped once it has said which ground points it touches.
+        let traced: Vec<(FrameTruth, Vec<bool>)> = eval
+            .par_iter()
+            .map(|frame| {
+                let t = inputs.trace(frame, &ground, held_out)?;
+                let near: Vec<bool> = ground
+                    .iter()
+                    .map(|&p| t.scene.surface_near(p, Vec3::Y, reach))
+                    .collect();
+                let truth = FrameTruth {
+                    frame: *frame,
+                    palette: t.palette,
+                    positions: t.positions,
+                    normals: t.normals,
+                    vertices: t.vertices,
+                    ground: t.ground,
+                };
+                Ok((truth, near))
+            })
+            .collect::<Result<_, TraceError>>()?;
         let mut ground_seen = vec![true; ground.len()];
         let mut frames = Vec::with_capacity(eval.len());
-        let mut noise_rmse = (0.0, 0.0);
-        for (k, frame) in eval.iter().enumerate() {
-            let t = inputs.trace(frame, &ground, held_out)?;
-            for (seen, &p) in ground_seen.iter_mut().zip(&ground) {
-                *seen &= !t.scene.surface_near(p, Vec3::Y, reach);
+        for (truth, near) in traced {
+            for (seen, near) in ground_seen.iter_mut().zip(near) {
+                *seen &= !near;
             }
-            if k == 0 {
-                let again = inputs.trace(frame, &ground, seed ^ NOISE_SEED)?;
-                noise_rmse = (
-                    rmse(&t.vertices, &again.vertices) / 2f64.sqrt(),
-                    rmse(&t.ground, &again.ground) / 2f64.sqrt(),
-                );
-            }
-            frames.push(FrameTruth {
-                frame: *frame,
-                palette: t.palette,
-                positions: t.positions,
-                normals: t.normals,
-                vertices: t.vertices,
-                ground: t.ground,
-            });
+            frames.push(truth);
         }
+        let mut noise_rmse = (0.0, 0.0);
+        if let (Some(frame), Some(first)) = (eval.first(), frames.first()) {
+            let again = inputs.trace(frame, &ground, seed ^ NOISE_SEED)?;
+            noise_rmse = (
+                rmse(&first.vertices, &again.vertices) / 2f64.sqrt(),
+                rmse(&first.ground, &again.ground) / 2f64.sqrt(),
+            );
+        }
+        let averaged: Vec<(Vec<f32>, Vec<f32>)> = average
+            .par_iter()
+            .map(|frame| {
+                let t = inputs.trace(frame, &ground, seed)?;
+                Ok((t.vertices, t.ground))
+            })
+            .collect::<Result<_, TraceError>>()?;
         let mut sum_v = vec![0.0f64; c.vertex_count()];
         let mut sum_g = vec![0.0f64; ground.len()];
-        for frame in &average {
-            let t = inputs.trace(frame, &ground, seed)?;
-            for (s, &v) in sum_v.iter_mut().zip(&t.vertices) {
+        for (vertices, ground) in &averaged {
+            for (s, &v) in sum_v.iter_mut().zip(vertices) {
                 *s += f64::from(v);
             }
-            for (s, &v) in sum_g.iter_mut().zip(&t.ground) {
+            for (s, &v) in sum_g.iter_mut().zip(ground) {
                 *s += f64::from(v);
             }
         }
