@@ -295,7 +295,7 @@ impl ClipErrors {
 /// errors are infinite), each scored by `predict(model, row)` on the
 /// group's frames. A candidate that changes only how a model runs can
 /// share one fit. `None` when the frames come from fewer than two clips.
-pub fn sse_by_clips<M: Send>(
+pub fn sse_by_clips<M: Send + Sync>(
     sources: &[Source],
     ao: &AoBlock,
     candidates: usize,
@@ -313,26 +313,28 @@ pub fn sse_by_clips<M: Send>(
         .par_iter()
         .map(|(train, test)| {
             let models = fit(train);
-            let mut sse = vec![vec![0.0f64; ao.vertices]; candidates];
-            let mut psnr = vec![f64::NEG_INFINITY; candidates];
-            for (k, (e, p)) in sse.iter_mut().zip(&mut psnr).enumerate() {
-                let Some(model) = models.get(k).and_then(Option::as_ref) else {
-                    e.iter_mut().for_each(|x| *x = f64::INFINITY);
-                    continue;
-                };
-                let mut frames = 0.0;
-                for &r in test {
-                    let mut frame = 0.0;
-                    for ((x, &a), &b) in e.iter_mut().zip(&predict(model, r)).zip(ao.row(r)) {
-                        let d = (f64::from(a) - f64::from(b)).powi(2);
-                        *x += d;
-                        frame += d;
+            // Each candidate scored on its own thread, its rows in order.
+            let scored: Vec<(Vec<f64>, f64)> = (0..candidates)
+                .into_par_iter()
+                .map(|k| {
+                    let Some(model) = models.get(k).and_then(Option::as_ref) else {
+                        return (vec![f64::INFINITY; ao.vertices], f64::NEG_INFINITY);
+                    };
+                    let mut e = vec![0.0f64; ao.vertices];
+                    let mut frames = 0.0;
+                    for &r in test {
+                        let mut frame = 0.0;
+                        for ((x, &a), &b) in e.iter_mut().zip(&predict(model, r)).zip(ao.row(r)) {
+                            let d = (f64::from(a) - f64::from(b)).powi(2);
+                            *x += d;
+                            frame += d;
+                        }
+                        frames += crate::asset::metrics::psnr(frame / ao.vertices.max(1) as f64);
                     }
-                    frames += crate::asset::metrics::psnr(frame / ao.vertices.max(1) as f64);
-                }
-                *p = frames / test.len() as f64;
-            }
-            (sse, psnr)
+                    (e, frames / test.len() as f64)
+                })
+                .collect();
+            scored.into_iter().unzip::<_, _, Vec<_>, Vec<_>>()
         })
         .collect();
     let mut sse = vec![vec![0.0f64; ao.vertices]; candidates];
@@ -401,7 +403,7 @@ fn clip_folds(sources: &[Source]) -> Option<(usize, Vec<(Vec<usize>, Vec<usize>)
 /// the group's model (`None`: every candidate's errors are infinite), and
 /// `frame_sse(model, row)` each candidate's squared error summed over the
 /// vertices of that frame. Only the PSNRs are kept (`sse` is empty).
-pub fn psnr_by_clips<M>(
+pub fn psnr_by_clips<M: Sync>(
     sources: &[Source],
     ao: &AoBlock,
     candidates: usize,
@@ -420,9 +422,10 @@ pub fn psnr_by_clips<M>(
             let Some(model) = fit(train) else {
                 return vec![f64::NEG_INFINITY; candidates];
             };
+            // The frames scored side by side, added in their order.
+            let scored: Vec<Vec<f64>> = test.par_iter().map(|&r| frame_sse(&model, r)).collect();
             let mut frames = vec![0.0f64; candidates];
-            for &r in test {
-                let sse = frame_sse(&model, r);
+            for sse in scored {
                 assert_eq!(sse.len(), candidates, "one error per candidate");
                 for (f, e) in frames.iter_mut().zip(sse) {
                     *f += crate::asset::metrics::psnr(e / ao.vertices.max(1) as f64);
@@ -449,7 +452,7 @@ pub fn psnr_by_clips<M>(
 /// [`sse_by_clips`]): the candidate with the least squared error over
 /// all left-out frames and vertices wins (the first on a tie). `None` when
 /// the frames come from fewer than two clips.
-pub fn choose_by_clips<M: Send>(
+pub fn choose_by_clips<M: Send + Sync>(
     sources: &[Source],
     ao: &AoBlock,
     candidates: &[f64],

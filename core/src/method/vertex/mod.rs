@@ -701,6 +701,7 @@ fn basis_by_clips(
         let mut trained = vec![false; poses.len()];
         train.iter().for_each(|&r| trained[r] = true);
         let predictions = (0..poses.len())
+            .into_par_iter()
             .filter(|&r| !trained[r] && matches!(sources[r], Source::Frame(_)))
             .map(|r| {
                 let w = model.weights(skeleton, &poses[r]);
