@@ -255,13 +255,19 @@ impl AppState {
 
     /// Tells listeners about a bake's state and wakes waiting workers.
     pub fn announce(&self, bake: &crate::store::BakeRow) {
+        self.publish(bake);
+        self.jobs_ready.notify_waiters();
+    }
+
+    /// Tells listeners about a bake (progress inside a running job: no
+    /// job became ready, so no worker is woken).
+    pub fn publish(&self, bake: &crate::store::BakeRow) {
         let _ = self.events.send(BakeEvent {
             id: bake.id,
             state: bake.state,
             done: bake.done_work,
             total: bake.total_work,
         });
-        self.jobs_ready.notify_waiters();
     }
 }
 

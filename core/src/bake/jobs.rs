@@ -686,13 +686,11 @@ impl<'a> Bake<'a> {
         let reference = self.stack(PoseSet::Reference, deps)?;
         let started = Instant::now();
         let poses = self.plan.reference_poses();
-        let steps = FitStep::ALL.len() as u64;
-        sink.progress(0, steps);
         let (model, fit) = self.plan.fit_stepwise(
             &poses,
             &reference,
             &self.plan.reference_sources(),
-            &mut |step| sink.progress(step.done(), steps),
+            &mut fit_progress(sink),
         )?;
         let baseline = Model::StaticAverage(StaticAverage::fit(
             &reference.select(self.plan.baseline_rows()),
@@ -724,8 +722,6 @@ impl<'a> Bake<'a> {
         let reference = self.stack(PoseSet::Reference, deps)?;
         let truth = self.stack(PoseSet::HeldOut, deps)?;
         let started = Instant::now();
-        let steps = FitStep::ALL.len() as u64;
-        sink.progress(0, steps);
         let result = self.plan.unseen_fold(
             clip,
             &self.plan.reference_poses(),
@@ -733,7 +729,7 @@ impl<'a> Bake<'a> {
             &self.plan.reference_sources(),
             &self.plan.test_poses(),
             &truth,
-            &mut |step| sink.progress(step.done(), steps),
+            &mut fit_progress(sink),
         )?;
         let mut out = JobOutput::default();
         out.push(&unseen_output(fold), json(&result));
@@ -838,6 +834,14 @@ impl<'a> Bake<'a> {
         out.timings = evaluated.timings;
         Ok(out)
     }
+}
+
+/// A fit's progress on `sink`, in steps ([`FitStep`]): 0 now, then one
+/// more as each step ends (what `fit` and `unseen` jobs are worth).
+fn fit_progress(sink: &mut dyn JobSink) -> impl FnMut(FitStep) + '_ {
+    let steps = FitStep::ALL.len() as u64;
+    sink.progress(0, steps);
+    move |step| sink.progress(step.done(), steps)
 }
 
 /// The output of the `unseen` job of `fold`.

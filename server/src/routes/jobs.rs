@@ -121,7 +121,7 @@ pub(crate) async fn heartbeat(
     // Progress inside a job (a sample's poses, a fit's steps) reaches the
     // bake's listeners, whose views add running jobs' progress.
     if beat.moved {
-        state.announce(&beat.bake);
+        state.publish(&beat.bake);
     }
     Ok(Json(HeartbeatReply { stop: beat.stop }))
 }
