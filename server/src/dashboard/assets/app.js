@@ -397,11 +397,10 @@ async function bakePage(signal, id) {
     }
   };
   const mayAct = can("submit");
-  const button = (label, action, enabled) => h("button", {
-    "data-action": action, disabled: !mayAct || !enabled,
+  const button = (label, action) => h("button", {
+    "data-action": action, disabled: true,
     title: mayAct ? null : "needs a token with the submit scope", onclick: act(action),
   }, label);
-  const actions = h("div", { class: "actions" });
   const download = async () => {
     const res = await api(`/v1/assets/${bake.asset}`);
     const a = h("a", { href: URL.createObjectURL(await res.blob()),
@@ -410,17 +409,25 @@ async function bakePage(signal, id) {
     a.click();
     a.remove();
   };
+  // The buttons are made once and only their state changes: a button
+  // replaced under the pointer between press and release loses the click.
+  const buttons = {
+    cancel: button("Cancel", "cancel"),
+    pause: button("Pause", "pause"),
+    resume: button("Resume", "resume"),
+    retry: button("Retry", "retry"),
+    download: h("button", { "data-action": "download", disabled: true, onclick: download }, "Download asset"),
+  };
+  const actions = h("div", { class: "actions" }, Object.values(buttons),
+    mayAct ? null : h("span", { class: "note", id: "read-only" },
+      `Your token “${me.name}” can read only: cancel, pause, resume and retry need the submit scope.`));
   const drawActions = () => {
     const s = bake.state;
-    fill(actions, [
-      button("Cancel", "cancel", !finished(s)),
-      button("Pause", "pause", s === "queued" || s === "running"),
-      button("Resume", "resume", s === "paused"),
-      button("Retry", "retry", s === "failed" || s === "cancelled"),
-      h("button", { "data-action": "download", disabled: !bake.asset, onclick: download }, "Download asset"),
-      mayAct ? null : h("span", { class: "note", id: "read-only" },
-        `Your token “${me.name}” can read only: cancel, pause, resume and retry need the submit scope.`),
-    ].filter(Boolean));
+    buttons.cancel.disabled = !mayAct || finished(s);
+    buttons.pause.disabled = !mayAct || !(s === "queued" || s === "running");
+    buttons.resume.disabled = !mayAct || s !== "paused";
+    buttons.retry.disabled = !mayAct || !(s === "failed" || s === "cancelled");
+    buttons.download.disabled = !bake.asset;
   };
 
   async function loadResults() {
