@@ -168,6 +168,11 @@ pub fn corpus(valid: &[u8]) -> Vec<Case> {
         let at = accessor_offset(j, input);
         b[at + 4..at + 8].copy_from_slice(&(-1.0f32).to_le_bytes());
     });
+    for (case, verdict) in validator_errors(valid) {
+        if let Verdict::Refused { .. } = verdict {
+            push(&case.name, case.bytes);
+        }
+    }
     let regressions = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions");
     let mut files: Vec<_> = std::fs::read_dir(regressions)
         .map(|d| d.flatten().map(|e| e.path()).collect())
@@ -179,5 +184,298 @@ pub fn corpus(valid: &[u8]) -> Vec<Case> {
             std::fs::read(&f).unwrap(),
         );
     }
+    out
+}
+
+/// What aobake does with a file the Khronos validator reports errors in
+/// (docs/import-policy.md).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Verdict {
+    /// Refused, with an error that names this JSON path.
+    Refused {
+        /// Part of the error message: the JSON path of the offence.
+        path: &'static str,
+    },
+    /// Accepted with a warning that contains this text.
+    Warned {
+        /// Part of the warning.
+        about: &'static str,
+    },
+}
+
+/// Files that the Khronos glTF validator reports errors in (each was
+/// checked with it: its codes are in the case names) and that aobake once
+/// accepted, built from a valid skinned, animated GLB (RiggedSimple), with
+/// what aobake must do with each.
+pub fn validator_errors(valid: &[u8]) -> Vec<(Case, Verdict)> {
+    let (json, bin) = glb_parts(valid);
+    let mut out = Vec::new();
+    let mut two_bins = glb(&json, &bin);
+    two_bins.extend(4u32.to_le_bytes());
+    two_bins.extend(b"BIN\0");
+    two_bins.extend([0u8; 4]);
+    let total = two_bins.len() as u32;
+    two_bins[8..12].copy_from_slice(&total.to_le_bytes());
+    out.push((
+        Case {
+            name: "GLB with two BIN chunks (GLB_DUPLICATE_CHUNK)".to_owned(),
+            bytes: two_bins,
+        },
+        Verdict::Refused { path: "chunk 2" },
+    ));
+    let mut edit = |name: &str, verdict: Verdict, f: &dyn Fn(&mut Value, &mut Vec<u8>)| {
+        let (mut j, mut b) = (json.clone(), bin.clone());
+        f(&mut j, &mut b);
+        let case = Case {
+            name: name.to_owned(),
+            bytes: glb(&j, &b),
+        };
+        out.push((case, verdict));
+    };
+    use Verdict::{Refused, Warned};
+    let position = json["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+        .as_u64()
+        .unwrap() as usize;
+    let normal = json["meshes"][0]["primitives"][0]["attributes"]["NORMAL"]
+        .as_u64()
+        .unwrap() as usize;
+    let joints = json["meshes"][0]["primitives"][0]["attributes"]["JOINTS_0"]
+        .as_u64()
+        .unwrap() as usize;
+    let weights = json["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"]
+        .as_u64()
+        .unwrap() as usize;
+    let indices = json["meshes"][0]["primitives"][0]["indices"]
+        .as_u64()
+        .unwrap() as usize;
+    let ibm = json["skins"][0]["inverseBindMatrices"].as_u64().unwrap() as usize;
+    let view_of = |j: &Value, a: usize| j["accessors"][a]["bufferView"].as_u64().unwrap() as usize;
+    // A joint node with a matrix (RiggedSimple's first joint) and the node
+    // the animation moves (its second).
+    let matrix_joint = json["skins"][0]["joints"][0].as_u64().unwrap();
+    let animated = json["animations"][0]["channels"][0]["target"]["node"]
+        .as_u64()
+        .unwrap();
+    assert!(json["nodes"][matrix_joint as usize]["matrix"].is_array());
+
+    edit(
+        "inverse-bind-matrix accessor with byteStride 64 (SKIN_IBM_ACCESSOR_WITH_BYTESTRIDE)",
+        Refused {
+            path: "skins[0].inverseBindMatrices",
+        },
+        &|j, _| {
+            let v = view_of(j, ibm);
+            j["bufferViews"][v]["byteStride"] = json!(64);
+        },
+    );
+    edit(
+        "index accessor with count 0 (VALUE_NOT_IN_RANGE)",
+        Refused { path: "count" },
+        &|j, _| {
+            let a = &mut j["accessors"][indices];
+            a["count"] = json!(0);
+            a.as_object_mut().unwrap().remove("max");
+            a.as_object_mut().unwrap().remove("min");
+        },
+    );
+    edit(
+        "index accessor in a strided buffer view (MESH_PRIMITIVE_INDICES_ACCESSOR_WITH_BYTESTRIDE)",
+        Refused {
+            path: "meshes[0].primitives[0].indices",
+        },
+        &|j, _| {
+            let v = view_of(j, indices);
+            j["bufferViews"][v]["byteStride"] = json!(4);
+            let count = j["accessors"][indices]["count"].as_u64().unwrap();
+            j["accessors"][indices]["count"] = json!(count / 2);
+        },
+    );
+    edit(
+        "JOINTS_0 of unsigned 16 bits at its maximum, weight 0 (ACCESSOR_JOINTS_INDEX_OOB)",
+        Warned {
+            about: "joint indices past their skin had weight 0",
+        },
+        &|j, b| {
+            // The last joint of vertex 0, whose weight is 0.
+            let at = accessor_offset(j, joints) + 6;
+            b[at..at + 2].copy_from_slice(&u16::MAX.to_le_bytes());
+        },
+    );
+    edit(
+        "WEIGHTS_0 of unsigned 32 bits (MESH_PRIMITIVE_ATTRIBUTES_ACCESSOR_INVALID_FORMAT)",
+        Refused {
+            path: "attributes.WEIGHTS_0",
+        },
+        &|j, _| {
+            j["accessors"][weights]["componentType"] = json!(5125);
+        },
+    );
+    edit(
+        "POSITION of unsigned bytes without KHR_mesh_quantization (MESH_PRIMITIVE_ATTRIBUTES_ACCESSOR_INVALID_FORMAT)",
+        Refused {
+            path: "attributes.POSITION",
+        },
+        &|j, _| {
+            let a = &mut j["accessors"][position];
+            a["componentType"] = json!(5121);
+            a.as_object_mut().unwrap().remove("max");
+            a.as_object_mut().unwrap().remove("min");
+        },
+    );
+    edit(
+        "skin that lists one joint twice (DUPLICATE_ELEMENTS)",
+        Refused {
+            path: "skins[0].joints",
+        },
+        &|j, _| {
+            let first = j["skins"][0]["joints"][0].clone();
+            j["skins"][0]["joints"][1] = first;
+        },
+    );
+    edit(
+        "inverse-bind-matrix accessor of unsigned shorts (SKIN_IBM_INVALID_FORMAT)",
+        Refused {
+            path: "skins[0].inverseBindMatrices",
+        },
+        &|j, _| {
+            j["accessors"][ibm]["componentType"] = json!(5123);
+        },
+    );
+    edit(
+        "morph target with an attribute the primitive lacks (MESH_PRIMITIVE_MORPH_TARGET_NO_BASE_ACCESSOR)",
+        Refused {
+            path: "targets[0].TANGENT",
+        },
+        &|j, _| {
+            j["meshes"][0]["primitives"][0]["targets"] = json!([{ "TANGENT": normal }]);
+        },
+    );
+    edit(
+        "primitives of one mesh with different numbers of targets (MESH_PRIMITIVES_UNEQUAL_TARGETS_COUNT)",
+        Refused {
+            path: "meshes[0].primitives[1].targets",
+        },
+        &|j, _| {
+            let plain = j["meshes"][0]["primitives"][0].clone();
+            j["meshes"][0]["primitives"][0]["targets"] = json!([{ "POSITION": normal }]);
+            j["meshes"][0]["primitives"]
+                .as_array_mut()
+                .unwrap()
+                .push(plain);
+        },
+    );
+    edit(
+        "primitive mode 2^32+4 (VALUE_NOT_IN_RANGE)",
+        Refused {
+            path: "meshes[0].primitives[0].mode",
+        },
+        &|j, _| {
+            j["meshes"][0]["primitives"][0]["mode"] = json!((1u64 << 32) + 4);
+        },
+    );
+    edit(
+        "node with two parents, one of them the scene (SCENE_NON_ROOT_NODE)",
+        Refused {
+            path: "scenes[0].nodes[1]",
+        },
+        &|j, _| {
+            j["scenes"][0]["nodes"]
+                .as_array_mut()
+                .unwrap()
+                .push(json!(matrix_joint));
+        },
+    );
+    edit(
+        "cubic-spline sampler with one key (ANIMATION_SAMPLER_INPUT_ACCESSOR_TOO_FEW_ELEMENTS)",
+        Refused {
+            path: "animations[0].samplers[0].input",
+        },
+        &|j, _| {
+            let sampler = j["animations"][0]["samplers"][0].clone();
+            let input = sampler["input"].as_u64().unwrap() as usize;
+            let output = sampler["output"].as_u64().unwrap() as usize;
+            let mut keys = j["accessors"][input].clone();
+            keys["count"] = json!(1);
+            keys["max"] = keys["min"].clone();
+            let mut values = j["accessors"][output].clone();
+            values["count"] = json!(3);
+            values.as_object_mut().unwrap().remove("max");
+            values.as_object_mut().unwrap().remove("min");
+            let accessors = j["accessors"].as_array_mut().unwrap();
+            let n = accessors.len();
+            accessors.extend([keys, values]);
+            j["animations"][0]["samplers"][0] =
+                json!({ "input": n, "output": n + 1, "interpolation": "CUBICSPLINE" });
+        },
+    );
+    edit(
+        "morph weights on a mesh without targets (MESH_INVALID_WEIGHTS_COUNT)",
+        Refused {
+            path: "meshes[0].weights",
+        },
+        &|j, _| {
+            j["meshes"][0]["weights"] = json!([0.5]);
+        },
+    );
+    edit(
+        "two channels of one animation on one node's path (ANIMATION_DUPLICATE_TARGETS)",
+        Refused {
+            path: "animations[0].channels[",
+        },
+        &|j, _| {
+            let first = j["animations"][0]["channels"][0].clone();
+            j["animations"][0]["channels"]
+                .as_array_mut()
+                .unwrap()
+                .push(first);
+        },
+    );
+    edit(
+        "animation channel on a node with a matrix (ANIMATION_CHANNEL_TARGET_NODE_MATRIX)",
+        Refused {
+            path: "animations[0].channels[0].target",
+        },
+        &|j, _| {
+            j["animations"][0]["channels"][0]["target"]["node"] = json!(matrix_joint);
+        },
+    );
+    edit(
+        "node with both a matrix and TRS (NODE_MATRIX_TRS)",
+        Refused { path: "nodes[" },
+        &|j, _| {
+            j["nodes"][matrix_joint as usize]["translation"] = json!([0.0, 0.0, 0.0]);
+        },
+    );
+    let _ = animated;
+    // Images AO never reads: warned about, as the texture exception says.
+    edit(
+        "image in a buffer view without mimeType (UNSATISFIED_DEPENDENCY)",
+        Warned {
+            about: "images stored in buffer views",
+        },
+        &|j, _| {
+            let v = view_of(j, ibm);
+            j["images"] = json!([{ "bufferView": v }]);
+        },
+    );
+    edit(
+        "image with a buffer view that does not exist (UNRESOLVED_REFERENCE)",
+        Warned {
+            about: "problems in materials, textures, images",
+        },
+        &|j, _| {
+            j["images"] = json!([{ "bufferView": 99, "mimeType": "image/png" }]);
+        },
+    );
+    edit(
+        "image with both a buffer view and a uri (ONE_OF_MISMATCH)",
+        Warned {
+            about: "images stored in buffer views",
+        },
+        &|j, _| {
+            let v = view_of(j, ibm);
+            j["images"] = json!([{ "bufferView": v, "mimeType": "image/png", "uri": "x.png" }]);
+        },
+    );
     out
 }

@@ -4,7 +4,7 @@
 use gltf::json::{self, validation::Validate as _};
 
 use super::{
-    ImportError,
+    ImportError, rules,
     source::{Container, Upload, UriTarget, check_json_depth, resolve_uri},
 };
 use crate::import::limits::Limits;
@@ -59,6 +59,10 @@ impl Document {
         }
         let container = Container::parse(upload.main)?;
         check_json_depth(container.json, limits.max_json_depth)?;
+        let raw: serde_json::Value =
+            serde_json::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
+        rules::check_integer_widths(&raw)?;
+        drop(raw);
         let root =
             json::Root::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
         let mut warnings = Vec::new();
@@ -68,6 +72,13 @@ impl Document {
             return Err(ImportError::limit("node count", nodes, limits.max_nodes));
         }
         let parents = node_parents(&root)?;
+        let image_problems = rules::check(&root, &parents)?;
+        if image_problems > 0 {
+            warnings.push(format!(
+                "{image_problems} images stored in buffer views are malformed (no mimeType, a uri \
+                 as well, or a missing or strided view); ignored, since images are never decoded"
+            ));
+        }
         let buffers = load_buffers(&root, upload, container.bin)?;
         check_images(&root, upload, &mut warnings)?;
         Ok(Self {

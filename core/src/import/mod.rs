@@ -15,6 +15,7 @@ mod error;
 pub mod limits;
 mod mesh;
 pub mod ply;
+mod rules;
 mod source;
 
 pub use document::referenced_files;

@@ -186,6 +186,16 @@ impl<'a> Container<'a> {
                 (0, CHUNK_JSON) => json = Some(data),
                 (0, _) => return Err(err(format!("first chunk has type {ty:#010x}, not JSON"))),
                 (1, CHUNK_BIN) => bin = Some(data),
+                // Only the second chunk may be BIN (GLB_DUPLICATE_CHUNK,
+                // GLB_UNEXPECTED_BIN_CHUNK): a reader could take either.
+                (_, CHUNK_BIN) => {
+                    return Err(err(format!(
+                        "chunk {index} is a BIN chunk; only the chunk after JSON may be"
+                    )));
+                }
+                (_, CHUNK_JSON) => {
+                    return Err(err(format!("chunk {index} is a second JSON chunk")));
+                }
                 // The spec says readers ignore chunks of unknown type.
                 _ => {}
             }

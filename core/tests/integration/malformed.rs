@@ -2,6 +2,7 @@
 //! names what is wrong; none panics; none reads a file outside the upload.
 
 use aobake_core::{ImportError, Limits, SideFile, Upload, import_character};
+use aobake_e2e::hostile::Verdict;
 use serde_json::json;
 
 use crate::util::{self, Gltf};
@@ -256,7 +257,7 @@ fn bad_references_and_types() {
     expect_err(&g, "index out of bounds");
     let mut g = util::tiny_rig();
     g.json["accessors"][0]["type"] = json!("VEC2");
-    expect_err(&g, "must be VEC3");
+    expect_err(&g, "must be a float VEC3");
     let mut g = util::tiny_rig();
     g.json["accessors"][0]["componentType"] = json!(1234);
     expect_err(&g, "accessors[0]");
@@ -388,5 +389,96 @@ fn the_shared_hostile_corpus_is_refused() {
     for case in corpus {
         let err = import(&case.bytes).err();
         assert!(err.is_some(), "{} was accepted", case.name);
+    }
+}
+
+/// Every file the Khronos validator reports errors in that aobake once
+/// accepted is refused with an error naming its JSON path, or accepted
+/// with the warning docs/import-policy.md promises.
+#[test]
+fn validator_errors_are_refused_or_warned_as_the_policy_says() {
+    let valid = std::fs::read(util::character_path("RiggedSimple.glb").unwrap()).unwrap();
+    let cases = aobake_e2e::hostile::validator_errors(&valid);
+    assert!(cases.len() >= 20);
+    for (case, verdict) in cases {
+        match (import(&case.bytes), verdict) {
+            (Err(e), Verdict::Refused { path }) => {
+                let message = e.to_string();
+                assert!(
+                    message.contains(path),
+                    "{}: {message:?} does not name {path:?}",
+                    case.name
+                );
+            }
+            (Ok(imported), Verdict::Warned { about }) => assert!(
+                imported.warnings.iter().any(|w| w.contains(about)),
+                "{}: no warning about {about:?} in {:?}",
+                case.name,
+                imported.warnings
+            ),
+            (result, verdict) => panic!(
+                "{}: expected {verdict:?}, got {:?}",
+                case.name,
+                result.map(|i| i.warnings)
+            ),
+        }
+    }
+}
+
+/// The corpus above is broken in the Khronos validator's eyes too: each
+/// case has errors, among them the code its name gives. Runs where node
+/// and the validator are installed (`npm ci --prefix tests/tools`; `.ci/run`
+/// does it and sets AOBAKE_REQUIRE_VALIDATOR, which makes a missing
+/// validator a failure).
+#[test]
+fn the_khronos_validator_reports_an_error_in_every_case() {
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/tools/gltf-validate.mjs");
+    let required = std::env::var_os("AOBAKE_REQUIRE_VALIDATOR").is_some();
+    let valid = std::fs::read(util::character_path("RiggedSimple.glb").unwrap()).unwrap();
+    let cases = aobake_e2e::hostile::validator_errors(&valid);
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("validator-corpus");
+    std::fs::create_dir_all(&dir).unwrap();
+    let files: Vec<_> = cases
+        .iter()
+        .enumerate()
+        .map(|(i, (case, _))| {
+            let file = dir.join(format!("{i:02}.glb"));
+            std::fs::write(&file, &case.bytes).unwrap();
+            file
+        })
+        .collect();
+    let out = match std::process::Command::new("node")
+        .arg(&script)
+        .args(&files)
+        .output()
+    {
+        Ok(out) if out.status.success() => out,
+        other => {
+            let why = format!("the Khronos validator did not run: {other:?}");
+            assert!(!required, "{why}");
+            eprintln!("skipped: {why}");
+            return;
+        }
+    };
+    let lines: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), cases.len());
+    for ((case, _), report) in cases.iter().zip(&lines) {
+        let code = case.name.rsplit_once('(').unwrap().1.trim_end_matches(')');
+        let codes: Vec<&str> = report["codes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_str().unwrap())
+            .collect();
+        assert!(
+            codes.contains(&code),
+            "{}: the validator reports {codes:?}",
+            case.name
+        );
     }
 }
