@@ -319,6 +319,16 @@ async fn to_completion(req: Request, next: Next) -> Response {
     }
 }
 
+/// 404 for a path no route serves, as problem+json like every error.
+async fn no_route(uri: axum::http::Uri) -> ApiError {
+    ApiError::NotFound(format!("no route for {}", uri.path()))
+}
+
+/// 405 for a route that exists under other methods, with `Allow` kept.
+async fn wrong_method(method: axum::http::Method, uri: axum::http::Uri) -> ApiError {
+    ApiError::MethodNotAllowed(format!("{} does not take {method}", uri.path()))
+}
+
 /// Every route, with request ids, limits and metrics.
 pub fn app(state: AppState) -> Router {
     let request_id = HeaderName::from_static("x-request-id");
@@ -327,6 +337,8 @@ pub fn app(state: AppState) -> Router {
     Router::new()
         .merge(routes::router())
         .merge(crate::dashboard::router())
+        .fallback(no_route)
+        .method_not_allowed_fallback(wrong_method)
         .layer(middleware::from_fn(to_completion))
         .layer(middleware::from_fn_with_state(metrics, record_latency))
         .layer(DefaultBodyLimit::max(limits.max_body_bytes as usize))

@@ -1,6 +1,8 @@
 //! Bearer tokens with scopes (DESIGN §9): `read` (everything a dashboard
-//! or CI shows), `submit` (uploads and bakes, their control), `worker`
-//! (the job protocol and blobs) and `admin` (all of them, and tokens).
+//! or CI shows: bakes, published assets, reports, previews, workers, but
+//! not the uploaded sources), `submit` (uploads, their bytes, and bakes
+//! and their control), `worker` (the job protocol and blobs) and `admin`
+//! (all of them, and tokens).
 //! Only a token's sha256 is stored; a token is 32 random bytes in hex.
 
 use axum::{extract::FromRequestParts, http::request::Parts};
@@ -11,9 +13,9 @@ use crate::{app::AppState, error::ApiError};
 /// A scope a route needs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Scope {
-    /// See bakes, reports, assets, workers.
+    /// See bakes, reports, published assets, previews, workers.
     Read,
-    /// Upload and bake.
+    /// Upload, read back what was uploaded, and bake.
     Submit,
     /// Run jobs.
     Worker,
@@ -63,9 +65,14 @@ pub struct Caller {
 }
 
 impl Caller {
+    /// Whether the caller has `scope` (or `admin`).
+    pub fn has(&self, scope: Scope) -> bool {
+        self.scopes.contains(&scope) || self.scopes.contains(&Scope::Admin)
+    }
+
     /// Refuses with 403 unless the caller has `scope` (or `admin`).
     pub fn require(&self, scope: Scope) -> Result<(), ApiError> {
-        if self.scopes.contains(&scope) || self.scopes.contains(&Scope::Admin) {
+        if self.has(scope) {
             Ok(())
         } else {
             Err(ApiError::Forbidden(scope.name()))
@@ -82,9 +89,12 @@ impl FromRequestParts<AppState> for Caller {
             .get(axum::http::header::AUTHORIZATION)
             .and_then(|v| v.to_str().ok())
             .ok_or(ApiError::Unauthorized)?;
+        // The scheme is case-insensitive (RFC 9110 §11.1).
         let token = header
-            .strip_prefix("Bearer ")
+            .split_once(' ')
+            .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
             .ok_or(ApiError::Unauthorized)?
+            .1
             .trim();
         let hash = token_hash(token);
         let row = state

@@ -2,8 +2,32 @@
 
 use clap::Parser as _;
 
+/// A command whose output goes to a pipe that closes (`aobake params |
+/// head`) ends quietly with 141 (128 + SIGPIPE, what a shell reports for a
+/// Unix tool killed by it) instead of a panic and a backtrace: `println!`
+/// panics on a closed stdout, and Rust ignores SIGPIPE (restoring it needs
+/// `unsafe`, which this workspace forbids).
+fn quiet_on_closed_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or_default();
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(141);
+        }
+        default(info);
+    }));
+}
+
 fn main() -> std::process::ExitCode {
     let cli = aobake_server::cli::Cli::parse();
+    if !cli.is_service() {
+        quiet_on_closed_pipe();
+    }
     match aobake_server::cli::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(err) => {

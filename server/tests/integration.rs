@@ -494,3 +494,48 @@ fn trace_agrees_with_blender_on_a_posed_character() {
     );
     assert!(bias.abs() < 1e-3, "bias {bias}");
 }
+
+/// A command whose stdout is a pipe that closes ends quietly: no panic,
+/// no backtrace, the status a Unix tool killed by SIGPIPE gets (141).
+#[test]
+fn a_closed_output_pipe_ends_a_command_quietly() {
+    for args in [&["openapi"][..], &["params", "--method", "grid"]] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_aobake"))
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take()); // the reader goes away first
+        let out = child.wait_with_output().unwrap();
+        assert_eq!(out.status.code(), Some(141), "{args:?}: {}", stderr(&out));
+        assert!(
+            !stderr(&out).contains("panicked"),
+            "{args:?}: {}",
+            stderr(&out)
+        );
+    }
+}
+
+/// `aobake params --method M` prints the common parameters and M's own
+/// section, not every method's.
+#[test]
+fn params_prints_the_methods_own_parameters() {
+    for (method, own) in [
+        ("vertex-linear", "linear"),
+        ("vertex-clustered", "clustered"),
+        ("grid", "grid"),
+        ("cubemap-discrete", "cubemap"),
+        ("cubemap-continuous", "cubemap"),
+    ] {
+        let out = aobake(&["params", "--method", method]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let p: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let sections: Vec<&str> = ["linear", "clustered", "grid", "cubemap"]
+            .into_iter()
+            .filter(|s| p.get(*s).is_some())
+            .collect();
+        assert_eq!(sections, [own], "{method}");
+        assert_eq!(p["method"], method);
+    }
+}

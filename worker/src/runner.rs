@@ -237,7 +237,7 @@ fn execute(
 ) -> Result<JobOutput, JobError> {
     let spec: JobSpec = serde_json::from_value(lease.job.spec.clone())
         .map_err(|e| JobError::Invalid(format!("job spec: {e}")))?;
-    let params: BakeParams = serde_json::from_value(lease.bake.params.clone())
+    let params = BakeParams::from_canonical(&lease.bake.params)
         .map_err(|e| JobError::Invalid(format!("bake params: {e}")))?;
     let inputs = inputs(client, lease, cache)?;
     let bake = Bake::new(&inputs, params)?;

@@ -196,9 +196,9 @@ impl BakeParams {
         }
     }
 
-    /// The parameters as they enter the key: only the chosen method's
-    /// options.
-    pub(crate) fn canonical(&self) -> serde_json::Value {
+    /// The parameters as they enter the key and as assets, bakes and
+    /// `aobake params` show them: only the chosen method's options.
+    pub fn canonical(&self) -> serde_json::Value {
         let mut v = serde_json::to_value(self).expect("params serialise");
         let map = v.as_object_mut().expect("an object");
         if self.method != Method::VertexLinear {
@@ -269,6 +269,23 @@ impl BakeParams {
             serde_json::from_value(value).map_err(|e| BakeError::Override(e.to_string()))?;
         params.validate()?;
         Ok(params)
+    }
+
+    /// Reads parameters as [`canonical`](Self::canonical) writes them (an
+    /// asset's header, a bake's row): the method's own sections, the
+    /// others filled with their defaults.
+    pub fn from_canonical(value: &Value) -> Result<Self, BakeError> {
+        let map = value
+            .as_object()
+            .ok_or_else(|| BakeError::Override("the parameters are not an object".into()))?;
+        let method: Method = map
+            .get("method")
+            .cloned()
+            .map(serde_json::from_value)
+            .transpose()
+            .map_err(|e| BakeError::Override(format!("method: {e}")))?
+            .ok_or_else(|| BakeError::Override("the parameters name no method".into()))?;
+        Self::with_overrides(method, map)
     }
 
     /// Checks every parameter's range; the error names the parameter.

@@ -121,6 +121,28 @@ impl Document {
         out
     }
 
+    /// The default (else first) scene's name, else the name of its first
+    /// named root node.
+    pub(crate) fn name(&self) -> Option<String> {
+        let scene = self
+            .root
+            .scene
+            .map(|s| s.value())
+            .or((!self.root.scenes.is_empty()).then_some(0))
+            .and_then(|s| self.root.scenes.get(s))?;
+        let named = |n: &Option<String>| {
+            n.as_ref()
+                .map(|s| s.trim().to_owned())
+                .filter(|s| !s.is_empty())
+        };
+        named(&scene.name).or_else(|| {
+            scene
+                .nodes
+                .iter()
+                .find_map(|n| self.root.nodes.get(n.value()).and_then(|n| named(&n.name)))
+        })
+    }
+
     /// All nodes with each parent before its children.
     pub(crate) fn parents_first(&self) -> Vec<usize> {
         let mut order: Vec<usize> = (0..self.parents.len())

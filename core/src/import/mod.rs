@@ -34,6 +34,9 @@ pub struct Imported {
     /// Things that were accepted but deserve a look (normalised weights,
     /// missing images, ignored primitives).
     pub warnings: Vec<String>,
+    /// What the file calls the character: its scene's name, else the name
+    /// of the scene's first named root node.
+    pub name: Option<String>,
 }
 
 /// Imports a character and the animations of its file.
@@ -46,6 +49,7 @@ pub fn import_character(upload: Upload<'_>, limits: &Limits) -> Result<Imported,
         character,
         clips,
         warnings,
+        name: doc.name(),
     })
 }
 

@@ -238,6 +238,7 @@ fn big_bake(api: &super::client::Api, jobs: usize) -> anyhow::Result<i64> {
     let c = api.upload(
         "/v1/characters",
         &aobake_core::bake::UploadBytes::single(RIGGED.to_vec()),
+        "RiggedSimple.glb",
     )?;
     let b = api.post(
         "/v1/bakes",

@@ -139,8 +139,14 @@ impl Api {
         self.json(res)
     }
 
-    /// Uploads a character or clip file (a bundle when it has side files).
-    pub(super) fn upload(&self, path: &str, upload: &UploadBytes) -> anyhow::Result<Value> {
+    /// Uploads a character or clip file (a bundle when it has side files)
+    /// under the file's name.
+    pub(super) fn upload(
+        &self,
+        path: &str,
+        upload: &UploadBytes,
+        name: &str,
+    ) -> anyhow::Result<Value> {
         let content_type = if upload.is_bundle() {
             "application/vnd.aobake.bundle"
         } else {
@@ -149,6 +155,7 @@ impl Api {
         let res = self.check(
             self.agent
                 .post(format!("{}{path}", self.base))
+                .query("name", name)
                 .header("authorization", &self.auth)
                 .header("content-type", content_type)
                 .send(&upload.to_blob()[..]),
@@ -176,6 +183,14 @@ pub(super) struct SubmitArgs {
     conn: Conn,
 }
 
+/// A file's name as the server keeps it for people to read.
+fn display_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
 /// Uploads the files, submits the bake and returns the bake as the API
 /// shows it.
 pub(super) fn submit_files(
@@ -189,14 +204,18 @@ pub(super) fn submit_files(
     let limits = Limits::default();
     let character = super::load::upload(file, &limits)?;
     let c = api
-        .upload("/v1/characters", &character)
+        .upload("/v1/characters", &character, &display_name(file))
         .with_context(|| format!("cannot upload {}", file.display()))?;
     let digest = c["digest"].as_str().context("no digest")?.to_owned();
     let mut clip_digests = Vec::new();
     for path in clips {
         let u = super::load::upload(path, &limits)?;
         let r = api
-            .upload(&format!("/v1/clips?character={digest}"), &u)
+            .upload(
+                &format!("/v1/clips?character={digest}"),
+                &u,
+                &display_name(path),
+            )
             .with_context(|| format!("cannot upload {}", path.display()))?;
         clip_digests.push(r["digest"].clone());
     }
@@ -495,7 +514,7 @@ pub async fn demo(url: &str, token: &str) -> anyhow::Result<()> {
     let (url, token) = (url.to_owned(), token.to_owned());
     tokio::task::spawn_blocking(move || {
         let api = Api::new(&url, &token);
-        let c = api.upload("/v1/characters", &UploadBytes::single(FOX.to_vec()))?;
+        let c = api.upload("/v1/characters", &UploadBytes::single(FOX.to_vec()), "Fox.glb")?;
         let seed = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_secs());
@@ -509,7 +528,7 @@ pub async fn demo(url: &str, token: &str) -> anyhow::Result<()> {
         )?;
         let id = &bake["id"];
         println!(
-            "demo: baking the bundled Fox (vertex-clustered) as bake {id}\n\n  open {url}/#token={}\n\nto watch it in the dashboard (or `aobake status {id}`)",
+            "demo: baking the bundled Fox (vertex-clustered) as bake {id}\n\n  open {url}/#token={}&next=/bakes/{id}\n\nto watch it in the dashboard (or `aobake status {id}`)",
             dashboard["token"].as_str().unwrap_or_default()
         );
         anyhow::Ok(())

@@ -91,7 +91,7 @@ fn grid(args: &Args, container: &Container) -> anyhow::Result<()> {
                 args.file.display()
             )
         })?;
-    let params: aobake_core::bake::BakeParams = serde_json::from_value(header.params.clone())
+    let params = aobake_core::bake::BakeParams::from_canonical(&header.params)
         .context("the asset's parameters are unreadable")?;
     let found = parts(character, params.grid.parts)?;
     if found.len() != model.parts.len()

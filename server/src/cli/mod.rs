@@ -79,6 +79,14 @@ enum Command {
     Bench(bench::Args),
 }
 
+impl Cli {
+    /// Whether the command is the service or a worker: long-running
+    /// processes that must outlive a closed output pipe.
+    pub fn is_service(&self) -> bool {
+        matches!(self.command, Command::Serve(_) | Command::Worker(_))
+    }
+}
+
 /// Runs a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {

@@ -177,9 +177,11 @@ pub(super) struct Args {
     params: ParamArgs,
 }
 
-/// Prints the fully defaulted parameters (with any flags applied) as JSON.
+/// Prints the method's fully defaulted parameters (with any flags
+/// applied) as JSON: the common ones and the method's own section, as the
+/// bake key and the asset have them.
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let p = args.params.params(args.method)?;
-    println!("{}", serde_json::to_string_pretty(&p)?);
+    println!("{}", serde_json::to_string_pretty(&p.canonical())?);
     Ok(())
 }

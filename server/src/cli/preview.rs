@@ -73,8 +73,8 @@ impl Loaded {
             model
                 .check_palette(character.joints.len())
                 .with_context(|| format!("{} does not fit {}", asset.display(), file.display()))?;
-            let mut params: BakeParams = serde_json::from_value(header.params.clone())
-                .unwrap_or_else(|_| BakeParams::new(header.method));
+            let mut params = BakeParams::from_canonical(&header.params)
+                .context("the asset's parameters are unreadable")?;
             let found = aobake_core::method::grid::parts::parts(&character, params.grid.parts)?;
             // The truth is traced as the bake's evaluation traced it.
             let distance = params.grid.distance(&character, &found);
@@ -86,16 +86,16 @@ impl Loaded {
         } else if container.method.family() == Family::Cubemap {
             let (model, header) = CubemapModel::from_container(&container)
                 .with_context(|| format!("cannot read {}", asset.display()))?;
-            let params: BakeParams = serde_json::from_value(header.params.clone())
-                .unwrap_or_else(|_| BakeParams::new(header.method));
+            let params = BakeParams::from_canonical(&header.params)
+                .context("the asset's parameters are unreadable")?;
             (Baked::Cubemap(model), params)
         } else {
             let (model, header) = Model::from_container(&container)
                 .with_context(|| format!("cannot read {}", asset.display()))?;
             // The ground truth is traced as the bake traced its held-out
             // poses.
-            let params: BakeParams = serde_json::from_value(header.params.clone())
-                .unwrap_or_else(|_| BakeParams::new(header.method));
+            let params = BakeParams::from_canonical(&header.params)
+                .context("the asset's parameters are unreadable")?;
             if let Err(e) = model.check_character(&character) {
                 bail!(
                     "{} does not fit {}: {e} (character {})",

@@ -1,5 +1,6 @@
 //! `GET /v1/assets/{digest}`: published bytes (assets, reports, plots) by
-//! content digest, and `GET /v1/previews/{digest}`: a preview PNG, served
+//! content digest (an uploaded character or clip file too, for a token
+//! that may upload: `read` reaches outputs, not the studio's sources), and `GET /v1/previews/{digest}`: a preview PNG, served
 //! as an image. The digest is the strong `ETag`, so `If-None-Match`
 //! answers 304, and a single `Range` answers 206 with those bytes.
 
@@ -13,7 +14,7 @@ use axum::{
 
 use crate::{
     app::AppState,
-    auth::{Need, Read},
+    auth::{Caller, Need, Read, Scope},
     error::{ApiError, ApiResult, Problem},
     extract::ApiPath,
     openapi::Digest,
@@ -27,14 +28,20 @@ pub(super) fn router() -> Router<AppState> {
 }
 
 #[utoipa::path(get, path = "/v1/assets/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the bytes"), ("If-None-Match" = Option<String>, Header, description = "An ETag"), ("Range" = Option<String>, Header, description = "One byte range")),
-    security(("bearer" = ["read"])),
-    responses((status = 200, description = "The bytes", content_type = "application/octet-stream", body = Vec<u8>), (status = 206, description = "The requested range", content_type = "application/octet-stream", body = Vec<u8>), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
+    security(("bearer" = ["read"]), ("bearer" = ["submit"])),
+    responses((status = 200, description = "The bytes (an uploaded source needs `submit`: 403 for `read` alone)", content_type = "application/octet-stream", body = Vec<u8>), (status = 206, description = "The requested range", content_type = "application/octet-stream", body = Vec<u8>), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn asset(
     State(state): State<AppState>,
-    _caller: Need<Read>,
+    caller: Caller,
     ApiPath(digest): ApiPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
+    crate::blobs::check_digest(&digest)?;
+    let mut source = false;
+    for kind in ["character", "clips"] {
+        source |= state.store.upload(&digest, kind).await?.is_some();
+    }
+    caller.require(if source { Scope::Submit } else { Scope::Read })?;
     serve(&state, &digest, &headers, "application/octet-stream").await
 }
 

@@ -150,7 +150,7 @@ pub(crate) async fn submit(
                 deps: j.deps.clone(),
             })
             .collect::<Vec<_>>();
-        Ok((key, (jobs, serde_json::to_value(&params).expect("params serialise"))))
+        Ok((key, (jobs, params.canonical())))
     })
     .await
     .map_err(|e| ApiError::Internal(e.to_string()))??;

@@ -49,7 +49,8 @@ pub(crate) struct Uploaded {
 const BUNDLE: &str = "application/vnd.aobake.bundle";
 
 /// Reads the body: one file, a bundle, or multipart parts.
-async fn read_upload(state: &AppState, req: Request) -> ApiResult<UploadBytes> {
+/// An upload's bytes and, for multipart, the main part's file name.
+async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, Option<String>)> {
     let content_type = req
         .headers()
         .get(header::CONTENT_TYPE)
@@ -78,14 +79,16 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<UploadBytes> {
         }
         if bundle {
             return UploadBytes::from_blob(&bytes, true)
+                .map(|u| (u, None))
                 .map_err(|e| ApiError::bad("bad_bundle", e.to_string()));
         }
-        return Ok(UploadBytes::single(bytes.to_vec()));
+        return Ok((UploadBytes::single(bytes.to_vec()), None));
     }
     let mut parts = Multipart::from_request(req, &())
         .await
         .map_err(|e| ApiError::bad("bad_multipart", e.body_text()))?;
     let mut main: Option<Vec<u8>> = None;
+    let mut main_name = None;
     let mut side_files = Vec::new();
     while let Some(field) = parts.next_field().await.map_err(|e| too_large(&e))? {
         let name = field
@@ -96,6 +99,7 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<UploadBytes> {
         let bytes = field.bytes().await.map_err(|e| too_large(&e))?.to_vec();
         if main.is_none() {
             main = Some(bytes);
+            main_name = Some(name);
         } else {
             if name.is_empty() {
                 return Err(ApiError::bad(
@@ -108,7 +112,26 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<UploadBytes> {
     }
     let main =
         main.ok_or_else(|| ApiError::bad("empty_body", "the multipart body has no parts"))?;
-    Ok(UploadBytes { main, side_files })
+    Ok((UploadBytes { main, side_files }, main_name))
+}
+
+/// What the uploader calls the file, kept to show people (the dashboard
+/// lists characters by it): its last path component, without control
+/// characters, at most 200 characters.
+fn file_name(given: Option<String>) -> Option<String> {
+    let given = given?;
+    let last = given.rsplit(['/', '\\']).next().unwrap_or_default();
+    let clean: String = last.chars().filter(|c| !c.is_control()).take(200).collect();
+    let clean = clean.trim();
+    (!clean.is_empty()).then(|| clean.to_owned())
+}
+
+/// The optional name of an upload sent as a raw body (multipart uploads
+/// name it with the main part's file name).
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+pub(crate) struct NameQuery {
+    /// The uploaded file's name, as the uploader knows it (`Fox.glb`).
+    name: Option<String>,
 }
 
 async fn store_upload(
@@ -138,21 +161,27 @@ async fn store_upload(
     Ok((status, Json(Uploaded { digest, summary })))
 }
 
-#[utoipa::path(post, path = "/v1/characters", tag = "uploads", request_body(content = Vec<u8>, description = "A .glb (model/gltf-binary), a bundle (application/vnd.aobake.bundle) or multipart/form-data with a .gltf and its side files", content_type = "model/gltf-binary"),
+#[utoipa::path(post, path = "/v1/characters", tag = "uploads", params(NameQuery),
+    request_body(description = "A .glb or self-contained .gltf as the body, a bundle of a .gltf and its side files, or multipart/form-data whose first part is the .gltf and whose other parts are its side files, each named by its file name",
+        content((Vec<u8> = "model/gltf-binary"), (Vec<u8> = "model/gltf+json"), (Vec<u8> = "application/vnd.aobake.bundle"), (MultipartUpload = "multipart/form-data"))),
     security(("bearer" = ["submit"])),
     responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn post_character(
     State(state): State<AppState>,
     _caller: Need<Submit>,
+    ApiQuery(q): ApiQuery<NameQuery>,
     req: Request,
 ) -> ApiResult<(StatusCode, Json<Uploaded>)> {
-    let upload = read_upload(&state, req).await?;
+    let (upload, part_name) = read_upload(&state, req).await?;
+    let name = file_name(q.name.or(part_name));
     let limits = state.import_limits.clone();
     let (summary, upload) = tokio::task::spawn_blocking(move || {
         let imported = import_character(upload.upload(), &limits)?;
         let mut s = serde_json::to_value(Summary::of(&imported.character, &imported.clips))
             .expect("summaries serialise");
         s["warnings"] = serde_json::json!(imported.warnings);
+        s["name"] = serde_json::json!(name);
+        s["scene"] = serde_json::json!(imported.name);
         Ok::<_, aobake_core::ImportError>((s, upload))
     })
     .await
@@ -161,13 +190,26 @@ pub(crate) async fn post_character(
     store_upload(&state, &upload, "character", summary).await
 }
 
+/// A `.gltf` and its side files as `multipart/form-data`.
+#[derive(utoipa::ToSchema)]
+#[allow(dead_code)] // documents the form; the parts are read one by one
+pub(crate) struct MultipartUpload {
+    /// The `.gltf` first, then each side file as a part named by the file
+    /// name its URIs use.
+    files: Vec<Vec<u8>>,
+}
+
 #[derive(Debug, Deserialize, utoipa::ToSchema)]
 pub(crate) struct ClipsQuery {
     /// The character whose skeleton the clips must drive.
     character: String,
+    /// The uploaded file's name, as the uploader knows it.
+    name: Option<String>,
 }
 
-#[utoipa::path(post, path = "/v1/clips", tag = "uploads", params(("character" = String, Query, description = "The character whose skeleton the clips drive")), request_body(content = Vec<u8>, description = "A glTF file of animations", content_type = "model/gltf-binary"),
+#[utoipa::path(post, path = "/v1/clips", tag = "uploads", params(("character" = String, Query, description = "The character whose skeleton the clips drive"), ("name" = Option<String>, Query, description = "The uploaded file's name")),
+    request_body(description = "A glTF file of animations, sent as for POST /v1/characters",
+        content((Vec<u8> = "model/gltf-binary"), (Vec<u8> = "model/gltf+json"), (Vec<u8> = "application/vnd.aobake.bundle"), (MultipartUpload = "multipart/form-data"))),
     security(("bearer" = ["submit"])),
     responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn post_clips(
@@ -177,7 +219,8 @@ pub(crate) async fn post_clips(
     req: Request,
 ) -> ApiResult<(StatusCode, Json<Uploaded>)> {
     let character = load_upload(&state, &q.character, "character").await?;
-    let upload = read_upload(&state, req).await?;
+    let (upload, part_name) = read_upload(&state, req).await?;
+    let name = file_name(q.name.or(part_name));
     let limits = state.import_limits.clone();
     let (summary, upload) = tokio::task::spawn_blocking(move || {
         let c = import_character(character.upload(), &limits)
@@ -192,7 +235,7 @@ pub(crate) async fn post_clips(
             .map(|c| serde_json::json!({"name": c.name, "duration": c.duration}))
             .collect();
         Ok((
-            serde_json::json!({"clips": names, "warnings": warnings, "character": c.character.vertex_count()}),
+            serde_json::json!({"clips": names, "warnings": warnings, "character": c.character.vertex_count(), "name": name}),
             upload,
         ))
     })

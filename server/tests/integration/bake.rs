@@ -1,6 +1,6 @@
 //! `aobake bake` and `aobake eval` as a user runs them.
 
-use super::{aobake, sample, stderr};
+use super::{aobake, occlusion_csv, sample, stderr};
 
 fn run_bake(dir: &std::path::Path, name: &str, extra: &[&str]) -> std::process::Output {
     let figure = sample("RiggedFigure/RiggedFigure.glb");
@@ -341,4 +341,128 @@ fn bench_bake_times_every_stage_and_each_step_of_the_fits() {
     assert!(stdout.contains("| whole bake |"), "{stdout}");
     assert!(stdout.contains("MB |"), "peak memory\n{stdout}");
     assert!(stdout.contains("× the reference trace"), "{stdout}");
+}
+
+/// `aobake eval` reads an asset of every method: the vertex methods and
+/// the grid give AO at every vertex of the posed character (the asset
+/// stores only its method's own parameters, which eval once failed to
+/// read for grids); a cubemap, which holds occlusion cast into space, is
+/// refused with a message that says where to look instead.
+#[test]
+fn eval_reads_an_asset_of_every_method() {
+    let dir = tempfile::tempdir().unwrap();
+    let truck = sample("CesiumMilkTruck/CesiumMilkTruck.glb");
+    let rigged = sample("RiggedSimple/RiggedSimple.glb");
+    let bake = |file: &std::path::Path, name: &str, args: &[&str]| {
+        let out = dir.path().join(format!("{name}.aob"));
+        let report = dir.path().join(format!("{name}.json"));
+        let mut all = vec![
+            "bake",
+            file.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ];
+        all.extend_from_slice(args);
+        let run = aobake(&all);
+        assert!(run.status.success(), "{name}: {}", stderr(&run));
+        out
+    };
+    let quick = [
+        "--poses",
+        "24",
+        "--samples",
+        "16",
+        "--eval-poses",
+        "2",
+        "--eval-fps",
+        "5",
+    ];
+    let cases = [
+        (
+            bake(
+                &rigged,
+                "linear",
+                &[&["--method", "vertex-linear"][..], &quick].concat(),
+            ),
+            &rigged,
+            160,
+        ),
+        (
+            bake(
+                &rigged,
+                "clustered",
+                &[
+                    &["--method", "vertex-clustered", "--pose-clusters", "2"][..],
+                    &quick,
+                ]
+                .concat(),
+            ),
+            &rigged,
+            160,
+        ),
+        (
+            bake(
+                &truck,
+                "grid",
+                &[
+                    "--method",
+                    "grid",
+                    "--param",
+                    r#"grid={"resolution":8,"rays":16,"eval_frames":1,"eval_ground":16,"eval_rays":8,"average_frames":1}"#,
+                ],
+            ),
+            &truck,
+            0,
+        ),
+    ];
+    for (asset, file, vertices) in cases {
+        let csv = dir.path().join("ao.csv");
+        let out = aobake(&[
+            "eval",
+            asset.to_str().unwrap(),
+            file.to_str().unwrap(),
+            "--clip",
+            "animation_0",
+            "--time",
+            "0.5",
+            "--out",
+            csv.to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}: {}",
+            asset.display(),
+            stderr(&out)
+        );
+        let values = occlusion_csv(&csv);
+        if vertices > 0 {
+            assert_eq!(values.len(), vertices);
+        }
+        assert!(
+            !values.is_empty() && values.iter().all(|v| (0.0..=1.0).contains(v)),
+            "{}",
+            asset.display()
+        );
+    }
+    let cube = bake(
+        &rigged,
+        "cube",
+        &[
+            "--method",
+            "cubemap-discrete",
+            "--param",
+            r#"cubemap={"resolution":8,"shells":2,"times":4,"rays":8,"eval_points":8,"eval_ground":8,"eval_rays":8,"eval_times":2}"#,
+        ],
+    );
+    let out = aobake(&[
+        "eval",
+        cube.to_str().unwrap(),
+        rigged.to_str().unwrap(),
+        "--out",
+        dir.path().join("c.csv").to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("aobake preview"), "{}", stderr(&out));
 }

@@ -160,3 +160,144 @@ fn status_only(env: &TestEnv, method: &str, path: &str, token: &str) -> u16 {
         .unwrap();
     agent.run(req).unwrap().status().as_u16()
 }
+
+/// A raw request: status, headers and body text.
+fn raw(
+    env: &TestEnv,
+    method: &str,
+    path: &str,
+    authorization: &str,
+    body: &[u8],
+) -> (u16, ureq::http::HeaderMap, Vec<u8>) {
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .build()
+        .into();
+    let req = ureq::http::Request::builder()
+        .method(method)
+        .uri(format!("{}{path}", env.url))
+        .header("authorization", authorization)
+        .body(body.to_vec())
+        .unwrap();
+    let mut res = agent.run(req).unwrap();
+    let bytes = res.body_mut().read_to_vec().unwrap();
+    (res.status().as_u16(), res.headers().clone(), bytes)
+}
+
+/// A `read` token reaches what aobake publishes, not the studio's
+/// sources: an uploaded character's bytes need `submit`.
+#[test]
+fn uploaded_sources_need_submit_and_outputs_need_read() {
+    let env = TestEnv::start(Options::default());
+    let reader = format!("Bearer {}", env.token(&["read"]));
+    let submitter = format!("Bearer {}", env.token(&["submit"]));
+    let worker = format!("Bearer {}", env.token(&["worker"]));
+    let source = std::fs::read(aobake_e2e::character("RiggedSimple")).unwrap();
+    let (status, body, _) = env.post_bytes(
+        "/v1/characters",
+        aobake_e2e::ADMIN,
+        "model/gltf-binary",
+        &source,
+    );
+    assert!(status == 201 || status == 200, "{status} {body}");
+    let digest = body["digest"].as_str().unwrap();
+
+    let (status, headers, bytes) = raw(&env, "GET", &format!("/v1/assets/{digest}"), &reader, b"");
+    assert_eq!(status, 403, "{}", String::from_utf8_lossy(&bytes));
+    assert_eq!(headers["content-type"], "application/problem+json");
+    let problem: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    assert!(
+        problem["detail"].as_str().unwrap().contains("submit"),
+        "{problem}"
+    );
+    let (status, _, bytes) = raw(
+        &env,
+        "GET",
+        &format!("/v1/assets/{digest}"),
+        &submitter,
+        b"",
+    );
+    assert_eq!(status, 200);
+    assert!(
+        bytes == source,
+        "a submit token reads back what was uploaded"
+    );
+
+    // An output (any blob that is not an upload) reads with `read`.
+    let output = b"an output a worker published".to_vec();
+    let out_digest = aobake_core::digest::sha256_hex(&output);
+    let (status, _, _) = raw(
+        &env,
+        "PUT",
+        &format!("/v1/blobs/{out_digest}"),
+        &worker,
+        &output,
+    );
+    assert!(status == 201 || status == 200 || status == 204, "{status}");
+    let (status, _, bytes) = raw(
+        &env,
+        "GET",
+        &format!("/v1/assets/{out_digest}"),
+        &reader,
+        b"",
+    );
+    assert_eq!((status, bytes), (200, output));
+}
+
+/// The scheme of `Authorization` is case-insensitive (RFC 9110 §11.1);
+/// another scheme is refused.
+#[test]
+fn the_bearer_scheme_is_case_insensitive() {
+    let env = TestEnv::start(Options::default());
+    let token = env.token(&["read"]);
+    for scheme in ["Bearer", "bearer", "BEARER", "bEaReR"] {
+        let (status, _, body) = raw(&env, "GET", "/v1/whoami", &format!("{scheme} {token}"), b"");
+        assert_eq!(status, 200, "{scheme}: {}", String::from_utf8_lossy(&body));
+    }
+    for header in [
+        format!("Basic {token}"),
+        format!("Bearer{token}"),
+        token.clone(),
+    ] {
+        let (status, _, _) = raw(&env, "GET", "/v1/whoami", &header, b"");
+        assert_eq!(status, 401, "{header}");
+    }
+}
+
+/// An unknown route and a wrong method answer problem+json like every
+/// other error, with the request's id.
+#[test]
+fn unknown_routes_and_wrong_methods_are_problems_too() {
+    let env = TestEnv::start(Options::default());
+    let admin = format!("Bearer {}", aobake_e2e::ADMIN);
+    for (method, path, status, code) in [
+        ("GET", "/v1/nothing-here", 404, "not_found"),
+        ("POST", "/nowhere/at/all", 404, "not_found"),
+        ("DELETE", "/v1/bakes", 405, "method_not_allowed"),
+        ("PUT", "/v1/whoami", 405, "method_not_allowed"),
+    ] {
+        let (got, headers, body) = raw(&env, method, path, &admin, b"");
+        assert_eq!(got, status, "{method} {path}");
+        assert_eq!(
+            headers["content-type"], "application/problem+json",
+            "{method} {path}"
+        );
+        assert!(
+            headers.contains_key("x-request-id"),
+            "{method} {path}: {headers:?}"
+        );
+        let problem: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(problem["code"], code, "{problem}");
+        assert_eq!(problem["status"], status, "{problem}");
+        assert!(
+            problem["detail"].as_str().unwrap().contains(path),
+            "{problem}"
+        );
+        if status == 405 {
+            assert!(
+                headers.contains_key("allow"),
+                "{method} {path}: {headers:?}"
+            );
+        }
+    }
+}

@@ -578,12 +578,29 @@ async function route() {
   }
 }
 
+// `#token=T` or `#token=T&next=/bakes/7`: T is any token the server
+// accepts, percent-encoded where it must be; next is the page to open.
+function signInFragment(hash) {
+  if (!hash.startsWith("#token=")) return null;
+  const out = { token: null, next: "/" };
+  for (const part of hash.slice(1).split("&")) {
+    const at = part.indexOf("=");
+    if (at < 0) continue;
+    const key = part.slice(0, at);
+    let value = part.slice(at + 1);
+    try { value = decodeURIComponent(value); } catch { /* keep it as written */ }
+    if (key === "token") out.token = value;
+    else if (key === "next" && value.startsWith("/")) out.next = value;
+  }
+  return out.token ? out : null;
+}
+
 async function start() {
-  const fragment = location.hash.match(/^#token=([0-9a-fA-F]+)/);
+  const fragment = signInFragment(location.hash);
   if (fragment) {
-    token = fragment[1];
+    token = fragment.token;
     localStorage.setItem(TOKEN_KEY, token);
-    history.replaceState(null, "", `${location.pathname}#/`);
+    history.replaceState(null, "", `${location.pathname}#${fragment.next}`);
   }
   if (!token) return signIn();
   try {
