@@ -15,6 +15,9 @@ use aobake_core::{
 
 use crate::client::{CheckpointRef, Client, ClientError, Lease, OutputRef};
 
+/// How soon a moved progress is sent, at most (see the heartbeat loop).
+const PROGRESS_EVERY: Duration = Duration::from_secs(1);
+
 /// How a worker runs.
 #[derive(Debug, Clone)]
 pub struct WorkerConfig {
@@ -333,10 +336,22 @@ fn run_leased(
         // starves the lease.
         scope.spawn(|| {
             let period = Duration::from_secs_f64(config.heartbeat_secs.max(0.05));
+            // Progress goes out within a second of moving, so the bar
+            // follows a job whose steps are shorter than the period (a
+            // cubemap face's batches, a fit's steps); without a change
+            // the heartbeat keeps its period.
+            let prompt = PROGRESS_EVERY.min(period);
+            let mut sent = 0;
             let mut shutdown_since: Option<Instant> = None;
             while !flags.done.load(Ordering::Relaxed) {
                 let tick = Instant::now();
-                while tick.elapsed() < period && !flags.done.load(Ordering::Relaxed) {
+                while !flags.done.load(Ordering::Relaxed) {
+                    let waited = tick.elapsed();
+                    if waited >= period
+                        || waited >= prompt && flags.progress.load(Ordering::Relaxed) != sent
+                    {
+                        break;
+                    }
                     std::thread::sleep(Duration::from_millis(20));
                 }
                 if flags.done.load(Ordering::Relaxed) {
@@ -349,6 +364,7 @@ fn run_leased(
                     }
                 }
                 let progress = flags.progress.load(Ordering::Relaxed);
+                sent = progress;
                 match client.heartbeat(job, &lease.token, progress) {
                     Ok(stop) => {
                         if stop {

@@ -174,3 +174,43 @@ fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
     assert_eq!(names[0], "cubemap-discrete");
     assert!(names.contains(&"cubemap-continuous"), "{names:?}");
 }
+
+/// A face's progress moves with its batches, within about a second, even
+/// when the worker's heartbeat period is far longer than a face (here
+/// 30 s): the bar does not sit at 0 until faces complete.
+#[test]
+fn a_faces_progress_moves_before_it_completes() {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 120.0,
+        ..Options::default()
+    });
+    let digest = upload(&env, &character("CesiumMan"));
+    let (status, b) = env
+        .request(
+            "POST",
+            "/v1/bakes",
+            ADMIN,
+            Some(json!({"character": digest, "method": "cubemap-discrete", "params": params()})),
+        )
+        .unwrap();
+    assert_eq!(status, 202, "{b}");
+    let id = b["id"].as_i64().unwrap();
+    env.start_worker(&[]);
+    let started = std::time::Instant::now();
+    let mut partial = None;
+    while partial.is_none() && started.elapsed() < Duration::from_secs(120) {
+        let view = bake_view(&env, id);
+        partial = view["jobs"].as_array().unwrap().iter().find_map(|j| {
+            let (progress, work) = (j["progress"].as_i64().unwrap(), j["work"].as_i64().unwrap());
+            (j["kind"] == "face" && j["state"] == "running" && progress > 0 && progress < work)
+                .then(|| (progress, work, view["progress"]["done"].as_i64().unwrap()))
+        });
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let (progress, work, done) = partial.expect("a running face showed partial progress");
+    assert!(
+        done >= progress,
+        "the bake's bar counts the face's progress: {done} < {progress}"
+    );
+    eprintln!("a running face at {progress}/{work}, the bake at {done}");
+}

@@ -33,6 +33,30 @@ function h(tag, attrs = {}, ...children) {
 }
 
 const short = (d) => (d ? d.slice(0, 12) : "");
+
+// What people call a character: the uploaded file's name, else its glTF
+// scene's name, else its digest's start. Read once per digest.
+const characterNames = new Map(); // digest -> Promise<{name, scene}>
+function characterInfo(digest) {
+  if (!characterNames.has(digest)) {
+    characterNames.set(digest, json(`/v1/characters/${digest}`)
+      .then((u) => ({ name: u.summary?.name || null, scene: u.summary?.scene || null }))
+      .catch(() => ({ name: null, scene: null })));
+  }
+  return characterNames.get(digest);
+}
+
+// A character's label, filled in when its name arrives; the digest stays
+// in the tooltip.
+function characterLabel(digest) {
+  const el = h("span", { class: "character", "data-character": digest, title: digest }, short(digest));
+  characterInfo(digest).then(({ name, scene }) => {
+    el.textContent = name || scene || short(digest);
+    if (name && scene && scene !== name) el.append(" ", h("span", { class: "muted" }, scene));
+    el.dataset.named = name || scene ? "yes" : "no";
+  });
+  return el;
+}
 const when = (ms) => (ms ? new Date(ms).toLocaleString() : "");
 const ago = (ms) => {
   const s = Math.max(0, Math.round((Date.now() - ms) / 1000));
@@ -204,7 +228,7 @@ async function bakesPage(signal) {
     tbody.append(h("tr", { "data-bake": b.id },
       h("td", {}, h("a", { href: `#/bakes/${b.id}` }, `#${b.id}`)),
       h("td", {}, b.method),
-      h("td", { class: "mono", title: b.character }, short(b.character)),
+      h("td", {}, characterLabel(b.character)),
       state,
       h("td", {}, bar),
       count,
@@ -238,8 +262,67 @@ function jobLabel(j) {
   return j.kind;
 }
 
-function jobsTable(jobs) {
-  return h("table", { id: "jobs" },
+// Job states as people read them: done, running, queued (blocked,
+// available or waiting to retry), failed (out of attempts) or cancelled.
+const JOB_GROUP = {
+  completed: "done", running: "running", blocked: "queued", available: "queued",
+  retryable: "queued", dead: "failed", cancelled: "cancelled",
+};
+
+// One row per stage (job kind, in graph order): how many jobs are in
+// each state and how much of its work is done.
+function stagesTable(jobs) {
+  const stages = new Map();
+  for (const j of jobs) {
+    if (!stages.has(j.kind)) {
+      stages.set(j.kind, { jobs: 0, done: 0, running: 0, queued: 0, failed: 0, cancelled: 0, work: 0, worked: 0 });
+    }
+    const st = stages.get(j.kind);
+    st.jobs += 1;
+    st[JOB_GROUP[j.state] || "queued"] += 1;
+    st.work += j.work;
+    st.worked += j.state === "completed" ? j.work : j.progress;
+  }
+  return h("table", { id: "stages" },
+    h("thead", {}, h("tr", {}, ...["Stage", "Jobs", "Done", "Running", "Queued", "Failed", "Work"]
+      .map((t) => h("th", {}, t)))),
+    h("tbody", {}, ...[...stages].map(([kind, st]) => h("tr", { "data-stage": kind },
+      h("td", {}, kind),
+      h("td", { class: "num" }, st.jobs),
+      h("td", { class: "num", "data-count": "done" }, st.done),
+      h("td", { class: "num", "data-count": "running" }, st.running),
+      h("td", { class: "num", "data-count": "queued" }, st.queued),
+      h("td", { class: st.failed ? "num error" : "num", "data-count": "failed" }, st.failed),
+      h("td", { class: "num" }, `${st.worked}/${st.work}`)))));
+}
+
+// Seconds as people say them.
+function duration(s) {
+  if (!Number.isFinite(s)) return "—";
+  if (s < 60) return `${Math.max(1, Math.round(s))} s`;
+  if (s < 3600) return `${Math.round(s / 60)} min`;
+  return `${(s / 3600).toFixed(1)} h`;
+}
+
+// The time left from the rate this page has measured: work done over the
+// last minute of progress events (at least 3 s of them), or "—".
+function makeEta() {
+  const samples = []; // [ms, done]
+  return (done, total, state) => {
+    if (finished(state) || state === "paused") return state === "paused" ? "paused" : "";
+    const now = Date.now();
+    samples.push([now, done]);
+    while (samples.length > 2 && now - samples[1][0] > 60_000) samples.shift();
+    const [t0, d0] = samples[0];
+    const seconds = (now - t0) / 1000;
+    if (seconds < 3 || done <= d0) return "measuring the rate…";
+    const rate = (done - d0) / seconds;
+    return `about ${duration((total - done) / rate)} left (${rate.toFixed(rate < 10 ? 1 : 0)} work units/s over the last ${Math.round(seconds)} s)`;
+  };
+}
+
+function jobsTable(jobs, id = "jobs") {
+  return h("table", { id },
     h("thead", {}, h("tr", {}, ...["#", "Job", "State", "Attempts", "Worker", "Checkpoint", "Progress", "Needs", "Error"]
       .map((t) => h("th", {}, t)))),
     h("tbody", {}, ...jobs.map((j) => h("tr", { "data-job": j.index },
@@ -252,6 +335,19 @@ function jobsTable(jobs) {
       h("td", { class: "num" }, `${j.state === "completed" ? j.work : j.progress}/${j.work}`),
       h("td", { class: "muted" }, j.deps.length > 6 ? `${j.deps.length} jobs` : j.deps.join(", ")),
       h("td", { class: "muted" }, j.error || "")))));
+}
+
+// A wide image shown at its own size in a scrolling frame (its text is
+// small when fitted to the page), with a button to fit it instead.
+function zoomable(url, alt, caption) {
+  const figure = h("figure", { class: "wide zoom", "data-zoom": "actual" });
+  const toggle = h("button", { type: "button", class: "small", "data-action": "zoom", onclick: () => {
+    const fit = figure.dataset.zoom === "actual";
+    figure.dataset.zoom = fit ? "fit" : "actual";
+    toggle.textContent = fit ? "Actual size" : "Fit to width";
+  } }, "Fit to width");
+  figure.append(h("div", { class: "scroll" }, h("img", { src: url, alt })), h("figcaption", {}, caption, " ", toggle));
+  return figure;
 }
 
 function cubemapReportSection(report, plotUrl) {
@@ -274,8 +370,8 @@ function cubemapReportSection(report, plotUrl) {
         h("td", { class: "num" }, v.bytes),
         ...[...err(v.space), ...err(v.ground)].map((x) => h("td", { class: "num" }, x)))))),
     h("p", { class: "muted" }, `Asset ${report.sizes.asset_bytes} bytes.`),
-    plotUrl ? h("figure", { class: "wide" }, h("img", { src: plotUrl, alt: "time × distance charts" }),
-      h("figcaption", {}, "Time × distance at the worst, a 90th-percentile and the median texel: input, then each encoding decoded and its error")) : null);
+    plotUrl ? zoomable(plotUrl, "time × distance charts",
+      "Time × distance at the worst, a 90th-percentile and the median texel: input, then each encoding decoded and its error") : null);
 }
 
 function gridReportSection(report, plotUrl) {
@@ -364,7 +460,7 @@ function reportSection(report, plotUrl) {
       `Ground truth's own noise: RMSE ${fmt(report.ground_truth_noise?.rmse)}. `,
       `Asset ${report.sizes.asset_bytes} bytes; ${fmt(ev.multiply_adds_per_vertex, 1)} multiply-adds per vertex.`),
     plotUrl ? h("figure", { class: "wide" }, h("img", { src: plotUrl, alt: "PSNR per frame" }),
-      h("figcaption", {}, "PSNR per held-out clip frame, model against the static average")) : null);
+      h("figcaption", {}, "PSNR per frame of the training clips (fresh rays), model against the static average; the unseen-clip folds are in the table")) : null);
 }
 
 function previewFigure(p, url) {
@@ -382,7 +478,28 @@ async function bakePage(signal, id) {
   const bar = progressBar(bake.progress.done, bake.progress.total, bake.state);
   const state = h("span", { id: "state" }, badge(bake.state));
   const count = h("span", { class: "mono", id: "count" }, `${bake.progress.done}/${bake.progress.total}`);
-  const jobs = h("div", {}, jobsTable(bake.jobs));
+  // Jobs: a summary by stage with the time left, the running and failed
+  // jobs, and every job folded away (a vertex bake has hundreds).
+  const stages = h("div");
+  const eta = h("p", { id: "eta", class: "muted" });
+  const active = h("div");
+  const allJobs = h("div");
+  const foldTitle = h("summary");
+  const folded = h("details", { id: "all-jobs" }, foldTitle, allJobs);
+  const estimate = makeEta();
+  const drawJobs = () => {
+    fill(stages, stagesTable(bake.jobs));
+    const shown = bake.jobs.filter((j) => j.state === "running" || j.state === "dead" || j.state === "retryable");
+    shown.sort((a, b) => (a.state === "running") - (b.state === "running") || a.index - b.index);
+    fill(active, shown.length
+      ? jobsTable(shown, "active")
+      : h("p", { class: "muted", id: "active" }, "No job is running or failing."));
+    fill(allJobs, jobsTable(bake.jobs));
+    foldTitle.textContent = `All ${bake.jobs.length} jobs`;
+  };
+  drawJobs();
+  eta.textContent = estimate(bake.progress.done, bake.progress.total, bake.state);
+  const jobs = h("div", {}, stages, eta, h("h3", {}, "Running and failed"), active, folded);
   const results = h("div", { id: "results" });
   const status = h("div");
   let loadedResults = false;
@@ -461,7 +578,7 @@ async function bakePage(signal, id) {
     setBar(bar, bake.progress.done, bake.progress.total, bake.state);
     fill(state, badge(bake.state));
     count.textContent = `${bake.progress.done}/${bake.progress.total}`;
-    fill(jobs, jobsTable(bake.jobs));
+    drawJobs();
     drawDetails();
     drawActions();
     loadResults();
@@ -470,7 +587,8 @@ async function bakePage(signal, id) {
   const details = h("dl", { class: "kv" });
   const drawDetails = () => fill(details,
     h("dt", {}, "Bake key"), h("dd", { class: "mono" }, bake.key),
-    h("dt", {}, "Character"), h("dd", { class: "mono" }, bake.character, " ",
+    h("dt", {}, "Character"), h("dd", {}, characterLabel(bake.character), " ",
+      h("span", { class: "mono muted" }, short(bake.character)), " ",
       h("a", { href: `#/versions/${bake.character}/${bake.method}` }, "versions")),
     h("dt", {}, "Clips"), h("dd", { class: "mono" }, bake.clips.map(short).join(", ") || "in the character file"),
     h("dt", {}, "Created"), h("dd", {}, when(bake.created_at)),
@@ -479,7 +597,7 @@ async function bakePage(signal, id) {
   drawDetails();
   drawActions();
   show(
-    h("h1", {}, `Bake #${id} `, h("span", { class: "muted" }, bake.method), " ", state),
+    h("h1", {}, `Bake #${id} `, characterLabel(bake.character), " ", h("span", { class: "muted" }, bake.method), " ", state),
     h("div", { class: "actions" }, bar, count),
     actions,
     status,
@@ -498,6 +616,7 @@ async function bakePage(signal, id) {
     setBar(bar, e.done, e.total, e.state);
     fill(state, badge(e.state));
     count.textContent = `${e.done}/${e.total}`;
+    eta.textContent = estimate(e.done, e.total, e.state);
     later();
   });
 }
@@ -538,13 +657,13 @@ async function versionsPage(signal, character, method) {
     show(h("h1", {}, "Versions"),
       h("table", {}, h("thead", {}, h("tr", {}, ...["Character", "Method", "Bakes"].map((t) => h("th", {}, t)))),
         h("tbody", {}, ...[...groups.values()].map((g) => h("tr", {},
-          h("td", { class: "mono" }, h("a", { href: `#/versions/${g.character}/${g.method}` }, short(g.character))),
+          h("td", {}, h("a", { href: `#/versions/${g.character}/${g.method}` }, characterLabel(g.character))),
           h("td", {}, g.method),
           h("td", { class: "num" }, g.count))))));
     return;
   }
   const list = await json(`/v1/characters/${character}/bakes?method=${encodeURIComponent(method)}`);
-  show(h("h1", {}, "Versions of ", h("span", { class: "mono" }, short(character)), ` (${method})`),
+  show(h("h1", {}, "Versions of ", characterLabel(character), ` (${method})`),
     h("table", {}, h("thead", {}, h("tr", {}, ...["Version", "Bake", "State", "Bake key", "Asset", "Finished"]
       .map((t) => h("th", {}, t)))),
       h("tbody", {}, ...list.map((b, i) => h("tr", {},
