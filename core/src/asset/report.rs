@@ -273,28 +273,49 @@ impl NoiseEstimate {
     }
 }
 
-/// Draws PSNR per frame over each test clip (one panel per clip, the model
-/// and the baseline in each) as PNG bytes.
+/// Draws PSNR per frame over each test clip's frames (one panel per clip,
+/// the model and the baseline in each, the legend above the panels) as
+/// PNG bytes.
 pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
     register_plot_font()?;
     let clips = &report.evaluation.clips;
-    let (width, panel) = (900u32, 280u32);
-    let height = 50 + panel * clips.len().max(1) as u32;
+    let (width, panel, head) = (900u32, 280u32, 64u32);
+    let height = head + panel * clips.len().max(1) as u32;
     let mut rgb = vec![255u8; (width * height * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area();
         let e = |e: DrawingAreaErrorKind<_>| e.to_string();
         root.fill(&WHITE).map_err(e)?;
-        let (title, body) = root.split_vertically(50);
+        let (title, body) = root.split_vertically(head);
+        // What the curves are: frames of the training clips traced with
+        // fresh rays (the unseen-clip folds are numbers in the report).
         title
-            .titled(
-                &format!(
-                    "{}: PSNR per frame on held-out clip frames (model vs static average)",
+            .draw(&Text::new(
+                format!(
+                    "{}: PSNR per frame of the training clips, fresh rays",
                     report.method.name()
                 ),
+                (12, 8),
                 ("sans-serif", 20),
-            )
+            ))
             .map_err(e)?;
+        // The legend above the panels, where it covers no curve.
+        let legend = [
+            (report.method.name().to_owned(), BLUE),
+            ("static average".to_owned(), RED),
+        ];
+        for (i, (label, colour)) in legend.into_iter().enumerate() {
+            let x = 12 + 260 * i as i32;
+            title
+                .draw(&PathElement::new(
+                    vec![(x, 46), (x + 28, 46)],
+                    colour.stroke_width(3),
+                ))
+                .map_err(e)?;
+            title
+                .draw(&Text::new(label, (x + 36, 37), ("sans-serif", 16)))
+                .map_err(e)?;
+        }
         let panels = body.split_evenly((clips.len().max(1), 1));
         for (clip, area) in clips.iter().zip(&panels) {
             let psnr = |v: &[f64]| -> Vec<(f64, f64)> {
@@ -338,19 +359,9 @@ pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
                 .map_err(e)?;
             chart
                 .draw_series(LineSeries::new(model, BLUE.stroke_width(2)))
-                .map_err(e)?
-                .label(report.method.name())
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+                .map_err(e)?;
             chart
                 .draw_series(LineSeries::new(base, RED.stroke_width(2)))
-                .map_err(e)?
-                .label("static average")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
                 .map_err(e)?;
         }
         root.present().map_err(e)?;

@@ -121,8 +121,7 @@ impl Document {
         out
     }
 
-    /// The default (else first) scene's name, else the name of its first
-    /// named root node.
+    /// The default (else first) scene's name, when it has one.
     pub(crate) fn name(&self) -> Option<String> {
         let scene = self
             .root
@@ -130,17 +129,11 @@ impl Document {
             .map(|s| s.value())
             .or((!self.root.scenes.is_empty()).then_some(0))
             .and_then(|s| self.root.scenes.get(s))?;
-        let named = |n: &Option<String>| {
-            n.as_ref()
-                .map(|s| s.trim().to_owned())
-                .filter(|s| !s.is_empty())
-        };
-        named(&scene.name).or_else(|| {
-            scene
-                .nodes
-                .iter()
-                .find_map(|n| self.root.nodes.get(n.value()).and_then(|n| named(&n.name)))
-        })
+        scene
+            .name
+            .as_ref()
+            .map(|s| s.trim().to_owned())
+            .filter(|s| !s.is_empty())
     }
 
     /// All nodes with each parent before its children.

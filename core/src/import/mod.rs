@@ -34,8 +34,7 @@ pub struct Imported {
     /// Things that were accepted but deserve a look (normalised weights,
     /// missing images, ignored primitives).
     pub warnings: Vec<String>,
-    /// What the file calls the character: its scene's name, else the name
-    /// of the scene's first named root node.
+    /// What the file calls the character: its scene's name, if any.
     pub name: Option<String>,
 }
 

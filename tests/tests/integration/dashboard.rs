@@ -151,6 +151,10 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
             .unwrap();
         let row = format!("document.querySelector('tr[data-bake=\"{id}\"] .bar')");
         wait_for(&c, "the bakes list", &row, Duration::from_secs(20)).await;
+        // Characters by the name they were uploaded under, not a digest.
+        let label = format!("document.querySelector('tr[data-bake=\"{id}\"] .character')");
+        let name = wait_for(&c, "the character's name", &format!("{label}.dataset.named === 'yes' && {label}.textContent"), Duration::from_secs(20)).await;
+        assert_eq!(name, json!("CesiumMan.glb"));
         let url = c.current_url().await.unwrap();
         assert!(!url.as_str().contains(&submitter), "{url}");
         let text = eval(&c, "return document.body.innerText").await;
@@ -168,6 +172,17 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         wait_for(&c, "the bake page", "document.querySelector('#jobs')", Duration::from_secs(20)).await;
         wait_for(&c, "the live stream", "document.querySelector('#live.on')", Duration::from_secs(20)).await;
         eval(&c, "window.__notReloaded = true; return null").await;
+        // A summary by stage; every job folded away.
+        let stages = eval(&c, "return [...document.querySelectorAll('#stages tbody tr')].map(r => r.dataset.stage)").await;
+        assert_eq!(stages[0], json!("sample"), "{stages}");
+        assert!(stages.as_array().unwrap().contains(&json!("fit")), "{stages}");
+        assert_eq!(eval(&c, "return document.querySelector('#all-jobs').open").await, json!(false));
+        let heading = eval(&c, "return document.querySelector('main h1').textContent").await;
+        assert!(heading.as_str().unwrap().contains("CesiumMan.glb"), "{heading}");
+        // The method's own parameters only.
+        let params = eval(&c, "return Object.keys(JSON.parse(document.querySelector('main pre').textContent))").await;
+        let params: Vec<&str> = params.as_array().unwrap().iter().map(|k| k.as_str().unwrap()).collect();
+        assert!(params.contains(&"linear") && !params.iter().any(|k| ["clustered", "grid", "cubemap"].contains(k)), "{params:?}");
         let bar = "document.querySelector('main .bar')";
         env.start_worker(&[]);
         let mid = wait_for(
@@ -178,6 +193,18 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         )
         .await;
         eprintln!("progress bar at {mid} without a reload");
+        // The running jobs come first, above the folded table, and the
+        // time left is estimated from the rate the page measured.
+        let active = wait_for(
+            &c,
+            "a running job listed first",
+            "document.querySelector('#active tbody tr') && document.querySelector('#active tbody tr [data-state]').dataset.state",
+            Duration::from_secs(60),
+        )
+        .await;
+        assert!(active == json!("running") || active == json!("retryable") || active == json!("dead"), "{active}");
+        let eta = wait_for(&c, "an estimate of the time left", "/ left \\(/.test(document.querySelector('#eta').textContent) && document.querySelector('#eta').textContent", Duration::from_secs(60)).await;
+        eprintln!("{eta}");
         wait_for(
             &c,
             "the jobs table to follow",
@@ -208,6 +235,12 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert_eq!(kinds, json!(["still", "still", "still", "animation"]));
         let plot = eval(&c, "const i = document.querySelector('#report img'); return i && i.naturalWidth").await;
         assert!(plot.as_u64().unwrap_or(0) > 100, "the PSNR plot shows: {plot}");
+        let caption = eval(&c, "return document.querySelector('#report figcaption').textContent").await;
+        assert!(caption.as_str().unwrap().contains("training clips"), "{caption}");
+        // Done: every stage's jobs are done, and no time is left.
+        let counted = eval(&c, "return [...document.querySelectorAll('#stages [data-count=\"done\"]')].reduce((n, td) => n + Number(td.textContent), 0) === document.querySelectorAll('#jobs tbody tr').length").await;
+        assert_eq!(counted, json!(true));
+        assert_eq!(eval(&c, "return document.querySelector('#eta').textContent").await, json!(""));
         assert_eq!(eval(&c, "return window.__notReloaded === true").await, json!(true));
         let jobs = eval(&c, "return [...document.querySelectorAll('#jobs [data-state]')].every(b => b.dataset.state === 'completed')").await;
         assert_eq!(jobs, json!(true), "every job shows completed");
@@ -259,6 +292,15 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         )
         .await;
         assert_eq!(versions, json!([format!("#{other}"), format!("#{id}")]));
+        let heading = wait_for(&c, "the named versions", "document.querySelector('main h1 .character').dataset.named === 'yes' && document.querySelector('main h1').textContent", Duration::from_secs(20)).await;
+        assert!(heading.as_str().unwrap().starts_with("Versions of CesiumMan.glb"), "{heading}");
+
+        // The URL `serve --demo` prints opens the bake itself, with any
+        // token the server accepts (this one is not hex).
+        c.goto(&format!("{}/#token={ADMIN}&next=/bakes/{id}", env.url)).await.unwrap();
+        wait_for(&c, "the bake page from a sign-in link", &format!("location.hash === '#/bakes/{id}' && document.querySelector('#stages')"), Duration::from_secs(20)).await;
+        let who = eval(&c, "return document.getElementById('who').textContent").await;
+        assert!(who.as_str().unwrap().contains("admin"), "{who}");
 
         // A read-only token sees everything, the actions disabled and why.
         c.goto(&format!("{}/#token={reader}", env.url)).await.unwrap();
@@ -315,6 +357,38 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert!(!text.as_str().unwrap().contains("null") && !text.as_str().unwrap().contains("undefined"), "{text}");
         eval(&c, "document.querySelector('#report').scrollIntoView(); return null").await;
         shot(&c, "7-grid-report").await;
+
+        // A cubemap bake's charts show at their own size, in a frame that
+        // scrolls, and fit the page on request.
+        let man = upload(&env, &character("CesiumMan"));
+        let (status, b) = env
+            .request(
+                "POST",
+                "/v1/bakes",
+                ADMIN,
+                Some(json!({"character": man, "method": "cubemap-discrete", "params": {"cubemap": {
+                    "resolution": 16, "shells": 4, "times": 16, "rays": 16, "eval_times": 2,
+                    "eval_points": 64, "eval_ground": 64, "eval_rays": 16}}})),
+            )
+            .unwrap();
+        assert_eq!(status, 202, "{b}");
+        let cube = b["id"].as_i64().unwrap();
+        c.goto(&format!("{}/#/bakes/{cube}", env.url)).await.unwrap();
+        wait_for(&c, "the finished cubemap bake", "document.querySelector('#state [data-state=\"done\"]')", Duration::from_secs(300)).await;
+        let chart = "document.querySelector('#report figure.zoom img')";
+        let sizes = wait_for(
+            &c,
+            "the charts",
+            &format!("{chart} && {chart}.complete && {chart}.naturalWidth > 0 && [{chart}.naturalWidth, Math.round({chart}.getBoundingClientRect().width)]"),
+            Duration::from_secs(30),
+        )
+        .await;
+        assert_eq!(sizes[0], sizes[1], "shown at its own size");
+        c.find(Locator::Css("button[data-action=\"zoom\"]")).await.unwrap().click().await.unwrap();
+        let fitted = eval(&c, &format!("return {chart}.getBoundingClientRect().width <= {chart}.closest('figure').getBoundingClientRect().width")).await;
+        assert_eq!(fitted, json!(true), "fitted to the page");
+        eval(&c, "document.querySelector('#report').scrollIntoView(); return null").await;
+        shot(&c, "7b-cubemap-charts").await;
 
         // A character with three clips: its report leads with the clips
         // the model never saw (leave one clip out), then the frames of

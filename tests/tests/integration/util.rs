@@ -22,10 +22,16 @@ pub(crate) fn quick_params(poses: usize) -> Value {
     json!({"samples": 32, "eval_poses": 2, "eval_fps": 10.0, "poses": poses})
 }
 
-/// Uploads a character; returns its digest.
+/// Uploads a character under its file name; returns its digest.
 pub(crate) fn upload(env: &TestEnv, path: &Path) -> String {
     let bytes = std::fs::read(path).unwrap();
-    let (status, body, _) = env.post_bytes("/v1/characters", ADMIN, "model/gltf-binary", &bytes);
+    let name = path.file_name().unwrap().to_str().unwrap();
+    let (status, body, _) = env.post_bytes(
+        &format!("/v1/characters?name={name}"),
+        ADMIN,
+        "model/gltf-binary",
+        &bytes,
+    );
     assert!(status == 201 || status == 200, "{status} {body}");
     body["digest"].as_str().unwrap().to_owned()
 }

@@ -458,9 +458,11 @@ pub fn charts_png(
     };
     let l = &first.layout;
     let (res, shells, times) = (l.resolution, l.spheroid.shells, l.times);
+    // Charts about 384 × 256 pixels, whole pixels per cell: readable at
+    // their own size (the dashboard shows them so, in a scrolling frame).
     let (cell_w, cell_h) = (
-        (300 / times.max(1)).max(1) as u32,
-        (128 / shells.max(1)).max(2) as u32,
+        384usize.div_ceil(times.max(1)).max(1) as u32,
+        256usize.div_ceil(shells.max(1)).max(2) as u32,
     );
     let (chart_w, chart_h) = (cell_w * times as u32, cell_h * shells as u32);
     let (label_h, gap) = (44u32, 14u32);
