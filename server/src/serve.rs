@@ -78,6 +78,12 @@ fn write_private(path: &Path, text: &str) -> anyhow::Result<()> {
 
 /// Runs the server until SIGTERM or Ctrl-C.
 pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
+    // jemalloc (the binary's allocator) purges freed pages on its own
+    // threads, so memory a burst of uploads freed goes back to the system
+    // while the server idles, not at its next allocation.
+    if let Err(e) = tikv_jemalloc_ctl::background_thread::write(true) {
+        eprintln!("warning: jemalloc's background purging is off: {e}");
+    }
     std::fs::create_dir_all(&args.data)
         .with_context(|| format!("cannot create {}", args.data.display()))?;
     let store: Arc<dyn Store> = match &args.database {

@@ -103,6 +103,11 @@ impl TestEnv {
         env
     }
 
+    /// The server process's id, while it runs.
+    pub fn server_pid(&self) -> Option<u32> {
+        self.server.as_ref().map(Child::id)
+    }
+
     /// The data directory's path.
     pub fn data(&self) -> PathBuf {
         self.dir.path().join("data")

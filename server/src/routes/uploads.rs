@@ -82,7 +82,7 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, 
                 .map(|u| (u, None))
                 .map_err(|e| ApiError::bad("bad_bundle", e.to_string()));
         }
-        return Ok((UploadBytes::single(bytes.to_vec()), None));
+        return Ok((UploadBytes::single(Vec::from(bytes)), None));
     }
     let mut parts = Multipart::from_request(req, &())
         .await
@@ -96,7 +96,7 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, 
             .or(field.name())
             .unwrap_or_default()
             .to_owned();
-        let bytes = field.bytes().await.map_err(|e| too_large(&e))?.to_vec();
+        let bytes = field.bytes().await.map_err(|e| too_large(&e))?.into();
         if main.is_none() {
             main = Some(bytes);
             main_name = Some(name);
