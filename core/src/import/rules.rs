@@ -30,13 +30,11 @@ const WIDE_FIELDS: &[&str] = &["byteLength", "byteOffset", "count"];
 pub(crate) fn check_integer_widths(json: &serde_json::Value) -> Result<(), ImportError> {
     fn walk(value: &serde_json::Value, path: &mut String) -> Result<(), ImportError> {
         match value {
-            serde_json::Value::Number(n) => {
-                if n.as_u64().is_some_and(|v| v > u64::from(u32::MAX)) {
-                    return Err(ImportError::invalid(
-                        path.clone(),
-                        format!("{n} is out of range (at most {})", u32::MAX),
-                    ));
-                }
+            serde_json::Value::Number(n) if n.as_u64().is_some_and(|v| v > u64::from(u32::MAX)) => {
+                return Err(ImportError::invalid(
+                    path.clone(),
+                    format!("{n} is out of range (at most {})", u32::MAX),
+                ));
             }
             serde_json::Value::Array(items) => {
                 for (i, item) in items.iter().enumerate() {
