@@ -446,7 +446,100 @@ pub fn validator_errors(valid: &[u8]) -> Vec<(Case, Verdict)> {
             j["nodes"][matrix_joint as usize]["translation"] = json!([0.0, 0.0, 0.0]);
         },
     );
-    let _ = animated;
+    edit(
+        "float accessor marked normalized (ACCESSOR_NORMALIZED_INVALID)",
+        Refused { path: "normalized" },
+        &|j, _| {
+            j["accessors"][weights]["normalized"] = json!(true);
+        },
+    );
+    edit(
+        "skin joints in two node trees (SKIN_NO_COMMON_ROOT)",
+        Refused {
+            path: "skins[0].joints",
+        },
+        &|j, _| {
+            let nodes = j["nodes"].as_array_mut().unwrap();
+            nodes.push(json!({ "name": "orphan" }));
+            let orphan = nodes.len() - 1;
+            let roots = j["scenes"][0]["nodes"].as_array_mut().unwrap();
+            roots.push(json!(orphan));
+            j["skins"][0]["joints"][1] = json!(orphan);
+        },
+    );
+    edit(
+        "skin skeleton below one of its joints (SKIN_SKELETON_INVALID)",
+        Refused {
+            path: "skins[0].skeleton",
+        },
+        &|j, _| {
+            j["skins"][0]["skeleton"] = json!(animated);
+        },
+    );
+    // Leniency that serves users: data AO computes from anyway.
+    edit(
+        "POSITION max that its data does not reach (ACCESSOR_MAX_MISMATCH)",
+        Warned {
+            about: "declare a min or max their data does not have",
+        },
+        &|j, _| {
+            j["accessors"][position]["max"] = json!([9.0, 9.0, 9.0]);
+        },
+    );
+    edit(
+        "index min that its data does not have (ACCESSOR_MIN_MISMATCH)",
+        Warned {
+            about: "declare a min or max their data does not have",
+        },
+        &|j, _| {
+            j["accessors"][indices]["min"] = json!([1]);
+        },
+    );
+    edit(
+        "a normal of length 2 (ACCESSOR_VECTOR3_NON_UNIT)",
+        Warned {
+            about: "normals were not of unit length; normalised",
+        },
+        &|j, b| {
+            let at = accessor_offset(j, normal);
+            b[at..at + 12].copy_from_slice(&[2f32, 0.0, 0.0].map(f32::to_le_bytes).concat());
+            let a = &mut j["accessors"][normal];
+            a.as_object_mut().unwrap().remove("max");
+            a.as_object_mut().unwrap().remove("min");
+        },
+    );
+    edit(
+        "a rotation key of length 2 (ACCESSOR_ANIMATION_SAMPLER_OUTPUT_NON_NORMALIZED_QUATERNION)",
+        Warned {
+            about: "rotation keys were not unit quaternions; normalised",
+        },
+        &|j, b| {
+            let channel = j["animations"][0]["channels"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|c| c["target"]["path"] == "rotation")
+                .unwrap()
+                .clone();
+            let sampler =
+                &j["animations"][0]["samplers"][channel["sampler"].as_u64().unwrap() as usize];
+            let output = sampler["output"].as_u64().unwrap() as usize;
+            let at = accessor_offset(j, output);
+            b[at..at + 16].copy_from_slice(&[0f32, 0.0, 0.0, 2.0].map(f32::to_le_bytes).concat());
+            let a = &mut j["accessors"][output];
+            a.as_object_mut().unwrap().remove("max");
+            a.as_object_mut().unwrap().remove("min");
+        },
+    );
+    edit(
+        "a node rotation of length 2 (VALUE_NOT_IN_RANGE)",
+        Warned {
+            about: "node rotations were not unit quaternions; normalised",
+        },
+        &|j, _| {
+            j["nodes"][animated as usize]["rotation"] = json!([0.0, 0.0, 0.0, 2.0]);
+        },
+    );
     // Images AO never reads: warned about, as the texture exception says.
     edit(
         "image in a buffer view without mimeType (UNSATISFIED_DEPENDENCY)",

@@ -32,6 +32,60 @@ impl Decoded<f32> {
 pub(crate) struct Accessors<'a> {
     pub(crate) root: &'a json::Root,
     pub(crate) buffers: &'a [Vec<u8>],
+    /// Accessors read so far whose declared `min` or `max` is not their
+    /// data's (ACCESSOR_MIN_MISMATCH / ACCESSOR_MAX_MISMATCH).
+    mismatched: std::cell::RefCell<std::collections::BTreeSet<usize>>,
+}
+
+impl<'a> Accessors<'a> {
+    pub(crate) fn new(root: &'a json::Root, buffers: &'a [Vec<u8>]) -> Self {
+        Self {
+            root,
+            buffers,
+            mismatched: Default::default(),
+        }
+    }
+
+    /// A warning naming the accessors whose declared bounds their data
+    /// does not have: aobake computes its own bounds, so it only says so.
+    pub(crate) fn bounds_warning(&self) -> Option<String> {
+        let mismatched = self.mismatched.borrow();
+        let first: Vec<String> = mismatched.iter().take(8).map(usize::to_string).collect();
+        (!mismatched.is_empty()).then(|| {
+            format!(
+                "{} accessors declare a min or max their data does not have (accessors {}{}); aobake uses the data",
+                mismatched.len(),
+                first.join(", "),
+                if mismatched.len() > first.len() { ", …" } else { "" }
+            )
+        })
+    }
+}
+
+/// Whether an accessor's declared `min`/`max` differ from its decoded
+/// values (compared as f32, as they are stored; normalised integers are
+/// declared unscaled and are not compared).
+fn bounds_differ(accessor: &json::Accessor, values: &[f64], width: usize) -> bool {
+    let declared = |v: &Option<json::Value>| -> Option<Vec<f32>> {
+        v.as_ref()?
+            .as_array()?
+            .iter()
+            .map(|x| x.as_f64().map(|x| x as f32))
+            .collect()
+    };
+    let (min, max) = (declared(&accessor.min), declared(&accessor.max));
+    if (min.is_none() && max.is_none()) || values.is_empty() {
+        return false;
+    }
+    let mut lo = vec![f32::INFINITY; width];
+    let mut hi = vec![f32::NEG_INFINITY; width];
+    for element in values.chunks_exact(width) {
+        for (c, &v) in element.iter().enumerate() {
+            lo[c] = lo[c].min(v as f32);
+            hi[c] = hi[c].max(v as f32);
+        }
+    }
+    min.is_some_and(|m| m != lo) || max.is_some_and(|m| m != hi)
 }
 
 fn width_of(ty: Type) -> usize {
@@ -266,6 +320,11 @@ impl Accessors<'_> {
 
         if let Some(sparse) = &accessor.sparse {
             self.apply_sparse(&path, sparse, ty, ct, kind, &mut values, count, width)?;
+        }
+        if !matches!(kind, Kind::Int { normalized: true })
+            && bounds_differ(accessor, &values, width)
+        {
+            self.mismatched.borrow_mut().insert(index);
         }
         Ok(Decoded { width, values })
     }

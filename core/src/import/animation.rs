@@ -28,10 +28,8 @@ pub(crate) fn read_clips(
     warnings: &mut Vec<String>,
 ) -> Result<Vec<Clip>, ImportError> {
     let root = &doc.root;
-    let acc = Accessors {
-        root,
-        buffers: &doc.buffers,
-    };
+    let acc = Accessors::new(root, &doc.buffers);
+    let mut non_unit = 0usize;
     // Every channel decodes its sampler, so keys are counted per channel.
     let mut keys = 0u64;
     for animation in &root.animations {
@@ -197,6 +195,7 @@ pub(crate) fn read_clips(
                             ),
                         ));
                     }
+                    non_unit += usize::from((length - 1.0).abs() > 5e-4);
                     q.copy_from_slice(&(quat / length).to_array());
                 }
             }
@@ -236,5 +235,11 @@ pub(crate) fn read_clips(
             "{unbound} animation channels target nodes that the character does not have; ignored"
         ));
     }
+    if non_unit > 0 {
+        warnings.push(format!(
+            "{non_unit} rotation keys were not unit quaternions; normalised"
+        ));
+    }
+    warnings.extend(acc.bounds_warning());
     Ok(clips)
 }

@@ -89,6 +89,8 @@ struct Builder<'a> {
     unnormalized: usize,
     unweighted: usize,
     zero_weight_out_of_range: usize,
+    /// Normals further than the validator's tolerance from unit length.
+    non_unit_normals: usize,
 }
 
 pub(crate) fn build_character(
@@ -96,10 +98,7 @@ pub(crate) fn build_character(
     limits: &Limits,
 ) -> Result<(Character, Vec<String>), ImportError> {
     let root = &doc.root;
-    let acc = Accessors {
-        root,
-        buffers: &doc.buffers,
-    };
+    let acc = Accessors::new(root, &doc.buffers);
     let instances: Vec<usize> = doc
         .scene_nodes()
         .into_iter()
@@ -183,6 +182,7 @@ pub(crate) fn build_character(
         unnormalized: 0,
         unweighted: 0,
         zero_weight_out_of_range: 0,
+        non_unit_normals: 0,
     };
     let mut warnings = Vec::new();
     let mut skipped = 0usize;
@@ -212,11 +212,18 @@ pub(crate) fn build_character(
             b.zero_weight_out_of_range
         ));
     }
+    if b.non_unit_normals > 0 {
+        warnings.push(format!(
+            "{} normals were not of unit length; normalised",
+            b.non_unit_normals
+        ));
+    }
+    warnings.extend(b.acc.bounds_warning());
     if b.triangles.is_empty() {
         return Err(ImportError::NoGeometry);
     }
 
-    let skeleton = skeleton(doc, b.morph_weights)?;
+    let skeleton = skeleton(doc, b.morph_weights, &mut warnings)?;
     let source = SourceStats {
         meshes: root.meshes.len(),
         primitives: root.meshes.iter().map(|m| m.primitives.len()).sum(),
@@ -267,8 +274,11 @@ pub(crate) fn build_character(
 pub(crate) fn skeleton(
     doc: &Document,
     morph_weights: Vec<Vec<f32>>,
+    warnings: &mut Vec<String>,
 ) -> Result<Skeleton, ImportError> {
     let mut nodes = Vec::with_capacity(doc.root.nodes.len());
+    // Rest rotations off unit length (NODE_ROTATION_NON_UNIT): normalised.
+    let mut non_unit = 0usize;
     for ((i, node), weights) in doc.root.nodes.iter().enumerate().zip(morph_weights) {
         let rest = match node.matrix {
             Some(m) => {
@@ -310,6 +320,9 @@ pub(crate) fn skeleton(
                 "transform is not finite",
             ));
         }
+        if (rest.rotation.length() - 1.0).abs() > 5e-4 && node.rotation.is_some() {
+            non_unit += 1;
+        }
         let rest = Transform {
             rotation: rest.rotation.normalize(),
             ..rest
@@ -326,6 +339,11 @@ pub(crate) fn skeleton(
             rest,
             morph_weights: weights,
         });
+    }
+    if non_unit > 0 {
+        warnings.push(format!(
+            "{non_unit} node rotations were not unit quaternions; normalised"
+        ));
     }
     Ok(Skeleton {
         nodes,
@@ -469,9 +487,15 @@ impl Builder<'_> {
             self.positions.extend_from_slice(&positions);
             let computed_normals = normals.is_none();
             match normals {
-                Some(normals) => self
-                    .normals
-                    .extend(normals.into_iter().map(Vec3::normalize_or_zero)),
+                Some(normals) => {
+                    // ACCESSOR_VECTOR3_NON_UNIT's tolerance.
+                    self.non_unit_normals += normals
+                        .iter()
+                        .filter(|n| (n.length() - 1.0).abs() > 5e-4)
+                        .count();
+                    self.normals
+                        .extend(normals.into_iter().map(Vec3::normalize_or_zero));
+                }
                 None => {
                     self.normals.resize(base + count, Vec3::ZERO);
                     angle_weighted_normals(

@@ -73,11 +73,23 @@ pub(crate) fn check_integer_widths(json: &serde_json::Value) -> Result<(), Impor
 pub(crate) fn check(root: &Root, parents: &[Option<usize>]) -> Result<usize, ImportError> {
     nodes(root)?;
     scenes(root, parents)?;
-    skins(root)?;
+    skins(root, parents)?;
     meshes(root)?;
     animations(root)?;
     strides(root)?;
     for (i, accessor) in root.accessors.iter().enumerate() {
+        let small = [
+            ComponentType::I8,
+            ComponentType::U8,
+            ComponentType::I16,
+            ComponentType::U16,
+        ];
+        if accessor.normalized && !small.into_iter().any(|c| is(accessor, c)) {
+            return Err(ImportError::invalid(
+                format!("accessors[{i}].normalized"),
+                "only byte and short components may be normalized",
+            ));
+        }
         if accessor.count.0 == 0 {
             return Err(ImportError::invalid(
                 format!("accessors[{i}].count"),
@@ -144,12 +156,36 @@ fn scenes(root: &Root, parents: &[Option<usize>]) -> Result<(), ImportError> {
     Ok(())
 }
 
-fn skins(root: &Root) -> Result<(), ImportError> {
+fn skins(root: &Root, parents: &[Option<usize>]) -> Result<(), ImportError> {
+    let ancestors = |mut n: usize| {
+        std::iter::from_fn(move || {
+            n = parents.get(n).copied().flatten()?;
+            Some(n)
+        })
+    };
+    let top = |n: usize| ancestors(n).last().unwrap_or(n);
+    let under = |n: usize, a: usize| n == a || ancestors(n).any(|p| p == a);
     for (s, skin) in root.skins.iter().enumerate() {
-        unique(
-            skin.joints.iter().map(|j| j.value()),
-            &format!("skins[{s}].joints"),
-        )?;
+        let joints = || skin.joints.iter().map(|j| j.value());
+        unique(joints(), &format!("skins[{s}].joints"))?;
+        // SKIN_NO_COMMON_ROOT: the joints are nodes of one tree.
+        if let Some(first) = joints().next()
+            && let Some(other) = joints().find(|&j| top(j) != top(first))
+        {
+            return Err(ImportError::invalid(
+                format!("skins[{s}].joints"),
+                format!("joints {first} and {other} have no common root"),
+            ));
+        }
+        // SKIN_SKELETON_INVALID: the skeleton is a common root of them.
+        if let Some(skeleton) = skin.skeleton.map(|k| k.value())
+            && let Some(joint) = joints().find(|&j| !under(j, skeleton))
+        {
+            return Err(ImportError::invalid(
+                format!("skins[{s}].skeleton"),
+                format!("node {skeleton} is not an ancestor of joint {joint}"),
+            ));
+        }
         if let Some(ibm) = skin.inverse_bind_matrices {
             let path = format!("skins[{s}].inverseBindMatrices");
             let accessor = accessor(root, ibm.value(), &path)?;
@@ -174,9 +210,12 @@ fn target_count(mesh: &json::Mesh) -> usize {
 }
 
 fn meshes(root: &Root) -> Result<(), ImportError> {
+    // Used or required (a file that requires it and forgot to list it as
+    // used still means it).
     let quantized = root
         .extensions_used
         .iter()
+        .chain(&root.extensions_required)
         .any(|e| e == "KHR_mesh_quantization");
     for (m, mesh) in root.meshes.iter().enumerate() {
         let targets = target_count(mesh);
