@@ -2,11 +2,13 @@
 
 use clap::Parser as _;
 
-/// mimalloc, not glibc's malloc: glibc keeps what a burst of large
-/// uploads freed in its per-thread arenas (a server grew from 43 to
-/// 138 MB over five passes of the same hostile corpus and stayed there),
-/// while mimalloc gives freed segments back to the system (a test holds
-/// the server under a stated bound: tests/tests/integration/bad_input.rs).
+/// jemalloc, not glibc's malloc: glibc kept what a burst of large uploads
+/// freed in its per-thread arenas (a server grew from 43 to 138 MB over
+/// five passes of the same hostile corpus and stayed there), while
+/// jemalloc with background purging (turned on by `serve`) gives freed
+/// pages back to the system (a test holds the server under a stated
+/// bound: tests/tests/integration/bad_input.rs). mimalloc was tried and
+/// kept more resident.
 #[global_allocator]
 static ALLOCATOR: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 

@@ -479,6 +479,16 @@ impl Builder<'_> {
                 }
                 None => None,
             };
+            // Quantized normals (normalized bytes or shorts) are as unit
+            // as their precision allows; only float ones are judged.
+            let float_normals = attribute(prim, Semantic::Normals).is_some_and(|a| {
+                matches!(
+                    self.acc.root.accessors.get(a).map(|x| x.component_type),
+                    Some(Checked::Valid(json::accessor::GenericComponentType(
+                        json::accessor::ComponentType::F32
+                    )))
+                )
+            });
             let morph = self.morph_targets(prim, n, m, count, &path)?;
 
             let tri_start = self.triangles.len();
@@ -489,10 +499,12 @@ impl Builder<'_> {
             match normals {
                 Some(normals) => {
                     // ACCESSOR_VECTOR3_NON_UNIT's tolerance.
-                    self.non_unit_normals += normals
-                        .iter()
-                        .filter(|n| (n.length() - 1.0).abs() > 5e-4)
-                        .count();
+                    if float_normals {
+                        self.non_unit_normals += normals
+                            .iter()
+                            .filter(|n| (n.length() - 1.0).abs() > 5e-4)
+                            .count();
+                    }
                     self.normals
                         .extend(normals.into_iter().map(Vec3::normalize_or_zero));
                 }

@@ -20,17 +20,61 @@ use gltf::json::{
 
 use super::ImportError;
 
-/// Integer fields of the glTF schema that may exceed 32 bits.
-const WIDE_FIELDS: &[&str] = &["byteLength", "byteOffset", "count"];
+/// Keys whose values (a number, or an array of numbers) are indices or
+/// enums, which `gltf-json` reads as 32-bit.
+const NARROW_KEYS: &[&str] = &[
+    "buffer",
+    "bufferView",
+    "byteStride",
+    "camera",
+    "children",
+    "componentType",
+    "index",
+    "indices",
+    "input",
+    "inverseBindMatrices",
+    "joints",
+    "magFilter",
+    "material",
+    "mesh",
+    "minFilter",
+    "mode",
+    "node",
+    "nodes",
+    "output",
+    "sampler",
+    "scene",
+    "skeleton",
+    "skin",
+    "source",
+    "target",
+    "texCoord",
+    "wrapS",
+    "wrapT",
+];
 
-/// Refuses the first integer above `u32::MAX` outside the fields that may
-/// hold one: `gltf-json` reads indices and enums as `value as u32`, so a
-/// primitive mode of 2³²+4 would silently become 4 (triangles) and a mesh
-/// index of 2³² would become mesh 0.
+/// Refuses the first index or enum above `u32::MAX`: `gltf-json` reads
+/// them as `value as u32`, so a primitive mode of 2³²+4 would silently
+/// become 4 (triangles) and a mesh index of 2³² would become mesh 0.
+/// Other numbers (bounds, transforms, factors) may be any size; attribute
+/// and morph-target maps hold accessor indices under any name.
 pub(crate) fn check_integer_widths(json: &serde_json::Value) -> Result<(), ImportError> {
-    fn walk(value: &serde_json::Value, path: &mut String) -> Result<(), ImportError> {
+    /// What the numbers at a place in the JSON are.
+    #[derive(Clone, Copy, PartialEq)]
+    enum Here {
+        /// Any number.
+        Free,
+        /// Indices or enums (objects inside start over).
+        Narrow,
+        /// Objects mapping names to accessor indices (attributes, morph
+        /// targets).
+        Maps,
+    }
+    fn walk(value: &serde_json::Value, path: &mut String, here: Here) -> Result<(), ImportError> {
         match value {
-            serde_json::Value::Number(n) if n.as_u64().is_some_and(|v| v > u64::from(u32::MAX)) => {
+            serde_json::Value::Number(n)
+                if here == Here::Narrow && n.as_u64().is_some_and(|v| v > u64::from(u32::MAX)) =>
+            {
                 return Err(ImportError::invalid(
                     path.clone(),
                     format!("{n} is out of range (at most {})", u32::MAX),
@@ -40,24 +84,31 @@ pub(crate) fn check_integer_widths(json: &serde_json::Value) -> Result<(), Impor
                 for (i, item) in items.iter().enumerate() {
                     let len = path.len();
                     path.push_str(&format!("[{i}]"));
-                    walk(item, path)?;
+                    walk(item, path, here)?;
                     path.truncate(len);
                 }
             }
             serde_json::Value::Object(map) => {
                 for (key, item) in map {
-                    // Extensions and extras are free-form; wide fields are
-                    // read as 64-bit and checked against the data.
-                    if key == "extras" || key == "extensions" || WIDE_FIELDS.contains(&key.as_str())
-                    {
+                    // Extensions and extras are free-form.
+                    if key == "extras" || key == "extensions" {
                         continue;
                     }
+                    let child = if here == Here::Maps {
+                        Here::Narrow
+                    } else if key == "attributes" || key == "targets" {
+                        Here::Maps
+                    } else if NARROW_KEYS.contains(&key.as_str()) {
+                        Here::Narrow
+                    } else {
+                        Here::Free
+                    };
                     let len = path.len();
                     if !path.is_empty() {
                         path.push('.');
                     }
                     path.push_str(key);
-                    walk(item, path)?;
+                    walk(item, path, child)?;
                     path.truncate(len);
                 }
             }
@@ -65,7 +116,7 @@ pub(crate) fn check_integer_widths(json: &serde_json::Value) -> Result<(), Impor
         }
         Ok(())
     }
-    walk(json, &mut String::new())
+    walk(json, &mut String::new(), Here::Free)
 }
 
 /// Checks the structural rules; returns how many problems were found in
@@ -156,21 +207,61 @@ fn scenes(root: &Root, parents: &[Option<usize>]) -> Result<(), ImportError> {
     Ok(())
 }
 
+/// Each node's tree as a depth-first interval: `enter[a] <= enter[n] <
+/// exit[a]` exactly when `a` is `n` or its ancestor, and `root[n]` is its
+/// tree's root. One pass over the forest (cycles and shared children were
+/// refused before), so checking a skin costs one step a joint.
+struct Forest {
+    root: Vec<usize>,
+    enter: Vec<usize>,
+    exit: Vec<usize>,
+}
+
+impl Forest {
+    fn new(root: &Root, parents: &[Option<usize>]) -> Self {
+        let n = parents.len();
+        let mut forest = Self {
+            root: (0..n).collect(),
+            enter: vec![0; n],
+            exit: vec![0; n],
+        };
+        let mut clock = 0;
+        for top in (0..n).filter(|&i| parents[i].is_none()) {
+            // (node, whether its children were pushed)
+            let mut stack = vec![(top, false)];
+            while let Some((node, expanded)) = stack.pop() {
+                if expanded {
+                    forest.exit[node] = clock;
+                    continue;
+                }
+                forest.root[node] = top;
+                forest.enter[node] = clock;
+                clock += 1;
+                stack.push((node, true));
+                let children = root.nodes[node].children.iter().flatten();
+                stack.extend(children.map(|c| (c.value(), false)));
+            }
+        }
+        forest
+    }
+
+    /// Whether `a` is `n` or one of its ancestors.
+    fn contains(&self, a: usize, n: usize) -> bool {
+        self.enter[a] <= self.enter[n] && self.enter[n] < self.exit[a]
+    }
+}
+
 fn skins(root: &Root, parents: &[Option<usize>]) -> Result<(), ImportError> {
-    let ancestors = |mut n: usize| {
-        std::iter::from_fn(move || {
-            n = parents.get(n).copied().flatten()?;
-            Some(n)
-        })
-    };
-    let top = |n: usize| ancestors(n).last().unwrap_or(n);
-    let under = |n: usize, a: usize| n == a || ancestors(n).any(|p| p == a);
+    if root.skins.is_empty() {
+        return Ok(());
+    }
+    let forest = Forest::new(root, parents);
     for (s, skin) in root.skins.iter().enumerate() {
         let joints = || skin.joints.iter().map(|j| j.value());
         unique(joints(), &format!("skins[{s}].joints"))?;
         // SKIN_NO_COMMON_ROOT: the joints are nodes of one tree.
         if let Some(first) = joints().next()
-            && let Some(other) = joints().find(|&j| top(j) != top(first))
+            && let Some(other) = joints().find(|&j| forest.root[j] != forest.root[first])
         {
             return Err(ImportError::invalid(
                 format!("skins[{s}].joints"),
@@ -179,7 +270,7 @@ fn skins(root: &Root, parents: &[Option<usize>]) -> Result<(), ImportError> {
         }
         // SKIN_SKELETON_INVALID: the skeleton is a common root of them.
         if let Some(skeleton) = skin.skeleton.map(|k| k.value())
-            && let Some(joint) = joints().find(|&j| !under(j, skeleton))
+            && let Some(joint) = joints().find(|&j| !forest.contains(skeleton, j))
         {
             return Err(ImportError::invalid(
                 format!("skins[{s}].skeleton"),

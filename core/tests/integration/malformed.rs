@@ -482,3 +482,22 @@ fn the_khronos_validator_reports_an_error_in_every_case() {
         );
     }
 }
+
+/// Only indices and enums are 32-bit in glTF: a wide integer there is
+/// refused (gltf-json would wrap it), anywhere else it is a number like
+/// any other (JSON writers print 5e9 as 5000000000).
+#[test]
+fn wide_integers_are_refused_only_where_gltf_has_32_bits() {
+    let mut g = util::tiny_rig();
+    g.json["nodes"][0]["translation"] = json!([5_000_000_000u64, 0, 0]);
+    g.json["extras"] = json!({"id": 1u64 << 40});
+    g.import().unwrap();
+    let mut g = util::tiny_rig();
+    let position = g.json["meshes"][0]["primitives"][0]["attributes"]["POSITION"].clone();
+    g.json["meshes"][0]["primitives"][0]["attributes"]["POSITION"] =
+        json!(position.as_u64().unwrap() + (1u64 << 32));
+    expect_err(&g, "meshes[0].primitives[0].attributes.POSITION");
+    let mut g = util::tiny_rig();
+    g.json["scenes"] = json!([{ "nodes": [1u64 << 32] }]);
+    expect_err(&g, "scenes[0].nodes[0]");
+}

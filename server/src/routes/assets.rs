@@ -28,7 +28,7 @@ pub(super) fn router() -> Router<AppState> {
 }
 
 #[utoipa::path(get, path = "/v1/assets/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the bytes"), ("If-None-Match" = Option<String>, Header, description = "An ETag"), ("Range" = Option<String>, Header, description = "One byte range")),
-    security(("bearer" = ["read"]), ("bearer" = ["submit"])),
+    security(("bearer" = ["read"])),
     responses((status = 200, description = "The bytes (an uploaded source needs `submit`: 403 for `read` alone)", content_type = "application/octet-stream", body = Vec<u8>), (status = 206, description = "The requested range", content_type = "application/octet-stream", body = Vec<u8>), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn asset(
     State(state): State<AppState>,

@@ -120,8 +120,19 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, 
 /// characters, at most 200 characters.
 fn file_name(given: Option<String>) -> Option<String> {
     let given = given?;
-    let last = given.rsplit(['/', '\\']).next().unwrap_or_default();
-    let clean: String = last.chars().filter(|c| !c.is_control()).take(200).collect();
+    shown(given.rsplit(['/', '\\']).next().unwrap_or_default())
+}
+
+/// A name as people will see it: without control characters or the
+/// bidirectional overrides that make text read otherwise than it is, at
+/// most 200 characters.
+fn shown(name: &str) -> Option<String> {
+    let bidi = |c: char| matches!(c, '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}');
+    let clean: String = name
+        .chars()
+        .filter(|&c| !c.is_control() && !bidi(c))
+        .take(200)
+        .collect();
     let clean = clean.trim();
     (!clean.is_empty()).then(|| clean.to_owned())
 }
@@ -142,7 +153,9 @@ async fn store_upload(
 ) -> ApiResult<(StatusCode, Json<Uploaded>)> {
     let blob = upload.to_blob();
     let digest = upload.digest();
-    state.blobs.put(&digest, &blob).await?;
+    // The row first: it marks the blob as a source, which `read` tokens
+    // may not download (routes/assets.rs), before the blob exists. A blob
+    // that then fails to store is stored by the next upload of it.
     let created = state
         .store
         .put_upload(&UploadRow {
@@ -153,12 +166,24 @@ async fn store_upload(
             summary: summary.clone(),
         })
         .await?;
-    let status = if created {
-        StatusCode::CREATED
-    } else {
-        StatusCode::OK
-    };
-    Ok((status, Json(Uploaded { digest, summary })))
+    state.blobs.put(&digest, &blob).await?;
+    if created {
+        return Ok((StatusCode::CREATED, Json(Uploaded { digest, summary })));
+    }
+    // Uploaded before: the stored summary (with the first upload's name)
+    // is the one every page shows.
+    let stored = state
+        .store
+        .upload(&digest, kind)
+        .await?
+        .map_or(summary, |row| row.summary);
+    Ok((
+        StatusCode::OK,
+        Json(Uploaded {
+            digest,
+            summary: stored,
+        }),
+    ))
 }
 
 #[utoipa::path(post, path = "/v1/characters", tag = "uploads", params(NameQuery),
@@ -181,7 +206,7 @@ pub(crate) async fn post_character(
             .expect("summaries serialise");
         s["warnings"] = serde_json::json!(imported.warnings);
         s["name"] = serde_json::json!(name);
-        s["scene"] = serde_json::json!(imported.name);
+        s["scene"] = serde_json::json!(imported.name.as_deref().and_then(shown));
         Ok::<_, aobake_core::ImportError>((s, upload))
     })
     .await

@@ -413,10 +413,29 @@ fn clips_and_multi_file_characters_upload_and_bake() {
         uploaded["digest"], glb_upload["digest"],
         "another upload, another digest"
     );
+    // The same character, each under the name it was uploaded with (the
+    // multipart part's file name; the raw GLB sent none).
+    assert_eq!(uploaded["summary"]["name"], "rig.gltf");
+    assert_eq!(glb_upload["summary"]["name"], serde_json::Value::Null);
+    let without_name = |s: &serde_json::Value| {
+        let mut s = s.clone();
+        s.as_object_mut().unwrap().remove("name");
+        s
+    };
     assert_eq!(
-        uploaded["summary"], glb_upload["summary"],
+        without_name(&uploaded["summary"]),
+        without_name(&glb_upload["summary"]),
         "the same character"
     );
+    // Uploaded again under another name: the stored summary, the first
+    // name, as every page shows it.
+    let (status, again, _) = env.post_bytes(
+        "/v1/characters?name=again.gltf",
+        ADMIN,
+        &format!("multipart/form-data; boundary={boundary}"),
+        &body,
+    );
+    assert_eq!((status, &again["summary"]), (200, &uploaded["summary"]));
     // Without its side file the .gltf is refused by name.
     let (status, refused, _) = env.post_bytes(
         "/v1/characters",

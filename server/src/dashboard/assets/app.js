@@ -41,7 +41,10 @@ function characterInfo(digest) {
   if (!characterNames.has(digest)) {
     characterNames.set(digest, json(`/v1/characters/${digest}`)
       .then((u) => ({ name: u.summary?.name || null, scene: u.summary?.scene || null }))
-      .catch(() => ({ name: null, scene: null })));
+      .catch(() => {
+        characterNames.delete(digest); // asked again next time
+        return { name: null, scene: null };
+      }));
   }
   return characterNames.get(digest);
 }
@@ -309,7 +312,10 @@ function duration(s) {
 function makeEta() {
   const samples = []; // [ms, done]
   return (done, total, state) => {
-    if (finished(state) || state === "paused") return state === "paused" ? "paused" : "";
+    if (finished(state) || state === "paused") {
+      samples.length = 0; // a pause is not a slow rate
+      return state === "paused" ? "paused" : "";
+    }
     const now = Date.now();
     samples.push([now, done]);
     while (samples.length > 2 && now - samples[1][0] > 60_000) samples.shift();
