@@ -109,7 +109,7 @@ impl BakeParams {
             // gaining from more poses on clips they never saw (Fox's
             // vertex-linear: +2.6 dB over the static average with 256,
             // +3.3 with 512, +4.0 with 1024 of mixed poses;
-            // RobotExpressive's +2.8 and +3.3 with 512 and 1024; docs/methods.md).
+            // RobotExpressive's +2.8 and +3.3 with 512 and 1024; docs/methods/vertex.md).
             // With `cv`, 1536 are 512 of each source, and a fit uses 1024
             // or all of them.
             poses: match method {
@@ -123,14 +123,14 @@ impl BakeParams {
             // Perturbed frames instead of random poses win on some
             // characters (InterpolationTest's unseen clips: +3.6 dB against
             // +3.0) and lose on others (Fox: +2.3 against +4.0), so the
-            // cross-validation over clips chooses per bake (docs/methods.md).
+            // cross-validation over clips chooses per bake (docs/methods/vertex.md).
             // vertex-clustered's linear base is fitted to them too.
             reference: match method {
                 Method::VertexLinear | Method::VertexClustered => ReferenceSource::Cv,
                 _ => ReferenceSource::Clips,
             },
             // Perturbed frames at ±25 % of the ranges barely differed
-            // from plain ones; ±75 % won on InterpolationTest (docs/methods.md).
+            // from plain ones; ±75 % won on InterpolationTest (docs/methods/vertex.md).
             perturbation: 0.75,
             samples: 256,
             max_distance: None,
@@ -144,7 +144,7 @@ impl BakeParams {
             // On InterpolationTest's unseen clips (three of which only
             // scale a cube) they lift vertex-linear from +2.14 to +2.96 dB
             // and vertex-clustered's worst clip from +0.09 to +0.67
-            // (docs/methods.md).
+            // (docs/methods/vertex.md).
             scale_parameters: matches!(method, Method::VertexLinear | Method::VertexClustered),
             linear: LinearOptions::default(),
             clustered: ClusteredOptions::default(),

@@ -96,7 +96,7 @@ pub struct CubemapOptions {
     /// The continuous encoding's layout: `cosine` (aobake's one 5 × 5
     /// cosine channel over the whole cycle, f16) or `thirds` (Kroon's: the
     /// cycle in three thirds as the channels of a 5 × 5 Blurhash). Every
-    /// report measures both; neither is better everywhere (docs/methods.md
+    /// report measures both; neither is better everywhere (docs/methods/cubemap.md
     /// gives the figures).
     pub continuous_layout: ContinuousLayout,
     /// The clip to bake (`None`: the first training clip).

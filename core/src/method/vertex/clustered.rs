@@ -68,7 +68,7 @@ pub struct ClusteredOptions {
     /// vertex-linear does, from [`super::linear::RIDGE_CANDIDATES`]);
     /// `ridge` is used when it is off or the reference frames come from
     /// fewer than two clips. Off by default: on unseen clips it measured
-    /// +0.3 dB on Fox but −1.6 dB on the Kenney character (docs/methods.md).
+    /// +0.3 dB on Fox but −1.6 dB on the Kenney character (docs/methods/vertex.md).
     pub ridge_cv: bool,
     /// Choose `clamp` by the same cross-validation over clips, among
     /// [`CLAMP_CANDIDATES`]. Off by default: on unseen clips it measured
@@ -101,7 +101,7 @@ pub enum Base {
     Mean,
     /// A vertex-linear model (the default in [`ClusteredOptions`]: on
     /// unseen clips it lifted Fox from +0.1 to +3.2 dB over the static
-    /// average, see docs/methods.md).
+    /// average, see docs/methods/vertex.md).
     Linear,
 }
 
@@ -132,7 +132,7 @@ impl Default for ClusteredOptions {
             base: Base::Linear,
             // One basis for the base and every cluster: the per-vertex
             // cost no longer grows with the clusters MLS blends (Fox: 144
-            // → 33 multiply-adds, unseen clips +3.23 → +3.43 dB; docs/methods.md).
+            // → 33 multiply-adds, unseen clips +3.23 → +3.43 dB; docs/methods/vertex.md).
             basis: 32,
             basis_threshold: 0.0,
             basis_cv: true,

@@ -191,7 +191,7 @@ impl Default for LinearOptions {
             components: 1.5,
             // On unseen clips 32 rows held or raised the gains of the
             // full model (Fox +3.20 → +3.26 dB, Kenney +3.84 → +3.85) at
-            // a third to four fifths of its run-time cost (docs/methods.md).
+            // a third to four fifths of its run-time cost (docs/methods/vertex.md).
             basis: 32,
             basis_threshold: 0.0,
             basis_cv: true,
