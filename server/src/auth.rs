@@ -8,7 +8,7 @@
 use axum::{extract::FromRequestParts, http::request::Parts};
 use rand::RngExt as _;
 
-use crate::{app::AppState, error::ApiError};
+use crate::{error::ApiError, state::AppState};
 
 /// A scope a route needs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

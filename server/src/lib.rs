@@ -2,9 +2,9 @@
 //!
 //! The `aobake` binary: the HTTP service and the command-line tools.
 //!
-//! * [`app`]: the axum application (state, layers, [`app::app`]) over
-//!   [`routes`] (one file per resource: uploads, bakes, the worker
-//!   protocol, assets, system).
+//! * [`app`]: the axum application (layers, [`app::app`]) over `routes`
+//!   (one file per resource: uploads, bakes, the worker protocol, assets,
+//!   system), all reading the shared [`state::AppState`].
 //! * [`store`]: metadata and the job queue behind one trait (SQLite, the
 //!   embedded default). [`blobs`]: content-addressed bytes behind another
 //!   (local disk).
@@ -34,4 +34,5 @@ pub mod listen;
 pub mod openapi;
 mod routes;
 pub mod serve;
+pub mod state;
 pub mod store;

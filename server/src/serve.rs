@@ -11,9 +11,10 @@ use anyhow::Context as _;
 use tokio::process::{Child, Command};
 
 use crate::{
-    app::{AppState, ServerLimits, app},
+    app::app,
     auth::{Scope, new_token, token_hash},
     blobs::LocalBlobs,
+    state::{AppState, ServerLimits},
     store::{PgStore, QueuePolicy, SqliteStore, Store},
 };
 

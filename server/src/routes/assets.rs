@@ -13,12 +13,12 @@ use axum::{
 };
 
 use crate::{
-    app::AppState,
     auth::{Caller, Need, Read, Scope},
     error::{ApiError, ApiResult, Problem},
     extract::ApiPath,
     openapi::Digest,
     openapi::Refusals,
+    state::AppState,
 };
 
 pub(super) fn router() -> Router<AppState> {

@@ -24,12 +24,12 @@ use tokio_stream::{Stream, StreamExt as _, wrappers::BroadcastStream};
 
 use super::uploads::load_upload;
 use crate::{
-    app::AppState,
     auth::{Need, Read, Submit},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery, Body},
     openapi::Digest,
     openapi::Refusals,
+    state::AppState,
     store::{Action, BakeRow, JobRow, NewBake, NewJob},
 };
 
@@ -450,7 +450,7 @@ pub(crate) async fn all_events(
     Sse::new(updates).keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
 }
 
-fn bake_event(e: &crate::app::BakeEvent) -> Event {
+fn bake_event(e: &crate::state::BakeEvent) -> Event {
     Event::default()
         .event("bake")
         .json_data(e)
@@ -467,7 +467,7 @@ pub(crate) async fn events(
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
     let rx = state.events.subscribe();
     let bake = find(&state, id).await?;
-    let first = crate::app::BakeEvent {
+    let first = crate::state::BakeEvent {
         id,
         state: bake.state,
         done: bake.done_work,

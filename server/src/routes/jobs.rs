@@ -16,12 +16,12 @@ use axum::{
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    app::AppState,
     auth::{Need, Worker},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, Body},
     openapi::Digest,
     openapi::Refusals,
+    state::AppState,
     store::{CheckpointRef, Completion, Lease},
 };
 

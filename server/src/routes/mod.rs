@@ -9,7 +9,7 @@ pub(crate) mod uploads;
 
 use axum::Router;
 
-use crate::app::AppState;
+use crate::state::AppState;
 
 /// Every route.
 pub(crate) fn router() -> Router<AppState> {

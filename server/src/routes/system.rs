@@ -10,11 +10,11 @@ use axum::{
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    app::AppState,
     auth::{Admin, Need, Read, new_token, token_hash},
     error::{ApiError, ApiResult, Problem},
     extract::Body,
     openapi::Refusals,
+    state::AppState,
     store::WorkerRow,
 };
 

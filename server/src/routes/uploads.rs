@@ -18,12 +18,12 @@ use axum::{
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    app::AppState,
     auth::{Need, Read, Submit},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery},
     openapi::Digest,
     openapi::Refusals,
+    state::AppState,
     store::UploadRow,
 };
 
