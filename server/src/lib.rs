@@ -28,6 +28,7 @@ pub mod auth;
 pub mod blobs;
 pub mod cli;
 mod dashboard;
+mod demo;
 pub mod error;
 mod extract;
 pub mod listen;

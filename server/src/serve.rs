@@ -202,7 +202,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     if args.demo {
         let (url, admin) = (url.clone(), admin.clone());
         tokio::spawn(async move {
-            if let Err(e) = crate::cli::client::demo(&url, &admin).await {
+            if let Err(e) = crate::demo::run(&url, &admin).await {
                 eprintln!("error: the demo bake could not be submitted: {e:#}");
             }
         });

@@ -1,5 +1,5 @@
-//! The service from the command line: `aobake submit`, `status`, `fetch`,
-//! `token create` and `worker`. The server and token come from flags, then
+//! The service from the command line: `aobake submit`, `status`, `fetch`
+//! and `token create` (`worker` is in `worker.rs`). The server and token come from flags, then
 //! `AOBAKE_SERVER` and `AOBAKE_TOKEN`, then the files `aobake serve`
 //! writes into its data directory (`aobake-data/server.url`,
 //! `aobake-data/admin.token`), so a second terminal beside `aobake serve`
@@ -33,7 +33,7 @@ pub(super) struct Conn {
 
 /// A blocking client of the API.
 #[derive(Debug)]
-pub(super) struct Api {
+pub(crate) struct Api {
     base: String,
     auth: String,
     agent: ureq::Agent,
@@ -75,7 +75,7 @@ impl Conn {
 }
 
 impl Api {
-    pub(super) fn new(base: &str, token: &str) -> Self {
+    pub(crate) fn new(base: &str, token: &str) -> Self {
         Self {
             base: base.trim_end_matches('/').to_owned(),
             auth: format!("Bearer {token}"),
@@ -129,7 +129,7 @@ impl Api {
         Ok(res.body_mut().with_config().limit(u64::MAX).read_to_vec()?)
     }
 
-    pub(super) fn post(&self, path: &str, body: &Value) -> anyhow::Result<Value> {
+    pub(crate) fn post(&self, path: &str, body: &Value) -> anyhow::Result<Value> {
         let res = self.check(
             self.agent
                 .post(format!("{}{path}", self.base))
@@ -141,7 +141,7 @@ impl Api {
 
     /// Uploads a character or clip file (a bundle when it has side files)
     /// under the file's name.
-    pub(super) fn upload(
+    pub(crate) fn upload(
         &self,
         path: &str,
         upload: &UploadBytes,
@@ -452,86 +452,4 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
         .post("/v1/tokens", &json!({"name": name, "scopes": scopes}))?;
     println!("{}", r["token"].as_str().context("no token in the answer")?);
     Ok(())
-}
-
-/// Arguments of `aobake worker`.
-#[derive(Debug, clap::Args)]
-pub(super) struct WorkerArgs {
-    /// The server's URL.
-    #[arg(long, env = "AOBAKE_SERVER")]
-    server: String,
-    /// A token with the worker scope.
-    #[arg(long, env = "AOBAKE_TOKEN", hide_env_values = true)]
-    token: String,
-    /// Jobs at once.
-    #[arg(long, default_value_t = 1)]
-    concurrency: usize,
-    /// This worker's name (default: host name and process id).
-    #[arg(long)]
-    id: Option<String>,
-    /// Seconds between heartbeats (well under the server's lease).
-    #[arg(long, default_value_t = 5.0)]
-    heartbeat_secs: f64,
-    /// A job's checkpoints are saved at most this often (seconds of work
-    /// since its last saved one): a crash costs at most this much work,
-    /// and fast steps (a pose of a small character) do not spend the
-    /// server's time on saves. 0 saves every checkpoint a job offers.
-    #[arg(long, env = "AOBAKE_CHECKPOINT_SECS", default_value_t = 2.0)]
-    checkpoint_secs: f64,
-    /// On SIGTERM, seconds a running job may take to finish before it
-    /// stops at its next checkpoint and gives its lease back.
-    #[arg(long, default_value_t = 20)]
-    shutdown_secs: u64,
-}
-
-pub(super) fn worker(args: &WorkerArgs) -> anyhow::Result<()> {
-    let host = std::fs::read_to_string("/etc/hostname")
-        .map(|h| h.trim().to_owned())
-        .unwrap_or_else(|_| "worker".into());
-    aobake_worker::run(aobake_worker::WorkerConfig {
-        server: args.server.clone(),
-        token: args.token.clone(),
-        concurrency: args.concurrency,
-        id: args
-            .id
-            .clone()
-            .unwrap_or_else(|| format!("{host}-{}", std::process::id())),
-        wait_secs: 20,
-        heartbeat_secs: args.heartbeat_secs,
-        checkpoint_secs: args.checkpoint_secs,
-        shutdown_secs: args.shutdown_secs,
-        fault: std::env::var("AOBAKE_FAULT").ok(),
-    })
-    .map_err(anyhow::Error::msg)
-}
-
-/// The bundled Fox (glTF sample models, CC BY 4.0: see
-/// tests/data/characters/Fox/SOURCE.md).
-static FOX: &[u8] = include_bytes!("../../../tests/data/characters/Fox/Fox.glb");
-
-/// `aobake serve --demo`: uploads the bundled Fox and bakes it.
-pub async fn demo(url: &str, token: &str) -> anyhow::Result<()> {
-    let (url, token) = (url.to_owned(), token.to_owned());
-    tokio::task::spawn_blocking(move || {
-        let api = Api::new(&url, &token);
-        let c = api.upload("/v1/characters", &UploadBytes::single(FOX.to_vec()), "Fox.glb")?;
-        let seed = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_secs());
-        let bake = api.post(
-            "/v1/bakes",
-            &json!({"character": c["digest"], "method": "vertex-clustered", "params": {"seed": seed}}),
-        )?;
-        let dashboard = api.post(
-            "/v1/tokens",
-            &json!({"name": "demo dashboard", "scopes": ["read", "submit"]}),
-        )?;
-        let id = &bake["id"];
-        println!(
-            "demo: baking the bundled Fox (vertex-clustered) as bake {id}\n\n  open {url}/#token={}&next=/bakes/{id}\n\nto watch it in the dashboard (or `aobake status {id}`)",
-            dashboard["token"].as_str().unwrap_or_default()
-        );
-        anyhow::Ok(())
-    })
-    .await?
 }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context as _, bail};
 use aobake_core::{Limits, asset::Container, method::vertex::Model};
 
-use super::posing::{PoseArgs, pose};
+use super::common::{PoseArgs, pose};
 
 /// Arguments of `aobake eval`.
 #[derive(Debug, clap::Args)]

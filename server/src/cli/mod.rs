@@ -1,21 +1,22 @@
 //! Command-line interface: `aobake <command>`.
+//!
+//! One file per command (`bench/` holds `aobake bench`'s measurements);
+//! `common` (choosing a pose), `load` (reading files) and `params` (the
+//! bake flags) are shared by several.
 
 mod bake;
 mod bench;
-mod bench_bake;
-mod bench_cubemap;
-mod bench_service;
 pub mod client;
+mod common;
 mod eval;
 mod export;
 mod inspect;
 mod load;
 mod params;
 mod pose;
-mod posing;
 mod preview;
-mod table;
 mod trace;
+mod worker;
 
 use clap::{Parser, Subcommand};
 
@@ -62,7 +63,7 @@ enum Command {
     Serve(Box<crate::serve::ServeArgs>),
     /// Run jobs for a server (a separate process; many may run on many
     /// machines).
-    Worker(client::WorkerArgs),
+    Worker(worker::WorkerArgs),
     /// Upload a character (and clips) to a server and bake it.
     Submit(Box<client::SubmitArgs>),
     /// Show a bake's state and progress.
@@ -102,7 +103,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Serve(args) => {
             tokio::runtime::Runtime::new()?.block_on(crate::serve::serve(*args))
         }
-        Command::Worker(args) => client::worker(&args),
+        Command::Worker(args) => worker::run(&args),
         Command::Openapi => {
             print!("{}", crate::openapi::yaml());
             Ok(())

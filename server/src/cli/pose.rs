@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use aobake_core::{Limits, import::ply};
 
-use super::posing::{PoseArgs, pose};
+use super::common::{PoseArgs, pose};
 
 /// Arguments of `aobake pose`.
 #[derive(Debug, clap::Args)]

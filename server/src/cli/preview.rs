@@ -14,7 +14,7 @@ use aobake_core::{
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
 
-use super::posing::{character_and_clips, find_clip};
+use super::common::{character_and_clips, find_clip};
 
 /// Arguments of `aobake preview`.
 #[derive(Debug, clap::Args)]

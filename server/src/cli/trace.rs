@@ -15,7 +15,7 @@ use aobake_core::{
 };
 use glam::Vec3;
 
-use super::posing::{PoseArgs, pose};
+use super::common::{PoseArgs, pose};
 
 /// Arguments of `aobake trace`.
 #[derive(Debug, clap::Args)]

@@ -225,16 +225,16 @@ impl Server {
         (field("VmRSS:"), field("VmHWM:"))
     }
 
-    fn api(&self) -> super::client::Api {
-        super::client::Api::new(&self.url, &self.token)
+    fn api(&self) -> crate::cli::client::Api {
+        crate::cli::client::Api::new(&self.url, &self.token)
     }
 }
 
 /// Submits a real bake of the bundled RiggedSimple with enough poses for
 /// `jobs` sample jobs; returns its id.
-fn big_bake(api: &super::client::Api, jobs: usize) -> anyhow::Result<i64> {
+fn big_bake(api: &crate::cli::client::Api, jobs: usize) -> anyhow::Result<i64> {
     static RIGGED: &[u8] =
-        include_bytes!("../../../tests/data/characters/RiggedSimple/RiggedSimple.glb");
+        include_bytes!("../../../../tests/data/characters/RiggedSimple/RiggedSimple.glb");
     let c = api.upload(
         "/v1/characters",
         &aobake_core::bake::UploadBytes::single(RIGGED.to_vec()),

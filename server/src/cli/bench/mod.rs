@@ -1,5 +1,10 @@
 //! `aobake bench`: speed measurements that print their figures.
 
+mod bake;
+mod cubemap;
+mod service;
+mod tables;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
@@ -33,27 +38,27 @@ enum What {
     /// error and size for every pose-cluster count, dimension and
     /// vertex-cluster level, beside vertex-linear and the static average,
     /// all judged on the same held-out clip frames.
-    Clusters(super::table::ClusterArgs),
+    Clusters(tables::ClusterArgs),
     /// vertex-linear's ridge weight and sparsification threshold: error,
     /// size and multiply-adds on the same held-out clip frames.
-    Linear(super::table::LinearArgs),
+    Linear(tables::LinearArgs),
     /// Jobs scheduled per second (lease + complete) on SQLite or
     /// PostgreSQL, through the store and over HTTP.
-    Queue(super::bench_service::QueueArgs),
+    Queue(service::QueueArgs),
     /// Status-request latency (p50, p99) under concurrent pollers, and the
     /// server's memory.
-    Api(super::bench_service::ApiArgs),
+    Api(service::ApiArgs),
     /// Preview render time per panel (the model's AO on the GPU, raster,
     /// readback) on every adapter among Vulkan and GL.
     Preview(super::preview::BenchArgs),
     /// A cubemap face job's tracing rate (Kroon's Eq. 3.1 from points in
     /// space) beside the per-vertex tracer's on the same posed meshes.
-    Cubemap(super::bench_cubemap::Args),
+    Cubemap(cubemap::Args),
     /// A whole bake here, stage by stage: the seconds and peak memory of
     /// tracing, each step of the fit and of the unseen-clip folds
     /// (cross-validation of the reference rows, of the ridge, of the
     /// basis), evaluation, assembly and previews.
-    Bake(super::bench_bake::Args),
+    Bake(bake::Args),
 }
 
 #[derive(Debug, clap::Args)]
@@ -119,13 +124,13 @@ impl Kernel {
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     match &args.what {
         What::Trace(a) => trace(a),
-        What::Clusters(a) => super::table::clusters(a),
-        What::Linear(a) => super::table::linear(a),
-        What::Queue(a) => super::bench_service::queue(a),
-        What::Api(a) => super::bench_service::api(a),
+        What::Clusters(a) => tables::clusters(a),
+        What::Linear(a) => tables::linear(a),
+        What::Queue(a) => service::queue(a),
+        What::Api(a) => service::api(a),
         What::Preview(a) => super::preview::bench(a),
-        What::Cubemap(a) => super::bench_cubemap::run(a),
-        What::Bake(a) => super::bench_bake::run(a),
+        What::Cubemap(a) => cubemap::run(a),
+        What::Bake(a) => bake::run(a),
     }
 }
 

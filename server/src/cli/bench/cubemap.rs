@@ -19,8 +19,8 @@ use aobake_core::{
     trace::{Falloff, SceneOptions, SurfaceParams, no_progress, trace_poses},
 };
 
-use super::bench::median;
-use super::posing::{character_and_clips, find_clip};
+use super::median;
+use crate::cli::common::{character_and_clips, find_clip};
 
 /// Arguments of `aobake bench cubemap`.
 #[derive(Debug, clap::Args)]

@@ -21,8 +21,8 @@ use aobake_core::{
     method::Method,
 };
 
-use super::bake::{load_inputs, run_with_progress};
-use super::trace::with_threads;
+use crate::cli::bake::{load_inputs, run_with_progress};
+use crate::cli::trace::with_threads;
 
 /// What both sweeps take.
 #[derive(Debug, clap::Args)]

@@ -14,8 +14,8 @@ use aobake_core::{
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
 
-use super::bench::median;
-use super::params::BakeRequestArgs;
+use super::median;
+use crate::cli::params::BakeRequestArgs;
 
 /// Arguments of `aobake bench bake`.
 #[derive(Debug, clap::Args)]
@@ -50,7 +50,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let limits = Limits::default();
     let r = &args.request;
     let params = r.params.params(r.method)?;
-    let inputs = super::bake::load_inputs(&r.file, &r.clips, &limits)?;
+    let inputs = crate::cli::bake::load_inputs(&r.file, &r.clips, &limits)?;
     let bake = Bake::new(&inputs, params)?;
     let mut gpu_renderer = None;
     if args.previews {

@@ -1,0 +1,54 @@
+//! `aobake worker`: runs jobs for a server (aobake-worker's lease loop) in
+//! this process; many may run on many machines.
+
+/// Arguments of `aobake worker`.
+#[derive(Debug, clap::Args)]
+pub(super) struct WorkerArgs {
+    /// The server's URL.
+    #[arg(long, env = "AOBAKE_SERVER")]
+    server: String,
+    /// A token with the worker scope.
+    #[arg(long, env = "AOBAKE_TOKEN", hide_env_values = true)]
+    token: String,
+    /// Jobs at once.
+    #[arg(long, default_value_t = 1)]
+    concurrency: usize,
+    /// This worker's name (default: host name and process id).
+    #[arg(long)]
+    id: Option<String>,
+    /// Seconds between heartbeats (well under the server's lease).
+    #[arg(long, default_value_t = 5.0)]
+    heartbeat_secs: f64,
+    /// A job's checkpoints are saved at most this often (seconds of work
+    /// since its last saved one): a crash costs at most this much work,
+    /// and fast steps (a pose of a small character) do not spend the
+    /// server's time on saves. 0 saves every checkpoint a job offers.
+    #[arg(long, env = "AOBAKE_CHECKPOINT_SECS", default_value_t = 2.0)]
+    checkpoint_secs: f64,
+    /// On SIGTERM, seconds a running job may take to finish before it
+    /// stops at its next checkpoint and gives its lease back.
+    #[arg(long, default_value_t = 20)]
+    shutdown_secs: u64,
+}
+
+/// Runs the lease loop until SIGTERM.
+pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
+    let host = std::fs::read_to_string("/etc/hostname")
+        .map(|h| h.trim().to_owned())
+        .unwrap_or_else(|_| "worker".into());
+    aobake_worker::run(aobake_worker::WorkerConfig {
+        server: args.server.clone(),
+        token: args.token.clone(),
+        concurrency: args.concurrency,
+        id: args
+            .id
+            .clone()
+            .unwrap_or_else(|| format!("{host}-{}", std::process::id())),
+        wait_secs: 20,
+        heartbeat_secs: args.heartbeat_secs,
+        checkpoint_secs: args.checkpoint_secs,
+        shutdown_secs: args.shutdown_secs,
+        fault: std::env::var("AOBAKE_FAULT").ok(),
+    })
+    .map_err(anyhow::Error::msg)
+}
