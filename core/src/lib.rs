@@ -16,7 +16,8 @@
 //! 3. [`pose_space`]: poses as numbers. Joint angles (Kontkanen & Aila) go
 //!    both ways between pose and vector, with ranges taken from the clips;
 //!    handles (Kirk & Arikan) are computed from a pose. Seeded samplers
-//!    give reference poses.
+//!    give reference poses. [`summary`] reports a character and its
+//!    clips (counts, bounds, pose parameters) from both floors.
 //! 4. [`trace`]: ground-truth AO by ray tracing (surface, obscurance,
 //!    volume and Kroon's estimators); [`trace::trace_poses`] traces a batch
 //!    of poses into the block of AO values that the models are fitted to.
@@ -38,6 +39,7 @@ pub mod import;
 pub mod method;
 pub mod pose_space;
 pub mod rig;
+pub mod summary;
 pub mod trace;
 
 pub use import::{

@@ -7,4 +7,3 @@ pub mod character;
 pub mod clip;
 pub mod pose;
 pub mod skeleton;
-pub mod summary;

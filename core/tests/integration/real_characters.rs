@@ -1,6 +1,6 @@
 //! Every real character loads, with the counts of `shared/data/README.md`.
 
-use aobake_core::rig::summary::Summary;
+use aobake_core::summary::Summary;
 
 use crate::util;
 

@@ -2,7 +2,7 @@
 //! written by `tools/threejs-reference/generate.mjs` for every shared
 //! character, three times per clip.
 
-use aobake_core::{Pose, rig::summary::Summary};
+use aobake_core::{Pose, summary::Summary};
 use serde::Deserialize;
 
 use crate::util;

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use aobake_core::{Limits, rig::summary::Summary};
+use aobake_core::{Limits, summary::Summary};
 use serde::Serialize;
 
 /// Arguments of `aobake inspect`.

@@ -5,9 +5,7 @@
 //! names, which are the only places its URIs may point to). The same bytes
 //! give the same digest, so uploading twice is harmless.
 
-use aobake_core::{
-    SideFile, bake::UploadBytes, import_character, import_clips, rig::summary::Summary,
-};
+use aobake_core::{SideFile, bake::UploadBytes, import_character, import_clips, summary::Summary};
 use axum::{
     Json, Router,
     body::Bytes,

@@ -1,4 +1,5 @@
-//! What `aobake inspect` reports about a character, as data.
+//! What `aobake inspect` (and an upload's answer) reports about a
+//! character, as data: above `rig` and `pose_space`, which it reads.
 
 use serde::Serialize;
 
