@@ -35,6 +35,7 @@ pub mod asset;
 pub mod bake;
 pub mod digest;
 pub mod geometry;
+pub mod image;
 pub mod import;
 pub mod method;
 pub mod pose_space;

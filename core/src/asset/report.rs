@@ -5,10 +5,7 @@
 //! errors in space and on the ground and Kroon's time × distance charts.
 //! [`BakeReport`] is either, told apart by the method.
 
-use std::sync::OnceLock;
-
 use plotters::prelude::*;
-use plotters::style::{FontStyle, register_font};
 use serde::{Deserialize, Serialize};
 
 use crate::{
@@ -20,11 +17,6 @@ use crate::{
     },
     trace::AoBlock,
 };
-
-/// The font of the plot's labels (DejaVu Sans, Bitstream Vera licence:
-/// `assets/DejaVuSans-LICENSE.txt`), so that plotting needs no system
-/// fonts.
-pub(crate) static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// Wall-clock seconds of each stage (summed over jobs).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -277,7 +269,7 @@ impl NoiseEstimate {
 /// the model and the baseline in each, the legend above the panels) as
 /// PNG bytes.
 pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
-    register_plot_font()?;
+    crate::image::register_plot_font()?;
     let clips = &report.evaluation.clips;
     let (width, panel, head) = (900u32, 280u32, 64u32);
     let height = head + panel * clips.len().max(1) as u32;
@@ -366,31 +358,7 @@ pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
         }
         root.present().map_err(e)?;
     }
-    encode_rgb_png(&rgb, width, height)
-}
-
-/// Registers the bundled font as plotters' `sans-serif` (once).
-pub(crate) fn register_plot_font() -> Result<(), String> {
-    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
-    REGISTERED
-        .get_or_init(|| {
-            register_font("sans-serif", FontStyle::Normal, FONT)
-                .map_err(|_| "the bundled font is invalid".to_owned())
-        })
-        .clone()
-}
-
-/// An RGB8 image as PNG bytes.
-pub(crate) fn encode_rgb_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>, String> {
-    let mut png = Vec::new();
-    {
-        let mut encoder = png::Encoder::new(&mut png, width, height);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
-        writer.write_image_data(rgb).map_err(|e| e.to_string())?;
-    }
-    Ok(png)
+    Ok(crate::image::encode_rgb_png(&rgb, width, height)?)
 }
 
 #[cfg(test)]

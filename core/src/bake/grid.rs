@@ -22,7 +22,8 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    asset::report::{CharacterInfo, GridReport, PartReport, Sizes, encode_rgb_png},
+    asset::report::{CharacterInfo, GridReport, PartReport, Sizes},
+    image::encode_rgb_png,
     method::grid::{
         evaluate::{GridEvaluation, GridVariant, GroundTruth, Inputs, Predictor},
         field::{GridBox, RawCell, Slab, finish, part_scene, trace_layers},
@@ -491,5 +492,5 @@ fn slices_png(model: &GridModel) -> Result<Vec<u8>, String> {
             }
         }
     }
-    encode_rgb_png(&rgb, width as u32, height as u32)
+    Ok(encode_rgb_png(&rgb, width as u32, height as u32)?)
 }

@@ -663,7 +663,7 @@ fn render(
 
 /// The font of titles and legends (the report's, DejaVu Sans).
 fn font() -> Result<(), JobError> {
-    crate::asset::report::register_plot_font().map_err(JobError::Failed)
+    crate::image::register_plot_font().map_err(|e| JobError::Failed(e.to_string()))
 }
 
 const TITLE_HEIGHT: u32 = 30;
@@ -713,7 +713,7 @@ fn compose_row(
             let y0 = (TITLE_HEIGHT + ph) as i32 + 6;
             for i in 0..bar {
                 let e = heat.range * (2.0 * i as f32 / (bar - 1) as f32 - 1.0);
-                let [r, g, b] = heat.color(e).map(srgb_byte);
+                let [r, g, b] = heat.color(e).map(crate::image::srgb_byte);
                 root.draw(&Rectangle::new(
                     [(x0 + i, y0), (x0 + i + 1, y0 + 14)],
                     RGBColor(r, g, b).filled(),
@@ -743,18 +743,6 @@ fn compose_row(
         height,
         rgba,
     })
-}
-
-/// Three panels (truth, model, error) with the legend.
-/// The sRGB byte of a linear value.
-pub fn srgb_byte(linear: f32) -> u8 {
-    let c = linear.clamp(0.0, 1.0);
-    let s = if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0).round() as u8
 }
 
 fn png_error(e: png::EncodingError) -> JobError {

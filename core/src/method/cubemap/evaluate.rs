@@ -29,7 +29,7 @@
 use glam::Vec3;
 use plotters::prelude::*;
 
-use crate::bake::preview::srgb_byte;
+use crate::image::srgb_byte;
 use rand::{RngExt as _, SeedableRng as _};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -452,7 +452,7 @@ pub fn charts_png(
     texels: &[(&str, (usize, usize), FrameError)],
     title: &str,
 ) -> Result<Vec<u8>, String> {
-    crate::asset::report::register_plot_font()?;
+    crate::image::register_plot_font()?;
     let Some((_, first)) = encodings.first() else {
         return Err("no encoding to chart".into());
     };
@@ -533,7 +533,7 @@ pub fn charts_png(
         }
         root.present().map_err(e)?;
     }
-    crate::asset::report::encode_rgb_png(&rgb, width, height)
+    Ok(crate::image::encode_rgb_png(&rgb, width, height)?)
 }
 
 /// Occlusion as a grey: 0 white, 1 black.
