@@ -53,6 +53,14 @@ pub fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
     out
 }
 
+/// Removes an accessor's declared `min` and `max` (after an edit makes
+/// them wrong, so that a case carries only the error it is about).
+fn drop_bounds(accessor: &mut Value) {
+    let map = accessor.as_object_mut().unwrap();
+    map.remove("max");
+    map.remove("min");
+}
+
 /// Where accessor `a`'s data starts in the binary chunk.
 fn accessor_offset(json: &Value, a: usize) -> usize {
     let acc = &json["accessors"][a];
@@ -274,8 +282,7 @@ pub fn validator_errors(valid: &[u8]) -> Vec<(Case, Verdict)> {
         &|j, _| {
             let a = &mut j["accessors"][indices];
             a["count"] = json!(0);
-            a.as_object_mut().unwrap().remove("max");
-            a.as_object_mut().unwrap().remove("min");
+            drop_bounds(a);
         },
     );
     edit(
@@ -318,8 +325,7 @@ pub fn validator_errors(valid: &[u8]) -> Vec<(Case, Verdict)> {
         &|j, _| {
             let a = &mut j["accessors"][position];
             a["componentType"] = json!(5121);
-            a.as_object_mut().unwrap().remove("max");
-            a.as_object_mut().unwrap().remove("min");
+            drop_bounds(a);
         },
     );
     edit(
@@ -399,8 +405,7 @@ pub fn validator_errors(valid: &[u8]) -> Vec<(Case, Verdict)> {
             keys["max"] = keys["min"].clone();
             let mut values = j["accessors"][output].clone();
             values["count"] = json!(3);
-            values.as_object_mut().unwrap().remove("max");
-            values.as_object_mut().unwrap().remove("min");
+            drop_bounds(&mut values);
             let accessors = j["accessors"].as_array_mut().unwrap();
             let n = accessors.len();
             accessors.extend([keys, values]);
@@ -504,8 +509,7 @@ pub fn validator_errors(valid: &[u8]) -> Vec<(Case, Verdict)> {
             let at = accessor_offset(j, normal);
             b[at..at + 12].copy_from_slice(&[2f32, 0.0, 0.0].map(f32::to_le_bytes).concat());
             let a = &mut j["accessors"][normal];
-            a.as_object_mut().unwrap().remove("max");
-            a.as_object_mut().unwrap().remove("min");
+            drop_bounds(a);
         },
     );
     edit(
@@ -527,8 +531,7 @@ pub fn validator_errors(valid: &[u8]) -> Vec<(Case, Verdict)> {
             let at = accessor_offset(j, output);
             b[at..at + 16].copy_from_slice(&[0f32, 0.0, 0.0, 2.0].map(f32::to_le_bytes).concat());
             let a = &mut j["accessors"][output];
-            a.as_object_mut().unwrap().remove("max");
-            a.as_object_mut().unwrap().remove("min");
+            drop_bounds(a);
         },
     );
     edit(

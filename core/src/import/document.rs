@@ -62,9 +62,9 @@ impl Document {
         let raw: serde_json::Value =
             serde_json::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
         rules::check_integer_widths(&raw)?;
-        drop(raw);
-        let root =
-            json::Root::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
+        // The text is parsed once: the tree just checked becomes the Root.
+        let root: json::Root =
+            serde_json::from_value(raw).map_err(|e| ImportError::Json(e.to_string()))?;
         let mut warnings = Vec::new();
         validate(&root, &mut warnings)?;
         let nodes = root.nodes.len() as u64;

@@ -37,15 +37,8 @@ fn params() -> Value {
         "eval_times": 2, "eval_points": 256, "eval_ground": 128, "eval_rays": 64}})
 }
 
-#[test]
-fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
-    let mut env = TestEnv::start(Options {
-        lease_secs: 1.5,
-        max_attempts: 30,
-        ..Options::default()
-    });
-    let cm = character("CesiumMan");
-    let digest = upload(&env, &cm);
+/// Submits a cubemap-discrete bake of `params()`; its id.
+fn submit(env: &TestEnv, digest: &str) -> i64 {
     let (status, b) = env
         .request(
             "POST",
@@ -55,7 +48,19 @@ fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
         )
         .unwrap();
     assert_eq!(status, 202, "{b}");
-    let id = b["id"].as_i64().unwrap();
+    b["id"].as_i64().unwrap()
+}
+
+#[test]
+fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 1.5,
+        max_attempts: 30,
+        ..Options::default()
+    });
+    let cm = character("CesiumMan");
+    let digest = upload(&env, &cm);
+    let id = submit(&env, &digest);
     let kinds: Vec<String> = bake_view(&env, id)["jobs"]
         .as_array()
         .unwrap()
@@ -185,16 +190,7 @@ fn a_faces_progress_moves_before_it_completes() {
         ..Options::default()
     });
     let digest = upload(&env, &character("CesiumMan"));
-    let (status, b) = env
-        .request(
-            "POST",
-            "/v1/bakes",
-            ADMIN,
-            Some(json!({"character": digest, "method": "cubemap-discrete", "params": params()})),
-        )
-        .unwrap();
-    assert_eq!(status, 202, "{b}");
-    let id = b["id"].as_i64().unwrap();
+    let id = submit(&env, &digest);
     env.start_worker(&[]);
     let started = std::time::Instant::now();
     let mut partial = None;
