@@ -12,31 +12,12 @@
 //! attempts run out: then it is `dead` and its bake `failed`. Every time
 //! comes from the database clock.
 //!
-//! [`SqliteStore`] is the embedded default. Both backends run one shared
-//! test suite (`suite`).
-
-/// Runs `$body` (an async block that may `return` early) in the
-/// transaction `$begin`: commits when it returns `Ok`, rolls back
-/// explicitly when it fails, so the pooled connection never goes back to
-/// the pool inside a transaction.
-macro_rules! in_tx {
-    ($begin:expr, |$tx:ident| $body:block) => {{
-        let mut $tx = $begin;
-        let result: Result<_> = async { $body }.await;
-        match result {
-            Ok(value) => {
-                $tx.commit().await?;
-                Ok(value)
-            }
-            Err(e) => {
-                let _ = $tx.rollback().await;
-                Err(e)
-            }
-        }
-    }};
-}
+//! The state machine is written once (`queue`) over the SQL both engines
+//! speak; [`SqliteStore`], the embedded default, and [`PgStore`] bring
+//! only their differences. Both run one shared test suite (`suite`).
 
 mod postgres;
+mod queue;
 mod rows;
 mod sqlite;
 #[cfg(test)]

@@ -1,0 +1,971 @@
+//! The queue's state machine, written once over the SQL that SQLite and
+//! PostgreSQL both speak. A backend ([`Backend`]) brings only what differs:
+//! its connections and transactions (how a write takes its turn and how
+//! durable it must be), the clock, how to list a job's dependencies, the
+//! row-lock suffixes and how other servers are woken. Statements use `$n`
+//! placeholders, which both drivers bind by number.
+//!
+//! A statement is text plus values ([`Stmt`]); [`Conn`] runs one on a
+//! connection. In the text, `{now}` is the database clock in milliseconds,
+//! `{deps}` the comma-separated graph indices of the dependencies of the
+//! row `jobs`, and `{for_update}` / `{skip_locked}` the row-lock suffixes.
+
+use std::ops::DerefMut;
+use std::sync::Arc;
+
+use sqlx::{FromRow, postgres::PgRow, sqlite::SqliteRow};
+
+use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
+use super::{
+    Action, BakeRow, BakeState, Beat, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
+    QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow, lease_token,
+};
+
+/// A value bound to a placeholder.
+#[derive(Debug, Clone)]
+pub(super) enum Arg {
+    Int(i64),
+    OptInt(Option<i64>),
+    Text(String),
+    OptText(Option<String>),
+    Bool(bool),
+}
+
+impl From<i64> for Arg {
+    fn from(v: i64) -> Self {
+        Self::Int(v)
+    }
+}
+impl From<Option<i64>> for Arg {
+    fn from(v: Option<i64>) -> Self {
+        Self::OptInt(v)
+    }
+}
+impl From<&str> for Arg {
+    fn from(v: &str) -> Self {
+        Self::Text(v.to_owned())
+    }
+}
+impl From<&String> for Arg {
+    fn from(v: &String) -> Self {
+        Self::Text(v.clone())
+    }
+}
+impl From<String> for Arg {
+    fn from(v: String) -> Self {
+        Self::Text(v)
+    }
+}
+impl From<Option<&str>> for Arg {
+    fn from(v: Option<&str>) -> Self {
+        Self::OptText(v.map(str::to_owned))
+    }
+}
+impl From<Option<String>> for Arg {
+    fn from(v: Option<String>) -> Self {
+        Self::OptText(v)
+    }
+}
+impl From<bool> for Arg {
+    fn from(v: bool) -> Self {
+        Self::Bool(v)
+    }
+}
+
+/// A statement with its dialect placeholders expanded, and its values.
+#[derive(Debug, Clone)]
+pub(super) struct Stmt {
+    pub sql: String,
+    pub args: Vec<Arg>,
+}
+
+impl Stmt {
+    /// Binds the next placeholder.
+    pub(super) fn bind(mut self, value: impl Into<Arg>) -> Self {
+        self.args.push(value.into());
+        self
+    }
+}
+
+/// Builds a driver's argument list from bound values.
+pub(super) fn arguments<'q, DB: sqlx::Database>(args: Vec<Arg>) -> Result<DB::Arguments<'q>>
+where
+    i64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    Option<i64>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    String: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    Option<String>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    bool: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+{
+    use sqlx::Arguments as _;
+    let mut out = DB::Arguments::default();
+    for a in args {
+        match a {
+            Arg::Int(v) => out.add(v),
+            Arg::OptInt(v) => out.add(v),
+            Arg::Text(v) => out.add(v),
+            Arg::OptText(v) => out.add(v),
+            Arg::Bool(v) => out.add(v),
+        }
+        .map_err(sqlx::Error::Encode)?;
+    }
+    Ok(out)
+}
+
+/// A row type that both drivers decode.
+pub(super) trait Decode:
+    for<'r> FromRow<'r, SqliteRow> + for<'r> FromRow<'r, PgRow> + Send + Unpin
+{
+}
+impl<T> Decode for T where
+    T: for<'r> FromRow<'r, SqliteRow> + for<'r> FromRow<'r, PgRow> + Send + Unpin
+{
+}
+
+/// A connection that runs statements.
+#[async_trait::async_trait]
+pub(super) trait Conn: Send {
+    /// Runs `s`; the rows it changed.
+    async fn execute(&mut self, s: Stmt) -> Result<u64>;
+    /// Every row `s` returns.
+    async fn all<T: Decode>(&mut self, s: Stmt) -> Result<Vec<T>>;
+    /// The first row `s` returns, if any.
+    async fn optional<T: Decode>(&mut self, s: Stmt) -> Result<Option<T>>;
+
+    /// The row `s` returns; an error when there is none.
+    async fn one<T: Decode>(&mut self, s: Stmt) -> Result<T> {
+        let sql = s.sql.clone();
+        self.optional(s)
+            .await?
+            .ok_or_else(|| StoreError::NotFound(format!("no row from `{sql}`")))
+    }
+
+    /// The first column of the first row, if any.
+    async fn scalar<T>(&mut self, s: Stmt) -> Result<Option<T>>
+    where
+        (T,): Decode,
+        T: Send,
+    {
+        Ok(self.optional::<(T,)>(s).await?.map(|(v,)| v))
+    }
+}
+
+/// Implements [`Conn`] for a driver's connection type.
+macro_rules! sql_conn {
+    ($conn:ty, $db:ty) => {
+        #[async_trait::async_trait]
+        impl $crate::store::queue::Conn for $conn {
+            async fn execute(
+                &mut self,
+                s: $crate::store::queue::Stmt,
+            ) -> $crate::store::Result<u64> {
+                let args = $crate::store::queue::arguments::<$db>(s.args)?;
+                let done = sqlx::query_with::<$db, _>(&s.sql, args)
+                    .execute(self)
+                    .await?;
+                Ok(done.rows_affected())
+            }
+
+            async fn all<T: $crate::store::queue::Decode>(
+                &mut self,
+                s: $crate::store::queue::Stmt,
+            ) -> $crate::store::Result<Vec<T>> {
+                let args = $crate::store::queue::arguments::<$db>(s.args)?;
+                Ok(sqlx::query_as_with::<$db, T, _>(&s.sql, args)
+                    .fetch_all(self)
+                    .await?)
+            }
+
+            async fn optional<T: $crate::store::queue::Decode>(
+                &mut self,
+                s: $crate::store::queue::Stmt,
+            ) -> $crate::store::Result<Option<T>> {
+                let args = $crate::store::queue::arguments::<$db>(s.args)?;
+                Ok(sqlx::query_as_with::<$db, T, _>(&s.sql, args)
+                    .fetch_optional(self)
+                    .await?)
+            }
+        }
+    };
+}
+pub(super) use sql_conn;
+
+/// How durable a write must be.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Durability {
+    /// Flushed to disk before the commit returns: what a client is told
+    /// is done (an upload, a bake, a completion, a failure, a control).
+    Acknowledged,
+    /// May be lost in a power cut without harm: leases, heartbeats,
+    /// checkpoints, reaping (a lost lease is re-leased, a lost checkpoint
+    /// resumes from the one before).
+    Queue,
+}
+
+/// What one database engine brings to the queue.
+#[async_trait::async_trait]
+pub(super) trait Backend: Send + Sync + std::fmt::Debug + 'static {
+    /// A connection.
+    type Conn: Conn;
+    /// A write transaction (holding whatever turn the engine needs).
+    type Tx: DerefMut<Target = Self::Conn> + Send;
+    /// A connection for reads.
+    type Read: DerefMut<Target = Self::Conn> + Send;
+
+    /// The clock, in milliseconds since the epoch.
+    const NOW: &'static str;
+    /// The comma-separated graph indices of the dependencies of `jobs`,
+    /// in order.
+    const DEPS: &'static str;
+    /// Locks the rows a `SELECT` reads until the transaction ends.
+    const FOR_UPDATE: &'static str;
+    /// Locks the rows a `SELECT` reads, skipping those locked by others.
+    const SKIP_LOCKED: &'static str;
+
+    /// Starts a write transaction.
+    async fn begin(&self, durability: Durability) -> Result<Self::Tx>;
+    /// Commits it.
+    async fn commit(tx: Self::Tx) -> Result<()>;
+    /// Rolls it back (best effort: the connection is dropped otherwise).
+    async fn rollback(tx: Self::Tx);
+    /// A connection for reads.
+    async fn read(&self) -> Result<Self::Read>;
+
+    /// Tells every server that jobs may have become ready, when the
+    /// transaction commits; a single-server engine needs nothing.
+    async fn wake(_tx: &mut Self::Conn) -> Result<()> {
+        Ok(())
+    }
+
+    /// Wakes `ready` whenever another server makes jobs ready.
+    async fn listen(&self, _ready: Arc<tokio::sync::Notify>) -> Result<()> {
+        Ok(())
+    }
+
+    /// A statement with the dialect's placeholders expanded.
+    fn sql(text: &str) -> Stmt {
+        let mut sql = text.to_owned();
+        for (name, value) in [
+            ("{now}", Self::NOW),
+            ("{deps}", Self::DEPS),
+            ("{for_update}", Self::FOR_UPDATE),
+            ("{skip_locked}", Self::SKIP_LOCKED),
+        ] {
+            if sql.contains(name) {
+                sql = sql.replace(name, value);
+            }
+        }
+        debug_assert!(!sql.contains('{'), "unexpanded placeholder in {sql}");
+        Stmt {
+            sql,
+            args: Vec::new(),
+        }
+    }
+}
+
+/// Runs `$body` (an async block that may `return` early) in a write
+/// transaction of `$store`'s backend, where `$tx` is the connection:
+/// commits when it returns `Ok`, rolls back explicitly when it fails, so a
+/// pooled connection never goes back to the pool inside a transaction.
+macro_rules! in_tx {
+    ($store:expr, $durability:expr, |$tx:ident| $body:block) => {{
+        let mut guard = $store.backend.begin($durability).await?;
+        let result: Result<_> = async {
+            let $tx = &mut *guard;
+            $body
+        }
+        .await;
+        match result {
+            Ok(value) => {
+                B::commit(guard).await?;
+                Ok(value)
+            }
+            Err(e) => {
+                B::rollback(guard).await;
+                Err(e)
+            }
+        }
+    }};
+}
+
+/// The store over one backend.
+#[derive(Debug, Clone)]
+pub struct SqlStore<B> {
+    pub(super) backend: B,
+}
+
+/// Jobs with their dependencies' graph indices.
+const JOB_SELECT: &str = "SELECT jobs.*, {deps} AS deps FROM jobs";
+
+/// Marks the workers' view: `worker` has no job now.
+const WORKER_IDLE: &str =
+    "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {now} WHERE id = $1";
+
+async fn bake_by_id<B: Backend>(c: &mut B::Conn, id: i64, lock: bool) -> Result<BakeRow> {
+    let text = if lock {
+        "SELECT * FROM bakes WHERE id = $1{for_update}"
+    } else {
+        "SELECT * FROM bakes WHERE id = $1"
+    };
+    c.optional::<RawBake>(B::sql(text).bind(id))
+        .await?
+        .ok_or_else(|| StoreError::NotFound(format!("bake {id}")))?
+        .cook()
+}
+
+async fn job_by_id<B: Backend>(c: &mut B::Conn, id: i64) -> Result<JobRow> {
+    c.optional::<RawJob>(B::sql(&format!("{JOB_SELECT} WHERE jobs.id = $1")).bind(id))
+        .await?
+        .ok_or_else(|| StoreError::NotFound(format!("job {id}")))?
+        .cook()
+}
+
+/// The job, locked, if `token` is its current lease, else `LeaseLost`.
+async fn leased<B: Backend>(c: &mut B::Conn, job: i64, token: &str) -> Result<JobRow> {
+    let held: Option<i64> = c
+        .scalar(
+            B::sql("SELECT id FROM jobs WHERE id = $1 AND lease_token = $2 AND state = 'running'{for_update}")
+                .bind(job)
+                .bind(token),
+        )
+        .await?;
+    if held.is_none() {
+        return Err(StoreError::LeaseLost(format!(
+            "job {job} is not leased with this token"
+        )));
+    }
+    job_by_id::<B>(c, job).await
+}
+
+/// After `job` completed: each dependent has one dependency fewer, and
+/// those with none left become available. Touches only the job's direct
+/// dependents, so a completion costs the same however large the bake.
+async fn release_dependents<B: Backend>(c: &mut B::Conn, job: i64) -> Result<()> {
+    // CASE sees the count before this update: 1 means this was the last.
+    c.execute(
+        B::sql("UPDATE jobs SET pending_deps = pending_deps - 1, state = CASE WHEN state = 'blocked' AND pending_deps = 1 THEN 'available' ELSE state END WHERE id IN (SELECT job_id FROM job_deps WHERE dep_id = $1)")
+            .bind(job),
+    )
+    .await?;
+    Ok(())
+}
+
+/// Recounts the pending dependencies of the bake's blocked jobs and makes
+/// those with none available (after a retry re-blocks jobs).
+async fn unblock<B: Backend>(c: &mut B::Conn, bake: i64) -> Result<()> {
+    c.execute(
+        B::sql("UPDATE jobs SET pending_deps = (SELECT COUNT(*) FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = jobs.id AND p.state != 'completed') WHERE bake_id = $1 AND state = 'blocked'")
+            .bind(bake),
+    )
+    .await?;
+    c.execute(
+        B::sql("UPDATE jobs SET state = 'available' WHERE bake_id = $1 AND state = 'blocked' AND pending_deps = 0")
+            .bind(bake),
+    )
+    .await?;
+    Ok(())
+}
+
+/// Marks the bake failed when one of its jobs is dead.
+async fn fail_bake_if_dead<B: Backend>(c: &mut B::Conn, bake: i64) -> Result<()> {
+    c.execute(
+        B::sql("UPDATE bakes SET state = 'failed', updated_at = {now}, finished_at = {now}, error = (SELECT 'job ' || idx || ' (' || kind || ') died after ' || attempts || ' attempts: ' || COALESCE(error, 'lease expired') FROM jobs WHERE bake_id = bakes.id AND state = 'dead' ORDER BY idx LIMIT 1) WHERE id = $1 AND state IN ('queued', 'running', 'paused') AND EXISTS (SELECT 1 FROM jobs WHERE bake_id = bakes.id AND state = 'dead')")
+            .bind(bake),
+    )
+    .await?;
+    Ok(())
+}
+
+/// Claims the first ready job of the most urgent bake this worker is not
+/// kept off: index lookups, however many jobs are queued. Claimers on
+/// other connections skip the rows each other locked.
+async fn claim<B: Backend>(
+    c: &mut B::Conn,
+    worker: &str,
+    policy: &QueuePolicy,
+) -> Result<Option<i64>> {
+    // Retries whose delay has passed are ready again.
+    c.execute(B::sql(
+        "UPDATE jobs SET state = 'available' WHERE state = 'retryable' AND run_at <= {now}",
+    ))
+    .await?;
+    let bakes: Vec<(i64,)> = c
+        .all(
+            B::sql("SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = $1 AND f.failures >= $2 AND EXISTS (SELECT 1 FROM workers o WHERE o.id != $1 AND o.last_seen > {now} - 60000 AND NOT EXISTS (SELECT 1 FROM worker_failures g WHERE g.bake_id = b.id AND g.worker = o.id AND g.failures >= $2))) ORDER BY b.priority DESC, b.id LIMIT 8")
+                .bind(worker)
+                .bind(policy.worker_failures),
+        )
+        .await?;
+    for (bake,) in bakes {
+        let id = c
+            .scalar(
+                B::sql("SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' ORDER BY idx LIMIT 1{skip_locked}")
+                    .bind(bake),
+            )
+            .await?;
+        if id.is_some() {
+            return Ok(id);
+        }
+    }
+    Ok(None)
+}
+
+/// What a leased job reads: the outputs of its dependencies, in graph
+/// order, and its bake's uploads.
+async fn lease_inputs<B: Backend>(
+    c: &mut B::Conn,
+    job: &JobRow,
+    bake: &BakeRow,
+) -> Result<(Vec<Completion>, Vec<UploadRef>)> {
+    let mut inputs = Vec::new();
+    if !job.deps.is_empty() {
+        let deps: Vec<(Option<String>, Option<String>)> = c
+            .all(
+                B::sql("SELECT p.outputs, p.timings FROM job_deps d JOIN jobs p ON p.id = d.dep_id WHERE d.job_id = $1 ORDER BY p.idx")
+                    .bind(job.id),
+            )
+            .await?;
+        for (outputs, timings) in deps {
+            inputs.push(Completion {
+                outputs: serde_json::from_str(outputs.as_deref().unwrap_or("[]"))?,
+                timings: serde_json::from_str(timings.as_deref().unwrap_or("null"))?,
+            });
+        }
+    }
+    let mut uploads = Vec::new();
+    for digest in std::iter::once(&bake.character).chain(&bake.clips) {
+        let bundle: Option<bool> = c
+            .scalar(B::sql("SELECT bundle FROM uploads WHERE digest = $1 LIMIT 1").bind(digest))
+            .await?;
+        uploads.push(UploadRef {
+            digest: digest.clone(),
+            bundle: bundle.unwrap_or(false),
+        });
+    }
+    Ok((inputs, uploads))
+}
+
+/// Applies a control to a bake whose row the transaction holds.
+async fn apply<B: Backend>(c: &mut B::Conn, b: &BakeRow, action: Action) -> Result<()> {
+    let bake = b.id;
+    let refuse = |why: &str| {
+        Err(StoreError::Conflict(format!(
+            "bake {bake} is {}: {why}",
+            b.state.as_str()
+        )))
+    };
+    match action {
+        Action::Cancel => {
+            if !b.state.is_active() {
+                return refuse("only a queued, running or paused bake can be cancelled");
+            }
+            c.execute(
+                B::sql("UPDATE jobs SET state = 'cancelled', lease_token = NULL, lease_expires_at = NULL WHERE bake_id = $1 AND state NOT IN ('completed', 'dead')")
+                    .bind(bake),
+            )
+            .await?;
+            c.execute(
+                B::sql("UPDATE bakes SET state = 'cancelled', finished_at = {now}, updated_at = {now} WHERE id = $1")
+                    .bind(bake),
+            )
+            .await?;
+        }
+        Action::Pause => {
+            if !matches!(b.state, BakeState::Queued | BakeState::Running) {
+                return refuse("only a queued or running bake can be paused");
+            }
+            c.execute(
+                B::sql("UPDATE bakes SET state = 'paused', updated_at = {now} WHERE id = $1")
+                    .bind(bake),
+            )
+            .await?;
+        }
+        Action::Resume => {
+            if b.state != BakeState::Paused {
+                return refuse("only a paused bake can be resumed");
+            }
+            c.execute(
+                B::sql("UPDATE bakes SET state = CASE WHEN jobs_done > 0 OR EXISTS (SELECT 1 FROM jobs WHERE bake_id = bakes.id AND state = 'running') THEN 'running' ELSE 'queued' END, updated_at = {now} WHERE id = $1")
+                    .bind(bake),
+            )
+            .await?;
+        }
+        Action::Retry => {
+            if !matches!(b.state, BakeState::Failed | BakeState::Cancelled) {
+                return refuse("only a failed or cancelled bake can be retried");
+            }
+            c.execute(
+                B::sql("UPDATE jobs SET state = 'blocked', attempts = 0, error = NULL, run_at = 0 WHERE bake_id = $1 AND state IN ('dead', 'cancelled', 'retryable', 'available')")
+                    .bind(bake),
+            )
+            .await?;
+            c.execute(B::sql("DELETE FROM worker_failures WHERE bake_id = $1").bind(bake))
+                .await?;
+            unblock::<B>(c, bake).await?;
+            c.execute(
+                B::sql("UPDATE bakes SET state = 'queued', error = NULL, finished_at = NULL, updated_at = {now} WHERE id = $1")
+                    .bind(bake),
+            )
+            .await?;
+        }
+    }
+    Ok(())
+}
+
+#[async_trait::async_trait]
+impl<B: Backend> Store for SqlStore<B> {
+    async fn put_upload(&self, u: &UploadRow) -> Result<bool> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            let done = c
+                .execute(
+                    B::sql("INSERT INTO uploads (digest, kind, bundle, bytes, summary, created_at) VALUES ($1, $2, $3, $4, $5, {now}) ON CONFLICT (digest, kind) DO NOTHING")
+                        .bind(&u.digest)
+                        .bind(&u.kind)
+                        .bind(u.bundle)
+                        .bind(u.bytes)
+                        .bind(u.summary.to_string()),
+                )
+                .await?;
+            Ok(done == 1)
+        })
+    }
+
+    async fn upload(&self, digest: &str, kind: &str) -> Result<Option<UploadRow>> {
+        let row: Option<RawUpload> = self
+            .backend
+            .read()
+            .await?
+            .optional(
+                B::sql("SELECT * FROM uploads WHERE digest = $1 AND kind = $2")
+                    .bind(digest)
+                    .bind(kind),
+            )
+            .await?;
+        row.map(RawUpload::cook).transpose()
+    }
+
+    async fn create_bake(&self, b: &NewBake) -> Result<BakeRow> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            let total: i64 = b.jobs.iter().map(|j| j.work).sum();
+            let (id,): (i64,) = c
+                .one(
+                    B::sql("INSERT INTO bakes (key, character, clips, method, params, state, priority, total_work, jobs_total, created_at, updated_at) VALUES ($1, $2, $3, $4, $5, 'queued', $6, $7, $8, {now}, {now}) RETURNING id")
+                        .bind(&b.key)
+                        .bind(&b.character)
+                        .bind(serde_json::to_string(&b.clips)?)
+                        .bind(&b.method)
+                        .bind(b.params.to_string())
+                        .bind(b.priority)
+                        .bind(total)
+                        .bind(b.jobs.len() as i64),
+                )
+                .await?;
+            let mut ids = Vec::with_capacity(b.jobs.len());
+            for (i, j) in b.jobs.iter().enumerate() {
+                let state = if j.deps.is_empty() {
+                    "available"
+                } else {
+                    "blocked"
+                };
+                let (job,): (i64,) = c
+                    .one(
+                        B::sql("INSERT INTO jobs (bake_id, idx, kind, spec, work, state, max_attempts, pending_deps) VALUES ($1, $2, $3, $4, $5, $6, $7, $8) RETURNING id")
+                            .bind(id)
+                            .bind(i as i64)
+                            .bind(&j.kind)
+                            .bind(j.spec.to_string())
+                            .bind(j.work)
+                            .bind(state)
+                            .bind(b.max_attempts)
+                            .bind(j.deps.len() as i64),
+                    )
+                    .await?;
+                for &d in &j.deps {
+                    let dep = *ids.get(d).ok_or_else(|| {
+                        StoreError::Conflict(format!("job {i} depends on a later job {d}"))
+                    })?;
+                    c.execute(
+                        B::sql(
+                            "INSERT INTO job_deps (job_id, dep_id, dep_idx) VALUES ($1, $2, $3)",
+                        )
+                        .bind(job)
+                        .bind(dep)
+                        .bind(d as i64),
+                    )
+                    .await?;
+                }
+                ids.push(job);
+            }
+            B::wake(c).await?;
+            bake_by_id::<B>(c, id, false).await
+        })
+    }
+
+    async fn bake(&self, id: i64) -> Result<Option<BakeRow>> {
+        let row: Option<RawBake> = self
+            .backend
+            .read()
+            .await?
+            .optional(B::sql("SELECT * FROM bakes WHERE id = $1").bind(id))
+            .await?;
+        row.map(RawBake::cook).transpose()
+    }
+
+    async fn bake_for_key(&self, key: &str) -> Result<Option<BakeRow>> {
+        let row: Option<RawBake> = self
+            .backend
+            .read()
+            .await?
+            .optional(
+                B::sql("SELECT * FROM bakes WHERE key = $1 AND state IN ('done', 'queued', 'running', 'paused') ORDER BY state = 'done' DESC, id DESC LIMIT 1")
+                    .bind(key),
+            )
+            .await?;
+        row.map(RawBake::cook).transpose()
+    }
+
+    async fn bakes(
+        &self,
+        character: Option<&str>,
+        method: Option<&str>,
+        limit: i64,
+    ) -> Result<Vec<BakeRow>> {
+        let rows: Vec<RawBake> = self
+            .backend
+            .read()
+            .await?
+            .all(
+                B::sql("SELECT * FROM bakes WHERE (CAST($1 AS TEXT) IS NULL OR character = $1) AND (CAST($2 AS TEXT) IS NULL OR method = $2) ORDER BY id DESC LIMIT $3")
+                    .bind(character)
+                    .bind(method)
+                    .bind(limit),
+            )
+            .await?;
+        rows.into_iter().map(RawBake::cook).collect()
+    }
+
+    async fn jobs(&self, bake: i64) -> Result<Vec<JobRow>> {
+        let rows: Vec<RawJob> = self
+            .backend
+            .read()
+            .await?
+            .all(
+                B::sql(&format!(
+                    "{JOB_SELECT} WHERE jobs.bake_id = $1 ORDER BY jobs.idx"
+                ))
+                .bind(bake),
+            )
+            .await?;
+        rows.into_iter().map(RawJob::cook).collect()
+    }
+
+    async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>> {
+        in_tx!(self, Durability::Queue, |c| {
+            let Some(id) = claim::<B>(c, worker, policy).await? else {
+                return Ok(None);
+            };
+            let token = lease_token();
+            let job: RawJob = c
+                .one(
+                    B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0 WHERE id = $4 RETURNING *, {deps} AS deps")
+                        .bind(&token)
+                        .bind(worker)
+                        .bind(policy.lease_ms)
+                        .bind(id),
+                )
+                .await?;
+            let expires_at = job.lease_expires_at.unwrap_or_default();
+            let job = job.cook()?;
+            let bake = c
+                .one::<RawBake>(
+                    B::sql("UPDATE bakes SET state = CASE WHEN state = 'queued' THEN 'running' ELSE state END, updated_at = CASE WHEN state = 'queued' THEN {now} ELSE updated_at END WHERE id = $1 RETURNING *")
+                        .bind(job.bake_id),
+                )
+                .await?
+                .cook()?;
+            let (inputs, uploads) = lease_inputs::<B>(c, &job, &bake).await?;
+            c.execute(
+                B::sql("INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES ($1, 'busy', $2, {now}, {now}) ON CONFLICT (id) DO UPDATE SET state = 'busy', job_id = $2, last_seen = {now}")
+                    .bind(worker)
+                    .bind(id),
+            )
+            .await?;
+            Ok(Some(Lease {
+                job,
+                token,
+                expires_at,
+                bake,
+                inputs,
+                uploads,
+            }))
+        })
+    }
+
+    async fn heartbeat(
+        &self,
+        job: i64,
+        token: &str,
+        progress: i64,
+        policy: &QueuePolicy,
+    ) -> Result<Beat> {
+        in_tx!(self, Durability::Queue, |c| {
+            let j = leased::<B>(c, job, token).await?;
+            let progress = progress.clamp(0, j.work);
+            c.execute(
+                B::sql(
+                    "UPDATE jobs SET lease_expires_at = {now} + $1, progress = $2 WHERE id = $3",
+                )
+                .bind(policy.lease_ms)
+                .bind(progress)
+                .bind(job),
+            )
+            .await?;
+            let bake = bake_by_id::<B>(c, j.bake_id, false).await?;
+            c.execute(
+                B::sql("UPDATE workers SET last_seen = {now}, state = 'busy', job_id = $1 WHERE id = $2")
+                    .bind(job)
+                    .bind(j.worker.as_deref().unwrap_or("")),
+            )
+            .await?;
+            Ok(Beat {
+                stop: !bake.state.is_active(),
+                moved: progress != j.progress,
+                bake,
+            })
+        })
+    }
+
+    async fn checkpoint(&self, job: i64, token: &str, cp: &CheckpointRef) -> Result<()> {
+        in_tx!(self, Durability::Queue, |c| {
+            leased::<B>(c, job, token).await?;
+            c.execute(
+                B::sql("UPDATE jobs SET checkpoint_step = $1, checkpoint_cursor = $2, checkpoint_blob = $3 WHERE id = $4")
+                    .bind(&cp.step)
+                    .bind(cp.cursor)
+                    .bind(&cp.blob)
+                    .bind(job),
+            )
+            .await?;
+            Ok(())
+        })
+    }
+
+    async fn complete(&self, job: i64, token: &str, done: &Completion) -> Result<BakeRow> {
+        let digest = |name: &str| {
+            done.outputs
+                .iter()
+                .find(|o| o.name == name)
+                .map(|o| o.digest.clone())
+        };
+        in_tx!(self, Durability::Acknowledged, |c| {
+            // Four statements: the completion (only with the current lease
+            // token), the bake's counts (publishing the asset, report
+            // and plot when this job produced them), the dependents, the worker.
+            let row: Option<(i64, i64, Option<String>)> = c
+                .optional(
+                    B::sql("UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {now} WHERE id = $3 AND lease_token = $4 AND state = 'running' RETURNING bake_id, work, worker")
+                        .bind(serde_json::to_string(&done.outputs)?)
+                        .bind(done.timings.to_string())
+                        .bind(job)
+                        .bind(token),
+                )
+                .await?;
+            let Some((bake_id, work, worker)) = row else {
+                return Err(StoreError::LeaseLost(format!(
+                    "job {job} is not leased with this token"
+                )));
+            };
+            let bake = c
+                .one::<RawBake>(
+                    B::sql("UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + 1, updated_at = {now}, state = CASE WHEN jobs_done + 1 = jobs_total THEN 'done' ELSE state END, asset = COALESCE($2, asset), report = COALESCE($3, report), plot = COALESCE($4, plot), finished_at = CASE WHEN jobs_done + 1 = jobs_total THEN {now} ELSE finished_at END WHERE id = $5 RETURNING *")
+                        .bind(work)
+                        .bind(digest("asset"))
+                        .bind(digest("report.json"))
+                        .bind(digest("plot.png"))
+                        .bind(bake_id),
+                )
+                .await?
+                .cook()?;
+            release_dependents::<B>(c, job).await?;
+            c.execute(B::sql(WORKER_IDLE).bind(worker.unwrap_or_default()))
+                .await?;
+            B::wake(c).await?;
+            Ok(bake)
+        })
+    }
+
+    async fn fail(
+        &self,
+        job: i64,
+        token: &str,
+        error: &str,
+        retryable: bool,
+        policy: &QueuePolicy,
+    ) -> Result<BakeRow> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            let j = leased::<B>(c, job, token).await?;
+            let dead = !retryable || j.attempts >= j.max_attempts;
+            let (now,): (i64,) = c.one(B::sql("SELECT {now}")).await?;
+            c.execute(
+                B::sql("UPDATE jobs SET state = $1, lease_token = NULL, lease_expires_at = NULL, run_at = $2, error = $3 WHERE id = $4")
+                    .bind(if dead { "dead" } else { "retryable" })
+                    .bind(now + policy.backoff_ms(j.attempts))
+                    .bind(error)
+                    .bind(job),
+            )
+            .await?;
+            let worker = j.worker.as_deref().unwrap_or("");
+            c.execute(
+                B::sql("INSERT INTO worker_failures (bake_id, worker, failures) VALUES ($1, $2, 1) ON CONFLICT (bake_id, worker) DO UPDATE SET failures = worker_failures.failures + 1")
+                    .bind(j.bake_id)
+                    .bind(worker),
+            )
+            .await?;
+            c.execute(B::sql(WORKER_IDLE).bind(worker)).await?;
+            fail_bake_if_dead::<B>(c, j.bake_id).await?;
+            B::wake(c).await?;
+            bake_by_id::<B>(c, j.bake_id, false).await
+        })
+    }
+
+    async fn release(&self, job: i64, token: &str) -> Result<()> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            let j = leased::<B>(c, job, token).await?;
+            c.execute(
+                B::sql("UPDATE jobs SET state = 'available', lease_token = NULL, lease_expires_at = NULL, attempts = attempts - 1 WHERE id = $1")
+                    .bind(job),
+            )
+            .await?;
+            c.execute(B::sql(WORKER_IDLE).bind(j.worker.as_deref().unwrap_or("")))
+                .await?;
+            B::wake(c).await?;
+            Ok(())
+        })
+    }
+
+    async fn reap(&self) -> Result<u64> {
+        in_tx!(self, Durability::Queue, |c| {
+            // One statement decides which leases expired and frees them,
+            // so a lease expiring meanwhile is either in both or in neither.
+            let expired: Vec<(i64, i64)> = c
+                .all(B::sql("UPDATE jobs SET state = CASE WHEN attempts >= max_attempts THEN 'dead' ELSE 'retryable' END, run_at = {now}, lease_token = NULL, lease_expires_at = NULL, error = COALESCE(error, 'lease expired') WHERE state = 'running' AND lease_expires_at < {now} RETURNING id, bake_id"))
+                .await?;
+            if expired.is_empty() {
+                return Ok(0);
+            }
+            c.execute(
+                B::sql("UPDATE counters SET value = value + $1 WHERE name = 'lease_expiries'")
+                    .bind(expired.len() as i64),
+            )
+            .await?;
+            for &(_, bake) in &expired {
+                fail_bake_if_dead::<B>(c, bake).await?;
+            }
+            B::wake(c).await?;
+            Ok(expired.len() as u64)
+        })
+    }
+
+    async fn control(&self, bake: i64, action: Action) -> Result<BakeRow> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            // The bake's row is locked: its state is read, checked and
+            // written back, and a completion or another control must not
+            // slip in between.
+            let b = bake_by_id::<B>(c, bake, true).await?;
+            apply::<B>(c, &b, action).await?;
+            B::wake(c).await?;
+            bake_by_id::<B>(c, bake, false).await
+        })
+    }
+
+    async fn set_priority(&self, bake: i64, priority: i64) -> Result<BakeRow> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            c.execute(
+                B::sql("UPDATE bakes SET priority = $1, updated_at = {now} WHERE id = $2")
+                    .bind(priority)
+                    .bind(bake),
+            )
+            .await?;
+            bake_by_id::<B>(c, bake, false).await
+        })
+    }
+
+    async fn worker_seen(&self, worker: &str, state: &str, job: Option<i64>) -> Result<()> {
+        in_tx!(self, Durability::Queue, |c| {
+            c.execute(
+                B::sql("INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES ($1, $2, $3, {now}, {now}) ON CONFLICT (id) DO UPDATE SET state = $2, job_id = $3, last_seen = {now}")
+                    .bind(worker)
+                    .bind(state)
+                    .bind(job),
+            )
+            .await?;
+            Ok(())
+        })
+    }
+
+    async fn workers(&self) -> Result<Vec<WorkerRow>> {
+        let rows: Vec<RawWorker> = self
+            .backend
+            .read()
+            .await?
+            .all(B::sql("SELECT * FROM workers ORDER BY last_seen DESC, id"))
+            .await?;
+        Ok(rows.into_iter().map(RawWorker::cook).collect())
+    }
+
+    async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            c.execute(
+                B::sql("INSERT INTO tokens (hash, name, scopes, created_at) VALUES ($1, $2, $3, {now}) ON CONFLICT (hash) DO UPDATE SET name = excluded.name, scopes = excluded.scopes")
+                    .bind(hash)
+                    .bind(name)
+                    .bind(scopes.join(",")),
+            )
+            .await?;
+            Ok(())
+        })
+    }
+
+    async fn token(&self, hash: &str) -> Result<Option<TokenRow>> {
+        let row: Option<(String, String)> = self
+            .backend
+            .read()
+            .await?
+            .optional(B::sql("SELECT name, scopes FROM tokens WHERE hash = $1").bind(hash))
+            .await?;
+        Ok(row.map(|(name, scopes)| TokenRow {
+            name,
+            scopes: scopes.split(',').map(str::to_owned).collect(),
+        }))
+    }
+
+    async fn queue_stats(&self) -> Result<(Vec<(JobState, i64)>, i64)> {
+        let mut c = self.backend.read().await?;
+        let rows: Vec<(String, i64)> = c
+            .all(B::sql("SELECT state, COUNT(*) FROM jobs GROUP BY state"))
+            .await?;
+        let (expiries,): (i64,) = c
+            .one(B::sql(
+                "SELECT value FROM counters WHERE name = 'lease_expiries'",
+            ))
+            .await?;
+        Ok((
+            rows.into_iter()
+                .map(|(s, n)| (JobState::parse(&s), n))
+                .collect(),
+            expiries,
+        ))
+    }
+
+    async fn ping(&self) -> Result<()> {
+        self.backend
+            .read()
+            .await?
+            .execute(B::sql("SELECT 1"))
+            .await?;
+        Ok(())
+    }
+
+    async fn listen(&self, ready: Arc<tokio::sync::Notify>) -> Result<()> {
+        self.backend.listen(ready).await
+    }
+}
