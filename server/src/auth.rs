@@ -10,37 +10,7 @@ use rand::RngExt as _;
 
 use crate::{error::ApiError, state::AppState};
 
-/// A scope a route needs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Scope {
-    /// See bakes, reports, published assets, previews, workers.
-    Read,
-    /// Upload, read back what was uploaded, and bake.
-    Submit,
-    /// Run jobs.
-    Worker,
-    /// Everything, and tokens.
-    Admin,
-}
-
-impl Scope {
-    /// As stored and as `--scope` spells it.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Read => "read",
-            Self::Submit => "submit",
-            Self::Worker => "worker",
-            Self::Admin => "admin",
-        }
-    }
-
-    /// The scope named `s`.
-    pub fn parse(s: &str) -> Option<Self> {
-        [Self::Read, Self::Submit, Self::Worker, Self::Admin]
-            .into_iter()
-            .find(|x| x.name() == s)
-    }
-}
+pub use aobake_api::Scope;
 
 /// A new random token (64 hex digits).
 pub fn new_token() -> String {

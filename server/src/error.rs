@@ -7,7 +7,6 @@ use axum::{
     http::{HeaderValue, StatusCode, header},
     response::{IntoResponse, Response},
 };
-use serde::Serialize;
 
 use crate::{blobs::BlobError, store::StoreError};
 
@@ -96,21 +95,7 @@ impl ApiError {
     }
 }
 
-/// The problem+json body.
-#[derive(Debug, Serialize, serde::Deserialize, PartialEq, utoipa::ToSchema)]
-pub struct Problem {
-    /// A URI naming the problem type.
-    #[serde(rename = "type")]
-    pub kind: String,
-    /// Short summary.
-    pub title: String,
-    /// HTTP status.
-    pub status: u16,
-    /// What went wrong with this request.
-    pub detail: String,
-    /// Machine-readable code.
-    pub code: String,
-}
+pub use aobake_api::Problem;
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {

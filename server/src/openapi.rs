@@ -27,17 +27,6 @@ impl utoipa::PartialSchema for Digest {
 
 impl utoipa::ToSchema for Digest {}
 
-/// The method names, from core's list.
-pub(crate) fn method_schema() -> utoipa::openapi::Object {
-    utoipa::openapi::ObjectBuilder::new()
-        .schema_type(utoipa::openapi::schema::Type::String)
-        .enum_values(Some(
-            aobake_core::method::Method::ALL.map(|m| m.name()).to_vec(),
-        ))
-        .description(Some("The method"))
-        .build()
-}
-
 /// What every authenticated operation may answer besides its own
 /// responses: a malformed request, a missing or unknown token, a token
 /// without the scope, too many requests.
@@ -72,18 +61,6 @@ pub(crate) enum Refusals {
         content_type = "application/problem+json"
     )]
     RateLimited(crate::error::Problem),
-}
-
-/// Token scopes.
-pub(crate) fn scopes_schema() -> utoipa::openapi::Array {
-    utoipa::openapi::ArrayBuilder::new()
-        .items(
-            utoipa::openapi::ObjectBuilder::new()
-                .schema_type(utoipa::openapi::schema::Type::String)
-                .enum_values(Some(["read", "submit", "worker", "admin"])),
-        )
-        .min_items(Some(1))
-        .build()
 }
 
 struct BearerAuth;

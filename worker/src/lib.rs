@@ -11,11 +11,10 @@
 //!   outputs at the end, and completes with its lease token. SIGTERM stops
 //!   leasing; a running job finishes or, past the deadline, stops at its
 //!   next checkpoint and gives its lease back.
-//! * [`client`]: the HTTP calls.
+//! * the HTTP calls: [`aobake_api::Client`].
 //! * [`gpu`]: a wgpu device on whatever adapter the machine has, and the
 //!   run-time evaluation of the vertex methods in WGSL.
 
-pub mod client;
 pub mod gpu;
 pub mod runner;
 

@@ -13,7 +13,7 @@ use aobake_core::{
     },
 };
 
-use crate::client::{CheckpointRef, Client, ClientError, Lease, OutputRef};
+use aobake_api::{ApiError, CheckpointRef, Client, Completion, Lease, OutputRef};
 
 /// How soon a moved progress is sent, at most (see the heartbeat loop).
 const PROGRESS_EVERY: Duration = Duration::from_secs(1);
@@ -56,7 +56,7 @@ pub fn run(config: WorkerConfig) -> Result<(), String> {
         signal_hook::flag::register(signal, shutdown.clone())
             .map_err(|e| format!("cannot handle signals: {e}"))?;
     }
-    let client = Client::new(&config.server, &config.token);
+    let client = Client::with_timeout(&config.server, &config.token, Duration::from_secs(120));
     let cache: Arc<InputCache> = Arc::default();
     std::thread::scope(|scope| {
         for slot in 0..config.concurrency.max(1) {
@@ -170,7 +170,7 @@ impl JobSink for Sink<'_> {
                     std::process::abort();
                 }
             }
-            Err(ClientError::LeaseLost(_)) => {
+            Err(e) if e.is_lease_lost() => {
                 self.flags.lost.store(true, Ordering::Relaxed);
             }
             // A checkpoint that cannot be saved costs only the work since
@@ -305,14 +305,11 @@ fn execute(
 /// Retries a call that failed on the network or with a 5xx (three tries,
 /// 0.5 s then 1 s apart): finished work is worth a second try. A 409 after
 /// a retry means an earlier try went through, or the lease is gone.
-fn with_retries<T>(mut call: impl FnMut() -> Result<T, ClientError>) -> Result<T, ClientError> {
+fn with_retries<T>(mut call: impl FnMut() -> Result<T, ApiError>) -> Result<T, ApiError> {
     let mut wait = Duration::from_millis(500);
     for _ in 0..2 {
         match call() {
-            Err(ClientError::Transport(e)) => eprintln!("retrying after: {e}"),
-            Err(ClientError::Status { status, body }) if status >= 500 => {
-                eprintln!("retrying after {status}: {body}");
-            }
+            Err(e) if e.is_transient() => eprintln!("retrying after: {e}"),
             other => return other,
         }
         std::thread::sleep(wait);
@@ -371,7 +368,7 @@ fn run_leased(
                             flags.lost.store(true, Ordering::Relaxed);
                         }
                     }
-                    Err(ClientError::LeaseLost(_)) => flags.lost.store(true, Ordering::Relaxed),
+                    Err(e) if e.is_lease_lost() => flags.lost.store(true, Ordering::Relaxed),
                     Err(e) => eprintln!("job {job}: heartbeat failed: {e}"),
                 }
             }
@@ -395,7 +392,7 @@ fn run_leased(
     let spec = &lease.job.spec;
     match result {
         Ok(out) => {
-            let uploaded: Result<Vec<OutputRef>, ClientError> = out
+            let uploaded: Result<Vec<OutputRef>, ApiError> = out
                 .outputs
                 .iter()
                 .map(|o| {
@@ -406,8 +403,10 @@ fn run_leased(
                 })
                 .collect();
             let timings = serde_json::to_value(out.timings).unwrap_or_default();
-            let done = uploaded
-                .and_then(|o| with_retries(|| client.complete(job, &lease.token, &o, &timings)));
+            let done = uploaded.and_then(|outputs| {
+                let completion = Completion { outputs, timings };
+                with_retries(|| client.complete(job, &lease.token, completion.clone()))
+            });
             match done {
                 Ok(()) => eprintln!(
                     "job {job} ({}) done in {:.2} s",

@@ -22,8 +22,9 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    asset::report::{CharacterInfo, ChartTexel, CubemapReport, Sizes},
+    asset::Container,
     digest::sha256_hex,
+    method::Method,
     method::cubemap::{
         continuous,
         evaluate::{
@@ -32,14 +33,16 @@ use crate::{
         },
         face::{FaceError, FaceField, Manifest, Part, checkpoint_batch, compute_face},
         geometry::FACES,
-        model::{CubemapModel, Encoding},
+        model::{CubemapLayout, CubemapModel, Encoding},
         setup::Setup,
     },
 };
 
 use super::{
-    Bake, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec, PlannedJob,
-    jobs::{decode_cubemap, find, json, named, parse},
+    Bake, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec,
+    PlannedJob,
+    jobs::{find, json, named, parse},
+    report::{CharacterInfo, Sizes, Timings},
 };
 
 /// The step name of a face job's checkpoints.
@@ -64,6 +67,26 @@ pub struct FaceInfo {
 }
 
 impl Bake<'_> {
+    /// Runs one of the family's jobs.
+    pub(super) fn cubemap_job(
+        &self,
+        spec: &JobSpec,
+        deps: &[&JobOutput],
+        resume: Option<Checkpoint>,
+        sink: &mut dyn JobSink,
+    ) -> Result<JobOutput, JobError> {
+        match spec {
+            JobSpec::Face { face, times } => self.face(*face, *times, resume, sink),
+            JobSpec::Assemble => self.cubemap_assemble(deps),
+            JobSpec::Evaluate => self.cubemap_evaluate(deps),
+            JobSpec::Sample { .. }
+            | JobSpec::Fit
+            | JobSpec::Unseen { .. }
+            | JobSpec::Slab { .. }
+            | JobSpec::Preview => Err(self.foreign(spec)),
+        }
+    }
+
     /// The cubemap bake's clip, time samples and spheroid.
     pub fn cubemap_setup(&self) -> Result<Setup<'_>, JobError> {
         let clip = self.cubemap_clip()?;
@@ -433,4 +456,56 @@ impl Bake<'_> {
         out.timings = timings;
         Ok(out)
     }
+}
+
+/// A cubemap asset's model.
+pub(super) fn decode_cubemap(bytes: &[u8]) -> Result<CubemapModel, JobError> {
+    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
+    CubemapModel::from_container(&container)
+        .map(|(m, _)| m)
+        .map_err(|e| JobError::Invalid(e.to_string()))
+}
+
+/// A cubemap bake's report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CubemapReport {
+    /// The method.
+    pub method: Method,
+    /// The bake key.
+    pub bake_key: String,
+    /// The parameters.
+    pub params: BakeParams,
+    /// The character (its train and test clips are the baked clip).
+    pub character: CharacterInfo,
+    /// The baked clip.
+    pub clip: String,
+    /// Where the cubemaps sit.
+    pub layout: CubemapLayout,
+    /// Rays traced: the faces' sample points and the ground truth.
+    pub rays: u64,
+    /// Stage times.
+    pub timings: Timings,
+    /// Sizes: the asset, its texels, and the static baseline (a byte per
+    /// texel and shell).
+    pub sizes: Sizes,
+    /// Every encoding and reference against the ground truth.
+    pub evaluation: CubemapEvaluation,
+    /// The texels the charts (`plot.png`) show, with each encoding's
+    /// summed squared errors there.
+    pub charts: Vec<ChartTexel>,
+}
+
+/// A texel of the charts and each encoding's squared errors summed over
+/// its (time × distance) chart against the input, as Kroon's Tables
+/// 5.1–5.3 give them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChartTexel {
+    /// Why it was chosen: `worst`, `90th percentile` or `median`.
+    pub name: String,
+    /// Its face.
+    pub face: usize,
+    /// Its texel in the face (`j · resolution + i`).
+    pub texel: usize,
+    /// Per encoding: (too dark, too bright, total).
+    pub sums: Vec<(String, [f64; 3])>,
 }

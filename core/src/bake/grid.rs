@@ -22,8 +22,9 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    asset::report::{CharacterInfo, GridReport, PartReport, Sizes},
+    asset::Container,
     image::encode_rgb_png,
+    method::Method,
     method::grid::{
         evaluate::{GridEvaluation, GridVariant, GroundTruth, Inputs, Predictor},
         field::{GridBox, RawCell, Slab, finish, part_scene, trace_layers},
@@ -35,8 +36,10 @@ use crate::{
 };
 
 use super::{
-    Bake, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec, PlannedJob,
+    Bake, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec,
+    PlannedJob,
     jobs::{find, json, named, parse},
+    report::{CharacterInfo, Sizes, Timings},
 };
 
 /// The step name of a slab job's checkpoints.
@@ -58,6 +61,26 @@ fn slab_name(part: usize, first: usize) -> String {
 }
 
 impl Bake<'_> {
+    /// Runs one of the family's jobs.
+    pub(super) fn grid_job(
+        &self,
+        spec: &JobSpec,
+        deps: &[&JobOutput],
+        resume: Option<Checkpoint>,
+        sink: &mut dyn JobSink,
+    ) -> Result<JobOutput, JobError> {
+        match spec {
+            JobSpec::Slab { part, first, count } => self.slab(*part, *first, *count, resume, sink),
+            JobSpec::Assemble => self.grid_assemble(deps),
+            JobSpec::Evaluate => self.grid_evaluate(deps),
+            JobSpec::Sample { .. }
+            | JobSpec::Fit
+            | JobSpec::Unseen { .. }
+            | JobSpec::Face { .. }
+            | JobSpec::Preview => Err(self.foreign(spec)),
+        }
+    }
+
     /// The parts of a grid bake.
     pub fn grid_parts(&self) -> Result<Vec<Part>, JobError> {
         parts(&self.inputs.character, self.plan.params.grid.parts)
@@ -295,7 +318,7 @@ impl Bake<'_> {
         let raw = self.raw_cells(&parts, deps)?;
         let assembled = find(deps, "asset")?;
         let asset = named(assembled, "asset")?;
-        let model = super::jobs::decode_grid(asset)?;
+        let model = decode_grid(asset)?;
         let o = &self.plan.params.grid;
         let character = &self.inputs.character;
         let clips = &self.inputs.clips;
@@ -493,4 +516,61 @@ fn slices_png(model: &GridModel) -> Result<Vec<u8>, String> {
         }
     }
     Ok(encode_rgb_png(&rgb, width as u32, height as u32)?)
+}
+
+/// A grid asset's model.
+pub(super) fn decode_grid(bytes: &[u8]) -> Result<GridModel, JobError> {
+    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
+    GridModel::from_container(&container)
+        .map(|(m, _)| m)
+        .map_err(|e| JobError::Invalid(e.to_string()))
+}
+
+/// A grid bake's report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GridReport {
+    /// The method.
+    pub method: Method,
+    /// The bake key.
+    pub bake_key: String,
+    /// The parameters.
+    pub params: BakeParams,
+    /// The character.
+    pub character: CharacterInfo,
+    /// Every part's grid.
+    pub parts: Vec<PartReport>,
+    /// Rays traced: the cells and the ground truth.
+    pub rays: u64,
+    /// Stage times (`reference_trace_s`: the slabs, summed).
+    pub timings: Timings,
+    /// Sizes: the asset, its cells (and `T_clip`), and the static average
+    /// (one f16 per vertex).
+    pub sizes: Sizes,
+    /// Every variant against the ground truth.
+    pub evaluation: GridEvaluation,
+}
+
+/// One part's grid in a report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PartReport {
+    /// The part (its node's name).
+    pub name: String,
+    /// Its node.
+    pub node: usize,
+    /// Vertices it carries.
+    pub vertices: usize,
+    /// Its triangles.
+    pub triangles: usize,
+    /// Cells per grid edge.
+    pub resolution: usize,
+    /// The grid's half extent per axis (Eq. 4), bind space.
+    pub half_extent: [f32; 3],
+    /// V_M, the boundary maximum the cells were rescaled by.
+    pub boundary_max: f32,
+    /// Cells inside the part, filled from their neighbours.
+    pub inside_cells: usize,
+    /// Bytes its cells take with cones (RGBA) and without (one byte).
+    pub bytes: [usize; 2],
+    /// Seconds its slabs traced (summed over slab jobs).
+    pub bake_s: f64,
 }

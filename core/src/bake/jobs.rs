@@ -3,69 +3,27 @@
 //! run it anywhere, a retry can resume it, and its outputs are the same
 //! bytes however often it was interrupted.
 //!
-//! Per-vertex bakes have five kinds of job:
-//!
-//! * `sample`: a batch of poses of one set (reference, held-out, or the
-//!   noise re-trace) → their AO block; checkpointed after every pose.
-//! * `fit`: the reference blocks → the model and the baseline (each as an
-//!   asset container) and the fit's statistics; its progress counts the
-//!   fit's steps ([`FitStep`]).
-//! * `unseen`: one fold of the unseen-clips evaluation: the reference and
-//!   held-out blocks → the method refitted without one clip, judged on its
-//!   frames. The folds need not wait for `fit`, so workers run them beside
-//!   it and beside each other.
-//! * `evaluate`: the model, the held-out blocks, the noise re-trace and
-//!   the folds → the evaluation and the ground truth's noise estimate.
-//! * `assemble`: → the asset, the JSON report and the PSNR plot.
+//! This file is the contract every family shares: the job specs, their
+//! outputs, checkpoints, sinks and errors, and [`Bake`], which runs a job
+//! by handing it to its family's bake file (`vertex.rs`, `cubemap.rs`,
+//! `grid.rs`) in one exhaustive `match`. `preview` is the same for every
+//! family (`preview.rs`).
 //!
 //! Outputs are named blobs; a job finds its inputs by name in its
 //! dependencies' outputs.
 
-use std::ops::Range;
-use std::time::Instant;
-
 use serde::{Deserialize, Serialize};
 
-use crate::{
-    asset::{
-        Container,
-        report::{CharacterInfo, NoiseEstimate, Report, Sizes, Timings, psnr_plot_png},
-    },
-    method::{
-        Family,
-        vertex::{FitStats, FitStep, Model, StaticAverage},
-    },
-    rig::pose::Pose,
-    trace::{AoBlock, SceneOptions, no_progress, trace_poses},
-};
+use crate::method::{Family, vertex::FitStep};
 
 use super::{
-    BakeError, BakeInputs, BakeParams, Evaluation, Plan, UnseenClips, UnseenFold,
+    BakeError, BakeInputs, BakeParams, Plan, PoseSet,
+    cubemap::decode_cubemap,
+    grid::decode_grid,
     preview::{PreviewInfo, PreviewModel, Renderer, STILL_FRACTIONS, Subject, preview_clip},
+    report::Timings,
+    vertex::decode,
 };
-
-/// Which poses a `sample` job traces.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum PoseSet {
-    /// The reference poses the model is fitted to.
-    Reference,
-    /// The held-out poses it is judged on (another ray seed).
-    HeldOut,
-    /// A few held-out poses traced again with independent rays, for the
-    /// ground truth's own noise.
-    Noise,
-}
-
-impl PoseSet {
-    fn output(self) -> &'static str {
-        match self {
-            Self::Reference => "ao-reference",
-            Self::HeldOut => "ao-held-out",
-            Self::Noise => "ao-noise",
-        }
-    }
-}
 
 /// What one job computes. Serialised into the queue as JSON.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -291,84 +249,16 @@ impl From<crate::trace::TraceError> for JobError {
     }
 }
 
+impl From<crate::image::ImageError> for JobError {
+    fn from(e: crate::image::ImageError) -> Self {
+        Self::Failed(e.to_string())
+    }
+}
+
 impl From<BakeError> for JobError {
     fn from(e: BakeError) -> Self {
         Self::Invalid(e.to_string())
     }
-}
-
-/// An [`AoBlock`] with the index of its first pose in its set, as a blob:
-/// `AOBK`, format 1 (u32), first pose (u64), vertices (u32), poses (u32),
-/// then the values as little-endian f32, pose-major.
-#[derive(Debug, Clone, PartialEq)]
-pub struct IndexedBlock {
-    /// Index of the block's first pose in its set.
-    pub first: usize,
-    /// The values.
-    pub block: AoBlock,
-}
-
-const BLOCK_MAGIC: &[u8; 4] = b"AOBK";
-const BLOCK_HEAD: usize = 24;
-
-impl IndexedBlock {
-    /// The blob.
-    pub fn to_bytes(&self) -> Vec<u8> {
-        let b = &self.block;
-        let mut out = Vec::with_capacity(BLOCK_HEAD + 4 * b.values.len());
-        out.extend(BLOCK_MAGIC);
-        out.extend(1u32.to_le_bytes());
-        out.extend((self.first as u64).to_le_bytes());
-        out.extend((b.vertices as u32).to_le_bytes());
-        out.extend((b.poses() as u32).to_le_bytes());
-        for v in &b.values {
-            out.extend(v.to_le_bytes());
-        }
-        out
-    }
-
-    /// Reads a blob back; `vertices` is what the character has.
-    pub fn from_bytes(bytes: &[u8], vertices: usize) -> Result<Self, JobError> {
-        let bad = |what: &str| JobError::Invalid(format!("an AO block is malformed: {what}"));
-        if bytes.len() < BLOCK_HEAD || &bytes[..4] != BLOCK_MAGIC {
-            return Err(bad("no AOBK header"));
-        }
-        let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().expect("4 bytes"));
-        if u32_at(4) != 1 {
-            return Err(bad("unknown format"));
-        }
-        let first = u64::from_le_bytes(bytes[8..16].try_into().expect("8 bytes"));
-        let (v, p) = (u32_at(16) as usize, u32_at(20) as usize);
-        if v != vertices {
-            return Err(bad("its vertex count is not the character's"));
-        }
-        let body = &bytes[BLOCK_HEAD..];
-        if Some(body.len()) != v.checked_mul(p).and_then(|n| n.checked_mul(4)) {
-            return Err(bad("its length does not match its header"));
-        }
-        let values = body
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-            .collect();
-        Ok(Self {
-            first: usize::try_from(first).map_err(|_| bad("first pose out of range"))?,
-            block: AoBlock { vertices, values },
-        })
-    }
-}
-
-/// The fit's statistics and where its inputs came from, as `fit.json`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct FitInfo {
-    fit: FitStats,
-}
-
-/// The evaluation and the noise estimate, as `evaluation.json`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct EvaluationInfo {
-    evaluation: Evaluation,
-    ground_truth_noise: NoiseEstimate,
-    rays: u64,
 }
 
 /// A bake ready to run jobs: its inputs and its pose spaces.
@@ -387,14 +277,18 @@ impl<'a> Bake<'a> {
             inputs,
             plan: Plan::new(&inputs.character, &inputs.clips, params)?,
         };
-        if let Some(name) = &bake.plan.params.cubemap.clip
-            && bake.plan.params.method.family() == Family::Cubemap
-        {
-            super::plan::clip_index(&inputs.clips, name)?;
-        }
-        if bake.plan.params.method.family() == Family::Grid {
-            crate::method::grid::parts::parts(&inputs.character, bake.plan.params.grid.parts)
-                .map_err(|e| BakeError::Param(e.to_string()))?;
+        let params = &bake.plan.params;
+        match params.method.family() {
+            Family::Vertex => {}
+            Family::Cubemap => {
+                if let Some(name) = &params.cubemap.clip {
+                    super::plan::clip_index(&inputs.clips, name)?;
+                }
+            }
+            Family::Grid => {
+                crate::method::grid::parts::parts(&inputs.character, params.grid.parts)
+                    .map_err(|e| BakeError::Param(e.to_string()))?;
+            }
         }
         Ok(bake)
     }
@@ -406,32 +300,9 @@ impl<'a> Bake<'a> {
         let frames = self.poses_in(PoseSet::HeldOut).saturating_sub(p.eval_poses);
         let parts = match p.method.family() {
             Family::Grid => self.grid_parts().map_or(0, |p| p.len()),
-            _ => 0,
+            Family::Vertex | Family::Cubemap => 0,
         };
         p.work(self.inputs.character.vertex_count(), frames, parts)
-    }
-
-    /// Poses `range` of a set, seeded: the same request gives the same
-    /// poses; only those in the range are built.
-    pub fn poses(&self, set: PoseSet, range: Range<usize>) -> Vec<Pose> {
-        match set {
-            PoseSet::Reference => self.plan.reference_poses_in(range),
-            PoseSet::HeldOut => self
-                .plan
-                .test_poses_in(range)
-                .into_iter()
-                .map(|t| t.pose)
-                .collect(),
-            PoseSet::Noise => {
-                let rows = self.plan.noise_rows();
-                rows.get(range)
-                    .unwrap_or_default()
-                    .iter()
-                    .flat_map(|&r| self.plan.test_poses_in(r..r + 1))
-                    .map(|t| t.pose)
-                    .collect()
-            }
-        }
     }
 
     /// Runs one job. `deps` are the outputs of the job's dependencies (in
@@ -443,39 +314,23 @@ impl<'a> Bake<'a> {
         resume: Option<Checkpoint>,
         sink: &mut dyn JobSink,
     ) -> Result<JobOutput, JobError> {
-        let family = self.plan.params.method.family();
-        match (spec, family) {
-            (JobSpec::Sample { set, first, count }, Family::Vertex) => {
-                self.sample(*set, *first, *count, resume, sink)
-            }
-            (JobSpec::Fit, Family::Vertex) => self.fit(deps, sink),
-            (JobSpec::Unseen { fold }, Family::Vertex) => self.unseen(*fold, deps, sink),
-            (JobSpec::Evaluate, Family::Vertex) => self.evaluate(deps),
-            (JobSpec::Assemble, Family::Vertex) => self.assemble(deps),
-            (JobSpec::Face { face, times }, Family::Cubemap) => {
-                self.face(*face, *times, resume, sink)
-            }
-            (JobSpec::Evaluate, Family::Cubemap) => self.cubemap_evaluate(deps),
-            (JobSpec::Assemble, Family::Cubemap) => self.cubemap_assemble(deps),
-            (JobSpec::Slab { part, first, count }, Family::Grid) => {
-                self.slab(*part, *first, *count, resume, sink)
-            }
-            (JobSpec::Evaluate, Family::Grid) => self.grid_evaluate(deps),
-            (JobSpec::Assemble, Family::Grid) => self.grid_assemble(deps),
-            (
-                JobSpec::Sample { .. }
-                | JobSpec::Fit
-                | JobSpec::Unseen { .. }
-                | JobSpec::Face { .. }
-                | JobSpec::Slab { .. },
-                _,
-            ) => Err(JobError::Invalid(format!(
+        match self.plan.params.method.family() {
+            Family::Vertex => self.vertex_job(spec, deps, resume, sink),
+            Family::Cubemap => self.cubemap_job(spec, deps, resume, sink),
+            Family::Grid => self.grid_job(spec, deps, resume, sink),
+        }
+    }
+
+    /// Why `spec` is not one of this bake's family's jobs.
+    pub(super) fn foreign(&self, spec: &JobSpec) -> JobError {
+        match spec {
+            JobSpec::Preview => JobError::Invalid(
+                "a preview job needs a renderer: run it with Bake::preview".into(),
+            ),
+            _ => JobError::Invalid(format!(
                 "a {} job is not part of a {} bake",
                 spec.kind(),
                 self.plan.params.method
-            ))),
-            (JobSpec::Preview, _) => Err(JobError::Invalid(
-                "a preview job needs a renderer: run it with Bake::preview".into(),
             )),
         }
     }
@@ -556,297 +411,6 @@ impl<'a> Bake<'a> {
         out.timings = assembled.timings;
         Ok(out)
     }
-
-    fn sample(
-        &self,
-        set: PoseSet,
-        first: usize,
-        count: usize,
-        resume: Option<Checkpoint>,
-        sink: &mut dyn JobSink,
-    ) -> Result<JobOutput, JobError> {
-        let started = Instant::now();
-        let total = self.poses_in(set);
-        let end = first.checked_add(count).filter(|&e| e <= total);
-        let Some(end) = end else {
-            return Err(JobError::Invalid(format!(
-                "poses {first}..{} are outside the set's {total} poses",
-                first.saturating_add(count),
-            )));
-        };
-        let poses = self.poses(set, first..end);
-        let vertices = self.inputs.character.vertex_count();
-        let mut done = IndexedBlock {
-            first,
-            block: AoBlock {
-                vertices,
-                values: Vec::with_capacity(vertices * count),
-            },
-        };
-        if let Some(cp) = resume.filter(|cp| cp.step == "sample") {
-            let saved = IndexedBlock::from_bytes(&cp.data, vertices)?;
-            let ok = saved.first == first
-                && saved.block.poses() as u64 == cp.cursor
-                && saved.block.poses() <= count;
-            if !ok {
-                return Err(JobError::Invalid(
-                    "the checkpoint does not belong to this job".into(),
-                ));
-            }
-            done = saved;
-        }
-        let p = &self.plan.params;
-        let surface = match set {
-            PoseSet::Reference => p.surface(),
-            PoseSet::HeldOut => p.held_out_surface(),
-            PoseSet::Noise => p.noise_surface(),
-        };
-        let options = SceneOptions::default();
-        sink.progress(done.block.poses() as u64, count as u64);
-        for pose in &poses[done.block.poses()..] {
-            let row = trace_poses(
-                &self.inputs.character,
-                std::slice::from_ref(pose),
-                &options,
-                &surface,
-                &no_progress,
-            )
-            .map_err(|e| JobError::Invalid(e.to_string()))?;
-            done.block.values.extend(row.values);
-            let cursor = done.block.poses() as u64;
-            sink.progress(cursor, count as u64);
-            if cursor < count as u64 {
-                sink.checkpoint(Checkpoint {
-                    step: "sample".into(),
-                    cursor,
-                    data: done.to_bytes(),
-                })
-                .map_err(JobError::Stopped)?;
-            }
-        }
-        let mut out = JobOutput::default();
-        out.push(set.output(), done.to_bytes());
-        let seconds = started.elapsed().as_secs_f64();
-        match set {
-            PoseSet::Reference => out.timings.reference_trace_s = seconds,
-            _ => out.timings.test_trace_s = seconds,
-        }
-        Ok(out)
-    }
-
-    /// The blocks of a set, from `deps`, stacked in pose order; every pose
-    /// of the set must be there exactly once.
-    fn stack(&self, set: PoseSet, deps: &[&JobOutput]) -> Result<AoBlock, JobError> {
-        let vertices = self.inputs.character.vertex_count();
-        let mut blocks = Vec::new();
-        for d in deps {
-            for o in d.outputs.iter().filter(|o| o.name == set.output()) {
-                blocks.push(IndexedBlock::from_bytes(&o.bytes, vertices)?);
-            }
-        }
-        blocks.sort_by_key(|b| b.first);
-        let mut values = Vec::new();
-        let mut next = 0;
-        for b in blocks {
-            if b.first != next {
-                return Err(JobError::Invalid(format!(
-                    "{} blocks do not cover the poses in order (expected pose {next}, got {})",
-                    set.output(),
-                    b.first
-                )));
-            }
-            next += b.block.poses();
-            values.extend(b.block.values);
-        }
-        let want = self.poses_in(set);
-        if next != want {
-            return Err(JobError::Invalid(format!(
-                "{} blocks hold {next} poses, not {want}",
-                set.output()
-            )));
-        }
-        Ok(AoBlock { vertices, values })
-    }
-
-    /// The number of poses in a set.
-    pub fn poses_in(&self, set: PoseSet) -> usize {
-        match set {
-            PoseSet::Reference => self.plan.params.poses,
-            PoseSet::HeldOut => self.plan.test_count(),
-            PoseSet::Noise => self.plan.noise_rows().len(),
-        }
-    }
-
-    pub(super) fn header(&self) -> crate::method::vertex::AssetHeaderFields {
-        self.plan
-            .header(&self.inputs.character_digest, &self.inputs.clip_digests)
-    }
-
-    fn fit(&self, deps: &[&JobOutput], sink: &mut dyn JobSink) -> Result<JobOutput, JobError> {
-        let reference = self.stack(PoseSet::Reference, deps)?;
-        let started = Instant::now();
-        let poses = self.plan.reference_poses();
-        let (model, fit) = self.plan.fit_stepwise(
-            &poses,
-            &reference,
-            &self.plan.reference_sources(),
-            &mut fit_progress(sink),
-        )?;
-        let baseline = Model::StaticAverage(StaticAverage::fit(
-            &reference.select(self.plan.baseline_rows()),
-        ));
-        let mut out = JobOutput::default();
-        out.push("model", model.to_container(self.header()).to_bytes());
-        out.push("baseline", baseline.to_container(self.header()).to_bytes());
-        out.push("fit.json", json(&FitInfo { fit }));
-        out.timings.reference_trace_s = deps.iter().map(|d| d.timings.reference_trace_s).sum();
-        out.timings.fit_s = started.elapsed().as_secs_f64();
-        Ok(out)
-    }
-
-    /// One fold of the unseen-clips evaluation (an `unseen` job): its
-    /// [`UnseenFold`] as `unseen-{fold}.json`.
-    fn unseen(
-        &self,
-        fold: usize,
-        deps: &[&JobOutput],
-        sink: &mut dyn JobSink,
-    ) -> Result<JobOutput, JobError> {
-        let clips = self.plan.fold_clips();
-        let Some(&clip) = clips.get(fold) else {
-            return Err(JobError::Invalid(format!(
-                "fold {fold} is outside the bake's {} unseen-clip folds",
-                clips.len()
-            )));
-        };
-        let reference = self.stack(PoseSet::Reference, deps)?;
-        let truth = self.stack(PoseSet::HeldOut, deps)?;
-        let started = Instant::now();
-        let result = self.plan.unseen_fold(
-            clip,
-            &self.plan.reference_poses(),
-            &reference,
-            &self.plan.reference_sources(),
-            &self.plan.test_poses(),
-            &truth,
-            &mut fit_progress(sink),
-        )?;
-        let mut out = JobOutput::default();
-        out.push(&unseen_output(fold), json(&result));
-        out.timings.unseen_s = started.elapsed().as_secs_f64();
-        Ok(out)
-    }
-
-    fn evaluate(&self, deps: &[&JobOutput]) -> Result<JobOutput, JobError> {
-        let fit = find(deps, "model")?;
-        let model = decode(named(fit, "model")?)?;
-        let Model::StaticAverage(baseline) = decode(named(fit, "baseline")?)? else {
-            return Err(JobError::Invalid(
-                "the baseline is not a static average".into(),
-            ));
-        };
-        let truth = self.stack(PoseSet::HeldOut, deps)?;
-        let again = self.stack(PoseSet::Noise, deps)?;
-        let started = Instant::now();
-        let tests = self.plan.test_poses();
-        let mut evaluation = self.plan.evaluate(&model, &baseline, &tests, &truth);
-        // The folds, in their order, from the `unseen` jobs.
-        let folds = (0..self.plan.fold_clips().len())
-            .map(|fold| {
-                let name = unseen_output(fold);
-                parse::<UnseenFold>(named(find(deps, &name)?, &name)?)
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        if !folds.is_empty() {
-            evaluation.unseen_clips = Some(UnseenClips::of(folds));
-        }
-        let noise_rows = self.plan.noise_rows();
-        let ground_truth_noise = NoiseEstimate::of(&noise_rows, &truth, &again);
-        let vertices = self.inputs.character.vertex_count() as u64;
-        let rays = (self.plan.params.poses + tests.len()) as u64
-            * vertices
-            * u64::from(self.plan.params.samples);
-        let mut out = JobOutput::default();
-        out.push(
-            "evaluation.json",
-            json(&EvaluationInfo {
-                evaluation,
-                ground_truth_noise,
-                rays,
-            }),
-        );
-        out.timings = Timings {
-            test_trace_s: deps.iter().map(|d| d.timings.test_trace_s).sum(),
-            unseen_s: deps.iter().map(|d| d.timings.unseen_s).sum(),
-            evaluate_s: started.elapsed().as_secs_f64(),
-            ..fit.timings
-        };
-        Ok(out)
-    }
-
-    fn assemble(&self, deps: &[&JobOutput]) -> Result<JobOutput, JobError> {
-        let fit = find(deps, "model")?;
-        let evaluated = find(deps, "evaluation.json")?;
-        let asset = named(fit, "model")?.to_vec();
-        let model = decode(&asset)?;
-        let FitInfo { fit: fit_stats } = parse(named(fit, "fit.json")?)?;
-        let info: EvaluationInfo = parse(named(evaluated, "evaluation.json")?)?;
-        let plan = &self.plan;
-        let clips = &self.inputs.clips;
-        let names =
-            |idx: &[usize]| -> Vec<String> { idx.iter().map(|&i| clips[i].name.clone()).collect() };
-        let character = &self.inputs.character;
-        let vertices = character.vertex_count();
-        let report = Report {
-            method: plan.params.method,
-            bake_key: self.header().bake_key,
-            params: plan.params.clone(),
-            character: CharacterInfo {
-                digest: self.inputs.character_digest.clone(),
-                vertices,
-                triangles: character.triangles.len(),
-                clips: clips.iter().map(|c| c.name.clone()).collect(),
-                train_clips: names(&plan.train),
-                test_clips: names(&plan.test),
-                joint_angle_parameters: plan.joint_angles.len(),
-                handle_coordinates: plan.handles.len(),
-            },
-            rays: info.rays,
-            timings: evaluated.timings,
-            fit: fit_stats,
-            sizes: Sizes {
-                asset_bytes: asset.len(),
-                model_bytes: model.bytes(),
-                baseline_bytes: 2 * vertices,
-            },
-            evaluation: info.evaluation,
-            ground_truth_noise: info.ground_truth_noise,
-        };
-        let plot = psnr_plot_png(&report)
-            .map_err(|e| JobError::Failed(format!("cannot draw the plot: {e}")))?;
-        let mut out = JobOutput::default();
-        out.push("asset", asset);
-        out.push(
-            "report.json",
-            serde_json::to_vec_pretty(&report).expect("reports serialise"),
-        );
-        out.push("plot.png", plot);
-        out.timings = evaluated.timings;
-        Ok(out)
-    }
-}
-
-/// A fit's progress on `sink`, in steps ([`FitStep`]): 0 now, then one
-/// more as each step ends (what `fit` and `unseen` jobs are worth).
-fn fit_progress(sink: &mut dyn JobSink) -> impl FnMut(FitStep) + '_ {
-    let steps = FitStep::ALL.len() as u64;
-    sink.progress(0, steps);
-    move |step| sink.progress(step.done(), steps)
-}
-
-/// The output of the `unseen` job of `fold`.
-fn unseen_output(fold: usize) -> String {
-    format!("unseen-{fold}.json")
 }
 
 pub(super) fn json(value: &impl Serialize) -> Vec<u8> {
@@ -868,29 +432,4 @@ pub(super) fn named<'o>(output: &'o JobOutput, name: &str) -> Result<&'o [u8], J
     output
         .get(name)
         .ok_or_else(|| JobError::Invalid(format!("no output named {name}")))
-}
-
-fn decode(bytes: &[u8]) -> Result<Model, JobError> {
-    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
-    Model::from_container(&container)
-        .map(|(m, _)| m)
-        .map_err(|e| JobError::Invalid(e.to_string()))
-}
-
-/// A grid asset's model.
-pub(super) fn decode_grid(bytes: &[u8]) -> Result<crate::method::grid::model::GridModel, JobError> {
-    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
-    crate::method::grid::model::GridModel::from_container(&container)
-        .map(|(m, _)| m)
-        .map_err(|e| JobError::Invalid(e.to_string()))
-}
-
-/// A cubemap asset's model.
-pub(super) fn decode_cubemap(
-    bytes: &[u8],
-) -> Result<crate::method::cubemap::model::CubemapModel, JobError> {
-    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
-    crate::method::cubemap::model::CubemapModel::from_container(&container)
-        .map(|(m, _)| m)
-        .map_err(|e| JobError::Invalid(e.to_string()))
 }

@@ -7,12 +7,13 @@
 //! 3. [`Plan`] ([`plan`]): the pose spaces and the seeded reference,
 //!    held-out and noise poses.
 //! 4. [`JobGraph`] ([`graph`]): the bake cut into jobs.
-//! 5. The job functions ([`jobs`]): `sample`, `fit`, `unseen` (one fold
-//!    of the unseen-clips evaluation), `evaluate`, `assemble`, each
-//!    `(spec, dependency outputs, checkpoint?) → outputs`,
-//!    and `preview` ([`preview`]), which also needs a [`Renderer`]; a
-//!    cubemap bake's `face`, `assemble` and `evaluate` are in [`cubemap`],
-//!    a grid bake's `slab`, `assemble` and `evaluate` in [`grid`].
+//! 5. The job functions, each `(spec, dependency outputs, checkpoint?) →
+//!    outputs`: the contract and the one dispatch on the family in
+//!    [`jobs`]; each family's jobs, evaluation and report in its own file:
+//!    [`vertex`] (`sample`, `fit`, `unseen`, `evaluate`, `assemble`),
+//!    [`cubemap`] (`face`, `assemble`, `evaluate`), [`grid`] (`slab`,
+//!    `assemble`, `evaluate`); `preview` ([`preview`]), the same for all,
+//!    also needs a [`Renderer`]. [`report`] holds what the reports share.
 //! 6. [`run_graph`] ([`runner`]): the whole graph in this process.
 //!
 //! Everything is seeded from [`BakeParams::seed`]: the same request gives
@@ -21,7 +22,6 @@
 //! interrupted.
 
 pub mod cubemap;
-pub mod evaluation;
 pub mod graph;
 pub mod grid;
 pub mod inputs;
@@ -29,21 +29,22 @@ pub mod jobs;
 pub mod params;
 pub mod plan;
 pub mod preview;
+pub mod report;
 pub mod runner;
+pub mod vertex;
 
-pub use evaluation::{ClipEvaluation, Comparison, Evaluation, UnseenClips, UnseenFold};
 pub use graph::{GraphOptions, JobGraph, PlannedJob};
 pub use inputs::{BakeInputs, BundleError, InputError, UploadBytes};
-pub use jobs::{
-    Bake, Checkpoint, IndexedBlock, JobError, JobOutput, JobSink, JobSpec, NoSink, Output, PoseSet,
-    Stop,
-};
+pub use jobs::{Bake, Checkpoint, JobError, JobOutput, JobSink, JobSpec, NoSink, Output, Stop};
 pub use params::{BakeError, BakeParams, ReferenceSource, bake_key};
 pub use plan::{Plan, TestPose};
 pub use preview::{
-    Camera, Image, Panel, Preview, PreviewInfo, PreviewModel, RenderFrame, RenderScene, Renderer,
+    Camera, Panel, Preview, PreviewInfo, PreviewModel, RenderFrame, RenderScene, Renderer,
 };
 pub use runner::{Baked, JobEvent, bake_in_process, run_graph};
+pub use vertex::{
+    ClipEvaluation, Comparison, Evaluation, IndexedBlock, PoseSet, UnseenClips, UnseenFold,
+};
 
 pub use crate::digest::sha256_hex;
 pub use crate::method::vertex::FitStats;

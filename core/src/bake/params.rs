@@ -112,10 +112,7 @@ impl BakeParams {
             // RobotExpressive's +2.8 and +3.3 with 512 and 1024; docs/methods/vertex.md).
             // With `cv`, 1536 are 512 of each source, and a fit uses 1024
             // or all of them.
-            poses: match method {
-                Method::VertexLinear | Method::VertexClustered => 1536,
-                _ => 256,
-            },
+            poses: if method.fits_poses() { 1536 } else { 256 },
             // Random joint angles alone combine every joint's extremes and
             // fit clip poses poorly (Fox: +0.5 dB over the baseline on
             // clip frames against +9 dB with half clip frames); clip frames
@@ -125,9 +122,10 @@ impl BakeParams {
             // +3.0) and lose on others (Fox: +2.3 against +4.0), so the
             // cross-validation over clips chooses per bake (docs/methods/vertex.md).
             // vertex-clustered's linear base is fitted to them too.
-            reference: match method {
-                Method::VertexLinear | Method::VertexClustered => ReferenceSource::Cv,
-                _ => ReferenceSource::Clips,
+            reference: if method.fits_poses() {
+                ReferenceSource::Cv
+            } else {
+                ReferenceSource::Clips
             },
             // Perturbed frames at ±25 % of the ranges barely differed
             // from plain ones; ±75 % won on InterpolationTest (docs/methods/vertex.md).
@@ -145,7 +143,7 @@ impl BakeParams {
             // scale a cube) they lift vertex-linear from +2.14 to +2.96 dB
             // and vertex-clustered's worst clip from +0.09 to +0.67
             // (docs/methods/vertex.md).
-            scale_parameters: matches!(method, Method::VertexLinear | Method::VertexClustered),
+            scale_parameters: method.fits_poses(),
             linear: LinearOptions::default(),
             clustered: ClusteredOptions::default(),
             cubemap: CubemapOptions::default(),
@@ -201,17 +199,18 @@ impl BakeParams {
     pub fn canonical(&self) -> serde_json::Value {
         let mut v = serde_json::to_value(self).expect("params serialise");
         let map = v.as_object_mut().expect("an object");
-        if self.method != Method::VertexLinear {
-            map.remove("linear");
-        }
-        if self.method != Method::VertexClustered {
-            map.remove("clustered");
-        }
-        if self.method.family() != Family::Cubemap {
-            map.remove("cubemap");
-        }
-        if self.method.family() != Family::Grid {
-            map.remove("grid");
+        // Each method keeps its own options' block, and only that one.
+        let own = match self.method {
+            Method::StaticAverage => None,
+            Method::VertexLinear => Some("linear"),
+            Method::VertexClustered => Some("clustered"),
+            Method::CubemapDiscrete | Method::CubemapContinuous => Some("cubemap"),
+            Method::Grid => Some("grid"),
+        };
+        for block in ["linear", "clustered", "cubemap", "grid"] {
+            if own != Some(block) {
+                map.remove(block);
+            }
         }
         v
     }

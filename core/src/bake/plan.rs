@@ -9,7 +9,6 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::{
     Character, Clip,
-    method::Family,
     method::vertex::{AssetHeaderFields, FitStats, FitStep, Model, Source},
     pose_space::ParamError,
     pose_space::{ClipFrame, Handles, JointAngles, LayoutOptions, random_clip_frames},
@@ -106,10 +105,7 @@ impl<'a> Plan<'a> {
             },
         ) {
             Ok(layout) => layout,
-            // A cubemap bakes the world around the clip as it plays, root
-            // motion included (Kroon's spinning cube has nothing else), and
-            // a grid is baked per part, so neither needs joint angles.
-            Err(ParamError::NothingAnimated) if p.method.family() != Family::Vertex => {
+            Err(ParamError::NothingAnimated) if !p.method.family().needs_joint_angles() => {
                 JointAngles::default()
             }
             Err(e) => return Err(e.into()),

@@ -15,6 +15,7 @@
 //! adapter draws the same bytes. Render times go into [`PreviewInfo`],
 //! never into an image.
 
+use crate::image::{HEAT_MAP, HeatMap, Image, encode_apng, encode_image};
 use std::time::Instant;
 
 use glam::{Mat4, Vec3};
@@ -116,45 +117,6 @@ pub enum Panel {
     Model,
     /// The model's AO minus the ray-traced AO through [`HeatMap`].
     Error,
-}
-
-/// The error colour ramp, written once here: the renderer gets these
-/// numbers as uniforms and the legend is drawn from them. Colours are
-/// linear RGB; an error `e = model − truth` (occlusion) maps to
-/// `mix(neutral, too_dark, e / range)` above zero and
-/// `mix(neutral, too_bright, −e / range)` below, clamped at `range`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct HeatMap {
-    /// Error magnitude that saturates the colour.
-    pub range: f32,
-    /// Colour of no error.
-    pub neutral: [f32; 3],
-    /// Colour of a model darker than the truth (more occlusion).
-    pub too_dark: [f32; 3],
-    /// Colour of a model brighter than the truth.
-    pub too_bright: [f32; 3],
-}
-
-/// The ramp every preview uses: ±0.1 occlusion saturates (a good bake's
-/// errors are a few hundredths; a tenth is plainly wrong).
-pub const HEAT_MAP: HeatMap = HeatMap {
-    range: 0.1,
-    neutral: [0.9, 0.9, 0.9],
-    too_dark: [0.8, 0.02, 0.01],
-    too_bright: [0.01, 0.1, 0.8],
-};
-
-impl HeatMap {
-    /// The linear colour of an error.
-    pub fn color(&self, error: f32) -> [f32; 3] {
-        let s = (error / self.range).clamp(-1.0, 1.0);
-        let (to, f) = if s >= 0.0 {
-            (self.too_dark, s)
-        } else {
-            (self.too_bright, -s)
-        };
-        std::array::from_fn(|i| self.neutral[i] + (to[i] - self.neutral[i]) * f)
-    }
 }
 
 /// The camera and the ground of a preview, the same for every frame of a
@@ -308,17 +270,6 @@ pub struct RenderFrame {
     pub ground_ao: Vec<f32>,
     /// The frame's phase of the clip's cycle (a cubemap's lookup).
     pub phase: f32,
-}
-
-/// An sRGB-encoded RGBA8 image, rows top to bottom.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Image {
-    /// Width in pixels.
-    pub width: u32,
-    /// Height in pixels.
-    pub height: u32,
-    /// `4 × width × height` bytes.
-    pub rgba: Vec<u8>,
 }
 
 /// Draws frames: implemented by the worker on wgpu.
@@ -529,7 +480,7 @@ impl Subject<'_> {
                         frame_ms,
                         trace_s: trace_s / times.len() as f64,
                     },
-                    png: encode_png(&image, None)?,
+                    png: encode_image(&image)?,
                 })
             })
             .collect()
@@ -745,55 +696,6 @@ fn compose_row(
     })
 }
 
-fn png_error(e: png::EncodingError) -> JobError {
-    JobError::Failed(format!("cannot encode a PNG: {e}"))
-}
-
-fn encoder<'o>(image: &Image, out: &'o mut Vec<u8>) -> png::Encoder<'static, &'o mut Vec<u8>> {
-    let mut e = png::Encoder::new(out, image.width, image.height);
-    e.set_color(png::ColorType::Rgba);
-    e.set_depth(png::BitDepth::Eight);
-    e.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-    e
-}
-
-/// A PNG of one image; `animation` makes it an APNG of several.
-fn encode_png(image: &Image, animation: Option<(&[Image], f32)>) -> Result<Vec<u8>, JobError> {
-    let mut out = Vec::new();
-    {
-        let mut e = encoder(image, &mut out);
-        if let Some((frames, delay)) = animation {
-            e.set_animated(frames.len() as u32, 0).map_err(png_error)?;
-            let ms = (1000.0 * delay).round().clamp(1.0, 65_535.0) as u16;
-            e.set_frame_delay(ms, 1000).map_err(png_error)?;
-        }
-        let mut w = e.write_header().map_err(png_error)?;
-        match animation {
-            Some((frames, _)) => {
-                for f in frames {
-                    w.write_image_data(&f.rgba).map_err(png_error)?;
-                }
-            }
-            None => w.write_image_data(&image.rgba).map_err(png_error)?,
-        }
-        w.finish().map_err(png_error)?;
-    }
-    Ok(out)
-}
-
-/// An APNG that loops forever, `delay` seconds per frame.
-pub fn encode_apng(frames: &[Image], delay: f32) -> Result<Vec<u8>, JobError> {
-    let first = frames
-        .first()
-        .ok_or_else(|| JobError::Invalid("an animation needs frames".into()))?;
-    encode_png(first, Some((frames, delay)))
-}
-
-/// A PNG of one image.
-pub fn encode_image(image: &Image) -> Result<Vec<u8>, JobError> {
-    encode_png(image, None)
-}
-
 /// Output of a `preview` job that could not render (no adapter on the
 /// worker's machine): an empty `previews.json` and, in
 /// `previews-unavailable.txt`, the reason.
@@ -829,20 +731,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_heat_map_is_neutral_at_zero_and_saturates_at_its_range() {
-        let h = HEAT_MAP;
-        let near = |a: [f32; 3], b: [f32; 3]| a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-6);
-        assert_eq!(h.color(0.0), h.neutral);
-        assert!(near(h.color(h.range), h.too_dark));
-        assert!(near(h.color(10.0), h.too_dark));
-        assert!(near(h.color(-h.range), h.too_bright));
-        let half = h.color(0.5 * h.range);
-        assert!(half[0] > half[2], "too dark leans red: {half:?}");
-        let half = h.color(-0.5 * h.range);
-        assert!(half[2] > half[0], "too bright leans blue: {half:?}");
-    }
-
-    #[test]
     fn the_camera_sees_the_whole_box() {
         let (min, max) = (Vec3::new(-0.3, 0.0, -0.2), Vec3::new(0.3, 1.8, 0.2));
         let cam = Camera::framing(min, max);
@@ -859,29 +747,6 @@ mod tests {
             assert!((0.0..=1.0).contains(&ndc.z), "{corner} depth {}", ndc.z);
         }
         assert_eq!(cam.ground_y, 0.0);
-    }
-
-    #[test]
-    fn an_apng_holds_every_frame_and_loops() {
-        let frame = |v: u8| Image {
-            width: 4,
-            height: 3,
-            rgba: vec![v; 48],
-        };
-        let frames = [frame(0), frame(100), frame(200)];
-        let bytes = encode_apng(&frames, 0.04).unwrap();
-        let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
-            .read_info()
-            .unwrap();
-        let control = reader.info().animation_control.unwrap();
-        assert_eq!((control.num_frames, control.num_plays), (3, 0));
-        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-        for want in [0u8, 100, 200] {
-            reader.next_frame(&mut buf).unwrap();
-            assert!(buf[..48].iter().all(|&b| b == want));
-            let fc = reader.info().frame_control.unwrap();
-            assert_eq!((fc.delay_num, fc.delay_den), (40, 1000));
-        }
     }
 
     #[test]

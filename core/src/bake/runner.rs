@@ -5,7 +5,7 @@
 
 use std::collections::HashMap;
 
-use crate::asset::report::BakeReport;
+use super::report::BakeReport;
 
 use super::{
     Bake, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec, NoSink,

@@ -48,6 +48,19 @@ pub enum Family {
     Grid,
 }
 
+impl Family {
+    /// Whether its bakes need joint angles (a pose space to fit over). A
+    /// cubemap bakes the world around the clip as it plays, root motion
+    /// included (Kroon's spinning cube has nothing else), and a grid is
+    /// baked per part, so neither needs them.
+    pub fn needs_joint_angles(self) -> bool {
+        match self {
+            Self::Vertex => true,
+            Self::Cubemap | Self::Grid => false,
+        }
+    }
+}
+
 impl Method {
     /// Every method, in code order.
     pub const ALL: [Self; 6] = [
@@ -92,6 +105,18 @@ impl Method {
             Self::StaticAverage | Self::VertexLinear | Self::VertexClustered => Family::Vertex,
             Self::CubemapDiscrete | Self::CubemapContinuous => Family::Cubemap,
             Self::Grid => Family::Grid,
+        }
+    }
+
+    /// Whether the method fits per-vertex AO to pose parameters (what
+    /// more reference poses, cross-validated reference sources and scale
+    /// parameters serve).
+    pub fn fits_poses(self) -> bool {
+        match self {
+            Self::VertexLinear | Self::VertexClustered => true,
+            Self::StaticAverage | Self::CubemapDiscrete | Self::CubemapContinuous | Self::Grid => {
+                false
+            }
         }
     }
 

@@ -4,10 +4,8 @@
 //! ground truth they never saw.
 
 use aobake_core::{
-    asset::{
-        Container,
-        report::{BakeReport, CubemapReport},
-    },
+    asset::Container,
+    bake::report::{BakeReport, CubemapReport},
     bake::{Bake, BakeParams, JobError, JobSpec, NoSink, bake_in_process, cubemap::FaceInfo},
     method::{
         Method,

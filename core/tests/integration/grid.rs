@@ -4,10 +4,8 @@
 //! and the rigid robot, judged on clip frames against ray-traced truth.
 
 use aobake_core::{
-    asset::{
-        Container,
-        report::{BakeReport, GridReport},
-    },
+    asset::Container,
+    bake::report::{BakeReport, GridReport},
     bake::{Bake, BakeParams, GraphOptions, JobError, JobSpec, NoSink, bake_in_process},
     method::{
         Method,

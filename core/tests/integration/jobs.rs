@@ -5,8 +5,8 @@
 use std::collections::HashMap;
 
 use aobake_core::{
-    asset::report::Report,
     bake::JobEvent,
+    bake::report::Report,
     bake::{
         Bake, BakeError, BakeParams, Checkpoint, GraphOptions, JobError, JobOutput, JobSink,
         JobSpec, NoSink, PoseSet, Stop, bake_in_process, run_graph,

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, bail};
 use aobake_core::{
     Limits,
-    asset::report::{BakeReport, CubemapReport, GridReport, Report},
+    bake::report::{BakeReport, CubemapReport, GridReport, Report},
     bake::{
         Bake, BakeInputs, Baked, GraphOptions, JobEvent, JobOutput, JobSpec, Renderer, run_graph,
     },

@@ -9,8 +9,9 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{Context as _, bail};
-use aobake_core::{Limits, asset::report::BakeReport, bake::UploadBytes, method::Method};
-use serde_json::{Value, json};
+use aobake_api::{BakeRequest, BakeState, BakeView, Client, JobState, NewTokenRequest};
+use aobake_core::{Limits, bake::report::BakeReport, method::Method};
+use serde_json::Value;
 
 use super::params::BakeRequestArgs;
 
@@ -31,22 +32,6 @@ pub(super) struct Conn {
     data: PathBuf,
 }
 
-/// A blocking client of the API.
-#[derive(Debug)]
-pub(crate) struct Api {
-    base: String,
-    auth: String,
-    agent: ureq::Agent,
-}
-
-/// A status the API answered with, and its problem+json detail.
-#[derive(Debug, thiserror::Error)]
-#[error("the server answered {status}: {detail}")]
-pub(super) struct ApiStatus {
-    pub status: u16,
-    pub detail: String,
-}
-
 /// Ends the process with this exit code (after printing the message).
 #[derive(Debug, thiserror::Error)]
 #[error("{message}")]
@@ -58,7 +43,7 @@ pub struct Exit {
 }
 
 impl Conn {
-    fn api(&self) -> anyhow::Result<Api> {
+    fn api(&self) -> anyhow::Result<Client> {
         let read = |name: &str| std::fs::read_to_string(self.data.join(name)).ok();
         let server = self
             .server
@@ -70,97 +55,7 @@ impl Conn {
             .clone()
             .or_else(|| read("admin.token"))
             .context("no token: pass --token or set AOBAKE_TOKEN")?;
-        Ok(Api::new(server.trim(), token.trim()))
-    }
-}
-
-impl Api {
-    pub(crate) fn new(base: &str, token: &str) -> Self {
-        Self {
-            base: base.trim_end_matches('/').to_owned(),
-            auth: format!("Bearer {token}"),
-            agent: ureq::Agent::config_builder()
-                .timeout_global(Some(Duration::from_secs(600)))
-                .http_status_as_error(false)
-                .build()
-                .into(),
-        }
-    }
-
-    fn check(
-        &self,
-        res: Result<ureq::http::Response<ureq::Body>, ureq::Error>,
-    ) -> anyhow::Result<ureq::http::Response<ureq::Body>> {
-        let mut res = res.with_context(|| format!("cannot reach {}", self.base))?;
-        let status = res.status().as_u16();
-        if status >= 400 {
-            let body = res.body_mut().read_to_string().unwrap_or_default();
-            let detail = serde_json::from_str::<Value>(&body)
-                .ok()
-                .and_then(|v| v["detail"].as_str().map(str::to_owned))
-                .unwrap_or(body);
-            return Err(ApiStatus { status, detail }.into());
-        }
-        Ok(res)
-    }
-
-    fn json(&self, res: ureq::http::Response<ureq::Body>) -> anyhow::Result<Value> {
-        let mut res = res;
-        Ok(res.body_mut().with_config().limit(1 << 30).read_json()?)
-    }
-
-    pub(super) fn get(&self, path: &str) -> anyhow::Result<Value> {
-        let res = self.check(
-            self.agent
-                .get(format!("{}{path}", self.base))
-                .header("authorization", &self.auth)
-                .call(),
-        )?;
-        self.json(res)
-    }
-
-    fn get_bytes(&self, path: &str) -> anyhow::Result<Vec<u8>> {
-        let mut res = self.check(
-            self.agent
-                .get(format!("{}{path}", self.base))
-                .header("authorization", &self.auth)
-                .call(),
-        )?;
-        Ok(res.body_mut().with_config().limit(u64::MAX).read_to_vec()?)
-    }
-
-    pub(crate) fn post(&self, path: &str, body: &Value) -> anyhow::Result<Value> {
-        let res = self.check(
-            self.agent
-                .post(format!("{}{path}", self.base))
-                .header("authorization", &self.auth)
-                .send_json(body),
-        )?;
-        self.json(res)
-    }
-
-    /// Uploads a character or clip file (a bundle when it has side files)
-    /// under the file's name.
-    pub(crate) fn upload(
-        &self,
-        path: &str,
-        upload: &UploadBytes,
-        name: &str,
-    ) -> anyhow::Result<Value> {
-        let content_type = if upload.is_bundle() {
-            "application/vnd.aobake.bundle"
-        } else {
-            "model/gltf-binary"
-        };
-        let res = self.check(
-            self.agent
-                .post(format!("{}{path}", self.base))
-                .query("name", name)
-                .header("authorization", &self.auth)
-                .header("content-type", content_type)
-                .send(&upload.to_blob()[..]),
-        )?;
-        self.json(res)
+        Ok(Client::new(server.trim(), token.trim()))
     }
 }
 
@@ -194,41 +89,37 @@ fn display_name(path: &Path) -> String {
 /// Uploads the files, submits the bake and returns the bake as the API
 /// shows it.
 pub(super) fn submit_files(
-    api: &Api,
+    api: &Client,
     file: &Path,
     clips: &[PathBuf],
     method: Method,
     params: serde_json::Map<String, Value>,
     priority: i64,
-) -> anyhow::Result<Value> {
+) -> anyhow::Result<BakeView> {
     let limits = Limits::default();
     let character = super::load::upload(file, &limits)?;
     let c = api
-        .upload("/v1/characters", &character, &display_name(file))
+        .upload_character(
+            &character.to_blob(),
+            character.is_bundle(),
+            &display_name(file),
+        )
         .with_context(|| format!("cannot upload {}", file.display()))?;
-    let digest = c["digest"].as_str().context("no digest")?.to_owned();
     let mut clip_digests = Vec::new();
     for path in clips {
         let u = super::load::upload(path, &limits)?;
         let r = api
-            .upload(
-                &format!("/v1/clips?character={digest}"),
-                &u,
-                &display_name(path),
-            )
+            .upload_clips(&c.digest, &u.to_blob(), u.is_bundle(), &display_name(path))
             .with_context(|| format!("cannot upload {}", path.display()))?;
-        clip_digests.push(r["digest"].clone());
+        clip_digests.push(r.digest);
     }
-    api.post(
-        "/v1/bakes",
-        &json!({
-            "character": digest,
-            "clips": clip_digests,
-            "method": method.name(),
-            "params": params,
-            "priority": priority,
-        }),
-    )
+    Ok(api.submit(&BakeRequest {
+        character: c.digest,
+        clips: clip_digests,
+        method: method.name().to_owned(),
+        params,
+        priority,
+    })?)
 }
 
 pub(super) fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
@@ -238,11 +129,11 @@ pub(super) fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
     // Validate here too, so a typo fails before the upload.
     aobake_core::bake::BakeParams::with_overrides(r.method, &overrides)?;
     let bake = submit_files(&api, &r.file, &r.clips, r.method, overrides, args.priority)?;
-    let id = bake["id"].as_i64().context("no bake id")?;
+    let id = bake.bake.id;
     println!(
         "bake {id}: key {}, {}",
-        bake["key"].as_str().unwrap_or("?"),
-        bake["state"].as_str().unwrap_or("?")
+        bake.bake.key,
+        bake.bake.state.as_str()
     );
     if args.wait {
         wait(&api, id)?;
@@ -251,35 +142,31 @@ pub(super) fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
 }
 
 /// Follows a bake until it ends, with a progress bar; prints the summary.
-fn wait(api: &Api, id: i64) -> anyhow::Result<()> {
+fn wait(api: &Client, id: i64) -> anyhow::Result<()> {
     let bar = super::trace::progress_bar(1, "baking");
     loop {
-        let b = api.get(&format!("/v1/bakes/{id}"))?;
-        let (done, total) = (
-            b["progress"]["done"].as_u64().unwrap_or(0),
-            b["progress"]["total"].as_u64().unwrap_or(1),
-        );
-        bar.set_length(total);
-        bar.set_position(done);
-        bar.set_message(running_jobs(&b));
-        match b["state"].as_str().unwrap_or("") {
-            "done" => {
+        let view = api.bake(id)?;
+        bar.set_length(u64::try_from(view.progress.total).unwrap_or(1));
+        bar.set_position(u64::try_from(view.progress.done).unwrap_or(0));
+        bar.set_message(running_jobs(&view));
+        let b = &view.bake;
+        match b.state {
+            BakeState::Done => {
                 bar.finish_and_clear();
-                let report: BakeReport =
-                    serde_json::from_slice(&api.get_bytes(&format!("/v1/bakes/{id}/report"))?)?;
+                let report: BakeReport = serde_json::from_slice(&api.report(id)?)?;
                 println!(
                     "bake {id} done: asset {}",
-                    b["asset"].as_str().unwrap_or("?")
+                    b.asset.as_deref().unwrap_or("?")
                 );
                 print!("{}", super::bake::summary(&report));
                 return Ok(());
             }
-            "failed" | "cancelled" => {
+            BakeState::Failed | BakeState::Cancelled => {
                 bar.finish_and_clear();
                 bail!(
                     "bake {id} {}: {}",
-                    b["state"].as_str().unwrap_or("?"),
-                    b["error"].as_str().unwrap_or("no reason recorded")
+                    b.state.as_str(),
+                    b.error.as_deref().unwrap_or("no reason recorded")
                 );
             }
             _ => std::thread::sleep(Duration::from_millis(500)),
@@ -289,23 +176,16 @@ fn wait(api: &Api, id: i64) -> anyhow::Result<()> {
 
 /// The running jobs of a bake view and how far each is (`fit 2/4,
 /// unseen 1/4`), or the bake's state when none runs.
-fn running_jobs(bake: &serde_json::Value) -> String {
-    let running: Vec<String> = bake["jobs"]
-        .as_array()
-        .into_iter()
+fn running_jobs(view: &BakeView) -> String {
+    let running: Vec<String> = view
+        .jobs
+        .iter()
         .flatten()
-        .filter(|j| j["state"] == "running")
-        .map(|j| {
-            format!(
-                "{} {}/{}",
-                j["kind"].as_str().unwrap_or("job"),
-                j["progress"].as_i64().unwrap_or(0),
-                j["work"].as_i64().unwrap_or(1)
-            )
-        })
+        .filter(|j| j.state == JobState::Running)
+        .map(|j| format!("{} {}/{}", j.kind, j.progress, j.work))
         .collect();
     if running.is_empty() {
-        bake["state"].as_str().unwrap_or("").to_owned()
+        view.bake.state.as_str().to_owned()
     } else {
         running.join(", ")
     }
@@ -324,36 +204,34 @@ pub(super) struct StatusArgs {
 }
 
 pub(super) fn status(args: &StatusArgs) -> anyhow::Result<()> {
-    let b = args.conn.api()?.get(&format!("/v1/bakes/{}", args.id))?;
+    let view = args.conn.api()?.bake(args.id)?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&b)?);
+        println!("{}", serde_json::to_string_pretty(&view)?);
         return Ok(());
     }
-    let jobs = b["jobs"].as_array().cloned().unwrap_or_default();
-    let mut states: std::collections::BTreeMap<String, usize> = Default::default();
-    for j in &jobs {
-        *states
-            .entry(j["state"].as_str().unwrap_or("?").to_owned())
-            .or_default() += 1;
+    let mut states: std::collections::BTreeMap<&str, usize> = Default::default();
+    for j in view.jobs.iter().flatten() {
+        *states.entry(j.state.as_str()).or_default() += 1;
     }
+    let b = &view.bake;
     println!(
         "bake {}: {} ({} of {} units), {} {}; key {}",
         args.id,
-        b["state"].as_str().unwrap_or("?"),
-        b["progress"]["done"],
-        b["progress"]["total"],
-        b["method"].as_str().unwrap_or("?"),
+        b.state.as_str(),
+        view.progress.done,
+        view.progress.total,
+        b.method,
         states
             .iter()
             .map(|(s, n)| format!("{n} {s}"))
             .collect::<Vec<_>>()
             .join(", "),
-        b["key"].as_str().unwrap_or("?"),
+        b.key,
     );
-    if let Some(a) = b["asset"].as_str() {
+    if let Some(a) = &b.asset {
         println!("asset {a}");
     }
-    if let Some(e) = b["error"].as_str() {
+    if let Some(e) = &b.error {
         println!("error: {e}");
     }
     Ok(())
@@ -380,36 +258,24 @@ pub const NOT_BAKED: u8 = 4;
 
 pub(super) fn fetch(args: &FetchArgs) -> anyhow::Result<()> {
     let api = args.conn.api()?;
-    let bake = match (&args.key, args.id) {
-        (Some(key), _) => match api.get(&format!("/v1/cache/{key}")) {
-            Err(e)
-                if e.downcast_ref::<ApiStatus>()
-                    .is_some_and(|s| s.status == 404) =>
-            {
-                return Err(Exit {
-                    code: NOT_BAKED,
-                    message: format!("no finished bake for key {key}"),
-                }
-                .into());
-            }
-            other => other?,
-        },
-        (None, Some(id)) => api.get(&format!("/v1/bakes/{id}"))?,
+    let view = match (&args.key, args.id) {
+        (Some(key), _) => api.cached(key)?.ok_or_else(|| Exit {
+            code: NOT_BAKED,
+            message: format!("no finished bake for key {key}"),
+        })?,
+        (None, Some(id)) => api.bake(id)?,
         (None, None) => bail!("give a bake id or --key"),
     };
-    let Some(asset) = bake["asset"].as_str() else {
+    let bake = &view.bake;
+    let Some(asset) = &bake.asset else {
         return Err(Exit {
             code: NOT_BAKED,
-            message: format!(
-                "bake {} is {}, not done",
-                bake["id"],
-                bake["state"].as_str().unwrap_or("?")
-            ),
+            message: format!("bake {} is {}, not done", bake.id, bake.state.as_str()),
         }
         .into());
     };
-    let bytes = api.get_bytes(&format!("/v1/assets/{asset}"))?;
-    if aobake_core::digest::sha256_hex(&bytes) != asset {
+    let bytes = api.asset(asset)?;
+    if aobake_core::digest::sha256_hex(&bytes) != *asset {
         bail!("the asset's bytes do not match its digest {asset}");
     }
     std::fs::write(&args.out, &bytes)
@@ -418,7 +284,7 @@ pub(super) fn fetch(args: &FetchArgs) -> anyhow::Result<()> {
         "wrote {} ({} bytes) from bake {}",
         args.out.display(),
         bytes.len(),
-        bake["id"]
+        bake.id
     );
     Ok(())
 }
@@ -447,9 +313,10 @@ enum TokenCommand {
 
 pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
     let TokenCommand::Create { scopes, name, conn } = &args.what;
-    let r = conn
-        .api()?
-        .post("/v1/tokens", &json!({"name": name, "scopes": scopes}))?;
-    println!("{}", r["token"].as_str().context("no token in the answer")?);
+    let created = conn.api()?.create_token(&NewTokenRequest {
+        name: name.clone(),
+        scopes: scopes.clone(),
+    })?;
+    println!("{}", created.token);
     Ok(())
 }

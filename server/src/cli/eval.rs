@@ -1,6 +1,7 @@
 //! `aobake eval`: a baked asset evaluated at a pose, as an engine would at
 //! run time, written as CSV.
 
+use aobake_core::method::Family;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -28,15 +29,14 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
     let container = Container::from_bytes(&bytes)
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
-    if container.method.family() == aobake_core::method::Family::Cubemap {
-        bail!(
+    match container.method.family() {
+        Family::Cubemap => bail!(
             "{} is a {} asset: it holds the occlusion cast into space, not per-vertex AO; `aobake preview` renders it on the ground and `aobake export --exr` writes its faces",
             args.asset.display(),
             container.method
-        );
-    }
-    if container.method.family() == aobake_core::method::Family::Grid {
-        return grid(args, &container);
+        ),
+        Family::Grid => return grid(args, &container),
+        Family::Vertex => {}
     }
     let (model, header) = Model::from_container(&container)
         .with_context(|| format!("cannot read {}", args.asset.display()))?;

@@ -50,15 +50,14 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
     let container = Container::from_bytes(&bytes)
         .with_context(|| format!("cannot read {}", args.asset.display()))?;
-    if container.method.family() == Family::Grid {
-        return grids(args, &container);
-    }
-    if container.method.family() != Family::Cubemap {
-        bail!(
+    match container.method.family() {
+        Family::Grid => return grids(args, &container),
+        Family::Vertex => bail!(
             "{} holds a {} asset: --exr exports cubemap and grid assets (per-vertex AO has no image to export)",
             args.asset.display(),
             container.method
-        );
+        ),
+        Family::Cubemap => {}
     }
     let (model, header) = CubemapModel::from_container(&container)
         .with_context(|| format!("cannot read {}", args.asset.display()))?;

@@ -67,44 +67,52 @@ impl Loaded {
         let container = Container::from_bytes(&bytes)
             .with_context(|| format!("cannot read {}", asset.display()))?;
         let (character, clips) = character_and_clips(file, clips, &Limits::default())?;
-        let (model, params) = if container.method.family() == Family::Grid {
-            let (model, header) = GridModel::from_container(&container)
-                .with_context(|| format!("cannot read {}", asset.display()))?;
-            model
-                .check_palette(character.joints.len())
-                .with_context(|| format!("{} does not fit {}", asset.display(), file.display()))?;
-            let mut params = BakeParams::from_canonical(&header.params)
-                .context("the asset's parameters are unreadable")?;
-            let found = aobake_core::method::grid::parts::parts(&character, params.grid.parts)?;
-            // The truth is traced as the bake's evaluation traced it.
-            let distance = params.grid.distance(&character, &found);
-            params.max_distance = Some(distance);
-            params.samples = params.grid.eval_rays;
-            let owners =
-                aobake_core::method::grid::parts::owner_indices(&found, character.vertex_count());
-            (Baked::Grid(model, owners), params)
-        } else if container.method.family() == Family::Cubemap {
-            let (model, header) = CubemapModel::from_container(&container)
-                .with_context(|| format!("cannot read {}", asset.display()))?;
-            let params = BakeParams::from_canonical(&header.params)
-                .context("the asset's parameters are unreadable")?;
-            (Baked::Cubemap(model), params)
-        } else {
-            let (model, header) = Model::from_container(&container)
-                .with_context(|| format!("cannot read {}", asset.display()))?;
-            // The ground truth is traced as the bake traced its held-out
-            // poses.
-            let params = BakeParams::from_canonical(&header.params)
-                .context("the asset's parameters are unreadable")?;
-            if let Err(e) = model.check_character(&character) {
-                bail!(
-                    "{} does not fit {}: {e} (character {})",
-                    asset.display(),
-                    file.display(),
-                    header.character
+        let (model, params) = match container.method.family() {
+            Family::Grid => {
+                let (model, header) = GridModel::from_container(&container)
+                    .with_context(|| format!("cannot read {}", asset.display()))?;
+                model
+                    .check_palette(character.joints.len())
+                    .with_context(|| {
+                        format!("{} does not fit {}", asset.display(), file.display())
+                    })?;
+                let mut params = BakeParams::from_canonical(&header.params)
+                    .context("the asset's parameters are unreadable")?;
+                let found = aobake_core::method::grid::parts::parts(&character, params.grid.parts)?;
+                // The truth is traced as the bake's evaluation traced it.
+                let distance = params.grid.distance(&character, &found);
+                params.max_distance = Some(distance);
+                params.samples = params.grid.eval_rays;
+                let owners = aobake_core::method::grid::parts::owner_indices(
+                    &found,
+                    character.vertex_count(),
                 );
+                (Baked::Grid(model, owners), params)
             }
-            (Baked::Vertex(Box::new(model)), params)
+            Family::Cubemap => {
+                let (model, header) = CubemapModel::from_container(&container)
+                    .with_context(|| format!("cannot read {}", asset.display()))?;
+                let params = BakeParams::from_canonical(&header.params)
+                    .context("the asset's parameters are unreadable")?;
+                (Baked::Cubemap(model), params)
+            }
+            Family::Vertex => {
+                let (model, header) = Model::from_container(&container)
+                    .with_context(|| format!("cannot read {}", asset.display()))?;
+                // The ground truth is traced as the bake traced its held-out
+                // poses.
+                let params = BakeParams::from_canonical(&header.params)
+                    .context("the asset's parameters are unreadable")?;
+                if let Err(e) = model.check_character(&character) {
+                    bail!(
+                        "{} does not fit {}: {e} (character {})",
+                        asset.display(),
+                        file.display(),
+                        header.character
+                    );
+                }
+                (Baked::Vertex(Box::new(model)), params)
+            }
         };
         Ok(Self {
             model,

@@ -2,6 +2,7 @@
 //! core's job graph), list, inspect with every job, the report, live
 //! events, control, and the cache by bake key that CI reads.
 
+use aobake_api::{BakeRequest, BakeView, PatchBody, PreviewItem, PreviewList, Progress};
 use std::convert::Infallible;
 use std::time::Duration;
 
@@ -19,7 +20,7 @@ use axum::{
     },
     routing::{get, post},
 };
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 use tokio_stream::{Stream, StreamExt as _, wrappers::BroadcastStream};
 
 use super::uploads::load_upload;
@@ -44,46 +45,6 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/bakes/{id}/{action}", post(control))
         .route("/v1/cache/{key}", get(cache))
         .route("/v1/characters/{digest}/bakes", get(versions))
-}
-
-/// `POST /v1/bakes`.
-#[derive(Debug, Deserialize, utoipa::ToSchema)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct BakeRequest {
-    /// The character's upload digest.
-    #[schema(value_type = String, pattern = "^[0-9a-f]{64}$")]
-    character: String,
-    /// Clip upload digests.
-    #[serde(default)]
-    #[schema(value_type = Vec<String>)]
-    clips: Vec<String>,
-    #[schema(schema_with = crate::openapi::method_schema)]
-    method: String,
-    /// Overrides of the method's default parameters (`aobake params
-    /// --method M` lists them), by name; dotted names or nested objects
-    /// for method options.
-    #[serde(default)]
-    #[schema(value_type = Object)]
-    params: serde_json::Map<String, serde_json::Value>,
-    #[serde(default)]
-    priority: i64,
-}
-
-/// Progress of a bake in units of work.
-#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
-pub(crate) struct Progress {
-    done: i64,
-    total: i64,
-}
-
-/// A bake as the API shows it.
-#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
-pub(crate) struct BakeView {
-    #[serde(flatten)]
-    bake: BakeRow,
-    progress: Progress,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    jobs: Option<Vec<JobRow>>,
 }
 
 fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
@@ -256,48 +217,6 @@ pub(crate) async fn show(
     Ok(Json(view(bake, Some(jobs))))
 }
 
-/// One preview image of a bake.
-#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
-pub(crate) struct PreviewItem {
-    /// Output name, such as `still-0.png` or `animation.png`.
-    name: String,
-    /// `still` (truth, model and error side by side) or `animation` (an
-    /// APNG of a whole clip, model beside truth).
-    kind: String,
-    /// The clip shown, if any.
-    clip: Option<String>,
-    /// Clip times shown, in seconds.
-    times: Vec<f32>,
-    /// Image width in pixels.
-    width: u32,
-    /// Image height in pixels.
-    height: u32,
-    /// The adapter that rendered it (name, backend, driver).
-    adapter: String,
-    /// Milliseconds per rendered panel.
-    frame_ms: f64,
-    /// Seconds spent ray tracing its ground truth.
-    trace_s: f64,
-    /// sha256 of the PNG: `GET /v1/previews/{digest}`.
-    #[serde(default)]
-    #[schema(value_type = String, pattern = "^[0-9a-f]{64}$")]
-    digest: String,
-}
-
-/// `GET /v1/bakes/{id}/previews`.
-#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
-pub(crate) struct PreviewList {
-    /// The state of the bake's `preview` job (none for a graph without
-    /// one).
-    state: Option<crate::store::JobState>,
-    /// The images, once the job has completed.
-    previews: Vec<PreviewItem>,
-    /// Why the job completed without images (its worker had no GPU
-    /// adapter, not even a software one).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    unavailable: Option<String>,
-}
-
 #[utoipa::path(get, path = "/v1/bakes/{id}/previews", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["read"])),
     responses((status = 200, description = "The bake's preview images (empty until its preview job has completed)", body = PreviewList), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
@@ -372,11 +291,6 @@ pub(crate) async fn report(
         bytes,
     )
         .into_response())
-}
-
-#[derive(Debug, Deserialize, utoipa::ToSchema)]
-pub(crate) struct PatchBody {
-    priority: i64,
 }
 
 #[utoipa::path(patch, path = "/v1/bakes/{id}", tag = "bakes", params(("id" = i64, Path, description = "Bake id")), request_body = PatchBody,

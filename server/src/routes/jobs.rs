@@ -3,6 +3,10 @@
 //! current lease token (a stale one gets 409), and the blobs workers read
 //! and write.
 
+use aobake_api::{
+    CheckpointRequest, CompleteRequest, FailRequest, HeartbeatReply, HeartbeatRequest,
+    LeaseRequest, TokenRequest,
+};
 use std::time::Duration;
 
 use axum::{
@@ -13,7 +17,6 @@ use axum::{
     response::{IntoResponse, Response},
     routing::{get, post},
 };
-use serde::{Deserialize, Serialize};
 
 use crate::{
     auth::{Need, Worker},
@@ -22,7 +25,7 @@ use crate::{
     openapi::Digest,
     openapi::Refusals,
     state::AppState,
-    store::{CheckpointRef, Completion, Lease},
+    store::Lease,
 };
 
 pub(super) fn router() -> Router<AppState> {
@@ -34,18 +37,6 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/jobs/{id}/fail", post(fail))
         .route("/v1/jobs/{id}/release", post(release))
         .route("/v1/blobs/{digest}", get(get_blob).put(put_blob))
-}
-
-/// `POST /v1/jobs/lease`.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct LeaseRequest {
-    /// The worker's id.
-    #[schema(min_length = 1, max_length = 200)]
-    pub worker: String,
-    /// Seconds to wait for a job before answering 204 (at most 60).
-    #[serde(default)]
-    #[schema(maximum = 60)]
-    pub wait_secs: u64,
 }
 
 #[utoipa::path(post, path = "/v1/jobs/lease", tag = "worker protocol", request_body = LeaseRequest,
@@ -88,23 +79,6 @@ pub(crate) async fn lease(
     }
 }
 
-/// Token and progress.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct HeartbeatRequest {
-    /// The lease token.
-    pub token: String,
-    /// Units done in this attempt.
-    #[serde(default)]
-    pub progress: i64,
-}
-
-/// Whether the worker should stop.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct HeartbeatReply {
-    /// The bake was cancelled: stop and drop the job.
-    pub stop: bool,
-}
-
 #[utoipa::path(post, path = "/v1/jobs/{id}/heartbeat", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = HeartbeatRequest,
     security(("bearer" = ["worker"])),
     responses((status = 200, description = "Lease extended", body = HeartbeatReply), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
@@ -126,16 +100,6 @@ pub(crate) async fn heartbeat(
     Ok(Json(HeartbeatReply { stop: beat.stop }))
 }
 
-/// A checkpoint whose blob is stored.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct CheckpointRequest {
-    /// The lease token.
-    pub token: String,
-    /// Step, cursor and blob.
-    #[serde(flatten)]
-    pub checkpoint: CheckpointRef,
-}
-
 #[utoipa::path(post, path = "/v1/jobs/{id}/checkpoint", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = CheckpointRequest,
     security(("bearer" = ["worker"])),
     responses((status = 204, description = "Saved"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
@@ -151,16 +115,6 @@ pub(crate) async fn checkpoint(
         .checkpoint(id, &req.token, &req.checkpoint)
         .await?;
     Ok(StatusCode::NO_CONTENT)
-}
-
-/// Outputs whose blobs are stored.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct CompleteRequest {
-    /// The lease token.
-    pub token: String,
-    /// Outputs and timings.
-    #[serde(flatten)]
-    pub completion: Completion,
 }
 
 async fn require_blob(state: &AppState, digest: &str) -> ApiResult<()> {
@@ -194,17 +148,6 @@ pub(crate) async fn complete(
     Ok(StatusCode::NO_CONTENT)
 }
 
-/// Why an attempt failed.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct FailRequest {
-    /// The lease token.
-    pub token: String,
-    /// What went wrong.
-    pub error: String,
-    /// Whether another attempt can help.
-    pub retryable: bool,
-}
-
 #[utoipa::path(post, path = "/v1/jobs/{id}/fail", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = FailRequest,
     security(("bearer" = ["worker"])),
     responses((status = 204, description = "Recorded"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
@@ -221,13 +164,6 @@ pub(crate) async fn fail(
         .await?;
     state.announce(&bake);
     Ok(StatusCode::NO_CONTENT)
-}
-
-/// The lease token alone.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct TokenRequest {
-    /// The lease token.
-    pub token: String,
 }
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/release", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = TokenRequest,

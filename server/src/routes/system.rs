@@ -1,5 +1,6 @@
 //! Workers, tokens, health and metrics.
 
+use aobake_api::{NewToken, NewTokenRequest, Whoami};
 use axum::{
     Json, Router,
     extract::State,
@@ -7,7 +8,6 @@ use axum::{
     response::{IntoResponse, Response},
     routing::{get, post},
 };
-use serde::{Deserialize, Serialize};
 
 use crate::{
     auth::{Admin, Need, Read, new_token, token_hash},
@@ -38,15 +38,6 @@ pub(crate) async fn workers(
     Ok(Json(state.store.workers().await?))
 }
 
-/// The caller's token, as `GET /v1/whoami` shows it.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct Whoami {
-    /// The token's name.
-    pub name: String,
-    /// Its scopes (`admin` implies every other).
-    pub scopes: Vec<String>,
-}
-
 #[utoipa::path(get, path = "/v1/whoami", tag = "system",
     security(("bearer" = [])),
     responses((status = 200, description = "The caller's token name and scopes: what a dashboard may offer", body = Whoami), Refusals))]
@@ -55,27 +46,6 @@ pub(crate) async fn whoami(caller: crate::auth::Caller) -> Json<Whoami> {
         name: caller.name,
         scopes: caller.scopes.iter().map(|s| s.name().to_owned()).collect(),
     })
-}
-
-/// `POST /v1/tokens`.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct NewTokenRequest {
-    /// A name to recognise it by.
-    pub name: String,
-    /// Its scopes.
-    #[schema(schema_with = crate::openapi::scopes_schema)]
-    pub scopes: Vec<String>,
-}
-
-/// The new token: shown once, stored hashed.
-#[derive(Debug, Deserialize, Serialize, utoipa::ToSchema)]
-pub(crate) struct NewToken {
-    /// The secret.
-    pub token: String,
-    /// Its name.
-    pub name: String,
-    /// Its scopes.
-    pub scopes: Vec<String>,
 }
 
 #[utoipa::path(post, path = "/v1/tokens", tag = "system", request_body = NewTokenRequest,

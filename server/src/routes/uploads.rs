@@ -5,6 +5,7 @@
 //! names, which are the only places its URIs may point to). The same bytes
 //! give the same digest, so uploading twice is harmless.
 
+use aobake_api::Uploaded;
 use aobake_core::{SideFile, bake::UploadBytes, import_character, import_clips, summary::Summary};
 use axum::{
     Json, Router,
@@ -13,7 +14,7 @@ use axum::{
     http::{StatusCode, header},
     routing::{get, post},
 };
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 
 use crate::{
     auth::{Need, Read, Submit},
@@ -31,15 +32,6 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/characters/{digest}", get(get_upload))
         .route("/v1/clips", post(post_clips))
         .route("/v1/clips/{digest}", get(get_clips))
-}
-
-/// What an upload answers.
-#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
-pub(crate) struct Uploaded {
-    digest: String,
-    /// The `aobake inspect` summary (clips, vertices, joints, warnings).
-    #[schema(value_type = Object)]
-    summary: serde_json::Value,
 }
 
 /// The content type of a `.gltf` and its side files as one body: the

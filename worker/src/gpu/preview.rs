@@ -6,7 +6,8 @@
 //! [`VertexAo`]; a cubemap is looked up on the ground's vertices by
 //! [`CubemapAo`] at the frame's phase.
 
-use aobake_core::bake::{Image, Panel, PreviewModel, RenderFrame, RenderScene, Renderer};
+use aobake_core::bake::{Panel, PreviewModel, RenderFrame, RenderScene, Renderer};
+use aobake_core::image::Image;
 use aobake_shaders::{GridReceiver, PreviewUniforms};
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;

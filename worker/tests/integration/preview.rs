@@ -9,8 +9,9 @@
 
 use aobake_core::{
     Limits, Upload,
-    bake::preview::{Ground, HEAT_MAP, Subject},
-    bake::{BakeParams, Camera, Image, Panel, Plan, RenderFrame, RenderScene, Renderer},
+    bake::preview::{Ground, Subject},
+    bake::{BakeParams, Camera, Panel, Plan, RenderFrame, RenderScene, Renderer},
+    image::{HEAT_MAP, Image},
     import_character,
     method::Method,
     method::vertex::{Model, StaticAverage},
@@ -131,7 +132,7 @@ fn read_png(path: &std::path::Path) -> Image {
 fn check_golden(name: &str, image: &Image) {
     let artifacts = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("previews");
     std::fs::create_dir_all(&artifacts).unwrap();
-    let png = aobake_core::bake::preview::encode_image(image).unwrap();
+    let png = aobake_core::image::encode_image(image).unwrap();
     std::fs::write(artifacts.join(name), &png).unwrap();
     let path = golden_path(name);
     if std::env::var_os("AOBAKE_BLESS").is_some() {

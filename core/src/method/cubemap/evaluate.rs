@@ -481,7 +481,7 @@ pub fn charts_png(
             ("sans-serif", 18),
         ))
         .map_err(e)?;
-        let heat = crate::bake::preview::HEAT_MAP;
+        let heat = crate::image::HEAT_MAP;
         for (row, &(name, (face, texel), err)) in texels.iter().enumerate() {
             let input = input_block(faces, face, texel);
             let y0 = 40 + row as i32 * row_h as i32;

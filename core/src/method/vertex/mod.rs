@@ -337,7 +337,7 @@ pub fn fit(
     on_step: &mut dyn FnMut(FitStep),
 ) -> Result<(Model, FitStats), String> {
     let (joint_angles, _) = spaces;
-    let pose_dependent = matches!(method, Method::VertexLinear | Method::VertexClustered);
+    let pose_dependent = method.fits_poses();
     // The joint angles of every pose: what vertex-linear (and
     // vertex-clustered's linear base) reads, and what scores the rows.
     let q: Vec<Vec<f32>> = if pose_dependent {

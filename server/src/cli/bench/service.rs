@@ -6,6 +6,7 @@
 //! * `api`: latency of `GET /v1/bakes/{id}` (p50, p99) under concurrent
 //!   pollers, and the server process's memory.
 
+use aobake_api::{BakeRequest, Client, Completion, NewTokenRequest, OutputRef};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
@@ -225,27 +226,26 @@ impl Server {
         (field("VmRSS:"), field("VmHWM:"))
     }
 
-    fn api(&self) -> crate::cli::client::Api {
-        crate::cli::client::Api::new(&self.url, &self.token)
+    fn api(&self) -> Client {
+        Client::new(&self.url, &self.token)
     }
 }
 
 /// Submits a real bake of the bundled RiggedSimple with enough poses for
 /// `jobs` sample jobs; returns its id.
-fn big_bake(api: &crate::cli::client::Api, jobs: usize) -> anyhow::Result<i64> {
+fn big_bake(api: &Client, jobs: usize) -> anyhow::Result<i64> {
     static RIGGED: &[u8] =
         include_bytes!("../../../../tests/data/characters/RiggedSimple/RiggedSimple.glb");
-    let c = api.upload(
-        "/v1/characters",
-        &aobake_core::bake::UploadBytes::single(RIGGED.to_vec()),
-        "RiggedSimple.glb",
-    )?;
-    let b = api.post(
-        "/v1/bakes",
-        &json!({"character": c["digest"], "method": "vertex-linear",
-                "params": {"poses": 4 * jobs, "samples": 1, "eval_poses": 0, "seed": rand_seed()}}),
-    )?;
-    b["id"].as_i64().context("no bake id")
+    let c = api.upload_character(RIGGED, false, "RiggedSimple.glb")?;
+    let params = json!({"poses": 4 * jobs, "samples": 1, "eval_poses": 0, "seed": rand_seed()});
+    let b = api.submit(&BakeRequest {
+        character: c.digest,
+        clips: Vec::new(),
+        method: "vertex-linear".to_owned(),
+        params: params.as_object().cloned().unwrap_or_default(),
+        priority: 0,
+    })?;
+    Ok(b.bake.id)
 }
 
 fn rand_seed() -> u64 {
@@ -259,27 +259,31 @@ fn http_queue(args: &QueueArgs, dir: &Path) -> anyhow::Result<f64> {
     let server = Server::start(dir, args.database.as_deref())?;
     let api = server.api();
     let id = big_bake(&api, args.jobs)?;
-    let worker = api.post(
-        "/v1/tokens",
-        &json!({"name": "bench", "scopes": ["worker"]}),
-    )?;
-    let worker_token = worker["token"].as_str().context("token")?.to_owned();
-    let blob = aobake_worker::client::Client::new(&server.url, &worker_token).put_blob(b"x")?;
+    let worker_token = api
+        .create_token(&NewTokenRequest {
+            name: "bench".to_owned(),
+            scopes: vec!["worker".to_owned()],
+        })?
+        .token;
+    let blob = Client::new(&server.url, &worker_token).put_blob(b"x")?;
     let started = Instant::now();
     let counts: Vec<usize> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..args.workers)
             .map(|w| {
                 let (url, token, blob) = (&server.url, &worker_token, &blob);
                 s.spawn(move || {
-                    let client = aobake_worker::client::Client::new(url, token);
+                    let client = Client::new(url, token);
                     let mut n = 0;
-                    let outputs = [aobake_worker::client::OutputRef {
-                        name: "ao-reference".into(),
-                        digest: blob.clone(),
-                    }];
+                    let completion = Completion {
+                        outputs: vec![OutputRef {
+                            name: "ao-reference".into(),
+                            digest: blob.clone(),
+                        }],
+                        timings: json!({}),
+                    };
                     while let Ok(Some(l)) = client.lease(&format!("bench-{w}"), 0) {
                         if client
-                            .complete(l.job.id, &l.token, &outputs, &json!({}))
+                            .complete(l.job.id, &l.token, completion.clone())
                             .is_ok()
                         {
                             n += 1;
@@ -293,9 +297,13 @@ fn http_queue(args: &QueueArgs, dir: &Path) -> anyhow::Result<f64> {
     });
     let secs = started.elapsed().as_secs_f64();
     let total: usize = counts.iter().sum();
-    let bake = api.get(&format!("/v1/bakes/{id}"))?;
-    if bake["jobs_done"].as_i64() != bake["jobs_total"].as_i64() {
-        bail!("the bake did not finish: {bake}");
+    let bake = api.bake(id)?.bake;
+    if bake.jobs_done != bake.jobs_total {
+        bail!(
+            "the bake did not finish: {} of {} jobs done",
+            bake.jobs_done,
+            bake.jobs_total
+        );
     }
     Ok(total as f64 / secs)
 }

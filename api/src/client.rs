@@ -1,0 +1,532 @@
+//! The API as blocking calls (ureq): a worker's threads and the CLI each
+//! wait on one request at a time, so no async runtime is needed.
+
+use std::time::Duration;
+
+use serde::{Serialize, de::DeserializeOwned};
+use sha2::{Digest as _, Sha256};
+
+use crate::types::{
+    Action, BakeRequest, BakeView, CheckpointRef, CheckpointRequest, CompleteRequest, Completion,
+    FailRequest, HeartbeatReply, HeartbeatRequest, Lease, LeaseRequest, NewToken, NewTokenRequest,
+    PatchBody, PreviewList, Problem, TokenRequest, Uploaded, Whoami, WorkerRow,
+};
+
+/// The longest a call waits in all on a server that answers 429 before it
+/// fails with that status.
+const MAX_RATE_WAIT: Duration = Duration::from_secs(300);
+
+/// The content type of a `.gltf` and its side files as one body.
+pub const BUNDLE: &str = "application/vnd.aobake.bundle";
+
+/// A failed call.
+#[derive(Debug, thiserror::Error)]
+pub enum ApiError {
+    /// The server answered with an error status; `problem` is its
+    /// problem+json body (or, from something else on the way, the body as
+    /// its detail).
+    #[error("the server answered {status}: {}", problem.detail)]
+    Status {
+        /// HTTP status.
+        status: u16,
+        /// What the server said.
+        problem: Box<Problem>,
+    },
+    /// The server could not be reached, or the connection broke.
+    #[error("cannot reach {base}: {message}")]
+    Transport {
+        /// The server.
+        base: String,
+        /// What failed.
+        message: String,
+    },
+    /// The answer was not what the API promises.
+    #[error("unexpected answer from {base}: {message}")]
+    Decode {
+        /// The server.
+        base: String,
+        /// What failed.
+        message: String,
+    },
+}
+
+impl ApiError {
+    /// The HTTP status, when the server answered.
+    pub fn status(&self) -> Option<u16> {
+        match self {
+            Self::Status { status, .. } => Some(*status),
+            _ => None,
+        }
+    }
+
+    /// 409 to a worker-protocol call: the lease is gone (expired and
+    /// re-leased, or the bake was cancelled).
+    pub fn is_lease_lost(&self) -> bool {
+        self.status() == Some(409)
+    }
+
+    /// Worth trying again: the server was unreachable or failed (5xx).
+    pub fn is_transient(&self) -> bool {
+        match self {
+            Self::Transport { .. } => true,
+            Self::Status { status, .. } => *status >= 500,
+            Self::Decode { .. } => false,
+        }
+    }
+}
+
+/// Results of calls.
+pub type Result<T, E = ApiError> = std::result::Result<T, E>;
+
+type Response = ureq::http::Response<ureq::Body>;
+
+/// A connection to the server with a bearer token.
+#[derive(Debug, Clone)]
+pub struct Client {
+    base: String,
+    auth: String,
+    agent: ureq::Agent,
+}
+
+impl Client {
+    /// A client of the server at `base` (such as `http://127.0.0.1:8080`)
+    /// whose calls each take at most ten minutes.
+    pub fn new(base: &str, token: &str) -> Self {
+        Self::with_timeout(base, token, Duration::from_secs(600))
+    }
+
+    /// A client whose calls each take at most `timeout`.
+    pub fn with_timeout(base: &str, token: &str, timeout: Duration) -> Self {
+        Self {
+            base: base.trim_end_matches('/').to_owned(),
+            auth: format!("Bearer {token}"),
+            agent: ureq::Agent::config_builder()
+                .timeout_global(Some(timeout))
+                .http_status_as_error(false)
+                .build()
+                .into(),
+        }
+    }
+
+    /// The server's URL.
+    pub fn base(&self) -> &str {
+        &self.base
+    }
+
+    fn url(&self, path: &str) -> String {
+        format!("{}{path}", self.base)
+    }
+
+    fn transport(&self, e: impl std::fmt::Display) -> ApiError {
+        ApiError::Transport {
+            base: self.base.clone(),
+            message: e.to_string(),
+        }
+    }
+
+    fn decode(&self, e: impl std::fmt::Display) -> ApiError {
+        ApiError::Decode {
+            base: self.base.clone(),
+            message: e.to_string(),
+        }
+    }
+
+    /// Sends `request` until the server stops answering 429 (over its
+    /// request rate), waiting what each answer's `Retry-After` asks (1 to
+    /// 30 s) and at most [`MAX_RATE_WAIT`] in all, then checks the status.
+    /// A busy server slows a caller down; it does not fail it.
+    fn send(
+        &self,
+        request: impl Fn() -> std::result::Result<Response, ureq::Error>,
+    ) -> Result<Response> {
+        let mut waited = Duration::ZERO;
+        loop {
+            let res = request().map_err(|e| self.transport(e))?;
+            if res.status().as_u16() != 429 || waited >= MAX_RATE_WAIT {
+                return self.check(res);
+            }
+            let wait = Duration::from_secs(
+                res.headers()
+                    .get("retry-after")
+                    .and_then(|v| v.to_str().ok())
+                    .and_then(|v| v.trim().parse::<u64>().ok())
+                    .unwrap_or(1)
+                    .clamp(1, 30),
+            );
+            std::thread::sleep(wait);
+            waited += wait;
+        }
+    }
+
+    /// The answer when its status is a success, else its problem.
+    fn check(&self, mut res: Response) -> Result<Response> {
+        let status = res.status().as_u16();
+        if status < 400 {
+            return Ok(res);
+        }
+        let body = res.body_mut().read_to_string().unwrap_or_default();
+        let problem = serde_json::from_str::<Problem>(&body).unwrap_or_else(|_| Problem {
+            kind: "about:blank".to_owned(),
+            title: res
+                .status()
+                .canonical_reason()
+                .unwrap_or_default()
+                .to_owned(),
+            status,
+            detail: body,
+            code: String::new(),
+        });
+        Err(ApiError::Status {
+            status,
+            problem: Box::new(problem),
+        })
+    }
+
+    fn read_json<R: DeserializeOwned>(&self, mut res: Response) -> Result<R> {
+        res.body_mut()
+            .with_config()
+            .limit(1 << 30)
+            .read_json()
+            .map_err(|e| self.decode(e))
+    }
+
+    fn get<R: DeserializeOwned>(&self, path: &str) -> Result<R> {
+        let res = self.send(|| {
+            self.agent
+                .get(self.url(path))
+                .header("authorization", &self.auth)
+                .call()
+        })?;
+        self.read_json(res)
+    }
+
+    /// Posts `body`; `None` when the server answers 204.
+    fn post<T: Serialize, R: DeserializeOwned>(&self, path: &str, body: &T) -> Result<Option<R>> {
+        let res = self.send(|| {
+            self.agent
+                .post(self.url(path))
+                .header("authorization", &self.auth)
+                .send_json(body)
+        })?;
+        if res.status().as_u16() == 204 {
+            return Ok(None);
+        }
+        self.read_json(res).map(Some)
+    }
+
+    /// Posts `body` and reads the answer that the operation always has.
+    fn post_for<T: Serialize, R: DeserializeOwned>(&self, path: &str, body: &T) -> Result<R> {
+        self.post(path, body)?
+            .ok_or_else(|| self.decode(format!("{path} answered 204, with no body")))
+    }
+
+    /// Posts `body` to an operation that answers 204.
+    fn post_empty<T: Serialize>(&self, path: &str, body: &T) -> Result<()> {
+        self.post::<_, serde::de::IgnoredAny>(path, body)?;
+        Ok(())
+    }
+
+    /// The bytes at `path`, whatever their size.
+    pub fn get_bytes(&self, path: &str) -> Result<Vec<u8>> {
+        let mut res = self.send(|| {
+            self.agent
+                .get(self.url(path))
+                .header("authorization", &self.auth)
+                .call()
+        })?;
+        res.body_mut()
+            .with_config()
+            .limit(u64::MAX)
+            .read_to_vec()
+            .map_err(|e| self.transport(e))
+    }
+
+    fn upload(&self, path: &str, bytes: &[u8], bundle: bool, name: &str) -> Result<Uploaded> {
+        let content_type = if bundle { BUNDLE } else { "model/gltf-binary" };
+        let res = self.send(|| {
+            self.agent
+                .post(self.url(path))
+                .query("name", name)
+                .header("authorization", &self.auth)
+                .header("content-type", content_type)
+                .send(bytes)
+        })?;
+        self.read_json(res)
+    }
+
+    /// `POST /v1/characters`: a `.glb` (or a bundle of a `.gltf` and its
+    /// side files) under the file name `name`.
+    pub fn upload_character(&self, bytes: &[u8], bundle: bool, name: &str) -> Result<Uploaded> {
+        self.upload("/v1/characters", bytes, bundle, name)
+    }
+
+    /// `POST /v1/clips` for the character with digest `character`.
+    pub fn upload_clips(
+        &self,
+        character: &str,
+        bytes: &[u8],
+        bundle: bool,
+        name: &str,
+    ) -> Result<Uploaded> {
+        self.upload(
+            &format!("/v1/clips?character={character}"),
+            bytes,
+            bundle,
+            name,
+        )
+    }
+
+    /// `POST /v1/bakes`.
+    pub fn submit(&self, request: &BakeRequest) -> Result<BakeView> {
+        self.post_for("/v1/bakes", request)
+    }
+
+    /// `GET /v1/bakes/{id}`, with its jobs.
+    pub fn bake(&self, id: i64) -> Result<BakeView> {
+        self.get(&format!("/v1/bakes/{id}"))
+    }
+
+    /// `GET /v1/cache/{key}`: the finished bake with this key, `None` when
+    /// there is none.
+    pub fn cached(&self, key: &str) -> Result<Option<BakeView>> {
+        match self.get(&format!("/v1/cache/{key}")) {
+            Err(e) if e.status() == Some(404) => Ok(None),
+            other => other.map(Some),
+        }
+    }
+
+    /// `GET /v1/bakes/{id}/report`, as JSON bytes (core's `BakeReport`).
+    pub fn report(&self, id: i64) -> Result<Vec<u8>> {
+        self.get_bytes(&format!("/v1/bakes/{id}/report"))
+    }
+
+    /// `GET /v1/bakes/{id}/previews`.
+    pub fn previews(&self, id: i64) -> Result<PreviewList> {
+        self.get(&format!("/v1/bakes/{id}/previews"))
+    }
+
+    /// `GET /v1/assets/{digest}`: the published bytes.
+    pub fn asset(&self, digest: &str) -> Result<Vec<u8>> {
+        self.get_bytes(&format!("/v1/assets/{digest}"))
+    }
+
+    /// `GET /v1/previews/{digest}`: a preview PNG.
+    pub fn preview(&self, digest: &str) -> Result<Vec<u8>> {
+        self.get_bytes(&format!("/v1/previews/{digest}"))
+    }
+
+    /// `POST /v1/bakes/{id}/{action}`.
+    pub fn control(&self, id: i64, action: Action) -> Result<BakeView> {
+        self.post_for(
+            &format!("/v1/bakes/{id}/{}", action.as_str()),
+            &serde_json::Value::Null,
+        )
+    }
+
+    /// `PATCH /v1/bakes/{id}`: sets the priority.
+    pub fn set_priority(&self, id: i64, priority: i64) -> Result<BakeView> {
+        let res = self.send(|| {
+            self.agent
+                .patch(self.url(&format!("/v1/bakes/{id}")))
+                .header("authorization", &self.auth)
+                .send_json(PatchBody { priority })
+        })?;
+        self.read_json(res)
+    }
+
+    /// `GET /v1/whoami`.
+    pub fn whoami(&self) -> Result<Whoami> {
+        self.get("/v1/whoami")
+    }
+
+    /// `GET /v1/workers`.
+    pub fn workers(&self) -> Result<Vec<WorkerRow>> {
+        self.get("/v1/workers")
+    }
+
+    /// `POST /v1/tokens` (admin).
+    pub fn create_token(&self, request: &NewTokenRequest) -> Result<NewToken> {
+        self.post_for("/v1/tokens", request)
+    }
+
+    /// Waits up to `wait_secs` for a job.
+    pub fn lease(&self, worker: &str, wait_secs: u64) -> Result<Option<Lease>> {
+        self.post(
+            "/v1/jobs/lease",
+            &LeaseRequest {
+                worker: worker.to_owned(),
+                wait_secs,
+            },
+        )
+    }
+
+    /// Extends the lease; `true` asks the job to stop.
+    pub fn heartbeat(&self, job: i64, token: &str, progress: u64) -> Result<bool> {
+        let reply: HeartbeatReply = self.post_for(
+            &format!("/v1/jobs/{job}/heartbeat"),
+            &HeartbeatRequest {
+                token: token.to_owned(),
+                progress: i64::try_from(progress).unwrap_or(i64::MAX),
+            },
+        )?;
+        Ok(reply.stop)
+    }
+
+    /// Records a checkpoint whose blob is stored.
+    pub fn checkpoint(&self, job: i64, token: &str, checkpoint: &CheckpointRef) -> Result<()> {
+        self.post_empty(
+            &format!("/v1/jobs/{job}/checkpoint"),
+            &CheckpointRequest {
+                token: token.to_owned(),
+                checkpoint: checkpoint.clone(),
+            },
+        )
+    }
+
+    /// Completes the job.
+    pub fn complete(&self, job: i64, token: &str, completion: Completion) -> Result<()> {
+        self.post_empty(
+            &format!("/v1/jobs/{job}/complete"),
+            &CompleteRequest {
+                token: token.to_owned(),
+                completion,
+            },
+        )
+    }
+
+    /// Fails this attempt.
+    pub fn fail(&self, job: i64, token: &str, error: &str, retryable: bool) -> Result<()> {
+        self.post_empty(
+            &format!("/v1/jobs/{job}/fail"),
+            &FailRequest {
+                token: token.to_owned(),
+                error: error.to_owned(),
+                retryable,
+            },
+        )
+    }
+
+    /// Gives the lease back without using up an attempt.
+    pub fn release(&self, job: i64, token: &str) -> Result<()> {
+        self.post_empty(
+            &format!("/v1/jobs/{job}/release"),
+            &TokenRequest {
+                token: token.to_owned(),
+            },
+        )
+    }
+
+    /// A blob's bytes.
+    pub fn get_blob(&self, digest: &str) -> Result<Vec<u8>> {
+        self.get_bytes(&format!("/v1/blobs/{digest}"))
+    }
+
+    /// Stores a blob; returns its digest (sha256, lower-case hex).
+    pub fn put_blob(&self, bytes: &[u8]) -> Result<String> {
+        let digest: String = Sha256::digest(bytes)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        self.send(|| {
+            self.agent
+                .put(self.url(&format!("/v1/blobs/{digest}")))
+                .header("authorization", &self.auth)
+                .send(bytes)
+        })?;
+        Ok(digest)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::{BufRead as _, BufReader, Write as _};
+
+    use super::*;
+
+    /// A server on a free port that answers its connections, one request
+    /// each, with `answers` in turn; returns its address.
+    fn serve(answers: Vec<&'static str>) -> String {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = listener.local_addr().unwrap();
+        std::thread::spawn(move || {
+            for answer in answers {
+                let (mut stream, _) = listener.accept().unwrap();
+                let mut reader = BufReader::new(stream.try_clone().unwrap());
+                let mut line = String::new();
+                while reader.read_line(&mut line).unwrap() > 0 && line != "\r\n" {
+                    line.clear();
+                }
+                stream.write_all(answer.as_bytes()).unwrap();
+            }
+        });
+        format!("http://{addr}")
+    }
+
+    #[test]
+    fn a_rate_limited_call_waits_and_is_sent_again() {
+        let base = serve(vec![
+            "HTTP/1.1 429 Too Many Requests\r\nRetry-After: 1\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+            "HTTP/1.1 200 OK\r\nContent-Length: 3\r\nConnection: close\r\n\r\nabc",
+        ]);
+        let started = std::time::Instant::now();
+        let bytes = Client::new(&base, "t").get_blob("d").unwrap();
+        assert_eq!(bytes, b"abc");
+        assert!(started.elapsed() >= Duration::from_secs(1), "it waited");
+        // Other failures are not retried.
+        let base = serve(vec![
+            "HTTP/1.1 503 Service Unavailable\r\nContent-Length: 4\r\nConnection: close\r\n\r\ndown",
+        ]);
+        match Client::new(&base, "t").get_blob("d") {
+            Err(e @ ApiError::Status { status: 503, .. }) => {
+                assert!(e.is_transient());
+                let ApiError::Status { problem, .. } = e else {
+                    unreachable!()
+                };
+                assert_eq!(problem.detail, "down");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// An HTTP/1.1 answer with a JSON body.
+    fn answer(status: &str, body: &str) -> &'static str {
+        Box::leak(
+            format!(
+                "HTTP/1.1 {status}\r\nContent-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+                body.len()
+            )
+            .into_boxed_str(),
+        )
+    }
+
+    #[test]
+    fn an_error_status_carries_the_servers_problem() {
+        let base = serve(vec![answer(
+            "409 Conflict",
+            r#"{"type":"about:blank","title":"Conflict","status":409,"detail":"job 3 is not leased with this token","code":"lease_lost"}"#,
+        )]);
+        let err = Client::new(&base, "t").release(3, "x").unwrap_err();
+        assert!(err.is_lease_lost(), "{err:?}");
+        assert!(!err.is_transient());
+        let ApiError::Status { problem, .. } = &err else {
+            panic!("{err:?}")
+        };
+        assert_eq!(problem.code, "lease_lost");
+        assert_eq!(
+            err.to_string(),
+            "the server answered 409: job 3 is not leased with this token"
+        );
+    }
+
+    #[test]
+    fn a_typed_answer_is_decoded_and_a_wrong_one_is_an_error() {
+        let base = serve(vec![
+            answer("200 OK", r#"{"name":"ci","scopes":["read","submit"]}"#),
+            answer("200 OK", "[]"),
+        ]);
+        let client = Client::new(&base, "t");
+        let me = client.whoami().unwrap();
+        assert_eq!((me.name.as_str(), me.scopes.len()), ("ci", 2));
+        assert!(matches!(client.whoami(), Err(ApiError::Decode { .. })));
+    }
+}

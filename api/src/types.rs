@@ -1,0 +1,581 @@
+//! The HTTP API's wire types: what the server answers and what its
+//! clients send, as one set of serde types that the server, the worker and
+//! the CLI share. With the `schema` feature each derives its OpenAPI
+//! schema (utoipa), from which `api-spec/openapi.yaml` is generated.
+
+use serde::{Deserialize, Serialize};
+
+/// A stored upload.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct UploadRow {
+    /// sha256 of the upload (its blob's digest).
+    pub digest: String,
+    /// `character` or `clips`.
+    pub kind: String,
+    /// Whether the blob is a bundle of a `.gltf` and its side files.
+    pub bundle: bool,
+    /// Blob size.
+    pub bytes: i64,
+    /// The `inspect` summary.
+    #[cfg_attr(feature = "schema", schema(value_type = Object))]
+    pub summary: serde_json::Value,
+}
+
+/// A bake's state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+#[serde(rename_all = "lowercase")]
+pub enum BakeState {
+    /// Jobs wait for workers.
+    Queued,
+    /// A job has started.
+    Running,
+    /// No new jobs are leased; running ones finish.
+    Paused,
+    /// The asset is published.
+    Done,
+    /// A job died.
+    Failed,
+    /// Cancelled by a user.
+    Cancelled,
+}
+
+/// A job's state (River's names, with `dead` for discarded).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+#[serde(rename_all = "lowercase")]
+pub enum JobState {
+    /// Waiting for its dependencies.
+    Blocked,
+    /// Ready to lease.
+    Available,
+    /// Leased by a worker.
+    Running,
+    /// Failed or lost its lease; leasable again after `run_at`.
+    Retryable,
+    /// Finished; its outputs are final.
+    Completed,
+    /// Its bake was cancelled.
+    Cancelled,
+    /// Out of attempts.
+    Dead,
+}
+
+/// A bake as stored.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct BakeRow {
+    /// Its id.
+    pub id: i64,
+    /// The bake key.
+    pub key: String,
+    /// Character digest.
+    pub character: String,
+    /// Clip digests.
+    pub clips: Vec<String>,
+    /// Method name.
+    pub method: String,
+    /// Fully defaulted parameters.
+    #[cfg_attr(feature = "schema", schema(value_type = Object))]
+    pub params: serde_json::Value,
+    /// State.
+    pub state: BakeState,
+    /// Higher runs first.
+    pub priority: i64,
+    /// Units of work in all.
+    pub total_work: i64,
+    /// Units of work of completed jobs.
+    pub done_work: i64,
+    /// Jobs in all.
+    pub jobs_total: i64,
+    /// Jobs completed.
+    pub jobs_done: i64,
+    /// Asset digest, once done.
+    pub asset: Option<String>,
+    /// Report digest, once done.
+    pub report: Option<String>,
+    /// Plot digest, once done.
+    pub plot: Option<String>,
+    /// Why it failed.
+    pub error: Option<String>,
+    /// Milliseconds since the epoch.
+    pub created_at: i64,
+    /// Milliseconds since the epoch.
+    pub updated_at: i64,
+    /// Milliseconds since the epoch.
+    pub finished_at: Option<i64>,
+}
+
+/// A job as stored.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct JobRow {
+    /// Its id.
+    pub id: i64,
+    /// Its bake.
+    pub bake_id: i64,
+    /// Index in the bake's graph.
+    pub index: i64,
+    /// `sample`, `fit`, …
+    pub kind: String,
+    /// The job spec (core's `JobSpec`).
+    #[cfg_attr(feature = "schema", schema(value_type = Object))]
+    pub spec: serde_json::Value,
+    /// Units of work.
+    pub work: i64,
+    /// State.
+    pub state: JobState,
+    /// Leases so far.
+    pub attempts: i64,
+    /// Leases allowed.
+    pub max_attempts: i64,
+    /// The worker holding or last holding it.
+    pub worker: Option<String>,
+    /// Units done in the current attempt.
+    pub progress: i64,
+    /// Last checkpoint: step, cursor and blob.
+    pub checkpoint: Option<CheckpointRef>,
+    /// Outputs, once completed.
+    pub outputs: Option<Vec<OutputRef>>,
+    /// The last error.
+    pub error: Option<String>,
+    /// Indices of the jobs it needs.
+    pub deps: Vec<i64>,
+}
+
+/// A checkpoint saved as a blob.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct CheckpointRef {
+    /// Named step.
+    pub step: String,
+    /// Cursor within it.
+    pub cursor: i64,
+    /// Blob digest of its data.
+    pub blob: String,
+}
+
+/// A named output blob of a job.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct OutputRef {
+    /// Output name.
+    pub name: String,
+    /// Blob digest.
+    pub digest: String,
+}
+
+/// A leased job and what the worker needs to run it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct Lease {
+    /// The job.
+    pub job: JobRow,
+    /// The token `heartbeat`, `checkpoint` and `complete` must present.
+    pub token: String,
+    /// When the lease expires unless extended (ms since the epoch).
+    pub expires_at: i64,
+    /// The bake it belongs to.
+    pub bake: BakeRow,
+    /// Outputs of its dependencies, one entry per dependency.
+    pub inputs: Vec<Completion>,
+    /// The bake's uploads: whether each is a bundle (character first).
+    pub uploads: Vec<UploadRef>,
+}
+
+/// An upload a job reads.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct UploadRef {
+    /// Blob digest.
+    pub digest: String,
+    /// Whether the blob is a bundle.
+    pub bundle: bool,
+}
+
+/// What a completing worker hands in.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct Completion {
+    /// Output blobs, already stored.
+    pub outputs: Vec<OutputRef>,
+    /// Stage seconds, for the report.
+    #[cfg_attr(feature = "schema", schema(value_type = Object))]
+    pub timings: serde_json::Value,
+}
+
+/// Changes to a bake's course.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+#[serde(rename_all = "lowercase")]
+pub enum Action {
+    /// Stop it for good.
+    Cancel,
+    /// Lease no more of its jobs.
+    Pause,
+    /// Lease them again.
+    Resume,
+    /// Re-queue its dead and cancelled jobs with fresh attempts.
+    Retry,
+}
+
+/// A worker as last seen.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct WorkerRow {
+    /// Its id.
+    pub id: String,
+    /// `idle`, `busy` or `stopped`.
+    pub state: String,
+    /// The job it runs.
+    pub job_id: Option<i64>,
+    /// Last contact (ms since the epoch).
+    pub last_seen: i64,
+    /// First contact.
+    pub started_at: i64,
+}
+
+/// What an upload answers.
+#[derive(Debug, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct Uploaded {
+    pub digest: String,
+    /// The `aobake inspect` summary (clips, vertices, joints, warnings).
+    #[cfg_attr(feature = "schema", schema(value_type = Object))]
+    pub summary: serde_json::Value,
+}
+
+/// `POST /v1/bakes`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct BakeRequest {
+    /// The character's upload digest.
+    #[cfg_attr(feature = "schema", schema(value_type = String, pattern = "^[0-9a-f]{64}$"))]
+    pub character: String,
+    /// Clip upload digests.
+    #[serde(default)]
+    #[cfg_attr(feature = "schema", schema(value_type = Vec<String>))]
+    pub clips: Vec<String>,
+    #[cfg_attr(feature = "schema", schema(schema_with = crate::schema::method))]
+    pub method: String,
+    /// Overrides of the method's default parameters (`aobake params
+    /// --method M` lists them), by name; dotted names or nested objects
+    /// for method options.
+    #[serde(default)]
+    #[cfg_attr(feature = "schema", schema(value_type = Object))]
+    pub params: serde_json::Map<String, serde_json::Value>,
+    #[serde(default)]
+    pub priority: i64,
+}
+
+/// Progress of a bake in units of work.
+#[derive(Debug, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct Progress {
+    pub done: i64,
+    pub total: i64,
+}
+
+/// A bake as the API shows it.
+#[derive(Debug, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct BakeView {
+    #[serde(flatten)]
+    pub bake: BakeRow,
+    pub progress: Progress,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub jobs: Option<Vec<JobRow>>,
+}
+
+/// One preview image of a bake.
+#[derive(Debug, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct PreviewItem {
+    /// Output name, such as `still-0.png` or `animation.png`.
+    pub name: String,
+    /// `still` (truth, model and error side by side) or `animation` (an
+    /// APNG of a whole clip, model beside truth).
+    pub kind: String,
+    /// The clip shown, if any.
+    pub clip: Option<String>,
+    /// Clip times shown, in seconds.
+    pub times: Vec<f32>,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// The adapter that rendered it (name, backend, driver).
+    pub adapter: String,
+    /// Milliseconds per rendered panel.
+    pub frame_ms: f64,
+    /// Seconds spent ray tracing its ground truth.
+    pub trace_s: f64,
+    /// sha256 of the PNG: `GET /v1/previews/{digest}`.
+    #[serde(default)]
+    #[cfg_attr(feature = "schema", schema(value_type = String, pattern = "^[0-9a-f]{64}$"))]
+    pub digest: String,
+}
+
+/// `GET /v1/bakes/{id}/previews`.
+#[derive(Debug, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct PreviewList {
+    /// The state of the bake's `preview` job (none for a graph without
+    /// one).
+    pub state: Option<JobState>,
+    /// The images, once the job has completed.
+    pub previews: Vec<PreviewItem>,
+    /// Why the job completed without images (its worker had no GPU
+    /// adapter, not even a software one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unavailable: Option<String>,
+}
+
+// `PATCH /v1/bakes/{id}`: the new priority.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct PatchBody {
+    pub priority: i64,
+}
+
+/// `POST /v1/jobs/lease`.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct LeaseRequest {
+    /// The worker's id.
+    #[cfg_attr(feature = "schema", schema(min_length = 1, max_length = 200))]
+    pub worker: String,
+    /// Seconds to wait for a job before answering 204 (at most 60).
+    #[serde(default)]
+    #[cfg_attr(feature = "schema", schema(maximum = 60))]
+    pub wait_secs: u64,
+}
+
+/// Token and progress.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct HeartbeatRequest {
+    /// The lease token.
+    pub token: String,
+    /// Units done in this attempt.
+    #[serde(default)]
+    pub progress: i64,
+}
+
+/// Whether the worker should stop.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct HeartbeatReply {
+    /// The bake was cancelled: stop and drop the job.
+    pub stop: bool,
+}
+
+/// A checkpoint whose blob is stored.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct CheckpointRequest {
+    /// The lease token.
+    pub token: String,
+    /// Step, cursor and blob.
+    #[serde(flatten)]
+    pub checkpoint: CheckpointRef,
+}
+
+/// Outputs whose blobs are stored.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct CompleteRequest {
+    /// The lease token.
+    pub token: String,
+    /// Outputs and timings.
+    #[serde(flatten)]
+    pub completion: Completion,
+}
+
+/// Why an attempt failed.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct FailRequest {
+    /// The lease token.
+    pub token: String,
+    /// What went wrong.
+    pub error: String,
+    /// Whether another attempt can help.
+    pub retryable: bool,
+}
+
+/// The lease token alone.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct TokenRequest {
+    /// The lease token.
+    pub token: String,
+}
+
+/// The caller's token, as `GET /v1/whoami` shows it.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct Whoami {
+    /// The token's name.
+    pub name: String,
+    /// Its scopes (`admin` implies every other).
+    pub scopes: Vec<String>,
+}
+
+/// `POST /v1/tokens`.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct NewTokenRequest {
+    /// A name to recognise it by.
+    pub name: String,
+    /// Its scopes.
+    #[cfg_attr(feature = "schema", schema(schema_with = crate::schema::scopes))]
+    pub scopes: Vec<String>,
+}
+
+/// The new token: shown once, stored hashed.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct NewToken {
+    /// The secret.
+    pub token: String,
+    /// Its name.
+    pub name: String,
+    /// Its scopes.
+    pub scopes: Vec<String>,
+}
+
+/// The problem+json body.
+#[derive(Debug, Serialize, Deserialize, PartialEq)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct Problem {
+    /// A URI naming the problem type.
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// Short summary.
+    pub title: String,
+    /// HTTP status.
+    pub status: u16,
+    /// What went wrong with this request.
+    pub detail: String,
+    /// Machine-readable code.
+    pub code: String,
+}
+
+impl BakeState {
+    /// Every state.
+    pub const ALL: [Self; 6] = [
+        Self::Queued,
+        Self::Running,
+        Self::Paused,
+        Self::Done,
+        Self::Failed,
+        Self::Cancelled,
+    ];
+
+    /// As stored and sent.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Queued => "queued",
+            Self::Running => "running",
+            Self::Paused => "paused",
+            Self::Done => "done",
+            Self::Failed => "failed",
+            Self::Cancelled => "cancelled",
+        }
+    }
+
+    /// The state spelled `s` (`queued` for anything else).
+    pub fn parse(s: &str) -> Self {
+        Self::ALL
+            .into_iter()
+            .find(|x| x.as_str() == s)
+            .unwrap_or(Self::Queued)
+    }
+
+    /// Whether the bake can still change.
+    pub fn is_active(self) -> bool {
+        matches!(self, Self::Queued | Self::Running | Self::Paused)
+    }
+}
+
+impl JobState {
+    /// Every state, for metrics.
+    pub const ALL: [Self; 7] = [
+        Self::Blocked,
+        Self::Available,
+        Self::Running,
+        Self::Retryable,
+        Self::Completed,
+        Self::Cancelled,
+        Self::Dead,
+    ];
+
+    /// As stored and sent.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Blocked => "blocked",
+            Self::Available => "available",
+            Self::Running => "running",
+            Self::Retryable => "retryable",
+            Self::Completed => "completed",
+            Self::Cancelled => "cancelled",
+            Self::Dead => "dead",
+        }
+    }
+
+    /// The state spelled `s` (`blocked` for anything else).
+    pub fn parse(s: &str) -> Self {
+        Self::ALL
+            .into_iter()
+            .find(|x| x.as_str() == s)
+            .unwrap_or(Self::Blocked)
+    }
+}
+
+impl Action {
+    /// As the path `POST /v1/bakes/{id}/{action}` spells it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Cancel => "cancel",
+            Self::Pause => "pause",
+            Self::Resume => "resume",
+            Self::Retry => "retry",
+        }
+    }
+}
+
+/// A token's scope.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scope {
+    /// See bakes, reports, published assets, previews, workers.
+    Read,
+    /// Upload, read back what was uploaded, and bake.
+    Submit,
+    /// Run jobs.
+    Worker,
+    /// Everything, and tokens.
+    Admin,
+}
+
+impl Scope {
+    /// Every scope.
+    pub const ALL: [Self; 4] = [Self::Read, Self::Submit, Self::Worker, Self::Admin];
+
+    /// As stored and as `--scope` spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Read => "read",
+            Self::Submit => "submit",
+            Self::Worker => "worker",
+            Self::Admin => "admin",
+        }
+    }
+
+    /// The scope named `s`.
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|x| x.name() == s)
+    }
+}

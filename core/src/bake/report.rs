@@ -1,0 +1,104 @@
+//! The report every bake carries (DESIGN §6): a JSON document and a PNG.
+//! Each family's report sits beside its bake file: a per-vertex bake's
+//! [`Report`] (`vertex.rs`) plots PSNR per frame over each test clip for
+//! the model and the static-average baseline, as Kontkanen & Aila plot it
+//! (Fig. 3); a cubemap bake's [`CubemapReport`] (`cubemap.rs`) gives every
+//! encoding's errors in space and on the ground and Kroon's time ×
+//! distance charts; a grid bake's [`GridReport`] (`grid.rs`) each part's
+//! grid and the errors on its clip frames. Here are what they share and
+//! [`BakeReport`], any of them, told apart by the method.
+
+use serde::{Deserialize, Serialize};
+
+use crate::method::{Family, Method};
+
+pub use super::cubemap::{ChartTexel, CubemapReport};
+pub use super::grid::{GridReport, PartReport};
+pub use super::vertex::{NoiseEstimate, Report, psnr_plot_png};
+
+/// Wall-clock seconds of each stage (summed over jobs).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Timings {
+    /// Ray tracing the reference poses (a cubemap: its six faces).
+    pub reference_trace_s: f64,
+    /// Fitting the model and the baseline (a cubemap: encoding it).
+    pub fit_s: f64,
+    /// Ray tracing the held-out poses (a cubemap: the evaluation's ground
+    /// truth).
+    pub test_trace_s: f64,
+    /// Evaluating the model on them.
+    pub evaluate_s: f64,
+    /// The unseen-clip folds' refits and judgements (summed over the
+    /// folds, which run side by side as jobs of their own).
+    #[serde(default)]
+    pub unseen_s: f64,
+}
+
+/// Sizes of the model and the baseline.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Sizes {
+    /// The whole asset file.
+    pub asset_bytes: usize,
+    /// The model's numbers alone (coefficients, maps, cluster data).
+    pub model_bytes: usize,
+    /// The baseline's numbers (one f16 per vertex).
+    pub baseline_bytes: usize,
+}
+
+/// The character a bake ran on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CharacterInfo {
+    /// Upload digest.
+    pub digest: String,
+    /// Vertices.
+    pub vertices: usize,
+    /// Triangles.
+    pub triangles: usize,
+    /// Every clip's name.
+    pub clips: Vec<String>,
+    /// Clips the model was fitted on.
+    pub train_clips: Vec<String>,
+    /// Clips whose frames were held out.
+    pub test_clips: Vec<String>,
+    /// Joint-angle parameters (Kontkanen & Aila).
+    pub joint_angle_parameters: usize,
+    /// Handle coordinates (Kirk & Arikan).
+    pub handle_coordinates: usize,
+}
+
+/// Either kind of report, told apart by its method's family.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum BakeReport {
+    /// A per-vertex bake's.
+    Vertex(Box<Report>),
+    /// A cubemap bake's.
+    Cubemap(Box<CubemapReport>),
+    /// A grid bake's.
+    Grid(Box<GridReport>),
+}
+
+impl<'de> Deserialize<'de> for BakeReport {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error as _;
+        let value = serde_json::Value::deserialize(d)?;
+        let method: Method = serde_json::from_value(value["method"].clone())
+            .map_err(|e| D::Error::custom(format!("report.method: {e}")))?;
+        match method.family() {
+            Family::Vertex => serde_json::from_value(value).map(Self::Vertex),
+            Family::Cubemap => serde_json::from_value(value).map(Self::Cubemap),
+            Family::Grid => serde_json::from_value(value).map(Self::Grid),
+        }
+        .map_err(D::Error::custom)
+    }
+}
+
+impl BakeReport {
+    /// The per-vertex report, if it is one.
+    pub fn vertex(&self) -> Option<&Report> {
+        match self {
+            Self::Vertex(r) => Some(r),
+            Self::Cubemap(_) | Self::Grid(_) => None,
+        }
+    }
+}
