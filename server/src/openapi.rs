@@ -10,58 +10,7 @@ use utoipa::{
 
 use crate::routes::{assets, bakes, jobs, system, uploads};
 
-/// A sha256 digest in lower-case hex: how uploads, blobs, assets and bake
-/// keys are named.
-#[derive(Debug)]
-pub(crate) struct Digest;
-
-impl utoipa::PartialSchema for Digest {
-    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
-        utoipa::openapi::ObjectBuilder::new()
-            .schema_type(utoipa::openapi::schema::Type::String)
-            .pattern(Some("^[0-9a-f]{64}$"))
-            .description(Some("sha256, lower-case hex"))
-            .into()
-    }
-}
-
-impl utoipa::ToSchema for Digest {}
-
-/// What every authenticated operation may answer besides its own
-/// responses: a malformed request, a missing or unknown token, a token
-/// without the scope, too many requests.
-#[derive(Debug, utoipa::IntoResponses)]
-#[expect(dead_code, reason = "a type for the spec; handlers answer ApiError")]
-pub(crate) enum Refusals {
-    /// Bad request.
-    #[response(
-        status = 400,
-        description = "Bad request",
-        content_type = "application/problem+json"
-    )]
-    BadRequest(crate::error::Problem),
-    /// No or unknown token.
-    #[response(
-        status = 401,
-        description = "No or unknown token",
-        content_type = "application/problem+json"
-    )]
-    Unauthorized(crate::error::Problem),
-    /// The token lacks the scope.
-    #[response(
-        status = 403,
-        description = "The token lacks the scope",
-        content_type = "application/problem+json"
-    )]
-    Forbidden(crate::error::Problem),
-    /// Too many requests.
-    #[response(
-        status = 429,
-        description = "Too many requests",
-        content_type = "application/problem+json"
-    )]
-    RateLimited(crate::error::Problem),
-}
+use aobake_api::schema::Digest;
 
 struct BearerAuth;
 

@@ -3,9 +3,7 @@
 //! the in-process runner walks it in order. Jobs are listed so that every
 //! job comes after its dependencies.
 
-use crate::method::Family;
-
-use super::{Bake, JobSpec, PoseSet};
+use super::JobSpec;
 
 /// How a bake is cut into jobs. Cutting never changes the result: `sample`
 /// batches stack byte for byte into the whole.
@@ -85,80 +83,5 @@ impl JobGraph {
             });
         }
         Self { jobs }
-    }
-}
-
-impl Bake<'_> {
-    /// The job graph of this bake; the one place that knows each method
-    /// family's stages.
-    pub fn graph(&self, options: GraphOptions) -> JobGraph {
-        match self.plan.params.method.family() {
-            Family::Vertex => self.vertex_graph(options),
-            Family::Cubemap => self.cubemap_graph(options),
-            Family::Grid => self.grid_graph(options),
-        }
-    }
-
-    /// `sample` (reference) → `fit`; `sample` (reference, held-out) →
-    /// one `unseen` per unseen-clips fold; `fit`, the `unseen` folds and
-    /// `sample` (held-out, noise) → `evaluate`; `fit` and `evaluate` →
-    /// `assemble` → `preview`.
-    fn vertex_graph(&self, options: GraphOptions) -> JobGraph {
-        let batch = options.sample_batch.max(1);
-        let mut jobs: Vec<PlannedJob> = Vec::new();
-        let samples = |set: PoseSet, jobs: &mut Vec<PlannedJob>| -> Vec<usize> {
-            let n = self.poses_in(set);
-            (0..n)
-                .step_by(batch)
-                .map(|first| {
-                    jobs.push(PlannedJob {
-                        spec: JobSpec::Sample {
-                            set,
-                            first,
-                            count: batch.min(n - first),
-                        },
-                        deps: Vec::new(),
-                    });
-                    jobs.len() - 1
-                })
-                .collect()
-        };
-        let reference = samples(PoseSet::Reference, &mut jobs);
-        let held_out = samples(PoseSet::HeldOut, &mut jobs);
-        let noise = samples(PoseSet::Noise, &mut jobs);
-        jobs.push(PlannedJob {
-            spec: JobSpec::Fit,
-            deps: reference.clone(),
-        });
-        let fit = jobs.len() - 1;
-        // The unseen-clips folds refit to the reference AO without one
-        // clip each, beside the fit (they do not need it).
-        let mut deps = vec![fit];
-        for fold in 0..self.plan.fold_clips().len() {
-            jobs.push(PlannedJob {
-                spec: JobSpec::Unseen { fold },
-                deps: reference.iter().chain(&held_out).copied().collect(),
-            });
-            deps.push(jobs.len() - 1);
-        }
-        deps.extend(held_out);
-        deps.extend(noise);
-        jobs.push(PlannedJob {
-            spec: JobSpec::Evaluate,
-            deps,
-        });
-        let evaluate = jobs.len() - 1;
-        jobs.push(PlannedJob {
-            spec: JobSpec::Assemble,
-            deps: vec![fit, evaluate],
-        });
-        if options.previews {
-            let assemble = jobs.len() - 1;
-            jobs.push(PlannedJob {
-                spec: JobSpec::Preview,
-                deps: vec![assemble],
-            });
-        }
-        JobGraph { jobs }
     }
 }

@@ -4,26 +4,42 @@
 //! bytes however often it was interrupted.
 //!
 //! This file is the contract every family shares: the job specs, their
-//! outputs, checkpoints, sinks and errors, and [`Bake`], which runs a job
-//! by handing it to its family's bake file (`vertex.rs`, `cubemap.rs`,
-//! `grid.rs`) in one exhaustive `match`. `preview` is the same for every
-//! family (`preview.rs`).
+//! outputs, checkpoints, sinks and errors, and [`Bake`]. Each family's
+//! bake file (`vertex.rs`, `cubemap.rs`, `grid.rs`) builds on it;
+//! `family.rs`, above them, hands each concern to its family in one
+//! exhaustive `match`.
 //!
 //! Outputs are named blobs; a job finds its inputs by name in its
 //! dependencies' outputs.
 
 use serde::{Deserialize, Serialize};
 
-use crate::method::{Family, vertex::FitStep};
+use crate::method::vertex::FitStep;
 
-use super::{
-    BakeError, BakeInputs, BakeParams, Plan, PoseSet,
-    cubemap::decode_cubemap,
-    grid::decode_grid,
-    preview::{PreviewInfo, PreviewModel, Renderer, STILL_FRACTIONS, Subject, preview_clip},
-    report::Timings,
-    vertex::decode,
-};
+use super::{BakeError, BakeInputs, Plan, report::Timings};
+
+/// Which poses a `sample` job traces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PoseSet {
+    /// The reference poses the model is fitted to.
+    Reference,
+    /// The held-out poses it is judged on (another ray seed).
+    HeldOut,
+    /// A few held-out poses traced again with independent rays, for the
+    /// ground truth's own noise.
+    Noise,
+}
+
+impl PoseSet {
+    pub(super) fn output(self) -> &'static str {
+        match self {
+            Self::Reference => "ao-reference",
+            Self::HeldOut => "ao-held-out",
+            Self::Noise => "ao-noise",
+        }
+    }
+}
 
 /// What one job computes. Serialised into the queue as JSON.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -270,57 +286,7 @@ pub struct Bake<'a> {
     pub plan: Plan<'a>,
 }
 
-impl<'a> Bake<'a> {
-    /// Checks the parameters against the inputs.
-    pub fn new(inputs: &'a BakeInputs, params: BakeParams) -> Result<Self, BakeError> {
-        let bake = Self {
-            inputs,
-            plan: Plan::new(&inputs.character, &inputs.clips, params)?,
-        };
-        let params = &bake.plan.params;
-        match params.method.family() {
-            Family::Vertex => {}
-            Family::Cubemap => {
-                if let Some(name) = &params.cubemap.clip {
-                    super::plan::clip_index(&inputs.clips, name)?;
-                }
-            }
-            Family::Grid => {
-                crate::method::grid::parts::parts(&inputs.character, params.grid.parts)
-                    .map_err(|e| BakeError::Param(e.to_string()))?;
-            }
-        }
-        Ok(bake)
-    }
-
-    /// Ray-point pairs the whole bake traces: what the service bounds per
-    /// request.
-    pub fn work(&self) -> u128 {
-        let p = &self.plan.params;
-        let frames = self.poses_in(PoseSet::HeldOut).saturating_sub(p.eval_poses);
-        let parts = match p.method.family() {
-            Family::Grid => self.grid_parts().map_or(0, |p| p.len()),
-            Family::Vertex | Family::Cubemap => 0,
-        };
-        p.work(self.inputs.character.vertex_count(), frames, parts)
-    }
-
-    /// Runs one job. `deps` are the outputs of the job's dependencies (in
-    /// any order); `resume` is the last checkpoint of an earlier attempt.
-    pub fn run_job(
-        &self,
-        spec: &JobSpec,
-        deps: &[&JobOutput],
-        resume: Option<Checkpoint>,
-        sink: &mut dyn JobSink,
-    ) -> Result<JobOutput, JobError> {
-        match self.plan.params.method.family() {
-            Family::Vertex => self.vertex_job(spec, deps, resume, sink),
-            Family::Cubemap => self.cubemap_job(spec, deps, resume, sink),
-            Family::Grid => self.grid_job(spec, deps, resume, sink),
-        }
-    }
-
+impl Bake<'_> {
     /// Why `spec` is not one of this bake's family's jobs.
     pub(super) fn foreign(&self, spec: &JobSpec) -> JobError {
         match spec {
@@ -333,83 +299,6 @@ impl<'a> Bake<'a> {
                 self.plan.params.method
             )),
         }
-    }
-
-    /// Runs a `preview` job: the stills and the animation of the asset
-    /// that `assemble` produced, on `renderer`, and `previews.json`
-    /// listing them.
-    pub fn preview(
-        &self,
-        deps: &[&JobOutput],
-        renderer: &mut dyn Renderer,
-    ) -> Result<JobOutput, JobError> {
-        let assembled = find(deps, "asset")?;
-        let asset = named(assembled, "asset")?;
-        let clips = &self.inputs.clips;
-        let vertex_model;
-        let cubemap_model;
-        let grid_model;
-        let owners: Vec<u32>;
-        let mut grid_truth = None;
-        let (model, clip) = match self.plan.params.method.family() {
-            Family::Cubemap => {
-                cubemap_model = decode_cubemap(asset)?;
-                // The ground's truth is what the cubemap stores: Eq. 3.1.
-                let kroon = self
-                    .plan
-                    .params
-                    .cubemap_truth(&cubemap_model.layout.spheroid);
-                (
-                    PreviewModel::Cubemap(&cubemap_model, kroon),
-                    Some(&clips[self.cubemap_clip()?]),
-                )
-            }
-            Family::Grid => {
-                grid_model = decode_grid(asset)?;
-                let parts = self.grid_parts()?;
-                owners = crate::method::grid::parts::owner_indices(
-                    &parts,
-                    self.inputs.character.vertex_count(),
-                );
-                // The grids' truth is traced as their evaluation traces it.
-                grid_truth = Some(self.plan.params.grid.truth(
-                    self.grid_distance(&parts),
-                    self.plan.params.held_out_surface().seed,
-                ));
-                (
-                    PreviewModel::Grid(&grid_model, &owners),
-                    preview_clip(clips, &self.plan.test).map(|i| &clips[i]),
-                )
-            }
-            Family::Vertex => {
-                vertex_model = decode(asset)?;
-                (
-                    PreviewModel::Vertex(&vertex_model),
-                    preview_clip(clips, &self.plan.test).map(|i| &clips[i]),
-                )
-            }
-        };
-        let surface = grid_truth.unwrap_or_else(|| self.plan.params.held_out_surface());
-        let subject = Subject {
-            character: &self.inputs.character,
-            model,
-            surface,
-        };
-        let times: Vec<f32> = clip.map_or_else(Vec::new, |c| {
-            STILL_FRACTIONS.iter().map(|f| f * c.duration).collect()
-        });
-        let mut previews = subject.stills(clip, &times, renderer)?;
-        if let Some(c) = clip {
-            previews.push(subject.animation(c, renderer)?);
-        }
-        let mut out = JobOutput::default();
-        let infos: Vec<&PreviewInfo> = previews.iter().map(|p| &p.info).collect();
-        out.push("previews.json", json(&infos));
-        for p in previews {
-            out.push(&p.info.name, p.png);
-        }
-        out.timings = assembled.timings;
-        Ok(out)
     }
 }
 

@@ -9,11 +9,13 @@
 //! 4. [`JobGraph`] ([`graph`]): the bake cut into jobs.
 //! 5. The job functions, each `(spec, dependency outputs, checkpoint?) →
 //!    outputs`: the contract and the one dispatch on the family in
-//!    [`jobs`]; each family's jobs, evaluation and report in its own file:
-//!    [`vertex`] (`sample`, `fit`, `unseen`, `evaluate`, `assemble`),
-//!    [`cubemap`] (`face`, `assemble`, `evaluate`), [`grid`] (`slab`,
-//!    `assemble`, `evaluate`); `preview` ([`preview`]), the same for all,
-//!    also needs a [`Renderer`]. [`report`] holds what the reports share.
+//!    [`jobs`]; each family's graph, jobs, evaluation and report in its
+//!    own file: [`vertex`] (`sample`, `fit`, `unseen`, `evaluate`,
+//!    `assemble`), [`cubemap`] (`face`, `assemble`, `evaluate`), [`grid`]
+//!    (`slab`, `assemble`, `evaluate`); `preview` ([`preview`]), the same
+//!    for all, also needs a [`Renderer`]; [`report`] holds what the
+//!    reports share. [`family`], above them all, is the one place per
+//!    concern that hands a bake to its family.
 //! 6. [`run_graph`] ([`runner`]): the whole graph in this process.
 //!
 //! Everything is seeded from [`BakeParams::seed`]: the same request gives
@@ -22,6 +24,7 @@
 //! interrupted.
 
 pub mod cubemap;
+pub mod family;
 pub mod graph;
 pub mod grid;
 pub mod inputs;
@@ -33,18 +36,19 @@ pub mod report;
 pub mod runner;
 pub mod vertex;
 
+pub use family::BakeReport;
 pub use graph::{GraphOptions, JobGraph, PlannedJob};
 pub use inputs::{BakeInputs, BundleError, InputError, UploadBytes};
-pub use jobs::{Bake, Checkpoint, JobError, JobOutput, JobSink, JobSpec, NoSink, Output, Stop};
+pub use jobs::{
+    Bake, Checkpoint, JobError, JobOutput, JobSink, JobSpec, NoSink, Output, PoseSet, Stop,
+};
 pub use params::{BakeError, BakeParams, ReferenceSource, bake_key};
 pub use plan::{Plan, TestPose};
 pub use preview::{
     Camera, Panel, Preview, PreviewInfo, PreviewModel, RenderFrame, RenderScene, Renderer,
 };
 pub use runner::{Baked, JobEvent, bake_in_process, run_graph};
-pub use vertex::{
-    ClipEvaluation, Comparison, Evaluation, IndexedBlock, PoseSet, UnseenClips, UnseenFold,
-};
+pub use vertex::{ClipEvaluation, Comparison, Evaluation, IndexedBlock, UnseenClips, UnseenFold};
 
 pub use crate::digest::sha256_hex;
 pub use crate::method::vertex::FitStats;

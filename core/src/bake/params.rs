@@ -17,11 +17,9 @@ use crate::{
         vertex::{ClusteredOptions, LinearOptions},
     },
     pose_space::ParamError,
-    trace::{Falloff, SurfaceParams},
+    trace::{Falloff, HELD_OUT_SEED, SurfaceParams},
 };
 
-/// Mixed into the seed of everything held out ("heldout!" in ASCII).
-pub(crate) const HELD_OUT_SEED: u64 = 0x6865_6c64_6f75_7421;
 /// Mixed into the ray seed of the noise estimate ("noise!!!").
 const NOISE_SEED: u64 = 0x6e6f_6973_6521_2121;
 

@@ -13,12 +13,12 @@ use crate::{
     pose_space::ParamError,
     pose_space::{ClipFrame, Handles, JointAngles, LayoutOptions, random_clip_frames},
     rig::pose::Pose,
-    trace::AoBlock,
+    trace::{AoBlock, HELD_OUT_SEED},
 };
 
 use super::{
     BakeError, BakeParams, ReferenceSource,
-    params::{HELD_OUT_SEED, NOISE_POSES, bake_key},
+    params::{NOISE_POSES, bake_key},
 };
 
 /// Mixed into the seed of perturbed reference poses ("perturb!").

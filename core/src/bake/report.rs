@@ -5,16 +5,10 @@
 //! (Fig. 3); a cubemap bake's [`CubemapReport`] (`cubemap.rs`) gives every
 //! encoding's errors in space and on the ground and Kroon's time ×
 //! distance charts; a grid bake's [`GridReport`] (`grid.rs`) each part's
-//! grid and the errors on its clip frames. Here are what they share and
-//! [`BakeReport`], any of them, told apart by the method.
+//! grid and the errors on its clip frames. Here is what they share; any of
+//! them is a [`BakeReport`](super::family::BakeReport).
 
 use serde::{Deserialize, Serialize};
-
-use crate::method::{Family, Method};
-
-pub use super::cubemap::{ChartTexel, CubemapReport};
-pub use super::grid::{GridReport, PartReport};
-pub use super::vertex::{NoiseEstimate, Report, psnr_plot_png};
 
 /// Wall-clock seconds of each stage (summed over jobs).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -64,41 +58,4 @@ pub struct CharacterInfo {
     pub joint_angle_parameters: usize,
     /// Handle coordinates (Kirk & Arikan).
     pub handle_coordinates: usize,
-}
-
-/// Either kind of report, told apart by its method's family.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(untagged)]
-pub enum BakeReport {
-    /// A per-vertex bake's.
-    Vertex(Box<Report>),
-    /// A cubemap bake's.
-    Cubemap(Box<CubemapReport>),
-    /// A grid bake's.
-    Grid(Box<GridReport>),
-}
-
-impl<'de> Deserialize<'de> for BakeReport {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        use serde::de::Error as _;
-        let value = serde_json::Value::deserialize(d)?;
-        let method: Method = serde_json::from_value(value["method"].clone())
-            .map_err(|e| D::Error::custom(format!("report.method: {e}")))?;
-        match method.family() {
-            Family::Vertex => serde_json::from_value(value).map(Self::Vertex),
-            Family::Cubemap => serde_json::from_value(value).map(Self::Cubemap),
-            Family::Grid => serde_json::from_value(value).map(Self::Grid),
-        }
-        .map_err(D::Error::custom)
-    }
-}
-
-impl BakeReport {
-    /// The per-vertex report, if it is one.
-    pub fn vertex(&self) -> Option<&Report> {
-        match self {
-            Self::Vertex(r) => Some(r),
-            Self::Cubemap(_) | Self::Grid(_) => None,
-        }
-    }
 }

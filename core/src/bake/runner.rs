@@ -5,7 +5,7 @@
 
 use std::collections::HashMap;
 
-use super::report::BakeReport;
+use super::family::BakeReport;
 
 use super::{
     Bake, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec, NoSink,

@@ -42,33 +42,11 @@ use crate::{
 };
 
 use super::{
-    Bake, BakeError, BakeParams, Checkpoint, JobError, JobOutput, JobSink, JobSpec, Plan, TestPose,
+    Bake, BakeError, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink,
+    JobSpec, Plan, PlannedJob, PoseSet, TestPose,
     jobs::{find, json, named, parse},
     report::{CharacterInfo, Sizes, Timings},
 };
-
-/// Which poses a `sample` job traces.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum PoseSet {
-    /// The reference poses the model is fitted to.
-    Reference,
-    /// The held-out poses it is judged on (another ray seed).
-    HeldOut,
-    /// A few held-out poses traced again with independent rays, for the
-    /// ground truth's own noise.
-    Noise,
-}
-
-impl PoseSet {
-    pub(super) fn output(self) -> &'static str {
-        match self {
-            Self::Reference => "ao-reference",
-            Self::HeldOut => "ao-held-out",
-            Self::Noise => "ao-noise",
-        }
-    }
-}
 
 /// An [`AoBlock`] with the index of its first pose in its set, as a blob:
 /// `AOBK`, format 1 (u32), first pose (u64), vertices (u32), poses (u32),
@@ -145,6 +123,69 @@ struct EvaluationInfo {
 }
 
 impl Bake<'_> {
+    /// `sample` (reference) → `fit`; `sample` (reference, held-out) →
+    /// one `unseen` per unseen-clips fold; `fit`, the `unseen` folds and
+    /// `sample` (held-out, noise) → `evaluate`; `fit` and `evaluate` →
+    /// `assemble` → `preview`.
+    pub(super) fn vertex_graph(&self, options: GraphOptions) -> JobGraph {
+        let batch = options.sample_batch.max(1);
+        let mut jobs: Vec<PlannedJob> = Vec::new();
+        let samples = |set: PoseSet, jobs: &mut Vec<PlannedJob>| -> Vec<usize> {
+            let n = self.poses_in(set);
+            (0..n)
+                .step_by(batch)
+                .map(|first| {
+                    jobs.push(PlannedJob {
+                        spec: JobSpec::Sample {
+                            set,
+                            first,
+                            count: batch.min(n - first),
+                        },
+                        deps: Vec::new(),
+                    });
+                    jobs.len() - 1
+                })
+                .collect()
+        };
+        let reference = samples(PoseSet::Reference, &mut jobs);
+        let held_out = samples(PoseSet::HeldOut, &mut jobs);
+        let noise = samples(PoseSet::Noise, &mut jobs);
+        jobs.push(PlannedJob {
+            spec: JobSpec::Fit,
+            deps: reference.clone(),
+        });
+        let fit = jobs.len() - 1;
+        // The unseen-clips folds refit to the reference AO without one
+        // clip each, beside the fit (they do not need it).
+        let mut deps = vec![fit];
+        for fold in 0..self.plan.fold_clips().len() {
+            jobs.push(PlannedJob {
+                spec: JobSpec::Unseen { fold },
+                deps: reference.iter().chain(&held_out).copied().collect(),
+            });
+            deps.push(jobs.len() - 1);
+        }
+        deps.extend(held_out);
+        deps.extend(noise);
+        jobs.push(PlannedJob {
+            spec: JobSpec::Evaluate,
+            deps,
+        });
+        let evaluate = jobs.len() - 1;
+        jobs.push(PlannedJob {
+            spec: JobSpec::Assemble,
+            deps: vec![fit, evaluate],
+        });
+        if options.previews {
+            let assemble = jobs.len() - 1;
+            jobs.push(PlannedJob {
+                spec: JobSpec::Preview,
+                deps: vec![assemble],
+            });
+        }
+        JobGraph { jobs }
+    }
+
     /// Poses `range` of a set, seeded: the same request gives the same
     /// poses; only those in the range are built.
     pub fn poses(&self, set: PoseSet, range: Range<usize>) -> Vec<Pose> {

@@ -53,6 +53,10 @@ use scene::Tracer;
 
 use sampling::{Frame, cosine_directions, point_seed, sphere_directions};
 
+/// Mixed into the seed of everything held out ("heldout!" in ASCII), so
+/// that the poses and rays a model is judged on are never those it was
+/// fitted to.
+pub const HELD_OUT_SEED: u64 = 0x6865_6c64_6f75_7421;
 /// Invalid tracing input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TraceError {

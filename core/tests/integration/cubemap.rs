@@ -5,8 +5,8 @@
 
 use aobake_core::{
     asset::Container,
-    bake::report::{BakeReport, CubemapReport},
     bake::{Bake, BakeParams, JobError, JobSpec, NoSink, bake_in_process, cubemap::FaceInfo},
+    bake::{BakeReport, cubemap::CubemapReport},
     method::{
         Method,
         cubemap::{ContinuousLayout, CubemapOptions, model::CubemapModel},

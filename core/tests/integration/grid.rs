@@ -5,8 +5,8 @@
 
 use aobake_core::{
     asset::Container,
-    bake::report::{BakeReport, GridReport},
     bake::{Bake, BakeParams, GraphOptions, JobError, JobSpec, NoSink, bake_in_process},
+    bake::{BakeReport, grid::GridReport},
     method::{
         Method,
         grid::{

@@ -6,7 +6,7 @@ use std::collections::HashMap;
 
 use aobake_core::{
     bake::JobEvent,
-    bake::report::Report,
+    bake::vertex::Report,
     bake::{
         Bake, BakeError, BakeParams, Checkpoint, GraphOptions, JobError, JobOutput, JobSink,
         JobSpec, NoSink, PoseSet, Stop, bake_in_process, run_graph,

@@ -9,10 +9,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, bail};
 use aobake_core::{
     Limits,
-    bake::report::{BakeReport, CubemapReport, GridReport, Report},
     bake::{
         Bake, BakeInputs, Baked, GraphOptions, JobEvent, JobOutput, JobSpec, Renderer, run_graph,
     },
+    bake::{BakeReport, cubemap::CubemapReport, grid::GridReport, vertex::Report},
     method::vertex::Rows,
 };
 

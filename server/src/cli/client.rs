@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use anyhow::{Context as _, bail};
 use aobake_api::{BakeRequest, BakeState, BakeView, Client, JobState, NewTokenRequest};
-use aobake_core::{Limits, bake::report::BakeReport, method::Method};
+use aobake_core::{Limits, bake::BakeReport, method::Method};
 use serde_json::Value;
 
 use super::params::BakeRequestArgs;

@@ -84,3 +84,16 @@ pub(super) fn pose(file: &Path, args: &PoseArgs, limits: &Limits) -> anyhow::Res
         pose,
     })
 }
+
+/// The median of `v` (the mean of the middle two when their number is
+/// even): what the benchmarks quote on noisy shared machines.
+pub(super) fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}

@@ -227,10 +227,6 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             }
         }
     }
-    let median = |v: &mut Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
     println!(
         "{}: {} vertices, {} triangles; clip {} ({} animation frames); medians of {} runs after one warm-up",
         args.file.display(),
@@ -247,8 +243,8 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             "| {} | {}× | {:.1} | {:.1} |",
             adapters[i].label(),
             r.samples(),
-            median(&mut stills[i]),
-            median(&mut frames[i])
+            super::common::median(&stills[i]),
+            super::common::median(&frames[i])
         );
     }
     Ok(())

@@ -4,6 +4,7 @@
 //! as an image. The digest is the strong `ETag`, so `If-None-Match`
 //! answers 304, and a single `Range` answers 206 with those bytes.
 
+use aobake_api::schema::{Digest, Refusals};
 use axum::{
     Router,
     extract::State,
@@ -16,8 +17,6 @@ use crate::{
     auth::{Caller, Need, Read, Scope},
     error::{ApiError, ApiResult, Problem},
     extract::ApiPath,
-    openapi::Digest,
-    openapi::Refusals,
     state::AppState,
 };
 

@@ -2,6 +2,7 @@
 //! core's job graph), list, inspect with every job, the report, live
 //! events, control, and the cache by bake key that CI reads.
 
+use aobake_api::schema::{Digest, Refusals};
 use aobake_api::{BakeRequest, BakeView, PatchBody, PreviewItem, PreviewList, Progress};
 use std::convert::Infallible;
 use std::time::Duration;
@@ -28,8 +29,6 @@ use crate::{
     auth::{Need, Read, Submit},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery, Body},
-    openapi::Digest,
-    openapi::Refusals,
     state::AppState,
     store::{Action, BakeRow, JobRow, NewBake, NewJob},
 };

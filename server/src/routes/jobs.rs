@@ -3,6 +3,7 @@
 //! current lease token (a stale one gets 409), and the blobs workers read
 //! and write.
 
+use aobake_api::schema::{Digest, Refusals};
 use aobake_api::{
     CheckpointRequest, CompleteRequest, FailRequest, HeartbeatReply, HeartbeatRequest,
     LeaseRequest, TokenRequest,
@@ -22,8 +23,6 @@ use crate::{
     auth::{Need, Worker},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, Body},
-    openapi::Digest,
-    openapi::Refusals,
     state::AppState,
     store::Lease,
 };

@@ -1,5 +1,6 @@
 //! Workers, tokens, health and metrics.
 
+use aobake_api::schema::Refusals;
 use aobake_api::{NewToken, NewTokenRequest, Whoami};
 use axum::{
     Json, Router,
@@ -13,7 +14,6 @@ use crate::{
     auth::{Admin, Need, Read, new_token, token_hash},
     error::{ApiError, ApiResult, Problem},
     extract::Body,
-    openapi::Refusals,
     state::AppState,
     store::WorkerRow,
 };

@@ -6,6 +6,7 @@
 //! give the same digest, so uploading twice is harmless.
 
 use aobake_api::Uploaded;
+use aobake_api::schema::{Digest, Refusals};
 use aobake_core::{SideFile, bake::UploadBytes, import_character, import_clips, summary::Summary};
 use axum::{
     Json, Router,
@@ -20,8 +21,6 @@ use crate::{
     auth::{Need, Read, Submit},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery},
-    openapi::Digest,
-    openapi::Refusals,
     state::AppState,
     store::UploadRow,
 };

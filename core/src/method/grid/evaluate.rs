@@ -277,7 +277,7 @@ impl GroundTruth {
             }
         }
         let reach = CONTACT * (hi - lo).length();
-        let held_out = seed ^ crate::bake::params::HELD_OUT_SEED;
+        let held_out = seed ^ crate::trace::HELD_OUT_SEED;
         // The frames are traced side by side (each its own skinning and
         // BVH, the serial part of a small mesh's trace) and gathered in
         // order: the same values on any number of threads. A frame's BVH

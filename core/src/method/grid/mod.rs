@@ -31,26 +31,14 @@ pub mod model;
 pub mod parts;
 pub mod tclip;
 
+pub use parts::PartsMode;
+
 use serde::{Deserialize, Serialize};
 
 use crate::trace::MAX_SAMPLES;
 
 /// The version of the grid bake's algorithm, part of the bake key.
 pub const ALGORITHM_VERSION: u32 = 1;
-
-/// What a part is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum PartsMode {
-    /// Each mesh node moved by the animation (a rigid object is a one-joint
-    /// skin): every vertex must follow one node alone; a skinned vertex is
-    /// refused with a pointer to `joints`.
-    Rigid,
-    /// Each joint's part is the vertices whose largest skin weight is
-    /// that joint's (for skinned characters; the parts then bend a little
-    /// where they meet).
-    Joints,
-}
 
 /// A grid bake's options (DESIGN §5), with the paper's defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

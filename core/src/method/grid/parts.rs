@@ -8,8 +8,21 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use super::PartsMode;
 use crate::Character;
+
+/// What a part is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PartsMode {
+    /// Each mesh node moved by the animation (a rigid object is a one-joint
+    /// skin): every vertex must follow one node alone; a skinned vertex is
+    /// refused with a pointer to `joints`.
+    Rigid,
+    /// Each joint's part is the vertices whose largest skin weight is
+    /// that joint's (for skinned characters; the parts then bend a little
+    /// where they meet).
+    Joints,
+}
 
 /// Most parts a grid bake takes (each costs a grid and its bake).
 pub const MAX_PARTS: usize = 256;

@@ -577,24 +577,7 @@ impl VertexLinear {
         let local = local.as_deref();
         let n = features.count(angles.ranges.len(), rotations);
         let v = ao.vertices;
-        let mean_j: Vec<f64> = (0..n)
-            .map(|k| poses.iter().map(|q| f64::from(q[k])).sum::<f64>() / p as f64)
-            .collect();
-        let inv_std: Vec<f64> = (0..n)
-            .map(|k| {
-                let var = poses
-                    .iter()
-                    .map(|q| (f64::from(q[k]) - mean_j[k]).powi(2))
-                    .sum::<f64>()
-                    / p as f64;
-                // An angle that moved less than this (radians) is constant.
-                if var.sqrt() > 1e-6 {
-                    1.0 / var.sqrt()
-                } else {
-                    0.0
-                }
-            })
-            .collect();
+        let (mean_j, inv_std) = standardise(&poses, n);
         let mean_a = ao.mean();
         let js = Mat::from_fn(p, n, |r, k| {
             (f64::from(poses[r][k]) - mean_j[k]) * inv_std[k]
@@ -689,6 +672,19 @@ impl VertexLinear {
                 ((params, vertices), solver(params).project(y.as_ref()))
             })
             .collect();
+        let shared = Shared {
+            raw,
+            ao,
+            angles,
+            options,
+            js: &js,
+            mean_a: &mean_a,
+            mean_j: &mean_j,
+            inv_std: &inv_std,
+            projection: projection.as_deref(),
+            solve,
+            training_errors,
+        };
         // The models side by side, each on its own thread.
         models
             .par_iter()
@@ -705,99 +701,7 @@ impl VertexLinear {
                         }
                     }
                 }
-                let mut mean_a = mean_a.clone();
-                if let Some(constants) = constants {
-                    for (i, c) in columns.iter().enumerate() {
-                        if c.scope == Scope::Constant {
-                            mean_a[i] = f64::from(constants[i]);
-                        }
-                    }
-                }
-                let largest = (0..m)
-                    .flat_map(|k| (0..v).map(move |i| (k, i)))
-                    .map(|(k, i)| t[(k, i)].abs())
-                    .fold(0.0f64, f64::max);
-                if largest.is_nan() || largest > F16_MAX {
-                    return Err(FitOverflow {
-                        largest,
-                        parameters: m,
-                    });
-                }
-                let mut coefficients = Vec::with_capacity((m + 1) * v);
-                for k in 0..m {
-                    coefficients.extend((0..v).map(|i| f16::from_f64(t[(k, i)])));
-                }
-                coefficients.extend(mean_a.iter().map(|&c| f16::from_f64(c)));
-                let block = Block {
-                    rows: m + 1,
-                    columns: v,
-                    coefficients,
-                    map: None,
-                };
-                let uniform = columns.iter().all(|c| c.scope == Scope::Global);
-                let threshold = match (!uniform, options.threshold > 0.0) {
-                    (_, true) => options.threshold,
-                    // Locality or constant vertices: the coefficients outside a
-                    // vertex's set are zero.
-                    (true, false) => f32::MIN_POSITIVE,
-                    (false, false) => 0.0,
-                };
-                let (stored, kept_fraction) = if threshold > 0.0 {
-                    let sparse = SparseForm::from_dense(&block, v, threshold, &[m]);
-                    let kept = sparse.values.len() as f64 / ((m + 1) * v).max(1) as f64;
-                    (Coefficients::Sparse(sparse), kept)
-                } else {
-                    (
-                        Coefficients::Dense(LinearForm {
-                            vertices: v,
-                            blocks: vec![block],
-                        }),
-                        1.0,
-                    )
-                };
-                let model = Self {
-                    parameters: m,
-                    projection: projection.clone(),
-                    features,
-                    rotations,
-                    mean: mean_j.iter().map(|&x| x as f32).collect(),
-                    inv_std: inv_std.iter().map(|&x| x as f32).collect(),
-                    ranges: angles.ranges.to_vec(),
-                    coefficients: stored,
-                    basis: None,
-                };
-                // The f64 fit's predictions in one product, not a dot product
-                // per pose and vertex. Cross-validation's candidates skip this
-                // (their statistics are not kept).
-                let (mut exact, mut rounded) = (f64::NAN, f64::NAN);
-                if training_errors {
-                    let fitted = &js * &t;
-                    (exact, rounded) = (0.0, 0.0);
-                    for (r, q) in raw.iter().enumerate() {
-                        let predicted = model.evaluate(q);
-                        for (i, (&truth, &pred)) in ao.row(r).iter().zip(&predicted).enumerate() {
-                            let f = mean_a[i] + fitted[(r, i)];
-                            exact += (f - f64::from(truth)).powi(2);
-                            rounded += (f64::from(pred) - f64::from(truth)).powi(2);
-                        }
-                    }
-                }
-                let count = (p * v).max(1) as f64;
-                let stats = LinearFitStats {
-                    solve,
-                    constant_parameters: inv_std.iter().filter(|&&s| s == 0.0).count(),
-                    training_rmse: (exact / count).sqrt(),
-                    stored_training_rmse: (rounded / count).sqrt(),
-                    kept_fraction,
-                    ridge: options.ridge,
-                    ridge_cv: None,
-                    local: columns.iter().any(|c| c.scope == Scope::Local),
-                    per_vertex: None,
-                    basis: None,
-                    basis_cv: None,
-                    reference: None,
-                };
-                Ok((model, stats))
+                shared.finish(columns, &t, constants)
             })
             .collect()
     }
@@ -873,6 +777,160 @@ fn principal_directions(d: faer::MatRef<'_, f64>, k: usize) -> Mat<f64> {
         .count();
     let k = k.min(rank);
     Mat::from_fn(d.ncols(), k, |r, c| svd.V()[(r, c)])
+}
+
+/// What every model of one [`VertexLinear::fit_many`] shares: the
+/// standardised design and what it was built from.
+struct Shared<'a> {
+    /// The reference poses' joint angles, as given.
+    raw: &'a [Vec<f32>],
+    ao: &'a AoBlock,
+    angles: Angles<'a>,
+    options: &'a LinearOptions,
+    /// Standardised (and maybe projected) features: poses × parameters.
+    js: &'a Mat<f64>,
+    /// Mean AO per vertex.
+    mean_a: &'a [f64],
+    /// Mean and inverse standard deviation of each feature.
+    mean_j: &'a [f64],
+    inv_std: &'a [f64],
+    /// Row-major parameters × features, when projected.
+    projection: Option<&'a [f32]>,
+    solve: SolveStats,
+    training_errors: bool,
+}
+
+impl Shared<'_> {
+    /// A model from its coefficients `t` (parameters × vertices): rounded
+    /// to f16 (refused when one overflows), stored sparse when a
+    /// threshold or locality zeroes some, with its statistics.
+    fn finish(
+        &self,
+        columns: &[Column],
+        t: &Mat<f64>,
+        constants: Option<&[f32]>,
+    ) -> Result<(VertexLinear, LinearFitStats), FitOverflow> {
+        let (p, v, m) = (self.raw.len(), self.ao.vertices, t.nrows());
+        let (features, rotations) = (self.options.features, self.angles.rotations);
+        let mut mean_a = self.mean_a.to_vec();
+        if let Some(constants) = constants {
+            for (i, c) in columns.iter().enumerate() {
+                if c.scope == Scope::Constant {
+                    mean_a[i] = f64::from(constants[i]);
+                }
+            }
+        }
+        let largest = (0..m)
+            .flat_map(|k| (0..v).map(move |i| (k, i)))
+            .map(|(k, i)| t[(k, i)].abs())
+            .fold(0.0f64, f64::max);
+        if largest.is_nan() || largest > F16_MAX {
+            return Err(FitOverflow {
+                largest,
+                parameters: m,
+            });
+        }
+        let mut coefficients = Vec::with_capacity((m + 1) * v);
+        for k in 0..m {
+            coefficients.extend((0..v).map(|i| f16::from_f64(t[(k, i)])));
+        }
+        coefficients.extend(mean_a.iter().map(|&c| f16::from_f64(c)));
+        let block = Block {
+            rows: m + 1,
+            columns: v,
+            coefficients,
+            map: None,
+        };
+        let uniform = columns.iter().all(|c| c.scope == Scope::Global);
+        let threshold = match (!uniform, self.options.threshold > 0.0) {
+            (_, true) => self.options.threshold,
+            // Locality or constant vertices: the coefficients outside a
+            // vertex's set are zero.
+            (true, false) => f32::MIN_POSITIVE,
+            (false, false) => 0.0,
+        };
+        let (stored, kept_fraction) = if threshold > 0.0 {
+            let sparse = SparseForm::from_dense(&block, v, threshold, &[m]);
+            let kept = sparse.values.len() as f64 / ((m + 1) * v).max(1) as f64;
+            (Coefficients::Sparse(sparse), kept)
+        } else {
+            (
+                Coefficients::Dense(LinearForm {
+                    vertices: v,
+                    blocks: vec![block],
+                }),
+                1.0,
+            )
+        };
+        let model = VertexLinear {
+            parameters: m,
+            projection: self.projection.map(<[f32]>::to_vec),
+            features,
+            rotations,
+            mean: self.mean_j.iter().map(|&x| x as f32).collect(),
+            inv_std: self.inv_std.iter().map(|&x| x as f32).collect(),
+            ranges: self.angles.ranges.to_vec(),
+            coefficients: stored,
+            basis: None,
+        };
+        // The f64 fit's predictions in one product, not a dot product
+        // per pose and vertex. Cross-validation's candidates skip this
+        // (their statistics are not kept).
+        let (mut exact, mut rounded) = (f64::NAN, f64::NAN);
+        if self.training_errors {
+            let fitted = self.js * t;
+            (exact, rounded) = (0.0, 0.0);
+            for (r, q) in self.raw.iter().enumerate() {
+                let predicted = model.evaluate(q);
+                for (i, (&truth, &pred)) in self.ao.row(r).iter().zip(&predicted).enumerate() {
+                    let f = mean_a[i] + fitted[(r, i)];
+                    exact += (f - f64::from(truth)).powi(2);
+                    rounded += (f64::from(pred) - f64::from(truth)).powi(2);
+                }
+            }
+        }
+        let count = (p * v).max(1) as f64;
+        let stats = LinearFitStats {
+            solve: self.solve,
+            constant_parameters: self.inv_std.iter().filter(|&&s| s == 0.0).count(),
+            training_rmse: (exact / count).sqrt(),
+            stored_training_rmse: (rounded / count).sqrt(),
+            kept_fraction,
+            ridge: self.options.ridge,
+            ridge_cv: None,
+            local: columns.iter().any(|c| c.scope == Scope::Local),
+            per_vertex: None,
+            basis: None,
+            basis_cv: None,
+            reference: None,
+        };
+        Ok((model, stats))
+    }
+}
+
+/// The mean and inverse standard deviation of each of `n` features over
+/// `poses` (0 for a feature that barely moves: it is constant).
+fn standardise(poses: &[Vec<f32>], n: usize) -> (Vec<f64>, Vec<f64>) {
+    let p = poses.len() as f64;
+    let mean: Vec<f64> = (0..n)
+        .map(|k| poses.iter().map(|q| f64::from(q[k])).sum::<f64>() / p)
+        .collect();
+    let inv_std = (0..n)
+        .map(|k| {
+            let var = poses
+                .iter()
+                .map(|q| (f64::from(q[k]) - mean[k]).powi(2))
+                .sum::<f64>()
+                / p;
+            // An angle that moved less than this (radians) is constant.
+            if var.sqrt() > 1e-6 {
+                1.0 / var.sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    (mean, inv_std)
 }
 
 #[cfg(test)]

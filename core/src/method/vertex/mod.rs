@@ -401,9 +401,8 @@ fn fit_rows(
     sources: &[Source],
     on_step: &mut dyn FnMut(FitStep),
 ) -> Result<(Model, FitStats), String> {
-    let skeleton = &character.skeleton;
-    let (linear, clustered) = options;
-    let (joint_angles, handles) = spaces;
+    let (linear, _) = options;
+    let (joint_angles, _) = spaces;
     let (mut model, mut stats) = match method {
         Method::StaticAverage => (
             Model::StaticAverage(StaticAverage::fit(ao)),
@@ -417,126 +416,194 @@ fn fit_rows(
             )
         }
         Method::VertexClustered => {
-            let h: Vec<Vec<f32>> = poses.iter().map(|p| handles.handles(skeleton, p)).collect();
-            // A linear base is fitted first (global and dense, so that its
-            // block can stand in the clustered form); the clusters then
-            // model what it leaves.
-            // The base's joint angles per pose (none without a base).
-            let none = vec![Vec::new(); poses.len()];
-            let q: &[Vec<f32>] = match clustered.base {
-                clustered::Base::Mean => &none,
-                clustered::Base::Linear => q,
-            };
-            let base = match clustered.base {
-                clustered::Base::Mean => None,
-                clustered::Base::Linear => {
-                    let dense = LinearOptions {
-                        locality: Locality::Off,
-                        per_vertex: false,
-                        threshold: 0.0,
-                        basis: 0,
-                        ..*linear
-                    };
-                    Some(fit_linear(character, joint_angles, q, ao, sources, &dense)?)
-                }
-            };
-            let leftover;
-            let ao = match &base {
-                Some((m, _)) => {
-                    let mut values = Vec::with_capacity(ao.values.len());
-                    for (r, angles) in q.iter().enumerate() {
-                        let predicted = m.evaluate(angles);
-                        values.extend(ao.row(r).iter().zip(&predicted).map(|(a, b)| a - b));
-                    }
-                    leftover = AoBlock {
-                        vertices: ao.vertices,
-                        values,
-                    };
-                    &leftover
-                }
-                None => ao,
-            };
-            let fit_on = |o: &ClusteredOptions, train: &[usize]| {
-                let hs: Vec<Vec<f32>> = train.iter().map(|&r| h[r].clone()).collect();
-                VertexClustered::fit(&hs, &ao.select(train.iter().copied()), o, seed)
-                    .ok()
-                    .map(|(m, _)| m)
-            };
-            let predict = |m: &VertexClustered, r: usize| m.evaluate(&h[r]);
-            let choice = clustered
-                .ridge_cv
-                .then(|| {
-                    let each_ridge = |train: &[usize]| {
-                        linear::RIDGE_CANDIDATES
-                            .par_iter()
-                            .map(|&ridge| {
-                                fit_on(
-                                    &ClusteredOptions {
-                                        ridge,
-                                        ..*clustered
-                                    },
-                                    train,
-                                )
-                            })
-                            .collect()
-                    };
-                    cv::choose_by_clips(sources, ao, &linear::RIDGE_CANDIDATES, each_ridge, predict)
-                })
-                .flatten();
-            let mut chosen = ClusteredOptions {
-                ridge: choice.as_ref().map_or(clustered.ridge, |c| c.ridge),
-                ..*clustered
-            };
-            // The clamp only changes how a fitted model runs: one fit per
-            // fold serves every candidate.
-            let clamp = clustered
-                .clamp_cv
-                .then(|| {
-                    let each_clamp = |train: &[usize]| {
-                        let fitted = fit_on(&chosen, train);
-                        clustered::CLAMP_CANDIDATES
-                            .iter()
-                            .map(|&c| {
-                                fitted.clone().map(|m| VertexClustered {
-                                    clamp: c as f32,
-                                    ..m
-                                })
-                            })
-                            .collect()
-                    };
-                    cv::choose_by_clips(
-                        sources,
-                        ao,
-                        &clustered::CLAMP_CANDIDATES,
-                        each_clamp,
-                        predict,
-                    )
-                })
-                .flatten();
-            if let Some(c) = &clamp {
-                chosen.clamp = c.ridge as f32;
-            }
-            let (m, mut stats) =
-                VertexClustered::fit(&h, ao, &chosen, seed).map_err(|e| e.to_string())?;
-            stats.ridge_cv = choice;
-            stats.clamp_cv = clamp;
-            let m = match base {
-                Some((linear_model, linear_stats)) => {
-                    stats.base = Some(linear_stats);
-                    m.with_base(joint_angles.clone(), linear_model)
-                }
-                None => m,
-            };
-            (
-                Model::VertexClustered(handles.clone(), m),
-                FitStats::VertexClustered(Box::new(stats)),
-            )
+            fit_clustered(character, spaces, options, seed, poses, q, ao, sources)?
         }
         Method::CubemapDiscrete | Method::CubemapContinuous | Method::Grid => {
             return Err(format!("{method} is not a per-vertex method"));
         }
     };
     on_step(FitStep::Model);
+    add_basis(
+        method,
+        options,
+        seed,
+        character,
+        spaces,
+        (poses, q, ao, sources),
+        (&mut model, &mut stats),
+    );
+    on_step(FitStep::Basis);
+    on_step(FitStep::Compress);
+    Ok((model, stats))
+}
+
+/// Kirk & Arikan's fit: pose clusters over the handles of the residual a
+/// dense linear base leaves (or of the AO, with a mean base), with the
+/// ridge weight and the clamp chosen by cross-validation over clips when
+/// the options ask.
+#[allow(clippy::too_many_arguments)]
+fn fit_clustered(
+    character: &crate::Character,
+    spaces: (&JointAngles, &Handles),
+    options: (&LinearOptions, &ClusteredOptions),
+    seed: u64,
+    poses: &[Pose],
+    q: &[Vec<f32>],
+    ao: &AoBlock,
+    sources: &[Source],
+) -> Result<(Model, FitStats), String> {
+    let skeleton = &character.skeleton;
+    let (linear, clustered) = options;
+    let (joint_angles, handles) = spaces;
+    let h: Vec<Vec<f32>> = poses.iter().map(|p| handles.handles(skeleton, p)).collect();
+    // A linear base is fitted first (global and dense, so that its
+    // block can stand in the clustered form); the clusters then
+    // model what it leaves.
+    // The base's joint angles per pose (none without a base).
+    let none = vec![Vec::new(); poses.len()];
+    let q: &[Vec<f32>] = match clustered.base {
+        clustered::Base::Mean => &none,
+        clustered::Base::Linear => q,
+    };
+    let base = match clustered.base {
+        clustered::Base::Mean => None,
+        clustered::Base::Linear => {
+            let dense = LinearOptions {
+                locality: Locality::Off,
+                per_vertex: false,
+                threshold: 0.0,
+                basis: 0,
+                ..*linear
+            };
+            Some(fit_linear(character, joint_angles, q, ao, sources, &dense)?)
+        }
+    };
+    let leftover;
+    let ao = match &base {
+        Some((m, _)) => {
+            let mut values = Vec::with_capacity(ao.values.len());
+            for (r, angles) in q.iter().enumerate() {
+                let predicted = m.evaluate(angles);
+                values.extend(ao.row(r).iter().zip(&predicted).map(|(a, b)| a - b));
+            }
+            leftover = AoBlock {
+                vertices: ao.vertices,
+                values,
+            };
+            &leftover
+        }
+        None => ao,
+    };
+    let (chosen, choice, clamp) = choose_clustered(&h, ao, sources, clustered, seed);
+    let (m, mut stats) = VertexClustered::fit(&h, ao, &chosen, seed).map_err(|e| e.to_string())?;
+    stats.ridge_cv = choice;
+    stats.clamp_cv = clamp;
+    let m = match base {
+        Some((linear_model, linear_stats)) => {
+            stats.base = Some(linear_stats);
+            m.with_base(joint_angles.clone(), linear_model)
+        }
+        None => m,
+    };
+    Ok((
+        Model::VertexClustered(handles.clone(), m),
+        FitStats::VertexClustered(Box::new(stats)),
+    ))
+}
+
+/// vertex-clustered's ridge weight and then its clamp, each chosen by
+/// cross-validation over clips when the options ask (else as given):
+/// the options to fit with and the two choices.
+fn choose_clustered(
+    h: &[Vec<f32>],
+    ao: &AoBlock,
+    sources: &[Source],
+    clustered: &ClusteredOptions,
+    seed: u64,
+) -> (
+    ClusteredOptions,
+    Option<cv::RidgeChoice>,
+    Option<cv::RidgeChoice>,
+) {
+    let fit_on = |o: &ClusteredOptions, train: &[usize]| {
+        let hs: Vec<Vec<f32>> = train.iter().map(|&r| h[r].clone()).collect();
+        VertexClustered::fit(&hs, &ao.select(train.iter().copied()), o, seed)
+            .ok()
+            .map(|(m, _)| m)
+    };
+    let predict = |m: &VertexClustered, r: usize| m.evaluate(&h[r]);
+    let choice = clustered
+        .ridge_cv
+        .then(|| {
+            let each_ridge = |train: &[usize]| {
+                linear::RIDGE_CANDIDATES
+                    .par_iter()
+                    .map(|&ridge| {
+                        fit_on(
+                            &ClusteredOptions {
+                                ridge,
+                                ..*clustered
+                            },
+                            train,
+                        )
+                    })
+                    .collect()
+            };
+            cv::choose_by_clips(sources, ao, &linear::RIDGE_CANDIDATES, each_ridge, predict)
+        })
+        .flatten();
+    let mut chosen = ClusteredOptions {
+        ridge: choice.as_ref().map_or(clustered.ridge, |c| c.ridge),
+        ..*clustered
+    };
+    // The clamp only changes how a fitted model runs: one fit per
+    // fold serves every candidate.
+    let clamp = clustered
+        .clamp_cv
+        .then(|| {
+            let each_clamp = |train: &[usize]| {
+                let fitted = fit_on(&chosen, train);
+                clustered::CLAMP_CANDIDATES
+                    .iter()
+                    .map(|&c| {
+                        fitted.clone().map(|m| VertexClustered {
+                            clamp: c as f32,
+                            ..m
+                        })
+                    })
+                    .collect()
+            };
+            cv::choose_by_clips(
+                sources,
+                ao,
+                &clustered::CLAMP_CANDIDATES,
+                each_clamp,
+                predict,
+            )
+        })
+        .flatten();
+    if let Some(c) = &clamp {
+        chosen.clamp = c.ridge as f32;
+    }
+    (chosen, choice, clamp)
+}
+
+/// Compresses a fitted model's per-vertex data onto a basis of at most
+/// the options' rank (chosen, with its threshold, by cross-validation
+/// over clips when they ask) and records it in `stats`.
+fn add_basis(
+    method: Method,
+    options: (&LinearOptions, &ClusteredOptions),
+    seed: u64,
+    character: &crate::Character,
+    spaces: (&JointAngles, &Handles),
+    rows: (&[Pose], &[Vec<f32>], &AoBlock, &[Source]),
+    fitted: (&mut Model, &mut FitStats),
+) {
+    let (linear, clustered) = options;
+    let skeleton = &character.skeleton;
+    let (poses, q, ao, sources) = rows;
+    let (model, stats) = fitted;
     let (most, threshold, basis_cv) = match method {
         Method::VertexLinear => (linear.basis, linear.basis_threshold, linear.basis_cv),
         Method::VertexClustered => (
@@ -544,12 +611,15 @@ fn fit_rows(
             clustered.basis_threshold,
             clustered.basis_cv,
         ),
-        _ => (0, 0.0, false),
+        Method::StaticAverage
+        | Method::CubemapDiscrete
+        | Method::CubemapContinuous
+        | Method::Grid => (0, 0.0, false),
     };
     if most > 0 {
         let weights: Vec<Vec<f32>> = poses.iter().map(|p| model.weights(skeleton, p)).collect();
         let choice = if basis_cv {
-            let settled = settled(options, &stats);
+            let settled = settled(options, stats);
             let fit = |train: &[usize]| {
                 let pick = |r: &usize| (poses[*r].clone(), q[*r].clone());
                 let (poses, q): (Vec<Pose>, Vec<Vec<f32>>) = train.iter().map(pick).unzip();
@@ -569,25 +639,20 @@ fn fit_rows(
                 );
                 fitted.ok().map(|(m, _)| m)
             };
-            basis_by_clips(skeleton, poses, ao, sources, (&model, &weights), most, fit)
+            basis_by_clips(skeleton, poses, ao, sources, (model, &weights), most, fit)
         } else {
             None
         };
-        on_step(FitStep::Basis);
         let (rank, threshold) = choice
             .as_ref()
             .map_or((most, threshold), |c| (c.rank, c.threshold));
         let basis = model.compress(&weights, rank, threshold);
-        match &mut stats {
+        match stats {
             FitStats::VertexLinear(s) => (s.basis, s.basis_cv) = (basis, choice),
             FitStats::VertexClustered(s) => (s.basis, s.basis_cv) = (basis, choice),
             FitStats::StaticAverage => {}
         }
-    } else {
-        on_step(FitStep::Basis);
     }
-    on_step(FitStep::Compress);
-    Ok((model, stats))
 }
 
 /// `options` with what a fit chose (its `stats`) settled, and no basis:

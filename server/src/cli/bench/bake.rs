@@ -14,7 +14,7 @@ use aobake_core::{
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
 
-use super::median;
+use crate::cli::common::median;
 use crate::cli::params::BakeRequestArgs;
 
 /// Arguments of `aobake bench bake`.

@@ -19,7 +19,7 @@ use aobake_core::{
     trace::{Falloff, SceneOptions, SurfaceParams, no_progress, trace_poses},
 };
 
-use super::median;
+use crate::cli::common::median;
 use crate::cli::common::{character_and_clips, find_clip};
 
 /// Arguments of `aobake bench cubemap`.

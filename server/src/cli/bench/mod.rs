@@ -21,6 +21,8 @@ use aobake_core::{
 };
 use glam::Vec3;
 
+use crate::cli::common::median;
+
 /// Arguments of `aobake bench`.
 #[derive(Debug, clap::Args)]
 pub(super) struct Args {
@@ -131,17 +133,6 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         What::Preview(a) => super::preview::bench(a),
         What::Cubemap(a) => cubemap::run(a),
         What::Bake(a) => bake::run(a),
-    }
-}
-
-pub(super) fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let n = s.len();
-    if n % 2 == 1 {
-        s[n / 2]
-    } else {
-        0.5 * (s[n / 2 - 1] + s[n / 2])
     }
 }
 

@@ -6,6 +6,7 @@
 //! * `api`: latency of `GET /v1/bakes/{id}` (p50, p99) under concurrent
 //!   pollers, and the server process's memory.
 
+use crate::cli::common::median;
 use aobake_api::{BakeRequest, Client, Completion, NewTokenRequest, OutputRef};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -51,11 +52,6 @@ pub(super) struct ApiArgs {
     /// as the server answers).
     #[arg(long, default_value_t = 500)]
     interval_ms: u64,
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 async fn open_store(database: Option<&str>, dir: &Path) -> anyhow::Result<Arc<dyn Store>> {
@@ -106,9 +102,9 @@ pub(super) fn queue(args: &QueueArgs) -> anyhow::Result<()> {
         args.jobs,
         args.workers,
         args.repeat,
-        median(store_rates.clone()),
+        median(&store_rates),
         store_rates.iter().map(|r| r.round()).collect::<Vec<_>>(),
-        median(http_rates.clone()),
+        median(&http_rates),
         http_rates.iter().map(|r| r.round()).collect::<Vec<_>>(),
     );
     Ok(())

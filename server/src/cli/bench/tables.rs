@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use aobake_core::{
     Limits,
-    bake::report::Report,
+    bake::vertex::Report,
     bake::{
         Bake, BakeInputs, BakeParams, Baked, GraphOptions, JobOutput, JobSpec, ReferenceSource,
     },
@@ -253,7 +253,7 @@ pub(super) fn linear(args: &LinearArgs) -> anyhow::Result<()> {
 
 fn vertex_report(baked: Baked) -> anyhow::Result<Report> {
     match baked.report {
-        aobake_core::bake::report::BakeReport::Vertex(r) => Ok(*r),
+        aobake_core::bake::BakeReport::Vertex(r) => Ok(*r),
         _ => anyhow::bail!("the tables compare per-vertex methods"),
     }
 }
