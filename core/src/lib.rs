@@ -22,14 +22,25 @@
 //!    volume and Kroon's estimators); [`trace::trace_poses`] traces a batch
 //!    of poses into the block of AO values that the models are fitted to.
 //! 5. [`method`]: the methods, fitted to traced AO and evaluated at run
-//!    time, and the one place that dispatches on [`method::Method`].
+//!    time, and the one place that dispatches on [`method::Method`]; each
+//!    family in its own folder.
 //! 6. [`bake`]: a bake as jobs. [`bake::BakeParams`] (the only home of
 //!    defaults) and the bake key; the planner's job graph; the job
-//!    functions `(spec, inputs, checkpoint) → outputs`; and the in-process
-//!    runner that `aobake bake`, the benches and the tests use (workers
-//!    run the same functions one job at a time).
-//! 7. [`asset`]: the versioned container the bake publishes, the quality
-//!    metrics and the report.
+//!    functions `(spec, inputs, checkpoint) → outputs`, one file per
+//!    method family with its jobs, evaluation and report, and
+//!    `bake::family` handing each concern to its family; and the
+//!    in-process runner that `aobake bake`, the benches and the tests use
+//!    (workers run the same functions one job at a time).
+//! 7. [`asset`]: the versioned container the bake publishes and the
+//!    quality metrics; [`image`]: the heat map, sRGB, the PNG/APNG encoder
+//!    and the plot font that plots, charts and previews share.
+//!
+//! **Layers**, bottom up: `digest`, `geometry`, `image`, `rig`, `import`,
+//! `pose_space`, `summary`, `trace`, `asset`, `method`, `bake`. A file
+//! imports files of its own layer or below; the one arrow up is the asset
+//! container reading the method code of its preamble (`method::Method`).
+//! `python3 tools/import-graph.py core <layers>` checks both, and that the
+//! file-level import graph has no circle.
 
 pub mod asset;
 pub mod bake;

@@ -22,6 +22,12 @@
 //! complete with their lease token; `assemble` publishes the asset,
 //! `preview` renders its images, the last completion finishes the bake,
 //! and `GET /v1/cache/{key}` finds it from then on.
+//!
+//! **Layers**, bottom up: `store`, `blobs`, `error`, `state`, `auth`,
+//! `extract`, `dashboard`, `routes`, `openapi`, `app`, `listen`, `demo`,
+//! `serve`, `cli`. No file imports one of a higher layer
+//! (`python3 tools/import-graph.py server <layers>`). The wire types and
+//! the HTTP client are the `aobake-api` crate's.
 
 pub mod app;
 pub mod auth;

@@ -22,7 +22,6 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    asset::Container,
     digest::sha256_hex,
     method::Method,
     method::cubemap::{
@@ -41,7 +40,7 @@ use crate::{
 use super::{
     Bake, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec,
     PlannedJob,
-    jobs::{find, json, named, parse},
+    jobs::{decode_with, find, json, named, parse},
     report::{CharacterInfo, Sizes, Timings},
 };
 
@@ -460,10 +459,7 @@ impl Bake<'_> {
 
 /// A cubemap asset's model.
 pub(super) fn decode_cubemap(bytes: &[u8]) -> Result<CubemapModel, JobError> {
-    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
-    CubemapModel::from_container(&container)
-        .map(|(m, _)| m)
-        .map_err(|e| JobError::Invalid(e.to_string()))
+    decode_with(bytes, CubemapModel::from_container)
 }
 
 /// A cubemap bake's report.

@@ -22,7 +22,6 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    asset::Container,
     image::encode_rgb_png,
     method::Method,
     method::grid::{
@@ -38,7 +37,7 @@ use crate::{
 use super::{
     Bake, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec,
     PlannedJob,
-    jobs::{find, json, named, parse},
+    jobs::{decode_with, find, json, named, parse},
     report::{CharacterInfo, Sizes, Timings},
 };
 
@@ -520,10 +519,7 @@ fn slices_png(model: &GridModel) -> Result<Vec<u8>, String> {
 
 /// A grid asset's model.
 pub(super) fn decode_grid(bytes: &[u8]) -> Result<GridModel, JobError> {
-    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
-    GridModel::from_container(&container)
-        .map(|(m, _)| m)
-        .map_err(|e| JobError::Invalid(e.to_string()))
+    decode_with(bytes, GridModel::from_container)
 }
 
 /// A grid bake's report.

@@ -14,7 +14,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::method::vertex::FitStep;
+use crate::{asset::Container, method::vertex::FitStep};
 
 use super::{BakeError, BakeInputs, Plan, report::Timings};
 
@@ -321,4 +321,15 @@ pub(super) fn named<'o>(output: &'o JobOutput, name: &str) -> Result<&'o [u8], J
     output
         .get(name)
         .ok_or_else(|| JobError::Invalid(format!("no output named {name}")))
+}
+
+/// The model of an asset, read by its method's codec (`from_container`).
+pub(super) fn decode_with<M, H, E: std::fmt::Display>(
+    bytes: &[u8],
+    read: impl FnOnce(&Container) -> Result<(M, H), E>,
+) -> Result<M, JobError> {
+    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
+    read(&container)
+        .map(|(m, _)| m)
+        .map_err(|e| JobError::Invalid(e.to_string()))
 }

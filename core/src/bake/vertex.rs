@@ -31,10 +31,7 @@ use serde::{Deserialize, Serialize};
 use plotters::prelude::*;
 
 use crate::{
-    asset::{
-        Container,
-        metrics::{Errors, FrameError, psnr},
-    },
+    asset::metrics::{Errors, FrameError, psnr},
     method::Method,
     method::vertex::{FitStats, FitStep, Model, Rows, Source, StaticAverage},
     rig::pose::Pose,
@@ -44,7 +41,7 @@ use crate::{
 use super::{
     Bake, BakeError, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink,
     JobSpec, Plan, PlannedJob, PoseSet, TestPose,
-    jobs::{find, json, named, parse},
+    jobs::{decode_with, find, json, named, parse},
     report::{CharacterInfo, Sizes, Timings},
 };
 
@@ -525,10 +522,7 @@ fn unseen_output(fold: usize) -> String {
 
 /// A per-vertex asset's model.
 pub(super) fn decode(bytes: &[u8]) -> Result<Model, JobError> {
-    let container = Container::from_bytes(bytes).map_err(|e| JobError::Invalid(e.to_string()))?;
-    Model::from_container(&container)
-        .map(|(m, _)| m)
-        .map_err(|e| JobError::Invalid(e.to_string()))
+    decode_with(bytes, Model::from_container)
 }
 
 impl Plan<'_> {

@@ -36,6 +36,7 @@
 //!   get occlusion 0.
 
 mod bvh;
+mod error;
 mod poses;
 mod sampling;
 mod scene;
@@ -45,6 +46,7 @@ use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use error::TraceError;
 pub use poses::{AoBlock, trace_poses};
 pub use sampling::MAX_SAMPLES;
 pub use scene::{Axis, BvhQuality, Ground, Scene, SceneOptions, Traversal};
@@ -57,14 +59,6 @@ use sampling::{Frame, cosine_directions, point_seed, sphere_directions};
 /// that the poses and rays a model is judged on are never those it was
 /// fitted to.
 pub const HELD_OUT_SEED: u64 = 0x6865_6c64_6f75_7421;
-/// Invalid tracing input.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum TraceError {
-    /// A parameter or the geometry is unusable; the message names it.
-    #[error("{0}")]
-    Invalid(String),
-}
-
 /// Reports progress: called with the number of points just finished, from
 /// any thread.
 pub type Progress<'a> = &'a (dyn Fn(usize) + Sync);

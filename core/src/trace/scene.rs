@@ -12,7 +12,7 @@ use obvhs::{
 };
 use serde::{Deserialize, Serialize};
 
-use super::{TraceError, bvh::Bvh8};
+use super::{bvh::Bvh8, error::TraceError};
 
 /// The scene is traced in a local frame: centred on the mesh's bounding
 /// box and scaled by a power of two (exact in floating point) so that the

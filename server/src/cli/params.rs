@@ -140,13 +140,9 @@ impl ParamArgs {
         if let Some(r) = self.ridge {
             let key = match method {
                 Method::VertexClustered => "clustered.ridge",
-                // The other methods have no ridge of their own; their
-                // parameters keep vertex-linear's, which they ignore.
-                Method::VertexLinear
-                | Method::StaticAverage
-                | Method::CubemapDiscrete
-                | Method::CubemapContinuous
-                | Method::Grid => "linear.ridge",
+                // vertex-linear's; the other methods have no ridge of their
+                // own and ignore it.
+                _ => "linear.ridge",
             };
             set(key, json!(r));
         }

@@ -418,9 +418,8 @@ fn fit_rows(
         Method::VertexClustered => {
             fit_clustered(character, spaces, options, seed, poses, q, ao, sources)?
         }
-        Method::CubemapDiscrete | Method::CubemapContinuous | Method::Grid => {
-            return Err(format!("{method} is not a per-vertex method"));
-        }
+        // Methods of other families have no per-vertex fit.
+        other => return Err(format!("{other} is not a per-vertex method")),
     };
     on_step(FitStep::Model);
     add_basis(
@@ -611,10 +610,8 @@ fn add_basis(
             clustered.basis_threshold,
             clustered.basis_cv,
         ),
-        Method::StaticAverage
-        | Method::CubemapDiscrete
-        | Method::CubemapContinuous
-        | Method::Grid => (0, 0.0, false),
+        // The static average has no basis; other families no vertices.
+        _ => (0, 0.0, false),
     };
     if most > 0 {
         let weights: Vec<Vec<f32>> = poses.iter().map(|p| model.weights(skeleton, p)).collect();
