@@ -175,6 +175,24 @@ pub struct Image {
     pub rgba: Vec<u8>,
 }
 
+/// Named float channels of one image (an asset's data, as `aobake
+/// export` writes it to OpenEXR).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FloatImage {
+    /// The file name.
+    pub file: String,
+    /// The layer's name.
+    pub layer: String,
+    /// What the values are.
+    pub comment: String,
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Named channels, each `width × height` values, rows top to bottom.
+    pub channels: Vec<(String, Vec<f32>)>,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

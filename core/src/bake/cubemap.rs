@@ -505,3 +505,44 @@ pub struct ChartTexel {
     /// Per encoding: (too dark, too bright, total).
     pub sums: Vec<(String, [f64; 3])>,
 }
+
+/// A cubemap asset's decoded faces at each of `times` (seconds into the
+/// clip): one image per time and shell, `t{time}-shell{k}.exr`, the six
+/// faces side by side (+x, −x, +y, −y, +z, −z, each `resolution` texels
+/// square, rows top to bottom as the cube-map convention has them) in one
+/// channel `Y`, decoded at each texel's centre exactly as the run time
+/// decodes it.
+pub(super) fn face_strips(
+    model: &CubemapModel,
+    clip: &str,
+    times: &[f32],
+) -> Vec<crate::image::FloatImage> {
+    let res = model.layout.resolution;
+    let mut images = Vec::new();
+    for &t in times {
+        let phase = model.layout.phase(t);
+        for shell in 0..model.layout.spheroid.shells {
+            let faces: Vec<Vec<f32>> = (0..FACES)
+                .map(|face| model.decode_face(face, shell, phase))
+                .collect();
+            let mut y = Vec::with_capacity(FACES * res * res);
+            for j in 0..res {
+                for face in &faces {
+                    y.extend_from_slice(&face[j * res..(j + 1) * res]);
+                }
+            }
+            images.push(crate::image::FloatImage {
+                file: format!("t{t:.3}-shell{shell}.exr"),
+                layer: format!("shell {shell}"),
+                comment: format!(
+                    "aobake {}: occlusion (0 open, 1 blocked) of clip {clip} at t = {t} s (phase {phase:.4}) on shell {shell}; faces +x -x +y -y +z -z left to right",
+                    model.method()
+                ),
+                width: FACES * res,
+                height: res,
+                channels: vec![("Y".into(), y)],
+            });
+        }
+    }
+    images
+}

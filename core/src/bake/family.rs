@@ -8,16 +8,20 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::method::{Family, Method};
+use crate::{
+    asset::Container,
+    image::FloatImage,
+    method::{Family, Method},
+};
 
 use super::{
     Bake, BakeError, BakeInputs, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph,
     JobOutput, JobSink, JobSpec, Plan, PoseSet,
-    cubemap::{CubemapReport, decode_cubemap},
-    grid::{GridReport, decode_grid},
+    cubemap::CubemapReport,
+    grid::GridReport,
     jobs::{find, json, named},
     preview::{PreviewInfo, PreviewModel, Renderer, STILL_FRACTIONS, Subject, preview_clip},
-    vertex::{Report, decode},
+    vertex::Report,
 };
 
 impl<'a> Bake<'a> {
@@ -89,52 +93,20 @@ impl<'a> Bake<'a> {
         renderer: &mut dyn Renderer,
     ) -> Result<JobOutput, JobError> {
         let assembled = find(deps, "asset")?;
-        let asset = named(assembled, "asset")?;
+        let container = Container::from_bytes(named(assembled, "asset")?)
+            .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let baked = BakedAsset::read(&container, Some(&self.inputs.character))
+            .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let (model, surface) = baked
+            .preview_model()
+            .map_err(|e| JobError::Invalid(e.to_string()))?;
         let clips = &self.inputs.clips;
-        let vertex_model;
-        let cubemap_model;
-        let grid_model;
-        let owners: Vec<u32>;
-        let mut grid_truth = None;
-        let (model, clip) = match self.plan.params.method.family() {
-            Family::Cubemap => {
-                cubemap_model = decode_cubemap(asset)?;
-                // The ground's truth is what the cubemap stores: Eq. 3.1.
-                let kroon = self
-                    .plan
-                    .params
-                    .cubemap_truth(&cubemap_model.layout.spheroid);
-                (
-                    PreviewModel::Cubemap(&cubemap_model, kroon),
-                    Some(&clips[self.cubemap_clip()?]),
-                )
-            }
-            Family::Grid => {
-                grid_model = decode_grid(asset)?;
-                let parts = self.grid_parts()?;
-                owners = crate::method::grid::parts::owner_indices(
-                    &parts,
-                    self.inputs.character.vertex_count(),
-                );
-                // The grids' truth is traced as their evaluation traces it.
-                grid_truth = Some(self.plan.params.grid.truth(
-                    self.grid_distance(&parts),
-                    self.plan.params.held_out_surface().seed,
-                ));
-                (
-                    PreviewModel::Grid(&grid_model, &owners),
-                    preview_clip(clips, &self.plan.test).map(|i| &clips[i]),
-                )
-            }
-            Family::Vertex => {
-                vertex_model = decode(asset)?;
-                (
-                    PreviewModel::Vertex(&vertex_model),
-                    preview_clip(clips, &self.plan.test).map(|i| &clips[i]),
-                )
+        let clip = match self.plan.params.method.family() {
+            Family::Cubemap => Some(&clips[self.cubemap_clip()?]),
+            Family::Vertex | Family::Grid => {
+                preview_clip(clips, &self.plan.test).map(|i| &clips[i])
             }
         };
-        let surface = grid_truth.unwrap_or_else(|| self.plan.params.held_out_surface());
         let subject = Subject {
             character: &self.inputs.character,
             model,
@@ -193,4 +165,199 @@ impl BakeReport {
             Self::Cubemap(_) | Self::Grid(_) => None,
         }
     }
+}
+
+/// Why a published asset cannot serve a use.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AssetUseError {
+    /// Its header or sections do not decode.
+    #[error("{0}")]
+    Unreadable(String),
+    /// It was baked for another character: what differs.
+    #[error("{0}")]
+    Mismatch(String),
+    /// Its method holds no such data: what it holds instead.
+    #[error("{0}")]
+    Unsupported(String),
+}
+
+/// A published asset's model, read from its container and, given the
+/// character it was baked for, checked against it: what previews,
+/// `aobake eval`, `export` and `preview` start from.
+#[derive(Debug)]
+pub struct BakedAsset {
+    /// The bake's parameters, from the asset's header.
+    pub params: BakeParams,
+    /// sha256 of the character it was baked for.
+    pub character: String,
+    model: AssetModel,
+}
+
+#[derive(Debug)]
+enum AssetModel {
+    Vertex(Box<crate::method::vertex::Model>),
+    /// The model and its clip's name.
+    Cubemap(crate::method::cubemap::model::CubemapModel, String),
+    /// The grids and, with the character, each vertex's part (`u32::MAX`
+    /// for none) and the truth's reach.
+    Grid(
+        crate::method::grid::model::GridModel,
+        Option<(Vec<u32>, f32)>,
+    ),
+}
+
+impl BakedAsset {
+    /// Reads `container`'s model; with `character`, checks that the asset
+    /// was baked for it and prepares what its vertices need.
+    pub fn read(
+        container: &Container,
+        character: Option<&crate::Character>,
+    ) -> Result<Self, AssetUseError> {
+        use crate::method::{cubemap::model::CubemapModel, grid, vertex::Model};
+        let unreadable = |e: &dyn std::fmt::Display| AssetUseError::Unreadable(e.to_string());
+        let params = |v: &serde_json::Value| {
+            BakeParams::from_canonical(v).map_err(|e| {
+                AssetUseError::Unreadable(format!("the asset's parameters are unreadable: {e}"))
+            })
+        };
+        Ok(match container.method.family() {
+            Family::Vertex => {
+                let (model, header) =
+                    Model::from_container(container).map_err(|e| unreadable(&e))?;
+                if let Some(c) = character {
+                    model.check_character(c).map_err(|e| {
+                        AssetUseError::Mismatch(format!("{e} (character {})", header.character))
+                    })?;
+                }
+                Self {
+                    params: params(&header.params)?,
+                    character: header.character,
+                    model: AssetModel::Vertex(Box::new(model)),
+                }
+            }
+            Family::Cubemap => {
+                let (model, header) =
+                    CubemapModel::from_container(container).map_err(|e| unreadable(&e))?;
+                Self {
+                    params: params(&header.params)?,
+                    character: header.character,
+                    model: AssetModel::Cubemap(model, header.clip),
+                }
+            }
+            Family::Grid => {
+                let (model, header) = grid::model::GridModel::from_container(container)
+                    .map_err(|e| unreadable(&e))?;
+                let params = params(&header.params)?;
+                let fitted = match character {
+                    Some(c) => {
+                        model
+                            .check_palette(c.joints.len())
+                            .map_err(|e| AssetUseError::Mismatch(e.to_string()))?;
+                        let found = grid::parts::parts(c, params.grid.parts)
+                            .map_err(|e| AssetUseError::Mismatch(e.to_string()))?;
+                        if found.len() != model.parts.len()
+                            || found
+                                .iter()
+                                .zip(&model.parts)
+                                .any(|(a, b)| a.joint != b.joint)
+                        {
+                            return Err(AssetUseError::Mismatch(format!(
+                                "its parts are not the character's (character {})",
+                                header.character
+                            )));
+                        }
+                        let owners = grid::parts::owner_indices(&found, c.vertex_count());
+                        Some((owners, params.grid.distance(c, &found)))
+                    }
+                    None => None,
+                };
+                Self {
+                    params,
+                    character: header.character,
+                    model: AssetModel::Grid(model, fitted),
+                }
+            }
+        })
+    }
+
+    /// The model to preview and the tracing parameters of its ground
+    /// truth (a grid's as its evaluation traces it; a cubemap's ground
+    /// truth is Eq. 3.1, what it stores, in the model itself).
+    pub fn preview_model(
+        &self,
+    ) -> Result<(PreviewModel<'_>, crate::trace::SurfaceParams), AssetUseError> {
+        let surface = self.params.held_out_surface();
+        Ok(match &self.model {
+            AssetModel::Vertex(m) => (PreviewModel::Vertex(m), surface),
+            AssetModel::Cubemap(m, _) => (
+                PreviewModel::Cubemap(m, self.params.cubemap_truth(&m.layout.spheroid)),
+                surface,
+            ),
+            AssetModel::Grid(m, fitted) => {
+                let (owners, distance) = fitted.as_ref().ok_or_else(not_fitted)?;
+                (
+                    PreviewModel::Grid(m, owners),
+                    self.params.grid.truth(*distance, surface.seed),
+                )
+            }
+        })
+    }
+
+    /// Occlusion per vertex of `character` posed (`pose`, skinned into
+    /// `mesh`), as an engine evaluates the asset at run time.
+    pub fn vertex_ao(
+        &self,
+        character: &crate::Character,
+        pose: &crate::Pose,
+        mesh: &crate::PosedMesh,
+    ) -> Result<Vec<f32>, AssetUseError> {
+        use crate::method::grid::model::Terms;
+        match &self.model {
+            AssetModel::Vertex(m) => Ok(m.evaluate(&character.skeleton, pose)),
+            AssetModel::Cubemap(..) => Err(AssetUseError::Unsupported(
+                "it holds the occlusion cast into space, not per-vertex AO; `aobake preview` renders it on the ground and `aobake export --exr` writes its faces".into(),
+            )),
+            // Each vertex a receiver on its own part, shaded by every
+            // part's grid.
+            AssetModel::Grid(m, fitted) => {
+                let (owners, _) = fitted.as_ref().ok_or_else(not_fitted)?;
+                let poses = m.poses(&character.joint_matrices(pose));
+                Ok(mesh
+                    .positions
+                    .iter()
+                    .zip(&mesh.normals)
+                    .zip(owners)
+                    .map(|((p, n), &owner)| {
+                        let owner = (owner != u32::MAX).then_some(owner as usize);
+                        m.occlusion(&poses, *p, *n, owner, Terms::All)
+                    })
+                    .collect())
+            }
+        }
+    }
+
+    /// The asset's data as float images: a cubemap's decoded faces, one
+    /// image per clip time and shell (the six faces side by side, +x −x
+    /// +y −y +z −z, in one channel `Y`); a grid's parts, one image per
+    /// part (its z-slices top to bottom, +y up, +x right; `ao_grid`, and
+    /// with cones `axis.x`, `axis.y`, `axis.z` in the part's bind space),
+    /// each value exactly what the run time reads.
+    pub fn images(&self, times: &[f32]) -> Result<Vec<FloatImage>, AssetUseError> {
+        match &self.model {
+            AssetModel::Vertex(_) => Err(AssetUseError::Unsupported(
+                "per-vertex AO has no image to export".into(),
+            )),
+            AssetModel::Cubemap(m, clip) => Ok(super::cubemap::face_strips(m, clip, times)),
+            AssetModel::Grid(m, _) => Ok(m
+                .parts
+                .iter()
+                .enumerate()
+                .map(|(k, part)| super::grid::part_slices(k, part))
+                .collect()),
+        }
+    }
+}
+
+fn not_fitted() -> AssetUseError {
+    AssetUseError::Mismatch("the asset was read without its character".into())
 }

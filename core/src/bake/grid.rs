@@ -570,3 +570,61 @@ pub struct PartReport {
     /// Seconds its slabs traced (summed over slab jobs).
     pub bake_s: f64,
 }
+
+/// Part `k`'s grid as one image of its z-slices, `part{k}-{name}.exr`:
+/// slice z in rows z·n .. (z + 1)·n, +y up within a slice, +x left to
+/// right; the channel `ao_grid` (the stored 2·ao′, 0..2) and, with cones,
+/// `axis.x`, `axis.y`, `axis.z` (the average occluded direction in the
+/// part's bind space), each exactly the value the run time reads.
+pub(super) fn part_slices(k: usize, part: &PartGrid) -> crate::image::FloatImage {
+    let n = part.grid.resolution;
+    // The cell shown at pixel (x, y).
+    let cell = |x: usize, y: usize| {
+        let (z, row) = (y / n, y % n);
+        (z * n + (n - 1 - row)) * n + x
+    };
+    let cells: Vec<usize> = (0..n * n)
+        .flat_map(|y| (0..n).map(move |x| cell(x, y)))
+        .collect();
+    let mut channels = vec![(
+        "ao_grid".to_owned(),
+        cells
+            .iter()
+            .map(|&i| 2.0 * f32::from(part.occlusion[i]) / 255.0)
+            .collect::<Vec<f32>>(),
+    )];
+    if let Some(d) = &part.directions {
+        for (c, name) in ["axis.x", "axis.y", "axis.z"].into_iter().enumerate() {
+            channels.push((
+                name.to_owned(),
+                cells
+                    .iter()
+                    .map(|&i| f32::from(d[i][c]) / 255.0 * 2.0 - 1.0)
+                    .collect(),
+            ));
+        }
+    }
+    let safe: String = part
+        .name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(64)
+        .collect();
+    crate::image::FloatImage {
+        file: format!("part{k}-{safe}.exr"),
+        layer: part.name.clone(),
+        comment: format!(
+            "aobake grid: part {} ({n}^3 cells); ao_grid = 2 x occluded fraction of the sphere; z-slices top to bottom, +y up, +x right; axis in the part's bind space",
+            part.name
+        ),
+        width: n,
+        height: n * n,
+        channels,
+    }
+}

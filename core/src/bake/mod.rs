@@ -36,7 +36,7 @@ pub mod report;
 pub mod runner;
 pub mod vertex;
 
-pub use family::BakeReport;
+pub use family::{AssetUseError, BakeReport, BakedAsset};
 pub use graph::{GraphOptions, JobGraph, PlannedJob};
 pub use inputs::{BakeInputs, BundleError, InputError, UploadBytes};
 pub use jobs::{

@@ -9,8 +9,7 @@ use anyhow::{Context as _, bail};
 use aobake_core::{
     Character, Clip, Limits,
     asset::Container,
-    bake::{BakeParams, PreviewModel, preview::Subject},
-    method::{Family, cubemap::model::CubemapModel, grid::model::GridModel, vertex::Model},
+    bake::{AssetUseError, BakedAsset, preview::Subject},
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
 
@@ -44,18 +43,9 @@ pub(super) struct Args {
     out: PathBuf,
 }
 
-/// The model an asset holds.
-enum Baked {
-    Vertex(Box<Model>),
-    Cubemap(CubemapModel),
-    /// The grids and each vertex's part.
-    Grid(GridModel, Vec<u32>),
-}
-
 /// An asset and the character it was baked for, loaded and checked.
 struct Loaded {
-    model: Baked,
-    params: BakeParams,
+    asset: BakedAsset,
     character: Character,
     clips: Vec<Clip>,
 }
@@ -67,73 +57,26 @@ impl Loaded {
         let container = Container::from_bytes(&bytes)
             .with_context(|| format!("cannot read {}", asset.display()))?;
         let (character, clips) = character_and_clips(file, clips, &Limits::default())?;
-        let (model, params) = match container.method.family() {
-            Family::Grid => {
-                let (model, header) = GridModel::from_container(&container)
-                    .with_context(|| format!("cannot read {}", asset.display()))?;
-                model
-                    .check_palette(character.joints.len())
-                    .with_context(|| {
-                        format!("{} does not fit {}", asset.display(), file.display())
-                    })?;
-                let mut params = BakeParams::from_canonical(&header.params)
-                    .context("the asset's parameters are unreadable")?;
-                let found = aobake_core::method::grid::parts::parts(&character, params.grid.parts)?;
-                // The truth is traced as the bake's evaluation traced it.
-                let distance = params.grid.distance(&character, &found);
-                params.max_distance = Some(distance);
-                params.samples = params.grid.eval_rays;
-                let owners = aobake_core::method::grid::parts::owner_indices(
-                    &found,
-                    character.vertex_count(),
-                );
-                (Baked::Grid(model, owners), params)
+        let baked = BakedAsset::read(&container, Some(&character)).map_err(|e| match e {
+            AssetUseError::Mismatch(e) => {
+                anyhow::anyhow!("{} does not fit {}: {e}", asset.display(), file.display())
             }
-            Family::Cubemap => {
-                let (model, header) = CubemapModel::from_container(&container)
-                    .with_context(|| format!("cannot read {}", asset.display()))?;
-                let params = BakeParams::from_canonical(&header.params)
-                    .context("the asset's parameters are unreadable")?;
-                (Baked::Cubemap(model), params)
-            }
-            Family::Vertex => {
-                let (model, header) = Model::from_container(&container)
-                    .with_context(|| format!("cannot read {}", asset.display()))?;
-                // The ground truth is traced as the bake traced its held-out
-                // poses.
-                let params = BakeParams::from_canonical(&header.params)
-                    .context("the asset's parameters are unreadable")?;
-                if let Err(e) = model.check_character(&character) {
-                    bail!(
-                        "{} does not fit {}: {e} (character {})",
-                        asset.display(),
-                        file.display(),
-                        header.character
-                    );
-                }
-                (Baked::Vertex(Box::new(model)), params)
-            }
-        };
+            e => anyhow::anyhow!("cannot read {}: {e}", asset.display()),
+        })?;
         Ok(Self {
-            model,
-            params,
+            asset: baked,
             character,
             clips,
         })
     }
 
-    fn subject(&self) -> Subject<'_> {
-        Subject {
+    fn subject(&self) -> anyhow::Result<Subject<'_>> {
+        let (model, surface) = self.asset.preview_model()?;
+        Ok(Subject {
             character: &self.character,
-            model: match &self.model {
-                Baked::Vertex(m) => PreviewModel::Vertex(m),
-                Baked::Cubemap(m) => {
-                    PreviewModel::Cubemap(m, self.params.cubemap_truth(&m.layout.spheroid))
-                }
-                Baked::Grid(m, owners) => PreviewModel::Grid(m, owners),
-            },
-            surface: self.params.held_out_surface(),
-        }
+            model,
+            surface,
+        })
     }
 }
 
@@ -142,7 +85,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let clip = find_clip(&loaded.clips, &args.clip)?;
     let gpu = Gpu::shared().context("no GPU adapter for the preview")?;
     let mut renderer = PreviewRenderer::new(gpu)?;
-    let subject = loaded.subject();
+    let subject = loaded.subject()?;
     let preview = match args.time {
         Some(t) if !t.is_finite() => bail!("--time must be a finite number of seconds"),
         Some(t) => subject.stills(Some(clip), &[t], &mut renderer)?.remove(0),
@@ -197,7 +140,7 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         Some(name) => find_clip(&loaded.clips, name)?,
         None => loaded.clips.first().context("the character has no clips")?,
     };
-    let subject = loaded.subject();
+    let subject = loaded.subject()?;
     let mut adapters = Vec::new();
     for backends in [wgpu_backends::VULKAN, wgpu_backends::GL] {
         match Gpu::with_backends(backends) {
