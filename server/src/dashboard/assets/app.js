@@ -423,6 +423,13 @@ const ROWS = {
 function reportSection(report, plotUrl) {
   if (report.layout) return cubemapReportSection(report, plotUrl);
   if (report.parts) return gridReportSection(report, plotUrl);
+  // A family this page has no figures for: its plot and its evaluation.
+  if (!report.fit) {
+    return h("section", { id: "report" },
+      h("h2", {}, "Quality"),
+      plotUrl ? h("figure", { class: "wide" }, h("img", { src: plotUrl, alt: "report plot" })) : null,
+      h("pre", { class: "mono" }, JSON.stringify(report.evaluation ?? report, null, 2)));
+  }
   const ev = report.evaluation;
   const unseen = ev.unseen_clips;
   const reference = report.fit?.reference;
