@@ -31,16 +31,16 @@
 //!    `bake::family` handing each concern to its family; and the
 //!    in-process runner that `aobake bake`, the benches and the tests use
 //!    (workers run the same functions one job at a time).
-//! 7. [`asset`]: the versioned container the bake publishes and the
-//!    quality metrics; [`image`]: the heat map, sRGB, the PNG/APNG encoder
+//! 7. [`asset`]: the versioned container the bake publishes (from
+//!    `aobake-runtime`) and the quality metrics; [`image`]: the heat map, sRGB, the PNG/APNG encoder
 //!    and the plot font that plots, charts and previews share.
 //!
 //! **Layers**, bottom up: `digest`, `geometry`, `image`, `rig`, `import`,
 //! `pose_space`, `summary`, `trace`, `asset`, `method`, `bake`. A file
-//! imports files of its own layer or below; the one arrow up is the asset
-//! container reading the method code of its preamble (`method::Method`).
-//! `python3 tools/import-graph.py core <layers>` checks both, and that the
-//! file-level import graph has no circle.
+//! imports files of its own layer or below, and the file-level import
+//! graph has no circle (`python3 tools/import-graph.py core <layers>`).
+//! Below them all is the `aobake-runtime` crate: the asset container and
+//! the method an asset holds, which engines read assets with.
 
 pub mod asset;
 pub mod bake;

@@ -5,7 +5,7 @@
 //! Nothing here fits or traces; the methods decide what goes into the
 //! sections, `bake` decides when.
 
-mod container;
 pub mod metrics;
 
-pub use container::{AssetError, Container, Data, MAGIC, MAJOR, MINOR, Section};
+/// The container lives in the runtime crate, which engines read assets with.
+pub use aobake_runtime::container::{AssetError, Container, Data, MAGIC, MAJOR, MINOR, Section};

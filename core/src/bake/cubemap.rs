@@ -112,14 +112,12 @@ impl Bake<'_> {
 
     fn encoding(&self) -> Result<Encoding, JobError> {
         let p = &self.plan.params;
-        p.method
-            .cubemap_encoding(p.cubemap.continuous_layout)
-            .ok_or_else(|| {
-                JobError::Invalid(format!(
-                    "{} is not a cubemap method",
-                    self.plan.params.method
-                ))
-            })
+        crate::method::cubemap_encoding(p.method, p.cubemap.continuous_layout).ok_or_else(|| {
+            JobError::Invalid(format!(
+                "{} is not a cubemap method",
+                self.plan.params.method
+            ))
+        })
     }
 
     /// Six `face` jobs → `assemble` → `evaluate` → `preview`.

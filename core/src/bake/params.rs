@@ -412,7 +412,7 @@ fn merge(value: &mut Value, path: &[&str], v: Value, key: &str) -> Result<(), Ba
 /// parameters and the algorithm version.
 pub fn bake_key(character: &str, clips: &[String], params: &BakeParams) -> String {
     let request = serde_json::json!({
-        "algorithm_version": params.method.algorithm_version(),
+        "algorithm_version": crate::method::algorithm_version(params.method),
         "character": character,
         "clips": clips,
         "method": params.method,

@@ -10,36 +10,34 @@
 
 pub mod cubemap;
 pub mod grid;
-mod id;
 pub mod vertex;
 
-pub use id::{Family, Method};
+/// A method's identity lives in the runtime crate, which engines read
+/// assets with.
+pub use aobake_runtime::method::{Family, Method};
 
-/// What differs by method in its algorithms: the one place that reaches
-/// into each family's code.
-impl Method {
-    /// The version of the method's algorithm, part of the bake key: a
-    /// change that alters a method's bytes bumps its family's version.
-    pub fn algorithm_version(self) -> u32 {
-        match self.family() {
-            Family::Vertex => vertex::ALGORITHM_VERSION,
-            Family::Cubemap => cubemap::ALGORITHM_VERSION,
-            Family::Grid => grid::ALGORITHM_VERSION,
-        }
+/// The version of `method`'s algorithm, part of the bake key: a change
+/// that alters a method's bytes bumps its family's version. The one place
+/// that reaches into each family's code for it.
+pub fn algorithm_version(method: Method) -> u32 {
+    match method.family() {
+        Family::Vertex => vertex::ALGORITHM_VERSION,
+        Family::Cubemap => cubemap::ALGORITHM_VERSION,
+        Family::Grid => grid::ALGORITHM_VERSION,
     }
+}
 
-    /// The cubemap encoding of a cubemap method with the continuous
-    /// encoding's `layout`.
-    pub fn cubemap_encoding(
-        self,
-        layout: cubemap::ContinuousLayout,
-    ) -> Option<cubemap::model::Encoding> {
-        use cubemap::{ContinuousLayout, model::Encoding};
-        match (self, layout) {
-            (Self::CubemapDiscrete, _) => Some(Encoding::Discrete),
-            (Self::CubemapContinuous, ContinuousLayout::Cosine) => Some(Encoding::Continuous),
-            (Self::CubemapContinuous, ContinuousLayout::Thirds) => Some(Encoding::Thirds),
-            _ => None,
-        }
+/// The cubemap encoding of a cubemap `method` with the continuous
+/// encoding's `layout`; `None` for other methods.
+pub fn cubemap_encoding(
+    method: Method,
+    layout: cubemap::ContinuousLayout,
+) -> Option<cubemap::model::Encoding> {
+    use cubemap::{ContinuousLayout, model::Encoding};
+    match (method, layout) {
+        (Method::CubemapDiscrete, _) => Some(Encoding::Discrete),
+        (Method::CubemapContinuous, ContinuousLayout::Cosine) => Some(Encoding::Continuous),
+        (Method::CubemapContinuous, ContinuousLayout::Thirds) => Some(Encoding::Thirds),
+        _ => None,
     }
 }

@@ -130,11 +130,10 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
     let clips = &bake.inputs.clips;
     let names =
         |idx: &[usize]| -> Vec<&str> { idx.iter().map(|&i| clips[i].name.as_str()).collect() };
-    if let Some(encoding) = plan
-        .params
-        .method
-        .cubemap_encoding(plan.params.cubemap.continuous_layout)
-    {
+    if let Some(encoding) = aobake_core::method::cubemap_encoding(
+        plan.params.method,
+        plan.params.cubemap.continuous_layout,
+    ) {
         let setup = bake.cubemap_setup()?;
         let o = &setup.options;
         eprintln!(

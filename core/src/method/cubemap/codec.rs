@@ -6,6 +6,7 @@
 //! the layout and the section's length, so a hostile file with valid
 //! checksums is refused with a message.
 
+use aobake_runtime::Method;
 use serde::{Deserialize, Serialize};
 
 use super::{
@@ -15,7 +16,7 @@ use super::{
 };
 use crate::{
     asset::{AssetError, Container, Data, Section},
-    method::{Method, vertex::AssetHeaderFields},
+    method::vertex::AssetHeaderFields,
 };
 
 /// What the stored values mean, written into every header.

@@ -13,6 +13,7 @@
 //! Reading checks every number and every section's length, so a hostile
 //! file with valid checksums is refused with a message.
 
+use aobake_runtime::Method;
 use serde::{Deserialize, Serialize};
 
 use super::{
@@ -24,7 +25,7 @@ use super::{
 };
 use crate::{
     asset::{AssetError, Container, Data, Section},
-    method::{Method, vertex::AssetHeaderFields},
+    method::vertex::AssetHeaderFields,
 };
 
 /// What the stored values mean, written into every header.

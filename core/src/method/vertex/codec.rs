@@ -4,6 +4,7 @@
 //! every length and number against the header so that a hostile file
 //! with valid checksums is refused with a message.
 
+use aobake_runtime::Method;
 use half::f16;
 use serde::{Deserialize, Serialize};
 
@@ -13,7 +14,6 @@ use super::{
 };
 use crate::{
     asset::{AssetError, Container, Data, Section},
-    method::Method,
     method::vertex::linear::Features,
     pose_space::{Handles, JointAngles},
 };

@@ -37,11 +37,11 @@ pub use linear::{
     count_columns,
 };
 
+use aobake_runtime::Method;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    method::Method,
     pose_space::{Handles, JointAngles},
     rig::{pose::Pose, skeleton::Skeleton},
     trace::AoBlock,
