@@ -204,11 +204,16 @@ pub(super) struct StatusArgs {
 }
 
 pub(super) fn status(args: &StatusArgs) -> anyhow::Result<()> {
-    let view = args.conn.api()?.bake(args.id)?;
+    let api = args.conn.api()?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&view)?);
+        // The server's document as it is, fields this build does not know
+        // included.
+        let raw: Value =
+            serde_json::from_slice(&api.get_bytes(&format!("/v1/bakes/{}", args.id))?)?;
+        println!("{}", serde_json::to_string_pretty(&raw)?);
         return Ok(());
     }
+    let view = api.bake(args.id)?;
     let mut states: std::collections::BTreeMap<&str, usize> = Default::default();
     for j in view.jobs.iter().flatten() {
         *states.entry(j.state.as_str()).or_default() += 1;

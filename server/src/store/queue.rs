@@ -133,10 +133,9 @@ pub(super) trait Conn: Send {
 
     /// The row `s` returns; an error when there is none.
     async fn one<T: Decode>(&mut self, s: Stmt) -> Result<T> {
-        let sql = s.sql.clone();
         self.optional(s)
             .await?
-            .ok_or_else(|| StoreError::NotFound(format!("no row from `{sql}`")))
+            .ok_or(StoreError::Database(sqlx::Error::RowNotFound))
     }
 
     /// The first column of the first row, if any.
