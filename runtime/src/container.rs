@@ -397,6 +397,21 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// The parts of the header that come from the bake rather than the model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssetHeaderFields {
+    /// The program that wrote it, such as `aobake 0.1.0`.
+    pub generator: String,
+    /// The bake key.
+    pub bake_key: String,
+    /// sha256 of the character upload.
+    pub character: String,
+    /// sha256 of the clip uploads.
+    pub clips: Vec<String>,
+    /// The bake's fully defaulted parameters.
+    pub params: serde_json::Value,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -3,13 +3,16 @@
 //! What reading a baked AO asset takes, apart from everything that bakes
 //! one: the versioned container (magic, version, the method, a JSON
 //! header and typed, checksummed sections; `docs/asset-format.md`) and the
-//! method an asset holds. aobake's core, worker and CLI read assets
+//! method an asset holds, and each family's run time (so far the grids).
+//! aobake's core, worker and CLI read assets
 //! through it, and so can an engine's tools. It must not depend on a ray
 //! tracer, linear algebra, a glTF reader or an async runtime (no obvhs,
 //! faer, gltf, tokio or axum; DESIGN §2): a test holds it to its short
 //! list of dependencies.
 //!
-//! Layers, bottom up: `method`, `container`.
+//! Layers, bottom up: `method` (a method's identity; each family's run
+//! time in its folder below it: [`method::grid`] so far), `container`.
+//! Each family's codec reads and writes the container.
 
 pub mod container;
 pub mod method;
@@ -35,7 +38,14 @@ mod tests {
             .filter_map(|l| l.split(['.', ' ', '=']).next())
             .filter(|name| !name.is_empty() && !name.starts_with('#'))
             .collect();
-        let allowed = ["crc32fast", "half", "serde", "serde_json", "thiserror"];
+        let allowed = [
+            "crc32fast",
+            "glam",
+            "half",
+            "serde",
+            "serde_json",
+            "thiserror",
+        ];
         for d in &deps {
             assert!(allowed.contains(d), "aobake-runtime depends on {d}");
         }

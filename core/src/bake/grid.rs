@@ -26,7 +26,7 @@ use crate::{
     method::Method,
     method::grid::{
         evaluate::{GridEvaluation, GridVariant, GroundTruth, Inputs, Predictor},
-        field::{GridBox, RawCell, Slab, finish, part_scene, trace_layers},
+        field::{self, GridBox, RawCell, Slab, finish, part_scene, trace_layers},
         model::{GridModel, PartGrid, Terms},
         parts::{Part, parts},
         tclip::TClip,
@@ -99,7 +99,7 @@ impl Bake<'_> {
     fn part_grid(&self, part: &Part) -> (Vec<glam::Vec3>, Vec<[u32; 3]>, GridBox) {
         let o = &self.plan.params.grid;
         let (_, positions, triangles) = part.mesh(&self.inputs.character);
-        let grid = GridBox::around(&positions, o.epsilon, o.resolution);
+        let grid = field::around(&positions, o.epsilon, o.resolution);
         (positions, triangles, grid)
     }
 

@@ -11,7 +11,7 @@ use aobake_core::{
         Method,
         grid::{
             GridOptions, PartsMode,
-            field::{GridBox, Slab, finish, part_scene, trace_layers},
+            field::{self, Slab, finish, part_scene, trace_layers},
             model::{GridModel, PartGrid, Terms},
             tclip::TClip,
         },
@@ -113,7 +113,7 @@ fn the_cone_lookup_gives_the_sphere_over_a_plane_and_the_plain_rule_half() {
     let scene = part_scene(&ball.positions, &ball.triangles).unwrap();
     // A tiny ε: a grid wide enough that the boundary rescale barely
     // touches the values looked up.
-    let grid = GridBox::around(&ball.positions, 0.005, 48);
+    let grid = field::around(&ball.positions, 0.005, 48);
     let mut cells = Vec::new();
     trace_layers::<TraceError>(
         &scene,

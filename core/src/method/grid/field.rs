@@ -2,77 +2,41 @@
 //! z-layer at a time, as `slab` jobs compute it), and the finishing steps
 //! of §3.3 that turn the traced cells into what the asset stores.
 
-use glam::{Mat4, Vec3};
-use serde::{Deserialize, Serialize};
+use glam::Vec3;
+
+pub use aobake_runtime::method::grid::GridBox;
 
 use crate::trace::{Scene, SceneOptions, TraceError, VolumeParams, no_progress, volume_occlusion};
 
-/// Where a part's grid sits in the part's (bind) space: an axis-aligned
-/// box of `2·half` around `centre`, cut into `resolution³` cells whose
-/// centres are the sample points.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct GridBox {
-    /// Centre of the part's bounding box.
-    pub centre: Vec3,
-    /// The grid's half extent per axis, e_i of Eq. 4.
-    pub half: Vec3,
-    /// Cells per edge.
-    pub resolution: usize,
+/// The grid around `positions` (a part in bind space) by Eq. 4:
+/// e_i = r_i + √(A_i / 4πε), r_i the bounding box's half size and A_i
+/// its area seen along axis i. A flat or thin part keeps a grid of at
+/// least a thousandth of its largest size along every axis.
+pub fn around(positions: &[Vec3], epsilon: f32, resolution: usize) -> GridBox {
+    let (lo, hi) =
+        crate::geometry::bounds(positions.iter().copied()).unwrap_or((Vec3::ZERO, Vec3::ZERO));
+    let r = (hi - lo) * 0.5;
+    let floor = (r.max_element() * 1e-3).max(1e-6);
+    let area = Vec3::new(4.0 * r.y * r.z, 4.0 * r.x * r.z, 4.0 * r.x * r.y);
+    let half = r + (area / (4.0 * std::f32::consts::PI * epsilon)).map(f32::sqrt);
+    GridBox {
+        centre: (lo + hi) * 0.5,
+        half: half.max(Vec3::splat(floor)),
+        resolution,
+    }
 }
 
-impl GridBox {
-    /// The grid around `positions` (a part in bind space) by Eq. 4:
-    /// e_i = r_i + √(A_i / 4πε), r_i the bounding box's half size and A_i
-    /// its area seen along axis i. A flat or thin part keeps a grid of at
-    /// least a thousandth of its largest size along every axis.
-    pub fn around(positions: &[Vec3], epsilon: f32, resolution: usize) -> Self {
-        let (lo, hi) =
-            crate::geometry::bounds(positions.iter().copied()).unwrap_or((Vec3::ZERO, Vec3::ZERO));
-        let r = (hi - lo) * 0.5;
-        let floor = (r.max_element() * 1e-3).max(1e-6);
-        let area = Vec3::new(4.0 * r.y * r.z, 4.0 * r.x * r.z, 4.0 * r.x * r.y);
-        let half = r + (area / (4.0 * std::f32::consts::PI * epsilon)).map(f32::sqrt);
-        Self {
-            centre: (lo + hi) * 0.5,
-            half: half.max(Vec3::splat(floor)),
-            resolution,
-        }
-    }
-
-    /// How far Eq. 4 reaches beyond the part's bounding box along its
-    /// longest-reaching axis: max_i √(A_i / 4πε). Beyond it the part's
-    /// occlusion is below ε.
-    pub fn reach(positions: &[Vec3], epsilon: f32) -> f32 {
-        let (lo, hi) =
-            crate::geometry::bounds(positions.iter().copied()).unwrap_or((Vec3::ZERO, Vec3::ZERO));
-        let r = (hi - lo) * 0.5;
-        let area = Vec3::new(4.0 * r.y * r.z, 4.0 * r.x * r.z, 4.0 * r.x * r.y);
-        (area / (4.0 * std::f32::consts::PI * epsilon))
-            .map(f32::sqrt)
-            .max_element()
-    }
-
-    /// The sample point of cell (x, y, z), bind space.
-    pub fn cell_centre(&self, x: usize, y: usize, z: usize) -> Vec3 {
-        let n = self.resolution as f32;
-        let u = (Vec3::new(x as f32, y as f32, z as f32) + 0.5) / n;
-        self.centre - self.half + 2.0 * self.half * u
-    }
-
-    /// The matrix from bind space to grid space, where the box is [0, 1]³.
-    pub fn grid_from_bind(&self) -> Mat4 {
-        Mat4::from_scale(0.5 / self.half) * Mat4::from_translation(self.half - self.centre)
-    }
-
-    /// Cells in one z-layer.
-    pub fn layer_cells(&self) -> usize {
-        self.resolution * self.resolution
-    }
-
-    /// Cells of the grid.
-    pub fn cells(&self) -> usize {
-        self.resolution.pow(3)
-    }
+/// How far Eq. 4 reaches beyond the part's bounding box along its
+/// longest-reaching axis: max_i √(A_i / 4πε). Beyond it the part's
+/// occlusion is below ε.
+pub fn reach(positions: &[Vec3], epsilon: f32) -> f32 {
+    let (lo, hi) =
+        crate::geometry::bounds(positions.iter().copied()).unwrap_or((Vec3::ZERO, Vec3::ZERO));
+    let r = (hi - lo) * 0.5;
+    let area = Vec3::new(4.0 * r.y * r.z, 4.0 * r.x * r.z, 4.0 * r.x * r.y);
+    (area / (4.0 * std::f32::consts::PI * epsilon))
+        .map(f32::sqrt)
+        .max_element()
 }
 
 /// One traced cell.
@@ -362,7 +326,7 @@ mod tests {
     #[test]
     fn the_grid_of_a_cube_reaches_about_three_times_its_half_size() {
         let cube = [Vec3::splat(-1.0), Vec3::splat(1.0)];
-        let g = GridBox::around(&cube, 0.1, 32);
+        let g = around(&cube, 0.1, 32);
         // e = 1 + √(4 / 0.4π) = 2.78 (the paper: "about 3 r").
         assert!((g.half.x - 2.784).abs() < 1e-3, "{}", g.half);
         assert_eq!(g.half.x, g.half.z);
@@ -378,7 +342,7 @@ mod tests {
         let c = m.transform_point3(g.cell_centre(0, 31, 5));
         assert!(c.abs_diff_eq(Vec3::new(0.5, 31.5, 5.5) / 32.0, 1e-6), "{c}");
         // A flat part still gets depth from its area.
-        let flat = GridBox::around(
+        let flat = around(
             &[Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 0.0, 1.0)],
             0.1,
             8,

@@ -24,21 +24,19 @@
 //! The jobs (`slab` → `assemble` → `evaluate` → `preview`) are in
 //! `bake::grid`.
 
-pub mod codec;
 pub mod evaluate;
 pub mod field;
-pub mod model;
 pub mod parts;
-pub mod tclip;
+
+/// The run time (the model, the codec, `T_clip`) is the runtime crate's,
+/// which engines read grid assets with.
+pub use aobake_runtime::method::grid::{ALGORITHM_VERSION, codec, model, tclip};
 
 pub use parts::PartsMode;
 
 use serde::{Deserialize, Serialize};
 
 use crate::trace::MAX_SAMPLES;
-
-/// The version of the grid bake's algorithm, part of the bake key.
-pub const ALGORITHM_VERSION: u32 = 1;
 
 /// A grid bake's options (DESIGN §5), with the paper's defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -151,7 +149,7 @@ impl GridOptions {
         self.max_distance.unwrap_or_else(|| {
             parts
                 .iter()
-                .map(|p| field::GridBox::reach(&p.mesh(character).1, self.epsilon))
+                .map(|p| field::reach(&p.mesh(character).1, self.epsilon))
                 .fold(0.0f32, f32::max)
                 .max(f32::MIN_POSITIVE)
         })

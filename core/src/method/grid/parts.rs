@@ -24,8 +24,7 @@ pub enum PartsMode {
     Joints,
 }
 
-/// Most parts a grid bake takes (each costs a grid and its bake).
-pub const MAX_PARTS: usize = 256;
+pub use aobake_runtime::method::grid::MAX_PARTS;
 
 /// Weight at or above which a vertex counts as carried by one joint alone.
 const RIGID_WEIGHT: f32 = 0.999;

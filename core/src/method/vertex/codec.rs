@@ -5,6 +5,7 @@
 //! with valid checksums is refused with a message.
 
 use aobake_runtime::Method;
+pub use aobake_runtime::container::AssetHeaderFields;
 use half::f16;
 use serde::{Deserialize, Serialize};
 
@@ -505,21 +506,6 @@ fn linear_weight_sections(m: &VertexLinear, tags: [[u8; 4]; 2]) -> Vec<Section> 
         sections.push(section(tags[1], Data::F32(d.clone())));
     }
     sections
-}
-
-/// The parts of the header that come from the bake rather than the model.
-#[derive(Debug, Clone, PartialEq)]
-pub struct AssetHeaderFields {
-    /// The program that wrote it, such as `aobake 0.1.0`.
-    pub generator: String,
-    /// The bake key.
-    pub bake_key: String,
-    /// sha256 of the character upload.
-    pub character: String,
-    /// sha256 of the clip uploads.
-    pub clips: Vec<String>,
-    /// The bake's fully defaulted parameters.
-    pub params: serde_json::Value,
 }
 
 /// Most vertices, joints, pose clusters and dimensions an asset may

@@ -1,6 +1,9 @@
 //! What names a method: its name (CLI, API, headers), its code (the
-//! asset preamble) and its family (the shape of its bake). Nothing here
-//! reaches into a method's code, so every floor may read it.
+//! asset preamble) and its family (the shape of its bake); and, one folder
+//! per family below, what an engine needs to read and evaluate the
+//! family's assets (`grid` so far; the vertex and cubemap families follow).
+
+pub mod grid;
 
 use serde::{Deserialize, Serialize};
 

@@ -13,20 +13,15 @@
 //! Reading checks every number and every section's length, so a hostile
 //! file with valid checksums is refused with a message.
 
-use aobake_runtime::Method;
+use crate::method::Method;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    ALGORITHM_VERSION,
-    field::GridBox,
+    ALGORITHM_VERSION, GridBox, MAX_PARTS,
     model::{GridModel, PartGrid},
-    parts::MAX_PARTS,
     tclip::TClip,
 };
-use crate::{
-    asset::{AssetError, Container, Data, Section},
-    method::vertex::AssetHeaderFields,
-};
+use crate::container::{AssetError, AssetHeaderFields, Container, Data, Section};
 
 /// What the stored values mean, written into every header.
 pub const UNITS: &str = "occlusion each part casts into space: ao_grid = 2 x the occluded fraction of the sphere, rescaled to 0 on the grid's boundary";

@@ -19,11 +19,11 @@
 //! `shaders/wgsl/grid_ao.wgsl` is the same function for engines; a worker
 //! test holds the two together.
 
-use aobake_runtime::Method;
+use crate::method::Method;
 use glam::{Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
-use super::{field::GridBox, tclip::TClip};
+use super::{GridBox, tclip::TClip};
 
 /// One part's baked grid.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
