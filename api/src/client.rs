@@ -7,9 +7,9 @@ use serde::{Serialize, de::DeserializeOwned};
 use sha2::{Digest as _, Sha256};
 
 use crate::types::{
-    Action, BakeRequest, BakeView, CheckpointRef, CheckpointRequest, CompleteRequest, Completion,
+    BakeRequest, BakeView, CheckpointRef, CheckpointRequest, CompleteRequest, Completion,
     FailRequest, HeartbeatReply, HeartbeatRequest, Lease, LeaseRequest, NewToken, NewTokenRequest,
-    PatchBody, PreviewList, Problem, TokenRequest, Uploaded, Whoami, WorkerRow,
+    Problem, TokenRequest, Uploaded, Whoami,
 };
 
 /// The longest a call waits in all on a server that answers 429 before it
@@ -106,11 +106,6 @@ impl Client {
                 .build()
                 .into(),
         }
-    }
-
-    /// The server's URL.
-    pub fn base(&self) -> &str {
-        &self.base
     }
 
     fn url(&self, path: &str) -> String {
@@ -300,48 +295,14 @@ impl Client {
         self.get_bytes(&format!("/v1/bakes/{id}/report"))
     }
 
-    /// `GET /v1/bakes/{id}/previews`.
-    pub fn previews(&self, id: i64) -> Result<PreviewList> {
-        self.get(&format!("/v1/bakes/{id}/previews"))
-    }
-
     /// `GET /v1/assets/{digest}`: the published bytes.
     pub fn asset(&self, digest: &str) -> Result<Vec<u8>> {
         self.get_bytes(&format!("/v1/assets/{digest}"))
     }
 
-    /// `GET /v1/previews/{digest}`: a preview PNG.
-    pub fn preview(&self, digest: &str) -> Result<Vec<u8>> {
-        self.get_bytes(&format!("/v1/previews/{digest}"))
-    }
-
-    /// `POST /v1/bakes/{id}/{action}`.
-    pub fn control(&self, id: i64, action: Action) -> Result<BakeView> {
-        self.post_for(
-            &format!("/v1/bakes/{id}/{}", action.as_str()),
-            &serde_json::Value::Null,
-        )
-    }
-
-    /// `PATCH /v1/bakes/{id}`: sets the priority.
-    pub fn set_priority(&self, id: i64, priority: i64) -> Result<BakeView> {
-        let res = self.send(|| {
-            self.agent
-                .patch(self.url(&format!("/v1/bakes/{id}")))
-                .header("authorization", &self.auth)
-                .send_json(PatchBody { priority })
-        })?;
-        self.read_json(res)
-    }
-
     /// `GET /v1/whoami`.
     pub fn whoami(&self) -> Result<Whoami> {
         self.get("/v1/whoami")
-    }
-
-    /// `GET /v1/workers`.
-    pub fn workers(&self) -> Result<Vec<WorkerRow>> {
-        self.get("/v1/workers")
     }
 
     /// `POST /v1/tokens` (admin).

@@ -464,6 +464,24 @@ pub struct Problem {
     pub code: String,
 }
 
+impl BakeRequest {
+    /// A request to bake `character` (an upload digest) with `method` and
+    /// the parameter overrides `params`, without clips, at priority 0.
+    pub fn new(
+        character: String,
+        method: &str,
+        params: serde_json::Map<String, serde_json::Value>,
+    ) -> Self {
+        Self {
+            character,
+            clips: Vec::new(),
+            method: method.to_owned(),
+            params,
+            priority: 0,
+        }
+    }
+}
+
 impl BakeState {
     /// Every state.
     pub const ALL: [Self; 6] = [
@@ -532,18 +550,6 @@ impl JobState {
             .into_iter()
             .find(|x| x.as_str() == s)
             .unwrap_or(Self::Blocked)
-    }
-}
-
-impl Action {
-    /// As the path `POST /v1/bakes/{id}/{action}` spells it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Cancel => "cancel",
-            Self::Pause => "pause",
-            Self::Resume => "resume",
-            Self::Retry => "retry",
-        }
     }
 }
 

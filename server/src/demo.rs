@@ -18,14 +18,8 @@ pub(crate) async fn run(url: &str, token: &str) -> anyhow::Result<()> {
         let seed = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_secs());
-        let params = json!({ "seed": seed });
-        let bake = api.submit(&BakeRequest {
-            character: c.digest,
-            clips: Vec::new(),
-            method: "vertex-clustered".to_owned(),
-            params: params.as_object().cloned().unwrap_or_default(),
-            priority: 0,
-        })?;
+        let params = serde_json::Map::from_iter([("seed".to_owned(), json!(seed))]);
+        let bake = api.submit(&BakeRequest::new(c.digest, "vertex-clustered", params))?;
         let dashboard = api.create_token(&NewTokenRequest {
             name: "demo dashboard".to_owned(),
             scopes: vec!["read".to_owned(), "submit".to_owned()],

@@ -114,11 +114,9 @@ pub(super) fn submit_files(
         clip_digests.push(r.digest);
     }
     Ok(api.submit(&BakeRequest {
-        character: c.digest,
         clips: clip_digests,
-        method: method.name().to_owned(),
-        params,
         priority,
+        ..BakeRequest::new(c.digest, method.name(), params)
     })?)
 }
 

@@ -5,8 +5,11 @@
 //! names, which are the only places its URIs may point to). The same bytes
 //! give the same digest, so uploading twice is harmless.
 
-use aobake_api::Uploaded;
+// BUNDLE: the content type of a `.gltf` and its side files as one body
+// (the framing of `UploadBytes::to_blob`, whose sha256 is the upload
+// digest), as the one client sends it.
 use aobake_api::schema::{Digest, Refusals};
+use aobake_api::{Uploaded, client::BUNDLE};
 use aobake_core::{SideFile, bake::UploadBytes, import_character, import_clips, summary::Summary};
 use axum::{
     Json, Router,
@@ -32,10 +35,6 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/clips", post(post_clips))
         .route("/v1/clips/{digest}", get(get_clips))
 }
-
-/// The content type of a `.gltf` and its side files as one body: the
-/// framing of `UploadBytes::to_blob`, whose sha256 is the upload digest.
-const BUNDLE: &str = "application/vnd.aobake.bundle";
 
 /// Reads the body: one file, a bundle, or multipart parts.
 /// An upload's bytes and, for multipart, the main part's file name.

@@ -243,13 +243,14 @@ pub(super) trait Backend: Send + Sync + std::fmt::Debug + 'static {
     /// A statement with the dialect's placeholders expanded.
     fn sql(text: &str) -> Stmt {
         let mut sql = text.to_owned();
-        for (name, value) in [
-            ("{now}", Self::NOW),
-            ("{deps}", Self::DEPS),
-            ("{for_update}", Self::FOR_UPDATE),
-            ("{skip_locked}", Self::SKIP_LOCKED),
-        ] {
-            if sql.contains(name) {
+        // Most statements have no placeholder: nothing to replace.
+        if text.contains('{') {
+            for (name, value) in [
+                ("{now}", Self::NOW),
+                ("{deps}", Self::DEPS),
+                ("{for_update}", Self::FOR_UPDATE),
+                ("{skip_locked}", Self::SKIP_LOCKED),
+            ] {
                 sql = sql.replace(name, value);
             }
         }

@@ -233,14 +233,16 @@ fn big_bake(api: &Client, jobs: usize) -> anyhow::Result<i64> {
     static RIGGED: &[u8] =
         include_bytes!("../../../../tests/data/characters/RiggedSimple/RiggedSimple.glb");
     let c = api.upload_character(RIGGED, false, "RiggedSimple.glb")?;
-    let params = json!({"poses": 4 * jobs, "samples": 1, "eval_poses": 0, "seed": rand_seed()});
-    let b = api.submit(&BakeRequest {
-        character: c.digest,
-        clips: Vec::new(),
-        method: "vertex-linear".to_owned(),
-        params: params.as_object().cloned().unwrap_or_default(),
-        priority: 0,
-    })?;
+    let params = serde_json::Map::from_iter(
+        [
+            ("poses", json!(4 * jobs)),
+            ("samples", json!(1)),
+            ("eval_poses", json!(0)),
+            ("seed", json!(rand_seed())),
+        ]
+        .map(|(k, v)| (k.to_owned(), v)),
+    );
+    let b = api.submit(&BakeRequest::new(c.digest, "vertex-linear", params))?;
     Ok(b.bake.id)
 }
 
