@@ -82,6 +82,7 @@ impl Bake<'_> {
             | JobSpec::Fit
             | JobSpec::Unseen { .. }
             | JobSpec::Slab { .. }
+            | JobSpec::PreviewTruth { .. }
             | JobSpec::Preview => Err(self.foreign(spec)),
         }
     }
@@ -129,7 +130,11 @@ impl Bake<'_> {
                 deps: Vec::new(),
             })
             .collect();
-        JobGraph::assemble_evaluate_preview(jobs, options.previews)
+        JobGraph::assemble_evaluate_preview(
+            jobs,
+            self.preview_truth_jobs(options),
+            options.previews,
+        )
     }
 
     /// A `face` job: resumes from `resume`'s parts, traces the remaining

@@ -16,11 +16,15 @@ use crate::{
 
 use super::{
     Bake, BakeError, BakeInputs, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph,
-    JobOutput, JobSink, JobSpec, Plan, PoseSet,
+    JobOutput, JobSink, JobSpec, Plan, PlannedJob, PoseSet,
     cubemap::CubemapReport,
     grid::GridReport,
-    jobs::{find, json, named},
-    preview::{PreviewInfo, PreviewModel, Renderer, STILL_FRACTIONS, Subject, preview_clip},
+    jobs::{IndexedBlock, find, json, named, parse, stack_blocks},
+    preview::{
+        self, FrameTruth, GROUND_GRID, PreviewFrames, PreviewInfo, PreviewModel, Renderer,
+        STILL_FRACTIONS, Subject, TruthTracing, animation_times, frame_poses, preview_clip,
+        still_times,
+    },
     vertex::Report,
 };
 
@@ -77,6 +81,9 @@ impl<'a> Bake<'a> {
         resume: Option<Checkpoint>,
         sink: &mut dyn JobSink,
     ) -> Result<JobOutput, JobError> {
+        if let JobSpec::PreviewTruth { first, count } = spec {
+            return self.preview_truth(*first, *count);
+        }
         match self.plan.params.method.family() {
             Family::Vertex => self.vertex_job(spec, deps, resume, sink),
             Family::Cubemap => self.cubemap_job(spec, deps, resume, sink),
@@ -84,9 +91,158 @@ impl<'a> Bake<'a> {
         }
     }
 
+    /// How the previews' ground truth is traced: the held-out rays, as
+    /// [`BakedAsset::preview_model`] reads them from the asset (a grid's
+    /// distance limit and rays as its evaluation traces; a cubemap's
+    /// ground as Eq. 3.1 over its spheroid, what it stores).
+    pub fn preview_tracing(&self) -> Result<TruthTracing, JobError> {
+        let params = &self.plan.params;
+        let surface = params.held_out_surface();
+        Ok(match params.method.family() {
+            Family::Vertex => TruthTracing {
+                surface,
+                kroon: None,
+            },
+            Family::Cubemap => TruthTracing {
+                surface,
+                kroon: Some(params.cubemap_truth(&self.cubemap_setup()?.spheroid)),
+            },
+            Family::Grid => TruthTracing {
+                surface: params
+                    .grid
+                    .truth(self.grid_distance(&self.grid_parts()?), surface.seed),
+                kroon: None,
+            },
+        })
+    }
+
+    /// The frames the previews show: the clip (a cubemap's baked clip,
+    /// else the first held-out clip), the stills' times and the
+    /// animation's.
+    pub fn preview_frames(&self) -> Result<PreviewFrames<'_>, JobError> {
+        let clips = &self.inputs.clips;
+        let clip = match self.plan.params.method.family() {
+            Family::Cubemap => Some(&clips[self.cubemap_clip()?]),
+            Family::Vertex | Family::Grid => {
+                preview_clip(clips, &self.plan.test).map(|i| &clips[i])
+            }
+        };
+        let fractions: Vec<f32> = clip.map_or_else(Vec::new, |c| {
+            STILL_FRACTIONS.iter().map(|f| f * c.duration).collect()
+        });
+        Ok(PreviewFrames {
+            clip,
+            stills: still_times(clip, &fractions),
+            animation: clip.map(animation_times).unwrap_or_default(),
+        })
+    }
+
+    /// The `preview-truth` jobs of the previews' frames in batches of
+    /// `options.sample_batch`; none without previews.
+    pub(super) fn preview_truth_jobs(&self, options: GraphOptions) -> Vec<PlannedJob> {
+        let frames = match self.preview_frames() {
+            Ok(f) if options.previews => f.len(),
+            // A bake without previews, or one whose clip is missing (its
+            // preview job says so).
+            _ => 0,
+        };
+        let batch = options.sample_batch.max(1);
+        (0..frames)
+            .step_by(batch)
+            .map(|first| PlannedJob {
+                spec: JobSpec::PreviewTruth {
+                    first,
+                    count: batch.min(frames - first),
+                },
+                deps: Vec::new(),
+            })
+            .collect()
+    }
+
+    /// Runs a `preview-truth` job: the ground truth of preview frames
+    /// `first..first + count`, as three outputs: `preview-truth` and
+    /// `preview-ground` ([`IndexedBlock`]s of the character's and the
+    /// ground's occlusion) and `preview-truth.json` (the seconds each
+    /// frame took).
+    fn preview_truth(&self, first: usize, count: usize) -> Result<JobOutput, JobError> {
+        let frames = self.preview_frames()?;
+        let times = frames.times();
+        let end = first.checked_add(count).filter(|&e| e <= times.len());
+        let Some(end) = end else {
+            return Err(JobError::Invalid(format!(
+                "preview frames {first}..{} are outside the {} frames",
+                first.saturating_add(count),
+                times.len()
+            )));
+        };
+        let character = &self.inputs.character;
+        let ground = preview::camera(character, frames.clip).ground();
+        let poses = frame_poses(character, frames.clip, &times[first..end]);
+        let truth = self.preview_tracing()?.trace(character, &poses, &ground)?;
+        let mut out = JobOutput::default();
+        out.push(
+            TRUTH,
+            IndexedBlock {
+                first,
+                block: truth.character,
+            }
+            .to_bytes(),
+        );
+        out.push(
+            GROUND,
+            IndexedBlock {
+                first,
+                block: truth.ground,
+            }
+            .to_bytes(),
+        );
+        out.push(
+            SECONDS,
+            json(&TruthSeconds {
+                first,
+                seconds: truth.seconds,
+            }),
+        );
+        Ok(out)
+    }
+
+    /// The previews' truth from the `preview-truth` jobs among `deps`, or
+    /// `None` when there are none (a graph from before those jobs: the
+    /// preview traces it itself).
+    fn stacked_truth(
+        &self,
+        deps: &[&JobOutput],
+        frames: usize,
+    ) -> Result<Option<FrameTruth>, JobError> {
+        if !deps.iter().any(|d| d.get(SECONDS).is_some()) {
+            return Ok(None);
+        }
+        let ground = GROUND_GRID * GROUND_GRID;
+        let character = stack_blocks(deps, TRUTH, self.inputs.character.vertex_count(), frames)?;
+        let ground = stack_blocks(deps, GROUND, ground, frames)?;
+        let mut parts: Vec<TruthSeconds> = deps
+            .iter()
+            .filter_map(|d| d.get(SECONDS))
+            .map(parse)
+            .collect::<Result<_, _>>()?;
+        parts.sort_by_key(|p| p.first);
+        let seconds: Vec<f64> = parts.into_iter().flat_map(|p| p.seconds).collect();
+        if seconds.len() != frames {
+            return Err(JobError::Invalid(format!(
+                "the preview truth's seconds cover {} frames, not {frames}",
+                seconds.len()
+            )));
+        }
+        Ok(Some(FrameTruth {
+            character,
+            ground,
+            seconds,
+        }))
+    }
+
     /// Runs a `preview` job: the stills and the animation of the asset
     /// that `assemble` produced, on `renderer`, and `previews.json`
-    /// listing them.
+    /// listing them. Their truth comes from the `preview-truth` jobs.
     pub fn preview(
         &self,
         deps: &[&JobOutput],
@@ -100,24 +256,23 @@ impl<'a> Bake<'a> {
         let (model, surface) = baked
             .preview_model()
             .map_err(|e| JobError::Invalid(e.to_string()))?;
-        let clips = &self.inputs.clips;
-        let clip = match self.plan.params.method.family() {
-            Family::Cubemap => Some(&clips[self.cubemap_clip()?]),
-            Family::Vertex | Family::Grid => {
-                preview_clip(clips, &self.plan.test).map(|i| &clips[i])
-            }
-        };
+        let frames = self.preview_frames()?;
+        let truth = self.stacked_truth(deps, frames.len())?;
+        let stills = frames.stills.len();
         let subject = Subject {
             character: &self.inputs.character,
             model,
             surface,
         };
-        let times: Vec<f32> = clip.map_or_else(Vec::new, |c| {
-            STILL_FRACTIONS.iter().map(|f| f * c.duration).collect()
-        });
-        let mut previews = subject.stills(clip, &times, renderer)?;
-        if let Some(c) = clip {
-            previews.push(subject.animation(c, renderer)?);
+        let mut previews = subject.stills(
+            frames.clip,
+            &frames.stills,
+            truth.as_ref().map(|t| t.select(0..stills)),
+            renderer,
+        )?;
+        if let Some(c) = frames.clip {
+            let animation = truth.as_ref().map(|t| t.select(stills..t.frames()));
+            previews.push(subject.animation(c, animation, renderer)?);
         }
         let mut out = JobOutput::default();
         let infos: Vec<&PreviewInfo> = previews.iter().map(|p| &p.info).collect();
@@ -128,6 +283,22 @@ impl<'a> Bake<'a> {
         out.timings = assembled.timings;
         Ok(out)
     }
+}
+
+/// A `preview-truth` job's character occlusion ([`IndexedBlock`]).
+const TRUTH: &str = "preview-truth";
+/// A `preview-truth` job's ground occlusion ([`IndexedBlock`]).
+const GROUND: &str = "preview-ground";
+/// A `preview-truth` job's seconds per frame ([`TruthSeconds`]).
+const SECONDS: &str = "preview-truth.json";
+
+/// The seconds each frame of a `preview-truth` job took to trace.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct TruthSeconds {
+    /// The job's first frame.
+    first: usize,
+    /// Seconds per frame.
+    seconds: Vec<f64>,
 }
 
 /// Either kind of report, told apart by its method's family.

@@ -58,12 +58,24 @@ impl JobGraph {
 
 impl JobGraph {
     /// The stages after a volume method's tracing jobs (`producers`):
-    /// `assemble` after them, `evaluate` after `assemble` and them (it
-    /// judges the encoding against the raw fields), and, with `previews`,
-    /// `preview` after `assemble` and `evaluate`.
-    pub(super) fn assemble_evaluate_preview(jobs: Vec<PlannedJob>, previews: bool) -> Self {
-        let mut jobs = jobs;
+    /// the previews' `truth` jobs beside them, `assemble` after the
+    /// producers, `evaluate` after `assemble` and them (it judges the
+    /// encoding against the raw fields), and, with `previews`, `preview`
+    /// after `assemble`, `evaluate` and the truth jobs.
+    pub(super) fn assemble_evaluate_preview(
+        producers: Vec<PlannedJob>,
+        truth: Vec<PlannedJob>,
+        previews: bool,
+    ) -> Self {
+        let mut jobs = producers;
         let producers: Vec<usize> = (0..jobs.len()).collect();
+        let truth: Vec<usize> = truth
+            .into_iter()
+            .map(|job| {
+                jobs.push(job);
+                jobs.len() - 1
+            })
+            .collect();
         jobs.push(PlannedJob {
             spec: JobSpec::Assemble,
             deps: producers.clone(),
@@ -77,9 +89,11 @@ impl JobGraph {
         });
         if previews {
             let evaluate = jobs.len() - 1;
+            let mut deps = vec![assemble, evaluate];
+            deps.extend(truth);
             jobs.push(PlannedJob {
                 spec: JobSpec::Preview,
-                deps: vec![assemble, evaluate],
+                deps,
             });
         }
         Self { jobs }

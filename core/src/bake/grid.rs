@@ -76,6 +76,7 @@ impl Bake<'_> {
             | JobSpec::Fit
             | JobSpec::Unseen { .. }
             | JobSpec::Face { .. }
+            | JobSpec::PreviewTruth { .. }
             | JobSpec::Preview => Err(self.foreign(spec)),
         }
     }
@@ -122,7 +123,11 @@ impl Bake<'_> {
                 });
             }
         }
-        JobGraph::assemble_evaluate_preview(jobs, options.previews)
+        JobGraph::assemble_evaluate_preview(
+            jobs,
+            self.preview_truth_jobs(options),
+            options.previews,
+        )
     }
 
     /// A `slab` job: layers `first..first + count` of part `part`'s grid,

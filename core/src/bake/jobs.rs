@@ -14,7 +14,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{asset::Container, method::vertex::FitStep};
+use crate::{asset::Container, method::vertex::FitStep, trace::AoBlock};
 
 use super::{BakeError, BakeInputs, Plan, report::Timings};
 
@@ -85,6 +85,16 @@ pub enum JobSpec {
     Evaluate,
     /// Pack the asset, the report and the plot.
     Assemble,
+    /// Trace the ground truth of preview frames `first..first + count`
+    /// (the stills', then the animation's: see [`Bake::preview_frames`]).
+    /// It needs no model, so it runs beside the tracing jobs and leaves
+    /// `preview` only the drawing.
+    PreviewTruth {
+        /// The first frame.
+        first: usize,
+        /// Frames in this batch.
+        count: usize,
+    },
     /// Render the asset's previews (needs a [`Renderer`]).
     Preview,
 }
@@ -100,16 +110,19 @@ impl JobSpec {
             Self::Unseen { .. } => "unseen",
             Self::Evaluate => "evaluate",
             Self::Assemble => "assemble",
+            Self::PreviewTruth { .. } => "preview-truth",
             Self::Preview => "preview",
         }
     }
 
     /// Units of progress the job is worth (poses for `sample`, time
-    /// samples for `face`, layers for `slab`, the steps of a fit for `fit`
-    /// and `unseen`, 1 else).
+    /// samples for `face`, layers for `slab`, frames for `preview-truth`,
+    /// the steps of a fit for `fit` and `unseen`, 1 else).
     pub fn work(&self) -> u64 {
         match self {
-            Self::Sample { count, .. } | Self::Slab { count, .. } => *count as u64,
+            Self::Sample { count, .. }
+            | Self::Slab { count, .. }
+            | Self::PreviewTruth { count, .. } => *count as u64,
             Self::Face { times, .. } => *times as u64,
             Self::Fit | Self::Unseen { .. } => FitStep::ALL.len() as u64,
             _ => 1,
@@ -136,6 +149,9 @@ impl std::fmt::Display for JobSpec {
                 write!(f, "slab part {part} layers {first}..{}", first + count)
             }
             Self::Unseen { fold } => write!(f, "unseen fold {fold}"),
+            Self::PreviewTruth { first, count } => {
+                write!(f, "preview truth frames {first}..{}", first + count)
+            }
             other => f.write_str(other.kind()),
         }
     }
@@ -321,6 +337,101 @@ pub(super) fn named<'o>(output: &'o JobOutput, name: &str) -> Result<&'o [u8], J
     output
         .get(name)
         .ok_or_else(|| JobError::Invalid(format!("no output named {name}")))
+}
+
+/// An [`AoBlock`] with the index of its first pose in its set, as a blob:
+/// `AOBK`, format 1 (u32), first pose (u64), vertices (u32), poses (u32),
+/// then the values as little-endian f32, pose-major.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IndexedBlock {
+    /// Index of the block's first pose in its set.
+    pub first: usize,
+    /// The values.
+    pub block: AoBlock,
+}
+
+const BLOCK_MAGIC: &[u8; 4] = b"AOBK";
+const BLOCK_HEAD: usize = 24;
+
+impl IndexedBlock {
+    /// The blob.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let b = &self.block;
+        let mut out = Vec::with_capacity(BLOCK_HEAD + 4 * b.values.len());
+        out.extend(BLOCK_MAGIC);
+        out.extend(1u32.to_le_bytes());
+        out.extend((self.first as u64).to_le_bytes());
+        out.extend((b.vertices as u32).to_le_bytes());
+        out.extend((b.poses() as u32).to_le_bytes());
+        for v in &b.values {
+            out.extend(v.to_le_bytes());
+        }
+        out
+    }
+
+    /// Reads a blob back; `vertices` is what the character has.
+    pub fn from_bytes(bytes: &[u8], vertices: usize) -> Result<Self, JobError> {
+        let bad = |what: &str| JobError::Invalid(format!("an AO block is malformed: {what}"));
+        if bytes.len() < BLOCK_HEAD || &bytes[..4] != BLOCK_MAGIC {
+            return Err(bad("no AOBK header"));
+        }
+        let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().expect("4 bytes"));
+        if u32_at(4) != 1 {
+            return Err(bad("unknown format"));
+        }
+        let first = u64::from_le_bytes(bytes[8..16].try_into().expect("8 bytes"));
+        let (v, p) = (u32_at(16) as usize, u32_at(20) as usize);
+        if v != vertices {
+            return Err(bad("its vertex count is not the character's"));
+        }
+        let body = &bytes[BLOCK_HEAD..];
+        if Some(body.len()) != v.checked_mul(p).and_then(|n| n.checked_mul(4)) {
+            return Err(bad("its length does not match its header"));
+        }
+        let values = body
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+            .collect();
+        Ok(Self {
+            first: usize::try_from(first).map_err(|_| bad("first pose out of range"))?,
+            block: AoBlock { vertices, values },
+        })
+    }
+}
+
+/// The [`IndexedBlock`]s named `name` in `deps`, stacked in pose order;
+/// every pose of `0..poses` must be there exactly once.
+pub(super) fn stack_blocks(
+    deps: &[&JobOutput],
+    name: &str,
+    vertices: usize,
+    poses: usize,
+) -> Result<AoBlock, JobError> {
+    let mut blocks = Vec::new();
+    for d in deps {
+        for o in d.outputs.iter().filter(|o| o.name == name) {
+            blocks.push(IndexedBlock::from_bytes(&o.bytes, vertices)?);
+        }
+    }
+    blocks.sort_by_key(|b| b.first);
+    let mut values = Vec::with_capacity(vertices * poses);
+    let mut next = 0;
+    for b in blocks {
+        if b.first != next {
+            return Err(JobError::Invalid(format!(
+                "{name} blocks do not cover the poses in order (expected pose {next}, got {})",
+                b.first
+            )));
+        }
+        next += b.block.poses();
+        values.extend(b.block.values);
+    }
+    if next != poses {
+        return Err(JobError::Invalid(format!(
+            "{name} blocks hold {next} poses, not {poses}"
+        )));
+    }
+    Ok(AoBlock { vertices, values })
 }
 
 /// The model of an asset, read by its method's codec (`from_container`).

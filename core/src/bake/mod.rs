@@ -12,8 +12,9 @@
 //!    [`jobs`]; each family's graph, jobs, evaluation and report in its
 //!    own file: [`vertex`] (`sample`, `fit`, `unseen`, `evaluate`,
 //!    `assemble`), [`cubemap`] (`face`, `assemble`, `evaluate`), [`grid`]
-//!    (`slab`, `assemble`, `evaluate`); `preview` ([`preview`]), the same
-//!    for all, also needs a [`Renderer`]; [`report`] holds what the
+//!    (`slab`, `assemble`, `evaluate`); `preview-truth` and `preview`
+//!    ([`preview`]), the same for all (in [`family`]), the second of
+//!    which also needs a [`Renderer`]; [`report`] holds what the
 //!    reports share. [`family`], above them all, is the one place per
 //!    concern that hands a bake to its family.
 //! 6. [`run_graph`] ([`runner`]): the whole graph in this process.
@@ -40,7 +41,8 @@ pub use family::{AssetUseError, BakeReport, BakedAsset};
 pub use graph::{GraphOptions, JobGraph, PlannedJob};
 pub use inputs::{BakeInputs, BundleError, InputError, UploadBytes};
 pub use jobs::{
-    Bake, Checkpoint, JobError, JobOutput, JobSink, JobSpec, NoSink, Output, PoseSet, Stop,
+    Bake, Checkpoint, IndexedBlock, JobError, JobOutput, JobSink, JobSpec, NoSink, Output, PoseSet,
+    Stop,
 };
 pub use params::{BakeError, BakeParams, ReferenceSource, bake_key};
 pub use plan::{Plan, TestPose};
@@ -48,7 +50,7 @@ pub use preview::{
     Camera, Panel, Preview, PreviewInfo, PreviewModel, RenderFrame, RenderScene, Renderer,
 };
 pub use runner::{Baked, JobEvent, bake_in_process, run_graph};
-pub use vertex::{ClipEvaluation, Comparison, Evaluation, IndexedBlock, UnseenClips, UnseenFold};
+pub use vertex::{ClipEvaluation, Comparison, Evaluation, UnseenClips, UnseenFold};
 
 pub use crate::digest::sha256_hex;
 pub use crate::method::vertex::FitStats;

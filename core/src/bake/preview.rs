@@ -27,8 +27,8 @@ use crate::{
     method::{Method, cubemap::model::CubemapModel, grid::model::GridModel, vertex::Model},
     rig::{clip::Clip, pose::Pose},
     trace::{
-        KroonParams, Scene, SceneOptions, SurfaceParams, kroon_occlusion, no_progress,
-        surface_occlusion, trace_poses,
+        AoBlock, KroonParams, Scene, SceneOptions, SurfaceMesh, SurfaceParams, kroon_occlusion,
+        no_progress, surface_occlusion, vertex_occlusion,
     },
 };
 
@@ -333,28 +333,20 @@ pub struct Subject<'a> {
 }
 
 impl Subject<'_> {
-    /// The camera for a clip (the box over all its frames at 30 fps, at
-    /// most 240 of them) or for the rest pose.
+    /// The camera for a clip or for the rest pose ([`camera`]).
     pub fn camera(&self, clip: Option<&Clip>) -> Camera {
-        let poses: Vec<Pose> = match clip {
-            Some(c) => c
-                .sample_times(30.0, 240)
-                .into_iter()
-                .map(|t| Pose::sample(&self.character.skeleton, c, t))
-                .collect(),
-            None => vec![Pose::rest(&self.character.skeleton)],
-        };
-        let (mut min, mut max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for pose in &poses {
-            for p in self.character.skin(pose).positions {
-                min = min.min(p);
-                max = max.max(p);
-            }
+        camera(self.character, clip)
+    }
+
+    /// How this subject's ground truth is traced.
+    pub fn tracing(&self) -> TruthTracing {
+        TruthTracing {
+            surface: self.surface,
+            kroon: match self.model {
+                PreviewModel::Cubemap(_, kroon) => Some(kroon),
+                PreviewModel::Vertex(_) | PreviewModel::Grid(..) => None,
+            },
         }
-        if !min.is_finite() {
-            (min, max) = (Vec3::ZERO, Vec3::ONE);
-        }
-        Camera::framing(min, max)
     }
 
     /// The posed frames at `times` (the rest pose without a clip): the
@@ -366,55 +358,36 @@ impl Subject<'_> {
         times: &[f32],
         ground: &Ground,
     ) -> Result<Vec<RenderFrame>, JobError> {
+        let poses = frame_poses(self.character, clip, times);
+        let truth = self.tracing().trace(self.character, &poses, ground)?;
+        self.frames_with(&poses, times, truth)
+    }
+
+    /// The posed frames of `poses` (at clip `times`) with their truth
+    /// traced already.
+    fn frames_with(
+        &self,
+        poses: &[Pose],
+        times: &[f32],
+        truth: FrameTruth,
+    ) -> Result<Vec<RenderFrame>, JobError> {
         let skeleton = &self.character.skeleton;
-        let poses: Vec<Pose> = times
-            .iter()
-            .map(|&t| match clip {
-                Some(c) => Pose::sample(skeleton, c, t),
-                None => Pose::rest(skeleton),
-            })
-            .collect();
-        let truth = trace_poses(
-            self.character,
-            &poses,
-            &SceneOptions::default(),
-            &self.surface,
-            &no_progress,
-        )
-        .map_err(|e| JobError::Invalid(e.to_string()))?;
-        let vertices = self.character.vertex_count();
-        let up = vec![Vec3::Y; ground.positions.len()];
-        let ground_surface = SurfaceParams {
-            samples: self.surface.samples.min(GROUND_SAMPLES),
-            ..self.surface
-        };
-        let invalid = |e: crate::trace::TraceError| JobError::Invalid(e.to_string());
-        poses
+        if truth.frames() != poses.len()
+            || truth.character.vertices != self.character.vertex_count()
+        {
+            return Err(JobError::Invalid(format!(
+                "the preview's truth holds {} frames of {} vertices, not {} of {}",
+                truth.frames(),
+                truth.character.vertices,
+                poses.len(),
+                self.character.vertex_count()
+            )));
+        }
+        Ok(poses
             .iter()
             .enumerate()
             .map(|(i, pose)| {
                 let posed = self.character.skin(pose);
-                let scene = Scene::new(
-                    &posed.positions,
-                    &self.character.triangles,
-                    &SceneOptions::default(),
-                )
-                .map_err(invalid)?;
-                // The ground's truth: what the cubemap stores (Eq. 3.1),
-                // else surface AO under the character.
-                let ground_ao = match self.model {
-                    PreviewModel::Cubemap(_, kroon) => {
-                        kroon_occlusion(&scene, &ground.positions, None, &kroon, &no_progress)
-                    }
-                    PreviewModel::Vertex(_) | PreviewModel::Grid(..) => surface_occlusion(
-                        &scene,
-                        &ground.positions,
-                        &up,
-                        &ground_surface,
-                        &no_progress,
-                    ),
-                }
-                .map_err(invalid)?;
                 let (weights, phase) = match self.model {
                     PreviewModel::Vertex(model) => (model.weights(skeleton, pose), 0.0),
                     PreviewModel::Grid(model, _) => (
@@ -423,33 +396,30 @@ impl Subject<'_> {
                     ),
                     PreviewModel::Cubemap(model, _) => (Vec::new(), model.layout.phase(times[i])),
                 };
-                Ok(RenderFrame {
+                RenderFrame {
                     positions: posed.positions,
                     normals: posed.normals,
-                    truth: truth.values[i * vertices..(i + 1) * vertices].to_vec(),
+                    truth: truth.character.row(i).to_vec(),
                     weights,
-                    ground_ao,
+                    ground_ao: truth.ground.row(i).to_vec(),
                     phase,
-                })
+                }
             })
-            .collect()
+            .collect())
     }
 
     /// Stills at `times` of `clip` (or one of the rest pose without a
-    /// clip), named `still-{i}.png`.
+    /// clip: see [`still_times`]), named `still-{i}.png`; their truth is
+    /// traced here unless `truth` holds it already.
     pub fn stills(
         &self,
         clip: Option<&Clip>,
         times: &[f32],
+        truth: Option<FrameTruth>,
         renderer: &mut dyn Renderer,
     ) -> Result<Vec<Preview>, JobError> {
-        let times: Vec<f32> = if clip.is_some() {
-            times.to_vec()
-        } else {
-            vec![0.0]
-        };
-        let prepared = self.prepare(clip, &times)?;
-        let trace_s = prepared.trace_s;
+        let times = still_times(clip, times);
+        let prepared = self.prepare(clip, &times, truth)?;
         let panels = [Panel::Truth, Panel::Model, Panel::Error];
         let (images, frame_ms) = self.render(&prepared, STILL_PANEL, &panels, renderer)?;
         let method = self.model.method().name();
@@ -478,7 +448,7 @@ impl Subject<'_> {
                         height: image.height,
                         adapter: renderer.adapter(),
                         frame_ms,
-                        trace_s: trace_s / times.len() as f64,
+                        trace_s: prepared.trace_s[i],
                     },
                     png: encode_image(&image)?,
                 })
@@ -486,17 +456,28 @@ impl Subject<'_> {
             .collect()
     }
 
-    /// The camera, the ground and the traced frames of `times`.
-    fn prepare(&self, clip: Option<&Clip>, times: &[f32]) -> Result<Prepared, JobError> {
+    /// The camera, the ground and the frames of `times`, traced here
+    /// unless `truth` holds them already.
+    fn prepare(
+        &self,
+        clip: Option<&Clip>,
+        times: &[f32],
+        truth: Option<FrameTruth>,
+    ) -> Result<Prepared, JobError> {
         let camera = self.camera(clip);
         let ground = camera.ground();
-        let traced = Instant::now();
-        let frames = self.frames(clip, times, &ground)?;
+        let poses = frame_poses(self.character, clip, times);
+        let truth = match truth {
+            Some(t) => t,
+            None => self.tracing().trace(self.character, &poses, &ground)?,
+        };
+        let trace_s = truth.seconds.clone();
+        let frames = self.frames_with(&poses, times, truth)?;
         Ok(Prepared {
             camera,
             ground,
             frames,
-            trace_s: traced.elapsed().as_secs_f64(),
+            trace_s,
         })
     }
 
@@ -520,21 +501,19 @@ impl Subject<'_> {
         render(renderer, &scene, &prepared.frames, panels)
     }
 
-    /// The clip times of an animation: evenly spaced, fewer per second
-    /// for a long clip.
-    pub fn animation_times(&self, clip: &Clip) -> Vec<f32> {
-        let mut times = clip.frame_times(animation_fps(clip));
-        times.truncate(ANIMATION_MAX_FRAMES);
-        times
-    }
-
     /// The whole clip as an APNG, the model beside the ground truth,
-    /// named `animation.png`.
-    pub fn animation(&self, clip: &Clip, renderer: &mut dyn Renderer) -> Result<Preview, JobError> {
+    /// named `animation.png`; its truth is traced here unless `truth`
+    /// holds it already.
+    pub fn animation(
+        &self,
+        clip: &Clip,
+        truth: Option<FrameTruth>,
+        renderer: &mut dyn Renderer,
+    ) -> Result<Preview, JobError> {
         let fps = animation_fps(clip);
-        let times = self.animation_times(clip);
-        let prepared = self.prepare(Some(clip), &times)?;
-        let trace_s = prepared.trace_s;
+        let times = animation_times(clip);
+        let prepared = self.prepare(Some(clip), &times, truth)?;
+        let trace_s = prepared.trace_s.iter().sum();
         let panels = [Panel::Truth, Panel::Model];
         let (images, frame_ms) = self.render(&prepared, ANIMATION_PANEL, &panels, renderer)?;
         let method = self.model.method().name();
@@ -568,12 +547,201 @@ impl Subject<'_> {
     }
 }
 
-/// What a render call draws: frames traced under one camera.
+/// What a render call draws: frames traced under one camera, and the
+/// seconds each frame's truth took to trace.
 struct Prepared {
     camera: Camera,
     ground: Ground,
     frames: Vec<RenderFrame>,
-    trace_s: f64,
+    trace_s: Vec<f64>,
+}
+
+/// The camera for a clip (the box over all its frames at 30 fps, at
+/// most 240 of them) or for the rest pose.
+pub fn camera(character: &Character, clip: Option<&Clip>) -> Camera {
+    let poses: Vec<Pose> = match clip {
+        Some(c) => c
+            .sample_times(30.0, 240)
+            .into_iter()
+            .map(|t| Pose::sample(&character.skeleton, c, t))
+            .collect(),
+        None => vec![Pose::rest(&character.skeleton)],
+    };
+    let (mut min, mut max) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for pose in &poses {
+        for p in character.skin(pose).positions {
+            min = min.min(p);
+            max = max.max(p);
+        }
+    }
+    if !min.is_finite() {
+        (min, max) = (Vec3::ZERO, Vec3::ONE);
+    }
+    Camera::framing(min, max)
+}
+
+/// The frames a bake's previews show.
+#[derive(Debug, Clone)]
+pub struct PreviewFrames<'c> {
+    /// The clip (none: the rest pose).
+    pub clip: Option<&'c Clip>,
+    /// The stills' times ([`still_times`]).
+    pub stills: Vec<f32>,
+    /// The animation's times ([`animation_times`]; none without a clip).
+    pub animation: Vec<f32>,
+}
+
+impl PreviewFrames<'_> {
+    /// Every frame: the stills', then the animation's.
+    pub fn times(&self) -> Vec<f32> {
+        [self.stills.as_slice(), &self.animation].concat()
+    }
+
+    /// How many frames there are.
+    pub fn len(&self) -> usize {
+        self.stills.len() + self.animation.len()
+    }
+
+    /// Whether there are none (never for a bake: a still at least).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// The times of a bake's stills: `times` of a clip, one at the rest pose
+/// without one.
+pub fn still_times(clip: Option<&Clip>, times: &[f32]) -> Vec<f32> {
+    if clip.is_some() {
+        times.to_vec()
+    } else {
+        vec![0.0]
+    }
+}
+
+/// The clip times of an animation: evenly spaced, fewer per second for a
+/// long clip.
+pub fn animation_times(clip: &Clip) -> Vec<f32> {
+    let mut times = clip.frame_times(animation_fps(clip));
+    times.truncate(ANIMATION_MAX_FRAMES);
+    times
+}
+
+/// The poses at `times` of `clip`, or the rest pose at each without one.
+pub fn frame_poses(character: &Character, clip: Option<&Clip>, times: &[f32]) -> Vec<Pose> {
+    let skeleton = &character.skeleton;
+    times
+        .iter()
+        .map(|&t| match clip {
+            Some(c) => Pose::sample(skeleton, c, t),
+            None => Pose::rest(skeleton),
+        })
+        .collect()
+}
+
+/// How the ground truth of a preview is traced; it needs the bake's
+/// parameters, not its model, so it can be traced while the model is
+/// still being made (the `preview-truth` jobs).
+#[derive(Debug, Clone, Copy)]
+pub struct TruthTracing {
+    /// The character's rays (the bake's held-out seed); the ground's
+    /// surface AO takes at most [`GROUND_SAMPLES`] of them.
+    pub surface: SurfaceParams,
+    /// A cubemap's: the ground's truth is Eq. 3.1 with these parameters,
+    /// what the cubemap stores; else surface AO under the character.
+    pub kroon: Option<KroonParams>,
+}
+
+/// The ray-traced truth of a run of frames.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameTruth {
+    /// Occlusion per vertex, a row per frame.
+    pub character: AoBlock,
+    /// Occlusion of each ground vertex by the character, a row per frame.
+    pub ground: AoBlock,
+    /// Seconds each frame took to trace.
+    pub seconds: Vec<f64>,
+}
+
+impl FrameTruth {
+    /// Frames held.
+    pub fn frames(&self) -> usize {
+        self.seconds.len()
+    }
+
+    /// Frames `range`, in order.
+    pub fn select(&self, range: std::ops::Range<usize>) -> Self {
+        Self {
+            character: self.character.select(range.clone()),
+            ground: self.ground.select(range.clone()),
+            seconds: self.seconds[range].to_vec(),
+        }
+    }
+}
+
+impl TruthTracing {
+    /// The truth of `character` in `poses` over `ground`. Frames are traced
+    /// one at a time (each in parallel inside) and do not depend on each
+    /// other: a run of frames traced in batches stacks into the whole, bit
+    /// for bit.
+    pub fn trace(
+        &self,
+        character: &Character,
+        poses: &[Pose],
+        ground: &Ground,
+    ) -> Result<FrameTruth, JobError> {
+        let invalid = |e: crate::trace::TraceError| JobError::Invalid(e.to_string());
+        let up = vec![Vec3::Y; ground.positions.len()];
+        let ground_surface = SurfaceParams {
+            samples: self.surface.samples.min(GROUND_SAMPLES),
+            ..self.surface
+        };
+        let options = SceneOptions::default();
+        let mut truth = FrameTruth {
+            character: AoBlock {
+                vertices: character.vertex_count(),
+                values: Vec::with_capacity(character.vertex_count() * poses.len()),
+            },
+            ground: AoBlock {
+                vertices: ground.positions.len(),
+                values: Vec::with_capacity(ground.positions.len() * poses.len()),
+            },
+            seconds: Vec::with_capacity(poses.len()),
+        };
+        for pose in poses {
+            let started = Instant::now();
+            // What `trace_poses` does for one pose, the scene kept for the
+            // ground.
+            let posed = character.skin(pose);
+            let scene =
+                Scene::new(&posed.positions, &character.triangles, &options).map_err(invalid)?;
+            let mesh = SurfaceMesh {
+                positions: &posed.positions,
+                normals: &posed.normals,
+                triangles: &character.triangles,
+            };
+            let ao =
+                vertex_occlusion(&scene, &mesh, &self.surface, &no_progress).map_err(invalid)?;
+            // The ground's truth: what the cubemap stores (Eq. 3.1), else
+            // surface AO under the character.
+            let ground_ao = match &self.kroon {
+                Some(kroon) => {
+                    kroon_occlusion(&scene, &ground.positions, None, kroon, &no_progress)
+                }
+                None => surface_occlusion(
+                    &scene,
+                    &ground.positions,
+                    &up,
+                    &ground_surface,
+                    &no_progress,
+                ),
+            }
+            .map_err(invalid)?;
+            truth.character.values.extend(ao);
+            truth.ground.values.extend(ground_ao);
+            truth.seconds.push(started.elapsed().as_secs_f64());
+        }
+        Ok(truth)
+    }
 }
 
 fn animation_fps(clip: &Clip) -> f32 {

@@ -41,69 +41,9 @@ use crate::{
 use super::{
     Bake, BakeError, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink,
     JobSpec, Plan, PlannedJob, PoseSet, TestPose,
-    jobs::{decode_with, find, json, named, parse},
+    jobs::{IndexedBlock, decode_with, find, json, named, parse, stack_blocks},
     report::{CharacterInfo, Sizes, Timings},
 };
-
-/// An [`AoBlock`] with the index of its first pose in its set, as a blob:
-/// `AOBK`, format 1 (u32), first pose (u64), vertices (u32), poses (u32),
-/// then the values as little-endian f32, pose-major.
-#[derive(Debug, Clone, PartialEq)]
-pub struct IndexedBlock {
-    /// Index of the block's first pose in its set.
-    pub first: usize,
-    /// The values.
-    pub block: AoBlock,
-}
-
-const BLOCK_MAGIC: &[u8; 4] = b"AOBK";
-const BLOCK_HEAD: usize = 24;
-
-impl IndexedBlock {
-    /// The blob.
-    pub fn to_bytes(&self) -> Vec<u8> {
-        let b = &self.block;
-        let mut out = Vec::with_capacity(BLOCK_HEAD + 4 * b.values.len());
-        out.extend(BLOCK_MAGIC);
-        out.extend(1u32.to_le_bytes());
-        out.extend((self.first as u64).to_le_bytes());
-        out.extend((b.vertices as u32).to_le_bytes());
-        out.extend((b.poses() as u32).to_le_bytes());
-        for v in &b.values {
-            out.extend(v.to_le_bytes());
-        }
-        out
-    }
-
-    /// Reads a blob back; `vertices` is what the character has.
-    pub fn from_bytes(bytes: &[u8], vertices: usize) -> Result<Self, JobError> {
-        let bad = |what: &str| JobError::Invalid(format!("an AO block is malformed: {what}"));
-        if bytes.len() < BLOCK_HEAD || &bytes[..4] != BLOCK_MAGIC {
-            return Err(bad("no AOBK header"));
-        }
-        let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().expect("4 bytes"));
-        if u32_at(4) != 1 {
-            return Err(bad("unknown format"));
-        }
-        let first = u64::from_le_bytes(bytes[8..16].try_into().expect("8 bytes"));
-        let (v, p) = (u32_at(16) as usize, u32_at(20) as usize);
-        if v != vertices {
-            return Err(bad("its vertex count is not the character's"));
-        }
-        let body = &bytes[BLOCK_HEAD..];
-        if Some(body.len()) != v.checked_mul(p).and_then(|n| n.checked_mul(4)) {
-            return Err(bad("its length does not match its header"));
-        }
-        let values = body
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-            .collect();
-        Ok(Self {
-            first: usize::try_from(first).map_err(|_| bad("first pose out of range"))?,
-            block: AoBlock { vertices, values },
-        })
-    }
-}
 
 /// The fit's statistics and where its inputs came from, as `fit.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -147,6 +87,12 @@ impl Bake<'_> {
         let reference = samples(PoseSet::Reference, &mut jobs);
         let held_out = samples(PoseSet::HeldOut, &mut jobs);
         let noise = samples(PoseSet::Noise, &mut jobs);
+        // The previews' truth beside the tracing: it needs no model.
+        let mut truth = Vec::new();
+        for job in self.preview_truth_jobs(options) {
+            jobs.push(job);
+            truth.push(jobs.len() - 1);
+        }
         jobs.push(PlannedJob {
             spec: JobSpec::Fit,
             deps: reference.clone(),
@@ -175,9 +121,11 @@ impl Bake<'_> {
         });
         if options.previews {
             let assemble = jobs.len() - 1;
+            let mut deps = vec![assemble];
+            deps.extend(truth);
             jobs.push(PlannedJob {
                 spec: JobSpec::Preview,
-                deps: vec![assemble],
+                deps,
             });
         }
         JobGraph { jobs }
@@ -222,9 +170,10 @@ impl Bake<'_> {
             JobSpec::Unseen { fold } => self.unseen(*fold, deps, sink),
             JobSpec::Evaluate => self.evaluate(deps),
             JobSpec::Assemble => self.assemble(deps),
-            JobSpec::Face { .. } | JobSpec::Slab { .. } | JobSpec::Preview => {
-                Err(self.foreign(spec))
-            }
+            JobSpec::Face { .. }
+            | JobSpec::Slab { .. }
+            | JobSpec::PreviewTruth { .. }
+            | JobSpec::Preview => Err(self.foreign(spec)),
         }
     }
 
@@ -308,35 +257,12 @@ impl Bake<'_> {
     /// The blocks of a set, from `deps`, stacked in pose order; every pose
     /// of the set must be there exactly once.
     fn stack(&self, set: PoseSet, deps: &[&JobOutput]) -> Result<AoBlock, JobError> {
-        let vertices = self.inputs.character.vertex_count();
-        let mut blocks = Vec::new();
-        for d in deps {
-            for o in d.outputs.iter().filter(|o| o.name == set.output()) {
-                blocks.push(IndexedBlock::from_bytes(&o.bytes, vertices)?);
-            }
-        }
-        blocks.sort_by_key(|b| b.first);
-        let mut values = Vec::new();
-        let mut next = 0;
-        for b in blocks {
-            if b.first != next {
-                return Err(JobError::Invalid(format!(
-                    "{} blocks do not cover the poses in order (expected pose {next}, got {})",
-                    set.output(),
-                    b.first
-                )));
-            }
-            next += b.block.poses();
-            values.extend(b.block.values);
-        }
-        let want = self.poses_in(set);
-        if next != want {
-            return Err(JobError::Invalid(format!(
-                "{} blocks hold {next} poses, not {want}",
-                set.output()
-            )));
-        }
-        Ok(AoBlock { vertices, values })
+        stack_blocks(
+            deps,
+            set.output(),
+            self.inputs.character.vertex_count(),
+            self.poses_in(set),
+        )
     }
 
     /// The number of poses in a set.

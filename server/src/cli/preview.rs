@@ -88,8 +88,10 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let subject = loaded.subject()?;
     let preview = match args.time {
         Some(t) if !t.is_finite() => bail!("--time must be a finite number of seconds"),
-        Some(t) => subject.stills(Some(clip), &[t], &mut renderer)?.remove(0),
-        None => subject.animation(clip, &mut renderer)?,
+        Some(t) => subject
+            .stills(Some(clip), &[t], None, &mut renderer)?
+            .remove(0),
+        None => subject.animation(clip, None, &mut renderer)?,
     };
     std::fs::write(&args.out, &preview.png)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
@@ -161,8 +163,10 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let still_time = 0.5 * clip.duration;
     for run in 0..args.runs.max(1) {
         for (i, r) in renderers.iter_mut().enumerate() {
-            let s = subject.stills(Some(clip), &[still_time], r)?.remove(0);
-            let a = subject.animation(clip, r)?;
+            let s = subject
+                .stills(Some(clip), &[still_time], None, r)?
+                .remove(0);
+            let a = subject.animation(clip, None, r)?;
             // The first run includes shader compilation and warm-up.
             if run > 0 || args.runs <= 1 {
                 stills[i].push(s.info.frame_ms);
@@ -176,7 +180,7 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         loaded.character.vertex_count(),
         loaded.character.triangles.len(),
         clip.name,
-        subject.animation_times(clip).len(),
+        aobake_core::bake::preview::animation_times(clip).len(),
         args.runs.saturating_sub(1).max(1)
     );
     println!("| adapter | MSAA | still panel 360² (ms) | animation panel 240² (ms) |");

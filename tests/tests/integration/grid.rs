@@ -57,8 +57,13 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
         .iter()
         .map(|j| j["kind"].as_str().unwrap().to_owned())
         .collect();
-    // Three parts (the body and two axles), four slabs of 8 layers each.
+    // Three parts (the body and two axles), four slabs of 8 layers each,
+    // then the previews' truth in batches of 4 frames (3 stills and the
+    // animation's frames) beside them.
+    let truth = kinds.iter().filter(|k| *k == "preview-truth").count();
+    assert!(truth >= 1, "{kinds:?}");
     let mut want = vec!["slab"; 12];
+    want.extend(vec!["preview-truth"; truth]);
     want.extend(["assemble", "evaluate", "preview"]);
     assert_eq!(kinds, want);
     env.start_worker(&[("AOBAKE_FAULT", "after_checkpoint")]);

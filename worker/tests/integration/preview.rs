@@ -282,6 +282,79 @@ fn brightness(baked: &[Image], open: &[Image]) -> (f64, f64, f64) {
     )
 }
 
+/// A bake's previews, made by its graph (the truth traced by its
+/// `preview-truth` jobs, in batches, beside the other tracing), are byte
+/// for byte the previews traced and rendered in one go from its asset, as
+/// `aobake preview` makes them; and the `preview` job needs those jobs.
+fn previews_match_one_go(
+    bake: &aobake_core::bake::Bake<'_>,
+    baked: &aobake_core::bake::Baked,
+    r: &mut PreviewRenderer<'_>,
+) {
+    use aobake_core::{
+        asset::Container,
+        bake::{BakedAsset, GraphOptions, JobSpec},
+    };
+    let graph = bake.graph(GraphOptions::default());
+    let truth: Vec<usize> = (0..graph.jobs.len())
+        .filter(|&i| matches!(graph.jobs[i].spec, JobSpec::PreviewTruth { .. }))
+        .collect();
+    let frames = bake.preview_frames().unwrap();
+    assert_eq!(
+        truth.len(),
+        frames.len().div_ceil(GraphOptions::default().sample_batch),
+        "one truth job per batch of frames"
+    );
+    let preview = graph.jobs.last().unwrap();
+    assert_eq!(preview.spec, JobSpec::Preview);
+    assert!(truth.iter().all(|t| preview.deps.contains(t)));
+    assert!(truth.iter().all(|&t| graph.jobs[t].deps.is_empty()));
+
+    let container = Container::from_bytes(&baked.asset).unwrap();
+    let asset = BakedAsset::read(&container, Some(&bake.inputs.character)).unwrap();
+    let (model, surface) = asset.preview_model().unwrap();
+    let subject = Subject {
+        character: &bake.inputs.character,
+        model,
+        surface,
+    };
+    let mut one_go = subject
+        .stills(frames.clip, &frames.stills, None, r)
+        .unwrap();
+    if let Some(c) = frames.clip {
+        one_go.push(subject.animation(c, None, r).unwrap());
+    }
+    assert_eq!(one_go.len(), baked.previews.len());
+    for (a, (info, png)) in one_go.iter().zip(&baked.previews) {
+        assert_eq!(a.info.name, info.name);
+        assert_eq!(a.info.times, info.times);
+        assert!(a.png == *png, "{} differs", info.name);
+    }
+}
+
+#[test]
+fn a_vertex_bakes_previews_are_those_of_its_asset() {
+    use aobake_core::bake::{Bake, BakeInputs, UploadBytes, bake_in_process};
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/data/characters/RiggedFigure/RiggedFigure.glb"
+    );
+    let inputs = BakeInputs::load(
+        &UploadBytes::single(std::fs::read(path).unwrap()),
+        &[],
+        &Limits::default(),
+    )
+    .unwrap();
+    let mut p = BakeParams::new(Method::VertexLinear);
+    p.poses = 24;
+    p.samples = 16;
+    p.eval_poses = 4;
+    let bake = Bake::new(&inputs, p).unwrap();
+    let mut r = renderer();
+    let baked = bake_in_process(&bake, Some(&mut r)).unwrap();
+    previews_match_one_go(&bake, &baked, &mut r);
+}
+
 #[test]
 fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its_previews() {
     use aobake_core::{
@@ -315,6 +388,7 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
         ["still-0.png", "still-1.png", "still-2.png", "animation.png"]
     );
     assert_eq!(baked.previews[0].0.clip.as_deref(), Some("spin"));
+    previews_match_one_go(&bake, &baked, &mut r);
     // The model panel's ground comes from the cubemap: the baked one
     // darkens it around the cube, an all-open one (zero texels) does not.
     let (model, _) =
@@ -380,6 +454,7 @@ fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
     let mut r = renderer();
     let baked = bake_in_process(&bake, Some(&mut r)).unwrap();
     assert_eq!(baked.previews.len(), 4, "three stills and an animation");
+    previews_match_one_go(&bake, &baked, &mut r);
     // The model panel comes from the grids: the baked ones darken the
     // parts and the ground towards the truth, all-open ones (zero cells)
     // do not.
