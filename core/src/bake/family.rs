@@ -21,9 +21,9 @@ use super::{
     grid::GridReport,
     jobs::{IndexedBlock, find, json, named, parse, stack_blocks},
     preview::{
-        self, FrameTruth, GROUND_GRID, PreviewFrames, PreviewInfo, PreviewModel, Renderer,
-        STILL_FRACTIONS, Subject, TruthTracing, animation_times, frame_poses, preview_clip,
-        still_times,
+        self, FrameTruth, GROUND_GRID, GROUND_SAMPLES, PreviewFrames, PreviewInfo, PreviewModel,
+        Renderer, STILL_FRACTIONS, Subject, TruthTracing, animation_times, frame_poses,
+        preview_clip, still_times,
     },
     vertex::Report,
 };
@@ -137,8 +137,8 @@ impl<'a> Bake<'a> {
         })
     }
 
-    /// The `preview-truth` jobs of the previews' frames in batches of
-    /// `options.sample_batch`; none without previews.
+    /// The `preview-truth` jobs of the previews' frames in batches
+    /// ([`GraphOptions::batch`]); none without previews.
     pub(super) fn preview_truth_jobs(&self, options: GraphOptions) -> Vec<PlannedJob> {
         let frames = match self.preview_frames() {
             Ok(f) if options.previews => f.len(),
@@ -146,7 +146,11 @@ impl<'a> Bake<'a> {
             // preview job says so).
             _ => 0,
         };
-        let batch = options.sample_batch.max(1);
+        // About: the character's rays and the ground's, per frame.
+        let samples = u64::from(self.plan.params.held_out_surface().samples);
+        let ground = (GROUND_GRID * GROUND_GRID) as u64 * samples.min(GROUND_SAMPLES.into());
+        let rays = self.inputs.character.vertex_count() as u64 * samples + ground;
+        let batch = options.batch(rays);
         (0..frames)
             .step_by(batch)
             .map(|first| PlannedJob {

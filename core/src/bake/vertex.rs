@@ -63,9 +63,17 @@ impl Bake<'_> {
     /// `sample` (reference) → `fit`; `sample` (reference, held-out) →
     /// one `unseen` per unseen-clips fold; `fit`, the `unseen` folds and
     /// `sample` (held-out, noise) → `evaluate`; `fit` and `evaluate` →
-    /// `assemble` → `preview`.
+    /// `assemble`; `assemble` and the `preview-truth` jobs → `preview`.
+    ///
+    /// Workers take the first ready job in this order, so it is the
+    /// schedule: `fit`, the longest chain, comes right after the
+    /// reference poses it needs and starts while other workers trace the
+    /// held-out poses; the unseen-clip folds and the previews' truth fill
+    /// the workers beside it.
     pub(super) fn vertex_graph(&self, options: GraphOptions) -> JobGraph {
-        let batch = options.sample_batch.max(1);
+        let p = &self.plan.params;
+        let rays = self.inputs.character.vertex_count() as u64 * u64::from(p.samples);
+        let batch = options.batch(rays);
         let mut jobs: Vec<PlannedJob> = Vec::new();
         let samples = |set: PoseSet, jobs: &mut Vec<PlannedJob>| -> Vec<usize> {
             let n = self.poses_in(set);
@@ -85,21 +93,12 @@ impl Bake<'_> {
                 .collect()
         };
         let reference = samples(PoseSet::Reference, &mut jobs);
-        let held_out = samples(PoseSet::HeldOut, &mut jobs);
-        let noise = samples(PoseSet::Noise, &mut jobs);
-        // The previews' truth beside the tracing: it needs no model.
-        let mut truth = Vec::new();
-        for job in self.preview_truth_jobs(options) {
-            jobs.push(job);
-            truth.push(jobs.len() - 1);
-        }
         jobs.push(PlannedJob {
             spec: JobSpec::Fit,
             deps: reference.clone(),
         });
         let fit = jobs.len() - 1;
-        // The unseen-clips folds refit to the reference AO without one
-        // clip each, beside the fit (they do not need it).
+        let held_out = samples(PoseSet::HeldOut, &mut jobs);
         let mut deps = vec![fit];
         for fold in 0..self.plan.fold_clips().len() {
             jobs.push(PlannedJob {
@@ -107,6 +106,13 @@ impl Bake<'_> {
                 deps: reference.iter().chain(&held_out).copied().collect(),
             });
             deps.push(jobs.len() - 1);
+        }
+        let noise = samples(PoseSet::Noise, &mut jobs);
+        // The previews' truth: it needs no model.
+        let mut truth = Vec::new();
+        for job in self.preview_truth_jobs(options) {
+            jobs.push(job);
+            truth.push(jobs.len() - 1);
         }
         deps.extend(held_out);
         deps.extend(noise);

@@ -139,6 +139,7 @@ fn cutting_the_bake_into_other_batches_changes_no_byte() {
         for batch in [1, 5, 100] {
             let graph = bake.graph(GraphOptions {
                 sample_batch: batch,
+                sample_rays: 0,
                 previews: false,
                 ..GraphOptions::default()
             });
@@ -161,17 +162,36 @@ fn the_graph_lists_dependencies_first_and_covers_every_pose() {
     let bake = Bake::new(&inputs, quick(Method::VertexLinear)).unwrap();
     let graph = bake.graph(GraphOptions {
         sample_batch: 5,
+        sample_rays: 0,
         previews: true,
         ..GraphOptions::default()
     });
     for (i, job) in graph.jobs.iter().enumerate() {
         assert!(job.deps.iter().all(|&d| d < i), "{i}: {:?}", job.deps);
     }
+    // Workers take the first ready job: the fit comes right after the
+    // reference poses it needs; the previews' truth needs nothing and the
+    // preview needs it.
     let kinds: Vec<&str> = graph.jobs.iter().map(|j| j.spec.kind()).collect();
+    let fit = kinds.iter().position(|&k| k == "fit").unwrap();
+    assert!(graph.jobs[..fit].iter().all(|j| matches!(
+        j.spec,
+        JobSpec::Sample {
+            set: PoseSet::Reference,
+            ..
+        }
+    )));
     assert_eq!(
-        &kinds[kinds.len() - 4..],
-        ["fit", "evaluate", "assemble", "preview"]
+        &kinds[kinds.len() - 3..],
+        ["evaluate", "assemble", "preview"]
     );
+    let truth: Vec<usize> = (0..kinds.len())
+        .filter(|&i| kinds[i] == "preview-truth")
+        .collect();
+    assert!(!truth.is_empty());
+    assert!(truth.iter().all(|&t| graph.jobs[t].deps.is_empty()
+        && graph.jobs.last().unwrap().deps.contains(&t)));
+    let frames = bake.preview_frames().unwrap().len();
     for set in [PoseSet::Reference, PoseSet::HeldOut, PoseSet::Noise] {
         let covered: usize = graph
             .jobs
@@ -196,8 +216,9 @@ fn the_graph_lists_dependencies_first_and_covers_every_pose() {
     for range in [0..1, 1..4, 2..tests.len()] {
         assert_eq!(bake.poses(PoseSet::HeldOut, range.clone()), tests[range]);
     }
-    // One clip: no unseen-clips folds. The fit is worth its steps; the
-    // evaluate, assemble and preview jobs one each.
+    // One clip: no unseen-clips folds. The fit is worth its steps, the
+    // previews' truth its frames; the evaluate, assemble and preview jobs
+    // one each.
     assert!(bake.plan.fold_clips().is_empty());
     assert_eq!(
         graph.total_work(),
@@ -205,6 +226,7 @@ fn the_graph_lists_dependencies_first_and_covers_every_pose() {
             + bake.poses_in(PoseSet::HeldOut)
             + bake.poses_in(PoseSet::Noise)
             + FitStep::ALL.len()
+            + frames
             + 3) as u64
     );
     // Specs travel through the queue as JSON.

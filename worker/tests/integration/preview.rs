@@ -300,11 +300,15 @@ fn previews_match_one_go(
         .filter(|&i| matches!(graph.jobs[i].spec, JobSpec::PreviewTruth { .. }))
         .collect();
     let frames = bake.preview_frames().unwrap();
-    assert_eq!(
-        truth.len(),
-        frames.len().div_ceil(GraphOptions::default().sample_batch),
-        "one truth job per batch of frames"
-    );
+    let mut next = 0;
+    for &t in &truth {
+        let JobSpec::PreviewTruth { first, count } = graph.jobs[t].spec else {
+            unreachable!()
+        };
+        assert_eq!(first, next, "truth batches cover the frames in order");
+        next += count;
+    }
+    assert_eq!(next, frames.len());
     let preview = graph.jobs.last().unwrap();
     assert_eq!(preview.spec, JobSpec::Preview);
     assert!(truth.iter().all(|t| preview.deps.contains(t)));
