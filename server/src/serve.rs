@@ -55,6 +55,12 @@ pub struct ServeArgs {
     /// A client must send its request headers within this many seconds.
     #[arg(long, env = "AOBAKE_HEADER_TIMEOUT_SECS", default_value_t = 10.0)]
     pub header_timeout_secs: f64,
+    /// Rays a tracing job (`sample`, `preview-truth`) aims for: a batch
+    /// takes as many poses as make about this many, 4 at least (0: 4 poses
+    /// each). Larger jobs cost the queue less per ray; smaller ones lose
+    /// less to a lost worker and spread a small bake over more workers.
+    #[arg(long, env = "AOBAKE_JOB_RAYS", default_value_t = aobake_core::bake::GraphOptions::default().sample_rays)]
+    pub job_rays: u64,
     /// Also upload the bundled Fox, start a fresh bake of it (a new seed
     /// each time, so it is never a cached result), and print a dashboard
     /// URL that signs in with a new read-and-submit token.
@@ -136,7 +142,8 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             &[Scope::Worker.name().to_owned()],
         )
         .await?;
-    let state = AppState::new(store.clone(), Arc::new(blobs), policy, limits);
+    let mut state = AppState::new(store.clone(), Arc::new(blobs), policy, limits);
+    state.graph.sample_rays = args.job_rays;
     store.listen(state.jobs_ready.clone()).await?;
     let listener = tokio::net::TcpListener::bind(args.listen)
         .await

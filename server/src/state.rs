@@ -166,6 +166,8 @@ pub struct AppState {
     pub blob_reads: Arc<tokio::sync::Semaphore>,
     /// Request metrics.
     pub metrics: Arc<Metrics>,
+    /// How new bakes are cut into jobs.
+    pub graph: aobake_core::bake::GraphOptions,
 }
 
 /// A rate limiter keyed by token hash.
@@ -212,6 +214,7 @@ impl AppState {
             limiter: Arc::new(Limiter::new(limits.requests_per_second)),
             blob_reads: Arc::new(tokio::sync::Semaphore::new(8)),
             metrics: Arc::new(Metrics::new()),
+            graph: aobake_core::bake::GraphOptions::default(),
         }
     }
 

@@ -62,6 +62,9 @@ pub struct Options {
     pub rate: u32,
     /// Seconds a client has to send its request headers.
     pub header_timeout_secs: f64,
+    /// `--job-rays`, when not the server's default (0: 4 poses a job,
+    /// for tests that need many small jobs).
+    pub job_rays: Option<u64>,
 }
 
 impl Default for Options {
@@ -72,6 +75,7 @@ impl Default for Options {
             max_body_bytes: 64 << 20,
             rate: 10_000,
             header_timeout_secs: 10.0,
+            job_rays: None,
         }
     }
 }
@@ -137,6 +141,7 @@ impl TestEnv {
             .args(["--max-body-bytes", &o.max_body_bytes.to_string()])
             .args(["--rate", &o.rate.to_string()])
             .args(["--header-timeout-secs", &o.header_timeout_secs.to_string()])
+            .args(o.job_rays.map(|r| format!("--job-rays={r}")))
             .env("AOBAKE_ADMIN_TOKEN", ADMIN)
             .stdout(Stdio::null())
             .stderr(log)

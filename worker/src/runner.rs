@@ -298,8 +298,42 @@ fn execute(
                 bake.preview(&dep_refs, &mut renderer)
             }
         },
-        _ => bake.run_job(&spec, &dep_refs, resume, &mut sink),
+        // The stages after the tracing run while few jobs are left to
+        // share the machine: on every core. The bytes do not depend on the
+        // thread count (tested in core).
+        JobSpec::Fit | JobSpec::Unseen { .. } | JobSpec::Evaluate | JobSpec::Assemble => {
+            match wide_pool() {
+                Some(pool) => pool.install(|| bake.run_job(&spec, &dep_refs, resume, &mut sink)),
+                None => bake.run_job(&spec, &dep_refs, resume, &mut sink),
+            }
+        }
+        JobSpec::Sample { .. }
+        | JobSpec::Face { .. }
+        | JobSpec::Slab { .. }
+        | JobSpec::PreviewTruth { .. } => bake.run_job(&spec, &dep_refs, resume, &mut sink),
     }
+}
+
+/// A thread pool of every core, for the jobs that follow a bake's tracing
+/// (a fit, its unseen-clip folds, evaluation, assembly). The tracing jobs
+/// keep the worker's own threads (`RAYON_NUM_THREADS`: `aobake serve`
+/// gives each local worker its share of the cores), which is right while
+/// there are many of them; a fit or an evaluation often runs alone, with
+/// the other workers idle. `None` when the worker has every core already.
+fn wide_pool() -> Option<&'static rayon::ThreadPool> {
+    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    POOL.get_or_init(|| {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if cores <= rayon::current_num_threads() {
+            return None;
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(cores)
+            .thread_name(|i| format!("fit-{i}"))
+            .build()
+            .ok()
+    })
+    .as_ref()
 }
 
 /// Retries a call that failed on the network or with a 5xx (three tries,

@@ -8,7 +8,7 @@ use std::convert::Infallible;
 use std::time::Duration;
 
 use aobake_core::{
-    bake::{Bake, BakeInputs, BakeParams, GraphOptions, bake_key},
+    bake::{Bake, BakeInputs, BakeParams, bake_key},
     method::Method,
 };
 use axum::{
@@ -99,7 +99,7 @@ pub(crate) async fn submit(
             ));
         }
         let key = bake_key(&inputs.character_digest, &inputs.clip_digests, &params);
-        let graph = bake.graph(GraphOptions::default());
+        let graph = bake.graph(state.graph);
         let jobs = graph
             .jobs
             .iter()

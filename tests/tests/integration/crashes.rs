@@ -35,6 +35,7 @@ fn workers_killed_at_random_moments_change_no_byte() {
     let mut env = TestEnv::start(Options {
         lease_secs: 1.5,
         max_attempts: 30,
+        job_rays: Some(0),
         ..Options::default()
     });
     let cm = character("CesiumMan");

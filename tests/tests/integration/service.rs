@@ -295,6 +295,7 @@ fn a_worker_over_the_rate_waits_and_fails_no_job() {
     // are sent again; no attempt is used up.
     let mut env = TestEnv::start(Options {
         rate: 10,
+        job_rays: Some(0),
         ..Options::default()
     });
     let digest = upload(&env, &character("Fox"));
