@@ -16,8 +16,10 @@
 //! * [`PREVIEW`]: the preview raster (`vs_main`, `fs_main`).
 //!
 //! The Rust mirrors of the uniforms and storage structs are in [`mirror`],
-//! field for field with size assertions.
+//! field for field with size assertions; [`export`] translates the
+//! run-time evaluators for engines (GLSL, HLSL, MSL, SPIR-V).
 
+pub mod export;
 pub mod mirror;
 
 pub use mirror::{

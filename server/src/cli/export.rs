@@ -1,4 +1,7 @@
-//! `aobake export`: a baked asset's data in formats other tools read.
+//! `aobake export`: a baked asset's data in formats other tools read, and
+//! the run-time shaders in the languages engines use (`--shaders DIR`,
+//! `aobake_shaders::export`).
+//!
 //! `--exr DIR` writes a cubemap asset's decoded faces as OpenEXR (the
 //! `exr` crate): one file per clip time and shell, `t{time}-shell{k}.exr`,
 //! a strip of the six faces side by side (+x, −x, +y, −y, +z, −z, each
@@ -29,46 +32,88 @@ use exr::prelude::{
 
 /// Arguments of `aobake export`.
 #[derive(Debug, clap::Args)]
+#[command(group = clap::ArgGroup::new("what").required(true).multiple(true).args(["exr", "shaders"]))]
 pub(super) struct Args {
-    /// The asset (from `aobake bake` or `aobake fetch`).
-    asset: PathBuf,
+    /// The asset (from `aobake bake` or `aobake fetch`); `--exr` needs one.
+    asset: Option<PathBuf>,
     /// Write a cubemap asset's decoded faces, or a grid asset's parts as
     /// z-slices, as OpenEXR files into this folder (created if missing).
-    #[arg(long)]
-    exr: PathBuf,
+    #[arg(long, requires = "asset")]
+    exr: Option<PathBuf>,
     /// Clip times (seconds) to decode at; default: the start of the
     /// cycle.
     #[arg(long, num_args = 1.., default_values_t = [0.0f32])]
     times: Vec<f32>,
+    /// Write the run-time evaluators (vertex AO, cubemap and grid
+    /// lookups) for engines into this folder: GLSL 4.50 and ES 3.10, HLSL
+    /// for shader models 5.1 and 6.0, MSL 2.1 and SPIR-V 1.3, translated
+    /// by naga from the WGSL the previews run (no asset needed).
+    #[arg(long)]
+    shaders: Option<PathBuf>,
 }
 
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
-    let bytes = std::fs::read(&args.asset)
-        .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    if let Some(dir) = &args.shaders {
+        write_shaders(dir)?;
+    }
+    match (&args.asset, &args.exr) {
+        (Some(asset), Some(exr)) => export_exr(asset, exr, &args.times),
+        _ => Ok(()),
+    }
+}
+
+/// `--shaders DIR`: every run-time evaluator in every target, one folder
+/// per target.
+fn write_shaders(dir: &Path) -> anyhow::Result<()> {
+    let files = aobake_shaders::export::export_all()?;
+    for f in &files {
+        let path = dir.join(&f.path);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create {}", parent.display()))?;
+        }
+        std::fs::write(&path, &f.bytes)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    let targets: Vec<&str> = aobake_shaders::export::Target::ALL
+        .iter()
+        .map(|t| t.dir())
+        .collect();
+    eprintln!(
+        "wrote {} shader files into {} ({})",
+        files.len(),
+        dir.display(),
+        targets.join(", ")
+    );
+    Ok(())
+}
+
+/// `--exr DIR`: a cubemap's faces or a grid's parts as OpenEXR.
+fn export_exr(asset: &Path, exr: &Path, times: &[f32]) -> anyhow::Result<()> {
+    let bytes = std::fs::read(asset).with_context(|| format!("cannot read {}", asset.display()))?;
     let container = Container::from_bytes(&bytes)
-        .with_context(|| format!("cannot read {}", args.asset.display()))?;
-    if let Some(t) = args.times.iter().find(|t| !t.is_finite()) {
+        .with_context(|| format!("cannot read {}", asset.display()))?;
+    if let Some(t) = times.iter().find(|t| !t.is_finite()) {
         bail!("--times must be finite numbers of seconds, not {t}");
     }
-    let images = match BakedAsset::read(&container, None).and_then(|b| b.images(&args.times)) {
+    let images = match BakedAsset::read(&container, None).and_then(|b| b.images(times)) {
         Ok(images) => images,
         Err(AssetUseError::Unsupported(e)) => bail!(
             "{} holds a {} asset: --exr exports cubemap and grid assets ({e})",
-            args.asset.display(),
+            asset.display(),
             container.method
         ),
-        Err(e) => bail!("cannot read {}: {e}", args.asset.display()),
+        Err(e) => bail!("cannot read {}: {e}", asset.display()),
     };
-    std::fs::create_dir_all(&args.exr)
-        .with_context(|| format!("cannot create {}", args.exr.display()))?;
+    std::fs::create_dir_all(&exr).with_context(|| format!("cannot create {}", exr.display()))?;
     for image in &images {
-        write_exr(image, &args.exr.join(&image.file))?;
+        write_exr(image, &exr.join(&image.file))?;
     }
     eprintln!(
         "wrote {} OpenEXR files of the {} asset into {}",
         images.len(),
         container.method,
-        args.exr.display()
+        exr.display()
     );
     Ok(())
 }

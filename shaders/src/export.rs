@@ -1,0 +1,450 @@
+//! The run-time evaluators for engines that do not speak WGSL: each of
+//! [`VERTEX_AO`], [`CUBEMAP_AO`] and [`GRID_AO`] translated by naga into
+//! GLSL (4.50 core and ES 3.10, one file per entry point), HLSL (shader
+//! models 5.1 and 6.0), MSL (2.1) and SPIR-V (1.3). `aobake export
+//! --shaders DIR` writes them.
+//!
+//! Resources keep their WGSL numbering: in GLSL, `binding = 8·group +
+//! binding`; in HLSL, `register(…binding, space group)`; in MSL, buffers
+//! take `[[buffer(i)]]` in the order the WGSL declares them (after it, the
+//! buffer of runtime array sizes that MSL needs, see [`MSL_SIZES_NOTE`]);
+//! in SPIR-V, the WGSL's set and binding.
+//!
+//! GLSL ES 3.00 (WebGL2) has neither compute shaders nor storage buffers,
+//! so these compute evaluators cannot be written for it.
+
+use naga::{
+    AddressSpace, ResourceBinding, ShaderStage, StorageAccess, TypeInner,
+    back::{glsl, hlsl, msl, spv},
+    valid::{Capabilities, ModuleInfo, ValidationFlags, Validator},
+};
+
+use crate::{CUBEMAP_AO, GRID_AO, VERTEX_AO};
+
+/// What the MSL files say about the extra buffer that holds the byte sizes
+/// of the runtime-sized arrays.
+pub const MSL_SIZES_NOTE: &str = "buffer slot after the last resource: a uint per runtime-sized storage buffer, its size in bytes, in declaration order";
+
+/// A target language and version.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Target {
+    /// GLSL 4.50 core: one compute shader per entry point.
+    Glsl450,
+    /// GLSL ES 3.10 (compute shaders and storage buffers): one per entry
+    /// point.
+    GlslEs310,
+    /// HLSL for shader model 5.1 (Direct3D 11.3 / 12, `fxc`).
+    HlslSm51,
+    /// HLSL for shader model 6.0 (Direct3D 12, `dxc`).
+    HlslSm60,
+    /// Metal Shading Language 2.1.
+    Msl21,
+    /// SPIR-V 1.3 (Vulkan 1.1), binary.
+    SpirV13,
+}
+
+impl Target {
+    /// Every target.
+    pub const ALL: [Self; 6] = [
+        Self::Glsl450,
+        Self::GlslEs310,
+        Self::HlslSm51,
+        Self::HlslSm60,
+        Self::Msl21,
+        Self::SpirV13,
+    ];
+
+    /// Its folder under the export directory.
+    pub fn dir(self) -> &'static str {
+        match self {
+            Self::Glsl450 => "glsl450",
+            Self::GlslEs310 => "glsl-es310",
+            Self::HlslSm51 => "hlsl-sm5_1",
+            Self::HlslSm60 => "hlsl-sm6_0",
+            Self::Msl21 => "msl2_1",
+            Self::SpirV13 => "spirv1_3",
+        }
+    }
+}
+
+/// One written file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ShaderFile {
+    /// Its target.
+    pub target: Target,
+    /// Its path under the export directory, such as
+    /// `glsl450/vertex_ao.cs_main.comp`.
+    pub path: String,
+    /// Its contents (text, or SPIR-V words little-endian).
+    pub bytes: Vec<u8>,
+}
+
+/// Why a shader could not be translated.
+#[derive(Debug, thiserror::Error)]
+#[error("{shader} for {target:?}: {message}")]
+pub struct ExportError {
+    /// The WGSL pipeline.
+    pub shader: &'static str,
+    /// The target.
+    pub target: Target,
+    /// What naga said.
+    pub message: String,
+}
+
+/// The run-time evaluators an engine needs, by name.
+pub fn runtime_sources() -> [(&'static str, &'static str); 3] {
+    [
+        ("vertex_ao", VERTEX_AO),
+        ("cubemap_ao", CUBEMAP_AO),
+        ("grid_ao", GRID_AO),
+    ]
+}
+
+/// Every run-time evaluator in every target.
+pub fn export_all() -> Result<Vec<ShaderFile>, ExportError> {
+    let mut files = Vec::new();
+    for (name, source) in runtime_sources() {
+        for target in Target::ALL {
+            files.extend(translate(name, source, target)?);
+        }
+    }
+    Ok(files)
+}
+
+/// Parses and validates a WGSL source with the capabilities of a
+/// WebGPU-level adapter (nothing optional).
+pub fn parse(name: &'static str, source: &str) -> Result<(naga::Module, ModuleInfo), String> {
+    let module = naga::front::wgsl::parse_str(source)
+        .map_err(|e| format!("{name}: {}", e.emit_to_string(source)))?;
+    let info = Validator::new(ValidationFlags::all(), Capabilities::empty())
+        .validate(&module)
+        .map_err(|e| format!("{name}: {}", e.emit_to_string(source)))?;
+    Ok((module, info))
+}
+
+/// One WGSL pipeline in one target.
+pub fn translate(
+    name: &'static str,
+    source: &str,
+    target: Target,
+) -> Result<Vec<ShaderFile>, ExportError> {
+    let fail = |message: String| ExportError {
+        shader: name,
+        target,
+        message,
+    };
+    let (module, info) = parse(name, source).map_err(fail)?;
+    let file = |path: String, bytes: Vec<u8>| ShaderFile {
+        target,
+        path: format!("{}/{path}", target.dir()),
+        bytes,
+    };
+    let bindings = bindings(&module);
+    Ok(match target {
+        Target::Glsl450 | Target::GlslEs310 => {
+            let version = match target {
+                Target::Glsl450 => glsl::Version::Desktop(450),
+                _ => glsl::Version::Embedded {
+                    version: 310,
+                    is_webgl: false,
+                },
+            };
+            let options = glsl::Options {
+                version,
+                writer_flags: glsl::WriterFlags::empty(),
+                binding_map: bindings
+                    .iter()
+                    .map(|b| (b.binding, (8 * b.binding.group + b.binding.binding) as u8))
+                    .collect(),
+                zero_initialize_workgroup_memory: true,
+            };
+            let mut files = Vec::new();
+            for entry in &module.entry_points {
+                let pipeline = glsl::PipelineOptions {
+                    shader_stage: entry.stage,
+                    entry_point: entry.name.clone(),
+                    multiview: None,
+                };
+                let mut text = String::new();
+                glsl::Writer::new(
+                    &mut text,
+                    &module,
+                    &info,
+                    &options,
+                    &pipeline,
+                    naga::proc::BoundsCheckPolicies::default(),
+                )
+                .and_then(|mut w| w.write().map(|_| ()))
+                .map_err(|e| fail(e.to_string()))?;
+                let ext = match entry.stage {
+                    ShaderStage::Vertex => "vert",
+                    ShaderStage::Fragment => "frag",
+                    _ => "comp",
+                };
+                files.push(file(
+                    format!("{name}.{}.{ext}", entry.name),
+                    text.into_bytes(),
+                ));
+            }
+            files
+        }
+        Target::HlslSm51 | Target::HlslSm60 => {
+            let options = hlsl::Options {
+                shader_model: match target {
+                    Target::HlslSm51 => hlsl::ShaderModel::V5_1,
+                    _ => hlsl::ShaderModel::V6_0,
+                },
+                binding_map: bindings
+                    .iter()
+                    .map(|b| {
+                        (
+                            b.binding,
+                            hlsl::BindTarget {
+                                space: b.binding.group as u8,
+                                register: b.binding.binding,
+                                binding_array_size: None,
+                                dynamic_storage_buffer_offsets_index: None,
+                                restrict_indexing: false,
+                            },
+                        )
+                    })
+                    .collect(),
+                zero_initialize_workgroup_memory: true,
+                ..hlsl::Options::default()
+            };
+            let pipeline = hlsl::PipelineOptions { entry_point: None };
+            let mut text = String::new();
+            hlsl::Writer::new(&mut text, &options, &pipeline)
+                .write(&module, &info, None)
+                .map_err(|e| fail(e.to_string()))?;
+            vec![file(format!("{name}.hlsl"), text.into_bytes())]
+        }
+        Target::Msl21 => {
+            // Buffers in declaration order, then the sizes buffer.
+            let resources: msl::BindingMap = bindings
+                .iter()
+                .enumerate()
+                .map(|(slot, b)| {
+                    (
+                        b.binding,
+                        msl::BindTarget {
+                            buffer: Some(slot as u8),
+                            mutable: b.writable,
+                            ..msl::BindTarget::default()
+                        },
+                    )
+                })
+                .collect();
+            let per_entry = msl::EntryPointResources {
+                resources,
+                immediates_buffer: None,
+                sizes_buffer: Some(bindings.len() as u8),
+            };
+            let options = msl::Options {
+                lang_version: (2, 1),
+                per_entry_point_map: module
+                    .entry_points
+                    .iter()
+                    .map(|e| (e.name.clone(), per_entry.clone()))
+                    .collect(),
+                zero_initialize_workgroup_memory: true,
+                ..msl::Options::default()
+            };
+            let (text, _) =
+                msl::write_string(&module, &info, &options, &msl::PipelineOptions::default())
+                    .map_err(|e| fail(e.to_string()))?;
+            let text = format!("// Sizes: {MSL_SIZES_NOTE}.\n{text}");
+            vec![file(format!("{name}.metal"), text.into_bytes())]
+        }
+        Target::SpirV13 => {
+            let options = spv::Options {
+                lang_version: (1, 3),
+                flags: spv::WriterFlags::empty(),
+                ..spv::Options::default()
+            };
+            let words =
+                spv::write_vec(&module, &info, &options, None).map_err(|e| fail(e.to_string()))?;
+            let bytes = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+            vec![file(format!("{name}.spv"), bytes)]
+        }
+    })
+}
+
+/// A resource the shader binds.
+struct Binding {
+    binding: ResourceBinding,
+    writable: bool,
+}
+
+/// The module's bound buffers in declaration order (the run-time shaders
+/// bind uniform and storage buffers only).
+fn bindings(module: &naga::Module) -> Vec<Binding> {
+    module
+        .global_variables
+        .iter()
+        .filter_map(|(_, g)| {
+            let binding = g.binding?;
+            debug_assert!(!matches!(
+                module.types[g.ty].inner,
+                TypeInner::Image { .. } | TypeInner::Sampler { .. }
+            ));
+            let writable = matches!(g.space, AddressSpace::Storage { access } if access.contains(StorageAccess::STORE));
+            Some(Binding { binding, writable })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::process::Command;
+
+    /// Every file, written under a temporary directory.
+    fn written() -> (tempfile::TempDir, Vec<ShaderFile>) {
+        let dir = tempfile::tempdir().unwrap();
+        let files = export_all().unwrap();
+        for f in &files {
+            let path = dir.path().join(&f.path);
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(path, &f.bytes).unwrap();
+        }
+        (dir, files)
+    }
+
+    /// Runs a Khronos tool (Debian's glslang-tools and spirv-tools, which
+    /// `.ci/run` installs): a missing tool fails the test.
+    fn run(tool: &str, args: &[&std::ffi::OsStr]) -> (bool, String) {
+        let out = Command::new(tool).args(args).output().unwrap_or_else(|e| {
+            panic!("{tool} is needed (apt-get install glslang-tools spirv-tools): {e}")
+        });
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (out.status.success(), text)
+    }
+
+    #[test]
+    fn every_evaluator_has_a_file_per_target_and_entry_point() {
+        let files = export_all().unwrap();
+        for (name, source) in runtime_sources() {
+            let (module, _) = parse(name, source).unwrap();
+            let entries = module.entry_points.len();
+            assert!(entries >= 1, "{name}");
+            for target in Target::ALL {
+                let mine: Vec<&ShaderFile> = files
+                    .iter()
+                    .filter(|f| f.target == target && f.path.contains(name))
+                    .collect();
+                let want = match target {
+                    Target::Glsl450 | Target::GlslEs310 => entries,
+                    _ => 1,
+                };
+                assert_eq!(mine.len(), want, "{name} {target:?}");
+                assert!(mine.iter().all(|f| !f.bytes.is_empty()));
+            }
+        }
+    }
+
+    #[test]
+    fn glslang_accepts_every_glsl_file() {
+        let (dir, files) = written();
+        let glsl: Vec<&ShaderFile> = files
+            .iter()
+            .filter(|f| matches!(f.target, Target::Glsl450 | Target::GlslEs310))
+            .collect();
+        assert_eq!(
+            glsl.len(),
+            2 * 4,
+            "vertex 2, cubemap 1, grid 1; in two versions"
+        );
+        for f in glsl {
+            let path = dir.path().join(&f.path);
+            let (ok, said) = run("glslangValidator", &[path.as_os_str()]);
+            assert!(ok, "{}: {said}", f.path);
+            let text = std::str::from_utf8(&f.bytes).unwrap();
+            let version = match f.target {
+                Target::Glsl450 => "#version 450 core",
+                _ => "#version 310 es",
+            };
+            assert!(text.starts_with(version), "{}", f.path);
+        }
+    }
+
+    #[test]
+    fn spirv_val_accepts_the_spirv_and_naga_reads_it_back() {
+        let (dir, files) = written();
+        let spirv: Vec<&ShaderFile> = files
+            .iter()
+            .filter(|f| f.target == Target::SpirV13)
+            .collect();
+        assert_eq!(spirv.len(), 3);
+        for f in spirv {
+            let path = dir.path().join(&f.path);
+            let (ok, said) = run(
+                "spirv-val",
+                &[
+                    "--target-env".as_ref(),
+                    "vulkan1.1".as_ref(),
+                    path.as_os_str(),
+                ],
+            );
+            assert!(ok, "{}: {said}", f.path);
+            // The round trip: naga's SPIR-V front end reads it back into a
+            // module that validates, with the same entry points.
+            let module =
+                naga::front::spv::parse_u8_slice(&f.bytes, &naga::front::spv::Options::default())
+                    .unwrap();
+            Validator::new(ValidationFlags::all(), Capabilities::empty())
+                .validate(&module)
+                .unwrap();
+            let name = f
+                .path
+                .trim_start_matches("spirv1_3/")
+                .trim_end_matches(".spv");
+            let (wgsl, _) = parse(
+                "wgsl",
+                runtime_sources()
+                    .iter()
+                    .find(|(n, _)| *n == name)
+                    .unwrap()
+                    .1,
+            )
+            .unwrap();
+            let names = |m: &naga::Module| -> Vec<String> {
+                m.entry_points.iter().map(|e| e.name.clone()).collect()
+            };
+            assert_eq!(names(&module), names(&wgsl), "{name}");
+        }
+    }
+
+    #[test]
+    fn hlsl_and_msl_keep_the_wgsl_numbering() {
+        let files = export_all().unwrap();
+        let text = |path: &str| {
+            let f = files.iter().find(|f| f.path == path).unwrap();
+            String::from_utf8(f.bytes.clone()).unwrap()
+        };
+        // vertex_ao: @group(0) @binding(5) is the AO it writes; @binding(0)
+        // its uniforms.
+        for sm in ["hlsl-sm5_1", "hlsl-sm6_0"] {
+            let hlsl = text(&format!("{sm}/vertex_ao.hlsl"));
+            assert!(
+                hlsl.contains("register(u5)") || hlsl.contains("register(u5, space0)"),
+                "{hlsl}"
+            );
+            assert!(
+                hlsl.contains("register(b0)") || hlsl.contains("register(b0, space0)"),
+                "{hlsl}"
+            );
+            assert!(hlsl.contains("void cs_main(") && hlsl.contains("void cs_sparse("));
+        }
+        let msl = text("msl2_1/vertex_ao.metal");
+        assert!(
+            msl.contains("[[buffer(5)]]") && msl.contains("[[buffer(7)]]"),
+            "{msl}"
+        );
+        assert!(msl.contains("kernel void cs_main(") && msl.contains("kernel void cs_sparse("));
+    }
+}
