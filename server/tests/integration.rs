@@ -223,6 +223,41 @@ fn errors_are_clear_and_exit_nonzero() {
     assert!(stderr(&out).contains("cannot read"), "{}", stderr(&out));
 }
 
+#[test]
+fn export_writes_the_shaders_for_engines_and_says_what_it_needs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = aobake(&["export", "--shaders", dir.path().to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("wrote 20 shader files"),
+        "{}",
+        stderr(&out)
+    );
+    for file in [
+        "glsl450/vertex_ao.cs_main.comp",
+        "glsl-es310/vertex_ao.cs_sparse.comp",
+        "hlsl-sm5_1/grid_ao.hlsl",
+        "hlsl-sm6_0/cubemap_ao.hlsl",
+        "msl2_1/vertex_ao.metal",
+    ] {
+        let text = std::fs::read_to_string(dir.path().join(file)).unwrap();
+        assert!(!text.is_empty(), "{file}");
+    }
+    let spirv = std::fs::read(dir.path().join("spirv1_3/vertex_ao.spv")).unwrap();
+    assert_eq!(
+        spirv[..4],
+        0x0723_0203u32.to_le_bytes(),
+        "the SPIR-V magic number"
+    );
+    // Nothing to export, and --exr without an asset, are usage errors.
+    let out = aobake(&["export"]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("--exr") && stderr(&out).contains("--shaders"));
+    let out = aobake(&["export", "--exr", dir.path().to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("<ASSET>"), "{}", stderr(&out));
+}
+
 /// Reads `index,occlusion` rows, checking the header and the index column.
 fn occlusion_csv(path: &Path) -> Vec<f32> {
     let text = std::fs::read_to_string(path).unwrap();
