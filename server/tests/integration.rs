@@ -229,13 +229,15 @@ fn export_writes_the_shaders_for_engines_and_says_what_it_needs() {
     let out = aobake(&["export", "--shaders", dir.path().to_str().unwrap()]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(
-        stderr(&out).contains("wrote 20 shader files"),
+        stderr(&out).contains("wrote 30 shader files"),
         "{}",
         stderr(&out)
     );
     for file in [
         "glsl450/vertex_ao.cs_main.comp",
         "glsl-es310/vertex_ao.cs_sparse.comp",
+        "glsl-es300/vertex_ao_vs.vs_main.vert",
+        "glsl-es300/vertex_ao_vs.fs_main.frag",
         "hlsl-sm5_1/grid_ao.hlsl",
         "hlsl-sm6_0/cubemap_ao.hlsl",
         "msl2_1/vertex_ao.metal",

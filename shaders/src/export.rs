@@ -1,6 +1,7 @@
 //! The run-time evaluators for engines that do not speak WGSL: each of
-//! [`VERTEX_AO`], [`CUBEMAP_AO`] and [`GRID_AO`] translated by naga into
-//! GLSL (4.50 core and ES 3.10, one file per entry point), HLSL (shader
+//! [`VERTEX_AO`], [`VERTEX_AO_VS`], [`CUBEMAP_AO`] and [`GRID_AO`]
+//! translated by naga into GLSL (4.50 core, ES 3.00 for the vertex stage,
+//! and ES 3.10, one file per entry point), HLSL (shader
 //! models 5.1 and 6.0), MSL (2.1) and SPIR-V (1.3). `aobake export
 //! --shaders DIR` writes them.
 //!
@@ -10,8 +11,8 @@
 //! buffer of runtime array sizes that MSL needs, see [`MSL_SIZES_NOTE`]);
 //! in SPIR-V, the WGSL's set and binding.
 //!
-//! GLSL ES 3.00 (WebGL2) has neither compute shaders nor storage buffers,
-//! so these compute evaluators cannot be written for it.
+//! GLSL ES 3.00 (WebGL2) has neither compute shaders nor storage buffers:
+//! it gets the vertex-stage evaluator ([`VERTEX_AO_VS`]) only.
 
 use naga::{
     AddressSpace, ResourceBinding, ShaderStage, StorageAccess, TypeInner,
@@ -19,7 +20,7 @@ use naga::{
     valid::{Capabilities, ModuleInfo, ValidationFlags, Validator},
 };
 
-use crate::{CUBEMAP_AO, GRID_AO, VERTEX_AO};
+use crate::{CUBEMAP_AO, GRID_AO, VERTEX_AO, VERTEX_AO_VS};
 
 /// What the MSL files say about the extra buffer that holds the byte sizes
 /// of the runtime-sized arrays.
@@ -28,8 +29,11 @@ pub const MSL_SIZES_NOTE: &str = "buffer slot after the last resource: a uint pe
 /// A target language and version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Target {
-    /// GLSL 4.50 core: one compute shader per entry point.
+    /// GLSL 4.50 core: one shader per entry point.
     Glsl450,
+    /// GLSL ES 3.00 (WebGL2): the vertex-stage evaluator only (no compute
+    /// shaders, no storage buffers), one shader per entry point.
+    GlslEs300,
     /// GLSL ES 3.10 (compute shaders and storage buffers): one per entry
     /// point.
     GlslEs310,
@@ -45,8 +49,9 @@ pub enum Target {
 
 impl Target {
     /// Every target.
-    pub const ALL: [Self; 6] = [
+    pub const ALL: [Self; 7] = [
         Self::Glsl450,
+        Self::GlslEs300,
         Self::GlslEs310,
         Self::HlslSm51,
         Self::HlslSm60,
@@ -58,6 +63,7 @@ impl Target {
     pub fn dir(self) -> &'static str {
         match self {
             Self::Glsl450 => "glsl450",
+            Self::GlslEs300 => "glsl-es300",
             Self::GlslEs310 => "glsl-es310",
             Self::HlslSm51 => "hlsl-sm5_1",
             Self::HlslSm60 => "hlsl-sm6_0",
@@ -92,9 +98,10 @@ pub struct ExportError {
 }
 
 /// The run-time evaluators an engine needs, by name.
-pub fn runtime_sources() -> [(&'static str, &'static str); 3] {
+pub fn runtime_sources() -> [(&'static str, &'static str); 4] {
     [
         ("vertex_ao", VERTEX_AO),
+        ("vertex_ao_vs", VERTEX_AO_VS),
         ("cubemap_ao", CUBEMAP_AO),
         ("grid_ao", GRID_AO),
     ]
@@ -141,9 +148,21 @@ pub fn translate(
     };
     let bindings = bindings(&module);
     Ok(match target {
-        Target::Glsl450 | Target::GlslEs310 => {
+        Target::GlslEs300
+            if module
+                .entry_points
+                .iter()
+                .any(|e| e.stage == ShaderStage::Compute) =>
+        {
+            Vec::new()
+        }
+        Target::Glsl450 | Target::GlslEs300 | Target::GlslEs310 => {
             let version = match target {
                 Target::Glsl450 => glsl::Version::Desktop(450),
+                Target::GlslEs300 => glsl::Version::Embedded {
+                    version: 300,
+                    is_webgl: true,
+                },
                 _ => glsl::Version::Embedded {
                     version: 310,
                     is_webgl: false,
@@ -221,24 +240,31 @@ pub fn translate(
         }
         Target::Msl21 => {
             // Buffers in declaration order, then the sizes buffer.
+            let (mut buffers, mut textures) = (0u8, 0u8);
             let resources: msl::BindingMap = bindings
                 .iter()
-                .enumerate()
-                .map(|(slot, b)| {
-                    (
-                        b.binding,
+                .map(|b| {
+                    let target = if b.texture {
+                        textures += 1;
                         msl::BindTarget {
-                            buffer: Some(slot as u8),
+                            texture: Some(textures - 1),
+                            ..msl::BindTarget::default()
+                        }
+                    } else {
+                        buffers += 1;
+                        msl::BindTarget {
+                            buffer: Some(buffers - 1),
                             mutable: b.writable,
                             ..msl::BindTarget::default()
-                        },
-                    )
+                        }
+                    };
+                    (b.binding, target)
                 })
                 .collect();
             let per_entry = msl::EntryPointResources {
                 resources,
                 immediates_buffer: None,
-                sizes_buffer: Some(bindings.len() as u8),
+                sizes_buffer: Some(buffers),
             };
             let options = msl::Options {
                 lang_version: (2, 1),
@@ -274,22 +300,25 @@ pub fn translate(
 struct Binding {
     binding: ResourceBinding,
     writable: bool,
+    texture: bool,
 }
 
-/// The module's bound buffers in declaration order (the run-time shaders
-/// bind uniform and storage buffers only).
+/// The module's bound resources in declaration order (buffers, and the
+/// vertex-stage evaluator's textures, read with `textureLoad`: no
+/// samplers).
 fn bindings(module: &naga::Module) -> Vec<Binding> {
     module
         .global_variables
         .iter()
         .filter_map(|(_, g)| {
             let binding = g.binding?;
-            debug_assert!(!matches!(
-                module.types[g.ty].inner,
-                TypeInner::Image { .. } | TypeInner::Sampler { .. }
-            ));
+            let texture = matches!(module.types[g.ty].inner, TypeInner::Image { .. });
             let writable = matches!(g.space, AddressSpace::Storage { access } if access.contains(StorageAccess::STORE));
-            Some(Binding { binding, writable })
+            Some(Binding {
+                binding,
+                writable,
+                texture,
+            })
         })
         .collect()
 }
@@ -335,10 +364,19 @@ mod tests {
             for target in Target::ALL {
                 let mine: Vec<&ShaderFile> = files
                     .iter()
-                    .filter(|f| f.target == target && f.path.contains(name))
+                    .filter(|f| {
+                        let file = f.path.rsplit('/').next().unwrap();
+                        f.target == target && file.split('.').next() == Some(name)
+                    })
                     .collect();
+                let compute = module
+                    .entry_points
+                    .iter()
+                    .any(|e| e.stage == ShaderStage::Compute);
                 let want = match target {
-                    Target::Glsl450 | Target::GlslEs310 => entries,
+                    // WebGL2 has no compute shaders.
+                    Target::GlslEs300 if compute => 0,
+                    Target::Glsl450 | Target::GlslEs300 | Target::GlslEs310 => entries,
                     _ => 1,
                 };
                 assert_eq!(mine.len(), want, "{name} {target:?}");
@@ -352,13 +390,16 @@ mod tests {
         let (dir, files) = written();
         let glsl: Vec<&ShaderFile> = files
             .iter()
-            .filter(|f| matches!(f.target, Target::Glsl450 | Target::GlslEs310))
+            .filter(|f| {
+                matches!(
+                    f.target,
+                    Target::Glsl450 | Target::GlslEs300 | Target::GlslEs310
+                )
+            })
             .collect();
-        assert_eq!(
-            glsl.len(),
-            2 * 4,
-            "vertex 2, cubemap 1, grid 1; in two versions"
-        );
+        // vertex 2, vertex-stage 2, cubemap 1, grid 1, in 4.50 and ES 3.10;
+        // the vertex stage's 2 in ES 3.00.
+        assert_eq!(glsl.len(), 2 * 6 + 2);
         for f in glsl {
             let path = dir.path().join(&f.path);
             let (ok, said) = run("glslangValidator", &[path.as_os_str()]);
@@ -366,6 +407,7 @@ mod tests {
             let text = std::str::from_utf8(&f.bytes).unwrap();
             let version = match f.target {
                 Target::Glsl450 => "#version 450 core",
+                Target::GlslEs300 => "#version 300 es",
                 _ => "#version 310 es",
             };
             assert!(text.starts_with(version), "{}", f.path);
@@ -379,7 +421,7 @@ mod tests {
             .iter()
             .filter(|f| f.target == Target::SpirV13)
             .collect();
-        assert_eq!(spirv.len(), 3);
+        assert_eq!(spirv.len(), 4);
         for f in spirv {
             let path = dir.path().join(&f.path);
             let (ok, said) = run(

@@ -9,6 +9,8 @@
 //! * [`VERTEX_AO`]: run-time per-vertex AO of the vertex methods
 //!   (`cs_main` for dense coefficients, `cs_sparse` for CSR), the
 //!   evaluation an engine runs per frame.
+//! * [`VERTEX_AO_VS`]: the same in a vertex shader (`vertex_ao(v)`; data
+//!   in textures), for WebGL2 and GLSL ES 3.00.
 //! * [`CUBEMAP_AO`]: run-time lookup of Kroon's cubemaps at points in
 //!   space (`cubemap_occlusion`, and `cs_main` over a batch of points).
 //! * [`GRID_AO`]: run-time lookup of Malmer et al.'s grids at receivers
@@ -24,7 +26,7 @@ pub mod mirror;
 
 pub use mirror::{
     BlockInfo, CubemapAoParams, GridAoParams, GridPartInfo, GridReceiver, PreviewUniforms,
-    VertexAoParams,
+    VertexAoParams, VertexAoVsParams,
 };
 
 /// Half-float decoding shared by the pipelines.
@@ -37,6 +39,19 @@ pub const VERTEX_AO: &str = concat!(
     "\n",
     include_str!("../wgsl/vertex_ao.wgsl")
 );
+
+/// The vertex-method evaluation in a vertex shader (textures instead of
+/// storage buffers, for WebGL2 and GLSL ES 3.00), composed: [`COMMON_F16`]
+/// then `vertex_ao_vs.wgsl`.
+pub const VERTEX_AO_VS: &str = concat!(
+    include_str!("../wgsl/common/f16.wgsl"),
+    "\n",
+    include_str!("../wgsl/vertex_ao_vs.wgsl")
+);
+
+/// Texels per row of [`VERTEX_AO_VS`]'s data textures (WebGL2's smallest
+/// `MAX_TEXTURE_SIZE`).
+pub const VS_TEXTURE_WIDTH: u32 = 2048;
 
 /// The cubemap lookup shader, composed: [`COMMON_F16`] then
 /// `cubemap_ao.wgsl`.
@@ -53,9 +68,10 @@ pub const GRID_AO: &str = include_str!("../wgsl/grid_ao.wgsl");
 pub const PREVIEW: &str = include_str!("../wgsl/preview.wgsl");
 
 /// Every composed pipeline source, by file name.
-pub fn sources() -> [(&'static str, &'static str); 4] {
+pub fn sources() -> [(&'static str, &'static str); 5] {
     [
         ("vertex_ao.wgsl", VERTEX_AO),
+        ("vertex_ao_vs.wgsl", VERTEX_AO_VS),
         ("cubemap_ao.wgsl", CUBEMAP_AO),
         ("grid_ao.wgsl", GRID_AO),
         ("preview.wgsl", PREVIEW),
@@ -152,6 +168,10 @@ mod tests {
         assert_eq!(
             wgsl_size(VERTEX_AO, "BlockInfo") as usize,
             size_of::<BlockInfo>()
+        );
+        assert_eq!(
+            wgsl_size(VERTEX_AO_VS, "VsParams") as usize,
+            size_of::<VertexAoVsParams>()
         );
         assert_eq!(
             wgsl_size(CUBEMAP_AO, "Params") as usize,

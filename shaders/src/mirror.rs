@@ -18,6 +18,26 @@ pub struct VertexAoParams {
     pub _pad: u32,
 }
 
+/// `VsParams` of vertex_ao_vs.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct VertexAoVsParams {
+    /// Vertices to evaluate.
+    pub vertices: u32,
+    /// Blocks in the blocks texture (dense).
+    pub blocks: u32,
+    /// 1 for sparse (CSR) coefficients, 0 for dense blocks.
+    pub sparse: u32,
+    /// Texels per row of every data texture.
+    pub width: u32,
+    /// The test target's width in pixels.
+    pub target_width: u32,
+    /// The test target's height in pixels.
+    pub target_height: u32,
+    /// Padding.
+    pub _pad: [u32; 2],
+}
+
 /// `BlockInfo` of vertex_ao.wgsl.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]

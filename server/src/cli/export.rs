@@ -105,7 +105,7 @@ fn export_exr(asset: &Path, exr: &Path, times: &[f32]) -> anyhow::Result<()> {
         ),
         Err(e) => bail!("cannot read {}: {e}", asset.display()),
     };
-    std::fs::create_dir_all(&exr).with_context(|| format!("cannot create {}", exr.display()))?;
+    std::fs::create_dir_all(exr).with_context(|| format!("cannot create {}", exr.display()))?;
     for image in &images {
         write_exr(image, &exr.join(&image.file))?;
     }

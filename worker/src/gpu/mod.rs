@@ -18,11 +18,13 @@ pub mod cubemap_ao;
 pub mod grid_ao;
 pub mod preview;
 pub mod vertex_ao;
+pub mod vertex_ao_vs;
 
 pub use cubemap_ao::CubemapAo;
 pub use grid_ao::GridAo;
 pub use preview::PreviewRenderer;
 pub use vertex_ao::VertexAo;
+pub use vertex_ao_vs::evaluate_vertex_stage;
 pub use wgpu::{Backends, DeviceType};
 
 /// Why the GPU could not be used.

@@ -30,14 +30,14 @@ pub struct VertexAo<'g> {
 }
 
 /// What a model uploads: the entry point and its buffers' contents.
-struct Upload {
-    entry: &'static str,
-    vertices: u32,
-    weights: usize,
-    blocks: Vec<BlockInfo>,
-    coefficients: Vec<u32>,
-    maps: Vec<u32>,
-    sparse_rows: Vec<u32>,
+pub(super) struct Upload {
+    pub(super) entry: &'static str,
+    pub(super) vertices: u32,
+    pub(super) weights: usize,
+    pub(super) blocks: Vec<BlockInfo>,
+    pub(super) coefficients: Vec<u32>,
+    pub(super) maps: Vec<u32>,
+    pub(super) sparse_rows: Vec<u32>,
 }
 
 /// Packs 16-bit values two per u32 (element 2i in the low half), padded
@@ -50,6 +50,14 @@ fn pack16(values: impl ExactSizeIterator<Item = u16>) -> Vec<u32> {
     out
 }
 
+/// A model's arrays as the evaluators read them.
+pub(super) fn upload(model: &Model) -> Result<Upload, GpuError> {
+    match model.form() {
+        FormRef::Dense(form) => VertexAo::dense(form),
+        FormRef::Sparse(form) => VertexAo::sparse(form),
+    }
+}
+
 fn non_empty(mut v: Vec<u32>) -> Vec<u32> {
     if v.is_empty() {
         v.push(0);
@@ -57,7 +65,7 @@ fn non_empty(mut v: Vec<u32>) -> Vec<u32> {
     v
 }
 
-fn to_u32(n: usize, what: &str) -> Result<u32, GpuError> {
+pub(super) fn to_u32(n: usize, what: &str) -> Result<u32, GpuError> {
     u32::try_from(n).map_err(|_| GpuError::TooLarge(format!("{what}: {n}")))
 }
 
@@ -72,10 +80,7 @@ impl<'g> VertexAo<'g> {
             coefficients,
             maps,
             sparse_rows,
-        } = match model.form() {
-            FormRef::Dense(form) => Self::dense(form)?,
-            FormRef::Sparse(form) => Self::sparse(form)?,
-        };
+        } = upload(model)?;
         let device = &gpu.device;
         let groups_needed = vertices.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1);
         let groups = (
@@ -161,7 +166,7 @@ impl<'g> VertexAo<'g> {
         Ok(out)
     }
 
-    fn dense(form: &LinearForm) -> Result<Upload, GpuError> {
+    pub(super) fn dense(form: &LinearForm) -> Result<Upload, GpuError> {
         let mut blocks = Vec::with_capacity(form.blocks.len());
         let (mut coef_offset, mut weight_offset) = (0usize, 0usize);
         let mut maps = Vec::new();
@@ -203,7 +208,7 @@ impl<'g> VertexAo<'g> {
         })
     }
 
-    fn sparse(form: &SparseForm) -> Result<Upload, GpuError> {
+    pub(super) fn sparse(form: &SparseForm) -> Result<Upload, GpuError> {
         Ok(Upload {
             entry: "cs_sparse",
             vertices: to_u32(form.vertices, "vertices")?,

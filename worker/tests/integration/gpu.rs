@@ -11,7 +11,7 @@ use aobake_core::{
     trace::SceneOptions,
     trace::trace_poses,
 };
-use aobake_worker::gpu::{Gpu, VertexAo};
+use aobake_worker::gpu::{Gpu, VertexAo, evaluate_vertex_stage};
 use half::f16;
 
 /// f16's machine epsilon.
@@ -100,12 +100,27 @@ fn every_vertex_method_matches_the_cpu() {
             tests.truncate(40);
             let mut max = 0.0f32;
             let mut outputs = Vec::new();
-            for pose in &tests {
+            for (i, pose) in tests.iter().enumerate() {
                 let w = model.weights(&c.skeleton, pose);
                 let cpu = model.evaluate_weights(&w);
-                let gpu = on_gpu.evaluate(&w).unwrap();
-                max = max.max(worst(&cpu, &gpu));
-                outputs.push(gpu);
+                let gpu_ao = on_gpu.evaluate(&w).unwrap();
+                max = max.max(worst(&cpu, &gpu_ao));
+                // The vertex-stage evaluator (WebGL2's: textures, no
+                // compute) sums the same terms in the same order as the
+                // compute shader on the same adapter: the same bits.
+                if i % 8 == 0 {
+                    let vs = evaluate_vertex_stage(&gpu, model, &w).unwrap();
+                    let same = vs
+                        .iter()
+                        .zip(&gpu_ao)
+                        .all(|(a, b)| a.to_bits() == b.to_bits());
+                    assert!(
+                        same && vs.len() == gpu_ao.len(),
+                        "{:?}: the vertex stage differs",
+                        model.method()
+                    );
+                }
+                outputs.push(gpu_ao);
             }
             // Not a trivial agreement: real AO, varying with the pose for
             // the pose-dependent methods.
