@@ -336,19 +336,24 @@ fn previews_match_one_go(
     }
 }
 
-#[test]
-fn a_vertex_bakes_previews_are_those_of_its_asset() {
-    use aobake_core::bake::{Bake, BakeInputs, UploadBytes, bake_in_process};
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../tests/data/characters/RiggedFigure/RiggedFigure.glb"
-    );
-    let inputs = BakeInputs::load(
+/// A test file's inputs (`tests/data/…`), imported for a bake.
+fn test_inputs(path: &str) -> aobake_core::bake::BakeInputs {
+    use aobake_core::bake::{BakeInputs, UploadBytes};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/data")
+        .join(path);
+    BakeInputs::load(
         &UploadBytes::single(std::fs::read(path).unwrap()),
         &[],
         &Limits::default(),
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn a_vertex_bakes_previews_are_those_of_its_asset() {
+    use aobake_core::bake::{Bake, bake_in_process};
+    let inputs = test_inputs("characters/RiggedFigure/RiggedFigure.glb");
     let mut p = BakeParams::new(Method::VertexLinear);
     p.poses = 24;
     p.samples = 16;
@@ -363,19 +368,10 @@ fn a_vertex_bakes_previews_are_those_of_its_asset() {
 fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its_previews() {
     use aobake_core::{
         asset::Container,
-        bake::{Bake, BakeInputs, PreviewModel, UploadBytes, bake_in_process},
+        bake::{Bake, PreviewModel, bake_in_process},
         method::cubemap::model::CubemapModel,
     };
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../tests/data/scenes/SpinningCube/SpinningCube.gltf"
-    );
-    let inputs = BakeInputs::load(
-        &UploadBytes::single(std::fs::read(path).unwrap()),
-        &[],
-        &Limits::default(),
-    )
-    .unwrap();
+    let inputs = test_inputs("scenes/SpinningCube/SpinningCube.gltf");
     let mut p = super::gpu::small_cubemap(Method::CubemapContinuous, 16, 4, 32, 32);
     // The previews' ground truth traces this many rays per ground point.
     p.cubemap.eval_rays = 32;
@@ -427,23 +423,14 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
 fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
     use aobake_core::{
         asset::Container,
-        bake::{Bake, BakeInputs, PreviewModel, UploadBytes, bake_in_process},
+        bake::{Bake, PreviewModel, bake_in_process},
         method::grid::{
             GridOptions,
             model::GridModel,
             parts::{owner_indices, parts},
         },
     };
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../tests/data/scenes/RigidRobot/RigidRobot.gltf"
-    );
-    let inputs = BakeInputs::load(
-        &UploadBytes::single(std::fs::read(path).unwrap()),
-        &[],
-        &Limits::default(),
-    )
-    .unwrap();
+    let inputs = test_inputs("scenes/RigidRobot/RigidRobot.gltf");
     let mut p = aobake_core::bake::BakeParams::new(Method::Grid);
     p.grid = GridOptions {
         resolution: 16,

@@ -262,6 +262,8 @@ async function bakesPage(signal) {
 function jobLabel(j) {
   const s = j.spec || {};
   if (j.kind === "sample") return `sample ${s.set} ${s.first}..${s.first + s.count}`;
+  if (j.kind === "preview-truth") return `preview truth frames ${s.first}..${s.first + s.count}`;
+  if (j.kind === "unseen") return `unseen fold ${s.fold}`;
   return j.kind;
 }
 
