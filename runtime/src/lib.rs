@@ -3,7 +3,8 @@
 //! What reading a baked AO asset takes, apart from everything that bakes
 //! one: the versioned container (magic, version, the method, a JSON
 //! header and typed, checksummed sections; `docs/asset-format.md`) and the
-//! method an asset holds, and each family's run time (so far the grids).
+//! method an asset holds, and each family's run time (so far the grids
+//! and the vertex methods' linear form).
 //! aobake's core, worker and CLI read assets
 //! through it, and so can an engine's tools. It must not depend on a ray
 //! tracer, linear algebra, a glTF reader or an async runtime (no obvhs,
@@ -11,7 +12,8 @@
 //! list of dependencies.
 //!
 //! Layers, bottom up: `method` (a method's identity; each family's run
-//! time in its folder below it: [`method::grid`] so far), `container`.
+//! time in its folder below it: [`method::grid`], [`method::vertex`] in
+//! part), `container`.
 //! Each family's codec reads and writes the container.
 
 pub mod container;

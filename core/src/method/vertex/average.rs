@@ -3,8 +3,8 @@
 
 use half::f16;
 
-use super::form::{Block, LinearForm};
 use crate::trace::AoBlock;
+use aobake_runtime::method::vertex::form::{Block, LinearForm};
 
 /// Mean AO per vertex.
 #[derive(Debug, Clone, PartialEq)]

@@ -16,11 +16,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::basis::Basis;
-use super::form::{Block, Coefficients, LinearForm};
 use super::kmeans::kmeans;
 use super::linalg::{principal_axes, ridge_lstsq};
 use super::linear::{F16_MAX, FitOverflow, VertexLinear};
 use crate::{pose_space::JointAngles, trace::AoBlock};
+use aobake_runtime::method::vertex::form::{Block, Coefficients, LinearForm};
 
 /// MLS weights below this are dropped (and the rest renormalised), so a
 /// pose pays only for the handful of clusters it is near (with α = 10 the

@@ -9,9 +9,9 @@ use serde::{Deserialize, Serialize};
 
 use super::basis::Basis;
 use super::cv::RidgeChoice;
-use super::form::{Block, Coefficients, LinearForm, SparseForm};
 use super::linalg::{RidgeSolver, SolveStats};
 use crate::{pose_space::Range, trace::AoBlock};
+use aobake_runtime::method::vertex::form::{Block, Coefficients, LinearForm, SparseForm};
 
 /// The default ridge weight: on standardised angles it shrinks directions
 /// of pose space with less than about 1/1000 of a typical angle's variance

@@ -16,11 +16,13 @@ mod basis;
 mod clustered;
 mod codec;
 pub mod cv;
-mod form;
 mod kmeans;
 mod linalg;
 mod linear;
 
+pub use aobake_runtime::method::vertex::form::{
+    self, Block, Coefficients, FormRef, LinearForm, SparseForm,
+};
 pub use average::StaticAverage;
 pub use basis::{Basis, BasisStats};
 pub use clustered::{
@@ -29,7 +31,6 @@ pub use clustered::{
 };
 pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
 pub use cv::{BasisCandidate, BasisChoice, Rows, RowsChoice, Source};
-pub use form::{Block, Coefficients, FormRef, LinearForm, SparseForm};
 pub use linalg::SolveStats;
 pub use linear::{
     Angles, Column, ColumnCount, DEFAULT_RIDGE, Features, FitOverflow, LinearFitStats,

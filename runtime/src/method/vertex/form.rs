@@ -17,7 +17,8 @@
 //! saturate it: a linear model can overshoot on poses far from its
 //! training set.
 //!
-//! `shaders/wgsl/vertex_ao.wgsl` evaluates exactly this layout on the GPU.
+//! `shaders/wgsl/vertex_ao.wgsl` (and `vertex_ao_vs.wgsl`, in a vertex
+//! shader) evaluates exactly this layout on the GPU.
 
 use half::f16;
 
@@ -93,8 +94,9 @@ impl LinearForm {
     }
 }
 
-/// Bytes per map entry: u16 when the columns fit.
-pub(crate) fn map_entry_bytes(columns: usize) -> usize {
+/// Bytes per vertex-cluster map entry in an asset: u16 when the columns
+/// fit.
+pub fn map_entry_bytes(columns: usize) -> usize {
     if columns <= usize::from(u16::MAX) + 1 {
         2
     } else {
