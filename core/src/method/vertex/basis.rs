@@ -30,21 +30,9 @@ use faer::Mat;
 use half::f16;
 use serde::{Deserialize, Serialize};
 
-use super::{Block, FormRef, LinearForm, linalg::principal_axes_of_factor};
+pub use aobake_runtime::method::vertex::basis::Basis;
 
-/// The per-pose step of an eigen-AO model: its `inputs` weights in, `rank`
-/// basis weights (and a 1) out.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Basis {
-    /// Weights the model computes per pose (W).
-    pub inputs: usize,
-    /// Basis rows (r).
-    pub rank: usize,
-    /// `M`: `inputs × rank`, row-major.
-    pub mix: Vec<f32>,
-    /// `o`: one per basis row.
-    pub offset: Vec<f32>,
-}
+use super::{Block, FormRef, LinearForm, linalg::principal_axes_of_factor};
 
 /// How the compression went, for the report.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -67,27 +55,6 @@ pub struct BasisStats {
     /// Coefficients a vertex reads: its multiply-adds.
     #[serde(default)]
     pub multiply_adds: f64,
-}
-
-impl Basis {
-    /// The basis weights of one pose's model weights, then a 1 (the mean's
-    /// row).
-    pub fn apply(&self, weights: &[f32]) -> Vec<f32> {
-        assert_eq!(weights.len(), self.inputs, "one weight per input");
-        let mut out: Vec<f32> = self.offset.iter().map(|&o| -o).collect();
-        for (row, &w) in self.mix.chunks_exact(self.rank).zip(weights) {
-            if w != 0.0 {
-                out.iter_mut().zip(row).for_each(|(o, &m)| *o += w * m);
-            }
-        }
-        out.push(1.0);
-        out
-    }
-
-    /// Bytes of the mix and offsets (f32).
-    pub fn bytes(&self) -> usize {
-        4 * (self.mix.len() + self.offset.len())
-    }
 }
 
 /// Compresses `form` (read with the per-pose `weights` of the reference
