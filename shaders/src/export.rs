@@ -87,12 +87,12 @@ pub struct ShaderFile {
 
 /// Why a shader could not be translated.
 #[derive(Debug, thiserror::Error)]
-#[error("{shader} for {target:?}: {message}")]
+#[error("{shader} ({}): {message}", target.map_or("WGSL", Target::dir))]
 pub struct ExportError {
     /// The WGSL pipeline.
     pub shader: &'static str,
-    /// The target.
-    pub target: Target,
+    /// The target (none: the WGSL itself did not parse or validate).
+    pub target: Option<Target>,
     /// What naga said.
     pub message: String,
 }
@@ -111,8 +111,13 @@ pub fn runtime_sources() -> [(&'static str, &'static str); 4] {
 pub fn export_all() -> Result<Vec<ShaderFile>, ExportError> {
     let mut files = Vec::new();
     for (name, source) in runtime_sources() {
+        let (module, info) = parse(name, source).map_err(|message| ExportError {
+            shader: name,
+            target: None,
+            message,
+        })?;
         for target in Target::ALL {
-            files.extend(translate(name, source, target)?);
+            files.extend(translate(name, &module, &info, target)?);
         }
     }
     Ok(files)
@@ -129,24 +134,24 @@ pub fn parse(name: &'static str, source: &str) -> Result<(naga::Module, ModuleIn
     Ok((module, info))
 }
 
-/// One WGSL pipeline in one target.
+/// One parsed WGSL pipeline ([`parse`]) in one target.
 pub fn translate(
     name: &'static str,
-    source: &str,
+    module: &naga::Module,
+    info: &ModuleInfo,
     target: Target,
 ) -> Result<Vec<ShaderFile>, ExportError> {
     let fail = |message: String| ExportError {
         shader: name,
-        target,
+        target: Some(target),
         message,
     };
-    let (module, info) = parse(name, source).map_err(fail)?;
     let file = |path: String, bytes: Vec<u8>| ShaderFile {
         target,
         path: format!("{}/{path}", target.dir()),
         bytes,
     };
-    let bindings = bindings(&module);
+    let bindings = bindings(module);
     Ok(match target {
         Target::GlslEs300
             if module
@@ -187,8 +192,8 @@ pub fn translate(
                 let mut text = String::new();
                 glsl::Writer::new(
                     &mut text,
-                    &module,
-                    &info,
+                    module,
+                    info,
                     &options,
                     &pipeline,
                     naga::proc::BoundsCheckPolicies::default(),
@@ -234,7 +239,7 @@ pub fn translate(
             let pipeline = hlsl::PipelineOptions { entry_point: None };
             let mut text = String::new();
             hlsl::Writer::new(&mut text, &options, &pipeline)
-                .write(&module, &info, None)
+                .write(module, info, None)
                 .map_err(|e| fail(e.to_string()))?;
             vec![file(format!("{name}.hlsl"), text.into_bytes())]
         }
@@ -277,7 +282,7 @@ pub fn translate(
                 ..msl::Options::default()
             };
             let (text, _) =
-                msl::write_string(&module, &info, &options, &msl::PipelineOptions::default())
+                msl::write_string(module, info, &options, &msl::PipelineOptions::default())
                     .map_err(|e| fail(e.to_string()))?;
             let text = format!("// Sizes: {MSL_SIZES_NOTE}.\n{text}");
             vec![file(format!("{name}.metal"), text.into_bytes())]
@@ -289,7 +294,7 @@ pub fn translate(
                 ..spv::Options::default()
             };
             let words =
-                spv::write_vec(&module, &info, &options, None).map_err(|e| fail(e.to_string()))?;
+                spv::write_vec(module, info, &options, None).map_err(|e| fail(e.to_string()))?;
             let bytes = words.iter().flat_map(|w| w.to_le_bytes()).collect();
             vec![file(format!("{name}.spv"), bytes)]
         }

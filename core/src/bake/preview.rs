@@ -27,8 +27,8 @@ use crate::{
     method::{Method, cubemap::model::CubemapModel, grid::model::GridModel, vertex::Model},
     rig::{clip::Clip, pose::Pose},
     trace::{
-        AoBlock, KroonParams, Scene, SceneOptions, SurfaceMesh, SurfaceParams, kroon_occlusion,
-        no_progress, surface_occlusion, vertex_occlusion,
+        AoBlock, KroonParams, SceneOptions, SurfaceParams, kroon_occlusion, no_progress,
+        surface_occlusion, trace_pose,
     },
 };
 
@@ -709,18 +709,8 @@ impl TruthTracing {
         };
         for pose in poses {
             let started = Instant::now();
-            // What `trace_poses` does for one pose, the scene kept for the
-            // ground.
-            let posed = character.skin(pose);
-            let scene =
-                Scene::new(&posed.positions, &character.triangles, &options).map_err(invalid)?;
-            let mesh = SurfaceMesh {
-                positions: &posed.positions,
-                normals: &posed.normals,
-                triangles: &character.triangles,
-            };
-            let ao =
-                vertex_occlusion(&scene, &mesh, &self.surface, &no_progress).map_err(invalid)?;
+            let (scene, ao) = trace_pose(character, pose, &options, &self.surface, &no_progress)
+                .map_err(invalid)?;
             // The ground's truth: what the cubemap stores (Eq. 3.1), else
             // surface AO under the character.
             let ground_ao = match &self.kroon {

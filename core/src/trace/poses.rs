@@ -71,16 +71,30 @@ pub fn trace_poses(
     let vertices = character.positions.len();
     let mut values = Vec::with_capacity(vertices * poses.len());
     for pose in poses {
-        let posed = character.skin(pose);
-        let scene = Scene::new(&posed.positions, &character.triangles, options)?;
-        let mesh = SurfaceMesh {
-            positions: &posed.positions,
-            normals: &posed.normals,
-            triangles: &character.triangles,
-        };
-        values.extend(vertex_occlusion(&scene, &mesh, params, progress)?);
+        values.extend(trace_pose(character, pose, options, params, progress)?.1);
     }
     Ok(AoBlock { vertices, values })
+}
+
+/// One pose of [`trace_poses`]: the posed scene (for callers that trace
+/// more from it, such as a ground under the character) and the occlusion
+/// of every vertex.
+pub fn trace_pose(
+    character: &Character,
+    pose: &Pose,
+    options: &SceneOptions,
+    params: &SurfaceParams,
+    progress: Progress<'_>,
+) -> Result<(Scene, Vec<f32>), TraceError> {
+    let posed = character.skin(pose);
+    let scene = Scene::new(&posed.positions, &character.triangles, options)?;
+    let mesh = SurfaceMesh {
+        positions: &posed.positions,
+        normals: &posed.normals,
+        triangles: &character.triangles,
+    };
+    let ao = vertex_occlusion(&scene, &mesh, params, progress)?;
+    Ok((scene, ao))
 }
 
 #[cfg(test)]
