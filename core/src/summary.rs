@@ -6,7 +6,7 @@ use serde::Serialize;
 use crate::{
     Character, Clip, Pose,
     geometry::bounds,
-    pose_space::{Handles, JointAngles, LayoutOptions},
+    pose_space::{self, LayoutOptions},
 };
 
 /// Frame rate at which clips are sampled for the bounds.
@@ -82,7 +82,7 @@ impl Summary {
             .filter_map(|p| bounds(character.skin(&p).positions))
             .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
             .unwrap_or_default();
-        let pose_parameters = JointAngles::from_clips(character, clips, LayoutOptions::default())
+        let pose_parameters = pose_space::joint_angles(character, clips, LayoutOptions::default())
             .map_or(0, |l| l.len());
         Self {
             meshes: character.source.meshes,
@@ -110,7 +110,7 @@ impl Summary {
                 })
                 .collect(),
             pose_parameters,
-            handle_parameters: Handles::new(character).len(),
+            handle_parameters: pose_space::handles(character).len(),
             bounds: [lo.to_array(), hi.to_array()],
             diagonal: (hi - lo).length(),
         }

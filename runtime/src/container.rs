@@ -22,7 +22,7 @@ pub const MAGIC: [u8; 8] = *b"\x89AOB\r\n\x1a\n";
 /// Format major version this build writes and reads.
 pub const MAJOR: u16 = 1;
 /// Format minor version this build writes.
-pub const MINOR: u16 = 3;
+pub const MINOR: u16 = 4;
 
 /// Fixed part before the header: magic, major, minor, method, flags,
 /// header length, section count, reserved, CRC.
@@ -160,6 +160,9 @@ pub enum AssetError {
     /// A field has an impossible value.
     #[error("asset is malformed: {0}")]
     Malformed(String),
+    /// Sound, but without what the reader was asked for.
+    #[error("the asset cannot do this: {0}")]
+    Unsupported(String),
 }
 
 fn tag_name(tag: [u8; 4]) -> String {

@@ -18,6 +18,8 @@
 
 pub mod container;
 pub mod method;
+pub mod pose_space;
+pub mod rig;
 
 pub use container::{AssetError, Container, Data, MAGIC, MAJOR, MINOR, Section};
 pub use method::{Family, Method};

@@ -400,7 +400,7 @@ impl BakedAsset {
                 let (model, header) =
                     Model::from_container(container).map_err(|e| unreadable(&e))?;
                 if let Some(c) = character {
-                    model.check_character(c).map_err(|e| {
+                    crate::method::vertex::check_character(&model, c).map_err(|e| {
                         AssetUseError::Mismatch(format!("{e} (character {})", header.character))
                     })?;
                 }
@@ -488,7 +488,7 @@ impl BakedAsset {
     ) -> Result<Vec<f32>, AssetUseError> {
         use crate::method::grid::model::Terms;
         match &self.model {
-            AssetModel::Vertex(m) => Ok(m.evaluate(&character.skeleton, pose)),
+            AssetModel::Vertex(m) => Ok(m.evaluate(&character.skeleton, &pose.locals)),
             AssetModel::Cubemap(..) => Err(AssetUseError::Unsupported(
                 "it holds the occlusion cast into space, not per-vertex AO; `aobake preview` renders it on the ground and `aobake export --exr` writes its faces".into(),
             )),

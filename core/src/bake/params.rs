@@ -425,7 +425,7 @@ pub fn bake_key(character: &str, clips: &[String], params: &BakeParams) -> Strin
 mod tests {
     use super::*;
 
-    const GOLDEN_KEY: &str = "9c57f8d6841a9680f7e70bb0c6f23294e60871b6de8d5c3a18a37aed274cbe70";
+    const GOLDEN_KEY: &str = "b6cb2301462f58135c713ff29dda8cc804ab56e8dfc93daa3d56095b7175c03e";
 
     #[test]
     fn key_depends_on_what_matters_only() {

@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::{
     Character, Clip,
     method::vertex::{AssetHeaderFields, FitStats, FitStep, Model, Source},
-    pose_space::ParamError,
+    pose_space::{self, ParamError},
     pose_space::{ClipFrame, Handles, JointAngles, LayoutOptions, random_clip_frames},
     rig::pose::Pose,
     trace::{AoBlock, HELD_OUT_SEED},
@@ -95,7 +95,7 @@ impl<'a> Plan<'a> {
         let train = select(clips, &p.train_clips)?;
         let test = select(clips, &p.test_clips)?;
         let train_clips: Vec<Clip> = train.iter().map(|&i| clips[i].clone()).collect();
-        let joint_angles = match JointAngles::from_clips(
+        let joint_angles = match pose_space::joint_angles(
             character,
             &train_clips,
             LayoutOptions {
@@ -116,7 +116,7 @@ impl<'a> Plan<'a> {
             train,
             test,
             joint_angles,
-            handles: Handles::new(character),
+            handles: pose_space::handles(character),
             params,
             train_clips,
         })
@@ -125,14 +125,13 @@ impl<'a> Plan<'a> {
     /// Poses `range` of `count` random joint-angle poses: every vector is
     /// drawn (the sequence is seeded), only those in `range` are built.
     fn random_poses(&self, count: usize, seed: u64, range: Range<usize>) -> Vec<Pose> {
-        let vectors = self.joint_angles.sample_uniform(count, seed);
+        let vectors = pose_space::sample_uniform(&self.joint_angles, count, seed);
         vectors
             .get(range)
             .unwrap_or_default()
             .iter()
             .map(|q| {
-                self.joint_angles
-                    .pose(&self.character.skeleton, q)
+                pose_space::pose(&self.joint_angles, &self.character.skeleton, q)
                     .expect("sampled vectors have the layout's length")
             })
             .collect()
@@ -164,7 +163,7 @@ impl<'a> Plan<'a> {
 
     /// Poses `range` of `count` perturbed training-clip frames: random
     /// frames (another seed than the plain ones) with every joint
-    /// parameter moved at random (see [`JointAngles::perturb`]).
+    /// parameter moved at random (see [`pose_space::perturb`]).
     fn perturbed_poses(&self, count: usize, seed: u64, range: Range<usize>) -> Vec<Pose> {
         let seed = seed ^ PERTURBED_SEED;
         let frames = random_clip_frames(&self.train_clips, count, seed);
@@ -180,17 +179,20 @@ impl<'a> Plan<'a> {
             let mut q = if range.contains(&i) {
                 self.joint_angles.params(
                     skeleton,
-                    &Pose::sample(skeleton, &self.train_clips[f.clip], f.time),
+                    &Pose::sample(skeleton, &self.train_clips[f.clip], f.time).locals,
                 )
             } else {
                 vec![0.0; self.joint_angles.len()]
             };
-            self.joint_angles
-                .perturb(&mut q, self.params.perturbation, &mut rng);
+            pose_space::perturb(
+                &self.joint_angles,
+                &mut q,
+                self.params.perturbation,
+                &mut rng,
+            );
             if range.contains(&i) {
                 poses.push(
-                    self.joint_angles
-                        .pose(skeleton, &q)
+                    pose_space::pose(&self.joint_angles, skeleton, &q)
                         .expect("the parameters have the layout's length"),
                 );
             }

@@ -389,7 +389,7 @@ impl Subject<'_> {
             .map(|(i, pose)| {
                 let posed = self.character.skin(pose);
                 let (weights, phase) = match self.model {
-                    PreviewModel::Vertex(model) => (model.weights(skeleton, pose), 0.0),
+                    PreviewModel::Vertex(model) => (model.weights(skeleton, &pose.locals), 0.0),
                     PreviewModel::Grid(model, _) => (
                         grid_weights(model, &self.character.joint_matrices(pose)),
                         0.0,

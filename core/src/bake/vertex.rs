@@ -33,7 +33,7 @@ use plotters::prelude::*;
 use crate::{
     asset::metrics::{Errors, FrameError, psnr},
     method::Method,
-    method::vertex::{FitStats, FitStep, Model, Rows, Source, StaticAverage},
+    method::vertex::{FitStats, FitStep, Model, Rows, Source, StaticAverage, fit_static_average},
     rig::pose::Pose,
     trace::{AoBlock, SceneOptions, no_progress, trace_poses},
 };
@@ -295,12 +295,19 @@ impl Bake<'_> {
             &self.plan.reference_sources(),
             &mut fit_progress(sink),
         )?;
-        let baseline = Model::StaticAverage(StaticAverage::fit(
+        let baseline = Model::StaticAverage(fit_static_average(
             &reference.select(self.plan.baseline_rows()),
         ));
         let mut out = JobOutput::default();
-        out.push("model", model.to_container(self.header()).to_bytes());
-        out.push("baseline", baseline.to_container(self.header()).to_bytes());
+        let skeleton = &self.plan.character.skeleton;
+        out.push(
+            "model",
+            model.to_container(self.header(), skeleton).to_bytes(),
+        );
+        out.push(
+            "baseline",
+            baseline.to_container(self.header(), skeleton).to_bytes(),
+        );
         out.push("fit.json", json(&FitInfo { fit }));
         out.timings.reference_trace_s = deps.iter().map(|d| d.timings.reference_trace_s).sum();
         out.timings.fit_s = started.elapsed().as_secs_f64();
@@ -482,7 +489,7 @@ impl Plan<'_> {
             .par_iter()
             .enumerate()
             .map(|(i, t)| {
-                let w = model.weights(skeleton, &t.pose);
+                let w = model.weights(skeleton, &t.pose.locals);
                 let predicted = model.evaluate_weights(&w);
                 (
                     model.multiply_adds(&w),
@@ -593,7 +600,7 @@ impl Plan<'_> {
             on_step,
         )?;
         let frames: Vec<usize> = keep.iter().copied().filter(|i| plain.contains(i)).collect();
-        let baseline = StaticAverage::fit(&reference.select(if frames.is_empty() {
+        let baseline = fit_static_average(&reference.select(if frames.is_empty() {
             keep.clone()
         } else {
             frames
@@ -604,7 +611,7 @@ impl Plan<'_> {
             .enumerate()
             .filter(|(_, t)| t.frame.is_some_and(|f| f.clip == c))
             .map(|(i, t)| {
-                let predicted = model.evaluate(skeleton, &t.pose);
+                let predicted = model.evaluate(skeleton, &t.pose.locals);
                 (
                     FrameError::of(&predicted, truth.row(i)),
                     FrameError::of(&baseline, truth.row(i)),

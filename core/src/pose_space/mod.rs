@@ -1,5 +1,7 @@
-//! Poses as vectors of numbers (DESIGN §3), and seeded samplers of
-//! reference poses.
+//! Poses as vectors of numbers (DESIGN §3): choosing the layouts from a
+//! character and its clips, and seeded samplers of reference poses. The
+//! layouts themselves, and the step from a pose to its numbers, are in
+//! the runtime (`aobake_runtime::pose_space`), which engines use too.
 //!
 //! * Joint angles (Kontkanen & Aila 2006): for each animated joint, its
 //!   local rotation relative to the rest rotation as a rotation vector,
@@ -10,7 +12,8 @@
 //!   position of a point offset from the bone axis, both relative to the
 //!   root joint's position; two handles fix a bone's frame.
 
-use glam::{Quat, Vec3};
+pub use aobake_runtime::pose_space::{Handles, JointAngles, ParamError, Range, rotation_vector};
+use glam::Vec3;
 use rand::{RngExt as _, SeedableRng as _};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -25,15 +28,6 @@ use crate::{
 
 /// At most this many poses per clip when finding parameter ranges.
 const MAX_RANGE_SAMPLES: usize = 10_000;
-
-/// Closed range of one parameter.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Range {
-    /// Smallest value.
-    pub min: f32,
-    /// Largest value.
-    pub max: f32,
-}
 
 /// How a joint-angle layout is derived from clips.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -63,362 +57,253 @@ impl Default for LayoutOptions {
     }
 }
 
-/// Why a parameterisation could not be made.
-#[derive(Debug, Clone, thiserror::Error, PartialEq, Eq)]
-pub enum ParamError {
-    /// No clip rotates a node that moves the mesh.
-    #[error("no clip rotates a joint that moves the mesh; joint angles need animated joints")]
-    NothingAnimated,
-    /// A parameter vector of the wrong length.
-    #[error("expected {expected} parameters, got {got}")]
-    Length {
-        /// Parameters of the layout.
-        expected: usize,
-        /// Parameters given.
-        got: usize,
-    },
-}
-
-/// The joint-angle parameterisation of a character's poses.
-///
-/// Rotations of the body root (the joints' lowest common ancestor) and of
-/// its ancestors are left out: they turn the whole mesh, which changes no
-/// self-occlusion.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct JointAngles {
-    /// Nodes with 3 rotation-vector parameters each, in node order.
-    pub joints: Vec<usize>,
-    /// Nodes with 3 translation parameters each (offset from rest).
-    pub translations: Vec<usize>,
-    /// Nodes with 3 scale parameters each: the scale over the rest scale,
-    /// minus 1, per axis (linear, not logarithmic: a node scaled to zero is
-    /// a plain end of the range, and the geometry moves linearly with it;
-    /// absent in layouts written before there were any).
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub scales: Vec<usize>,
-    /// Range per parameter: joints first, then translations, then scales.
-    pub ranges: Vec<Range>,
-    /// Name per parameter, such as `Hips.rx`, `Root.ty` or `Cube.sx`.
-    pub names: Vec<String>,
-}
-
-/// `log(q)` as a rotation vector (axis times angle, angle in [0, π]).
-pub fn rotation_vector(q: Quat) -> Vec3 {
-    let q = if q.w < 0.0 { -q } else { q };
-    q.to_scaled_axis()
-}
-
-impl JointAngles {
-    /// The layout for the joints that `clips` rotate, with ranges over the
-    /// clips' frames widened by the margin.
-    pub fn from_clips(
-        character: &Character,
-        clips: &[Clip],
-        options: LayoutOptions,
-    ) -> Result<Self, ParamError> {
-        let skeleton = &character.skeleton;
-        let relevant = character.relevant_nodes();
-        // The body root and its ancestors move the mesh rigidly; AO does
-        // not depend on their rotations.
-        let mut rigid = vec![false; skeleton.nodes.len()];
-        let mut n = character.body_root();
-        while let Some(r) = n {
-            rigid[r] = true;
-            n = skeleton.nodes[r].parent;
-        }
-        let animated = |property: Property| {
-            let mut nodes: Vec<usize> = clips
-                .iter()
-                .flat_map(|c| &c.channels)
-                .filter(|c| {
-                    c.property == property
-                        && relevant[c.node]
-                        && (property != Property::Rotation || !rigid[c.node])
-                })
-                .map(|c| c.node)
-                .collect();
-            nodes.sort_unstable();
-            nodes.dedup();
-            nodes
-        };
-        let joints = animated(Property::Rotation);
-        if joints.is_empty() {
-            return Err(ParamError::NothingAnimated);
-        }
-        let translations = if options.root_translation {
-            let moved: Vec<usize> = animated(Property::Translation)
-                .into_iter()
-                .filter(|&n| !rigid[n])
-                .collect();
-            let mut is_animated = vec![false; skeleton.nodes.len()];
-            for &n in joints.iter().chain(&moved) {
-                is_animated[n] = true;
-            }
-            moved
-                .into_iter()
-                .filter(|&n| {
-                    let mut p = skeleton.nodes[n].parent;
-                    while let Some(a) = p {
-                        if is_animated[a] {
-                            return false;
-                        }
-                        p = skeleton.nodes[a].parent;
-                    }
-                    true
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
-        // A scaled node (grown, squashed, shrunk to nothing) moves geometry
-        // the rotations and translations do not describe.
-        let scales: Vec<usize> = if options.scales {
-            animated(Property::Scale)
-                .into_iter()
-                .filter(|&n| !rigid[n])
-                .collect()
-        } else {
-            Vec::new()
-        };
-        let mut names = Vec::new();
-        for &j in &joints {
-            for axis in ["rx", "ry", "rz"] {
-                names.push(format!("{}.{axis}", skeleton.label(j)));
-            }
-        }
-        for &t in &translations {
-            for axis in ["tx", "ty", "tz"] {
-                names.push(format!("{}.{axis}", skeleton.label(t)));
-            }
-        }
-        for &t in &scales {
-            for axis in ["sx", "sy", "sz"] {
-                names.push(format!("{}.{axis}", skeleton.label(t)));
-            }
-        }
-        let mut layout = Self {
-            ranges: vec![
-                Range {
-                    min: f32::INFINITY,
-                    max: f32::NEG_INFINITY,
-                };
-                names.len()
-            ],
-            joints,
-            translations,
-            scales,
-            names,
-        };
-        for clip in clips {
-            for t in clip.sample_times(options.fps, MAX_RANGE_SAMPLES) {
-                let params = layout.params(skeleton, &Pose::sample(skeleton, clip, t));
-                for (range, v) in layout.ranges.iter_mut().zip(params) {
-                    range.min = range.min.min(v);
-                    range.max = range.max.max(v);
-                }
-            }
-        }
-        // A translation or scale channel that never moves its node (many
-        // exporters key every bone's rest offset and scale) carries
-        // nothing: left out.
-        let r = layout.joints.len() * 3;
-        let t = layout.translations.len();
-        let moving: Vec<bool> = (0..t + layout.scales.len())
-            .map(|k| {
-                layout.ranges[r + 3 * k..r + 3 * k + 3]
-                    .iter()
-                    .any(|x| x.max - x.min > 1e-6 * x.max.abs().max(x.min.abs()).max(1.0))
-            })
-            .collect();
-        if moving.iter().any(|m| !m) {
-            let keep = |i: usize| i < r || moving[(i - r) / 3];
-            let mut i = 0;
-            layout.names.retain(|_| {
-                i += 1;
-                keep(i - 1)
-            });
-            let mut i = 0;
-            layout.ranges.retain(|_| {
-                i += 1;
-                keep(i - 1)
-            });
-            let mut k = 0;
-            layout.translations.retain(|_| {
-                k += 1;
-                moving[k - 1]
-            });
-            layout.scales.retain(|_| {
-                k += 1;
-                moving[k - 1]
-            });
-        }
-        let first_scale = r + 3 * layout.translations.len();
-        for (i, range) in layout.ranges.iter_mut().enumerate() {
-            let pad = (range.max - range.min) * options.margin;
-            // The margin does not take a scale through zero (parameter
-            // −1) that the clips never took there: a node turned inside
-            // out is no pose of the character.
-            let floor = if i >= first_scale && range.min >= -1.0 {
-                -1.0
-            } else {
-                f32::NEG_INFINITY
-            };
-            range.min = (range.min - pad).max(floor);
-            range.max += pad;
-        }
-        Ok(layout)
+/// The joint-angle layout for the joints that `clips` rotate, with ranges
+/// over the clips' frames widened by the margin.
+pub fn joint_angles(
+    character: &Character,
+    clips: &[Clip],
+    options: LayoutOptions,
+) -> Result<JointAngles, ParamError> {
+    let skeleton = &character.skeleton;
+    let relevant = character.relevant_nodes();
+    // The body root and its ancestors move the mesh rigidly; AO does
+    // not depend on their rotations.
+    let mut rigid = vec![false; skeleton.nodes.len()];
+    let mut n = character.body_root();
+    while let Some(r) = n {
+        rigid[r] = true;
+        n = skeleton.nodes[r].parent;
     }
-
-    /// For every vertex of `character`, the parameters that can move
-    /// geometry near it (in increasing order): those of the nodes that skin
-    /// it and of their parents and children on the skeleton (the joints
-    /// next to a vertex's bones are where the occluders that move relative
-    /// to it hang).
-    pub fn local_parameters(&self, character: &Character) -> Vec<Vec<usize>> {
-        let skeleton = &character.skeleton;
-        let nodes = skeleton.nodes.len();
-        // Parameters of each node.
-        let mut of_node: Vec<Vec<usize>> = vec![Vec::new(); nodes];
-        for (k, &j) in self.joints.iter().enumerate() {
-            of_node[j].extend(3 * k..3 * k + 3);
-        }
-        let r = 3 * self.joints.len();
-        for (k, &t) in self.translations.iter().chain(&self.scales).enumerate() {
-            of_node[t].extend(r + 3 * k..r + 3 * k + 3);
-        }
-        let mut children: Vec<Vec<usize>> = vec![Vec::new(); nodes];
-        for (n, node) in skeleton.nodes.iter().enumerate() {
-            if let Some(p) = node.parent {
-                children[p].push(n);
-            }
-        }
-        let k = character.influences;
-        (0..character.vertex_count())
-            .map(|v| {
-                let mut params = Vec::new();
-                for i in v * k..(v + 1) * k {
-                    if character.joint_weights[i] <= 0.0 {
-                        continue;
-                    }
-                    let node = character.joints[character.joint_indices[i] as usize].node;
-                    let ring = std::iter::once(node)
-                        .chain(skeleton.nodes[node].parent)
-                        .chain(children[node].iter().copied());
-                    for n in ring {
-                        params.extend(&of_node[n]);
-                    }
-                }
-                params.sort_unstable();
-                params.dedup();
-                params
-            })
-            .collect()
-    }
-
-    /// The nodes the parameters move: rotated joints, then translated
-    /// nodes, then scaled ones.
-    pub fn nodes(&self) -> impl Iterator<Item = usize> + '_ {
-        self.joints
+    let animated = |property: Property| {
+        let mut nodes: Vec<usize> = clips
             .iter()
-            .chain(&self.translations)
-            .chain(&self.scales)
-            .copied()
+            .flat_map(|c| &c.channels)
+            .filter(|c| {
+                c.property == property
+                    && relevant[c.node]
+                    && (property != Property::Rotation || !rigid[c.node])
+            })
+            .map(|c| c.node)
+            .collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        nodes
+    };
+    let joints = animated(Property::Rotation);
+    if joints.is_empty() {
+        return Err(ParamError::NothingAnimated);
     }
-
-    /// Number of parameters.
-    pub fn len(&self) -> usize {
-        self.names.len()
-    }
-
-    /// Whether the layout has no parameters.
-    pub fn is_empty(&self) -> bool {
-        self.names.is_empty()
-    }
-
-    /// Pose → parameters.
-    pub fn params(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
-        let mut out = Vec::with_capacity(self.len());
-        for &j in &self.joints {
-            let rest = skeleton.nodes[j].rest.rotation;
-            out.extend(rotation_vector(rest.inverse() * pose.locals[j].rotation).to_array());
+    let translations = if options.root_translation {
+        let moved: Vec<usize> = animated(Property::Translation)
+            .into_iter()
+            .filter(|&n| !rigid[n])
+            .collect();
+        let mut is_animated = vec![false; skeleton.nodes.len()];
+        for &n in joints.iter().chain(&moved) {
+            is_animated[n] = true;
         }
-        for &t in &self.translations {
-            out.extend(
-                (pose.locals[t].translation - skeleton.nodes[t].rest.translation).to_array(),
-            );
-        }
-        for &t in &self.scales {
-            let (now, rest) = (pose.locals[t].scale, skeleton.nodes[t].rest.scale);
-            out.extend((0..3).map(|a| {
-                if rest[a] != 0.0 {
-                    now[a] / rest[a] - 1.0
-                } else {
-                    0.0
+        moved
+            .into_iter()
+            .filter(|&n| {
+                let mut p = skeleton.nodes[n].parent;
+                while let Some(a) = p {
+                    if is_animated[a] {
+                        return false;
+                    }
+                    p = skeleton.nodes[a].parent;
                 }
-            }));
+                true
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    // A scaled node (grown, squashed, shrunk to nothing) moves geometry
+    // the rotations and translations do not describe.
+    let scales: Vec<usize> = if options.scales {
+        animated(Property::Scale)
+            .into_iter()
+            .filter(|&n| !rigid[n])
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let mut names = Vec::new();
+    for &j in &joints {
+        for axis in ["rx", "ry", "rz"] {
+            names.push(format!("{}.{axis}", skeleton.label(j)));
         }
-        out
     }
-
-    /// Parameters → pose: the rest pose with the parameterised rotations,
-    /// translations and scales set.
-    pub fn pose(&self, skeleton: &Skeleton, params: &[f32]) -> Result<Pose, ParamError> {
-        if params.len() != self.len() {
-            return Err(ParamError::Length {
-                expected: self.len(),
-                got: params.len(),
-            });
+    for &t in &translations {
+        for axis in ["tx", "ty", "tz"] {
+            names.push(format!("{}.{axis}", skeleton.label(t)));
         }
-        let mut pose = Pose::rest(skeleton);
-        let (rot, rest) = params.split_at(3 * self.joints.len());
-        let (trans, scales) = rest.split_at(3 * self.translations.len());
-        for (&j, r) in self.joints.iter().zip(rot.chunks_exact(3)) {
-            let rest = skeleton.nodes[j].rest.rotation;
-            pose.locals[j].rotation =
-                (rest * Quat::from_scaled_axis(Vec3::from_slice(r))).normalize();
-        }
-        for (&t, d) in self.translations.iter().zip(trans.chunks_exact(3)) {
-            pose.locals[t].translation = skeleton.nodes[t].rest.translation + Vec3::from_slice(d);
-        }
-        for (&t, s) in self.scales.iter().zip(scales.chunks_exact(3)) {
-            pose.locals[t].scale = skeleton.nodes[t].rest.scale * (Vec3::ONE + Vec3::from_slice(s));
-        }
-        Ok(pose)
     }
-
-    /// Moves every parameter of `params` by a uniform offset of up to
-    /// ±`fraction` of its range, clamped to the range.
-    pub fn perturb(&self, params: &mut [f32], fraction: f32, rng: &mut ChaCha8Rng) {
-        for (v, r) in params.iter_mut().zip(&self.ranges) {
-            let reach = fraction * (r.max - r.min);
-            // Drawn for every parameter, so that a pose's offsets do not
-            // depend on which ranges are empty.
-            let u: f32 = rng.random_range(-1.0..=1.0);
-            if reach > 0.0 && reach.is_finite() {
-                *v = (*v + u * reach).clamp(r.min, r.max);
+    for &t in &scales {
+        for axis in ["sx", "sy", "sz"] {
+            names.push(format!("{}.{axis}", skeleton.label(t)));
+        }
+    }
+    let mut layout = JointAngles {
+        ranges: vec![
+            Range {
+                min: f32::INFINITY,
+                max: f32::NEG_INFINITY,
+            };
+            names.len()
+        ],
+        joints,
+        translations,
+        scales,
+        names,
+    };
+    for clip in clips {
+        for t in clip.sample_times(options.fps, MAX_RANGE_SAMPLES) {
+            let params = layout.params(skeleton, &Pose::sample(skeleton, clip, t).locals);
+            for (range, v) in layout.ranges.iter_mut().zip(params) {
+                range.min = range.min.min(v);
+                range.max = range.max.max(v);
             }
         }
     }
-
-    /// `count` parameter vectors, each parameter uniform in its range
-    /// (Kontkanen & Aila's random reference poses). Same seed, same poses.
-    pub fn sample_uniform(&self, count: usize, seed: u64) -> Vec<Vec<f32>> {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        (0..count)
-            .map(|_| {
-                self.ranges
-                    .iter()
-                    .map(|r| {
-                        if r.max > r.min && (r.max - r.min).is_finite() {
-                            rng.random_range(r.min..=r.max)
-                        } else {
-                            r.min
-                        }
-                    })
-                    .collect()
-            })
-            .collect()
+    // A translation or scale channel that never moves its node (many
+    // exporters key every bone's rest offset and scale) carries
+    // nothing: left out.
+    let r = layout.joints.len() * 3;
+    let t = layout.translations.len();
+    let moving: Vec<bool> = (0..t + layout.scales.len())
+        .map(|k| {
+            layout.ranges[r + 3 * k..r + 3 * k + 3]
+                .iter()
+                .any(|x| x.max - x.min > 1e-6 * x.max.abs().max(x.min.abs()).max(1.0))
+        })
+        .collect();
+    if moving.iter().any(|m| !m) {
+        let keep = |i: usize| i < r || moving[(i - r) / 3];
+        let mut i = 0;
+        layout.names.retain(|_| {
+            i += 1;
+            keep(i - 1)
+        });
+        let mut i = 0;
+        layout.ranges.retain(|_| {
+            i += 1;
+            keep(i - 1)
+        });
+        let mut k = 0;
+        layout.translations.retain(|_| {
+            k += 1;
+            moving[k - 1]
+        });
+        layout.scales.retain(|_| {
+            k += 1;
+            moving[k - 1]
+        });
     }
+    let first_scale = r + 3 * layout.translations.len();
+    for (i, range) in layout.ranges.iter_mut().enumerate() {
+        let pad = (range.max - range.min) * options.margin;
+        // The margin does not take a scale through zero (parameter
+        // −1) that the clips never took there: a node turned inside
+        // out is no pose of the character.
+        let floor = if i >= first_scale && range.min >= -1.0 {
+            -1.0
+        } else {
+            f32::NEG_INFINITY
+        };
+        range.min = (range.min - pad).max(floor);
+        range.max += pad;
+    }
+    Ok(layout)
+}
+
+/// For every vertex of `character`, the parameters of `layout` that can move
+/// geometry near it (in increasing order): those of the nodes that skin
+/// it and of their parents and children on the skeleton (the joints
+/// next to a vertex's bones are where the occluders that move relative
+/// to it hang).
+pub fn local_parameters(layout: &JointAngles, character: &Character) -> Vec<Vec<usize>> {
+    let skeleton = &character.skeleton;
+    let nodes = skeleton.nodes.len();
+    // Parameters of each node.
+    let mut of_node: Vec<Vec<usize>> = vec![Vec::new(); nodes];
+    for (k, &j) in layout.joints.iter().enumerate() {
+        of_node[j].extend(3 * k..3 * k + 3);
+    }
+    let r = 3 * layout.joints.len();
+    for (k, &t) in layout.translations.iter().chain(&layout.scales).enumerate() {
+        of_node[t].extend(r + 3 * k..r + 3 * k + 3);
+    }
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); nodes];
+    for (n, node) in skeleton.nodes.iter().enumerate() {
+        if let Some(p) = node.parent {
+            children[p].push(n);
+        }
+    }
+    let k = character.influences;
+    (0..character.vertex_count())
+        .map(|v| {
+            let mut params = Vec::new();
+            for i in v * k..(v + 1) * k {
+                if character.joint_weights[i] <= 0.0 {
+                    continue;
+                }
+                let node = character.joints[character.joint_indices[i] as usize].node;
+                let ring = std::iter::once(node)
+                    .chain(skeleton.nodes[node].parent)
+                    .chain(children[node].iter().copied());
+                for n in ring {
+                    params.extend(&of_node[n]);
+                }
+            }
+            params.sort_unstable();
+            params.dedup();
+            params
+        })
+        .collect()
+}
+
+/// Parameters → pose: the rest pose with the parameterised rotations,
+/// translations and scales set.
+pub fn pose(layout: &JointAngles, skeleton: &Skeleton, params: &[f32]) -> Result<Pose, ParamError> {
+    let mut pose = Pose::rest(skeleton);
+    pose.locals = layout.locals(skeleton, params)?;
+    Ok(pose)
+}
+
+/// Moves every parameter of `params` by a uniform offset of up to
+/// ±`fraction` of its range, clamped to the range.
+pub fn perturb(layout: &JointAngles, params: &mut [f32], fraction: f32, rng: &mut ChaCha8Rng) {
+    for (v, r) in params.iter_mut().zip(&layout.ranges) {
+        let reach = fraction * (r.max - r.min);
+        // Drawn for every parameter, so that a pose's offsets do not
+        // depend on which ranges are empty.
+        let u: f32 = rng.random_range(-1.0..=1.0);
+        if reach > 0.0 && reach.is_finite() {
+            *v = (*v + u * reach).clamp(r.min, r.max);
+        }
+    }
+}
+
+/// `count` parameter vectors, each parameter uniform in its range
+/// (Kontkanen & Aila's random reference poses). Same seed, same poses.
+pub fn sample_uniform(layout: &JointAngles, count: usize, seed: u64) -> Vec<Vec<f32>> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..count)
+        .map(|_| {
+            layout
+                .ranges
+                .iter()
+                .map(|r| {
+                    if r.max > r.min && (r.max - r.min).is_finite() {
+                        rng.random_range(r.min..=r.max)
+                    } else {
+                        r.min
+                    }
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// A clip and a time in it.
@@ -469,103 +354,61 @@ pub fn random_clip_frames(clips: &[Clip], count: usize, seed: u64) -> Vec<ClipFr
         .collect()
 }
 
-/// Kirk & Arikan's handle layout of a character.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Handles {
-    /// The node whose frame the handles are expressed in: the body root
-    /// (the joints' lowest common ancestor), so that handles do not change
-    /// when the whole character moves or turns; `None` (joints in separate
-    /// trees) uses world space.
-    pub root: Option<usize>,
-    /// Joints with two handles each, in palette order.
-    pub joints: Vec<usize>,
-    /// Per joint, the off-axis handle in the joint's local frame.
-    pub offsets: Vec<Vec3>,
-}
-
-impl Handles {
-    /// Places one off-axis handle per joint, perpendicular to the bone (to
-    /// the first child joint, else from the parent joint) at half the bone's
-    /// length, measured in the rest pose.
-    pub fn new(character: &Character) -> Self {
-        let skeleton = &character.skeleton;
-        let joints = character.joint_nodes();
-        let world = skeleton.world_from_node(&Pose::rest(skeleton).locals);
-        let root = character.body_root();
-        let diag =
-            bounds(character.positions.iter().copied()).map_or(1.0, |(lo, hi)| (hi - lo).length());
-        let is_joint = {
-            let mut v = vec![false; skeleton.nodes.len()];
-            joints.iter().for_each(|&j| v[j] = true);
-            v
-        };
-        // Nearest joint ancestor of each joint, found once (depth-bounded).
-        let parents: Vec<Option<usize>> = joints
-            .iter()
-            .map(|&j| {
-                let mut n = j;
-                while let Some(p) = skeleton.nodes[n].parent {
-                    if is_joint[p] {
-                        return Some(p);
-                    }
-                    n = p;
+/// Kirk & Arikan's handles for `character`: one off-axis handle per joint,
+/// perpendicular to the bone (to the first child joint, else from the
+/// parent joint) at half the bone's length, measured in the rest pose.
+pub fn handles(character: &Character) -> Handles {
+    let skeleton = &character.skeleton;
+    let joints = character.joint_nodes();
+    let world = skeleton.world_from_node(&Pose::rest(skeleton).locals);
+    let root = character.body_root();
+    let diag =
+        bounds(character.positions.iter().copied()).map_or(1.0, |(lo, hi)| (hi - lo).length());
+    let is_joint = {
+        let mut v = vec![false; skeleton.nodes.len()];
+        joints.iter().for_each(|&j| v[j] = true);
+        v
+    };
+    // Nearest joint ancestor of each joint, found once (depth-bounded).
+    let parents: Vec<Option<usize>> = joints
+        .iter()
+        .map(|&j| {
+            let mut n = j;
+            while let Some(p) = skeleton.nodes[n].parent {
+                if is_joint[p] {
+                    return Some(p);
                 }
-                None
-            })
-            .collect();
-        let offsets = joints
-            .iter()
-            .zip(&parents)
-            .map(|(&j, &parent)| {
-                let here = world[j].translation;
-                let child = joints
-                    .iter()
-                    .zip(&parents)
-                    .find(|(_, p)| **p == Some(j))
-                    .map(|(c, _)| c);
-                let bone = match (child, parent) {
-                    (Some(&c), _) => Vec3::from(world[c].translation - here),
-                    (None, Some(p)) => Vec3::from(here - world[p].translation),
-                    (None, None) => Vec3::ZERO,
-                };
-                let (dir, len) = match bone.try_normalize() {
-                    Some(d) => (d, bone.length()),
-                    None => (Vec3::Y, 0.1 * diag),
-                };
-                let offset_in_world = dir.any_orthonormal_vector() * (0.5 * len);
-                world[j].inverse().transform_vector3(offset_in_world)
-            })
-            .collect();
-        Self {
-            root,
-            joints,
-            offsets,
-        }
-    }
-
-    /// Numbers per pose: 6 per joint.
-    pub fn len(&self) -> usize {
-        6 * self.joints.len()
-    }
-
-    /// Whether there are no handles.
-    pub fn is_empty(&self) -> bool {
-        self.joints.is_empty()
-    }
-
-    /// The handle vector of a pose: per joint, its position and its
-    /// off-axis handle, in the body root's frame.
-    pub fn handles(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
-        let world = skeleton.world_from_node(&pose.locals);
-        let root_from_world = self
-            .root
-            .map_or(glam::Affine3A::IDENTITY, |r| world[r].inverse());
-        let mut out = Vec::with_capacity(self.len());
-        for (&j, offset) in self.joints.iter().zip(&self.offsets) {
-            let root_from_joint = root_from_world * world[j];
-            out.extend(Vec3::from(root_from_joint.translation).to_array());
-            out.extend(root_from_joint.transform_point3(*offset).to_array());
-        }
-        out
+                n = p;
+            }
+            None
+        })
+        .collect();
+    let offsets = joints
+        .iter()
+        .zip(&parents)
+        .map(|(&j, &parent)| {
+            let here = world[j].translation;
+            let child = joints
+                .iter()
+                .zip(&parents)
+                .find(|(_, p)| **p == Some(j))
+                .map(|(c, _)| c);
+            let bone = match (child, parent) {
+                (Some(&c), _) => Vec3::from(world[c].translation - here),
+                (None, Some(p)) => Vec3::from(here - world[p].translation),
+                (None, None) => Vec3::ZERO,
+            };
+            let (dir, len) = match bone.try_normalize() {
+                Some(d) => (d, bone.length()),
+                None => (Vec3::Y, 0.1 * diag),
+            };
+            let offset_in_world = dir.any_orthonormal_vector() * (0.5 * len);
+            world[j].inverse().transform_vector3(offset_in_world)
+        })
+        .collect();
+    Handles {
+        root,
+        joints,
+        offsets,
     }
 }

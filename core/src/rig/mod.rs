@@ -6,4 +6,5 @@
 pub mod character;
 pub mod clip;
 pub mod pose;
-pub mod skeleton;
+/// The node hierarchy lives in the runtime, which engines use too.
+pub use aobake_runtime::rig as skeleton;

@@ -8,8 +8,9 @@ use aobake_core::{
     bake::{Bake, BakeParams, Evaluation, Plan, bake_in_process},
     method::{
         Method,
-        vertex::{FormRef, Model},
+        vertex::{FormRef, Model, VertexAo},
     },
+    pose_space,
 };
 
 use crate::util;
@@ -163,15 +164,70 @@ fn bakes_are_deterministic_and_assets_round_trip() {
         assert_eq!(header.vertices, c.vertex_count());
         assert_eq!(header.bake_key.len(), 64);
         let pose = Pose::sample(&c.skeleton, &imported.clips[0], 0.4);
+        let expected = a.model.evaluate(&c.skeleton, &pose.locals);
+        assert_eq!(back.evaluate(&c.skeleton, &pose.locals), expected);
+        // As an engine plays it: the asset alone, its rig, each animated
+        // node's local transform set by name; bit for bit the same.
+        let mut engine = VertexAo::from_bytes(&a.bytes).unwrap();
         assert_eq!(
-            back.evaluate(&c.skeleton, &pose),
-            a.model.evaluate(&c.skeleton, &pose)
+            engine.evaluate(),
+            a.model.evaluate(&c.skeleton, &c.skeleton.rest_locals())
         );
+        for (n, local) in pose.locals.iter().enumerate() {
+            let name = c.skeleton.nodes[n]
+                .name
+                .as_deref()
+                .expect("RiggedFigure names its nodes");
+            let node = engine.node(name).expect("the rig has every node");
+            assert!(engine.set_local(node, *local));
+        }
+        assert_eq!(engine.evaluate(), expected, "{:?}", params.method);
         // Another seed, other bytes.
         let mut other = params;
         other.seed = 9;
         assert_ne!(bake(c, &imported.clips, other).bytes, a.bytes);
     }
+}
+
+#[test]
+fn a_rig_that_does_not_fit_is_refused_and_an_asset_without_one_is_named() {
+    let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
+    let baked = bake(
+        &imported.character,
+        &imported.clips,
+        quick(Method::VertexLinear),
+    );
+    let container = Container::from_bytes(&baked.bytes).unwrap();
+    let mut header: serde_json::Value = serde_json::from_str(&container.header).unwrap();
+    let reread = |header: &serde_json::Value| {
+        let mut c = container.clone();
+        c.header = header.to_string();
+        Container::from_bytes(&c.to_bytes()).unwrap()
+    };
+    // A node that is its own parent: the order no longer has parents first.
+    let mut cycle = header.clone();
+    cycle["rig"]["nodes"][1]["parent"] = 1.into();
+    assert!(matches!(
+        Model::from_container(&reread(&cycle)),
+        Err(AssetError::Malformed(m)) if m.contains("parent")
+    ));
+    // A layout that reads a node past the rig's end.
+    let mut short = header.clone();
+    let nodes = short["rig"]["nodes"].as_array().unwrap().len();
+    short["layout"]["joint_angles"]["joints"][0] = (nodes + 5).into();
+    assert!(matches!(
+        Model::from_container(&reread(&short)),
+        Err(AssetError::Malformed(m)) if m.contains("does not fit the rig")
+    ));
+    // Written before format 1.4: the model reads, an engine cannot pose it
+    // by name and is told why.
+    header.as_object_mut().unwrap().remove("rig");
+    let old = reread(&header);
+    assert!(Model::from_container(&old).is_ok());
+    assert!(matches!(
+        VertexAo::from_bytes(&old.to_bytes()),
+        Err(AssetError::Unsupported(m)) if m.contains("no rig")
+    ));
 }
 
 #[test]
@@ -613,7 +669,7 @@ fn a_local_linear_model_uses_only_the_joints_near_each_vertex() {
     let c = &imported.character;
     let plan =
         aobake_core::bake::Plan::new(c, &imported.clips, quick(Method::VertexLinear)).unwrap();
-    let sets = plan.joint_angles.local_parameters(c);
+    let sets = pose_space::local_parameters(&plan.joint_angles, c);
     let n = plan.joint_angles.len();
     assert_eq!(sets.len(), c.vertex_count());
     let mean = sets.iter().map(Vec::len).sum::<usize>() as f64 / sets.len() as f64;

@@ -3,7 +3,7 @@
 
 use aobake_core::{
     Pose,
-    pose_space::{Handles, JointAngles, LayoutOptions, clip_frames, random_clip_frames},
+    pose_space::{self, LayoutOptions, clip_frames, random_clip_frames},
 };
 
 use crate::util;
@@ -20,14 +20,14 @@ fn characters_with_clips() -> Vec<aobake_core::Imported> {
 fn joint_angles_round_trip_through_clip_poses() {
     for imported in characters_with_clips() {
         let c = &imported.character;
-        let Ok(layout) = JointAngles::from_clips(c, &imported.clips, LayoutOptions::default())
+        let Ok(layout) = pose_space::joint_angles(c, &imported.clips, LayoutOptions::default())
         else {
             continue;
         };
         for clip in &imported.clips {
             let pose = Pose::sample(&c.skeleton, clip, clip.duration * 0.37);
-            let params = layout.params(&c.skeleton, &pose);
-            let back = layout.pose(&c.skeleton, &params).unwrap();
+            let params = layout.params(&c.skeleton, &pose.locals);
+            let back = pose_space::pose(&layout, &c.skeleton, &params).unwrap();
             for &j in &layout.joints {
                 let (a, b) = (pose.locals[j].rotation, back.locals[j].rotation);
                 assert!(a.dot(b).abs() > 1.0 - 1e-5, "{}: joint {j}", clip.name);
@@ -51,7 +51,7 @@ fn joint_angle_pose_reproduces_the_skinned_mesh() {
         root_translation: true,
         ..LayoutOptions::default()
     };
-    let layout = JointAngles::from_clips(c, &imported.clips, options).unwrap();
+    let layout = pose_space::joint_angles(c, &imported.clips, options).unwrap();
     // The body root's translation moves the whole mesh and changes no AO:
     // never a parameter; RiggedFigure's other translation channels hold
     // their rest offsets, so none is one.
@@ -61,9 +61,12 @@ fn joint_angle_pose_reproduces_the_skinned_mesh() {
     let pose = Pose::sample(&c.skeleton, clip, 0.6);
     let direct = c.skin(&pose);
     let via = c.skin(
-        &layout
-            .pose(&c.skeleton, &layout.params(&c.skeleton, &pose))
-            .unwrap(),
+        &pose_space::pose(
+            &layout,
+            &c.skeleton,
+            &layout.params(&c.skeleton, &pose.locals),
+        )
+        .unwrap(),
     );
     let centre = |p: &[glam::Vec3]| p.iter().copied().sum::<glam::Vec3>() / p.len() as f32;
     let (ca, cb) = (centre(&direct.positions), centre(&via.positions));
@@ -80,27 +83,27 @@ fn joint_angle_pose_reproduces_the_skinned_mesh() {
 fn uniform_sampler_is_seeded_and_stays_in_range() {
     let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
     let c = &imported.character;
-    let layout = JointAngles::from_clips(c, &imported.clips, LayoutOptions::default()).unwrap();
-    let a = layout.sample_uniform(50, 7);
-    assert_eq!(a, layout.sample_uniform(50, 7));
-    assert_ne!(a, layout.sample_uniform(50, 8));
+    let layout = pose_space::joint_angles(c, &imported.clips, LayoutOptions::default()).unwrap();
+    let a = pose_space::sample_uniform(&layout, 50, 7);
+    assert_eq!(a, pose_space::sample_uniform(&layout, 50, 7));
+    assert_ne!(a, pose_space::sample_uniform(&layout, 50, 8));
     for params in &a {
         for (v, r) in params.iter().zip(&layout.ranges) {
             assert!(*v >= r.min && *v <= r.max);
         }
-        let posed = c.skin(&layout.pose(&c.skeleton, params).unwrap());
+        let posed = c.skin(&pose_space::pose(&layout, &c.skeleton, params).unwrap());
         assert!(posed.positions.iter().all(|p| p.is_finite()));
     }
-    assert!(layout.pose(&c.skeleton, &[0.0]).is_err());
+    assert!(pose_space::pose(&layout, &c.skeleton, &[0.0]).is_err());
 }
 
 #[test]
 fn handles_are_root_relative_and_move_with_the_pose() {
     let imported = util::load(&util::character_path("RiggedFigure.glb").unwrap());
     let c = &imported.character;
-    let handles = Handles::new(c);
+    let handles = pose_space::handles(c);
     assert_eq!(handles.len(), 6 * 19);
-    let rest = handles.handles(&c.skeleton, &Pose::rest(&c.skeleton));
+    let rest = handles.handles(&c.skeleton, &c.skeleton.rest_locals());
     // The body root is a joint here, at the origin of its own frame.
     let body = c.body_root().unwrap();
     assert_eq!(handles.root, Some(body));
@@ -114,7 +117,7 @@ fn handles_are_root_relative_and_move_with_the_pose() {
     }
     let moved = handles.handles(
         &c.skeleton,
-        &Pose::sample(&c.skeleton, &imported.clips[0], 0.6),
+        &Pose::sample(&c.skeleton, &imported.clips[0], 0.6).locals,
     );
     assert_ne!(rest, moved);
     // Turning and moving the whole character changes no handle.
@@ -124,7 +127,7 @@ fn handles_are_root_relative_and_move_with_the_pose() {
         .unwrap();
     turned.locals[top].rotation = glam::Quat::from_rotation_y(1.0) * turned.locals[top].rotation;
     turned.locals[top].translation += glam::Vec3::new(3.0, -1.0, 2.0);
-    let after = handles.handles(&c.skeleton, &turned);
+    let after = handles.handles(&c.skeleton, &turned.locals);
     for (a, b) in after.iter().zip(&moved) {
         assert!((a - b).abs() < 1e-4, "{a} vs {b}");
     }
@@ -150,7 +153,7 @@ fn animated_scales_are_pose_parameters_down_to_zero() {
     // Three of InterpolationTest's clips only scale a cube, down to 0.
     let imported = util::load(&util::character_path("InterpolationTest.glb").unwrap());
     let c = &imported.character;
-    let without = JointAngles::from_clips(
+    let without = pose_space::joint_angles(
         c,
         &imported.clips,
         LayoutOptions {
@@ -159,7 +162,7 @@ fn animated_scales_are_pose_parameters_down_to_zero() {
         },
     )
     .unwrap();
-    let layout = JointAngles::from_clips(c, &imported.clips, LayoutOptions::default()).unwrap();
+    let layout = pose_space::joint_angles(c, &imported.clips, LayoutOptions::default()).unwrap();
     assert!(without.scales.is_empty());
     assert_eq!(layout.scales.len(), 3, "{:?}", layout.names);
     assert_eq!(layout.len(), without.len() + 9);
@@ -183,7 +186,7 @@ fn animated_scales_are_pose_parameters_down_to_zero() {
     );
     let rest = Pose::rest(&c.skeleton);
     assert!(
-        layout.params(&c.skeleton, &rest)[first_scale..]
+        layout.params(&c.skeleton, &rest.locals)[first_scale..]
             .iter()
             .all(|&x| x == 0.0)
     );
@@ -192,9 +195,9 @@ fn animated_scales_are_pose_parameters_down_to_zero() {
     for clip in &imported.clips {
         for t in [0.3f32, 0.9, 1.5] {
             let pose = Pose::sample(&c.skeleton, clip, t);
-            let params = layout.params(&c.skeleton, &pose);
-            let back = layout.pose(&c.skeleton, &params).unwrap();
-            let again = layout.params(&c.skeleton, &back);
+            let params = layout.params(&c.skeleton, &pose.locals);
+            let back = pose_space::pose(&layout, &c.skeleton, &params).unwrap();
+            let again = layout.params(&c.skeleton, &back.locals);
             for (a, b) in params.iter().zip(&again) {
                 assert!((a - b).abs() < 1e-5, "{}: {a} vs {b}", clip.name);
             }

@@ -93,7 +93,10 @@ fn every_vertex_method_matches_the_cpu() {
                 params.method
             );
         }
-        let models = [model, Model::StaticAverage(StaticAverage::fit(&ao))];
+        let models = [
+            model,
+            Model::StaticAverage(aobake_core::method::vertex::fit_static_average(&ao)),
+        ];
         for model in &models {
             let on_gpu = VertexAo::new(&gpu, model).unwrap();
             let mut tests: Vec<Pose> = plan.test_poses().into_iter().map(|t| t.pose).collect();
@@ -101,7 +104,7 @@ fn every_vertex_method_matches_the_cpu() {
             let mut max = 0.0f32;
             let mut outputs = Vec::new();
             for (i, pose) in tests.iter().enumerate() {
-                let w = model.weights(&c.skeleton, pose);
+                let w = model.weights(&c.skeleton, &pose.locals);
                 let cpu = model.evaluate_weights(&w);
                 let gpu_ao = on_gpu.evaluate(&w).unwrap();
                 max = max.max(worst(&cpu, &gpu_ao));

@@ -14,7 +14,7 @@ use aobake_core::{
     image::{HEAT_MAP, Image},
     import_character,
     method::Method,
-    method::vertex::{Model, StaticAverage},
+    method::vertex::Model,
     trace::{AoBlock, SceneOptions, no_progress, trace_poses},
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
@@ -199,7 +199,7 @@ fn the_model_panel_shades_with_the_gpu_evaluation_of_the_model() {
     // model panel follows the model, not the ground truth.
     let constant = |value: f32| {
         let vertices = f.character.vertex_count();
-        Model::StaticAverage(StaticAverage::fit(&AoBlock {
+        Model::StaticAverage(aobake_core::method::vertex::fit_static_average(&AoBlock {
             vertices,
             values: vec![value; vertices],
         }))

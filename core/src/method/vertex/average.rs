@@ -6,32 +6,20 @@ use half::f16;
 use crate::trace::AoBlock;
 use aobake_runtime::method::vertex::form::{Block, LinearForm};
 
-/// Mean AO per vertex.
-#[derive(Debug, Clone, PartialEq)]
-pub struct StaticAverage {
-    /// One block, one row: the means in f16.
-    pub form: LinearForm,
-}
+pub use aobake_runtime::method::vertex::average::StaticAverage;
 
-impl StaticAverage {
-    /// The mean over the rows of `ao`.
-    pub fn fit(ao: &AoBlock) -> Self {
-        Self {
-            form: LinearForm {
-                vertices: ao.vertices,
-                blocks: vec![Block {
-                    rows: 1,
-                    columns: ao.vertices,
-                    coefficients: ao.mean().into_iter().map(f16::from_f64).collect(),
-                    map: None,
-                }],
-            },
-        }
-    }
-
-    /// The AO of every vertex, whatever the pose.
-    pub fn evaluate(&self) -> Vec<f32> {
-        self.form.evaluate(&[1.0])
+/// The static average of `ao`: the mean over its rows.
+pub fn fit(ao: &AoBlock) -> StaticAverage {
+    StaticAverage {
+        form: LinearForm {
+            vertices: ao.vertices,
+            blocks: vec![Block {
+                rows: 1,
+                columns: ao.vertices,
+                coefficients: ao.mean().into_iter().map(f16::from_f64).collect(),
+                map: None,
+            }],
+        },
     }
 }
 
@@ -45,6 +33,6 @@ mod tests {
             vertices: 2,
             values: vec![0.0, 1.0, 0.5, 0.5],
         };
-        assert_eq!(StaticAverage::fit(&ao).evaluate(), vec![0.25, 0.75]);
+        assert_eq!(fit(&ao).evaluate(), vec![0.25, 0.75]);
     }
 }

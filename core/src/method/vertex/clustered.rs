@@ -15,28 +15,14 @@ use half::f16;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::basis::Basis;
 use super::kmeans::kmeans;
 use super::linalg::{principal_axes, ridge_lstsq};
 use super::linear::{F16_MAX, FitOverflow, VertexLinear};
 use crate::{pose_space::JointAngles, trace::AoBlock};
+pub use aobake_runtime::method::vertex::clustered::{
+    Centering, LinearBase, MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
+};
 use aobake_runtime::method::vertex::form::{Block, Coefficients, LinearForm};
-
-/// MLS weights below this are dropped (and the rest renormalised), so a
-/// pose pays only for the handful of clusters it is near (with α = 10 the
-/// others contribute less than f16 can hold anyway).
-pub const MIN_BLEND_WEIGHT: f64 = 1e-4;
-
-/// What each pose cluster's linear model is centred on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Centering {
-    /// The paper's Eq. 1: AO minus the global mean, no constant term.
-    Global,
-    /// A constant per vertex and cluster as well (one more coefficient).
-    #[default]
-    Cluster,
-}
 
 /// Fitting options of vertex-clustered.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -105,17 +91,6 @@ pub enum Base {
     Linear,
 }
 
-/// A vertex-linear base: the joint angles it reads and how it turns them
-/// into weights. Its coefficients are block 0 of the clustered form (the
-/// `VertexLinear`'s own are empty).
-#[derive(Debug, Clone, PartialEq)]
-pub struct LinearBase {
-    /// The joint angles.
-    pub joint_angles: JointAngles,
-    /// Ranges, features, projection, means and scales of the weights.
-    pub weights: VertexLinear,
-}
-
 impl Default for ClusteredOptions {
     fn default() -> Self {
         Self {
@@ -143,45 +118,6 @@ impl Default for ClusteredOptions {
 /// The run-time clamps (standard deviations) cross-validation chooses
 /// from.
 pub const CLAMP_CANDIDATES: [f64; 5] = [0.5, 1.0, 2.0, 3.0, 5.0];
-
-/// One pose cluster's centre and PCA projection.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PoseCluster {
-    /// h̄_j, the mean handle vector of the cluster's poses.
-    pub center: Vec<f32>,
-    /// P_j: `dimensions × handles` row-major, each row a principal axis
-    /// divided by the standard deviation along it (so projections are
-    /// whitened); rows past the cluster's rank are zero.
-    pub axes: Vec<f32>,
-}
-
-/// A fitted vertex-clustered model.
-#[derive(Debug, Clone, PartialEq)]
-pub struct VertexClustered {
-    /// Numbers per handle vector.
-    pub handles: usize,
-    /// n.
-    pub dimensions: usize,
-    /// α.
-    pub alpha: f32,
-    /// Centring (whether each cluster block has a constant row).
-    pub centering: Centering,
-    /// Clamp of the whitened coordinates (0: none).
-    pub clamp: f32,
-    /// The pose clusters.
-    pub clusters: Vec<PoseCluster>,
-    /// Block 0: the global mean AO (or with a linear base, its
-    /// coefficients: a row per weight, the last the constant); block 1 + j:
-    /// pose cluster j's coefficients (`n` rows, plus the constant row with
-    /// [`Centering::Cluster`]), per vertex or per vertex cluster. With a
-    /// basis, its one block, dense or with small entries dropped.
-    pub form: Coefficients,
-    /// The vertex-linear base, if any (see [`Base`]).
-    pub base: Option<Box<LinearBase>>,
-    /// The eigen-AO basis the model was compressed into, if any: the
-    /// weights above go through it, and `form` is its rows.
-    pub basis: Option<Basis>,
-}
 
 /// What the fit did, for the report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -218,287 +154,194 @@ pub struct ClusteredFitStats {
     pub reference: Option<super::cv::RowsChoice>,
 }
 
-impl VertexClustered {
-    /// Rows per pose-cluster block.
-    pub fn rows(&self) -> usize {
-        self.dimensions + usize::from(self.centering == Centering::Cluster)
-    }
+/// Fits vertex-clustered to `handles` (one handle vector per row of `ao`).
+/// `seed` seeds k-means++.
+pub fn fit(
+    handles: &[Vec<f32>],
+    ao: &AoBlock,
+    options: &ClusteredOptions,
+    seed: u64,
+) -> Result<(VertexClustered, ClusteredFitStats), FitOverflow> {
+    let p = handles.len();
+    assert_eq!(p, ao.poses(), "one pose per AO row");
+    assert!(p > 0, "at least one reference pose");
+    let dim = handles[0].len();
+    let v = ao.vertices;
+    let n = options.dimensions;
+    let offset = options.centering == Centering::Cluster;
+    let rows = n + usize::from(offset);
+    let m = options.pose_clusters.clamp(1, p);
 
-    /// Fits the model to `handles` (one handle vector per row of `ao`).
-    /// `seed` seeds k-means++.
-    pub fn fit(
-        handles: &[Vec<f32>],
-        ao: &AoBlock,
-        options: &ClusteredOptions,
-        seed: u64,
-    ) -> Result<(Self, ClusteredFitStats), FitOverflow> {
-        let p = handles.len();
-        assert_eq!(p, ao.poses(), "one pose per AO row");
-        assert!(p > 0, "at least one reference pose");
-        let dim = handles[0].len();
-        let v = ao.vertices;
-        let n = options.dimensions;
-        let offset = options.centering == Centering::Cluster;
-        let rows = n + usize::from(offset);
-        let m = options.pose_clusters.clamp(1, p);
+    let points: Vec<f64> = handles.iter().flatten().map(|&x| f64::from(x)).collect();
+    let km = kmeans(&points, dim, m, seed);
+    let mean = ao.mean();
 
-        let points: Vec<f64> = handles.iter().flatten().map(|&x| f64::from(x)).collect();
-        let km = kmeans(&points, dim, m, seed);
-        let mean = ao.mean();
-
-        let mut blocks = vec![Block {
-            rows: 1,
-            columns: v,
-            coefficients: mean.iter().map(|&x| f16::from_f64(x)).collect(),
-            map: None,
-        }];
-        let mut clusters = Vec::with_capacity(m);
-        let mut stats = ClusteredFitStats {
-            cluster_sizes: Vec::with_capacity(m),
-            cluster_ranks: Vec::with_capacity(m),
-            vertex_clusters: Vec::with_capacity(m),
-            stored_training_rmse: 0.0,
-            ridge_cv: None,
-            clamp_cv: None,
-            base: None,
-            basis: None,
-            basis_cv: None,
-            reference: None,
-        };
-        // The pose clusters are fitted side by side, each on its own
-        // thread, and gathered in their order.
-        let fitted: Vec<Result<(Block, PoseCluster, usize, usize), FitOverflow>> = (0..m)
-            .into_par_iter()
-            .map(|j| {
-                let members: Vec<usize> = (0..p).filter(|&r| km.assignment[r] == j).collect();
-                let k = members.len();
-                let center = &km.centers[j * dim..(j + 1) * dim];
-                let xc = Mat::from_fn(k, dim, |r, c| points[members[r] * dim + c] - center[c]);
-                let axes = principal_axes(xc.as_ref(), n);
-                let rank = axes.nrows();
-                let scores = &xc * axes.transpose();
-                let q = Mat::from_fn(k, rank + usize::from(offset), |r, c| {
-                    if c < rank { scores[(r, c)] } else { 1.0 }
+    let mut blocks = vec![Block {
+        rows: 1,
+        columns: v,
+        coefficients: mean.iter().map(|&x| f16::from_f64(x)).collect(),
+        map: None,
+    }];
+    let mut clusters = Vec::with_capacity(m);
+    let mut stats = ClusteredFitStats {
+        cluster_sizes: Vec::with_capacity(m),
+        cluster_ranks: Vec::with_capacity(m),
+        vertex_clusters: Vec::with_capacity(m),
+        stored_training_rmse: 0.0,
+        ridge_cv: None,
+        clamp_cv: None,
+        base: None,
+        basis: None,
+        basis_cv: None,
+        reference: None,
+    };
+    // The pose clusters are fitted side by side, each on its own
+    // thread, and gathered in their order.
+    let fitted: Vec<Result<(Block, PoseCluster, usize, usize), FitOverflow>> = (0..m)
+        .into_par_iter()
+        .map(|j| {
+            let members: Vec<usize> = (0..p).filter(|&r| km.assignment[r] == j).collect();
+            let k = members.len();
+            let center = &km.centers[j * dim..(j + 1) * dim];
+            let xc = Mat::from_fn(k, dim, |r, c| points[members[r] * dim + c] - center[c]);
+            let axes = principal_axes(xc.as_ref(), n);
+            let rank = axes.nrows();
+            let scores = &xc * axes.transpose();
+            let q = Mat::from_fn(k, rank + usize::from(offset), |r, c| {
+                if c < rank { scores[(r, c)] } else { 1.0 }
+            });
+            let y = Mat::from_fn(k, v, |r, i| f64::from(ao.row(members[r])[i]) - mean[i]);
+            let (targets, map) = if options.vertex_clusters > 0 && options.vertex_clusters < v {
+                let groups = vertex_clusters(
+                    y.as_ref(),
+                    options.vertex_clusters,
+                    f64::from(options.vertex_tolerance),
+                );
+                let count = groups.count;
+                let mut sums = Mat::<f64>::zeros(k, count);
+                let mut sizes = vec![0usize; count];
+                for (i, &g) in groups.map.iter().enumerate() {
+                    sizes[g as usize] += 1;
+                    for r in 0..k {
+                        sums[(r, g as usize)] += y[(r, i)];
+                    }
+                }
+                let means = Mat::from_fn(k, count, |r, g| sums[(r, g)] / sizes[g] as f64);
+                (means, Some(groups.map))
+            } else {
+                (y, None)
+            };
+            let (x, _) = ridge_lstsq(q.as_ref(), targets.as_ref(), options.ridge * k as f64);
+            let largest = x.norm_max();
+            if largest.is_nan() || largest > F16_MAX {
+                return Err(FitOverflow {
+                    largest,
+                    parameters: x.nrows(),
                 });
-                let y = Mat::from_fn(k, v, |r, i| f64::from(ao.row(members[r])[i]) - mean[i]);
-                let (targets, map) = if options.vertex_clusters > 0 && options.vertex_clusters < v {
-                    let groups = vertex_clusters(
-                        y.as_ref(),
-                        options.vertex_clusters,
-                        f64::from(options.vertex_tolerance),
-                    );
-                    let count = groups.count;
-                    let mut sums = Mat::<f64>::zeros(k, count);
-                    let mut sizes = vec![0usize; count];
-                    for (i, &g) in groups.map.iter().enumerate() {
-                        sizes[g as usize] += 1;
-                        for r in 0..k {
-                            sums[(r, g as usize)] += y[(r, i)];
-                        }
-                    }
-                    let means = Mat::from_fn(k, count, |r, g| sums[(r, g)] / sizes[g] as f64);
-                    (means, Some(groups.map))
-                } else {
-                    (y, None)
-                };
-                let (x, _) = ridge_lstsq(q.as_ref(), targets.as_ref(), options.ridge * k as f64);
-                let largest = x.norm_max();
-                if largest.is_nan() || largest > F16_MAX {
-                    return Err(FitOverflow {
-                        largest,
-                        parameters: x.nrows(),
-                    });
+            }
+            let columns = targets.ncols();
+            // Rows past the cluster's rank stay zero; the constant, if
+            // any, is always the last row.
+            let mut coefficients = vec![f16::ZERO; rows * columns];
+            for r in 0..x.nrows() {
+                let dst = if r < rank { r } else { n };
+                for c in 0..columns {
+                    coefficients[dst * columns + c] = f16::from_f64(x[(r, c)]);
                 }
-                let columns = targets.ncols();
-                // Rows past the cluster's rank stay zero; the constant, if
-                // any, is always the last row.
-                let mut coefficients = vec![f16::ZERO; rows * columns];
-                for r in 0..x.nrows() {
-                    let dst = if r < rank { r } else { n };
-                    for c in 0..columns {
-                        coefficients[dst * columns + c] = f16::from_f64(x[(r, c)]);
-                    }
+            }
+            let mut axes_f32 = vec![0.0f32; n * dim];
+            for r in 0..rank {
+                for c in 0..dim {
+                    axes_f32[r * dim + c] = axes[(r, c)] as f32;
                 }
-                let mut axes_f32 = vec![0.0f32; n * dim];
-                for r in 0..rank {
-                    for c in 0..dim {
-                        axes_f32[r * dim + c] = axes[(r, c)] as f32;
-                    }
-                }
-                Ok((
-                    Block {
-                        rows,
-                        columns,
-                        coefficients,
-                        map,
-                    },
-                    PoseCluster {
-                        center: center.iter().map(|&x| x as f32).collect(),
-                        axes: axes_f32,
-                    },
-                    rank,
-                    k,
-                ))
-            })
-            .collect();
-        for fit in fitted {
-            // The first cluster that overflows is the one reported.
-            let (block, cluster, rank, k) = fit?;
-            stats.cluster_sizes.push(k);
-            stats.cluster_ranks.push(rank);
-            stats.vertex_clusters.push(block.columns);
-            blocks.push(block);
-            clusters.push(cluster);
-        }
-        let model = Self {
-            handles: dim,
-            dimensions: n,
-            alpha: options.alpha,
-            centering: options.centering,
-            clamp: options.clamp,
-            clusters,
-            form: Coefficients::Dense(LinearForm {
-                vertices: v,
-                blocks,
-            }),
-            base: None,
-            basis: None,
-        };
-        let mut se = 0.0f64;
-        for (r, h) in handles.iter().enumerate() {
-            let predicted = model.evaluate(h);
-            se += predicted
-                .iter()
-                .zip(ao.row(r))
-                .map(|(&a, &b)| f64::from(a - b).powi(2))
-                .sum::<f64>();
-        }
-        stats.stored_training_rmse = (se / (p * v).max(1) as f64).sqrt();
-        Ok((model, stats))
+            }
+            Ok((
+                Block {
+                    rows,
+                    columns,
+                    coefficients,
+                    map,
+                },
+                PoseCluster {
+                    center: center.iter().map(|&x| x as f32).collect(),
+                    axes: axes_f32,
+                },
+                rank,
+                k,
+            ))
+        })
+        .collect();
+    for fit in fitted {
+        // The first cluster that overflows is the one reported.
+        let (block, cluster, rank, k) = fit?;
+        stats.cluster_sizes.push(k);
+        stats.cluster_ranks.push(rank);
+        stats.vertex_clusters.push(block.columns);
+        blocks.push(block);
+        clusters.push(cluster);
     }
-
-    /// Kirk & Arikan's Eq. 5: normalised ‖h − h̄_j‖^(−α), computed in logs
-    /// so that neither tiny nor huge distances overflow; weights under
-    /// [`MIN_BLEND_WEIGHT`] are dropped and the rest renormalised. A pose
-    /// on a centre takes that cluster alone.
-    pub fn blend_weights(&self, h: &[f32]) -> Vec<f64> {
-        let d2: Vec<f64> = self
-            .clusters
+    let model = VertexClustered {
+        handles: dim,
+        dimensions: n,
+        alpha: options.alpha,
+        centering: options.centering,
+        clamp: options.clamp,
+        clusters,
+        form: Coefficients::Dense(LinearForm {
+            vertices: v,
+            blocks,
+        }),
+        base: None,
+        basis: None,
+    };
+    let mut se = 0.0f64;
+    for (r, h) in handles.iter().enumerate() {
+        let predicted = model.evaluate(h);
+        se += predicted
             .iter()
-            .map(|c| {
-                c.center
-                    .iter()
-                    .zip(h)
-                    .map(|(&a, &b)| (f64::from(b) - f64::from(a)).powi(2))
-                    .sum()
-            })
-            .collect();
-        if let Some(hit) = d2.iter().position(|&d| d == 0.0) {
-            return (0..d2.len()).map(|j| f64::from(j == hit)).collect();
-        }
-        let alpha = f64::from(self.alpha);
-        let logs: Vec<f64> = d2.iter().map(|&d| -0.5 * alpha * d.ln()).collect();
-        let top = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let mut w: Vec<f64> = logs.iter().map(|&l| (l - top).exp()).collect();
-        let sum: f64 = w.iter().sum();
-        w.iter_mut().for_each(|x| *x /= sum);
-        w.iter_mut()
-            .filter(|x| **x < MIN_BLEND_WEIGHT)
-            .for_each(|x| *x = 0.0);
-        let sum: f64 = w.iter().sum();
-        w.iter_mut().for_each(|x| *x /= sum);
-        w
+            .zip(ao.row(r))
+            .map(|(&a, &b)| f64::from(a - b).powi(2))
+            .sum::<f64>();
     }
+    stats.stored_training_rmse = (se / (p * v).max(1) as f64).sqrt();
+    Ok((model, stats))
+}
 
-    /// The per-pose weights of the linear form: `[1]` for the mean, then
-    /// per cluster `ω_j · P_j (h − h̄_j)`, each coordinate clamped to
-    /// ±`clamp` (and `ω_j` for the constant).
-    pub fn weights(&self, h: &[f32]) -> Vec<f32> {
-        assert!(self.base.is_none(), "a linear base needs the joint angles");
-        self.weights_with(h, &[])
+/// Puts a fitted linear base under a model fitted to what the base
+/// leaves: block 0 (the leftover's mean) is added to the base's
+/// constant row and replaced by the base's block.
+pub fn with_base(
+    mut model: VertexClustered,
+    joint_angles: JointAngles,
+    base: VertexLinear,
+) -> VertexClustered {
+    let Coefficients::Dense(form) = &base.coefficients else {
+        panic!("a linear base is dense")
+    };
+    let Coefficients::Dense(own) = &mut model.form else {
+        panic!("a base goes under a model as fitted, before a basis")
+    };
+    let mut block = form.blocks[0].clone();
+    let last = (block.rows - 1) * block.columns;
+    for (c, m) in block.coefficients[last..]
+        .iter_mut()
+        .zip(&own.blocks[0].coefficients)
+    {
+        *c = f16::from_f32(c.to_f32() + m.to_f32());
     }
-
-    /// [`VertexClustered::weights`] with a linear base: its weights of
-    /// `angles` (ignored without a base) first.
-    pub fn weights_with(&self, h: &[f32], angles: &[f32]) -> Vec<f32> {
-        assert_eq!(h.len(), self.handles, "one number per handle coordinate");
-        let omega = self.blend_weights(h);
-        let mut out = Vec::with_capacity(1 + self.clusters.len() * self.rows());
-        match &self.base {
-            Some(base) => out.extend(base.weights.weights(angles)),
-            None => out.push(1.0),
-        }
-        for (cluster, &w) in self.clusters.iter().zip(&omega) {
-            for r in 0..self.dimensions {
-                let axis = &cluster.axes[r * self.handles..(r + 1) * self.handles];
-                let y: f64 = axis
-                    .iter()
-                    .zip(h.iter().zip(&cluster.center))
-                    .map(|(&a, (&x, &c))| f64::from(a) * (f64::from(x) - f64::from(c)))
-                    .sum();
-                let y = if self.clamp > 0.0 {
-                    let c = f64::from(self.clamp);
-                    y.clamp(-c, c)
-                } else {
-                    y
-                };
-                out.push((w * y) as f32);
-            }
-            if self.centering == Centering::Cluster {
-                out.push(w as f32);
-            }
-        }
-        match &self.basis {
-            Some(b) => b.apply(&out),
-            None => out,
-        }
-    }
-
-    /// AO of every vertex for a handle vector (Eq. 4).
-    pub fn evaluate(&self, h: &[f32]) -> Vec<f32> {
-        self.form.evaluate(&self.weights(h))
-    }
-
-    /// Puts a fitted linear base under a model fitted to what the base
-    /// leaves: block 0 (the leftover's mean) is added to the base's
-    /// constant row and replaced by the base's block.
-    pub fn with_base(mut self, joint_angles: JointAngles, base: VertexLinear) -> Self {
-        let Coefficients::Dense(form) = &base.coefficients else {
-            panic!("a linear base is dense")
-        };
-        let Coefficients::Dense(own) = &mut self.form else {
-            panic!("a base goes under a model as fitted, before a basis")
-        };
-        let mut block = form.blocks[0].clone();
-        let last = (block.rows - 1) * block.columns;
-        for (c, m) in block.coefficients[last..]
-            .iter_mut()
-            .zip(&own.blocks[0].coefficients)
-        {
-            *c = f16::from_f32(c.to_f32() + m.to_f32());
-        }
-        own.blocks[0] = block;
-        let weights = VertexLinear {
-            coefficients: Coefficients::Dense(LinearForm {
-                vertices: own.vertices,
-                blocks: Vec::new(),
-            }),
-            ..base
-        };
-        self.base = Some(Box::new(LinearBase {
-            joint_angles,
-            weights,
-        }));
-        self
-    }
-
-    /// Bytes of the model: coefficients and maps, centres and axes (f32).
-    pub fn bytes(&self) -> usize {
-        self.form.bytes()
-            + self.clusters.len() * 4 * (self.handles * (1 + self.dimensions))
-            + self.base.as_ref().map_or(0, |b| b.weights.bytes())
-            + self.basis.as_ref().map_or(0, Basis::bytes)
-    }
+    own.blocks[0] = block;
+    let weights = VertexLinear {
+        coefficients: Coefficients::Dense(LinearForm {
+            vertices: own.vertices,
+            blocks: Vec::new(),
+        }),
+        ..base
+    };
+    model.base = Some(Box::new(LinearBase {
+        joint_angles,
+        weights,
+    }));
+    model
 }
 
 /// Vertex clusters of one pose cluster.
@@ -634,7 +477,7 @@ mod tests {
             dimensions: 1,
             ..ClusteredOptions::default()
         };
-        let (model, stats) = VertexClustered::fit(&h, &ao, &options, 1).unwrap();
+        let (model, stats) = fit(&h, &ao, &options, 1).unwrap();
         assert_eq!(stats.cluster_sizes, vec![20, 20]);
         assert_eq!(stats.cluster_ranks, vec![1, 1]);
         assert!(stats.stored_training_rmse < 2e-3, "{stats:?}");
@@ -652,7 +495,7 @@ mod tests {
             centering: Centering::Global,
             ..options
         };
-        let (_, g) = VertexClustered::fit(&h, &ao, &global, 1).unwrap();
+        let (_, g) = fit(&h, &ao, &global, 1).unwrap();
         assert!(g.stored_training_rmse > 10.0 * stats.stored_training_rmse);
     }
 
@@ -665,7 +508,7 @@ mod tests {
             vertex_clusters: 3,
             ..ClusteredOptions::default()
         };
-        let (model, stats) = VertexClustered::fit(&h, &ao, &options, 1).unwrap();
+        let (model, stats) = fit(&h, &ao, &options, 1).unwrap();
         assert_eq!(stats.vertex_clusters, vec![3, 3]);
         // Vertices 0 and 3 move together (offset 0.01): one cluster.
         let Coefficients::Dense(form) = &model.form else {
@@ -682,7 +525,7 @@ mod tests {
             vertex_clusters: 1,
             ..options
         };
-        let (_, coarse) = VertexClustered::fit(&h, &ao, &one, 1).unwrap();
+        let (_, coarse) = fit(&h, &ao, &one, 1).unwrap();
         assert!(coarse.stored_training_rmse > stats.stored_training_rmse);
     }
 
@@ -694,7 +537,7 @@ mod tests {
             dimensions: 1,
             ..ClusteredOptions::default()
         };
-        let (model, _) = VertexClustered::fit(&h, &ao, &options, 1).unwrap();
+        let (model, _) = fit(&h, &ao, &options, 1).unwrap();
         let w = model.blend_weights(&[10.5, 21.0]);
         assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
         assert_eq!(w.iter().filter(|&&x| x > 0.0).count(), 1, "{w:?}");

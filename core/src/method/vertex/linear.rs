@@ -7,11 +7,11 @@ use half::f16;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::basis::Basis;
 use super::cv::RidgeChoice;
 use super::linalg::{RidgeSolver, SolveStats};
 use crate::{pose_space::Range, trace::AoBlock};
 use aobake_runtime::method::vertex::form::{Block, Coefficients, LinearForm, SparseForm};
+pub use aobake_runtime::method::vertex::linear::{Features, VertexLinear};
 
 /// The default ridge weight: on standardised angles it shrinks directions
 /// of pose space with less than about 1/1000 of a typical angle's variance
@@ -82,18 +82,6 @@ pub struct LinearOptions {
     pub basis_cv: bool,
 }
 
-/// What vertex-linear is linear in, per rotated joint (translations are
-/// always their 3 offsets).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Features {
-    /// Its rotation vector r (3 numbers).
-    #[default]
-    RotationVector,
-    /// Its rotation matrix R(r) − I, column-major (9 numbers).
-    Matrix,
-}
-
 /// The joint angles a vertex-linear model reads: their ranges (rotation
 /// vectors first, 3 numbers per rotated joint, then translations).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -102,63 +90,6 @@ pub struct Angles<'a> {
     pub ranges: &'a [Range],
     /// Rotated joints: the first `3 × rotations` angles.
     pub rotations: usize,
-}
-
-impl Features {
-    /// Features per rotated joint.
-    fn per_rotation(self) -> usize {
-        match self {
-            Self::RotationVector => 3,
-            Self::Matrix => 9,
-        }
-    }
-
-    /// How many features `angles` angles with `rotations` rotated joints
-    /// give.
-    pub fn count(self, angles: usize, rotations: usize) -> usize {
-        angles - 3 * rotations + self.per_rotation() * rotations
-    }
-
-    /// The features of a joint-angle vector.
-    pub fn expand(self, angles: &[f32], rotations: usize) -> Vec<f32> {
-        match self {
-            Self::RotationVector => angles.to_vec(),
-            Self::Matrix => {
-                let (rot, rest) = angles.split_at(3 * rotations);
-                let mut out = Vec::with_capacity(self.count(angles.len(), rotations));
-                for r in rot.chunks_exact(3) {
-                    let m = glam::Mat3::from_quat(glam::Quat::from_scaled_axis(
-                        glam::Vec3::from_slice(r),
-                    )) - glam::Mat3::IDENTITY;
-                    out.extend(m.to_cols_array());
-                }
-                out.extend_from_slice(rest);
-                out
-            }
-        }
-    }
-
-    /// The features that angles `params` (sorted) drive, sorted.
-    pub fn expand_indices(self, params: &[usize], rotations: usize) -> Vec<usize> {
-        let k = self.per_rotation();
-        let mut out: Vec<usize> = params
-            .iter()
-            .flat_map(|&p| {
-                if p < 3 * rotations {
-                    let j = p / 3;
-                    match self {
-                        Self::RotationVector => p..p + 1,
-                        Self::Matrix => k * j..k * j + k,
-                    }
-                } else {
-                    let f = p - 3 * rotations + k * rotations;
-                    f..f + 1
-                }
-            })
-            .collect();
-        out.dedup();
-        out
-    }
 }
 
 /// Whether vertex-linear's vertices see every parameter or only their
@@ -262,7 +193,7 @@ fn fit_ridges(
         .map(|&ridge| vec![Column { ridge, scope }; block.vertices])
         .collect();
     let models: Vec<&[Column]> = models.iter().map(Vec::as_slice).collect();
-    VertexLinear::fit_many(&q, angles, &block, &models, local, options, None, false)
+    fit_many(&q, angles, &block, &models, local, options, None, false)
         .into_iter()
         .map(|fitted| fitted.ok().map(|(m, _)| m))
         .collect()
@@ -356,46 +287,6 @@ pub fn count_columns(columns: &[Column]) -> Vec<ColumnCount> {
     counts
 }
 
-/// A fitted vertex-linear model.
-///
-/// The joint angles enter standardised, `(j_k − μ_k) / σ_k` over the
-/// reference poses, which is the same linear model as Kontkanen & Aila's
-/// `jᵀt` (an affine change of the pose vector, still with the constant
-/// column) but puts every coefficient in AO units (the AO change over one
-/// standard deviation of that angle). That keeps f16 storage accurate (no
-/// large terms cancelling against the constant), makes the ridge weight and
-/// the sparsification threshold unit-free, and makes the constant the mean
-/// AO.
-#[derive(Debug, Clone, PartialEq)]
-pub struct VertexLinear {
-    /// Features (N) the model is linear in.
-    pub parameters: usize,
-    /// What they are.
-    pub features: Features,
-    /// Rotated joints among the angles.
-    pub rotations: usize,
-    /// With matrix features: the leading principal directions of the
-    /// standardised features, row-major `parameters × features`; the
-    /// model is linear in the projections onto them.
-    pub projection: Option<Vec<f32>>,
-    /// μ_k: mean of each feature over the reference poses.
-    pub mean: Vec<f32>,
-    /// 1/σ_k, or 0 for a feature that never moved (its column is left
-    /// out).
-    pub inv_std: Vec<f32>,
-    /// The valid range of each angle (from the clips, with the margin):
-    /// angles are clamped to it at run time, so a pose outside what the
-    /// model was fitted on does not extrapolate a linear function without
-    /// bound.
-    pub ranges: Vec<Range>,
-    /// `T` in f16: N+1 rows (the standardised features, then the
-    /// constant); with a basis, its `r + 1` rows.
-    pub coefficients: Coefficients,
-    /// The eigen-AO basis the model was compressed into, if any: the
-    /// weights above go through it.
-    pub basis: Option<Basis>,
-}
-
 /// What the fit did, for the report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LinearFitStats {
@@ -479,287 +370,230 @@ pub struct FitOverflow {
 /// The largest value an f16 holds.
 pub(crate) const F16_MAX: f64 = 65504.0;
 
-impl VertexLinear {
-    /// Fits `T = J⁺A` over `poses` (one joint-angle vector per row of
-    /// `ao`), on standardised angles; the constant column, the mean AO, is
-    /// never penalised by the ridge. The solve goes through an SVD (see
-    /// [`ridge_lstsq`]).
-    pub fn fit(
-        poses: &[Vec<f32>],
-        angles: Angles<'_>,
-        ao: &AoBlock,
-        options: &LinearOptions,
-        local: Option<&[Vec<usize>]>,
-    ) -> Result<(Self, LinearFitStats), FitOverflow> {
-        let column = Column {
-            ridge: options.ridge,
-            scope: if local.is_some() {
-                Scope::Local
-            } else {
-                Scope::Global
-            },
-        };
-        Self::fit_columns(
-            poses,
-            angles,
-            ao,
-            &vec![column; ao.vertices],
-            local,
-            options,
-            None,
-        )
-    }
+/// Fits `T = J⁺A` over `poses` (one joint-angle vector per row of
+/// `ao`), on standardised angles; the constant column, the mean AO, is
+/// never penalised by the ridge. The solve goes through an SVD (see
+/// [`ridge_lstsq`]).
+pub fn fit(
+    poses: &[Vec<f32>],
+    angles: Angles<'_>,
+    ao: &AoBlock,
+    options: &LinearOptions,
+    local: Option<&[Vec<usize>]>,
+) -> Result<(VertexLinear, LinearFitStats), FitOverflow> {
+    let column = Column {
+        ridge: options.ridge,
+        scope: if local.is_some() {
+            Scope::Local
+        } else {
+            Scope::Global
+        },
+    };
+    fit_columns(
+        poses,
+        angles,
+        ao,
+        &vec![column; ao.vertices],
+        local,
+        options,
+        None,
+    )
+}
 
-    /// [`VertexLinear::fit`] with every vertex fitted its own way
-    /// (`columns`, one per vertex): its ridge weight and which parameters
-    /// it sees. A [`Scope::Constant`] vertex gets `constants[vertex]`
-    /// (default: its mean over the poses) and no coefficients.
-    /// `options.ridge` is only reported.
-    pub fn fit_columns(
-        poses: &[Vec<f32>],
-        angles: Angles<'_>,
-        ao: &AoBlock,
-        columns: &[Column],
-        local: Option<&[Vec<usize>]>,
-        options: &LinearOptions,
-        constants: Option<&[f32]>,
-    ) -> Result<(Self, LinearFitStats), FitOverflow> {
-        Self::fit_many(
-            poses,
-            angles,
-            ao,
-            &[columns],
-            local,
-            options,
-            constants,
-            true,
-        )
-        .pop()
-        .expect("one model")
-    }
+/// [`fit`] with every vertex fitted its own way
+/// (`columns`, one per vertex): its ridge weight and which parameters
+/// it sees. A [`Scope::Constant`] vertex gets `constants[vertex]`
+/// (default: its mean over the poses) and no coefficients.
+/// `options.ridge` is only reported.
+pub fn fit_columns(
+    poses: &[Vec<f32>],
+    angles: Angles<'_>,
+    ao: &AoBlock,
+    columns: &[Column],
+    local: Option<&[Vec<usize>]>,
+    options: &LinearOptions,
+    constants: Option<&[f32]>,
+) -> Result<(VertexLinear, LinearFitStats), FitOverflow> {
+    fit_many(
+        poses,
+        angles,
+        ao,
+        &[columns],
+        local,
+        options,
+        constants,
+        true,
+    )
+    .pop()
+    .expect("one model")
+}
 
-    /// [`VertexLinear::fit_columns`] for several models at once (one per
-    /// entry of `models`): the features are built, standardised and
-    /// projected once, and each design matrix factorised once, whatever
-    /// the ridge weights (what cross-validation fits candidates with).
-    /// The models are projected only when none of them has a local
-    /// vertex. Without `training_errors` the statistics' training RMSEs
-    /// are NaN (not measured: cross-validation keeps only the models).
-    #[allow(clippy::too_many_arguments)]
-    pub fn fit_many(
-        poses: &[Vec<f32>],
-        angles: Angles<'_>,
-        ao: &AoBlock,
-        models: &[&[Column]],
-        local: Option<&[Vec<usize>]>,
-        options: &LinearOptions,
-        constants: Option<&[f32]>,
-        training_errors: bool,
-    ) -> Vec<Result<(Self, LinearFitStats), FitOverflow>> {
-        let p = poses.len();
-        assert_eq!(p, ao.poses(), "one pose per AO row");
-        assert!(p > 0, "at least one reference pose");
-        assert!(
-            poses.iter().all(|q| q.len() == angles.ranges.len()),
-            "one range per angle"
-        );
-        let (features, rotations) = (options.features, angles.rotations);
-        let raw = poses;
-        let poses: Vec<Vec<f32>> = poses
-            .iter()
-            .map(|q| features.expand(q, rotations))
-            .collect();
-        let local: Option<Vec<Vec<usize>>> = local.map(|sets| {
-            sets.iter()
-                .map(|s| features.expand_indices(s, rotations))
-                .collect()
-        });
-        let local = local.as_deref();
-        let n = features.count(angles.ranges.len(), rotations);
-        let v = ao.vertices;
-        let (mean_j, inv_std) = standardise(&poses, n);
-        let mean_a = ao.mean();
-        let js = Mat::from_fn(p, n, |r, k| {
-            (f64::from(poses[r][k]) - mean_j[k]) * inv_std[k]
-        });
-        // Matrix features of a global model: projected onto their leading
-        // principal directions (see `LinearOptions::components`).
-        let components = (options.features == Features::Matrix
-            && rotations > 0
-            && options.components > 0.0
-            && models
-                .iter()
-                .flat_map(|columns| columns.iter())
-                .all(|c| c.scope != Scope::Local))
-        .then(|| {
-            let k = (options.components * angles.ranges.len() as f32).round() as usize;
-            principal_directions(js.as_ref(), k.max(1))
-        });
-        let js = match &components {
-            Some(d) => &js * d,
-            None => js,
-        };
-        let local = if components.is_some() { None } else { local };
-        let m = js.ncols();
-        let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
-        // The whole design's factorisation: the report's conditioning and
-        // every global vertex's solve; one more per set of local
-        // parameters.
-        let whole = RidgeSolver::new(js.as_ref());
-        let solve = whole.stats;
-        let all: Vec<usize> = (0..m).collect();
-        // Row-major k × n: row c is direction c.
-        let projection: Option<Vec<f32>> = components.as_ref().map(|d| {
-            (0..m)
-                .flat_map(|c| (0..n).map(move |k| (k, c)))
-                .map(|(k, c)| d[(k, c)] as f32)
-                .collect()
-        });
-        // Per model, one solve per ridge weight and set of parameters, over
-        // the vertices that share them.
-        type Sets<'c> = std::collections::BTreeMap<(u64, &'c [usize]), Vec<usize>>;
-        let model_sets: Vec<Sets<'_>> = models
-            .iter()
-            .map(|columns| {
-                assert_eq!(columns.len(), v, "one column per vertex");
-                let mut sets: Sets<'_> = Default::default();
-                for (i, c) in columns.iter().enumerate() {
-                    let params = match c.scope {
-                        Scope::Constant => continue,
-                        Scope::Global => all.as_slice(),
-                        Scope::Local => local.map_or(all.as_slice(), |l| l[i].as_slice()),
-                    };
-                    if !params.is_empty() {
-                        sets.entry((c.ridge.to_bits(), params)).or_default().push(i);
-                    }
-                }
-                sets
-            })
-            .collect();
-        // The factorisation of each set of parameters, and `Uᵀ Y` of each
-        // (parameters, vertices) pair: what every ridge weight shares, so
-        // cross-validation's candidates cost one projection, not one each.
-        let mut keys: Vec<(&[usize], &[usize])> = model_sets
-            .iter()
-            .flat_map(|sets| {
-                sets.iter()
-                    .map(|((_, params), vs)| (*params, vs.as_slice()))
-            })
-            .collect();
-        keys.sort_unstable();
-        keys.dedup();
-        let mut designs: Vec<&[usize]> = keys.iter().map(|(params, _)| *params).collect();
-        designs.dedup();
-        let solvers: std::collections::BTreeMap<&[usize], RidgeSolver> = designs
-            .par_iter()
-            .filter(|params| params.len() != m)
-            .map(|&params| {
-                let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
-                (params, RidgeSolver::new(d.as_ref()))
-            })
-            .collect();
-        let solver = |params: &[usize]| -> &RidgeSolver {
-            if params.len() == m {
-                &whole
-            } else {
-                &solvers[params]
-            }
-        };
-        let projections: std::collections::BTreeMap<(&[usize], &[usize]), Mat<f64>> = keys
-            .par_iter()
-            .map(|&(params, vertices)| {
-                let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
-                ((params, vertices), solver(params).project(y.as_ref()))
-            })
-            .collect();
-        let shared = Shared {
-            raw,
-            ao,
-            angles,
-            options,
-            js: &js,
-            mean_a: &mean_a,
-            mean_j: &mean_j,
-            inv_std: &inv_std,
-            projection: projection.as_deref(),
-            solve,
-            training_errors,
-        };
-        // The models side by side, each on its own thread.
-        models
-            .par_iter()
-            .zip(&model_sets)
-            .map(|(columns, sets)| {
-                let mut t = Mat::zeros(m, v);
-                for (&(ridge, params), vertices) in sets {
-                    let lambda = f64::from_bits(ridge) * p as f64;
-                    let uty = &projections[&(params, vertices.as_slice())];
-                    let x = solver(params).solve_projected(uty, lambda);
-                    for (c, &i) in vertices.iter().enumerate() {
-                        for (row, &k) in params.iter().enumerate() {
-                            t[(k, i)] = x[(row, c)];
-                        }
-                    }
-                }
-                shared.finish(columns, &t, constants)
-            })
+/// [`fit_columns`] for several models at once (one per
+/// entry of `models`): the features are built, standardised and
+/// projected once, and each design matrix factorised once, whatever
+/// the ridge weights (what cross-validation fits candidates with).
+/// The models are projected only when none of them has a local
+/// vertex. Without `training_errors` the statistics' training RMSEs
+/// are NaN (not measured: cross-validation keeps only the models).
+#[allow(clippy::too_many_arguments)]
+pub fn fit_many(
+    poses: &[Vec<f32>],
+    angles: Angles<'_>,
+    ao: &AoBlock,
+    models: &[&[Column]],
+    local: Option<&[Vec<usize>]>,
+    options: &LinearOptions,
+    constants: Option<&[f32]>,
+    training_errors: bool,
+) -> Vec<Result<(VertexLinear, LinearFitStats), FitOverflow>> {
+    let p = poses.len();
+    assert_eq!(p, ao.poses(), "one pose per AO row");
+    assert!(p > 0, "at least one reference pose");
+    assert!(
+        poses.iter().all(|q| q.len() == angles.ranges.len()),
+        "one range per angle"
+    );
+    let (features, rotations) = (options.features, angles.rotations);
+    let raw = poses;
+    let poses: Vec<Vec<f32>> = poses
+        .iter()
+        .map(|q| features.expand(q, rotations))
+        .collect();
+    let local: Option<Vec<Vec<usize>>> = local.map(|sets| {
+        sets.iter()
+            .map(|s| features.expand_indices(s, rotations))
             .collect()
-    }
-
-    /// The weights of a pose: its joint angles clamped to their ranges,
-    /// turned into features and standardised, and a 1.
-    pub fn weights(&self, angles: &[f32]) -> Vec<f32> {
-        assert_eq!(angles.len(), self.ranges.len(), "one number per angle");
-        let clamped: Vec<f32> = angles
+    });
+    let local = local.as_deref();
+    let n = features.count(angles.ranges.len(), rotations);
+    let v = ao.vertices;
+    let (mean_j, inv_std) = standardise(&poses, n);
+    let mean_a = ao.mean();
+    let js = Mat::from_fn(p, n, |r, k| {
+        (f64::from(poses[r][k]) - mean_j[k]) * inv_std[k]
+    });
+    // Matrix features of a global model: projected onto their leading
+    // principal directions (see `LinearOptions::components`).
+    let components = (options.features == Features::Matrix
+        && rotations > 0
+        && options.components > 0.0
+        && models
             .iter()
-            .zip(&self.ranges)
-            .map(|(&x, r)| x.clamp(r.min, r.max))
-            .collect();
-        let standard: Vec<f32> = self
-            .features
-            .expand(&clamped, self.rotations)
-            .iter()
-            .zip(self.mean.iter().zip(&self.inv_std))
-            .map(|(&x, (&m, &s))| (x - m) * s)
-            .collect();
-        let mut w = match &self.projection {
-            Some(d) => d
-                .chunks_exact(standard.len())
-                .map(|row| row.iter().zip(&standard).map(|(a, b)| a * b).sum())
-                .collect(),
-            None => standard,
-        };
-        w.push(1.0);
-        match &self.basis {
-            Some(b) => b.apply(&w),
-            None => w,
+            .flat_map(|columns| columns.iter())
+            .all(|c| c.scope != Scope::Local))
+    .then(|| {
+        let k = (options.components * angles.ranges.len() as f32).round() as usize;
+        principal_directions(js.as_ref(), k.max(1))
+    });
+    let js = match &components {
+        Some(d) => &js * d,
+        None => js,
+    };
+    let local = if components.is_some() { None } else { local };
+    let m = js.ncols();
+    let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
+    // The whole design's factorisation: the report's conditioning and
+    // every global vertex's solve; one more per set of local
+    // parameters.
+    let whole = RidgeSolver::new(js.as_ref());
+    let solve = whole.stats;
+    let all: Vec<usize> = (0..m).collect();
+    // Row-major k × n: row c is direction c.
+    let projection: Option<Vec<f32>> = components.as_ref().map(|d| {
+        (0..m)
+            .flat_map(|c| (0..n).map(move |k| (k, c)))
+            .map(|(k, c)| d[(k, c)] as f32)
+            .collect()
+    });
+    // Per model, one solve per ridge weight and set of parameters, over
+    // the vertices that share them.
+    type Sets<'c> = std::collections::BTreeMap<(u64, &'c [usize]), Vec<usize>>;
+    let model_sets: Vec<Sets<'_>> = models
+        .iter()
+        .map(|columns| {
+            assert_eq!(columns.len(), v, "one column per vertex");
+            let mut sets: Sets<'_> = Default::default();
+            for (i, c) in columns.iter().enumerate() {
+                let params = match c.scope {
+                    Scope::Constant => continue,
+                    Scope::Global => all.as_slice(),
+                    Scope::Local => local.map_or(all.as_slice(), |l| l[i].as_slice()),
+                };
+                if !params.is_empty() {
+                    sets.entry((c.ridge.to_bits(), params)).or_default().push(i);
+                }
+            }
+            sets
+        })
+        .collect();
+    // The factorisation of each set of parameters, and `Uᵀ Y` of each
+    // (parameters, vertices) pair: what every ridge weight shares, so
+    // cross-validation's candidates cost one projection, not one each.
+    let mut keys: Vec<(&[usize], &[usize])> = model_sets
+        .iter()
+        .flat_map(|sets| {
+            sets.iter()
+                .map(|((_, params), vs)| (*params, vs.as_slice()))
+        })
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    let mut designs: Vec<&[usize]> = keys.iter().map(|(params, _)| *params).collect();
+    designs.dedup();
+    let solvers: std::collections::BTreeMap<&[usize], RidgeSolver> = designs
+        .par_iter()
+        .filter(|params| params.len() != m)
+        .map(|&params| {
+            let d = Mat::from_fn(p, params.len(), |r, c| js[(r, params[c])]);
+            (params, RidgeSolver::new(d.as_ref()))
+        })
+        .collect();
+    let solver = |params: &[usize]| -> &RidgeSolver {
+        if params.len() == m {
+            &whole
+        } else {
+            &solvers[params]
         }
-    }
-
-    /// AO of every vertex at these joint angles.
-    pub fn evaluate(&self, angles: &[f32]) -> Vec<f32> {
-        let w = self.weights(angles);
-        match &self.coefficients {
-            Coefficients::Dense(form) => form.evaluate(&w),
-            Coefficients::Sparse(form) => form.evaluate(&w),
-        }
-    }
-
-    /// Multiply-adds per vertex at run time (mean over vertices if sparse).
-    pub fn multiply_adds(&self) -> f64 {
-        match &self.coefficients {
-            Coefficients::Dense(f) => f.weight_count() as f64,
-            Coefficients::Sparse(s) => s.multiply_adds(),
-        }
-    }
-
-    /// Coefficient bytes and the angles' means and scales.
-    pub fn bytes(&self) -> usize {
-        8 * self.mean.len()
-            + 4 * self.projection.as_ref().map_or(0, Vec::len)
-            + self.basis.as_ref().map_or(0, Basis::bytes)
-            + self.coefficients.bytes()
-    }
+    };
+    let projections: std::collections::BTreeMap<(&[usize], &[usize]), Mat<f64>> = keys
+        .par_iter()
+        .map(|&(params, vertices)| {
+            let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
+            ((params, vertices), solver(params).project(y.as_ref()))
+        })
+        .collect();
+    let shared = Shared {
+        raw,
+        ao,
+        angles,
+        options,
+        js: &js,
+        mean_a: &mean_a,
+        mean_j: &mean_j,
+        inv_std: &inv_std,
+        projection: projection.as_deref(),
+        solve,
+        training_errors,
+    };
+    // The models side by side, each on its own thread.
+    models
+        .par_iter()
+        .zip(&model_sets)
+        .map(|(columns, sets)| {
+            let mut t = Mat::zeros(m, v);
+            for (&(ridge, params), vertices) in sets {
+                let lambda = f64::from_bits(ridge) * p as f64;
+                let uty = &projections[&(params, vertices.as_slice())];
+                let x = solver(params).solve_projected(uty, lambda);
+                for (c, &i) in vertices.iter().enumerate() {
+                    for (row, &k) in params.iter().enumerate() {
+                        t[(k, i)] = x[(row, c)];
+                    }
+                }
+            }
+            shared.finish(columns, &t, constants)
+        })
+        .collect()
 }
 
 /// The first `k` (at most) right singular vectors of `d` with non-zero
@@ -779,7 +613,7 @@ fn principal_directions(d: faer::MatRef<'_, f64>, k: usize) -> Mat<f64> {
     Mat::from_fn(d.ncols(), k, |r, c| svd.V()[(r, c)])
 }
 
-/// What every model of one [`VertexLinear::fit_many`] shares: the
+/// What every model of one [`fit_many`] shares: the
 /// standardised design and what it was built from.
 struct Shared<'a> {
     /// The reference poses' joint angles, as given.
@@ -982,7 +816,7 @@ mod tests {
             features: Features::RotationVector,
             ..LinearOptions::default()
         };
-        let (model, stats) = VertexLinear::fit(&q, wide(), &ao, &exact, None).unwrap();
+        let (model, stats) = fit(&q, wide(), &ao, &exact, None).unwrap();
         assert_eq!(stats.solve.rank, 3);
         assert!(stats.training_rmse < 1e-6, "{stats:?}");
         assert!(
@@ -1010,7 +844,7 @@ mod tests {
             threshold: 0.01,
             ..LinearOptions::default()
         };
-        let (model, stats) = VertexLinear::fit(&q, wide(), &ao, &options, None).unwrap();
+        let (model, stats) = fit(&q, wide(), &ao, &options, None).unwrap();
         // 3 of the 9 angle coefficients are non-zero, plus 3 constants.
         let Coefficients::Sparse(s) = &model.coefficients else {
             panic!("sparse expected")
@@ -1018,7 +852,7 @@ mod tests {
         assert_eq!(s.values.len(), 3 + 3);
         assert!((stats.kept_fraction - 0.5).abs() < 1e-9);
         assert!(stats.stored_training_rmse < 1e-3);
-        let (ridged, rs) = VertexLinear::fit(
+        let (ridged, rs) = fit(
             &q,
             wide(),
             &ao,

@@ -14,28 +14,30 @@
 mod average;
 mod basis;
 mod clustered;
-mod codec;
 pub mod cv;
 mod kmeans;
 mod linalg;
 mod linear;
 
+pub use aobake_runtime::method::vertex::codec::{
+    AssetHeader, AssetHeaderFields, BaseLayout, Layout, UNITS,
+};
 pub use aobake_runtime::method::vertex::form::{
     self, Block, Coefficients, FormRef, LinearForm, SparseForm,
 };
-pub use average::StaticAverage;
+pub use average::{StaticAverage, fit as fit_static_average};
 pub use basis::{Basis, BasisStats};
 pub use clustered::{
     Base, CLAMP_CANDIDATES, Centering, ClusteredFitStats, ClusteredOptions, LinearBase,
-    MIN_BLEND_WEIGHT, PoseCluster, VertexClustered,
+    MIN_BLEND_WEIGHT, PoseCluster, VertexClustered, fit as fit_vertex_clustered, with_base,
 };
-pub use codec::{AssetHeader, AssetHeaderFields, Layout, UNITS};
 pub use cv::{BasisCandidate, BasisChoice, Rows, RowsChoice, Source};
 pub use linalg::SolveStats;
 pub use linear::{
     Angles, Column, ColumnCount, DEFAULT_RIDGE, Features, FitOverflow, LinearFitStats,
     LinearOptions, Locality, RIDGE_CANDIDATES, Scope, VertexLinear, choose_columns, choose_ridge,
-    count_columns,
+    count_columns, fit as fit_vertex_linear, fit_columns as fit_linear_columns,
+    fit_many as fit_linear_many,
 };
 
 use aobake_runtime::Method;
@@ -48,183 +50,90 @@ use crate::{
     trace::AoBlock,
 };
 
-/// Version of the fitting algorithms, part of the bake key: bump it when a
-/// change to fitting changes the coefficients a bake produces.
-pub const ALGORITHM_VERSION: u32 = 7;
+pub use aobake_runtime::method::vertex::{ALGORITHM_VERSION, Model, VertexAo};
 
-/// A fitted model and the pose features it reads.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Model {
-    /// The baseline.
-    StaticAverage(StaticAverage),
-    /// Kontkanen & Aila, over these joint angles.
-    VertexLinear(JointAngles, VertexLinear),
-    /// Kirk & Arikan, over these handles.
-    VertexClustered(Handles, VertexClustered),
+/// Whether the model can evaluate poses of `character`: the same vertex
+/// count, and every node it reads exists. (An asset read from a file is
+/// self-consistent after [`Model::from_container`]; this checks it
+/// against the character it is used with.)
+pub fn check_character(model: &Model, character: &crate::Character) -> Result<(), String> {
+    if character.vertex_count() != model.vertices() {
+        return Err(format!(
+            "the character has {} vertices but the asset was baked for {} vertices",
+            character.vertex_count(),
+            model.vertices()
+        ));
+    }
+    let nodes = character.skeleton.nodes.len();
+    let ok = match model {
+        Model::StaticAverage(_) => true,
+        Model::VertexLinear(layout, _) => layout.nodes().all(|n| n < nodes),
+        Model::VertexClustered(handles, m) => {
+            handles.root.is_none_or(|r| r < nodes)
+                && handles.joints.iter().all(|&n| n < nodes)
+                && m.base
+                    .as_ref()
+                    .is_none_or(|b| b.joint_angles.nodes().all(|n| n < nodes))
+        }
+    };
+    if ok {
+        Ok(())
+    } else {
+        Err("the asset reads joints the character does not have: it was baked for another character".into())
+    }
 }
 
-impl Model {
-    /// The method.
-    pub fn method(&self) -> Method {
-        match self {
-            Self::StaticAverage(_) => Method::StaticAverage,
-            Self::VertexLinear(..) => Method::VertexLinear,
-            Self::VertexClustered(..) => Method::VertexClustered,
+/// Compresses a fitted vertex-linear or vertex-clustered model into at
+/// most `rank` eigen-AO basis rows ([`basis`]), found over the
+/// per-pose `weights` ([`Model::weights`]) of the reference poses it
+/// was fitted to. With a `threshold`, each vertex keeps only the basis
+/// entries whose magnitude reaches it (and its mean), stored sparse.
+/// `None` (and the model as it was) for the static average, or when
+/// there is nothing to compress or the basis would not cost a vertex
+/// fewer multiply-adds than the model does now.
+pub fn compress(
+    model: &mut Model,
+    weights: &[Vec<f32>],
+    rank: usize,
+    threshold: f32,
+) -> Option<BasisStats> {
+    if matches!(model, Model::StaticAverage(_)) || weights.is_empty() {
+        return None;
+    }
+    let cost = mean_multiply_adds(model, weights);
+    let (basis, dense, mut stats) = basis::compress(model.form(), weights, rank)?;
+    let form = if threshold > 0.0 {
+        Coefficients::Sparse(SparseForm::from_dense(
+            &dense.blocks[0],
+            dense.vertices,
+            threshold,
+            &[basis.rank],
+        ))
+    } else {
+        Coefficients::Dense(dense)
+    };
+    stats.threshold = threshold;
+    stats.multiply_adds = match &form {
+        Coefficients::Dense(f) => f.weight_count() as f64,
+        Coefficients::Sparse(s) => s.multiply_adds(),
+    };
+    if stats.multiply_adds >= cost {
+        return None;
+    }
+    match model {
+        Model::StaticAverage(_) => unreachable!("returned above"),
+        Model::VertexLinear(_, m) => {
+            assert!(m.basis.is_none(), "compressed once");
+            m.coefficients = form;
+            m.basis = Some(basis);
+        }
+        Model::VertexClustered(_, m) => {
+            assert!(m.basis.is_none(), "compressed once");
+            m.form = form;
+            m.basis = Some(basis);
         }
     }
-
-    /// Vertices the model covers.
-    pub fn vertices(&self) -> usize {
-        match self {
-            Self::StaticAverage(m) => m.form.vertices,
-            Self::VertexLinear(_, m) => m.coefficients.vertices(),
-            Self::VertexClustered(_, m) => m.form.vertices(),
-        }
-    }
-
-    /// Whether the model can evaluate poses of `character`: the same vertex
-    /// count, and every node it reads exists. (An asset read from a file is
-    /// self-consistent after [`Model::from_container`]; this checks it
-    /// against the character it is used with.)
-    pub fn check_character(&self, character: &crate::Character) -> Result<(), String> {
-        if character.vertex_count() != self.vertices() {
-            return Err(format!(
-                "the character has {} vertices but the asset was baked for {} vertices",
-                character.vertex_count(),
-                self.vertices()
-            ));
-        }
-        let nodes = character.skeleton.nodes.len();
-        let ok = match self {
-            Self::StaticAverage(_) => true,
-            Self::VertexLinear(layout, _) => layout.nodes().all(|n| n < nodes),
-            Self::VertexClustered(handles, m) => {
-                handles.root.is_none_or(|r| r < nodes)
-                    && handles.joints.iter().all(|&n| n < nodes)
-                    && m.base
-                        .as_ref()
-                        .is_none_or(|b| b.joint_angles.nodes().all(|n| n < nodes))
-            }
-        };
-        if ok {
-            Ok(())
-        } else {
-            Err("the asset reads joints the character does not have: it was baked for another character".into())
-        }
-    }
-
-    /// The coefficients as the run time sees them: a dense linear form or a
-    /// sparse one, taking [`Model::weights`].
-    pub fn form(&self) -> FormRef<'_> {
-        match self {
-            Self::StaticAverage(m) => FormRef::Dense(&m.form),
-            Self::VertexLinear(_, m) => m.coefficients.as_ref(),
-            Self::VertexClustered(_, m) => m.form.as_ref(),
-        }
-    }
-
-    /// Compresses a fitted vertex-linear or vertex-clustered model into at
-    /// most `rank` eigen-AO basis rows ([`basis`]), found over the
-    /// per-pose `weights` ([`Model::weights`]) of the reference poses it
-    /// was fitted to. With a `threshold`, each vertex keeps only the basis
-    /// entries whose magnitude reaches it (and its mean), stored sparse.
-    /// `None` (and the model as it was) for the static average, or when
-    /// there is nothing to compress or the basis would not cost a vertex
-    /// fewer multiply-adds than the model does now.
-    pub fn compress(
-        &mut self,
-        weights: &[Vec<f32>],
-        rank: usize,
-        threshold: f32,
-    ) -> Option<BasisStats> {
-        if matches!(self, Self::StaticAverage(_)) || weights.is_empty() {
-            return None;
-        }
-        let cost = mean_multiply_adds(self, weights);
-        let (basis, dense, mut stats) = basis::compress(self.form(), weights, rank)?;
-        let form = if threshold > 0.0 {
-            Coefficients::Sparse(SparseForm::from_dense(
-                &dense.blocks[0],
-                dense.vertices,
-                threshold,
-                &[basis.rank],
-            ))
-        } else {
-            Coefficients::Dense(dense)
-        };
-        stats.threshold = threshold;
-        stats.multiply_adds = match &form {
-            Coefficients::Dense(f) => f.weight_count() as f64,
-            Coefficients::Sparse(s) => s.multiply_adds(),
-        };
-        if stats.multiply_adds >= cost {
-            return None;
-        }
-        match self {
-            Self::StaticAverage(_) => unreachable!("returned above"),
-            Self::VertexLinear(_, m) => {
-                assert!(m.basis.is_none(), "compressed once");
-                m.coefficients = form;
-                m.basis = Some(basis);
-            }
-            Self::VertexClustered(_, m) => {
-                assert!(m.basis.is_none(), "compressed once");
-                m.form = form;
-                m.basis = Some(basis);
-            }
-        }
-        Some(stats)
-    }
-
-    /// Bytes of the model's numbers: coefficients, maps, cluster centres
-    /// and axes.
-    pub fn bytes(&self) -> usize {
-        match self {
-            Self::StaticAverage(m) => m.form.bytes(),
-            Self::VertexLinear(_, m) => m.bytes(),
-            Self::VertexClustered(_, m) => m.bytes(),
-        }
-    }
-
-    /// The per-pose weights (joint angles and a 1, blended projections, or
-    /// `[1]`), computed once per pose on the CPU.
-    pub fn weights(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
-        match self {
-            Self::StaticAverage(_) => vec![1.0],
-            Self::VertexLinear(layout, m) => m.weights(&layout.params(skeleton, pose)),
-            Self::VertexClustered(handles, m) => {
-                let angles = m
-                    .base
-                    .as_ref()
-                    .map(|b| b.joint_angles.params(skeleton, pose))
-                    .unwrap_or_default();
-                m.weights_with(&handles.handles(skeleton, pose), &angles)
-            }
-        }
-    }
-
-    /// AO of every vertex for weights from [`Model::weights`].
-    pub fn evaluate_weights(&self, weights: &[f32]) -> Vec<f32> {
-        match self.form() {
-            FormRef::Dense(f) => f.evaluate(weights),
-            FormRef::Sparse(s) => s.evaluate(weights),
-        }
-    }
-
-    /// AO of every vertex in a pose.
-    pub fn evaluate(&self, skeleton: &Skeleton, pose: &Pose) -> Vec<f32> {
-        self.evaluate_weights(&self.weights(skeleton, pose))
-    }
-
-    /// Multiply-adds per vertex for these weights: one per non-zero weight
-    /// (clusters that MLS leaves out cost nothing), or the mean number of
-    /// stored coefficients per vertex for a sparse model.
-    pub fn multiply_adds(&self, weights: &[f32]) -> f64 {
-        match self.form() {
-            FormRef::Sparse(s) => s.multiply_adds(),
-            FormRef::Dense(_) => weights.iter().filter(|&&w| w != 0.0).count() as f64,
-        }
-    }
+    Some(stats)
 }
 
 /// What a fit reports.
@@ -344,7 +253,7 @@ pub fn fit(
     let q: Vec<Vec<f32>> = if pose_dependent {
         poses
             .iter()
-            .map(|p| joint_angles.params(&character.skeleton, p))
+            .map(|p| joint_angles.params(&character.skeleton, &p.locals))
             .collect()
     } else {
         vec![Vec::new(); poses.len()]
@@ -406,7 +315,7 @@ fn fit_rows(
     let (joint_angles, _) = spaces;
     let (mut model, mut stats) = match method {
         Method::StaticAverage => (
-            Model::StaticAverage(StaticAverage::fit(ao)),
+            Model::StaticAverage(average::fit(ao)),
             FitStats::StaticAverage,
         ),
         Method::VertexLinear => {
@@ -455,7 +364,10 @@ fn fit_clustered(
     let skeleton = &character.skeleton;
     let (linear, clustered) = options;
     let (joint_angles, handles) = spaces;
-    let h: Vec<Vec<f32>> = poses.iter().map(|p| handles.handles(skeleton, p)).collect();
+    let h: Vec<Vec<f32>> = poses
+        .iter()
+        .map(|p| handles.handles(skeleton, &p.locals))
+        .collect();
     // A linear base is fitted first (global and dense, so that its
     // block can stand in the clustered form); the clusters then
     // model what it leaves.
@@ -495,13 +407,13 @@ fn fit_clustered(
         None => ao,
     };
     let (chosen, choice, clamp) = choose_clustered(&h, ao, sources, clustered, seed);
-    let (m, mut stats) = VertexClustered::fit(&h, ao, &chosen, seed).map_err(|e| e.to_string())?;
+    let (m, mut stats) = clustered::fit(&h, ao, &chosen, seed).map_err(|e| e.to_string())?;
     stats.ridge_cv = choice;
     stats.clamp_cv = clamp;
     let m = match base {
         Some((linear_model, linear_stats)) => {
             stats.base = Some(linear_stats);
-            m.with_base(joint_angles.clone(), linear_model)
+            clustered::with_base(m, joint_angles.clone(), linear_model)
         }
         None => m,
     };
@@ -527,7 +439,7 @@ fn choose_clustered(
 ) {
     let fit_on = |o: &ClusteredOptions, train: &[usize]| {
         let hs: Vec<Vec<f32>> = train.iter().map(|&r| h[r].clone()).collect();
-        VertexClustered::fit(&hs, &ao.select(train.iter().copied()), o, seed)
+        clustered::fit(&hs, &ao.select(train.iter().copied()), o, seed)
             .ok()
             .map(|(m, _)| m)
     };
@@ -615,7 +527,10 @@ fn add_basis(
         _ => (0, 0.0, false),
     };
     if most > 0 {
-        let weights: Vec<Vec<f32>> = poses.iter().map(|p| model.weights(skeleton, p)).collect();
+        let weights: Vec<Vec<f32>> = poses
+            .iter()
+            .map(|p| model.weights(skeleton, &p.locals))
+            .collect();
         let choice = if basis_cv {
             let settled = settled(options, stats);
             let fit = |train: &[usize]| {
@@ -644,7 +559,7 @@ fn add_basis(
         let (rank, threshold) = choice
             .as_ref()
             .map_or((most, threshold), |c| (c.rank, c.threshold));
-        let basis = model.compress(&weights, rank, threshold);
+        let basis = compress(model, &weights, rank, threshold);
         match stats {
             FitStats::VertexLinear(s) => (s.basis, s.basis_cv) = (basis, choice),
             FitStats::VertexClustered(s) => (s.basis, s.basis_cv) = (basis, choice),
@@ -758,7 +673,7 @@ fn basis_by_clips(
         let model = fit(train)?;
         let weights: Vec<Vec<f32>> = train
             .iter()
-            .map(|&r| model.weights(skeleton, &poses[r]))
+            .map(|&r| model.weights(skeleton, &poses[r].locals))
             .collect();
         let truncations = basis::Truncations::new(model.form(), &weights, most)?;
         let mut trained = vec![false; poses.len()];
@@ -767,7 +682,7 @@ fn basis_by_clips(
             .into_par_iter()
             .filter(|&r| !trained[r] && matches!(sources[r], Source::Frame(_)))
             .map(|r| {
-                let w = model.weights(skeleton, &poses[r]);
+                let w = model.weights(skeleton, &poses[r].locals);
                 let sse = model
                     .evaluate_weights(&w)
                     .iter()
@@ -821,7 +736,7 @@ fn fit_linear_per_vertex(
             .filter(|&r| matches!(sources[r], Source::Frame(_)))
             .collect();
         let rows = if frames.is_empty() { rows } else { &frames };
-        StaticAverage::fit(&ao.select(rows.iter().copied())).evaluate()
+        average::fit(&ao.select(rows.iter().copied())).evaluate()
     };
     let scopes: &[Scope] = match options.locality {
         Locality::Off => &[Scope::Global],
@@ -832,7 +747,7 @@ fn fit_linear_per_vertex(
     let all: Vec<usize> = (0..sources.len()).collect();
     let constants = baseline(&all);
     Some(
-        VertexLinear::fit_columns(q, ranges, ao, &columns, sets, options, Some(&constants)).map(
+        linear::fit_columns(q, ranges, ao, &columns, sets, options, Some(&constants)).map(
             |(m, mut stats)| {
                 stats.per_vertex = Some(linear::count_columns(&columns));
                 (m, stats)
@@ -852,7 +767,8 @@ fn fit_linear(
     sources: &[Source],
     linear: &LinearOptions,
 ) -> Result<(VertexLinear, linear::LinearFitStats), String> {
-    let sets = (linear.locality != Locality::Off).then(|| joint_angles.local_parameters(character));
+    let sets = (linear.locality != Locality::Off)
+        .then(|| crate::pose_space::local_parameters(joint_angles, character));
     let ranges = linear::Angles {
         ranges: &joint_angles.ranges,
         rotations: joint_angles.joints.len(),
@@ -883,8 +799,7 @@ fn fit_linear(
         ridge: choice.as_ref().map_or(linear.ridge, |c| c.ridge),
         ..*linear
     };
-    let (m, mut stats) =
-        VertexLinear::fit(q, ranges, ao, &chosen, local).map_err(|e| e.to_string())?;
+    let (m, mut stats) = linear::fit(q, ranges, ao, &chosen, local).map_err(|e| e.to_string())?;
     stats.ridge_cv = choice;
     Ok((m, stats))
 }

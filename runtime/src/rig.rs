@@ -1,5 +1,7 @@
 //! The node hierarchy: rest transforms, parents, and world transforms in a
-//! parents-first order.
+//! parents-first order. An engine poses it by setting nodes' local
+//! transforms (found by name with [`Skeleton::find`]); the nodes it does
+//! not set keep their rest transforms ([`Skeleton::rest_locals`]).
 
 use glam::{Affine3A, Mat4, Quat, Vec3};
 use serde::{Deserialize, Serialize};
@@ -42,7 +44,7 @@ impl Transform {
 }
 
 /// One node of the glTF scene graph.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Node {
     /// The node's name, if the file gives one. Clips shipped in separate
     /// files bind to nodes by this name.
@@ -53,11 +55,12 @@ pub struct Node {
     pub rest: Transform,
     /// Default morph-target weights of the node's mesh (node weights, else
     /// mesh weights, else zeros); empty without morph targets.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub morph_weights: Vec<f32>,
 }
 
 /// The whole node hierarchy of a character.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Skeleton {
     /// All nodes of the file, in file order.
     pub nodes: Vec<Node>,
@@ -78,6 +81,41 @@ impl Skeleton {
             };
         }
         world
+    }
+
+    /// Whether the hierarchy is sound: every parent a node of this
+    /// skeleton, and `order` every node once with each parent before its
+    /// children. A skeleton read from a file is checked before it is used.
+    pub fn check(&self) -> Result<(), String> {
+        let n = self.nodes.len();
+        let mut seen = vec![false; n];
+        if self.order.len() != n {
+            return Err(format!(
+                "skeleton: {} nodes but {} in order",
+                n,
+                self.order.len()
+            ));
+        }
+        for &i in &self.order {
+            if i >= n || seen[i] {
+                return Err(format!("skeleton: node {i} out of range or twice in order"));
+            }
+            if let Some(p) = self.nodes[i].parent
+                && (p >= n || !seen[p])
+            {
+                return Err(format!(
+                    "skeleton: node {i}'s parent {p} does not come before it"
+                ));
+            }
+            seen[i] = true;
+        }
+        Ok(())
+    }
+
+    /// The rest transform of every node: the pose an engine starts from
+    /// before it sets the nodes it animates.
+    pub fn rest_locals(&self) -> Vec<Transform> {
+        self.nodes.iter().map(|n| n.rest).collect()
     }
 
     /// The first node with this exact name.

@@ -1,22 +1,23 @@
 //! The per-vertex methods in the asset container: the JSON header's
 //! [`Layout`] says what each section means, [`Model::to_container`]
 //! writes them and [`Model::from_container`] reads them back, checking
-//! every length and number against the header so that a hostile file
+//! every length and number against the header (and, from format 1.4,
+//! every node against the rig the header carries) so that a hostile file
 //! with valid checksums is refused with a message.
 
-use aobake_runtime::Method;
-pub use aobake_runtime::container::AssetHeaderFields;
 use half::f16;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    ALGORITHM_VERSION, Basis, Block, Centering, Coefficients, LinearBase, LinearForm, Model,
-    PoseCluster, SparseForm, StaticAverage, VertexClustered, VertexLinear, form,
+    ALGORITHM_VERSION, Basis, Block, Centering, Coefficients, Features, LinearBase, LinearForm,
+    Model, PoseCluster, SparseForm, StaticAverage, VertexClustered, VertexLinear, form,
 };
+pub use crate::container::AssetHeaderFields;
 use crate::{
-    asset::{AssetError, Container, Data, Section},
-    method::vertex::linear::Features,
+    Method,
+    container::{AssetError, Container, Data, Section},
     pose_space::{Handles, JointAngles},
+    rig::Skeleton,
 };
 
 /// The model's structure in the asset header: what the sections mean.
@@ -125,14 +126,20 @@ pub struct AssetHeader {
     pub params: serde_json::Value,
     /// The model's structure.
     pub layout: Layout,
+    /// The character's node hierarchy (names, parents, rest transforms)
+    /// that the layout's node indices point into: what an engine poses by
+    /// node name. Absent in assets written before format 1.4.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig: Option<Skeleton>,
 }
 
 /// What the stored values mean, written into every header.
 pub const UNITS: &str = "occlusion per vertex: 0 = open, 1 = blocked";
 
 impl Model {
-    /// The asset: header and sections.
-    pub fn to_container(&self, header: AssetHeaderFields) -> Container {
+    /// The asset: header and sections, with the `skeleton` the model reads
+    /// as its rig.
+    pub fn to_container(&self, header: AssetHeaderFields, skeleton: &Skeleton) -> Container {
         let (layout, sections) = match self {
             Self::StaticAverage(m) => (Layout::StaticAverage, form_sections(&m.form)),
             Self::VertexLinear(joint_angles, m) => {
@@ -207,6 +214,7 @@ impl Model {
             units: UNITS.to_owned(),
             params: header.params,
             layout,
+            rig: Some(skeleton.clone()),
         };
         Container::new(self.method(), &header, sections)
     }
@@ -219,6 +227,9 @@ impl Model {
             return Err(bad("the header's method differs from the preamble's"));
         }
         validate_layout(&header)?;
+        if let Some(rig) = &header.rig {
+            validate_rig(rig, &header.layout)?;
+        }
         let v = header.vertices;
         let coef = f16s(container.section(b"COEF")?)?;
         if coef.iter().any(|c| !c.is_finite()) {
@@ -516,6 +527,7 @@ const MAX_JOINTS: usize = 1 << 12;
 const MAX_POSE_CLUSTERS: usize = 1024;
 const MAX_DIMENSIONS: usize = 256;
 const MAX_BASIS: usize = 4096;
+const MAX_NODES: usize = 1 << 16;
 
 /// Checks a joint-angle layout's lengths and ranges.
 fn validate_joint_angles(ja: &JointAngles) -> Result<(), AssetError> {
@@ -597,6 +609,28 @@ fn validate_layout(header: &AssetHeader) -> Result<(), AssetError> {
         }
     }
     Ok(())
+}
+
+/// Checks the rig's hierarchy, and that every node the layout reads is one
+/// of its nodes.
+fn validate_rig(rig: &Skeleton, layout: &Layout) -> Result<(), AssetError> {
+    if rig.nodes.len() > MAX_NODES {
+        return Err(bad("the rig has more than 65536 nodes"));
+    }
+    rig.check().map_err(|e| bad(&e))?;
+    if rig.nodes.iter().any(|n| {
+        !(n.rest.translation.is_finite() && n.rest.rotation.is_finite() && n.rest.scale.is_finite())
+    }) {
+        return Err(bad("a rest transform of the rig is not finite"));
+    }
+    let fits = match layout {
+        Layout::StaticAverage => Ok(()),
+        Layout::VertexLinear { joint_angles, .. } => joint_angles.check(rig),
+        Layout::VertexClustered { handles, base, .. } => handles
+            .check(rig)
+            .and_then(|()| base.as_ref().map_or(Ok(()), |b| b.joint_angles.check(rig))),
+    };
+    fits.map_err(|e| bad(&format!("the layout does not fit the rig: {e}")))
 }
 
 fn section(tag: [u8; 4], data: Data) -> Section {

@@ -1,0 +1,101 @@
+//! A vertex model as an asset holds it: the fitted model and the pose
+//! features it reads, evaluated per pose from the nodes' local transforms.
+
+use super::{FormRef, average::StaticAverage, clustered::VertexClustered, linear::VertexLinear};
+use crate::{
+    Method,
+    pose_space::{Handles, JointAngles},
+    rig::{Skeleton, Transform},
+};
+
+/// A fitted model and the pose features it reads.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Model {
+    /// The baseline.
+    StaticAverage(StaticAverage),
+    /// Kontkanen & Aila, over these joint angles.
+    VertexLinear(JointAngles, VertexLinear),
+    /// Kirk & Arikan, over these handles.
+    VertexClustered(Handles, VertexClustered),
+}
+
+impl Model {
+    /// The method.
+    pub fn method(&self) -> Method {
+        match self {
+            Self::StaticAverage(_) => Method::StaticAverage,
+            Self::VertexLinear(..) => Method::VertexLinear,
+            Self::VertexClustered(..) => Method::VertexClustered,
+        }
+    }
+
+    /// Vertices the model covers.
+    pub fn vertices(&self) -> usize {
+        match self {
+            Self::StaticAverage(m) => m.form.vertices,
+            Self::VertexLinear(_, m) => m.coefficients.vertices(),
+            Self::VertexClustered(_, m) => m.form.vertices(),
+        }
+    }
+
+    /// The coefficients as the run time sees them: a dense linear form or a
+    /// sparse one, taking [`Model::weights`].
+    pub fn form(&self) -> FormRef<'_> {
+        match self {
+            Self::StaticAverage(m) => FormRef::Dense(&m.form),
+            Self::VertexLinear(_, m) => m.coefficients.as_ref(),
+            Self::VertexClustered(_, m) => m.form.as_ref(),
+        }
+    }
+
+    /// Bytes of the model's numbers: coefficients, maps, cluster centres
+    /// and axes.
+    pub fn bytes(&self) -> usize {
+        match self {
+            Self::StaticAverage(m) => m.form.bytes(),
+            Self::VertexLinear(_, m) => m.bytes(),
+            Self::VertexClustered(_, m) => m.bytes(),
+        }
+    }
+
+    /// The per-pose weights (joint angles and a 1, blended projections, or
+    /// `[1]`), computed once per pose on the CPU.
+    pub fn weights(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f32> {
+        match self {
+            Self::StaticAverage(_) => vec![1.0],
+            Self::VertexLinear(layout, m) => m.weights(&layout.params(skeleton, locals)),
+            Self::VertexClustered(handles, m) => {
+                let angles = m
+                    .base
+                    .as_ref()
+                    .map(|b| b.joint_angles.params(skeleton, locals))
+                    .unwrap_or_default();
+                m.weights_with(&handles.handles(skeleton, locals), &angles)
+            }
+        }
+    }
+
+    /// AO of every vertex for weights from [`Model::weights`].
+    pub fn evaluate_weights(&self, weights: &[f32]) -> Vec<f32> {
+        match self.form() {
+            FormRef::Dense(f) => f.evaluate(weights),
+            FormRef::Sparse(s) => s.evaluate(weights),
+        }
+    }
+
+    /// AO of every vertex in a pose (one local transform per node of
+    /// `skeleton`).
+    pub fn evaluate(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f32> {
+        self.evaluate_weights(&self.weights(skeleton, locals))
+    }
+
+    /// Multiply-adds per vertex for these weights: one per non-zero weight
+    /// (clusters that MLS leaves out cost nothing), or the mean number of
+    /// stored coefficients per vertex for a sparse model.
+    pub fn multiply_adds(&self, weights: &[f32]) -> f64 {
+        match self.form() {
+            FormRef::Sparse(s) => s.multiply_adds(),
+            FormRef::Dense(_) => weights.iter().filter(|&&w| w != 0.0).count() as f64,
+        }
+    }
+}

@@ -1,0 +1,128 @@
+//! A vertex asset as an engine plays it: read once, then per frame set the
+//! local transforms of the nodes the engine animates (found once by name),
+//! compute the pose's weights on the CPU, and evaluate every vertex (on
+//! the CPU here, or on the GPU with the weights and the coefficients; see
+//! `docs/engines.md`).
+//!
+//! ```no_run
+//! # fn main() -> Result<(), aobake_runtime::AssetError> {
+//! use aobake_runtime::{method::vertex::VertexAo, rig::Transform};
+//! let bytes = std::fs::read("fox.aobake").expect("the asset");
+//! let mut ao = VertexAo::from_bytes(&bytes)?;
+//! let head = ao.node("b_Head_05").expect("the rig has the node");
+//! let mut local = ao.skeleton().nodes[head].rest;
+//! local.rotation = glam::Quat::from_rotation_y(0.3) * local.rotation;
+//! ao.set_local(head, local);
+//! let per_vertex: Vec<f32> = ao.evaluate();
+//! # Ok(()) }
+//! ```
+
+use super::{AssetHeader, Model};
+use crate::{
+    container::{AssetError, Container},
+    rig::{Skeleton, Transform},
+};
+
+/// A vertex-method asset (static average, vertex-linear or
+/// vertex-clustered) with its rig and the current pose.
+#[derive(Debug, Clone)]
+pub struct VertexAo {
+    model: Model,
+    header: AssetHeader,
+    skeleton: Skeleton,
+    locals: Vec<Transform>,
+}
+
+impl VertexAo {
+    /// Reads an asset, checking it whole (checksums, lengths, every node
+    /// against the rig), and starts at the rest pose. An asset of another
+    /// family, or one written before format 1.4 (it has no rig to pose by
+    /// node name), is refused with a message.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, AssetError> {
+        let container = Container::from_bytes(bytes)?;
+        if !matches!(container.method.family(), crate::Family::Vertex) {
+            return Err(AssetError::Unsupported(format!(
+                "a {} asset is not a vertex method's",
+                container.method.name()
+            )));
+        }
+        let (model, header) = Model::from_container(&container)?;
+        Self::new(model, header)
+    }
+
+    /// A model and its header, as [`Model::from_container`] reads them.
+    pub fn new(model: Model, header: AssetHeader) -> Result<Self, AssetError> {
+        let Some(skeleton) = header.rig.clone() else {
+            return Err(AssetError::Unsupported(
+                "the asset has no rig (it was written before format 1.4): bake it again to pose it by node name".into(),
+            ));
+        };
+        let locals = skeleton.rest_locals();
+        Ok(Self {
+            model,
+            header,
+            skeleton,
+            locals,
+        })
+    }
+
+    /// The fitted model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The asset's header.
+    pub fn header(&self) -> &AssetHeader {
+        &self.header
+    }
+
+    /// The rig: node names, parents and rest transforms.
+    pub fn skeleton(&self) -> &Skeleton {
+        &self.skeleton
+    }
+
+    /// Vertices, in aobake's vertex order.
+    pub fn vertices(&self) -> usize {
+        self.model.vertices()
+    }
+
+    /// The node of this name, to set each frame with
+    /// [`VertexAo::set_local`].
+    pub fn node(&self, name: &str) -> Option<usize> {
+        self.skeleton.find(name)
+    }
+
+    /// Sets one node's local transform (translation, rotation, scale in its
+    /// parent's frame, as the engine's animation gives it). `false`, and
+    /// nothing changed, for a node the rig does not have.
+    pub fn set_local(&mut self, node: usize, local: Transform) -> bool {
+        match self.locals.get_mut(node) {
+            Some(l) => {
+                *l = local;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The local transforms of the pose, one per node.
+    pub fn locals(&self) -> &[Transform] {
+        &self.locals
+    }
+
+    /// Every node back to its rest transform.
+    pub fn reset(&mut self) {
+        self.locals = self.skeleton.rest_locals();
+    }
+
+    /// The weights of the current pose, one per coefficient row: what a
+    /// GPU evaluation reads (`shaders/wgsl/vertex_ao.wgsl`).
+    pub fn weights(&self) -> Vec<f32> {
+        self.model.weights(&self.skeleton, &self.locals)
+    }
+
+    /// The AO of every vertex in the current pose, in [0, 1].
+    pub fn evaluate(&self) -> Vec<f32> {
+        self.model.evaluate_weights(&self.weights())
+    }
+}
