@@ -86,6 +86,14 @@ impl VertexAo {
         self.model.vertices()
     }
 
+    /// Weights per pose ([`VertexAo::weights`]' length).
+    pub fn weight_count(&self) -> usize {
+        match self.model.form() {
+            super::FormRef::Dense(f) => f.weight_count(),
+            super::FormRef::Sparse(s) => s.rows,
+        }
+    }
+
     /// The node of this name, to set each frame with
     /// [`VertexAo::set_local`].
     pub fn node(&self, name: &str) -> Option<usize> {
