@@ -1,26 +1,32 @@
 //! # aobake-runtime
 //!
-//! What reading a baked AO asset takes, apart from everything that bakes
+//! What playing a baked AO asset takes, apart from everything that bakes
 //! one: the versioned container (magic, version, the method, a JSON
-//! header and typed, checksummed sections; `docs/asset-format.md`) and the
-//! method an asset holds, and each family's run time (so far the grids
-//! and the vertex methods' linear form).
-//! aobake's core, worker and CLI read assets
-//! through it, and so can an engine's tools. It must not depend on a ray
-//! tracer, linear algebra, a glTF reader or an async runtime (no obvhs,
-//! faer, gltf, tokio or axum; DESIGN §2): a test holds it to its short
-//! list of dependencies.
+//! header and typed, checksummed sections; `docs/asset-format.md`), the
+//! rig and the pose features the vertex methods read, and each family's
+//! run time: per-vertex AO from the local transforms of named nodes
+//! ([`method::vertex::VertexAo`]), the cubemap lookup at a point and a
+//! phase ([`method::cubemap`]), the grid lookup at a point and a normal
+//! ([`method::grid`]). [`Asset::from_bytes`] reads any of them.
 //!
-//! Layers, bottom up: `method` (a method's identity; each family's run
-//! time in its folder below it: [`method::grid`], [`method::vertex`] in
-//! part), `container`.
-//! Each family's codec reads and writes the container.
+//! aobake's core, worker and CLI read assets through it, and so do
+//! engines (in Rust, or in C, C++ and C# through `runtime/capi`;
+//! `docs/engines.md`). It must not depend on a ray tracer, linear
+//! algebra, a glTF reader or an async runtime (no obvhs, faer, gltf, tokio
+//! or axum; DESIGN §2): a test holds it to its short list of
+//! dependencies.
+//!
+//! Layers, bottom up: `container`, `rig`, `pose_space`, `method` (a
+//! method's identity; each family's run time and codec in its folder
+//! below it), `asset`.
 
+pub mod asset;
 pub mod container;
 pub mod method;
 pub mod pose_space;
 pub mod rig;
 
+pub use asset::Asset;
 pub use container::{AssetError, Container, Data, MAGIC, MAJOR, MINOR, Section};
 pub use method::{Family, Method};
 

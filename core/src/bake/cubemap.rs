@@ -252,7 +252,7 @@ impl Bake<'_> {
         residuals: bool,
     ) -> Result<CubemapModel, JobError> {
         let o = &setup.options;
-        CubemapModel::encode(
+        crate::method::cubemap::model::encode(
             setup.layout(encoding),
             faces,
             continuous::Encoding {

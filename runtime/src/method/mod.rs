@@ -1,9 +1,9 @@
 //! What names a method: its name (CLI, API, headers), its code (the
 //! asset preamble) and its family (the shape of its bake); and, one folder
 //! per family below, what an engine needs to read and evaluate the
-//! family's assets (`grid`; `vertex` in part, its linear form; the
-//! cubemap family follows).
+//! family's assets (`cubemap`, `grid`, `vertex`).
 
+pub mod cubemap;
 pub mod grid;
 pub mod vertex;
 

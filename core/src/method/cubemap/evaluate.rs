@@ -612,7 +612,7 @@ mod tests {
             ..layout()
         };
         let fs = faces(|k, m| 0.1 + 0.05 * k as f32 + 0.02 * m as f32);
-        let model = CubemapModel::encode(
+        let model = crate::method::cubemap::model::encode(
             l,
             &fs,
             continuous::Encoding {

@@ -28,19 +28,15 @@
 //! The jobs themselves (`face` → `assemble` → `evaluate` → `preview`) are
 //! in `bake::cubemap`.
 
-pub mod blurhash;
-pub mod codec;
-pub mod continuous;
-pub mod discrete;
 pub mod evaluate;
 pub mod face;
 pub mod field;
-pub mod geometry;
 pub mod model;
 pub mod setup;
 
-/// The version of the cubemap bake's algorithm, part of the bake key.
-pub const ALGORITHM_VERSION: u32 = 1;
+pub use aobake_runtime::method::cubemap::{
+    ALGORITHM_VERSION, blurhash, codec, continuous, discrete, geometry,
+};
 
 use serde::{Deserialize, Serialize};
 

@@ -39,14 +39,18 @@ impl VertexAo {
     /// family, or one written before format 1.4 (it has no rig to pose by
     /// node name), is refused with a message.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, AssetError> {
-        let container = Container::from_bytes(bytes)?;
+        Self::from_container(&Container::from_bytes(bytes)?)
+    }
+
+    /// [`VertexAo::from_bytes`] for a container already read.
+    pub fn from_container(container: &Container) -> Result<Self, AssetError> {
         if !matches!(container.method.family(), crate::Family::Vertex) {
             return Err(AssetError::Unsupported(format!(
                 "a {} asset is not a vertex method's",
                 container.method.name()
             )));
         }
-        let (model, header) = Model::from_container(&container)?;
+        let (model, header) = Model::from_container(container)?;
         Self::new(model, header)
     }
 

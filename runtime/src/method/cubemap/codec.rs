@@ -6,7 +6,6 @@
 //! the layout and the section's length, so a hostile file with valid
 //! checksums is refused with a message.
 
-use aobake_runtime::Method;
 use serde::{Deserialize, Serialize};
 
 use super::{
@@ -15,8 +14,8 @@ use super::{
     model::{CubemapLayout, CubemapModel, Encoding},
 };
 use crate::{
-    asset::{AssetError, Container, Data, Section},
-    method::vertex::AssetHeaderFields,
+    Method,
+    container::{AssetError, AssetHeaderFields, Container, Data, Section},
 };
 
 /// What the stored values mean, written into every header.

@@ -1,0 +1,117 @@
+//! Any asset, read by what it holds: the one call an engine's importer
+//! makes before it knows which method a file was baked with.
+
+use crate::{
+    Family, Method,
+    container::{AssetError, Container},
+    method::{
+        cubemap::{CubemapHeader, CubemapModel},
+        grid::{codec::GridHeader, model::GridModel},
+        vertex::VertexAo,
+    },
+};
+
+/// A baked asset of any family, checked whole and ready to evaluate.
+#[derive(Debug, Clone)]
+pub enum Asset {
+    /// Static average, vertex-linear or vertex-clustered: per-vertex AO
+    /// from the local transforms of the rig's nodes.
+    Vertex(Box<VertexAo>),
+    /// Kroon's cubemaps: occlusion at a point at a phase of the clip.
+    Cubemap {
+        /// The texels and their layout.
+        model: CubemapModel,
+        /// The header.
+        header: Box<CubemapHeader>,
+    },
+    /// Malmer et al.'s grids: occlusion cast by rigid parts at a point
+    /// and normal, given the parts' skinning palette.
+    Grid {
+        /// The parts' grids.
+        model: GridModel,
+        /// The header.
+        header: Box<GridHeader>,
+    },
+}
+
+impl Asset {
+    /// Reads an asset of any family from its bytes.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, AssetError> {
+        let container = Container::from_bytes(bytes)?;
+        Ok(match container.method.family() {
+            Family::Vertex => Self::Vertex(Box::new(VertexAo::from_container(&container)?)),
+            Family::Cubemap => {
+                let (model, header) = CubemapModel::from_container(&container)?;
+                Self::Cubemap {
+                    model,
+                    header: Box::new(header),
+                }
+            }
+            Family::Grid => {
+                let (model, header) = GridModel::from_container(&container)?;
+                Self::Grid {
+                    model,
+                    header: Box::new(header),
+                }
+            }
+        })
+    }
+
+    /// The method it was baked with.
+    pub fn method(&self) -> Method {
+        match self {
+            Self::Vertex(v) => v.header().method,
+            Self::Cubemap { model, .. } => model.method(),
+            Self::Grid { header, .. } => header.method,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::*;
+    use crate::{
+        container::AssetHeaderFields,
+        method::cubemap::{CubemapLayout, Encoding, geometry::Spheroid},
+    };
+
+    #[test]
+    fn reads_what_the_file_holds_and_refuses_the_rest() {
+        let layout = CubemapLayout {
+            spheroid: Spheroid {
+                centre: Vec3::Y,
+                radii: Vec3::ONE,
+                outer: 1.2,
+                inner: 0.2,
+                shells: 2,
+            },
+            resolution: 2,
+            times: 8,
+            encoding: Encoding::Discrete,
+            duration: 1.0,
+        };
+        let texels = (0..layout.texel_bytes()).map(|i| (i * 29) as u8).collect();
+        let model = CubemapModel { layout, texels };
+        let fields = AssetHeaderFields {
+            generator: "test".into(),
+            bake_key: "k".into(),
+            character: "c".into(),
+            clips: vec![],
+            params: serde_json::json!({}),
+        };
+        let bytes = model.to_container(fields, "walk").to_bytes();
+        match Asset::from_bytes(&bytes).unwrap() {
+            Asset::Cubemap {
+                model: read,
+                header,
+            } => {
+                assert_eq!(read, model);
+                assert_eq!(header.clip, "walk");
+            }
+            other => panic!("read as {:?}", other.method()),
+        }
+        assert_eq!(Asset::from_bytes(b"junk").unwrap_err(), AssetError::Magic);
+    }
+}
