@@ -7,6 +7,8 @@ use std::{
 
 #[path = "integration/bake.rs"]
 mod bake;
+#[path = "integration/export_gltf.rs"]
+mod export_gltf;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -5,6 +5,7 @@
 //! Nothing here fits or traces; the methods decide what goes into the
 //! sections, `bake` decides when.
 
+pub mod gltf;
 pub mod metrics;
 
 /// The container lives in the runtime crate, which engines read assets with.

@@ -52,6 +52,59 @@ pub fn import_character(upload: Upload<'_>, limits: &Limits) -> Result<Imported,
     })
 }
 
+/// A character as [`import_character`] reads it, with the file's own JSON,
+/// its buffers resolved (GLB chunk, data URIs, side files) and the bytes of
+/// each image a URI names (`None` where the upload lacks it): what the glTF
+/// export rewrites.
+pub(crate) struct Source {
+    pub(crate) imported: Imported,
+    pub(crate) json: serde_json::Value,
+    pub(crate) buffers: Vec<Vec<u8>>,
+    pub(crate) images: Vec<Option<Vec<u8>>>,
+}
+
+/// [`import_character`] with the [`Source`] kept.
+pub(crate) fn import_with_source(
+    upload: Upload<'_>,
+    limits: &Limits,
+) -> Result<Source, ImportError> {
+    let doc = document::Document::parse(upload, limits)?;
+    let (character, mut warnings) = mesh::build_character(&doc, limits)?;
+    warnings.splice(0..0, doc.warnings.iter().cloned());
+    let clips = animation::read_clips(&doc, &character.skeleton, &Some, limits, &mut warnings)?;
+    let container = source::Container::parse(upload.main)?;
+    let json: serde_json::Value =
+        serde_json::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
+    let images = doc
+        .root
+        .images
+        .iter()
+        .enumerate()
+        .map(|(i, image)| match &image.uri {
+            None => Ok(None),
+            Some(uri) => Ok(
+                match source::resolve_uri(uri, &format!("images[{i}].uri"))? {
+                    source::UriTarget::Data(bytes) => Some(bytes),
+                    source::UriTarget::File(name) => {
+                        upload.side_file(&name).map(|f| f.bytes.clone())
+                    }
+                },
+            ),
+        })
+        .collect::<Result<_, ImportError>>()?;
+    Ok(Source {
+        imported: Imported {
+            character,
+            clips,
+            warnings,
+            name: doc.name(),
+        },
+        json,
+        buffers: doc.buffers,
+        images,
+    })
+}
+
 /// Imports the animations of a separate glTF file (clips shipped apart from
 /// the character), binding each channel to the character's node of the same
 /// name. Returns the clips and warnings.

@@ -2,6 +2,10 @@
 //! the run-time shaders in the languages engines use (`--shaders DIR`,
 //! `aobake_shaders::export`).
 //!
+//! `--gltf OUT.glb` writes the character a vertex asset was baked for
+//! (`FILE`) with the AO as vertex attributes and the per-pose step in the
+//! root's `extras.aobake` (`aobake_core::asset::gltf`, `docs/engines.md`).
+//!
 //! `--exr DIR` writes a cubemap asset's decoded faces as OpenEXR (the
 //! `exr` crate): one file per clip time and shell, `t{time}-shell{k}.exr`,
 //! a strip of the six faces side by side (+x, −x, +y, −y, +z, −z, each
@@ -21,6 +25,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use aobake_core::{
+    Limits,
     asset::Container,
     bake::{AssetUseError, BakedAsset},
     image::FloatImage,
@@ -32,10 +37,21 @@ use exr::prelude::{
 
 /// Arguments of `aobake export`.
 #[derive(Debug, clap::Args)]
-#[command(group = clap::ArgGroup::new("what").required(true).multiple(true).args(["exr", "shaders"]))]
+#[command(group = clap::ArgGroup::new("what").required(true).multiple(true).args(["exr", "shaders", "gltf"]))]
 pub(super) struct Args {
-    /// The asset (from `aobake bake` or `aobake fetch`); `--exr` needs one.
+    /// The asset (from `aobake bake` or `aobake fetch`); `--exr` and
+    /// `--gltf` need one.
     asset: Option<PathBuf>,
+    /// The character the asset was baked for (.glb, or .gltf with its side
+    /// files beside it); `--gltf` needs it.
+    file: Option<PathBuf>,
+    /// Write the character with a vertex asset's AO as a GLB: `_AO` (the
+    /// AO averaged over the file's clips) and `COLOR_0` per vertex, the
+    /// model's coefficient rows as `_AO_BASIS_k` (VEC4), and the per-pose
+    /// weights' numbers in the root's `extras.aobake` (see
+    /// docs/engines.md).
+    #[arg(long, requires_all = ["asset", "file"])]
+    gltf: Option<PathBuf>,
     /// Write a cubemap asset's decoded faces, or a grid asset's parts as
     /// z-slices, as OpenEXR files into this folder (created if missing).
     #[arg(long, requires = "asset")]
@@ -58,10 +74,37 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     if let Some(dir) = &args.shaders {
         write_shaders(dir)?;
     }
-    match (&args.asset, &args.exr) {
-        (Some(asset), Some(exr)) => export_exr(asset, exr, &args.times),
+    if let (Some(asset), Some(exr)) = (&args.asset, &args.exr) {
+        export_exr(asset, exr, &args.times)?;
+    }
+    match (&args.asset, &args.file, &args.gltf) {
+        (Some(asset), Some(file), Some(out)) => export_gltf(asset, file, out),
         _ => Ok(()),
     }
+}
+
+/// `--gltf OUT.glb`: the character with the asset's AO.
+fn export_gltf(asset: &Path, file: &Path, out: &Path) -> anyhow::Result<()> {
+    let bytes = std::fs::read(asset).with_context(|| format!("cannot read {}", asset.display()))?;
+    let container = Container::from_bytes(&bytes)
+        .with_context(|| format!("cannot read {}", asset.display()))?;
+    let limits = Limits::default();
+    let upload = super::load::upload(file, &limits)?;
+    let export = aobake_core::asset::gltf::export_gltf(upload.upload(), &limits, &container)
+        .with_context(|| format!("cannot export {} with {}", file.display(), asset.display()))?;
+    for w in &export.warnings {
+        eprintln!("warning: {w}");
+    }
+    std::fs::write(out, &export.glb).with_context(|| format!("cannot write {}", out.display()))?;
+    eprintln!(
+        "wrote {} ({} bytes): _AO over {} clip frames, COLOR_0, {} coefficient rows in {} _AO_BASIS attributes",
+        out.display(),
+        export.glb.len(),
+        export.frames,
+        export.rows,
+        export.rows.div_ceil(4)
+    );
+    Ok(())
 }
 
 /// `--shaders DIR`: every run-time evaluator in every target, one folder

@@ -1,0 +1,456 @@
+//! A character with its baked AO as glTF (`aobake export ASSET FILE --gltf
+//! OUT.glb`): the character's own file, rewritten as one GLB, with the AO
+//! as vertex data an engine loads the way it loads morph targets.
+//!
+//! Per primitive of the mesh aobake baked (in aobake's vertex order,
+//! `Character::primitives`):
+//!
+//! * `_AO` (FLOAT SCALAR): the model's AO averaged over the frames of the
+//!   file's clips at 30 fps (the rest pose without clips); a static AO an
+//!   engine can use as it is;
+//! * `COLOR_0` (FLOAT VEC3): `1 − _AO` as grey, for viewers that show only
+//!   colours (the next free `COLOR_n` when the primitive has one);
+//! * for vertex-linear and vertex-clustered, `_AO_BASIS_0`, `_AO_BASIS_1`,
+//!   … (FLOAT VEC4): the model's coefficient rows at the vertex, four a
+//!   attribute (row `j` in component `j mod 4` of `_AO_BASIS_{j div 4}`,
+//!   zero past the last), so that per pose
+//!   `ao(v) = clamp(Σ_j w_j · row_j(v), 0, 1)`.
+//!
+//! `extras.aobake.primitives` lists the primitives in aobake's vertex
+//! order (`node`, `mesh`, `primitive`, `first`, `count`), so that vertex
+//! `first + i` of the asset is vertex `i` of that primitive.
+//!
+//! The weights `w` of a pose are the asset's per-pose step
+//! (`docs/asset-format.md`), whose numbers the root's `extras.aobake`
+//! carries: the asset header's `layout` (node indices are the glTF file's
+//! node indices) and its small sections (`NORM`, `PROJ`, `BMIX`, `CENT`,
+//! `AXES`, `BNRM`, `BPRJ`) as arrays of numbers (`docs/engines.md`).
+//!
+//! Everything else in the file is kept: buffers are merged into the one
+//! GLB buffer (views moved accordingly), images given by URI are embedded,
+//! and a mesh that several nodes instance is copied per extra instance,
+//! since each instance has its own AO.
+
+use serde_json::{Map, Value, json};
+
+use crate::{
+    Limits,
+    asset::{AssetError, Container, Data},
+    import::{ImportError, Upload, import_with_source},
+    method::{
+        Family,
+        vertex::{FormRef, Model, check_character},
+    },
+    rig::pose::Pose,
+};
+
+/// Most coefficient rows an export stores as vertex attributes (16 VEC4).
+pub const MAX_ROWS: usize = 64;
+
+/// Most clip frames the static `_AO` averages (spread evenly over all).
+const MAX_FRAMES: usize = 4096;
+
+/// The frame rate the static `_AO` samples clips at.
+const FPS: f32 = 30.0;
+
+/// Why an export could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum GltfExportError {
+    /// The character file.
+    #[error("the character: {0}")]
+    Import(#[from] ImportError),
+    /// The asset.
+    #[error("the asset: {0}")]
+    Asset(#[from] AssetError),
+    /// The asset and the character do not go together, or the asset has no
+    /// per-vertex data.
+    #[error("{0}")]
+    Unsupported(String),
+}
+
+/// A written export.
+#[derive(Debug, Clone)]
+pub struct GltfExport {
+    /// The GLB file.
+    pub glb: Vec<u8>,
+    /// Things kept as they were that deserve a look.
+    pub warnings: Vec<String>,
+    /// Coefficient rows per vertex (0 for a static average).
+    pub rows: usize,
+    /// Clip frames the static `_AO` averages.
+    pub frames: usize,
+}
+
+/// Exports `upload` (the character the asset was baked for) with the AO of
+/// `asset` (a vertex method's).
+pub fn export_gltf(
+    upload: Upload<'_>,
+    limits: &Limits,
+    asset: &Container,
+) -> Result<GltfExport, GltfExportError> {
+    if asset.method.family() != Family::Vertex {
+        return Err(GltfExportError::Unsupported(format!(
+            "a {} asset has no per-vertex AO to put in a glTF file (its data exports with --exr)",
+            asset.method.name()
+        )));
+    }
+    let source = import_with_source(upload, limits)?;
+    let character = &source.imported.character;
+    let (model, header) = Model::from_container(asset)?;
+    check_character(&model, character).map_err(GltfExportError::Unsupported)?;
+    let v = character.vertex_count();
+
+    let (static_ao, frames) = static_ao(&model, &source.imported);
+    let (rows, coefficients) = match &model {
+        Model::StaticAverage(_) => (0, Vec::new()),
+        _ => rows_per_vertex(&model)?,
+    };
+    let attributes_per_vertex = rows.div_ceil(4);
+
+    let mut out = Glb::default();
+    let mut json = source.json;
+    let mut warnings = Vec::new();
+    // Every buffer into the one: views move by their buffer's offset.
+    let bases: Vec<usize> = source.buffers.iter().map(|b| out.append(b)).collect();
+    for view in array(&mut json, "bufferViews") {
+        let buffer = view["buffer"].as_u64().unwrap_or(0) as usize;
+        let offset = view["byteOffset"].as_u64().unwrap_or(0) as usize;
+        view["buffer"] = 0.into();
+        view["byteOffset"] = (bases.get(buffer).copied().unwrap_or(0) + offset).into();
+    }
+    // Images given by URI: embedded, where the upload has them.
+    let views_before = array(&mut json, "bufferViews").len();
+    let mut new_views = Vec::new();
+    for (i, image) in array(&mut json, "images").iter_mut().enumerate() {
+        if image.get("uri").is_none() {
+            continue;
+        }
+        let bytes = match source.images.get(i).cloned().flatten() {
+            Some(bytes) => bytes,
+            None => {
+                // The GLB must stand alone: a white pixel holds the place
+                // (textures keep their indices).
+                warnings.push(format!(
+                    "images[{i}]: {} was not given beside the file: a 1×1 white PNG stands in",
+                    image["uri"]
+                ));
+                image["mimeType"] = "image/png".into();
+                crate::image::encode_rgb_png(&[255, 255, 255], 1, 1).expect("a 1×1 PNG encodes")
+            }
+        };
+        let mime = image["mimeType"]
+            .as_str()
+            .map(str::to_owned)
+            .or_else(|| sniff_mime(&bytes).map(str::to_owned));
+        let Some(mime) = mime else {
+            warnings.push(format!("images[{i}]: neither PNG nor JPEG, its uri kept"));
+            continue;
+        };
+        let offset = out.append(&bytes);
+        let object = image.as_object_mut().expect("images are objects");
+        object.remove("uri");
+        object.insert("mimeType".into(), mime.into());
+        object.insert("bufferView".into(), (views_before + new_views.len()).into());
+        new_views.push(json!({ "buffer": 0, "byteOffset": offset, "byteLength": bytes.len() }));
+    }
+    array(&mut json, "bufferViews").extend(new_views);
+
+    // Each node that instances a mesh gets its own copy after the first.
+    let mut mesh_of_node = std::collections::BTreeMap::<usize, usize>::new();
+    let mut first_node_of_mesh = std::collections::BTreeMap::<usize, usize>::new();
+    for p in &character.primitives {
+        if mesh_of_node.contains_key(&p.node) {
+            continue;
+        }
+        let mesh = match first_node_of_mesh.get(&p.mesh) {
+            None => {
+                first_node_of_mesh.insert(p.mesh, p.node);
+                p.mesh
+            }
+            Some(_) => {
+                let meshes = array(&mut json, "meshes");
+                let copy = meshes[p.mesh].clone();
+                meshes.push(copy);
+                let index = meshes.len() - 1;
+                array(&mut json, "nodes")[p.node]["mesh"] = index.into();
+                index
+            }
+        };
+        mesh_of_node.insert(p.node, mesh);
+    }
+
+    let mut color_names = Vec::new();
+    let mut order = Vec::new();
+    for p in &character.primitives {
+        let mesh = mesh_of_node[&p.node];
+        let count = p.vertices.len();
+        let position = json["meshes"][mesh]["primitives"][p.primitive]["attributes"]["POSITION"]
+            .as_u64()
+            .and_then(|a| json["accessors"][a as usize]["count"].as_u64());
+        if position != Some(count as u64) {
+            return Err(GltfExportError::Unsupported(format!(
+                "meshes[{}].primitives[{}]: {count} vertices in aobake's order but POSITION has {position:?}",
+                p.mesh, p.primitive
+            )));
+        }
+        let vertices = p.vertices.clone();
+        order.push(json!({
+            "node": p.node,
+            "mesh": mesh,
+            "primitive": p.primitive,
+            "first": vertices.start,
+            "count": count,
+        }));
+        let ao: Vec<f32> = static_ao[vertices.clone()].to_vec();
+        let grey: Vec<f32> = ao.iter().flat_map(|&a| [1.0 - a; 3]).collect();
+        let mut added = vec![("_AO".to_owned(), out.accessor(&mut json, &ao, "SCALAR"))];
+        let attributes = json["meshes"][mesh]["primitives"][p.primitive]["attributes"]
+            .as_object()
+            .cloned()
+            .unwrap_or_default();
+        let color = (0..)
+            .map(|n| format!("COLOR_{n}"))
+            .find(|name| !attributes.contains_key(name))
+            .expect("a free COLOR_n");
+        color_names.push(color.clone());
+        added.push((color, out.accessor(&mut json, &grey, "VEC3")));
+        let width = 4 * attributes_per_vertex;
+        for k in 0..attributes_per_vertex {
+            let values: Vec<f32> = vertices
+                .clone()
+                .flat_map(|v| coefficients[v * width + 4 * k..v * width + 4 * k + 4].to_vec())
+                .collect();
+            added.push((
+                format!("_AO_BASIS_{k}"),
+                out.accessor(&mut json, &values, "VEC4"),
+            ));
+        }
+        let target = &mut json["meshes"][mesh]["primitives"][p.primitive]["attributes"];
+        for (name, accessor) in added {
+            target[name.as_str()] = accessor.into();
+        }
+    }
+    color_names.sort();
+    color_names.dedup();
+
+    let sections: Map<String, Value> = asset
+        .sections
+        .iter()
+        .filter(|s| {
+            [
+                b"NORM", b"PROJ", b"BMIX", b"CENT", b"AXES", b"BNRM", b"BPRJ",
+            ]
+            .contains(&&s.tag)
+        })
+        .filter_map(|s| match &s.data {
+            Data::F32(values) => Some((
+                String::from_utf8_lossy(&s.tag).into_owned(),
+                Value::from(values.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>()),
+            )),
+            _ => None,
+        })
+        .collect();
+    let aobake = json!({
+        "version": 1,
+        "method": header.method,
+        "format": format!("{}.{}", asset.version.0, asset.version.1),
+        "algorithm_version": header.algorithm_version,
+        "bake_key": header.bake_key,
+        "character": header.character,
+        "vertices": v,
+        "primitives": order,
+        "static": { "attribute": "_AO", "color": color_names, "frames": frames },
+        "rows": rows,
+        "basis": (0..attributes_per_vertex).map(|k| format!("_AO_BASIS_{k}")).collect::<Vec<_>>(),
+        "layout": serde_json::to_value(&header.layout).expect("layouts serialise"),
+        "sections": sections,
+    });
+    let root = json.as_object_mut().expect("a glTF root is an object");
+    match root.entry("extras") {
+        serde_json::map::Entry::Occupied(mut e) => match e.get_mut().as_object_mut() {
+            Some(extras) => {
+                extras.insert("aobake".into(), aobake);
+            }
+            None => {
+                warnings.push("the file's root extras were not an object: replaced".into());
+                e.insert(json!({ "aobake": aobake }));
+            }
+        },
+        serde_json::map::Entry::Vacant(e) => {
+            e.insert(json!({ "aobake": aobake }));
+        }
+    }
+    root.insert("buffers".into(), json!([{ "byteLength": out.bin.len() }]));
+    // Arrays walked above that the file did not have (glTF forbids empty
+    // ones).
+    root.retain(|_, value| value.as_array().is_none_or(|a| !a.is_empty()));
+    Ok(GltfExport {
+        glb: out.finish(&json),
+        warnings,
+        rows,
+        frames,
+    })
+}
+
+/// The model's AO averaged over the clips' frames at [`FPS`] (at most
+/// [`MAX_FRAMES`], spread evenly), or at rest without clips; and the frame
+/// count.
+fn static_ao(model: &Model, imported: &crate::import::Imported) -> (Vec<f32>, usize) {
+    let skeleton = &imported.character.skeleton;
+    let mut poses: Vec<(usize, f32)> = imported
+        .clips
+        .iter()
+        .enumerate()
+        .flat_map(|(c, clip)| clip.frame_times(FPS).into_iter().map(move |t| (c, t)))
+        .collect();
+    if poses.len() > MAX_FRAMES {
+        let step = poses.len() as f64 / MAX_FRAMES as f64;
+        poses = (0..MAX_FRAMES)
+            .map(|i| poses[(i as f64 * step) as usize])
+            .collect();
+    }
+    let locals: Vec<Vec<crate::rig::skeleton::Transform>> = if poses.is_empty() {
+        vec![skeleton.rest_locals()]
+    } else {
+        poses
+            .iter()
+            .map(|&(c, t)| Pose::sample(skeleton, &imported.clips[c], t).locals)
+            .collect()
+    };
+    let mut sum = vec![0.0f64; model.vertices()];
+    for l in &locals {
+        for (s, a) in sum.iter_mut().zip(model.evaluate(skeleton, l)) {
+            *s += f64::from(a);
+        }
+    }
+    let n = locals.len() as f64;
+    (sum.iter().map(|&s| (s / n) as f32).collect(), poses.len())
+}
+
+/// Every vertex's coefficient rows, `4 · ceil(R / 4)` floats a vertex (zero
+/// past row R), and R.
+fn rows_per_vertex(model: &Model) -> Result<(usize, Vec<f32>), GltfExportError> {
+    let v = model.vertices();
+    let rows = match model.form() {
+        FormRef::Dense(f) => f.weight_count(),
+        FormRef::Sparse(s) => s.rows,
+    };
+    if rows > MAX_ROWS {
+        return Err(GltfExportError::Unsupported(format!(
+            "the model takes {rows} weights per pose, more than the {MAX_ROWS} rows a glTF export \
+             stores as vertex attributes: bake it with an eigen-AO basis (the default; \
+             `--param linear.basis=32` or `clustered.basis=32`)"
+        )));
+    }
+    let width = 4 * rows.div_ceil(4);
+    let mut out = vec![0.0f32; v * width];
+    match model.form() {
+        FormRef::Dense(f) => {
+            let mut row = 0;
+            for block in &f.blocks {
+                for k in 0..block.rows {
+                    let coefficients =
+                        &block.coefficients[k * block.columns..(k + 1) * block.columns];
+                    for vertex in 0..v {
+                        let column = block.map.as_ref().map_or(vertex, |m| m[vertex] as usize);
+                        out[vertex * width + row] = coefficients[column].to_f32();
+                    }
+                    row += 1;
+                }
+            }
+        }
+        FormRef::Sparse(s) => {
+            for vertex in 0..v {
+                let (from, to) = (s.offsets[vertex] as usize, s.offsets[vertex + 1] as usize);
+                for e in from..to {
+                    out[vertex * width + usize::from(s.rows_of[e])] = s.values[e].to_f32();
+                }
+            }
+        }
+    }
+    Ok((rows, out))
+}
+
+/// A top-level array of the glTF JSON (created empty if absent).
+fn array<'a>(json: &'a mut Value, key: &str) -> &'a mut Vec<Value> {
+    let root = json.as_object_mut().expect("a glTF root is an object");
+    let entry = root.entry(key).or_insert_with(|| Value::Array(Vec::new()));
+    if !entry.is_array() {
+        *entry = Value::Array(Vec::new());
+    }
+    entry.as_array_mut().expect("just made an array")
+}
+
+fn sniff_mime(bytes: &[u8]) -> Option<&'static str> {
+    if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        Some("image/png")
+    } else if bytes.starts_with(&[0xFF, 0xD8, 0xFF]) {
+        Some("image/jpeg")
+    } else {
+        None
+    }
+}
+
+/// The GLB being written: its binary chunk.
+#[derive(Debug, Default)]
+struct Glb {
+    bin: Vec<u8>,
+}
+
+impl Glb {
+    /// Appends `bytes` at a 4-byte boundary; their offset.
+    fn append(&mut self, bytes: &[u8]) -> usize {
+        self.bin.resize(self.bin.len().next_multiple_of(4), 0);
+        let at = self.bin.len();
+        self.bin.extend_from_slice(bytes);
+        at
+    }
+
+    /// A FLOAT accessor of `kind` over `values` in a view of its own; its
+    /// index.
+    fn accessor(&mut self, json: &mut Value, values: &[f32], kind: &str) -> usize {
+        let width = match kind {
+            "SCALAR" => 1,
+            "VEC3" => 3,
+            _ => 4,
+        };
+        let bytes: Vec<u8> = values.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let offset = self.append(&bytes);
+        let views = array(json, "bufferViews");
+        views.push(json!({
+            "buffer": 0,
+            "byteOffset": offset,
+            "byteLength": bytes.len(),
+            "target": 34962,
+        }));
+        let view = views.len() - 1;
+        let accessors = array(json, "accessors");
+        accessors.push(json!({
+            "bufferView": view,
+            "componentType": 5126,
+            "count": values.len() / width,
+            "type": kind,
+        }));
+        accessors.len() - 1
+    }
+
+    /// The file: header, JSON chunk (padded with spaces), BIN chunk
+    /// (padded with zeros).
+    fn finish(mut self, json: &Value) -> Vec<u8> {
+        let mut text = serde_json::to_vec(json).expect("JSON serialises");
+        text.resize(text.len().next_multiple_of(4), b' ');
+        self.bin.resize(self.bin.len().next_multiple_of(4), 0);
+        let total = 12 + 8 + text.len() + 8 + self.bin.len();
+        let mut out = Vec::with_capacity(total);
+        out.extend_from_slice(b"glTF");
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(total as u32).to_le_bytes());
+        out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+        out.extend_from_slice(&0x4E4F_534Au32.to_le_bytes());
+        out.extend_from_slice(&text);
+        out.extend_from_slice(&(self.bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(&0x004E_4942u32.to_le_bytes());
+        out.extend_from_slice(&self.bin);
+        out
+    }
+}
