@@ -13,7 +13,7 @@
 //! aobake-core chooses the layouts from the character and its clips when
 //! it bakes; an asset stores them in its header.
 
-use glam::{Affine3A, Quat, Vec3};
+use glam::{Affine3A, DQuat, DVec3, Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::rig::{Skeleton, Transform};
@@ -68,6 +68,11 @@ pub struct JointAngles {
 
 /// `log(q)` as a rotation vector (axis times angle, angle in [0, π]).
 pub fn rotation_vector(q: Quat) -> Vec3 {
+    rotation_vector_f64(q.as_dquat()).as_vec3()
+}
+
+/// [`rotation_vector`] in double precision.
+pub fn rotation_vector_f64(q: DQuat) -> DVec3 {
     let q = if q.w < 0.0 { -q } else { q };
     q.to_scaled_axis()
 }
@@ -115,18 +120,35 @@ impl JointAngles {
     }
 
     /// Local transforms → parameters (one transform per node of
-    /// `skeleton`).
+    /// `skeleton`), computed in double precision and rounded.
     pub fn params(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f32> {
+        self.params_f64(skeleton, locals)
+            .into_iter()
+            .map(|x| x as f32)
+            .collect()
+    }
+
+    /// [`JointAngles::params`] unrounded: what the run time computes
+    /// weights from. A joint that barely moves has a large inverse
+    /// standard deviation, which would make single precision's rounding
+    /// visible in the AO.
+    pub fn params_f64(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f64> {
         let mut out = Vec::with_capacity(self.len());
         for &j in &self.joints {
-            let rest = skeleton.nodes[j].rest.rotation;
-            out.extend(rotation_vector(rest.inverse() * locals[j].rotation).to_array());
+            let rest = skeleton.nodes[j].rest.rotation.as_dquat();
+            let now = locals[j].rotation.as_dquat();
+            out.extend(rotation_vector_f64(rest.conjugate() * now).to_array());
         }
         for &t in &self.translations {
-            out.extend((locals[t].translation - skeleton.nodes[t].rest.translation).to_array());
+            let d =
+                locals[t].translation.as_dvec3() - skeleton.nodes[t].rest.translation.as_dvec3();
+            out.extend(d.to_array());
         }
         for &t in &self.scales {
-            let (now, rest) = (locals[t].scale, skeleton.nodes[t].rest.scale);
+            let (now, rest) = (
+                locals[t].scale.as_dvec3(),
+                skeleton.nodes[t].rest.scale.as_dvec3(),
+            );
             out.extend((0..3).map(|a| {
                 if rest[a] != 0.0 {
                     now[a] / rest[a] - 1.0

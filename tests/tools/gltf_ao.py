@@ -23,6 +23,14 @@ import math
 import struct
 import sys
 
+F32 = struct.Struct("<f")
+
+
+def f32(x):
+    """x rounded to single precision."""
+    return F32.unpack(F32.pack(x))[0]
+
+
 COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 FORMATS = {5120: "b", 5121: "B", 5122: "h", 5123: "H", 5125: "I", 5126: "f"}
 NORMALISE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
@@ -184,9 +192,11 @@ def rest_transforms(gltf):
             t, r, s = decompose(node["matrix"])
             out.append(Transform(t, r, s))
             continue
-        f32 = lambda v: [struct.unpack("<f", struct.pack("<f", c))[0] for c in v]
-        # As the file's reader holds them: single-precision floats.
-        out.append(Transform(f32(node.get("translation", (0, 0, 0))), f32(node.get("rotation", (0, 0, 0, 1))), f32(node.get("scale", (1, 1, 1)))))
+        # As the file's reader holds them: single-precision floats, the
+        # rotation normalised.
+        single = lambda v: [f32(c) for c in v]
+        rotation = single(q_norm(single(node.get("rotation", (0, 0, 0, 1)))))
+        out.append(Transform(single(node.get("translation", (0, 0, 0))), rotation, single(node.get("scale", (1, 1, 1)))))
     return out
 
 
@@ -229,7 +239,7 @@ def sample(gltf, binary, clip, time, locals_):
                     out = [h00 * v0[i] + h10 * dt * b0[i] + h01 * v1[i] + h11 * dt * a1[i] for i in range(len(v0))]
         node = locals_[target["node"]]
         if path == "rotation":
-            node.r = q_norm(out)
+            node.r = [f32(c) for c in q_norm(out)]
         elif path == "translation":
             node.t = list(out)
         elif path == "scale":
@@ -271,7 +281,8 @@ def inverse_apply(chain, p):
 def joint_angles(layout, rest, locals_):
     out = []
     for j in layout["joints"]:
-        out.extend(rotation_vector(q_mul(q_inv(rest[j].r), locals_[j].r)))
+        conjugate = [-rest[j].r[0], -rest[j].r[1], -rest[j].r[2], rest[j].r[3]]
+        out.extend(rotation_vector(q_mul(conjugate, locals_[j].r)))
     for t in layout["translations"]:
         out.extend(locals_[t].t[i] - rest[t].t[i] for i in range(3))
     for t in layout.get("scales", []):
@@ -385,8 +396,9 @@ def main():
         clips = [a for i, a in enumerate(gltf.get("animations", [])) if (a.get("name") or f"animation_{i}") == args.clip]
         if not clips:
             sys.exit(f"no animation named {args.clip!r}")
-        sample(gltf, binary, clips[0], args.time, locals_)
-    w = weights(meta, gltf, locals_, rest)
+        sample(gltf, binary, clips[0], f32(args.time), locals_)
+    # The weights as an engine uploads them: single precision.
+    w = [f32(x) for x in weights(meta, gltf, locals_, rest)]
     print("index,occlusion")
     for p in meta["primitives"]:
         attributes = gltf["meshes"][p["mesh"]]["primitives"][p["primitive"]]["attributes"]
@@ -394,7 +406,11 @@ def main():
             rows = [accessor(gltf, binary, attributes[name]) for name in meta["basis"]]
             for i in range(p["count"]):
                 coefficients = [c for attr in rows for c in attr[i]][: len(w)]
-                ao = sum(wj * cj for wj, cj in zip(w, coefficients))
+                # Row by row in single precision, as the run time sums.
+                ao = 0.0
+                for wj, cj in zip(w, coefficients):
+                    if wj != 0.0:
+                        ao = f32(ao + f32(wj * cj))
                 print(f"{p['first'] + i},{min(max(ao, 0.0), 1.0)!r}")
         else:
             static = accessor(gltf, binary, attributes[meta["static"]["attribute"]])

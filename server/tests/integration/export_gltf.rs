@@ -125,55 +125,67 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
         assert_eq!(meta["method"], "vertex-linear", "{name}");
         let rows = meta["rows"].as_u64().unwrap() as usize;
         assert_eq!(meta["basis"].as_array().unwrap().len(), rows.div_ceil(4));
-        // The last frame of the first clip: the file's own key values, no
-        // interpolation on either side.
+        // The first clip's last key (the file's own numbers, no
+        // interpolation) and a time between keys (slerp on both sides).
         let clip = doc["animations"][0]["name"]
             .as_str()
             .map_or_else(|| "animation_0".to_owned(), str::to_owned);
-        let time = "1000";
-        let truth = dir.path().join(format!("{name}-eval.csv"));
-        let eval = aobake(&[
-            "eval",
-            asset.to_str().unwrap(),
-            file.to_str().unwrap(),
-            "--clip",
-            &clip,
-            "--time",
-            time,
-            "--out",
-            truth.to_str().unwrap(),
-        ]);
-        assert!(eval.status.success(), "{name}: {}", stderr(&eval));
-        let python = Command::new("python3")
-            .arg(repo().join("tests/tools/gltf_ao.py"))
-            .arg(&glb)
-            .args(["--clip", &clip, "--time", time])
-            .output()
-            .expect("python3");
-        assert!(
-            python.status.success(),
-            "{name}: {}",
-            String::from_utf8_lossy(&python.stderr)
-        );
-        let mine = dir.path().join(format!("{name}-py.csv"));
-        std::fs::write(&mine, &python.stdout).unwrap();
-        let (a, b) = (csv(&truth), csv(&mine));
-        assert_eq!(a.len(), b.len(), "{name}: one value per vertex");
-        let worst = a
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max);
-        eprintln!("{name}: {rows} rows, Python against aobake eval: worst {worst:.2e}");
-        assert!(worst <= TOLERANCE, "{name}: worst difference {worst}");
+        for (time, tolerance) in [("1000", AT_KEYS), ("0.37", BETWEEN_KEYS)] {
+            let truth = dir.path().join(format!("{name}-eval.csv"));
+            let eval = aobake(&[
+                "eval",
+                asset.to_str().unwrap(),
+                file.to_str().unwrap(),
+                "--clip",
+                &clip,
+                "--time",
+                time,
+                "--out",
+                truth.to_str().unwrap(),
+            ]);
+            assert!(eval.status.success(), "{name}: {}", stderr(&eval));
+            let python = Command::new("python3")
+                .arg(repo().join("tests/tools/gltf_ao.py"))
+                .arg(&glb)
+                .args(["--clip", &clip, "--time", time])
+                .output()
+                .expect("python3");
+            assert!(
+                python.status.success(),
+                "{name}: {}",
+                String::from_utf8_lossy(&python.stderr)
+            );
+            let mine = dir.path().join(format!("{name}-py.csv"));
+            std::fs::write(&mine, &python.stdout).unwrap();
+            let (a, b) = (csv(&truth), csv(&mine));
+            assert_eq!(a.len(), b.len(), "{name}: one value per vertex");
+            let worst = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max);
+            eprintln!(
+                "{name}: {rows} rows, at {time} s of {clip}, Python against aobake eval: worst {worst:.2e}"
+            );
+            assert!(
+                worst <= tolerance,
+                "{name} at {time} s: worst difference {worst}"
+            );
+        }
         evaluated += 1;
     }
     assert!(evaluated >= 3, "at least three characters exported");
 }
 
-/// How closely the Python evaluation matches `aobake eval`. The run time
-/// computes the per-pose step in f32, the script in f64: joint angles
-/// whose features barely move get inverse standard deviations up to about
-/// 3·10⁵, which turn f32 rounding into up to about 3·10⁻⁵ of AO (issue 28's
-/// note).
-const TOLERANCE: f64 = 1e-4;
+/// How closely the Python evaluation matches `aobake eval` at a key of
+/// the clip (the file's own numbers on both sides). The run time computes
+/// the per-pose step in double precision from the single-precision
+/// transforms and sums the rows in single precision, and the script does
+/// the same; what is left is an occasional last bit of a normalised
+/// quaternion, which a joint that barely moves (inverse standard
+/// deviations in the thousands) can carry into the AO.
+const AT_KEYS: f64 = 1e-6;
+
+/// The same between keys, where the run time's slerp runs in single
+/// precision and the script's in double (measured: up to 2.2·10⁻⁶).
+const BETWEEN_KEYS: f64 = 1e-5;

@@ -21,15 +21,23 @@ impl Basis {
     /// The basis weights of one pose's model weights, then a 1 (the mean's
     /// row).
     pub fn apply(&self, weights: &[f32]) -> Vec<f32> {
+        let weights: Vec<f64> = weights.iter().map(|&w| f64::from(w)).collect();
+        self.apply_f64(&weights)
+    }
+
+    /// [`Basis::apply`] in double precision, rounded once at the end.
+    pub fn apply_f64(&self, weights: &[f64]) -> Vec<f32> {
         assert_eq!(weights.len(), self.inputs, "one weight per input");
-        let mut out: Vec<f32> = self.offset.iter().map(|&o| -o).collect();
+        let mut out: Vec<f64> = self.offset.iter().map(|&o| -f64::from(o)).collect();
         for (row, &w) in self.mix.chunks_exact(self.rank).zip(weights) {
             if w != 0.0 {
-                out.iter_mut().zip(row).for_each(|(o, &m)| *o += w * m);
+                out.iter_mut()
+                    .zip(row)
+                    .for_each(|(o, &m)| *o += w * f64::from(m));
             }
         }
         out.push(1.0);
-        out
+        out.into_iter().map(|x| x as f32).collect()
     }
 
     /// Bytes of the mix and offsets (f32).

@@ -127,11 +127,18 @@ impl VertexClustered {
     /// [`VertexClustered::weights`] with a linear base: its weights of
     /// `angles` (ignored without a base) first.
     pub fn weights_with(&self, h: &[f32], angles: &[f32]) -> Vec<f32> {
+        let angles: Vec<f64> = angles.iter().map(|&a| f64::from(a)).collect();
+        self.weights_with_f64(h, &angles)
+    }
+
+    /// [`VertexClustered::weights_with`] of unrounded joint angles, in
+    /// double precision until the end.
+    pub fn weights_with_f64(&self, h: &[f32], angles: &[f64]) -> Vec<f32> {
         assert_eq!(h.len(), self.handles, "one number per handle coordinate");
         let omega = self.blend_weights(h);
-        let mut out = Vec::with_capacity(1 + self.clusters.len() * self.rows());
+        let mut out: Vec<f64> = Vec::with_capacity(1 + self.clusters.len() * self.rows());
         match &self.base {
-            Some(base) => out.extend(base.weights.weights(angles)),
+            Some(base) => out.extend(base.weights.unrounded_weights(angles)),
             None => out.push(1.0),
         }
         for (cluster, &w) in self.clusters.iter().zip(&omega) {
@@ -148,15 +155,15 @@ impl VertexClustered {
                 } else {
                     y
                 };
-                out.push((w * y) as f32);
+                out.push(w * y);
             }
             if self.centering == Centering::Cluster {
-                out.push(w as f32);
+                out.push(w);
             }
         }
         match &self.basis {
-            Some(b) => b.apply(&out),
-            None => out,
+            Some(b) => b.apply_f64(&out),
+            None => out.into_iter().map(|x| x as f32).collect(),
         }
     }
 

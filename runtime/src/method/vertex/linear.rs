@@ -37,16 +37,26 @@ impl Features {
     }
 
     /// The features of a joint-angle vector.
+    /// (Computed in double precision and rounded.)
     pub fn expand(self, angles: &[f32], rotations: usize) -> Vec<f32> {
+        let angles: Vec<f64> = angles.iter().map(|&a| f64::from(a)).collect();
+        self.expand_f64(&angles, rotations)
+            .into_iter()
+            .map(|x| x as f32)
+            .collect()
+    }
+
+    /// [`Features::expand`] in double precision.
+    pub fn expand_f64(self, angles: &[f64], rotations: usize) -> Vec<f64> {
         match self {
             Self::RotationVector => angles.to_vec(),
             Self::Matrix => {
                 let (rot, rest) = angles.split_at(3 * rotations);
                 let mut out = Vec::with_capacity(self.count(angles.len(), rotations));
                 for r in rot.chunks_exact(3) {
-                    let m = glam::Mat3::from_quat(glam::Quat::from_scaled_axis(
-                        glam::Vec3::from_slice(r),
-                    )) - glam::Mat3::IDENTITY;
+                    let m = glam::DMat3::from_quat(glam::DQuat::from_scaled_axis(
+                        glam::DVec3::from_slice(r),
+                    )) - glam::DMat3::IDENTITY;
                     out.extend(m.to_cols_array());
                 }
                 out.extend_from_slice(rest);
@@ -122,31 +132,53 @@ impl VertexLinear {
     /// The weights of a pose: its joint angles clamped to their ranges,
     /// turned into features and standardised, and a 1.
     pub fn weights(&self, angles: &[f32]) -> Vec<f32> {
+        let angles: Vec<f64> = angles.iter().map(|&a| f64::from(a)).collect();
+        self.weights_f64(&angles)
+    }
+
+    /// [`VertexLinear::weights`] of unrounded joint angles, computed in
+    /// double precision (features, standardising, projection, basis) and
+    /// rounded once at the end: the inverse standard deviation of a joint
+    /// that barely moved can be 10⁵, which would make single precision's
+    /// rounding along the way visible in the AO.
+    pub fn weights_f64(&self, angles: &[f64]) -> Vec<f32> {
+        let w = self.unrounded_weights(angles);
+        match &self.basis {
+            Some(b) => b.apply_f64(&w),
+            None => w.into_iter().map(|x| x as f32).collect(),
+        }
+    }
+
+    /// The weights before the basis, unrounded (what vertex-clustered's
+    /// linear base contributes).
+    pub fn unrounded_weights(&self, angles: &[f64]) -> Vec<f64> {
         assert_eq!(angles.len(), self.ranges.len(), "one number per angle");
-        let clamped: Vec<f32> = angles
+        let clamped: Vec<f64> = angles
             .iter()
             .zip(&self.ranges)
-            .map(|(&x, r)| x.clamp(r.min, r.max))
+            .map(|(&x, r)| x.clamp(f64::from(r.min), f64::from(r.max)))
             .collect();
-        let standard: Vec<f32> = self
+        let standard: Vec<f64> = self
             .features
-            .expand(&clamped, self.rotations)
+            .expand_f64(&clamped, self.rotations)
             .iter()
             .zip(self.mean.iter().zip(&self.inv_std))
-            .map(|(&x, (&m, &s))| (x - m) * s)
+            .map(|(&x, (&m, &s))| (x - f64::from(m)) * f64::from(s))
             .collect();
-        let mut w = match &self.projection {
+        let mut w: Vec<f64> = match &self.projection {
             Some(d) => d
                 .chunks_exact(standard.len())
-                .map(|row| row.iter().zip(&standard).map(|(a, b)| a * b).sum())
+                .map(|row| {
+                    row.iter()
+                        .zip(&standard)
+                        .map(|(&a, b)| f64::from(a) * b)
+                        .sum()
+                })
                 .collect(),
             None => standard,
         };
         w.push(1.0);
-        match &self.basis {
-            Some(b) => b.apply(&w),
-            None => w,
-        }
+        w
     }
 
     /// AO of every vertex at these joint angles.

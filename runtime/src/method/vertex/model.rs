@@ -59,18 +59,19 @@ impl Model {
     }
 
     /// The per-pose weights (joint angles and a 1, blended projections, or
-    /// `[1]`), computed once per pose on the CPU.
+    /// `[1]`), computed once per pose on the CPU, in double precision from
+    /// the local transforms on and rounded once at the end.
     pub fn weights(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f32> {
         match self {
             Self::StaticAverage(_) => vec![1.0],
-            Self::VertexLinear(layout, m) => m.weights(&layout.params(skeleton, locals)),
+            Self::VertexLinear(layout, m) => m.weights_f64(&layout.params_f64(skeleton, locals)),
             Self::VertexClustered(handles, m) => {
                 let angles = m
                     .base
                     .as_ref()
-                    .map(|b| b.joint_angles.params(skeleton, locals))
+                    .map(|b| b.joint_angles.params_f64(skeleton, locals))
                     .unwrap_or_default();
-                m.weights_with(&handles.handles(skeleton, locals), &angles)
+                m.weights_with_f64(&handles.handles(skeleton, locals), &angles)
             }
         }
     }
