@@ -336,10 +336,19 @@ fn rows_per_vertex(model: &Model) -> Result<(usize, Vec<f32>), GltfExportError> 
         FormRef::Sparse(s) => s.rows,
     };
     if rows > MAX_ROWS {
+        let fix = match model {
+            Model::VertexClustered(..) => {
+                "fewer pose clusters or dimensions (`--param clustered.pose_clusters=4 \
+                 --param clustered.dimensions=4`; the eigen-AO basis is kept only where it \
+                 saves multiply-adds, and MLS leaves most clusters out of each pose)"
+            }
+            _ => {
+                "an eigen-AO basis (`--param linear.basis_cv=false`: `linear.basis` rows, 32 by default)"
+            }
+        };
         return Err(GltfExportError::Unsupported(format!(
             "the model takes {rows} weights per pose, more than the {MAX_ROWS} rows a glTF export \
-             stores as vertex attributes: bake it with an eigen-AO basis (the default; \
-             `--param linear.basis=32` or `clustered.basis=32`)"
+             stores as vertex attributes: bake it with {fix}"
         )));
     }
     let width = 4 * rows.div_ceil(4);

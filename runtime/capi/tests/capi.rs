@@ -116,7 +116,11 @@ fn a_c_program_plays_an_asset_as_the_runtime_does() {
         let pose_path = dir.join("pose.txt");
         std::fs::write(&pose_path, text).unwrap();
         let out_path = dir.join("out.bin");
+        // The library the test was built with, by the rpath: cargo's
+        // LD_LIBRARY_PATH would put target/debug first, where an older
+        // build's copy may lie.
         let run = Command::new(&exe)
+            .env_remove("LD_LIBRARY_PATH")
             .args([&asset_path, &pose_path, &out_path])
             .output()
             .unwrap();

@@ -73,15 +73,18 @@ fn csv(path: &Path) -> Vec<f64> {
 fn exports_validate_and_evaluate_from_the_file_alone() {
     let dir = tempfile::tempdir().unwrap();
     let mut evaluated = 0;
-    for file in characters() {
-        let name = file.file_stem().unwrap().to_string_lossy().into_owned();
+    let runs = characters().into_iter().flat_map(|file| {
+        ["vertex-linear", "vertex-clustered"].map(|method| (file.clone(), method))
+    });
+    for (file, method) in runs {
+        let name = format!("{}-{method}", file.file_stem().unwrap().to_string_lossy());
         let asset = dir.path().join(format!("{name}.aob"));
         // Small bakes: the export, not the fit, is under test.
         let bake = aobake(&[
             "bake",
             file.to_str().unwrap(),
             "--method",
-            "vertex-linear",
+            method,
             "--poses",
             "48",
             "--samples",
@@ -105,13 +108,61 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
             continue;
         }
         let glb = dir.path().join(format!("{name}-ao.glb"));
-        let export = aobake(&[
+        let export_args = [
             "export",
             asset.to_str().unwrap(),
             file.to_str().unwrap(),
             "--gltf",
             glb.to_str().unwrap(),
-        ]);
+        ];
+        let mut export = aobake(&export_args);
+        if !export.status.success() && stderr(&export).contains("rows a glTF export stores") {
+            // Too many weights for vertex attributes: the refusal names
+            // the fix, which works.
+            let fix: &[&str] = if method == "vertex-linear" {
+                &["--param", "linear.basis_cv=false"]
+            } else {
+                &[
+                    "--param",
+                    "clustered.pose_clusters=4",
+                    "--param",
+                    "clustered.dimensions=4",
+                ]
+            };
+            for part in fix {
+                assert!(
+                    stderr(&export).contains(part),
+                    "{name}: {}",
+                    stderr(&export)
+                );
+            }
+            let again = aobake(
+                &[
+                    "bake",
+                    file.to_str().unwrap(),
+                    "--method",
+                    method,
+                    "--poses",
+                    "48",
+                    "--samples",
+                    "16",
+                    "--eval-poses",
+                    "2",
+                    "--eval-fps",
+                    "5",
+                    "--out",
+                    asset.to_str().unwrap(),
+                    "--report",
+                    dir.path().join(format!("{name}.json")).to_str().unwrap(),
+                ]
+                .iter()
+                .chain(fix)
+                .copied()
+                .collect::<Vec<_>>(),
+            );
+            assert!(again.status.success(), "{name}: {}", stderr(&again));
+            export = aobake(&export_args);
+        }
         assert!(export.status.success(), "{name}: {}", stderr(&export));
         if let Some((errors, codes)) = validator_errors(&glb) {
             assert_eq!(errors, 0, "{name}: the validator's errors {codes}");
@@ -122,7 +173,7 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
             serde_json::from_slice(&bytes[20..20 + len]).unwrap()
         };
         let meta = &doc["extras"]["aobake"];
-        assert_eq!(meta["method"], "vertex-linear", "{name}");
+        assert_eq!(meta["method"], method, "{name}");
         let rows = meta["rows"].as_u64().unwrap() as usize;
         assert_eq!(meta["basis"].as_array().unwrap().len(), rows.div_ceil(4));
         // The first clip's last key (the file's own numbers, no
@@ -174,7 +225,10 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
         }
         evaluated += 1;
     }
-    assert!(evaluated >= 3, "at least three characters exported");
+    assert!(
+        evaluated >= 6,
+        "at least three characters exported by both methods"
+    );
 }
 
 /// How closely the Python evaluation matches `aobake eval` at a key of
@@ -187,5 +241,5 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
 const AT_KEYS: f64 = 1e-6;
 
 /// The same between keys, where the run time's slerp runs in single
-/// precision and the script's in double (measured: up to 2.2·10⁻⁶).
+/// precision and the script's in double (measured: up to 3.5·10⁻⁶).
 const BETWEEN_KEYS: f64 = 1e-5;

@@ -88,6 +88,12 @@ impl VertexClustered {
     /// [`MIN_BLEND_WEIGHT`] are dropped and the rest renormalised. A pose
     /// on a centre takes that cluster alone.
     pub fn blend_weights(&self, h: &[f32]) -> Vec<f64> {
+        let h: Vec<f64> = h.iter().map(|&x| f64::from(x)).collect();
+        self.blend_weights_f64(&h)
+    }
+
+    /// [`VertexClustered::blend_weights`] of an unrounded handle vector.
+    pub fn blend_weights_f64(&self, h: &[f64]) -> Vec<f64> {
         let d2: Vec<f64> = self
             .clusters
             .iter()
@@ -95,7 +101,7 @@ impl VertexClustered {
                 c.center
                     .iter()
                     .zip(h)
-                    .map(|(&a, &b)| (f64::from(b) - f64::from(a)).powi(2))
+                    .map(|(&a, &b)| (b - f64::from(a)).powi(2))
                     .sum()
             })
             .collect();
@@ -128,14 +134,15 @@ impl VertexClustered {
     /// `angles` (ignored without a base) first.
     pub fn weights_with(&self, h: &[f32], angles: &[f32]) -> Vec<f32> {
         let angles: Vec<f64> = angles.iter().map(|&a| f64::from(a)).collect();
-        self.weights_with_f64(h, &angles)
+        let h: Vec<f64> = h.iter().map(|&x| f64::from(x)).collect();
+        self.weights_with_f64(&h, &angles)
     }
 
-    /// [`VertexClustered::weights_with`] of unrounded joint angles, in
-    /// double precision until the end.
-    pub fn weights_with_f64(&self, h: &[f32], angles: &[f64]) -> Vec<f32> {
+    /// [`VertexClustered::weights_with`] of unrounded handles and joint
+    /// angles, in double precision until the end.
+    pub fn weights_with_f64(&self, h: &[f64], angles: &[f64]) -> Vec<f32> {
         assert_eq!(h.len(), self.handles, "one number per handle coordinate");
-        let omega = self.blend_weights(h);
+        let omega = self.blend_weights_f64(h);
         let mut out: Vec<f64> = Vec::with_capacity(1 + self.clusters.len() * self.rows());
         match &self.base {
             Some(base) => out.extend(base.weights.unrounded_weights(angles)),
@@ -147,7 +154,7 @@ impl VertexClustered {
                 let y: f64 = axis
                     .iter()
                     .zip(h.iter().zip(&cluster.center))
-                    .map(|(&a, (&x, &c))| f64::from(a) * (f64::from(x) - f64::from(c)))
+                    .map(|(&a, (&x, &c))| f64::from(a) * (x - f64::from(c)))
                     .sum();
                 let y = if self.clamp > 0.0 {
                     let c = f64::from(self.clamp);

@@ -71,7 +71,7 @@ impl Model {
                     .as_ref()
                     .map(|b| b.joint_angles.params_f64(skeleton, locals))
                     .unwrap_or_default();
-                m.weights_with_f64(&handles.handles(skeleton, locals), &angles)
+                m.weights_with_f64(&handles.handles_f64(skeleton, locals), &angles)
             }
         }
     }
