@@ -54,7 +54,8 @@ enum Command {
     Eval(eval::Args),
     /// Write a baked asset's data for other tools: a cubemap's decoded
     /// faces, or a grid asset's parts as z-slices, as OpenEXR (--exr DIR);
-    /// or the run-time shaders for engines (--shaders DIR).
+    /// the character with a vertex asset's AO as glTF (--gltf OUT.glb); or
+    /// the run-time shaders for engines (--shaders DIR).
     Export(export::Args),
     /// Render a baked asset with wgpu: a still at a clip time (ground
     /// truth, model, error) or an animated PNG of a whole clip.
