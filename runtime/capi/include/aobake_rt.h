@@ -8,6 +8,16 @@
 #include <stdbool.h>
 
 /**
+ * A cubemap asset. Opaque to C.
+ */
+typedef struct AobakeCubemap AobakeCubemap;
+
+/**
+ * A grid asset. Opaque to C.
+ */
+typedef struct AobakeGrid AobakeGrid;
+
+/**
  * A vertex-method asset (static average, vertex-linear or
  * vertex-clustered), its rig and the pose being set. Opaque to C.
  */
@@ -143,6 +153,90 @@ bool aobake_vertex_ao_weights(const struct AobakeVertexAo *ao, float *out, size_
  * floats.
  */
 bool aobake_vertex_ao_evaluate(const struct AobakeVertexAo *ao, float *out, size_t len);
+
+/**
+ * Reads a cubemap asset (`cubemap-discrete` or `cubemap-continuous`) from
+ * `len` bytes at `bytes`; NULL on failure.
+ *
+ * # Safety
+ * `bytes` must point to `len` readable bytes.
+ */
+struct AobakeCubemap *aobake_cubemap_open(const uint8_t *bytes, size_t len);
+
+/**
+ * Frees a cubemap handle (NULL is ignored).
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle from `aobake_cubemap_open`.
+ */
+void aobake_cubemap_free(struct AobakeCubemap *cubemap);
+
+/**
+ * The baked clip's duration in seconds (the cycle), 0 for NULL.
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle.
+ */
+float aobake_cubemap_duration(const struct AobakeCubemap *cubemap);
+
+/**
+ * Writes the occlusion the character casts at `count` points (`3 ·
+ * count` floats, x y z, in the character's space as baked) at `seconds`
+ * of its clip to `out` (`count` floats). `false` on NULL.
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle; `points` NULL or `3 · count`
+ * readable floats; `out` NULL or `count` writable floats.
+ */
+bool aobake_cubemap_occlusion(const struct AobakeCubemap *cubemap, float seconds, const float *points, size_t count, float *out);
+
+/**
+ * Reads a grid asset from `len` bytes at `bytes`; NULL on failure.
+ *
+ * # Safety
+ * `bytes` must point to `len` readable bytes.
+ */
+struct AobakeGrid *aobake_grid_open(const uint8_t *bytes, size_t len);
+
+/**
+ * Frees a grid handle (NULL is ignored).
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle from `aobake_grid_open`.
+ */
+void aobake_grid_free(struct AobakeGrid *grid);
+
+/**
+ * Parts (rigid bodies with a grid each), 0 for NULL.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle.
+ */
+size_t aobake_grid_part_count(const struct AobakeGrid *grid);
+
+/**
+ * Matrices the palette must hold: the highest joint a part follows, plus
+ * one (0 for NULL).
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle.
+ */
+size_t aobake_grid_palette_len(const struct AobakeGrid *grid);
+
+/**
+ * Writes the occlusion every part casts at `count` receivers to `out`
+ * (`count` floats), the parts posed by the frame's skinning `palette`
+ * (`palette_len` column-major 4 × 4 matrices, world from bind, as the
+ * renderer skins with). `points` and `normals` are `3 · count` floats
+ * (world space, unit normals); `parts` is NULL (no receiver is on a
+ * part, as the ground) or `count` part indices, -1 for none: a receiver
+ * on a part takes its own part by the self-occlusion rule.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle; each pointer NULL or holding the
+ * counts above.
+ */
+bool aobake_grid_occlusion(const struct AobakeGrid *grid, const float *palette, size_t palette_len, const float *points, const float *normals, const int64_t *parts, size_t count, float *out);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -19,6 +19,11 @@
 //!    vertex's AO, on the CPU).
 //! 4. `aobake_vertex_ao_free`.
 //!
+//! And the lookups in space: `aobake_cubemap_*` (Kroon's cubemaps: the
+//! occlusion a character casts at points, at a time of its clip) and
+//! `aobake_grid_*` (Malmer et al.'s grids: the occlusion rigid parts cast
+//! at receivers, given the frame's skinning palette).
+//!
 //! Errors: a function that can fail returns `false` or `NULL`, and
 //! `aobake_last_error` gives the reason, on the calling thread. A handle
 //! may be used from one thread at a time; separate handles are
@@ -29,8 +34,16 @@ use std::{
     ffi::{CStr, CString, c_char},
 };
 
-use aobake_runtime::{method::vertex::VertexAo, rig::Transform};
-use glam::{Quat, Vec3};
+use aobake_runtime::{
+    Container, Family,
+    method::{
+        cubemap::CubemapModel,
+        grid::model::{GridModel, Terms},
+        vertex::VertexAo,
+    },
+    rig::Transform,
+};
+use glam::{Mat4, Quat, Vec3};
 
 /// A vertex-method asset (static average, vertex-linear or
 /// vertex-clustered), its rig and the pose being set. Opaque to C.
@@ -334,4 +347,269 @@ pub unsafe extern "C" fn aobake_vertex_ao_evaluate(
         Some(h) => unsafe { fill(&h.evaluate(), out, len, "evaluate") },
         None => false,
     }
+}
+
+/// A cubemap asset. Opaque to C.
+#[derive(Debug)]
+pub struct AobakeCubemap(CubemapModel);
+
+/// A grid asset. Opaque to C.
+#[derive(Debug)]
+pub struct AobakeGrid(GridModel);
+
+/// The container in `len` bytes at `bytes`, of `family`, or `None` with
+/// the reason.
+///
+/// # Safety
+/// `bytes` must be NULL or point to `len` readable bytes.
+unsafe fn container(bytes: *const u8, len: usize, family: Family) -> Option<Container> {
+    if bytes.is_null() {
+        fail("bytes is NULL");
+        return None;
+    }
+    // SAFETY: the caller promises `len` readable bytes at `bytes`.
+    let data = unsafe { std::slice::from_raw_parts(bytes, len) };
+    let c = Container::from_bytes(data)
+        .map_err(|e| fail(e.to_string()))
+        .ok()?;
+    if c.method.family() != family {
+        let wanted = match family {
+            Family::Cubemap => "cubemap",
+            Family::Grid => "grid",
+            Family::Vertex => "vertex",
+        };
+        fail(format!(
+            "a {} asset is not a {wanted} asset",
+            c.method.name()
+        ));
+        return None;
+    }
+    Some(c)
+}
+
+/// Reads a cubemap asset (`cubemap-discrete` or `cubemap-continuous`) from
+/// `len` bytes at `bytes`; NULL on failure.
+///
+/// # Safety
+/// `bytes` must point to `len` readable bytes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_open(bytes: *const u8, len: usize) -> *mut AobakeCubemap {
+    // SAFETY: forwarded from the caller.
+    let Some(c) = (unsafe { container(bytes, len, Family::Cubemap) }) else {
+        return std::ptr::null_mut();
+    };
+    match CubemapModel::from_container(&c) {
+        Ok((model, _)) => Box::into_raw(Box::new(AobakeCubemap(model))),
+        Err(e) => {
+            fail(e.to_string());
+            std::ptr::null_mut()
+        }
+    }
+}
+
+/// Frees a cubemap handle (NULL is ignored).
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle from `aobake_cubemap_open`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_free(cubemap: *mut AobakeCubemap) {
+    if !cubemap.is_null() {
+        // SAFETY: the caller passes a live handle made by Box::into_raw.
+        drop(unsafe { Box::from_raw(cubemap) });
+    }
+}
+
+/// The baked clip's duration in seconds (the cycle), 0 for NULL.
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_duration(cubemap: *const AobakeCubemap) -> f32 {
+    // SAFETY: the caller passes NULL or a live handle.
+    unsafe { cubemap.as_ref() }.map_or(0.0, |c| c.0.layout.duration)
+}
+
+/// Writes the occlusion the character casts at `count` points (`3 ·
+/// count` floats, x y z, in the character's space as baked) at `seconds`
+/// of its clip to `out` (`count` floats). `false` on NULL.
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle; `points` NULL or `3 · count`
+/// readable floats; `out` NULL or `count` writable floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_occlusion(
+    cubemap: *const AobakeCubemap,
+    seconds: f32,
+    points: *const f32,
+    count: usize,
+    out: *mut f32,
+) -> bool {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(c) = (unsafe { cubemap.as_ref() }) else {
+        fail("the handle is NULL");
+        return false;
+    };
+    // SAFETY: forwarded from the caller.
+    let Some(points) = (unsafe { floats(points, count, 3, "points") }) else {
+        return false;
+    };
+    let phase = c.0.layout.phase(seconds);
+    let values: Vec<f32> = points
+        .chunks_exact(3)
+        .map(|p| c.0.occlusion(Vec3::from_slice(p), phase))
+        .collect();
+    // SAFETY: forwarded from the caller.
+    unsafe { fill(&values, out, count, "occlusion") }
+}
+
+/// `count · width` floats at `data`, or NULL's error.
+///
+/// # Safety
+/// `data` must be NULL or point to `count · width` readable floats.
+unsafe fn floats<'a>(
+    data: *const f32,
+    count: usize,
+    width: usize,
+    what: &str,
+) -> Option<&'a [f32]> {
+    if data.is_null() {
+        fail(format!("{what} is NULL"));
+        return None;
+    }
+    let Some(len) = count.checked_mul(width) else {
+        fail(format!("{what}: {count} items overflow"));
+        return None;
+    };
+    // SAFETY: the caller promises `count · width` readable floats.
+    Some(unsafe { std::slice::from_raw_parts(data, len) })
+}
+
+/// Reads a grid asset from `len` bytes at `bytes`; NULL on failure.
+///
+/// # Safety
+/// `bytes` must point to `len` readable bytes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_open(bytes: *const u8, len: usize) -> *mut AobakeGrid {
+    // SAFETY: forwarded from the caller.
+    let Some(c) = (unsafe { container(bytes, len, Family::Grid) }) else {
+        return std::ptr::null_mut();
+    };
+    match GridModel::from_container(&c) {
+        Ok((model, _)) => Box::into_raw(Box::new(AobakeGrid(model))),
+        Err(e) => {
+            fail(e.to_string());
+            std::ptr::null_mut()
+        }
+    }
+}
+
+/// Frees a grid handle (NULL is ignored).
+///
+/// # Safety
+/// `grid` must be NULL or a live handle from `aobake_grid_open`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_free(grid: *mut AobakeGrid) {
+    if !grid.is_null() {
+        // SAFETY: the caller passes a live handle made by Box::into_raw.
+        drop(unsafe { Box::from_raw(grid) });
+    }
+}
+
+/// Parts (rigid bodies with a grid each), 0 for NULL.
+///
+/// # Safety
+/// `grid` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_part_count(grid: *const AobakeGrid) -> usize {
+    // SAFETY: the caller passes NULL or a live handle.
+    unsafe { grid.as_ref() }.map_or(0, |g| g.0.parts.len())
+}
+
+/// Matrices the palette must hold: the highest joint a part follows, plus
+/// one (0 for NULL).
+///
+/// # Safety
+/// `grid` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_palette_len(grid: *const AobakeGrid) -> usize {
+    // SAFETY: the caller passes NULL or a live handle.
+    unsafe { grid.as_ref() }.map_or(0, |g| {
+        g.0.parts.iter().map(|p| p.joint + 1).max().unwrap_or(0)
+    })
+}
+
+/// Writes the occlusion every part casts at `count` receivers to `out`
+/// (`count` floats), the parts posed by the frame's skinning `palette`
+/// (`palette_len` column-major 4 × 4 matrices, world from bind, as the
+/// renderer skins with). `points` and `normals` are `3 · count` floats
+/// (world space, unit normals); `parts` is NULL (no receiver is on a
+/// part, as the ground) or `count` part indices, -1 for none: a receiver
+/// on a part takes its own part by the self-occlusion rule.
+///
+/// # Safety
+/// `grid` must be NULL or a live handle; each pointer NULL or holding the
+/// counts above.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_occlusion(
+    grid: *const AobakeGrid,
+    palette: *const f32,
+    palette_len: usize,
+    points: *const f32,
+    normals: *const f32,
+    parts: *const i64,
+    count: usize,
+    out: *mut f32,
+) -> bool {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(g) = (unsafe { grid.as_ref() }) else {
+        fail("the handle is NULL");
+        return false;
+    };
+    if let Err(e) = g.0.check_palette(palette_len) {
+        fail(e.to_string());
+        return false;
+    }
+    // SAFETY: forwarded from the caller.
+    let (Some(palette), Some(points), Some(normals)) = (unsafe {
+        (
+            floats(palette, palette_len, 16, "palette"),
+            floats(points, count, 3, "points"),
+            floats(normals, count, 3, "normals"),
+        )
+    }) else {
+        return false;
+    };
+    let own: Vec<Option<usize>> = if parts.is_null() {
+        vec![None; count]
+    } else {
+        // SAFETY: the caller promises `count` readable part indices.
+        let parts = unsafe { std::slice::from_raw_parts(parts, count) };
+        let n = g.0.parts.len();
+        if let Some(bad) = parts.iter().find(|&&k| k >= n as i64 || k < -1) {
+            fail(format!("part {bad} of {n}"));
+            return false;
+        }
+        parts.iter().map(|&k| usize::try_from(k).ok()).collect()
+    };
+    let palette: Vec<Mat4> = palette
+        .chunks_exact(16)
+        .map(|m| Mat4::from_cols_slice(m))
+        .collect();
+    let poses = g.0.poses(&palette);
+    let values: Vec<f32> = points
+        .chunks_exact(3)
+        .zip(normals.chunks_exact(3))
+        .zip(&own)
+        .map(|((p, n), &k)| {
+            g.0.occlusion(
+                &poses,
+                Vec3::from_slice(p),
+                Vec3::from_slice(n),
+                k,
+                Terms::All,
+            )
+        })
+        .collect();
+    // SAFETY: forwarded from the caller.
+    unsafe { fill(&values, out, count, "occlusion") }
 }

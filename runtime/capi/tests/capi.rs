@@ -49,7 +49,21 @@ fn library_dir() -> PathBuf {
 }
 
 fn bake_rigged_figure(method: Method) -> (Vec<u8>, aobake_core::Character, Vec<aobake_core::Clip>) {
-    let path = crate_dir().join("../../tests/data/characters/RiggedFigure/RiggedFigure.glb");
+    let mut params = BakeParams::new(method);
+    params.poses = 96;
+    params.samples = 64;
+    params.eval_poses = 8;
+    params.eval_fps = 15.0;
+    bake("RiggedFigure", params)
+}
+
+/// A bundled character baked in process with `params`: the asset, the
+/// character and its clips.
+fn bake(
+    name: &str,
+    params: BakeParams,
+) -> (Vec<u8>, aobake_core::Character, Vec<aobake_core::Clip>) {
+    let path = crate_dir().join(format!("../../tests/data/characters/{name}/{name}.glb"));
     let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let imported = import_character(Upload::single(&bytes), &Limits::default()).unwrap();
     let inputs = BakeInputs {
@@ -59,22 +73,17 @@ fn bake_rigged_figure(method: Method) -> (Vec<u8>, aobake_core::Character, Vec<a
         clip_digests: Vec::new(),
         warnings: Vec::new(),
     };
-    let mut params = BakeParams::new(method);
-    params.poses = 96;
-    params.samples = 64;
-    params.eval_poses = 8;
-    params.eval_fps = 15.0;
     let baked = bake_in_process(&Bake::new(&inputs, params).unwrap(), None).unwrap();
     (baked.asset, imported.character, imported.clips)
 }
 
-fn compile(dir: &Path) -> PathBuf {
-    let exe = dir.join("play");
+fn compile(dir: &Path, program: &str) -> PathBuf {
+    let exe = dir.join(program);
     let lib = library_dir();
     let status = Command::new(std::env::var("CC").unwrap_or_else(|_| "cc".into()))
         .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-I"])
         .arg(crate_dir().join("include"))
-        .arg(crate_dir().join("tests/c/play.c"))
+        .arg(crate_dir().join(format!("tests/c/{program}.c")))
         .arg("-L")
         .arg(&lib)
         .arg(format!("-Wl,-rpath,{}", lib.display()))
@@ -83,7 +92,7 @@ fn compile(dir: &Path) -> PathBuf {
         .arg(&exe)
         .status()
         .expect("a C compiler (cc)");
-    assert!(status.success(), "play.c compiles against the header");
+    assert!(status.success(), "{program}.c compiles against the header");
     exe
 }
 
@@ -91,7 +100,7 @@ fn compile(dir: &Path) -> PathBuf {
 fn a_c_program_plays_an_asset_as_the_runtime_does() {
     let dir = std::env::temp_dir().join(format!("aobake-capi-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let exe = compile(&dir);
+    let exe = compile(&dir, "play");
     for method in [Method::VertexLinear, Method::VertexClustered] {
         let (asset, character, clips) = bake_rigged_figure(method);
         let asset_path = dir.join("figure.aobake");
@@ -144,5 +153,149 @@ fn a_c_program_plays_an_asset_as_the_runtime_does() {
         assert_eq!(ao, rust.evaluate(), "{method:?}: AO bit for bit");
         assert!(ao.iter().any(|&a| a > 0.0), "{method:?}: some occlusion");
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Runs `exe` with `args` on the library it was built with; the floats it
+/// wrote to `out`.
+fn run_c(exe: &Path, args: &[&Path], out: &Path) -> Vec<f32> {
+    // cargo's LD_LIBRARY_PATH would put target/debug first, where an older
+    // build's copy of the library may lie: the rpath decides.
+    let run = Command::new(exe)
+        .env_remove("LD_LIBRARY_PATH")
+        .args(args)
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    std::fs::read(out)
+        .unwrap()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect()
+}
+
+/// Receivers as lookups.c reads them: `px py pz nx ny nz part` a line.
+fn receivers_text(receivers: &[(glam::Vec3, glam::Vec3, i64)]) -> String {
+    receivers
+        .iter()
+        .map(|(p, n, k)| {
+            format!(
+                "{:e} {:e} {:e} {:e} {:e} {:e} {k}\n",
+                p.x, p.y, p.z, n.x, n.y, n.z
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
+    use aobake_runtime::method::{
+        cubemap::CubemapModel,
+        grid::model::{GridModel, Terms},
+    };
+    use glam::Vec3;
+
+    let dir = std::env::temp_dir().join(format!("aobake-capi-lookups-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let exe = compile(&dir, "lookups");
+    let receivers_path = dir.join("receivers.txt");
+    let asset_path = dir.join("asset.aob");
+    let out_path = dir.join("out.bin");
+
+    // A small cubemap of CesiumMan's walk; receivers around it and below.
+    let mut params = BakeParams::new(Method::CubemapDiscrete);
+    params.samples = 16;
+    params.cubemap.resolution = 8;
+    params.cubemap.times = 16;
+    params.cubemap.eval_times = 2;
+    let (asset, _, _) = bake("CesiumMan", params);
+    std::fs::write(&asset_path, &asset).unwrap();
+    let container = aobake_runtime::Container::from_bytes(&asset).unwrap();
+    let (model, _) = CubemapModel::from_container(&container).unwrap();
+    let s = model.layout.spheroid;
+    let receivers: Vec<(Vec3, Vec3, i64)> = (0..64)
+        .map(|i| {
+            let t = i as f32 / 63.0;
+            let d = Vec3::new((7.0 * t).cos(), 2.0 * t - 1.0, (7.0 * t).sin());
+            (s.centre + s.radii * d * (0.6 + 0.8 * t), Vec3::Y, -1)
+        })
+        .collect();
+    std::fs::write(&receivers_path, receivers_text(&receivers)).unwrap();
+    let seconds = 0.7f32;
+    let c = run_c(
+        &exe,
+        &[
+            Path::new("cubemap"),
+            &asset_path,
+            Path::new(&seconds.to_string()),
+            &receivers_path,
+        ],
+        &out_path,
+    );
+    let phase = model.layout.phase(seconds);
+    let rust: Vec<f32> = receivers
+        .iter()
+        .map(|(p, _, _)| model.occlusion(*p, phase))
+        .collect();
+    assert_eq!(c, rust, "cubemap lookups bit for bit");
+    assert!(rust.iter().any(|&a| a > 0.0), "some occlusion");
+
+    // Small grids of the milk truck's parts, posed at a frame of its clip.
+    let mut params = BakeParams::new(Method::Grid);
+    params.grid.resolution = 8;
+    params.grid.rays = 32;
+    params.grid.eval_frames = 2;
+    params.grid.eval_rays = 16;
+    params.grid.eval_ground = 16;
+    params.grid.average_frames = 2;
+    let (asset, character, clips) = bake("CesiumMilkTruck", params);
+    std::fs::write(&asset_path, &asset).unwrap();
+    let container = aobake_runtime::Container::from_bytes(&asset).unwrap();
+    let (model, _) = GridModel::from_container(&container).unwrap();
+    let palette = character.joint_matrices(&Pose::sample(&character.skeleton, &clips[0], 0.4));
+    let palette_text: String = palette
+        .iter()
+        .map(|m| {
+            let n: Vec<String> = m.to_cols_array().iter().map(|x| format!("{x:e}")).collect();
+            n.join(" ") + "\n"
+        })
+        .collect();
+    let palette_path = dir.join("palette.txt");
+    std::fs::write(&palette_path, palette_text).unwrap();
+    let poses = model.poses(&palette);
+    // Receivers at each part's grid centre (on that part, facing up) and
+    // on the ground below it (on no part).
+    let mut receivers = Vec::new();
+    for (k, pose) in poses.iter().enumerate() {
+        let centre = pose
+            .grid_from_world
+            .inverse()
+            .transform_point3(Vec3::splat(0.5));
+        receivers.push((centre, Vec3::Y, k as i64));
+        receivers.push((centre - Vec3::Y * 0.5, Vec3::Y, -1));
+    }
+    std::fs::write(&receivers_path, receivers_text(&receivers)).unwrap();
+    let c = run_c(
+        &exe,
+        &[
+            Path::new("grid"),
+            &asset_path,
+            &palette_path,
+            &receivers_path,
+        ],
+        &out_path,
+    );
+    let rust: Vec<f32> = receivers
+        .iter()
+        .map(|(p, n, k)| model.occlusion(&poses, *p, *n, usize::try_from(*k).ok(), Terms::All))
+        .collect();
+    assert_eq!(c, rust, "grid lookups bit for bit");
+    assert!(rust.iter().any(|&a| a > 0.0), "some occlusion");
     std::fs::remove_dir_all(&dir).ok();
 }
