@@ -94,14 +94,9 @@ mod tests {
         };
         let texels = (0..layout.texel_bytes()).map(|i| (i * 29) as u8).collect();
         let model = CubemapModel { layout, texels };
-        let fields = AssetHeaderFields {
-            generator: "test".into(),
-            bake_key: "k".into(),
-            character: "c".into(),
-            clips: vec![],
-            params: serde_json::json!({}),
-        };
-        let bytes = model.to_container(fields, "walk").to_bytes();
+        let bytes = model
+            .to_container(AssetHeaderFields::for_tests(), "walk")
+            .to_bytes();
         match Asset::from_bytes(&bytes).unwrap() {
             Asset::Cubemap {
                 model: read,

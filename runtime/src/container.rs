@@ -416,6 +416,20 @@ pub struct AssetHeaderFields {
 }
 
 #[cfg(test)]
+impl AssetHeaderFields {
+    /// Placeholder fields for the codecs' tests.
+    pub(crate) fn for_tests() -> Self {
+        Self {
+            generator: "test".into(),
+            bake_key: "k".into(),
+            character: "c".into(),
+            clips: vec![],
+            params: serde_json::json!({}),
+        }
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
 

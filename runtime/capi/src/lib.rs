@@ -35,7 +35,7 @@ use std::{
 };
 
 use aobake_runtime::{
-    Container, Family,
+    Asset,
     method::{
         cubemap::CubemapModel,
         grid::model::{GridModel, Terms},
@@ -90,6 +90,53 @@ pub extern "C" fn aobake_last_error() -> *const c_char {
     LAST_ERROR.with(|e| e.borrow().as_ref().map_or(std::ptr::null(), |c| c.as_ptr()))
 }
 
+/// Reads the asset in `len` bytes at `bytes` (copied) with
+/// [`Asset::from_bytes`], keeps it as a new handle if `pick` takes its
+/// family, or returns NULL with the reason.
+///
+/// # Safety
+/// `bytes` must be NULL or point to `len` readable bytes.
+unsafe fn open<T>(
+    bytes: *const u8,
+    len: usize,
+    wanted: &str,
+    pick: impl FnOnce(Asset) -> Option<T>,
+) -> *mut T {
+    if bytes.is_null() {
+        fail("bytes is NULL");
+        return std::ptr::null_mut();
+    }
+    // SAFETY: the caller promises `len` readable bytes at `bytes`, which
+    // is not NULL.
+    let data = unsafe { std::slice::from_raw_parts(bytes, len) };
+    let asset = match Asset::from_bytes(data) {
+        Ok(asset) => asset,
+        Err(e) => {
+            fail(e.to_string());
+            return std::ptr::null_mut();
+        }
+    };
+    let method = asset.method();
+    match pick(asset) {
+        Some(handle) => Box::into_raw(Box::new(handle)),
+        None => {
+            fail(format!("a {} asset is not a {wanted} asset", method.name()));
+            std::ptr::null_mut()
+        }
+    }
+}
+
+/// Frees a handle made by [`open`] (NULL is ignored).
+///
+/// # Safety
+/// `handle` must be NULL or a live handle from [`open`] not yet freed.
+unsafe fn free<T>(handle: *mut T) {
+    if !handle.is_null() {
+        // SAFETY: the caller passes a live handle made by Box::into_raw.
+        drop(unsafe { Box::from_raw(handle) });
+    }
+}
+
 /// Reads a vertex-method asset from `len` bytes at `bytes` (copied; the
 /// caller may free them after). NULL on failure: not an asset, damaged,
 /// not a vertex method, or written before asset format 1.4 (no rig).
@@ -101,19 +148,12 @@ pub unsafe extern "C" fn aobake_vertex_ao_open(
     bytes: *const u8,
     len: usize,
 ) -> *mut AobakeVertexAo {
-    if bytes.is_null() {
-        fail("bytes is NULL");
-        return std::ptr::null_mut();
-    }
-    // SAFETY: the caller promises `len` readable bytes at `bytes`, which
-    // is not NULL.
-    let data = unsafe { std::slice::from_raw_parts(bytes, len) };
-    match VertexAo::from_bytes(data) {
-        Ok(ao) => Box::into_raw(Box::new(AobakeVertexAo(ao))),
-        Err(e) => {
-            fail(e.to_string());
-            std::ptr::null_mut()
-        }
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        open(bytes, len, "vertex", |a| match a {
+            Asset::Vertex(ao) => Some(AobakeVertexAo(*ao)),
+            _ => None,
+        })
     }
 }
 
@@ -124,10 +164,8 @@ pub unsafe extern "C" fn aobake_vertex_ao_open(
 /// freed.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_vertex_ao_free(ao: *mut AobakeVertexAo) {
-    if !ao.is_null() {
-        // SAFETY: the caller passes a live handle made by Box::into_raw.
-        drop(unsafe { Box::from_raw(ao) });
-    }
+    // SAFETY: forwarded from the caller.
+    unsafe { free(ao) }
 }
 
 /// The handle behind a pointer, or an error for NULL.
@@ -357,36 +395,6 @@ pub struct AobakeCubemap(CubemapModel);
 #[derive(Debug)]
 pub struct AobakeGrid(GridModel);
 
-/// The container in `len` bytes at `bytes`, of `family`, or `None` with
-/// the reason.
-///
-/// # Safety
-/// `bytes` must be NULL or point to `len` readable bytes.
-unsafe fn container(bytes: *const u8, len: usize, family: Family) -> Option<Container> {
-    if bytes.is_null() {
-        fail("bytes is NULL");
-        return None;
-    }
-    // SAFETY: the caller promises `len` readable bytes at `bytes`.
-    let data = unsafe { std::slice::from_raw_parts(bytes, len) };
-    let c = Container::from_bytes(data)
-        .map_err(|e| fail(e.to_string()))
-        .ok()?;
-    if c.method.family() != family {
-        let wanted = match family {
-            Family::Cubemap => "cubemap",
-            Family::Grid => "grid",
-            Family::Vertex => "vertex",
-        };
-        fail(format!(
-            "a {} asset is not a {wanted} asset",
-            c.method.name()
-        ));
-        return None;
-    }
-    Some(c)
-}
-
 /// Reads a cubemap asset (`cubemap-discrete` or `cubemap-continuous`) from
 /// `len` bytes at `bytes`; NULL on failure.
 ///
@@ -395,15 +403,11 @@ unsafe fn container(bytes: *const u8, len: usize, family: Family) -> Option<Cont
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_cubemap_open(bytes: *const u8, len: usize) -> *mut AobakeCubemap {
     // SAFETY: forwarded from the caller.
-    let Some(c) = (unsafe { container(bytes, len, Family::Cubemap) }) else {
-        return std::ptr::null_mut();
-    };
-    match CubemapModel::from_container(&c) {
-        Ok((model, _)) => Box::into_raw(Box::new(AobakeCubemap(model))),
-        Err(e) => {
-            fail(e.to_string());
-            std::ptr::null_mut()
-        }
+    unsafe {
+        open(bytes, len, "cubemap", |a| match a {
+            Asset::Cubemap { model, .. } => Some(AobakeCubemap(model)),
+            _ => None,
+        })
     }
 }
 
@@ -413,10 +417,8 @@ pub unsafe extern "C" fn aobake_cubemap_open(bytes: *const u8, len: usize) -> *m
 /// `cubemap` must be NULL or a live handle from `aobake_cubemap_open`.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_cubemap_free(cubemap: *mut AobakeCubemap) {
-    if !cubemap.is_null() {
-        // SAFETY: the caller passes a live handle made by Box::into_raw.
-        drop(unsafe { Box::from_raw(cubemap) });
-    }
+    // SAFETY: forwarded from the caller.
+    unsafe { free(cubemap) }
 }
 
 /// The baked clip's duration in seconds (the cycle), 0 for NULL.
@@ -491,15 +493,11 @@ unsafe fn floats<'a>(
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_open(bytes: *const u8, len: usize) -> *mut AobakeGrid {
     // SAFETY: forwarded from the caller.
-    let Some(c) = (unsafe { container(bytes, len, Family::Grid) }) else {
-        return std::ptr::null_mut();
-    };
-    match GridModel::from_container(&c) {
-        Ok((model, _)) => Box::into_raw(Box::new(AobakeGrid(model))),
-        Err(e) => {
-            fail(e.to_string());
-            std::ptr::null_mut()
-        }
+    unsafe {
+        open(bytes, len, "grid", |a| match a {
+            Asset::Grid { model, .. } => Some(AobakeGrid(model)),
+            _ => None,
+        })
     }
 }
 
@@ -509,10 +507,8 @@ pub unsafe extern "C" fn aobake_grid_open(bytes: *const u8, len: usize) -> *mut 
 /// `grid` must be NULL or a live handle from `aobake_grid_open`.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_free(grid: *mut AobakeGrid) {
-    if !grid.is_null() {
-        // SAFETY: the caller passes a live handle made by Box::into_raw.
-        drop(unsafe { Box::from_raw(grid) });
-    }
+    // SAFETY: forwarded from the caller.
+    unsafe { free(grid) }
 }
 
 /// Parts (rigid bodies with a grid each), 0 for NULL.

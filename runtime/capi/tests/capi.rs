@@ -124,26 +124,7 @@ fn a_c_program_plays_an_asset_as_the_runtime_does() {
         }
         let pose_path = dir.join("pose.txt");
         std::fs::write(&pose_path, text).unwrap();
-        let out_path = dir.join("out.bin");
-        // The library the test was built with, by the rpath: cargo's
-        // LD_LIBRARY_PATH would put target/debug first, where an older
-        // build's copy may lie.
-        let run = Command::new(&exe)
-            .env_remove("LD_LIBRARY_PATH")
-            .args([&asset_path, &pose_path, &out_path])
-            .output()
-            .unwrap();
-        assert!(
-            run.status.success(),
-            "{method:?}: {}{}",
-            String::from_utf8_lossy(&run.stdout),
-            String::from_utf8_lossy(&run.stderr)
-        );
-        let floats: Vec<f32> = std::fs::read(&out_path)
-            .unwrap()
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
-            .collect();
+        let floats = run_c(&exe, &[&asset_path, &pose_path], &dir.join("out.bin"));
         let mut rust = VertexAo::from_bytes(&asset).unwrap();
         for (n, t) in pose.locals.iter().enumerate() {
             assert!(rust.set_local(n, *t));

@@ -172,21 +172,13 @@ mod tests {
         CubemapModel { layout, texels }
     }
 
-    fn fields() -> AssetHeaderFields {
-        AssetHeaderFields {
-            generator: "test".into(),
-            bake_key: "k".into(),
-            character: "c".into(),
-            clips: vec![],
-            params: serde_json::json!({}),
-        }
-    }
-
     #[test]
     fn a_model_round_trips_through_its_container_bit_for_bit() {
         for encoding in [Encoding::Discrete, Encoding::Continuous, Encoding::Thirds] {
             let m = model(encoding);
-            let bytes = m.to_container(fields(), "walk").to_bytes();
+            let bytes = m
+                .to_container(AssetHeaderFields::for_tests(), "walk")
+                .to_bytes();
             let (back, header) =
                 CubemapModel::from_container(&Container::from_bytes(&bytes).unwrap()).unwrap();
             assert_eq!(back, m);
@@ -210,7 +202,11 @@ mod tests {
         for (what, break_it) in cases {
             let mut m = model(Encoding::Discrete);
             break_it(&mut m);
-            let c = Container::from_bytes(&m.to_container(fields(), "walk").to_bytes()).unwrap();
+            let c = Container::from_bytes(
+                &m.to_container(AssetHeaderFields::for_tests(), "walk")
+                    .to_bytes(),
+            )
+            .unwrap();
             let e = CubemapModel::from_container(&c).unwrap_err().to_string();
             assert!(e.contains(what), "{what}: {e}");
         }

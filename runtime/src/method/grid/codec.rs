@@ -267,21 +267,11 @@ mod tests {
         }
     }
 
-    fn fields() -> AssetHeaderFields {
-        AssetHeaderFields {
-            generator: "test".into(),
-            bake_key: "k".into(),
-            character: "c".into(),
-            clips: vec![],
-            params: serde_json::json!({}),
-        }
-    }
-
     #[test]
     fn a_model_round_trips_through_its_container_bit_for_bit() {
         for cones in [false, true] {
             let m = model(cones);
-            let bytes = m.to_container(fields()).to_bytes();
+            let bytes = m.to_container(AssetHeaderFields::for_tests()).to_bytes();
             let (back, header) =
                 GridModel::from_container(&Container::from_bytes(&bytes).unwrap()).unwrap();
             assert_eq!(back, m);
@@ -304,7 +294,9 @@ mod tests {
         for (what, break_it) in cases {
             let mut m = model(false);
             break_it(&mut m);
-            let c = Container::from_bytes(&m.to_container(fields()).to_bytes()).unwrap();
+            let c =
+                Container::from_bytes(&m.to_container(AssetHeaderFields::for_tests()).to_bytes())
+                    .unwrap();
             let e = GridModel::from_container(&c).unwrap_err().to_string();
             assert!(e.contains(what), "{what}: {e}");
         }
