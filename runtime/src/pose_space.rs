@@ -13,7 +13,7 @@
 //! aobake-core chooses the layouts from the character and its clips when
 //! it bakes; an asset stores them in its header.
 
-use glam::{Affine3A, DAffine3, DQuat, DVec3, Quat, Vec3};
+use glam::{DAffine3, DQuat, DVec3, Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::rig::{Skeleton, Transform};
@@ -235,19 +235,7 @@ impl Handles {
     /// [`Handles::handles`] in double precision from the single-precision
     /// transforms: what the run time blends and projects.
     pub fn handles_f64(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f64> {
-        let mut world = vec![DAffine3::IDENTITY; skeleton.nodes.len()];
-        for &i in &skeleton.order {
-            let l = &locals[i];
-            let local = DAffine3::from_scale_rotation_translation(
-                l.scale.as_dvec3(),
-                l.rotation.as_dquat(),
-                l.translation.as_dvec3(),
-            );
-            world[i] = match skeleton.nodes[i].parent {
-                Some(p) => world[p] * local,
-                None => local,
-            };
-        }
+        let world = skeleton.world_from_node_f64(locals);
         let root_from_world = self.root.map_or(DAffine3::IDENTITY, |r| world[r].inverse());
         let mut out = Vec::with_capacity(self.len());
         for (&j, offset) in self.joints.iter().zip(&self.offsets) {
@@ -265,15 +253,11 @@ impl Handles {
     /// The handle vector of a pose (one local transform per node of
     /// `skeleton`): per joint, its position and its off-axis handle, in the
     /// body root's frame.
+    /// (Computed in double precision and rounded.)
     pub fn handles(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f32> {
-        let world = skeleton.world_from_node(locals);
-        let root_from_world = self.root.map_or(Affine3A::IDENTITY, |r| world[r].inverse());
-        let mut out = Vec::with_capacity(self.len());
-        for (&j, offset) in self.joints.iter().zip(&self.offsets) {
-            let root_from_joint = root_from_world * world[j];
-            out.extend(Vec3::from(root_from_joint.translation).to_array());
-            out.extend(root_from_joint.transform_point3(*offset).to_array());
-        }
-        out
+        self.handles_f64(skeleton, locals)
+            .into_iter()
+            .map(|x| x as f32)
+            .collect()
     }
 }

@@ -3,7 +3,7 @@
 //! transforms (found by name with [`Skeleton::find`]); the nodes it does
 //! not set keep their rest transforms ([`Skeleton::rest_locals`]).
 
-use glam::{Affine3A, Mat4, Quat, Vec3};
+use glam::{Affine3A, DAffine3, Mat4, Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// A node's local transform as translation, rotation and scale (the form
@@ -75,6 +75,25 @@ impl Skeleton {
         let mut world = vec![Affine3A::IDENTITY; self.nodes.len()];
         for &i in &self.order {
             let local = locals[i].to_affine();
+            world[i] = match self.nodes[i].parent {
+                Some(p) => world[p] * local,
+                None => local,
+            };
+        }
+        world
+    }
+
+    /// [`Skeleton::world_from_node`] in double precision (what the run
+    /// time's per-pose step reads).
+    pub fn world_from_node_f64(&self, locals: &[Transform]) -> Vec<DAffine3> {
+        let mut world = vec![DAffine3::IDENTITY; self.nodes.len()];
+        for &i in &self.order {
+            let l = &locals[i];
+            let local = DAffine3::from_scale_rotation_translation(
+                l.scale.as_dvec3(),
+                l.rotation.as_dquat(),
+                l.translation.as_dvec3(),
+            );
             world[i] = match self.nodes[i].parent {
                 Some(p) => world[p] * local,
                 None => local,

@@ -112,16 +112,16 @@ pub fn export_gltf(
     let mut warnings = Vec::new();
     // Every buffer into the one: views move by their buffer's offset.
     let bases: Vec<usize> = source.buffers.iter().map(|b| out.append(b)).collect();
-    for view in array(&mut json, "bufferViews") {
+    for view in existing(&mut json, "bufferViews") {
         let buffer = view["buffer"].as_u64().unwrap_or(0) as usize;
         let offset = view["byteOffset"].as_u64().unwrap_or(0) as usize;
         view["buffer"] = 0.into();
         view["byteOffset"] = (bases.get(buffer).copied().unwrap_or(0) + offset).into();
     }
     // Images given by URI: embedded, where the upload has them.
-    let views_before = array(&mut json, "bufferViews").len();
+    let views_before = existing(&mut json, "bufferViews").len();
     let mut new_views = Vec::new();
-    for (i, image) in array(&mut json, "images").iter_mut().enumerate() {
+    for (i, image) in existing(&mut json, "images").iter_mut().enumerate() {
         if image.get("uri").is_none() {
             continue;
         }
@@ -153,7 +153,9 @@ pub fn export_gltf(
         object.insert("bufferView".into(), (views_before + new_views.len()).into());
         new_views.push(json!({ "buffer": 0, "byteOffset": offset, "byteLength": bytes.len() }));
     }
-    array(&mut json, "bufferViews").extend(new_views);
+    if !new_views.is_empty() {
+        array(&mut json, "bufferViews").extend(new_views);
+    }
 
     // Each node that instances a mesh gets its own copy after the first.
     let mut mesh_of_node = std::collections::BTreeMap::<usize, usize>::new();
@@ -281,9 +283,6 @@ pub fn export_gltf(
         }
     }
     root.insert("buffers".into(), json!([{ "byteLength": out.bin.len() }]));
-    // Arrays walked above that the file did not have (glTF forbids empty
-    // ones).
-    root.retain(|_, value| value.as_array().is_none_or(|a| !a.is_empty()));
     Ok(GltfExport {
         glb: out.finish(&json),
         warnings,
@@ -380,7 +379,15 @@ fn rows_per_vertex(model: &Model) -> Result<(usize, Vec<f32>), GltfExportError> 
     Ok((rows, out))
 }
 
-/// A top-level array of the glTF JSON (created empty if absent).
+/// A top-level array of the glTF JSON, empty if the file has none (nothing
+/// is added to the file).
+fn existing<'a>(json: &'a mut Value, key: &str) -> &'a mut [Value] {
+    json.get_mut(key)
+        .and_then(Value::as_array_mut)
+        .map_or(&mut [], Vec::as_mut_slice)
+}
+
+/// A top-level array of the glTF JSON to add to (created if absent).
 fn array<'a>(json: &'a mut Value, key: &str) -> &'a mut Vec<Value> {
     let root = json.as_object_mut().expect("a glTF root is an object");
     let entry = root.entry(key).or_insert_with(|| Value::Array(Vec::new()));

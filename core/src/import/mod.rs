@@ -41,9 +41,14 @@ pub struct Imported {
 /// Imports a character and the animations of its file.
 pub fn import_character(upload: Upload<'_>, limits: &Limits) -> Result<Imported, ImportError> {
     let doc = document::Document::parse(upload, limits)?;
-    let (character, mut warnings) = mesh::build_character(&doc, limits)?;
+    imported(&doc, limits)
+}
+
+/// The character and clips of a parsed file.
+fn imported(doc: &document::Document, limits: &Limits) -> Result<Imported, ImportError> {
+    let (character, mut warnings) = mesh::build_character(doc, limits)?;
     warnings.splice(0..0, doc.warnings.iter().cloned());
-    let clips = animation::read_clips(&doc, &character.skeleton, &Some, limits, &mut warnings)?;
+    let clips = animation::read_clips(doc, &character.skeleton, &Some, limits, &mut warnings)?;
     Ok(Imported {
         character,
         clips,
@@ -69,9 +74,7 @@ pub(crate) fn import_with_source(
     limits: &Limits,
 ) -> Result<Source, ImportError> {
     let doc = document::Document::parse(upload, limits)?;
-    let (character, mut warnings) = mesh::build_character(&doc, limits)?;
-    warnings.splice(0..0, doc.warnings.iter().cloned());
-    let clips = animation::read_clips(&doc, &character.skeleton, &Some, limits, &mut warnings)?;
+    let imported = imported(&doc, limits)?;
     let container = source::Container::parse(upload.main)?;
     let json: serde_json::Value =
         serde_json::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
@@ -93,12 +96,7 @@ pub(crate) fn import_with_source(
         })
         .collect::<Result<_, ImportError>>()?;
     Ok(Source {
-        imported: Imported {
-            character,
-            clips,
-            warnings,
-            name: doc.name(),
-        },
+        imported,
         json,
         buffers: doc.buffers,
         images,

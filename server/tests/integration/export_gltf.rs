@@ -79,25 +79,31 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
     for (file, method) in runs {
         let name = format!("{}-{method}", file.file_stem().unwrap().to_string_lossy());
         let asset = dir.path().join(format!("{name}.aob"));
+        let report = dir.path().join(format!("{name}.json"));
         // Small bakes: the export, not the fit, is under test.
-        let bake = aobake(&[
-            "bake",
-            file.to_str().unwrap(),
-            "--method",
-            method,
-            "--poses",
-            "48",
-            "--samples",
-            "16",
-            "--eval-poses",
-            "2",
-            "--eval-fps",
-            "5",
-            "--out",
-            asset.to_str().unwrap(),
-            "--report",
-            dir.path().join(format!("{name}.json")).to_str().unwrap(),
-        ]);
+        let bake_with = |extra: &[&str]| {
+            let mut args = vec![
+                "bake",
+                file.to_str().unwrap(),
+                "--method",
+                method,
+                "--poses",
+                "48",
+                "--samples",
+                "16",
+                "--eval-poses",
+                "2",
+                "--eval-fps",
+                "5",
+                "--out",
+                asset.to_str().unwrap(),
+                "--report",
+                report.to_str().unwrap(),
+            ];
+            args.extend(extra);
+            aobake(&args)
+        };
+        let bake = bake_with(&[]);
         if !bake.status.success() {
             // A character no clip animates has no joint angles to fit.
             assert!(
@@ -136,30 +142,7 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
                     stderr(&export)
                 );
             }
-            let again = aobake(
-                &[
-                    "bake",
-                    file.to_str().unwrap(),
-                    "--method",
-                    method,
-                    "--poses",
-                    "48",
-                    "--samples",
-                    "16",
-                    "--eval-poses",
-                    "2",
-                    "--eval-fps",
-                    "5",
-                    "--out",
-                    asset.to_str().unwrap(),
-                    "--report",
-                    dir.path().join(format!("{name}.json")).to_str().unwrap(),
-                ]
-                .iter()
-                .chain(fix)
-                .copied()
-                .collect::<Vec<_>>(),
-            );
+            let again = bake_with(fix);
             assert!(again.status.success(), "{name}: {}", stderr(&again));
             export = aobake(&export_args);
         }
