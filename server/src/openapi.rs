@@ -8,7 +8,7 @@ use utoipa::{
     openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme},
 };
 
-use crate::routes::{assets, bakes, jobs, system, uploads};
+use crate::routes::{assets, bakes, jobs, system, uploads, viewer};
 
 use aobake_api::schema::Digest;
 
@@ -50,6 +50,8 @@ impl Modify for BearerAuth {
         bakes::show,
         bakes::report,
         bakes::previews,
+        viewer::scene,
+        viewer::frames,
         assets::preview,
         bakes::patch,
         bakes::control,

@@ -301,6 +301,99 @@ pub fn translate(
     })
 }
 
+/// A WebGL2 program: a vertex and a fragment shader in GLSL ES 3.00 and
+/// the names naga gave their resources, so that a page binds them by the
+/// WGSL's binding numbers (GLSL ES 3.00 has no `layout(binding)`).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct WebGlProgram {
+    /// The vertex shader.
+    pub vertex: String,
+    /// The fragment shader.
+    pub fragment: String,
+    /// Uniform blocks (`uniformBlockBinding`) and samplers
+    /// (`uniform1i`) by their WGSL binding in group 0, per stage.
+    pub resources: Vec<WebGlResource>,
+}
+
+/// One resource of a [`WebGlProgram`].
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct WebGlResource {
+    /// Its WGSL binding (group 0).
+    pub binding: u32,
+    /// `block` (a uniform block) or `sampler`.
+    pub kind: &'static str,
+    /// Its name in the GLSL.
+    pub name: String,
+}
+
+/// The dashboard viewer's program ([`crate::VIEWER`]) for WebGL2.
+pub fn webgl_viewer() -> Result<WebGlProgram, ExportError> {
+    let name = "viewer";
+    let fail = |target, message| ExportError {
+        shader: name,
+        target,
+        message,
+    };
+    let (module, info) = parse(name, crate::VIEWER).map_err(|m| fail(None, m))?;
+    let options = glsl::Options {
+        version: glsl::Version::Embedded {
+            version: 300,
+            is_webgl: true,
+        },
+        writer_flags: glsl::WriterFlags::empty(),
+        binding_map: Default::default(),
+        zero_initialize_workgroup_memory: true,
+    };
+    let mut resources = Vec::new();
+    let mut stage = |shader_stage, entry_point: &str| -> Result<String, ExportError> {
+        let pipeline = glsl::PipelineOptions {
+            shader_stage,
+            entry_point: entry_point.to_owned(),
+            multiview: None,
+        };
+        let mut text = String::new();
+        let reflection = glsl::Writer::new(
+            &mut text,
+            &module,
+            &info,
+            &options,
+            &pipeline,
+            naga::proc::BoundsCheckPolicies::default(),
+        )
+        .and_then(|mut w| w.write())
+        .map_err(|e| fail(Some(Target::GlslEs300), e.to_string()))?;
+        let binding = |handle: naga::Handle<naga::GlobalVariable>| {
+            module.global_variables[handle]
+                .binding
+                .map_or(u32::MAX, |b| b.binding)
+        };
+        for (handle, block) in &reflection.uniforms {
+            resources.push(WebGlResource {
+                binding: binding(*handle),
+                kind: "block",
+                name: block.clone(),
+            });
+        }
+        for (sampler, mapping) in &reflection.texture_mapping {
+            resources.push(WebGlResource {
+                binding: binding(mapping.texture),
+                kind: "sampler",
+                name: sampler.clone(),
+            });
+        }
+        Ok(text)
+    };
+    let vertex = stage(ShaderStage::Vertex, "vs_main")?;
+    let fragment = stage(ShaderStage::Fragment, "fs_main")?;
+    resources.sort_by(|a, b| (a.binding, &a.name).cmp(&(b.binding, &b.name)));
+    resources.dedup();
+    Ok(WebGlProgram {
+        vertex,
+        fragment,
+        resources,
+    })
+}
+
 /// A resource the shader binds.
 struct Binding {
     binding: ResourceBinding,
@@ -388,6 +481,47 @@ mod tests {
                 assert!(mine.iter().all(|f| !f.bytes.is_empty()));
             }
         }
+    }
+
+    #[test]
+    fn the_viewer_is_valid_glsl_es_300_with_every_resource_named() {
+        let program = webgl_viewer().unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        for (file, text) in [
+            ("viewer.vert", &program.vertex),
+            ("viewer.frag", &program.fragment),
+        ] {
+            assert!(text.starts_with("#version 300 es"), "{file}");
+            let path = dir.path().join(file);
+            std::fs::write(&path, text).unwrap();
+            let (ok, said) = run("glslangValidator", &[path.as_os_str()]);
+            assert!(ok, "{file}: {said}");
+        }
+        // Bindings 0 to 9, each named as the GLSL declares it: the
+        // samplers (2 to 5 for the AO's arrays, 8 and 9 for the skin) in
+        // the vertex stage, the shading uniforms (6) in both.
+        for binding in 0..10 {
+            let named: Vec<&WebGlResource> = program
+                .resources
+                .iter()
+                .filter(|r| r.binding == binding)
+                .collect();
+            assert!(!named.is_empty(), "binding {binding}: {:?}", program.resources);
+            for r in named {
+                let text = format!("{}{}", program.vertex, program.fragment);
+                assert!(text.contains(&r.name), "{r:?}");
+            }
+        }
+        assert!(
+            program
+                .resources
+                .iter()
+                .filter(|r| r.binding == 6)
+                .count()
+                == 2,
+            "{:?}",
+            program.resources
+        );
     }
 
     #[test]

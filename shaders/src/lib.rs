@@ -16,6 +16,8 @@
 //! * [`GRID_AO`]: run-time lookup of Malmer et al.'s grids at receivers
 //!   (`grid_occlusion`, and `cs_main` over a batch).
 //! * [`PREVIEW`]: the preview raster (`vs_main`, `fs_main`).
+//! * [`VIEWER`]: the dashboard's WebGL2 viewer: GPU skinning,
+//!   `vertex_ao(v)` and the previews' shading, for naga's GLSL ES 3.00.
 //!
 //! The Rust mirrors of the uniforms and storage structs are in [`mirror`],
 //! field for field with size assertions; [`export`] translates the
@@ -41,10 +43,13 @@ pub const VERTEX_AO: &str = concat!(
 );
 
 /// The vertex-method evaluation in a vertex shader (textures instead of
-/// storage buffers, for WebGL2 and GLSL ES 3.00), composed: [`COMMON_F16`]
-/// then `vertex_ao_vs.wgsl`.
+/// storage buffers, for WebGL2 and GLSL ES 3.00), composed: [`COMMON_F16`],
+/// `common/vertex_ao_textures.wgsl`, then `vertex_ao_vs.wgsl` (the tests'
+/// point draw).
 pub const VERTEX_AO_VS: &str = concat!(
     include_str!("../wgsl/common/f16.wgsl"),
+    "\n",
+    include_str!("../wgsl/common/vertex_ao_textures.wgsl"),
     "\n",
     include_str!("../wgsl/vertex_ao_vs.wgsl")
 );
@@ -64,17 +69,37 @@ pub const CUBEMAP_AO: &str = concat!(
 /// The grid lookup shader.
 pub const GRID_AO: &str = include_str!("../wgsl/grid_ao.wgsl");
 
-/// The preview raster shader.
-pub const PREVIEW: &str = include_str!("../wgsl/preview.wgsl");
+/// The preview raster shader, composed: `common/shade.wgsl` then
+/// `preview.wgsl`.
+pub const PREVIEW: &str = concat!(
+    include_str!("../wgsl/common/shade.wgsl"),
+    "\n",
+    include_str!("../wgsl/preview.wgsl")
+);
+
+/// The dashboard viewer's shader (WebGL2 through naga's GLSL ES 3.00:
+/// [`export::webgl_viewer`]), composed: [`COMMON_F16`],
+/// `common/vertex_ao_textures.wgsl`, `common/shade.wgsl`, then
+/// `viewer.wgsl`.
+pub const VIEWER: &str = concat!(
+    include_str!("../wgsl/common/f16.wgsl"),
+    "\n",
+    include_str!("../wgsl/common/vertex_ao_textures.wgsl"),
+    "\n",
+    include_str!("../wgsl/common/shade.wgsl"),
+    "\n",
+    include_str!("../wgsl/viewer.wgsl")
+);
 
 /// Every composed pipeline source, by file name.
-pub fn sources() -> [(&'static str, &'static str); 5] {
+pub fn sources() -> [(&'static str, &'static str); 6] {
     [
         ("vertex_ao.wgsl", VERTEX_AO),
         ("vertex_ao_vs.wgsl", VERTEX_AO_VS),
         ("cubemap_ao.wgsl", CUBEMAP_AO),
         ("grid_ao.wgsl", GRID_AO),
         ("preview.wgsl", PREVIEW),
+        ("viewer.wgsl", VIEWER),
     ]
 }
 

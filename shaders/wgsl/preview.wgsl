@@ -12,29 +12,7 @@
 // encodes on store and resolves multisamples in linear space.
 // Mirrored field for field by aobake_shaders::PreviewUniforms.
 
-struct Uniforms {
-    clip_from_world: mat4x4<f32>,
-    // xyz: the eye (world space).
-    eye: vec4<f32>,
-    // xyz: unit direction towards the key light; w: its intensity.
-    light: vec4<f32>,
-    // rgb: ambient radiance; w: the key light's wrap (0 = Lambert).
-    ambient: vec4<f32>,
-    // rgb: the surface's albedo.
-    albedo: vec4<f32>,
-    // rgb: the heat map's colour of no error; w: its saturating error.
-    neutral: vec4<f32>,
-    too_dark: vec4<f32>,
-    too_bright: vec4<f32>,
-    // xyz: the ground's centre; w: its half extent (it fades out there).
-    ground: vec4<f32>,
-    // rgb: the background, which the ground fades into.
-    background: vec4<f32>,
-    panel: u32,
-    surface: u32,
-    _pad0: u32,
-    _pad1: u32,
-}
+// Prepended at load time: common/shade.wgsl (Uniforms, shade).
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
 
@@ -64,35 +42,7 @@ fn vs_main(v: VertexIn) -> VertexOut {
     return out;
 }
 
-fn heat(error: f32) -> vec3<f32> {
-    let s = clamp(error / u.neutral.w, -1.0, 1.0);
-    if s >= 0.0 {
-        return mix(u.neutral.rgb, u.too_dark.rgb, s);
-    }
-    return mix(u.neutral.rgb, u.too_bright.rgb, -s);
-}
-
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    var n = normalize(in.normal);
-    // Two-sided: a back face is lit as seen.
-    if dot(n, u.eye.xyz - in.world) < 0.0 {
-        n = -n;
-    }
-    let wrap = u.ambient.w;
-    let key = u.light.w * max(0.0, (dot(n, u.light.xyz) + wrap) / (1.0 + wrap));
-    let truth = clamp(in.truth, 0.0, 1.0);
-    let model = clamp(in.model, 0.0, 1.0);
-    var color: vec3<f32>;
-    if u.panel == 2u {
-        color = heat(model - truth) * (0.6 + 0.4 * key / max(u.light.w, 1e-6));
-    } else {
-        let ao = select(truth, model, u.panel == 1u);
-        color = u.albedo.rgb * (u.ambient.rgb * (1.0 - ao) + vec3<f32>(key));
-    }
-    if u.surface == 1u {
-        let r = length(in.world.xz - u.ground.xz) / u.ground.w;
-        color = mix(color, u.background.rgb, smoothstep(0.5, 1.0, r));
-    }
-    return vec4<f32>(color, 1.0);
+    return vec4<f32>(shade(in.world, in.normal, in.truth, in.model), 1.0);
 }

@@ -100,7 +100,8 @@ pub fn export_gltf(
     check_character(&model, character).map_err(GltfExportError::Unsupported)?;
     let v = character.vertex_count();
 
-    let (static_ao, frames) = static_ao(&model, &source.imported);
+    let imported = &source.imported;
+    let (static_ao, frames) = static_ao(&model, &imported.character.skeleton, &imported.clips);
     let (rows, coefficients) = match &model {
         Model::StaticAverage(_) => (0, Vec::new()),
         _ => rows_per_vertex(&model)?,
@@ -294,10 +295,12 @@ pub fn export_gltf(
 /// The model's AO averaged over the clips' frames at [`FPS`] (at most
 /// [`MAX_FRAMES`], spread evenly), or at rest without clips; and the frame
 /// count.
-fn static_ao(model: &Model, imported: &crate::import::Imported) -> (Vec<f32>, usize) {
-    let skeleton = &imported.character.skeleton;
-    let mut poses: Vec<(usize, f32)> = imported
-        .clips
+pub(crate) fn static_ao(
+    model: &Model,
+    skeleton: &crate::rig::skeleton::Skeleton,
+    clips: &[crate::rig::clip::Clip],
+) -> (Vec<f32>, usize) {
+    let mut poses: Vec<(usize, f32)> = clips
         .iter()
         .enumerate()
         .flat_map(|(c, clip)| clip.frame_times(FPS).into_iter().map(move |t| (c, t)))
@@ -313,7 +316,7 @@ fn static_ao(model: &Model, imported: &crate::import::Imported) -> (Vec<f32>, us
     } else {
         poses
             .iter()
-            .map(|&(c, t)| Pose::sample(skeleton, &imported.clips[c], t).locals)
+            .map(|&(c, t)| Pose::sample(skeleton, &clips[c], t).locals)
             .collect()
     };
     let mut sum = vec![0.0f64; model.vertices()];

@@ -210,6 +210,13 @@ impl<'a> Bake<'a> {
         Ok(out)
     }
 
+    /// The ray-traced truth of every preview frame
+    /// ([`Self::preview_frames`]), stacked from the outputs of the bake's
+    /// `preview-truth` jobs; `None` when there are none.
+    pub fn preview_truth_of(&self, outputs: &[&JobOutput]) -> Result<Option<FrameTruth>, JobError> {
+        self.stacked_truth(outputs, self.preview_frames()?.len())
+    }
+
     /// The previews' truth from the `preview-truth` jobs among `deps`, or
     /// `None` when there are none (a graph from before those jobs: the
     /// preview traces it itself).

@@ -36,6 +36,7 @@ pub mod preview;
 pub mod report;
 pub mod runner;
 pub mod vertex;
+pub mod viewer;
 
 pub use family::{AssetUseError, BakeReport, BakedAsset};
 pub use graph::{GraphOptions, JobGraph, PlannedJob};

@@ -17,6 +17,7 @@ use crate::state::AppState;
 
 const INDEX: &str = include_str!("assets/index.html");
 const APP: &str = include_str!("assets/app.js");
+const VIEWER: &str = include_str!("assets/viewer.js");
 const STYLE: &str = include_str!("assets/style.css");
 
 const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob:; connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
@@ -30,6 +31,10 @@ pub(crate) fn router() -> Router<AppState> {
         .route(
             "/dashboard/app.js",
             get(|| async { file(APP, "text/javascript; charset=utf-8") }),
+        )
+        .route(
+            "/dashboard/viewer.js",
+            get(|| async { file(VIEWER, "text/javascript; charset=utf-8") }),
         )
         .route(
             "/dashboard/style.css",
@@ -67,9 +72,12 @@ mod tests {
             assert!(INDEX.contains(path), "{path}");
         }
         assert!(!INDEX.contains("http://") && !INDEX.contains("https://"));
-        assert!(
-            !APP.contains("http://") && !APP.contains("https://"),
-            "works offline"
-        );
+        for script in [APP, VIEWER] {
+            assert!(
+                !script.contains("http://") && !script.contains("https://"),
+                "works offline"
+            );
+        }
+        assert!(APP.contains("\"./viewer.js\""));
     }
 }

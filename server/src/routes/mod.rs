@@ -6,6 +6,7 @@ pub(crate) mod bakes;
 pub(crate) mod jobs;
 pub(crate) mod system;
 pub(crate) mod uploads;
+pub(crate) mod viewer;
 
 use axum::Router;
 
@@ -19,4 +20,5 @@ pub(crate) fn router() -> Router<AppState> {
         .merge(jobs::router())
         .merge(assets::router())
         .merge(system::router())
+        .merge(viewer::router())
 }

@@ -6,8 +6,8 @@
 //! [`VertexAo`]; a cubemap is looked up on the ground's vertices by
 //! [`CubemapAo`] at the frame's phase.
 
-use aobake_core::bake::{Panel, PreviewModel, RenderFrame, RenderScene, Renderer};
-use aobake_core::image::Image;
+use aobake_core::bake::{Camera, Panel, PreviewModel, RenderFrame, RenderScene, Renderer};
+use aobake_core::image::{HeatMap, Image};
 use aobake_shaders::{GridReceiver, PreviewUniforms};
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;
@@ -136,37 +136,50 @@ impl<'g> PreviewRenderer<'g> {
     }
 
     fn uniforms(scene: &RenderScene<'_>, panel: Panel, ground: bool) -> PreviewUniforms {
-        let c = &scene.camera;
-        let h = &scene.heat_map;
         let aspect = scene.size.0 as f32 / scene.size.1.max(1) as f32;
-        let v4 = |v: [f32; 3], w: f32| [v[0], v[1], v[2], w];
-        let light = Vec3::from(look::LIGHT).normalize().to_array();
-        PreviewUniforms {
-            clip_from_world: c.clip_from_world(aspect).to_cols_array_2d(),
-            eye: c.eye.extend(1.0).to_array(),
-            light: v4(light, look::KEY),
-            ambient: v4([look::AMBIENT; 3], look::WRAP),
-            albedo: v4(
-                if ground {
-                    look::GROUND
-                } else {
-                    look::CHARACTER
-                },
-                1.0,
-            ),
-            neutral: v4(h.neutral, h.range),
-            too_dark: v4(h.too_dark, 0.0),
-            too_bright: v4(h.too_bright, 0.0),
-            ground: [c.target.x, c.ground_y, c.target.z, c.ground_half_extent],
-            background: v4(look::BACKGROUND, 1.0),
-            panel: match panel {
-                Panel::Truth => 0,
-                Panel::Model => 1,
-                Panel::Error => 2,
+        uniforms(&scene.camera, aspect, &scene.heat_map, panel, ground)
+    }
+}
+
+/// The preview shader's uniforms for one surface (`ground`, else the
+/// character) of one panel seen by `camera` at `aspect`: the looks every
+/// preview shares. The dashboard's viewer shades with the same ones
+/// (`shaders/wgsl/common/shade.wgsl`).
+pub fn uniforms(
+    camera: &Camera,
+    aspect: f32,
+    heat_map: &HeatMap,
+    panel: Panel,
+    ground: bool,
+) -> PreviewUniforms {
+    let (c, h) = (camera, heat_map);
+    let v4 = |v: [f32; 3], w: f32| [v[0], v[1], v[2], w];
+    let light = Vec3::from(look::LIGHT).normalize().to_array();
+    PreviewUniforms {
+        clip_from_world: c.clip_from_world(aspect).to_cols_array_2d(),
+        eye: c.eye.extend(1.0).to_array(),
+        light: v4(light, look::KEY),
+        ambient: v4([look::AMBIENT; 3], look::WRAP),
+        albedo: v4(
+            if ground {
+                look::GROUND
+            } else {
+                look::CHARACTER
             },
-            surface: u32::from(ground),
-            _pad: [0; 2],
-        }
+            1.0,
+        ),
+        neutral: v4(h.neutral, h.range),
+        too_dark: v4(h.too_dark, 0.0),
+        too_bright: v4(h.too_bright, 0.0),
+        ground: [c.target.x, c.ground_y, c.target.z, c.ground_half_extent],
+        background: v4(look::BACKGROUND, 1.0),
+        panel: match panel {
+            Panel::Truth => 0,
+            Panel::Model => 1,
+            Panel::Error => 2,
+        },
+        surface: u32::from(ground),
+        _pad: [0; 2],
     }
 }
 

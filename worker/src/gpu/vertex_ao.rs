@@ -3,8 +3,11 @@
 //! core's CPU evaluation, and the previews shade with the model's AO as
 //! the GPU computes it.
 
-use aobake_core::method::vertex::{FormRef, LinearForm, Model, SparseForm};
-use aobake_shaders::{BlockInfo, VertexAoParams};
+use aobake_core::method::vertex::{
+    Model,
+    form::{BLOCK_WORDS, GpuArrays},
+};
+use aobake_shaders::VertexAoParams;
 use wgpu::util::DeviceExt as _;
 
 use super::{Gpu, GpuError};
@@ -29,40 +32,14 @@ pub struct VertexAo<'g> {
     groups: (u32, u32),
 }
 
-/// What a model uploads: the entry point and its buffers' contents.
-pub(super) struct Upload {
-    pub(super) entry: &'static str,
-    pub(super) vertices: u32,
-    pub(super) weights: usize,
-    pub(super) blocks: Vec<BlockInfo>,
-    pub(super) coefficients: Vec<u32>,
-    pub(super) maps: Vec<u32>,
-    pub(super) sparse_rows: Vec<u32>,
+/// A model's arrays as the evaluators read them (the runtime's packing).
+pub(super) fn upload(model: &Model) -> Result<GpuArrays, GpuError> {
+    GpuArrays::new(model.form()).map_err(|e| GpuError::TooLarge(e.to_string()))
 }
 
-/// Packs 16-bit values two per u32 (element 2i in the low half), padded
-/// to at least one word.
-fn pack16(values: impl ExactSizeIterator<Item = u16>) -> Vec<u32> {
-    let mut out = vec![0u32; values.len().div_ceil(2).max(1)];
-    for (i, v) in values.enumerate() {
-        out[i / 2] |= u32::from(v) << (16 * (i % 2));
-    }
-    out
-}
-
-/// A model's arrays as the evaluators read them.
-pub(super) fn upload(model: &Model) -> Result<Upload, GpuError> {
-    match model.form() {
-        FormRef::Dense(form) => VertexAo::dense(form),
-        FormRef::Sparse(form) => VertexAo::sparse(form),
-    }
-}
-
-fn non_empty(mut v: Vec<u32>) -> Vec<u32> {
-    if v.is_empty() {
-        v.push(0);
-    }
-    v
+/// The compute entry point for `arrays`.
+pub(super) fn entry(arrays: &GpuArrays) -> &'static str {
+    if arrays.sparse { "cs_sparse" } else { "cs_main" }
 }
 
 pub(super) fn to_u32(n: usize, what: &str) -> Result<u32, GpuError> {
@@ -72,15 +49,17 @@ pub(super) fn to_u32(n: usize, what: &str) -> Result<u32, GpuError> {
 impl<'g> VertexAo<'g> {
     /// Uploads the model's coefficients and builds the pipeline.
     pub fn new(gpu: &'g Gpu, model: &Model) -> Result<Self, GpuError> {
-        let Upload {
-            entry,
+        let arrays = upload(model)?;
+        let entry = entry(&arrays);
+        let GpuArrays {
             vertices,
             weights,
             blocks,
             coefficients,
             maps,
             sparse_rows,
-        } = upload(model)?;
+            ..
+        } = arrays;
         let device = &gpu.device;
         let groups_needed = vertices.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1);
         let groups = (
@@ -141,7 +120,7 @@ impl<'g> VertexAo<'g> {
         let blocks = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("blocks"),
             contents: bytemuck::cast_slice(&if blocks.is_empty() {
-                vec![bytemuck::Zeroable::zeroed()]
+                vec![[0; BLOCK_WORDS]]
             } else {
                 blocks
             }),
@@ -164,60 +143,6 @@ impl<'g> VertexAo<'g> {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         Ok(out)
-    }
-
-    pub(super) fn dense(form: &LinearForm) -> Result<Upload, GpuError> {
-        let mut blocks = Vec::with_capacity(form.blocks.len());
-        let (mut coef_offset, mut weight_offset) = (0usize, 0usize);
-        let mut maps = Vec::new();
-        for b in &form.blocks {
-            let map_offset = match &b.map {
-                Some(m) => {
-                    let at = to_u32(maps.len(), "map entries")?;
-                    maps.extend_from_slice(m);
-                    at
-                }
-                None => BlockInfo::NO_MAP,
-            };
-            blocks.push(BlockInfo {
-                rows: to_u32(b.rows, "rows")?,
-                columns: to_u32(b.columns, "columns")?,
-                coef_offset: to_u32(coef_offset, "coefficients")?,
-                map_offset,
-                weight_offset: to_u32(weight_offset, "weights")?,
-                _pad: [0; 3],
-            });
-            coef_offset += b.coefficients.len();
-            weight_offset += b.rows;
-        }
-        to_u32(coef_offset, "coefficients")?;
-        let bits: Vec<u16> = form
-            .blocks
-            .iter()
-            .flat_map(|b| b.coefficients.iter().map(|c| c.to_bits()))
-            .collect();
-        let coefficients = pack16(bits.into_iter());
-        Ok(Upload {
-            entry: "cs_main",
-            vertices: to_u32(form.vertices, "vertices")?,
-            weights: weight_offset,
-            blocks,
-            coefficients,
-            maps: non_empty(maps),
-            sparse_rows: vec![0],
-        })
-    }
-
-    pub(super) fn sparse(form: &SparseForm) -> Result<Upload, GpuError> {
-        Ok(Upload {
-            entry: "cs_sparse",
-            vertices: to_u32(form.vertices, "vertices")?,
-            weights: form.rows,
-            blocks: Vec::new(),
-            coefficients: pack16(form.values.iter().map(|c| c.to_bits())),
-            maps: form.offsets.clone(),
-            sparse_rows: pack16(form.rows_of.iter().copied()),
-        })
     }
 
     /// Vertices the model evaluates.

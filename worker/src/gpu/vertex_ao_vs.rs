@@ -5,13 +5,13 @@
 //! R32Uint target (the AO's bits) and reads the target back, so that tests compare it
 //! with the compute shader and the CPU.
 
-use aobake_core::method::vertex::Model;
+use aobake_core::method::vertex::{Model, form::GpuArrays};
 use aobake_shaders::{VS_TEXTURE_WIDTH, VertexAoVsParams};
 use wgpu::util::DeviceExt as _;
 
 use super::{
     Gpu, GpuError,
-    vertex_ao::{Upload, to_u32, upload},
+    vertex_ao::{to_u32, upload},
 };
 
 /// A data texture of `words`, [`VS_TEXTURE_WIDTH`] texels wide (element i
@@ -56,15 +56,17 @@ pub fn evaluate_vertex_stage(
     model: &Model,
     weights: &[f32],
 ) -> Result<Vec<f32>, GpuError> {
-    let Upload {
-        entry,
+    let arrays = upload(model)?;
+    let sparse = arrays.sparse;
+    let GpuArrays {
         vertices,
         weights: want,
         blocks,
         coefficients,
         maps,
         sparse_rows,
-    } = upload(model)?;
+        ..
+    } = arrays;
     if weights.len() != want {
         return Err(GpuError::TooLarge(format!(
             "{} weights given, the model takes {want}",
@@ -78,7 +80,7 @@ pub fn evaluate_vertex_stage(
     let params = VertexAoVsParams {
         vertices,
         blocks: to_u32(blocks.len(), "blocks")?,
-        sparse: u32::from(entry == "cs_sparse"),
+        sparse: u32::from(sparse),
         width: VS_TEXTURE_WIDTH,
         target_width,
         target_height,

@@ -228,6 +228,132 @@ impl Coefficients {
     }
 }
 
+/// Words per block in [`GpuArrays::blocks`]: rows, columns, coefficient
+/// offset (in f16 elements), map offset (or [`GpuArrays::NO_MAP`]),
+/// weight offset, and three words of padding (`BlockInfo` of
+/// `shaders/wgsl/vertex_ao.wgsl`).
+pub const BLOCK_WORDS: usize = 8;
+
+/// A form's arrays as the GPU evaluators read them
+/// (`shaders/wgsl/vertex_ao.wgsl` from storage buffers,
+/// `vertex_ao_vs.wgsl` from R32Uint textures): what an engine uploads once
+/// per asset. Every array holds at least one word (WebGPU and WebGL refuse
+/// empty buffers and textures).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GpuArrays {
+    /// Sparse (CSR) coefficients (`cs_sparse`); else dense blocks
+    /// (`cs_main`).
+    pub sparse: bool,
+    /// Vertices.
+    pub vertices: u32,
+    /// Weights per pose.
+    pub weights: usize,
+    /// Dense: [`BLOCK_WORDS`] words per block; sparse: empty.
+    pub blocks: Vec<[u32; BLOCK_WORDS]>,
+    /// f16 bits, two per word (element 2i in the low half).
+    pub coefficients: Vec<u32>,
+    /// Dense: the blocks' vertex-cluster maps, one after another; sparse:
+    /// the `vertices + 1` row offsets.
+    pub maps: Vec<u32>,
+    /// Sparse: each coefficient's row, u16 two per word.
+    pub sparse_rows: Vec<u32>,
+}
+
+/// Why a form does not fit the GPU evaluators' 32-bit offsets.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{what} ({count}) do not fit in 32 bits")]
+pub struct TooLarge {
+    /// What overflowed.
+    pub what: &'static str,
+    /// How many there are.
+    pub count: usize,
+}
+
+fn to_u32(count: usize, what: &'static str) -> Result<u32, TooLarge> {
+    u32::try_from(count).map_err(|_| TooLarge { what, count })
+}
+
+/// Packs 16-bit values two per u32 (element 2i in the low half), padded
+/// to at least one word.
+fn pack16(values: impl ExactSizeIterator<Item = u16>) -> Vec<u32> {
+    let mut out = vec![0u32; values.len().div_ceil(2).max(1)];
+    for (i, v) in values.enumerate() {
+        out[i / 2] |= u32::from(v) << (16 * (i % 2));
+    }
+    out
+}
+
+fn non_empty(mut v: Vec<u32>) -> Vec<u32> {
+    if v.is_empty() {
+        v.push(0);
+    }
+    v
+}
+
+impl GpuArrays {
+    /// `map_offset` of a block whose columns are the vertices.
+    pub const NO_MAP: u32 = u32::MAX;
+
+    /// The arrays of `form`.
+    pub fn new(form: FormRef<'_>) -> Result<Self, TooLarge> {
+        match form {
+            FormRef::Dense(form) => Self::dense(form),
+            FormRef::Sparse(form) => Ok(Self {
+                sparse: true,
+                vertices: to_u32(form.vertices, "vertices")?,
+                weights: form.rows,
+                blocks: Vec::new(),
+                coefficients: pack16(form.values.iter().map(|c| c.to_bits())),
+                maps: non_empty(form.offsets.clone()),
+                sparse_rows: pack16(form.rows_of.iter().copied()),
+            }),
+        }
+    }
+
+    fn dense(form: &LinearForm) -> Result<Self, TooLarge> {
+        let mut blocks = Vec::with_capacity(form.blocks.len());
+        let (mut coef_offset, mut weight_offset) = (0usize, 0usize);
+        let mut maps = Vec::new();
+        for b in &form.blocks {
+            let map_offset = match &b.map {
+                Some(m) => {
+                    let at = to_u32(maps.len(), "map entries")?;
+                    maps.extend_from_slice(m);
+                    at
+                }
+                None => Self::NO_MAP,
+            };
+            blocks.push([
+                to_u32(b.rows, "rows")?,
+                to_u32(b.columns, "columns")?,
+                to_u32(coef_offset, "coefficients")?,
+                map_offset,
+                to_u32(weight_offset, "weights")?,
+                0,
+                0,
+                0,
+            ]);
+            coef_offset += b.coefficients.len();
+            weight_offset += b.rows;
+        }
+        to_u32(coef_offset, "coefficients")?;
+        let bits = form
+            .blocks
+            .iter()
+            .flat_map(|b| b.coefficients.iter().map(|c| c.to_bits()));
+        let coefficients = pack16(bits.collect::<Vec<_>>().into_iter());
+        Ok(Self {
+            sparse: false,
+            vertices: to_u32(form.vertices, "vertices")?,
+            weights: weight_offset,
+            blocks,
+            coefficients,
+            maps: non_empty(maps),
+            sparse_rows: vec![0],
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

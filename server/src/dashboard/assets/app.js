@@ -7,6 +7,8 @@
 // send to servers; `aobake serve --demo` prints such a URL) or from the
 // sign-in form, and is kept in this browser's localStorage.
 
+import { viewerSection } from "./viewer.js";
+
 const TOKEN_KEY = "aobake.token";
 const main = document.getElementById("main");
 let token = localStorage.getItem(TOKEN_KEY);
@@ -516,6 +518,19 @@ async function bakePage(signal, id) {
   eta.textContent = estimate(bake.progress.done, bake.progress.total, bake.state);
   const jobs = h("div", {}, stages, eta, h("h3", {}, "Running and failed"), active, folded);
   const results = h("div", { id: "results" });
+  // The 3D viewer, once a vertex-method bake has its asset: it shows the
+  // character's mesh, which needs the submit scope as the uploads do.
+  const viewerSlot = h("div");
+  let viewerShown = false;
+  const drawViewer = () => {
+    if (viewerShown || !bake.asset || !bake.method.startsWith("vertex-")) return;
+    viewerShown = true;
+    fill(viewerSlot, can("submit")
+      ? viewerSection(id, { api, h })
+      : h("section", { id: "viewer" }, h("h2", {}, "Viewer"),
+        h("p", { class: "note", id: "viewer-status" },
+          `The viewer shows the character's mesh: your token “${me.name}” can read only, and the mesh needs the submit scope.`)));
+  };
   const status = h("div");
   let loadedResults = false;
 
@@ -596,6 +611,7 @@ async function bakePage(signal, id) {
     drawJobs();
     drawDetails();
     drawActions();
+    drawViewer();
     loadResults();
   }
 
@@ -611,12 +627,14 @@ async function bakePage(signal, id) {
     bake.error ? h("dt", {}, "Error") : null, bake.error ? h("dd", { class: "error" }, bake.error) : null);
   drawDetails();
   drawActions();
+  drawViewer();
   show(
     h("h1", {}, `Bake #${id} `, characterLabel(bake.character), " ", h("span", { class: "muted" }, bake.method), " ", state),
     h("div", { class: "actions" }, bar, count),
     actions,
     status,
     details,
+    viewerSlot,
     results,
     h("h2", {}, "Jobs"),
     jobs,

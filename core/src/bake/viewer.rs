@@ -1,0 +1,402 @@
+//! What the dashboard's 3D viewer loads (DESIGN §9): a bake's character in
+//! its bind pose with its skin, the asset's arrays as the GPU evaluator
+//! reads them ([`GpuArrays`]), and per clip the frames an engine would
+//! compute at run time: each joint's `world_from_bind` matrix and the
+//! model's weights, from the clip's local transforms through the runtime's
+//! [`VertexAo`] (by node name, as an engine calls it). Where the previews
+//! traced the ground truth (their clip's stills and animation frames), a
+//! frame carries it too, with the model's error there.
+//!
+//! Both are [`Bundle`]s: a JSON description and typed arrays in one
+//! binary (`AOVW`), which the page reads without copying.
+
+use glam::Vec3;
+use serde::Serialize;
+use serde_json::{Value, json};
+
+use crate::{
+    Character,
+    method::vertex::{Model, VertexAo, form::GpuArrays},
+    rig::{clip::Clip, pose::Pose},
+};
+
+use super::{
+    JobError,
+    preview::{Camera, FrameTruth, PreviewFrames, camera},
+};
+
+/// Frames per second of a clip's frames.
+pub const FPS: f32 = 30.0;
+/// Most frames of one clip: a longer clip is sampled more sparsely.
+pub const MAX_FRAMES: usize = 600;
+/// The bundle's magic.
+pub const MAGIC: &[u8; 4] = b"AOVW";
+/// The bundle's version.
+pub const VERSION: u32 = 1;
+
+/// One typed array of a [`Bundle`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum Array {
+    /// 32-bit floats.
+    F32(Vec<f32>),
+    /// 32-bit unsigned integers.
+    U32(Vec<u32>),
+}
+
+impl Array {
+    fn kind(&self) -> &'static str {
+        match self {
+            Self::F32(_) => "f32",
+            Self::U32(_) => "u32",
+        }
+    }
+
+    fn len(&self) -> usize {
+        match self {
+            Self::F32(v) => v.len(),
+            Self::U32(v) => v.len(),
+        }
+    }
+}
+
+/// A JSON description and named typed arrays, written as one binary:
+///
+/// ```text
+/// "AOVW"  u32 version  u32 json_bytes  json (padded with spaces to 4 bytes)
+/// arrays, little-endian, one after another
+/// ```
+///
+/// The JSON is the description with `arrays` added: per name its `type`
+/// (`f32` or `u32`), `offset` (bytes from the start of the file, a
+/// multiple of 4) and `count`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bundle {
+    /// The description (a JSON object).
+    pub meta: Value,
+    /// The arrays, by name.
+    pub arrays: Vec<(String, Array)>,
+}
+
+impl Bundle {
+    /// The array named `name`.
+    pub fn array(&self, name: &str) -> Option<&Array> {
+        self.arrays.iter().find(|(n, _)| n == name).map(|(_, a)| a)
+    }
+
+    /// The binary.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut meta = self.meta.clone();
+        let mut table = serde_json::Map::new();
+        let data: usize = self.arrays.iter().map(|(_, a)| 4 * a.len()).sum();
+        let mut start = 0usize;
+        for (name, array) in &self.arrays {
+            table.insert(
+                name.clone(),
+                json!({"type": array.kind(), "offset": start, "count": array.len()}),
+            );
+            start += 4 * array.len();
+        }
+        meta["arrays"] = Value::Object(table);
+        // Offsets are relative to the data for now; the header's length is
+        // known once the JSON is, so shift them by it (their digits can
+        // grow the JSON: iterate until the length is stable).
+        let mut header_len = 0usize;
+        let text = loop {
+            let mut shifted = meta.clone();
+            for (_, entry) in shifted["arrays"].as_object_mut().into_iter().flatten() {
+                let offset = entry["offset"].as_u64().unwrap_or(0) as usize;
+                entry["offset"] = json!(offset + header_len);
+            }
+            let mut text = serde_json::to_string(&shifted).unwrap_or_default();
+            while (12 + text.len()) % 4 != 0 {
+                text.push(' ');
+            }
+            if 12 + text.len() == header_len {
+                break text;
+            }
+            header_len = 12 + text.len();
+        };
+        let mut out = Vec::with_capacity(header_len + data);
+        out.extend_from_slice(MAGIC);
+        out.extend_from_slice(&VERSION.to_le_bytes());
+        out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+        out.extend_from_slice(text.as_bytes());
+        for (_, array) in &self.arrays {
+            match array {
+                Array::F32(v) => v.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
+                Array::U32(v) => v.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
+            }
+        }
+        out
+    }
+}
+
+fn flat3(v: &[Vec3]) -> Vec<f32> {
+    v.iter().flat_map(|p| p.to_array()).collect()
+}
+
+/// Why a bake cannot be shown in the viewer.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewerError {
+    /// The asset's arrays do not fit 32-bit offsets.
+    #[error("the asset is too large for the viewer: {0}")]
+    TooLarge(String),
+    /// No clip of that name.
+    #[error("no clip named {0:?} (the bake's clips: {1})")]
+    NoClip(String, String),
+    /// The bake's jobs disagree with its inputs.
+    #[error(transparent)]
+    Job(#[from] JobError),
+}
+
+/// The viewer's scene of a vertex-method bake: `character` in its bind
+/// pose, its skin, the static average `static_ao` (the model averaged
+/// over the clips' frames, as the glTF export's `_AO`), the model's GPU
+/// arrays, and the clips by name. `preview` is the previews' clip.
+pub fn scene(
+    character: &Character,
+    clips: &[Clip],
+    model: &Model,
+    preview: Option<&str>,
+) -> Result<Bundle, ViewerError> {
+    let gpu = GpuArrays::new(model.form()).map_err(|e| ViewerError::TooLarge(e.to_string()))?;
+    let k = character.influences;
+    let mut skin = Vec::with_capacity(2 * k * character.vertex_count());
+    for v in 0..character.vertex_count() {
+        skin.extend_from_slice(&character.joint_indices[v * k..(v + 1) * k]);
+        skin.extend(
+            character.joint_weights[v * k..(v + 1) * k]
+                .iter()
+                .map(|w| w.to_bits()),
+        );
+    }
+    let (static_ao, static_frames) =
+        crate::asset::gltf::static_ao(model, &character.skeleton, clips);
+    let meta = json!({
+        "method": model.method().name(),
+        "vertices": character.vertex_count(),
+        "triangles": character.triangles.len(),
+        "influences": k,
+        "joints": character.joints.len(),
+        "weights": gpu.weights,
+        "sparse": gpu.sparse,
+        "blocks": gpu.blocks.len(),
+        "static_frames": static_frames,
+        // Where the viewer's GPU skinning differs from the previews' CPU
+        // skinning: morph targets are not applied, and normals the file
+        // lacked are the bind pose's, skinned, not recomputed per frame.
+        "morphs": !character.morphs.is_empty(),
+        "computed_normals": character.primitives.iter().any(|p| p.computed_normals),
+        "clips": clips.iter().map(|c| json!({"name": c.name, "duration": c.duration})).collect::<Vec<_>>(),
+        "preview_clip": preview,
+    });
+    Ok(Bundle {
+        meta,
+        arrays: vec![
+            ("positions".into(), Array::F32(flat3(&character.positions))),
+            ("normals".into(), Array::F32(flat3(&character.normals))),
+            (
+                "indices".into(),
+                Array::U32(character.triangles.iter().flatten().copied().collect()),
+            ),
+            ("skin".into(), Array::U32(skin)),
+            ("static_ao".into(), Array::F32(static_ao)),
+            (
+                "blocks".into(),
+                Array::U32(if gpu.blocks.is_empty() {
+                    vec![0; 8]
+                } else {
+                    gpu.blocks.iter().flatten().copied().collect()
+                }),
+            ),
+            ("coefficients".into(), Array::U32(gpu.coefficients)),
+            ("maps".into(), Array::U32(gpu.maps)),
+            ("sparse_rows".into(), Array::U32(gpu.sparse_rows)),
+        ],
+    })
+}
+
+/// The times of a clip's frames: every `1 / FPS` seconds (at most
+/// [`MAX_FRAMES`], spread evenly) and `extra` (the previews' times, which
+/// have truth), sorted.
+fn frame_times(clip: &Clip, extra: &[f32]) -> Vec<f32> {
+    let mut times = clip.frame_times(FPS);
+    if times.len() > MAX_FRAMES {
+        let step = (times.len() - 1) as f64 / (MAX_FRAMES - 1) as f64;
+        times = (0..MAX_FRAMES)
+            .map(|i| times[((i as f64 * step).round() as usize).min(times.len() - 1)])
+            .collect();
+    }
+    times.extend_from_slice(extra);
+    times.sort_by(f32::total_cmp);
+    times.dedup_by(|a, b| a.to_bits() == b.to_bits());
+    times
+}
+
+/// The previews' frames and their truth, when the clip is theirs.
+#[derive(Debug, Clone, Copy)]
+pub struct PreviewTruth<'a> {
+    /// The previews' frames (their clip, stills and animation).
+    pub frames: &'a PreviewFrames<'a>,
+    /// The ray-traced truth of every one of them, in
+    /// [`PreviewFrames::times`]' order.
+    pub truth: &'a FrameTruth,
+}
+
+/// A camera as the page reads it.
+#[derive(Debug, Serialize)]
+struct CameraView {
+    eye: [f32; 3],
+    target: [f32; 3],
+    fov_y: f32,
+    near: f32,
+    far: f32,
+    ground_y: f32,
+    ground_half_extent: f32,
+}
+
+impl From<Camera> for CameraView {
+    fn from(c: Camera) -> Self {
+        Self {
+            eye: c.eye.to_array(),
+            target: c.target.to_array(),
+            fov_y: c.fov_y,
+            near: c.near,
+            far: c.far,
+            ground_y: c.ground_y,
+            ground_half_extent: c.ground_half_extent,
+        }
+    }
+}
+
+/// The frames of `clip` (of `clips`) for the viewer: per frame its time,
+/// every joint's `world_from_bind` (16 floats each, column-major) and the
+/// model's weights from `runtime`; the camera and ground the previews use
+/// for that clip (returned too); and where `truth` covers the clip, the
+/// traced AO of the character and the ground at those frames with the
+/// model's error.
+pub fn clip_frames(
+    character: &Character,
+    clips: &[Clip],
+    clip: &str,
+    runtime: &mut VertexAo,
+    truth: Option<PreviewTruth<'_>>,
+) -> Result<(Bundle, Camera), ViewerError> {
+    let Some(clip) = clips.iter().find(|c| c.name == clip) else {
+        let names: Vec<&str> = clips.iter().map(|c| c.name.as_str()).collect();
+        return Err(ViewerError::NoClip(clip.to_owned(), names.join(", ")));
+    };
+    let truth = truth.filter(|t| t.frames.clip.is_some_and(|c| c.name == clip.name));
+    let truth_times = truth.map(|t| t.frames.times()).unwrap_or_default();
+    let times = frame_times(clip, &truth_times);
+    let skeleton = &character.skeleton;
+    // The runtime reads joints by name, as an engine does.
+    let nodes: Vec<Option<usize>> = skeleton
+        .nodes
+        .iter()
+        .map(|n| n.name.as_deref().and_then(|name| runtime.node(name)))
+        .collect();
+    let mut palettes = Vec::with_capacity(times.len() * 16 * character.joints.len());
+    let mut weights = Vec::with_capacity(times.len() * runtime.weight_count());
+    let (mut traced, mut ground_traced) = (Vec::new(), Vec::new());
+    let mut frames_truth = Vec::with_capacity(times.len());
+    let mut errors = Vec::new();
+    for &t in &times {
+        let pose = Pose::sample(skeleton, clip, t);
+        palettes.extend(
+            character
+                .joint_matrices(&pose)
+                .iter()
+                .flat_map(|m| m.to_cols_array()),
+        );
+        runtime.reset();
+        for (node, local) in nodes.iter().zip(&pose.locals) {
+            if let Some(n) = node {
+                runtime.set_local(*n, *local);
+            }
+        }
+        weights.extend(runtime.weights());
+        let row = truth_times.iter().position(|s| s.to_bits() == t.to_bits());
+        frames_truth.push(row.map(|_| errors.len()));
+        if let (Some(row), Some(truth)) = (row, truth) {
+            let want = truth.truth.character.row(row);
+            let got = runtime.evaluate();
+            let squares: f64 = got
+                .iter()
+                .zip(want)
+                .map(|(a, b)| f64::from(a - b).powi(2))
+                .sum();
+            let worst = got
+                .iter()
+                .zip(want)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            errors.push(json!({
+                "time": t,
+                "rmse": (squares / got.len().max(1) as f64).sqrt(),
+                "max": worst,
+            }));
+            traced.extend_from_slice(want);
+            ground_traced.extend_from_slice(truth.truth.ground.row(row));
+        }
+    }
+    let camera = camera(character, Some(clip));
+    let ground = camera.ground();
+    let meta = json!({
+        "clip": clip.name,
+        "duration": clip.duration,
+        "times": times,
+        "truth": frames_truth,
+        "errors": errors,
+        "camera": CameraView::from(camera),
+        "ground_vertices": ground.positions.len(),
+        "joints": character.joints.len(),
+        "weights": runtime.weight_count(),
+    });
+    let bundle = Bundle {
+        meta,
+        arrays: vec![
+            ("palettes".into(), Array::F32(palettes)),
+            ("weights".into(), Array::F32(weights)),
+            ("truth".into(), Array::F32(traced)),
+            ("ground_truth".into(), Array::F32(ground_traced)),
+            ("ground_positions".into(), Array::F32(flat3(&ground.positions))),
+            (
+                "ground_indices".into(),
+                Array::U32(ground.triangles.iter().flatten().copied().collect()),
+            ),
+        ],
+    };
+    Ok((bundle, camera))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_bundle_lays_arrays_out_aligned_where_its_json_says() {
+        let bundle = Bundle {
+            meta: json!({"what": "a test"}),
+            arrays: vec![
+                ("a".into(), Array::F32(vec![1.5, -2.0])),
+                ("b".into(), Array::U32(vec![7, 8, 9])),
+            ],
+        };
+        let bytes = bundle.to_bytes();
+        assert_eq!(&bytes[..4], MAGIC);
+        let json_len = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
+        assert_eq!((12 + json_len) % 4, 0);
+        let meta: Value = serde_json::from_slice(&bytes[12..12 + json_len]).unwrap();
+        assert_eq!(meta["what"], "a test");
+        let at = |name: &str, i: usize| {
+            let o = meta["arrays"][name]["offset"].as_u64().unwrap() as usize + 4 * i;
+            assert_eq!(o % 4, 0);
+            <[u8; 4]>::try_from(&bytes[o..o + 4]).unwrap()
+        };
+        assert_eq!(meta["arrays"]["b"]["count"], 3);
+        assert_eq!(f32::from_le_bytes(at("a", 1)), -2.0);
+        assert_eq!(u32::from_le_bytes(at("b", 2)), 9);
+        assert_eq!(bytes.len(), 12 + json_len + 4 * 5);
+    }
+}

@@ -1,0 +1,248 @@
+//! The dashboard's 3D viewer reads a finished vertex-method bake from
+//! here (core's `bake::viewer` builds both bundles):
+//!
+//! * `GET /v1/bakes/{id}/viewer`: the character in its bind pose with its
+//!   skin, the asset's arrays as the GPU evaluator reads them, the static
+//!   average, the clips, and the WebGL2 program (naga's GLSL ES 3.00 of
+//!   `shaders/wgsl/viewer.wgsl`).
+//! * `GET /v1/bakes/{id}/viewer/frames?clip=NAME`: the clip's frames as an
+//!   engine computes them (joint matrices, and the model's weights from the
+//!   runtime), the previews' camera and looks, and the ray-traced truth at
+//!   the previews' frames.
+//!
+//! Both show the character's mesh, which is the studio's source: they need
+//! `submit` as well as `read`, as the uploads themselves do.
+
+use aobake_api::schema::Refusals;
+use aobake_core::{
+    bake::{
+        Bake, BakeInputs, BakeParams, JobOutput, Output, Panel,
+        viewer::{self, Bundle, PreviewTruth, ViewerError},
+    },
+    image::HEAT_MAP,
+    method::{
+        Family, Method,
+        vertex::{VertexAo, check_character},
+    },
+};
+use axum::{
+    Router,
+    extract::State,
+    http::header,
+    response::{IntoResponse, Response},
+    routing::get,
+};
+use serde::Deserialize;
+
+use super::uploads::load_upload;
+use crate::{
+    auth::{Caller, Scope},
+    error::{ApiError, ApiResult, Problem},
+    extract::{ApiPath, ApiQuery},
+    state::AppState,
+    store::BakeRow,
+};
+
+/// The bundles' media type.
+const BUNDLE: &str = "application/vnd.aobake.viewer";
+
+pub(super) fn router() -> Router<AppState> {
+    Router::new()
+        .route("/v1/bakes/{id}/viewer", get(scene))
+        .route("/v1/bakes/{id}/viewer/frames", get(frames))
+}
+
+/// What both bundles start from: the bake's inputs, parameters and asset.
+struct Loaded {
+    inputs: BakeInputs,
+    params: BakeParams,
+    runtime: VertexAo,
+    /// The outputs of the bake's `preview-truth` jobs.
+    truth: Vec<JobOutput>,
+}
+
+async fn load(state: &AppState, caller: &Caller, id: i64, truth: bool) -> ApiResult<Loaded> {
+    caller.require(Scope::Read)?;
+    // The bundles carry the character's mesh: the studio's source.
+    caller.require(Scope::Submit)?;
+    let bake: BakeRow = state
+        .store
+        .bake(id)
+        .await?
+        .ok_or_else(|| ApiError::NotFound(format!("no bake {id}")))?;
+    let method: Method = bake
+        .method
+        .parse()
+        .map_err(|e: String| ApiError::Internal(e))?;
+    if method.family() != Family::Vertex {
+        return Err(ApiError::Conflict(format!(
+            "the viewer plays the vertex methods' bakes; bake {id} is {}, see its previews",
+            method.name()
+        )));
+    }
+    let digest = bake
+        .asset
+        .clone()
+        .ok_or_else(|| ApiError::Conflict(format!("bake {id} has no asset yet")))?;
+    let asset = state
+        .read_blob(&digest, None)
+        .await?
+        .ok_or_else(|| ApiError::Internal(format!("asset {digest} has no blob")))?;
+    let character = load_upload(state, &bake.character, "character").await?;
+    let mut clips = Vec::new();
+    for c in &bake.clips {
+        clips.push(load_upload(state, c, "clips").await?);
+    }
+    let mut outputs = Vec::new();
+    if truth {
+        for job in state.store.jobs(id).await? {
+            if job.kind != "preview-truth" {
+                continue;
+            }
+            let mut out = JobOutput::default();
+            for o in job.outputs.iter().flatten() {
+                let bytes = state.read_blob(&o.digest, None).await?.ok_or_else(|| {
+                    ApiError::Internal(format!("output {} has no blob", o.digest))
+                })?;
+                out.outputs.push(Output {
+                    name: o.name.clone(),
+                    bytes,
+                });
+            }
+            outputs.push(out);
+        }
+    }
+    let limits = state.import_limits.clone();
+    let params = bake.params;
+    tokio::task::spawn_blocking(move || -> ApiResult<Loaded> {
+        let inputs = BakeInputs::load(&character, &clips, &limits)
+            .map_err(|e| ApiError::Internal(format!("bake {id}'s inputs: {e}")))?;
+        let params = BakeParams::from_canonical(&params)
+            .map_err(|e| ApiError::Internal(format!("bake {id}'s parameters: {e}")))?;
+        let runtime = VertexAo::from_bytes(&asset)
+            .map_err(|e| ApiError::Internal(format!("bake {id}'s asset: {e}")))?;
+        check_character(runtime.model(), &inputs.character)
+            .map_err(|e| ApiError::Internal(format!("bake {id}'s asset: {e}")))?;
+        Ok(Loaded {
+            inputs,
+            params,
+            runtime,
+            truth: outputs,
+        })
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))?
+}
+
+fn bundle(bundle: &Bundle) -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, BUNDLE),
+            (header::CACHE_CONTROL, "private, max-age=3600"),
+        ],
+        bundle.to_bytes(),
+    )
+        .into_response()
+}
+
+fn viewer_error(e: ViewerError) -> ApiError {
+    match e {
+        ViewerError::NoClip(..) => ApiError::NotFound(e.to_string()),
+        ViewerError::TooLarge(_) => ApiError::Unprocessable(e.to_string()),
+        ViewerError::Job(_) => ApiError::Internal(e.to_string()),
+    }
+}
+
+#[utoipa::path(get, path = "/v1/bakes/{id}/viewer", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
+    security(("bearer" = ["read", "submit"])),
+    responses((status = 200, description = "The viewer's scene: an `AOVW` bundle (JSON description, then typed arrays; see docs/engines.md)", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet, or not a vertex method", body = Problem, content_type = "application/problem+json"), Refusals))]
+pub(crate) async fn scene(
+    State(state): State<AppState>,
+    caller: Caller,
+    ApiPath(id): ApiPath<i64>,
+) -> ApiResult<Response> {
+    let loaded = load(&state, &caller, id, false).await?;
+    let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
+        let bake = Bake::new(&loaded.inputs, loaded.params)
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let frames = bake.preview_frames().map_err(|e| ApiError::Internal(e.to_string()))?;
+        let mut scene = viewer::scene(
+            &loaded.inputs.character,
+            &loaded.inputs.clips,
+            loaded.runtime.model(),
+            frames.clip.map(|c| c.name.as_str()),
+        )
+        .map_err(viewer_error)?;
+        let program = aobake_shaders::export::webgl_viewer()
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        scene.meta["program"] = serde_json::to_value(program).unwrap_or_default();
+        scene.meta["texture_width"] = aobake_shaders::VS_TEXTURE_WIDTH.into();
+        Ok(scene)
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))??;
+    Ok(bundle(&out))
+}
+
+/// Which clip's frames.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub(crate) struct FramesQuery {
+    /// The clip's name (the scene's `clips`).
+    clip: String,
+}
+
+#[utoipa::path(get, path = "/v1/bakes/{id}/viewer/frames", tag = "bakes", params(("id" = i64, Path, description = "Bake id"), FramesQuery),
+    security(("bearer" = ["read", "submit"])),
+    responses((status = 200, description = "One clip's frames: an `AOVW` bundle", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "No such bake or clip", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet, or not a vertex method", body = Problem, content_type = "application/problem+json"), Refusals))]
+pub(crate) async fn frames(
+    State(state): State<AppState>,
+    caller: Caller,
+    ApiPath(id): ApiPath<i64>,
+    ApiQuery(query): ApiQuery<FramesQuery>,
+) -> ApiResult<Response> {
+    let mut loaded = load(&state, &caller, id, true).await?;
+    let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
+        let inputs = &loaded.inputs;
+        let bake = Bake::new(inputs, loaded.params)
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let preview_frames = bake
+            .preview_frames()
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let outputs: Vec<&JobOutput> = loaded.truth.iter().collect();
+        let truth = bake
+            .preview_truth_of(&outputs)
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let (mut frames, camera) = viewer::clip_frames(
+            &inputs.character,
+            &inputs.clips,
+            &query.clip,
+            &mut loaded.runtime,
+            truth.as_ref().map(|truth| PreviewTruth {
+                frames: &preview_frames,
+                truth,
+            }),
+        )
+        .map_err(viewer_error)?;
+        // The previews' looks for this clip's camera, character then
+        // ground, as the preview shader's uniform words (the page sets
+        // the camera, the eye and the panel itself).
+        for (name, ground) in [("shading_character", false), ("shading_ground", true)] {
+            let u = aobake_worker::gpu::preview::uniforms(
+                &camera,
+                1.0,
+                &HEAT_MAP,
+                Panel::Model,
+                ground,
+            );
+            let words: [u32; 56] = bytemuck::cast(u);
+            frames
+                .arrays
+                .push((name.into(), viewer::Array::U32(words.to_vec())));
+        }
+        Ok(frames)
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))??;
+    Ok(bundle(&out))
+}
