@@ -506,19 +506,18 @@ mod tests {
                 .iter()
                 .filter(|r| r.binding == binding)
                 .collect();
-            assert!(!named.is_empty(), "binding {binding}: {:?}", program.resources);
+            assert!(
+                !named.is_empty(),
+                "binding {binding}: {:?}",
+                program.resources
+            );
             for r in named {
                 let text = format!("{}{}", program.vertex, program.fragment);
                 assert!(text.contains(&r.name), "{r:?}");
             }
         }
         assert!(
-            program
-                .resources
-                .iter()
-                .filter(|r| r.binding == 6)
-                .count()
-                == 2,
+            program.resources.iter().filter(|r| r.binding == 6).count() == 2,
             "{:?}",
             program.resources
         );

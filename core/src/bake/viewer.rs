@@ -123,8 +123,12 @@ impl Bundle {
         out.extend_from_slice(text.as_bytes());
         for (_, array) in &self.arrays {
             match array {
-                Array::F32(v) => v.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
-                Array::U32(v) => v.iter().for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
+                Array::F32(v) => v
+                    .iter()
+                    .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
+                Array::U32(v) => v
+                    .iter()
+                    .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
             }
         }
         out
@@ -360,7 +364,10 @@ pub fn clip_frames(
             ("weights".into(), Array::F32(weights)),
             ("truth".into(), Array::F32(traced)),
             ("ground_truth".into(), Array::F32(ground_traced)),
-            ("ground_positions".into(), Array::F32(flat3(&ground.positions))),
+            (
+                "ground_positions".into(),
+                Array::F32(flat3(&ground.positions)),
+            ),
             (
                 "ground_indices".into(),
                 Array::U32(ground.triangles.iter().flatten().copied().collect()),

@@ -165,7 +165,9 @@ pub(crate) async fn scene(
     let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
         let bake = Bake::new(&loaded.inputs, loaded.params)
             .map_err(|e| ApiError::Internal(e.to_string()))?;
-        let frames = bake.preview_frames().map_err(|e| ApiError::Internal(e.to_string()))?;
+        let frames = bake
+            .preview_frames()
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
         let mut scene = viewer::scene(
             &loaded.inputs.character,
             &loaded.inputs.clips,
@@ -204,8 +206,8 @@ pub(crate) async fn frames(
     let mut loaded = load(&state, &caller, id, true).await?;
     let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
         let inputs = &loaded.inputs;
-        let bake = Bake::new(inputs, loaded.params)
-            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let bake =
+            Bake::new(inputs, loaded.params).map_err(|e| ApiError::Internal(e.to_string()))?;
         let preview_frames = bake
             .preview_frames()
             .map_err(|e| ApiError::Internal(e.to_string()))?;

@@ -68,14 +68,29 @@ fn artifacts() -> PathBuf {
 }
 
 async fn browser(driver: &Driver) -> Client {
+    browser_with(driver, false).await
+}
+
+/// A Chromium session; with `webgl`, WebGL2 on SwiftShader (a software
+/// GPU: the flags Chromium wants before it offers WebGL without one).
+async fn browser_with(driver: &Driver, webgl: bool) -> Client {
     let mut caps = serde_json::Map::new();
     let chromium = ["/usr/bin/chromium", "/usr/bin/chromium-browser"]
         .into_iter()
         .find(|p| std::path::Path::new(p).exists());
-    let mut options = json!({
-        "args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                 "--window-size=1280,1100", "--no-first-run"],
-    });
+    let mut args = vec![
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-dev-shm-usage",
+        "--window-size=1280,1100",
+        "--no-first-run",
+    ];
+    if webgl {
+        args.extend(["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]);
+    } else {
+        args.push("--disable-gpu");
+    }
+    let mut options = json!({ "args": args });
     if let Some(c) = chromium {
         options["binary"] = json!(c);
     }
@@ -316,6 +331,9 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         let download = eval(&c, "return document.querySelector('button[data-action=\"download\"]').disabled").await;
         assert_eq!(download, json!(false), "reading the asset needs only read");
         wait_for(&c, "the previews", &format!("{images}.length === 4"), Duration::from_secs(30)).await;
+        // The viewer shows the mesh, the studio's source: not to `read`.
+        let note = eval(&c, "return document.querySelector('#viewer-status').textContent").await;
+        assert!(note.as_str().unwrap().contains("submit scope"), "{note}");
         shot(&c, "6-read-only").await;
 
         // A grid bake's page: its parts, every variant and the slices.
@@ -461,5 +479,242 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         );
         shot(&c, "8-unseen-clips").await;
         c.close().await.unwrap();
+    });
+}
+
+/// An RGBA image.
+struct Rgba {
+    width: u32,
+    height: u32,
+    rgba: Vec<u8>,
+}
+
+impl Rgba {
+    fn read_png(path: &std::path::Path) -> Self {
+        let mut decoder = png::Decoder::new(std::io::BufReader::new(
+            std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+        ));
+        decoder.set_transformations(png::Transformations::EXPAND);
+        let mut reader = decoder.read_info().unwrap();
+        let mut data = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut data).unwrap();
+        let rgba = match info.color_type {
+            png::ColorType::Rgba => data,
+            png::ColorType::Rgb => data
+                .chunks_exact(3)
+                .flat_map(|p| [p[0], p[1], p[2], 255])
+                .collect(),
+            other => panic!("{}: {other:?}", path.display()),
+        };
+        Self {
+            width: info.width,
+            height: info.height,
+            rgba,
+        }
+    }
+
+    /// The `size`² square at (`x`, `y`).
+    fn crop(&self, x: u32, y: u32, size: u32) -> Self {
+        let mut rgba = Vec::with_capacity((4 * size * size) as usize);
+        for row in y..y + size {
+            let at = (4 * (row * self.width + x)) as usize;
+            rgba.extend_from_slice(&self.rgba[at..at + 4 * size as usize]);
+        }
+        Self {
+            width: size,
+            height: size,
+            rgba,
+        }
+    }
+
+    fn write_png(&self, path: &std::path::Path) {
+        let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+        let mut encoder = png::Encoder::new(file, self.width, self.height);
+        encoder.set_color(png::ColorType::Rgba);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder
+            .write_header()
+            .unwrap()
+            .write_image_data(&self.rgba)
+            .unwrap();
+    }
+
+    /// The share of colour channels that differ by more than the render
+    /// tests' ±6, and the largest difference.
+    fn differ(&self, other: &Self) -> (f64, u8) {
+        assert_eq!((self.width, self.height), (other.width, other.height));
+        let (mut over, mut channels, mut worst) = (0usize, 0usize, 0u8);
+        for (a, b) in self.rgba.chunks_exact(4).zip(other.rgba.chunks_exact(4)) {
+            for k in 0..3 {
+                let d = a[k].abs_diff(b[k]);
+                worst = worst.max(d);
+                over += usize::from(d > RENDER_TOLERANCE);
+                channels += 1;
+            }
+        }
+        (over as f64 / channels as f64, worst)
+    }
+}
+
+/// The render tests' tolerance (worker/tests/integration/preview.rs): a
+/// channel may differ by ±6; up to 3 % of them by up to 96, at the
+/// multisampled edges, which another rasteriser covers differently.
+const RENDER_TOLERANCE: u8 = 6;
+const EDGE_SHARE: f64 = 0.03;
+const EDGE_TOLERANCE: u8 = 96;
+/// The error panel's edges: its heat map puts saturated blue (18, 69,
+/// 184) beside near white (238), 220 levels apart, so two of four samples
+/// covered differently at an inner silhouette move a channel by 110.
+const ERROR_EDGE_TOLERANCE: u8 = 128;
+
+/// The viewer's canvas, read back.
+async fn viewer_pixels(c: &Client) -> Rgba {
+    let v = eval(
+        c,
+        "return document.querySelector('#viewer canvas').viewer.pixels()",
+    )
+    .await;
+    use base64::Engine as _;
+    let rgba = base64::engine::general_purpose::STANDARD
+        .decode(v["rgba"].as_str().unwrap())
+        .unwrap();
+    Rgba {
+        width: v["width"].as_u64().unwrap() as u32,
+        height: v["height"].as_u64().unwrap() as u32,
+        rgba,
+    }
+}
+
+/// Shows `mode` at the clip's time `time` from the previews' camera in a
+/// panel of the previews' size.
+async fn viewer_show(c: &Client, clip: &str, time: f32, mode: &str) -> Value {
+    let script = format!(
+        "const done = arguments[arguments.length - 1];
+         document.querySelector('#viewer canvas').viewer
+           .show({{clip: {clip:?}, time: {time}, mode: {mode:?}, size: {}}})
+           .then(done, (e) => done({{error: String(e)}}));",
+        aobake_core::bake::preview::STILL_PANEL
+    );
+    let shown = c.execute_async(&script, vec![]).await.unwrap();
+    assert!(shown.get("error").is_none(), "{shown}");
+    shown
+}
+
+#[test]
+fn the_viewer_plays_a_bake_and_matches_aobake_preview() {
+    let mut env = TestEnv::start(Options::default());
+    let driver = Driver::start();
+    let man = character("CesiumMan");
+    let digest = upload(&env, &man);
+    let id = submit(&env, ADMIN, &digest, 24);
+    env.start_worker(&[]);
+    let bake = env.wait_bake(id, Duration::from_secs(300));
+    assert_eq!(bake["state"], "done", "{bake}");
+    // `aobake preview` of the same asset at a still's time (0.15 of the
+    // clip's 2 s, where the bake's previews traced the truth too).
+    let dir = artifacts();
+    let asset = dir.join("viewer.aob");
+    let out = env.aobake(&[
+        "fetch",
+        "--key",
+        bake["key"].as_str().unwrap(),
+        "--out",
+        asset.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let time = aobake_core::bake::preview::STILL_FRACTIONS[0] * 2.0;
+    let still = dir.join("viewer-aobake-preview.png");
+    let out = env.aobake(&[
+        "preview",
+        asset.to_str().unwrap(),
+        man.to_str().unwrap(),
+        "--clip",
+        "animation_0",
+        "--time",
+        &time.to_string(),
+        "--out",
+        still.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let still = Rgba::read_png(&still);
+    let panel = aobake_core::bake::preview::STILL_PANEL;
+    // Panels sit under a 30-pixel title row: truth, model, error.
+    let preview_panel = |k: u32| still.crop(k * panel, 30, panel);
+
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let c = browser_with(&driver, true).await;
+        c.goto(&format!("{}/#token={ADMIN}&next=/bakes/{id}", env.url))
+            .await
+            .unwrap();
+        let status = "document.querySelector('#viewer-status')";
+        wait_for(
+            &c,
+            "the viewer",
+            &format!("(document.querySelector('#viewer[data-ready=\"yes\"]') || /failed|no WebGL2/.test({status} && {status}.textContent)) && {status}.textContent"),
+            Duration::from_secs(60),
+        )
+        .await;
+        let text = eval(&c, &format!("return {status}.textContent")).await;
+        assert!(text.as_str().unwrap().starts_with("vertex-linear: 3273 vertices"), "{text}");
+        // It plays: the frame moves on by itself.
+        let state = "document.querySelector('#viewer canvas').viewer.state()";
+        let first = eval(&c, &format!("return {state}.frame")).await;
+        wait_for(&c, "the clip to play", &format!("{state}.playing && {state}.frame !== {first}"), Duration::from_secs(20)).await;
+        shot(&c, "8-viewer-playing").await;
+
+        // At the still's time, from the previews' camera, each mode
+        // matches its panel of `aobake preview` within the render tests'
+        // tolerance.
+        for (k, mode) in ["truth", "model", "error"].into_iter().enumerate() {
+            let shown = viewer_show(&c, "animation_0", time, mode).await;
+            assert_eq!(shown["time"].as_f64(), Some(f64::from(time)), "{shown}");
+            assert_eq!(shown["truth"], json!(true), "the still's frame has its truth");
+            let mine = viewer_pixels(&c).await;
+            mine.write_png(&dir.join(format!("viewer-{mode}.png")));
+            let theirs = preview_panel(k as u32);
+            theirs.write_png(&dir.join(format!("viewer-preview-{mode}.png")));
+            let (share, worst) = mine.differ(&theirs);
+            eprintln!("viewer {mode} against aobake preview: {share:.4} of channels over ±{RENDER_TOLERANCE}, worst {worst} (in {})", dir.display());
+            let edges = if mode == "error" { ERROR_EDGE_TOLERANCE } else { EDGE_TOLERANCE };
+            assert!(
+                share <= EDGE_SHARE && worst <= edges,
+                "the viewer's {mode} differs from aobake preview's panel: {share:.4} of channels over ±{RENDER_TOLERANCE}, worst {worst} (images in {})",
+                dir.display()
+            );
+        }
+        // Without AO, or with the static average, the same frame is not
+        // the model's: the comparison above sees AO.
+        viewer_show(&c, "animation_0", time, "none").await;
+        let (share, _) = viewer_pixels(&c).await.differ(&preview_panel(1));
+        assert!(share > EDGE_SHARE, "no AO passes for the model: {share}");
+        viewer_show(&c, "animation_0", time, "model").await;
+        let model = viewer_pixels(&c).await;
+        viewer_show(&c, "animation_0", time, "static").await;
+        let (share, worst) = viewer_pixels(&c).await.differ(&model);
+        eprintln!("static average against the model at {time} s: {share:.4} over ±{RENDER_TOLERANCE}, worst {worst}");
+        assert!(worst > RENDER_TOLERANCE, "the static average is the model's AO");
+        let error = eval(&c, "return document.querySelector('#viewer-error').textContent").await;
+        assert!(error.as_str().unwrap().contains("RMSE"), "{error}");
+
+        // The orbit camera: a drag turns the view.
+        eval(&c, "const cv = document.querySelector('#viewer canvas');
+                  const at = (type, x) => cv.dispatchEvent(new PointerEvent(type, {clientX: x, clientY: 200, pointerId: 1, bubbles: true}));
+                  at('pointerdown', 200); at('pointermove', 260); at('pointerup', 260); return null").await;
+        let (share, _) = viewer_pixels(&c).await.differ(&model);
+        assert!(share > EDGE_SHARE, "a drag did not turn the camera: {share}");
+        c.find(Locator::Css("#viewer-reset")).await.unwrap().click().await.unwrap();
+        shot(&c, "9-viewer-orbited").await;
     });
 }

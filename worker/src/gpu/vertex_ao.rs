@@ -39,7 +39,11 @@ pub(super) fn upload(model: &Model) -> Result<GpuArrays, GpuError> {
 
 /// The compute entry point for `arrays`.
 pub(super) fn entry(arrays: &GpuArrays) -> &'static str {
-    if arrays.sparse { "cs_sparse" } else { "cs_main" }
+    if arrays.sparse {
+        "cs_sparse"
+    } else {
+        "cs_main"
+    }
 }
 
 pub(super) fn to_u32(n: usize, what: &str) -> Result<u32, GpuError> {

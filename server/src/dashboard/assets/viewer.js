@@ -383,7 +383,10 @@ export function viewerSection(id, { api, h }) {
   }
   reset.addEventListener("click", () => { if (clip) { loadClip(clip.meta.clip).catch(fail); } });
   let drag = null;
-  canvas.addEventListener("pointerdown", (e) => { drag = { x: e.clientX, y: e.clientY }; canvas.setPointerCapture(e.pointerId); });
+  canvas.addEventListener("pointerdown", (e) => {
+    drag = { x: e.clientX, y: e.clientY };
+    try { canvas.setPointerCapture(e.pointerId); } catch (_) { /* a synthetic pointer */ }
+  });
   canvas.addEventListener("pointerup", () => { drag = null; });
   canvas.addEventListener("pointermove", (e) => {
     if (!drag || !orbit) return;
