@@ -1,7 +1,8 @@
 //! The run-time evaluators for engines that do not speak WGSL: each of
-//! [`VERTEX_AO`], [`VERTEX_AO_VS`], [`CUBEMAP_AO`] and [`GRID_AO`]
-//! translated by naga into GLSL (4.50 core, ES 3.00 for the vertex stage,
-//! and ES 3.10, one file per entry point), HLSL (shader
+//! [`VERTEX_AO`], [`CUBEMAP_AO`] and [`GRID_AO`] (compute) and their
+//! vertex-stage twins [`VERTEX_AO_VS`], [`CUBEMAP_AO_VS`] and
+//! [`GRID_AO_VS`] (textures) translated by naga into GLSL (4.50 core, ES
+//! 3.00 for the vertex stage, and ES 3.10, one file per entry point), HLSL (shader
 //! models 5.1 and 6.0), MSL (2.1) and SPIR-V (1.3). `aobake export
 //! --shaders DIR` writes them.
 //!
@@ -12,7 +13,7 @@
 //! in SPIR-V, the WGSL's set and binding.
 //!
 //! GLSL ES 3.00 (WebGL2) has neither compute shaders nor storage buffers:
-//! it gets the vertex-stage evaluator ([`VERTEX_AO_VS`]) only.
+//! it gets the vertex-stage evaluators only.
 
 use naga::{
     AddressSpace, ResourceBinding, ShaderStage, StorageAccess, TypeInner,
@@ -20,7 +21,7 @@ use naga::{
     valid::{Capabilities, ModuleInfo, ValidationFlags, Validator},
 };
 
-use crate::{CUBEMAP_AO, GRID_AO, VERTEX_AO, VERTEX_AO_VS};
+use crate::{CUBEMAP_AO, CUBEMAP_AO_VS, GRID_AO, GRID_AO_VS, VERTEX_AO, VERTEX_AO_VS};
 
 /// What the MSL files say about the extra buffer that holds the byte sizes
 /// of the runtime-sized arrays.
@@ -98,12 +99,14 @@ pub struct ExportError {
 }
 
 /// The run-time evaluators an engine needs, by name.
-pub fn runtime_sources() -> [(&'static str, &'static str); 4] {
+pub fn runtime_sources() -> [(&'static str, &'static str); 6] {
     [
         ("vertex_ao", VERTEX_AO),
         ("vertex_ao_vs", VERTEX_AO_VS),
         ("cubemap_ao", CUBEMAP_AO),
+        ("cubemap_ao_vs", CUBEMAP_AO_VS),
         ("grid_ao", GRID_AO),
+        ("grid_ao_vs", GRID_AO_VS),
     ]
 }
 
@@ -326,15 +329,28 @@ pub struct WebGlResource {
     pub name: String,
 }
 
-/// The dashboard viewer's program ([`crate::VIEWER`]) for WebGL2.
-pub fn webgl_viewer() -> Result<WebGlProgram, ExportError> {
-    let name = "viewer";
+/// The dashboard viewer's program for WebGL2, for a method `family`
+/// (`vertex`, `grid` or `cubemap`: [`crate::VIEWER_VERTEX`],
+/// [`crate::VIEWER_GRID`], [`crate::VIEWER_CUBEMAP`]).
+pub fn webgl_viewer(family: &str) -> Result<WebGlProgram, ExportError> {
+    let (name, source) = match family {
+        "vertex" => ("viewer_vertex", crate::VIEWER_VERTEX),
+        "grid" => ("viewer_grid", crate::VIEWER_GRID),
+        "cubemap" => ("viewer_cubemap", crate::VIEWER_CUBEMAP),
+        _ => {
+            return Err(ExportError {
+                shader: "viewer",
+                target: None,
+                message: format!("no viewer for the {family:?} family"),
+            });
+        }
+    };
     let fail = |target, message| ExportError {
         shader: name,
         target,
         message,
     };
-    let (module, info) = parse(name, crate::VIEWER).map_err(|m| fail(None, m))?;
+    let (module, info) = parse(name, source).map_err(|m| fail(None, m))?;
     let options = glsl::Options {
         version: glsl::Version::Embedded {
             version: 300,
@@ -484,43 +500,35 @@ mod tests {
     }
 
     #[test]
-    fn the_viewer_is_valid_glsl_es_300_with_every_resource_named() {
-        let program = webgl_viewer().unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        for (file, text) in [
-            ("viewer.vert", &program.vertex),
-            ("viewer.frag", &program.fragment),
-        ] {
-            assert!(text.starts_with("#version 300 es"), "{file}");
-            let path = dir.path().join(file);
-            std::fs::write(&path, text).unwrap();
-            let (ok, said) = run("glslangValidator", &[path.as_os_str()]);
-            assert!(ok, "{file}: {said}");
-        }
-        // Bindings 0 to 9, each named as the GLSL declares it: the
-        // samplers (2 to 5 for the AO's arrays, 8 and 9 for the skin) in
-        // the vertex stage, the shading uniforms (6) in both.
-        for binding in 0..10 {
-            let named: Vec<&WebGlResource> = program
-                .resources
-                .iter()
-                .filter(|r| r.binding == binding)
-                .collect();
-            assert!(
-                !named.is_empty(),
-                "binding {binding}: {:?}",
-                program.resources
-            );
-            for r in named {
-                let text = format!("{}{}", program.vertex, program.fragment);
-                assert!(text.contains(&r.name), "{r:?}");
+    fn every_viewer_is_valid_glsl_es_300_with_every_resource_named() {
+        // The family's lookup bindings, then the viewer's own: the shading
+        // uniforms (6, in both stages), the viewer's uniforms (7), the
+        // skin (8) and the palette (9).
+        for (family, lookup) in [("vertex", 0..6), ("grid", 0..6), ("cubemap", 0..3)] {
+            let program = webgl_viewer(family).unwrap();
+            let dir = tempfile::tempdir().unwrap();
+            for (file, text) in [
+                ("viewer.vert", &program.vertex),
+                ("viewer.frag", &program.fragment),
+            ] {
+                assert!(text.starts_with("#version 300 es"), "{family} {file}");
+                let path = dir.path().join(file);
+                std::fs::write(&path, text).unwrap();
+                let (ok, said) = run("glslangValidator", &[path.as_os_str()]);
+                assert!(ok, "{family} {file}: {said}");
             }
+            let mut bindings: Vec<u32> = program.resources.iter().map(|r| r.binding).collect();
+            bindings.dedup();
+            let want: Vec<u32> = lookup.chain(6..10).collect();
+            assert_eq!(bindings, want, "{family}: {:?}", program.resources);
+            let text = format!("{}{}", program.vertex, program.fragment);
+            for r in &program.resources {
+                assert!(text.contains(&r.name), "{family}: {r:?}");
+            }
+            let shading = program.resources.iter().filter(|r| r.binding == 6).count();
+            assert_eq!(shading, 2, "{family}: {:?}", program.resources);
         }
-        assert!(
-            program.resources.iter().filter(|r| r.binding == 6).count() == 2,
-            "{:?}",
-            program.resources
-        );
+        assert!(webgl_viewer("nothing").is_err());
     }
 
     #[test]
@@ -535,9 +543,9 @@ mod tests {
                 )
             })
             .collect();
-        // vertex 2, vertex-stage 2, cubemap 1, grid 1, in 4.50 and ES 3.10;
-        // the vertex stage's 2 in ES 3.00.
-        assert_eq!(glsl.len(), 2 * 6 + 2);
+        // In 4.50 and ES 3.10: vertex 2, cubemap 1, grid 1, and 2 for each
+        // vertex-stage twin; in ES 3.00 the vertex-stage twins' only.
+        assert_eq!(glsl.len(), 2 * 10 + 3 * 2);
         for f in glsl {
             let path = dir.path().join(&f.path);
             let (ok, said) = run("glslangValidator", &[path.as_os_str()]);
@@ -559,7 +567,7 @@ mod tests {
             .iter()
             .filter(|f| f.target == Target::SpirV13)
             .collect();
-        assert_eq!(spirv.len(), 4);
+        assert_eq!(spirv.len(), runtime_sources().len());
         for f in spirv {
             let path = dir.path().join(&f.path);
             let (ok, said) = run(

@@ -16,8 +16,12 @@
 //! * [`GRID_AO`]: run-time lookup of Malmer et al.'s grids at receivers
 //!   (`grid_occlusion`, and `cs_main` over a batch).
 //! * [`PREVIEW`]: the preview raster (`vs_main`, `fs_main`).
-//! * [`VIEWER`]: the dashboard's WebGL2 viewer: GPU skinning,
-//!   `vertex_ao(v)` and the previews' shading, for naga's GLSL ES 3.00.
+//! * [`CUBEMAP_AO_VS`], [`GRID_AO_VS`]: the lookups in a vertex shader
+//!   (data in textures), for WebGL2.
+//! * [`VIEWER_VERTEX`], [`VIEWER_GRID`], [`VIEWER_CUBEMAP`]: the
+//!   dashboard's WebGL2 viewer per method family: GPU skinning, the
+//!   method's vertex-stage lookup and the previews' shading, for naga's
+//!   GLSL ES 3.00.
 //!
 //! The Rust mirrors of the uniforms and storage structs are in [`mirror`],
 //! field for field with size assertions; [`export`] translates the
@@ -34,72 +38,121 @@ pub use mirror::{
 /// Half-float decoding shared by the pipelines.
 pub const COMMON_F16: &str = include_str!("../wgsl/common/f16.wgsl");
 
+/// Composes WGSL files under `shaders/wgsl/` into one source, in order.
+macro_rules! compose {
+    ($($file:literal),+ $(,)?) => {
+        concat!($(include_str!(concat!("../wgsl/", $file)), "\n"),+)
+    };
+}
+
 /// The vertex-method evaluation shader, composed: [`COMMON_F16`] then
 /// `vertex_ao.wgsl`.
-pub const VERTEX_AO: &str = concat!(
-    include_str!("../wgsl/common/f16.wgsl"),
-    "\n",
-    include_str!("../wgsl/vertex_ao.wgsl")
-);
+pub const VERTEX_AO: &str = compose!("common/f16.wgsl", "vertex_ao.wgsl");
 
 /// The vertex-method evaluation in a vertex shader (textures instead of
 /// storage buffers, for WebGL2 and GLSL ES 3.00), composed: [`COMMON_F16`],
-/// `common/vertex_ao_textures.wgsl`, then `vertex_ao_vs.wgsl` (the tests'
-/// point draw).
-pub const VERTEX_AO_VS: &str = concat!(
-    include_str!("../wgsl/common/f16.wgsl"),
-    "\n",
-    include_str!("../wgsl/common/vertex_ao_textures.wgsl"),
-    "\n",
-    include_str!("../wgsl/vertex_ao_vs.wgsl")
+/// `common/vertex_ao_textures.wgsl`, `common/point_target.wgsl`, then
+/// `vertex_ao_vs.wgsl` (the tests' point draw).
+pub const VERTEX_AO_VS: &str = compose!(
+    "common/f16.wgsl",
+    "common/vertex_ao_textures.wgsl",
+    "common/point_target.wgsl",
+    "vertex_ao_vs.wgsl"
 );
 
-/// Texels per row of [`VERTEX_AO_VS`]'s data textures (WebGL2's smallest
-/// `MAX_TEXTURE_SIZE`).
+/// Texels per row of the vertex-stage evaluators' data textures (WebGL2's
+/// smallest `MAX_TEXTURE_SIZE`).
 pub const VS_TEXTURE_WIDTH: u32 = 2048;
 
-/// The cubemap lookup shader, composed: [`COMMON_F16`] then
-/// `cubemap_ao.wgsl`.
-pub const CUBEMAP_AO: &str = concat!(
-    include_str!("../wgsl/common/f16.wgsl"),
-    "\n",
-    include_str!("../wgsl/cubemap_ao.wgsl")
+/// The cubemap lookup shader, composed: [`COMMON_F16`],
+/// `common/cubemap_lookup.wgsl`, then `cubemap_ao.wgsl`.
+pub const CUBEMAP_AO: &str = compose!(
+    "common/f16.wgsl",
+    "common/cubemap_lookup.wgsl",
+    "cubemap_ao.wgsl"
 );
 
-/// The grid lookup shader.
-pub const GRID_AO: &str = include_str!("../wgsl/grid_ao.wgsl");
+/// The cubemap lookup in a vertex shader (textures, for WebGL2), composed:
+/// [`COMMON_F16`], `common/data_textures.wgsl`,
+/// `common/cubemap_lookup.wgsl`, `common/cubemap_textures.wgsl`,
+/// `common/point_target.wgsl`, then `cubemap_ao_vs.wgsl`.
+pub const CUBEMAP_AO_VS: &str = compose!(
+    "common/f16.wgsl",
+    "common/data_textures.wgsl",
+    "common/cubemap_lookup.wgsl",
+    "common/cubemap_textures.wgsl",
+    "common/point_target.wgsl",
+    "cubemap_ao_vs.wgsl"
+);
+
+/// The grid lookup shader, composed: `common/grid_lookup.wgsl` then
+/// `grid_ao.wgsl`.
+pub const GRID_AO: &str = compose!("common/grid_lookup.wgsl", "grid_ao.wgsl");
+
+/// The grid lookup in a vertex shader (textures, for WebGL2), composed:
+/// `common/data_textures.wgsl`, `common/grid_lookup.wgsl`,
+/// `common/grid_textures.wgsl`, `common/point_target.wgsl`, then
+/// `grid_ao_vs.wgsl`.
+pub const GRID_AO_VS: &str = compose!(
+    "common/data_textures.wgsl",
+    "common/grid_lookup.wgsl",
+    "common/grid_textures.wgsl",
+    "common/point_target.wgsl",
+    "grid_ao_vs.wgsl"
+);
 
 /// The preview raster shader, composed: `common/shade.wgsl` then
 /// `preview.wgsl`.
-pub const PREVIEW: &str = concat!(
-    include_str!("../wgsl/common/shade.wgsl"),
-    "\n",
-    include_str!("../wgsl/preview.wgsl")
+pub const PREVIEW: &str = compose!("common/shade.wgsl", "preview.wgsl");
+
+/// The dashboard viewer's shader for a vertex-method asset (WebGL2 through
+/// naga's GLSL ES 3.00, [`export::webgl_viewer`]): `common/shade.wgsl`,
+/// `viewer.wgsl`, the vertex-stage evaluator and `viewer_vertex.wgsl`.
+pub const VIEWER_VERTEX: &str = compose!(
+    "common/shade.wgsl",
+    "viewer.wgsl",
+    "common/f16.wgsl",
+    "common/vertex_ao_textures.wgsl",
+    "viewer_vertex.wgsl"
 );
 
-/// The dashboard viewer's shader (WebGL2 through naga's GLSL ES 3.00:
-/// [`export::webgl_viewer`]), composed: [`COMMON_F16`],
-/// `common/vertex_ao_textures.wgsl`, `common/shade.wgsl`, then
-/// `viewer.wgsl`.
-pub const VIEWER: &str = concat!(
-    include_str!("../wgsl/common/f16.wgsl"),
-    "\n",
-    include_str!("../wgsl/common/vertex_ao_textures.wgsl"),
-    "\n",
-    include_str!("../wgsl/common/shade.wgsl"),
-    "\n",
-    include_str!("../wgsl/viewer.wgsl")
+/// The viewer's shader for a grid asset: `common/shade.wgsl`,
+/// `viewer.wgsl`, the grid's vertex-stage lookup and `viewer_grid.wgsl`.
+pub const VIEWER_GRID: &str = compose!(
+    "common/shade.wgsl",
+    "viewer.wgsl",
+    "common/data_textures.wgsl",
+    "common/grid_lookup.wgsl",
+    "common/grid_textures.wgsl",
+    "viewer_grid.wgsl"
+);
+
+/// The viewer's shader for a cubemap asset: `common/shade.wgsl`,
+/// `viewer.wgsl`, the cubemap's vertex-stage lookup and
+/// `viewer_cubemap.wgsl`.
+pub const VIEWER_CUBEMAP: &str = compose!(
+    "common/shade.wgsl",
+    "viewer.wgsl",
+    "common/f16.wgsl",
+    "common/data_textures.wgsl",
+    "common/cubemap_lookup.wgsl",
+    "common/cubemap_textures.wgsl",
+    "viewer_cubemap.wgsl"
 );
 
 /// Every composed pipeline source, by file name.
-pub fn sources() -> [(&'static str, &'static str); 6] {
+pub fn sources() -> [(&'static str, &'static str); 10] {
     [
         ("vertex_ao.wgsl", VERTEX_AO),
         ("vertex_ao_vs.wgsl", VERTEX_AO_VS),
         ("cubemap_ao.wgsl", CUBEMAP_AO),
+        ("cubemap_ao_vs.wgsl", CUBEMAP_AO_VS),
         ("grid_ao.wgsl", GRID_AO),
+        ("grid_ao_vs.wgsl", GRID_AO_VS),
         ("preview.wgsl", PREVIEW),
-        ("viewer.wgsl", VIEWER),
+        ("viewer_vertex.wgsl", VIEWER_VERTEX),
+        ("viewer_grid.wgsl", VIEWER_GRID),
+        ("viewer_cubemap.wgsl", VIEWER_CUBEMAP),
     ]
 }
 

@@ -1,9 +1,11 @@
 // The dashboard's 3D viewer (WebGL2, through naga's GLSL ES 3.00): a
-// character skinned on the GPU, its AO evaluated per vertex by
-// `vertex_ao(v)` from the asset's arrays in textures
-// (common/vertex_ao_textures.wgsl, bindings 0 to 5), shaded as the
-// previews are (common/shade.wgsl), and its ground plane. What an engine
-// on WebGL2 does with a vertex-method asset, end to end.
+// character skinned on the GPU and its ground plane, shaded as the
+// previews are (common/shade.wgsl), with the model's AO from the method's
+// run-time lookup in the vertex stage, its arrays in textures at bindings
+// 0 to 5: `model_ao`, defined by viewer_vertex.wgsl (`vertex_ao(v)`),
+// viewer_grid.wgsl (`grid_occlusion` at the skinned vertex, on its part)
+// or viewer_cubemap.wgsl (`cubemap_occlusion` at the frame's phase). What
+// an engine on WebGL2 does with an asset, end to end.
 //
 // Skinning is linear blend skinning as aobake_core's `Character::skin`
 // does it: the palette matrices summed with their weights (zero weights
@@ -17,18 +19,23 @@
 // The target is the canvas, which is not sRGB: the fragment stage encodes
 // the linear colour to sRGB itself (the previews let the hardware do it).
 //
-// Prepended at load time: common/f16.wgsl, common/vertex_ao_textures.wgsl,
-// common/shade.wgsl.
+// Prepended at load time: common/shade.wgsl; then the family's lookup and
+// viewer_{family}.wgsl.
+
+// Texels per row of the skin and palette textures (WebGL2's smallest
+// MAX_TEXTURE_SIZE).
+const VIEWER_WIDTH: u32 = 2048u;
 
 struct ViewerParams {
     // 1: skin by the palette; 0: draw as given (the ground).
     skinned: u32,
     // Joint influences per vertex in `skin`.
     influences: u32,
-    // 1: the model's AO, vertex_ao(v); 0: the `ao` attribute (the static
-    // average, the ground's truth, or none).
+    // 1: the model's AO, model_ao(…); 0: the `ao` attribute (the static
+    // average, the truth, or none).
     model: u32,
-    _pad: u32,
+    // A cubemap's phase of the clip's cycle at this frame.
+    phase: f32,
 }
 
 @group(0) @binding(6) var<uniform> u: Uniforms;
@@ -53,11 +60,16 @@ struct ViewerOut {
 }
 
 fn skin_word(i: u32) -> u32 {
-    return textureLoad(skin_tex, texel(i), 0).x;
+    return textureLoad(skin_tex, viewer_texel(i), 0).x;
 }
 
 fn palette_at(i: u32) -> f32 {
-    return bitcast<f32>(textureLoad(palette_tex, texel(i), 0).x);
+    return bitcast<f32>(textureLoad(palette_tex, viewer_texel(i), 0).x);
+}
+
+// Word i of the skin and palette textures, VIEWER_WIDTH texels wide.
+fn viewer_texel(i: u32) -> vec2<i32> {
+    return vec2<i32>(i32(i % VIEWER_WIDTH), i32(i / VIEWER_WIDTH));
 }
 
 fn palette_matrix(j: u32) -> mat4x4<f32> {
@@ -104,7 +116,7 @@ fn vs_main(in: ViewerIn) -> ViewerOut {
     out.truth = in.truth;
     out.model = in.ao;
     if (viewer.model != 0u) {
-        out.model = vertex_ao(in.index);
+        out.model = model_ao(in.index, world, normal, viewer.skinned != 0u);
     }
     return out;
 }

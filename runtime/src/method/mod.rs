@@ -9,6 +9,20 @@ pub mod vertex;
 
 use serde::{Deserialize, Serialize};
 
+/// Why a model's arrays do not fit the GPU evaluators' 32-bit offsets.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{what} ({count}) do not fit in 32 bits")]
+pub struct TooLarge {
+    /// What overflowed.
+    pub what: &'static str,
+    /// How many there are.
+    pub count: usize,
+}
+
+pub(crate) fn to_u32(count: usize, what: &'static str) -> Result<u32, TooLarge> {
+    u32::try_from(count).map_err(|_| TooLarge { what, count })
+}
+
 /// The method an asset holds, as a number in the asset preamble (so tools
 /// can tell without parsing JSON) and as a name in headers, the CLI and
 /// the API.

@@ -3,7 +3,7 @@
 //! CPU lookup, and the previews shade the ground with the cubemap as the
 //! GPU evaluates it.
 
-use aobake_core::method::cubemap::model::{CubemapModel, Encoding};
+use aobake_core::method::cubemap::{gpu::CubemapGpu, model::CubemapModel};
 use aobake_shaders::CubemapAoParams;
 use wgpu::util::DeviceExt as _;
 
@@ -26,7 +26,6 @@ impl<'g> CubemapAo<'g> {
     /// Uploads the model's texels and builds the pipeline.
     pub fn new(gpu: &'g Gpu, model: &CubemapModel) -> Result<Self, GpuError> {
         let device = &gpu.device;
-        let l = &model.layout;
         let limit = device.limits().max_storage_buffer_binding_size;
         if model.texels.len() as u64 > limit {
             return Err(GpuError::TooLarge(format!(
@@ -34,21 +33,14 @@ impl<'g> CubemapAo<'g> {
                 model.texels.len()
             )));
         }
-        let s = &l.spheroid;
-        let to_u32 = |n: usize, what: &str| {
-            u32::try_from(n).map_err(|_| GpuError::TooLarge(format!("{what}: {n}")))
-        };
+        let gpu_form = CubemapGpu::new(model).map_err(|e| GpuError::TooLarge(e.to_string()))?;
         let base = CubemapAoParams {
-            centre: [s.centre.x, s.centre.y, s.centre.z, s.outer],
-            radii: [s.radii.x, s.radii.y, s.radii.z, s.inner],
-            resolution: to_u32(l.resolution, "resolution")?,
-            shells: to_u32(s.shells, "shells")?,
-            times: to_u32(l.times, "times")?,
-            encoding: match l.encoding {
-                Encoding::Discrete => 0,
-                Encoding::Continuous => 1,
-                Encoding::Thirds => 2,
-            },
+            centre: gpu_form.centre,
+            radii: gpu_form.radii,
+            resolution: gpu_form.resolution,
+            shells: gpu_form.shells,
+            times: gpu_form.times,
+            encoding: gpu_form.encoding,
             points: 0,
             phase: 0.0,
             row_stride: 0,
@@ -69,11 +61,7 @@ impl<'g> CubemapAo<'g> {
         });
         let texels = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("cubemap texels"),
-            contents: if model.texels.is_empty() {
-                &[0u8; 16]
-            } else {
-                &model.texels
-            },
+            contents: bytemuck::cast_slice(&gpu_form.texels),
             usage: wgpu::BufferUsages::STORAGE,
         });
         if let Some(e) = pollster::block_on(scope.pop()) {

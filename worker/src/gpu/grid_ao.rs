@@ -3,7 +3,7 @@
 //! core's CPU lookup, and the previews shade the parts and the ground with
 //! the grids as the GPU evaluates them.
 
-use aobake_core::method::grid::model::GridModel;
+use aobake_core::method::grid::{gpu::GridGpu, model::GridModel};
 use aobake_shaders::{GridAoParams, GridPartInfo, GridReceiver};
 use wgpu::util::DeviceExt as _;
 
@@ -31,25 +31,17 @@ impl<'g> GridAo<'g> {
     /// builds the pipeline.
     pub fn new(gpu: &'g Gpu, model: &GridModel) -> Result<Self, GpuError> {
         let device = &gpu.device;
-        let too_large = |what: String| GpuError::TooLarge(what);
-        let mut cells: Vec<u32> = Vec::new();
-        let mut infos = Vec::with_capacity(model.parts.len());
-        for part in &model.parts {
-            infos.push(GridPartInfo {
-                resolution: u32::try_from(part.grid.resolution)
-                    .map_err(|_| too_large("resolution".into()))?,
-                offset: u32::try_from(cells.len()).map_err(|_| too_large("cells".into()))?,
+        let arrays = GridGpu::new(model).map_err(|e| GpuError::TooLarge(e.to_string()))?;
+        let cells = &arrays.cells;
+        let infos: Vec<GridPartInfo> = arrays
+            .infos
+            .iter()
+            .map(|i| GridPartInfo {
+                resolution: i[0],
+                offset: i[1],
                 _pad: [0; 2],
-            });
-            for (i, &a) in part.occlusion.iter().enumerate() {
-                let d = part.directions.as_ref().map_or([0; 3], |d| d[i]);
-                cells.push(u32::from_le_bytes([d[0], d[1], d[2], a]));
-            }
-        }
-        let tclip_offset = u32::try_from(cells.len()).map_err(|_| too_large("cells".into()))?;
-        if let Some(t) = &model.tclip {
-            cells.extend(t.values.iter().flatten().map(|v| v.to_bits()));
-        }
+            })
+            .collect();
         let limit = device.limits().max_storage_buffer_binding_size;
         if 4 * cells.len() as u64 > limit {
             return Err(GpuError::TooLarge(format!(
@@ -58,12 +50,12 @@ impl<'g> GridAo<'g> {
             )));
         }
         let base = GridAoParams {
-            parts: infos.len() as u32,
+            parts: arrays.parts(),
             points: 0,
             row_stride: 0,
-            cones: u32::from(model.cones()),
-            tclip_resolution: model.tclip.as_ref().map_or(0, |t| t.resolution as u32),
-            tclip_offset,
+            cones: arrays.cones,
+            tclip_resolution: arrays.tclip_resolution,
+            tclip_offset: arrays.tclip_offset,
             _pad: [0; 2],
         };
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -87,7 +79,7 @@ impl<'g> GridAo<'g> {
             })
         };
         let infos = storage("grid parts", bytemuck::cast_slice(&infos));
-        let cells = storage("grid cells", bytemuck::cast_slice(&cells));
+        let cells = storage("grid cells", bytemuck::cast_slice(cells));
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Pipeline(e.to_string()));
         }

@@ -24,7 +24,7 @@ pub use cubemap_ao::CubemapAo;
 pub use grid_ao::GridAo;
 pub use preview::PreviewRenderer;
 pub use vertex_ao::VertexAo;
-pub use vertex_ao_vs::evaluate_vertex_stage;
+pub use vertex_ao_vs::{cubemap_vertex_stage, evaluate_vertex_stage, grid_vertex_stage};
 pub use wgpu::{Backends, DeviceType};
 
 /// Why the GPU could not be used.

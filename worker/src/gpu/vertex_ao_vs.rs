@@ -1,18 +1,33 @@
-//! [`evaluate_vertex_stage`] runs `shaders/wgsl/vertex_ao_vs.wgsl`, the
-//! vertex-method evaluation in a vertex shader with its arrays in
-//! textures: what a WebGL2 engine (GLSL ES 3.00, no compute shaders) runs.
-//! It draws vertex v as a point at pixel (v % width, v / width) of an
-//! R32Uint target (the AO's bits) and reads the target back, so that tests compare it
-//! with the compute shader and the CPU.
+//! The vertex-stage evaluators: what a WebGL2 engine (GLSL ES 3.00, no
+//! compute shaders) runs, with every array in an R32Uint texture.
+//! [`evaluate_vertex_stage`] runs `shaders/wgsl/vertex_ao_vs.wgsl`,
+//! [`cubemap_vertex_stage`] `cubemap_ao_vs.wgsl` and [`grid_vertex_stage`]
+//! `grid_ao_vs.wgsl`. Each draws element n as a point at pixel
+//! (n % width, n / width) of an R32Uint target (its value's bits) and
+//! reads the target back ([`draw_points`]), so that tests compare it with
+//! the compute shaders and the CPU.
 
-use aobake_core::method::vertex::{Model, form::GpuArrays};
-use aobake_shaders::{VS_TEXTURE_WIDTH, VertexAoVsParams};
+use aobake_core::method::{
+    cubemap::{gpu::CubemapGpu, model::CubemapModel},
+    grid::{gpu::GridGpu, model::GridModel},
+    vertex::{Model, form::GpuArrays},
+};
+use aobake_shaders::{CubemapAoParams, GridAoParams, VS_TEXTURE_WIDTH, VertexAoVsParams};
+use glam::Vec3;
 use wgpu::util::DeviceExt as _;
 
 use super::{
     Gpu, GpuError,
     vertex_ao::{to_u32, upload},
 };
+
+/// One resource of a point draw, at its WGSL binding in group 0.
+enum Resource<'a> {
+    /// A uniform buffer's bytes.
+    Uniform(&'a [u8]),
+    /// An R32Uint data texture's words.
+    Words(&'a [u32]),
+}
 
 /// A data texture of `words`, [`VS_TEXTURE_WIDTH`] texels wide (element i
 /// at (i % width, i / width)), R32Uint.
@@ -49,63 +64,53 @@ fn data_texture(gpu: &Gpu, label: &str, words: &[u32]) -> Result<wgpu::TextureVi
     Ok(texture.create_view(&wgpu::TextureViewDescriptor::default()))
 }
 
-/// AO of every vertex of `model` for one pose's `weights`
-/// ([`Model::weights`]), computed by the vertex-stage evaluator.
-pub fn evaluate_vertex_stage(
+/// The target's size for `count` points: [`VS_TEXTURE_WIDTH`] wide at
+/// most.
+fn target_size(count: u32) -> (u32, u32) {
+    let width = count.clamp(1, VS_TEXTURE_WIDTH);
+    (width, count.div_ceil(width).max(1))
+}
+
+/// Draws points `0..count` with `source`'s `vs_main` and `fs_main` (the
+/// entry points of common/point_target.wgsl) and `resources` bound, and
+/// reads each point's value back.
+fn draw_points(
     gpu: &Gpu,
-    model: &Model,
-    weights: &[f32],
+    label: &str,
+    source: &str,
+    resources: &[(u32, Resource<'_>)],
+    count: u32,
 ) -> Result<Vec<f32>, GpuError> {
-    let arrays = upload(model)?;
-    let sparse = arrays.sparse;
-    let GpuArrays {
-        vertices,
-        weights: want,
-        blocks,
-        coefficients,
-        maps,
-        sparse_rows,
-        ..
-    } = arrays;
-    if weights.len() != want {
-        return Err(GpuError::TooLarge(format!(
-            "{} weights given, the model takes {want}",
-            weights.len()
-        )));
-    }
     let device = &gpu.device;
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let target_width = vertices.clamp(1, VS_TEXTURE_WIDTH);
-    let target_height = vertices.div_ceil(target_width).max(1);
-    let params = VertexAoVsParams {
-        vertices,
-        blocks: to_u32(blocks.len(), "blocks")?,
-        sparse: u32::from(sparse),
-        width: VS_TEXTURE_WIDTH,
-        target_width,
-        target_height,
-        _pad: [0; 2],
-    };
-    let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("vertex ao vs params"),
-        contents: bytemuck::bytes_of(&params),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let weight_bits: Vec<u32> = weights.iter().map(|w| w.to_bits()).collect();
-    let views = [
-        data_texture(gpu, "blocks", bytemuck::cast_slice(&blocks))?,
-        data_texture(gpu, "coefficients", &coefficients)?,
-        data_texture(gpu, "maps", &maps)?,
-        data_texture(gpu, "weights", &weight_bits)?,
-        data_texture(gpu, "sparse rows", &sparse_rows)?,
-    ];
+    let (target_width, target_height) = target_size(count);
+    enum Bound {
+        Buffer(wgpu::Buffer),
+        View(wgpu::TextureView),
+    }
+    let mut bound = Vec::with_capacity(resources.len());
+    for (binding, resource) in resources {
+        bound.push((
+            *binding,
+            match resource {
+                Resource::Uniform(bytes) => Bound::Buffer(device.create_buffer_init(
+                    &wgpu::util::BufferInitDescriptor {
+                        label: Some(label),
+                        contents: bytes,
+                        usage: wgpu::BufferUsages::UNIFORM,
+                    },
+                )),
+                Resource::Words(words) => Bound::View(data_texture(gpu, label, words)?),
+            },
+        ));
+    }
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("vertex_ao_vs.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(aobake_shaders::VERTEX_AO_VS.into()),
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
     });
     let format = wgpu::TextureFormat::R32Uint;
     let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("vertex ao vs"),
+        label: Some(label),
         layout: None,
         vertex: wgpu::VertexState {
             module: &module,
@@ -132,18 +137,18 @@ pub fn evaluate_vertex_stage(
         multiview_mask: None,
         cache: None,
     });
-    let mut entries = vec![wgpu::BindGroupEntry {
-        binding: 0,
-        resource: params.as_entire_binding(),
-    }];
-    for (i, view) in views.iter().enumerate() {
-        entries.push(wgpu::BindGroupEntry {
-            binding: i as u32 + 1,
-            resource: wgpu::BindingResource::TextureView(view),
-        });
-    }
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = bound
+        .iter()
+        .map(|(binding, b)| wgpu::BindGroupEntry {
+            binding: *binding,
+            resource: match b {
+                Bound::Buffer(buffer) => buffer.as_entire_binding(),
+                Bound::View(view) => wgpu::BindingResource::TextureView(view),
+            },
+        })
+        .collect();
     let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("vertex ao vs"),
+        label: Some(label),
         layout: &pipeline.get_bind_group_layout(0),
         entries: &entries,
     });
@@ -153,7 +158,7 @@ pub fn evaluate_vertex_stage(
         depth_or_array_layers: 1,
     };
     let target = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("vertex ao vs target"),
+        label: Some(label),
         size,
         mip_level_count: 1,
         sample_count: 1,
@@ -165,7 +170,7 @@ pub fn evaluate_vertex_stage(
     let view = target.create_view(&wgpu::TextureViewDescriptor::default());
     let row = (4 * target_width).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
     let staging = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("vertex ao vs readback"),
+        label: Some(label),
         size: u64::from(row * target_height),
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
@@ -174,13 +179,13 @@ pub fn evaluate_vertex_stage(
         device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
     {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("vertex ao vs"),
+            label: Some(label),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
                 view: &view,
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
-                    // A pixel no vertex reached reads as a NaN.
+                    // A pixel no point reached reads as a NaN.
                     load: wgpu::LoadOp::Clear(wgpu::Color {
                         r: f64::from(u32::MAX),
                         g: 0.0,
@@ -197,7 +202,7 @@ pub fn evaluate_vertex_stage(
         });
         pass.set_pipeline(&pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
-        pass.draw(0..vertices, 0..1);
+        pass.draw(0..count, 0..1);
     }
     encoder.copy_texture_to_buffer(
         target.as_image_copy(),
@@ -216,13 +221,149 @@ pub fn evaluate_vertex_stage(
         return Err(GpuError::Pipeline(e.to_string()));
     }
     let bytes = gpu.read(&staging, submission)?;
-    let mut ao = Vec::with_capacity(vertices as usize);
-    for v in 0..vertices {
-        let (x, y) = (v % target_width, v / target_width);
-        let at = (y * row + 4 * x) as usize;
-        ao.push(f32::from_le_bytes(
-            bytes[at..at + 4].try_into().expect("4 bytes"),
-        ));
+    Ok((0..count)
+        .map(|n| {
+            let (x, y) = (n % target_width, n / target_width);
+            let at = (y * row + 4 * x) as usize;
+            f32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"))
+        })
+        .collect())
+}
+
+/// The data layout uniform of the cubemap and grid vertex stages
+/// (`DataLayout` of common/data_textures.wgsl) for `count` points.
+fn data_layout(count: u32) -> [u32; 4] {
+    let (width, height) = target_size(count);
+    [VS_TEXTURE_WIDTH, width, height, 0]
+}
+
+/// AO of every vertex of `model` for one pose's `weights`
+/// ([`Model::weights`]), computed by the vertex-stage evaluator.
+pub fn evaluate_vertex_stage(
+    gpu: &Gpu,
+    model: &Model,
+    weights: &[f32],
+) -> Result<Vec<f32>, GpuError> {
+    let arrays = upload(model)?;
+    let GpuArrays {
+        vertices,
+        weights: want,
+        ..
+    } = arrays;
+    if weights.len() != want {
+        return Err(GpuError::TooLarge(format!(
+            "{} weights given, the model takes {want}",
+            weights.len()
+        )));
     }
-    Ok(ao)
+    let (target_width, target_height) = target_size(vertices);
+    let params = VertexAoVsParams {
+        vertices,
+        blocks: to_u32(arrays.blocks.len(), "blocks")?,
+        sparse: u32::from(arrays.sparse),
+        width: VS_TEXTURE_WIDTH,
+        target_width,
+        target_height,
+        _pad: [0; 2],
+    };
+    let weight_bits: Vec<u32> = weights.iter().map(|w| w.to_bits()).collect();
+    let blocks: &[u32] = bytemuck::cast_slice(&arrays.blocks);
+    draw_points(
+        gpu,
+        "vertex_ao_vs.wgsl",
+        aobake_shaders::VERTEX_AO_VS,
+        &[
+            (0, Resource::Uniform(bytemuck::bytes_of(&params))),
+            (1, Resource::Words(blocks)),
+            (2, Resource::Words(&arrays.coefficients)),
+            (3, Resource::Words(&arrays.maps)),
+            (4, Resource::Words(&weight_bits)),
+            (5, Resource::Words(&arrays.sparse_rows)),
+        ],
+        vertices,
+    )
+}
+
+/// The occlusion `model` casts at `points` at `phase`, computed by the
+/// cubemap's vertex-stage lookup.
+pub fn cubemap_vertex_stage(
+    gpu: &Gpu,
+    model: &CubemapModel,
+    points: &[Vec3],
+    phase: f32,
+) -> Result<Vec<f32>, GpuError> {
+    let form = CubemapGpu::new(model).map_err(|e| GpuError::TooLarge(e.to_string()))?;
+    let count = to_u32(points.len(), "points")?;
+    let params = CubemapAoParams {
+        centre: form.centre,
+        radii: form.radii,
+        resolution: form.resolution,
+        shells: form.shells,
+        times: form.times,
+        encoding: form.encoding,
+        points: count,
+        phase,
+        row_stride: 0,
+        _pad: 0,
+    };
+    let xyz: Vec<u32> = points
+        .iter()
+        .flat_map(|p| p.to_array().map(f32::to_bits))
+        .collect();
+    draw_points(
+        gpu,
+        "cubemap_ao_vs.wgsl",
+        aobake_shaders::CUBEMAP_AO_VS,
+        &[
+            (0, Resource::Uniform(bytemuck::bytes_of(&params))),
+            (1, Resource::Words(&form.texels)),
+            (
+                2,
+                Resource::Uniform(bytemuck::bytes_of(&data_layout(count))),
+            ),
+            (3, Resource::Words(&xyz)),
+        ],
+        count,
+    )
+}
+
+/// The occlusion `model`'s parts at `poses` ([`super::grid_ao::POSE_FLOATS`]
+/// per part) cast on `receivers` (grid_ao.wgsl's `Receiver`s), computed by
+/// the grid's vertex-stage lookup.
+pub fn grid_vertex_stage(
+    gpu: &Gpu,
+    model: &GridModel,
+    poses: &[f32],
+    receivers: &[aobake_shaders::GridReceiver],
+) -> Result<Vec<f32>, GpuError> {
+    let form = GridGpu::new(model).map_err(|e| GpuError::TooLarge(e.to_string()))?;
+    let count = to_u32(receivers.len(), "receivers")?;
+    let params = GridAoParams {
+        parts: form.parts(),
+        points: count,
+        row_stride: 0,
+        cones: form.cones,
+        tclip_resolution: form.tclip_resolution,
+        tclip_offset: form.tclip_offset,
+        _pad: [0; 2],
+    };
+    let infos: &[u32] = bytemuck::cast_slice(&form.infos);
+    let pose_bits: Vec<u32> = poses.iter().map(|p| p.to_bits()).collect();
+    draw_points(
+        gpu,
+        "grid_ao_vs.wgsl",
+        aobake_shaders::GRID_AO_VS,
+        &[
+            (0, Resource::Uniform(bytemuck::bytes_of(&params))),
+            (1, Resource::Words(infos)),
+            (2, Resource::Words(&form.cells)),
+            (3, Resource::Words(&pose_bits)),
+            (
+                4,
+                Resource::Uniform(bytemuck::bytes_of(&data_layout(count))),
+            ),
+            (5, Resource::Words(bytemuck::cast_slice(receivers))),
+        ],
+        count,
+    )
 }

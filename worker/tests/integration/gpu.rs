@@ -11,7 +11,9 @@ use aobake_core::{
     trace::SceneOptions,
     trace::trace_poses,
 };
-use aobake_worker::gpu::{Gpu, VertexAo, evaluate_vertex_stage};
+use aobake_worker::gpu::{
+    Gpu, VertexAo, cubemap_vertex_stage, evaluate_vertex_stage, grid_vertex_stage,
+};
 use half::f16;
 
 /// f16's machine epsilon.
@@ -300,6 +302,12 @@ fn the_wgsl_cubemap_lookup_matches_the_cpu_for_every_encoding() {
             let w = worst(&on_gpu, &on_cpu);
             eprintln!("{method} at phase {phase}: worst difference {w:e}");
             assert!(w < 1e-5, "{method} at phase {phase}: {w}");
+            // The vertex stage (textures, WebGL2) runs the same lookup
+            // (common/cubemap_lookup.wgsl) on the same adapter.
+            let vs = cubemap_vertex_stage(&gpu, &model, &points, phase).unwrap();
+            let w = worst(&vs, &on_cpu);
+            eprintln!("{method} at phase {phase}, vertex stage: worst difference {w:e}");
+            assert!(w < 1e-5, "{method} at phase {phase}, vertex stage: {w}");
         }
         assert!(nonzero > 1000, "the test points see occlusion: {nonzero}");
     }
@@ -419,6 +427,13 @@ fn the_wgsl_grid_lookup_matches_the_cpu_with_and_without_cones() {
             let w = worst(&on_gpu, &on_cpu);
             eprintln!("cones {cones}, clip {clip}: worst difference {w:e}");
             assert!(w < 1e-5, "cones {cones}, clip {clip}: {w}");
+            // The vertex stage (textures, WebGL2) runs the same lookup
+            // (common/grid_lookup.wgsl) on the same adapter.
+            let vs =
+                grid_vertex_stage(&gpu, &model, &grid_weights(&model, &palette), &packed).unwrap();
+            let w = worst(&vs, &on_cpu);
+            eprintln!("cones {cones}, clip {clip}, vertex stage: worst difference {w:e}");
+            assert!(w < 1e-5, "cones {cones}, clip {clip}, vertex stage: {w}");
         }
         assert!(nonzero > 500, "the receivers see occlusion: {nonzero}");
     }

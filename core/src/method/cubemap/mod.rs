@@ -35,7 +35,7 @@ pub mod model;
 pub mod setup;
 
 pub use aobake_runtime::method::cubemap::{
-    ALGORITHM_VERSION, blurhash, codec, continuous, discrete, geometry,
+    ALGORITHM_VERSION, blurhash, codec, continuous, discrete, geometry, gpu,
 };
 
 use serde::{Deserialize, Serialize};

@@ -30,7 +30,7 @@ pub mod parts;
 
 /// The run time (the model, the codec, `T_clip`) is the runtime crate's,
 /// which engines read grid assets with.
-pub use aobake_runtime::method::grid::{ALGORITHM_VERSION, codec, model, tclip};
+pub use aobake_runtime::method::grid::{ALGORITHM_VERSION, codec, gpu, model, tclip};
 
 pub use parts::PartsMode;
 

@@ -10,6 +10,7 @@ pub mod codec;
 pub mod continuous;
 pub mod discrete;
 pub mod geometry;
+pub mod gpu;
 pub mod model;
 
 pub use codec::CubemapHeader;

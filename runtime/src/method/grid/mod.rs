@@ -3,6 +3,7 @@
 //! the cone table `T_clip` ([`tclip`]).
 
 pub mod codec;
+pub mod gpu;
 pub mod model;
 pub mod tclip;
 

@@ -22,6 +22,8 @@
 
 use half::f16;
 
+use crate::method::{TooLarge, to_u32};
+
 /// One block of coefficients: `rows × columns`, row-major, so that for a
 /// given row neighbouring vertices read neighbouring values.
 #[derive(Debug, Clone, PartialEq)]
@@ -257,20 +259,6 @@ pub struct GpuArrays {
     pub maps: Vec<u32>,
     /// Sparse: each coefficient's row, u16 two per word.
     pub sparse_rows: Vec<u32>,
-}
-
-/// Why a form does not fit the GPU evaluators' 32-bit offsets.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{what} ({count}) do not fit in 32 bits")]
-pub struct TooLarge {
-    /// What overflowed.
-    pub what: &'static str,
-    /// How many there are.
-    pub count: usize,
-}
-
-fn to_u32(count: usize, what: &'static str) -> Result<u32, TooLarge> {
-    u32::try_from(count).map_err(|_| TooLarge { what, count })
 }
 
 /// Packs 16-bit values two per u32 (element 2i in the low half), padded
