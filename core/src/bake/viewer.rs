@@ -1,11 +1,14 @@
-//! What the dashboard's 3D viewer loads (DESIGN §9): a bake's character in
-//! its bind pose with its skin, the asset's arrays as the GPU evaluator
-//! reads them ([`GpuArrays`]), and per clip the frames an engine would
-//! compute at run time: each joint's `world_from_bind` matrix and the
-//! model's weights, from the clip's local transforms through the runtime's
-//! [`VertexAo`] (by node name, as an engine calls it). Where the previews
-//! traced the ground truth (their clip's stills and animation frames), a
-//! frame carries it too, with the model's error there.
+//! What the dashboard's 3D viewer loads: a bake's character in its bind
+//! pose with its skin, the asset's arrays as the GPU lookups read them
+//! (the runtime's [`GpuArrays`], [`GridGpu`], [`CubemapGpu`]) and where
+//! the page binds them, and per clip the frames an engine would compute at
+//! run time: each joint's `world_from_bind` matrix and the model's
+//! per-frame input ([`FrameModel`]): a vertex method's weights from the
+//! clip's local transforms through the runtime's [`VertexAo`] (by node
+//! name, as an engine calls it), the grids' part poses, or a cubemap's
+//! phase. Where the previews traced the ground truth (their clip's stills
+//! and animation frames), a frame carries it too, with the model's error
+//! there.
 //!
 //! Both are [`Bundle`]s: a JSON description and typed arrays in one
 //! binary (`AOVW`), which the page reads without copying.
@@ -16,13 +19,23 @@ use serde_json::{Value, json};
 
 use crate::{
     Character,
-    method::vertex::{Model, VertexAo, form::GpuArrays},
-    rig::{clip::Clip, pose::Pose},
+    method::{
+        cubemap::{gpu::CubemapGpu, model::CubemapModel},
+        grid::{
+            gpu::GridGpu,
+            model::{GridModel, Terms},
+        },
+        vertex::{VertexAo, form::GpuArrays},
+    },
+    rig::{
+        clip::Clip,
+        pose::{Pose, PosedMesh},
+    },
 };
 
 use super::{
     JobError,
-    preview::{Camera, FrameTruth, PreviewFrames, camera},
+    preview::{Camera, FrameTruth, Ground, PreviewFrames, PreviewModel, camera, grid_weights},
 };
 
 /// Frames per second of a clip's frames.
@@ -153,17 +166,27 @@ pub enum ViewerError {
     Job(#[from] JobError),
 }
 
-/// The viewer's scene of a vertex-method bake: `character` in its bind
-/// pose, its skin, the static average `static_ao` (the model averaged
-/// over the clips' frames, as the glTF export's `_AO`), the model's GPU
-/// arrays, and the clips by name. `preview` is the previews' clip.
+/// Texels per row of the data textures (WebGL2's smallest
+/// `MAX_TEXTURE_SIZE`; `aobake_shaders::VS_TEXTURE_WIDTH`).
+pub const TEXTURE_WIDTH: u32 = 2048;
+
+fn too_large(e: impl std::fmt::Display) -> ViewerError {
+    ViewerError::TooLarge(e.to_string())
+}
+
+/// The viewer's scene of a bake of `model`: `character` in its bind pose,
+/// its skin, the clips by name (`preview` is the previews' clip), and the
+/// model's arrays with the bindings the page gives them (`uniforms` and
+/// `textures`: a WGSL binding and an array's name each; `frame`: where a
+/// frame's input goes), and which surfaces the model shades. A vertex
+/// method's also holds its static average (the model averaged over the
+/// clips' frames, as the glTF export's `_AO`).
 pub fn scene(
     character: &Character,
     clips: &[Clip],
-    model: &Model,
+    model: PreviewModel<'_>,
     preview: Option<&str>,
 ) -> Result<Bundle, ViewerError> {
-    let gpu = GpuArrays::new(model.form()).map_err(|e| ViewerError::TooLarge(e.to_string()))?;
     let k = character.influences;
     let mut skin = Vec::with_capacity(2 * k * character.vertex_count());
     for v in 0..character.vertex_count() {
@@ -174,18 +197,13 @@ pub fn scene(
                 .map(|w| w.to_bits()),
         );
     }
-    let (static_ao, static_frames) =
-        crate::asset::gltf::static_ao(model, &character.skeleton, clips);
-    let meta = json!({
+    let mut meta = json!({
         "method": model.method().name(),
         "vertices": character.vertex_count(),
         "triangles": character.triangles.len(),
         "influences": k,
         "joints": character.joints.len(),
-        "weights": gpu.weights,
-        "sparse": gpu.sparse,
-        "blocks": gpu.blocks.len(),
-        "static_frames": static_frames,
+        "texture_width": TEXTURE_WIDTH,
         // Where the viewer's GPU skinning differs from the previews' CPU
         // skinning: morph targets are not applied, and normals the file
         // lacked are the bind pose's, skinned, not recomputed per frame.
@@ -194,30 +212,230 @@ pub fn scene(
         "clips": clips.iter().map(|c| json!({"name": c.name, "duration": c.duration})).collect::<Vec<_>>(),
         "preview_clip": preview,
     });
-    Ok(Bundle {
-        meta,
-        arrays: vec![
-            ("positions".into(), Array::F32(flat3(&character.positions))),
-            ("normals".into(), Array::F32(flat3(&character.normals))),
-            (
-                "indices".into(),
-                Array::U32(character.triangles.iter().flatten().copied().collect()),
-            ),
-            ("skin".into(), Array::U32(skin)),
-            ("static_ao".into(), Array::F32(static_ao)),
-            (
-                "blocks".into(),
-                Array::U32(if gpu.blocks.is_empty() {
-                    vec![0; 8]
-                } else {
-                    gpu.blocks.iter().flatten().copied().collect()
-                }),
-            ),
-            ("coefficients".into(), Array::U32(gpu.coefficients)),
-            ("maps".into(), Array::U32(gpu.maps)),
-            ("sparse_rows".into(), Array::U32(gpu.sparse_rows)),
-        ],
-    })
+    let mut arrays: Vec<(String, Array)> = vec![
+        ("positions".into(), Array::F32(flat3(&character.positions))),
+        ("normals".into(), Array::F32(flat3(&character.normals))),
+        (
+            "indices".into(),
+            Array::U32(character.triangles.iter().flatten().copied().collect()),
+        ),
+        ("skin".into(), Array::U32(skin)),
+    ];
+    let layout = vec![TEXTURE_WIDTH, 1, 1, 0];
+    let family = match model {
+        PreviewModel::Vertex(model) => {
+            let gpu = GpuArrays::new(model.form()).map_err(too_large)?;
+            let (static_ao, static_frames) =
+                crate::asset::gltf::static_ao(model, &character.skeleton, clips);
+            meta["static_frames"] = static_frames.into();
+            let blocks = gpu.blocks.len() as u32;
+            let vs_params = vec![
+                gpu.vertices,
+                blocks,
+                u32::from(gpu.sparse),
+                TEXTURE_WIDTH,
+                1,
+                1,
+                0,
+                0,
+            ];
+            arrays.extend([
+                ("static_ao".into(), Array::F32(static_ao)),
+                ("vs_params".into(), Array::U32(vs_params)),
+                (
+                    "blocks".into(),
+                    Array::U32(if gpu.blocks.is_empty() {
+                        vec![0; 8]
+                    } else {
+                        gpu.blocks.iter().flatten().copied().collect()
+                    }),
+                ),
+                ("coefficients".into(), Array::U32(gpu.coefficients)),
+                ("maps".into(), Array::U32(gpu.maps)),
+                ("sparse_rows".into(), Array::U32(gpu.sparse_rows)),
+            ]);
+            json!({
+                "family": "vertex",
+                "uniforms": [{"binding": 0, "array": "vs_params"}],
+                "textures": [
+                    {"binding": 1, "array": "blocks"},
+                    {"binding": 2, "array": "coefficients"},
+                    {"binding": 3, "array": "maps"},
+                    {"binding": 5, "array": "sparse_rows"},
+                ],
+                "frame": {"kind": "texture", "binding": 4, "floats": gpu.weights},
+                "model_on": {"character": true, "ground": false},
+            })
+        }
+        PreviewModel::Grid(model, owners) => {
+            let gpu = GridGpu::new(model).map_err(too_large)?;
+            let params = vec![
+                gpu.parts(),
+                0,
+                0,
+                gpu.cones,
+                gpu.tclip_resolution,
+                gpu.tclip_offset,
+                0,
+                0,
+            ];
+            let mut infos: Vec<u32> = gpu.infos.iter().flatten().copied().collect();
+            infos.resize(infos.len().max(4), 0);
+            arrays.extend([
+                ("grid_params".into(), Array::U32(params)),
+                ("layout".into(), Array::U32(layout)),
+                ("infos".into(), Array::U32(infos)),
+                ("cells".into(), Array::U32(gpu.cells)),
+                ("owners".into(), Array::U32(owners.to_vec())),
+            ]);
+            json!({
+                "family": "grid",
+                "uniforms": [{"binding": 0, "array": "grid_params"}, {"binding": 4, "array": "layout"}],
+                "textures": [
+                    {"binding": 1, "array": "infos"},
+                    {"binding": 2, "array": "cells"},
+                    {"binding": 5, "array": "owners"},
+                ],
+                "frame": {"kind": "texture", "binding": 3, "floats": 32 * gpu.infos.len()},
+                "model_on": {"character": true, "ground": true},
+            })
+        }
+        PreviewModel::Cubemap(model, _) => {
+            let gpu = CubemapGpu::new(model).map_err(too_large)?;
+            let mut params: Vec<u32> = gpu
+                .centre
+                .iter()
+                .chain(&gpu.radii)
+                .map(|x| x.to_bits())
+                .collect();
+            params.extend([
+                gpu.resolution,
+                gpu.shells,
+                gpu.times,
+                gpu.encoding,
+                0,
+                0,
+                0,
+                0,
+            ]);
+            arrays.extend([
+                ("cubemap_params".into(), Array::U32(params)),
+                ("layout".into(), Array::U32(layout)),
+                ("texels".into(), Array::U32(gpu.texels)),
+            ]);
+            json!({
+                "family": "cubemap",
+                "uniforms": [{"binding": 0, "array": "cubemap_params"}, {"binding": 2, "array": "layout"}],
+                "textures": [{"binding": 1, "array": "texels"}],
+                "frame": {"kind": "phase", "floats": 1},
+                "model_on": {"character": false, "ground": true},
+            })
+        }
+    };
+    meta["model"] = family;
+    Ok(Bundle { meta, arrays })
+}
+
+/// A model's run time per frame, as an engine drives it.
+#[derive(Debug)]
+pub enum FrameModel<'a> {
+    /// A vertex method through the runtime (joints by node name).
+    Vertex(&'a mut VertexAo),
+    /// Grids: each part's pose from the joint matrices; the character's
+    /// vertices on their parts (`owners`, `u32::MAX` for none).
+    Grid(&'a GridModel, &'a [u32]),
+    /// A cubemap at the frame's phase.
+    Cubemap(&'a CubemapModel),
+}
+
+impl FrameModel<'_> {
+    /// What the page uploads for a frame: a vertex method's weights, the
+    /// parts' poses (`grid_weights`), or a cubemap's phase.
+    fn input(&mut self, character: &Character, pose: &Pose, time: f32) -> Vec<f32> {
+        match self {
+            Self::Vertex(runtime) => {
+                runtime.reset();
+                for (node, local) in character.skeleton.nodes.iter().zip(&pose.locals) {
+                    if let Some(n) = node.name.as_deref().and_then(|name| runtime.node(name)) {
+                        runtime.set_local(n, *local);
+                    }
+                }
+                runtime.weights()
+            }
+            Self::Grid(model, _) => grid_weights(model, &character.joint_matrices(pose)),
+            Self::Cubemap(model) => vec![model.layout.phase(time)],
+        }
+    }
+
+    /// The model's AO where it shades: on the character's vertices (posed
+    /// as `posed`) and on `ground`'s points, at the frame just given to
+    /// [`Self::input`].
+    fn ao(
+        &mut self,
+        character: &Character,
+        pose: &Pose,
+        posed: &PosedMesh,
+        ground: &Ground,
+        time: f32,
+    ) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
+        match self {
+            Self::Vertex(runtime) => (Some(runtime.evaluate()), None),
+            Self::Grid(model, owners) => {
+                let poses = model.poses(&character.joint_matrices(pose));
+                let own = |v: usize| {
+                    owners
+                        .get(v)
+                        .filter(|&&o| o != u32::MAX)
+                        .map(|&o| o as usize)
+                };
+                let on_character = (0..posed.positions.len())
+                    .map(|v| {
+                        model.occlusion(
+                            &poses,
+                            posed.positions[v],
+                            posed.normals[v],
+                            own(v),
+                            Terms::All,
+                        )
+                    })
+                    .collect();
+                let on_ground = ground
+                    .positions
+                    .iter()
+                    .map(|&p| model.occlusion(&poses, p, Vec3::Y, None, Terms::All))
+                    .collect();
+                (Some(on_character), Some(on_ground))
+            }
+            Self::Cubemap(model) => {
+                let phase = model.layout.phase(time);
+                (
+                    None,
+                    Some(
+                        ground
+                            .positions
+                            .iter()
+                            .map(|&p| model.occlusion(p, phase))
+                            .collect(),
+                    ),
+                )
+            }
+        }
+    }
+}
+
+/// RMSE and worst difference of `got` against `want`.
+fn error(got: &[f32], want: &[f32]) -> Value {
+    let squares: f64 = got
+        .iter()
+        .zip(want)
+        .map(|(a, b)| f64::from(a - b).powi(2))
+        .sum();
+    let worst = got
+        .iter()
+        .zip(want)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    json!({"rmse": (squares / got.len().max(1) as f64).sqrt(), "max": worst})
 }
 
 /// The times of a clip's frames: every `1 / FPS` seconds (at most
@@ -275,15 +493,15 @@ impl From<Camera> for CameraView {
 
 /// The frames of `clip` (of `clips`) for the viewer: per frame its time,
 /// every joint's `world_from_bind` (16 floats each, column-major) and the
-/// model's weights from `runtime`; the camera and ground the previews use
-/// for that clip (returned too); and where `truth` covers the clip, the
-/// traced AO of the character and the ground at those frames with the
-/// model's error.
+/// model's input from `model`; the camera and ground the previews use for
+/// that clip (returned too); and where `truth` covers the clip, the traced
+/// AO of the character and the ground at those frames with the model's
+/// error where it shades.
 pub fn clip_frames(
     character: &Character,
     clips: &[Clip],
     clip: &str,
-    runtime: &mut VertexAo,
+    model: &mut FrameModel<'_>,
     truth: Option<PreviewTruth<'_>>,
 ) -> Result<(Bundle, Camera), ViewerError> {
     let Some(clip) = clips.iter().find(|c| c.name == clip) else {
@@ -294,14 +512,10 @@ pub fn clip_frames(
     let truth_times = truth.map(|t| t.frames.times()).unwrap_or_default();
     let times = frame_times(clip, &truth_times);
     let skeleton = &character.skeleton;
-    // The runtime reads joints by name, as an engine does.
-    let nodes: Vec<Option<usize>> = skeleton
-        .nodes
-        .iter()
-        .map(|n| n.name.as_deref().and_then(|name| runtime.node(name)))
-        .collect();
+    let camera = camera(character, Some(clip));
+    let ground = camera.ground();
     let mut palettes = Vec::with_capacity(times.len() * 16 * character.joints.len());
-    let mut weights = Vec::with_capacity(times.len() * runtime.weight_count());
+    let mut inputs = Vec::new();
     let (mut traced, mut ground_traced) = (Vec::new(), Vec::new());
     let mut frames_truth = Vec::with_capacity(times.len());
     let mut errors = Vec::new();
@@ -313,39 +527,23 @@ pub fn clip_frames(
                 .iter()
                 .flat_map(|m| m.to_cols_array()),
         );
-        runtime.reset();
-        for (node, local) in nodes.iter().zip(&pose.locals) {
-            if let Some(n) = node {
-                runtime.set_local(*n, *local);
-            }
-        }
-        weights.extend(runtime.weights());
+        inputs.extend(model.input(character, &pose, t));
         let row = truth_times.iter().position(|s| s.to_bits() == t.to_bits());
         frames_truth.push(row.map(|_| errors.len()));
         if let (Some(row), Some(truth)) = (row, truth) {
             let want = truth.truth.character.row(row);
-            let got = runtime.evaluate();
-            let squares: f64 = got
-                .iter()
-                .zip(want)
-                .map(|(a, b)| f64::from(a - b).powi(2))
-                .sum();
-            let worst = got
-                .iter()
-                .zip(want)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0f32, f32::max);
+            let want_ground = truth.truth.ground.row(row);
+            let posed = character.skin(&pose);
+            let (on_character, on_ground) = model.ao(character, &pose, &posed, &ground, t);
             errors.push(json!({
                 "time": t,
-                "rmse": (squares / got.len().max(1) as f64).sqrt(),
-                "max": worst,
+                "character": on_character.map(|a| error(&a, want)),
+                "ground": on_ground.map(|a| error(&a, want_ground)),
             }));
             traced.extend_from_slice(want);
-            ground_traced.extend_from_slice(truth.truth.ground.row(row));
+            ground_traced.extend_from_slice(want_ground);
         }
     }
-    let camera = camera(character, Some(clip));
-    let ground = camera.ground();
     let meta = json!({
         "clip": clip.name,
         "duration": clip.duration,
@@ -355,13 +553,13 @@ pub fn clip_frames(
         "camera": CameraView::from(camera),
         "ground_vertices": ground.positions.len(),
         "joints": character.joints.len(),
-        "weights": runtime.weight_count(),
+        "inputs": inputs.len() / times.len().max(1),
     });
     let bundle = Bundle {
         meta,
         arrays: vec![
             ("palettes".into(), Array::F32(palettes)),
-            ("weights".into(), Array::F32(weights)),
+            ("inputs".into(), Array::F32(inputs)),
             ("truth".into(), Array::F32(traced)),
             ("ground_truth".into(), Array::F32(ground_traced)),
             (

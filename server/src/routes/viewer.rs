@@ -1,13 +1,14 @@
-//! The dashboard's 3D viewer reads a finished vertex-method bake from
-//! here (core's `bake::viewer` builds both bundles):
+//! The dashboard's 3D viewer reads a finished bake from here (core's
+//! `bake::viewer` builds both bundles):
 //!
 //! * `GET /v1/bakes/{id}/viewer`: the character in its bind pose with its
-//!   skin, the asset's arrays as the GPU evaluator reads them, the static
-//!   average, the clips, and the WebGL2 program (naga's GLSL ES 3.00 of
-//!   `shaders/wgsl/viewer.wgsl`).
+//!   skin, the asset's arrays as the GPU lookups read them (and a vertex
+//!   method's static average), the clips, and the WebGL2 program (naga's
+//!   GLSL ES 3.00 of `shaders/wgsl/viewer.wgsl` with the family's lookup).
 //! * `GET /v1/bakes/{id}/viewer/frames?clip=NAME`: the clip's frames as an
-//!   engine computes them (joint matrices, and the model's weights from the
-//!   runtime), the previews' camera and looks, and the ray-traced truth at
+//!   engine computes them (joint matrices, and the model's input: a vertex
+//!   method's weights from the runtime, the grids' part poses, a cubemap's
+//!   phase), the previews' camera and looks, and the ray-traced truth at
 //!   the previews' frames.
 //!
 //! Both show the character's mesh, which is the studio's source: they need
@@ -15,15 +16,13 @@
 
 use aobake_api::schema::Refusals;
 use aobake_core::{
+    asset::Container,
     bake::{
-        Bake, BakeInputs, BakeParams, JobOutput, Output, Panel,
-        viewer::{self, Bundle, PreviewTruth, ViewerError},
+        Bake, BakeInputs, BakeParams, BakedAsset, JobOutput, Output, Panel, PreviewModel,
+        viewer::{self, Bundle, FrameModel, PreviewTruth, ViewerError},
     },
     image::HEAT_MAP,
-    method::{
-        Family, Method,
-        vertex::{VertexAo, check_character},
-    },
+    method::{Family, Method, vertex::VertexAo},
 };
 use axum::{
     Router,
@@ -56,9 +55,27 @@ pub(super) fn router() -> Router<AppState> {
 struct Loaded {
     inputs: BakeInputs,
     params: BakeParams,
-    runtime: VertexAo,
+    family: Family,
+    asset: Vec<u8>,
     /// The outputs of the bake's `preview-truth` jobs.
     truth: Vec<JobOutput>,
+}
+
+impl Loaded {
+    /// The asset read against the bake's character.
+    fn baked(&self) -> ApiResult<BakedAsset> {
+        let container =
+            Container::from_bytes(&self.asset).map_err(|e| ApiError::Internal(e.to_string()))?;
+        BakedAsset::read(&container, Some(&self.inputs.character))
+            .map_err(|e| ApiError::Internal(format!("the bake's asset: {e}")))
+    }
+}
+
+fn preview_model(baked: &BakedAsset) -> ApiResult<PreviewModel<'_>> {
+    Ok(baked
+        .preview_model()
+        .map_err(|e| ApiError::Internal(e.to_string()))?
+        .0)
 }
 
 async fn load(state: &AppState, caller: &Caller, id: i64, truth: bool) -> ApiResult<Loaded> {
@@ -74,12 +91,6 @@ async fn load(state: &AppState, caller: &Caller, id: i64, truth: bool) -> ApiRes
         .method
         .parse()
         .map_err(|e: String| ApiError::Internal(e))?;
-    if method.family() != Family::Vertex {
-        return Err(ApiError::Conflict(format!(
-            "the viewer plays the vertex methods' bakes; bake {id} is {}, see its previews",
-            method.name()
-        )));
-    }
     let digest = bake
         .asset
         .clone()
@@ -119,14 +130,11 @@ async fn load(state: &AppState, caller: &Caller, id: i64, truth: bool) -> ApiRes
             .map_err(|e| ApiError::Internal(format!("bake {id}'s inputs: {e}")))?;
         let params = BakeParams::from_canonical(&params)
             .map_err(|e| ApiError::Internal(format!("bake {id}'s parameters: {e}")))?;
-        let runtime = VertexAo::from_bytes(&asset)
-            .map_err(|e| ApiError::Internal(format!("bake {id}'s asset: {e}")))?;
-        check_character(runtime.model(), &inputs.character)
-            .map_err(|e| ApiError::Internal(format!("bake {id}'s asset: {e}")))?;
         Ok(Loaded {
             inputs,
             params,
-            runtime,
+            family: method.family(),
+            asset,
             truth: outputs,
         })
     })
@@ -155,7 +163,7 @@ fn viewer_error(e: ViewerError) -> ApiError {
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/viewer", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["read", "submit"])),
-    responses((status = 200, description = "The viewer's scene: an `AOVW` bundle (JSON description, then typed arrays; see docs/engines.md)", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet, or not a vertex method", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "The viewer's scene: an `AOVW` bundle (JSON description, then typed arrays; see docs/engines.md)", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn scene(
     State(state): State<AppState>,
     caller: Caller,
@@ -163,7 +171,8 @@ pub(crate) async fn scene(
 ) -> ApiResult<Response> {
     let loaded = load(&state, &caller, id, false).await?;
     let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
-        let bake = Bake::new(&loaded.inputs, loaded.params)
+        let baked = loaded.baked()?;
+        let bake = Bake::new(&loaded.inputs, loaded.params.clone())
             .map_err(|e| ApiError::Internal(e.to_string()))?;
         let frames = bake
             .preview_frames()
@@ -171,14 +180,18 @@ pub(crate) async fn scene(
         let mut scene = viewer::scene(
             &loaded.inputs.character,
             &loaded.inputs.clips,
-            loaded.runtime.model(),
+            preview_model(&baked)?,
             frames.clip.map(|c| c.name.as_str()),
         )
         .map_err(viewer_error)?;
-        let program = aobake_shaders::export::webgl_viewer()
+        let family = match loaded.family {
+            Family::Vertex => "vertex",
+            Family::Grid => "grid",
+            Family::Cubemap => "cubemap",
+        };
+        let program = aobake_shaders::export::webgl_viewer(family)
             .map_err(|e| ApiError::Internal(e.to_string()))?;
         scene.meta["program"] = serde_json::to_value(program).unwrap_or_default();
-        scene.meta["texture_width"] = aobake_shaders::VS_TEXTURE_WIDTH.into();
         Ok(scene)
     })
     .await
@@ -196,18 +209,19 @@ pub(crate) struct FramesQuery {
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/viewer/frames", tag = "bakes", params(("id" = i64, Path, description = "Bake id"), FramesQuery),
     security(("bearer" = ["read", "submit"])),
-    responses((status = 200, description = "One clip's frames: an `AOVW` bundle", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "No such bake or clip", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet, or not a vertex method", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "One clip's frames: an `AOVW` bundle", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "No such bake or clip", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn frames(
     State(state): State<AppState>,
     caller: Caller,
     ApiPath(id): ApiPath<i64>,
     ApiQuery(query): ApiQuery<FramesQuery>,
 ) -> ApiResult<Response> {
-    let mut loaded = load(&state, &caller, id, true).await?;
+    let loaded = load(&state, &caller, id, true).await?;
     let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
         let inputs = &loaded.inputs;
-        let bake =
-            Bake::new(inputs, loaded.params).map_err(|e| ApiError::Internal(e.to_string()))?;
+        let baked = loaded.baked()?;
+        let bake = Bake::new(inputs, loaded.params.clone())
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
         let preview_frames = bake
             .preview_frames()
             .map_err(|e| ApiError::Internal(e.to_string()))?;
@@ -215,11 +229,30 @@ pub(crate) async fn frames(
         let truth = bake
             .preview_truth_of(&outputs)
             .map_err(|e| ApiError::Internal(e.to_string()))?;
+        // A vertex method's weights come from the runtime, by node name,
+        // as an engine computes them.
+        let mut runtime = match loaded.family {
+            Family::Vertex => Some(
+                VertexAo::from_bytes(&loaded.asset)
+                    .map_err(|e| ApiError::Internal(format!("the bake's asset: {e}")))?,
+            ),
+            Family::Grid | Family::Cubemap => None,
+        };
+        let mut model = match (preview_model(&baked)?, runtime.as_mut()) {
+            (PreviewModel::Vertex(_), Some(runtime)) => FrameModel::Vertex(runtime),
+            (PreviewModel::Grid(model, owners), _) => FrameModel::Grid(model, owners),
+            (PreviewModel::Cubemap(model, _), _) => FrameModel::Cubemap(model),
+            (PreviewModel::Vertex(_), None) => {
+                return Err(ApiError::Internal(
+                    "a vertex asset of another family".into(),
+                ));
+            }
+        };
         let (mut frames, camera) = viewer::clip_frames(
             &inputs.character,
             &inputs.clips,
             &query.clip,
-            &mut loaded.runtime,
+            &mut model,
             truth.as_ref().map(|truth| PreviewTruth {
                 frames: &preview_frames,
                 truth,

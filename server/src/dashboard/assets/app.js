@@ -518,12 +518,12 @@ async function bakePage(signal, id) {
   eta.textContent = estimate(bake.progress.done, bake.progress.total, bake.state);
   const jobs = h("div", {}, stages, eta, h("h3", {}, "Running and failed"), active, folded);
   const results = h("div", { id: "results" });
-  // The 3D viewer, once a vertex-method bake has its asset: it shows the
-  // character's mesh, which needs the submit scope as the uploads do.
+  // The 3D viewer, once the bake has its asset: it shows the character's
+  // mesh, which needs the submit scope as the uploads do.
   const viewerSlot = h("div");
   let viewerShown = false;
   const drawViewer = () => {
-    if (viewerShown || !bake.asset || !bake.method.startsWith("vertex-")) return;
+    if (viewerShown || !bake.asset) return;
     viewerShown = true;
     fill(viewerSlot, can("submit")
       ? viewerSection(id, { api, h })

@@ -1,19 +1,22 @@
-// The bake page's 3D viewer: a vertex-method bake playing live in WebGL2,
-// written for this page (no library). What an engine on WebGL2 does with
-// an asset, end to end:
+// The bake page's 3D viewer: a bake playing live in WebGL2, written for
+// this page (no library). What an engine on WebGL2 does with an asset,
+// end to end:
 //
 // * once per bake, `GET /v1/bakes/{id}/viewer`: the character in its bind
-//   pose and its skin, the asset's arrays (the runtime's GPU packing) and
-//   the program, naga's GLSL ES 3.00 of shaders/wgsl/viewer.wgsl with the
-//   names it gave each WGSL binding;
+//   pose and its skin, the asset's arrays (the runtime's GPU packing) with
+//   the WGSL binding of each, and the program, naga's GLSL ES 3.00 of
+//   shaders/wgsl/viewer.wgsl and the family's lookup, with the names naga
+//   gave each binding;
 // * once per clip, `GET /v1/bakes/{id}/viewer/frames?clip=…`: per frame
-//   each joint's world_from_bind matrix and the model's weights, which the
-//   server's runtime computed from the clip's local joint transforms as an
-//   engine's would; the previews' camera and looks; the ray-traced truth
+//   each joint's world_from_bind matrix and the model's input (a vertex
+//   method's weights, which the server's runtime computed from the clip's
+//   local joint transforms as an engine's would; the grids' part poses; a
+//   cubemap's phase); the previews' camera and looks; the ray-traced truth
 //   at the previews' frames;
-// * per drawn frame: the palette and the weights go into two textures,
-//   and the vertex shader skins each vertex and evaluates its AO with
-//   vertex_ao(v), the same arithmetic as the GPU and CPU evaluators.
+// * per drawn frame: the palette and the input go into textures (or a
+//   uniform), and the vertex shader skins each vertex and looks its AO up
+//   with the method's run-time lookup: vertex_ao(v), grid_occlusion at
+//   the vertex and on the ground, cubemap_occlusion on the ground.
 //
 // Both bundles are `AOVW` files: a JSON description, then typed arrays
 // the page reads in place.
@@ -188,7 +191,7 @@ export function viewerSection(id, { api, h }) {
     h("label", {}, h("input", { type: "radio", name: "viewer-mode", value: mode, checked: mode === "model" }), ` ${label}`));
   const reset = h("button", { id: "viewer-reset" }, "Reset camera");
   const errorLine = h("p", { class: "muted", id: "viewer-error" });
-  const section = h("section", { id: "viewer" },
+  const section = h("section", { id: "viewer", "data-bake": id },
     h("h2", {}, "Viewer"),
     h("div", { class: "viewer" }, canvas,
       h("div", { class: "viewer-controls" },
@@ -212,7 +215,7 @@ export function viewerSection(id, { api, h }) {
   let clock = 0; // seconds into the clip
   let orbit = null; // {azimuth, elevation, distance}
   let last = null;
-  const ubo = { vs: null, shading: null, viewer: null };
+  const ubo = { shading: null, viewer: null };
 
   const fail = (e) => { status.textContent = `The viewer failed: ${e.message}`; status.classList.add("error"); };
 
@@ -221,29 +224,34 @@ export function viewerSection(id, { api, h }) {
     const { meta, arrays } = readBundle(await res.arrayBuffer());
     const program = compile(gl, meta.program);
     const width = meta.texture_width || TEXTURE_WIDTH_DEFAULT;
+    const m = meta.model;
+    // The family's arrays at their WGSL bindings (uniform blocks at binding
+    // points, textures at units of the same number).
+    for (const u of m.uniforms) gl.bindBufferBase(gl.UNIFORM_BUFFER, u.binding, buffer(gl, gl.UNIFORM_BUFFER, arrays[u.array]));
+    for (const t of m.textures) dataTexture(gl, t.binding, arrays[t.array], width);
     const textures = {
-      blocks: dataTexture(gl, 1, arrays.blocks, width),
-      coefficients: dataTexture(gl, 2, arrays.coefficients, width),
-      maps: dataTexture(gl, 3, arrays.maps, width),
-      weights: dataTexture(gl, 4, new Uint32Array(Math.max(1, meta.weights)), width),
-      sparse_rows: dataTexture(gl, 5, arrays.sparse_rows, width),
+      input: m.frame.kind === "texture" ? dataTexture(gl, m.frame.binding, new Uint32Array(Math.max(1, m.frame.floats)), width) : null,
       skin: dataTexture(gl, 8, arrays.skin, width),
       palette: dataTexture(gl, 9, new Uint32Array(16 * Math.max(1, meta.joints)), width),
     };
-    const vsParams = new Uint32Array([meta.vertices, meta.blocks, meta.sparse ? 1 : 0, width, 1, 1, 0, 0]);
-    ubo.vs = buffer(gl, gl.UNIFORM_BUFFER, vsParams);
     ubo.shading = buffer(gl, gl.UNIFORM_BUFFER, new Uint32Array(56), gl.DYNAMIC_DRAW);
     ubo.viewer = buffer(gl, gl.UNIFORM_BUFFER, new Uint32Array(4), gl.DYNAMIC_DRAW);
-    gl.bindBufferBase(gl.UNIFORM_BUFFER, 0, ubo.vs);
     gl.bindBufferBase(gl.UNIFORM_BUFFER, 6, ubo.shading);
     gl.bindBufferBase(gl.UNIFORM_BUFFER, 7, ubo.viewer);
     const character = surface(gl, arrays.positions, arrays.normals, arrays.indices, meta.vertices);
     scene = { meta, arrays, program, textures, character, zeros: new Float32Array(meta.vertices) };
     for (const c of meta.clips) clipSelect.append(h("option", { value: c.name }, c.name));
+    const staticInput = section.querySelector("input[name=viewer-mode][value=static]");
+    if (!arrays.static_ao) {
+      staticInput.disabled = true;
+      staticInput.parentElement.title = "the vertex methods bake a static average; this method's is in its report";
+    }
     const notes = [];
     if (meta.morphs) notes.push("morph targets are not applied");
     if (meta.computed_normals) notes.push("normals the file lacked are skinned from the bind pose");
-    status.textContent = `${meta.method}: ${meta.vertices} vertices, ${meta.weights} weights a frame, evaluated per vertex in the vertex shader.`
+    const shades = [m.model_on.character ? "the character" : null, m.model_on.ground ? "the ground" : null]
+      .filter(Boolean).join(" and ");
+    status.textContent = `${meta.method}: ${meta.vertices} vertices; the model shades ${shades}, looked up per vertex in the vertex shader.`
       + (notes.length ? ` Here, unlike the previews, ${notes.join(" and ")}.` : "");
   }
 
@@ -290,7 +298,9 @@ export function viewerSection(id, { api, h }) {
     }
     if (truth !== null) {
       const e = clip.meta.errors[truth];
-      errorLine.textContent = `Error against ray-traced AO at this frame: RMSE ${e.rmse.toFixed(4)}, worst vertex ${e.max.toFixed(4)}.`;
+      const part = (what, x) => (x ? `${what} RMSE ${x.rmse.toFixed(4)}, worst ${x.max.toFixed(4)}` : null);
+      errorLine.textContent = "Error against ray-traced AO at this frame: "
+        + [part("character", e.character), part("ground", e.ground)].filter(Boolean).join("; ") + ".";
     } else {
       errorLine.textContent = clip.meta.errors.length
         ? `Ray-traced truth at ${clip.meta.errors.length} frames of this clip (marked “ray-traced”).`
@@ -302,27 +312,34 @@ export function viewerSection(id, { api, h }) {
   function draw() {
     if (!scene || !clip) return;
     const { meta: cm, arrays: ca } = clip;
+    const sm = scene.meta;
     const truthRow = cm.truth[frame];
     const effective = truthRow === null && (mode === "truth" || mode === "error") ? "model" : mode;
-    const j = scene.meta.joints;
-    const w = scene.meta.weights;
+    // The frame's palette and model input.
+    const j = sm.joints;
     setWords(gl, scene.textures.palette, new Uint32Array(ca.palettes.buffer, ca.palettes.byteOffset + 4 * frame * 16 * j, 16 * j));
-    setWords(gl, scene.textures.weights, new Uint32Array(ca.weights.buffer, ca.weights.byteOffset + 4 * frame * w, Math.max(1, w)));
-    const v = scene.meta.vertices;
-    const truth = truthRow === null ? scene.zeros : ca.truth.subarray(truthRow * v, (truthRow + 1) * v);
+    const n = cm.inputs;
+    const input = ca.inputs.subarray(frame * n, (frame + 1) * n);
+    if (scene.textures.input) {
+      setWords(gl, scene.textures.input, new Uint32Array(input.buffer, input.byteOffset, Math.max(1, n)));
+    }
+    const phase = sm.model.frame.kind === "phase" ? input[0] : 0;
+    // Per surface: its truth, and the AO it shows where the model does not
+    // shade it (its truth, as in the previews; a vertex method's static
+    // average; or none).
+    const v = sm.vertices;
     const g = cm.ground_vertices;
-    const groundTruth = truthRow === null || effective === "none"
-      ? clip.groundZeros : ca.ground_truth.subarray(truthRow * g, (truthRow + 1) * g);
+    const rows = (all, row, count, zeros) => (row === null ? zeros : all.subarray(row * count, (row + 1) * count));
+    const truth = rows(ca.truth, truthRow, v, scene.zeros);
+    const groundTruth = rows(ca.ground_truth, truthRow, g, clip.groundZeros);
     const ch = scene.character;
-    setAttribute(gl, ch.truth, truth);
-    setAttribute(gl, ch.ao, effective === "static" ? scene.arrays.static_ao : scene.zeros);
-    setAttribute(gl, clip.ground.truth, groundTruth);
-    setAttribute(gl, clip.ground.ao, groundTruth);
-
+    const shown = [
+      [ch, truth, scene.zeros, sm.model.model_on.character, ca.shading_character, 1],
+      [clip.ground, groundTruth, clip.groundZeros, sm.model.model_on.ground, ca.shading_ground, 0],
+    ];
     const c = cm.camera;
     const eye = cameraEye();
-    const aspect = canvas.width / canvas.height;
-    const matrix = clipFromWorld(eye, c.target, c.fov_y, aspect, c.near, c.far);
+    const matrix = clipFromWorld(eye, c.target, c.fov_y, canvas.width / canvas.height, c.near, c.far);
     const panel = effective === "truth" ? 0 : effective === "error" ? 2 : 1;
     gl.viewport(0, 0, canvas.width, canvas.height);
     const bg = new Float32Array(ca.shading_character.buffer, ca.shading_character.byteOffset + 4 * 48, 3);
@@ -331,7 +348,13 @@ export function viewerSection(id, { api, h }) {
     gl.depthFunc(gl.LESS);
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
     gl.useProgram(scene.program);
-    for (const [s, words, skinned] of [[ch, ca.shading_character, 1], [clip.ground, ca.shading_ground, 0]]) {
+    for (const [s, surfaceTruth, zeros, modelled, words, skinned] of shown) {
+      const useModel = modelled && (effective === "model" || effective === "error");
+      let ao = surfaceTruth;
+      if (effective === "none") ao = zeros;
+      else if (effective === "static") ao = skinned ? scene.arrays.static_ao : surfaceTruth;
+      setAttribute(gl, s.truth, surfaceTruth);
+      setAttribute(gl, s.ao, ao);
       const u = new Uint32Array(words);
       const f = new Float32Array(u.buffer);
       f.set(matrix, 0);
@@ -339,9 +362,11 @@ export function viewerSection(id, { api, h }) {
       u[52] = panel;
       gl.bindBuffer(gl.UNIFORM_BUFFER, ubo.shading);
       gl.bufferSubData(gl.UNIFORM_BUFFER, 0, u);
-      const model = skinned && (effective === "model" || effective === "error") ? 1 : 0;
+      const params = new ArrayBuffer(16);
+      new Uint32Array(params).set([skinned, sm.influences, useModel ? 1 : 0]);
+      new Float32Array(params)[3] = phase;
       gl.bindBuffer(gl.UNIFORM_BUFFER, ubo.viewer);
-      gl.bufferSubData(gl.UNIFORM_BUFFER, 0, new Uint32Array([skinned, scene.meta.influences, model, 0]));
+      gl.bufferSubData(gl.UNIFORM_BUFFER, 0, params);
       gl.bindVertexArray(s.vao);
       gl.drawElements(gl.TRIANGLES, s.count, gl.UNSIGNED_INT, 0);
     }
@@ -434,7 +459,7 @@ export function viewerSection(id, { api, h }) {
       for (let i = 0; i < rows.length; i += 0x8000) text += String.fromCharCode(...rows.subarray(i, i + 0x8000));
       return { width, height, rgba: btoa(text) };
     },
-    state: () => ({ clip: clip?.meta.clip, frame, time: clip?.meta.times[frame], mode, playing }),
+    state: () => ({ clip: clip?.meta.clip, duration: clip?.meta.duration, frame, time: clip?.meta.times[frame], mode, playing }),
   };
   canvas.viewer.ready = (async () => {
     await loadScene();
