@@ -137,6 +137,130 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
         .request("GET", &format!("/v1/previews/{asset_digest}"), ADMIN, None)
         .unwrap();
     assert_eq!(status, 404, "{problem}");
+
+    viewer_bundles_hold_what_an_engine_computes(&env, id, &cm, &service);
+}
+
+/// An `AOVW` bundle's description and its arrays' bytes by name.
+fn read_bundle(
+    bytes: &[u8],
+) -> (
+    serde_json::Value,
+    std::collections::HashMap<String, Vec<u8>>,
+) {
+    assert_eq!(&bytes[..4], b"AOVW");
+    let len = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
+    let meta: serde_json::Value = serde_json::from_slice(&bytes[12..12 + len]).unwrap();
+    let arrays = meta["arrays"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(name, a)| {
+            let offset = a["offset"].as_u64().unwrap() as usize;
+            let count = a["count"].as_u64().unwrap() as usize;
+            assert_eq!(offset % 4, 0, "{name}");
+            (name.clone(), bytes[offset..offset + 4 * count].to_vec())
+        })
+        .collect();
+    (meta, arrays)
+}
+
+fn floats(bytes: &[u8]) -> Vec<f32> {
+    bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect()
+}
+
+/// The dashboard viewer's bundles: the scene has the character and the
+/// asset's arrays; a clip's frames hold, at every frame, the weights the
+/// asset's model computes for that pose (bit for bit), and the previews'
+/// truth with the model's error at their frames. Only a token that may
+/// see the character's mesh (submit) gets them.
+fn viewer_bundles_hold_what_an_engine_computes(
+    env: &TestEnv,
+    id: i64,
+    character: &std::path::Path,
+    asset: &[u8],
+) {
+    use aobake_core::{
+        Limits, Upload, asset::Container, import_character, method::vertex::Model, rig::pose::Pose,
+    };
+    let (content_type, bytes) = get_bytes(env, &format!("/v1/bakes/{id}/viewer"));
+    assert_eq!(content_type, "application/vnd.aobake.viewer");
+    let (scene, arrays) = read_bundle(&bytes);
+    let v = scene["vertices"].as_u64().unwrap() as usize;
+    assert_eq!(v, 3273);
+    assert_eq!(scene["model"]["family"], "vertex");
+    assert_eq!(arrays["positions"].len(), 4 * 3 * v);
+    assert_eq!(arrays["static_ao"].len(), 4 * v);
+    assert!(
+        scene["program"]["vertex"]
+            .as_str()
+            .unwrap()
+            .starts_with("#version 300 es")
+    );
+    let clip = scene["preview_clip"].as_str().unwrap();
+
+    let (_, bytes) = get_bytes(env, &format!("/v1/bakes/{id}/viewer/frames?clip={clip}"));
+    let (frames, arrays) = read_bundle(&bytes);
+    let times: Vec<f32> = frames["times"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_f64().unwrap() as f32)
+        .collect();
+    let per_frame = frames["inputs"].as_u64().unwrap() as usize;
+    let inputs = floats(&arrays["inputs"]);
+    assert_eq!(inputs.len(), per_frame * times.len());
+    let bytes = std::fs::read(character).unwrap();
+    let imported = import_character(Upload::single(&bytes), &Limits::default()).unwrap();
+    let skeleton = &imported.character.skeleton;
+    let (model, _) = Model::from_container(&Container::from_bytes(asset).unwrap()).unwrap();
+    let clip = imported.clips.iter().find(|c| c.name == clip).unwrap();
+    for (i, &t) in times.iter().enumerate() {
+        let want = model.weights(skeleton, &Pose::sample(skeleton, clip, t).locals);
+        assert_eq!(
+            &inputs[i * per_frame..(i + 1) * per_frame],
+            want.as_slice(),
+            "frame {i} at {t} s"
+        );
+    }
+    // The previews' 3 stills and their animation's frames have truth.
+    let errors = frames["errors"].as_array().unwrap();
+    assert!(errors.len() > 10, "{errors:?}");
+    assert_eq!(floats(&arrays["truth"]).len(), errors.len() * v);
+    for e in errors {
+        let rmse = e["character"]["rmse"].as_f64().unwrap();
+        assert!(rmse > 0.0 && rmse < 0.2, "{e}");
+    }
+    // The mesh is the studio's: `read` alone is refused, and why.
+    let reader = env.token(&["read"]);
+    let (status, problem) = env
+        .request("GET", &format!("/v1/bakes/{id}/viewer"), &reader, None)
+        .unwrap();
+    assert_eq!(status, 403, "{problem}");
+    assert!(
+        problem["detail"].as_str().unwrap().contains("submit"),
+        "{problem}"
+    );
+    let (status, problem) = env
+        .request(
+            "GET",
+            &format!("/v1/bakes/{id}/viewer/frames?clip=nope"),
+            ADMIN,
+            None,
+        )
+        .unwrap();
+    assert_eq!(status, 404, "{problem}");
+    assert!(
+        problem["detail"].as_str().unwrap().contains("animation_0"),
+        "{problem}"
+    );
+    let (status, _) = env
+        .request("GET", "/v1/bakes/999/viewer", ADMIN, None)
+        .unwrap();
+    assert_eq!(status, 404);
 }
 
 /// A GET's content type and body bytes.
