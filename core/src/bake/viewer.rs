@@ -80,8 +80,8 @@ impl Array {
 /// ```
 ///
 /// The JSON is the description with `arrays` added: per name its `type`
-/// (`f32` or `u32`), `offset` (bytes from the start of the file, a
-/// multiple of 4) and `count`.
+/// (`f32` or `u32`), `offset` (bytes from the end of the JSON, where the
+/// arrays start, a multiple of 4 like that start) and `count`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bundle {
     /// The description (a JSON object).
@@ -91,11 +91,6 @@ pub struct Bundle {
 }
 
 impl Bundle {
-    /// The array named `name`.
-    pub fn array(&self, name: &str) -> Option<&Array> {
-        self.arrays.iter().find(|(n, _)| n == name).map(|(_, a)| a)
-    }
-
     /// The binary.
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut meta = self.meta.clone();
@@ -110,25 +105,11 @@ impl Bundle {
             start += 4 * array.len();
         }
         meta["arrays"] = Value::Object(table);
-        // Offsets are relative to the data for now; the header's length is
-        // known once the JSON is, so shift them by it (their digits can
-        // grow the JSON: iterate until the length is stable).
-        let mut header_len = 0usize;
-        let text = loop {
-            let mut shifted = meta.clone();
-            for (_, entry) in shifted["arrays"].as_object_mut().into_iter().flatten() {
-                let offset = entry["offset"].as_u64().unwrap_or(0) as usize;
-                entry["offset"] = json!(offset + header_len);
-            }
-            let mut text = serde_json::to_string(&shifted).unwrap_or_default();
-            while (12 + text.len()) % 4 != 0 {
-                text.push(' ');
-            }
-            if 12 + text.len() == header_len {
-                break text;
-            }
-            header_len = 12 + text.len();
-        };
+        let mut text = serde_json::to_string(&meta).unwrap_or_default();
+        while !(12 + text.len()).is_multiple_of(4) {
+            text.push(' ');
+        }
+        let header_len = 12 + text.len();
         let mut out = Vec::with_capacity(header_len + data);
         out.extend_from_slice(MAGIC);
         out.extend_from_slice(&VERSION.to_le_bytes());
@@ -595,7 +576,7 @@ mod tests {
         let meta: Value = serde_json::from_slice(&bytes[12..12 + json_len]).unwrap();
         assert_eq!(meta["what"], "a test");
         let at = |name: &str, i: usize| {
-            let o = meta["arrays"][name]["offset"].as_u64().unwrap() as usize + 4 * i;
+            let o = 12 + json_len + meta["arrays"][name]["offset"].as_u64().unwrap() as usize + 4 * i;
             assert_eq!(o % 4, 0);
             <[u8; 4]>::try_from(&bytes[o..o + 4]).unwrap()
         };

@@ -156,7 +156,7 @@ fn read_bundle(
         .unwrap()
         .iter()
         .map(|(name, a)| {
-            let offset = a["offset"].as_u64().unwrap() as usize;
+            let offset = 12 + len + a["offset"].as_u64().unwrap() as usize;
             let count = a["count"].as_u64().unwrap() as usize;
             assert_eq!(offset % 4, 0, "{name}");
             (name.clone(), bytes[offset..offset + 4 * count].to_vec())

@@ -40,11 +40,12 @@ function readBundle(buffer) {
   if (view.getUint32(4, true) !== 1) throw new Error(`viewer bundle version ${view.getUint32(4, true)}`);
   const length = view.getUint32(8, true);
   const meta = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 12, length)));
+  const base = 12 + length; // where the arrays start, a multiple of 4
   const arrays = {};
   for (const [name, a] of Object.entries(meta.arrays)) {
     arrays[name] = a.type === "f32"
-      ? new Float32Array(buffer, a.offset, a.count)
-      : new Uint32Array(buffer, a.offset, a.count);
+      ? new Float32Array(buffer, base + a.offset, a.count)
+      : new Uint32Array(buffer, base + a.offset, a.count);
   }
   return { meta, arrays };
 }
