@@ -12,28 +12,14 @@
 // encodes on store and resolves multisamples in linear space.
 // Mirrored field for field by aobake_shaders::PreviewUniforms.
 
-// Prepended at load time: common/shade.wgsl (Uniforms, shade).
+// Prepended at load time: common/shade.wgsl (Uniforms, SurfaceIn, Shaded,
+// shade).
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
 
-struct VertexIn {
-    @location(0) position: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) truth: f32,
-    @location(3) model: f32,
-}
-
-struct VertexOut {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) world: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) truth: f32,
-    @location(3) model: f32,
-}
-
 @vertex
-fn vs_main(v: VertexIn) -> VertexOut {
-    var out: VertexOut;
+fn vs_main(v: SurfaceIn) -> Shaded {
+    var out: Shaded;
     out.clip = u.clip_from_world * vec4<f32>(v.position, 1.0);
     out.world = v.position;
     out.normal = v.normal;
@@ -43,6 +29,6 @@ fn vs_main(v: VertexIn) -> VertexOut {
 }
 
 @fragment
-fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+fn fs_main(in: Shaded) -> @location(0) vec4<f32> {
     return vec4<f32>(shade(in.world, in.normal, in.truth, in.model), 1.0);
 }

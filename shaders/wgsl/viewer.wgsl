@@ -31,7 +31,7 @@ struct ViewerParams {
     skinned: u32,
     // Joint influences per vertex in `skin`.
     influences: u32,
-    // 1: the model's AO, model_ao(…); 0: the `ao` attribute (the static
+    // 1: the model's AO, model_ao(…); 0: the `model` attribute (the static
     // average, the truth, or none).
     model: u32,
     // A cubemap's phase of the clip's cycle at this frame.
@@ -42,22 +42,6 @@ struct ViewerParams {
 @group(0) @binding(7) var<uniform> viewer: ViewerParams;
 @group(0) @binding(8) var skin_tex: texture_2d<u32>;
 @group(0) @binding(9) var palette_tex: texture_2d<u32>;
-
-struct ViewerIn {
-    @builtin(vertex_index) index: u32,
-    @location(0) position: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) truth: f32,
-    @location(3) ao: f32,
-}
-
-struct ViewerOut {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) world: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) truth: f32,
-    @location(3) model: f32,
-}
 
 fn skin_word(i: u32) -> u32 {
     return textureLoad(skin_tex, viewer_texel(i), 0).x;
@@ -96,11 +80,11 @@ fn skin_matrix(v: u32) -> mat4x4<f32> {
 }
 
 @vertex
-fn vs_main(in: ViewerIn) -> ViewerOut {
+fn vs_main(@builtin(vertex_index) index: u32, in: SurfaceIn) -> Shaded {
     var world = in.position;
     var normal = in.normal;
     if (viewer.skinned != 0u) {
-        let m = skin_matrix(in.index);
+        let m = skin_matrix(index);
         world = (m * vec4<f32>(in.position, 1.0)).xyz;
         let l = mat3x3<f32>(m[0].xyz, m[1].xyz, m[2].xyz);
         let cofactor = mat3x3<f32>(cross(l[1], l[2]), cross(l[2], l[0]), cross(l[0], l[1]));
@@ -109,14 +93,14 @@ fn vs_main(in: ViewerIn) -> ViewerOut {
         let length = length(n);
         normal = select(vec3<f32>(0.0), n / length, length > 0.0);
     }
-    var out: ViewerOut;
+    var out: Shaded;
     out.clip = u.clip_from_world * vec4<f32>(world, 1.0);
     out.world = world;
     out.normal = normal;
     out.truth = in.truth;
-    out.model = in.ao;
+    out.model = in.model;
     if (viewer.model != 0u) {
-        out.model = model_ao(in.index, world, normal, viewer.skinned != 0u);
+        out.model = model_ao(index, world, normal, viewer.skinned != 0u);
     }
     return out;
 }
@@ -127,6 +111,6 @@ fn srgb(c: vec3<f32>) -> vec3<f32> {
 }
 
 @fragment
-fn fs_main(in: ViewerOut) -> @location(0) vec4<f32> {
+fn fs_main(in: Shaded) -> @location(0) vec4<f32> {
     return vec4<f32>(srgb(shade(in.world, in.normal, in.truth, in.model)), 1.0);
 }

@@ -1,7 +1,8 @@
 // The preview's shading, shared by preview.wgsl (wgpu) and viewer.wgsl
 // (the dashboard's WebGL2 viewer, through naga's GLSL ES 3.00): ambient
 // light × (1 − AO) plus a soft (wrapped) key light, or the error's heat
-// map. The including file declares `u: Uniforms`.
+// map. The including file declares `u: Uniforms`; `SurfaceIn` and `Shaded`
+// are both pipelines' vertex input and output.
 // Mirrored field for field by aobake_shaders::PreviewUniforms.
 
 struct Uniforms {
@@ -26,6 +27,25 @@ struct Uniforms {
     surface: u32,
     _pad0: u32,
     _pad1: u32,
+}
+
+// A surface's vertex as the previews and the viewer draw it: `truth` the
+// ray-traced AO, `model` the AO shown for the model (the viewer's vertex
+// stage may look it up instead).
+struct SurfaceIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) truth: f32,
+    @location(3) model: f32,
+}
+
+// What the fragment stage shades.
+struct Shaded {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) truth: f32,
+    @location(3) model: f32,
 }
 
 fn heat(error: f32) -> vec3<f32> {
