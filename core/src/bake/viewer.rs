@@ -576,7 +576,8 @@ mod tests {
         let meta: Value = serde_json::from_slice(&bytes[12..12 + json_len]).unwrap();
         assert_eq!(meta["what"], "a test");
         let at = |name: &str, i: usize| {
-            let o = 12 + json_len + meta["arrays"][name]["offset"].as_u64().unwrap() as usize + 4 * i;
+            let o =
+                12 + json_len + meta["arrays"][name]["offset"].as_u64().unwrap() as usize + 4 * i;
             assert_eq!(o % 4, 0);
             <[u8; 4]>::try_from(&bytes[o..o + 4]).unwrap()
         };

@@ -12,7 +12,7 @@
 //!   the previews' frames.
 //!
 //! Both show the character's mesh, which is the studio's source: they need
-//! `submit` as well as `read`, as the uploads themselves do.
+//! `submit`, as reading the uploaded files themselves does.
 
 use aobake_api::schema::Refusals;
 use aobake_core::{
@@ -35,7 +35,7 @@ use serde::Deserialize;
 
 use super::uploads::load_upload;
 use crate::{
-    auth::{Caller, Scope},
+    auth::{Need, Submit},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, ApiQuery},
     state::AppState,
@@ -78,10 +78,7 @@ fn preview_model(baked: &BakedAsset) -> ApiResult<PreviewModel<'_>> {
         .0)
 }
 
-async fn load(state: &AppState, caller: &Caller, id: i64, truth: bool) -> ApiResult<Loaded> {
-    caller.require(Scope::Read)?;
-    // The bundles carry the character's mesh: the studio's source.
-    caller.require(Scope::Submit)?;
+async fn load(state: &AppState, id: i64, truth: bool) -> ApiResult<Loaded> {
     let bake: BakeRow = state
         .store
         .bake(id)
@@ -162,14 +159,14 @@ fn viewer_error(e: ViewerError) -> ApiError {
 }
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/viewer", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
-    security(("bearer" = ["read", "submit"])),
+    security(("bearer" = ["submit"])),
     responses((status = 200, description = "The viewer's scene: an `AOVW` bundle (JSON description, then typed arrays; see docs/engines.md)", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn scene(
     State(state): State<AppState>,
-    caller: Caller,
+    _caller: Need<Submit>,
     ApiPath(id): ApiPath<i64>,
 ) -> ApiResult<Response> {
-    let loaded = load(&state, &caller, id, false).await?;
+    let loaded = load(&state, id, false).await?;
     let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
         let baked = loaded.baked()?;
         let bake = Bake::new(&loaded.inputs, loaded.params.clone())
@@ -208,15 +205,15 @@ pub(crate) struct FramesQuery {
 }
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/viewer/frames", tag = "bakes", params(("id" = i64, Path, description = "Bake id"), FramesQuery),
-    security(("bearer" = ["read", "submit"])),
+    security(("bearer" = ["submit"])),
     responses((status = 200, description = "One clip's frames: an `AOVW` bundle", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "No such bake or clip", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn frames(
     State(state): State<AppState>,
-    caller: Caller,
+    _caller: Need<Submit>,
     ApiPath(id): ApiPath<i64>,
     ApiQuery(query): ApiQuery<FramesQuery>,
 ) -> ApiResult<Response> {
-    let loaded = load(&state, &caller, id, true).await?;
+    let loaded = load(&state, id, true).await?;
     let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
         let inputs = &loaded.inputs;
         let baked = loaded.baked()?;

@@ -22,6 +22,9 @@ const ROUTES: &[(&str, &str, &str)] = &[
     ("GET", "/v1/bakes/{id}/report", "read"),
     ("GET", "/v1/bakes/{id}/events", "read"),
     ("GET", "/v1/bakes/{id}/previews", "read"),
+    // The viewer's bundles carry the character's mesh: the studio's source.
+    ("GET", "/v1/bakes/{id}/viewer", "submit"),
+    ("GET", "/v1/bakes/{id}/viewer/frames", "submit"),
     ("GET", "/v1/events", "read"),
     ("GET", "/v1/previews/{digest}", "read"),
     ("GET", "/v1/whoami", ANY),
@@ -51,10 +54,10 @@ fn concrete(template: &str) -> Vec<String> {
         .replace("{digest}", &d)
         .replace("{key}", &d)
         .replace("{id}", "1");
-    let p = if p == "/v1/clips" {
-        format!("/v1/clips?character={d}")
-    } else {
-        p
+    let p = match p.as_str() {
+        "/v1/clips" => format!("/v1/clips?character={d}"),
+        "/v1/bakes/1/viewer/frames" => format!("{p}?clip=walk"),
+        _ => p,
     };
     if p.contains("{action}") {
         ["cancel", "pause", "resume", "retry"]
