@@ -6,9 +6,9 @@
 //! per-frame input ([`FrameModel`]): a vertex method's weights from the
 //! clip's local transforms through the runtime's [`VertexAo`] (by node
 //! name, as an engine calls it), the grids' part poses, or a cubemap's
-//! phase. Where the previews traced the ground truth (their clip's stills
-//! and animation frames), a frame carries it too, with the model's error
-//! there.
+//! phase. The clip the previews traced plays at their frames (stills and
+//! animation), each with its ground truth and the model's error there; any
+//! other clip plays every 1/30 s without truth.
 //!
 //! Both are [`Bundle`]s: a JSON description and typed arrays in one
 //! binary (`AOVW`), which the page reads without copying.
@@ -419,18 +419,23 @@ fn error(got: &[f32], want: &[f32]) -> Value {
     json!({"rmse": (squares / got.len().max(1) as f64).sqrt(), "max": worst})
 }
 
-/// The times of a clip's frames: every `1 / FPS` seconds (at most
-/// [`MAX_FRAMES`], spread evenly) and `extra` (the previews' times, which
-/// have truth), sorted.
-fn frame_times(clip: &Clip, extra: &[f32]) -> Vec<f32> {
-    let mut times = clip.frame_times(FPS);
+/// The times of a clip's frames, sorted: the previews' frames where they
+/// traced this clip (`traced`: their stills and their animation's frames,
+/// every one with truth, so the ground and the error do not come and go as
+/// it plays), else every `1 / FPS` seconds (at most [`MAX_FRAMES`], spread
+/// evenly).
+fn frame_times(clip: &Clip, traced: &[f32]) -> Vec<f32> {
+    let mut times = if traced.is_empty() {
+        clip.frame_times(FPS)
+    } else {
+        traced.to_vec()
+    };
     if times.len() > MAX_FRAMES {
         let step = (times.len() - 1) as f64 / (MAX_FRAMES - 1) as f64;
         times = (0..MAX_FRAMES)
             .map(|i| times[((i as f64 * step).round() as usize).min(times.len() - 1)])
             .collect();
     }
-    times.extend_from_slice(extra);
     times.sort_by(f32::total_cmp);
     times.dedup_by(|a, b| a.to_bits() == b.to_bits());
     times
@@ -525,9 +530,15 @@ pub fn clip_frames(
             ground_traced.extend_from_slice(want_ground);
         }
     }
+    // The page opens on the previews' first still where it has one.
+    let start = truth
+        .and_then(|t| t.frames.stills.first())
+        .and_then(|s| times.iter().position(|t| t.to_bits() == s.to_bits()))
+        .unwrap_or(0);
     let meta = json!({
         "clip": clip.name,
         "duration": clip.duration,
+        "start": start,
         "times": times,
         "truth": frames_truth,
         "errors": errors,

@@ -62,10 +62,10 @@ pub(super) struct Args {
     times: Vec<f32>,
     /// Write the run-time evaluators (vertex AO, cubemap and grid
     /// lookups) for engines into this folder: GLSL 4.50 and ES 3.10, HLSL
-    /// for shader models 5.1 and 6.0, MSL 2.1 and SPIR-V 1.3, and all
-    /// three in a vertex shader (arrays in textures) as GLSL ES 3.00 for
-    /// WebGL2, translated by naga from the WGSL the previews run (no asset
-    /// needed; see docs/engines.md).
+    /// for shader models 5.1 and 6.0, MSL 2.1 and SPIR-V 1.3; all three
+    /// also as vertex shaders reading textures (`*_vs`), in every language
+    /// and in GLSL ES 3.00 for WebGL2. Translated by naga from the WGSL the
+    /// previews run (no asset needed; see docs/engines.md).
     #[arg(long)]
     shaders: Option<PathBuf>,
 }

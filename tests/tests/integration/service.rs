@@ -226,7 +226,13 @@ fn viewer_bundles_hold_what_an_engine_computes(
             "frame {i} at {t} s"
         );
     }
-    // The previews' 3 stills and their animation's frames have truth.
+    // The previews' clip plays at their frames (3 stills and their
+    // animation's), every one with truth, so nothing comes and goes as it
+    // plays; it opens on the first still.
+    let truth = frames["truth"].as_array().unwrap();
+    assert!(truth.iter().all(|t| t.is_u64()), "{truth:?}");
+    let start = frames["start"].as_u64().unwrap() as usize;
+    assert_eq!(times[start], 0.15 * 2.0);
     let errors = frames["errors"].as_array().unwrap();
     assert!(errors.len() > 10, "{errors:?}");
     assert_eq!(floats(&arrays["truth"]).len(), errors.len() * v);

@@ -248,12 +248,14 @@ export function viewerSection(id, { api, h }) {
       staticInput.parentElement.title = "the vertex methods bake a static average; this method's is in its report";
     }
     const notes = [];
-    if (meta.morphs) notes.push("morph targets are not applied");
-    if (meta.computed_normals) notes.push("normals the file lacked are skinned from the bind pose");
+    if (meta.morphs) notes.push("Unlike the previews, the viewer does not apply morph targets.");
+    if (meta.computed_normals) {
+      notes.push("Where the file has no normals, the viewer skins the bind pose's (the previews recompute them every frame).");
+    }
     const shades = [m.model_on.character ? "the character" : null, m.model_on.ground ? "the ground" : null]
       .filter(Boolean).join(" and ");
     status.textContent = `${meta.method}: ${meta.vertices} vertices; the model shades ${shades}, looked up per vertex in the vertex shader.`
-      + (notes.length ? ` Here, unlike the previews, ${notes.join(" and ")}.` : "");
+      + (notes.length ? ` ${notes.join(" ")}` : "");
   }
 
   async function loadClip(name) {
@@ -273,7 +275,15 @@ export function viewerSection(id, { api, h }) {
     const offset = sub(c.eye, c.target);
     const distance = Math.hypot(...offset);
     orbit = { azimuth: Math.atan2(offset[0], offset[2]), elevation: Math.asin(offset[1] / distance), distance, home: true };
-    setFrame(0);
+    const traced = meta.errors.length > 0;
+    for (const input of section.querySelectorAll("input[name=viewer-mode]")) {
+      if (input.value === "truth" || input.value === "error") {
+        input.disabled = !traced;
+        input.parentElement.title = traced ? "" : "the previews traced another clip";
+        if (!traced && input.checked) setMode("model");
+      }
+    }
+    setFrame(meta.start || 0);
   }
 
   function cameraEye() {
@@ -292,20 +302,14 @@ export function viewerSection(id, { api, h }) {
     const t = clip.meta.times[frame];
     clock = t;
     const truth = clip.meta.truth[frame];
-    timeLabel.textContent = `${t.toFixed(3)} s / ${clip.meta.duration.toFixed(3)} s`
-      + (truth === null ? "" : " · ray-traced");
-    for (const input of section.querySelectorAll("input[name=viewer-mode]")) {
-      if (input.value === "truth" || input.value === "error") input.disabled = truth === null;
-    }
+    timeLabel.textContent = `${t.toFixed(3)} s / ${clip.meta.duration.toFixed(3)} s`;
     if (truth !== null) {
       const e = clip.meta.errors[truth];
       const part = (what, x) => (x ? `${what} RMSE ${x.rmse.toFixed(4)}, worst ${x.max.toFixed(4)}` : null);
       errorLine.textContent = "Error against ray-traced AO at this frame: "
         + [part("character", e.character), part("ground", e.ground)].filter(Boolean).join("; ") + ".";
     } else {
-      errorLine.textContent = clip.meta.errors.length
-        ? `Ray-traced truth at ${clip.meta.errors.length} frames of this clip (marked “ray-traced”).`
-        : "No ray-traced frames in this clip: the previews trace one clip.";
+      errorLine.textContent = "No ray-traced truth for this clip: the previews trace one clip, and only it shows the ground's occlusion, the truth and the error.";
     }
     draw();
   }
@@ -404,6 +408,10 @@ export function viewerSection(id, { api, h }) {
     play.textContent = "Play";
     setFrame(Number(slider.value));
   });
+  function setMode(m) {
+    mode = m;
+    for (const input of section.querySelectorAll("input[name=viewer-mode]")) input.checked = input.value === m;
+  }
   for (const input of section.querySelectorAll("input[name=viewer-mode]")) {
     input.addEventListener("change", () => { mode = input.value; draw(); });
   }
@@ -442,8 +450,7 @@ export function viewerSection(id, { api, h }) {
       if (size) { canvas.width = size; canvas.height = size; }
       if (!clip || clip.meta.clip !== name) await loadClip(name);
       orbit.home = true;
-      mode = m;
-      for (const input of section.querySelectorAll("input[name=viewer-mode]")) input.checked = input.value === m;
+      setMode(m);
       const times = clip.meta.times;
       let best = 0;
       for (let i = 0; i < times.length; i++) if (Math.abs(times[i] - time) < Math.abs(times[best] - time)) best = i;
