@@ -403,6 +403,17 @@ impl Bake<'_> {
             self_bytes,
             &|f| truth.predict(without, f, Terms::Own, true),
         ));
+        // The grids carrying only what a pose changes: what issue 29's
+        // product form would store beside them (a static bake of every
+        // receiver), measured here before it is built.
+        let baked: &Predictor<'_> = &|f| truth.predict(&model, f, Terms::All, false);
+        let shifted = truth.average_plus_change(baked);
+        variants.push(variant(
+            "static average + grids' change",
+            "per receiver, the static average plus how far the baked grids at this frame are from their own mean over the static average's frames: the grids carry only what the pose changes",
+            2 * (character.vertex_count() + truth.ground.len()) + model.bytes(),
+            &shifted,
+        ));
         let (average_v, average_g) = &truth.average;
         variants.push(variant(
             "static average",

@@ -365,7 +365,7 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
             Duration::from_secs(30),
         )
         .await;
-        assert_eq!(rows, json!([3, 8]), "three parts, eight variants");
+        assert_eq!(rows, json!([3, 9]), "three parts, nine variants");
         let first = eval(&c, "return document.querySelectorAll('#report table')[1].tBodies[0].rows[0].cells[0].textContent").await;
         assert_eq!(first, json!("grids (cones)"));
         let plot = eval(&c, "const i = document.querySelector('#report img'); return i && i.complete && i.naturalWidth").await;

@@ -12,8 +12,10 @@
 //! * **variants**: the grids as engines use them (with and without cones),
 //!   each part's grid alone (no occlusion between parts), each part's
 //!   exact self-occlusion (traced on the part alone: a rigid part's never
-//!   changes) with and without the other parts' grids, and the static
-//!   average (per receiver, the mean truth over the training frames).
+//!   changes) with and without the other parts' grids, the static
+//!   average (per receiver, the mean truth over the training frames), and
+//!   the static average plus the baked grids' change from their own mean
+//!   over those frames.
 
 use glam::{Mat4, Vec3};
 use rand::{RngExt as _, SeedableRng as _};
@@ -123,6 +125,8 @@ pub struct GroundTruth {
     /// The static average: mean truth over the training frames, per
     /// vertex, then per ground point.
     pub average: (Vec<f32>, Vec<f32>),
+    /// The training frames the static average is the mean of, traced.
+    pub training: Vec<FrameTruth>,
     /// RMSE of one truth estimate at the vertices and on the ground (the
     /// first frame traced again with independent rays, the difference
     /// over √2): what a perfect model would still score.
@@ -317,28 +321,21 @@ impl GroundTruth {
                 rmse(&first.ground, &again.ground) / 2f64.sqrt(),
             );
         }
-        let averaged: Vec<(Vec<f32>, Vec<f32>)> = average
+        let training: Vec<FrameTruth> = average
             .par_iter()
             .map(|frame| {
                 let t = inputs.trace(frame, &ground, seed)?;
-                Ok((t.vertices, t.ground))
+                Ok(FrameTruth {
+                    frame: *frame,
+                    palette: t.palette,
+                    positions: t.positions,
+                    normals: t.normals,
+                    vertices: t.vertices,
+                    ground: t.ground,
+                })
             })
             .collect::<Result<_, TraceError>>()?;
-        let mut sum_v = vec![0.0f64; c.vertex_count()];
-        let mut sum_g = vec![0.0f64; ground.len()];
-        for (vertices, ground) in &averaged {
-            for (s, &v) in sum_v.iter_mut().zip(vertices) {
-                *s += f64::from(v);
-            }
-            for (s, &v) in sum_g.iter_mut().zip(ground) {
-                *s += f64::from(v);
-            }
-        }
-        let mean = |s: Vec<f64>| -> Vec<f32> {
-            s.into_iter()
-                .map(|v| (v / average.len().max(1) as f64) as f32)
-                .collect()
-        };
+        let static_average = mean_over(&training, &|f| (f.vertices.clone(), f.ground.clone()));
         let traced_frames = (eval.len() + average.len() + 1) as u64;
         let self_ao = inputs.self_occlusion()?;
         let rays = (traced_frames * (c.vertex_count() + ground.len()) as u64
@@ -350,7 +347,8 @@ impl GroundTruth {
             ground_seen,
             owner: super::parts::owners(inputs.parts, c.vertex_count()),
             self_ao,
-            average: (mean(sum_v), mean(sum_g)),
+            average: static_average,
+            training,
             noise_rmse,
             rays,
         })
@@ -426,7 +424,51 @@ impl GroundTruth {
     }
 }
 
+/// The mean of `predict` over `frames`: per vertex, then per ground point.
+fn mean_over(frames: &[FrameTruth], predict: &Predictor<'_>) -> (Vec<f32>, Vec<f32>) {
+    let (mut sum_v, mut sum_g): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+    for f in frames {
+        let (v, g) = predict(f);
+        sum_v.resize(v.len(), 0.0);
+        sum_g.resize(g.len(), 0.0);
+        for (s, &x) in sum_v.iter_mut().zip(&v) {
+            *s += f64::from(x);
+        }
+        for (s, &x) in sum_g.iter_mut().zip(&g) {
+            *s += f64::from(x);
+        }
+    }
+    let n = frames.len().max(1) as f64;
+    let mean = |s: Vec<f64>| -> Vec<f32> { s.into_iter().map(|v| (v / n) as f32).collect() };
+    (mean(sum_v), mean(sum_g))
+}
+
 impl GroundTruth {
+    /// The static average carried by `predict`'s change: per receiver,
+    /// the static average plus how far `predict` at the frame is from its
+    /// own mean over the training frames, clamped to [0, 1]. The
+    /// prediction then only says what a pose changes.
+    pub fn average_plus_change<'a>(
+        &'a self,
+        predict: &'a Predictor<'a>,
+    ) -> impl Fn(&FrameTruth) -> (Vec<f32>, Vec<f32>) + Sync + 'a {
+        let (mean_v, mean_g) = mean_over(&self.training, predict);
+        move |f: &FrameTruth| {
+            let (v, g) = predict(f);
+            let shift = |average: &[f32], now: Vec<f32>, mean: &[f32]| -> Vec<f32> {
+                now.iter()
+                    .zip(average)
+                    .zip(mean)
+                    .map(|((&p, &a), &m)| (a + p - m).clamp(0.0, 1.0))
+                    .collect()
+            };
+            (
+                shift(&self.average.0, v, &mean_v),
+                shift(&self.average.1, g, &mean_g),
+            )
+        }
+    }
+
     /// Nanoseconds per receiver of `model`'s lookup at every receiver of a
     /// frame, on one thread: the median over the frames.
     pub fn lookup_cost(&self, model: &GridModel) -> f64 {
