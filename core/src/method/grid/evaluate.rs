@@ -165,6 +165,20 @@ struct Traced {
     normals: Vec<Vec3>,
 }
 
+impl Traced {
+    /// The frame's receivers and their truth (the BVH dropped).
+    fn truth(self, frame: Frame) -> FrameTruth {
+        FrameTruth {
+            frame,
+            palette: self.palette,
+            positions: self.positions,
+            normals: self.normals,
+            vertices: self.vertices,
+            ground: self.ground,
+        }
+    }
+}
+
 impl Inputs<'_> {
     fn surface(&self, seed: u64) -> SurfaceParams {
         self.options.truth(self.max_distance, seed)
@@ -294,15 +308,7 @@ impl GroundTruth {
                     .iter()
                     .map(|&p| t.scene.surface_near(p, Vec3::Y, reach))
                     .collect();
-                let truth = FrameTruth {
-                    frame: *frame,
-                    palette: t.palette,
-                    positions: t.positions,
-                    normals: t.normals,
-                    vertices: t.vertices,
-                    ground: t.ground,
-                };
-                Ok((truth, near))
+                Ok((t.truth(*frame), near))
             })
             .collect::<Result<_, TraceError>>()?;
         let mut ground_seen = vec![true; ground.len()];
@@ -323,17 +329,7 @@ impl GroundTruth {
         }
         let training: Vec<FrameTruth> = average
             .par_iter()
-            .map(|frame| {
-                let t = inputs.trace(frame, &ground, seed)?;
-                Ok(FrameTruth {
-                    frame: *frame,
-                    palette: t.palette,
-                    positions: t.positions,
-                    normals: t.normals,
-                    vertices: t.vertices,
-                    ground: t.ground,
-                })
-            })
+            .map(|frame| Ok(inputs.trace(frame, &ground, seed)?.truth(*frame)))
             .collect::<Result<_, TraceError>>()?;
         let static_average = mean_over(&training, &|f| (f.vertices.clone(), f.ground.clone()));
         let traced_frames = (eval.len() + average.len() + 1) as u64;
