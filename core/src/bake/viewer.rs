@@ -19,6 +19,7 @@ use serde_json::{Value, json};
 
 use crate::{
     Character,
+    asset::metrics::FrameError,
     method::{
         cubemap::{gpu::CubemapGpu, model::CubemapModel},
         grid::{
@@ -406,17 +407,12 @@ impl FrameModel<'_> {
 
 /// RMSE and worst difference of `got` against `want`.
 fn error(got: &[f32], want: &[f32]) -> Value {
-    let squares: f64 = got
-        .iter()
-        .zip(want)
-        .map(|(a, b)| f64::from(a - b).powi(2))
-        .sum();
     let worst = got
         .iter()
         .zip(want)
         .map(|(a, b)| (a - b).abs())
         .fold(0.0f32, f32::max);
-    json!({"rmse": (squares / got.len().max(1) as f64).sqrt(), "max": worst})
+    json!({"rmse": FrameError::of(got, want).rmse, "max": worst})
 }
 
 /// The times of a clip's frames, sorted: the previews' frames where they

@@ -61,21 +61,26 @@ struct Loaded {
     truth: Vec<JobOutput>,
 }
 
+fn internal(e: impl std::fmt::Display) -> ApiError {
+    ApiError::Internal(e.to_string())
+}
+
 impl Loaded {
+    /// The bake's plan over its inputs.
+    fn bake(&self) -> ApiResult<Bake<'_>> {
+        Bake::new(&self.inputs, self.params.clone()).map_err(internal)
+    }
+
     /// The asset read against the bake's character.
     fn baked(&self) -> ApiResult<BakedAsset> {
-        let container =
-            Container::from_bytes(&self.asset).map_err(|e| ApiError::Internal(e.to_string()))?;
+        let container = Container::from_bytes(&self.asset).map_err(internal)?;
         BakedAsset::read(&container, Some(&self.inputs.character))
             .map_err(|e| ApiError::Internal(format!("the bake's asset: {e}")))
     }
 }
 
 fn preview_model(baked: &BakedAsset) -> ApiResult<PreviewModel<'_>> {
-    Ok(baked
-        .preview_model()
-        .map_err(|e| ApiError::Internal(e.to_string()))?
-        .0)
+    Ok(baked.preview_model().map_err(internal)?.0)
 }
 
 async fn load(state: &AppState, id: i64, truth: bool) -> ApiResult<Loaded> {
@@ -136,7 +141,7 @@ async fn load(state: &AppState, id: i64, truth: bool) -> ApiResult<Loaded> {
         })
     })
     .await
-    .map_err(|e| ApiError::Internal(e.to_string()))?
+    .map_err(internal)?
 }
 
 fn bundle(bundle: &Bundle) -> Response {
@@ -169,11 +174,8 @@ pub(crate) async fn scene(
     let loaded = load(&state, id, false).await?;
     let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
         let baked = loaded.baked()?;
-        let bake = Bake::new(&loaded.inputs, loaded.params.clone())
-            .map_err(|e| ApiError::Internal(e.to_string()))?;
-        let frames = bake
-            .preview_frames()
-            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let bake = loaded.bake()?;
+        let frames = bake.preview_frames().map_err(internal)?;
         let mut scene = viewer::scene(
             &loaded.inputs.character,
             &loaded.inputs.clips,
@@ -186,13 +188,12 @@ pub(crate) async fn scene(
             Family::Grid => "grid",
             Family::Cubemap => "cubemap",
         };
-        let program = aobake_shaders::export::webgl_viewer(family)
-            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let program = aobake_shaders::export::webgl_viewer(family).map_err(internal)?;
         scene.meta["program"] = serde_json::to_value(program).unwrap_or_default();
         Ok(scene)
     })
     .await
-    .map_err(|e| ApiError::Internal(e.to_string()))??;
+    .map_err(internal)??;
     Ok(bundle(&out))
 }
 
@@ -217,15 +218,10 @@ pub(crate) async fn frames(
     let out = tokio::task::spawn_blocking(move || -> ApiResult<Bundle> {
         let inputs = &loaded.inputs;
         let baked = loaded.baked()?;
-        let bake = Bake::new(inputs, loaded.params.clone())
-            .map_err(|e| ApiError::Internal(e.to_string()))?;
-        let preview_frames = bake
-            .preview_frames()
-            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let bake = loaded.bake()?;
+        let preview_frames = bake.preview_frames().map_err(internal)?;
         let outputs: Vec<&JobOutput> = loaded.truth.iter().collect();
-        let truth = bake
-            .preview_truth_of(&outputs)
-            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let truth = bake.preview_truth_of(&outputs).map_err(internal)?;
         // A vertex method's weights come from the runtime, by node name,
         // as an engine computes them.
         let mut runtime = match loaded.family {
@@ -275,6 +271,6 @@ pub(crate) async fn frames(
         Ok(frames)
     })
     .await
-    .map_err(|e| ApiError::Internal(e.to_string()))??;
+    .map_err(internal)??;
     Ok(bundle(&out))
 }

@@ -22,6 +22,23 @@ pub struct CubemapAo<'g> {
     base: CubemapAoParams,
 }
 
+/// The `Params` uniform of a cubemap's GPU form, with no points yet
+/// (`points`, `phase` and `row_stride` are set per dispatch).
+pub(super) fn params(form: &CubemapGpu) -> CubemapAoParams {
+    CubemapAoParams {
+        centre: form.centre,
+        radii: form.radii,
+        resolution: form.resolution,
+        shells: form.shells,
+        times: form.times,
+        encoding: form.encoding,
+        points: 0,
+        phase: 0.0,
+        row_stride: 0,
+        _pad: 0,
+    }
+}
+
 impl<'g> CubemapAo<'g> {
     /// Uploads the model's texels and builds the pipeline.
     pub fn new(gpu: &'g Gpu, model: &CubemapModel) -> Result<Self, GpuError> {
@@ -34,18 +51,7 @@ impl<'g> CubemapAo<'g> {
             )));
         }
         let gpu_form = CubemapGpu::new(model).map_err(|e| GpuError::TooLarge(e.to_string()))?;
-        let base = CubemapAoParams {
-            centre: gpu_form.centre,
-            radii: gpu_form.radii,
-            resolution: gpu_form.resolution,
-            shells: gpu_form.shells,
-            times: gpu_form.times,
-            encoding: gpu_form.encoding,
-            points: 0,
-            phase: 0.0,
-            row_stride: 0,
-            _pad: 0,
-        };
+        let base = params(&gpu_form);
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("cubemap_ao.wgsl"),

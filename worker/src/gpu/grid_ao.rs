@@ -26,6 +26,20 @@ pub struct GridAo<'g> {
     base: GridAoParams,
 }
 
+/// The `Params` uniform of grids' GPU form, with no receivers yet
+/// (`points` and `row_stride` are set per dispatch).
+pub(super) fn params(form: &GridGpu) -> GridAoParams {
+    GridAoParams {
+        parts: form.parts(),
+        points: 0,
+        row_stride: 0,
+        cones: form.cones,
+        tclip_resolution: form.tclip_resolution,
+        tclip_offset: form.tclip_offset,
+        _pad: [0; 2],
+    }
+}
+
 impl<'g> GridAo<'g> {
     /// Uploads the model's cells (one u32 a cell, RGBA8) and `T_clip`, and
     /// builds the pipeline.
@@ -49,15 +63,7 @@ impl<'g> GridAo<'g> {
                 4 * cells.len()
             )));
         }
-        let base = GridAoParams {
-            parts: arrays.parts(),
-            points: 0,
-            row_stride: 0,
-            cones: arrays.cones,
-            tclip_resolution: arrays.tclip_resolution,
-            tclip_offset: arrays.tclip_offset,
-            _pad: [0; 2],
-        };
+        let base = params(&arrays);
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("grid_ao.wgsl"),

@@ -295,16 +295,9 @@ pub fn cubemap_vertex_stage(
     let form = CubemapGpu::new(model).map_err(|e| GpuError::TooLarge(e.to_string()))?;
     let count = to_u32(points.len(), "points")?;
     let params = CubemapAoParams {
-        centre: form.centre,
-        radii: form.radii,
-        resolution: form.resolution,
-        shells: form.shells,
-        times: form.times,
-        encoding: form.encoding,
         points: count,
         phase,
-        row_stride: 0,
-        _pad: 0,
+        ..super::cubemap_ao::params(&form)
     };
     let xyz: Vec<u32> = points
         .iter()
@@ -339,13 +332,8 @@ pub fn grid_vertex_stage(
     let form = GridGpu::new(model).map_err(|e| GpuError::TooLarge(e.to_string()))?;
     let count = to_u32(receivers.len(), "receivers")?;
     let params = GridAoParams {
-        parts: form.parts(),
         points: count,
-        row_stride: 0,
-        cones: form.cones,
-        tclip_resolution: form.tclip_resolution,
-        tclip_offset: form.tclip_offset,
-        _pad: [0; 2],
+        ..super::grid_ao::params(&form)
     };
     let infos: &[u32] = bytemuck::cast_slice(&form.infos);
     let pose_bits: Vec<u32> = poses.iter().map(|p| p.to_bits()).collect();

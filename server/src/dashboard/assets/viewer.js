@@ -23,7 +23,6 @@
 //
 // The canvas element carries `viewer` (show, pixels, state) for tests.
 
-const TEXTURE_WIDTH_DEFAULT = 2048;
 const MODES = [
   ["model", "Model"],
   ["static", "Static average"],
@@ -224,7 +223,7 @@ export function viewerSection(id, { api, h }) {
     const res = await api(`/v1/bakes/${id}/viewer`);
     const { meta, arrays } = readBundle(await res.arrayBuffer());
     const program = compile(gl, meta.program);
-    const width = meta.texture_width || TEXTURE_WIDTH_DEFAULT;
+    const width = meta.texture_width;
     const m = meta.model;
     // The family's arrays at their WGSL bindings (uniform blocks at binding
     // points, textures at units of the same number).
