@@ -22,7 +22,7 @@ pub const MAGIC: [u8; 8] = *b"\x89AOB\r\n\x1a\n";
 /// Format major version this build writes and reads.
 pub const MAJOR: u16 = 1;
 /// Format minor version this build writes.
-pub const MINOR: u16 = 4;
+pub const MINOR: u16 = 5;
 
 /// Fixed part before the header: magic, major, minor, method, flags,
 /// header length, section count, reserved, CRC.

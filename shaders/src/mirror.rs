@@ -103,8 +103,10 @@ pub struct GridAoParams {
     pub tclip_resolution: u32,
     /// Index in `cells` of `T_clip`'s first f32.
     pub tclip_offset: u32,
-    /// Padding.
-    pub _pad: [u32; 2],
+    /// 1 when the asset has a static base.
+    pub base: u32,
+    /// The bits of the base's ground gain.
+    pub ground_gain: u32,
 }
 
 /// `PartInfo` of grid_ao.wgsl.
@@ -115,8 +117,10 @@ pub struct GridPartInfo {
     pub resolution: u32,
     /// Index in `cells` of the part's first cell.
     pub offset: u32,
+    /// The bits of the base's gain at the part's vertices.
+    pub gain: u32,
     /// Padding.
-    pub _pad: [u32; 2],
+    pub _pad: u32,
 }
 
 /// `Receiver` of grid_ao.wgsl.
@@ -126,7 +130,7 @@ pub struct GridReceiver {
     /// xyz: the position; w: the bits of its part's index
     /// ([`GridReceiver::NO_PART`] for none).
     pub position: [f32; 4],
-    /// xyz: the unit normal.
+    /// xyz: the unit normal; w: the static base's offset (0 without).
     pub normal: [f32; 4],
 }
 
@@ -134,11 +138,12 @@ impl GridReceiver {
     /// The part index of a receiver of no part.
     pub const NO_PART: u32 = u32::MAX;
 
-    /// A receiver at `p` with normal `n` on part `own`.
-    pub fn new(p: [f32; 3], n: [f32; 3], own: u32) -> Self {
+    /// A receiver at `p` with normal `n` on part `own`, with the static
+    /// base's `offset`.
+    pub fn new(p: [f32; 3], n: [f32; 3], own: u32, offset: f32) -> Self {
         Self {
             position: [p[0], p[1], p[2], f32::from_bits(own)],
-            normal: [n[0], n[1], n[2], 0.0],
+            normal: [n[0], n[1], n[2], offset],
         }
     }
 }

@@ -1,13 +1,13 @@
 // Run-time lookup of Malmer et al.'s grids over a batch of receivers in a
-// compute shader: common/grid_lookup.wgsl's `grid_occlusion(p, n, own)`
-// with the grids in storage buffers. An engine calls grid_occlusion in its
-// own shaders; cs_main evaluates a batch of receivers (what the tests and
-// the previews run).
+// compute shader: common/grid_lookup.wgsl's `grid_ao(p, n, own, offset)`
+// with the grids in storage buffers. An engine calls grid_ao in its own
+// shaders; cs_main evaluates a batch of receivers (what the tests and the
+// previews run).
 //
 // Prepended at load time: common/grid_lookup.wgsl.
 
 // A receiver: xyz its position, w the bits of its part's index (none:
-// 0xffffffff); then xyz its unit normal.
+// 0xffffffff); then xyz its unit normal, w its static base's offset.
 struct Receiver {
     position: vec4<f32>,
     normal: vec4<f32>,
@@ -39,5 +39,5 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let r = receivers[i];
-    occlusion[i] = grid_occlusion(r.position.xyz, r.normal.xyz, bitcast<u32>(r.position.w));
+    occlusion[i] = grid_ao(r.position.xyz, r.normal.xyz, bitcast<u32>(r.position.w), r.normal.w);
 }

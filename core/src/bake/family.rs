@@ -493,14 +493,14 @@ impl BakedAsset {
         pose: &crate::Pose,
         mesh: &crate::PosedMesh,
     ) -> Result<Vec<f32>, AssetUseError> {
-        use crate::method::grid::model::Terms;
+        use crate::method::grid::base::Receiver;
         match &self.model {
             AssetModel::Vertex(m) => Ok(m.evaluate(&character.skeleton, &pose.locals)),
             AssetModel::Cubemap(..) => Err(AssetUseError::Unsupported(
                 "it holds the occlusion cast into space, not per-vertex AO; `aobake preview` renders it on the ground and `aobake export --exr` writes its faces".into(),
             )),
             // Each vertex a receiver on its own part, shaded by every
-            // part's grid.
+            // part's grid (on the static base, when the asset has one).
             AssetModel::Grid(m, fitted) => {
                 let (owners, _) = fitted.as_ref().ok_or_else(not_fitted)?;
                 let poses = m.poses(&character.joint_matrices(pose));
@@ -509,9 +509,9 @@ impl BakedAsset {
                     .iter()
                     .zip(&mesh.normals)
                     .zip(owners)
-                    .map(|((p, n), &owner)| {
-                        let owner = (owner != u32::MAX).then_some(owner as usize);
-                        m.occlusion(&poses, *p, *n, owner, Terms::All)
+                    .enumerate()
+                    .map(|(i, ((&p, &n), &owner))| {
+                        m.ao(&poses, p, n, Receiver::vertex(i, owner))
                     })
                     .collect())
             }
@@ -522,8 +522,9 @@ impl BakedAsset {
     /// image per clip time and shell (the six faces side by side, +x −x
     /// +y −y +z −z, in one channel `Y`); a grid's parts, one image per
     /// part (its z-slices top to bottom, +y up, +x right; `ao_grid`, and
-    /// with cones `axis.x`, `axis.y`, `axis.z` in the part's bind space),
-    /// each value exactly what the run time reads.
+    /// with cones `axis.x`, `axis.y`, `axis.z` in the part's bind space)
+    /// and, with a static base, its ground texture (`offset`), each value
+    /// exactly what the run time reads.
     pub fn images(&self, times: &[f32]) -> Result<Vec<FloatImage>, AssetUseError> {
         match &self.model {
             AssetModel::Vertex(_) => Err(AssetUseError::Unsupported(
@@ -535,6 +536,11 @@ impl BakedAsset {
                 .iter()
                 .enumerate()
                 .map(|(k, part)| super::grid::part_slices(k, part))
+                .chain(
+                    m.base
+                        .as_ref()
+                        .map(|b| super::grid::ground_offsets(&b.ground)),
+                )
                 .collect()),
         }
     }

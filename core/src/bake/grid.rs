@@ -7,9 +7,14 @@
 //!   not depend on how the grid was cut or how often a slab was
 //!   interrupted. Output: `slab-{part}-{first}` (raw cells) and a small
 //!   `.json` of how it ran.
+//! * `sample` (with the static base; batches of the training frames):
+//!   ray-traced truth at every vertex and at the centres of the base's
+//!   ground texels. Output: `ao-reference` and `ground-reference`
+//!   ([`IndexedBlock`]s).
 //! * `assemble`: every part's slabs stacked, finished (§3.3: boundary
 //!   rescale, inside cells filled, ×2 in a byte, cones), `T_clip` with
-//!   cones → `asset`.
+//!   cones, and the static base fitted to the `sample` jobs' truth →
+//!   `asset`.
 //! * `evaluate`: ray-traced truth on clip frames at the parts' vertices
 //!   and on the ground; the grids with and without cones and the
 //!   baselines against it → `report.json`, `plot.png` (slices of every
@@ -25,21 +30,29 @@ use crate::{
     image::encode_rgb_png,
     method::Method,
     method::grid::{
+        base::GroundSquare,
         evaluate::{GridEvaluation, GridVariant, GroundTruth, Inputs, Predictor},
         field::{self, GridBox, RawCell, Slab, finish, part_scene, trace_layers},
         model::{GridModel, PartGrid, Terms},
-        parts::{Part, parts},
+        parts::{Part, owners, parts},
+        static_base::{self, TrainingFrame},
         tclip::TClip,
     },
+    trace::AoBlock,
     trace::VolumeParams,
 };
 
 use super::{
     Bake, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink, JobSpec,
-    PlannedJob,
-    jobs::{decode_with, find, json, named, parse},
+    PlannedJob, PoseSet,
+    jobs::{IndexedBlock, decode_with, find, json, named, parse, stack_blocks},
     report::{CharacterInfo, Sizes, Timings},
 };
+
+/// The outputs of a grid `sample` job: the truth at the vertices and at
+/// the base's ground texels.
+const VERTEX_TRUTH: &str = "ao-reference";
+const GROUND_TRUTH: &str = "ground-reference";
 
 /// The step name of a slab job's checkpoints.
 const SLAB_STEP: &str = "slab";
@@ -70,6 +83,11 @@ impl Bake<'_> {
     ) -> Result<JobOutput, JobError> {
         match spec {
             JobSpec::Slab { part, first, count } => self.slab(*part, *first, *count, resume, sink),
+            JobSpec::Sample {
+                set: PoseSet::Reference,
+                first,
+                count,
+            } => self.grid_sample(*first, *count),
             JobSpec::Assemble => self.grid_assemble(deps),
             JobSpec::Evaluate => self.grid_evaluate(deps),
             JobSpec::Sample { .. }
@@ -96,6 +114,31 @@ impl Bake<'_> {
             .distance(&self.inputs.character, parts)
     }
 
+    /// What the grid's truth is traced with: the bake's clips, parts,
+    /// options, distance and seed.
+    fn grid_inputs<'a>(&'a self, parts: &'a [Part]) -> Inputs<'a> {
+        Inputs {
+            character: &self.inputs.character,
+            clips: &self.inputs.clips,
+            train: &self.plan.train,
+            test: &self.plan.test,
+            parts,
+            options: &self.plan.params.grid,
+            max_distance: self.grid_distance(parts),
+            seed: self.plan.params.seed,
+        }
+    }
+
+    /// The static base's ground square, under the training frames.
+    fn base_square(&self, inputs: &Inputs<'_>) -> GroundSquare {
+        static_base::ground_square(
+            inputs.character,
+            inputs.clips,
+            &inputs.training_frames(),
+            self.plan.params.grid.ground_resolution,
+        )
+    }
+
     /// A part's mesh and grid box.
     fn part_grid(&self, part: &Part) -> (Vec<glam::Vec3>, Vec<[u32; 3]>, GridBox) {
         let o = &self.plan.params.grid;
@@ -104,10 +147,12 @@ impl Bake<'_> {
         (positions, triangles, grid)
     }
 
-    /// `slab` jobs (per part, `options.slab_layers` layers each) →
+    /// `slab` jobs (per part, `options.slab_layers` layers each) and, with
+    /// the static base, `sample` jobs (batches of its training frames) →
     /// `assemble` → `evaluate` → `preview`.
     pub(super) fn grid_graph(&self, options: GraphOptions) -> JobGraph {
-        let n = self.plan.params.grid.resolution;
+        let o = &self.plan.params.grid;
+        let n = o.resolution;
         let step = options.slab_layers.clamp(1, n);
         let count = self.grid_parts().map_or(0, |p| p.len());
         let mut jobs: Vec<PlannedJob> = Vec::new();
@@ -123,11 +168,95 @@ impl Bake<'_> {
                 });
             }
         }
+        if o.static_base {
+            let frames = o.average_frames;
+            let receivers = self.inputs.character.vertex_count() + o.ground_resolution.pow(2);
+            let batch = options.batch(receivers as u64 * u64::from(o.eval_rays));
+            for first in (0..frames).step_by(batch) {
+                jobs.push(PlannedJob {
+                    spec: JobSpec::Sample {
+                        set: PoseSet::Reference,
+                        first,
+                        count: batch.min(frames - first),
+                    },
+                    deps: Vec::new(),
+                });
+            }
+        }
         JobGraph::assemble_evaluate_preview(
             jobs,
             self.preview_truth_jobs(options),
             options.previews,
         )
+    }
+
+    /// A grid `sample` job: the truth of training frames
+    /// `first..first + count` at the vertices and the base's ground
+    /// texels.
+    fn grid_sample(&self, first: usize, count: usize) -> Result<JobOutput, JobError> {
+        let started = Instant::now();
+        let parts = self.grid_parts()?;
+        let inputs = self.grid_inputs(&parts);
+        let frames = inputs.training_frames();
+        let end = first.checked_add(count).filter(|&e| e <= frames.len());
+        let Some(end) = end.filter(|_| self.plan.params.grid.static_base) else {
+            return Err(JobError::Invalid(format!(
+                "frames {first}..{} are not a batch of this bake's static base",
+                first.saturating_add(count)
+            )));
+        };
+        let texels = self.base_square(&inputs).texel_centres();
+        let traced = inputs
+            .trace_frames(&frames[first..end], &texels)
+            .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let block = |values: Vec<f32>, vertices: usize| {
+            IndexedBlock {
+                first,
+                block: AoBlock { vertices, values },
+            }
+            .to_bytes()
+        };
+        let (v, g): (Vec<Vec<f32>>, Vec<Vec<f32>>) =
+            traced.into_iter().map(|t| (t.vertices, t.ground)).unzip();
+        let mut out = JobOutput::default();
+        out.push(
+            VERTEX_TRUTH,
+            block(v.concat(), self.inputs.character.vertex_count()),
+        );
+        out.push(GROUND_TRUTH, block(g.concat(), texels.len()));
+        out.timings.reference_trace_s = started.elapsed().as_secs_f64();
+        Ok(out)
+    }
+
+    /// The static base of `model`, fitted to the `sample` jobs' truth
+    /// among `deps`.
+    fn fit_base(
+        &self,
+        parts: &[Part],
+        model: &GridModel,
+        deps: &[&JobOutput],
+    ) -> Result<crate::method::grid::base::StaticBase, JobError> {
+        let inputs = self.grid_inputs(parts);
+        let frames = inputs.training_frames();
+        let square = self.base_square(&inputs);
+        let character = &self.inputs.character;
+        let vertices = character.vertex_count();
+        let truth_v = stack_blocks(deps, VERTEX_TRUTH, vertices, frames.len())?;
+        let truth_g = stack_blocks(deps, GROUND_TRUTH, square.texels(), frames.len())?;
+        let training: Vec<TrainingFrame> = frames
+            .iter()
+            .zip(truth_v.values.chunks_exact(vertices.max(1)))
+            .zip(truth_g.values.chunks_exact(square.texels()))
+            .map(|((frame, v), g)| {
+                TrainingFrame::new(character, inputs.clips, frame, v.to_vec(), g.to_vec())
+            })
+            .collect();
+        Ok(static_base::fit(
+            model,
+            &owners(parts, vertices),
+            square,
+            &training,
+        ))
     }
 
     /// A `slab` job: layers `first..first + count` of part `part`'s grid,
@@ -299,6 +428,7 @@ impl Bake<'_> {
         GridModel {
             parts: grids,
             tclip: cones.then(|| TClip::compute(o.tclip_resolution)),
+            base: None,
         }
     }
 
@@ -307,10 +437,18 @@ impl Bake<'_> {
         let parts = self.grid_parts()?;
         let raw = self.raw_cells(&parts, deps)?;
         let started = Instant::now();
-        let model = self.finish_model(&parts, &raw, self.plan.params.grid.cones);
+        let mut model = self.finish_model(&parts, &raw, self.plan.params.grid.cones);
+        if self.plan.params.grid.static_base {
+            model.base = Some(self.fit_base(&parts, &model, deps)?);
+        }
         let mut out = JobOutput::default();
         out.push("asset", model.to_container(self.header()).to_bytes());
-        out.timings.reference_trace_s = raw.iter().map(|(_, s)| s).sum();
+        let sampled: f64 = deps
+            .iter()
+            .filter(|d| d.get(VERTEX_TRUTH).is_some())
+            .map(|d| d.timings.reference_trace_s)
+            .sum();
+        out.timings.reference_trace_s = raw.iter().map(|(_, s)| s).sum::<f64>() + sampled;
         out.timings.fit_s = started.elapsed().as_secs_f64();
         Ok(out)
     }
@@ -327,24 +465,21 @@ impl Bake<'_> {
         let character = &self.inputs.character;
         let clips = &self.inputs.clips;
         let traced = Instant::now();
-        let truth = GroundTruth::trace(&Inputs {
-            character,
-            clips,
-            train: &self.plan.train,
-            test: &self.plan.test,
-            parts: &parts,
-            options: o,
-            max_distance: self.grid_distance(&parts),
-            seed: self.plan.params.seed,
-        })
-        .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let truth = GroundTruth::trace(&self.grid_inputs(&parts))
+            .map_err(|e| JobError::Invalid(e.to_string()))?;
         let trace_s = traced.elapsed().as_secs_f64();
         let started = Instant::now();
+        // The paper's grids: the baked cells without the base, and the
+        // same cells finished with the other cone setting.
+        let paper = GridModel {
+            base: None,
+            ..model.clone()
+        };
         let other = self.finish_model(&parts, &raw, !o.cones);
         let (with, without) = if o.cones {
-            (&model, &other)
+            (&paper, &other)
         } else {
-            (&other, &model)
+            (&other, &paper)
         };
         let variant = |name: &str, description: &str, bytes: usize, predict: &Predictor<'_>| {
             let (vertices, ground) = truth.errors(predict);
@@ -371,9 +506,26 @@ impl Bake<'_> {
             ),
         ];
         if !o.cones {
-            grids.swap(0, 1); // the baked variant first
+            grids.swap(0, 1); // the baked cells first
         }
-        let mut variants: Vec<GridVariant> = grids.into();
+        let mut variants: Vec<GridVariant> = Vec::new();
+        if model.base.is_some() {
+            variants.push(variant(
+                if o.cones {
+                    "grids on a static base (cones)"
+                } else {
+                    "grids on a static base"
+                },
+                &format!(
+                    "aobake's product form, as baked: per receiver, a static base (the mean ray-traced occlusion over {} training frames) plus the grids' change from their own mean over those frames, scaled by a least-squares gain per part and for the ground; per-vertex offsets and a {r}×{r} ground texture beside the grids",
+                    o.average_frames,
+                    r = o.ground_resolution
+                ),
+                model.bytes(),
+                &|f| truth.predict_ao(&model, f),
+            ));
+        }
+        variants.extend(grids);
         let alone = "no occlusion between parts: each vertex shaded by its own part's grid alone, the ground by nothing";
         for (name, m) in [("own grid only (cones)", with), ("own grid only", without)] {
             variants.push(variant(name, alone, m.bytes(), &|f| {
@@ -402,17 +554,6 @@ impl Bake<'_> {
             "no occlusion between parts: each vertex's exact self-occlusion, the ground open",
             self_bytes,
             &|f| truth.predict(without, f, Terms::Own, true),
-        ));
-        // The grids carrying only what a pose changes: what issue 29's
-        // product form would store beside them (a static bake of every
-        // receiver), measured here before it is built.
-        let baked: &Predictor<'_> = &|f| truth.predict(&model, f, Terms::All, false);
-        let shifted = truth.average_plus_change(baked);
-        variants.push(variant(
-            "static average + grids' change",
-            "per receiver, the static average plus how far the baked grids at this frame are from their own mean over the static average's frames: the grids carry only what the pose changes",
-            2 * (character.vertex_count() + truth.ground.len()) + model.bytes(),
-            &shifted,
         ));
         let (average_v, average_g) = &truth.average;
         variants.push(variant(
@@ -642,5 +783,29 @@ pub(super) fn part_slices(k: usize, part: &PartGrid) -> crate::image::FloatImage
         width: n,
         height: n * n,
         channels,
+    }
+}
+
+/// A static base's ground texture as an image, `ground-offsets.exr`: texel
+/// (x, z) at pixel (x, z), so rows run along +z from the square's `min`
+/// corner; the channel `offset`, exactly the value the run time reads.
+pub(super) fn ground_offsets(
+    ground: &crate::method::grid::base::GroundBase,
+) -> crate::image::FloatImage {
+    let g = &ground.square;
+    crate::image::FloatImage {
+        file: "ground-offsets.exr".into(),
+        layer: "ground".into(),
+        comment: format!(
+            "aobake grid static base: the ground's offsets, texel (x, z) at pixel (x, z) of a {size} x {size} square from ({}, {}) at height {}; ao = clamp({} x grids + offset, 0, 1)",
+            g.min[0],
+            g.min[1],
+            g.height,
+            ground.gain,
+            size = g.size
+        ),
+        width: g.resolution,
+        height: g.resolution,
+        channels: vec![("offset".to_owned(), ground.offsets.clone())],
     }
 }

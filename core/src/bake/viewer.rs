@@ -22,10 +22,7 @@ use crate::{
     asset::metrics::FrameError,
     method::{
         cubemap::{gpu::CubemapGpu, model::CubemapModel},
-        grid::{
-            gpu::GridGpu,
-            model::{GridModel, Terms},
-        },
+        grid::{base::Receiver, gpu::GridGpu, model::GridModel},
         vertex::{VertexAo, form::GpuArrays},
     },
     rig::{
@@ -258,8 +255,8 @@ pub fn scene(
                 gpu.cones,
                 gpu.tclip_resolution,
                 gpu.tclip_offset,
-                0,
-                0,
+                gpu.base,
+                gpu.ground_gain,
             ];
             let mut infos: Vec<u32> = gpu.infos.iter().flatten().copied().collect();
             infos.resize(infos.len().max(4), 0);
@@ -268,7 +265,10 @@ pub fn scene(
                 ("layout".into(), Array::U32(layout)),
                 ("infos".into(), Array::U32(infos)),
                 ("cells".into(), Array::U32(gpu.cells)),
-                ("owners".into(), Array::U32(owners.to_vec())),
+                (
+                    "receivers".into(),
+                    Array::U32(grid_receivers(model, owners)),
+                ),
             ]);
             json!({
                 "family": "grid",
@@ -276,7 +276,7 @@ pub fn scene(
                 "textures": [
                     {"binding": 1, "array": "infos"},
                     {"binding": 2, "array": "cells"},
-                    {"binding": 5, "array": "owners"},
+                    {"binding": 5, "array": "receivers"},
                 ],
                 "frame": {"kind": "texture", "binding": 3, "floats": 32 * gpu.infos.len()},
                 "model_on": {"character": true, "ground": true},
@@ -364,27 +364,21 @@ impl FrameModel<'_> {
             Self::Vertex(runtime) => (Some(runtime.evaluate()), None),
             Self::Grid(model, owners) => {
                 let poses = model.poses(&character.joint_matrices(pose));
-                let own = |v: usize| {
-                    owners
-                        .get(v)
-                        .filter(|&&o| o != u32::MAX)
-                        .map(|&o| o as usize)
-                };
                 let on_character = (0..posed.positions.len())
                     .map(|v| {
-                        model.occlusion(
+                        let owner = owners.get(v).copied().unwrap_or(u32::MAX);
+                        model.ao(
                             &poses,
                             posed.positions[v],
                             posed.normals[v],
-                            own(v),
-                            Terms::All,
+                            Receiver::vertex(v, owner),
                         )
                     })
                     .collect();
                 let on_ground = ground
                     .positions
                     .iter()
-                    .map(|&p| model.occlusion(&poses, p, Vec3::Y, None, Terms::All))
+                    .map(|&p| model.ao(&poses, p, Vec3::Y, Receiver::Ground))
                     .collect();
                 (Some(on_character), Some(on_ground))
             }
@@ -561,6 +555,35 @@ pub fn clip_frames(
         ],
     };
     Ok((bundle, camera))
+}
+
+/// The viewer's `receivers` for a grid asset (viewer_grid.wgsl's binding
+/// 5): the base's ground square (min x, min z, size as f32 bits, texels
+/// per side; 0 texels without a base), the vertex count, per vertex its
+/// part (`u32::MAX`: none) and its base offset (f32 bits), then the ground
+/// texels' offsets (f32 bits).
+fn grid_receivers(model: &GridModel, owners: &[u32]) -> Vec<u32> {
+    let mut words = match &model.base {
+        Some(b) => {
+            let g = &b.ground.square;
+            vec![
+                g.min[0].to_bits(),
+                g.min[1].to_bits(),
+                g.size.to_bits(),
+                g.resolution as u32,
+            ]
+        }
+        None => vec![0; 4],
+    };
+    words.push(owners.len() as u32);
+    for (i, &owner) in owners.iter().enumerate() {
+        let offset = model.offset(Receiver::vertex(i, owner), Vec3::ZERO);
+        words.extend([owner, offset.to_bits()]);
+    }
+    if let Some(b) = &model.base {
+        words.extend(b.ground.offsets.iter().map(|x| x.to_bits()));
+    }
+    words
 }
 
 #[cfg(test)]

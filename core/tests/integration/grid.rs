@@ -146,6 +146,7 @@ fn the_cone_lookup_gives_the_sphere_over_a_plane_and_the_plain_rule_half() {
                 directions: f.directions,
             }],
             tclip: cones.then(|| TClip::compute(64)),
+            base: None,
         }
     };
     let (cones, plain) = (model(true), model(false));
@@ -196,7 +197,10 @@ fn grids_bake_in_process_and_beat_no_occlusion_between_parts_on_unseen_frames() 
                 ..GraphOptions::default()
             });
             let parts = bake.grid_parts().unwrap().len();
-            assert_eq!(graph.jobs.len(), 2 * parts + 2, "two slabs of 8 per part");
+            let count = |kind: &str| graph.jobs.iter().filter(|j| j.spec.kind() == kind).count();
+            assert_eq!(count("slab"), 2 * parts, "two slabs of 8 per part");
+            assert!(count("sample") >= 1, "the static base's frames");
+            assert_eq!(graph.jobs.len(), count("slab") + count("sample") + 2);
             let baked = bake_in_process(&bake, None).unwrap();
             let r = report(&baked);
             let container = Container::from_bytes(&baked.asset).unwrap();
@@ -216,8 +220,18 @@ fn grids_bake_in_process_and_beat_no_occlusion_between_parts_on_unseen_frames() 
                     .find(|x| x.name == n)
                     .unwrap_or_else(|| panic!("no variant {n}"))
             };
-            let first = if cones { "grids (cones)" } else { "grids" };
+            let first = if cones {
+                "grids on a static base (cones)"
+            } else {
+                "grids on a static base"
+            };
             assert_eq!(v[0].name, first, "the baked variant first");
+            assert_eq!(v[0].bytes, model.bytes());
+            let base = model
+                .base
+                .as_ref()
+                .expect("the default bakes a static base");
+            assert_eq!(base.vertex_offsets.len(), imported.character.vertex_count());
             // Every variant shades the ground better than nothing; at the
             // parts' vertices the cones do, while the plain ×2 rule, blind
             // to the receiver's normal, darkens faces turned away from the
@@ -259,6 +273,21 @@ fn grids_bake_in_process_and_beat_no_occlusion_between_parts_on_unseen_frames() 
                 average.ground.mean.rmse,
                 r.evaluation.noise_rmse_vertices,
                 r.evaluation.noise_rmse_ground
+            );
+            // The product beats the static average at the vertices and on
+            // the ground, on frames it never saw.
+            let product = &v[0];
+            eprintln!(
+                "{name}: {first}: vertices RMSE {:.4} ground {:.4}",
+                product.vertices.mean.rmse, product.ground.mean.rmse,
+            );
+            assert!(
+                product.vertices.mean.rmse < average.vertices.mean.rmse,
+                "{name}: {first} beats the static average at the vertices"
+            );
+            assert!(
+                product.ground.mean.rmse < average.ground.mean.rmse,
+                "{name}: {first} beats the static average on the ground"
             );
             assert!(baked.plot.starts_with(b"\x89PNG"));
         }

@@ -230,13 +230,30 @@ size_t aobake_grid_palette_len(const struct AobakeGrid *grid);
  * renderer skins with). `points` and `normals` are `3 · count` floats
  * (world space, unit normals); `parts` is NULL (no receiver is on a
  * part, as the ground) or `count` part indices, -1 for none: a receiver
- * on a part takes its own part by the self-occlusion rule.
+ * on a part takes its own part by the self-occlusion rule. These are
+ * the paper's grids alone; [`aobake_grid_ao`] adds the asset's static
+ * base.
  *
  * # Safety
  * `grid` must be NULL or a live handle; each pointer NULL or holding the
  * counts above.
  */
 bool aobake_grid_occlusion(const struct AobakeGrid *grid, const float *palette, size_t palette_len, const float *points, const float *normals, const int64_t *parts, size_t count, float *out);
+
+/**
+ * Writes the AO an engine shows at `count` receivers to `out`: as
+ * [`aobake_grid_occlusion`], plus the asset's static base when it has
+ * one (`gain · grids + offset`, clamped; see `docs/engines.md`).
+ * `receivers` is NULL (no receiver takes an offset) or `count` values:
+ * the receiver's vertex index in the character (its offset), -1 for a
+ * point of the ground (the base's ground texture), -2 for any other
+ * surface.
+ *
+ * # Safety
+ * As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`
+ * values.
+ */
+bool aobake_grid_ao(const struct AobakeGrid *grid, const float *palette, size_t palette_len, const float *points, const float *normals, const int64_t *parts, const int64_t *receivers, size_t count, float *out);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -38,7 +38,10 @@ use aobake_runtime::{
     Asset,
     method::{
         cubemap::CubemapModel,
-        grid::model::{GridModel, Terms},
+        grid::{
+            base::Receiver,
+            model::{GridModel, PartPose, Terms},
+        },
         vertex::VertexAo,
     },
     rig::Transform,
@@ -534,13 +537,86 @@ pub unsafe extern "C" fn aobake_grid_palette_len(grid: *const AobakeGrid) -> usi
     })
 }
 
+/// A grid lookup's checked inputs: the parts posed and each receiver's
+/// point, normal and part.
+struct GridReceivers {
+    poses: Vec<PartPose>,
+    receivers: Vec<(Vec3, Vec3, Option<usize>)>,
+}
+
+/// Reads a grid lookup's arguments; `None` (with the reason set) when any
+/// is wrong.
+///
+/// # Safety
+/// As [`aobake_grid_occlusion`].
+unsafe fn grid_receivers<'a>(
+    grid: *const AobakeGrid,
+    palette: *const f32,
+    palette_len: usize,
+    points: *const f32,
+    normals: *const f32,
+    parts: *const i64,
+    count: usize,
+) -> Option<(&'a AobakeGrid, GridReceivers)> {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(g) = (unsafe { grid.as_ref() }) else {
+        fail("the handle is NULL");
+        return None;
+    };
+    if let Err(e) = g.0.check_palette(palette_len) {
+        fail(e.to_string());
+        return None;
+    }
+    // SAFETY: forwarded from the caller.
+    let (Some(palette), Some(points), Some(normals)) = (unsafe {
+        (
+            floats(palette, palette_len, 16, "palette"),
+            floats(points, count, 3, "points"),
+            floats(normals, count, 3, "normals"),
+        )
+    }) else {
+        return None;
+    };
+    let own: Vec<Option<usize>> = if parts.is_null() {
+        vec![None; count]
+    } else {
+        // SAFETY: the caller promises `count` readable part indices.
+        let parts = unsafe { std::slice::from_raw_parts(parts, count) };
+        let n = g.0.parts.len();
+        if let Some(bad) = parts.iter().find(|&&k| k >= n as i64 || k < -1) {
+            fail(format!("part {bad} of {n}"));
+            return None;
+        }
+        parts.iter().map(|&k| usize::try_from(k).ok()).collect()
+    };
+    let palette: Vec<Mat4> = palette
+        .chunks_exact(16)
+        .map(|m| Mat4::from_cols_slice(m))
+        .collect();
+    let receivers = points
+        .chunks_exact(3)
+        .zip(normals.chunks_exact(3))
+        .zip(own)
+        .map(|((p, n), k)| (Vec3::from_slice(p), Vec3::from_slice(n), k))
+        .collect();
+    Some((
+        g,
+        GridReceivers {
+            poses: g.0.poses(&palette),
+            receivers,
+        },
+    ))
+}
+
 /// Writes the occlusion every part casts at `count` receivers to `out`
 /// (`count` floats), the parts posed by the frame's skinning `palette`
 /// (`palette_len` column-major 4 × 4 matrices, world from bind, as the
 /// renderer skins with). `points` and `normals` are `3 · count` floats
 /// (world space, unit normals); `parts` is NULL (no receiver is on a
 /// part, as the ground) or `count` part indices, -1 for none: a receiver
-/// on a part takes its own part by the self-occlusion rule.
+/// on a part takes its own part by the self-occlusion rule. These are
+/// the paper's grids alone; [`aobake_grid_ao`] adds the asset's static
+/// base.
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle; each pointer NULL or holding the
@@ -556,56 +632,71 @@ pub unsafe extern "C" fn aobake_grid_occlusion(
     count: usize,
     out: *mut f32,
 ) -> bool {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(g) = (unsafe { grid.as_ref() }) else {
-        fail("the handle is NULL");
-        return false;
-    };
-    if let Err(e) = g.0.check_palette(palette_len) {
-        fail(e.to_string());
-        return false;
-    }
     // SAFETY: forwarded from the caller.
-    let (Some(palette), Some(points), Some(normals)) = (unsafe {
-        (
-            floats(palette, palette_len, 16, "palette"),
-            floats(points, count, 3, "points"),
-            floats(normals, count, 3, "normals"),
-        )
-    }) else {
+    let Some((g, r)) =
+        (unsafe { grid_receivers(grid, palette, palette_len, points, normals, parts, count) })
+    else {
         return false;
     };
-    let own: Vec<Option<usize>> = if parts.is_null() {
-        vec![None; count]
-    } else {
-        // SAFETY: the caller promises `count` readable part indices.
-        let parts = unsafe { std::slice::from_raw_parts(parts, count) };
-        let n = g.0.parts.len();
-        if let Some(bad) = parts.iter().find(|&&k| k >= n as i64 || k < -1) {
-            fail(format!("part {bad} of {n}"));
-            return false;
-        }
-        parts.iter().map(|&k| usize::try_from(k).ok()).collect()
+    let values: Vec<f32> = r
+        .receivers
+        .iter()
+        .map(|&(p, n, k)| g.0.occlusion(&r.poses, p, n, k, Terms::All))
+        .collect();
+    // SAFETY: forwarded from the caller.
+    unsafe { fill(&values, out, count, "occlusion") }
+}
+
+/// Writes the AO an engine shows at `count` receivers to `out`: as
+/// [`aobake_grid_occlusion`], plus the asset's static base when it has
+/// one (`gain · grids + offset`, clamped; see `docs/engines.md`).
+/// `receivers` is NULL (no receiver takes an offset) or `count` values:
+/// the receiver's vertex index in the character (its offset), -1 for a
+/// point of the ground (the base's ground texture), -2 for any other
+/// surface.
+///
+/// # Safety
+/// As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`
+/// values.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_ao(
+    grid: *const AobakeGrid,
+    palette: *const f32,
+    palette_len: usize,
+    points: *const f32,
+    normals: *const f32,
+    parts: *const i64,
+    receivers: *const i64,
+    count: usize,
+    out: *mut f32,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    let Some((g, r)) =
+        (unsafe { grid_receivers(grid, palette, palette_len, points, normals, parts, count) })
+    else {
+        return false;
     };
-    let palette: Vec<Mat4> = palette
-        .chunks_exact(16)
-        .map(|m| Mat4::from_cols_slice(m))
-        .collect();
-    let poses = g.0.poses(&palette);
-    let values: Vec<f32> = points
-        .chunks_exact(3)
-        .zip(normals.chunks_exact(3))
-        .zip(&own)
-        .map(|((p, n), &k)| {
-            g.0.occlusion(
-                &poses,
-                Vec3::from_slice(p),
-                Vec3::from_slice(n),
-                k,
-                Terms::All,
-            )
-        })
-        .collect();
+    let kinds: Vec<i64> = if receivers.is_null() {
+        vec![-2; count]
+    } else {
+        // SAFETY: the caller promises `count` readable values.
+        unsafe { std::slice::from_raw_parts(receivers, count) }.to_vec()
+    };
+    let mut values = Vec::with_capacity(count);
+    for (&(p, n, part), &kind) in r.receivers.iter().zip(&kinds) {
+        let receiver = match kind {
+            -1 => Receiver::Ground,
+            -2 => Receiver::Other,
+            index => match usize::try_from(index) {
+                Ok(index) => Receiver::Vertex { index, part },
+                Err(_) => {
+                    fail(format!("receiver kind {index}: a vertex index, -1 or -2"));
+                    return false;
+                }
+            },
+        };
+        values.push(g.0.ao(&r.poses, p, n, receiver));
+    }
     // SAFETY: forwarded from the caller.
     unsafe { fill(&values, out, count, "occlusion") }
 }

@@ -161,13 +161,14 @@ fn run_c(exe: &Path, args: &[&Path], out: &Path) -> Vec<f32> {
         .collect()
 }
 
-/// Receivers as lookups.c reads them: `px py pz nx ny nz part` a line.
-fn receivers_text(receivers: &[(glam::Vec3, glam::Vec3, i64)]) -> String {
+/// Receivers as lookups.c reads them: `px py pz nx ny nz part kind` a
+/// line.
+fn receivers_text(receivers: &[(glam::Vec3, glam::Vec3, i64, i64)]) -> String {
     receivers
         .iter()
-        .map(|(p, n, k)| {
+        .map(|(p, n, k, kind)| {
             format!(
-                "{:e} {:e} {:e} {:e} {:e} {:e} {k}\n",
+                "{:e} {:e} {:e} {:e} {:e} {:e} {k} {kind}\n",
                 p.x, p.y, p.z, n.x, n.y, n.z
             )
         })
@@ -178,7 +179,10 @@ fn receivers_text(receivers: &[(glam::Vec3, glam::Vec3, i64)]) -> String {
 fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
     use aobake_runtime::method::{
         cubemap::CubemapModel,
-        grid::model::{GridModel, Terms},
+        grid::{
+            base::Receiver,
+            model::{GridModel, Terms},
+        },
     };
     use glam::Vec3;
 
@@ -200,11 +204,11 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
     let container = aobake_runtime::Container::from_bytes(&asset).unwrap();
     let (model, _) = CubemapModel::from_container(&container).unwrap();
     let s = model.layout.spheroid;
-    let receivers: Vec<(Vec3, Vec3, i64)> = (0..64)
+    let receivers: Vec<(Vec3, Vec3, i64, i64)> = (0..64)
         .map(|i| {
             let t = i as f32 / 63.0;
             let d = Vec3::new((7.0 * t).cos(), 2.0 * t - 1.0, (7.0 * t).sin());
-            (s.centre + s.radii * d * (0.6 + 0.8 * t), Vec3::Y, -1)
+            (s.centre + s.radii * d * (0.6 + 0.8 * t), Vec3::Y, -1, -1)
         })
         .collect();
     std::fs::write(&receivers_path, receivers_text(&receivers)).unwrap();
@@ -222,7 +226,7 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
     let phase = model.layout.phase(seconds);
     let rust: Vec<f32> = receivers
         .iter()
-        .map(|(p, _, _)| model.occlusion(*p, phase))
+        .map(|(p, _, _, _)| model.occlusion(*p, phase))
         .collect();
     assert_eq!(c, rust, "cubemap lookups bit for bit");
     assert!(rust.iter().any(|&a| a > 0.0), "some occlusion");
@@ -250,16 +254,19 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
     let palette_path = dir.join("palette.txt");
     std::fs::write(&palette_path, palette_text).unwrap();
     let poses = model.poses(&palette);
-    // Receivers at each part's grid centre (on that part, facing up) and
-    // on the ground below it (on no part).
+    let base = model.base.as_ref().expect("the default grid has a base");
+    assert!(base.vertex_offsets.iter().any(|&o| o != 0.0));
+    // Receivers at each part's grid centre (on that part, facing up, as
+    // vertex k), on the ground below it and beside that (on no part).
     let mut receivers = Vec::new();
     for (k, pose) in poses.iter().enumerate() {
         let centre = pose
             .grid_from_world
             .inverse()
             .transform_point3(Vec3::splat(0.5));
-        receivers.push((centre, Vec3::Y, k as i64));
-        receivers.push((centre - Vec3::Y * 0.5, Vec3::Y, -1));
+        receivers.push((centre, Vec3::Y, k as i64, k as i64));
+        receivers.push((centre - Vec3::Y * 0.5, Vec3::Y, -1, -1));
+        receivers.push((centre - Vec3::Y * 0.5, Vec3::X, -1, -2));
     }
     std::fs::write(&receivers_path, receivers_text(&receivers)).unwrap();
     let c = run_c(
@@ -272,10 +279,21 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
         ],
         &out_path,
     );
-    let rust: Vec<f32> = receivers
+    let grids = receivers
         .iter()
-        .map(|(p, n, k)| model.occlusion(&poses, *p, *n, usize::try_from(*k).ok(), Terms::All))
-        .collect();
+        .map(|(p, n, k, _)| model.occlusion(&poses, *p, *n, usize::try_from(*k).ok(), Terms::All));
+    let on_base = receivers.iter().map(|&(p, n, k, kind)| {
+        let receiver = match kind {
+            -1 => Receiver::Ground,
+            -2 => Receiver::Other,
+            index => Receiver::Vertex {
+                index: index as usize,
+                part: usize::try_from(k).ok(),
+            },
+        };
+        model.ao(&poses, p, n, receiver)
+    });
+    let rust: Vec<f32> = grids.chain(on_base).collect();
     assert_eq!(c, rust, "grid lookups bit for bit");
     assert!(rust.iter().any(|&a| a > 0.0), "some occlusion");
     std::fs::remove_dir_all(&dir).ok();

@@ -19,7 +19,9 @@
 //! rows z·n .. (z + 1)·n, +y up within a slice, +x left to right), in the
 //! channel `ao_grid` (the stored 2·ao′, 0..2) and, with cones, `axis.x`,
 //! `axis.y`, `axis.z` (the average occluded direction in the part's bind
-//! space), each exactly the value the run time reads at the cell.
+//! space), each exactly the value the run time reads at the cell; with a
+//! static base, its ground texture as `ground-offsets.exr` (channel
+//! `offset`, texel (x, z) at pixel (x, z)).
 
 use std::path::{Path, PathBuf};
 

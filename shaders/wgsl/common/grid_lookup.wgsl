@@ -14,7 +14,10 @@
 // * with cones, every part casts T_clip(ao', d.n), its own part included
 //   (section 5.1); without, another part casts min(1, ao_grid) and the
 //   receiver's own part max(0, (ao_grid - 1)/2) (section 4.2);
-// * the parts combine as 1 - prod(1 - a_i).
+// * the parts combine as 1 - prod(1 - a_i);
+// * grid_ao adds the static base (aobake's product form): the combined
+//   occlusion times the receiver's gain plus its offset, clamped
+//   (runtime method::grid::base).
 //
 // Cells are one u32 each (RGBA8, R in the low byte), part after part, the
 // bytes of the asset's RGBA section (or its OCCL bytes in A). With cones,
@@ -35,8 +38,10 @@ struct Params {
     tclip_resolution: u32,
     // Index in `cells` of T_clip's first f32.
     tclip_offset: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // 1 when the asset has a static base.
+    base: u32,
+    // The bits of the base's ground gain (f32).
+    ground_gain: u32,
 }
 
 struct PartInfo {
@@ -44,8 +49,9 @@ struct PartInfo {
     resolution: u32,
     // Index in `cells` of the part's first cell.
     offset: u32,
+    // The bits of the base's gain at the part's vertices (f32).
+    gain: u32,
     _pad0: u32,
-    _pad1: u32,
 }
 
 struct PartPose {
@@ -138,3 +144,20 @@ fn grid_occlusion(p: vec3<f32>, n: vec3<f32>, own: u32) -> f32 {
     return 1.0 - open;
 }
 
+
+// The occlusion an engine shows at a receiver (GridModel::ao): with a
+// static base, grid_occlusion times the gain of the receiver's part (the
+// ground's for NO_PART) plus `offset` (a vertex's VOFS value, a ground
+// point's bilinear GOFS value, 0 elsewhere), clamped to [0, 1]; without,
+// grid_occlusion alone.
+fn grid_ao(p: vec3<f32>, n: vec3<f32>, own: u32, offset: f32) -> f32 {
+    let g = grid_occlusion(p, n, own);
+    if (params.base == 0u) {
+        return g;
+    }
+    var gain = bitcast<f32>(params.ground_gain);
+    if (own != NO_PART) {
+        gain = bitcast<f32>(part_info(own).gain);
+    }
+    return clamp(gain * g + offset, 0.0, 1.0);
+}

@@ -23,7 +23,7 @@ fn pose_float(i: u32) -> f32 {
 }
 
 fn part_info(k: u32) -> PartInfo {
-    return PartInfo(info_word(4u * k), info_word(4u * k + 1u), 0u, 0u);
+    return PartInfo(info_word(4u * k), info_word(4u * k + 1u), info_word(4u * k + 2u), 0u);
 }
 
 fn pose_matrix(at: u32) -> mat4x4<f32> {

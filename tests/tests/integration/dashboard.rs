@@ -367,7 +367,7 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         .await;
         assert_eq!(rows, json!([3, 9]), "three parts, nine variants");
         let first = eval(&c, "return document.querySelectorAll('#report table')[1].tBodies[0].rows[0].cells[0].textContent").await;
-        assert_eq!(first, json!("grids (cones)"));
+        assert_eq!(first, json!("grids on a static base (cones)"));
         let plot = eval(&c, "const i = document.querySelector('#report img'); return i && i.complete && i.naturalWidth").await;
         assert!(plot.as_u64().unwrap_or(0) > 100, "the slices show: {plot}");
         wait_for(&c, "the grid previews", &format!("{images}.length === 4"), Duration::from_secs(30)).await;

@@ -58,11 +58,13 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
         .map(|j| j["kind"].as_str().unwrap().to_owned())
         .collect();
     // Three parts (the body and two axles), four slabs of 8 layers each,
-    // then the previews' truth in batches of 4 frames (3 stills and the
-    // animation's frames) beside them.
+    // the static base's training frames in one batch, then the previews'
+    // truth in batches of 4 frames (3 stills and the animation's frames)
+    // beside them.
     let truth = kinds.iter().filter(|k| *k == "preview-truth").count();
     assert!(truth >= 1, "{kinds:?}");
     let mut want = vec!["slab"; 12];
+    want.push("sample");
     want.extend(vec!["preview-truth"; truth]);
     want.extend(["assemble", "evaluate", "preview"]);
     assert_eq!(kinds, want);
@@ -124,7 +126,18 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
         .map(|e| e.unwrap().file_name().into_string().unwrap())
         .collect();
     files.sort();
-    assert_eq!(files.len(), 3, "{files:?}");
+    assert_eq!(files.len(), 4, "three parts and the ground: {files:?}");
+    let base = model.base.as_ref().expect("a static base by default");
+    let ground =
+        exr::prelude::read_all_flat_layers_from_file(exr_dir.join("ground-offsets.exr")).unwrap();
+    let offsets: Vec<f32> = ground.layer_data[0].channel_data.list[0]
+        .sample_data
+        .values_as_f32()
+        .collect();
+    assert_eq!(
+        offsets, base.ground.offsets,
+        "the ground's offsets bit for bit"
+    );
     let part = &model.parts[1];
     let file = files.iter().find(|f| f.starts_with("part1-")).unwrap();
     let image = exr::prelude::read_all_flat_layers_from_file(exr_dir.join(file)).unwrap();
@@ -159,7 +172,8 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
         .iter()
         .map(|v| v["name"].as_str().unwrap())
         .collect();
-    assert_eq!(names[0], "grids (cones)");
+    assert_eq!(names[0], "grids on a static base (cones)");
+    assert!(names.contains(&"grids (cones)"), "{names:?}");
     assert!(names.contains(&"static average"), "{names:?}");
     assert_eq!(report["parts"].as_array().unwrap().len(), 3);
 }

@@ -36,7 +36,8 @@ pub(super) fn params(form: &GridGpu) -> GridAoParams {
         cones: form.cones,
         tclip_resolution: form.tclip_resolution,
         tclip_offset: form.tclip_offset,
-        _pad: [0; 2],
+        base: form.base,
+        ground_gain: form.ground_gain,
     }
 }
 
@@ -53,7 +54,8 @@ impl<'g> GridAo<'g> {
             .map(|i| GridPartInfo {
                 resolution: i[0],
                 offset: i[1],
-                _pad: [0; 2],
+                gain: i[2],
+                _pad: 0,
             })
             .collect();
         let limit = device.limits().max_storage_buffer_binding_size;

@@ -8,6 +8,7 @@
 
 use aobake_core::bake::{Camera, Panel, PreviewModel, RenderFrame, RenderScene, Renderer};
 use aobake_core::image::{HeatMap, Image};
+use aobake_core::method::grid::{base::Receiver, model::GridModel};
 use aobake_shaders::{GridReceiver, PreviewUniforms};
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;
@@ -187,8 +188,9 @@ pub fn uniforms(
 enum Evaluator<'g> {
     Vertex(VertexAo<'g>),
     Cubemap(CubemapAo<'g>),
-    /// The grids and each character vertex's part.
-    Grid(GridAo<'g>, &'g [u32]),
+    /// The grids, their model (for the static base's offsets) and each
+    /// character vertex's part.
+    Grid(GridAo<'g>, &'g GridModel, &'g [u32]),
 }
 
 /// Vertex buffers of one surface.
@@ -263,7 +265,7 @@ impl PreviewRenderer<'_> {
                         owners.len()
                     )));
                 }
-                Evaluator::Grid(GridAo::new(gpu, m)?, owners)
+                Evaluator::Grid(GridAo::new(gpu, m)?, m, owners)
             }
         };
         let cubemap = matches!(evaluator, Evaluator::Cubemap(_));
@@ -316,12 +318,19 @@ impl PreviewRenderer<'_> {
         };
         // The grids' receivers: the character's (rewritten every frame)
         // and the ground's (fixed).
-        let receivers = grid.then(|| {
+        let receivers = match &evaluator {
+            Evaluator::Grid(_, model, _) => Some(model),
+            _ => None,
+        }
+        .map(|model| {
             let up = [0.0, 1.0, 0.0];
             let ground: Vec<GridReceiver> = g
                 .positions
                 .iter()
-                .map(|p| GridReceiver::new(p.to_array(), up, GridReceiver::NO_PART))
+                .map(|&p| {
+                    let offset = model.offset(Receiver::Ground, p);
+                    GridReceiver::new(p.to_array(), up, GridReceiver::NO_PART, offset)
+                })
                 .collect();
             (
                 buffer("character receivers", 32 * n, U::STORAGE | U::COPY_DST),
@@ -447,7 +456,7 @@ impl PreviewRenderer<'_> {
                     frame.phase,
                     &ground_model,
                 )?,
-                Evaluator::Grid(e, owners) => {
+                Evaluator::Grid(e, model, owners) => {
                     let (on_character, on_ground) = receivers
                         .as_ref()
                         .expect("grid receivers are made for grids");
@@ -456,7 +465,11 @@ impl PreviewRenderer<'_> {
                         .iter()
                         .zip(&frame.normals)
                         .zip(owners.iter())
-                        .map(|((p, n), &o)| GridReceiver::new(p.to_array(), n.to_array(), o))
+                        .enumerate()
+                        .map(|(i, ((&p, n), &o))| {
+                            let offset = model.offset(Receiver::vertex(i, o), p);
+                            GridReceiver::new(p.to_array(), n.to_array(), o, offset)
+                        })
                         .collect();
                     gpu.queue
                         .write_buffer(on_character, 0, bytemuck::cast_slice(&mine));

@@ -316,6 +316,7 @@ fn the_wgsl_cubemap_lookup_matches_the_cpu_for_every_encoding() {
 /// A small grid bake of the rigid robot, with or without cones.
 fn grid(
     cones: bool,
+    static_base: bool,
 ) -> (
     aobake_core::Imported,
     aobake_core::method::grid::model::GridModel,
@@ -345,10 +346,12 @@ fn grid(
         rays: 32,
         cones,
         tclip_resolution: 16,
+        static_base,
+        ground_resolution: 8,
         eval_frames: 1,
         eval_ground: 16,
         eval_rays: 16,
-        average_frames: 1,
+        average_frames: 2,
         ..GridOptions::default()
     };
     let baked = bake_in_process(&Bake::new(&inputs, p).unwrap(), None).unwrap();
@@ -359,11 +362,11 @@ fn grid(
 }
 
 #[test]
-fn the_wgsl_grid_lookup_matches_the_cpu_with_and_without_cones() {
+fn the_wgsl_grid_lookup_matches_the_cpu_with_and_without_cones_and_base() {
     use aobake_core::{
         bake::preview::grid_weights,
         method::grid::{
-            model::Terms,
+            base::Receiver,
             parts::{owners, parts},
         },
     };
@@ -371,8 +374,13 @@ fn the_wgsl_grid_lookup_matches_the_cpu_with_and_without_cones() {
     use aobake_worker::gpu::GridAo;
     use glam::Vec3;
     let gpu = gpu();
-    for cones in [false, true] {
-        let (imported, model) = grid(cones);
+    for (cones, base) in [(false, false), (true, false), (true, true)] {
+        let (imported, model) = grid(cones, base);
+        assert_eq!(model.base.is_some(), base);
+        if let Some(b) = &model.base {
+            assert!(b.vertex_offsets.iter().any(|&o| o != 0.0));
+            assert!(b.ground.offsets.iter().any(|&o| o != 0.0));
+        }
         let c = &imported.character;
         let owner = owners(
             &parts(c, aobake_core::method::grid::PartsMode::Rigid).unwrap(),
@@ -386,13 +394,14 @@ fn the_wgsl_grid_lookup_matches_the_cpu_with_and_without_cones() {
             let palette = c.joint_matrices(&pose);
             let poses = model.poses(&palette);
             // The vertices on their parts, then points around the robot
-            // (on no part) with normals on a spiral.
-            let mut receivers: Vec<(Vec3, Vec3, Option<usize>)> = posed
+            // (ground receivers, on no part) with normals on a spiral.
+            let mut receivers: Vec<(Vec3, Vec3, Receiver)> = posed
                 .positions
                 .iter()
                 .zip(&posed.normals)
                 .zip(&owner)
-                .map(|((&p, &n), &o)| (p, n, o))
+                .enumerate()
+                .map(|(index, ((&p, &n), &part))| (p, n, Receiver::Vertex { index, part }))
                 .collect();
             for k in 0..2000 {
                 let f = k as f32;
@@ -402,19 +411,24 @@ fn the_wgsl_grid_lookup_matches_the_cpu_with_and_without_cones() {
                     (f * 1.913).cos() * 0.6,
                 );
                 let n = Vec3::new((f * 0.51).cos(), (f * 0.23).sin(), (f * 0.87).sin()).normalize();
-                receivers.push((p, n, None));
+                receivers.push((p, n, Receiver::Ground));
             }
             let on_cpu: Vec<f32> = receivers
                 .iter()
-                .map(|&(p, n, o)| model.occlusion(&poses, p, n, o, Terms::All))
+                .map(|&(p, n, r)| model.ao(&poses, p, n, r))
                 .collect();
             let packed: Vec<GridReceiver> = receivers
                 .iter()
-                .map(|&(p, n, o)| {
+                .map(|&(p, n, r)| {
+                    let part = match r {
+                        Receiver::Vertex { part, .. } => part,
+                        _ => None,
+                    };
                     GridReceiver::new(
                         p.to_array(),
                         n.to_array(),
-                        o.map_or(GridReceiver::NO_PART, |o| o as u32),
+                        part.map_or(GridReceiver::NO_PART, |o| o as u32),
+                        model.offset(r, p),
                     )
                 })
                 .collect();
@@ -425,15 +439,20 @@ fn the_wgsl_grid_lookup_matches_the_cpu_with_and_without_cones() {
             // The same bytes, trilinear weights and table on both sides;
             // they differ by f32 rounding and fused multiply-adds.
             let w = worst(&on_gpu, &on_cpu);
-            eprintln!("cones {cones}, clip {clip}: worst difference {w:e}");
-            assert!(w < 1e-5, "cones {cones}, clip {clip}: {w}");
+            eprintln!("cones {cones}, base {base}, clip {clip}: worst difference {w:e}");
+            assert!(w < 1e-5, "cones {cones}, base {base}, clip {clip}: {w}");
             // The vertex stage (textures, WebGL2) runs the same lookup
             // (common/grid_lookup.wgsl) on the same adapter.
             let vs =
                 grid_vertex_stage(&gpu, &model, &grid_weights(&model, &palette), &packed).unwrap();
             let w = worst(&vs, &on_cpu);
-            eprintln!("cones {cones}, clip {clip}, vertex stage: worst difference {w:e}");
-            assert!(w < 1e-5, "cones {cones}, clip {clip}, vertex stage: {w}");
+            eprintln!(
+                "cones {cones}, base {base}, clip {clip}, vertex stage: worst difference {w:e}"
+            );
+            assert!(
+                w < 1e-5,
+                "cones {cones}, base {base}, clip {clip}, vertex stage: {w}"
+            );
         }
         assert!(nonzero > 500, "the receivers see occlusion: {nonzero}");
     }

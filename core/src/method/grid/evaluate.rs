@@ -14,8 +14,8 @@
 //!   exact self-occlusion (traced on the part alone: a rigid part's never
 //!   changes) with and without the other parts' grids, the static
 //!   average (per receiver, the mean truth over the training frames), and
-//!   the static average plus the baked grids' change from their own mean
-//!   over those frames.
+//!   the product form: the grids' change on a static base fitted to those
+//!   frames ([`GridModel::ao`]).
 
 use glam::{Mat4, Vec3};
 use rand::{RngExt as _, SeedableRng as _};
@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{
     GridOptions,
+    base::Receiver,
     model::{GridModel, PartPose, Terms},
     parts::Part,
 };
@@ -87,6 +88,15 @@ pub fn random_frames(all: &[Clip], clips: &[usize], count: usize, seed: u64) -> 
         .collect()
 }
 
+/// Occlusion at every receiver of one frame.
+#[derive(Debug, Clone, Default)]
+pub struct Values {
+    /// At each vertex.
+    pub vertices: Vec<f32>,
+    /// At each ground point.
+    pub ground: Vec<f32>,
+}
+
 /// A variant's prediction at a frame: its vertex values, then its ground
 /// values.
 pub type Predictor<'a> = dyn Fn(&FrameTruth) -> (Vec<f32>, Vec<f32>) + Sync + 'a;
@@ -125,8 +135,6 @@ pub struct GroundTruth {
     /// The static average: mean truth over the training frames, per
     /// vertex, then per ground point.
     pub average: (Vec<f32>, Vec<f32>),
-    /// The training frames the static average is the mean of, traced.
-    pub training: Vec<FrameTruth>,
     /// RMSE of one truth estimate at the vertices and on the ground (the
     /// first frame traced again with independent rays, the difference
     /// over √2): what a perfect model would still score.
@@ -180,6 +188,37 @@ impl Traced {
 }
 
 impl Inputs<'_> {
+    /// The static average's frames (of the training clips), which the
+    /// static base is fitted to.
+    pub fn training_frames(&self) -> Vec<Frame> {
+        random_frames(
+            self.clips,
+            self.train,
+            self.options.average_frames,
+            self.seed ^ AVERAGE_SEED,
+        )
+    }
+
+    /// The truth of `frames` at the vertices and at `ground` (normal up),
+    /// traced side by side with the bake's seed, as the static average's
+    /// frames are.
+    pub fn trace_frames(
+        &self,
+        frames: &[Frame],
+        ground: &[Vec3],
+    ) -> Result<Vec<Values>, TraceError> {
+        frames
+            .par_iter()
+            .map(|frame| {
+                let t = self.trace(frame, ground, self.seed)?;
+                Ok(Values {
+                    vertices: t.vertices,
+                    ground: t.ground,
+                })
+            })
+            .collect()
+    }
+
     fn surface(&self, seed: u64) -> SurfaceParams {
         self.options.truth(self.max_distance, seed)
     }
@@ -260,12 +299,7 @@ impl GroundTruth {
         let c = inputs.character;
         let seed = inputs.seed;
         let eval = random_frames(inputs.clips, inputs.test, o.eval_frames, seed ^ EVAL_SEED);
-        let average = random_frames(
-            inputs.clips,
-            inputs.train,
-            o.average_frames,
-            seed ^ AVERAGE_SEED,
-        );
+        let average = inputs.training_frames();
         // The ground: a disc under every frame's vertices, at the lowest.
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         for f in eval.iter().chain(&average) {
@@ -327,11 +361,9 @@ impl GroundTruth {
                 rmse(&first.ground, &again.ground) / 2f64.sqrt(),
             );
         }
-        let training: Vec<FrameTruth> = average
-            .par_iter()
-            .map(|frame| Ok(inputs.trace(frame, &ground, seed)?.truth(*frame)))
-            .collect::<Result<_, TraceError>>()?;
-        let static_average = mean_over(&training, &|f| (f.vertices.clone(), f.ground.clone()));
+        let training = inputs.trace_frames(&average, &ground)?;
+        let mean = mean_of(&training);
+        let static_average = (mean.vertices, mean.ground);
         let traced_frames = (eval.len() + average.len() + 1) as u64;
         let self_ao = inputs.self_occlusion()?;
         let rays = (traced_frames * (c.vertex_count() + ground.len()) as u64
@@ -344,7 +376,6 @@ impl GroundTruth {
             owner: super::parts::owners(inputs.parts, c.vertex_count()),
             self_ao,
             average: static_average,
-            training,
             noise_rmse,
             rays,
         })
@@ -420,49 +451,42 @@ impl GroundTruth {
     }
 }
 
-/// The mean of `predict` over `frames`: per vertex, then per ground point.
-fn mean_over(frames: &[FrameTruth], predict: &Predictor<'_>) -> (Vec<f32>, Vec<f32>) {
-    let (mut sum_v, mut sum_g): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
-    for f in frames {
-        let (v, g) = predict(f);
-        sum_v.resize(v.len(), 0.0);
-        sum_g.resize(g.len(), 0.0);
-        for (s, &x) in sum_v.iter_mut().zip(&v) {
-            *s += f64::from(x);
-        }
-        for (s, &x) in sum_g.iter_mut().zip(&g) {
-            *s += f64::from(x);
-        }
-    }
+/// The mean over frames of each receiver's value.
+pub fn mean_of(frames: &[Values]) -> Values {
     let n = frames.len().max(1) as f64;
-    let mean = |s: Vec<f64>| -> Vec<f32> { s.into_iter().map(|v| (v / n) as f32).collect() };
-    (mean(sum_v), mean(sum_g))
+    let mean = |values: fn(&Values) -> &Vec<f32>| -> Vec<f32> {
+        let len = frames.first().map_or(0, |f| values(f).len());
+        (0..len)
+            .map(|i| (frames.iter().map(|f| f64::from(values(f)[i])).sum::<f64>() / n) as f32)
+            .collect()
+    };
+    Values {
+        vertices: mean(|f| &f.vertices),
+        ground: mean(|f| &f.ground),
+    }
 }
 
 impl GroundTruth {
-    /// The static average carried by `predict`'s change: per receiver,
-    /// the static average plus how far `predict` at the frame is from its
-    /// own mean over the training frames, clamped to [0, 1]. The
-    /// prediction then only says what a pose changes.
-    pub fn average_plus_change<'a>(
-        &'a self,
-        predict: &'a Predictor<'a>,
-    ) -> impl Fn(&FrameTruth) -> (Vec<f32>, Vec<f32>) + Sync + 'a {
-        let (mean_v, mean_g) = mean_over(&self.training, predict);
-        move |f: &FrameTruth| {
-            let (v, g) = predict(f);
-            let shift = |average: &[f32], now: Vec<f32>, mean: &[f32]| -> Vec<f32> {
-                now.iter()
-                    .zip(average)
-                    .zip(mean)
-                    .map(|((&p, &a), &m)| (a + p - m).clamp(0.0, 1.0))
-                    .collect()
-            };
-            (
-                shift(&self.average.0, v, &mean_v),
-                shift(&self.average.1, g, &mean_g),
-            )
-        }
+    /// What an engine shows with `model` at a frame's receivers
+    /// ([`GridModel::ao`]: with a static base, its gains and offsets).
+    pub fn predict_ao(&self, model: &GridModel, frame: &FrameTruth) -> (Vec<f32>, Vec<f32>) {
+        let poses: Vec<PartPose> = model.poses(&frame.palette);
+        let vertices = frame
+            .positions
+            .iter()
+            .zip(&frame.normals)
+            .enumerate()
+            .map(|(index, (&p, &n))| {
+                let part = self.owner[index];
+                model.ao(&poses, p, n, Receiver::Vertex { index, part })
+            })
+            .collect();
+        let ground = self
+            .ground
+            .iter()
+            .map(|&p| model.ao(&poses, p, Vec3::Y, Receiver::Ground))
+            .collect();
+        (vertices, ground)
     }
 
     /// Nanoseconds per receiver of `model`'s lookup at every receiver of a
@@ -473,7 +497,7 @@ impl GroundTruth {
             .iter()
             .map(|f| {
                 let started = std::time::Instant::now();
-                let (v, g) = self.predict(model, f, Terms::All, false);
+                let (v, g) = self.predict_ao(model, f);
                 let n = (v.len() + g.len()).max(1) as f64;
                 std::hint::black_box((v, g));
                 started.elapsed().as_secs_f64() * 1e9 / n

@@ -16,21 +16,25 @@
 //! * [`model`]: a baked grid set at run time: the trilinear lookup of each
 //!   part's grid through the part's pose, the self-occlusion rule, and the
 //!   combination of the parts (1 − Π(1 − aᵢ), or through the cones).
+//! * [`base`] and [`static_base`]: aobake's product form, a static base
+//!   (per vertex, and a texture on the ground) that the grids' change
+//!   rides on, and its fit to ray-traced truth over the training frames.
 //! * [`codec`]: the model in the asset container.
 //! * [`evaluate`]: ray-traced ground truth of the whole posed object at
 //!   its vertices and on the ground, against the grids and the baselines
 //!   (DESIGN §6).
 //!
-//! The jobs (`slab` → `assemble` → `evaluate` → `preview`) are in
-//! `bake::grid`.
+//! The jobs (`slab`, and `sample` for the base's frames → `assemble` →
+//! `evaluate` → `preview`) are in `bake::grid`.
 
 pub mod evaluate;
 pub mod field;
 pub mod parts;
+pub mod static_base;
 
 /// The run time (the model, the codec, `T_clip`) is the runtime crate's,
 /// which engines read grid assets with.
-pub use aobake_runtime::method::grid::{ALGORITHM_VERSION, codec, gpu, model, tclip};
+pub use aobake_runtime::method::grid::{ALGORITHM_VERSION, base, codec, gpu, model, tclip};
 
 pub use parts::PartsMode;
 
@@ -65,6 +69,13 @@ pub struct GridOptions {
     pub cones: bool,
     /// Cells of the `T_clip` table along each of its axes.
     pub tclip_resolution: usize,
+    /// aobake's product form: a static base (per vertex, and a texture on
+    /// the ground) that the grids' change rides on, fitted to ray-traced
+    /// truth over the training frames (`runtime::method::grid::base`).
+    /// `false`: the paper's grids alone (still in every report).
+    pub static_base: bool,
+    /// Texels per side of the base's ground texture.
+    pub ground_resolution: usize,
     /// Random clip frames (of the test clips) at which `evaluate` traces
     /// the ground truth.
     pub eval_frames: usize,
@@ -73,7 +84,8 @@ pub struct GridOptions {
     /// Rays per ground-truth point.
     pub eval_rays: u32,
     /// Clip frames (of the training clips) whose mean is the static
-    /// average the grids are compared with.
+    /// average the grids are compared with, and that the static base is
+    /// fitted to.
     pub average_frames: usize,
 }
 
@@ -87,6 +99,8 @@ impl Default for GridOptions {
             max_distance: None,
             cones: true,
             tclip_resolution: 32,
+            static_base: true,
+            ground_resolution: 96,
             eval_frames: 16,
             eval_ground: 1024,
             eval_rays: 256,
@@ -136,6 +150,12 @@ impl GridOptions {
                 o.average_frames
             ));
         }
+        if !(2..=512).contains(&o.ground_resolution) {
+            return Err(format!(
+                "grid.ground_resolution must be between 2 and 512, not {}",
+                o.ground_resolution
+            ));
+        }
         if o.eval_ground > 1 << 20 {
             return Err("grid.eval_ground must be at most 1048576".into());
         }
@@ -172,11 +192,15 @@ impl GridOptions {
     }
 
     /// Rays a whole bake of `parts` parts over `vertices` vertices traces
-    /// (cells, then the evaluation's frames): what the service bounds.
+    /// (cells, the static base's frames, then the evaluation's): what the
+    /// service bounds.
     pub fn rays_total(&self, parts: usize, vertices: usize) -> u128 {
         let cells = u128::from(self.cells()) * parts as u128 * u128::from(self.rays);
         let frames = (self.eval_frames + self.average_frames + 1) as u128;
-        cells + frames * (vertices + self.eval_ground) as u128 * u128::from(self.eval_rays)
+        let base = u128::from(self.static_base)
+            * self.average_frames as u128
+            * (vertices + self.ground_resolution.pow(2)) as u128;
+        cells + (frames * (vertices + self.eval_ground) as u128 + base) * u128::from(self.eval_rays)
     }
 }
 

@@ -3,10 +3,13 @@
  *   lookups cubemap ASSET SECONDS POINTS OUT
  *   lookups grid ASSET PALETTE POINTS OUT
  *
- * POINTS has a receiver a line: "px py pz nx ny nz part" (part -1 for
- * none; the cubemap reads the point only); PALETTE a 4 x 4 column-major
- * matrix a line (16 numbers). Writes one float per receiver to OUT, raw
- * little-endian. Also checks that the other kind of asset and a short
+ * POINTS has a receiver a line: "px py pz nx ny nz part kind" (part -1
+ * for none; kind the vertex index, -1 for the ground, -2 for another
+ * surface; the cubemap reads the point only); PALETTE a 4 x 4
+ * column-major matrix a line (16 numbers). Writes one float per receiver
+ * to OUT, raw little-endian; for a grid, the grids alone
+ * (aobake_grid_occlusion) and then the AO on the static base
+ * (aobake_grid_ao). Also checks that the other kind of asset and a short
  * palette are refused with a reason. Exits non-zero on anything unexpected. */
 #include <stdio.h>
 #include <stdlib.h>
@@ -51,17 +54,20 @@ int main(int argc, char **argv) {
     uint8_t *bytes = slurp(argv[2], &len);
     size_t n;
     float *receivers = numbers(argv[4], &n);
-    EXPECT(n % 7 == 0 && n > 0, "POINTS: 7 numbers a line");
-    size_t count = n / 7;
+    EXPECT(n % 8 == 0 && n > 0, "POINTS: 8 numbers a line");
+    size_t count = n / 8;
     float *points = malloc(3 * count * sizeof *points);
     float *normals = malloc(3 * count * sizeof *normals);
     int64_t *parts = malloc(count * sizeof *parts);
+    int64_t *kinds = malloc(count * sizeof *kinds);
     for (size_t i = 0; i < count; i++) {
-        memcpy(points + 3 * i, receivers + 7 * i, 3 * sizeof *points);
-        memcpy(normals + 3 * i, receivers + 7 * i + 3, 3 * sizeof *normals);
-        parts[i] = (int64_t)receivers[7 * i + 6];
+        memcpy(points + 3 * i, receivers + 8 * i, 3 * sizeof *points);
+        memcpy(normals + 3 * i, receivers + 8 * i + 3, 3 * sizeof *normals);
+        parts[i] = (int64_t)receivers[8 * i + 6];
+        kinds[i] = (int64_t)receivers[8 * i + 7];
     }
-    float *out = malloc(count * sizeof *out);
+    size_t written = count;
+    float *out = malloc(2 * count * sizeof *out);
 
     if (strcmp(argv[1], "cubemap") == 0) {
         EXPECT(aobake_grid_open(bytes, len) == NULL, "a cubemap opened as a grid");
@@ -84,14 +90,17 @@ int main(int argc, char **argv) {
                "a short palette was taken");
         EXPECT(aobake_grid_occlusion(g, palette, m / 16, points, normals, parts, count, out),
                "%s", aobake_last_error());
+        EXPECT(aobake_grid_ao(g, palette, m / 16, points, normals, parts, kinds, count, out + count),
+               "%s", aobake_last_error());
+        written = 2 * count;
         free(palette);
         aobake_grid_free(g);
     }
     FILE *f = fopen(argv[5], "wb");
     EXPECT(f, "cannot write %s", argv[5]);
-    fwrite(out, sizeof *out, count, f);
+    fwrite(out, sizeof *out, written, f);
     fclose(f);
     printf("%zu receivers\n", count);
-    free(bytes); free(receivers); free(points); free(normals); free(parts); free(out);
+    free(bytes); free(receivers); free(points); free(normals); free(parts); free(kinds); free(out);
     return 0;
 }

@@ -8,7 +8,11 @@
 //!   (d = 2·b/255 − 1, the part's bind space) and the occlusion in A, one
 //!   RGBA8-unorm texel as the paper stores it;
 //! * `TCLP` (with cones): the `T_clip` table, (occlusion, f) as f32 pairs,
-//!   aperture-major.
+//!   aperture-major;
+//! * `VOFS` and `GOFS` (with a static base, format 1.5): the base's
+//!   offsets, f16, per vertex of the character and per texel of the
+//!   ground square (x fastest); the header's `base` holds the gains and
+//!   the square. A 1.4 reader ignores them and plays the grids alone.
 //!
 //! Reading checks every number and every section's length, so a hostile
 //! file with valid checksums is refused with a message.
@@ -16,8 +20,11 @@
 use crate::method::Method;
 use serde::{Deserialize, Serialize};
 
+use half::f16;
+
 use super::{
     ALGORITHM_VERSION, GridBox, MAX_PARTS,
+    base::{GroundBase, GroundSquare, StaticBase},
     model::{GridModel, PartGrid},
     tclip::TClip,
 };
@@ -68,7 +75,30 @@ pub struct GridHeader {
     pub cones: bool,
     /// `T_clip`'s samples per axis (0 without cones).
     pub tclip_resolution: usize,
+    /// The static base's layout, when the asset has one (format 1.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base: Option<BaseLayout>,
 }
+
+/// The static base as the header describes it; its offsets are the
+/// `VOFS` and `GOFS` sections.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BaseLayout {
+    /// Vertices of the character (`VOFS`'s length).
+    pub vertices: usize,
+    /// Per part, the gain at its vertices.
+    pub part_gains: Vec<f32>,
+    /// The gain on the ground.
+    pub ground_gain: f32,
+    /// The ground texture's square (`GOFS` holds its texels).
+    pub ground: GroundSquare,
+}
+
+/// Most texels per side of a base's ground square.
+pub const MAX_GROUND_RESOLUTION: usize = 1024;
+
+/// Most vertices a base may hold offsets for.
+pub const MAX_VERTICES: usize = 1 << 24;
 
 impl GridModel {
     /// The asset: header and sections.
@@ -97,6 +127,12 @@ impl GridModel {
             parts,
             cones: self.cones(),
             tclip_resolution: self.tclip.as_ref().map_or(0, |t| t.resolution),
+            base: self.base.as_ref().map(|b| BaseLayout {
+                vertices: b.vertex_offsets.len(),
+                part_gains: b.part_gains.clone(),
+                ground_gain: b.ground.gain,
+                ground: b.ground.square,
+            }),
         };
         let mut sections = Vec::new();
         match &self.tclip {
@@ -127,6 +163,17 @@ impl GridModel {
                         .collect(),
                 ),
             }),
+        }
+        if let Some(b) = &self.base {
+            let halves = |v: &[f32]| Data::F16(v.iter().map(|&x| f16::from_f32(x)).collect());
+            sections.push(Section {
+                tag: *b"VOFS",
+                data: halves(&b.vertex_offsets),
+            });
+            sections.push(Section {
+                tag: *b"GOFS",
+                data: halves(&b.ground.offsets),
+            });
         }
         Container::new(Method::Grid, &header, sections)
     }
@@ -220,7 +267,11 @@ impl GridModel {
                 }
             })
             .collect();
-        Ok((Self { parts, tclip }, header))
+        let base = match &header.base {
+            Some(layout) => Some(read_base(container, layout, header.parts.len())?),
+            None => None,
+        };
+        Ok((Self { parts, tclip, base }, header))
     }
 
     /// Checks the model against a character's palette: every part's
@@ -234,6 +285,62 @@ impl GridModel {
             None => Ok(()),
         }
     }
+}
+
+/// The static base from its layout and sections, every number checked.
+fn read_base(
+    container: &Container,
+    layout: &BaseLayout,
+    parts: usize,
+) -> Result<StaticBase, AssetError> {
+    let g = &layout.ground;
+    if layout.vertices > MAX_VERTICES {
+        return Err(bad(&format!(
+            "the base's vertex count must be at most {MAX_VERTICES}"
+        )));
+    }
+    if layout.part_gains.len() != parts {
+        return Err(bad("the base must hold one gain per part"));
+    }
+    let gains_ok = layout
+        .part_gains
+        .iter()
+        .chain([&layout.ground_gain])
+        .all(|k| k.is_finite());
+    if !gains_ok {
+        return Err(bad("the base's gains must be finite"));
+    }
+    if !(1..=MAX_GROUND_RESOLUTION).contains(&g.resolution) {
+        return Err(bad(&format!(
+            "the base's ground resolution must be between 1 and {MAX_GROUND_RESOLUTION}"
+        )));
+    }
+    if !(g.min.iter().all(|x| x.is_finite())
+        && g.height.is_finite()
+        && g.size.is_finite()
+        && g.size > 0.0)
+    {
+        return Err(bad("the base's ground square is not finite and positive"));
+    }
+    let offsets = |tag: &[u8; 4], len: usize| -> Result<Vec<f32>, AssetError> {
+        let name = String::from_utf8_lossy(tag).into_owned();
+        let Data::F16(v) = container.section(tag)? else {
+            return Err(bad(&format!("{name} must be f16")));
+        };
+        if v.len() != len || v.iter().any(|x| !x.is_finite()) {
+            return Err(bad(&format!("{name} must hold {len} finite numbers")));
+        }
+        Ok(v.iter().map(|x| x.to_f32()).collect())
+    };
+    Ok(StaticBase {
+        vertex_offsets: offsets(b"VOFS", layout.vertices)?,
+        part_gains: layout.part_gains.clone(),
+        ground: GroundBase {
+            square: *g,
+            gain: layout.ground_gain,
+            offsets: offsets(b"GOFS", g.texels())?,
+        },
+    })
 }
 
 fn bad(what: &str) -> AssetError {
@@ -264,6 +371,7 @@ mod tests {
         GridModel {
             parts: vec![part(0, 3), part(1, 2)],
             tclip: cones.then(|| TClip::compute(4)),
+            base: None,
         }
     }
 
@@ -278,6 +386,56 @@ mod tests {
             assert_eq!(header.parts.len(), 2);
             assert_eq!(header.cones, cones);
             assert_eq!(m.bytes(), if cones { 4 * 35 + 8 * 16 } else { 35 });
+        }
+    }
+
+    fn base() -> StaticBase {
+        StaticBase {
+            vertex_offsets: vec![0.25, -0.5, 0.125],
+            part_gains: vec![0.75, 1.5],
+            ground: GroundBase {
+                square: GroundSquare {
+                    min: [-2.0, -3.0],
+                    size: 4.0,
+                    height: 0.5,
+                    resolution: 2,
+                },
+                gain: 0.5,
+                offsets: vec![0.0, 0.0625, -0.25, 1.0],
+            },
+        }
+    }
+
+    #[test]
+    fn a_base_round_trips_and_a_hostile_one_is_refused_by_name() {
+        let mut m = model(true);
+        m.base = Some(base());
+        let bytes = m.to_container(AssetHeaderFields::for_tests()).to_bytes();
+        let (back, header) =
+            GridModel::from_container(&Container::from_bytes(&bytes).unwrap()).unwrap();
+        assert_eq!(back, m);
+        assert_eq!(header.base.unwrap().vertices, 3);
+        assert_eq!(m.bytes(), 4 * 35 + 8 * 16 + 2 * 7 + 4 * 2);
+        type Break = fn(&mut StaticBase);
+        let cases: [(&str, Break); 3] = [
+            ("one gain per part", |b| {
+                b.part_gains.pop();
+            }),
+            ("ground square", |b| b.ground.square.size = 0.0),
+            ("GOFS must hold 4", |b| {
+                b.ground.offsets.pop();
+            }),
+        ];
+        for (what, break_it) in cases {
+            let mut m = model(false);
+            let mut b = base();
+            break_it(&mut b);
+            m.base = Some(b);
+            let c =
+                Container::from_bytes(&m.to_container(AssetHeaderFields::for_tests()).to_bytes())
+                    .unwrap();
+            let e = GridModel::from_container(&c).unwrap_err().to_string();
+            assert!(e.contains(what), "{what}: {e}");
         }
     }
 

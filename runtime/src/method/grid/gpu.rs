@@ -16,8 +16,12 @@ pub struct GridGpu {
     pub tclip_resolution: u32,
     /// Index in `cells` of T_clip's first f32.
     pub tclip_offset: u32,
-    /// Per part: cells per grid edge, the index of its first cell, and two
-    /// words of padding.
+    /// 1 when the asset has a static base ([`super::base`]).
+    pub base: u32,
+    /// The bits of the base's ground gain (0 without a base).
+    pub ground_gain: u32,
+    /// Per part: cells per grid edge, the index of its first cell, the
+    /// bits of its base gain (0 without a base), and a word of padding.
     pub infos: Vec<[u32; 4]>,
     /// The cells, part after part, then T_clip (at least one word).
     pub cells: Vec<u32>,
@@ -28,11 +32,12 @@ impl GridGpu {
     pub fn new(model: &GridModel) -> Result<Self, TooLarge> {
         let mut cells: Vec<u32> = Vec::new();
         let mut infos = Vec::with_capacity(model.parts.len());
-        for part in &model.parts {
+        let gains = model.base.as_ref().map(|b| &b.part_gains);
+        for (k, part) in model.parts.iter().enumerate() {
             infos.push([
                 to_u32(part.grid.resolution, "resolution")?,
                 to_u32(cells.len(), "cells")?,
-                0,
+                gains.and_then(|g| g.get(k)).map_or(0, |g| g.to_bits()),
                 0,
             ]);
             for (i, &a) in part.occlusion.iter().enumerate() {
@@ -55,6 +60,8 @@ impl GridGpu {
                 .as_ref()
                 .map_or(Ok(0), |t| to_u32(t.resolution, "T_clip resolution"))?,
             tclip_offset,
+            base: u32::from(model.base.is_some()),
+            ground_gain: model.base.as_ref().map_or(0, |b| b.ground.gain.to_bits()),
             infos,
             cells,
         })

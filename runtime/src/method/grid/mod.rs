@@ -1,7 +1,9 @@
 //! Malmer et al.'s grids as an engine reads them: each rigid part's
-//! occlusion grid ([`model`]), how an asset stores them ([`codec`]) and
-//! the cone table `T_clip` ([`tclip`]).
+//! occlusion grid ([`model`]), the static base their change rides on in
+//! aobake's product form ([`base`]), how an asset stores them
+//! ([`codec`]) and the cone table `T_clip` ([`tclip`]).
 
+pub mod base;
 pub mod codec;
 pub mod gpu;
 pub mod model;
@@ -11,7 +13,7 @@ use glam::{Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// The version of the grid bake's algorithm, part of the bake key.
-pub const ALGORITHM_VERSION: u32 = 1;
+pub const ALGORITHM_VERSION: u32 = 2;
 
 /// Most parts a grid asset may hold.
 pub const MAX_PARTS: usize = 256;

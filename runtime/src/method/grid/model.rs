@@ -14,7 +14,10 @@
 //! * **with cones** (§5.1) every part, its own included, casts
 //!   a = T_clip(ao′, d·n): the cone clipped by the tangent plane;
 //! * the parts combine as 1 − Π(1 − aᵢ) (§3.2; with cones this is §5.2.1's
-//!   simple blending, whose occlusion is the same product).
+//!   simple blending, whose occlusion is the same product);
+//! * with a static base (aobake's product form, [`super::base`]), the
+//!   combined occlusion is scaled by the receiver's gain and its static
+//!   offset added: [`GridModel::ao`].
 //!
 //! `shaders/wgsl/grid_ao.wgsl` is the same function for engines; a worker
 //! test holds the two together.
@@ -23,7 +26,11 @@ use crate::method::Method;
 use glam::{Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
-use super::{GridBox, tclip::TClip};
+use super::{
+    GridBox,
+    base::{Receiver, StaticBase},
+    tclip::TClip,
+};
 
 /// One part's baked grid.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -77,6 +84,9 @@ pub struct GridModel {
     pub parts: Vec<PartGrid>,
     /// With cones, `T_clip`.
     pub tclip: Option<TClip>,
+    /// The static base (aobake's product form); `None`: the paper's
+    /// grids alone.
+    pub base: Option<StaticBase>,
 }
 
 /// A trilinear sample of one grid: ao′ (0..1) and the unnormalised axis.
@@ -143,10 +153,14 @@ impl GridModel {
         self.tclip.is_some()
     }
 
-    /// Bytes a renderer keeps: every part's cells and the table.
+    /// Bytes a renderer keeps: every part's cells, the table and the
+    /// base's f16 offsets.
     pub fn bytes(&self) -> usize {
         self.parts.iter().map(PartGrid::bytes).sum::<usize>()
             + self.tclip.as_ref().map_or(0, |t| 8 * t.values.len())
+            + self.base.as_ref().map_or(0, |b| {
+                2 * (b.vertex_offsets.len() + b.ground.offsets.len()) + 4 * b.part_gains.len()
+            })
     }
 
     /// Every part's pose from the palette matrices of a frame
@@ -204,6 +218,32 @@ impl GridModel {
         }
         1.0 - open
     }
+
+    /// The static base's offset for `receiver` at `p` (0 without a base):
+    /// what the GPU lookups (`grid_ao`) are given per receiver.
+    pub fn offset(&self, receiver: Receiver, p: Vec3) -> f32 {
+        self.base.as_ref().map_or(0.0, |b| b.offset(receiver, p))
+    }
+
+    /// The occlusion an engine shows at `receiver`, at `p` with unit
+    /// normal `n`: every part's grid combined
+    /// ([`Self::occlusion`] with [`Terms::All`]) and, with a base, scaled
+    /// by the receiver's gain with its static offset added, clamped to
+    /// [0, 1].
+    pub fn ao(&self, poses: &[PartPose], p: Vec3, n: Vec3, receiver: Receiver) -> f32 {
+        let own = match receiver {
+            Receiver::Vertex { part, .. } => part,
+            Receiver::Ground | Receiver::Other => None,
+        };
+        let grids = self.occlusion(poses, p, n, own, Terms::All);
+        match &self.base {
+            Some(base) => {
+                let (gain, offset) = base.terms(receiver, p);
+                (gain * grids + offset).clamp(0.0, 1.0)
+            }
+            None => grids,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -254,6 +294,7 @@ mod tests {
         let model = GridModel {
             parts: vec![a.clone(), b],
             tclip: None,
+            base: None,
         };
         let poses = model.poses(&[Mat4::IDENTITY, Mat4::IDENTITY]);
         let at = |own, terms| model.occlusion(&poses, Vec3::ZERO, Vec3::Y, own, terms);
@@ -267,5 +308,55 @@ mod tests {
         let moved = model.poses(&[Mat4::from_translation(Vec3::X * 5.0), Mat4::IDENTITY]);
         let v = model.occlusion(&moved, Vec3::ZERO, Vec3::Y, Some(1), Terms::Others);
         assert_eq!(v, 0.0);
+    }
+
+    #[test]
+    fn the_static_base_scales_the_grids_and_adds_each_receivers_offset() {
+        use crate::method::grid::base::{GroundBase, GroundSquare, StaticBase};
+        let model = GridModel {
+            parts: vec![part(2, |_, _, _| 51), part(2, |_, _, _| 153)],
+            tclip: None,
+            base: Some(StaticBase {
+                vertex_offsets: vec![0.25, -0.5],
+                part_gains: vec![0.5, 2.0],
+                ground: GroundBase {
+                    square: GroundSquare {
+                        min: [-1.0, -1.0],
+                        size: 2.0,
+                        height: 0.0,
+                        resolution: 1,
+                    },
+                    gain: 0.75,
+                    offsets: vec![0.125],
+                },
+            }),
+        };
+        let poses = model.poses(&[Mat4::IDENTITY, Mat4::IDENTITY]);
+        let ao = |r| model.ao(&poses, Vec3::ZERO, Vec3::Y, r);
+        let on_1 = model.occlusion(&poses, Vec3::ZERO, Vec3::Y, Some(1), Terms::All);
+        let vertex = |index, part| Receiver::Vertex { index, part };
+        assert!((ao(vertex(0, Some(1))) - (2.0 * on_1 + 0.25).min(1.0)).abs() < 1e-6);
+        let on_0 = model.occlusion(&poses, Vec3::ZERO, Vec3::Y, Some(0), Terms::All);
+        assert!((ao(vertex(1, Some(0))) - (0.5 * on_0 - 0.5).max(0.0)).abs() < 1e-6);
+        // The ground (and a vertex of no part) take the ground's gain.
+        let open = model.occlusion(&poses, Vec3::ZERO, Vec3::Y, None, Terms::All);
+        assert!((ao(Receiver::Ground) - (0.75 * open + 0.125).min(1.0)).abs() < 1e-6);
+        assert!((ao(Receiver::Other) - (0.75 * open).min(1.0)).abs() < 1e-6);
+        assert_eq!(model.offset(Receiver::Ground, Vec3::ZERO), 0.125);
+        assert_eq!(model.offset(vertex(1, None), Vec3::ZERO), -0.5);
+        // Without a base, the grids alone.
+        let paper = GridModel {
+            base: None,
+            ..model.clone()
+        };
+        assert_eq!(
+            paper.ao(
+                &paper.poses(&[Mat4::IDENTITY; 2]),
+                Vec3::ZERO,
+                Vec3::Y,
+                Receiver::Ground
+            ),
+            open
+        );
     }
 }

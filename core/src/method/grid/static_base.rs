@@ -1,0 +1,155 @@
+//! The static base fitted to ray-traced truth (the run time is
+//! [`super::base`]): the training frames' mean occlusion at every vertex
+//! and ground texel, and the gain of the truth's change on the grids'
+//! change over the same frames, one per part and one for the ground.
+
+use glam::{Mat4, Vec3};
+use half::f16;
+
+use super::{
+    base::{GroundBase, GroundSquare, StaticBase, gain},
+    evaluate::{Frame, Values},
+    model::{GridModel, Terms},
+};
+use crate::{Character, Clip};
+
+/// One training frame: where the receivers are and their traced truth.
+#[derive(Debug, Clone)]
+pub struct TrainingFrame {
+    /// Palette matrices (`world_from_bind`).
+    pub palette: Vec<Mat4>,
+    /// Posed vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Posed vertex normals.
+    pub normals: Vec<Vec3>,
+    /// Traced occlusion at each vertex.
+    pub vertices: Vec<f32>,
+    /// Traced occlusion at each ground texel's centre.
+    pub ground: Vec<f32>,
+}
+
+impl TrainingFrame {
+    /// The frame posed, with its traced truth.
+    pub fn new(
+        character: &Character,
+        clips: &[Clip],
+        frame: &Frame,
+        vertices: Vec<f32>,
+        ground: Vec<f32>,
+    ) -> Self {
+        let pose = frame.pose(character, clips);
+        let posed = character.skin(&pose);
+        Self {
+            palette: character.joint_matrices(&pose),
+            positions: posed.positions,
+            normals: posed.normals,
+            vertices,
+            ground,
+        }
+    }
+}
+
+/// The base's ground square under `frames`: centred on their vertices'
+/// horizontal bounds, 1.5 times as wide as the larger of x and z (as the
+/// evaluation's ground disc), at their lowest vertex.
+pub fn ground_square(
+    character: &Character,
+    clips: &[Clip],
+    frames: &[Frame],
+    resolution: usize,
+) -> GroundSquare {
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for f in frames {
+        for p in character.skin(&f.pose(character, clips)).positions {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    if !lo.is_finite() {
+        (lo, hi) = (Vec3::ZERO, Vec3::ONE);
+    }
+    let centre = (lo + hi) * 0.5;
+    let radius = 1.5 * 0.5 * (hi - lo).x.max((hi - lo).z).max(1e-6);
+    GroundSquare {
+        min: [centre.x - radius, centre.z - radius],
+        size: 2.0 * radius,
+        height: lo.y,
+        resolution,
+    }
+}
+
+/// The grids' raw occlusion (no base) at a frame's vertices and texels.
+fn grids_at(
+    model: &GridModel,
+    owners: &[Option<usize>],
+    texels: &[Vec3],
+    frame: &TrainingFrame,
+) -> Values {
+    let poses = model.poses(&frame.palette);
+    let vertices = frame
+        .positions
+        .iter()
+        .zip(&frame.normals)
+        .zip(owners)
+        .map(|((&p, &n), &own)| model.occlusion(&poses, p, n, own, Terms::All))
+        .collect();
+    let ground = texels
+        .iter()
+        .map(|&p| model.occlusion(&poses, p, Vec3::Y, None, Terms::All))
+        .collect();
+    Values { vertices, ground }
+}
+
+/// The base of `model`'s grids (its own base, if any, is ignored) over
+/// the training `frames` of a character whose vertices `owners` assigns
+/// to parts; offsets rounded to f16 as the asset stores them.
+pub fn fit(
+    model: &GridModel,
+    owners: &[Option<usize>],
+    square: GroundSquare,
+    frames: &[TrainingFrame],
+) -> StaticBase {
+    let texels = square.texel_centres();
+    let (grid_v, grid_g): (Vec<Vec<f32>>, Vec<Vec<f32>>) = frames
+        .iter()
+        .map(|f| {
+            let g = grids_at(model, owners, &texels, f);
+            (g.vertices, g.ground)
+        })
+        .unzip();
+    let truth_v: Vec<Vec<f32>> = frames.iter().map(|f| f.vertices.clone()).collect();
+    let truth_g: Vec<Vec<f32>> = frames.iter().map(|f| f.ground.clone()).collect();
+    let all_texels: Vec<usize> = (0..texels.len()).collect();
+    let ground_gain = gain(&truth_g, &grid_g, &all_texels);
+    let part_gains: Vec<f32> = (0..model.parts.len())
+        .map(|k| {
+            let mine: Vec<usize> = (0..owners.len())
+                .filter(|&i| owners[i] == Some(k))
+                .collect();
+            gain(&truth_v, &grid_v, &mine)
+        })
+        .collect();
+    let n = frames.len().max(1) as f64;
+    let mean = |values: &[Vec<f32>], i: usize| -> f32 {
+        (values.iter().map(|f| f64::from(f[i])).sum::<f64>() / n) as f32
+    };
+    let half = |x: f32| f16::from_f32(x).to_f32();
+    let vertex_offsets = (0..owners.len())
+        .map(|i| {
+            let k = owners[i].map_or(ground_gain, |p| part_gains[p]);
+            half(mean(&truth_v, i) - k * mean(&grid_v, i))
+        })
+        .collect();
+    let ground_offsets = (0..texels.len())
+        .map(|i| half(mean(&truth_g, i) - ground_gain * mean(&grid_g, i)))
+        .collect();
+    StaticBase {
+        vertex_offsets,
+        part_gains,
+        ground: GroundBase {
+            square,
+            gain: ground_gain,
+            offsets: ground_offsets,
+        },
+    }
+}
