@@ -44,6 +44,9 @@ use super::{
     report::{CharacterInfo, Sizes, Timings},
 };
 
+/// Texels a side of the static ground texture the report measures.
+const GROUND_RESOLUTION: usize = 96;
+
 /// The step name of a face job's checkpoints.
 const FACE_STEP: &str = "face";
 
@@ -351,6 +354,45 @@ impl Bake<'_> {
                 space,
                 ground,
                 fit: Some(fit),
+            });
+        }
+        // The baked encoding on a static ground texture, and that texture
+        // alone (issue 29's direction for the ground, measured here before
+        // it is built into the asset).
+        let kroon = setup.options.kroon(&setup.spheroid, self.plan.params.seed);
+        let (ground, still_ground) =
+            crate::method::cubemap::ground::fit(&setup, &model, &kroon, GROUND_RESOLUTION)
+                .map_err(|e| JobError::Invalid(e.to_string()))?;
+        let times = crate::method::cubemap::ground::GROUND_TIMES;
+        for (name, description, base) in [
+            (
+                format!("{} on a static ground", encoded[0].0),
+                format!(
+                    "on the ground plane, a static texture traced on the plane ({GROUND_RESOLUTION}², the mean over {times} of the clip's time samples) plus the cubemap's change from its own mean there, scaled by a least-squares gain ({:.3}); elsewhere the cubemap",
+                    ground.gain
+                ),
+                &ground,
+            ),
+            (
+                "static ground texture".to_owned(),
+                format!(
+                    "on the ground plane, that static texture alone (a static ground bake); elsewhere the cubemap"
+                ),
+                &still_ground,
+            ),
+        ] {
+            let lookup = crate::method::cubemap::ground::OnGround {
+                model: &model,
+                ground: base,
+            };
+            let (space, on) = truth.errors(&lookup, &layout);
+            variants.push(VariantErrors {
+                name,
+                description,
+                bytes: model.bytes() + 2 * base.offsets.len(),
+                space,
+                ground: on,
+                fit: None,
             });
         }
         let raw = RawCubemap {

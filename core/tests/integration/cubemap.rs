@@ -178,6 +178,27 @@ fn both_encodings_bake_in_process_and_beat_the_static_cubemap_on_unseen_points()
                 baked_v.space.mean.rmse < still.space.mean.rmse,
                 "{name} {method}: the cubemap follows the motion better than its time average"
             );
+            // On the ground, the cubemap's change on a static ground
+            // texture beats both static baselines: the cubemap's time
+            // average and the texture alone.
+            let on_ground = get(&format!("{baked_name} on a static ground"));
+            let texture = get("static ground texture");
+            eprintln!(
+                "{name} {method} {layout:?}: on a static ground {:.4}, the texture alone {:.4}",
+                on_ground.ground.mean.rmse, texture.ground.mean.rmse
+            );
+            assert_eq!(
+                on_ground.space, baked_v.space,
+                "off the ground, the cubemap"
+            );
+            assert!(
+                on_ground.ground.mean.rmse < still.ground.mean.rmse,
+                "{name} {method}"
+            );
+            assert!(
+                on_ground.ground.mean.rmse < texture.ground.mean.rmse,
+                "{name} {method}"
+            );
             assert_eq!(r.charts.len(), 3);
             assert!(baked.plot.starts_with(b"\x89PNG"));
         }

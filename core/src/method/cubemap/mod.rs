@@ -31,6 +31,7 @@
 pub mod evaluate;
 pub mod face;
 pub mod field;
+pub mod ground;
 pub mod model;
 pub mod setup;
 
