@@ -375,9 +375,8 @@ impl Bake<'_> {
             ),
             (
                 "static ground texture".to_owned(),
-                format!(
-                    "on the ground plane, that static texture alone (a static ground bake); elsewhere the cubemap"
-                ),
+                "on the ground plane, that static texture alone (a static ground bake); elsewhere the cubemap"
+                    .to_owned(),
                 &still_ground,
             ),
         ] {
