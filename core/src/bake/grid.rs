@@ -577,6 +577,7 @@ impl Bake<'_> {
             ground_points: truth.ground.len(),
             ground_hidden: truth.ground_hidden(),
             rays_per_point: o.eval_rays,
+            max_distance: self.grid_distance(&parts),
             noise_rmse_vertices: truth.noise_rmse.0,
             noise_rmse_ground: truth.noise_rmse.1,
             variants,

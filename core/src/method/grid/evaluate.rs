@@ -301,18 +301,9 @@ impl GroundTruth {
         let eval = random_frames(inputs.clips, inputs.test, o.eval_frames, seed ^ EVAL_SEED);
         let average = inputs.training_frames();
         // The ground: a disc under every frame's vertices, at the lowest.
-        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for f in eval.iter().chain(&average) {
-            for p in c.skin(&f.pose(c, inputs.clips)).positions {
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
-        }
-        if !lo.is_finite() {
-            (lo, hi) = (Vec3::ZERO, Vec3::ONE);
-        }
-        let centre = (lo + hi) * 0.5;
-        let radius = 1.5 * 0.5 * (hi - lo).x.max((hi - lo).z).max(1e-6);
+        let all: Vec<Frame> = eval.iter().chain(&average).copied().collect();
+        let (lo, hi) = super::static_base::bounds(c, inputs.clips, &all);
+        let (centre, radius) = super::static_base::ground_disc(lo, hi);
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ EVAL_SEED ^ 1);
         let mut ground = Vec::with_capacity(o.eval_ground);
         while ground.len() < o.eval_ground {
@@ -546,6 +537,9 @@ pub struct GridEvaluation {
     pub ground_hidden: usize,
     /// Rays per ground-truth point.
     pub rays_per_point: u32,
+    /// The truth's distance limit (`aobake trace --max-distance` gives
+    /// the same quantity).
+    pub max_distance: f32,
     /// RMSE of one truth estimate at the vertices.
     pub noise_rmse_vertices: f64,
     /// RMSE of one truth estimate on the ground.

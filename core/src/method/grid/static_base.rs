@@ -49,15 +49,9 @@ impl TrainingFrame {
     }
 }
 
-/// The base's ground square under `frames`: centred on their vertices'
-/// horizontal bounds, 1.5 times as wide as the larger of x and z (as the
-/// evaluation's ground disc), at their lowest vertex.
-pub fn ground_square(
-    character: &Character,
-    clips: &[Clip],
-    frames: &[Frame],
-    resolution: usize,
-) -> GroundSquare {
+/// The box around the character's vertices over `frames` (a unit box
+/// when there are none).
+pub fn bounds(character: &Character, clips: &[Clip], frames: &[Frame]) -> (Vec3, Vec3) {
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     for f in frames {
         for p in character.skin(&f.pose(character, clips)).positions {
@@ -65,11 +59,31 @@ pub fn ground_square(
             hi = hi.max(p);
         }
     }
-    if !lo.is_finite() {
-        (lo, hi) = (Vec3::ZERO, Vec3::ONE);
+    if lo.is_finite() {
+        (lo, hi)
+    } else {
+        (Vec3::ZERO, Vec3::ONE)
     }
+}
+
+/// The ground's centre (x, z) and radius under a box: centred on it, 1.5
+/// times as wide as the larger of its x and z sides (the evaluation's
+/// ground disc; the base's square is drawn around it).
+pub fn ground_disc(lo: Vec3, hi: Vec3) -> (Vec3, f32) {
     let centre = (lo + hi) * 0.5;
-    let radius = 1.5 * 0.5 * (hi - lo).x.max((hi - lo).z).max(1e-6);
+    (centre, 1.5 * 0.5 * (hi - lo).x.max((hi - lo).z).max(1e-6))
+}
+
+/// The base's ground square under `frames`: around the ground disc of
+/// their vertices' box, at their lowest vertex.
+pub fn ground_square(
+    character: &Character,
+    clips: &[Clip],
+    frames: &[Frame],
+    resolution: usize,
+) -> GroundSquare {
+    let (lo, hi) = bounds(character, clips, frames);
+    let (centre, radius) = ground_disc(lo, hi);
     GroundSquare {
         min: [centre.x - radius, centre.z - radius],
         size: 2.0 * radius,
