@@ -93,7 +93,11 @@ mod tests {
             duration: 1.0,
         };
         let texels = (0..layout.texel_bytes()).map(|i| (i * 29) as u8).collect();
-        let model = CubemapModel { layout, texels };
+        let model = CubemapModel {
+            layout,
+            texels,
+            ground: None,
+        };
         let bytes = model
             .to_container(AssetHeaderFields::for_tests(), "walk")
             .to_bytes();

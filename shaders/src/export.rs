@@ -501,10 +501,15 @@ mod tests {
 
     #[test]
     fn every_viewer_is_valid_glsl_es_300_with_every_resource_named() {
-        // The family's lookup bindings, then the viewer's own: the shading
-        // uniforms (6, in both stages), the viewer's uniforms (7), the
-        // skin (8) and the palette (9).
-        for (family, lookup) in [("vertex", 0..6), ("grid", 0..6), ("cubemap", 0..3)] {
+        // The family's lookup bindings (a cubemap's static ground at 4),
+        // then the viewer's own: the shading uniforms (6, in both stages),
+        // the viewer's uniforms (7), the skin (8) and the palette (9).
+        let cubemap: Vec<u32> = vec![0, 1, 2, 4];
+        for (family, lookup) in [
+            ("vertex", (0..6).collect::<Vec<u32>>()),
+            ("grid", (0..6).collect()),
+            ("cubemap", cubemap),
+        ] {
             let program = webgl_viewer(family).unwrap();
             let dir = tempfile::tempdir().unwrap();
             for (file, text) in [
@@ -519,7 +524,7 @@ mod tests {
             }
             let mut bindings: Vec<u32> = program.resources.iter().map(|r| r.binding).collect();
             bindings.dedup();
-            let want: Vec<u32> = lookup.chain(6..10).collect();
+            let want: Vec<u32> = lookup.into_iter().chain(6..10).collect();
             assert_eq!(bindings, want, "{family}: {:?}", program.resources);
             let text = format!("{}{}", program.vertex, program.fragment);
             for r in &program.resources {

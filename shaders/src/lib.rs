@@ -65,20 +65,24 @@ pub const VERTEX_AO_VS: &str = compose!(
 pub const VS_TEXTURE_WIDTH: u32 = 2048;
 
 /// The cubemap lookup shader, composed: [`COMMON_F16`],
-/// `common/cubemap_lookup.wgsl`, then `cubemap_ao.wgsl`.
+/// `common/ground_texture.wgsl`, `common/cubemap_lookup.wgsl`, then
+/// `cubemap_ao.wgsl`.
 pub const CUBEMAP_AO: &str = compose!(
     "common/f16.wgsl",
+    "common/ground_texture.wgsl",
     "common/cubemap_lookup.wgsl",
     "cubemap_ao.wgsl"
 );
 
 /// The cubemap lookup in a vertex shader (textures, for WebGL2), composed:
 /// [`COMMON_F16`], `common/data_textures.wgsl`,
-/// `common/cubemap_lookup.wgsl`, `common/cubemap_textures.wgsl`,
-/// `common/point_target.wgsl`, then `cubemap_ao_vs.wgsl`.
+/// `common/ground_texture.wgsl`, `common/cubemap_lookup.wgsl`,
+/// `common/cubemap_textures.wgsl`, `common/point_target.wgsl`, then
+/// `cubemap_ao_vs.wgsl`.
 pub const CUBEMAP_AO_VS: &str = compose!(
     "common/f16.wgsl",
     "common/data_textures.wgsl",
+    "common/ground_texture.wgsl",
     "common/cubemap_lookup.wgsl",
     "common/cubemap_textures.wgsl",
     "common/point_target.wgsl",
@@ -122,6 +126,7 @@ pub const VIEWER_GRID: &str = compose!(
     "common/shade.wgsl",
     "viewer.wgsl",
     "common/data_textures.wgsl",
+    "common/ground_texture.wgsl",
     "common/grid_lookup.wgsl",
     "common/grid_textures.wgsl",
     "viewer_grid.wgsl"
@@ -135,6 +140,7 @@ pub const VIEWER_CUBEMAP: &str = compose!(
     "viewer.wgsl",
     "common/f16.wgsl",
     "common/data_textures.wgsl",
+    "common/ground_texture.wgsl",
     "common/cubemap_lookup.wgsl",
     "common/cubemap_textures.wgsl",
     "viewer_cubemap.wgsl"

@@ -83,8 +83,9 @@ pub struct CubemapAoParams {
     pub phase: f32,
     /// Points per row of the dispatch grid (workgroups in x × 64).
     pub row_stride: u32,
-    /// Padding.
-    pub _pad: u32,
+    /// 1: the points are on the ground plane (`cubemap_ground_ao`, with
+    /// the static ground); 0: anywhere (`cubemap_occlusion`).
+    pub on_ground: u32,
 }
 
 /// `Params` of grid_ao.wgsl.

@@ -32,9 +32,11 @@ use crate::{
         },
         face::{FaceError, FaceField, Manifest, Part, checkpoint_batch, compute_face},
         geometry::FACES,
+        ground,
         model::{CubemapLayout, CubemapModel, Encoding},
         setup::Setup,
     },
+    method::ground::GroundBase,
 };
 
 use super::{
@@ -44,8 +46,9 @@ use super::{
     report::{CharacterInfo, Sizes, Timings},
 };
 
-/// Texels a side of the static ground texture the report measures.
-const GROUND_RESOLUTION: usize = 96;
+/// The output of `assemble` holding the static ground texture alone (the
+/// mean truth per texel, f32 little-endian), for the report.
+const STILL_GROUND: &str = "ground-static";
 
 /// The step name of a face job's checkpoints.
 const FACE_STEP: &str = "face";
@@ -271,11 +274,21 @@ impl Bake<'_> {
         let setup = self.cubemap_setup()?;
         let faces = self.faces(&setup, deps)?;
         let started = Instant::now();
-        let model = self.encode(&setup, &faces, self.encoding()?, setup.options.residuals)?;
+        let mut model = self.encode(&setup, &faces, self.encoding()?, setup.options.residuals)?;
+        let mut out = JobOutput::default();
+        if setup.options.static_ground {
+            let kroon = setup.options.kroon(&setup.spheroid, self.plan.params.seed);
+            let (ground, still) =
+                ground::fit(&setup, &model, &kroon, setup.options.ground_resolution)
+                    .map_err(|e| JobError::Invalid(e.to_string()))?;
+            model.ground = Some(ground);
+            // The texture alone, for the report's static ground baseline.
+            let bytes: Vec<u8> = still.offsets.iter().flat_map(|x| x.to_le_bytes()).collect();
+            out.push(STILL_GROUND, bytes);
+        }
         let asset = model
             .to_container(self.header(), &setup.clip.name)
             .to_bytes();
-        let mut out = JobOutput::default();
         out.push("asset", asset);
         out.timings.reference_trace_s = deps.iter().map(|d| d.timings.reference_trace_s).sum();
         out.timings.fit_s = started.elapsed().as_secs_f64();
@@ -356,43 +369,53 @@ impl Bake<'_> {
                 fit: Some(fit),
             });
         }
-        // The baked encoding on a static ground texture, and that texture
-        // alone (issue 29's direction for the ground, measured here before
-        // it is built into the asset).
-        let kroon = setup.options.kroon(&setup.spheroid, self.plan.params.seed);
-        let (ground, still_ground) =
-            crate::method::cubemap::ground::fit(&setup, &model, &kroon, GROUND_RESOLUTION)
-                .map_err(|e| JobError::Invalid(e.to_string()))?;
-        let times = crate::method::cubemap::ground::GROUND_TIMES;
-        for (name, description, base) in [
-            (
-                format!("{} on a static ground", encoded[0].0),
-                format!(
-                    "on the ground plane, a static texture traced on the plane ({GROUND_RESOLUTION}², the mean over {times} of the clip's time samples) plus the cubemap's change from its own mean there, scaled by a least-squares gain ({:.3}); elsewhere the cubemap",
-                    ground.gain
-                ),
-                &ground,
-            ),
-            (
-                "static ground texture".to_owned(),
-                "on the ground plane, that static texture alone (a static ground bake); elsewhere the cubemap"
-                    .to_owned(),
-                &still_ground,
-            ),
-        ] {
-            let lookup = crate::method::cubemap::ground::OnGround {
-                model: &model,
-                ground: base,
+        // With the static ground: the baked encoding without it, and the
+        // texture alone (gain 0: a static ground bake).
+        if let Some(g) = &model.ground {
+            let bare = CubemapModel {
+                ground: None,
+                ..model.clone()
             };
-            let (space, on) = truth.errors(&lookup, &layout);
-            variants.push(VariantErrors {
-                name,
-                description,
-                bytes: model.bytes() + 2 * base.offsets.len(),
-                space,
-                ground: on,
-                fit: None,
-            });
+            let offsets: Vec<f32> = assembled
+                .get(STILL_GROUND)
+                .ok_or_else(|| JobError::Invalid(format!("assemble left no {STILL_GROUND}")))?
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect();
+            let still = CubemapModel {
+                ground: Some(GroundBase {
+                    gain: 0.0,
+                    offsets,
+                    ..g.clone()
+                }),
+                ..model.clone()
+            };
+            let r = g.square.resolution;
+            for (name, description, m) in [
+                (
+                    format!("{} without the static ground", encoded[0].0),
+                    "Kroon's cubemap alone on the ground too".to_owned(),
+                    &bare,
+                ),
+                (
+                    "static ground texture".to_owned(),
+                    format!(
+                        "on the ground plane the static texture alone ({r}², traced on the plane over {} of the clip's time samples: a static ground bake); elsewhere the cubemap",
+                        ground::GROUND_TIMES
+                    ),
+                    &still,
+                ),
+            ] {
+                let (space, on) = truth.errors(m, &layout);
+                variants.push(VariantErrors {
+                    name,
+                    description,
+                    bytes: m.bytes(),
+                    space,
+                    ground: on,
+                    fit: None,
+                });
+            }
         }
         let raw = RawCubemap {
             layout,

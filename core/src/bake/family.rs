@@ -523,24 +523,25 @@ impl BakedAsset {
     /// +y −y +z −z, in one channel `Y`); a grid's parts, one image per
     /// part (its z-slices top to bottom, +y up, +x right; `ao_grid`, and
     /// with cones `axis.x`, `axis.y`, `axis.z` in the part's bind space)
-    /// and, with a static base, its ground texture (`offset`), each value
-    /// exactly what the run time reads.
+    /// and, with a static ground (a grid's base, a cubemap's), its texture
+    /// (`ground-offsets.exr`, `offset`), each value exactly what the run
+    /// time reads.
     pub fn images(&self, times: &[f32]) -> Result<Vec<FloatImage>, AssetUseError> {
         match &self.model {
             AssetModel::Vertex(_) => Err(AssetUseError::Unsupported(
                 "per-vertex AO has no image to export".into(),
             )),
-            AssetModel::Cubemap(m, clip) => Ok(super::cubemap::face_strips(m, clip, times)),
+            AssetModel::Cubemap(m, clip) => {
+                let mut images = super::cubemap::face_strips(m, clip, times);
+                images.extend(m.ground.as_ref().map(ground_offsets));
+                Ok(images)
+            }
             AssetModel::Grid(m, _) => Ok(m
                 .parts
                 .iter()
                 .enumerate()
                 .map(|(k, part)| super::grid::part_slices(k, part))
-                .chain(
-                    m.base
-                        .as_ref()
-                        .map(|b| super::grid::ground_offsets(&b.ground)),
-                )
+                .chain(m.base.as_ref().map(|b| ground_offsets(&b.ground)))
                 .collect()),
         }
     }
@@ -548,4 +549,27 @@ impl BakedAsset {
 
 fn not_fitted() -> AssetUseError {
     AssetUseError::Mismatch("the asset was read without its character".into())
+}
+
+/// A static ground texture (a grid's base, a cubemap's ground) as an
+/// image, `ground-offsets.exr`: texel (x, z) at pixel (x, z), so rows run
+/// along +z from the square's `min` corner; the channel `offset`, exactly
+/// the value the run time reads.
+fn ground_offsets(ground: &crate::method::ground::GroundBase) -> FloatImage {
+    let g = &ground.square;
+    FloatImage {
+        file: "ground-offsets.exr".into(),
+        layer: "ground".into(),
+        comment: format!(
+            "aobake static ground: offsets, texel (x, z) at pixel (x, z) of a {size} x {size} square from ({}, {}) at height {}; ao = clamp({} x model + offset, 0, 1)",
+            g.min[0],
+            g.min[1],
+            g.height,
+            ground.gain,
+            size = g.size
+        ),
+        width: g.resolution,
+        height: g.resolution,
+        channels: vec![("offset".to_owned(), ground.offsets.clone())],
+    }
 }

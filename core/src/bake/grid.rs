@@ -786,27 +786,3 @@ pub(super) fn part_slices(k: usize, part: &PartGrid) -> crate::image::FloatImage
         channels,
     }
 }
-
-/// A static base's ground texture as an image, `ground-offsets.exr`: texel
-/// (x, z) at pixel (x, z), so rows run along +z from the square's `min`
-/// corner; the channel `offset`, exactly the value the run time reads.
-pub(super) fn ground_offsets(
-    ground: &crate::method::grid::base::GroundBase,
-) -> crate::image::FloatImage {
-    let g = &ground.square;
-    crate::image::FloatImage {
-        file: "ground-offsets.exr".into(),
-        layer: "ground".into(),
-        comment: format!(
-            "aobake grid static base: the ground's offsets, texel (x, z) at pixel (x, z) of a {size} x {size} square from ({}, {}) at height {}; ao = clamp({} x grids + offset, 0, 1)",
-            g.min[0],
-            g.min[1],
-            g.height,
-            ground.gain,
-            size = g.size
-        ),
-        width: g.resolution,
-        height: g.resolution,
-        channels: vec![("offset".to_owned(), ground.offsets.clone())],
-    }
-}

@@ -290,6 +290,7 @@ pub fn scene(
                 .chain(&gpu.radii)
                 .map(|x| x.to_bits())
                 .collect();
+            // The viewer shades only the ground with a cubemap: on_ground 1.
             params.extend([
                 gpu.resolution,
                 gpu.shells,
@@ -298,17 +299,18 @@ pub fn scene(
                 0,
                 0,
                 0,
-                0,
+                1,
             ]);
             arrays.extend([
                 ("cubemap_params".into(), Array::U32(params)),
                 ("layout".into(), Array::U32(layout)),
                 ("texels".into(), Array::U32(gpu.texels)),
+                ("ground".into(), Array::U32(gpu.ground)),
             ]);
             json!({
                 "family": "cubemap",
                 "uniforms": [{"binding": 0, "array": "cubemap_params"}, {"binding": 2, "array": "layout"}],
-                "textures": [{"binding": 1, "array": "texels"}],
+                "textures": [{"binding": 1, "array": "texels"}, {"binding": 4, "array": "ground"}],
                 "frame": {"kind": "phase", "floats": 1},
                 "model_on": {"character": false, "ground": true},
             })
@@ -390,7 +392,7 @@ impl FrameModel<'_> {
                         ground
                             .positions
                             .iter()
-                            .map(|&p| model.occlusion(p, phase))
+                            .map(|&p| model.ground_ao(p, phase))
                             .collect(),
                     ),
                 )
@@ -558,30 +560,19 @@ pub fn clip_frames(
 }
 
 /// The viewer's `receivers` for a grid asset (viewer_grid.wgsl's binding
-/// 5): the base's ground square (min x, min z, size as f32 bits, texels
-/// per side; 0 texels without a base), the vertex count, per vertex its
-/// part (`u32::MAX`: none) and its base offset (f32 bits), then the ground
-/// texels' offsets (f32 bits).
+/// 5): the base's ground texture as `common/ground_texture.wgsl` reads it
+/// (a lone 0 word and four unused ones without a base), the vertex count,
+/// then per vertex its part (`u32::MAX`: none) and its base offset (f32
+/// bits).
 fn grid_receivers(model: &GridModel, owners: &[u32]) -> Vec<u32> {
     let mut words = match &model.base {
-        Some(b) => {
-            let g = &b.ground.square;
-            vec![
-                g.min[0].to_bits(),
-                g.min[1].to_bits(),
-                g.size.to_bits(),
-                g.resolution as u32,
-            ]
-        }
-        None => vec![0; 4],
+        Some(b) => b.ground.gpu_words(),
+        None => vec![0; 5],
     };
     words.push(owners.len() as u32);
     for (i, &owner) in owners.iter().enumerate() {
         let offset = model.offset(Receiver::vertex(i, owner), Vec3::ZERO);
         words.extend([owner, offset.to_bits()]);
-    }
-    if let Some(b) = &model.base {
-        words.extend(b.ground.offsets.iter().map(|x| x.to_bits()));
     }
     words
 }

@@ -16,6 +16,10 @@ pub mod vertex;
 /// assets with.
 pub use aobake_runtime::method::{Family, Method};
 
+/// The static ground texture the grids' base and the cubemaps ride on
+/// (the runtime's, as engines read it).
+pub use aobake_runtime::method::ground;
+
 /// The version of `method`'s algorithm, part of the bake key: a change
 /// that alters a method's bytes bumps its family's version. The one place
 /// that reaches into each family's code for it.

@@ -191,6 +191,16 @@ float aobake_cubemap_duration(const struct AobakeCubemap *cubemap);
 bool aobake_cubemap_occlusion(const struct AobakeCubemap *cubemap, float seconds, const float *points, size_t count, float *out);
 
 /**
+ * As [`aobake_cubemap_occlusion`] for points of the ground plane: with
+ * the asset's static ground, `gain · occlusion + offset`, clamped (see
+ * `docs/engines.md`).
+ *
+ * # Safety
+ * As [`aobake_cubemap_occlusion`].
+ */
+bool aobake_cubemap_ground_ao(const struct AobakeCubemap *cubemap, float seconds, const float *points, size_t count, float *out);
+
+/**
  * Reads a grid asset from `len` bytes at `bytes`; NULL on failure.
  *
  * # Safety

@@ -449,6 +449,58 @@ pub unsafe extern "C" fn aobake_cubemap_occlusion(
     count: usize,
     out: *mut f32,
 ) -> bool {
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        cubemap_lookup(
+            cubemap,
+            seconds,
+            points,
+            count,
+            out,
+            CubemapModel::occlusion,
+        )
+    }
+}
+
+/// As [`aobake_cubemap_occlusion`] for points of the ground plane: with
+/// the asset's static ground, `gain · occlusion + offset`, clamped (see
+/// `docs/engines.md`).
+///
+/// # Safety
+/// As [`aobake_cubemap_occlusion`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_ground_ao(
+    cubemap: *const AobakeCubemap,
+    seconds: f32,
+    points: *const f32,
+    count: usize,
+    out: *mut f32,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        cubemap_lookup(
+            cubemap,
+            seconds,
+            points,
+            count,
+            out,
+            CubemapModel::ground_ao,
+        )
+    }
+}
+
+/// `look` at `count` points at `seconds`, into `out`.
+///
+/// # Safety
+/// As [`aobake_cubemap_occlusion`].
+unsafe fn cubemap_lookup(
+    cubemap: *const AobakeCubemap,
+    seconds: f32,
+    points: *const f32,
+    count: usize,
+    out: *mut f32,
+    look: fn(&CubemapModel, Vec3, f32) -> f32,
+) -> bool {
     // SAFETY: the caller passes NULL or a live handle.
     let Some(c) = (unsafe { cubemap.as_ref() }) else {
         fail("the handle is NULL");
@@ -461,7 +513,7 @@ pub unsafe extern "C" fn aobake_cubemap_occlusion(
     let phase = c.0.layout.phase(seconds);
     let values: Vec<f32> = points
         .chunks_exact(3)
-        .map(|p| c.0.occlusion(Vec3::from_slice(p), phase))
+        .map(|p| look(&c.0, Vec3::from_slice(p), phase))
         .collect();
     // SAFETY: forwarded from the caller.
     unsafe { fill(&values, out, count, "occlusion") }

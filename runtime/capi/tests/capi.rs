@@ -224,11 +224,22 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
         &out_path,
     );
     let phase = model.layout.phase(seconds);
+    assert!(model.ground.is_some(), "a static ground by default");
     let rust: Vec<f32> = receivers
         .iter()
         .map(|(p, _, _, _)| model.occlusion(*p, phase))
+        .chain(
+            receivers
+                .iter()
+                .map(|(p, _, _, _)| model.ground_ao(*p, phase)),
+        )
         .collect();
     assert_eq!(c, rust, "cubemap lookups bit for bit");
+    assert_ne!(
+        c[..64],
+        c[64..],
+        "the static ground changes the ground's AO"
+    );
     assert!(rust.iter().any(|&a| a > 0.0), "some occlusion");
 
     // Small grids of the milk truck's parts, posed at a frame of its clip.

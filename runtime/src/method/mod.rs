@@ -5,6 +5,7 @@
 
 pub mod cubemap;
 pub mod grid;
+pub mod ground;
 pub mod vertex;
 
 use serde::{Deserialize, Serialize};

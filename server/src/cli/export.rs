@@ -12,7 +12,8 @@
 //! `resolution` texels square, rows top to bottom as the cube-map
 //! convention has them) in one 32-bit float channel `Y`: the occlusion,
 //! 0 open and 1 blocked, decoded at each texel's centre exactly as the
-//! run time decodes it.
+//! run time decodes it; with a static ground, its texture as
+//! `ground-offsets.exr` (as for grids, below).
 //!
 //! A grid asset's parts are written as one file per part,
 //! `part{k}-{name}.exr`, its z-slices stacked top to bottom (slice z in
@@ -55,7 +56,8 @@ pub(super) struct Args {
     #[arg(long, requires_all = ["asset", "file"])]
     gltf: Option<PathBuf>,
     /// Write a cubemap asset's decoded faces, or a grid asset's parts as
-    /// z-slices, as OpenEXR files into this folder (created if missing).
+    /// z-slices, as OpenEXR files into this folder (created if missing),
+    /// and the static ground's texture, when the asset has one.
     #[arg(long, requires = "asset")]
     exr: Option<PathBuf>,
     /// Clip times (seconds) to decode at; default: the start of the

@@ -41,7 +41,9 @@ struct Params {
     phase: f32,
     // Points per row of the dispatch grid (workgroups in x × 64).
     row_stride: u32,
-    _pad: u32,
+    // 1: the points are on the ground plane (cubemap_ground_ao); 0:
+    // anywhere (cubemap_occlusion).
+    on_ground: u32,
 }
 
 const PI: f32 = 3.14159265358979;
@@ -264,3 +266,24 @@ fn cubemap_occlusion(p: vec3<f32>, phase: f32) -> f32 {
     return fade * (top + fy * (bottom - top));
 }
 
+
+// The occlusion at a point p of the ground plane (CubemapModel::ground_ao):
+// with a static ground (common/ground_texture.wgsl), the cubemap times the
+// ground's gain plus the texture's offset at p, clamped to [0, 1]; without
+// one, cubemap_occlusion.
+fn cubemap_ground_ao(p: vec3<f32>, phase: f32) -> f32 {
+    let c = cubemap_occlusion(p, phase);
+    if (ground_word(0u) == 0u) {
+        return c;
+    }
+    return clamp(ground_gain() * c + ground_offset(p), 0.0, 1.0);
+}
+
+// What a batch of points gets: cubemap_ground_ao on the ground,
+// cubemap_occlusion elsewhere.
+fn cubemap_point(p: vec3<f32>, phase: f32) -> f32 {
+    if (params.on_ground == 1u) {
+        return cubemap_ground_ao(p, phase);
+    }
+    return cubemap_occlusion(p, phase);
+}

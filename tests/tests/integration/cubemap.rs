@@ -167,6 +167,15 @@ fn a_cubemap_bake_survives_killed_face_workers_with_the_same_bytes() {
             }
         }
     }
+    // And the static ground's texture, value for value.
+    let ground =
+        exr::prelude::read_first_flat_layer_from_file(exr_dir.join("ground-offsets.exr")).unwrap();
+    let offsets: Vec<f32> = ground.layer_data.channel_data.list[0]
+        .sample_data
+        .values_as_f32()
+        .collect();
+    let g = model.ground.as_ref().expect("a static ground by default");
+    assert_eq!(offsets, g.offsets, "the ground's offsets bit for bit");
     // The report is a cubemap report, with both encodings.
     let (_, report) = env
         .request("GET", &format!("/v1/bakes/{id}/report"), ADMIN, None)

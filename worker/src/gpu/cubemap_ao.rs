@@ -19,6 +19,7 @@ pub struct CubemapAo<'g> {
     gpu: &'g Gpu,
     pipeline: wgpu::ComputePipeline,
     texels: wgpu::Buffer,
+    ground: wgpu::Buffer,
     base: CubemapAoParams,
 }
 
@@ -35,7 +36,7 @@ pub(super) fn params(form: &CubemapGpu) -> CubemapAoParams {
         points: 0,
         phase: 0.0,
         row_stride: 0,
-        _pad: 0,
+        on_ground: 0,
     }
 }
 
@@ -70,6 +71,11 @@ impl<'g> CubemapAo<'g> {
             contents: bytemuck::cast_slice(&gpu_form.texels),
             usage: wgpu::BufferUsages::STORAGE,
         });
+        let ground = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("cubemap static ground"),
+            contents: bytemuck::cast_slice(&gpu_form.ground),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
@@ -77,6 +83,7 @@ impl<'g> CubemapAo<'g> {
             gpu,
             pipeline,
             texels,
+            ground,
             base,
         })
     }
@@ -84,13 +91,15 @@ impl<'g> CubemapAo<'g> {
     /// Records the lookup of `count` points (`points`: packed xyz f32, a
     /// `STORAGE` buffer) at `phase` into `encoder`, one f32 each into `out`
     /// (a `STORAGE` buffer a render pass can then read as a vertex
-    /// buffer).
+    /// buffer); `on_ground`: the points are on the ground plane, where the
+    /// static ground applies (`CubemapModel::ground_ao`).
     pub fn record(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         points: &wgpu::Buffer,
         count: u32,
         phase: f32,
+        on_ground: bool,
         out: &wgpu::Buffer,
     ) -> Result<(), GpuError> {
         let device = &self.gpu.device;
@@ -103,6 +112,7 @@ impl<'g> CubemapAo<'g> {
             points: count,
             phase,
             row_stride: groups.0 * aobake_shaders::WORKGROUP_SIZE,
+            on_ground: u32::from(on_ground),
             ..self.base
         };
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -131,6 +141,10 @@ impl<'g> CubemapAo<'g> {
                     binding: 3,
                     resource: out.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: self.ground.as_entire_binding(),
+                },
             ],
         });
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -144,13 +158,18 @@ impl<'g> CubemapAo<'g> {
     }
 
     /// Occlusion at every point at `phase`, read back.
-    pub fn evaluate(&self, points: &[glam::Vec3], phase: f32) -> Result<Vec<f32>, GpuError> {
+    pub fn evaluate(
+        &self,
+        points: &[glam::Vec3],
+        phase: f32,
+        on_ground: bool,
+    ) -> Result<Vec<f32>, GpuError> {
         let count = u32::try_from(points.len())
             .map_err(|_| GpuError::TooLarge(format!("{} points", points.len())))?;
         self.gpu.evaluate_batch(
             bytemuck::cast_slice(points),
             points.len(),
-            |encoder, input, out| self.record(encoder, input, count, phase, out),
+            |encoder, input, out| self.record(encoder, input, count, phase, on_ground, out),
         )
     }
 }

@@ -454,6 +454,7 @@ impl PreviewRenderer<'_> {
                     &ground_positions,
                     g.positions.len() as u32,
                     frame.phase,
+                    true,
                     &ground_model,
                 )?,
                 Evaluator::Grid(e, model, owners) => {

@@ -284,19 +284,22 @@ pub fn evaluate_vertex_stage(
     )
 }
 
-/// The occlusion `model` casts at `points` at `phase`, computed by the
+/// The occlusion `model` casts at `points` at `phase` (with `on_ground`,
+/// on the ground plane: its static ground applies), computed by the
 /// cubemap's vertex-stage lookup.
 pub fn cubemap_vertex_stage(
     gpu: &Gpu,
     model: &CubemapModel,
     points: &[Vec3],
     phase: f32,
+    on_ground: bool,
 ) -> Result<Vec<f32>, GpuError> {
     let form = CubemapGpu::new(model).map_err(|e| GpuError::TooLarge(e.to_string()))?;
     let count = to_u32(points.len(), "points")?;
     let params = CubemapAoParams {
         points: count,
         phase,
+        on_ground: u32::from(on_ground),
         ..super::cubemap_ao::params(&form)
     };
     let xyz: Vec<u32> = points
@@ -315,6 +318,7 @@ pub fn cubemap_vertex_stage(
                 Resource::Uniform(bytemuck::bytes_of(&data_layout(count))),
             ),
             (3, Resource::Words(&xyz)),
+            (4, Resource::Words(&form.ground)),
         ],
         count,
     )

@@ -232,6 +232,7 @@ pub(crate) fn small_cubemap(
         eval_points: 16,
         eval_ground: 16,
         eval_rays: 16,
+        ground_resolution: 24,
         ..Default::default()
     };
     p
@@ -263,7 +264,7 @@ fn cubemap(
 }
 
 #[test]
-fn the_wgsl_cubemap_lookup_matches_the_cpu_for_every_encoding() {
+fn the_wgsl_cubemap_lookup_matches_the_cpu_for_every_encoding_and_on_the_static_ground() {
     use aobake_worker::gpu::CubemapAo;
     use glam::Vec3;
     let gpu = gpu();
@@ -289,10 +290,41 @@ fn the_wgsl_cubemap_lookup_matches_the_cpu_for_every_encoding() {
                 s.centre + s.radii * s.outer * 1.25 * u * ((n % 97) as f32 / 96.0)
             })
             .collect();
+        // Points of the ground plane over its static texture's square and
+        // a little beyond, where the offset stops.
+        let g = model.ground.as_ref().expect("a static ground by default");
+        let q = g.square;
+        let ground: Vec<Vec3> = (0..2000)
+            .map(|n| {
+                let f = n as f32;
+                let (u, v) = ((f * 0.618).fract(), (f * 0.377).fract());
+                Vec3::new(
+                    q.min[0] + q.size * (1.2 * u - 0.1),
+                    q.height,
+                    q.min[1] + q.size * (1.2 * v - 0.1),
+                )
+            })
+            .collect();
         let evaluator = CubemapAo::new(&gpu, &model).unwrap();
         let mut nonzero = 0;
         for phase in [0.0, 0.137, 0.5, 0.9999] {
-            let on_gpu = evaluator.evaluate(&points, phase).unwrap();
+            let on_gpu = evaluator.evaluate(&ground, phase, true).unwrap();
+            let on_cpu: Vec<f32> = ground.iter().map(|&p| model.ground_ao(p, phase)).collect();
+            let w = worst(&on_gpu, &on_cpu);
+            eprintln!("{method} at phase {phase}, static ground: worst difference {w:e}");
+            assert!(w < 1e-5, "{method} at phase {phase}, static ground: {w}");
+            let vs = cubemap_vertex_stage(&gpu, &model, &ground, phase, true).unwrap();
+            let w = worst(&vs, &on_cpu);
+            assert!(
+                w < 1e-5,
+                "{method} at phase {phase}, static ground, vertex stage: {w}"
+            );
+            let bare: Vec<f32> = ground.iter().map(|&p| model.occlusion(p, phase)).collect();
+            assert!(
+                worst(&bare, &on_cpu) > 1e-3,
+                "the static ground changes the ground's AO"
+            );
+            let on_gpu = evaluator.evaluate(&points, phase, false).unwrap();
             let on_cpu: Vec<f32> = points.iter().map(|&p| model.occlusion(p, phase)).collect();
             nonzero += on_cpu.iter().filter(|&&v| v > 0.01).count();
             // Both decode the same bytes; they differ by f32 rounding and
@@ -304,7 +336,7 @@ fn the_wgsl_cubemap_lookup_matches_the_cpu_for_every_encoding() {
             assert!(w < 1e-5, "{method} at phase {phase}: {w}");
             // The vertex stage (textures, WebGL2) runs the same lookup
             // (common/cubemap_lookup.wgsl) on the same adapter.
-            let vs = cubemap_vertex_stage(&gpu, &model, &points, phase).unwrap();
+            let vs = cubemap_vertex_stage(&gpu, &model, &points, phase, false).unwrap();
             let w = worst(&vs, &on_cpu);
             eprintln!("{method} at phase {phase}, vertex stage: worst difference {w:e}");
             assert!(w < 1e-5, "{method} at phase {phase}, vertex stage: {w}");

@@ -390,7 +390,8 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
     assert_eq!(baked.previews[0].0.clip.as_deref(), Some("spin"));
     previews_match_one_go(&bake, &baked, &mut r);
     // The model panel's ground comes from the cubemap: the baked one
-    // darkens it around the cube, an all-open one (zero texels) does not.
+    // darkens it around the cube, an all-open one (zero texels, no static
+    // ground) does not.
     let (model, _) =
         CubemapModel::from_container(&Container::from_bytes(&baked.asset).unwrap()).unwrap();
     let open = CubemapModel {
@@ -399,6 +400,7 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
             encoding: aobake_core::method::cubemap::model::Encoding::Discrete,
             ..model.layout
         },
+        ground: None,
     };
     let kroon = p.cubemap_truth(&model.layout.spheroid);
     let clip = &inputs.clips[0];

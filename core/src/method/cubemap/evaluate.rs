@@ -51,11 +51,20 @@ use crate::{
 pub trait Lookup: Sync {
     /// Occlusion at `p` at `phase` ∈ [0, 1).
     fn occlusion(&self, p: Vec3, phase: f32) -> f32;
+
+    /// Occlusion at a point `p` of the ground plane.
+    fn ground(&self, p: Vec3, phase: f32) -> f32 {
+        self.occlusion(p, phase)
+    }
 }
 
 impl Lookup for CubemapModel {
     fn occlusion(&self, p: Vec3, phase: f32) -> f32 {
         CubemapModel::occlusion(self, p, phase)
+    }
+
+    fn ground(&self, p: Vec3, phase: f32) -> f32 {
+        self.ground_ao(p, phase)
     }
 }
 
@@ -299,14 +308,17 @@ impl GroundTruth {
             .zip(&self.visible)
             .map(|(((&t, ps), truth), visible)| {
                 let phase = layout.phase(t);
-                let seen = |range: std::ops::Range<usize>| -> (Vec<f32>, Vec<f32>) {
+                let seen = |range: std::ops::Range<usize>,
+                            look: &dyn Fn(Vec3) -> f32|
+                 -> (Vec<f32>, Vec<f32>) {
                     range
                         .filter(|&i| visible[i])
-                        .map(|i| (lookup.occlusion(ps[i], phase), truth[i]))
+                        .map(|i| (look(ps[i]), truth[i]))
                         .unzip()
                 };
-                let (space_got, space_want) = seen(0..self.space);
-                let (ground_got, ground_want) = seen(self.space..ps.len());
+                let (space_got, space_want) = seen(0..self.space, &|p| lookup.occlusion(p, phase));
+                let (ground_got, ground_want) =
+                    seen(self.space..ps.len(), &|p| lookup.ground(p, phase));
                 (
                     FrameError::of(&space_got, &space_want),
                     FrameError::of(&ground_got, &ground_want),

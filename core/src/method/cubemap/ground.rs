@@ -1,5 +1,5 @@
-//! The cubemap's change on a static ground (issue 29, measured before it
-//! is built into the asset): the grids' product form
+//! The cubemap's change on a static ground (issue 29; the run time is
+//! [`CubemapModel::ground_ao`]): the grids' product form
 //! ([`crate::method::grid::base`]) applied to the ground under a cubemap.
 //!
 //! A cubemap samples the field around the character coarsely near its
@@ -14,16 +14,15 @@
 //! offset = mean_t truth − k · mean_t cubemap,   k the least-squares gain
 //! ```
 //!
-//! fitted over time samples of the baked clip (the cubemap's own, not the
-//! evaluation's random times). Off the ground plane the cubemap is used
-//! as it is.
+//! fitted at `assemble` over time samples of the baked clip (the
+//! cubemap's own, not the evaluation's random times). Off the ground
+//! plane the cubemap is used as it is.
 
-use glam::Vec3;
 use rayon::prelude::*;
 
-use super::{evaluate::Lookup, model::CubemapModel, setup::Setup};
+use super::{model::CubemapModel, setup::Setup};
 use crate::{
-    method::grid::base::{GroundBase, GroundSquare, gain},
+    method::ground::{GroundBase, GroundSquare, gain},
     trace::{KroonParams, Scene, SceneOptions, TraceError, kroon_occlusion, no_progress},
 };
 
@@ -96,26 +95,4 @@ pub fn fit(
         offsets: all.iter().map(|&i| half(mean(&truth, i))).collect(),
     };
     Ok((base, still))
-}
-
-/// A cubemap with a ground base: on the ground plane (within a hair of
-/// its height) `clamp(k · cubemap + offset)`, elsewhere the cubemap.
-#[derive(Debug)]
-pub struct OnGround<'a> {
-    /// The cubemap.
-    pub model: &'a CubemapModel,
-    /// The ground base.
-    pub ground: &'a GroundBase,
-}
-
-impl Lookup for OnGround<'_> {
-    fn occlusion(&self, p: Vec3, phase: f32) -> f32 {
-        let c = self.model.occlusion(p, phase);
-        let g = &self.ground.square;
-        if (p.y - g.height).abs() <= 1e-4 * g.size {
-            (self.ground.gain * c + self.ground.offset(p)).clamp(0.0, 1.0)
-        } else {
-            c
-        }
-    }
 }

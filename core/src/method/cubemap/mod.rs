@@ -98,6 +98,13 @@ pub struct CubemapOptions {
     pub continuous_layout: ContinuousLayout,
     /// The clip to bake (`None`: the first training clip).
     pub clip: Option<String>,
+    /// aobake's product form on the ground: a static texture traced on
+    /// the ground plane that the cubemap's change rides on there
+    /// (`method::cubemap::ground`). `false`: Kroon's cubemap alone
+    /// everywhere (still in every report).
+    pub static_ground: bool,
+    /// Texels per side of the static ground texture.
+    pub ground_resolution: usize,
     /// Random clip times at which `evaluate` traces ground truth.
     pub eval_times: usize,
     /// Random points in the spheroid per evaluation time.
@@ -125,6 +132,8 @@ impl Default for CubemapOptions {
             residuals: true,
             continuous_layout: ContinuousLayout::Cosine,
             clip: None,
+            static_ground: true,
+            ground_resolution: 96,
             eval_times: 16,
             eval_points: 2048,
             eval_ground: 1024,
@@ -153,6 +162,12 @@ impl CubemapOptions {
             return Err(format!(
                 "cubemap.times must be between 2 and 256 (a segment start is a byte), not {}",
                 o.times
+            ));
+        }
+        if !(2..=512).contains(&o.ground_resolution) {
+            return Err(format!(
+                "cubemap.ground_resolution must be between 2 and 512, not {}",
+                o.ground_resolution
             ));
         }
         if !(o.outer.is_finite() && o.outer > 0.0 && o.outer <= 100.0) {
@@ -220,10 +235,13 @@ impl CubemapOptions {
         6 * (self.resolution * self.resolution * self.shells * self.times) as u64
     }
 
-    /// Rays a whole bake traces: its sample points and the evaluation's
-    /// ground truth (what the service bounds per request).
+    /// Rays a whole bake traces: its sample points, the static ground's
+    /// and the evaluation's ground truth (what the service bounds per
+    /// request).
     pub fn rays_total(&self) -> u128 {
-        u128::from(self.points()) * u128::from(self.rays)
+        let ground = u128::from(self.static_ground)
+            * (ground::GROUND_TIMES * self.ground_resolution.pow(2)) as u128;
+        (u128::from(self.points()) + ground) * u128::from(self.rays)
             + (self.eval_times * (self.eval_points + self.eval_ground)) as u128
                 * u128::from(self.eval_rays)
     }

@@ -63,6 +63,7 @@ pub fn encode(
     Ok(CubemapModel {
         layout,
         texels: bytes,
+        ground: None,
     })
 }
 
@@ -105,7 +106,11 @@ mod tests {
                 }
             }
         }
-        CubemapModel { layout: l, texels }
+        CubemapModel {
+            layout: l,
+            texels,
+            ground: None,
+        }
     }
 
     #[test]

@@ -6,9 +6,11 @@
  * POINTS has a receiver a line: "px py pz nx ny nz part kind" (part -1
  * for none; kind the vertex index, -1 for the ground, -2 for another
  * surface; the cubemap reads the point only); PALETTE a 4 x 4
- * column-major matrix a line (16 numbers). Writes one float per receiver
- * to OUT, raw little-endian; for a grid, the grids alone
- * (aobake_grid_occlusion) and then the AO on the static base
+ * column-major matrix a line (16 numbers). Writes two floats per receiver
+ * to OUT, raw little-endian, all of the first kind and then all of the
+ * second: for a cubemap, the occlusion and the AO on its static ground
+ * (aobake_cubemap_ground_ao); for a grid, the grids alone
+ * (aobake_grid_occlusion) and the AO on the static base
  * (aobake_grid_ao). Also checks that the other kind of asset and a short
  * palette are refused with a reason. Exits non-zero on anything unexpected. */
 #include <stdio.h>
@@ -77,6 +79,9 @@ int main(int argc, char **argv) {
         EXPECT(aobake_cubemap_duration(c) > 0.0f, "no duration");
         EXPECT(aobake_cubemap_occlusion(c, strtof(argv[3], NULL), points, count, out),
                "%s", aobake_last_error());
+        EXPECT(aobake_cubemap_ground_ao(c, strtof(argv[3], NULL), points, count, out + count),
+               "%s", aobake_last_error());
+        written = 2 * count;
         aobake_cubemap_free(c);
     } else {
         EXPECT(aobake_cubemap_open(bytes, len) == NULL, "a grid opened as a cubemap");

@@ -2,7 +2,9 @@
 //! carries the [`CubemapLayout`] (spheroid, resolution, time samples,
 //! encoding, the clip's duration) and one section, `TEXL`, holds the
 //! texels exactly as an engine uploads them (layer-major, 16 bytes a
-//! texel; `model` describes the layout). Reading checks every number of
+//! texel; `model` describes the layout); with a static ground (format
+//! 1.5), the header's `ground` (gain and square) and `GOFS`, its offsets
+//! (f16, x fastest). Reading checks every number of
 //! the layout and the section's length, so a hostile file with valid
 //! checksums is refused with a message.
 
@@ -16,6 +18,7 @@ use super::{
 use crate::{
     Method,
     container::{AssetError, AssetHeaderFields, Container, Data, Section},
+    method::ground::{GroundBase, GroundSquare},
 };
 
 /// What the stored values mean, written into every header.
@@ -44,6 +47,19 @@ pub struct CubemapHeader {
     pub params: serde_json::Value,
     /// Where the cubemaps sit and how the texels are laid out.
     pub layout: CubemapLayout,
+    /// The static ground (format 1.5): its square and gain; `GOFS` holds
+    /// its texels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ground: Option<GroundLayout>,
+}
+
+/// A static ground as the header describes it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct GroundLayout {
+    /// The gain of the cubemap's change on the ground.
+    pub gain: f32,
+    /// Where the texture lies.
+    pub square: GroundSquare,
 }
 
 impl CubemapModel {
@@ -68,15 +84,22 @@ impl CubemapModel {
             units: UNITS.to_owned(),
             params: fields.params,
             layout: self.layout,
+            ground: self.ground.as_ref().map(|g| GroundLayout {
+                gain: g.gain,
+                square: g.square,
+            }),
         };
-        Container::new(
-            self.method(),
-            &header,
-            vec![Section {
-                tag: *b"TEXL",
-                data: Data::U8(self.texels.clone()),
-            }],
-        )
+        let mut sections = vec![Section {
+            tag: *b"TEXL",
+            data: Data::U8(self.texels.clone()),
+        }];
+        if let Some(g) = &self.ground {
+            sections.push(Section {
+                tag: *b"GOFS",
+                data: g.section_data(),
+            });
+        }
+        Container::new(self.method(), &header, sections)
     }
 
     /// Reads a model back, checking the layout and the section's length.
@@ -90,6 +113,7 @@ impl CubemapModel {
         let method_of = Self {
             layout,
             texels: Vec::new(),
+            ground: None,
         }
         .method();
         if method_of != header.method {
@@ -105,10 +129,15 @@ impl CubemapModel {
                 layout.texel_bytes()
             )));
         }
+        let ground = match header.ground {
+            Some(g) => Some(GroundBase::read(container, g.square, g.gain, b"GOFS")?),
+            None => None,
+        };
         Ok((
             Self {
                 layout,
                 texels: texels.clone(),
+                ground,
             },
             header,
         ))
@@ -169,7 +198,11 @@ mod tests {
             duration: 1.5,
         };
         let texels = (0..layout.texel_bytes()).map(|i| (i * 37) as u8).collect();
-        CubemapModel { layout, texels }
+        CubemapModel {
+            layout,
+            texels,
+            ground: None,
+        }
     }
 
     #[test]

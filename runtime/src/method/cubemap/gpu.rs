@@ -4,7 +4,7 @@
 //! engine uploads once per asset.
 
 use super::{CubemapModel, Encoding};
-use crate::method::{TooLarge, to_u32};
+use crate::method::{TooLarge, ground::GroundBase, to_u32};
 
 /// A cubemap's GPU form.
 #[derive(Debug, Clone, PartialEq)]
@@ -25,6 +25,11 @@ pub struct CubemapGpu {
     /// The texels' bytes as little-endian words, four a texel (at least
     /// four words).
     pub texels: Vec<u32>,
+    /// The static ground: its texels per side (0 without one), then the
+    /// bits of its square's min x, min z and side and of its gain, then
+    /// its offsets' f32 bits (x fastest): what `cubemap_ground_offset`
+    /// reads (at least one word).
+    pub ground: Vec<u32>,
 }
 
 impl CubemapGpu {
@@ -51,6 +56,10 @@ impl CubemapGpu {
                 Encoding::Thirds => 2,
             },
             texels,
+            ground: model
+                .ground
+                .as_ref()
+                .map_or_else(|| vec![0], GroundBase::gpu_words),
         })
     }
 }

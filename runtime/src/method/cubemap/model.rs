@@ -24,6 +24,7 @@
 //!
 //! Decoded values are blended, never coefficients (Kroon §3.3.5).
 
+use crate::method::ground::GroundBase;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -144,6 +145,9 @@ pub struct CubemapModel {
     pub layout: CubemapLayout,
     /// [`CubemapLayout::texel_bytes`] bytes in the layout above.
     pub texels: Vec<u8>,
+    /// The static ground the cubemap's change rides on there (aobake's
+    /// product form, format 1.5); `None`: the cubemap alone everywhere.
+    pub ground: Option<GroundBase>,
 }
 
 impl CubemapModel {
@@ -201,6 +205,23 @@ impl CubemapModel {
 
     /// Bytes of the texels: what a renderer keeps in memory.
     pub fn bytes(&self) -> usize {
-        self.texels.len()
+        self.texels.len() + self.ground.as_ref().map_or(0, |g| 2 * g.offsets.len())
+    }
+
+    /// The occlusion at a point `p` of the ground plane at `phase`: with a
+    /// static ground, `clamp(gain · cubemap + offset(p), 0, 1)` (the
+    /// cubemap says what the clip changes, the texture what it does not);
+    /// without, [`Self::occlusion`].
+    pub fn ground_ao(&self, p: Vec3, phase: f32) -> f32 {
+        let c = self.occlusion(p, phase);
+        self.ground.as_ref().map_or(c, |g| g.ao(c, p))
+    }
+
+    /// The gain and offset the GPU lookups (`cubemap_ground_ao`) take for
+    /// a ground point `p`: the static ground's, or (1, 0) without one.
+    pub fn ground_terms(&self, p: Vec3) -> (f32, f32) {
+        self.ground
+            .as_ref()
+            .map_or((1.0, 0.0), |g| (g.gain, g.offset(p)))
     }
 }

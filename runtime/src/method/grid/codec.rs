@@ -20,8 +20,6 @@
 use crate::method::Method;
 use serde::{Deserialize, Serialize};
 
-use half::f16;
-
 use super::{
     ALGORITHM_VERSION, GridBox, MAX_PARTS,
     base::{GroundBase, GroundSquare, StaticBase},
@@ -29,6 +27,7 @@ use super::{
     tclip::TClip,
 };
 use crate::container::{AssetError, AssetHeaderFields, Container, Data, Section};
+use crate::method::ground::{halves, read_halves};
 
 /// What the stored values mean, written into every header.
 pub const UNITS: &str = "occlusion each part casts into space: ao_grid = 2 x the occluded fraction of the sphere, rescaled to 0 on the grid's boundary";
@@ -93,9 +92,6 @@ pub struct BaseLayout {
     /// The ground texture's square (`GOFS` holds its texels).
     pub ground: GroundSquare,
 }
-
-/// Most texels per side of a base's ground square.
-pub const MAX_GROUND_RESOLUTION: usize = 1024;
 
 /// Most vertices a base may hold offsets for.
 pub const MAX_VERTICES: usize = 1 << 24;
@@ -165,14 +161,13 @@ impl GridModel {
             }),
         }
         if let Some(b) = &self.base {
-            let halves = |v: &[f32]| Data::F16(v.iter().map(|&x| f16::from_f32(x)).collect());
             sections.push(Section {
                 tag: *b"VOFS",
                 data: halves(&b.vertex_offsets),
             });
             sections.push(Section {
                 tag: *b"GOFS",
-                data: halves(&b.ground.offsets),
+                data: b.ground.section_data(),
             });
         }
         Container::new(Method::Grid, &header, sections)
@@ -293,7 +288,6 @@ fn read_base(
     layout: &BaseLayout,
     parts: usize,
 ) -> Result<StaticBase, AssetError> {
-    let g = &layout.ground;
     if layout.vertices > MAX_VERTICES {
         return Err(bad(&format!(
             "the base's vertex count must be at most {MAX_VERTICES}"
@@ -302,44 +296,13 @@ fn read_base(
     if layout.part_gains.len() != parts {
         return Err(bad("the base must hold one gain per part"));
     }
-    let gains_ok = layout
-        .part_gains
-        .iter()
-        .chain([&layout.ground_gain])
-        .all(|k| k.is_finite());
-    if !gains_ok {
+    if !layout.part_gains.iter().all(|k| k.is_finite()) {
         return Err(bad("the base's gains must be finite"));
     }
-    if !(1..=MAX_GROUND_RESOLUTION).contains(&g.resolution) {
-        return Err(bad(&format!(
-            "the base's ground resolution must be between 1 and {MAX_GROUND_RESOLUTION}"
-        )));
-    }
-    if !(g.min.iter().all(|x| x.is_finite())
-        && g.height.is_finite()
-        && g.size.is_finite()
-        && g.size > 0.0)
-    {
-        return Err(bad("the base's ground square is not finite and positive"));
-    }
-    let offsets = |tag: &[u8; 4], len: usize| -> Result<Vec<f32>, AssetError> {
-        let name = String::from_utf8_lossy(tag).into_owned();
-        let Data::F16(v) = container.section(tag)? else {
-            return Err(bad(&format!("{name} must be f16")));
-        };
-        if v.len() != len || v.iter().any(|x| !x.is_finite()) {
-            return Err(bad(&format!("{name} must hold {len} finite numbers")));
-        }
-        Ok(v.iter().map(|x| x.to_f32()).collect())
-    };
     Ok(StaticBase {
-        vertex_offsets: offsets(b"VOFS", layout.vertices)?,
+        vertex_offsets: read_halves(container, b"VOFS", layout.vertices)?,
         part_gains: layout.part_gains.clone(),
-        ground: GroundBase {
-            square: *g,
-            gain: layout.ground_gain,
-            offsets: offsets(b"GOFS", g.texels())?,
-        },
+        ground: GroundBase::read(container, layout.ground, layout.ground_gain, b"GOFS")?,
     })
 }
 
