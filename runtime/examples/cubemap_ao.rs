@@ -35,18 +35,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         model.bytes() / 1024
     );
     let phase = l.phase(seconds);
-    // About the feet: the bottom of the character's bounds (the spheroid's
-    // radii before the shells' padding), outwards along +x.
-    let ground = s.centre - Vec3::Y * s.radii.y;
+    // About the feet: the ground plane the bake traced its static ground
+    // on (else the bottom of the character's bounds), outwards along +x;
+    // on the ground an engine uses ground_ao, elsewhere occlusion.
+    let floor = model
+        .ground
+        .as_ref()
+        .map_or(s.centre.y - s.radii.y, |g| g.square.height);
+    let ground = Vec3::new(s.centre.x, floor, s.centre.z);
     let reach = s.radii.x * s.outer;
     for step in 0..=8 {
         let p = ground + Vec3::X * reach * step as f32 / 8.0;
         println!(
-            "  at ({:.3}, {:.3}, {:.3}), t = {seconds} s: occlusion {:.3}",
+            "  at ({:.3}, {:.3}, {:.3}), t = {seconds} s: cubemap {:.3}, on the ground {:.3}",
             p.x,
             p.y,
             p.z,
-            model.occlusion(p, phase)
+            model.occlusion(p, phase),
+            model.ground_ao(p, phase)
         );
     }
     Ok(())
