@@ -197,18 +197,29 @@ fn grid_summary(report: &GridReport) -> String {
     let e = &report.evaluation;
     let t = &report.timings;
     let mut out = format!(
-        "{}: {} parts; {} bytes of cells{}
+        "{}: {} parts; {} bytes at run time ({})
 | part | vertices | triangles | grid | half extent | V_M | inside cells | bytes (cones / plain) | bake (s) |
 |---|---|---|---|---|---|---|---|---|
 ",
         report.method,
         report.parts.len(),
         report.sizes.model_bytes,
-        if report.params.grid.cones {
-            " (RGBA cones and T_clip)"
-        } else {
-            ""
-        },
+        [
+            Some(if report.params.grid.cones {
+                "RGBA cells with cones, T_clip"
+            } else {
+                "a byte a cell"
+            }),
+            report
+                .params
+                .grid
+                .static_base
+                .then_some("the static base's offsets and gains"),
+        ]
+        .into_iter()
+        .flatten()
+        .collect::<Vec<_>>()
+        .join(", "),
     );
     for p in &report.parts {
         out.push_str(&format!(

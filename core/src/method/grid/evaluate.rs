@@ -401,6 +401,24 @@ impl GroundTruth {
         (Errors::of(&v), Errors::of(&g))
     }
 
+    /// `vertex(index, position, normal, part)` at every vertex of a frame
+    /// and `ground(point)` at every ground point.
+    fn at_receivers(
+        &self,
+        frame: &FrameTruth,
+        vertex: impl Fn(usize, Vec3, Vec3, Option<usize>) -> f32,
+        ground: impl Fn(Vec3) -> f32,
+    ) -> (Vec<f32>, Vec<f32>) {
+        let vertices = frame
+            .positions
+            .iter()
+            .zip(&frame.normals)
+            .enumerate()
+            .map(|(i, (&p, &n))| vertex(i, p, n, self.owner[i]))
+            .collect();
+        (vertices, self.ground.iter().map(|&p| ground(p)).collect())
+    }
+
     /// A grid model's prediction at a frame's receivers, from the parts
     /// `terms` names; with `exact_self`, each vertex's own part is its
     /// traced self-occlusion instead of its grid.
@@ -412,33 +430,34 @@ impl GroundTruth {
         exact_self: bool,
     ) -> (Vec<f32>, Vec<f32>) {
         let poses: Vec<PartPose> = model.poses(&frame.palette);
-        let vertices = frame
-            .positions
-            .iter()
-            .zip(&frame.normals)
-            .enumerate()
-            .map(|(i, (&p, &n))| {
-                let own = self.owner[i];
-                if exact_self {
-                    let others = model.occlusion(&poses, p, n, own, Terms::Others);
-                    match terms {
-                        Terms::Own => self.self_ao[i],
-                        _ => 1.0 - (1.0 - self.self_ao[i]) * (1.0 - others),
-                    }
-                } else {
-                    model.occlusion(&poses, p, n, own, terms)
+        self.at_receivers(
+            frame,
+            |i, p, n, own| {
+                if !exact_self {
+                    return model.occlusion(&poses, p, n, own, terms);
                 }
-            })
-            .collect();
-        let ground = self
-            .ground
-            .iter()
-            .map(|&p| match terms {
+                let others = model.occlusion(&poses, p, n, own, Terms::Others);
+                match terms {
+                    Terms::Own => self.self_ao[i],
+                    _ => 1.0 - (1.0 - self.self_ao[i]) * (1.0 - others),
+                }
+            },
+            |p| match terms {
                 Terms::Own => 0.0,
                 _ => model.occlusion(&poses, p, Vec3::Y, None, Terms::All),
-            })
-            .collect();
-        (vertices, ground)
+            },
+        )
+    }
+
+    /// What an engine shows with `model` at a frame's receivers
+    /// ([`GridModel::ao`]: with a static base, its gains and offsets).
+    pub fn predict_ao(&self, model: &GridModel, frame: &FrameTruth) -> (Vec<f32>, Vec<f32>) {
+        let poses: Vec<PartPose> = model.poses(&frame.palette);
+        self.at_receivers(
+            frame,
+            |index, p, n, part| model.ao(&poses, p, n, Receiver::Vertex { index, part }),
+            |p| model.ao(&poses, p, Vec3::Y, Receiver::Ground),
+        )
     }
 }
 
@@ -458,28 +477,6 @@ pub fn mean_of(frames: &[Values]) -> Values {
 }
 
 impl GroundTruth {
-    /// What an engine shows with `model` at a frame's receivers
-    /// ([`GridModel::ao`]: with a static base, its gains and offsets).
-    pub fn predict_ao(&self, model: &GridModel, frame: &FrameTruth) -> (Vec<f32>, Vec<f32>) {
-        let poses: Vec<PartPose> = model.poses(&frame.palette);
-        let vertices = frame
-            .positions
-            .iter()
-            .zip(&frame.normals)
-            .enumerate()
-            .map(|(index, (&p, &n))| {
-                let part = self.owner[index];
-                model.ao(&poses, p, n, Receiver::Vertex { index, part })
-            })
-            .collect();
-        let ground = self
-            .ground
-            .iter()
-            .map(|&p| model.ao(&poses, p, Vec3::Y, Receiver::Ground))
-            .collect();
-        (vertices, ground)
-    }
-
     /// Nanoseconds per receiver of `model`'s lookup at every receiver of a
     /// frame, on one thread: the median over the frames.
     pub fn lookup_cost(&self, model: &GridModel) -> f64 {
