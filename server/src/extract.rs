@@ -47,7 +47,39 @@ impl<T: DeserializeOwned, S: Send + Sync> FromRequestParts<S> for ApiQuery<T> {
     async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
         match axum::extract::Query::<T>::from_request_parts(parts, state).await {
             Ok(axum::extract::Query(v)) => Ok(Self(v)),
-            Err(e) => Err(ApiError::bad("bad_query", e.body_text())),
+            Err(e) => Err(ApiError::bad("bad_query", query_problem(&e.body_text()))),
         }
+    }
+}
+
+/// A query string's deserialisation error in the API's words: a missing
+/// parameter is named as one, anything else keeps serde's reason.
+fn query_problem(text: &str) -> String {
+    let text = text
+        .strip_prefix("Failed to deserialize query string: ")
+        .unwrap_or(text);
+    match text
+        .strip_prefix("missing field `")
+        .and_then(|r| r.strip_suffix('`'))
+    {
+        Some(name) => format!("the query parameter `{name}` is required"),
+        None => format!("the query string is not valid: {text}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_query_parameter_is_named_and_other_errors_keep_their_reason() {
+        assert_eq!(
+            query_problem("Failed to deserialize query string: missing field `clip`"),
+            "the query parameter `clip` is required"
+        );
+        assert_eq!(
+            query_problem("Failed to deserialize query string: invalid digit found in string"),
+            "the query string is not valid: invalid digit found in string"
+        );
     }
 }

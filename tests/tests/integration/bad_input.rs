@@ -158,6 +158,17 @@ fn bad_requests_name_what_is_wrong() {
     }
     let (status, answer) = env.request("GET", "/v1/bakes/999", ADMIN, None).unwrap();
     assert_eq!((status, answer["code"].as_str()), (404, Some("not_found")));
+    // A missing query parameter is named as one.
+    let (status, answer) = env
+        .request("GET", "/v1/bakes/999/viewer/frames", ADMIN, None)
+        .unwrap();
+    assert_eq!((status, answer["code"].as_str()), (400, Some("bad_query")));
+    assert!(
+        answer
+            .to_string()
+            .contains("the query parameter `clip` is required"),
+        "{answer}"
+    );
     let (status, _) = env
         .request("POST", "/v1/bakes/999/explode", ADMIN, None)
         .unwrap();
