@@ -9,6 +9,7 @@
 //! runner never change when a method arrives.
 
 pub mod cubemap;
+pub mod fit;
 pub mod grid;
 pub mod vertex;
 

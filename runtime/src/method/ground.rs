@@ -1,5 +1,5 @@
-//! A texture of per-texel values on the ground plane and the least-squares
-//! gain that fits a model's change to the truth's: the static ground both
+//! A texture of per-texel values on the ground plane, with the gain of a
+//! model's change on it: the static ground both
 //! the grids' base ([`super::grid::base`]) and the cubemaps' ground
 //! ([`super::cubemap::model::CubemapModel::ground_ao`]) ride on.
 //!
@@ -185,29 +185,6 @@ fn bad(what: &str) -> AssetError {
     AssetError::Malformed(what.to_owned())
 }
 
-/// The least-squares gain of `truth`'s change on `grids`' change, each
-/// receiver's values centred on its own mean: Σ t̃·g̃ / Σ g̃², clamped to
-/// [0, 2]; 1 when the grids never change. `truth` and `grids` hold per
-/// frame every receiver's value; `receivers` picks the ones pooled.
-pub fn gain(truth: &[Vec<f32>], grids: &[Vec<f32>], receivers: &[usize]) -> f32 {
-    let frames = truth.len().max(1) as f64;
-    let (mut cross, mut square) = (0.0f64, 0.0f64);
-    for &r in receivers {
-        let t_mean: f64 = truth.iter().map(|f| f64::from(f[r])).sum::<f64>() / frames;
-        let g_mean: f64 = grids.iter().map(|f| f64::from(f[r])).sum::<f64>() / frames;
-        for (t, g) in truth.iter().zip(grids) {
-            let (dt, dg) = (f64::from(t[r]) - t_mean, f64::from(g[r]) - g_mean);
-            cross += dt * dg;
-            square += dg * dg;
-        }
-    }
-    if square <= 1e-12 {
-        1.0
-    } else {
-        (cross / square).clamp(0.0, 2.0) as f32
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -233,22 +210,5 @@ mod tests {
         assert_eq!(ground.offset(Vec3::new(1.5, 0.0, 0.0)), 0.0);
         let c = ground.square.texel_centres();
         assert_eq!(c[1], Vec3::new(0.5, 0.0, -0.5));
-    }
-
-    #[test]
-    fn the_gain_follows_the_truths_change_and_ignores_its_level() {
-        // Truth = 0.3 + 0.5·grids per receiver (levels differ): gain 0.5.
-        let grids = vec![vec![0.1, 0.5], vec![0.3, 0.2], vec![0.2, 0.9]];
-        let truth: Vec<Vec<f32>> = grids
-            .iter()
-            .map(|f| vec![0.3 + 0.5 * f[0], 0.7 + 0.5 * f[1]])
-            .collect();
-        assert!((gain(&truth, &grids, &[0, 1]) - 0.5).abs() < 1e-6);
-        // Grids that never change leave the gain at 1.
-        let flat = vec![vec![0.4, 0.4]; 3];
-        assert_eq!(gain(&truth, &flat, &[0, 1]), 1.0);
-        // A change against the truth's is clamped to 0.
-        let against: Vec<Vec<f32>> = grids.iter().map(|f| vec![-f[0], -f[1]]).collect();
-        assert_eq!(gain(&truth, &against, &[0, 1]), 0.0);
     }
 }

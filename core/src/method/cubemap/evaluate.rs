@@ -190,8 +190,7 @@ impl GroundTruth {
         let ground_y = setup.ground_y();
         let scale = s.radii * s.outer;
         // The spheroid's section at the ground's height.
-        let h = ((ground_y - s.centre.y) / scale.y).clamp(-1.0, 1.0);
-        let section = (1.0 - h * h).max(0.0).sqrt();
+        let (section_x, section_z) = setup.ground_section();
         let mut points = Vec::with_capacity(times.len());
         for _ in &times {
             let mut ps = Vec::with_capacity(o.eval_points + o.eval_ground);
@@ -212,9 +211,9 @@ impl GroundTruth {
                 );
                 if x * x + z * z <= 1.0 {
                     ps.push(Vec3::new(
-                        s.centre.x + scale.x * section * x,
+                        s.centre.x + section_x * x,
                         ground_y,
-                        s.centre.z + scale.z * section * z,
+                        s.centre.z + section_z * z,
                     ));
                 }
             }

@@ -22,7 +22,10 @@ use rayon::prelude::*;
 
 use super::{model::CubemapModel, setup::Setup};
 use crate::{
-    method::ground::{GroundBase, GroundSquare, gain},
+    method::{
+        fit as least_squares,
+        ground::{GroundBase, GroundSquare},
+    },
     trace::{KroonParams, Scene, SceneOptions, TraceError, kroon_occlusion, no_progress},
 };
 
@@ -33,10 +36,8 @@ pub const GROUND_TIMES: usize = 32;
 /// height, `resolution` texels a side.
 pub fn square(setup: &Setup<'_>, resolution: usize) -> GroundSquare {
     let s = &setup.spheroid;
-    let scale = s.radii * s.outer;
-    let h = ((setup.ground_y() - s.centre.y) / scale.y).clamp(-1.0, 1.0);
-    let section = (1.0 - h * h).max(0.0).sqrt();
-    let half = (scale.x.max(scale.z) * section).max(1e-6);
+    let (x, z) = setup.ground_section();
+    let half = x.max(z).max(1e-6);
     GroundSquare {
         min: [s.centre.x - half, s.centre.z - half],
         size: 2.0 * half,
@@ -75,24 +76,10 @@ pub fn fit(
         })
         .collect::<Result<_, TraceError>>()?;
     let (truth, cube): (Vec<Vec<f32>>, Vec<Vec<f32>>) = traced.into_iter().unzip();
-    let all: Vec<usize> = (0..texels.len()).collect();
-    let k = gain(&truth, &cube, &all);
-    let n = truth.len().max(1) as f64;
-    let mean =
-        |v: &[Vec<f32>], i: usize| (v.iter().map(|f| f64::from(f[i])).sum::<f64>() / n) as f32;
-    let half = |x: f32| half::f16::from_f32(x).to_f32();
-    let base = GroundBase {
-        square,
-        gain: k,
-        offsets: all
-            .iter()
-            .map(|&i| half(mean(&truth, i) - k * mean(&cube, i)))
-            .collect(),
-    };
     let still = GroundBase {
         square,
         gain: 0.0,
-        offsets: all.iter().map(|&i| half(mean(&truth, i))).collect(),
+        offsets: least_squares::offsets(&truth, &cube, |_| 0.0),
     };
-    Ok((base, still))
+    Ok((least_squares::ground(square, &truth, &cube), still))
 }

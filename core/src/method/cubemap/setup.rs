@@ -82,6 +82,17 @@ impl<'a> Setup<'a> {
         self.ground_y
     }
 
+    /// The half axes (x, z) of the ellipse where the ground plane cuts the
+    /// outer spheroid: the ground's footprint the evaluation samples and
+    /// the static ground covers.
+    pub fn ground_section(&self) -> (f32, f32) {
+        let s = &self.spheroid;
+        let scale = s.radii * s.outer;
+        let h = ((self.ground_y - s.centre.y) / scale.y).clamp(-1.0, 1.0);
+        let section = (1.0 - h * h).max(0.0).sqrt();
+        (scale.x * section, scale.z * section)
+    }
+
     /// The posed mesh's positions at time sample `m`.
     pub fn positions(&self, m: usize) -> Vec<Vec3> {
         positions_at(self.character, self.clip, self.times[m])

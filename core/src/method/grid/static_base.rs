@@ -4,14 +4,13 @@
 //! change over the same frames, one per part and one for the ground.
 
 use glam::{Mat4, Vec3};
-use half::f16;
 
 use super::{
-    base::{GroundBase, GroundSquare, StaticBase, gain},
+    base::{GroundSquare, StaticBase},
     evaluate::{Frame, Values},
     model::{GridModel, Terms},
 };
-use crate::{Character, Clip};
+use crate::{Character, Clip, method::fit};
 
 /// One training frame: where the receivers are and their traced truth.
 #[derive(Debug, Clone)]
@@ -133,37 +132,21 @@ pub fn fit(
         .unzip();
     let truth_v: Vec<Vec<f32>> = frames.iter().map(|f| f.vertices.clone()).collect();
     let truth_g: Vec<Vec<f32>> = frames.iter().map(|f| f.ground.clone()).collect();
-    let all_texels: Vec<usize> = (0..texels.len()).collect();
-    let ground_gain = gain(&truth_g, &grid_g, &all_texels);
+    let ground = fit::ground(square, &truth_g, &grid_g);
     let part_gains: Vec<f32> = (0..model.parts.len())
         .map(|k| {
             let mine: Vec<usize> = (0..owners.len())
                 .filter(|&i| owners[i] == Some(k))
                 .collect();
-            gain(&truth_v, &grid_v, &mine)
+            fit::gain(&truth_v, &grid_v, &mine)
         })
         .collect();
-    let n = frames.len().max(1) as f64;
-    let mean = |values: &[Vec<f32>], i: usize| -> f32 {
-        (values.iter().map(|f| f64::from(f[i])).sum::<f64>() / n) as f32
-    };
-    let half = |x: f32| f16::from_f32(x).to_f32();
-    let vertex_offsets = (0..owners.len())
-        .map(|i| {
-            let k = owners[i].map_or(ground_gain, |p| part_gains[p]);
-            half(mean(&truth_v, i) - k * mean(&grid_v, i))
-        })
-        .collect();
-    let ground_offsets = (0..texels.len())
-        .map(|i| half(mean(&truth_g, i) - ground_gain * mean(&grid_g, i)))
-        .collect();
+    let vertex_offsets = fit::offsets(&truth_v, &grid_v, |i| {
+        owners[i].map_or(ground.gain, |p| part_gains[p])
+    });
     StaticBase {
         vertex_offsets,
         part_gains,
-        ground: GroundBase {
-            square,
-            gain: ground_gain,
-            offsets: ground_offsets,
-        },
+        ground,
     }
 }

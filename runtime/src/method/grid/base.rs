@@ -26,7 +26,7 @@
 
 use glam::Vec3;
 
-pub use crate::method::ground::{GroundBase, GroundSquare, gain};
+pub use crate::method::ground::{GroundBase, GroundSquare};
 
 /// The static base of a grid asset.
 #[derive(Debug, Clone, PartialEq)]
