@@ -295,7 +295,8 @@ pub struct BakeView {
 pub struct PreviewItem {
     /// Output name, such as `still-0.png` or `animation.png`.
     pub name: String,
-    /// `still` (truth, model and error side by side) or `animation` (an
+    /// `still` (truth, model, screen-space AO and the model's error side
+    /// by side) or `animation` (an
     /// APNG of a whole clip, model beside truth).
     pub kind: String,
     /// The clip shown, if any.
@@ -312,6 +313,13 @@ pub struct PreviewItem {
     pub frame_ms: f64,
     /// Seconds spent ray tracing its ground truth.
     pub trace_s: f64,
+    /// A still's screen-space baseline (GTAO) beside the model: each
+    /// one's errors against per-pixel ray-traced AO on the character and
+    /// the ground, and each one's milliseconds per frame on the adapter
+    /// (core's `bake::screen_space::ScreenSpaceInfo`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "schema", schema(value_type = Option<Object>))]
+    pub screen_space: Option<serde_json::Value>,
     /// sha256 of the PNG: `GET /v1/previews/{digest}`.
     #[serde(default)]
     #[cfg_attr(feature = "schema", schema(value_type = String, pattern = "^[0-9a-f]{64}$"))]

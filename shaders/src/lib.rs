@@ -31,8 +31,8 @@ pub mod export;
 pub mod mirror;
 
 pub use mirror::{
-    BlockInfo, CubemapAoParams, GridAoParams, GridPartInfo, GridReceiver, PreviewUniforms,
-    VertexAoParams, VertexAoVsParams,
+    BlockInfo, CubemapAoParams, GridAoParams, GridPartInfo, GridReceiver, GtaoParams,
+    PreviewUniforms, VertexAoParams, VertexAoVsParams,
 };
 
 /// Half-float decoding shared by the pipelines.
@@ -109,6 +109,9 @@ pub const GRID_AO_VS: &str = compose!(
 /// `preview.wgsl`.
 pub const PREVIEW: &str = compose!("common/shade.wgsl", "preview.wgsl");
 
+/// The screen-space baseline (GTAO) over a G-buffer: `gtao.wgsl`.
+pub const GTAO: &str = compose!("gtao.wgsl");
+
 /// The dashboard viewer's shader for a vertex-method asset (WebGL2 through
 /// naga's GLSL ES 3.00, [`export::webgl_viewer`]): `common/shade.wgsl`,
 /// `viewer.wgsl`, the vertex-stage evaluator and `viewer_vertex.wgsl`.
@@ -147,7 +150,7 @@ pub const VIEWER_CUBEMAP: &str = compose!(
 );
 
 /// Every composed pipeline source, by file name.
-pub fn sources() -> [(&'static str, &'static str); 10] {
+pub fn sources() -> [(&'static str, &'static str); 11] {
     [
         ("vertex_ao.wgsl", VERTEX_AO),
         ("vertex_ao_vs.wgsl", VERTEX_AO_VS),
@@ -156,6 +159,7 @@ pub fn sources() -> [(&'static str, &'static str); 10] {
         ("grid_ao.wgsl", GRID_AO),
         ("grid_ao_vs.wgsl", GRID_AO_VS),
         ("preview.wgsl", PREVIEW),
+        ("gtao.wgsl", GTAO),
         ("viewer_vertex.wgsl", VIEWER_VERTEX),
         ("viewer_grid.wgsl", VIEWER_GRID),
         ("viewer_cubemap.wgsl", VIEWER_CUBEMAP),
@@ -261,6 +265,7 @@ mod tests {
             wgsl_size(CUBEMAP_AO, "Params") as usize,
             size_of::<CubemapAoParams>()
         );
+        assert_eq!(wgsl_size(GTAO, "Params") as usize, size_of::<GtaoParams>());
         for (name, size) in [
             ("Params", size_of::<GridAoParams>()),
             ("PartInfo", size_of::<GridPartInfo>()),
@@ -279,6 +284,9 @@ mod tests {
             .iter()
             .map(|e| e.name.as_str())
             .collect();
-        assert_eq!(names, ["vs_main", "fs_main"]);
+        assert_eq!(
+            names,
+            ["vs_main", "fs_main", "fs_gbuffer", "fs_screen_space"]
+        );
     }
 }

@@ -181,6 +181,34 @@ pub struct PreviewUniforms {
     pub _pad: [u32; 2],
 }
 
+/// `Params` of gtao.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GtaoParams {
+    /// View space (x right, y up, looking down −z) from world space,
+    /// column-major.
+    pub view_from_world: [[f32; 4]; 4],
+    /// xyz: the eye (world space).
+    pub eye: [f32; 4],
+    /// Target width in pixels.
+    pub width: u32,
+    /// Target height in pixels.
+    pub height: u32,
+    /// Screen directions per pixel (each a slice through both sides).
+    pub slices: u32,
+    /// Samples per side of a slice.
+    pub steps: u32,
+    /// Occluders farther than this from the pixel count not (world units).
+    pub radius: f32,
+    /// Pixels per world unit at view depth 1: `(height / 2) / tan(fov_y / 2)`.
+    pub focal: f32,
+    /// The fraction of the radius over which an occluder fades out.
+    pub falloff: f32,
+    /// Padding.
+    pub _pad: u32,
+}
+
+const _: () = assert!(size_of::<GtaoParams>() == 112);
 const _: () = assert!(size_of::<VertexAoParams>() == 16);
 const _: () = assert!(size_of::<BlockInfo>() == 32);
 const _: () = assert!(size_of::<CubemapAoParams>() == 64);

@@ -8,6 +8,11 @@
 //      aobake_core::bake::preview::HeatMap (too dark red, too bright blue),
 //      lightly shaded so the shape stays readable.
 //
+// Two more fragment stages serve the screen-space baseline (gtao.wgsl):
+// `fs_gbuffer` writes the G-buffer it reads (single-sampled), and
+// `fs_screen_space` shades a panel with its per-pixel occlusion (drawn
+// with `panel` 1, the AO taken from `screen` instead of `model`).
+//
 // Lighting is linear; the target is an sRGB texture, so the hardware
 // encodes on store and resolves multisamples in linear space.
 // Mirrored field for field by aobake_shaders::PreviewUniforms.
@@ -31,4 +36,35 @@ fn vs_main(v: SurfaceIn) -> Shaded {
 @fragment
 fn fs_main(in: Shaded) -> @location(0) vec4<f32> {
     return vec4<f32>(shade(in.world, in.normal, in.truth, in.model), 1.0);
+}
+
+// The G-buffer of a frame, as the bits of f32 in integer targets (which
+// every adapter can render to, unlike float ones): world position and
+// surface (1 character, 2 ground); the interpolated normal, and the
+// interpolated ray-traced and model AO as two f16.
+struct GBuffer {
+    @location(0) position: vec4<u32>,
+    @location(1) normal: vec4<u32>,
+}
+
+@fragment
+fn fs_gbuffer(in: Shaded) -> GBuffer {
+    var out: GBuffer;
+    out.position = vec4<u32>(bitcast<vec3<u32>>(in.world), u.surface + 1u);
+    out.normal = vec4<u32>(bitcast<vec3<u32>>(in.normal), pack2x16float(vec2<f32>(in.truth, in.model)));
+    return out;
+}
+
+// The screen-space occlusion per pixel (gtao.wgsl's output) and the
+// target's width.
+@group(0) @binding(1) var<storage, read> screen: array<f32>;
+@group(0) @binding(2) var<uniform> screen_width: vec4<u32>;
+
+@fragment
+fn fs_screen_space(in: Shaded) -> @location(0) vec4<f32> {
+    let pixel = vec2<u32>(in.clip.xy);
+    // Negative where the G-buffer's one sample missed the surface (an
+    // edge sample of the multisampled panel): open.
+    let ao = max(screen[pixel.y * screen_width.x + pixel.x], 0.0);
+    return vec4<f32>(shade(in.world, in.normal, in.truth, ao), 1.0);
 }

@@ -14,7 +14,8 @@
 //!    `assemble`), [`cubemap`] (`face`, `assemble`, `evaluate`), [`grid`]
 //!    (`slab`, `assemble`, `evaluate`); `preview-truth` and `preview`
 //!    ([`preview`]), the same for all (in [`family`]), the second of
-//!    which also needs a [`Renderer`]; [`report`] holds what the
+//!    which also needs a [`Renderer`] and judges the screen-space
+//!    baseline beside the model ([`screen_space`]); [`report`] holds what the
 //!    reports share. [`family`], above them all, is the one place per
 //!    concern that hands a bake to its family.
 //! 6. [`run_graph`] ([`runner`]): the whole graph in this process.
@@ -35,6 +36,7 @@ pub mod plan;
 pub mod preview;
 pub mod report;
 pub mod runner;
+pub mod screen_space;
 pub mod vertex;
 pub mod viewer;
 

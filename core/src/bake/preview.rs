@@ -5,9 +5,13 @@
 //! on the GPU, belong to a [`Renderer`], which the worker implements with
 //! wgpu (core knows no GPU, DESIGN §2).
 //!
-//! * A **still** is one clip time as a row of three panels: the ray-traced
-//!   ground truth, the baked model, and the error (model − truth: too dark
-//!   in red, too bright in blue, as Kroon shows it) with its legend.
+//! * A **still** is one clip time as a row of four panels: the ray-traced
+//!   ground truth, the baked model, the screen-space baseline (GTAO, what
+//!   an engine computes without a bake; [`super::screen_space`]), and the
+//!   model's error (model − truth: too dark in red, too bright in blue, as
+//!   Kroon shows it) with its legend. Its [`PreviewInfo`] carries the
+//!   baseline's and the model's errors against per-pixel ray-traced AO,
+//!   and what each costs per frame on the adapter.
 //! * An **animation** is an APNG of a whole clip, the model beside the
 //!   ground truth.
 //!
@@ -32,7 +36,10 @@ use crate::{
     },
 };
 
-use super::JobError;
+use super::{
+    JobError,
+    screen_space::{Gtao, ScreenFrame, ScreenSpaceInfo},
+};
 
 /// Side of a still's panels in pixels.
 pub const STILL_PANEL: u32 = 360;
@@ -117,6 +124,9 @@ pub enum Panel {
     Model,
     /// The model's AO minus the ray-traced AO through [`HeatMap`].
     Error,
+    /// Shaded with screen-space AO (GTAO over the frame's G-buffer, with
+    /// the scene's [`Gtao`] settings).
+    ScreenSpace,
 }
 
 /// The camera and the ground of a preview, the same for every frame of a
@@ -183,9 +193,13 @@ impl Camera {
     /// Clip space (wgpu's, which is Direct3D's: y up, depth 0..1) from
     /// world space.
     pub fn clip_from_world(&self, aspect: f32) -> Mat4 {
-        use glam::camera::rh::{proj::directx, view};
-        directx::perspective(self.fov_y, aspect, self.near, self.far)
-            * view::look_at_mat4(self.eye, self.target, Vec3::Y)
+        use glam::camera::rh::proj::directx;
+        directx::perspective(self.fov_y, aspect, self.near, self.far) * self.view_from_world()
+    }
+
+    /// View space (x right, y up, looking down −z) from world space.
+    pub fn view_from_world(&self) -> Mat4 {
+        glam::camera::rh::view::look_at_mat4(self.eye, self.target, Vec3::Y)
     }
 }
 
@@ -250,6 +264,8 @@ pub struct RenderScene<'a> {
     pub size: (u32, u32),
     /// The error colours.
     pub heat_map: HeatMap,
+    /// The screen-space baseline's settings.
+    pub gtao: Gtao,
 }
 
 /// One posed frame.
@@ -286,6 +302,15 @@ pub trait Renderer {
         frames: &[RenderFrame],
         panels: &[Panel],
     ) -> Result<Vec<Image>, String>;
+
+    /// The screen-space baseline of every frame: its G-buffer and GTAO's
+    /// occlusion per pixel (`scene.gtao`), read back, with what the GTAO
+    /// pass and the model's evaluation each took.
+    fn screen_space(
+        &mut self,
+        scene: &RenderScene<'_>,
+        frames: &[RenderFrame],
+    ) -> Result<Vec<ScreenFrame>, String>;
 }
 
 /// How a preview was made, as listed in `previews.json`.
@@ -310,6 +335,10 @@ pub struct PreviewInfo {
     pub frame_ms: f64,
     /// Seconds spent ray tracing its ground truth (character and ground).
     pub trace_s: f64,
+    /// A still's screen-space baseline beside the model, against
+    /// per-pixel ray-traced AO.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screen_space: Option<ScreenSpaceInfo>,
 }
 
 /// A rendered preview.
@@ -420,14 +449,16 @@ impl Subject<'_> {
     ) -> Result<Vec<Preview>, JobError> {
         let times = still_times(clip, times);
         let prepared = self.prepare(clip, &times, truth)?;
-        let panels = [Panel::Truth, Panel::Model, Panel::Error];
+        let panels = [Panel::Truth, Panel::Model, Panel::ScreenSpace, Panel::Error];
         let (images, frame_ms) = self.render(&prepared, STILL_PANEL, &panels, renderer)?;
+        let screen = self.screen_space(&prepared, STILL_PANEL, renderer)?;
         let method = self.model.method().name();
         times
             .iter()
             .zip(images.chunks_exact(panels.len()))
+            .zip(screen)
             .enumerate()
-            .map(|(i, (&t, row))| {
+            .map(|(i, ((&t, row), screen))| {
                 let when = match clip {
                     Some(c) => format!("{} at {t:.2} s", c.name),
                     None => "rest pose".to_owned(),
@@ -435,6 +466,7 @@ impl Subject<'_> {
                 let titles = [
                     format!("ray-traced: {when}"),
                     format!("baked: {method}"),
+                    "screen-space: GTAO".to_owned(),
                     "error: baked − ray-traced".to_owned(),
                 ];
                 let image = compose_row(row, &titles, Some(self.model.note()))?;
@@ -449,6 +481,7 @@ impl Subject<'_> {
                         adapter: renderer.adapter(),
                         frame_ms,
                         trace_s: prepared.trace_s[i],
+                        screen_space: Some(screen),
                     },
                     png: encode_image(&image)?,
                 })
@@ -481,6 +514,20 @@ impl Subject<'_> {
         })
     }
 
+    /// What a render call of prepared frames in square panels of `side`
+    /// pixels draws.
+    fn scene<'s>(&'s self, prepared: &'s Prepared, side: u32) -> RenderScene<'s> {
+        RenderScene {
+            triangles: &self.character.triangles,
+            model: self.model,
+            camera: prepared.camera,
+            ground: &prepared.ground,
+            size: (side, side),
+            heat_map: HEAT_MAP,
+            gtao: Gtao::for_camera(&prepared.camera, self.surface.max_distance),
+        }
+    }
+
     /// Renders prepared frames in square panels of `side` pixels; the
     /// images and the milliseconds per panel.
     fn render(
@@ -490,15 +537,59 @@ impl Subject<'_> {
         panels: &[Panel],
         renderer: &mut dyn Renderer,
     ) -> Result<(Vec<Image>, f64), JobError> {
-        let scene = RenderScene {
-            triangles: &self.character.triangles,
-            model: self.model,
-            camera: prepared.camera,
-            ground: &prepared.ground,
-            size: (side, side),
-            heat_map: HEAT_MAP,
-        };
-        render(renderer, &scene, &prepared.frames, panels)
+        render(
+            renderer,
+            &self.scene(prepared, side),
+            &prepared.frames,
+            panels,
+        )
+    }
+
+    /// The screen-space baseline of prepared frames in square panels of
+    /// `side` pixels, beside the model, against per-pixel ray-traced AO
+    /// (see [`ScreenSpaceInfo::measure`]).
+    fn screen_space(
+        &self,
+        prepared: &Prepared,
+        side: u32,
+        renderer: &mut dyn Renderer,
+    ) -> Result<Vec<ScreenSpaceInfo>, JobError> {
+        let scene = self.scene(prepared, side);
+        let screens = renderer
+            .screen_space(&scene, &prepared.frames)
+            .map_err(|e| JobError::Failed(format!("the preview renderer failed: {e}")))?;
+        let pixels = (side * side) as usize;
+        if screens.len() != prepared.frames.len()
+            || screens.iter().any(|s| {
+                (s.width, s.height) != (side, side)
+                    || [s.positions.len(), s.surfaces.len(), s.normals.len()]
+                        .into_iter()
+                        .chain([s.truth.len(), s.model.len(), s.gtao.len()])
+                        .any(|n| n != pixels)
+            })
+        {
+            return Err(JobError::Failed(format!(
+                "the renderer returned {} screen-space frames, not {} of {side}×{side}",
+                screens.len(),
+                prepared.frames.len()
+            )));
+        }
+        screens
+            .iter()
+            .zip(&prepared.frames)
+            .map(|(screen, frame)| {
+                ScreenSpaceInfo::measure(
+                    screen,
+                    frame,
+                    &self.character.triangles,
+                    &self.model,
+                    &prepared.camera,
+                    scene.gtao,
+                    &self.surface,
+                )
+                .map_err(|e| JobError::Invalid(e.to_string()))
+            })
+            .collect()
     }
 
     /// The whole clip as an APNG, the model beside the ground truth,
@@ -541,6 +632,7 @@ impl Subject<'_> {
                 adapter: renderer.adapter(),
                 frame_ms,
                 trace_s,
+                screen_space: None,
             },
             png,
         })

@@ -30,8 +30,10 @@ pub(super) struct Args {
     /// The clip to show (see `aobake inspect`).
     #[arg(long)]
     clip: String,
-    /// A still at this time in the clip, in seconds: ground truth, model
-    /// and error side by side.
+    /// A still at this time in the clip, in seconds: ground truth, model,
+    /// screen-space AO (GTAO, what an engine computes without a bake) and
+    /// the model's error side by side; the model and GTAO are measured
+    /// against per-pixel ray-traced AO and printed.
     #[arg(long, allow_negative_numbers = true)]
     time: Option<f32>,
     /// An animated PNG of the whole clip instead, model beside ground
@@ -112,6 +114,12 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         renderer.samples(),
         i.trace_s
     );
+    if let Some(screen) = &i.screen_space {
+        eprint!(
+            "the screen-space baseline (GTAO, panel 3) beside the model:\n{}",
+            screen.summary()
+        );
+    }
     Ok(())
 }
 
@@ -133,7 +141,7 @@ pub(super) struct BenchArgs {
     runs: usize,
 }
 
-/// Milliseconds per rendered panel of a still (3 panels) and of an
+/// Milliseconds per rendered panel of a still (4 panels) and of an
 /// animation, on every adapter the machine has among Vulkan and GL, runs
 /// interleaved so that drift in machine speed hits all alike.
 pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
@@ -160,6 +168,9 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let mut renderers = renderers;
     let mut stills = vec![Vec::new(); renderers.len()];
     let mut frames = vec![Vec::new(); renderers.len()];
+    let mut gtao = vec![Vec::new(); renderers.len()];
+    let mut model = vec![Vec::new(); renderers.len()];
+    let mut comparison = None;
     let still_time = 0.5 * clip.duration;
     for run in 0..args.runs.max(1) {
         for (i, r) in renderers.iter_mut().enumerate() {
@@ -171,6 +182,13 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             if run > 0 || args.runs <= 1 {
                 stills[i].push(s.info.frame_ms);
                 frames[i].push(a.info.frame_ms);
+                if let Some(screen) = &s.info.screen_space {
+                    gtao[i].push(screen.gtao_ms);
+                    model[i].push(screen.model_ms);
+                }
+            }
+            if comparison.is_none() {
+                comparison = s.info.screen_space;
             }
         }
     }
@@ -183,15 +201,25 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         aobake_core::bake::preview::animation_times(clip).len(),
         args.runs.saturating_sub(1).max(1)
     );
-    println!("| adapter | MSAA | still panel 360² (ms) | animation panel 240² (ms) |");
-    println!("|---|---|---|---|");
+    println!(
+        "| adapter | MSAA | still panel 360² (ms) | animation panel 240² (ms) | GTAO pass 360² (ms) | model evaluation (ms) |"
+    );
+    println!("|---|---|---|---|---|---|");
     for (i, r) in renderers.iter().enumerate() {
         println!(
-            "| {} | {}× | {:.1} | {:.1} |",
+            "| {} | {}× | {:.1} | {:.1} | {:.2} | {:.2} |",
             adapters[i].label(),
             r.samples(),
             super::common::median(&stills[i]),
-            super::common::median(&frames[i])
+            super::common::median(&frames[i]),
+            super::common::median(&gtao[i]),
+            super::common::median(&model[i])
+        );
+    }
+    if let Some(screen) = comparison {
+        println!(
+            "the still at {still_time:.2} s, against per-pixel ray-traced AO:\n{}",
+            screen.summary()
         );
     }
     Ok(())

@@ -706,15 +706,16 @@ async fn viewer_matches_aobake_preview(
         time,
     );
     let panel = aobake_core::bake::preview::STILL_PANEL;
-    // Panels sit under a 30-pixel title row: truth, model, error.
+    // Panels sit under a 30-pixel title row: truth, model, screen-space
+    // AO, error.
     let preview_panel = |k: u32| still.crop(k * panel, 30, panel);
     let dir = artifacts();
     let mut model = None;
-    for (k, mode) in ["truth", "model", "error"].into_iter().enumerate() {
+    for (k, mode) in [(0, "truth"), (1, "model"), (3, "error")] {
         viewer_show(c, clip, time, mode).await;
         let mine = viewer_pixels(c).await;
         mine.write_png(&dir.join(format!("viewer-{name}-{mode}.png")));
-        let theirs = preview_panel(k as u32);
+        let theirs = preview_panel(k);
         theirs.write_png(&dir.join(format!("viewer-{name}-preview-{mode}.png")));
         let (share, far, worst) = mine.differ(&theirs);
         eprintln!(

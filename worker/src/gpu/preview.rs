@@ -6,10 +6,11 @@
 //! [`VertexAo`]; a cubemap is looked up on the ground's vertices by
 //! [`CubemapAo`] at the frame's phase.
 
+use aobake_core::bake::screen_space::{ScreenFrame, Surface};
 use aobake_core::bake::{Camera, Panel, PreviewModel, RenderFrame, RenderScene, Renderer};
 use aobake_core::image::{HeatMap, Image};
 use aobake_core::method::grid::{base::Receiver, model::GridModel};
-use aobake_shaders::{GridReceiver, PreviewUniforms};
+use aobake_shaders::{GridReceiver, GtaoParams, PreviewUniforms};
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;
 
@@ -33,16 +34,37 @@ mod look {
     pub(super) const BACKGROUND: [f32; 3] = [0.32, 0.36, 0.42];
 }
 
-/// The preview pipeline on one [`Gpu`].
+/// The preview pipelines on one [`Gpu`].
 #[derive(Debug)]
 pub struct PreviewRenderer<'g> {
     gpu: &'g Gpu,
+    /// The panels (`fs_main`), multisampled.
     pipeline: wgpu::RenderPipeline,
+    /// The screen-space baseline's G-buffer (`fs_gbuffer`), one sample.
+    gbuffer: wgpu::RenderPipeline,
+    /// A panel shaded with the baseline's occlusion (`fs_screen_space`),
+    /// multisampled.
+    screen: wgpu::RenderPipeline,
+    /// GTAO over the G-buffer (gtao.wgsl).
+    gtao: wgpu::ComputePipeline,
+    /// Binding 0 (the uniforms) of `pipeline` and `gbuffer`.
+    surface_layout: wgpu::BindGroupLayout,
+    /// Bindings 0–2 of `screen`.
+    screen_layout: wgpu::BindGroupLayout,
     samples: u32,
 }
 
+/// The G-buffer's targets, f32 bits in integer texels (renderable on
+/// every adapter, unlike float formats on GL): world position and surface;
+/// normal, and the interpolated truth and model AO as two f16 (32 bytes a
+/// pixel, WebGPU's limit).
+const GBUFFER: [wgpu::TextureFormat; 2] = [
+    wgpu::TextureFormat::Rgba32Uint,
+    wgpu::TextureFormat::Rgba32Uint,
+];
+
 impl<'g> PreviewRenderer<'g> {
-    /// Builds the pipeline: 4× multisampling where the adapter has it for
+    /// Builds the pipelines: 4× multisampling where the adapter has it for
     /// both the colour and the depth format, else none.
     pub fn new(gpu: &'g Gpu) -> Result<Self, GpuError> {
         let supports = |f: wgpu::TextureFormat| {
@@ -86,39 +108,118 @@ impl<'g> PreviewRenderer<'g> {
                 })
             })
             .collect();
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("preview"),
+        use wgpu::ShaderStages as S;
+        let entry = |binding, visibility, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility,
+            ty,
+            count: None,
+        };
+        let uniform = wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        let surface_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("preview surface"),
+            entries: &[entry(0, S::VERTEX_FRAGMENT, uniform)],
+        });
+        let screen_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("preview screen-space"),
+            entries: &[
+                entry(0, S::VERTEX_FRAGMENT, uniform),
+                entry(
+                    1,
+                    S::FRAGMENT,
+                    wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                ),
+                entry(2, S::FRAGMENT, uniform),
+            ],
+        });
+        let layout = |group: &wgpu::BindGroupLayout| {
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("preview"),
+                bind_group_layouts: &[Some(group)],
+                immediate_size: 0,
+            })
+        };
+        let (surface_pipeline_layout, screen_pipeline_layout) =
+            (layout(&surface_layout), layout(&screen_layout));
+        let gbuffer_targets: Vec<Option<wgpu::ColorTargetState>> =
+            GBUFFER.iter().map(|&f| Some(f.into())).collect();
+        let color_targets = [Some(COLOR.into())];
+        let raster = |label, layout, entry_point, samples, targets| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &buffers,
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    front_face: wgpu::FrontFace::Ccw,
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: wgpu::MultisampleState {
+                    count: samples,
+                    ..Default::default()
+                },
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(entry_point),
+                    compilation_options: Default::default(),
+                    targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let pipeline = raster(
+            "preview",
+            &surface_pipeline_layout,
+            "fs_main",
+            samples,
+            &color_targets,
+        );
+        let gbuffer = raster(
+            "preview g-buffer",
+            &surface_pipeline_layout,
+            "fs_gbuffer",
+            1,
+            &gbuffer_targets,
+        );
+        let screen = raster(
+            "preview screen-space",
+            &screen_pipeline_layout,
+            "fs_screen_space",
+            samples,
+            &color_targets,
+        );
+        let gtao_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("gtao.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(aobake_shaders::GTAO.into()),
+        });
+        let gtao = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("gtao"),
             layout: None,
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &buffers,
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                front_face: wgpu::FrontFace::Ccw,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: wgpu::MultisampleState {
-                count: samples,
-                ..Default::default()
-            },
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(COLOR.into())],
-            }),
-            multiview_mask: None,
+            module: &gtao_module,
+            entry_point: Some("cs_main"),
+            compilation_options: Default::default(),
             cache: None,
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
@@ -127,6 +228,11 @@ impl<'g> PreviewRenderer<'g> {
         Ok(Self {
             gpu,
             pipeline,
+            gbuffer,
+            screen,
+            gtao,
+            surface_layout,
+            screen_layout,
             samples,
         })
     }
@@ -176,7 +282,8 @@ pub fn uniforms(
         background: v4(look::BACKGROUND, 1.0),
         panel: match panel {
             Panel::Truth => 0,
-            Panel::Model => 1,
+            // The screen-space panel shades the model's slot with GTAO.
+            Panel::Model | Panel::ScreenSpace => 1,
             Panel::Error => 2,
         },
         surface: u32::from(ground),
@@ -227,22 +334,58 @@ fn init(
     })
 }
 
-impl PreviewRenderer<'_> {
-    fn render_frames(
+/// Everything one render call draws with: the model's evaluator, both
+/// surfaces' buffers and the grids' receivers, made once and rewritten per
+/// frame.
+struct Stage<'s> {
+    evaluator: Evaluator<'s>,
+    vertices: usize,
+    character: Mesh,
+    ground: Mesh,
+    ground_positions: wgpu::Buffer,
+    ground_count: usize,
+    /// The grids' receivers: the character's (rewritten every frame) and
+    /// the ground's (fixed).
+    receivers: Option<(wgpu::Buffer, wgpu::Buffer)>,
+}
+
+/// A single-sampled texture, a view of it and its format.
+struct Target {
+    texture: wgpu::Texture,
+    view: wgpu::TextureView,
+}
+
+/// The screen-space baseline's resources for one target size: the
+/// G-buffer, its depth, GTAO's output and the bind group that reads them.
+struct ScreenPass {
+    targets: Vec<Target>,
+    depth: wgpu::TextureView,
+    occlusion: wgpu::Buffer,
+    gtao_group: wgpu::BindGroup,
+    groups: [u32; 2],
+    /// The `fs_screen_space` bind groups, character then ground.
+    shade_groups: (wgpu::BindGroup, wgpu::BindGroup),
+}
+
+impl<'g> PreviewRenderer<'g> {
+    /// Checks the frames against the model and builds the [`Stage`].
+    fn stage<'s>(
         &self,
-        scene: &RenderScene<'_>,
+        scene: &RenderScene<'s>,
         frames: &[RenderFrame],
-        panels: &[Panel],
-    ) -> Result<Vec<Image>, GpuError> {
+    ) -> Result<Stage<'s>, GpuError>
+    where
+        'g: 's,
+    {
         let gpu = self.gpu;
         let device = &gpu.device;
-        let (width, height) = scene.size;
         let vertices = match scene.model {
             PreviewModel::Vertex(m) => m.vertices(),
             PreviewModel::Cubemap(..) | PreviewModel::Grid(..) => {
                 frames.first().map_or(0, |f| f.positions.len())
             }
         };
+        let g = scene.ground;
         for f in frames {
             if f.positions.len() != vertices
                 || f.normals.len() != vertices
@@ -253,8 +396,14 @@ impl PreviewRenderer<'_> {
                     f.positions.len()
                 )));
             }
+            if f.ground_ao.len() != g.positions.len() {
+                return Err(GpuError::TooLarge(format!(
+                    "{} ground values for {} ground vertices",
+                    f.ground_ao.len(),
+                    g.positions.len()
+                )));
+            }
         }
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let evaluator = match scene.model {
             PreviewModel::Vertex(m) => Evaluator::Vertex(VertexAo::new(gpu, m)?),
             PreviewModel::Cubemap(m, _) => Evaluator::Cubemap(CubemapAo::new(gpu, m)?),
@@ -308,7 +457,6 @@ impl PreviewRenderer<'_> {
         // A vertex method's ground shows the ray-traced occlusion in both
         // AO slots (no vertex method bakes it); a cubemap's and the grids'
         // are looked up into their own buffer.
-        let g = scene.ground;
         let ground_n = g.positions.len().max(1) as u64;
         let ground_ao = buffer("ground ao", 4 * ground_n, dynamic);
         let ground_model = if cubemap || grid {
@@ -316,8 +464,6 @@ impl PreviewRenderer<'_> {
         } else {
             ground_ao.clone()
         };
-        // The grids' receivers: the character's (rewritten every frame)
-        // and the ground's (fixed).
         let receivers = match &evaluator {
             Evaluator::Grid(_, model, _) => Some(model),
             _ => None,
@@ -357,8 +503,8 @@ impl PreviewRenderer<'_> {
                 bytemuck::cast_slice(&vec![Vec3::Y; g.positions.len()]),
                 U::VERTEX,
             ),
-            truth: ground_ao.clone(),
-            model: ground_model.clone(),
+            truth: ground_ao,
+            model: ground_model,
             indices: init(
                 device,
                 "ground indices",
@@ -367,27 +513,311 @@ impl PreviewRenderer<'_> {
             ),
             index_count: ground_indices.len() as u32,
         };
-        let layout = self.pipeline.get_bind_group_layout(0);
-        let bind = |panel: Panel, on_ground: bool| {
+        Ok(Stage {
+            evaluator,
+            vertices,
+            character,
+            ground,
+            ground_positions,
+            ground_count: g.positions.len(),
+            receivers,
+        })
+    }
+
+    /// Uploads a frame and records the model's evaluation.
+    fn evaluate(
+        &self,
+        stage: &Stage<'_>,
+        frame: &RenderFrame,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<(), GpuError> {
+        let queue = &self.gpu.queue;
+        let c = &stage.character;
+        queue.write_buffer(&c.positions, 0, bytemuck::cast_slice(&frame.positions));
+        queue.write_buffer(&c.normals, 0, bytemuck::cast_slice(&frame.normals));
+        queue.write_buffer(&c.truth, 0, bytemuck::cast_slice(&frame.truth));
+        queue.write_buffer(
+            &stage.ground.truth,
+            0,
+            bytemuck::cast_slice(&frame.ground_ao),
+        );
+        match &stage.evaluator {
+            Evaluator::Vertex(e) => e.record(encoder, &frame.weights, &c.model),
+            Evaluator::Cubemap(e) => e.record(
+                encoder,
+                &stage.ground_positions,
+                stage.ground_count as u32,
+                frame.phase,
+                true,
+                &stage.ground.model,
+            ),
+            Evaluator::Grid(e, model, owners) => {
+                let (on_character, on_ground) = stage
+                    .receivers
+                    .as_ref()
+                    .expect("grid receivers are made for grids");
+                let mine: Vec<GridReceiver> = frame
+                    .positions
+                    .iter()
+                    .zip(&frame.normals)
+                    .zip(owners.iter())
+                    .enumerate()
+                    .map(|(i, ((&p, n), &o))| {
+                        let offset = model.offset(Receiver::vertex(i, o), p);
+                        GridReceiver::new(p.to_array(), n.to_array(), o, offset)
+                    })
+                    .collect();
+                queue.write_buffer(on_character, 0, bytemuck::cast_slice(&mine));
+                e.record(
+                    encoder,
+                    &frame.weights,
+                    on_character,
+                    stage.vertices as u32,
+                    &c.model,
+                )?;
+                e.record(
+                    encoder,
+                    &frame.weights,
+                    on_ground,
+                    stage.ground_count as u32,
+                    &stage.ground.model,
+                )
+            }
+        }
+    }
+
+    /// The bind group of one surface of one panel.
+    fn surface_group(
+        &self,
+        scene: &RenderScene<'_>,
+        panel: Panel,
+        ground: bool,
+    ) -> wgpu::BindGroup {
+        let device = &self.gpu.device;
+        let u = init(
+            device,
+            "uniforms",
+            bytemuck::bytes_of(&Self::uniforms(scene, panel, ground)),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("preview"),
+            layout: &self.surface_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: u.as_entire_binding(),
+            }],
+        })
+    }
+
+    /// The screen-space pass's resources for `scene`'s size and camera.
+    fn screen_pass(&self, scene: &RenderScene<'_>) -> ScreenPass {
+        let device = &self.gpu.device;
+        let (width, height) = scene.size;
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        use wgpu::TextureUsages as T;
+        let texture = |label, format, usage| {
+            let texture = device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            });
+            let view = texture.create_view(&Default::default());
+            Target { texture, view }
+        };
+        let targets: Vec<Target> = GBUFFER
+            .iter()
+            .zip(["g-buffer position", "g-buffer normal"])
+            .map(|(&f, label)| {
+                texture(
+                    label,
+                    f,
+                    T::RENDER_ATTACHMENT | T::TEXTURE_BINDING | T::COPY_SRC,
+                )
+            })
+            .collect();
+        let depth = texture("g-buffer depth", DEPTH, T::RENDER_ATTACHMENT).view;
+        let pixels = u64::from(width) * u64::from(height);
+        use wgpu::BufferUsages as U;
+        let occlusion = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("gtao occlusion"),
+            size: 4 * pixels.max(1),
+            usage: U::STORAGE | U::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let c = &scene.camera;
+        let g = &scene.gtao;
+        let view = c.view_from_world();
+        let params = GtaoParams {
+            view_from_world: view.to_cols_array_2d(),
+            eye: c.eye.extend(1.0).to_array(),
+            width,
+            height,
+            slices: g.slices,
+            steps: g.steps,
+            radius: g.radius,
+            focal: 0.5 * height as f32 / (0.5 * c.fov_y).tan(),
+            falloff: g.falloff,
+            _pad: 0,
+        };
+        let params = init(
+            device,
+            "gtao params",
+            bytemuck::bytes_of(&params),
+            U::UNIFORM,
+        );
+        let gtao_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("gtao"),
+            layout: &self.gtao.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&targets[0].view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&targets[1].view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: occlusion.as_entire_binding(),
+                },
+            ],
+        });
+        let width_uniform = init(
+            device,
+            "screen width",
+            bytemuck::bytes_of(&[width, height, 0, 0]),
+            U::UNIFORM,
+        );
+        let shade = |ground: bool| {
             let u = init(
                 device,
                 "uniforms",
-                bytemuck::bytes_of(&Self::uniforms(scene, panel, on_ground)),
+                bytemuck::bytes_of(&Self::uniforms(scene, Panel::ScreenSpace, ground)),
                 U::UNIFORM,
             );
             device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("preview"),
-                layout: &layout,
-                entries: &[wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: u.as_entire_binding(),
-                }],
+                label: Some("preview screen-space"),
+                layout: &self.screen_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: u.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: occlusion.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: width_uniform.as_entire_binding(),
+                    },
+                ],
             })
         };
+        ScreenPass {
+            targets,
+            depth,
+            occlusion: occlusion.clone(),
+            gtao_group,
+            groups: [width.div_ceil(8), height.div_ceil(8)],
+            shade_groups: (shade(false), shade(true)),
+        }
+    }
+
+    /// Records the G-buffer pass of the frame `stage` holds.
+    fn record_gbuffer(
+        &self,
+        stage: &Stage<'_>,
+        screen: &ScreenPass,
+        groups: &(wgpu::BindGroup, wgpu::BindGroup),
+        encoder: &mut wgpu::CommandEncoder,
+    ) {
+        let attachments: Vec<Option<wgpu::RenderPassColorAttachment<'_>>> = screen
+            .targets
+            .iter()
+            .map(|t| {
+                Some(wgpu::RenderPassColorAttachment {
+                    view: &t.view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })
+            })
+            .collect();
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("preview g-buffer"),
+            color_attachments: &attachments,
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &screen.depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.gbuffer);
+        pass.set_bind_group(0, &groups.1, &[]);
+        stage.ground.draw(&mut pass);
+        pass.set_bind_group(0, &groups.0, &[]);
+        stage.character.draw(&mut pass);
+    }
+
+    /// Records GTAO over the G-buffer.
+    fn record_gtao(&self, screen: &ScreenPass, encoder: &mut wgpu::CommandEncoder) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("gtao"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.gtao);
+        pass.set_bind_group(0, &screen.gtao_group, &[]);
+        pass.dispatch_workgroups(screen.groups[0], screen.groups[1], 1);
+    }
+
+    fn render_frames(
+        &self,
+        scene: &RenderScene<'_>,
+        frames: &[RenderFrame],
+        panels: &[Panel],
+    ) -> Result<Vec<Image>, GpuError> {
+        let gpu = self.gpu;
+        let device = &gpu.device;
+        let (width, height) = scene.size;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let stage = self.stage(scene, frames)?;
         let groups: Vec<(wgpu::BindGroup, wgpu::BindGroup)> = panels
             .iter()
-            .map(|&p| (bind(p, false), bind(p, true)))
+            .map(|&p| {
+                (
+                    self.surface_group(scene, p, false),
+                    self.surface_group(scene, p, true),
+                )
+            })
             .collect();
+        let screen = panels
+            .contains(&Panel::ScreenSpace)
+            .then(|| self.screen_pass(scene));
         let size = wgpu::Extent3d {
             width,
             height,
@@ -415,11 +845,12 @@ impl PreviewRenderer<'_> {
             .create_view(&Default::default());
         let row = (4 * width).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let panel_bytes = u64::from(row) * u64::from(height);
-        let staging = buffer(
-            "preview readback",
-            panel_bytes * panels.len().max(1) as u64,
-            U::MAP_READ | U::COPY_DST,
-        );
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("preview readback"),
+            size: panel_bytes * panels.len().max(1) as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let bg = look::BACKGROUND.map(f64::from);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Pipeline(e.to_string()));
@@ -427,70 +858,14 @@ impl PreviewRenderer<'_> {
         let mut images = Vec::with_capacity(frames.len() * panels.len());
         for frame in frames {
             let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-            gpu.queue.write_buffer(
-                &character.positions,
-                0,
-                bytemuck::cast_slice(&frame.positions),
-            );
-            gpu.queue
-                .write_buffer(&character.normals, 0, bytemuck::cast_slice(&frame.normals));
-            gpu.queue
-                .write_buffer(&character.truth, 0, bytemuck::cast_slice(&frame.truth));
-            if frame.ground_ao.len() != g.positions.len() {
-                return Err(GpuError::TooLarge(format!(
-                    "{} ground values for {} ground vertices",
-                    frame.ground_ao.len(),
-                    g.positions.len()
-                )));
-            }
-            gpu.queue
-                .write_buffer(&ground_ao, 0, bytemuck::cast_slice(&frame.ground_ao));
             let mut encoder =
                 device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-            match &evaluator {
-                Evaluator::Vertex(e) => e.record(&mut encoder, &frame.weights, &character.model)?,
-                Evaluator::Cubemap(e) => e.record(
-                    &mut encoder,
-                    &ground_positions,
-                    g.positions.len() as u32,
-                    frame.phase,
-                    true,
-                    &ground_model,
-                )?,
-                Evaluator::Grid(e, model, owners) => {
-                    let (on_character, on_ground) = receivers
-                        .as_ref()
-                        .expect("grid receivers are made for grids");
-                    let mine: Vec<GridReceiver> = frame
-                        .positions
-                        .iter()
-                        .zip(&frame.normals)
-                        .zip(owners.iter())
-                        .enumerate()
-                        .map(|(i, ((&p, n), &o))| {
-                            let offset = model.offset(Receiver::vertex(i, o), p);
-                            GridReceiver::new(p.to_array(), n.to_array(), o, offset)
-                        })
-                        .collect();
-                    gpu.queue
-                        .write_buffer(on_character, 0, bytemuck::cast_slice(&mine));
-                    e.record(
-                        &mut encoder,
-                        &frame.weights,
-                        on_character,
-                        vertices as u32,
-                        &character.model,
-                    )?;
-                    e.record(
-                        &mut encoder,
-                        &frame.weights,
-                        on_ground,
-                        g.positions.len() as u32,
-                        &ground_model,
-                    )?;
-                }
+            self.evaluate(&stage, frame, &mut encoder)?;
+            if let Some(screen) = &screen {
+                self.record_gbuffer(&stage, screen, &groups[0], &mut encoder);
+                self.record_gtao(screen, &mut encoder);
             }
-            for (k, (on_character, on_ground)) in groups.iter().enumerate() {
+            for (k, (&panel, (on_character, on_ground))) in panels.iter().zip(&groups).enumerate() {
                 {
                     let (view, resolve_target) = match &msaa {
                         Some(m) => (m, Some(&resolved_view)),
@@ -524,11 +899,21 @@ impl PreviewRenderer<'_> {
                         occlusion_query_set: None,
                         multiview_mask: None,
                     });
-                    pass.set_pipeline(&self.pipeline);
-                    pass.set_bind_group(0, on_ground, &[]);
-                    ground.draw(&mut pass);
-                    pass.set_bind_group(0, on_character, &[]);
-                    character.draw(&mut pass);
+                    match (&screen, panel) {
+                        (Some(s), Panel::ScreenSpace) => {
+                            pass.set_pipeline(&self.screen);
+                            pass.set_bind_group(0, &s.shade_groups.1, &[]);
+                            stage.ground.draw(&mut pass);
+                            pass.set_bind_group(0, &s.shade_groups.0, &[]);
+                        }
+                        _ => {
+                            pass.set_pipeline(&self.pipeline);
+                            pass.set_bind_group(0, on_ground, &[]);
+                            stage.ground.draw(&mut pass);
+                            pass.set_bind_group(0, on_character, &[]);
+                        }
+                    }
+                    stage.character.draw(&mut pass);
                 }
                 encoder.copy_texture_to_buffer(
                     resolved.as_image_copy(),
@@ -563,6 +948,135 @@ impl PreviewRenderer<'_> {
         }
         Ok(images)
     }
+
+    /// Submits `encoder` and waits for it: the milliseconds from
+    /// submission to completion.
+    fn timed(&self, encoder: wgpu::CommandEncoder) -> Result<f64, GpuError> {
+        let started = std::time::Instant::now();
+        let submission = self.gpu.queue.submit(Some(encoder.finish()));
+        self.gpu
+            .device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(submission),
+                timeout: None,
+            })
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        Ok(1e3 * started.elapsed().as_secs_f64())
+    }
+
+    fn screen_frames(
+        &self,
+        scene: &RenderScene<'_>,
+        frames: &[RenderFrame],
+    ) -> Result<Vec<ScreenFrame>, GpuError> {
+        let gpu = self.gpu;
+        let device = &gpu.device;
+        let (width, height) = scene.size;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let stage = self.stage(scene, frames)?;
+        let groups = (
+            self.surface_group(scene, Panel::Model, false),
+            self.surface_group(scene, Panel::Model, true),
+        );
+        let screen = self.screen_pass(scene);
+        let pixels = (width * height) as usize;
+        // Rows of the G-buffer's copies, then GTAO's output.
+        let row = (16 * width).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let target_bytes = u64::from(row) * u64::from(height);
+        let offsets = [0, target_bytes];
+        let gtao_at = 2 * target_bytes;
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("screen-space readback"),
+            size: gtao_at + 4 * pixels as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline(e.to_string()));
+        }
+        let new_encoder =
+            || device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut out = Vec::with_capacity(frames.len());
+        for frame in frames {
+            let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+            // Each pass alone, timed from submission to completion.
+            let mut encoder = new_encoder();
+            self.evaluate(&stage, frame, &mut encoder)?;
+            let model_ms = self.timed(encoder)?;
+            let mut encoder = new_encoder();
+            self.record_gbuffer(&stage, &screen, &groups, &mut encoder);
+            self.timed(encoder)?;
+            let mut encoder = new_encoder();
+            self.record_gtao(&screen, &mut encoder);
+            let gtao_ms = self.timed(encoder)?;
+            let mut encoder = new_encoder();
+            for (target, &offset) in screen.targets.iter().zip(&offsets) {
+                encoder.copy_texture_to_buffer(
+                    target.texture.as_image_copy(),
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: &staging,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset,
+                            bytes_per_row: Some(row),
+                            rows_per_image: Some(height),
+                        },
+                    },
+                    wgpu::Extent3d {
+                        width,
+                        height,
+                        depth_or_array_layers: 1,
+                    },
+                );
+            }
+            encoder.copy_buffer_to_buffer(
+                &screen.occlusion,
+                0,
+                &staging,
+                gtao_at,
+                4 * pixels as u64,
+            );
+            let submission = gpu.queue.submit(Some(encoder.finish()));
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(GpuError::Pipeline(e.to_string()));
+            }
+            let bytes = gpu.read(&staging, submission)?;
+            let texels = |k: usize| -> Vec<[f32; 4]> {
+                (0..height as usize)
+                    .flat_map(|y| {
+                        let at = offsets[k] as usize + y * row as usize;
+                        bytes[at..at + 16 * width as usize].chunks_exact(16)
+                    })
+                    .map(bytemuck::pod_read_unaligned::<[f32; 4]>)
+                    .collect()
+            };
+            let position = texels(0);
+            let normal = texels(1);
+            // Two f16 in the last word: truth low, model high.
+            let halves = |n: &[f32; 4]| {
+                let bits = n[3].to_bits();
+                [bits & 0xffff, bits >> 16].map(|h| half::f16::from_bits(h as u16).to_f32())
+            };
+            out.push(ScreenFrame {
+                width,
+                height,
+                positions: position
+                    .iter()
+                    .map(|p| Vec3::new(p[0], p[1], p[2]))
+                    .collect(),
+                surfaces: position
+                    .iter()
+                    .map(|p| Surface::from_code(p[3].to_bits()))
+                    .collect(),
+                normals: normal.iter().map(|n| Vec3::new(n[0], n[1], n[2])).collect(),
+                truth: normal.iter().map(|n| halves(n)[0]).collect(),
+                model: normal.iter().map(|n| halves(n)[1]).collect(),
+                gtao: bytemuck::pod_collect_to_vec::<u8, f32>(&bytes[gtao_at as usize..]),
+                gtao_ms,
+                model_ms,
+            });
+        }
+        Ok(out)
+    }
 }
 
 impl Renderer for PreviewRenderer<'_> {
@@ -578,5 +1092,13 @@ impl Renderer for PreviewRenderer<'_> {
     ) -> Result<Vec<Image>, String> {
         self.render_frames(scene, frames, panels)
             .map_err(|e| e.to_string())
+    }
+
+    fn screen_space(
+        &mut self,
+        scene: &RenderScene<'_>,
+        frames: &[RenderFrame],
+    ) -> Result<Vec<ScreenFrame>, String> {
+        self.screen_frames(scene, frames).map_err(|e| e.to_string())
     }
 }

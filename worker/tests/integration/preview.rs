@@ -10,6 +10,7 @@
 use aobake_core::{
     Limits, Upload,
     bake::preview::{Ground, Subject},
+    bake::screen_space::{Gtao, ScreenSpaceInfo, Surface},
     bake::{BakeParams, Camera, Panel, Plan, RenderFrame, RenderScene, Renderer},
     image::{HEAT_MAP, Image},
     import_character,
@@ -18,6 +19,7 @@ use aobake_core::{
     trace::{AoBlock, SceneOptions, no_progress, trace_poses},
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
+use glam::Vec3;
 
 const SIZE: u32 = 128;
 
@@ -103,6 +105,7 @@ fn scene<'a>(f: &'a Fixture, model: &'a Model) -> RenderScene<'a> {
         ground: &f.ground,
         size: (SIZE, SIZE),
         heat_map: HEAT_MAP,
+        gtao: Gtao::for_camera(&f.camera, f32::INFINITY),
     }
 }
 
@@ -168,7 +171,7 @@ fn pixel(image: &Image, x: u32, y: u32) -> [u8; 4] {
 fn panels_match_their_goldens() {
     let f = fixture();
     let mut r = renderer();
-    let panels = [Panel::Truth, Panel::Model, Panel::Error];
+    let panels = [Panel::Truth, Panel::Model, Panel::Error, Panel::ScreenSpace];
     let images = r
         .render(
             &scene(&f, &f.model),
@@ -176,8 +179,12 @@ fn panels_match_their_goldens() {
             &panels,
         )
         .unwrap();
-    assert_eq!(images.len(), 3);
-    for (image, name) in images.iter().zip(["truth.png", "model.png", "error.png"]) {
+    assert_eq!(images.len(), 4);
+    for (image, name) in
+        images
+            .iter()
+            .zip(["truth.png", "model.png", "error.png", "screen-space.png"])
+    {
         check_golden(name, image);
     }
     // Rendering again gives the same bytes: nothing jitters.
@@ -189,6 +196,152 @@ fn panels_match_their_goldens() {
         )
         .unwrap();
     assert_eq!(again, images, "a second render differs");
+}
+
+/// The screen-space baseline's buffers: the G-buffer holds each pixel's
+/// surface where the panels draw it, and GTAO (gtao.wgsl) is open on the
+/// open ground, dark in the figure's contact shadow, and absent off the
+/// surfaces.
+#[test]
+fn gtao_is_open_on_open_ground_and_dark_where_the_figure_meets_it() {
+    let f = fixture();
+    let mut r = renderer();
+    let scene = scene(&f, &f.model);
+    let screen = r
+        .screen_space(&scene, std::slice::from_ref(&f.frame))
+        .unwrap()
+        .remove(0);
+    let pixels = (SIZE * SIZE) as usize;
+    assert_eq!((screen.width, screen.height), (SIZE, SIZE));
+    assert_eq!(screen.gtao.len(), pixels);
+    let surfaces = &screen.surfaces;
+    let of = |s: Surface| (0..pixels).filter(move |&i| surfaces[i] == s);
+    let (character, ground, none) = (
+        of(Surface::Character).count(),
+        of(Surface::Ground).count(),
+        of(Surface::None).count(),
+    );
+    eprintln!("pixels: {character} character, {ground} ground, {none} background");
+    assert!(character > 200 && ground > 2000 && none > 200);
+    // Positions: the figure's pixels lie in its posed box, the ground's on
+    // the ground plane.
+    let (lo, hi) = f
+        .frame
+        .positions
+        .iter()
+        .fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| {
+            (lo.min(p), hi.max(p))
+        });
+    let slack = 1e-3 * (hi - lo).length();
+    for i in of(Surface::Character) {
+        let p = screen.positions[i];
+        assert!(
+            p.cmpge(lo - slack).all() && p.cmple(hi + slack).all(),
+            "pixel {i} at {p} is off the figure"
+        );
+        assert!(
+            (-1e-3..=1.001).contains(&screen.truth[i]),
+            "truth {} at pixel {i}",
+            screen.truth[i]
+        );
+    }
+    for i in of(Surface::Ground) {
+        assert!((screen.positions[i].y - f.camera.ground_y).abs() <= slack);
+    }
+    for i in of(Surface::None) {
+        assert!(screen.gtao[i] < 0.0, "no occlusion off the surfaces");
+    }
+    // The ground: open far from the figure (an open plane's visibility is
+    // exactly 1), dark near its feet.
+    let radius = f.camera.ground_half_extent / 3.0;
+    let distance = |i: usize| {
+        let p = screen.positions[i];
+        (p.x - f.camera.target.x).hypot(p.z - f.camera.target.z)
+    };
+    let far: Vec<f32> = of(Surface::Ground)
+        .filter(|&i| distance(i) > 1.5 * radius)
+        .map(|i| screen.gtao[i])
+        .collect();
+    assert!(!far.is_empty());
+    let worst = far.iter().copied().fold(0.0f32, f32::max);
+    assert!(worst < 0.02, "open ground gets {worst}");
+    let near = of(Surface::Ground)
+        .filter(|&i| distance(i) < 0.3 * radius)
+        .map(|i| screen.gtao[i])
+        .fold(0.0f32, f32::max);
+    assert!(near > 0.2, "the contact shadow gets {near}");
+    // Deterministic: the same buffers again.
+    let again = r
+        .screen_space(&scene, std::slice::from_ref(&f.frame))
+        .unwrap()
+        .remove(0);
+    assert_eq!(again.gtao, screen.gtao);
+    assert_eq!(again.positions, screen.positions);
+}
+
+/// The per-pixel comparison: the model and GTAO against AO ray-traced at
+/// the pixels' own points; a model that is wrong everywhere scores worse
+/// than the baked one, and the per-vertex truth on the ground (the same
+/// quantity at the ground's vertices) is close to it.
+#[test]
+fn the_screen_space_comparison_judges_the_model_and_gtao_per_pixel() {
+    let f = fixture();
+    let mut r = renderer();
+    let params = {
+        let mut p = BakeParams::new(Method::VertexLinear);
+        p.samples = 64;
+        p
+    };
+    let measure = |r: &mut PreviewRenderer<'_>, model: &Model, frame: &RenderFrame| {
+        let scene = scene(&f, model);
+        let screen = r
+            .screen_space(&scene, std::slice::from_ref(frame))
+            .unwrap()
+            .remove(0);
+        ScreenSpaceInfo::measure(
+            &screen,
+            frame,
+            &f.character.triangles,
+            &scene.model,
+            &f.camera,
+            scene.gtao,
+            &params.held_out_surface(),
+        )
+        .unwrap()
+    };
+    let baked = measure(&mut r, &f.model, &f.frame);
+    eprint!("{}", baked.summary());
+    let character = baked.character.unwrap();
+    let ground = baked.ground.unwrap();
+    let model = character
+        .model
+        .expect("a vertex model shades the character");
+    assert!(
+        ground.model.is_none(),
+        "a vertex model does not shade the ground"
+    );
+    assert!(model.rmse < 0.2 && character.gtao.rmse < 0.3);
+    assert!(ground.per_vertex_truth.rmse < 0.05);
+    assert!(ground.gtao.rmse > ground.per_vertex_truth.rmse);
+    assert!(baked.gtao_ms > 0.0 && baked.fetches_per_pixel == 2 * Gtao::SLICES * Gtao::STEPS);
+    // Fully occluded everywhere: far worse per pixel.
+    let vertices = f.character.vertex_count();
+    let closed = Model::StaticAverage(aobake_core::method::vertex::fit_static_average(&AoBlock {
+        vertices,
+        values: vec![1.0; vertices],
+    }));
+    let mut frame = f.frame.clone();
+    frame.weights = vec![1.0];
+    let wrong = measure(&mut r, &closed, &frame);
+    let wrong_model = wrong.character.unwrap().model.unwrap();
+    assert!(
+        wrong_model.rmse > model.rmse + 0.3,
+        "closed {} against baked {}",
+        wrong_model.rmse,
+        model.rmse
+    );
+    // GTAO does not depend on the model.
+    assert_eq!(wrong.character.unwrap().gtao, character.gtao);
 }
 
 #[test]
@@ -265,6 +418,7 @@ fn truth_and_model(
         ground: &ground,
         size: (SIZE, SIZE),
         heat_map: HEAT_MAP,
+        gtao: Gtao::for_camera(&camera, f32::INFINITY),
     };
     r.render(&scene, &frames, &[Panel::Truth, Panel::Model])
         .unwrap()
@@ -388,6 +542,18 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
         ["still-0.png", "still-1.png", "still-2.png", "animation.png"]
     );
     assert_eq!(baked.previews[0].0.clip.as_deref(), Some("spin"));
+    // A still: four panels, and the screen-space baseline judged beside
+    // the cubemap (which shades the ground with Eq. 3.1, so only GTAO is
+    // judged there).
+    let still = &baked.previews[0].0;
+    assert_eq!(still.width, 4 * aobake_core::bake::preview::STILL_PANEL);
+    let screen = still.screen_space.as_ref().expect("a still's baseline");
+    let ground = screen.ground.expect("ground pixels");
+    assert!(ground.model.is_none() && ground.pixels > 100);
+    assert!(
+        baked.previews[3].0.screen_space.is_none(),
+        "not on an animation"
+    );
     previews_match_one_go(&bake, &baked, &mut r);
     // The model panel's ground comes from the cubemap: the baked one
     // darkens it around the cube, an all-open one (zero texels, no static

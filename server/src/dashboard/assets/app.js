@@ -487,7 +487,26 @@ function previewFigure(p, url) {
   return h("figure", { class: p.kind === "still" ? "wide preview" : "preview", "data-kind": p.kind },
     h("img", { src: url, alt: `${p.kind} ${p.name}`, width: p.width, height: p.height }),
     h("figcaption", {}, `${p.kind}${p.clip ? ` of ${p.clip}` : ""}, ${times}; `,
-      `${fmt(p.frame_ms, 1)} ms per panel on ${p.adapter}`));
+      `${fmt(p.frame_ms, 1)} ms per panel on ${p.adapter}`),
+    p.screen_space ? screenSpaceTable(p.screen_space) : null);
+}
+
+// A still's screen-space baseline (GTAO, its third panel) beside the
+// model: RMSE against per-pixel ray-traced AO, and each one's cost.
+function screenSpaceTable(s) {
+  const row = (name, e) => e && h("tr", {},
+    h("td", {}, `${name} (${e.pixels} px)`),
+    h("td", { class: "num" }, e.model ? fmt(e.model.rmse) : "—"),
+    h("td", { class: "num" }, fmt(e.gtao.rmse)),
+    h("td", { class: "num" }, fmt(e.per_vertex_truth.rmse)));
+  return h("div", { class: "screen-space" },
+    h("table", { class: "screen-space-errors" },
+      h("caption", {}, "RMSE against per-pixel ray-traced AO"),
+      h("tr", {}, h("th", {}, "surface"), h("th", {}, "baked model"), h("th", {}, "GTAO"), h("th", {}, "per-vertex truth")),
+      row("character", s.character), row("ground", s.ground)),
+    h("p", { class: "muted" },
+      `Per frame on this adapter: GTAO ${fmt(s.gtao_ms, 2)} ms (${s.fetches_per_pixel} texel reads per pixel, radius ${fmt(s.gtao.radius, 3)}), `,
+      `the model's evaluation ${fmt(s.model_ms, 2)} ms.`));
 }
 
 async function bakePage(signal, id) {
