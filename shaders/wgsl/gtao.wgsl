@@ -2,7 +2,7 @@
 // (Jimenez et al. 2016, "Practical Realtime Strategies for Accurate
 // Indirect Occlusion"), from a frame's G-buffer (preview.wgsl's
 // fs_gbuffer: world position and surface per pixel, the shading normal,
-// as f32 bits in integer textures).
+// in integer textures).
 // The previews' baseline: what a studio gets without a bake.
 //
 // Per pixel, `slices` screen directions evenly spread over half a turn (no
@@ -37,8 +37,8 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
-// The bits of f32: xyz the world position; w 0 none, 1 character,
-// 2 ground.
+// xyz: the world position's f32 bits; w's low 2 bits: 0 none,
+// 1 character, 2 ground.
 @group(0) @binding(1) var positions: texture_2d<u32>;
 // The bits of f32: xyz the interpolated normal (world space).
 @group(0) @binding(2) var normals: texture_2d<u32>;
@@ -66,7 +66,7 @@ fn horizon(pixel: vec2<f32>, offset: vec2<f32>, p: vec3<f32>, v: vec3<f32>, low:
             break;
         }
         let texel = textureLoad(positions, vec2<i32>(at), 0);
-        if texel.w == 0u {
+        if (texel.w & 3u) == 0u {
             continue;
         }
         let d = view_point(bitcast<vec3<f32>>(texel.xyz)) - p;
@@ -87,7 +87,7 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let out = id.y * params.width + id.x;
     let texel = textureLoad(positions, vec2<i32>(id.xy), 0);
-    if texel.w == 0u {
+    if (texel.w & 3u) == 0u {
         occlusion[out] = -1.0;
         return;
     }

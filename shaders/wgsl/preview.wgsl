@@ -38,10 +38,11 @@ fn fs_main(in: Shaded) -> @location(0) vec4<f32> {
     return vec4<f32>(shade(in.world, in.normal, in.truth, in.model), 1.0);
 }
 
-// The G-buffer of a frame, as the bits of f32 in integer targets (which
-// every adapter can render to, unlike float ones): world position and
-// surface (1 character, 2 ground); the interpolated normal, and the
-// interpolated ray-traced and model AO as two f16.
+// The G-buffer of a frame in integer targets (which every adapter can
+// render to, unlike float ones): the world position's f32 bits and a word
+// with the surface (low 2 bits: 1 character, 2 ground) and the model's AO
+// in 20-bit fixed point above them; the interpolated normal's and
+// ray-traced AO's f32 bits.
 struct GBuffer {
     @location(0) position: vec4<u32>,
     @location(1) normal: vec4<u32>,
@@ -50,8 +51,9 @@ struct GBuffer {
 @fragment
 fn fs_gbuffer(in: Shaded) -> GBuffer {
     var out: GBuffer;
-    out.position = vec4<u32>(bitcast<vec3<u32>>(in.world), u.surface + 1u);
-    out.normal = vec4<u32>(bitcast<vec3<u32>>(in.normal), pack2x16float(vec2<f32>(in.truth, in.model)));
+    let model = u32(clamp(in.model, 0.0, 1.0) * 1048575.0 + 0.5);
+    out.position = vec4<u32>(bitcast<vec3<u32>>(in.world), (model << 2u) | (u.surface + 1u));
+    out.normal = vec4<u32>(bitcast<vec3<u32>>(in.normal), bitcast<u32>(in.truth));
     return out;
 }
 

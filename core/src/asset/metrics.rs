@@ -34,10 +34,25 @@ impl FrameError {
     /// prediction that is not a finite number counts as an error of 1 (too
     /// bright), the largest an AO value can be off by.
     pub fn of(predicted: &[f32], truth: &[f32]) -> Self {
+        Self::of_drawn(predicted, truth, None)
+    }
+
+    /// [`FrameError::of`] over the vertices that `drawn` marks (every one
+    /// without it): a vertex that covers no pixel in the pose (see
+    /// `Character::drawn_vertices`) has no AO to be right or wrong about.
+    /// A frame that draws nothing has no error.
+    pub fn of_drawn(predicted: &[f32], truth: &[f32], drawn: Option<&[bool]>) -> Self {
         assert_eq!(predicted.len(), truth.len(), "one value per vertex");
-        let n = predicted.len().max(1) as f64;
+        if let Some(d) = drawn {
+            assert_eq!(d.len(), truth.len(), "one flag per vertex");
+        }
+        let counted = |i: usize| drawn.is_none_or(|d| d[i]);
+        let n = (0..truth.len()).filter(|&i| counted(i)).count().max(1) as f64;
         let (mut abs, mut dark, mut bright) = (0.0f64, 0.0f64, 0.0f64);
-        for (&p, &t) in predicted.iter().zip(truth) {
+        for (i, (&p, &t)) in predicted.iter().zip(truth).enumerate() {
+            if !counted(i) {
+                continue;
+            }
             let d = if p.is_finite() {
                 f64::from(p) - f64::from(t)
             } else {
@@ -108,6 +123,19 @@ impl Errors {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_drawn_vertices_count() {
+        let (p, t) = ([0.5, 0.9, 0.3], [0.3, 0.1, 0.3]);
+        let e = FrameError::of_drawn(&p, &t, Some(&[true, false, true]));
+        // Two vertices judged, errors 0.2 and 0.
+        assert!((e.mae - 0.1).abs() < 1e-7, "{e:?}");
+        assert!((e.too_dark_mse - 0.04 / 2.0).abs() < 1e-7, "{e:?}");
+        assert_eq!(FrameError::of_drawn(&p, &t, None), FrameError::of(&p, &t));
+        // Nothing drawn: no error.
+        let none = FrameError::of_drawn(&p, &t, Some(&[false; 3]));
+        assert_eq!((none.rmse, none.psnr_db), (0.0, MAX_PSNR_DB));
+    }
 
     #[test]
     fn splits_dark_and_bright() {

@@ -425,7 +425,7 @@ pub fn bake_key(character: &str, clips: &[String], params: &BakeParams) -> Strin
 mod tests {
     use super::*;
 
-    const GOLDEN_KEY: &str = "b6cb2301462f58135c713ff29dda8cc804ab56e8dfc93daa3d56095b7175c03e";
+    const GOLDEN_KEY: &str = "20441f685138402e2934d668e591e208f1623fa264c3758abbf293de13a243f3";
 
     #[test]
     fn key_depends_on_what_matters_only() {

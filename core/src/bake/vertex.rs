@@ -485,22 +485,26 @@ impl Plan<'_> {
         }
         let mut per_clip: Vec<PerClip> = Vec::new();
         // Every pose on its own thread; the figures gathered in order.
-        let judged: Vec<(f64, FrameError, FrameError)> = tests
+        let judged: Vec<(f64, usize, FrameError, FrameError)> = tests
             .par_iter()
             .enumerate()
             .map(|(i, t)| {
                 let w = model.weights(skeleton, &t.pose.locals);
                 let predicted = model.evaluate_weights(&w);
+                let drawn = self.drawn(&t.pose);
                 (
                     model.multiply_adds(&w),
-                    FrameError::of(&predicted, truth.row(i)),
-                    FrameError::of(&base, truth.row(i)),
+                    drawn.iter().filter(|&&d| !d).count(),
+                    FrameError::of_drawn(&predicted, truth.row(i), Some(&drawn)),
+                    FrameError::of_drawn(&base, truth.row(i), Some(&drawn)),
                 )
             })
             .collect();
         let mut multiply_adds = 0.0;
-        for (t, (cost, e_model, e_base)) in tests.iter().zip(judged) {
+        let mut hidden = 0;
+        for (t, (cost, undrawn, e_model, e_base)) in tests.iter().zip(judged) {
             multiply_adds += cost;
+            hidden += undrawn;
             match t.frame {
                 None => {
                     random.0.push(e_model);
@@ -545,7 +549,16 @@ impl Plan<'_> {
             training_clip_frames: clip_frames,
             unseen_clips: None,
             multiply_adds_per_vertex: multiply_adds / tests.len().max(1) as f64,
+            undrawn_vertex_frames: hidden,
         }
+    }
+
+    /// Which vertices draw something in `pose` (see
+    /// [`crate::Character::drawn_vertices`]): the evaluations judge only
+    /// them.
+    fn drawn(&self, pose: &Pose) -> Vec<bool> {
+        let character = self.character;
+        character.drawn_vertices(&character.skin(pose).positions)
     }
 
     /// The clips an unseen-clips evaluation leaves out in turn: up to
@@ -612,27 +625,14 @@ impl Plan<'_> {
             .filter(|(_, t)| t.frame.is_some_and(|f| f.clip == c))
             .map(|(i, t)| {
                 let predicted = model.evaluate(skeleton, &t.pose.locals);
+                let drawn = self.drawn(&t.pose);
                 (
-                    FrameError::of(&predicted, truth.row(i)),
-                    FrameError::of(&baseline, truth.row(i)),
+                    FrameError::of_drawn(&predicted, truth.row(i), Some(&drawn)),
+                    FrameError::of_drawn(&baseline, truth.row(i), Some(&drawn)),
                 )
             })
             .collect();
         let (m, b): (Vec<FrameError>, Vec<FrameError>) = judged.into_iter().unzip();
-        if std::env::var_os("AOBAKE_EXP").is_some() {
-            experiment(
-                &self.clips[c].name,
-                &model,
-                skeleton,
-                &fold_poses,
-                &reference.select(keep.iter().copied()),
-                &fold_sources,
-                tests,
-                truth,
-                c,
-                &baseline,
-            );
-        }
         Ok(UnseenFold {
             clip: self.clips[c].name.clone(),
             reference_poses: keep.len(),
@@ -758,6 +758,11 @@ pub struct Evaluation {
     pub clips: Vec<ClipEvaluation>,
     /// Multiply-adds per vertex at run time, mean over the test poses.
     pub multiply_adds_per_vertex: f64,
+    /// Vertex-frames of the held-out poses left out of the errors because
+    /// the vertex drew nothing in that pose (every incident triangle of
+    /// zero area, such as a part scaled to zero: no pixel, no defined AO).
+    #[serde(default)]
+    pub undrawn_vertex_frames: usize,
 }
 
 /// A bake's report.
@@ -943,178 +948,5 @@ mod tests {
         assert!((n.rmse - 0.1 / 2f64.sqrt()).abs() < 1e-7, "{n:?}");
         assert!((n.mae - 0.1 / 2f64.sqrt()).abs() < 1e-7, "{n:?}");
         assert!((n.psnr_db - 10.0 * (1.0 / 0.005f64).log10()).abs() < 1e-4);
-    }
-}
-
-#[allow(clippy::too_many_arguments)]
-fn experiment(
-    name: &str,
-    model: &Model,
-    skeleton: &crate::rig::skeleton::Skeleton,
-    poses: &[Pose],
-    reference: &AoBlock,
-    sources: &[Source],
-    tests: &[TestPose],
-    truth: &AoBlock,
-    c: usize,
-    baseline: &[f32],
-) {
-    let w_ref: Vec<Vec<f32>> = poses
-        .iter()
-        .map(|p| model.weights(skeleton, &p.locals))
-        .collect();
-    let k = w_ref[0].len();
-    let frames: Vec<usize> = (0..poses.len())
-        .filter(|&i| matches!(sources[i], Source::Frame(_)))
-        .collect();
-    let range = |rows: &[usize]| -> (Vec<f32>, Vec<f32>) {
-        let mut lo = vec![f32::INFINITY; k];
-        let mut hi = vec![f32::NEG_INFINITY; k];
-        for &r in rows {
-            for j in 0..k {
-                lo[j] = lo[j].min(w_ref[r][j]);
-                hi[j] = hi[j].max(w_ref[r][j]);
-            }
-        }
-        (lo, hi)
-    };
-    let all: Vec<usize> = (0..poses.len()).collect();
-    let (lo_all, hi_all) = range(&all);
-    let (lo_fr, hi_fr) = range(&frames);
-    let n = poses.len() as f64;
-    let mu: Vec<f64> = (0..k)
-        .map(|j| w_ref.iter().map(|w| f64::from(w[j])).sum::<f64>() / n)
-        .collect();
-    let sd: Vec<f64> = (0..k)
-        .map(|j| {
-            (w_ref
-                .iter()
-                .map(|w| (f64::from(w[j]) - mu[j]).powi(2))
-                .sum::<f64>()
-                / n)
-                .sqrt()
-                .max(1e-9)
-        })
-        .collect();
-    let maha = |w: &[f32]| -> f64 {
-        (0..k - 1)
-            .map(|j| ((f64::from(w[j]) - mu[j]) / sd[j]).powi(2))
-            .sum::<f64>()
-            .sqrt()
-    };
-    let mut dref: Vec<f64> = frames.iter().map(|&r| maha(&w_ref[r])).collect();
-    dref.sort_by(f64::total_cmp);
-    let dq = |q: f64| dref[((dref.len() - 1) as f64 * q) as usize];
-    let v = reference.vertices;
-    let mut vlo = vec![f32::INFINITY; v];
-    let mut vhi = vec![f32::NEG_INFINITY; v];
-    for r in 0..reference.values.len() / v {
-        for (i, &a) in reference.row(r).iter().enumerate() {
-            vlo[i] = vlo[i].min(a);
-            vhi[i] = vhi[i].max(a);
-        }
-    }
-    let mut fvlo = vec![f32::INFINITY; v];
-    let mut fvhi = vec![f32::NEG_INFINITY; v];
-    for &r in &frames {
-        for (i, &a) in reference.row(r).iter().enumerate() {
-            fvlo[i] = fvlo[i].min(a);
-            fvhi[i] = fvhi[i].max(a);
-        }
-    }
-    let names = [
-        "plain",
-        "clamp-w-all",
-        "clamp-w-frames",
-        "shrink-max",
-        "shrink-q95",
-        "clamp-v-all",
-        "clamp-v-frames",
-        "oracle-blend",
-        "half-blend",
-    ];
-    let mut sums = vec![0.0f64; names.len() + 1];
-    let mut count = 0.0;
-    let mut dists = Vec::new();
-    for (i, t) in tests.iter().enumerate() {
-        if !t.frame.is_some_and(|f| f.clip == c) {
-            continue;
-        }
-        let tr = truth.row(i);
-        let w = model.weights(skeleton, &t.pose.locals);
-        let clampw = |lo: &[f32], hi: &[f32]| -> Vec<f32> {
-            w.iter()
-                .enumerate()
-                .map(|(j, &x)| if j + 1 == k { x } else { x.clamp(lo[j], hi[j]) })
-                .collect()
-        };
-        let d = maha(&w);
-        dists.push(d);
-        let shrink = |dm: f64| -> Vec<f32> {
-            let s = if d > dm { dm / d } else { 1.0 };
-            w.iter()
-                .enumerate()
-                .map(|(j, &x)| {
-                    if j + 1 == k {
-                        x
-                    } else {
-                        (mu[j] + (f64::from(x) - mu[j]) * s) as f32
-                    }
-                })
-                .collect()
-        };
-        let plain = model.evaluate_weights(&w);
-        let clampv = |lo: &[f32], hi: &[f32]| -> Vec<f32> {
-            plain
-                .iter()
-                .enumerate()
-                .map(|(j, &x)| x.clamp(lo[j], hi[j]))
-                .collect()
-        };
-        let psnr = |p: &[f32]| FrameError::of(p, tr).psnr_db;
-        let mut best = f64::NEG_INFINITY;
-        for s in 0..=10 {
-            let a = s as f32 / 10.0;
-            let p: Vec<f32> = plain
-                .iter()
-                .zip(baseline)
-                .map(|(&m, &b)| a * m + (1.0 - a) * b)
-                .collect();
-            best = best.max(psnr(&p));
-        }
-        let half: Vec<f32> = plain
-            .iter()
-            .zip(baseline)
-            .map(|(&m, &b)| 0.5 * m + 0.5 * b)
-            .collect();
-        let vals = [
-            psnr(&plain),
-            psnr(&model.evaluate_weights(&clampw(&lo_all, &hi_all))),
-            psnr(&model.evaluate_weights(&clampw(&lo_fr, &hi_fr))),
-            psnr(&model.evaluate_weights(&shrink(dq(1.0)))),
-            psnr(&model.evaluate_weights(&shrink(dq(0.95)))),
-            psnr(&clampv(&vlo, &vhi)),
-            psnr(&clampv(&fvlo, &fvhi)),
-            best,
-            psnr(&half),
-            psnr(baseline),
-        ];
-        for (s, x) in sums.iter_mut().zip(vals) {
-            *s += x;
-        }
-        count += 1.0;
-    }
-    let base = sums[names.len()] / count;
-    dists.sort_by(f64::total_cmp);
-    eprintln!(
-        "EXP {name}: frames {count} maha ref q50 {:.2} q95 {:.2} max {:.2}; test q50 {:.2} max {:.2}",
-        dq(0.5),
-        dq(0.95),
-        dq(1.0),
-        dists[dists.len() / 2],
-        dists[dists.len() - 1]
-    );
-    for (i, nm) in names.iter().enumerate() {
-        eprintln!("EXP {name} {nm}: gain {:+.2} dB", sums[i] / count - base);
     }
 }

@@ -116,6 +116,28 @@ impl Character {
         self.positions.len()
     }
 
+    /// Which vertices draw something at these posed `positions`: those
+    /// with at least one incident triangle of non-zero area (twice the
+    /// area above (10⁻⁶ of the bind pose's bounding-box diagonal)²). A
+    /// vertex of a part scaled to zero, or of no triangle, covers no pixel,
+    /// and its AO is undefined (its normal is skinned to nothing): the
+    /// evaluations leave it out of that pose's errors.
+    pub fn drawn_vertices(&self, positions: &[Vec3]) -> Vec<bool> {
+        let (lo, hi) = crate::geometry::bounds(self.positions.iter().copied())
+            .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        let least = (1e-6 * (hi - lo).length()).powi(2);
+        let mut drawn = vec![false; positions.len()];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| positions[i as usize]);
+            if (b - a).cross(c - a).length() > least {
+                for &i in t {
+                    drawn[i as usize] = true;
+                }
+            }
+        }
+        drawn
+    }
+
     /// Nodes that move vertices (palette nodes), each once, in palette
     /// order.
     pub fn joint_nodes(&self) -> Vec<usize> {

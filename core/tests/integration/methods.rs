@@ -785,3 +785,59 @@ fn a_linear_base_carries_vertex_clustered_to_fox_clips_it_never_saw() {
     );
     assert!(basis.1 <= 2.0 * mean.1, "{basis:?} {mean:?}");
 }
+
+/// A vertex that draws nothing in a pose (InterpolationTest's "Step
+/// Scale" clip scales a cube to zero half the time) has no AO to be
+/// judged on: the errors leave it out, and the report counts it.
+#[test]
+fn vertices_that_draw_nothing_are_left_out_of_the_errors() {
+    use aobake_core::asset::metrics::FrameError;
+    let imported = util::load(&util::character_path("InterpolationTest.glb").unwrap());
+    let c = &imported.character;
+    let clip = imported
+        .clips
+        .iter()
+        .find(|k| k.name == "Step Scale")
+        .unwrap();
+    let drawn = |t: f32| c.drawn_vertices(&c.skin(&Pose::sample(&c.skeleton, clip, t)).positions);
+    // Keys at 0, 0.5, 1, … s: scale 1, then 0, stepwise.
+    let (whole, gone) = (drawn(0.25), drawn(0.75));
+    assert!(whole.iter().all(|&d| d), "every vertex draws at scale 1");
+    let hidden = gone.iter().filter(|&&d| !d).count();
+    assert_eq!(hidden, 24, "the cube's 24 vertices draw nothing at scale 0");
+    // A prediction wrong only there has no error; without the mask it has.
+    let truth = vec![0.25f32; c.vertex_count()];
+    let predicted: Vec<f32> = gone
+        .iter()
+        .zip(&truth)
+        .map(|(&d, &t)| if d { t } else { 1.0 })
+        .collect();
+    assert_eq!(
+        FrameError::of_drawn(&predicted, &truth, Some(&gone)).rmse,
+        0.0
+    );
+    assert!(FrameError::of(&predicted, &truth).rmse > 0.1);
+    // The bake's evaluation counts the vertex-frames it left out: the
+    // cube's vertices in each held-out frame of the three scale clips
+    // where the cube is at zero.
+    let mut params = quick(Method::VertexLinear);
+    params.eval_folds = 0;
+    let inputs = util::inputs(c, &imported.clips);
+    let bake = Bake::new(&inputs, params).unwrap();
+    let expected: usize = bake
+        .plan
+        .test_poses()
+        .iter()
+        .map(|t| {
+            let posed = c.skin(&t.pose);
+            c.drawn_vertices(&posed.positions)
+                .iter()
+                .filter(|&&d| !d)
+                .count()
+        })
+        .sum();
+    assert!(expected >= 24, "some held-out frames hide a cube");
+    let baked = bake_in_process(&bake, None).unwrap();
+    let e = &baked.report.vertex().unwrap().evaluation;
+    assert_eq!(e.undrawn_vertex_frames, expected);
+}

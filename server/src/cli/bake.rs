@@ -380,6 +380,12 @@ held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:
         t.test_trace_s,
         t.fit_s,
     ));
+    if e.undrawn_vertex_frames > 0 {
+        out.push_str(&format!(
+            "{} vertex-frames of the held-out poses are left out of every error: those vertices draw nothing in that pose (every triangle of theirs has zero area, such as a part scaled to zero)\n",
+            e.undrawn_vertex_frames
+        ));
+    }
     if let Some(c) = report.fit.reference() {
         out.push_str(&format!(
             "reference rows: {} (cross-validation over clips, mean PSNR on left-out clips: {})\n",

@@ -54,10 +54,10 @@ pub struct PreviewRenderer<'g> {
     samples: u32,
 }
 
-/// The G-buffer's targets, f32 bits in integer texels (renderable on
-/// every adapter, unlike float formats on GL): world position and surface;
-/// normal, and the interpolated truth and model AO as two f16 (32 bytes a
-/// pixel, WebGPU's limit).
+/// The G-buffer's targets, integer texels (renderable on every adapter,
+/// unlike float formats on GL): world position (f32 bits), surface and the
+/// model's AO (fixed point); normal and the interpolated truth (f32 bits).
+/// 32 bytes a pixel, WebGPU's limit.
 const GBUFFER: [wgpu::TextureFormat; 2] = [
     wgpu::TextureFormat::Rgba32Uint,
     wgpu::TextureFormat::Rgba32Uint,
@@ -1051,11 +1051,10 @@ impl<'g> PreviewRenderer<'g> {
             };
             let position = texels(0);
             let normal = texels(1);
-            // Two f16 in the last word: truth low, model high.
-            let halves = |n: &[f32; 4]| {
-                let bits = n[3].to_bits();
-                [bits & 0xffff, bits >> 16].map(|h| half::f16::from_bits(h as u16).to_f32())
-            };
+            // The position's last word: the surface in its low 2 bits,
+            // the model's AO in 20-bit fixed point above; the normal's
+            // last word: the truth's f32 bits.
+            let word = |p: &[f32; 4]| p[3].to_bits();
             out.push(ScreenFrame {
                 width,
                 height,
@@ -1065,11 +1064,14 @@ impl<'g> PreviewRenderer<'g> {
                     .collect(),
                 surfaces: position
                     .iter()
-                    .map(|p| Surface::from_code(p[3].to_bits()))
+                    .map(|p| Surface::from_code(word(p) & 3))
                     .collect(),
                 normals: normal.iter().map(|n| Vec3::new(n[0], n[1], n[2])).collect(),
-                truth: normal.iter().map(|n| halves(n)[0]).collect(),
-                model: normal.iter().map(|n| halves(n)[1]).collect(),
+                truth: normal.iter().map(|n| n[3]).collect(),
+                model: position
+                    .iter()
+                    .map(|p| (word(p) >> 2) as f32 / 1_048_575.0)
+                    .collect(),
                 gtao: bytemuck::pod_collect_to_vec::<u8, f32>(&bytes[gtao_at as usize..]),
                 gtao_ms,
                 model_ms,

@@ -116,6 +116,9 @@ pub struct FrameTruth {
     pub vertices: Vec<f32>,
     /// Surface AO at each ground point.
     pub ground: Vec<f32>,
+    /// Which vertices draw something in the frame
+    /// (`Character::drawn_vertices`): only they are judged.
+    pub drawn: Vec<bool>,
 }
 
 /// The ground truth of an evaluation and the references it needs.
@@ -171,6 +174,7 @@ struct Traced {
     palette: Vec<Mat4>,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
+    drawn: Vec<bool>,
 }
 
 impl Traced {
@@ -183,6 +187,7 @@ impl Traced {
             normals: self.normals,
             vertices: self.vertices,
             ground: self.ground,
+            drawn: self.drawn,
         }
     }
 }
@@ -246,6 +251,7 @@ impl Inputs<'_> {
             ground,
             scene,
             palette: c.joint_matrices(&pose),
+            drawn: c.drawn_vertices(&posed.positions),
             positions: posed.positions,
             normals: posed.normals,
         })
@@ -387,7 +393,7 @@ impl GroundTruth {
             .map(|f| {
                 let (v, g) = predict(f);
                 let (vp, vt): (Vec<f32>, Vec<f32>) = (0..v.len())
-                    .filter(|&i| self.owner[i].is_some())
+                    .filter(|&i| self.owner[i].is_some() && f.drawn[i])
                     .map(|i| (v[i], f.vertices[i]))
                     .unzip();
                 let (gp, gt): (Vec<f32>, Vec<f32>) = (0..g.len())

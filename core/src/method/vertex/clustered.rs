@@ -119,6 +119,14 @@ impl Default for ClusteredOptions {
 /// from.
 pub const CLAMP_CANDIDATES: [f64; 5] = [0.5, 1.0, 2.0, 3.0, 5.0];
 
+/// The principal directions a joint angle of the linear base's features
+/// (`linear.components` when that is above 0). vertex-linear keeps every
+/// feature by default; under the pose clusters' blend that made
+/// vertex-clustered sensitive to single-precision noise in a pose
+/// (RiggedFigure between keys: 2.5·10⁻⁴ AO from a slerp's last bits,
+/// against 2·10⁻⁶ with the projection), so its base keeps the projection.
+pub const BASE_COMPONENTS: f32 = 1.5;
+
 /// What the fit did, for the report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ClusteredFitStats {

@@ -60,7 +60,10 @@ pub struct LinearOptions {
     /// directions of the standardised features the model is linear in, as
     /// a multiple of the number of joint angles (1: as many as rotation
     /// vectors have, so run-time cost and size stay Kontkanen & Aila's);
-    /// 0 keeps every feature.
+    /// 0 (the default) keeps every feature: with the eigen-AO basis a
+    /// vertex costs the basis rows whatever the features, and the
+    /// directions the projection dropped were ones a left-out clip moves
+    /// (docs/methods/vertex.md).
     pub components: f32,
     /// Eigen-AO basis rows the fitted model is compressed into
     /// ([`super::basis`]): each vertex then costs `basis + 1` multiply-adds
@@ -119,7 +122,7 @@ impl Default for LinearOptions {
             locality: Locality::Off,
             per_vertex: false,
             features: Features::Matrix,
-            components: 1.5,
+            components: 0.0,
             // On unseen clips 32 rows held or raised the gains of the
             // full model (Fox +3.20 → +3.26 dB, Kenney +3.84 → +3.85) at
             // a third to four fifths of its run-time cost (docs/methods/vertex.md).
