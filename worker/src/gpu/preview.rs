@@ -321,6 +321,18 @@ impl Mesh {
     }
 }
 
+/// A depth attachment cleared to the far plane, not kept after the pass.
+fn cleared_depth(view: &wgpu::TextureView) -> Option<wgpu::RenderPassDepthStencilAttachment<'_>> {
+    Some(wgpu::RenderPassDepthStencilAttachment {
+        view,
+        depth_ops: Some(wgpu::Operations {
+            load: wgpu::LoadOp::Clear(1.0),
+            store: wgpu::StoreOp::Discard,
+        }),
+        stencil_ops: None,
+    })
+}
+
 fn init(
     device: &wgpu::Device,
     label: &str,
@@ -765,14 +777,7 @@ impl<'g> PreviewRenderer<'g> {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("preview g-buffer"),
             color_attachments: &attachments,
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &screen.depth,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
+            depth_stencil_attachment: cleared_depth(&screen.depth),
             timestamp_writes: None,
             occlusion_query_set: None,
             multiview_mask: None,
@@ -887,14 +892,7 @@ impl<'g> PreviewRenderer<'g> {
                                 store: wgpu::StoreOp::Store,
                             },
                         })],
-                        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                            view: &depth,
-                            depth_ops: Some(wgpu::Operations {
-                                load: wgpu::LoadOp::Clear(1.0),
-                                store: wgpu::StoreOp::Discard,
-                            }),
-                            stencil_ops: None,
-                        }),
+                        depth_stencil_attachment: cleared_depth(&depth),
                         timestamp_writes: None,
                         occlusion_query_set: None,
                         multiview_mask: None,

@@ -125,7 +125,7 @@ pub const CLAMP_CANDIDATES: [f64; 5] = [0.5, 1.0, 2.0, 3.0, 5.0];
 /// vertex-clustered sensitive to single-precision noise in a pose
 /// (RiggedFigure between keys: 2.5·10⁻⁴ AO from a slerp's last bits,
 /// against 2·10⁻⁶ with the projection), so its base keeps the projection.
-pub const BASE_COMPONENTS: f32 = 1.5;
+pub(super) const BASE_COMPONENTS: f32 = 1.5;
 
 /// What the fit did, for the report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
