@@ -248,6 +248,22 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert_eq!(loaded, json!(4), "three stills and an animation");
         let kinds = eval(&c, &format!("return {images}.map(i => i.closest('figure').dataset.kind)")).await;
         assert_eq!(kinds, json!(["still", "still", "still", "animation"]));
+        // Each still carries the screen-space baseline beside the model:
+        // the character's row has both RMSEs as numbers.
+        let screen = eval(
+            &c,
+            "return [...document.querySelectorAll('#previews figure[data-kind=\"still\"]')].map(f => { const r = [...f.querySelectorAll('.screen-space-errors tr')].find(t => t.querySelector('td.num')); return r ? [...r.querySelectorAll('td.num')].slice(0, 2).map(td => Number(td.textContent)) : null; })",
+        )
+        .await;
+        let rows = screen.as_array().unwrap();
+        assert_eq!(rows.len(), 3, "{screen}");
+        for row in rows {
+            let values = row.as_array().unwrap_or_else(|| panic!("a still without its baseline: {screen}"));
+            assert!(
+                values.len() == 2 && values.iter().all(|v| v.as_f64().is_some_and(|x| x > 0.0 && x < 1.0)),
+                "model and GTAO RMSE: {screen}"
+            );
+        }
         let plot = eval(&c, "const i = document.querySelector('#report img'); return i && i.naturalWidth").await;
         assert!(plot.as_u64().unwrap_or(0) > 100, "the PSNR plot shows: {plot}");
         let caption = eval(&c, "return document.querySelector('#report figcaption').textContent").await;
