@@ -58,7 +58,8 @@ enum Command {
     /// the run-time shaders for engines (--shaders DIR).
     Export(export::Args),
     /// Render a baked asset with wgpu: a still at a clip time (ground
-    /// truth, model, error) or an animated PNG of a whole clip.
+    /// truth, model, screen-space AO, error; the model and GTAO judged
+    /// per pixel) or an animated PNG of a whole clip.
     Preview(preview::Args),
     /// Run the bake service: the HTTP API on SQLite and local disk under
     /// --data, with local worker processes.

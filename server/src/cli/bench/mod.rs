@@ -51,7 +51,8 @@ enum What {
     /// server's memory.
     Api(service::ApiArgs),
     /// Preview render time per panel (the model's AO on the GPU, raster,
-    /// readback) on every adapter among Vulkan and GL.
+    /// readback) on every adapter among Vulkan and GL, and a frame's GTAO
+    /// pass beside the model's evaluation with their per-pixel errors.
     Preview(super::preview::BenchArgs),
     /// A cubemap face job's tracing rate (Kroon's Eq. 3.1 from points in
     /// space) beside the per-vertex tracer's on the same posed meshes.
