@@ -119,13 +119,23 @@ impl Default for ClusteredOptions {
 /// from.
 pub const CLAMP_CANDIDATES: [f64; 5] = [0.5, 1.0, 2.0, 3.0, 5.0];
 
-/// The principal directions a joint angle of the linear base's features
-/// (`linear.components` when that is above 0). vertex-linear keeps every
-/// feature by default; under the pose clusters' blend that made
-/// vertex-clustered sensitive to single-precision noise in a pose
-/// (RiggedFigure between keys: 2.5·10⁻⁴ AO from a slerp's last bits,
-/// against 2·10⁻⁶ with the projection), so its base keeps the projection.
-pub(super) const BASE_COMPONENTS: f32 = 1.5;
+/// A pose cluster's PCA keeps the directions whose spread is at least
+/// this fraction of its largest. Whitening divides by the spread, so a
+/// direction the cluster's handles barely move along (10⁻⁸ of the
+/// largest) turned a slerp's last bits into 2.5·10⁻⁴ of AO (RiggedFigure
+/// between keys, against 2·10⁻⁶ without it).
+const SPREAD_TOLERANCE: f64 = 1e-4;
+
+/// The whitened principal `axes` (rows, largest spread first, each scaled
+/// by one over its spread) whose spread is at least [`SPREAD_TOLERANCE`]
+/// of the first's.
+fn spread_axes(axes: Mat<f64>) -> Mat<f64> {
+    let scale = |i: usize| axes.row(i).norm_l2();
+    let keep = (0..axes.nrows())
+        .take_while(|&i| scale(i) * SPREAD_TOLERANCE <= scale(0))
+        .count();
+    Mat::from_fn(keep, axes.ncols(), |i, c| axes[(i, c)])
+}
 
 /// What the fit did, for the report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -213,6 +223,7 @@ pub fn fit(
             let center = &km.centers[j * dim..(j + 1) * dim];
             let xc = Mat::from_fn(k, dim, |r, c| points[members[r] * dim + c] - center[c]);
             let axes = principal_axes(xc.as_ref(), n);
+            let axes = spread_axes(axes);
             let rank = axes.nrows();
             let scores = &xc * axes.transpose();
             let q = Mat::from_fn(k, rank + usize::from(offset), |r, c| {
@@ -475,6 +486,30 @@ mod tests {
                 values,
             },
         )
+    }
+
+    #[test]
+    fn directions_the_handles_barely_move_along_are_not_whitened() {
+        // Spread 1 along x, 1e-6 along y (a last bit's wobble), 1e-2
+        // along z.
+        let rows = 40;
+        let xc = Mat::from_fn(rows, 3, |r, c| {
+            let t = (r as f64 * 0.7).sin();
+            let u = (r as f64 * 1.3).cos();
+            match c {
+                0 => t,
+                1 => 1e-6 * u,
+                _ => 1e-2 * (r as f64 * 2.1).sin(),
+            }
+        });
+        let axes = principal_axes(xc.as_ref(), 3);
+        assert_eq!(axes.nrows(), 3, "PCA alone keeps all three");
+        let kept = spread_axes(axes);
+        assert_eq!(kept.nrows(), 2, "the wobble's direction is dropped");
+        // The kept ones are x and z, whitened (one over their spread).
+        assert!(kept[(0, 0)].abs() > 0.99 * kept.row(0).norm_l2());
+        assert!(kept[(1, 2)].abs() > 0.99 * kept.row(1).norm_l2());
+        assert!(kept.row(1).norm_l2() > 50.0 * kept.row(0).norm_l2());
     }
 
     #[test]

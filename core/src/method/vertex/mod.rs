@@ -385,11 +385,6 @@ fn fit_clustered(
                 per_vertex: false,
                 threshold: 0.0,
                 basis: 0,
-                components: if linear.components > 0.0 {
-                    linear.components
-                } else {
-                    clustered::BASE_COMPONENTS
-                },
                 ..*linear
             };
             Some(fit_linear(character, joint_angles, q, ao, sources, &dense)?)
