@@ -51,6 +51,8 @@ pub const ANIMATION_FPS: f32 = 24.0;
 pub const ANIMATION_MAX_FRAMES: usize = 48;
 /// Where in a clip a bake's stills are taken, as fractions of its length.
 pub const STILL_FRACTIONS: [f32; 3] = [0.15, 0.5, 0.85];
+/// The ground's half side, in scene radii ([`Camera::scene_radius`]).
+const GROUND_RADII: f32 = 3.0;
 /// Vertices per side of the ground grid.
 pub const GROUND_GRID: usize = 64;
 /// Most rays per ground point (the bake's count when lower).
@@ -186,7 +188,7 @@ impl Camera {
             near: (distance - 4.0 * radius).max(0.02 * distance),
             far: distance + 4.0 * radius,
             ground_y: min.y,
-            ground_half_extent: 3.0 * radius,
+            ground_half_extent: GROUND_RADII * radius,
         }
     }
 
@@ -195,6 +197,12 @@ impl Camera {
     pub fn clip_from_world(&self, aspect: f32) -> Mat4 {
         use glam::camera::rh::proj::directx;
         directx::perspective(self.fov_y, aspect, self.near, self.far) * self.view_from_world()
+    }
+
+    /// The framed scene's radius (half its bounding box's diagonal): the
+    /// ground is [`GROUND_RADII`] of them across each way.
+    pub fn scene_radius(&self) -> f32 {
+        self.ground_half_extent / GROUND_RADII
     }
 
     /// View space (x right, y up, looking down −z) from world space.

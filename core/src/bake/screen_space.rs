@@ -53,8 +53,7 @@ impl Gtao {
     /// [`Gtao::RADIUS_FRACTION`] of the scene's, and no farther than the
     /// bake's distance limit.
     pub fn for_camera(camera: &Camera, max_distance: f32) -> Self {
-        // Camera::framing makes the ground three scene radii across.
-        let scene_radius = camera.ground_half_extent / 3.0;
+        let scene_radius = camera.scene_radius();
         Self {
             slices: Self::SLICES,
             steps: Self::STEPS,
@@ -178,7 +177,7 @@ impl ScreenSpaceInfo {
         surface: &SurfaceParams,
     ) -> Result<Self, TraceError> {
         let scene = Scene::new(&frame.positions, triangles, &SceneOptions::default())?;
-        let contact = camera.ground_half_extent / 3.0;
+        let contact = camera.scene_radius();
         let target = camera.target;
         let mut character = Vec::new();
         let mut ground = Vec::new();

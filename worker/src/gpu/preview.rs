@@ -321,6 +321,31 @@ impl Mesh {
     }
 }
 
+/// A 2D texture of `size` pixels, one mip level.
+fn create_texture(
+    device: &wgpu::Device,
+    label: &str,
+    (width, height): (u32, u32),
+    format: wgpu::TextureFormat,
+    samples: u32,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: samples,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
 /// A depth attachment cleared to the far plane, not kept after the pass.
 fn cleared_depth(view: &wgpu::TextureView) -> Option<wgpu::RenderPassDepthStencilAttachment<'_>> {
     Some(wgpu::RenderPassDepthStencilAttachment {
@@ -361,7 +386,7 @@ struct Stage<'s> {
     receivers: Option<(wgpu::Buffer, wgpu::Buffer)>,
 }
 
-/// A single-sampled texture, a view of it and its format.
+/// A single-sampled texture and a view of it.
 struct Target {
     texture: wgpu::Texture,
     view: wgpu::TextureView,
@@ -626,23 +651,9 @@ impl<'g> PreviewRenderer<'g> {
     fn screen_pass(&self, scene: &RenderScene<'_>) -> ScreenPass {
         let device = &self.gpu.device;
         let (width, height) = scene.size;
-        let size = wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        };
         use wgpu::TextureUsages as T;
         let texture = |label, format, usage| {
-            let texture = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            });
+            let texture = create_texture(device, label, scene.size, format, 1, usage);
             let view = texture.create_view(&Default::default());
             Target { texture, view }
         };
@@ -829,16 +840,7 @@ impl<'g> PreviewRenderer<'g> {
             depth_or_array_layers: 1,
         };
         let texture = |label, format, samples, usage| {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size,
-                mip_level_count: 1,
-                sample_count: samples,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
+            create_texture(device, label, scene.size, format, samples, usage)
         };
         use wgpu::TextureUsages as T;
         let resolved = texture("resolved", COLOR, 1, T::RENDER_ATTACHMENT | T::COPY_SRC);

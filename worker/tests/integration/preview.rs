@@ -253,7 +253,7 @@ fn gtao_is_open_on_open_ground_and_dark_where_the_figure_meets_it() {
     }
     // The ground: open far from the figure (an open plane's visibility is
     // exactly 1), dark near its feet.
-    let radius = f.camera.ground_half_extent / 3.0;
+    let radius = f.camera.scene_radius();
     let distance = |i: usize| {
         let p = screen.positions[i];
         (p.x - f.camera.target.x).hypot(p.z - f.camera.target.z)
