@@ -15,6 +15,8 @@
 //!   space (`cubemap_occlusion`, and `cs_main` over a batch of points).
 //! * [`GRID_AO`]: run-time lookup of Malmer et al.'s grids at receivers
 //!   (`grid_occlusion`, and `cs_main` over a batch).
+//! * [`TRACE`]: ray casting in compute, the estimators of core's CPU
+//!   tracer with the same rays (`cs_trace`).
 //! * [`PREVIEW`]: the preview raster (`vs_main`, `fs_main`).
 //! * [`CUBEMAP_AO_VS`], [`GRID_AO_VS`]: the lookups in a vertex shader
 //!   (data in textures), for WebGL2.
@@ -32,7 +34,8 @@ pub mod mirror;
 
 pub use mirror::{
     BlockInfo, CubemapAoParams, GridAoParams, GridPartInfo, GridReceiver, GtaoParams,
-    PreviewUniforms, VertexAoParams, VertexAoVsParams,
+    PreviewUniforms, TraceParams, TracePoint, TraceScene, TraceTally, VertexAoParams,
+    VertexAoVsParams,
 };
 
 /// Half-float decoding shared by the pipelines.
@@ -149,9 +152,14 @@ pub const VIEWER_CUBEMAP: &str = compose!(
     "viewer_cubemap.wgsl"
 );
 
+/// Ray casting in compute, the CPU tracer's estimators (`cs_trace`):
+/// `trace.wgsl`.
+pub const TRACE: &str = compose!("trace.wgsl");
+
 /// Every composed pipeline source, by file name.
-pub fn sources() -> [(&'static str, &'static str); 11] {
+pub fn sources() -> [(&'static str, &'static str); 12] {
     [
+        ("trace.wgsl", TRACE),
         ("vertex_ao.wgsl", VERTEX_AO),
         ("vertex_ao_vs.wgsl", VERTEX_AO_VS),
         ("cubemap_ao.wgsl", CUBEMAP_AO),
@@ -273,6 +281,14 @@ mod tests {
             ("PartPose", 4 * 32),
         ] {
             assert_eq!(wgsl_size(GRID_AO, name) as usize, size, "{name}");
+        }
+        for (name, size) in [
+            ("Params", size_of::<TraceParams>()),
+            ("SceneInfo", size_of::<TraceScene>()),
+            ("RayPoint", size_of::<TracePoint>()),
+            ("Tally", size_of::<TraceTally>()),
+        ] {
+            assert_eq!(wgsl_size(TRACE, name) as usize, size, "{name}");
         }
     }
 

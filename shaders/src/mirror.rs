@@ -208,6 +208,105 @@ pub struct GtaoParams {
     pub _pad: u32,
 }
 
+/// `Params` of trace.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct TraceParams {
+    /// 0 cosine (count), 1 cosine with exponential falloff, 2 volume,
+    /// 3 Kroon.
+    pub estimator: u32,
+    /// Rays per point.
+    pub samples: u32,
+    /// Rays per invocation.
+    pub group_size: u32,
+    /// Invocations per point.
+    pub groups: u32,
+    /// Points of this dispatch.
+    pub points: u32,
+    /// The first point's index in the batch.
+    pub first_point: u32,
+    /// Invocations per row of the dispatch grid (workgroups in x × 64).
+    pub row_stride: u32,
+    /// Kroon: 1 when the normals weight the hits.
+    pub facing: u32,
+    /// Kroon's α.
+    pub alpha: f32,
+    /// Padding.
+    pub _pad: [u32; 3],
+    /// Sobol direction numbers of dimensions 0 and 1, two index bits per
+    /// entry.
+    pub sobol: [[u32; 4]; 8],
+}
+
+/// `SceneInfo` of trace.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct TraceScene {
+    /// The scene's first node in the batch's nodes.
+    pub first_node: u32,
+    /// The scene's first triangle in the batch's triangles.
+    pub first_triangle: u32,
+    /// Nodes (0: no triangles).
+    pub nodes: u32,
+    /// The ground's up axis, 3 for none.
+    pub ground_axis: u32,
+    /// The ground's height (local frame).
+    pub ground_height: f32,
+    /// A finite ground's half edge; negative for a solid half-space.
+    pub ground_half: f32,
+    /// Hits closer than this are ignored (local units).
+    pub tmin: f32,
+    /// Hits farther than this do not count (local units; f32::MAX for
+    /// none).
+    pub tmax: f32,
+    /// τ of the exponential falloff, per local unit.
+    pub tau: f32,
+    /// Padding.
+    pub _pad: [u32; 3],
+}
+
+/// `RayPoint` of trace.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct TracePoint {
+    /// The ray origin (local frame).
+    pub origin: [f32; 3],
+    /// Index of the point's scene.
+    pub scene: u32,
+    /// The ray frame's tangent.
+    pub tangent: [f32; 3],
+    /// The point's scramble seed.
+    pub seed: u32,
+    /// The ray frame's bitangent.
+    pub bitangent: [f32; 3],
+    /// Padding.
+    pub _pad0: u32,
+    /// The normal (zero for none).
+    pub normal: [f32; 3],
+    /// Padding.
+    pub _pad1: u32,
+}
+
+/// `Tally` of trace.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct TraceTally {
+    /// Sum of the directions that hit (volume).
+    pub direction: [f32; 3],
+    /// The weighted sum.
+    pub sum: f32,
+    /// Rays that hit within the limit.
+    pub hits: u32,
+    /// Rays whose closest hit is a back face.
+    pub back: u32,
+    /// Padding.
+    pub _pad: [u32; 2],
+}
+
+const _: () = assert!(size_of::<TraceParams>() == 176);
+const _: () = assert!(size_of::<TraceScene>() == 48);
+const _: () = assert!(size_of::<TracePoint>() == 64);
+const _: () = assert!(size_of::<TraceTally>() == 32);
 const _: () = assert!(size_of::<GtaoParams>() == 112);
 const _: () = assert!(size_of::<VertexAoParams>() == 16);
 const _: () = assert!(size_of::<BlockInfo>() == 32);

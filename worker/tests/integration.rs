@@ -3,4 +3,5 @@
 mod integration {
     mod gpu;
     mod preview;
+    mod trace;
 }

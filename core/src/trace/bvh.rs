@@ -15,6 +15,8 @@ use glam::Vec3A;
 use obvhs::{cwbvh::CwBvh, ray::Ray, rt_triangle::RtTriangle};
 use wide::f32x8;
 
+use super::engine::GPU_NODE_WORDS;
+
 /// Child slot of an internal node: the child's box and what it is.
 #[derive(Clone, Copy)]
 struct Node {
@@ -74,6 +76,56 @@ impl Bvh8 {
 
     pub(crate) fn node_count(&self) -> usize {
         self.nodes.len()
+    }
+
+    /// The nodes for a GPU tracer, [`GPU_NODE_WORDS`] words each: the
+    /// child boxes as f32 bits (min x of the eight children, then min y,
+    /// min z, max x, max y, max z), the eight `first` indices, the eight
+    /// counts as bytes (255: an empty slot), then padding.
+    pub(crate) fn gpu_nodes(&self) -> Vec<u32> {
+        let mut out = Vec::with_capacity(self.nodes.len() * GPU_NODE_WORDS);
+        for node in &self.nodes {
+            let start = out.len();
+            for lanes in node.lo.iter().chain(&node.hi) {
+                out.extend(lanes.to_array().map(f32::to_bits));
+            }
+            out.extend(node.first);
+            let counts = std::array::from_fn::<u8, 8, _>(|c| {
+                if node.lo[0].to_array()[c] > node.hi[0].to_array()[c] {
+                    u8::MAX
+                } else {
+                    node.count[c]
+                }
+            });
+            out.push(u32::from_le_bytes([
+                counts[0], counts[1], counts[2], counts[3],
+            ]));
+            out.push(u32::from_le_bytes([
+                counts[4], counts[5], counts[6], counts[7],
+            ]));
+            out.resize(start + GPU_NODE_WORDS, 0);
+        }
+        out
+    }
+
+    /// Nodes on the longest path from the root.
+    pub(crate) fn depth(&self) -> usize {
+        let mut depth = vec![0usize; self.nodes.len()];
+        depth[0] = 1;
+        let mut deepest = 1;
+        let mut stack = vec![0usize];
+        while let Some(i) = stack.pop() {
+            let node = &self.nodes[i];
+            for c in 0..8 {
+                if node.count[c] == 0 && node.lo[0].to_array()[c] <= node.hi[0].to_array()[c] {
+                    let child = node.first[c] as usize;
+                    depth[child] = depth[i] + 1;
+                    deepest = deepest.max(depth[child]);
+                    stack.push(child);
+                }
+            }
+        }
+        deepest
     }
 
     /// Traverses the tree for `ray` over `triangles` (those it was built

@@ -36,6 +36,7 @@
 //!   get occlusion 0.
 
 mod bvh;
+pub mod engine;
 mod error;
 mod poses;
 mod sampling;
@@ -53,6 +54,7 @@ pub use scene::{Axis, BvhQuality, Ground, Scene, SceneOptions, Traversal};
 
 use scene::Tracer;
 
+pub use engine::{Estimator, RayBatch, RayEngine, RayPoint, Tally};
 use sampling::{Frame, cosine_directions, point_seed, sphere_directions};
 
 /// Mixed into the seed of everything held out ("heldout!" in ASCII), so
@@ -197,37 +199,169 @@ fn morton_order(points: &[Vec3]) -> Vec<u32> {
 /// reuse the BVH nodes of one region, few enough to balance two cores.
 const CHUNK: usize = 32;
 
-/// Evaluates `f(tracer, directions, index)` for every point, in parallel
-/// and in Morton order; results are returned in point order. `tracer` and
-/// `directions` (a buffer for the point's ray directions) are reused by
-/// the points of a task.
-fn par_points<T: Send + Clone + Default>(
-    scene: &Scene,
-    points: &[Vec3],
-    progress: Progress<'_>,
-    f: impl Fn(&mut Tracer<'_>, &mut Vec<Vec3A>, u32) -> T + Sync,
-) -> Vec<T> {
-    let order = morton_order(points);
-    let chunks: Vec<Vec<T>> = order
-        .par_chunks(CHUNK)
-        .map(|chunk| {
-            let mut tracer = scene.tracer();
-            let mut directions = Vec::new();
-            let values = chunk
-                .iter()
-                .map(|&i| f(&mut tracer, &mut directions, i))
-                .collect();
-            progress(chunk.len());
-            values
-        })
-        .collect();
-    let mut out = vec![T::default(); points.len()];
-    for (chunk, values) in order.chunks(CHUNK).zip(chunks) {
-        for (&i, v) in chunk.iter().zip(values) {
-            out[i as usize] = v;
+/// Traces a batch: on the process's [`RayEngine`] when one is installed
+/// and takes every scene, else here, one scene after another, its points
+/// in parallel and in Morton order of their origins. Tallies are returned
+/// in point order.
+fn trace_batch(batch: &RayBatch<'_>, progress: Progress<'_>) -> Result<Vec<Tally>, TraceError> {
+    if let Some(engine) = engine::engine()
+        && batch.scenes.iter().all(|s| s.gpu_info().is_some())
+        && let Some(tallies) = engine.trace(batch, progress)?
+    {
+        return Ok(tallies);
+    }
+    let mut out = vec![Tally::default(); batch.points.len()];
+    for (s, scene) in batch.scenes.iter().enumerate() {
+        let indices: Vec<u32> = (0..batch.points.len() as u32)
+            .filter(|&i| batch.points[i as usize].scene == s as u32)
+            .collect();
+        let origins: Vec<Vec3> = indices
+            .iter()
+            .map(|&i| Vec3::from(batch.points[i as usize].origin))
+            .collect();
+        let order: Vec<u32> = morton_order(&origins)
+            .into_iter()
+            .map(|k| indices[k as usize])
+            .collect();
+        let tally = CpuTally::new(scene, batch);
+        let chunks: Vec<Vec<Tally>> = order
+            .par_chunks(CHUNK)
+            .map(|chunk| {
+                let mut tracer = scene.tracer();
+                let mut directions = Vec::new();
+                let values = chunk
+                    .iter()
+                    .map(|&i| tally.point(&mut tracer, &mut directions, &batch.points[i as usize]))
+                    .collect();
+                progress(chunk.len());
+                values
+            })
+            .collect();
+        for (chunk, values) in order.chunks(CHUNK).zip(chunks) {
+            for (&i, v) in chunk.iter().zip(values) {
+                out[i as usize] = v;
+            }
         }
     }
-    out
+    Ok(out)
+}
+
+/// The CPU tracer's reduction of one point's rays, for one scene of a
+/// batch.
+struct CpuTally {
+    estimator: Estimator,
+    samples: u32,
+    /// The maximum distance in local units.
+    tmax: f32,
+    /// τ in local units (the exponential falloff).
+    tau: f32,
+}
+
+impl CpuTally {
+    fn new(scene: &Scene, batch: &RayBatch<'_>) -> Self {
+        let tau = match batch.estimator {
+            Estimator::CosineExponential { tau } => tau / scene.local_distance(1.0),
+            _ => 0.0,
+        };
+        Self {
+            estimator: batch.estimator,
+            samples: batch.samples,
+            tmax: scene.local_distance(batch.max_distance),
+            tau,
+        }
+    }
+
+    fn point(&self, tracer: &mut Tracer<'_>, dirs: &mut Vec<Vec3A>, p: &RayPoint) -> Tally {
+        let mut tally = Tally::default();
+        let origin = p.origin;
+        if self.estimator.is_cosine() {
+            if p.normal == Vec3A::ZERO {
+                return tally;
+            }
+            let frame = Frame::from_axes(p.tangent, p.bitangent, p.normal);
+            cosine_directions(self.samples, p.seed, &frame, dirs);
+        } else {
+            sphere_directions(self.samples, p.seed, dirs);
+        }
+        let tmax = self.tmax;
+        match self.estimator {
+            Estimator::Cosine => {
+                tally.hits = dirs
+                    .iter()
+                    .filter(|&&d| tracer.occluded(origin, d, tmax))
+                    .count() as u32;
+            }
+            Estimator::CosineExponential { .. } => {
+                for &d in dirs.iter() {
+                    if let Some(h) = tracer.closest(origin, d, tmax) {
+                        tally.hits += 1;
+                        tally.sum += f64::from((-self.tau * h.t).exp());
+                    }
+                }
+            }
+            Estimator::Volume => {
+                for &d in dirs.iter() {
+                    let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
+                        continue;
+                    };
+                    tally.back += u32::from(hit.back_face);
+                    if hit.t < tmax {
+                        tally.hits += 1;
+                        tally.direction += d;
+                    }
+                }
+            }
+            Estimator::Kroon { alpha, facing } => {
+                let facing_normal = facing.then_some(p.normal);
+                for &d in dirs.iter() {
+                    let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
+                        continue;
+                    };
+                    tally.back += u32::from(hit.back_face);
+                    if hit.t < tmax {
+                        tally.hits += 1;
+                        let facing = facing_normal.map_or(1.0, |n| n.dot(d).max(0.0));
+                        let falloff = (1.0 - hit.t / tmax).powf(alpha);
+                        tally.sum += f64::from(facing * falloff);
+                    }
+                }
+            }
+        }
+        tally
+    }
+}
+
+/// A batch point with cosine-weighted rays about `normal` (or none, for
+/// a zero normal), scrambled by point `index` of a request seeded `seed`.
+fn cosine_point(scene: u32, origin: Vec3A, normal: Vec3, seed: u64, index: u32) -> RayPoint {
+    let (tangent, bitangent, normal) = match normal.try_normalize() {
+        Some(n) => {
+            let f = Frame::new(n);
+            (f.t, f.b, f.n)
+        }
+        None => (Vec3A::ZERO, Vec3A::ZERO, Vec3A::ZERO),
+    };
+    RayPoint {
+        scene,
+        origin,
+        tangent,
+        bitangent,
+        normal,
+        seed: point_seed(seed, index),
+    }
+}
+
+/// A batch point with rays uniform on the sphere; `normal` (Kroon's facing
+/// term) may be zero.
+fn sphere_point(scene: u32, origin: Vec3A, normal: Vec3, seed: u64, index: u32) -> RayPoint {
+    RayPoint {
+        scene,
+        origin,
+        tangent: Vec3A::ZERO,
+        bitangent: Vec3A::ZERO,
+        normal: normal.normalize_or_zero().into(),
+        seed: point_seed(seed, index),
+    }
 }
 
 /// Surface ambient occlusion at `points` about their unit `normals`
@@ -256,9 +390,7 @@ pub fn surface_occlusion(
         .zip(normals)
         .map(|(&p, &n)| scene.to_local(p) + Vec3A::from(n.normalize_or_zero()) * scene.lift())
         .collect::<Vec<_>>();
-    Ok(surface_from(
-        scene, points, &origins, normals, params, progress,
-    ))
+    surface_from(scene, &origins, normals, params, progress)
 }
 
 /// A triangle mesh with a unit normal per vertex: the input of
@@ -289,6 +421,61 @@ pub fn vertex_occlusion(
     progress: Progress<'_>,
 ) -> Result<Vec<f32>, TraceError> {
     check_surface(mesh.positions, mesh.normals, params)?;
+    let origins = vertex_origins(scene, mesh)?;
+    surface_from(scene, &origins, mesh.normals, params, progress)
+}
+
+/// [`vertex_occlusion`] of several posed meshes, each in its own scene,
+/// traced as one batch (one dispatch on a GPU engine); each mesh's points
+/// are scrambled by `(seed, vertex)` as in [`vertex_occlusion`].
+pub fn vertex_occlusion_many(
+    scenes: &[&Scene],
+    meshes: &[SurfaceMesh<'_>],
+    params: &SurfaceParams,
+    progress: Progress<'_>,
+) -> Result<Vec<Vec<f32>>, TraceError> {
+    if scenes.len() != meshes.len() {
+        return Err(TraceError::Invalid(format!(
+            "{} scenes for {} meshes",
+            scenes.len(),
+            meshes.len()
+        )));
+    }
+    let mut points = Vec::new();
+    for (s, (scene, mesh)) in scenes.iter().zip(meshes).enumerate() {
+        check_surface(mesh.positions, mesh.normals, params)?;
+        let origins = vertex_origins(scene, mesh)?;
+        points.extend(
+            origins
+                .iter()
+                .zip(mesh.normals)
+                .enumerate()
+                .map(|(i, (&o, &n))| cosine_point(s as u32, o, n, params.seed, i as u32)),
+        );
+    }
+    let batch = RayBatch {
+        scenes: scenes.to_vec(),
+        points,
+        estimator: surface_estimator(params),
+        samples: params.samples,
+        max_distance: params.max_distance,
+    };
+    let tallies = trace_batch(&batch, progress)?;
+    let mut rest = &tallies[..];
+    Ok(meshes
+        .iter()
+        .map(|m| {
+            let (mine, after) = rest.split_at(m.positions.len());
+            rest = after;
+            mine.iter().map(|t| surface_value(t, params)).collect()
+        })
+        .collect())
+}
+
+/// The ray origins of a mesh's vertices (local frame): lifted along the
+/// normal and, on a boundary or crease, slid towards the vertex's own
+/// triangles (see [`vertex_occlusion`]).
+fn vertex_origins(scene: &Scene, mesh: &SurfaceMesh<'_>) -> Result<Vec<Vec3A>, TraceError> {
     let n = mesh.positions.len();
     if let Some(t) = mesh
         .triangles
@@ -324,14 +511,7 @@ pub fn vertex_occlusion(
             scene.to_local(mesh.positions[i]) + Vec3A::from(normal + slide) * lift
         })
         .collect::<Vec<_>>();
-    Ok(surface_from(
-        scene,
-        mesh.positions,
-        &origins,
-        mesh.normals,
-        params,
-        progress,
-    ))
+    Ok(origins)
 }
 
 fn check_surface(
@@ -362,38 +542,40 @@ fn check_surface(
 /// (world) only order the work.
 fn surface_from(
     scene: &Scene,
-    points: &[Vec3],
     origins: &[Vec3A],
     normals: &[Vec3],
     params: &SurfaceParams,
     progress: Progress<'_>,
-) -> Vec<f32> {
-    let tmax = scene.local_distance(params.max_distance);
-    let samples = params.samples;
-    par_points(scene, points, progress, |tracer, dirs, i| {
-        let Some(n) = normals[i as usize].try_normalize() else {
-            return 0.0;
-        };
-        let origin = origins[i as usize];
-        let frame = Frame::new(n);
-        let seed = point_seed(params.seed, i);
-        cosine_directions(samples, seed, &frame, dirs);
-        let dirs = dirs.iter().copied();
-        match params.falloff {
-            Falloff::None => {
-                let hits = dirs.filter(|&d| tracer.occluded(origin, d, tmax)).count();
-                hits as f32 / samples as f32
-            }
-            Falloff::Exponential { tau } => {
-                let tau_local = tau / scene.local_distance(1.0);
-                let sum: f64 = dirs
-                    .filter_map(|d| tracer.closest(origin, d, tmax))
-                    .map(|h| f64::from((-tau_local * h.t).exp()))
-                    .sum();
-                (sum / f64::from(samples)) as f32
-            }
-        }
-    })
+) -> Result<Vec<f32>, TraceError> {
+    let batch = RayBatch {
+        scenes: vec![scene],
+        points: origins
+            .iter()
+            .zip(normals)
+            .enumerate()
+            .map(|(i, (&o, &n))| cosine_point(0, o, n, params.seed, i as u32))
+            .collect(),
+        estimator: surface_estimator(params),
+        samples: params.samples,
+        max_distance: params.max_distance,
+    };
+    let tallies = trace_batch(&batch, progress)?;
+    Ok(tallies.iter().map(|t| surface_value(t, params)).collect())
+}
+
+fn surface_estimator(params: &SurfaceParams) -> Estimator {
+    match params.falloff {
+        Falloff::None => Estimator::Cosine,
+        Falloff::Exponential { tau } => Estimator::CosineExponential { tau },
+    }
+}
+
+/// The surface estimator's value from a point's tally.
+fn surface_value(t: &Tally, params: &SurfaceParams) -> f32 {
+    match params.falloff {
+        Falloff::None => t.hits as f32 / params.samples as f32,
+        Falloff::Exponential { .. } => (t.sum / f64::from(params.samples)) as f32,
+    }
 }
 
 /// Full-sphere volume occlusion at points in space (Malmer et al. 2005,
@@ -417,30 +599,26 @@ pub fn volume_occlusion(
     check_samples(params.samples)?;
     check_distance("max_distance", params.max_distance, false)?;
     check_points(points)?;
-    let tmax = scene.local_distance(params.max_distance);
+    let batch = RayBatch {
+        scenes: vec![scene],
+        points: points
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| sphere_point(0, scene.to_local(p), Vec3::ZERO, params.seed, i as u32))
+            .collect(),
+        estimator: Estimator::Volume,
+        samples: params.samples,
+        max_distance: params.max_distance,
+    };
     let samples = params.samples;
-    Ok(par_points(scene, points, progress, |tracer, dirs, i| {
-        let origin = scene.to_local(points[i as usize]);
-        let seed = point_seed(params.seed, i);
-        let (mut hits, mut back) = (0u32, 0u32);
-        let mut sum = Vec3A::ZERO;
-        sphere_directions(samples, seed, dirs);
-        for &d in dirs.iter() {
-            let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
-                continue;
-            };
-            back += u32::from(hit.back_face);
-            if hit.t < tmax {
-                hits += 1;
-                sum += d;
-            }
-        }
-        VolumeSample {
-            occlusion: 2.0 * hits as f32 / samples as f32,
-            direction: Vec3::from(sum.normalize_or_zero()),
-            inside: 2 * back > samples,
-        }
-    }))
+    Ok(trace_batch(&batch, progress)?
+        .iter()
+        .map(|t| VolumeSample {
+            occlusion: 2.0 * t.hits as f32 / samples as f32,
+            direction: Vec3::from(t.direction.normalize_or_zero()),
+            inside: 2 * t.back > samples,
+        })
+        .collect())
 }
 
 /// Kroon's occlusion at points (Kroon 2023, Eq. 3.1):
@@ -488,29 +666,31 @@ pub fn kroon_occlusion(
             points.len()
         )));
     }
-    let d_max = scene.local_distance(params.max_distance);
+    let batch = RayBatch {
+        scenes: vec![scene],
+        points: points
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| {
+                let n = normals.map_or(Vec3::ZERO, |n| n[i]);
+                sphere_point(0, scene.to_local(p), n, params.seed, i as u32)
+            })
+            .collect(),
+        estimator: Estimator::Kroon {
+            alpha: params.alpha,
+            facing: normals.is_some(),
+        },
+        samples: params.samples,
+        max_distance: params.max_distance,
+    };
     let samples = params.samples;
-    Ok(par_points(scene, points, progress, |tracer, dirs, i| {
-        let origin = scene.to_local(points[i as usize]);
-        let normal = normals.map(|n| Vec3A::from(n[i as usize].normalize_or_zero()));
-        let seed = point_seed(params.seed, i);
-        let mut back = 0u32;
-        let mut sum = 0.0f64;
-        sphere_directions(samples, seed, dirs);
-        for &d in dirs.iter() {
-            let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
-                continue;
-            };
-            back += u32::from(hit.back_face);
-            if hit.t < d_max {
-                let facing = normal.map_or(1.0, |n| n.dot(d).max(0.0));
-                let falloff = (1.0 - hit.t / d_max).powf(params.alpha);
-                sum += f64::from(facing * falloff);
+    Ok(trace_batch(&batch, progress)?
+        .iter()
+        .map(|t| {
+            if 2 * t.back > samples {
+                return 1.0;
             }
-        }
-        if 2 * back > samples {
-            return 1.0;
-        }
-        ((f64::from(params.weight) * sum / f64::from(samples)) as f32).clamp(0.0, 1.0)
-    }))
+            ((f64::from(params.weight) * t.sum / f64::from(samples)) as f32).clamp(0.0, 1.0)
+        })
+        .collect())
 }

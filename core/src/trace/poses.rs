@@ -5,6 +5,7 @@
 
 use super::{
     Progress, Scene, SceneOptions, SurfaceMesh, SurfaceParams, TraceError, vertex_occlusion,
+    vertex_occlusion_many,
 };
 use crate::{Character, Pose};
 
@@ -70,6 +71,27 @@ pub fn trace_poses(
 ) -> Result<AoBlock, TraceError> {
     let vertices = character.positions.len();
     let mut values = Vec::with_capacity(vertices * poses.len());
+    if super::engine::engine().is_some() {
+        // One batch, so that a GPU traces every pose in one dispatch.
+        let posed: Vec<_> = poses.iter().map(|p| character.skin(p)).collect();
+        let scenes = posed
+            .iter()
+            .map(|p| Scene::new(&p.positions, &character.triangles, options))
+            .collect::<Result<Vec<_>, _>>()?;
+        let meshes: Vec<SurfaceMesh<'_>> = posed
+            .iter()
+            .map(|p| SurfaceMesh {
+                positions: &p.positions,
+                normals: &p.normals,
+                triangles: &character.triangles,
+            })
+            .collect();
+        let scenes: Vec<&Scene> = scenes.iter().collect();
+        for row in vertex_occlusion_many(&scenes, &meshes, params, progress)? {
+            values.extend(row);
+        }
+        return Ok(AoBlock { vertices, values });
+    }
     for pose in poses {
         values.extend(trace_pose(character, pose, options, params, progress)?.1);
     }

@@ -26,6 +26,14 @@ pub(crate) fn point_seed(seed: u64, index: u32) -> u32 {
     (z ^ (z >> 32)) as u32
 }
 
+/// The Sobol direction numbers of dimensions 0 and 1 in bit-reversed form,
+/// one pair per bit of the sample index (the most significant first), as
+/// `sobol_burley` applies them: what a GPU tracer needs to compute
+/// [`sample_2d`] itself.
+pub fn sobol_directions() -> [[u32; 2]; 16] {
+    std::array::from_fn(|m| [0, 1].map(|d| sobol_burley::parts::sobol_rev(0x8000_0000u32 >> m, d)))
+}
+
 /// Sample `i` of the 2-D sequence scrambled by `seed`, in [0, 1)².
 #[inline]
 pub(crate) fn sample_2d(i: u32, seed: u32) -> (f32, f32) {
@@ -109,9 +117,9 @@ fn uniform_sphere(u: f32x8, v: f32x8) -> [f32x8; 3] {
 /// about +z to one about `n`.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Frame {
-    t: Vec3A,
-    b: Vec3A,
-    n: Vec3A,
+    pub(crate) t: Vec3A,
+    pub(crate) b: Vec3A,
+    pub(crate) n: Vec3A,
 }
 
 impl Frame {
@@ -124,6 +132,11 @@ impl Frame {
             b: b.into(),
             n: n.into(),
         }
+    }
+
+    /// The frame of these axes (as [`Frame::new`] made them).
+    pub(crate) fn from_axes(t: Vec3A, b: Vec3A, n: Vec3A) -> Frame {
+        Frame { t, b, n }
     }
 
     #[cfg(test)]

@@ -12,7 +12,11 @@ use obvhs::{
 };
 use serde::{Deserialize, Serialize};
 
-use super::{bvh::Bvh8, error::TraceError};
+use super::{
+    bvh::Bvh8,
+    engine::{GPU_TRIANGLE_FLOATS, GpuSceneInfo},
+    error::TraceError,
+};
 
 /// The scene is traced in a local frame: centred on the mesh's bounding
 /// box and scaled by a power of two (exact in floating point) so that the
@@ -341,6 +345,44 @@ impl Scene {
             Accel::Bvh2(bvh) => bvh.nodes.len(),
             Accel::Wide(bvh) => bvh.node_count(),
         }
+    }
+
+    /// The scene's constants for a GPU tracer, or `None` when its tree is
+    /// not aobake's wide BVH (the comparison kernels are CPU-only).
+    pub fn gpu_info(&self) -> Option<GpuSceneInfo> {
+        let depth = match &self.accel {
+            Accel::Empty => 0,
+            Accel::Wide(bvh) => bvh.depth(),
+            Accel::Obvhs(_) | Accel::Bvh2(_) => return None,
+        };
+        Some(GpuSceneInfo {
+            scale: self.scale,
+            tmin: TMIN,
+            ground: self.ground.map(|g| (g.axis as u32, g.height, g.half_size)),
+            depth,
+        })
+    }
+
+    /// The wide BVH's nodes for a GPU tracer ([`GPU_NODE_WORDS`] words
+    /// each; see `bvh.rs`), empty without triangles or with another tree.
+    pub fn gpu_nodes(&self) -> Vec<u32> {
+        match &self.accel {
+            Accel::Wide(bvh) => bvh.gpu_nodes(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The triangles in the BVH's leaf order for a GPU tracer,
+    /// [`GPU_TRIANGLE_FLOATS`] floats each: v0, e1 = v0 − v1, e2 = v2 − v0
+    /// and ng = e1 × e2 (obvhs's `RtTriangle`, local frame).
+    pub fn gpu_triangles(&self) -> Vec<f32> {
+        let mut out = Vec::with_capacity(self.triangles.len() * GPU_TRIANGLE_FLOATS);
+        for t in &self.triangles {
+            for v in [t.v0, t.e1, t.e2, t.ng] {
+                out.extend(v.to_array());
+            }
+        }
+        out
     }
 
     /// World point to the local frame.

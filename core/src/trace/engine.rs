@@ -1,0 +1,167 @@
+//! Who casts the rays: the CPU tracer here, or a [`RayEngine`] installed by
+//! the process (the worker's wgpu compute tracer, `aobake_worker::gpu::
+//! GpuTracer`).
+//!
+//! Every estimator reduces a point's rays to a [`Tally`] (hits, back-face
+//! hits, a weighted sum, a sum of hit directions), and turns the tally into
+//! its value in one place, whoever traced the rays. An engine is given a
+//! [`RayBatch`]: the scenes (posed meshes, several per batch so that one
+//! dispatch traces many poses), the points with their ray frames and
+//! scrambling seeds, the estimator and the ray count; it returns one tally
+//! per point. The directions are those of [`super::sampling`], so an engine
+//! that casts the same rays through the same arithmetic gets the same hits
+//! except at float ties.
+//!
+//! The engine is process-wide ([`set_engine`]): the tracer is a property of
+//! the machine a job runs on, like its core count, not of the bake.
+
+use std::sync::{Arc, RwLock};
+
+use glam::Vec3A;
+
+pub use super::sampling::sobol_directions;
+use super::{Scene, TraceError};
+
+/// What a point's rays estimate, and how a hit counts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Estimator {
+    /// Cosine-weighted about the normal: count the rays that meet a surface
+    /// within the maximum distance (any hit).
+    Cosine,
+    /// Cosine-weighted about the normal: sum e^(−τt) over the closest hits
+    /// within the maximum distance; `tau` per model unit.
+    CosineExponential {
+        /// τ, per model unit.
+        tau: f32,
+    },
+    /// Uniform on the sphere, closest hit without a limit: count hits
+    /// within the maximum distance and their directions' sum, and the rays
+    /// whose first hit is a back face (Malmer et al. Eq. 5).
+    Volume,
+    /// Uniform on the sphere, closest hit without a limit: sum
+    /// max(0, n·ω)·(1 − t/D_max)^α over hits within D_max (the maximum
+    /// distance), and count back-face hits (Kroon Eq. 3.1).
+    Kroon {
+        /// α, ≥ 0.
+        alpha: f32,
+        /// Whether the points' normals weight the hits (else the term is
+        /// 1).
+        facing: bool,
+    },
+}
+
+impl Estimator {
+    /// Whether the directions are cosine-weighted about the normal (else
+    /// uniform on the sphere).
+    pub fn is_cosine(self) -> bool {
+        matches!(
+            self,
+            Estimator::Cosine | Estimator::CosineExponential { .. }
+        )
+    }
+}
+
+/// One point of a batch: where its rays start and how they are oriented.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayPoint {
+    /// Index into [`RayBatch::scenes`].
+    pub scene: u32,
+    /// Ray origin in the scene's local frame.
+    pub origin: Vec3A,
+    /// The orthonormal frame of cosine-weighted rays (tangent, bitangent,
+    /// normal), or the normal of Kroon's facing term in `normal`; all zero
+    /// for a point with no normal.
+    pub tangent: Vec3A,
+    /// See `tangent`.
+    pub bitangent: Vec3A,
+    /// See `tangent`.
+    pub normal: Vec3A,
+    /// The scramble of the point's direction sequence.
+    pub seed: u32,
+}
+
+/// Points to trace in one go, possibly over several scenes.
+#[derive(Debug)]
+pub struct RayBatch<'a> {
+    /// The scenes the points refer to.
+    pub scenes: Vec<&'a Scene>,
+    /// The points.
+    pub points: Vec<RayPoint>,
+    /// What the rays estimate.
+    pub estimator: Estimator,
+    /// Rays per point.
+    pub samples: u32,
+    /// Hits farther than this (model units) count as misses; may be
+    /// infinite (not for [`Estimator::Kroon`]).
+    pub max_distance: f32,
+}
+
+/// A point's rays reduced: what every estimator's value is made from.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Tally {
+    /// Rays that hit within the maximum distance.
+    pub hits: u32,
+    /// Rays whose closest hit (without the distance limit) is a back face
+    /// or the ground from below (sphere estimators only).
+    pub back: u32,
+    /// The estimator's weighted sum (exponential falloff, Kroon's terms).
+    pub sum: f64,
+    /// Sum of the directions of the rays that hit within the maximum
+    /// distance (the volume estimator).
+    pub direction: Vec3A,
+}
+
+/// A ray tracer other than the CPU's: it traces whole batches.
+pub trait RayEngine: Send + Sync + std::fmt::Debug {
+    /// The engine as a person reads it: kind and adapter.
+    fn label(&self) -> String;
+
+    /// One tally per point of `batch`, in order; `None` when the engine
+    /// declines the batch (a scene it cannot take, such as a tree deeper
+    /// than its traversal stack), which the CPU then traces. `progress` is
+    /// called with the number of points just finished.
+    fn trace(
+        &self,
+        batch: &RayBatch<'_>,
+        progress: super::Progress<'_>,
+    ) -> Result<Option<Vec<Tally>>, TraceError>;
+}
+
+static ENGINE: RwLock<Option<Arc<dyn RayEngine>>> = RwLock::new(None);
+
+/// Installs the process's ray engine (`None`: the CPU tracer, the
+/// default). Every estimator of this module traces through it from then
+/// on.
+pub fn set_engine(engine: Option<Arc<dyn RayEngine>>) {
+    *ENGINE.write().unwrap_or_else(|e| e.into_inner()) = engine;
+}
+
+/// The process's ray engine, if one is installed.
+pub fn engine() -> Option<Arc<dyn RayEngine>> {
+    ENGINE.read().unwrap_or_else(|e| e.into_inner()).clone()
+}
+
+/// The label of the tracer this process uses: `cpu` or the engine's.
+pub fn tracer_label() -> String {
+    engine().map_or_else(|| "cpu".to_owned(), |e| e.label())
+}
+
+/// Words per node of [`Scene::gpu_nodes`].
+pub const GPU_NODE_WORDS: usize = 64;
+/// Floats per triangle of [`Scene::gpu_triangles`].
+pub const GPU_TRIANGLE_FLOATS: usize = 12;
+
+/// A scene's constants for a GPU tracer, in its local frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GpuSceneInfo {
+    /// Local units per model unit.
+    pub scale: f32,
+    /// Hits closer than this are ignored (local units).
+    pub tmin: f32,
+    /// The ground: axis (0–2), height, and half size (`None`: infinite,
+    /// a solid half-space).
+    pub ground: Option<(u32, f32, Option<f32>)>,
+    /// Deepest path from the root, in nodes (the traversal stack needs
+    /// at most 7 entries per level).
+    pub depth: usize,
+}

@@ -1,0 +1,292 @@
+//! The GPU tracer (`shaders/wgsl/trace.wgsl`) against core's CPU tracer,
+//! on both adapters a machine without a GPU has: lavapipe (Vulkan) and
+//! llvmpipe (GL). The same rays: per-vertex values identical but at float
+//! ties, and those within one ray; the analytic sphere over a floor within
+//! the CPU tracer's own tolerances; the same bits run to run.
+
+use aobake_core::{
+    Limits, Pose, Upload, import_character,
+    trace::{
+        Axis, Falloff, Ground, KroonParams, Scene, SceneOptions, SurfaceMesh, SurfaceParams,
+        VolumeParams, engine::set_engine, kroon_occlusion, no_progress, shapes, surface_occlusion,
+        trace_poses, vertex_occlusion, volume_occlusion,
+    },
+};
+use aobake_worker::gpu::{Gpu, GpuTracer};
+use glam::Vec3;
+use std::sync::Arc;
+
+/// The tracer on the best adapter of `backends`, for the whole process.
+fn tracer(backends: aobake_worker::gpu::Backends) -> Arc<GpuTracer<'static>> {
+    let gpu = Gpu::with_backends(backends)
+        .unwrap_or_else(|e| panic!("a {backends:?} adapter (lavapipe or llvmpipe): {e}"));
+    let gpu: &'static Gpu = Box::leak(Box::new(gpu));
+    let tracer = GpuTracer::new(gpu).expect("the trace pipeline");
+    eprintln!("adapter: {}", tracer.adapter());
+    Arc::new(tracer)
+}
+
+fn both_adapters() -> [Arc<GpuTracer<'static>>; 2] {
+    [
+        tracer(aobake_worker::gpu::Backends::VULKAN),
+        tracer(aobake_worker::gpu::Backends::GL),
+    ]
+}
+
+/// `f` traced by the CPU, then by `gpu` twice.
+fn cpu_and_gpu<T>(gpu: &Arc<GpuTracer<'static>>, f: impl Fn() -> T) -> (T, T, T) {
+    set_engine(None);
+    let cpu = f();
+    set_engine(Some(gpu.clone()));
+    let first = f();
+    let second = f();
+    set_engine(None);
+    (cpu, first, second)
+}
+
+/// Asserts that at least 99.99 % of `gpu` equals `cpu` exactly and the rest
+/// is within `one_ray`; returns the count of differing values.
+fn agree(what: &str, cpu: &[f32], gpu: &[f32], one_ray: f32) -> usize {
+    assert_eq!(cpu.len(), gpu.len(), "{what}");
+    let differ: Vec<(usize, f32)> = cpu
+        .iter()
+        .zip(gpu)
+        .enumerate()
+        .filter(|(_, (a, b))| a != b)
+        .map(|(i, (a, b))| (i, (a - b).abs()))
+        .collect();
+    eprintln!("{what}: {} of {} values differ", differ.len(), cpu.len());
+    assert!(
+        differ.len() as f64 <= 1e-4 * cpu.len() as f64,
+        "{what}: {} of {} values differ: {:?}",
+        differ.len(),
+        cpu.len(),
+        &differ[..differ.len().min(10)]
+    );
+    for &(i, d) in &differ {
+        assert!(d <= one_ray * 1.0001, "{what}: value {i} differs by {d}");
+    }
+    differ.len()
+}
+
+fn ground(height: f32) -> Option<Ground> {
+    Some(Ground {
+        up: Axis::Z,
+        height,
+        half_size: None,
+    })
+}
+
+#[test]
+fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
+    // The benchmark mesh (101,120 triangles) on a solid ground.
+    let mesh = shapes::timing_mesh();
+    let normals = mesh.normals();
+    let options = SceneOptions {
+        ground: ground(0.0),
+        ..SceneOptions::default()
+    };
+    let scene = Scene::new(&mesh.positions, &mesh.triangles, &options).unwrap();
+    let surface = SurfaceMesh {
+        positions: &mesh.positions,
+        normals: &normals,
+        triangles: &mesh.triangles,
+    };
+    let params = SurfaceParams {
+        samples: 64,
+        max_distance: 3.0,
+        seed: 7,
+        falloff: Falloff::None,
+    };
+    // A skinned character in three poses: one batch of three scenes.
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/data/characters/RiggedFigure/RiggedFigure.glb"
+    );
+    let imported = import_character(
+        Upload::single(&std::fs::read(path).unwrap()),
+        &Limits::default(),
+    )
+    .unwrap();
+    let c = &imported.character;
+    let poses: Vec<Pose> = [0.0, 0.5, 1.0]
+        .iter()
+        .map(|&t| Pose::sample(&c.skeleton, &imported.clips[0], t))
+        .collect();
+    let character = SurfaceParams {
+        samples: 128,
+        max_distance: 0.5,
+        seed: 3,
+        falloff: Falloff::None,
+    };
+    // Obscurance: the closest-hit query and the exponential falloff.
+    let obscurance = SurfaceParams {
+        falloff: Falloff::Exponential { tau: 2.0 },
+        ..params
+    };
+    for gpu in both_adapters() {
+        let (cpu, first, second) = cpu_and_gpu(&gpu, || {
+            vertex_occlusion(&scene, &surface, &params, &no_progress).unwrap()
+        });
+        assert_eq!(first, second, "the same bits run to run");
+        agree("benchmark mesh", &cpu, &first, 1.0 / 64.0);
+
+        let (cpu, first, second) = cpu_and_gpu(&gpu, || {
+            trace_poses(
+                c,
+                &poses,
+                &SceneOptions::default(),
+                &character,
+                &no_progress,
+            )
+            .unwrap()
+        });
+        assert_eq!(first, second);
+        assert_eq!(cpu.poses(), 3);
+        agree("character poses", &cpu.values, &first.values, 1.0 / 128.0);
+
+        let (cpu, first, second) = cpu_and_gpu(&gpu, || {
+            vertex_occlusion(&scene, &surface, &obscurance, &no_progress).unwrap()
+        });
+        assert_eq!(first, second);
+        // f32 sums of e^(−τt) per group of rays against the CPU's f64 sum.
+        let worst = cpu
+            .iter()
+            .zip(&first)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        let close = cpu
+            .iter()
+            .zip(&first)
+            .filter(|(a, b)| (*a - *b).abs() < 1e-5)
+            .count();
+        assert!(
+            close as f64 >= 0.9999 * cpu.len() as f64 && worst <= 1.0 / 64.0,
+            "obscurance: {close} of {} within 1e-5, worst {worst}",
+            cpu.len()
+        );
+    }
+}
+
+#[test]
+fn the_sphere_over_a_floor_and_the_sphere_estimators_hold_on_the_gpu() {
+    // The analytic case of core's tracing tests: a sphere of radius ½
+    // centred 1 above an 8 × 8 floor; occlusion r²d/L³ on the floor.
+    let (r, d) = (0.5f64, 1.0f64);
+    let mut mesh = shapes::grid(
+        Vec3::new(-4.0, -4.0, 0.0),
+        Vec3::new(8.0, 0.0, 0.0),
+        Vec3::new(0.0, 8.0, 0.0),
+        41,
+        41,
+    );
+    let floor = mesh.positions.len();
+    mesh.append(&shapes::icosphere(
+        5,
+        r as f32,
+        Vec3::new(0.0, 0.0, d as f32),
+    ));
+    let scene = Scene::new(&mesh.positions, &mesh.triangles, &SceneOptions::default()).unwrap();
+    let points = &mesh.positions[..floor];
+    let up = vec![Vec3::Z; floor];
+    let centre = Vec3::new(0.0, 0.0, d as f32);
+    let exact: Vec<f64> = points
+        .iter()
+        .map(|p| r * r * d / f64::from(p.distance(centre)).powi(3))
+        .collect();
+    let under_centre = points.iter().position(|p| *p == Vec3::ZERO).unwrap();
+
+    // A ball over solid ground for the sphere estimators.
+    let ball = shapes::icosphere(3, 1.0, Vec3::new(0.0, 0.0, 2.0));
+    let ball_scene = Scene::new(
+        &ball.positions,
+        &ball.triangles,
+        &SceneOptions {
+            ground: ground(0.0),
+            ..SceneOptions::default()
+        },
+    )
+    .unwrap();
+    let probes: Vec<Vec3> = (0..400)
+        .map(|i| {
+            let a = i as f32 * 0.37;
+            Vec3::new(
+                3.0 * a.cos() * (i as f32 / 400.0),
+                3.0 * a.sin(),
+                0.05 + 0.01 * i as f32,
+            )
+        })
+        .chain([Vec3::new(0.0, 0.0, 2.0), Vec3::new(1.0, 1.0, -0.5)])
+        .collect();
+    let volume = VolumeParams {
+        samples: 256,
+        max_distance: 1.5,
+        seed: 5,
+    };
+    let kroon = KroonParams {
+        samples: 256,
+        max_distance: 2.0,
+        alpha: 1.0,
+        weight: 1.0,
+        seed: 9,
+    };
+
+    for gpu in both_adapters() {
+        for (samples, blender_rmse) in [(64, 0.0096), (256, 0.0034)] {
+            let params = SurfaceParams {
+                samples,
+                max_distance: 100.0,
+                seed: 0,
+                falloff: Falloff::None,
+            };
+            let (cpu, first, _) = cpu_and_gpu(&gpu, || {
+                surface_occlusion(&scene, points, &up, &params, &no_progress).unwrap()
+            });
+            agree("floor", &cpu, &first, 1.0 / samples as f32);
+            let n = exact.len() as f64;
+            let diffs = first.iter().zip(&exact).map(|(&v, &e)| f64::from(v) - e);
+            let bias = diffs.clone().sum::<f64>() / n;
+            let rmse = (diffs.map(|x| x * x).sum::<f64>() / n).sqrt();
+            // The CPU tracer's tolerances (core's tracing tests).
+            assert!(rmse < blender_rmse * 1.2, "{samples}: RMSE {rmse}");
+            assert!(bias.abs() < 5e-4, "{samples}: bias {bias}");
+            let centre_value = f64::from(first[under_centre]);
+            assert!(
+                (centre_value - (r / d).powi(2)).abs() < 1e-6,
+                "{centre_value}"
+            );
+        }
+
+        let (cpu, first, second) = cpu_and_gpu(&gpu, || {
+            volume_occlusion(&ball_scene, &probes, &volume, &no_progress).unwrap()
+        });
+        assert_eq!(first, second);
+        let occlusion = |v: &[aobake_core::trace::VolumeSample]| {
+            v.iter().map(|s| s.occlusion).collect::<Vec<_>>()
+        };
+        agree("volume", &occlusion(&cpu), &occlusion(&first), 2.0 / 256.0);
+        for (a, b) in cpu.iter().zip(&first) {
+            assert_eq!(a.inside, b.inside);
+            if a.occlusion == b.occlusion {
+                assert!(a.direction.distance(b.direction) < 1e-4);
+            }
+        }
+        assert!(first[probes.len() - 1].inside, "under the ground");
+
+        let (cpu, first, second) = cpu_and_gpu(&gpu, || {
+            kroon_occlusion(&ball_scene, &probes, None, &kroon, &no_progress).unwrap()
+        });
+        assert_eq!(first, second);
+        let close = cpu
+            .iter()
+            .zip(&first)
+            .filter(|(a, b)| (*a - *b).abs() < 1e-5)
+            .count();
+        assert!(
+            close as f64 >= 0.99 * cpu.len() as f64,
+            "Kroon: {close} of {}",
+            cpu.len()
+        );
+        assert_eq!(first[probes.len() - 2], 1.0, "inside the ball");
+    }
+}
