@@ -217,15 +217,15 @@ pub struct TraceParams {
     pub estimator: u32,
     /// Rays per point.
     pub samples: u32,
-    /// Rays per invocation.
+    /// Rays per lane.
     pub group_size: u32,
-    /// Invocations per point.
+    /// Lanes (invocations) per point.
     pub groups: u32,
     /// Points of this dispatch.
     pub points: u32,
     /// The first point's index in the batch.
     pub first_point: u32,
-    /// Invocations per row of the dispatch grid (workgroups in x × 64).
+    /// Workgroups per row of the dispatch grid.
     pub row_stride: u32,
     /// Kroon: 1 when the normals weight the hits.
     pub facing: u32,

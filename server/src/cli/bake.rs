@@ -16,6 +16,7 @@ use aobake_core::{
     method::vertex::Rows,
 };
 
+use super::common::TracerChoice;
 use super::params::BakeRequestArgs;
 use super::trace::{progress_bar, with_threads};
 
@@ -30,6 +31,12 @@ pub(super) struct Args {
     /// Worker threads for tracing. Default: one per core.
     #[arg(long)]
     threads: Option<usize>,
+    /// Who casts the rays: `cpu`, `gpu` (the wgpu compute tracer on any
+    /// adapter with compute, software ones too), or `auto` (a hardware GPU
+    /// when there is one, else the CPU). Both cast the same rays: values
+    /// differ only where a ray grazes an edge (float ties).
+    #[arg(long, value_enum, default_value = "auto")]
+    tracer: TracerChoice,
     /// The asset to write (aobake asset format v1, docs/asset-format.md).
     #[arg(long)]
     out: PathBuf,
@@ -121,6 +128,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     }
     let inputs = load_inputs(&r.file, &r.clips, &limits)?;
     let bake = Bake::new(&inputs, params)?;
+    args.tracer.install()?;
     with_threads(args.threads, || run_bake(args, &bake))?
 }
 

@@ -97,3 +97,34 @@ pub(super) fn median(v: &[f64]) -> f64 {
         0.5 * (s[n / 2 - 1] + s[n / 2])
     }
 }
+
+/// Which tracer casts this process's rays (`--tracer`, `--gpu`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(super) enum TracerChoice {
+    /// The CPU tracer (every core).
+    Cpu,
+    /// The wgpu compute tracer on any adapter with compute shaders
+    /// (software ones too); an error without one.
+    Gpu,
+    /// A hardware GPU when there is one, else the CPU.
+    Auto,
+}
+
+impl TracerChoice {
+    /// Installs the choice for the process and prints which tracer runs;
+    /// returns its label.
+    pub(super) fn install(self) -> anyhow::Result<String> {
+        use aobake_worker::gpu::{GpuMode, trace::install};
+        let mode = match self {
+            TracerChoice::Cpu => GpuMode::Off,
+            TracerChoice::Gpu => GpuMode::Require,
+            TracerChoice::Auto => GpuMode::Auto,
+        };
+        let (label, note) = install(mode).map_err(|e| anyhow::anyhow!("--tracer gpu: {e}"))?;
+        if let Some(note) = note {
+            eprintln!("{note}");
+        }
+        eprintln!("tracer: {label}");
+        Ok(label)
+    }
+}

@@ -25,14 +25,35 @@ pub(super) struct WorkerArgs {
     /// server's time on saves. 0 saves every checkpoint a job offers.
     #[arg(long, env = "AOBAKE_CHECKPOINT_SECS", default_value_t = 2.0)]
     checkpoint_secs: f64,
+    /// The GPU tracer: `auto` (a hardware GPU with compute shaders when
+    /// there is one, else the CPU), `off` (the CPU), or `require` (any
+    /// adapter with compute, software ones too; the worker does not start
+    /// without one).
+    #[arg(long, value_enum, env = "AOBAKE_GPU", default_value = "auto")]
+    gpu: GpuChoice,
     /// On SIGTERM, seconds a running job may take to finish before it
     /// stops at its next checkpoint and gives its lease back.
     #[arg(long, default_value_t = 20)]
     shutdown_secs: u64,
 }
 
+/// `--gpu`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum GpuChoice {
+    Auto,
+    Off,
+    Require,
+}
+
 /// Runs the lease loop until SIGTERM.
 pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
+    use super::common::TracerChoice;
+    let tracer = match args.gpu {
+        GpuChoice::Auto => TracerChoice::Auto,
+        GpuChoice::Off => TracerChoice::Cpu,
+        GpuChoice::Require => TracerChoice::Gpu,
+    };
+    tracer.install()?;
     let host = std::fs::read_to_string("/etc/hostname")
         .map(|h| h.trim().to_owned())
         .unwrap_or_else(|_| "worker".into());

@@ -26,7 +26,7 @@ pub mod vertex_ao_vs;
 pub use cubemap_ao::CubemapAo;
 pub use grid_ao::GridAo;
 pub use preview::PreviewRenderer;
-pub use trace::GpuTracer;
+pub use trace::{GpuMode, GpuTracer};
 pub use vertex_ao::VertexAo;
 pub use vertex_ao_vs::{cubemap_vertex_stage, evaluate_vertex_stage, grid_vertex_stage};
 pub use wgpu::{Backends, DeviceType};

@@ -5,9 +5,9 @@
 //!
 //! A batch (many poses' scenes and their points) is uploaded once: the
 //! scenes' wide BVH nodes and triangles concatenated, the points with their
-//! ray frames and seeds. Each invocation traces [`GROUP_SIZE`] rays of one
-//! point and writes their tally; the host adds a point's groups in order,
-//! so results do not depend on scheduling. Dispatches are cut to the
+//! ray frames and seeds. Sixteen invocations share a point's rays and
+//! their workgroup adds the sixteen tallies in a fixed order, so results
+//! do not depend on scheduling. Dispatches are cut to the
 //! adapter's limits; a batch whose buffers do not fit is split by points,
 //! and one that runs out of memory is retried in halves.
 
@@ -21,9 +21,11 @@ use wgpu::util::DeviceExt as _;
 
 use super::{Gpu, GpuError};
 
-/// Rays per invocation: a 256-ray vertex is 16 invocations, enough to fill
-/// a large GPU with a single pose of a character.
-pub const GROUP_SIZE: u32 = 16;
+/// Invocations per point (`LANES` in trace.wgsl): a 50k-vertex mesh is
+/// 800k invocations, enough to fill a large GPU.
+const LANES: u32 = 16;
+/// Points per workgroup.
+const POINTS_PER_GROUP: u32 = WORKGROUP_SIZE / LANES;
 /// Most workgroups per dispatch dimension (WebGPU's minimum limit).
 const MAX_GROUPS: u32 = 65_535;
 /// Most invocations per dispatch: short dispatches keep a desktop GPU's
@@ -172,7 +174,7 @@ impl<'g> GpuTracer<'g> {
         let binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
-        let groups = batch.samples.div_ceil(GROUP_SIZE);
+        let rays_per_lane = batch.samples.div_ceil(LANES);
         // Geometry and points of the part's scenes.
         let mut nodes: Vec<u32> = Vec::new();
         let mut triangles: Vec<f32> = Vec::new();
@@ -207,7 +209,7 @@ impl<'g> GpuTracer<'g> {
                 _pad1: 0,
             })
             .collect();
-        let tally_bytes = part.points.len() as u64 * u64::from(groups) * 32;
+        let tally_bytes = part.points.len() as u64 * 32;
         let largest = [
             4 * nodes.len() as u64,
             4 * triangles.len() as u64,
@@ -255,35 +257,29 @@ impl<'g> GpuTracer<'g> {
         let alignment = u64::from(limits.min_storage_buffer_offset_alignment);
         // Points per dispatch: within the invocation cap, and a multiple of
         // the offset alignment in tallies.
-        let per_dispatch = (MAX_INVOCATIONS / u64::from(groups))
-            .min(
-                u64::from(MAX_GROUPS) * u64::from(MAX_GROUPS) * u64::from(WORKGROUP_SIZE)
-                    / u64::from(groups),
-            )
-            .max(1);
         let step = alignment.div_ceil(32).max(1);
+        let per_dispatch = (MAX_INVOCATIONS / u64::from(LANES))
+            .min(u64::from(MAX_GROUPS) * u64::from(MAX_GROUPS) * u64::from(POINTS_PER_GROUP));
         let per_dispatch = (per_dispatch / step * step).max(step);
 
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("trace"),
-        });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
         let mut bind_groups = Vec::new();
         let mut dispatches = Vec::new();
         let total = points.len() as u64;
         let mut first = 0u64;
         while first < total {
             let count = per_dispatch.min(total - first);
-            let invocations = count * u64::from(groups);
-            let workgroups = invocations.div_ceil(u64::from(WORKGROUP_SIZE)) as u32;
+            let workgroups = count.div_ceil(u64::from(POINTS_PER_GROUP)) as u32;
             let grid = (workgroups.min(MAX_GROUPS), workgroups.div_ceil(MAX_GROUPS));
             let params = TraceParams {
                 estimator: estimator_code(batch.estimator),
                 samples: batch.samples,
-                group_size: GROUP_SIZE,
-                groups,
+                group_size: rays_per_lane,
+                groups: LANES,
                 points: count as u32,
                 first_point: first as u32,
-                row_stride: grid.0 * WORKGROUP_SIZE,
+                row_stride: grid.0,
                 facing: u32::from(matches!(
                     batch.estimator,
                     Estimator::Kroon { facing: true, .. }
@@ -300,8 +296,8 @@ impl<'g> GpuTracer<'g> {
                 contents: bytemuck::bytes_of(&params),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-            let offset = first * u64::from(groups) * 32;
-            let size = invocations * 32;
+            let offset = first * 32;
+            let size = count * 32;
             bind_groups.push(device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("trace"),
                 layout: &layout,
@@ -349,16 +345,12 @@ impl<'g> GpuTracer<'g> {
             .map_err(PartError::Gpu)?;
         let raw: &[TraceTally] = bytemuck::cast_slice(&bytes);
         Ok(raw
-            .chunks(groups as usize)
-            .map(|groups| {
-                let mut tally = Tally::default();
-                for g in groups {
-                    tally.hits += g.hits;
-                    tally.back += g.back;
-                    tally.sum += f64::from(g.sum);
-                    tally.direction += Vec3A::from_array(g.direction);
-                }
-                tally
+            .iter()
+            .map(|t| Tally {
+                hits: t.hits,
+                back: t.back,
+                sum: f64::from(t.sum),
+                direction: Vec3A::from_array(t.direction),
             })
             .collect())
     }
@@ -435,5 +427,53 @@ impl RayEngine for GpuTracer<'static> {
     ) -> Result<Option<Vec<Tally>>, TraceError> {
         self.trace_batch(batch, progress)
             .map_err(|e| TraceError::Invalid(format!("GPU tracer: {e}")))
+    }
+}
+
+/// How a process picks its tracer (`aobake worker --gpu`, `aobake bake
+/// --tracer`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GpuMode {
+    /// The CPU tracer.
+    Off,
+    /// A hardware GPU with compute shaders when there is one, else the
+    /// CPU (a software rasteriser such as llvmpipe does not count: it is
+    /// slower than the CPU tracer).
+    Auto,
+    /// Any adapter with compute shaders, software ones too; an error
+    /// without one.
+    Require,
+}
+
+/// Installs the process's tracer as `mode` asks and returns its label
+/// (`cpu`, or `gpu: ADAPTER`); with [`GpuMode::Auto`] a missing GPU is
+/// not an error, and the reason is in the returned note.
+pub fn install(mode: GpuMode) -> Result<(String, Option<String>), GpuError> {
+    use aobake_core::trace::engine::set_engine;
+    if mode == GpuMode::Off {
+        set_engine(None);
+        return Ok(("cpu".into(), None));
+    }
+    let opened = Gpu::shared().and_then(|gpu| {
+        if mode == GpuMode::Auto && gpu.info.device_type == wgpu::DeviceType::Cpu {
+            return Err(GpuError::NoAdapter(format!(
+                "only the software adapter {}",
+                gpu.label()
+            )));
+        }
+        GpuTracer::new(gpu)
+    });
+    match opened {
+        Ok(tracer) => {
+            let tracer = std::sync::Arc::new(tracer);
+            let label = tracer.label();
+            set_engine(Some(tracer));
+            Ok((label, None))
+        }
+        Err(e) if mode == GpuMode::Auto => {
+            set_engine(None);
+            Ok(("cpu".into(), Some(format!("no GPU tracer ({e}); tracing on the CPU"))))
+        }
+        Err(e) => Err(e),
     }
 }

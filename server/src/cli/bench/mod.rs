@@ -92,6 +92,13 @@ struct TraceArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
+    /// Tracers to time, comma-separated, in turn within each repetition:
+    /// `cpu` (the traversal kernels above) and `gpu` (the wgpu compute
+    /// tracer, aobake's wide BVH, on the best adapter with compute; its
+    /// time includes the upload and the readback). With both, the figures
+    /// of the same run are compared, and the values too.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
+    tracer: Vec<BenchTracer>,
     /// Also bake with Blender: the path of `bake_vertex_ao.py` (in
     /// `shared/tools/blender-ao`); `blender` must be on the PATH. Runs
     /// alternate between aobake and Blender, so drift in machine speed hits
@@ -105,6 +112,12 @@ enum Quality {
     Fast,
     Medium,
     Slow,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum BenchTracer {
+    Cpu,
+    Gpu,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -140,6 +153,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
 struct Run {
     build_s: f64,
     trace_s: f64,
+    values: Vec<f32>,
 }
 
 fn run_aobake(
@@ -160,8 +174,11 @@ fn run_aobake(
     };
     let values = vertex_occlusion(&scene, &mesh, params, &no_progress)?;
     let trace_s = started.elapsed().as_secs_f64();
-    std::hint::black_box(values);
-    Ok(Run { build_s, trace_s })
+    Ok(Run {
+        build_s,
+        trace_s,
+        values,
+    })
 }
 
 fn run_blender(script: &Path, ply: &Path, csv: &Path, args: &TraceArgs) -> anyhow::Result<f64> {
@@ -263,12 +280,35 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
     if kernels.is_empty() {
         bail!("--traversal names no kernel");
     }
-    let mut ours: Vec<Vec<Run>> = kernels.iter().map(|_| Vec::new()).collect();
+    let mut tracers = args.tracer.clone();
+    tracers.dedup();
+    // What is timed: the CPU with each kernel, then the GPU.
+    let mut rows: Vec<(String, Option<Kernel>)> = Vec::new();
+    if tracers.contains(&BenchTracer::Cpu) {
+        rows.extend(kernels.iter().map(|k| (format!("cpu {k:?}"), Some(*k))));
+    }
+    let gpu = if tracers.contains(&BenchTracer::Gpu) {
+        use aobake_worker::gpu::{GpuMode, trace::install};
+        let (label, _) = install(GpuMode::Require).map_err(|e| anyhow::anyhow!("--tracer gpu: {e}"))?;
+        println!("GPU tracer: {label}");
+        rows.push(("gpu".into(), None));
+        aobake_core::trace::engine::engine()
+    } else {
+        None
+    };
+    if rows.is_empty() {
+        bail!("--tracer names no tracer");
+    }
+    let mut ours: Vec<Vec<Run>> = rows.iter().map(|_| Vec::new()).collect();
     let mut theirs = Vec::new();
     for r in 0..args.repeat {
-        for (k, kernel) in kernels.iter().enumerate() {
+        for (k, (name, kernel)) in rows.iter().enumerate() {
+            aobake_core::trace::engine::set_engine(match kernel {
+                Some(_) => None,
+                None => gpu.clone(),
+            });
             let options = SceneOptions {
-                traversal: kernel.traversal(),
+                traversal: kernel.map_or(Traversal::Wide, Kernel::traversal),
                 ..options
             };
             let run = super::trace::with_threads(args.threads, || {
@@ -281,7 +321,7 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
                 )
             })??;
             println!(
-                "[{r}] aobake ({kernel:?}): BVH {:.1} ms, trace {:.3} s: {:.2} Mrays/s",
+                "[{r}] aobake ({name}): BVH {:.1} ms, trace {:.3} s: {:.2} Mrays/s",
                 run.build_s * 1e3,
                 run.trace_s,
                 rays / run.trace_s / 1e6
@@ -297,7 +337,8 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
             theirs.push(s);
         }
     }
-    for (kernel, runs) in kernels.iter().zip(&ours) {
+    aobake_core::trace::engine::set_engine(None);
+    for ((name, _), runs) in rows.iter().zip(&ours) {
         let build = median(&runs.iter().map(|r| r.build_s).collect::<Vec<_>>());
         let traced = median(&runs.iter().map(|r| r.trace_s).collect::<Vec<_>>());
         let total = median(
@@ -307,25 +348,42 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
                 .collect::<Vec<_>>(),
         );
         println!(
-            "aobake ({kernel:?}) median of {}: BVH build {:.1} ms, trace {:.3} s, {:.2} Mrays/s ({:.2} M vertex-samples/s with the build)",
+            "aobake ({name}) median of {}: BVH build {:.1} ms, trace {:.3} s, {:.2} Mrays/s = {:.3} Grays/s ({:.2} M vertex-samples/s with the build)",
             runs.len(),
             build * 1e3,
             traced,
             rays / traced / 1e6,
+            rays / traced / 1e9,
             rays / total / 1e6
         );
     }
-    if kernels.len() > 1 {
-        for (kernel, runs) in kernels.iter().zip(&ours).skip(1) {
+    if rows.len() > 1 {
+        for ((name, _), runs) in rows.iter().zip(&ours).skip(1) {
             let pairs: Vec<f64> = runs
                 .iter()
                 .zip(&ours[0])
                 .map(|(other, first)| other.trace_s / first.trace_s)
                 .collect();
+            let speed: Vec<f64> = pairs.iter().map(|p| 1.0 / p).collect();
             println!(
-                "trace time {kernel:?} / {:?}: {:.2}x median of pairs",
-                kernels[0],
-                median(&pairs)
+                "trace time {name} / {}: {:.3}x median of pairs ({name} traces {:.1}x as fast)",
+                rows[0].0,
+                median(&pairs),
+                median(&speed)
+            );
+            // The same rays: how many vertices' values differ.
+            let (a, b) = (&runs[0].values, &ours[0][0].values);
+            let differ = a.iter().zip(b).filter(|(x, y)| x != y).count();
+            let worst = a
+                .iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max);
+            println!(
+                "values {name} against {}: {differ} of {} vertices differ (worst by {worst}, one ray is {})",
+                rows[0].0,
+                a.len(),
+                1.0 / params.samples as f32
             );
         }
     }
@@ -343,8 +401,8 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
             rays / blender / 1e6
         );
         println!(
-            "speed-up of aobake ({:?}) over Blender (bake time / build+trace): {:.1}x median of pairs (min {:.1}x, max {:.1}x)",
-            kernels[0],
+            "speed-up of aobake ({}) over Blender (bake time / build+trace): {:.1}x median of pairs (min {:.1}x, max {:.1}x)",
+            rows[0].0,
             median(&pairs),
             pairs.iter().copied().fold(f64::INFINITY, f64::min),
             pairs.iter().copied().fold(0.0, f64::max)
