@@ -96,6 +96,9 @@ struct Tally {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
+// The traversal stack: private to the invocation and zeroed once, not for
+// every ray as a function's variable would be.
+var<private> stack: array<u32, STACK>;
 // 16 vec4 per node: child boxes (min x, y, z, max x, y, z of the eight
 // children, two vec4 each, as f32 bits), first indices (two vec4), the
 // eight counts as bytes (one vec4, xy used).
@@ -301,7 +304,6 @@ fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: 
     var tmax = tmax_in;
     let inv = vec3<f32>(safe_inverse(dir.x), safe_inverse(dir.y), safe_inverse(dir.z));
     let neg = inv < vec3<f32>(0.0);
-    var stack: array<u32, STACK>;
     var top = 0u;
     var current = 0u;
     loop {

@@ -73,9 +73,10 @@ pub fn trace_poses(
     let mut values = Vec::with_capacity(vertices * poses.len());
     if super::engine::engine().is_some() {
         // One batch, so that a GPU traces every pose in one dispatch.
-        let posed: Vec<_> = poses.iter().map(|p| character.skin(p)).collect();
+        use rayon::prelude::*;
+        let posed: Vec<_> = poses.par_iter().map(|p| character.skin(p)).collect();
         let scenes = posed
-            .iter()
+            .par_iter()
             .map(|p| Scene::new(&p.positions, &character.triangles, options))
             .collect::<Result<Vec<_>, _>>()?;
         let meshes: Vec<SurfaceMesh<'_>> = posed
