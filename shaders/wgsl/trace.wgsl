@@ -99,6 +99,11 @@ struct Tally {
 // The traversal stack: private to the invocation and zeroed once, not for
 // every ray as a function's variable would be.
 var<private> stack: array<u32, STACK>;
+// The entry distance of each stacked node.
+var<private> stack_near: array<f32, STACK>;
+// A node's inner children that the ray enters, farthest first.
+var<private> child_near: array<f32, 8>;
+var<private> child_index: array<u32, 8>;
 // 16 vec4 per node: child boxes (min x, y, z, max x, y, z of the eight
 // children, two vec4 each, as f32 bits), first indices (two vec4), the
 // eight counts as bytes (one vec4, xy used).
@@ -293,9 +298,13 @@ fn box_lanes(node: u32, field: u32, half: u32) -> vec4<f32> {
 
 // The BVH of scene `s` along the ray: with `any`, whether a triangle lies
 // within (tmin, tmax); otherwise the closest, with its side. Four child
-// boxes are tested at once, as the CPU tests eight (the same operations
-// in the same order per child); children are visited in slot order and
-// nodes popped last-in first-out, as on the CPU.
+// boxes are tested at once, as the CPU tests eight (the same operations in
+// the same order per child), leaves as they come, and the inner children
+// that the ray enters are pushed farthest first, with their entry
+// distance, so the nearest is visited next and a node that starts beyond
+// a closer hit is dropped when popped (any-hit rays keep the slot order).
+// Only the work depends on the order: the CPU's answer is the same (the
+// closest hit is the closest in any order).
 fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: bool) -> Hit {
     var best = no_hit();
     if (s.nodes == 0u) {
@@ -309,6 +318,8 @@ fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: 
     loop {
         let node = s.first_node + current;
         let counts = child_counts(node);
+        // Inner children entered, sorted by entry distance, farthest first.
+        var pending = 0u;
         for (var half = 0u; half < 2u; half = half + 1u) {
             var near = vec4<f32>(s.tmin);
             var far = vec4<f32>(tmax);
@@ -332,10 +343,18 @@ fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: 
                 }
                 let first = firsts[k];
                 if (count == 0u) {
-                    if (top < STACK) {
-                        stack[top] = first;
-                        top = top + 1u;
+                    var j = pending;
+                    // Sorted for the closest hit only: an any-hit ray
+                    // stops at the first hit, and sorting cost more than
+                    // it saved there (lavapipe).
+                    while (!any && j > 0u && child_near[j - 1u] < near[k]) {
+                        child_near[j] = child_near[j - 1u];
+                        child_index[j] = child_index[j - 1u];
+                        j = j - 1u;
                     }
+                    child_near[j] = near[k];
+                    child_index[j] = first;
+                    pending = pending + 1u;
                     continue;
                 }
                 for (var m = 0u; m < count; m = m + 1u) {
@@ -351,11 +370,23 @@ fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: 
                 }
             }
         }
-        if (top == 0u) {
-            return best;
+        for (var j = 0u; j < pending; j = j + 1u) {
+            if (top < STACK) {
+                stack[top] = child_index[j];
+                stack_near[top] = child_near[j];
+                top = top + 1u;
+            }
         }
-        top = top - 1u;
-        current = stack[top];
+        loop {
+            if (top == 0u) {
+                return best;
+            }
+            top = top - 1u;
+            if (stack_near[top] <= tmax) {
+                current = stack[top];
+                break;
+            }
+        }
     }
     return best;
 }

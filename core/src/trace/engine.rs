@@ -116,6 +116,12 @@ pub trait RayEngine: Send + Sync + std::fmt::Debug {
     /// The engine as a person reads it: kind and adapter.
     fn label(&self) -> String;
 
+    /// What the engine has done so far in this process, for a person
+    /// (rays, seconds), if it keeps count.
+    fn summary(&self) -> Option<String> {
+        None
+    }
+
     /// One tally per point of `batch`, in order; `None` when the engine
     /// declines the batch (a scene it cannot take, such as a tree deeper
     /// than its traversal stack), which the CPU then traces. `progress` is

@@ -642,6 +642,50 @@ pub fn kroon_occlusion(
     params: &KroonParams,
     progress: Progress<'_>,
 ) -> Result<Vec<f32>, TraceError> {
+    check_kroon(points, normals, params)?;
+    let points = (0..points.len())
+        .map(|i| {
+            let n = normals.map_or(Vec3::ZERO, |n| n[i]);
+            sphere_point(0, scene.to_local(points[i]), n, params.seed, i as u32)
+        })
+        .collect();
+    kroon_batch(vec![scene], points, normals.is_some(), params, progress)
+}
+
+/// [`kroon_occlusion`] of the same points (no normals) around several
+/// scenes (posed meshes), traced as one batch: one dispatch on a GPU
+/// engine. Each scene's values are those [`kroon_occlusion`] gives.
+pub fn kroon_occlusion_many(
+    scenes: &[&Scene],
+    points: &[Vec3],
+    params: &KroonParams,
+    progress: Progress<'_>,
+) -> Result<Vec<Vec<f32>>, TraceError> {
+    check_kroon(points, None, params)?;
+    if points.is_empty() {
+        return Ok(vec![Vec::new(); scenes.len()]);
+    }
+    let mut batch_points = Vec::with_capacity(scenes.len() * points.len());
+    for (s, scene) in scenes.iter().enumerate() {
+        batch_points.extend(points.iter().enumerate().map(|(i, &p)| {
+            sphere_point(
+                s as u32,
+                scene.to_local(p),
+                Vec3::ZERO,
+                params.seed,
+                i as u32,
+            )
+        }));
+    }
+    let values = kroon_batch(scenes.to_vec(), batch_points, false, params, progress)?;
+    Ok(values.chunks(points.len()).map(<[f32]>::to_vec).collect())
+}
+
+fn check_kroon(
+    points: &[Vec3],
+    normals: Option<&[Vec3]>,
+    params: &KroonParams,
+) -> Result<(), TraceError> {
     check_samples(params.samples)?;
     check_distance("max_distance", params.max_distance, true)?;
     check_points(points)?;
@@ -666,19 +710,23 @@ pub fn kroon_occlusion(
             points.len()
         )));
     }
+    Ok(())
+}
+
+/// Kroon's estimator over a batch's points.
+fn kroon_batch(
+    scenes: Vec<&Scene>,
+    points: Vec<RayPoint>,
+    facing: bool,
+    params: &KroonParams,
+    progress: Progress<'_>,
+) -> Result<Vec<f32>, TraceError> {
     let batch = RayBatch {
-        scenes: vec![scene],
-        points: points
-            .iter()
-            .enumerate()
-            .map(|(i, &p)| {
-                let n = normals.map_or(Vec3::ZERO, |n| n[i]);
-                sphere_point(0, scene.to_local(p), n, params.seed, i as u32)
-            })
-            .collect(),
+        scenes,
+        points,
         estimator: Estimator::Kroon {
             alpha: params.alpha,
-            facing: normals.is_some(),
+            facing,
         },
         samples: params.samples,
         max_distance: params.max_distance,

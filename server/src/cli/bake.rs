@@ -170,6 +170,9 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
         );
     }
     let outputs = run_with_progress(bake, &HashMap::new(), None)?;
+    if let Some(summary) = aobake_core::trace::engine::engine().and_then(|e| e.summary()) {
+        eprintln!("GPU tracer: {summary}");
+    }
     let baked = Baked::from_outputs(&outputs)?;
     write(&args.out, &baked.asset)?;
     write(&args.report, &baked.report_json)?;

@@ -130,7 +130,9 @@ impl Gpu {
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("aobake"),
-                required_features: wgpu::Features::empty(),
+                // Timestamps time the tracer's compute passes where the
+                // adapter has them.
+                required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY,
                 required_limits: adapter.limits(),
                 ..Default::default()
             })
@@ -202,7 +204,18 @@ impl Gpu {
         staging: &wgpu::Buffer,
         submission: wgpu::SubmissionIndex,
     ) -> Result<Vec<u8>, GpuError> {
-        let slice = staging.slice(..);
+        self.read_range(staging, staging.size(), submission)
+    }
+
+    /// Waits for `submission` and copies the first `size` bytes of a
+    /// `MAP_READ` buffer out.
+    pub(crate) fn read_range(
+        &self,
+        staging: &wgpu::Buffer,
+        size: u64,
+        submission: wgpu::SubmissionIndex,
+    ) -> Result<Vec<u8>, GpuError> {
+        let slice = staging.slice(..size);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);

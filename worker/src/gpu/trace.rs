@@ -40,6 +40,107 @@ pub struct GpuTracer<'g> {
     gpu: &'g Gpu,
     pipeline: wgpu::ComputePipeline,
     sobol: [[u32; 4]; 8],
+    /// Buffers kept between batches (allocating them is a large part of
+    /// a small batch's cost); one batch at a time uses them.
+    buffers: std::sync::Mutex<Buffers>,
+    stats: Counters,
+}
+
+/// Device buffers that grow to the largest batch seen.
+#[derive(Debug, Default)]
+struct Buffers {
+    nodes: Option<wgpu::Buffer>,
+    triangles: Option<wgpu::Buffer>,
+    scenes: Option<wgpu::Buffer>,
+    points: Option<wgpu::Buffer>,
+    tallies: Option<wgpu::Buffer>,
+    staging: Option<wgpu::Buffer>,
+    /// Two timestamps around the compute pass, where the adapter has
+    /// timestamp queries.
+    timer: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+}
+
+/// Running totals of the tracer's work in this process.
+#[derive(Debug, Default)]
+struct Counters {
+    batches: std::sync::atomic::AtomicU64,
+    rays: std::sync::atomic::AtomicU64,
+    /// Nanoseconds: the whole call, the GPU's compute passes (timestamps),
+    /// and waiting for the results.
+    wall_ns: std::sync::atomic::AtomicU64,
+    kernel_ns: std::sync::atomic::AtomicU64,
+    wait_ns: std::sync::atomic::AtomicU64,
+}
+
+/// What a [`GpuTracer`] has done so far.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceStats {
+    /// Submissions (a batch is one unless it was split).
+    pub batches: u64,
+    /// Rays cast.
+    pub rays: u64,
+    /// Seconds in the tracer's calls, preparation and readback included.
+    pub wall_s: f64,
+    /// Seconds of the compute passes on the GPU (timestamp queries; zero
+    /// where the adapter has none).
+    pub kernel_s: f64,
+    /// Seconds waiting for the GPU and reading the results back.
+    pub wait_s: f64,
+}
+
+impl std::fmt::Display for TraceStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let rate = |s: f64| {
+            if s > 0.0 {
+                self.rays as f64 / s / 1e9
+            } else {
+                0.0
+            }
+        };
+        write!(
+            f,
+            "{} submissions, {:.2} G rays: {:.2} s in the tracer ({:.2} Grays/s), {:.2} s waiting for the GPU",
+            self.batches,
+            self.rays as f64 / 1e9,
+            self.wall_s,
+            rate(self.wall_s),
+            self.wait_s
+        )?;
+        if self.kernel_s > 0.0 {
+            write!(
+                f,
+                ", {:.2} s in its compute passes ({:.2} Grays/s)",
+                self.kernel_s,
+                rate(self.kernel_s)
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// A buffer of at least `size` bytes in `slot`, reallocated (with room to
+/// grow) when too small.
+fn ensure<'b>(
+    device: &wgpu::Device,
+    slot: &'b mut Option<wgpu::Buffer>,
+    size: u64,
+    usage: wgpu::BufferUsages,
+    label: &str,
+) -> &'b wgpu::Buffer {
+    let size = size.max(256);
+    if slot.as_ref().is_none_or(|b| b.size() < size) {
+        *slot = Some(
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size
+                    .next_power_of_two()
+                    .min(size.max(device.limits().max_buffer_size)),
+                usage,
+                mapped_at_creation: false,
+            }),
+        );
+    }
+    slot.as_ref().expect("just made")
 }
 
 /// The points of a batch traced in one submission, and the scenes they use.
@@ -77,7 +178,22 @@ impl<'g> GpuTracer<'g> {
             gpu,
             pipeline,
             sobol,
+            buffers: std::sync::Mutex::default(),
+            stats: Counters::default(),
         })
+    }
+
+    /// The work done so far.
+    pub fn stats(&self) -> TraceStats {
+        use std::sync::atomic::Ordering::Relaxed;
+        let s = &self.stats;
+        TraceStats {
+            batches: s.batches.load(Relaxed),
+            rays: s.rays.load(Relaxed),
+            wall_s: s.wall_ns.load(Relaxed) as f64 * 1e-9,
+            kernel_s: s.kernel_ns.load(Relaxed) as f64 * 1e-9,
+            wait_s: s.wait_ns.load(Relaxed) as f64 * 1e-9,
+        }
     }
 
     /// The adapter as a person reads it.
@@ -169,6 +285,7 @@ impl<'g> GpuTracer<'g> {
         infos: &[GpuSceneInfo],
         part: &Part,
     ) -> Result<Vec<Tally>, PartError> {
+        let started = std::time::Instant::now();
         let device = &self.gpu.device;
         let limits = device.limits();
         let binding = limits
@@ -196,8 +313,9 @@ impl<'g> GpuTracer<'g> {
                 (scene_nodes.len() / GPU_NODE_WORDS) as u32,
             ));
         }
+        use rayon::prelude::*;
         let points: Vec<TracePoint> = batch.points[part.points.clone()]
-            .iter()
+            .par_iter()
             .map(|p| TracePoint {
                 origin: p.origin.to_array(),
                 scene: p.scene - part.scenes.start as u32,
@@ -226,33 +344,89 @@ impl<'g> GpuTracer<'g> {
             return Ok(Vec::new());
         }
 
+        let mut guard = self.buffers.lock().unwrap_or_else(|e| e.into_inner());
+        let buffers = &mut *guard;
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let storage = |label: &str, bytes: &[u8]| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                // Bindings cannot be empty.
-                contents: if bytes.is_empty() { &[0u8; 64] } else { bytes },
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
-        let nodes_buffer = storage("trace nodes", bytemuck::cast_slice(&nodes));
-        let triangles_buffer = storage("trace triangles", bytemuck::cast_slice(&triangles));
-        let scenes_buffer = storage("trace scenes", bytemuck::cast_slice(&scenes));
-        let points_buffer = storage("trace points", bytemuck::cast_slice(&points));
         use wgpu::BufferUsages as U;
-        let tallies_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("trace tallies"),
-            size: tally_bytes,
-            usage: U::STORAGE | U::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("trace tallies readback"),
-            size: tally_bytes,
-            usage: U::MAP_READ | U::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let queue = &self.gpu.queue;
+        let upload = |slot: &mut Option<wgpu::Buffer>, bytes: &[u8], label: &str| {
+            let buffer = ensure(
+                device,
+                slot,
+                bytes.len() as u64,
+                U::STORAGE | U::COPY_DST,
+                label,
+            );
+            if !bytes.is_empty() {
+                queue.write_buffer(buffer, 0, bytes);
+            }
+        };
+        upload(
+            &mut buffers.nodes,
+            bytemuck::cast_slice(&nodes),
+            "trace nodes",
+        );
+        upload(
+            &mut buffers.triangles,
+            bytemuck::cast_slice(&triangles),
+            "trace triangles",
+        );
+        upload(
+            &mut buffers.scenes,
+            bytemuck::cast_slice(&scenes),
+            "trace scenes",
+        );
+        upload(
+            &mut buffers.points,
+            bytemuck::cast_slice(&points),
+            "trace points",
+        );
+        ensure(
+            device,
+            &mut buffers.tallies,
+            tally_bytes,
+            U::STORAGE | U::COPY_SRC,
+            "trace tallies",
+        );
+        ensure(
+            device,
+            &mut buffers.staging,
+            tally_bytes,
+            U::MAP_READ | U::COPY_DST,
+            "trace readback",
+        );
+        if buffers.timer.is_none() && device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("trace timer"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            });
+            let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("trace timer resolve"),
+                size: 16,
+                usage: U::QUERY_RESOLVE | U::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let read = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("trace timer readback"),
+                size: 16,
+                usage: U::MAP_READ | U::COPY_DST,
+                mapped_at_creation: false,
+            });
+            buffers.timer = Some((set, resolve, read));
+        }
+        let (Some(nodes_buffer), Some(triangles_buffer), Some(scenes_buffer), Some(points_buffer)) = (
+            &buffers.nodes,
+            &buffers.triangles,
+            &buffers.scenes,
+            &buffers.points,
+        ) else {
+            unreachable!("uploaded above");
+        };
+        let (Some(tallies_buffer), Some(staging)) = (&buffers.tallies, &buffers.staging) else {
+            unreachable!("made above");
+        };
         let layout = self.pipeline.get_bind_group_layout(0);
         let alignment = u64::from(limits.min_storage_buffer_offset_alignment);
         // Points per dispatch: within the invocation cap, and a multiple of
@@ -262,8 +436,9 @@ impl<'g> GpuTracer<'g> {
             .min(u64::from(MAX_GROUPS) * u64::from(MAX_GROUPS) * u64::from(POINTS_PER_GROUP));
         let per_dispatch = (per_dispatch / step * step).max(step);
 
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("trace") });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("trace"),
+        });
         let mut bind_groups = Vec::new();
         let mut dispatches = Vec::new();
         let total = points.len() as u64;
@@ -310,7 +485,7 @@ impl<'g> GpuTracer<'g> {
                     entry(
                         5,
                         wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &tallies_buffer,
+                            buffer: tallies_buffer,
                             offset,
                             size: wgpu::BufferSize::new(size),
                         }),
@@ -323,7 +498,13 @@ impl<'g> GpuTracer<'g> {
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("trace"),
-                timestamp_writes: None,
+                timestamp_writes: buffers.timer.as_ref().map(|(set, _, _)| {
+                    wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    }
+                }),
             });
             pass.set_pipeline(&self.pipeline);
             for (bind_group, grid) in bind_groups.iter().zip(&dispatches) {
@@ -331,18 +512,48 @@ impl<'g> GpuTracer<'g> {
                 pass.dispatch_workgroups(grid.0, grid.1, 1);
             }
         }
-        encoder.copy_buffer_to_buffer(&tallies_buffer, 0, &staging, 0, tally_bytes);
+        encoder.copy_buffer_to_buffer(tallies_buffer, 0, staging, 0, tally_bytes);
+        if let Some((set, resolve, read)) = &buffers.timer {
+            encoder.resolve_query_set(set, 0..2, resolve, 0);
+            encoder.copy_buffer_to_buffer(resolve, 0, read, 0, 16);
+        }
+        let waiting = std::time::Instant::now();
         let submission = self.gpu.queue.submit(Some(encoder.finish()));
         if let Some(e) = pollster::block_on(validation.pop()) {
             return Err(PartError::Gpu(GpuError::Pipeline(e.to_string())));
         }
         if pollster::block_on(oom.pop()).is_some() {
+            // The buffers may be the cause: the retry allocates afresh.
+            *buffers = Buffers::default();
             return Err(PartError::OutOfMemory);
         }
         let bytes = self
             .gpu
-            .read(&staging, submission)
+            .read_range(staging, tally_bytes, submission.clone())
             .map_err(PartError::Gpu)?;
+        let kernel_ns = match &buffers.timer {
+            Some((_, _, read)) => {
+                let ticks = self
+                    .gpu
+                    .read_range(read, 16, submission)
+                    .map_err(PartError::Gpu)?;
+                let t: &[u64] = bytemuck::cast_slice(&ticks);
+                (t[1].saturating_sub(t[0]) as f64 * f64::from(queue.get_timestamp_period())) as u64
+            }
+            None => 0,
+        };
+        {
+            use std::sync::atomic::Ordering::Relaxed;
+            let s = &self.stats;
+            s.batches.fetch_add(1, Relaxed);
+            s.rays
+                .fetch_add(part.points.len() as u64 * u64::from(batch.samples), Relaxed);
+            s.wall_ns
+                .fetch_add(started.elapsed().as_nanos() as u64, Relaxed);
+            s.wait_ns
+                .fetch_add(waiting.elapsed().as_nanos() as u64, Relaxed);
+            s.kernel_ns.fetch_add(kernel_ns, Relaxed);
+        }
         let raw: &[TraceTally] = bytemuck::cast_slice(&bytes);
         Ok(raw
             .iter()
@@ -420,6 +631,10 @@ impl RayEngine for GpuTracer<'static> {
         format!("gpu: {}", self.adapter())
     }
 
+    fn summary(&self) -> Option<String> {
+        Some(self.stats().to_string())
+    }
+
     fn trace(
         &self,
         batch: &RayBatch<'_>,
@@ -472,7 +687,10 @@ pub fn install(mode: GpuMode) -> Result<(String, Option<String>), GpuError> {
         }
         Err(e) if mode == GpuMode::Auto => {
             set_engine(None);
-            Ok(("cpu".into(), Some(format!("no GPU tracer ({e}); tracing on the CPU"))))
+            Ok((
+                "cpu".into(),
+                Some(format!("no GPU tracer ({e}); tracing on the CPU")),
+            ))
         }
         Err(e) => Err(e),
     }

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use crate::trace::{KroonParams, TraceError};
 
 use super::{
-    field::{face_points, face_slice},
+    field::{face_points, face_slices},
     geometry::Spheroid,
 };
 
@@ -239,22 +239,26 @@ pub fn compute_face<E>(
         first: next,
         slices: Vec::with_capacity(batch * points.len()),
     };
-    for m in next..field.times {
-        let ao = face_slice(&positions(m), triangles, &points, face, &sampling.kroon)?;
-        let slice: Vec<u8> = ao.into_iter().map(quantise).collect();
-        field.insert(m, &slice);
-        part.slices.extend(slice);
-        let done = m + 1;
-        if done - part.first == batch || done == field.times {
-            let full = std::mem::replace(
-                &mut part,
-                Part {
-                    first: done,
-                    slices: Vec::with_capacity(batch * points.len()),
-                },
-            );
-            save(full, done).map_err(FaceError::Stopped)?;
+    // A checkpoint's time samples are traced as one batch.
+    let mut m = next;
+    while m < field.times {
+        let end = (part.first + batch).min(field.times);
+        let frames: Vec<Vec<Vec3>> = (m..end).map(&mut *positions).collect();
+        let slices = face_slices(&frames, triangles, &points, face, &sampling.kroon)?;
+        for (t, ao) in (m..end).zip(slices) {
+            let slice: Vec<u8> = ao.into_iter().map(quantise).collect();
+            field.insert(t, &slice);
+            part.slices.extend(slice);
         }
+        m = end;
+        let full = std::mem::replace(
+            &mut part,
+            Part {
+                first: end,
+                slices: Vec::with_capacity(batch * points.len()),
+            },
+        );
+        save(full, end).map_err(FaceError::Stopped)?;
     }
     Ok(())
 }

@@ -11,7 +11,11 @@
 
 use glam::Vec3;
 
-use crate::trace::{KroonParams, Scene, SceneOptions, TraceError, kroon_occlusion, no_progress};
+use rayon::prelude::*;
+
+use crate::trace::{
+    KroonParams, Scene, SceneOptions, TraceError, kroon_occlusion_many, no_progress,
+};
 
 use super::geometry::{Spheroid, texel_direction};
 
@@ -37,14 +41,31 @@ pub fn face_slice(
     face: usize,
     params: &KroonParams,
 ) -> Result<Vec<f32>, TraceError> {
-    let scene = Scene::new(positions, triangles, &SceneOptions::default())?;
+    let mut slices = face_slices(&[positions.to_vec()], triangles, points, face, params)?;
+    Ok(slices.pop().unwrap_or_default())
+}
+
+/// [`face_slice`] around several posed meshes (time samples), traced as
+/// one batch: one dispatch on a GPU tracer.
+pub fn face_slices(
+    frames: &[Vec<Vec3>],
+    triangles: &[[u32; 3]],
+    points: &[Vec3],
+    face: usize,
+    params: &KroonParams,
+) -> Result<Vec<Vec<f32>>, TraceError> {
+    let scenes = frames
+        .par_iter()
+        .map(|positions| Scene::new(positions, triangles, &SceneOptions::default()))
+        .collect::<Result<Vec<_>, _>>()?;
     let params = KroonParams {
         // Faces must not share scrambles: texel i of every face would
         // otherwise trace the same directions.
         seed: params.seed ^ (0x9e37_79b9_7f4a_7c15u64.wrapping_mul(face as u64 + 1)),
         ..*params
     };
-    kroon_occlusion(&scene, points, None, &params, &no_progress)
+    let scenes: Vec<&Scene> = scenes.iter().collect();
+    kroon_occlusion_many(&scenes, points, &params, &no_progress)
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@ use aobake_core::{
     trace::{Falloff, SceneOptions, SurfaceParams, no_progress, trace_poses},
 };
 
-use crate::cli::common::median;
+use crate::cli::common::{TracerChoice, median};
 use crate::cli::common::{character_and_clips, find_clip};
 
 /// Arguments of `aobake bench cubemap`.
@@ -48,9 +48,14 @@ pub(super) struct Args {
     /// Timed runs of each (medians are quoted).
     #[arg(long, default_value_t = 3)]
     repeat: usize,
+    /// Who casts the rays: `cpu`, `gpu` (the wgpu compute tracer, any
+    /// adapter with compute) or `auto` (a hardware GPU, else the CPU).
+    #[arg(long, value_enum, default_value = "cpu")]
+    tracer: TracerChoice,
 }
 
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
+    let tracer = args.tracer.install()?;
     let (character, clips) =
         character_and_clips(&args.file, args.clips.as_deref(), &Limits::default())?;
     let clip = match &args.clip {
@@ -142,8 +147,12 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         options.times,
         args.rays
     );
+    if let Some(summary) = aobake_core::trace::engine::engine().and_then(|e| e.summary()) {
+        println!("GPU tracer, all runs: {summary}");
+    }
     println!(
-        "median: face job {face:.1} Mrays/s, vertex tracer {:.1} Mrays/s on the same poses; vertex/face {:.2}× (median of pairs)",
+        "tracer {tracer}: median face job {face:.1} Mrays/s = {:.3} Grays/s, vertex tracer {:.1} Mrays/s on the same poses; vertex/face {:.2}× (median of pairs)",
+        face / 1e3,
         median(&vertex_rates),
         median(&ratios)
     );

@@ -289,7 +289,8 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
     }
     let gpu = if tracers.contains(&BenchTracer::Gpu) {
         use aobake_worker::gpu::{GpuMode, trace::install};
-        let (label, _) = install(GpuMode::Require).map_err(|e| anyhow::anyhow!("--tracer gpu: {e}"))?;
+        let (label, _) =
+            install(GpuMode::Require).map_err(|e| anyhow::anyhow!("--tracer gpu: {e}"))?;
         println!("GPU tracer: {label}");
         rows.push(("gpu".into(), None));
         aobake_core::trace::engine::engine()
@@ -336,6 +337,9 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
             );
             theirs.push(s);
         }
+    }
+    if let Some(summary) = gpu.as_ref().and_then(|e| e.summary()) {
+        println!("GPU tracer, all runs: {summary}");
     }
     aobake_core::trace::engine::set_engine(None);
     for ((name, _), runs) in rows.iter().zip(&ours) {
