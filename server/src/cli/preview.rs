@@ -158,14 +158,22 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             Err(e) => eprintln!("{backends:?}: {e}"),
         }
     }
-    if adapters.is_empty() {
+    // An adapter whose backend cannot build the preview's pipelines (a GL
+    // context without storage buffers in fragment shaders, say) is
+    // skipped with the reason.
+    let mut renderers: Vec<PreviewRenderer<'_>> = adapters
+        .iter()
+        .filter_map(|gpu| match PreviewRenderer::new(gpu) {
+            Ok(r) => Some(r),
+            Err(e) => {
+                eprintln!("skipping {}: {e}", gpu.label());
+                None
+            }
+        })
+        .collect();
+    if renderers.is_empty() {
         bail!("no adapter to render with");
     }
-    let renderers = adapters
-        .iter()
-        .map(PreviewRenderer::new)
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut renderers = renderers;
     let mut stills = vec![Vec::new(); renderers.len()];
     let mut frames = vec![Vec::new(); renderers.len()];
     let mut gtao = vec![Vec::new(); renderers.len()];
@@ -208,7 +216,7 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     for (i, r) in renderers.iter().enumerate() {
         println!(
             "| {} | {}× | {:.1} | {:.1} | {:.2} | {:.2} |",
-            adapters[i].label(),
+            r.gpu().label(),
             r.samples(),
             super::common::median(&stills[i]),
             super::common::median(&frames[i]),

@@ -67,6 +67,8 @@ impl<'g> GridAo<'g> {
         }
         let base = params(&arrays);
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // A shader the backend cannot translate is an internal error.
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("grid_ao.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::GRID_AO.into()),
@@ -88,7 +90,7 @@ impl<'g> GridAo<'g> {
         };
         let infos = storage("grid parts", bytemuck::cast_slice(&infos));
         let cells = storage("grid cells", bytemuck::cast_slice(cells));
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         Ok(Self {

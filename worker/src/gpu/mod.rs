@@ -138,6 +138,11 @@ impl Gpu {
             })
             .await
             .map_err(|e| GpuError::Device(format!("{label}: {e}")))?;
+        // Every call that can fail runs in error scopes; an error outside
+        // them is reported, never a panic in the middle of a worker's job.
+        device.on_uncaptured_error(std::sync::Arc::new(|e| {
+            eprintln!("wgpu error outside an error scope: {e}");
+        }));
         Ok(Self {
             info,
             adapter,
@@ -169,6 +174,8 @@ impl Gpu {
         use wgpu::util::DeviceExt as _;
         let device = &self.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // A shader the backend cannot translate is an internal error.
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("lookup input"),
             contents: if input.is_empty() { &[0u8; 32] } else { input },
@@ -191,7 +198,7 @@ impl Gpu {
         record(&mut encoder, &input, &out)?;
         encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, size);
         let submission = self.queue.submit(Some(encoder.finish()));
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let bytes = self.read(&staging, submission)?;

@@ -66,6 +66,11 @@ const GBUFFER: [wgpu::TextureFormat; 2] = [
 impl<'g> PreviewRenderer<'g> {
     /// Builds the pipelines: 4× multisampling where the adapter has it for
     /// both the colour and the depth format, else none.
+    /// The adapter it renders on.
+    pub fn gpu(&self) -> &'g Gpu {
+        self.gpu
+    }
+
     pub fn new(gpu: &'g Gpu) -> Result<Self, GpuError> {
         let supports = |f: wgpu::TextureFormat| {
             gpu.adapter
@@ -80,6 +85,8 @@ impl<'g> PreviewRenderer<'g> {
         };
         let device = &gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // A shader the backend cannot translate is an internal error.
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("preview.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::PREVIEW.into()),
@@ -222,7 +229,7 @@ impl<'g> PreviewRenderer<'g> {
             compilation_options: Default::default(),
             cache: None,
         });
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         Ok(Self {
@@ -821,6 +828,8 @@ impl<'g> PreviewRenderer<'g> {
         let device = &gpu.device;
         let (width, height) = scene.size;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // A shader the backend cannot translate is an internal error.
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let stage = self.stage(scene, frames)?;
         let groups: Vec<(wgpu::BindGroup, wgpu::BindGroup)> = panels
             .iter()
@@ -859,12 +868,14 @@ impl<'g> PreviewRenderer<'g> {
             mapped_at_creation: false,
         });
         let bg = look::BACKGROUND.map(f64::from);
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let mut images = Vec::with_capacity(frames.len() * panels.len());
         for frame in frames {
             let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+            // A shader the backend cannot translate is an internal error.
+            let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
             let mut encoder =
                 device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
             self.evaluate(&stage, frame, &mut encoder)?;
@@ -929,7 +940,8 @@ impl<'g> PreviewRenderer<'g> {
                 );
             }
             let submission = gpu.queue.submit(Some(encoder.finish()));
-            if let Some(e) = pollster::block_on(scope.pop()) {
+            if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop()))
+            {
                 return Err(GpuError::Pipeline(e.to_string()));
             }
             let bytes = gpu.read(&staging, submission)?;
@@ -973,6 +985,8 @@ impl<'g> PreviewRenderer<'g> {
         let device = &gpu.device;
         let (width, height) = scene.size;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // A shader the backend cannot translate is an internal error.
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let stage = self.stage(scene, frames)?;
         let groups = (
             self.surface_group(scene, Panel::Model, false),
@@ -991,7 +1005,7 @@ impl<'g> PreviewRenderer<'g> {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let new_encoder =
@@ -999,6 +1013,8 @@ impl<'g> PreviewRenderer<'g> {
         let mut out = Vec::with_capacity(frames.len());
         for frame in frames {
             let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+            // A shader the backend cannot translate is an internal error.
+            let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
             // Each pass alone, timed from submission to completion.
             let mut encoder = new_encoder();
             self.evaluate(&stage, frame, &mut encoder)?;
@@ -1036,7 +1052,8 @@ impl<'g> PreviewRenderer<'g> {
                 4 * pixels as u64,
             );
             let submission = gpu.queue.submit(Some(encoder.finish()));
-            if let Some(e) = pollster::block_on(scope.pop()) {
+            if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop()))
+            {
                 return Err(GpuError::Pipeline(e.to_string()));
             }
             let bytes = gpu.read(&staging, submission)?;

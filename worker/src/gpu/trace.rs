@@ -154,6 +154,8 @@ impl<'g> GpuTracer<'g> {
     pub fn new(gpu: &'g Gpu) -> Result<Self, GpuError> {
         let device = &gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // A shader the backend cannot translate is an internal error.
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("trace.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::TRACE.into()),
@@ -166,7 +168,7 @@ impl<'g> GpuTracer<'g> {
             compilation_options: wgpu::PipelineCompilationOptions::default(),
             cache: None,
         });
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let numbers = sobol_directions();
@@ -348,6 +350,7 @@ impl<'g> GpuTracer<'g> {
         let buffers = &mut *guard;
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         use wgpu::BufferUsages as U;
         let queue = &self.gpu.queue;
         let upload = |slot: &mut Option<wgpu::Buffer>, bytes: &[u8], label: &str| {
@@ -519,7 +522,8 @@ impl<'g> GpuTracer<'g> {
         }
         let waiting = std::time::Instant::now();
         let submission = self.gpu.queue.submit(Some(encoder.finish()));
-        if let Some(e) = pollster::block_on(validation.pop()) {
+        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(validation.pop()))
+        {
             return Err(PartError::Gpu(GpuError::Pipeline(e.to_string())));
         }
         if pollster::block_on(oom.pop()).is_some() {

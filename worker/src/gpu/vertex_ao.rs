@@ -97,6 +97,8 @@ impl<'g> VertexAo<'g> {
             return Err(GpuError::TooLarge(format!("{vertices} vertices")));
         }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // A shader the backend cannot translate is an internal error.
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("vertex_ao.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::VERTEX_AO.into()),
@@ -143,7 +145,7 @@ impl<'g> VertexAo<'g> {
             weights,
             groups,
         };
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         Ok(out)
@@ -229,6 +231,8 @@ impl<'g> VertexAo<'g> {
         assert_eq!(weights.len(), self.weights, "one weight per row");
         let device = &self.gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // A shader the backend cannot translate is an internal error.
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         let size = 4 * u64::from(self.vertices.max(1));
         let ao = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("ao"),
@@ -247,7 +251,7 @@ impl<'g> VertexAo<'g> {
         self.record(&mut encoder, weights, &ao)?;
         encoder.copy_buffer_to_buffer(&ao, 0, &staging, 0, size);
         let submission = self.gpu.queue.submit(Some(encoder.finish()));
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let bytes = self.gpu.read(&staging, submission)?;

@@ -83,6 +83,8 @@ fn draw_points(
 ) -> Result<Vec<f32>, GpuError> {
     let device = &gpu.device;
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    // A shader the backend cannot translate is an internal error.
+    let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
     let (target_width, target_height) = target_size(count);
     enum Bound {
         Buffer(wgpu::Buffer),
@@ -217,7 +219,7 @@ fn draw_points(
         size,
     );
     let submission = gpu.queue.submit(Some(encoder.finish()));
-    if let Some(e) = pollster::block_on(scope.pop()) {
+    if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
         return Err(GpuError::Pipeline(e.to_string()));
     }
     let bytes = gpu.read(&staging, submission)?;
