@@ -310,13 +310,21 @@ impl Client {
         self.post_for("/v1/tokens", request)
     }
 
-    /// Waits up to `wait_secs` for a job.
-    pub fn lease(&self, worker: &str, wait_secs: u64) -> Result<Option<Lease>> {
+    /// Waits up to `wait_secs` for a job; `tracer` tells the server what
+    /// casts the worker's rays (`cpu`, or `gpu: ` and the adapter): once
+    /// is enough, it is recorded.
+    pub fn lease(
+        &self,
+        worker: &str,
+        wait_secs: u64,
+        tracer: Option<&str>,
+    ) -> Result<Option<Lease>> {
         self.post(
             "/v1/jobs/lease",
             &LeaseRequest {
                 worker: worker.to_owned(),
                 wait_secs,
+                tracer: tracer.map(str::to_owned),
             },
         )
     }

@@ -234,6 +234,14 @@ pub struct WorkerRow {
     pub last_seen: i64,
     /// First contact.
     pub started_at: i64,
+    /// What casts its rays, as it last said: `cpu`, or `gpu: ` and the
+    /// adapter (`aobake worker --gpu`).
+    #[serde(default = "cpu")]
+    pub tracer: String,
+}
+
+fn cpu() -> String {
+    "cpu".to_owned()
 }
 
 /// What an upload answers.
@@ -359,6 +367,11 @@ pub struct LeaseRequest {
     #[serde(default)]
     #[cfg_attr(feature = "schema", schema(maximum = 60))]
     pub wait_secs: u64,
+    /// What casts the worker's rays: `cpu`, or `gpu: ` and the adapter;
+    /// shown in `GET /v1/workers`.
+    #[serde(default)]
+    #[cfg_attr(feature = "schema", schema(max_length = 200))]
+    pub tracer: Option<String>,
 }
 
 /// Token and progress.

@@ -83,8 +83,14 @@ fn lease_loop(
     cache: &InputCache,
 ) {
     let mut failures = 0u32;
+    // The process's tracer (installed by `aobake worker --gpu`), told to
+    // the server until a request has gone through.
+    let tracer = aobake_core::trace::engine::tracer_label();
+    let mut told = false;
     while !shutdown.load(Ordering::Relaxed) {
-        match client.lease(id, config.wait_secs) {
+        let leased = client.lease(id, config.wait_secs, (!told).then_some(tracer.as_str()));
+        told |= leased.is_ok();
+        match leased {
             Ok(Some(lease)) => {
                 failures = 0;
                 if shutdown.load(Ordering::Relaxed) {

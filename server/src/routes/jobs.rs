@@ -52,6 +52,15 @@ pub(crate) async fn lease(
             "worker ids are 1 to 200 characters",
         ));
     }
+    if let Some(tracer) = &req.tracer {
+        if tracer.is_empty() || tracer.len() > 200 {
+            return Err(ApiError::bad(
+                "bad_tracer",
+                "a worker's tracer is 1 to 200 characters",
+            ));
+        }
+        state.store.worker_tracer(&req.worker, tracer).await?;
+    }
     let deadline = tokio::time::Instant::now() + Duration::from_secs(req.wait_secs.min(60));
     loop {
         // Register interest before looking, so a job made available between

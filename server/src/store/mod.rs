@@ -221,6 +221,8 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn set_priority(&self, bake: i64, priority: i64) -> Result<BakeRow>;
     /// Records that a worker is alive (and what it runs).
     async fn worker_seen(&self, worker: &str, state: &str, job: Option<i64>) -> Result<()>;
+    /// Records what casts a worker's rays (`cpu`, or `gpu: ADAPTER`).
+    async fn worker_tracer(&self, worker: &str, tracer: &str) -> Result<()>;
     /// Every worker, most recently seen first.
     async fn workers(&self) -> Result<Vec<WorkerRow>>;
     /// Stores a token's hash.

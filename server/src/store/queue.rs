@@ -902,6 +902,18 @@ impl<B: Backend> Store for SqlStore<B> {
         })
     }
 
+    async fn worker_tracer(&self, worker: &str, tracer: &str) -> Result<()> {
+        in_tx!(self, Durability::Queue, |c| {
+            c.execute(
+                B::sql("INSERT INTO workers (id, state, job_id, last_seen, started_at, tracer) VALUES ($1, 'idle', NULL, {now}, {now}, $2) ON CONFLICT (id) DO UPDATE SET tracer = $2, last_seen = {now}")
+                    .bind(worker)
+                    .bind(tracer),
+            )
+            .await?;
+            Ok(())
+        })
+    }
+
     async fn workers(&self) -> Result<Vec<WorkerRow>> {
         let rows: Vec<RawWorker> = self
             .backend

@@ -136,6 +136,7 @@ pub(super) struct RawWorker {
     job_id: Option<i64>,
     last_seen: i64,
     started_at: i64,
+    tracer: String,
 }
 
 impl RawWorker {
@@ -146,6 +147,7 @@ impl RawWorker {
             job_id: self.job_id,
             last_seen: self.last_seen,
             started_at: self.started_at,
+            tracer: self.tracer,
         }
     }
 }

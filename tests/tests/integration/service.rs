@@ -9,8 +9,10 @@ use crate::util::{QUICK, asset, local_bake, submit, upload};
 #[test]
 fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
     let mut env = TestEnv::start(Options::default());
-    env.start_worker(&[]);
-    env.start_worker(&[]);
+    // One worker traces on the GPU tracer (lavapipe or llvmpipe here), the
+    // other on the CPU: the same rays, so the same bytes as `aobake bake`.
+    env.start_worker(&[("AOBAKE_GPU", "require")]);
+    env.start_worker(&[("AOBAKE_GPU", "off")]);
     let cm = character("CesiumMan");
     let cm_arg = cm.to_str().unwrap();
     let mut args = vec!["submit", cm_arg, "--poses", "24", "--wait"];
@@ -103,6 +105,16 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
     assert_eq!(bake["progress"]["done"], bake["progress"]["total"]);
     let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
     assert_eq!(workers.as_array().unwrap().len(), 2, "{workers}");
+    // Each worker said what traces its rays.
+    let mut tracers: Vec<&str> = workers
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w["tracer"].as_str().unwrap())
+        .collect();
+    tracers.sort_unstable();
+    assert_eq!(tracers[0], "cpu", "{workers}");
+    assert!(tracers[1].starts_with("gpu: "), "{workers}");
     assert_eq!(jobs.last().unwrap()["kind"], "preview");
 
     // The previews: three stills and an animation of the held-out clip,

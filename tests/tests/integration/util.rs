@@ -57,7 +57,8 @@ pub(crate) fn local_bake(dir: &Path, character: &Path, poses: usize) -> Vec<u8> 
 }
 
 /// `aobake bake CHARACTER ARGS…` into `dir/{name}.aob` (two tracing
-/// threads, as the workers have); returns the asset bytes.
+/// threads, as the workers have, on the CPU tracer even where a GPU is);
+/// returns the asset bytes.
 pub(crate) fn aobake_bake(dir: &Path, character: &Path, args: &[&str], name: &str) -> Vec<u8> {
     let out = dir.join(format!("{name}.aob"));
     let run = std::process::Command::new(binary())
@@ -68,6 +69,7 @@ pub(crate) fn aobake_bake(dir: &Path, character: &Path, args: &[&str], name: &st
         .arg(&out)
         .arg("--report")
         .arg(dir.join(format!("{name}.json")))
+        .args(["--tracer", "cpu"])
         .env("RAYON_NUM_THREADS", "2")
         .output()
         .unwrap();

@@ -279,7 +279,7 @@ fn http_queue(args: &QueueArgs, dir: &Path) -> anyhow::Result<f64> {
                         }],
                         timings: json!({}),
                     };
-                    while let Ok(Some(l)) = client.lease(&format!("bench-{w}"), 0) {
+                    while let Ok(Some(l)) = client.lease(&format!("bench-{w}"), 0, None) {
                         if client
                             .complete(l.job.id, &l.token, completion.clone())
                             .is_ok()

@@ -681,12 +681,13 @@ async function workersPage(signal) {
       h("td", { class: "mono" }, w.id),
       h("td", {}, badge(w.state)),
       h("td", { class: "num" }, w.job_id ?? ""),
+      h("td", { class: "tracer" }, w.tracer ?? "cpu"),
       h("td", { "data-seen": w.last_seen }, ago(w.last_seen)),
       h("td", { class: "muted" }, when(w.started_at)))));
   };
   await draw();
   show(h("h1", {}, "Workers"),
-    h("table", {}, h("thead", {}, h("tr", {}, ...["Worker", "State", "Job", "Last heartbeat", "Started"]
+    h("table", {}, h("thead", {}, h("tr", {}, ...["Worker", "State", "Job", "Tracer", "Last heartbeat", "Started"]
       .map((t) => h("th", {}, t)))), tbody));
   // Relative times tick locally; the list is re-read when a bake changes.
   const tick = setInterval(() => {
