@@ -15,5 +15,7 @@ mod dashboard;
 mod grid;
 #[path = "integration/service.rs"]
 mod service;
+#[path = "integration/tracer.rs"]
+mod tracer;
 #[path = "integration/util.rs"]
 mod util;

@@ -236,6 +236,7 @@ impl Bake<'_> {
         out.push(&format!("face-{face}"), field.to_bytes());
         out.push(&format!("face-{face}.json"), json(&info));
         out.timings.reference_trace_s = started.elapsed().as_secs_f64();
+        out.timings.gpu_trace_s = super::report::on_gpu(out.timings.reference_trace_s);
         Ok(out)
     }
 
@@ -291,6 +292,7 @@ impl Bake<'_> {
             .to_bytes();
         out.push("asset", asset);
         out.timings.reference_trace_s = deps.iter().map(|d| d.timings.reference_trace_s).sum();
+        out.timings.gpu_trace_s = super::report::gpu_seconds(deps);
         out.timings.fit_s = started.elapsed().as_secs_f64();
         Ok(out)
     }
@@ -484,6 +486,7 @@ impl Bake<'_> {
         };
         let mut timings = assembled.timings;
         timings.test_trace_s = trace_s;
+        timings.gpu_trace_s += super::report::on_gpu(trace_s);
         timings.evaluate_s = started.elapsed().as_secs_f64();
         let character = &self.inputs.character;
         let clips = &self.inputs.clips;

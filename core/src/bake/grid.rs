@@ -225,6 +225,7 @@ impl Bake<'_> {
         );
         out.push(GROUND_TRUTH, block(g.concat(), texels.len()));
         out.timings.reference_trace_s = started.elapsed().as_secs_f64();
+        out.timings.gpu_trace_s = super::report::on_gpu(out.timings.reference_trace_s);
         Ok(out)
     }
 
@@ -343,6 +344,7 @@ impl Bake<'_> {
             }),
         );
         out.timings.reference_trace_s = seconds;
+        out.timings.gpu_trace_s = super::report::on_gpu(seconds);
         Ok(out)
     }
 
@@ -449,6 +451,7 @@ impl Bake<'_> {
             .map(|d| d.timings.reference_trace_s)
             .sum();
         out.timings.reference_trace_s = raw.iter().map(|(_, s)| s).sum::<f64>() + sampled;
+        out.timings.gpu_trace_s = super::report::gpu_seconds(deps);
         out.timings.fit_s = started.elapsed().as_secs_f64();
         Ok(out)
     }
@@ -585,6 +588,7 @@ impl Bake<'_> {
         };
         let mut timings = assembled.timings;
         timings.test_trace_s = trace_s;
+        timings.gpu_trace_s += super::report::on_gpu(trace_s);
         timings.evaluate_s = started.elapsed().as_secs_f64();
         let plan = &self.plan;
         let names =

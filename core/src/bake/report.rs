@@ -26,6 +26,26 @@ pub struct Timings {
     /// folds, which run side by side as jobs of their own).
     #[serde(default)]
     pub unseen_s: f64,
+    /// Of the two tracing times, the seconds of jobs whose process traced
+    /// on a GPU (`aobake worker --gpu`, `aobake bake --tracer`): 0 when
+    /// every ray was cast on the CPU. The rays are the same either way;
+    /// the values can differ where a ray grazes an edge.
+    #[serde(default)]
+    pub gpu_trace_s: f64,
+}
+
+/// `seconds` of tracing if this process traces on a GPU, else 0.
+pub(crate) fn on_gpu(seconds: f64) -> f64 {
+    if crate::trace::engine::engine().is_some() {
+        seconds
+    } else {
+        0.0
+    }
+}
+
+/// The GPU tracing seconds of `deps`, summed.
+pub(crate) fn gpu_seconds(deps: &[&super::JobOutput]) -> f64 {
+    deps.iter().map(|d| d.timings.gpu_trace_s).sum()
 }
 
 /// Sizes of the model and the baseline.

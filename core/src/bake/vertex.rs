@@ -257,6 +257,7 @@ impl Bake<'_> {
             PoseSet::Reference => out.timings.reference_trace_s = seconds,
             _ => out.timings.test_trace_s = seconds,
         }
+        out.timings.gpu_trace_s = super::report::on_gpu(seconds);
         Ok(out)
     }
 
@@ -310,6 +311,7 @@ impl Bake<'_> {
         );
         out.push("fit.json", json(&FitInfo { fit }));
         out.timings.reference_trace_s = deps.iter().map(|d| d.timings.reference_trace_s).sum();
+        out.timings.gpu_trace_s = super::report::gpu_seconds(deps);
         out.timings.fit_s = started.elapsed().as_secs_f64();
         Ok(out)
     }
@@ -389,6 +391,8 @@ impl Bake<'_> {
             test_trace_s: deps.iter().map(|d| d.timings.test_trace_s).sum(),
             unseen_s: deps.iter().map(|d| d.timings.unseen_s).sum(),
             evaluate_s: started.elapsed().as_secs_f64(),
+            // The fit's (its reference samples') and the test samples'.
+            gpu_trace_s: super::report::gpu_seconds(deps),
             ..fit.timings
         };
         Ok(out)
