@@ -306,9 +306,12 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert_eq!(b["state"], "cancelled", "the server agrees");
         shot(&c, "4-bake-cancelled").await;
 
-        // Workers: the one worker, with its last heartbeat.
+        // Workers: the one worker, with its tracer and last heartbeat.
         c.goto(&format!("{}/#/workers", env.url)).await.unwrap();
         wait_for(&c, "the workers", "document.querySelectorAll('tr[data-worker]').length === 1", Duration::from_secs(20)).await;
+        let tracer = eval(&c, "return document.querySelector('tr[data-worker] td.tracer').textContent").await;
+        let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
+        assert_eq!(tracer, workers[0]["tracer"], "the tracer the worker told");
         shot(&c, "5-workers").await;
 
         // Versions of the character and method: both bakes, newest first.
