@@ -378,6 +378,12 @@ async fn fail_bake_if_dead<B: Backend>(c: &mut B::Conn, bake: i64) -> Result<()>
 /// Claims the first ready job of the most urgent bake this worker is not
 /// kept off: index lookups, however many jobs are queued. Claimers on
 /// other connections skip the rows each other locked.
+///
+/// Tracing jobs prefer GPU workers: a CPU worker passes over them while a
+/// GPU worker that may take the bake is waiting for a job (idle, and
+/// polling within the last two seconds), which then claims them at once.
+/// A fleet without an idle GPU worker is never held up: busy or silent
+/// GPU workers are not waited for.
 async fn claim<B: Backend>(
     c: &mut B::Conn,
     worker: &str,
@@ -398,8 +404,10 @@ async fn claim<B: Backend>(
     for (bake,) in bakes {
         let id = c
             .scalar(
-                B::sql("SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' ORDER BY idx LIMIT 1{skip_locked}")
-                    .bind(bake),
+                B::sql("SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' AND NOT (kind IN ('sample', 'face', 'slab', 'preview-truth') AND EXISTS (SELECT 1 FROM workers me WHERE me.id = $2 AND me.tracer = 'cpu') AND EXISTS (SELECT 1 FROM workers g WHERE g.id != $2 AND g.tracer LIKE 'gpu%' AND g.state = 'idle' AND g.last_seen > {now} - 2000 AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = $1 AND f.worker = g.id AND f.failures >= $3))) ORDER BY idx LIMIT 1{skip_locked}")
+                    .bind(bake)
+                    .bind(worker)
+                    .bind(policy.worker_failures),
             )
             .await?;
         if id.is_some() {

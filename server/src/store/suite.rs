@@ -77,6 +77,7 @@ pub(crate) async fn run_all(store: &dyn Store) {
     failures_retry_then_kill_the_bake(store).await;
     cancel_pause_resume_retry(store).await;
     a_worker_that_keeps_failing_a_bake_is_kept_off_it(store).await;
+    tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store).await;
 }
 
 /// With no other worker to take its jobs, a failing worker goes on
@@ -136,6 +137,43 @@ async fn a_worker_that_keeps_failing_a_bake_is_kept_off_it(store: &dyn Store) {
     }
     let other = store.lease("careful", &p).await.unwrap().unwrap();
     assert_eq!(other.job.bake_id, created.id);
+}
+
+async fn tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store: &dyn Store) {
+    let c = character(store).await;
+    let mut b = bake(&c, &"5".repeat(64));
+    b.priority = 2000;
+    let created = store.create_bake(&b).await.unwrap();
+    let p = policy();
+    store.worker_tracer("gpu", "gpu: an adapter").await.unwrap();
+    store.worker_seen("gpu", "idle", None).await.unwrap();
+    store.worker_tracer("cpu", "cpu").await.unwrap();
+    // A GPU worker is waiting: the CPU worker leaves the samples to it
+    // (and may take another bake's work).
+    if let Some(l) = store.lease("cpu", &p).await.unwrap() {
+        assert_ne!(l.job.bake_id, created.id, "{:?}", l.job);
+        store
+            .complete(l.job.id, &l.token, &done("x"))
+            .await
+            .unwrap();
+    }
+    let first = store.lease("gpu", &p).await.unwrap().unwrap();
+    assert_eq!(
+        (first.job.bake_id, first.job.kind.as_str()),
+        (created.id, "sample")
+    );
+    // Now it is busy: the CPU worker is not held up.
+    let second = store.lease("cpu", &p).await.unwrap().unwrap();
+    assert_eq!(
+        (second.job.bake_id, second.job.kind.as_str()),
+        (created.id, "sample")
+    );
+    let workers = store.workers().await.unwrap();
+    let tracer = |id: &str| workers.iter().find(|w| w.id == id).unwrap().tracer.clone();
+    assert_eq!(
+        (tracer("gpu").as_str(), tracer("cpu").as_str()),
+        ("gpu: an adapter", "cpu")
+    );
 }
 
 async fn uploads_are_idempotent(store: &dyn Store) {
