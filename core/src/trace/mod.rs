@@ -596,27 +596,54 @@ pub fn volume_occlusion(
     params: &VolumeParams,
     progress: Progress<'_>,
 ) -> Result<Vec<VolumeSample>, TraceError> {
+    let mut groups = volume_occlusion_many(scene, &[(points, params.seed)], params, progress)?;
+    Ok(groups.pop().unwrap_or_default())
+}
+
+/// [`volume_occlusion`] of several groups of points in one scene, each
+/// group scrambled by its own seed (`params.seed` is not used), traced as
+/// one batch: one dispatch on a GPU engine. Each group's samples are those
+/// [`volume_occlusion`] gives it with its seed.
+pub fn volume_occlusion_many(
+    scene: &Scene,
+    groups: &[(&[Vec3], u64)],
+    params: &VolumeParams,
+    progress: Progress<'_>,
+) -> Result<Vec<Vec<VolumeSample>>, TraceError> {
     check_samples(params.samples)?;
     check_distance("max_distance", params.max_distance, false)?;
-    check_points(points)?;
+    let mut points = Vec::new();
+    for (group, seed) in groups {
+        check_points(group)?;
+        points.extend(
+            group
+                .iter()
+                .enumerate()
+                .map(|(i, &p)| sphere_point(0, scene.to_local(p), Vec3::ZERO, *seed, i as u32)),
+        );
+    }
     let batch = RayBatch {
         scenes: vec![scene],
-        points: points
-            .iter()
-            .enumerate()
-            .map(|(i, &p)| sphere_point(0, scene.to_local(p), Vec3::ZERO, params.seed, i as u32))
-            .collect(),
+        points,
         estimator: Estimator::Volume,
         samples: params.samples,
         max_distance: params.max_distance,
     };
     let samples = params.samples;
-    Ok(trace_batch(&batch, progress)?
+    let tallies = trace_batch(&batch, progress)?;
+    let mut rest = &tallies[..];
+    Ok(groups
         .iter()
-        .map(|t| VolumeSample {
-            occlusion: 2.0 * t.hits as f32 / samples as f32,
-            direction: Vec3::from(t.direction.normalize_or_zero()),
-            inside: 2 * t.back > samples,
+        .map(|(group, _)| {
+            let (mine, after) = rest.split_at(group.len());
+            rest = after;
+            mine.iter()
+                .map(|t| VolumeSample {
+                    occlusion: 2.0 * t.hits as f32 / samples as f32,
+                    direction: Vec3::from(t.direction.normalize_or_zero()),
+                    inside: 2 * t.back > samples,
+                })
+                .collect()
         })
         .collect())
 }

@@ -6,7 +6,9 @@ use glam::Vec3;
 
 pub use aobake_runtime::method::grid::GridBox;
 
-use crate::trace::{Scene, SceneOptions, TraceError, VolumeParams, no_progress, volume_occlusion};
+use crate::trace::{
+    Scene, SceneOptions, TraceError, VolumeParams, no_progress, volume_occlusion_many,
+};
 
 /// The grid around `positions` (a part in bind space) by Eq. 4:
 /// e_i = r_i + √(A_i / 4πε), r_i the bounding box's half size and A_i
@@ -75,28 +77,36 @@ pub fn trace_layers<E: From<TraceError>>(
     done: &mut dyn FnMut(usize, Vec<RawCell>) -> Result<(), E>,
 ) -> Result<(), E> {
     let n = grid.resolution;
-    for z in layers {
-        let points: Vec<Vec3> = (0..n * n)
-            .map(|i| grid.cell_centre(i % n, i / n, z))
-            .collect();
-        let samples = volume_occlusion(
-            scene,
-            &points,
-            &VolumeParams {
-                seed: layer_seed(params.seed, part, z),
-                ..params
-            },
-            &no_progress,
-        )?;
-        let cells = samples
-            .into_iter()
-            .map(|s| RawCell {
-                occlusion: 0.5 * s.occlusion,
-                direction: s.direction,
-                inside: s.inside,
+    // Layers are traced in batches of about 64k cells (one dispatch on a
+    // GPU tracer); `done` still sees them one by one.
+    let per_batch = (65_536 / (n * n).max(1)).max(1);
+    let layers: Vec<usize> = layers.collect();
+    for batch in layers.chunks(per_batch) {
+        let points: Vec<Vec<Vec3>> = batch
+            .iter()
+            .map(|&z| {
+                (0..n * n)
+                    .map(|i| grid.cell_centre(i % n, i / n, z))
+                    .collect()
             })
             .collect();
-        done(z, cells)?;
+        let groups: Vec<(&[Vec3], u64)> = batch
+            .iter()
+            .zip(&points)
+            .map(|(&z, p)| (p.as_slice(), layer_seed(params.seed, part, z)))
+            .collect();
+        let traced = volume_occlusion_many(scene, &groups, &params, &no_progress)?;
+        for (&z, samples) in batch.iter().zip(traced) {
+            let cells = samples
+                .into_iter()
+                .map(|s| RawCell {
+                    occlusion: 0.5 * s.occlusion,
+                    direction: s.direction,
+                    inside: s.inside,
+                })
+                .collect();
+            done(z, cells)?;
+        }
     }
     Ok(())
 }

@@ -19,7 +19,7 @@ use aobake_core::{
     trace::{Falloff, SceneOptions, SurfaceParams, no_progress, trace_poses},
 };
 
-use crate::cli::common::{TracerChoice, median};
+use crate::cli::common::median;
 use crate::cli::common::{character_and_clips, find_clip};
 
 /// Arguments of `aobake bench cubemap`.
@@ -48,14 +48,15 @@ pub(super) struct Args {
     /// Timed runs of each (medians are quoted).
     #[arg(long, default_value_t = 3)]
     repeat: usize,
-    /// Who casts the rays: `cpu`, `gpu` (the wgpu compute tracer, any
-    /// adapter with compute) or `auto` (a hardware GPU, else the CPU).
-    #[arg(long, value_enum, default_value = "cpu")]
-    tracer: TracerChoice,
+    /// Tracers to time in turn within each run, comma-separated: `cpu`
+    /// and `gpu` (the wgpu compute tracer on the best adapter with
+    /// compute; its times include uploads and readbacks).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
+    tracer: Vec<super::BenchTracer>,
 }
 
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
-    let tracer = args.tracer.install()?;
+    let tracers = super::bench_tracers(&args.tracer)?;
     let (character, clips) =
         character_and_clips(&args.file, args.clips.as_deref(), &Limits::default())?;
     let clip = match &args.clip {
@@ -96,46 +97,50 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         seed: 0,
         falloff: Falloff::None,
     };
-    let (mut face_rates, mut vertex_rates, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+    let mut face_rates = vec![Vec::new(); tracers.len()];
+    let mut vertex_rates = vec![Vec::new(); tracers.len()];
     for run in 0..args.repeat.max(1) {
-        let started = Instant::now();
-        let mut field = FaceField::new(options.resolution, options.shells, options.times);
-        let mut parts = 0usize;
-        compute_face::<()>(
-            &sampling,
-            0,
-            &character.triangles,
-            &mut |m| frames[m].clone(),
-            &mut field,
-            0,
-            &mut |_, _| {
-                parts += 1;
-                Ok(())
-            },
-        )
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let face_s = started.elapsed().as_secs_f64();
-        let started = Instant::now();
-        trace_poses(
-            &character,
-            &poses,
-            &SceneOptions::default(),
-            &surface,
-            &no_progress,
-        )?;
-        let vertex_s = started.elapsed().as_secs_f64();
-        let face_rate = points * f64::from(args.rays) / face_s / 1e6;
-        let vertex_rate = vertex_rays / vertex_s / 1e6;
-        println!(
-            "run {}: face {face_s:.2} s ({face_rate:.1} Mrays/s, {parts} checkpoints), vertices {vertex_s:.2} s ({vertex_rate:.1} Mrays/s)",
-            run + 1
-        );
-        face_rates.push(face_rate);
-        vertex_rates.push(vertex_rate);
-        ratios.push(vertex_rate / face_rate);
+        for (t, (name, engine)) in tracers.iter().enumerate() {
+            aobake_core::trace::engine::set_engine(engine.clone());
+            let started = Instant::now();
+            let mut field = FaceField::new(options.resolution, options.shells, options.times);
+            let mut parts = 0usize;
+            compute_face::<()>(
+                &sampling,
+                0,
+                &character.triangles,
+                &mut |m| frames[m].clone(),
+                &mut field,
+                0,
+                &mut |_, _| {
+                    parts += 1;
+                    Ok(())
+                },
+            )
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let face_s = started.elapsed().as_secs_f64();
+            let started = Instant::now();
+            trace_poses(
+                &character,
+                &poses,
+                &SceneOptions::default(),
+                &surface,
+                &no_progress,
+            )?;
+            let vertex_s = started.elapsed().as_secs_f64();
+            let face_rate = points * f64::from(args.rays) / face_s / 1e9;
+            let vertex_rate = vertex_rays / vertex_s / 1e9;
+            println!(
+                "run {} ({name}): face {face_s:.2} s ({:.1} Mrays/s, {parts} checkpoints), vertices {vertex_s:.2} s ({:.1} Mrays/s)",
+                run + 1,
+                face_rate * 1e3,
+                vertex_rate * 1e3
+            );
+            face_rates[t].push(face_rate);
+            vertex_rates[t].push(vertex_rate);
+        }
     }
-    let face = median(&face_rates);
-    let full = CubemapOptions::default().points() as f64 * f64::from(args.rays) / (face * 1e6);
+    aobake_core::trace::engine::set_engine(None);
     println!(
         "{}: {} vertices, clip {} ({:.2} s); face {}² × {} shells × {} times, {} rays per point",
         args.file.display(),
@@ -147,18 +152,16 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         options.times,
         args.rays
     );
-    if let Some(summary) = aobake_core::trace::engine::engine().and_then(|e| e.summary()) {
-        println!("GPU tracer, all runs: {summary}");
+    super::compare_tracers("face job", &tracers, &face_rates);
+    super::compare_tracers("vertex tracer, same poses", &tracers, &vertex_rates);
+    super::tracer_summaries(&tracers);
+    for ((name, _), rates) in tracers.iter().zip(&face_rates) {
+        let full = CubemapOptions::default().points() as f64 * f64::from(args.rays)
+            / (median(rates) * 1e9);
+        println!(
+            "a default bake's faces (6 × 128² × 8 × 255 points, {} rays each) at the {name} face rate: {full:.0} s",
+            args.rays
+        );
     }
-    println!(
-        "tracer {tracer}: median face job {face:.1} Mrays/s = {:.3} Grays/s, vertex tracer {:.1} Mrays/s on the same poses; vertex/face {:.2}× (median of pairs)",
-        face / 1e3,
-        median(&vertex_rates),
-        median(&ratios)
-    );
-    println!(
-        "a default bake (6 × 128² × 8 × 255 points, {} rays each) at this rate: {full:.0} s",
-        args.rays
-    );
     Ok(())
 }

@@ -2,6 +2,7 @@
 
 mod bake;
 mod cubemap;
+mod grid;
 mod service;
 mod tables;
 
@@ -57,6 +58,10 @@ enum What {
     /// A cubemap face job's tracing rate (Kroon's Eq. 3.1 from points in
     /// space) beside the per-vertex tracer's on the same posed meshes.
     Cubemap(cubemap::Args),
+    /// A grid slab's tracing rate (Malmer et al.'s Eq. 5 at the cell
+    /// centres of a part's grid, every layer), on the CPU and the GPU
+    /// tracer in turn.
+    Grid(grid::Args),
     /// A whole bake here, stage by stage: the seconds and peak memory of
     /// tracing, each step of the fit and of the unseen-clip folds
     /// (cross-validation of the reference rows, of the ridge, of the
@@ -114,10 +119,72 @@ enum Quality {
     Slow,
 }
 
+/// A tracer a bench times.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum BenchTracer {
     Cpu,
     Gpu,
+}
+
+/// A tracer to time: its name and its engine (`None`: the CPU).
+type Timed = (
+    String,
+    Option<std::sync::Arc<dyn aobake_core::trace::RayEngine>>,
+);
+
+/// The tracers of `list`, in order, the GPU one opened on the best adapter
+/// with compute shaders (its label printed).
+fn bench_tracers(list: &[BenchTracer]) -> anyhow::Result<Vec<Timed>> {
+    let mut list = list.to_vec();
+    list.dedup();
+    if list.is_empty() {
+        bail!("--tracer names no tracer");
+    }
+    list.iter()
+        .map(|t| match t {
+            BenchTracer::Cpu => Ok(("cpu".to_owned(), None)),
+            BenchTracer::Gpu => {
+                use aobake_worker::gpu::{GpuMode, trace::install};
+                let (label, _) =
+                    install(GpuMode::Require).map_err(|e| anyhow::anyhow!("--tracer gpu: {e}"))?;
+                println!("GPU tracer: {label}");
+                let engine = aobake_core::trace::engine::engine();
+                aobake_core::trace::engine::set_engine(None);
+                Ok(("gpu".to_owned(), engine))
+            }
+        })
+        .collect()
+}
+
+/// Prints what each engine counted over all runs (the GPU tracer: its
+/// compute passes' seconds beside its calls').
+fn tracer_summaries(tracers: &[Timed]) {
+    for (name, engine) in tracers {
+        if let Some(summary) = engine.as_ref().and_then(|e| e.summary()) {
+            println!("{name} tracer, all runs: {summary}");
+        }
+    }
+}
+
+/// Prints each tracer's median rate and every other tracer's speed
+/// against the first (median of the runs' ratios); `rates[t]` holds the
+/// runs of tracer `t`, in G rays per second.
+fn compare_tracers(what: &str, tracers: &[Timed], rates: &[Vec<f64>]) {
+    for ((name, _), r) in tracers.iter().zip(rates) {
+        println!(
+            "{what}, {name}: median {:.3} Grays/s over {} runs",
+            median(r),
+            r.len()
+        );
+    }
+    for ((name, _), r) in tracers.iter().zip(rates).skip(1) {
+        let ratios: Vec<f64> = r.iter().zip(&rates[0]).map(|(a, b)| a / b).collect();
+        println!(
+            "{what}: {name} traces {:.2}x as fast as {} (median of pairs)",
+            median(&ratios),
+            tracers[0].0
+        );
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -147,6 +214,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         What::Preview(a) => super::preview::bench(a),
         What::Cubemap(a) => cubemap::run(a),
         What::Bake(a) => bake::run(a),
+        What::Grid(a) => grid::run(a),
     }
 }
 
