@@ -231,8 +231,14 @@ pub struct TraceParams {
     pub facing: u32,
     /// Kroon's α.
     pub alpha: f32,
-    /// Padding.
-    pub _pad: [u32; 3],
+    /// With `shared_points`: the scene every point of this dispatch is traced in.
+    pub scene: u32,
+    /// 1: the points are in model units, shared by every scene (each
+    /// dispatch traces them in `scene`); 0: each point names its scene and
+    /// is in that scene's frame.
+    pub shared_points: u32,
+    /// The index of this dispatch's first tally.
+    pub tally_base: u32,
     /// Sobol direction numbers of dimensions 0 and 1, two index bits per
     /// entry.
     pub sobol: [[u32; 4]; 8],
@@ -261,8 +267,14 @@ pub struct TraceScene {
     pub tmax: f32,
     /// τ of the exponential falloff, per local unit.
     pub tau: f32,
+    /// Local units per model unit.
+    pub scale: f32,
     /// Padding.
-    pub _pad: [u32; 3],
+    pub _pad: [u32; 2],
+    /// The local frame's origin in model units.
+    pub centre: [f32; 3],
+    /// Padding.
+    pub _pad1: u32,
 }
 
 /// `RayPoint` of trace.wgsl.
@@ -304,7 +316,7 @@ pub struct TraceTally {
 }
 
 const _: () = assert!(size_of::<TraceParams>() == 176);
-const _: () = assert!(size_of::<TraceScene>() == 48);
+const _: () = assert!(size_of::<TraceScene>() == 64);
 const _: () = assert!(size_of::<TracePoint>() == 64);
 const _: () = assert!(size_of::<TraceTally>() == 32);
 const _: () = assert!(size_of::<GtaoParams>() == 112);

@@ -46,9 +46,13 @@ struct Params {
     // Kroon: α, and 1 when the points' normals weight the hits.
     facing: u32,
     alpha: f32,
-    _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // shared_points = 1: the points are in model units and every one is traced
+    // in `scene` (a batch's scenes share them); 0: each point names its
+    // scene and is in its frame.
+    scene: u32,
+    shared_points: u32,
+    // The index of this dispatch's first tally.
+    tally_base: u32,
     // Sobol direction numbers (bit-reversed) of dimensions 0 and 1, one
     // pair per index bit, most significant first: (d0, d1) of bit 2k in
     // xy and of bit 2k + 1 in zw.
@@ -70,8 +74,11 @@ struct SceneInfo {
     tmin: f32,
     tmax: f32,
     tau: f32,
+    // local = (model − centre) · scale.
+    scale: f32,
     _pad0: u32,
     _pad1: u32,
+    centre: vec3<f32>,
     _pad2: u32,
 }
 
@@ -530,7 +537,14 @@ fn cs_trace(
     let n = (workgroup.y * params.row_stride + workgroup.x) * (64u / LANES) + slot;
     var tally = Tally(vec3<f32>(0.0), 0.0, 0u, 0u, 0u, 0u);
     if (n < params.points) {
-        tally = trace_lane(points[params.first_point + n], lane);
+        var p = points[params.first_point + n];
+        if (params.shared_points != 0u) {
+            // Scene::to_local's arithmetic.
+            let s = scenes[params.scene];
+            p.scene = params.scene;
+            p.origin = (p.origin - s.centre) * s.scale;
+        }
+        tally = trace_lane(p, lane);
     }
     partial[local] = tally;
     workgroupBarrier();
@@ -539,6 +553,6 @@ fn cs_trace(
         for (var k = 1u; k < LANES; k = k + 1u) {
             total = add(total, partial[local + k]);
         }
-        tallies[n] = total;
+        tallies[params.tally_base + n] = total;
     }
 }

@@ -94,6 +94,24 @@ pub struct RayBatch<'a> {
     /// Hits farther than this (model units) count as misses; may be
     /// infinite (not for [`Estimator::Kroon`]).
     pub max_distance: f32,
+    /// Every point is traced in every scene: `points` hold their origins
+    /// in model units (their `scene` is not used), each scene takes them
+    /// to its own frame ([`Scene::to_local`]'s arithmetic), and the tallies
+    /// come scene by scene (every point in the first scene, then in the
+    /// second, …). A cubemap face's time samples share their points so.
+    pub shared: bool,
+}
+
+impl RayBatch<'_> {
+    /// Tallies the batch yields: one per point, or per point and scene
+    /// when the points are shared.
+    pub fn tallies(&self) -> usize {
+        if self.shared {
+            self.points.len() * self.scenes.len()
+        } else {
+            self.points.len()
+        }
+    }
 }
 
 /// A point's rays reduced: what every estimator's value is made from.
@@ -160,8 +178,10 @@ pub const GPU_TRIANGLE_FLOATS: usize = 12;
 /// A scene's constants for a GPU tracer, in its local frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GpuSceneInfo {
-    /// Local units per model unit.
+    /// Local units per model unit: local = (model − `centre`) · `scale`.
     pub scale: f32,
+    /// The local frame's origin in model units.
+    pub centre: glam::Vec3,
     /// Hits closer than this are ignored (local units).
     pub tmin: f32,
     /// The ground: axis (0–2), height, and half size (`None`: infinite,

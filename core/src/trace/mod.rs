@@ -210,40 +210,70 @@ fn trace_batch(batch: &RayBatch<'_>, progress: Progress<'_>) -> Result<Vec<Tally
     {
         return Ok(tallies);
     }
-    let mut out = vec![Tally::default(); batch.points.len()];
-    for (s, scene) in batch.scenes.iter().enumerate() {
-        let indices: Vec<u32> = (0..batch.points.len() as u32)
-            .filter(|&i| batch.points[i as usize].scene == s as u32)
-            .collect();
-        let origins: Vec<Vec3> = indices
-            .iter()
-            .map(|&i| Vec3::from(batch.points[i as usize].origin))
-            .collect();
-        let order: Vec<u32> = morton_order(&origins)
-            .into_iter()
-            .map(|k| indices[k as usize])
-            .collect();
-        let tally = CpuTally::new(scene, batch);
-        let chunks: Vec<Vec<Tally>> = order
-            .par_chunks(CHUNK)
-            .map(|chunk| {
-                let mut tracer = scene.tracer();
-                let mut directions = Vec::new();
-                let values = chunk
-                    .iter()
-                    .map(|&i| tally.point(&mut tracer, &mut directions, &batch.points[i as usize]))
-                    .collect();
-                progress(chunk.len());
-                values
-            })
-            .collect();
-        for (chunk, values) in order.chunks(CHUNK).zip(chunks) {
-            for (&i, v) in chunk.iter().zip(values) {
-                out[i as usize] = v;
-            }
+    if batch.shared {
+        let mut out = Vec::with_capacity(batch.tallies());
+        for (s, scene) in batch.scenes.iter().enumerate() {
+            let points: Vec<RayPoint> = batch
+                .points
+                .iter()
+                .map(|p| RayPoint {
+                    scene: s as u32,
+                    origin: scene.to_local(Vec3::from(p.origin)),
+                    ..*p
+                })
+                .collect();
+            out.extend(cpu_tallies(scene, batch, &points, progress));
         }
+        return Ok(out);
+    }
+    let mut out = Vec::with_capacity(batch.points.len());
+    let mut rest = &batch.points[..];
+    for (s, scene) in batch.scenes.iter().enumerate() {
+        // Points come grouped by scene.
+        let count = rest.iter().take_while(|p| p.scene == s as u32).count();
+        let (mine, after) = rest.split_at(count);
+        rest = after;
+        out.extend(cpu_tallies(scene, batch, mine, progress));
+    }
+    if !rest.is_empty() {
+        return Err(TraceError::Invalid(
+            "a batch's points are not grouped by scene".into(),
+        ));
     }
     Ok(out)
+}
+
+/// `points` (all in `scene`) traced here, in parallel and in Morton order
+/// of their origins; tallies in point order.
+fn cpu_tallies(
+    scene: &Scene,
+    batch: &RayBatch<'_>,
+    points: &[RayPoint],
+    progress: Progress<'_>,
+) -> Vec<Tally> {
+    let origins: Vec<Vec3> = points.iter().map(|p| Vec3::from(p.origin)).collect();
+    let order = morton_order(&origins);
+    let tally = CpuTally::new(scene, batch);
+    let chunks: Vec<Vec<Tally>> = order
+        .par_chunks(CHUNK)
+        .map(|chunk| {
+            let mut tracer = scene.tracer();
+            let mut directions = Vec::new();
+            let values = chunk
+                .iter()
+                .map(|&i| tally.point(&mut tracer, &mut directions, &points[i as usize]))
+                .collect();
+            progress(chunk.len());
+            values
+        })
+        .collect();
+    let mut out = vec![Tally::default(); points.len()];
+    for (chunk, values) in order.chunks(CHUNK).zip(chunks) {
+        for (&i, v) in chunk.iter().zip(values) {
+            out[i as usize] = v;
+        }
+    }
+    out
 }
 
 /// The CPU tracer's reduction of one point's rays, for one scene of a
@@ -459,6 +489,7 @@ pub fn vertex_occlusion_many(
         estimator: surface_estimator(params),
         samples: params.samples,
         max_distance: params.max_distance,
+        shared: false,
     };
     let tallies = trace_batch(&batch, progress)?;
     let mut rest = &tallies[..];
@@ -558,6 +589,7 @@ fn surface_from(
         estimator: surface_estimator(params),
         samples: params.samples,
         max_distance: params.max_distance,
+        shared: false,
     };
     let tallies = trace_batch(&batch, progress)?;
     Ok(tallies.iter().map(|t| surface_value(t, params)).collect())
@@ -628,6 +660,7 @@ pub fn volume_occlusion_many(
         estimator: Estimator::Volume,
         samples: params.samples,
         max_distance: params.max_distance,
+        shared: false,
     };
     let samples = params.samples;
     let tallies = trace_batch(&batch, progress)?;
@@ -676,7 +709,14 @@ pub fn kroon_occlusion(
             sphere_point(0, scene.to_local(points[i]), n, params.seed, i as u32)
         })
         .collect();
-    kroon_batch(vec![scene], points, normals.is_some(), params, progress)
+    kroon_batch(
+        vec![scene],
+        points,
+        false,
+        normals.is_some(),
+        params,
+        progress,
+    )
 }
 
 /// [`kroon_occlusion`] of the same points (no normals) around several
@@ -692,19 +732,13 @@ pub fn kroon_occlusion_many(
     if points.is_empty() {
         return Ok(vec![Vec::new(); scenes.len()]);
     }
-    let mut batch_points = Vec::with_capacity(scenes.len() * points.len());
-    for (s, scene) in scenes.iter().enumerate() {
-        batch_points.extend(points.iter().enumerate().map(|(i, &p)| {
-            sphere_point(
-                s as u32,
-                scene.to_local(p),
-                Vec3::ZERO,
-                params.seed,
-                i as u32,
-            )
-        }));
-    }
-    let values = kroon_batch(scenes.to_vec(), batch_points, false, params, progress)?;
+    // The points once, in model units: each scene takes them to its frame.
+    let shared = points
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| sphere_point(0, p.into(), Vec3::ZERO, params.seed, i as u32))
+        .collect();
+    let values = kroon_batch(scenes.to_vec(), shared, true, false, params, progress)?;
     Ok(values.chunks(points.len()).map(<[f32]>::to_vec).collect())
 }
 
@@ -744,6 +778,7 @@ fn check_kroon(
 fn kroon_batch(
     scenes: Vec<&Scene>,
     points: Vec<RayPoint>,
+    shared: bool,
     facing: bool,
     params: &KroonParams,
     progress: Progress<'_>,
@@ -757,6 +792,7 @@ fn kroon_batch(
         },
         samples: params.samples,
         max_distance: params.max_distance,
+        shared,
     };
     let samples = params.samples;
     Ok(trace_batch(&batch, progress)?

@@ -357,6 +357,7 @@ impl Scene {
         };
         Some(GpuSceneInfo {
             scale: self.scale,
+            centre: self.centre.into(),
             tmin: TMIN,
             ground: self.ground.map(|g| (g.axis as u32, g.height, g.half_size)),
             depth,
@@ -385,8 +386,8 @@ impl Scene {
         out
     }
 
-    /// World point to the local frame.
-    pub(crate) fn to_local(&self, p: Vec3) -> Vec3A {
+    /// World point to the local frame: (p − centre) · scale.
+    pub fn to_local(&self, p: Vec3) -> Vec3A {
         (Vec3A::from(p) - self.centre) * self.scale
     }
 

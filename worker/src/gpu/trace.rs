@@ -129,16 +129,17 @@ fn ensure<'b>(
 ) -> &'b wgpu::Buffer {
     let size = size.max(256);
     if slot.as_ref().is_none_or(|b| b.size() < size) {
-        *slot = Some(
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size
-                    .next_power_of_two()
-                    .min(size.max(device.limits().max_buffer_size)),
-                usage,
-                mapped_at_creation: false,
-            }),
-        );
+        // Room to grow, within what one binding may see.
+        let limits = device.limits();
+        let cap = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        *slot = Some(device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.next_power_of_two().min(cap.max(size)),
+            usage,
+            mapped_at_creation: false,
+        }));
     }
     slot.as_ref().expect("just made")
 }
@@ -217,25 +218,28 @@ impl<'g> GpuTracer<'g> {
                 _ => return Ok(None),
             }
         }
-        if batch.points.windows(2).any(|w| w[1].scene < w[0].scene)
-            || batch
-                .points
-                .iter()
-                .any(|p| p.scene as usize >= batch.scenes.len())
+        if !batch.shared
+            && (batch.points.windows(2).any(|w| w[1].scene < w[0].scene)
+                || batch
+                    .points
+                    .iter()
+                    .any(|p| p.scene as usize >= batch.scenes.len()))
         {
             return Err(GpuError::TooLarge(
                 "the batch's points are not grouped by scene".into(),
             ));
         }
-        let mut out = Vec::with_capacity(batch.points.len());
+        let mut out = Vec::with_capacity(batch.tallies());
         let mut pending = vec![self.whole(batch)];
         while let Some(part) = pending.pop() {
             match self.trace_part(batch, &infos, &part) {
                 Ok(tallies) => {
-                    progress(part.points.len());
+                    progress(tallies.len());
                     out.extend(tallies);
                 }
-                Err(PartError::TooLarge) | Err(PartError::OutOfMemory) if part.points.len() > 1 => {
+                Err(PartError::TooLarge) | Err(PartError::OutOfMemory)
+                    if part.points.len() > 1 || part.scenes.len() > 1 =>
+                {
                     let (a, b) = self.halves(batch, &part);
                     // Pop order: the first half next.
                     pending.push(b);
@@ -244,7 +248,7 @@ impl<'g> GpuTracer<'g> {
                 Err(PartError::TooLarge) => {
                     return Err(GpuError::TooLarge(format!(
                         "one point's scene ({} nodes) exceeds the adapter's buffer limits",
-                        batch.scenes[batch.points[part.points.start].scene as usize].node_count()
+                        batch.scenes[part.scenes.start].node_count()
                     )));
                 }
                 Err(PartError::OutOfMemory) => {
@@ -261,11 +265,45 @@ impl<'g> GpuTracer<'g> {
     fn whole(&self, batch: &RayBatch<'_>) -> Part {
         Part {
             points: 0..batch.points.len(),
-            scenes: scene_range(batch, 0..batch.points.len()),
+            scenes: if batch.shared {
+                0..batch.scenes.len()
+            } else {
+                scene_range(batch, 0..batch.points.len())
+            },
         }
     }
 
+    /// A part in two. Shared points keep their tallies scene by scene: the
+    /// scenes are halved first, with every point, and one scene's points
+    /// after.
     fn halves(&self, batch: &RayBatch<'_>, part: &Part) -> (Part, Part) {
+        if batch.shared {
+            let (s, p) = (part.scenes.clone(), part.points.clone());
+            if s.len() > 1 {
+                let mid = s.start + s.len() / 2;
+                return (
+                    Part {
+                        points: p.clone(),
+                        scenes: s.start..mid,
+                    },
+                    Part {
+                        points: p,
+                        scenes: mid..s.end,
+                    },
+                );
+            }
+            let mid = p.start + p.len() / 2;
+            return (
+                Part {
+                    points: p.start..mid,
+                    scenes: s.clone(),
+                },
+                Part {
+                    points: mid..p.end,
+                    scenes: s,
+                },
+            );
+        }
         let mid = part.points.start + part.points.len() / 2;
         let a = part.points.start..mid;
         let b = mid..part.points.end;
@@ -320,7 +358,12 @@ impl<'g> GpuTracer<'g> {
             .par_iter()
             .map(|p| TracePoint {
                 origin: p.origin.to_array(),
-                scene: p.scene - part.scenes.start as u32,
+                // Shared points are traced in the dispatch's scene.
+                scene: if batch.shared {
+                    0
+                } else {
+                    p.scene - part.scenes.start as u32
+                },
                 tangent: p.tangent.to_array(),
                 seed: p.seed,
                 bitangent: p.bitangent.to_array(),
@@ -329,7 +372,12 @@ impl<'g> GpuTracer<'g> {
                 _pad1: 0,
             })
             .collect();
-        let tally_bytes = part.points.len() as u64 * 32;
+        let tally_count = if batch.shared {
+            part.points.len() * part.scenes.len()
+        } else {
+            part.points.len()
+        } as u64;
+        let tally_bytes = tally_count * 32;
         let largest = [
             4 * nodes.len() as u64,
             4 * triangles.len() as u64,
@@ -431,23 +479,31 @@ impl<'g> GpuTracer<'g> {
             unreachable!("made above");
         };
         let layout = self.pipeline.get_bind_group_layout(0);
-        let alignment = u64::from(limits.min_storage_buffer_offset_alignment);
-        // Points per dispatch: within the invocation cap, and a multiple of
-        // the offset alignment in tallies.
-        let step = alignment.div_ceil(32).max(1);
+        // Points per dispatch: within the invocation cap.
         let per_dispatch = (MAX_INVOCATIONS / u64::from(LANES))
             .min(u64::from(MAX_GROUPS) * u64::from(MAX_GROUPS) * u64::from(POINTS_PER_GROUP));
-        let per_dispatch = (per_dispatch / step * step).max(step);
+        // (scene, first point, points, first tally) of each dispatch: shared
+        // points once per scene, scene by scene; else the points in order.
+        let total = points.len() as u64;
+        let chunks = || {
+            (0..total)
+                .step_by(per_dispatch as usize)
+                .map(move |f| (f, per_dispatch.min(total - f)))
+        };
+        let jobs: Vec<(u32, u64, u64, u64)> = if batch.shared {
+            (0..part.scenes.len() as u64)
+                .flat_map(|s| chunks().map(move |(f, c)| (s as u32, f, c, s * total + f)))
+                .collect()
+        } else {
+            chunks().map(|(f, c)| (0, f, c, f)).collect()
+        };
 
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("trace"),
         });
         let mut bind_groups = Vec::new();
         let mut dispatches = Vec::new();
-        let total = points.len() as u64;
-        let mut first = 0u64;
-        while first < total {
-            let count = per_dispatch.min(total - first);
+        for &(scene, first, count, tally_base) in &jobs {
             let workgroups = count.div_ceil(u64::from(POINTS_PER_GROUP)) as u32;
             let grid = (workgroups.min(MAX_GROUPS), workgroups.div_ceil(MAX_GROUPS));
             let params = TraceParams {
@@ -466,7 +522,9 @@ impl<'g> GpuTracer<'g> {
                     Estimator::Kroon { alpha, .. } => alpha,
                     _ => 0.0,
                 },
-                _pad: [0; 3],
+                scene,
+                shared_points: u32::from(batch.shared),
+                tally_base: tally_base as u32,
                 sobol: self.sobol,
             };
             let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -474,8 +532,6 @@ impl<'g> GpuTracer<'g> {
                 contents: bytemuck::bytes_of(&params),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-            let offset = first * 32;
-            let size = count * 32;
             bind_groups.push(device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("trace"),
                 layout: &layout,
@@ -485,18 +541,10 @@ impl<'g> GpuTracer<'g> {
                     entry(2, triangles_buffer.as_entire_binding()),
                     entry(3, scenes_buffer.as_entire_binding()),
                     entry(4, points_buffer.as_entire_binding()),
-                    entry(
-                        5,
-                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: tallies_buffer,
-                            offset,
-                            size: wgpu::BufferSize::new(size),
-                        }),
-                    ),
+                    entry(5, tallies_buffer.as_entire_binding()),
                 ],
             }));
             dispatches.push(grid);
-            first += count;
         }
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -626,7 +674,10 @@ fn scene_constants(
         tmin: info.tmin,
         tmax: (batch.max_distance * info.scale).min(f32::MAX),
         tau,
-        _pad: [0; 3],
+        scale: info.scale,
+        _pad: [0; 2],
+        centre: info.centre.to_array(),
+        _pad1: 0,
     }
 }
 
