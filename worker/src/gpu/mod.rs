@@ -68,12 +68,12 @@ impl Gpu {
     /// Opens the best adapter over Vulkan and GL (a real GPU before a
     /// software one), or over the backends `WGPU_BACKEND` names.
     pub fn new() -> Result<Self, GpuError> {
-        pollster::block_on(Self::open(default_backends(), false))
+        pollster::block_on(Self::open(default_backends(), false, None))
     }
 
     /// The best adapter of these backends only (benches compare them).
     pub fn with_backends(backends: wgpu::Backends) -> Result<Self, GpuError> {
-        pollster::block_on(Self::open(backends, false))
+        pollster::block_on(Self::open(backends, false, None))
     }
 
     /// The software rasteriser only (lavapipe or llvmpipe), even on a
@@ -81,7 +81,7 @@ impl Gpu {
     /// whose golden images were made on it, so that they compare the same
     /// rasterisation rules and arithmetic wherever they run.
     pub fn software() -> Result<Self, GpuError> {
-        pollster::block_on(Self::open(default_backends(), true))
+        pollster::block_on(Self::open(default_backends(), true, None))
     }
 
     /// The process's adapter, opened on first use: a worker renders many
@@ -103,7 +103,17 @@ impl Gpu {
         format!("{} ({:?}{driver})", i.name, i.backend)
     }
 
-    async fn open(backends: wgpu::Backends, software: bool) -> Result<Self, GpuError> {
+    /// The best adapter of these backends, with storage bindings limited
+    /// to `bytes`: how the tests make a batch too large for its adapter.
+    pub fn with_binding_limit(backends: wgpu::Backends, bytes: u64) -> Result<Self, GpuError> {
+        pollster::block_on(Self::open(backends, false, Some(bytes)))
+    }
+
+    async fn open(
+        backends: wgpu::Backends,
+        software: bool,
+        binding_limit: Option<u64>,
+    ) -> Result<Self, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
             backends,
             flags: wgpu::InstanceFlags::empty(),
@@ -133,7 +143,14 @@ impl Gpu {
                 // Timestamps time the tracer's compute passes where the
                 // adapter has them.
                 required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY,
-                required_limits: adapter.limits(),
+                required_limits: {
+                    let mut limits = adapter.limits();
+                    if let Some(bytes) = binding_limit {
+                        limits.max_storage_buffer_binding_size =
+                            limits.max_storage_buffer_binding_size.min(bytes);
+                    }
+                    limits
+                },
                 ..Default::default()
             })
             .await

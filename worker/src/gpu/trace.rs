@@ -7,9 +7,10 @@
 //! scenes' wide BVH nodes and triangles concatenated, the points with their
 //! ray frames and seeds. Sixteen invocations share a point's rays and
 //! their workgroup adds the sixteen tallies in a fixed order, so results
-//! do not depend on scheduling. Dispatches are cut to the
-//! adapter's limits; a batch whose buffers do not fit is split by points,
-//! and one that runs out of memory is retried in halves.
+//! do not depend on scheduling. Dispatches are cut to the adapter's
+//! limits; a batch whose buffers do not fit is split (by scene, then by
+//! point), one that runs out of memory is retried in halves, and one whose
+//! single scene does not fit is left to the CPU.
 
 use aobake_core::trace::{
     RayBatch, RayEngine, Tally, TraceError,
@@ -204,8 +205,10 @@ impl<'g> GpuTracer<'g> {
         self.gpu.label()
     }
 
-    /// Traces `batch` on the GPU: one tally per point, or `None` when a
-    /// scene's tree is too deep for the shader's stack or not a wide BVH.
+    /// Traces `batch` on the GPU: one tally per point (per point and scene
+    /// when the points are shared), or `None` when a scene's tree is too
+    /// deep for the shader's stack, not a wide BVH, or too large for the
+    /// adapter's bindings, for the CPU to trace.
     pub fn trace_batch(
         &self,
         batch: &RayBatch<'_>,
@@ -245,12 +248,9 @@ impl<'g> GpuTracer<'g> {
                     pending.push(b);
                     pending.push(a);
                 }
-                Err(PartError::TooLarge) => {
-                    return Err(GpuError::TooLarge(format!(
-                        "one point's scene ({} nodes) exceeds the adapter's buffer limits",
-                        batch.scenes[part.scenes.start].node_count()
-                    )));
-                }
+                // One scene beyond what the adapter can bind: the CPU
+                // traces the batch.
+                Err(PartError::TooLarge) => return Ok(None),
                 Err(PartError::OutOfMemory) => {
                     return Err(GpuError::TooLarge(
                         "the GPU ran out of memory on a single point's scene".into(),

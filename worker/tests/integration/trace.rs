@@ -290,3 +290,89 @@ fn the_sphere_over_a_floor_and_the_sphere_estimators_hold_on_the_gpu() {
         assert_eq!(first[probes.len() - 2], 1.0, "inside the ball");
     }
 }
+
+#[test]
+fn a_batch_beyond_the_adapters_binding_limit_is_split_not_refused() {
+    // Storage bindings of 256 KiB: the benchmark mesh's 50,570 points
+    // (3.2 MB) and a shared batch of three scenes must be cut in parts.
+    let gpu = Gpu::with_binding_limit(aobake_worker::gpu::Backends::VULKAN, 256 << 10)
+        .expect("a Vulkan adapter (lavapipe)");
+    let gpu: &'static Gpu = Box::leak(Box::new(gpu));
+    let small = Arc::new(GpuTracer::new(gpu).unwrap());
+    // 40,000 floor points (2.6 MB) under a small ball: split by point.
+    let ball = shapes::icosphere(3, 0.5, Vec3::new(0.0, 0.0, 0.8));
+    let scene = Scene::new(&ball.positions, &ball.triangles, &SceneOptions::default()).unwrap();
+    let floor: Vec<Vec3> = (0..40_000)
+        .map(|i| {
+            Vec3::new(
+                (i % 200) as f32 * 0.02 - 2.0,
+                (i / 200) as f32 * 0.02 - 2.0,
+                0.0,
+            )
+        })
+        .collect();
+    let up = vec![Vec3::Z; floor.len()];
+    let params = SurfaceParams {
+        samples: 16,
+        max_distance: 3.0,
+        seed: 2,
+        falloff: Falloff::None,
+    };
+    let (cpu, split, _) = cpu_and_gpu(&small, || {
+        surface_occlusion(&scene, &floor, &up, &params, &no_progress).unwrap()
+    });
+    agree("split floor", &cpu, &split, 1.0 / 16.0);
+    assert!(small.stats().batches >= 16, "{}", small.stats());
+
+    // A scene that cannot be bound at all (the benchmark mesh's 4.9 MB of
+    // triangles) is left to the CPU, not refused.
+    let mesh = shapes::timing_mesh();
+    let big = Scene::new(&mesh.positions, &mesh.triangles, &SceneOptions::default()).unwrap();
+    let some = &mesh.positions[..500];
+    let before = small.stats().batches;
+    let (cpu, fallback, _) = cpu_and_gpu(&small, || {
+        surface_occlusion(&big, some, &vec![Vec3::Z; 500], &params, &no_progress).unwrap()
+    });
+    assert_eq!(cpu, fallback);
+    assert_eq!(small.stats().batches, before, "nothing was submitted");
+
+    // A cubemap face's checkpoint: the same points around three poses of
+    // a moving ball, one shared batch, split by scene and then by point.
+    let moved = |x: f32| shapes::icosphere(3, 0.5, Vec3::new(x, 0.0, 1.0));
+    let balls: Vec<_> = [-0.5, 0.0, 0.5].map(moved).into();
+    let scenes: Vec<Scene> = balls
+        .iter()
+        .map(|b| Scene::new(&b.positions, &b.triangles, &SceneOptions::default()).unwrap())
+        .collect();
+    let scenes: Vec<&Scene> = scenes.iter().collect();
+    let points: Vec<Vec3> = (0..6000)
+        .map(|i| {
+            let a = i as f32 * 0.011;
+            Vec3::new(2.0 * a.cos(), 2.0 * a.sin(), 0.2 + 0.0003 * i as f32)
+        })
+        .collect();
+    let kroon = KroonParams {
+        samples: 32,
+        max_distance: 3.0,
+        alpha: 1.0,
+        weight: 1.0,
+        seed: 4,
+    };
+    let before = small.stats().batches;
+    let (cpu, split, _) = cpu_and_gpu(&small, || {
+        aobake_core::trace::kroon_occlusion_many(&scenes, &points, &kroon, &no_progress).unwrap()
+    });
+    assert!(small.stats().batches - before > 3, "{}", small.stats());
+    for (c, g) in cpu.iter().zip(&split) {
+        let close = c
+            .iter()
+            .zip(g)
+            .filter(|(a, b)| (*a - *b).abs() < 1e-5)
+            .count();
+        assert!(
+            close as f64 >= 0.999 * c.len() as f64,
+            "{close} of {}",
+            c.len()
+        );
+    }
+}
