@@ -8,7 +8,7 @@
 //! [`RayBatch`]: the scenes (posed meshes, several per batch so that one
 //! dispatch traces many poses), the points with their ray frames and
 //! scrambling seeds, the estimator and the ray count; it returns one tally
-//! per point. The directions are those of [`super::sampling`], so an engine
+//! per point. The directions are those of `trace::sampling`, so an engine
 //! that casts the same rays through the same arithmetic gets the same hits
 //! except at float ties.
 //!
