@@ -541,13 +541,17 @@ fn trace_agrees_with_blender_on_a_posed_character() {
 #[test]
 fn a_closed_output_pipe_ends_a_command_quietly() {
     for args in [&["openapi"][..], &["params", "--method", "grid"]] {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_aobake"))
+        // The reader is gone before the command starts: however short its
+        // output, its first write meets a closed pipe (closing it after
+        // the spawn raced a short output into the pipe's buffer).
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let child = Command::new(env!("CARGO_BIN_EXE_aobake"))
             .args(args)
-            .stdout(std::process::Stdio::piped())
+            .stdout(writer)
             .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap();
-        drop(child.stdout.take()); // the reader goes away first
         let out = child.wait_with_output().unwrap();
         assert_eq!(out.status.code(), Some(141), "{args:?}: {}", stderr(&out));
         assert!(
