@@ -201,6 +201,32 @@ pub fn subdivided_box(centre: Vec3, size: Vec3, n: u32) -> TriMesh {
     mesh
 }
 
+/// The sphere-over-floor case of `shared/tools/blender-ao`: an 8 × 8
+/// floor at z = 0 (41 × 41 vertices, listed first) and a sphere of radius
+/// ½ centred 1 above the floor's middle (`icosphere(5, …)`). Returns the
+/// mesh and the number of floor vertices. A floor point at distance L
+/// from the centre has occlusion r²d/L³ (the sphere is wholly above its
+/// tangent plane), exactly (r/d)² under the centre.
+pub fn sphere_over_floor() -> (TriMesh, usize) {
+    let mut mesh = grid(
+        Vec3::new(-4.0, -4.0, 0.0),
+        Vec3::new(8.0, 0.0, 0.0),
+        Vec3::new(0.0, 8.0, 0.0),
+        41,
+        41,
+    );
+    let floor = mesh.positions.len();
+    mesh.append(&icosphere(
+        5,
+        SPHERE_OVER_FLOOR.0,
+        Vec3::new(0.0, 0.0, SPHERE_OVER_FLOOR.1),
+    ));
+    (mesh, floor)
+}
+
+/// The radius and the centre's height of [`sphere_over_floor`]'s sphere.
+pub const SPHERE_OVER_FLOOR: (f32, f32) = (0.5, 1.0);
+
 /// The tracing benchmark mesh of `shared/tools/blender-ao` (`timing`): an
 /// icosphere (level 6, radius 1, on the ground) and four boxes subdivided
 /// 20 × 20 per face standing around it, z up, ground at z = 0: 101,120

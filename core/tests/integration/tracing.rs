@@ -4,7 +4,9 @@
 //! Kroon's estimator; determinism across thread counts; and agreement of
 //! the two traversal kernels.
 
-use aobake_core::trace::shapes::{TriMesh, grid, icosphere, subdivided_box};
+use aobake_core::trace::shapes::{
+    SPHERE_OVER_FLOOR, TriMesh, grid, icosphere, sphere_over_floor, subdivided_box,
+};
 use aobake_core::trace::{
     Axis, Falloff, Ground, KroonParams, Scene, SceneOptions, SurfaceMesh, SurfaceParams,
     TraceError, Traversal, VolumeParams, kroon_occlusion, no_progress, surface_occlusion,
@@ -59,23 +61,9 @@ fn integrate(a: f64, b: f64, f: impl Fn(f64) -> f64) -> f64 {
     (f(a) + f(b) + inner) * h / 3.0
 }
 
-/// The sphere-over-floor case: an 8 × 8 floor at z = 0 (41 × 41 vertices)
-/// and a sphere of radius 0.5 centred 1 above the floor's middle.
-const R: f64 = 0.5;
-const D: f64 = 1.0;
-
-fn sphere_over_floor() -> (TriMesh, usize) {
-    let mut mesh = grid(
-        Vec3::new(-4.0, -4.0, 0.0),
-        Vec3::new(8.0, 0.0, 0.0),
-        Vec3::new(0.0, 8.0, 0.0),
-        41,
-        41,
-    );
-    let floor = mesh.positions.len();
-    mesh.append(&icosphere(5, R as f32, Vec3::new(0.0, 0.0, D as f32)));
-    (mesh, floor)
-}
+/// The sphere-over-floor case: its sphere's radius and height.
+const R: f64 = SPHERE_OVER_FLOOR.0 as f64;
+const D: f64 = SPHERE_OVER_FLOOR.1 as f64;
 
 #[test]
 fn a_flat_square_alone_is_open_everywhere() {

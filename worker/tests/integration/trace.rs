@@ -172,20 +172,11 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
 fn the_sphere_over_a_floor_and_the_sphere_estimators_hold_on_the_gpu() {
     // The analytic case of core's tracing tests: a sphere of radius ½
     // centred 1 above an 8 × 8 floor; occlusion r²d/L³ on the floor.
-    let (r, d) = (0.5f64, 1.0f64);
-    let mut mesh = shapes::grid(
-        Vec3::new(-4.0, -4.0, 0.0),
-        Vec3::new(8.0, 0.0, 0.0),
-        Vec3::new(0.0, 8.0, 0.0),
-        41,
-        41,
+    let (mesh, floor) = shapes::sphere_over_floor();
+    let (r, d) = (
+        f64::from(shapes::SPHERE_OVER_FLOOR.0),
+        f64::from(shapes::SPHERE_OVER_FLOOR.1),
     );
-    let floor = mesh.positions.len();
-    mesh.append(&shapes::icosphere(
-        5,
-        r as f32,
-        Vec3::new(0.0, 0.0, d as f32),
-    ));
     let scene = Scene::new(&mesh.positions, &mesh.triangles, &SceneOptions::default()).unwrap();
     let points = &mesh.positions[..floor];
     let up = vec![Vec3::Z; floor];

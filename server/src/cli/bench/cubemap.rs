@@ -45,18 +45,12 @@ pub(super) struct Args {
     /// Rays per sample point.
     #[arg(long, default_value_t = 64)]
     rays: u32,
-    /// Timed runs of each (medians are quoted).
-    #[arg(long, default_value_t = 3)]
-    repeat: usize,
-    /// Tracers to time in turn within each run, comma-separated: `cpu`
-    /// and `gpu` (the wgpu compute tracer on the best adapter with
-    /// compute; its times include uploads and readbacks).
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
-    tracer: Vec<super::BenchTracer>,
+    #[command(flatten)]
+    runs: super::TracerRuns,
 }
 
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
-    let tracers = super::bench_tracers(&args.tracer)?;
+    let tracers = super::bench_tracers(&args.runs.tracer)?;
     let (character, clips) =
         character_and_clips(&args.file, args.clips.as_deref(), &Limits::default())?;
     let clip = match &args.clip {
@@ -99,7 +93,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     };
     let mut face_rates = vec![Vec::new(); tracers.len()];
     let mut vertex_rates = vec![Vec::new(); tracers.len()];
-    for run in 0..args.repeat.max(1) {
+    for run in 0..args.runs.repeat.max(1) {
         for (t, (name, engine)) in tracers.iter().enumerate() {
             aobake_core::trace::engine::set_engine(engine.clone());
             let started = Instant::now();

@@ -25,18 +25,12 @@ pub(super) struct Args {
     /// Rays per cell (the default bake has 256).
     #[arg(long, default_value_t = 256)]
     rays: u32,
-    /// Timed runs of each tracer (medians are quoted).
-    #[arg(long, default_value_t = 3)]
-    repeat: usize,
-    /// Tracers to time in turn within each run, comma-separated: `cpu`
-    /// and `gpu` (the wgpu compute tracer on the best adapter with
-    /// compute; its times include uploads and readbacks).
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
-    tracer: Vec<super::BenchTracer>,
+    #[command(flatten)]
+    runs: super::TracerRuns,
 }
 
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
-    let tracers = super::bench_tracers(&args.tracer)?;
+    let tracers = super::bench_tracers(&args.runs.tracer)?;
     let (character, _) = character_and_clips(&args.file, None, &Limits::default())?;
     let positions = &character.positions;
     // The grid method's defaults: Eq. 4's ε = 0.1 and no distance limit.
@@ -59,7 +53,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     );
     let mut rates = vec![Vec::new(); tracers.len()];
     let mut cells: Vec<Vec<RawCell>> = vec![Vec::new(); tracers.len()];
-    for run in 0..args.repeat.max(1) {
+    for run in 0..args.runs.repeat.max(1) {
         for (t, (name, engine)) in tracers.iter().enumerate() {
             aobake_core::trace::engine::set_engine(engine.clone());
             let started = Instant::now();

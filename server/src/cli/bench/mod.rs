@@ -126,6 +126,19 @@ enum BenchTracer {
     Gpu,
 }
 
+/// Which tracers a tracing bench times, and how often.
+#[derive(Debug, clap::Args)]
+struct TracerRuns {
+    /// Timed runs of each tracer (medians are quoted).
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Tracers to time in turn within each run, comma-separated: `cpu`
+    /// and `gpu` (the wgpu compute tracer on the best adapter with
+    /// compute; its times include uploads and readbacks).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
+    tracer: Vec<BenchTracer>,
+}
+
 /// A tracer to time: its name and its engine (`None`: the CPU).
 type Timed = (
     String,
