@@ -97,33 +97,72 @@ pub fn encode(field: &[f32], times: usize, shells: usize, encoding: Encoding) ->
         }
         bits += 13;
     }
-    // The residual cubics, fitted to what the quantised thirds decode.
+    // The residual cubics, fitted to what the quantised thirds decode
+    // (`base` at every sample, its terms dequantised and its cosines
+    // computed once).
+    let thirds = Thirds::of(&out);
+    let at_times: Vec<(usize, [f32; COMPONENTS])> = (0..times)
+        .map(|tau| {
+            let (c, x) = third(times, tau as f32);
+            (c, cosines(x))
+        })
+        .collect();
+    let at_shells: Vec<[f32; COMPONENTS]> = (0..shells)
+        .map(|k| cosines((k as f32 + 0.5) / shells as f32))
+        .collect();
     let decoded: Vec<f32> = (0..shells * times)
-        .map(|s| base(&out, times, shells, (s % times) as f32, (s / times) as f32))
+        .map(|s| {
+            let (c, t) = &at_times[s % times];
+            thirds.at(*c, t, &at_shells[s / times])
+        })
         .collect();
     continuous::fit_residuals(field, &decoded, times, shells, encoding, &mut out);
     out
 }
 
+/// A texel's quantised thirds, dequantised: each third's DC term and its
+/// AC terms (index `n = i · 5 + j`, 0 unused).
+struct Thirds {
+    dc: [f32; THIRDS],
+    ac: [[f32; COMPONENTS * COMPONENTS]; THIRDS],
+}
+
+impl Thirds {
+    fn of(bytes: &[u8; BYTES]) -> Self {
+        let actual_max = (f32::from(bytes[3]) + 1.0) / 166.0;
+        let mut ac = [[0.0f32; COMPONENTS * COMPONENTS]; THIRDS];
+        for n in 1..COMPONENTS * COMPONENTS {
+            let bit = 13 * (n - 1);
+            let mut packed = 0u32;
+            for b in 0..13 {
+                packed |= u32::from(bytes[AC + (bit + b) / 8] >> ((bit + b) % 8) & 1) << b;
+            }
+            for (c, third) in ac.iter_mut().enumerate() {
+                let q = (packed / 19u32.pow((THIRDS - 1 - c) as u32)) % 19;
+                third[n] = sign_pow((q as f32 - 9.0) / 9.0, 2.0) * actual_max;
+            }
+        }
+        Self {
+            dc: std::array::from_fn(|c| f32::from(bytes[c]) / 255.0),
+            ac,
+        }
+    }
+
+    /// Third `c` at the cosines `t` (time) and `d` (distance).
+    fn at(&self, c: usize, t: &[f32; COMPONENTS], d: &[f32; COMPONENTS]) -> f32 {
+        let mut v = self.dc[c];
+        for n in 1..COMPONENTS * COMPONENTS {
+            let (i, j) = (n / COMPONENTS, n % COMPONENTS);
+            v += self.ac[c][n] * t[i] * d[j];
+        }
+        v
+    }
+}
+
 /// The quantised thirds alone at time `tau` and shell `k`.
 fn base(bytes: &[u8; BYTES], times: usize, shells: usize, tau: f32, k: f32) -> f32 {
     let (c, x) = third(times, tau.rem_euclid(times as f32));
-    let t = cosines(x);
-    let d = cosines((k + 0.5) / shells as f32);
-    let actual_max = (f32::from(bytes[3]) + 1.0) / 166.0;
-    let mut v = f32::from(bytes[c]) / 255.0;
-    for n in 1..COMPONENTS * COMPONENTS {
-        let (i, j) = (n / COMPONENTS, n % COMPONENTS);
-        let bit = 13 * (n - 1);
-        let mut packed = 0u32;
-        for b in 0..13 {
-            packed |= u32::from(bytes[AC + (bit + b) / 8] >> ((bit + b) % 8) & 1) << b;
-        }
-        let q = (packed / 19u32.pow((THIRDS - 1 - c) as u32)) % 19;
-        let value = sign_pow((q as f32 - 9.0) / 9.0, 2.0) * actual_max;
-        v += value * t[i] * d[j];
-    }
-    v
+    Thirds::of(bytes).at(c, &cosines(x), &cosines((k + 0.5) / shells as f32))
 }
 
 /// The value of an [`encode`]d texel at time `tau` and shell `k`,
