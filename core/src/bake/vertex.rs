@@ -229,16 +229,27 @@ impl Bake<'_> {
         };
         let options = SceneOptions::default();
         sink.progress(done.block.poses() as u64, count as u64);
-        for pose in &poses[done.block.poses()..] {
-            let row = trace_poses(
+        // A checkpoint per pose; on a GPU tracer, per batch of poses of
+        // about 256k vertices (one dispatch: a single small pose leaves
+        // most of a GPU idle).
+        let step = if crate::trace::engine::engine().is_some() {
+            (262_144 / vertices.max(1)).clamp(1, 64)
+        } else {
+            1
+        };
+        let mut next = done.block.poses();
+        while next < poses.len() {
+            let end = (next + step).min(poses.len());
+            let rows = trace_poses(
                 &self.inputs.character,
-                std::slice::from_ref(pose),
+                &poses[next..end],
                 &options,
                 &surface,
                 &no_progress,
             )
             .map_err(|e| JobError::Invalid(e.to_string()))?;
-            done.block.values.extend(row.values);
+            next = end;
+            done.block.values.extend(rows.values);
             let cursor = done.block.poses() as u64;
             sink.progress(cursor, count as u64);
             if cursor < count as u64 {
