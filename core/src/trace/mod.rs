@@ -204,8 +204,8 @@ const CHUNK: usize = 32;
 /// in parallel and in Morton order of their origins. Tallies are returned
 /// in point order.
 fn trace_batch(batch: &RayBatch<'_>, progress: Progress<'_>) -> Result<Vec<Tally>, TraceError> {
+    // An engine declines a batch it cannot take (RayEngine::trace).
     if let Some(engine) = engine::engine()
-        && batch.scenes.iter().all(|s| s.gpu_info().is_some())
         && let Some(tallies) = engine.trace(batch, progress)?
     {
         return Ok(tallies);
@@ -329,30 +329,29 @@ impl CpuTally {
                     }
                 }
             }
-            Estimator::Volume => {
+            // The sphere estimators: closest hits without a limit, so a
+            // ray also says whether it left from inside the mesh.
+            Estimator::Volume | Estimator::Kroon { .. } => {
                 for &d in dirs.iter() {
                     let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
                         continue;
                     };
                     tally.back += u32::from(hit.back_face);
-                    if hit.t < tmax {
-                        tally.hits += 1;
-                        tally.direction += d;
+                    if hit.t >= tmax {
+                        continue;
                     }
-                }
-            }
-            Estimator::Kroon { alpha, facing } => {
-                let facing_normal = facing.then_some(p.normal);
-                for &d in dirs.iter() {
-                    let Some(hit) = tracer.closest(origin, d, f32::INFINITY) else {
-                        continue;
-                    };
-                    tally.back += u32::from(hit.back_face);
-                    if hit.t < tmax {
-                        tally.hits += 1;
-                        let facing = facing_normal.map_or(1.0, |n| n.dot(d).max(0.0));
-                        let falloff = (1.0 - hit.t / tmax).powf(alpha);
-                        tally.sum += f64::from(facing * falloff);
+                    tally.hits += 1;
+                    match self.estimator {
+                        Estimator::Kroon { alpha, facing } => {
+                            let facing = if facing {
+                                p.normal.dot(d).max(0.0)
+                            } else {
+                                1.0
+                            };
+                            let falloff = (1.0 - hit.t / tmax).powf(alpha);
+                            tally.sum += f64::from(facing * falloff);
+                        }
+                        _ => tally.direction += d,
                     }
                 }
             }

@@ -7,7 +7,7 @@ use aobake_core::method::cubemap::{gpu::CubemapGpu, model::CubemapModel};
 use aobake_shaders::CubemapAoParams;
 use wgpu::util::DeviceExt as _;
 
-use super::{Gpu, GpuError};
+use super::{ErrorScopes, Gpu, GpuError};
 
 /// Most workgroups per dispatch dimension (WebGPU's minimum limit).
 const MAX_GROUPS: u32 = 65_535;
@@ -53,9 +53,7 @@ impl<'g> CubemapAo<'g> {
         }
         let gpu_form = CubemapGpu::new(model).map_err(|e| GpuError::TooLarge(e.to_string()))?;
         let base = params(&gpu_form);
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // A shader the backend cannot translate is an internal error.
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scope = ErrorScopes::push(device);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("cubemap_ao.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::CUBEMAP_AO.into()),
@@ -78,7 +76,7 @@ impl<'g> CubemapAo<'g> {
             contents: bytemuck::cast_slice(&gpu_form.ground),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+        if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         Ok(Self {

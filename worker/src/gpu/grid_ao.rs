@@ -7,7 +7,7 @@ use aobake_core::method::grid::{gpu::GridGpu, model::GridModel};
 use aobake_shaders::{GridAoParams, GridPartInfo, GridReceiver};
 use wgpu::util::DeviceExt as _;
 
-use super::{Gpu, GpuError};
+use super::{ErrorScopes, Gpu, GpuError};
 
 /// Most workgroups per dispatch dimension (WebGPU's minimum limit).
 const MAX_GROUPS: u32 = 65_535;
@@ -66,9 +66,7 @@ impl<'g> GridAo<'g> {
             )));
         }
         let base = params(&arrays);
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // A shader the backend cannot translate is an internal error.
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scope = ErrorScopes::push(device);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("grid_ao.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::GRID_AO.into()),
@@ -90,7 +88,7 @@ impl<'g> GridAo<'g> {
         };
         let infos = storage("grid parts", bytemuck::cast_slice(&infos));
         let cells = storage("grid cells", bytemuck::cast_slice(cells));
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+        if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         Ok(Self {

@@ -169,6 +169,32 @@ impl Gpu {
     }
 }
 
+/// The validation and internal error scopes around GPU work (an internal
+/// error is a shader the backend cannot translate): what every pipeline
+/// and dispatch runs in, so that a failure is an error, not wgpu's panic.
+pub(crate) struct ErrorScopes {
+    validation: wgpu::ErrorScopeGuard,
+    internal: wgpu::ErrorScopeGuard,
+}
+
+impl ErrorScopes {
+    pub(crate) fn push(device: &wgpu::Device) -> Self {
+        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        Self {
+            validation,
+            internal,
+        }
+    }
+
+    /// The first error caught, if any.
+    pub(crate) fn pop(self) -> Option<wgpu::Error> {
+        let internal = pollster::block_on(self.internal.pop());
+        let validation = pollster::block_on(self.validation.pop());
+        internal.or(validation)
+    }
+}
+
 /// Vulkan and GL, or what `WGPU_BACKEND` names.
 fn default_backends() -> wgpu::Backends {
     wgpu::Backends::from_env().unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::GL)
@@ -190,9 +216,7 @@ impl Gpu {
     ) -> Result<Vec<f32>, GpuError> {
         use wgpu::util::DeviceExt as _;
         let device = &self.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // A shader the backend cannot translate is an internal error.
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scope = ErrorScopes::push(device);
         let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("lookup input"),
             contents: if input.is_empty() { &[0u8; 32] } else { input },
@@ -215,7 +239,7 @@ impl Gpu {
         record(&mut encoder, &input, &out)?;
         encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, size);
         let submission = self.queue.submit(Some(encoder.finish()));
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+        if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let bytes = self.read(&staging, submission)?;

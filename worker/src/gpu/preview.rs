@@ -14,7 +14,7 @@ use aobake_shaders::{GridReceiver, GtaoParams, PreviewUniforms};
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;
 
-use super::{CubemapAo, Gpu, GpuError, GridAo, VertexAo};
+use super::{CubemapAo, ErrorScopes, Gpu, GpuError, GridAo, VertexAo};
 
 const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -84,9 +84,7 @@ impl<'g> PreviewRenderer<'g> {
             1
         };
         let device = &gpu.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // A shader the backend cannot translate is an internal error.
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scope = ErrorScopes::push(device);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("preview.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::PREVIEW.into()),
@@ -229,7 +227,7 @@ impl<'g> PreviewRenderer<'g> {
             compilation_options: Default::default(),
             cache: None,
         });
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+        if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         Ok(Self {
@@ -827,9 +825,7 @@ impl<'g> PreviewRenderer<'g> {
         let gpu = self.gpu;
         let device = &gpu.device;
         let (width, height) = scene.size;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // A shader the backend cannot translate is an internal error.
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scope = ErrorScopes::push(device);
         let stage = self.stage(scene, frames)?;
         let groups: Vec<(wgpu::BindGroup, wgpu::BindGroup)> = panels
             .iter()
@@ -868,14 +864,12 @@ impl<'g> PreviewRenderer<'g> {
             mapped_at_creation: false,
         });
         let bg = look::BACKGROUND.map(f64::from);
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+        if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let mut images = Vec::with_capacity(frames.len() * panels.len());
         for frame in frames {
-            let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-            // A shader the backend cannot translate is an internal error.
-            let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+            let scope = ErrorScopes::push(device);
             let mut encoder =
                 device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
             self.evaluate(&stage, frame, &mut encoder)?;
@@ -940,8 +934,7 @@ impl<'g> PreviewRenderer<'g> {
                 );
             }
             let submission = gpu.queue.submit(Some(encoder.finish()));
-            if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop()))
-            {
+            if let Some(e) = scope.pop() {
                 return Err(GpuError::Pipeline(e.to_string()));
             }
             let bytes = gpu.read(&staging, submission)?;
@@ -984,9 +977,7 @@ impl<'g> PreviewRenderer<'g> {
         let gpu = self.gpu;
         let device = &gpu.device;
         let (width, height) = scene.size;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // A shader the backend cannot translate is an internal error.
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scope = ErrorScopes::push(device);
         let stage = self.stage(scene, frames)?;
         let groups = (
             self.surface_group(scene, Panel::Model, false),
@@ -1005,16 +996,14 @@ impl<'g> PreviewRenderer<'g> {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+        if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let new_encoder =
             || device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         let mut out = Vec::with_capacity(frames.len());
         for frame in frames {
-            let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-            // A shader the backend cannot translate is an internal error.
-            let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+            let scope = ErrorScopes::push(device);
             // Each pass alone, timed from submission to completion.
             let mut encoder = new_encoder();
             self.evaluate(&stage, frame, &mut encoder)?;
@@ -1052,8 +1041,7 @@ impl<'g> PreviewRenderer<'g> {
                 4 * pixels as u64,
             );
             let submission = gpu.queue.submit(Some(encoder.finish()));
-            if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop()))
-            {
+            if let Some(e) = scope.pop() {
                 return Err(GpuError::Pipeline(e.to_string()));
             }
             let bytes = gpu.read(&staging, submission)?;

@@ -20,7 +20,7 @@ use aobake_shaders::{TraceParams, TracePoint, TraceScene, TraceTally, WORKGROUP_
 use glam::Vec3A;
 use wgpu::util::DeviceExt as _;
 
-use super::{Gpu, GpuError};
+use super::{ErrorScopes, Gpu, GpuError};
 
 /// Invocations per point (`LANES` in trace.wgsl): a 50k-vertex mesh is
 /// 800k invocations, enough to fill a large GPU.
@@ -155,9 +155,7 @@ impl<'g> GpuTracer<'g> {
     /// Builds the pipeline on `gpu`.
     pub fn new(gpu: &'g Gpu) -> Result<Self, GpuError> {
         let device = &gpu.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // A shader the backend cannot translate is an internal error.
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scope = ErrorScopes::push(device);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("trace.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::TRACE.into()),
@@ -170,7 +168,7 @@ impl<'g> GpuTracer<'g> {
             compilation_options: wgpu::PipelineCompilationOptions::default(),
             cache: None,
         });
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+        if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let numbers = sobol_directions();
@@ -397,8 +395,7 @@ impl<'g> GpuTracer<'g> {
         let mut guard = self.buffers.lock().unwrap_or_else(|e| e.into_inner());
         let buffers = &mut *guard;
         let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scopes = ErrorScopes::push(device);
         use wgpu::BufferUsages as U;
         let queue = &self.gpu.queue;
         let upload = |slot: &mut Option<wgpu::Buffer>, bytes: &[u8], label: &str| {
@@ -570,8 +567,7 @@ impl<'g> GpuTracer<'g> {
         }
         let waiting = std::time::Instant::now();
         let submission = self.gpu.queue.submit(Some(encoder.finish()));
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(validation.pop()))
-        {
+        if let Some(e) = scopes.pop() {
             return Err(PartError::Gpu(GpuError::Pipeline(e.to_string())));
         }
         if pollster::block_on(oom.pop()).is_some() {

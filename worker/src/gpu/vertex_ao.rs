@@ -10,7 +10,7 @@ use aobake_core::method::vertex::{
 use aobake_shaders::VertexAoParams;
 use wgpu::util::DeviceExt as _;
 
-use super::{Gpu, GpuError};
+use super::{ErrorScopes, Gpu, GpuError};
 
 /// Most workgroups per dispatch dimension (WebGPU's minimum limit).
 const MAX_GROUPS: u32 = 65_535;
@@ -96,9 +96,7 @@ impl<'g> VertexAo<'g> {
         if groups.1 > MAX_GROUPS {
             return Err(GpuError::TooLarge(format!("{vertices} vertices")));
         }
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // A shader the backend cannot translate is an internal error.
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scope = ErrorScopes::push(device);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("vertex_ao.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::VERTEX_AO.into()),
@@ -145,7 +143,7 @@ impl<'g> VertexAo<'g> {
             weights,
             groups,
         };
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+        if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         Ok(out)
@@ -230,9 +228,7 @@ impl<'g> VertexAo<'g> {
     pub fn evaluate(&self, weights: &[f32]) -> Result<Vec<f32>, GpuError> {
         assert_eq!(weights.len(), self.weights, "one weight per row");
         let device = &self.gpu.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // A shader the backend cannot translate is an internal error.
-        let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let scope = ErrorScopes::push(device);
         let size = 4 * u64::from(self.vertices.max(1));
         let ao = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("ao"),
@@ -251,7 +247,7 @@ impl<'g> VertexAo<'g> {
         self.record(&mut encoder, weights, &ao)?;
         encoder.copy_buffer_to_buffer(&ao, 0, &staging, 0, size);
         let submission = self.gpu.queue.submit(Some(encoder.finish()));
-        if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+        if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
         let bytes = self.gpu.read(&staging, submission)?;

@@ -17,7 +17,7 @@ use glam::Vec3;
 use wgpu::util::DeviceExt as _;
 
 use super::{
-    Gpu, GpuError,
+    ErrorScopes, Gpu, GpuError,
     vertex_ao::{to_u32, upload},
 };
 
@@ -82,9 +82,7 @@ fn draw_points(
     count: u32,
 ) -> Result<Vec<f32>, GpuError> {
     let device = &gpu.device;
-    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    // A shader the backend cannot translate is an internal error.
-    let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
+    let scope = ErrorScopes::push(device);
     let (target_width, target_height) = target_size(count);
     enum Bound {
         Buffer(wgpu::Buffer),
@@ -219,7 +217,7 @@ fn draw_points(
         size,
     );
     let submission = gpu.queue.submit(Some(encoder.finish()));
-    if let Some(e) = pollster::block_on(internal.pop()).or(pollster::block_on(scope.pop())) {
+    if let Some(e) = scope.pop() {
         return Err(GpuError::Pipeline(e.to_string()));
     }
     let bytes = gpu.read(&staging, submission)?;

@@ -361,25 +361,18 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
     if kernels.is_empty() {
         bail!("--traversal names no kernel");
     }
-    let mut tracers = args.tracer.clone();
-    tracers.dedup();
     // What is timed: the CPU with each kernel, then the GPU.
+    let tracers = bench_tracers(&args.tracer)?;
     let mut rows: Vec<(String, Option<Kernel>)> = Vec::new();
-    if tracers.contains(&BenchTracer::Cpu) {
-        rows.extend(kernels.iter().map(|k| (format!("cpu {k:?}"), Some(*k))));
-    }
-    let gpu = if tracers.contains(&BenchTracer::Gpu) {
-        use aobake_worker::gpu::{GpuMode, trace::install};
-        let (label, _) =
-            install(GpuMode::Require).map_err(|e| anyhow::anyhow!("--tracer gpu: {e}"))?;
-        println!("GPU tracer: {label}");
-        rows.push(("gpu".into(), None));
-        aobake_core::trace::engine::engine()
-    } else {
-        None
-    };
-    if rows.is_empty() {
-        bail!("--tracer names no tracer");
+    let mut gpu = None;
+    for (name, engine) in &tracers {
+        match engine {
+            None => rows.extend(kernels.iter().map(|k| (format!("{name} {k:?}"), Some(*k)))),
+            Some(_) => {
+                rows.push((name.clone(), None));
+                gpu = engine.clone();
+            }
+        }
     }
     let mut ours: Vec<Vec<Run>> = rows.iter().map(|_| Vec::new()).collect();
     let mut theirs = Vec::new();
