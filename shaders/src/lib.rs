@@ -177,6 +177,14 @@ pub fn sources() -> [(&'static str, &'static str); 12] {
 /// Workgroup size of the compute entry points (`@workgroup_size(64)`).
 pub const WORKGROUP_SIZE: u32 = 64;
 
+/// Invocations that share a point's rays in `cs_trace` (`LANES` in
+/// trace.wgsl).
+pub const TRACE_LANES: u32 = 16;
+
+/// Entries of `cs_trace`'s traversal stack (`STACK` in trace.wgsl): the
+/// host leaves a deeper tree to the CPU.
+pub const TRACE_STACK: u32 = 96;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -235,6 +243,26 @@ mod tests {
         for e in &module.entry_points {
             assert_eq!(e.workgroup_size, [WORKGROUP_SIZE, 1, 1]);
         }
+    }
+
+    #[test]
+    fn the_tracers_constants_are_the_hosts() {
+        let module = naga::front::wgsl::parse_str(TRACE).unwrap();
+        let constant = |name: &str| {
+            let (_, c) = module
+                .constants
+                .iter()
+                .find(|(_, c)| c.name.as_deref() == Some(name))
+                .unwrap_or_else(|| panic!("no constant {name}"));
+            match module.global_expressions[c.init] {
+                naga::Expression::Literal(naga::Literal::U32(v)) => v,
+                ref other => panic!("{name}: {other:?}"),
+            }
+        };
+        assert_eq!(constant("LANES"), TRACE_LANES);
+        assert_eq!(constant("STACK"), TRACE_STACK);
+        let entry = module.entry_points.iter().find(|e| e.name == "cs_trace");
+        assert_eq!(entry.unwrap().workgroup_size, [WORKGROUP_SIZE, 1, 1]);
     }
 
     /// The size naga computes for a WGSL struct.

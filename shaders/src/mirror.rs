@@ -219,8 +219,8 @@ pub struct TraceParams {
     pub samples: u32,
     /// Rays per lane.
     pub group_size: u32,
-    /// Lanes (invocations) per point.
-    pub groups: u32,
+    /// Padding.
+    pub _pad: u32,
     /// Points of this dispatch.
     pub points: u32,
     /// The first point's index in the batch.

@@ -35,9 +35,9 @@ const STACK: u32 = 96u;
 struct Params {
     estimator: u32,
     samples: u32,
-    // Rays per lane, and lanes per point (LANES).
+    // Rays per lane.
     group_size: u32,
-    groups: u32,
+    _pad: u32,
     // Points of this dispatch, the first one's index in the batch, and
     // workgroups per row of the dispatch grid.
     points: u32,

@@ -115,6 +115,24 @@ impl JobSpec {
         }
     }
 
+    /// The kinds of the jobs that cast rays (what a queue offers GPU
+    /// workers first): those whose [`JobSpec::traces`] holds.
+    pub const TRACING_KINDS: [&'static str; 4] = ["sample", "face", "slab", "preview-truth"];
+
+    /// Whether the job casts rays (its kind is in
+    /// [`JobSpec::TRACING_KINDS`]).
+    pub fn traces(&self) -> bool {
+        match self {
+            Self::Sample { .. }
+            | Self::Face { .. }
+            | Self::Slab { .. }
+            | Self::PreviewTruth { .. } => true,
+            Self::Fit | Self::Unseen { .. } | Self::Evaluate | Self::Assemble | Self::Preview => {
+                false
+            }
+        }
+    }
+
     /// Units of progress the job is worth (poses for `sample`, time
     /// samples for `face`, layers for `slab`, frames for `preview-truth`,
     /// the steps of a fit for `fit` and `unseen`, 1 else).
@@ -443,4 +461,41 @@ pub(super) fn decode_with<M, H, E: std::fmt::Display>(
     read(&container)
         .map(|(m, _)| m)
         .map_err(|e| JobError::Invalid(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{JobSpec, PoseSet};
+
+    #[test]
+    fn the_tracing_kinds_are_the_jobs_that_trace() {
+        let specs = [
+            JobSpec::Sample {
+                set: PoseSet::Reference,
+                first: 0,
+                count: 1,
+            },
+            JobSpec::Fit,
+            JobSpec::Face { face: 0, times: 1 },
+            JobSpec::Slab {
+                part: 0,
+                first: 0,
+                count: 1,
+            },
+            JobSpec::Unseen { fold: 0 },
+            JobSpec::Evaluate,
+            JobSpec::Assemble,
+            JobSpec::PreviewTruth { first: 0, count: 1 },
+            JobSpec::Preview,
+        ];
+        for spec in &specs {
+            assert_eq!(
+                JobSpec::TRACING_KINDS.contains(&spec.kind()),
+                spec.traces(),
+                "{spec}"
+            );
+        }
+        let tracing = specs.iter().filter(|s| s.traces()).count();
+        assert_eq!(tracing, JobSpec::TRACING_KINDS.len());
+    }
 }

@@ -230,13 +230,8 @@ impl Bake<'_> {
         let options = SceneOptions::default();
         sink.progress(done.block.poses() as u64, count as u64);
         // A checkpoint per pose; on a GPU tracer, per batch of poses of
-        // about 256k vertices (one dispatch: a single small pose leaves
-        // most of a GPU idle).
-        let step = if crate::trace::engine::engine().is_some() {
-            (262_144 / vertices.max(1)).clamp(1, 64)
-        } else {
-            1
-        };
+        // about 256k vertices, at most 64.
+        let step = crate::trace::engine::batch_items(vertices, 262_144, 64);
         let mut next = done.block.poses();
         while next < poses.len() {
             let end = (next + step).min(poses.len());

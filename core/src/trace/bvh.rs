@@ -35,6 +35,13 @@ pub(crate) struct Bvh8 {
     nodes: Vec<Node>,
 }
 
+impl Node {
+    /// Whether child slot `c` is empty (its box inverted).
+    fn is_empty(&self, c: usize) -> bool {
+        self.lo[0].to_array()[c] > self.hi[0].to_array()[c]
+    }
+}
+
 fn union(a: (Vec3A, Vec3A), b: (Vec3A, Vec3A)) -> (Vec3A, Vec3A) {
     (a.0.min(b.0), a.1.max(b.1))
 }
@@ -91,7 +98,7 @@ impl Bvh8 {
             }
             out.extend(node.first);
             let counts = std::array::from_fn::<u8, 8, _>(|c| {
-                if node.lo[0].to_array()[c] > node.hi[0].to_array()[c] {
+                if node.is_empty(c) {
                     u8::MAX
                 } else {
                     node.count[c]
@@ -110,18 +117,14 @@ impl Bvh8 {
 
     /// Nodes on the longest path from the root.
     pub(crate) fn depth(&self) -> usize {
-        let mut depth = vec![0usize; self.nodes.len()];
-        depth[0] = 1;
         let mut deepest = 1;
-        let mut stack = vec![0usize];
-        while let Some(i) = stack.pop() {
+        let mut stack = vec![(0usize, 1usize)];
+        while let Some((i, depth)) = stack.pop() {
+            deepest = deepest.max(depth);
             let node = &self.nodes[i];
             for c in 0..8 {
-                if node.count[c] == 0 && node.lo[0].to_array()[c] <= node.hi[0].to_array()[c] {
-                    let child = node.first[c] as usize;
-                    depth[child] = depth[i] + 1;
-                    deepest = deepest.max(depth[child]);
-                    stack.push(child);
+                if node.count[c] == 0 && !node.is_empty(c) {
+                    stack.push((node.first[c] as usize, depth + 1));
                 }
             }
         }

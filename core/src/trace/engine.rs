@@ -112,6 +112,22 @@ impl RayBatch<'_> {
             self.points.len()
         }
     }
+
+    /// Checks what every tracer relies on: unless shared, the points come
+    /// grouped by scene, in scene order, and name scenes of the batch.
+    pub fn check(&self) -> Result<(), TraceError> {
+        if self.shared {
+            return Ok(());
+        }
+        let scenes = self.scenes.len() as u32;
+        let ordered = self.points.windows(2).all(|w| w[0].scene <= w[1].scene);
+        if !ordered || self.points.last().is_some_and(|p| p.scene >= scenes) {
+            return Err(TraceError::Invalid(
+                "a batch's points are not grouped by scene".into(),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// A point's rays reduced: what every estimator's value is made from.
@@ -163,6 +179,18 @@ pub fn set_engine(engine: Option<Arc<dyn RayEngine>>) {
 /// The process's ray engine, if one is installed.
 pub fn engine() -> Option<Arc<dyn RayEngine>> {
     ENGINE.read().unwrap_or_else(|e| e.into_inner()).clone()
+}
+
+/// Items (poses, grid layers) a job traces per call of `per_item` points
+/// each: with an engine installed, about `points` points (one dispatch,
+/// since a single small item leaves most of a GPU idle), between 1 and
+/// `max`; on the CPU one, so that the job checkpoints after every item.
+pub fn batch_items(per_item: usize, points: usize, max: usize) -> usize {
+    if engine().is_some() {
+        (points / per_item.max(1)).clamp(1, max.max(1))
+    } else {
+        1
+    }
 }
 
 /// The label of the tracer this process uses: `cpu` or the engine's.

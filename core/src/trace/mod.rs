@@ -204,6 +204,7 @@ const CHUNK: usize = 32;
 /// in parallel and in Morton order of their origins. Tallies are returned
 /// in point order.
 fn trace_batch(batch: &RayBatch<'_>, progress: Progress<'_>) -> Result<Vec<Tally>, TraceError> {
+    batch.check()?;
     // An engine declines a batch it cannot take (RayEngine::trace).
     if let Some(engine) = engine::engine()
         && let Some(tallies) = engine.trace(batch, progress)?
@@ -229,16 +230,11 @@ fn trace_batch(batch: &RayBatch<'_>, progress: Progress<'_>) -> Result<Vec<Tally
     let mut out = Vec::with_capacity(batch.points.len());
     let mut rest = &batch.points[..];
     for (s, scene) in batch.scenes.iter().enumerate() {
-        // Points come grouped by scene.
+        // Points come grouped by scene (checked above).
         let count = rest.iter().take_while(|p| p.scene == s as u32).count();
         let (mine, after) = rest.split_at(count);
         rest = after;
         out.extend(cpu_tallies(scene, batch, mine, progress));
-    }
-    if !rest.is_empty() {
-        return Err(TraceError::Invalid(
-            "a batch's points are not grouped by scene".into(),
-        ));
     }
     Ok(out)
 }
@@ -568,8 +564,8 @@ fn check_surface(
     Ok(())
 }
 
-/// The surface estimator from given ray origins (local frame); `points`
-/// (world) only order the work.
+/// The surface estimator from given ray origins (local frame) and their
+/// normals.
 fn surface_from(
     scene: &Scene,
     origins: &[Vec3A],

@@ -13,6 +13,7 @@
 use std::ops::DerefMut;
 use std::sync::Arc;
 
+use aobake_core::bake::JobSpec;
 use sqlx::{FromRow, postgres::PgRow, sqlite::SqliteRow};
 
 use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
@@ -375,6 +376,11 @@ async fn fail_bake_if_dead<B: Backend>(c: &mut B::Conn, bake: i64) -> Result<()>
     Ok(())
 }
 
+/// How recently (ms) an idle GPU worker must have polled to count as
+/// waiting: a waiting worker polls again at least every second
+/// (`routes::jobs`'s long poll), so two seconds miss none.
+const GPU_WAITING_MS: u32 = 2000;
+
 /// Claims the first ready job of the most urgent bake this worker is not
 /// kept off: index lookups, however many jobs are queued. Claimers on
 /// other connections skip the rows each other locked.
@@ -401,10 +407,11 @@ async fn claim<B: Backend>(
                 .bind(policy.worker_failures),
         )
         .await?;
+    let tracing = JobSpec::TRACING_KINDS.map(|k| format!("'{k}'")).join(", ");
     for (bake,) in bakes {
         let id = c
             .scalar(
-                B::sql("SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' AND NOT (kind IN ('sample', 'face', 'slab', 'preview-truth') AND EXISTS (SELECT 1 FROM workers me WHERE me.id = $2 AND me.tracer = 'cpu') AND EXISTS (SELECT 1 FROM workers g WHERE g.id != $2 AND g.tracer LIKE 'gpu%' AND g.state = 'idle' AND g.last_seen > {now} - 2000 AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = $1 AND f.worker = g.id AND f.failures >= $3))) ORDER BY idx LIMIT 1{skip_locked}")
+                B::sql(&format!("SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' AND NOT (kind IN ({tracing}) AND EXISTS (SELECT 1 FROM workers me WHERE me.id = $2 AND me.tracer = 'cpu') AND EXISTS (SELECT 1 FROM workers g WHERE g.id != $2 AND g.tracer LIKE 'gpu%' AND g.state = 'idle' AND g.last_seen > {{now}} - {GPU_WAITING_MS} AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = $1 AND f.worker = g.id AND f.failures >= $3))) ORDER BY idx LIMIT 1{{skip_locked}}"))
                     .bind(bake)
                     .bind(worker)
                     .bind(policy.worker_failures),

@@ -1,9 +1,9 @@
 //! `aobake bake --tracer gpu`: the wgpu compute tracer in a whole bake, on
 //! whatever adapter has compute (lavapipe or llvmpipe without a GPU).
 
-use aobake_e2e::{binary, character};
+use aobake_e2e::character;
 
-use crate::util::{QUICK, aobake_bake};
+use crate::util::{QUICK, aobake_bake, aobake_bake_on};
 
 fn report(dir: &std::path::Path, name: &str) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(dir.join(format!("{name}.json"))).unwrap()).unwrap()
@@ -16,25 +16,19 @@ fn a_bake_traced_on_the_gpu_casts_the_cpus_rays_and_says_so() {
     let mut args: Vec<&str> = QUICK.to_vec();
     args.extend(["--poses", "24"]);
     let cpu = aobake_bake(dir.path(), &fox, &args, "cpu");
-    let out = std::process::Command::new(binary())
-        .arg("bake")
-        .arg(&fox)
-        .args(&args)
-        .args(["--tracer", "gpu", "--out"])
-        .arg(dir.path().join("gpu.aob"))
-        .arg("--report")
-        .arg(dir.path().join("gpu.json"))
-        .env("RAYON_NUM_THREADS", "2")
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
-    let gpu = std::fs::read(dir.path().join("gpu.aob")).unwrap();
+    let (gpu, stderr) = aobake_bake_on(dir.path(), &fox, &args, "gpu", "gpu");
     // "tracer: gpu: ADAPTER (BACKEND, DRIVER)"
     let adapter = stderr
         .lines()
         .find_map(|l| l.strip_prefix("tracer: gpu: "))
         .unwrap_or_else(|| panic!("no GPU tracer line: {stderr}"));
+    // "GPU tracer: N submissions, …": the GPU traced, not the CPU behind it.
+    let submissions: u64 = stderr
+        .lines()
+        .find_map(|l| l.strip_prefix("GPU tracer: "))
+        .and_then(|l| l.split(' ').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no GPU tracer summary: {stderr}"));
+    assert!(submissions > 0, "{stderr}");
     let (cpu_report, gpu_report) = (report(dir.path(), "cpu"), report(dir.path(), "gpu"));
     // The report says which tracing ran on a GPU: all of it, or none.
     let timings = |r: &serde_json::Value, k: &str| r["timings"][k].as_f64().unwrap();

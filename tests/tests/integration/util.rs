@@ -60,6 +60,18 @@ pub(crate) fn local_bake(dir: &Path, character: &Path, poses: usize) -> Vec<u8> 
 /// threads, as the workers have, on the CPU tracer even where a GPU is);
 /// returns the asset bytes.
 pub(crate) fn aobake_bake(dir: &Path, character: &Path, args: &[&str], name: &str) -> Vec<u8> {
+    aobake_bake_on(dir, character, args, name, "cpu").0
+}
+
+/// [`aobake_bake`] with `--tracer TRACER`; the asset bytes and what the
+/// command printed on stderr.
+pub(crate) fn aobake_bake_on(
+    dir: &Path,
+    character: &Path,
+    args: &[&str],
+    name: &str,
+    tracer: &str,
+) -> (Vec<u8>, String) {
     let out = dir.join(format!("{name}.aob"));
     let run = std::process::Command::new(binary())
         .arg("bake")
@@ -69,16 +81,13 @@ pub(crate) fn aobake_bake(dir: &Path, character: &Path, args: &[&str], name: &st
         .arg(&out)
         .arg("--report")
         .arg(dir.join(format!("{name}.json")))
-        .args(["--tracer", "cpu"])
+        .args(["--tracer", tracer])
         .env("RAYON_NUM_THREADS", "2")
         .output()
         .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    std::fs::read(out).unwrap()
+    let stderr = String::from_utf8_lossy(&run.stderr).into_owned();
+    assert!(run.status.success(), "{stderr}");
+    (std::fs::read(out).unwrap(), stderr)
 }
 
 /// A bake as `GET /v1/bakes/{id}` shows it.

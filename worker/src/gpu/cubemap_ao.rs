@@ -7,10 +7,7 @@ use aobake_core::method::cubemap::{gpu::CubemapGpu, model::CubemapModel};
 use aobake_shaders::CubemapAoParams;
 use wgpu::util::DeviceExt as _;
 
-use super::{ErrorScopes, Gpu, GpuError};
-
-/// Most workgroups per dispatch dimension (WebGPU's minimum limit).
-const MAX_GROUPS: u32 = 65_535;
+use super::{ErrorScopes, Gpu, GpuError, dispatch_grid};
 
 /// A cubemap's texels uploaded once; each [`CubemapAo::record`] then costs
 /// one small uniform and one dispatch.
@@ -104,10 +101,9 @@ impl<'g> CubemapAo<'g> {
     ) -> Result<(), GpuError> {
         let device = &self.gpu.device;
         let needed = count.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1);
-        let groups = (needed.min(MAX_GROUPS), needed.div_ceil(MAX_GROUPS));
-        if groups.1 > MAX_GROUPS {
+        let Some(groups) = dispatch_grid(needed) else {
             return Err(GpuError::TooLarge(format!("{count} points")));
-        }
+        };
         let params = CubemapAoParams {
             points: count,
             phase,

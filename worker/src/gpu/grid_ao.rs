@@ -7,10 +7,7 @@ use aobake_core::method::grid::{gpu::GridGpu, model::GridModel};
 use aobake_shaders::{GridAoParams, GridPartInfo, GridReceiver};
 use wgpu::util::DeviceExt as _;
 
-use super::{ErrorScopes, Gpu, GpuError};
-
-/// Most workgroups per dispatch dimension (WebGPU's minimum limit).
-const MAX_GROUPS: u32 = 65_535;
+use super::{ErrorScopes, Gpu, GpuError, dispatch_grid};
 
 /// Floats per part in a frame's poses (two column-major 4 × 4 matrices).
 pub const POSE_FLOATS: usize = aobake_core::bake::preview::GRID_POSE_FLOATS;
@@ -122,10 +119,9 @@ impl<'g> GridAo<'g> {
             )));
         }
         let needed = count.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1);
-        let groups = (needed.min(MAX_GROUPS), needed.div_ceil(MAX_GROUPS));
-        if groups.1 > MAX_GROUPS {
+        let Some(groups) = dispatch_grid(needed) else {
             return Err(GpuError::TooLarge(format!("{count} receivers")));
-        }
+        };
         let params = GridAoParams {
             points: count,
             row_stride: groups.0 * aobake_shaders::WORKGROUP_SIZE,

@@ -172,9 +172,13 @@ impl Gpu {
 /// The validation and internal error scopes around GPU work (an internal
 /// error is a shader the backend cannot translate): what every pipeline
 /// and dispatch runs in, so that a failure is an error, not wgpu's panic.
+///
+/// The fields drop in declaration order and wgpu panics unless scopes are
+/// popped in reverse order of their pushing, so `internal` (pushed last)
+/// comes first: a guard dropped on an early return pops cleanly.
 pub(crate) struct ErrorScopes {
-    validation: wgpu::ErrorScopeGuard,
     internal: wgpu::ErrorScopeGuard,
+    validation: wgpu::ErrorScopeGuard,
 }
 
 impl ErrorScopes {
@@ -182,8 +186,8 @@ impl ErrorScopes {
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let internal = device.push_error_scope(wgpu::ErrorFilter::Internal);
         Self {
-            validation,
             internal,
+            validation,
         }
     }
 
@@ -193,6 +197,16 @@ impl ErrorScopes {
         let validation = pollster::block_on(self.validation.pop());
         internal.or(validation)
     }
+}
+
+/// Most workgroups per dispatch dimension (WebGPU's minimum limit).
+pub(crate) const MAX_GROUPS: u32 = 65_535;
+
+/// The (x, y) grid of a dispatch of `groups` workgroups: rows of at most
+/// [`MAX_GROUPS`]; `None` when that many rows do not suffice either.
+pub(crate) fn dispatch_grid(groups: u32) -> Option<(u32, u32)> {
+    let grid = (groups.min(MAX_GROUPS), groups.div_ceil(MAX_GROUPS));
+    (grid.1 <= MAX_GROUPS).then_some(grid)
 }
 
 /// Vulkan and GL, or what `WGPU_BACKEND` names.
@@ -283,5 +297,20 @@ impl Gpu {
             .to_vec();
         staging.unmap();
         Ok(bytes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{ErrorScopes, Gpu};
+
+    #[test]
+    fn error_scopes_dropped_without_a_pop_unwind_in_order() {
+        let gpu = Gpu::new().expect("a wgpu adapter (llvmpipe or lavapipe without a GPU)");
+        // What a `?` between push and pop does: the guard is dropped, and
+        // wgpu panics if its two scopes leave in the wrong order.
+        drop(ErrorScopes::push(&gpu.device));
+        // The device's scopes are balanced after it.
+        assert!(ErrorScopes::push(&gpu.device).pop().is_none());
     }
 }

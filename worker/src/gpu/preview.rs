@@ -64,13 +64,13 @@ const GBUFFER: [wgpu::TextureFormat; 2] = [
 ];
 
 impl<'g> PreviewRenderer<'g> {
-    /// Builds the pipelines: 4× multisampling where the adapter has it for
-    /// both the colour and the depth format, else none.
     /// The adapter it renders on.
     pub fn gpu(&self) -> &'g Gpu {
         self.gpu
     }
 
+    /// Builds the pipelines: 4× multisampling where the adapter has it for
+    /// both the colour and the depth format, else none.
     pub fn new(gpu: &'g Gpu) -> Result<Self, GpuError> {
         let supports = |f: wgpu::TextureFormat| {
             gpu.adapter

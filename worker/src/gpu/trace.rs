@@ -16,24 +16,30 @@ use aobake_core::trace::{
     RayBatch, RayEngine, Tally, TraceError,
     engine::{Estimator, GPU_NODE_WORDS, GPU_TRIANGLE_FLOATS, GpuSceneInfo, sobol_directions},
 };
-use aobake_shaders::{TraceParams, TracePoint, TraceScene, TraceTally, WORKGROUP_SIZE};
+use aobake_shaders::{
+    TRACE_LANES, TRACE_STACK, TraceParams, TracePoint, TraceScene, TraceTally, WORKGROUP_SIZE,
+};
 use glam::Vec3A;
 use wgpu::util::DeviceExt as _;
 
 use super::{ErrorScopes, Gpu, GpuError};
 
-/// Invocations per point (`LANES` in trace.wgsl): a 50k-vertex mesh is
-/// 800k invocations, enough to fill a large GPU.
-const LANES: u32 = 16;
+/// Invocations per point: a 50k-vertex mesh is 800k invocations, enough
+/// to fill a large GPU.
+const LANES: u32 = TRACE_LANES;
 /// Points per workgroup.
 const POINTS_PER_GROUP: u32 = WORKGROUP_SIZE / LANES;
-/// Most workgroups per dispatch dimension (WebGPU's minimum limit).
-const MAX_GROUPS: u32 = 65_535;
 /// Most invocations per dispatch: short dispatches keep a desktop GPU's
 /// watchdog away and let progress be reported.
 const MAX_INVOCATIONS: u64 = 1 << 22;
-/// The shader's traversal stack (`STACK` in trace.wgsl).
-const STACK: usize = 96;
+/// Points per dispatch: within the invocation cap.
+const PER_DISPATCH: u64 = MAX_INVOCATIONS / LANES as u64;
+// A dispatch's workgroups fit the dispatch grid.
+const _: () = assert!(
+    PER_DISPATCH / POINTS_PER_GROUP as u64 <= super::MAX_GROUPS as u64 * super::MAX_GROUPS as u64
+);
+/// The shader's traversal stack.
+const STACK: usize = TRACE_STACK as usize;
 
 /// core's estimators on a wgpu adapter with compute shaders.
 #[derive(Debug)]
@@ -219,17 +225,7 @@ impl<'g> GpuTracer<'g> {
                 _ => return Ok(None),
             }
         }
-        if !batch.shared
-            && (batch.points.windows(2).any(|w| w[1].scene < w[0].scene)
-                || batch
-                    .points
-                    .iter()
-                    .any(|p| p.scene as usize >= batch.scenes.len()))
-        {
-            return Err(GpuError::TooLarge(
-                "the batch's points are not grouped by scene".into(),
-            ));
-        }
+        // Core checked the batch (RayBatch::check): points grouped by scene.
         let mut out = Vec::with_capacity(batch.tallies());
         let mut pending = vec![self.whole(batch)];
         while let Some(part) = pending.pop() {
@@ -351,6 +347,27 @@ impl<'g> GpuTracer<'g> {
                 (scene_nodes.len() / GPU_NODE_WORDS) as u32,
             ));
         }
+        let tally_count = if batch.shared {
+            part.points.len() * part.scenes.len()
+        } else {
+            part.points.len()
+        } as u64;
+        let tally_bytes = tally_count * size_of::<TraceTally>() as u64;
+        let largest = [
+            4 * nodes.len() as u64,
+            4 * triangles.len() as u64,
+            (size_of::<TracePoint>() * part.points.len()) as u64,
+            tally_bytes,
+        ]
+        .into_iter()
+        .max()
+        .unwrap_or(0);
+        if largest > binding {
+            return Err(PartError::TooLarge);
+        }
+        if part.points.is_empty() {
+            return Ok(Vec::new());
+        }
         use rayon::prelude::*;
         let points: Vec<TracePoint> = batch.points[part.points.clone()]
             .par_iter()
@@ -370,27 +387,6 @@ impl<'g> GpuTracer<'g> {
                 _pad1: 0,
             })
             .collect();
-        let tally_count = if batch.shared {
-            part.points.len() * part.scenes.len()
-        } else {
-            part.points.len()
-        } as u64;
-        let tally_bytes = tally_count * 32;
-        let largest = [
-            4 * nodes.len() as u64,
-            4 * triangles.len() as u64,
-            64 * points.len() as u64,
-            tally_bytes,
-        ]
-        .into_iter()
-        .max()
-        .unwrap_or(0);
-        if largest > binding {
-            return Err(PartError::TooLarge);
-        }
-        if points.is_empty() {
-            return Ok(Vec::new());
-        }
 
         let mut guard = self.buffers.lock().unwrap_or_else(|e| e.into_inner());
         let buffers = &mut *guard;
@@ -476,16 +472,13 @@ impl<'g> GpuTracer<'g> {
             unreachable!("made above");
         };
         let layout = self.pipeline.get_bind_group_layout(0);
-        // Points per dispatch: within the invocation cap.
-        let per_dispatch = (MAX_INVOCATIONS / u64::from(LANES))
-            .min(u64::from(MAX_GROUPS) * u64::from(MAX_GROUPS) * u64::from(POINTS_PER_GROUP));
         // (scene, first point, points, first tally) of each dispatch: shared
         // points once per scene, scene by scene; else the points in order.
         let total = points.len() as u64;
         let chunks = || {
             (0..total)
-                .step_by(per_dispatch as usize)
-                .map(move |f| (f, per_dispatch.min(total - f)))
+                .step_by(PER_DISPATCH as usize)
+                .map(move |f| (f, PER_DISPATCH.min(total - f)))
         };
         let jobs: Vec<(u32, u64, u64, u64)> = if batch.shared {
             (0..part.scenes.len() as u64)
@@ -502,12 +495,12 @@ impl<'g> GpuTracer<'g> {
         let mut dispatches = Vec::new();
         for &(scene, first, count, tally_base) in &jobs {
             let workgroups = count.div_ceil(u64::from(POINTS_PER_GROUP)) as u32;
-            let grid = (workgroups.min(MAX_GROUPS), workgroups.div_ceil(MAX_GROUPS));
+            let grid = super::dispatch_grid(workgroups).expect("PER_DISPATCH fits the grid");
             let params = TraceParams {
                 estimator: estimator_code(batch.estimator),
                 samples: batch.samples,
                 group_size: rays_per_lane,
-                groups: LANES,
+                _pad: 0,
                 points: count as u32,
                 first_point: first as u32,
                 row_stride: grid.0,
@@ -594,8 +587,9 @@ impl<'g> GpuTracer<'g> {
             use std::sync::atomic::Ordering::Relaxed;
             let s = &self.stats;
             s.batches.fetch_add(1, Relaxed);
+            // A tally per point, or per point and scene when shared.
             s.rays
-                .fetch_add(part.points.len() as u64 * u64::from(batch.samples), Relaxed);
+                .fetch_add(tally_count * u64::from(batch.samples), Relaxed);
             s.wall_ns
                 .fetch_add(started.elapsed().as_nanos() as u64, Relaxed);
             s.wait_ns

@@ -10,10 +10,7 @@ use aobake_core::method::vertex::{
 use aobake_shaders::VertexAoParams;
 use wgpu::util::DeviceExt as _;
 
-use super::{ErrorScopes, Gpu, GpuError};
-
-/// Most workgroups per dispatch dimension (WebGPU's minimum limit).
-const MAX_GROUPS: u32 = 65_535;
+use super::{ErrorScopes, Gpu, GpuError, dispatch_grid};
 
 /// A model's coefficients uploaded once; [`VertexAo::evaluate`] then costs
 /// one weight upload, one dispatch and one readback per pose.
@@ -65,11 +62,10 @@ impl<'g> VertexAo<'g> {
             ..
         } = arrays;
         let device = &gpu.device;
-        let groups_needed = vertices.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1);
-        let groups = (
-            groups_needed.min(MAX_GROUPS),
-            groups_needed.div_ceil(MAX_GROUPS),
-        );
+        let Some(groups) = dispatch_grid(vertices.div_ceil(aobake_shaders::WORKGROUP_SIZE).max(1))
+        else {
+            return Err(GpuError::TooLarge(format!("{vertices} vertices")));
+        };
         let params = VertexAoParams {
             vertices,
             blocks: to_u32(blocks.len(), "blocks")?,
@@ -92,9 +88,6 @@ impl<'g> VertexAo<'g> {
                     "{what} take {bytes} bytes, over the adapter's storage binding limit of {limit}"
                 )));
             }
-        }
-        if groups.1 > MAX_GROUPS {
-            return Err(GpuError::TooLarge(format!("{vertices} vertices")));
         }
         let scope = ErrorScopes::push(device);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {

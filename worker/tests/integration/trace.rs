@@ -33,15 +33,35 @@ fn both_adapters() -> [Arc<GpuTracer<'static>>; 2] {
     ]
 }
 
-/// `f` traced by the CPU, then by `gpu` twice.
+/// `f` traced by the CPU, then by `gpu` twice; the GPU must have traced
+/// (not declined every batch to the CPU).
 fn cpu_and_gpu<T>(gpu: &Arc<GpuTracer<'static>>, f: impl Fn() -> T) -> (T, T, T) {
     set_engine(None);
     let cpu = f();
     set_engine(Some(gpu.clone()));
+    let before = gpu.stats().batches;
     let first = f();
     let second = f();
     set_engine(None);
+    assert!(gpu.stats().batches > before, "the GPU traced nothing");
     (cpu, first, second)
+}
+
+/// How many of `gpu`'s values are within 1e-5 of `cpu`'s (of as many),
+/// and the worst difference.
+fn near(cpu: &[f32], gpu: &[f32]) -> (usize, f32) {
+    assert_eq!(cpu.len(), gpu.len());
+    let close = cpu
+        .iter()
+        .zip(gpu)
+        .filter(|(a, b)| (*a - *b).abs() < 1e-5)
+        .count();
+    let worst = cpu
+        .iter()
+        .zip(gpu)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    (close, worst)
 }
 
 /// Asserts that at least 99.99 % of `gpu` equals `cpu` exactly and the rest
@@ -150,16 +170,7 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
         });
         assert_eq!(first, second);
         // f32 sums of e^(−τt) per group of rays against the CPU's f64 sum.
-        let worst = cpu
-            .iter()
-            .zip(&first)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
-        let close = cpu
-            .iter()
-            .zip(&first)
-            .filter(|(a, b)| (*a - *b).abs() < 1e-5)
-            .count();
+        let (close, worst) = near(&cpu, &first);
         assert!(
             close as f64 >= 0.9999 * cpu.len() as f64 && worst <= 1.0 / 64.0,
             "obscurance: {close} of {} within 1e-5, worst {worst}",
@@ -268,11 +279,7 @@ fn the_sphere_over_a_floor_and_the_sphere_estimators_hold_on_the_gpu() {
             kroon_occlusion(&ball_scene, &probes, None, &kroon, &no_progress).unwrap()
         });
         assert_eq!(first, second);
-        let close = cpu
-            .iter()
-            .zip(&first)
-            .filter(|(a, b)| (*a - *b).abs() < 1e-5)
-            .count();
+        let (close, _) = near(&cpu, &first);
         assert!(
             close as f64 >= 0.99 * cpu.len() as f64,
             "Kroon: {close} of {}",
@@ -321,9 +328,12 @@ fn a_batch_beyond_the_adapters_binding_limit_is_split_not_refused() {
     let big = Scene::new(&mesh.positions, &mesh.triangles, &SceneOptions::default()).unwrap();
     let some = &mesh.positions[..500];
     let before = small.stats().batches;
-    let (cpu, fallback, _) = cpu_and_gpu(&small, || {
-        surface_occlusion(&big, some, &vec![Vec3::Z; 500], &params, &no_progress).unwrap()
-    });
+    let trace = || surface_occlusion(&big, some, &vec![Vec3::Z; 500], &params, &no_progress);
+    set_engine(None);
+    let cpu = trace().unwrap();
+    set_engine(Some(small.clone()));
+    let fallback = trace().unwrap();
+    set_engine(None);
     assert_eq!(cpu, fallback);
     assert_eq!(small.stats().batches, before, "nothing was submitted");
 
@@ -354,12 +364,9 @@ fn a_batch_beyond_the_adapters_binding_limit_is_split_not_refused() {
         aobake_core::trace::kroon_occlusion_many(&scenes, &points, &kroon, &no_progress).unwrap()
     });
     assert!(small.stats().batches - before > 3, "{}", small.stats());
+    assert_eq!(cpu.len(), split.len());
     for (c, g) in cpu.iter().zip(&split) {
-        let close = c
-            .iter()
-            .zip(g)
-            .filter(|(a, b)| (*a - *b).abs() < 1e-5)
-            .count();
+        let (close, _) = near(c, g);
         assert!(
             close as f64 >= 0.999 * c.len() as f64,
             "{close} of {}",

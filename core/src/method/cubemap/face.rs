@@ -240,17 +240,15 @@ pub fn compute_face<E>(
         slices: Vec::with_capacity(batch * points.len()),
     };
     // A checkpoint's time samples are traced as one batch.
-    let mut m = next;
-    while m < field.times {
+    while part.first < field.times {
         let end = (part.first + batch).min(field.times);
-        let frames: Vec<Vec<Vec3>> = (m..end).map(&mut *positions).collect();
+        let frames: Vec<Vec<Vec3>> = (part.first..end).map(&mut *positions).collect();
         let slices = face_slices(&frames, triangles, &points, face, &sampling.kroon)?;
-        for (t, ao) in (m..end).zip(slices) {
+        for (t, ao) in (part.first..end).zip(slices) {
             let slice: Vec<u8> = ao.into_iter().map(quantise).collect();
             field.insert(t, &slice);
             part.slices.extend(slice);
         }
-        m = end;
         let full = std::mem::replace(
             &mut part,
             Part {

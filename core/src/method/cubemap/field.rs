@@ -34,7 +34,8 @@ pub fn face_points(spheroid: &Spheroid, face: usize, res: usize) -> Vec<Vec3> {
 }
 
 /// Occlusion at `points` (from [`face_points`]) around one posed mesh.
-pub fn face_slice(
+#[cfg(test)]
+fn face_slice(
     positions: &[Vec3],
     triangles: &[[u32; 3]],
     points: &[Vec3],
@@ -45,8 +46,9 @@ pub fn face_slice(
     Ok(slices.pop().unwrap_or_default())
 }
 
-/// [`face_slice`] around several posed meshes (time samples), traced as
-/// one batch: one dispatch on a GPU tracer.
+/// Occlusion at `points` (from [`face_points`]) around several posed
+/// meshes (time samples), traced as one batch: one dispatch on a GPU
+/// tracer.
 pub fn face_slices(
     frames: &[Vec<Vec3>],
     triangles: &[[u32; 3]],

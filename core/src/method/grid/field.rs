@@ -77,9 +77,9 @@ pub fn trace_layers<E: From<TraceError>>(
     done: &mut dyn FnMut(usize, Vec<RawCell>) -> Result<(), E>,
 ) -> Result<(), E> {
     let n = grid.resolution;
-    // Layers are traced in batches of about 64k cells (one dispatch on a
-    // GPU tracer); `done` still sees them one by one.
-    let per_batch = (65_536 / (n * n).max(1)).max(1);
+    // On a GPU tracer, layers are traced in batches of about 64k cells;
+    // on the CPU one by one (each checkpointed before the next is traced).
+    let per_batch = crate::trace::engine::batch_items(n * n, 65_536, usize::MAX);
     let layers: Vec<usize> = layers.collect();
     for batch in layers.chunks(per_batch) {
         let points: Vec<Vec<Vec3>> = batch

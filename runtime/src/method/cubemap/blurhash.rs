@@ -120,49 +120,67 @@ pub fn encode(field: &[f32], times: usize, shells: usize, encoding: Encoding) ->
     out
 }
 
-/// A texel's quantised thirds, dequantised: each third's DC term and its
-/// AC terms (index `n = i · 5 + j`, 0 unused).
-struct Thirds {
-    dc: [f32; THIRDS],
-    ac: [[f32; COMPONENTS * COMPONENTS]; THIRDS],
+/// One third of a texel, dequantised: its DC term and its AC terms
+/// (index `n = i · 5 + j`, 0 unused).
+type Third = (f32, [f32; COMPONENTS * COMPONENTS]);
+
+/// A texel's 13-bit AC fields, each holding the three thirds' quantised
+/// term `n` (0 unused).
+fn packed_ac(bytes: &[u8; BYTES]) -> [u32; COMPONENTS * COMPONENTS] {
+    let mut packed = [0u32; COMPONENTS * COMPONENTS];
+    for (n, p) in packed.iter_mut().enumerate().skip(1) {
+        let bit = 13 * (n - 1);
+        for b in 0..13 {
+            *p |= u32::from(bytes[AC + (bit + b) / 8] >> ((bit + b) % 8) & 1) << b;
+        }
+    }
+    packed
 }
+
+/// Third `c` of a texel whose AC fields are `packed`.
+fn third_terms(bytes: &[u8; BYTES], packed: &[u32; COMPONENTS * COMPONENTS], c: usize) -> Third {
+    let actual_max = (f32::from(bytes[3]) + 1.0) / 166.0;
+    let mut ac = [0.0f32; COMPONENTS * COMPONENTS];
+    for n in 1..COMPONENTS * COMPONENTS {
+        let q = (packed[n] / 19u32.pow((THIRDS - 1 - c) as u32)) % 19;
+        ac[n] = sign_pow((q as f32 - 9.0) / 9.0, 2.0) * actual_max;
+    }
+    (f32::from(bytes[c]) / 255.0, ac)
+}
+
+/// A third at the cosines `t` (time) and `d` (distance).
+fn third_at(third: &Third, t: &[f32; COMPONENTS], d: &[f32; COMPONENTS]) -> f32 {
+    let (dc, ac) = third;
+    let mut v = *dc;
+    for (n, a) in ac.iter().enumerate().skip(1) {
+        let (i, j) = (n / COMPONENTS, n % COMPONENTS);
+        v += a * t[i] * d[j];
+    }
+    v
+}
+
+/// A texel's three thirds, dequantised once (what `encode` evaluates at
+/// every sample).
+struct Thirds([Third; THIRDS]);
 
 impl Thirds {
     fn of(bytes: &[u8; BYTES]) -> Self {
-        let actual_max = (f32::from(bytes[3]) + 1.0) / 166.0;
-        let mut ac = [[0.0f32; COMPONENTS * COMPONENTS]; THIRDS];
-        for n in 1..COMPONENTS * COMPONENTS {
-            let bit = 13 * (n - 1);
-            let mut packed = 0u32;
-            for b in 0..13 {
-                packed |= u32::from(bytes[AC + (bit + b) / 8] >> ((bit + b) % 8) & 1) << b;
-            }
-            for (c, third) in ac.iter_mut().enumerate() {
-                let q = (packed / 19u32.pow((THIRDS - 1 - c) as u32)) % 19;
-                third[n] = sign_pow((q as f32 - 9.0) / 9.0, 2.0) * actual_max;
-            }
-        }
-        Self {
-            dc: std::array::from_fn(|c| f32::from(bytes[c]) / 255.0),
-            ac,
-        }
+        let packed = packed_ac(bytes);
+        Self(std::array::from_fn(|c| third_terms(bytes, &packed, c)))
     }
 
     /// Third `c` at the cosines `t` (time) and `d` (distance).
     fn at(&self, c: usize, t: &[f32; COMPONENTS], d: &[f32; COMPONENTS]) -> f32 {
-        let mut v = self.dc[c];
-        for n in 1..COMPONENTS * COMPONENTS {
-            let (i, j) = (n / COMPONENTS, n % COMPONENTS);
-            v += self.ac[c][n] * t[i] * d[j];
-        }
-        v
+        third_at(&self.0[c], t, d)
     }
 }
 
-/// The quantised thirds alone at time `tau` and shell `k`.
+/// The quantised thirds alone at time `tau` and shell `k`: only the third
+/// that holds `tau` is dequantised.
 fn base(bytes: &[u8; BYTES], times: usize, shells: usize, tau: f32, k: f32) -> f32 {
     let (c, x) = third(times, tau.rem_euclid(times as f32));
-    Thirds::of(bytes).at(c, &cosines(x), &cosines((k + 0.5) / shells as f32))
+    let third = third_terms(bytes, &packed_ac(bytes), c);
+    third_at(&third, &cosines(x), &cosines((k + 0.5) / shells as f32))
 }
 
 /// The value of an [`encode`]d texel at time `tau` and shell `k`,

@@ -363,25 +363,23 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
     }
     // What is timed: the CPU with each kernel, then the GPU.
     let tracers = bench_tracers(&args.tracer)?;
-    let mut rows: Vec<(String, Option<Kernel>)> = Vec::new();
-    let mut gpu = None;
-    for (name, engine) in &tracers {
-        match engine {
-            None => rows.extend(kernels.iter().map(|k| (format!("{name} {k:?}"), Some(*k)))),
-            Some(_) => {
-                rows.push((name.clone(), None));
-                gpu = engine.clone();
-            }
+    // A row per CPU kernel and one for the GPU, with its engine.
+    let mut rows: Vec<(String, Option<Kernel>, Timed)> = Vec::new();
+    for tracer in &tracers {
+        match &tracer.1 {
+            None => rows.extend(
+                kernels
+                    .iter()
+                    .map(|k| (format!("{} {k:?}", tracer.0), Some(*k), tracer.clone())),
+            ),
+            Some(_) => rows.push((tracer.0.clone(), None, tracer.clone())),
         }
     }
     let mut ours: Vec<Vec<Run>> = rows.iter().map(|_| Vec::new()).collect();
     let mut theirs = Vec::new();
     for r in 0..args.repeat {
-        for (k, (name, kernel)) in rows.iter().enumerate() {
-            aobake_core::trace::engine::set_engine(match kernel {
-                Some(_) => None,
-                None => gpu.clone(),
-            });
+        for (k, (name, kernel, (_, engine))) in rows.iter().enumerate() {
+            aobake_core::trace::engine::set_engine(engine.clone());
             let options = SceneOptions {
                 traversal: kernel.map_or(Traversal::Wide, Kernel::traversal),
                 ..options
@@ -412,11 +410,9 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
             theirs.push(s);
         }
     }
-    if let Some(summary) = gpu.as_ref().and_then(|e| e.summary()) {
-        println!("GPU tracer, all runs: {summary}");
-    }
+    tracer_summaries(&tracers);
     aobake_core::trace::engine::set_engine(None);
-    for ((name, _), runs) in rows.iter().zip(&ours) {
+    for ((name, _, _), runs) in rows.iter().zip(&ours) {
         let build = median(&runs.iter().map(|r| r.build_s).collect::<Vec<_>>());
         let traced = median(&runs.iter().map(|r| r.trace_s).collect::<Vec<_>>());
         let total = median(
@@ -436,7 +432,7 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
         );
     }
     if rows.len() > 1 {
-        for ((name, _), runs) in rows.iter().zip(&ours).skip(1) {
+        for ((name, _, _), runs) in rows.iter().zip(&ours).skip(1) {
             let pairs: Vec<f64> = runs
                 .iter()
                 .zip(&ours[0])
