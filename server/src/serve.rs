@@ -18,6 +18,10 @@ use crate::{
     store::{PgStore, QueuePolicy, SqliteStore, Store},
 };
 
+/// The environment variable that gives `aobake serve` its admin token
+/// (else it makes one and writes it to `admin.token`).
+pub const ADMIN_TOKEN_ENV: &str = "AOBAKE_ADMIN_TOKEN";
+
 /// `aobake serve`'s settings.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ServeArgs {
@@ -117,7 +121,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         max_bake_work: args.max_bake_work,
         ..ServerLimits::default()
     };
-    let admin = match std::env::var("AOBAKE_ADMIN_TOKEN") {
+    let admin = match std::env::var(ADMIN_TOKEN_ENV) {
         Ok(t) if !t.is_empty() => t,
         _ => {
             let t = new_token();

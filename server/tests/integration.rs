@@ -7,6 +7,8 @@ use std::{
 
 #[path = "integration/bake.rs"]
 mod bake;
+#[path = "integration/docker.rs"]
+mod docker;
 #[path = "integration/export_gltf.rs"]
 mod export_gltf;
 
