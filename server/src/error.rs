@@ -149,7 +149,9 @@ impl From<BlobError> for ApiError {
             BlobError::DigestMismatch { .. } | BlobError::BadDigest(_) => {
                 Self::bad("bad_digest", e.to_string())
             }
-            BlobError::Io(io) => Self::Internal(io.to_string()),
+            BlobError::Io(_) | BlobError::Store(_) | BlobError::Config(_) => {
+                Self::Internal(e.to_string())
+            }
         }
     }
 }

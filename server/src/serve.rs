@@ -13,7 +13,7 @@ use tokio::process::{Child, Command};
 use crate::{
     app::app,
     auth::{Scope, new_token, token_hash},
-    blobs::LocalBlobs,
+    blobs::{self, Blobs, LocalBlobs},
     state::{AppState, ServerLimits},
     store::{PgStore, QueuePolicy, SqliteStore, Store},
 };
@@ -33,6 +33,13 @@ pub struct ServeArgs {
     /// several servers and remote workers.
     #[arg(long, env = "AOBAKE_DATABASE")]
     pub database: Option<String>,
+    /// Where blobs (uploads, assets, checkpoints) live: empty for a folder
+    /// in --data (the embedded default), a directory, or an S3-compatible
+    /// bucket for several servers, `s3://BUCKET[/PREFIX][?endpoint=URL&
+    /// region=R&allow_http=true…]` (any `object_store` S3 setting; the
+    /// credentials from AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY).
+    #[arg(long, env = "AOBAKE_BLOBS")]
+    pub blobs: Option<String>,
     /// Address to listen on; port 0 picks a free one.
     #[arg(long, env = "AOBAKE_LISTEN", default_value = "127.0.0.1:8080")]
     pub listen: SocketAddr,
@@ -109,7 +116,10 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 .context("cannot open the database")?,
         ),
     };
-    let blobs = LocalBlobs::open(&args.data.join("blobs"))?;
+    let blobs: Arc<dyn Blobs> = match &args.blobs {
+        Some(url) => blobs::open(url)?,
+        None => Arc::new(LocalBlobs::open(&args.data.join("blobs"))?),
+    };
     let policy = QueuePolicy {
         lease_ms: (args.lease_secs * 1000.0) as i64,
         max_attempts: args.max_attempts,
@@ -146,7 +156,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             &[Scope::Worker.name().to_owned()],
         )
         .await?;
-    let mut state = AppState::new(store.clone(), Arc::new(blobs), policy, limits);
+    let mut state = AppState::new(store.clone(), blobs, policy, limits);
     state.graph.sample_rays = args.job_rays;
     store.listen(state.jobs_ready.clone()).await?;
     let listener = tokio::net::TcpListener::bind(args.listen)

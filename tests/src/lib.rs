@@ -65,6 +65,8 @@ pub struct Options {
     /// `--job-rays`, when not the server's default (0: 4 poses a job,
     /// for tests that need many small jobs).
     pub job_rays: Option<u64>,
+    /// `--blobs`, when not the data directory (an S3 bucket: [`TestS3`]).
+    pub blobs: Option<String>,
 }
 
 impl Default for Options {
@@ -76,6 +78,7 @@ impl Default for Options {
             rate: 10_000,
             header_timeout_secs: 10.0,
             job_rays: None,
+            blobs: None,
         }
     }
 }
@@ -142,6 +145,7 @@ impl TestEnv {
             .args(["--rate", &o.rate.to_string()])
             .args(["--header-timeout-secs", &o.header_timeout_secs.to_string()])
             .args(o.job_rays.map(|r| format!("--job-rays={r}")))
+            .args(o.blobs.as_ref().map(|b| format!("--blobs={b}")))
             .env("AOBAKE_ADMIN_TOKEN", ADMIN)
             .stdout(Stdio::null())
             .stderr(log)
@@ -357,5 +361,68 @@ impl Drop for TestEnv {
             self.kill_worker(i);
         }
         self.kill_server();
+    }
+}
+
+/// An S3-compatible server on a free loopback port (moto's `moto_server`,
+/// which `.ci/run` installs; `AOBAKE_MOTO_SERVER` names another program),
+/// with an empty bucket; stopped when dropped. A machine without it fails
+/// the test that asks for it, never skips it.
+#[derive(Debug)]
+pub struct TestS3 {
+    child: Child,
+    /// `s3://BUCKET/PREFIX?…`, what `aobake serve --blobs` takes.
+    pub url: String,
+}
+
+impl TestS3 {
+    /// Starts the server and makes the bucket.
+    pub fn start() -> Self {
+        let program = std::env::var("AOBAKE_MOTO_SERVER").unwrap_or_else(|_| "moto_server".into());
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free port")
+            .port();
+        let child = Command::new(&program)
+            .args(["-H", "127.0.0.1", "-p", &port.to_string()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!(
+                    "{program}: {e}; the S3 blob tests need moto's server \
+                     (pip install 'moto[server]', as .ci/run does)"
+                )
+            });
+        let server = Self {
+            child,
+            url: format!(
+                "s3://aobake-test/blobs?endpoint=http://127.0.0.1:{port}&allow_http=true\
+                 &region=us-east-1&access_key_id=test&secret_access_key=test"
+            ),
+        };
+        // Up when it answers; the bucket then (moto takes unsigned requests).
+        let started = Instant::now();
+        let bucket = format!("http://127.0.0.1:{port}/aobake-test");
+        loop {
+            match ureq::put(&bucket).send_empty() {
+                Ok(_) => break,
+                Err(ureq::Error::StatusCode(code)) => panic!("creating the bucket: {code}"),
+                Err(_) => {}
+            }
+            assert!(
+                started.elapsed() < Duration::from_secs(30),
+                "{program} did not start on port {port}"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        server
+    }
+}
+
+impl Drop for TestS3 {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 }

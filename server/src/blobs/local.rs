@@ -6,9 +6,7 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use aobake_core::digest::sha256_hex;
-
-use super::{BlobError, Blobs, check_digest};
+use super::{BlobError, Blobs, check_digest, verify};
 
 /// Blobs on local disk.
 #[derive(Debug, Clone)]
@@ -32,13 +30,7 @@ impl LocalBlobs {
 
     fn put_sync(&self, digest: &str, bytes: &[u8]) -> Result<(), BlobError> {
         let path = self.path(digest)?;
-        let actual = sha256_hex(bytes);
-        if actual != digest {
-            return Err(BlobError::DigestMismatch {
-                expected: digest.to_owned(),
-                actual,
-            });
-        }
+        verify(digest, bytes)?;
         if path.exists() {
             return Ok(());
         }
@@ -104,33 +96,10 @@ mod tests {
     use super::*;
 
     #[tokio::test]
-    async fn blobs_are_verified_then_published_whole() {
+    async fn blobs_on_disk_pass_the_suite_and_leave_no_temporary_file() {
         let dir = tempfile::tempdir().unwrap();
         let blobs = LocalBlobs::open(dir.path()).unwrap();
-        let bytes = b"hello blobs".to_vec();
-        let d = sha256_hex(&bytes);
-        assert!(blobs.get(&d).await.unwrap().is_none());
-        let wrong = sha256_hex(b"other");
-        assert!(matches!(
-            blobs.put(&wrong, &bytes).await,
-            Err(BlobError::DigestMismatch { .. })
-        ));
-        assert!(
-            blobs.get(&wrong).await.unwrap().is_none(),
-            "nothing published"
-        );
-        blobs.put(&d, &bytes).await.unwrap();
-        blobs.put(&d, &bytes).await.unwrap();
-        assert_eq!(blobs.get(&d).await.unwrap().unwrap(), bytes);
-        assert_eq!(blobs.len(&d).await.unwrap(), Some(11));
-        assert_eq!(
-            blobs.get_range(&d, 6, 100).await.unwrap().unwrap(),
-            b"blobs"
-        );
-        // Names that could leave the directory are refused.
-        for bad in ["../../etc/passwd", "AB", &d.to_uppercase()] {
-            assert!(matches!(blobs.get(bad).await, Err(BlobError::BadDigest(_))));
-        }
+        super::super::suite::run_all(&blobs).await;
         let tmp: Vec<_> = std::fs::read_dir(dir.path().join("tmp")).unwrap().collect();
         assert!(tmp.is_empty(), "no temporary file left behind");
     }

@@ -4,14 +4,17 @@
 //! becomes visible, so a reader never sees a blob that does not match its
 //! name.
 //!
-//! [`LocalBlobs`] keeps them on local disk. The trait takes and returns
-//! whole byte buffers and a byte range, which is also what an
-//! S3-compatible backend (the `object_store` crate: conditional put,
-//! ranged get) offers, so one drops in beside it.
+//! [`LocalBlobs`] keeps them on local disk, [`ObjectBlobs`] in an
+//! S3-compatible object store (chosen with `aobake serve --blobs URL`,
+//! [`open`]). The same suite ([`suite`]) runs on both.
 
 mod local;
+mod object;
+#[cfg(test)]
+mod suite;
 
 pub use local::LocalBlobs;
+pub use object::{MULTIPART_BYTES, ObjectBlobs};
 
 /// A failed blob operation.
 #[derive(Debug, thiserror::Error)]
@@ -30,6 +33,31 @@ pub enum BlobError {
     /// The backend failed.
     #[error("blob store: {0}")]
     Io(#[from] std::io::Error),
+    /// The object store failed.
+    #[error("blob store: {0}")]
+    Store(#[from] object_store::Error),
+    /// The blob store's settings cannot be used.
+    #[error("{0}")]
+    Config(String),
+}
+
+/// The blob store `url` names: `s3://…` ([`ObjectBlobs::from_url`]), or a
+/// directory (`file:///path`, or a plain path) for [`LocalBlobs`].
+pub fn open(url: &str) -> Result<std::sync::Arc<dyn Blobs>, BlobError> {
+    if url.starts_with("s3://") {
+        return Ok(std::sync::Arc::new(ObjectBlobs::from_url(url)?));
+    }
+    if let Some((scheme, _)) = url.split_once("://")
+        && scheme != "file"
+    {
+        return Err(BlobError::Config(format!(
+            "--blobs {url:?}: use s3://BUCKET[/PREFIX][?endpoint=…] or a directory"
+        )));
+    }
+    let dir = url.strip_prefix("file://").unwrap_or(url);
+    Ok(std::sync::Arc::new(LocalBlobs::open(
+        std::path::Path::new(dir),
+    )?))
 }
 
 /// Checks that `digest` is 64 lower-case hex digits (so it is safe as a
@@ -44,6 +72,20 @@ pub fn check_digest(digest: &str) -> Result<(), BlobError> {
     } else {
         Err(BlobError::BadDigest(digest.chars().take(80).collect()))
     }
+}
+
+/// Checks that `bytes` hash to `digest`, what every backend does before
+/// it stores anything.
+pub fn verify(digest: &str, bytes: &[u8]) -> Result<(), BlobError> {
+    check_digest(digest)?;
+    let actual = aobake_core::digest::sha256_hex(bytes);
+    if actual != digest {
+        return Err(BlobError::DigestMismatch {
+            expected: digest.to_owned(),
+            actual,
+        });
+    }
+    Ok(())
 }
 
 /// Content-addressed bytes.

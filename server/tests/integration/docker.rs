@@ -94,11 +94,21 @@ fn the_docker_files_run_commands_aobake_takes() {
     }
     assert_eq!(ours, 3, "server, worker and gpu-worker");
 
-    // PostgreSQL's health check, and the server's on a route it serves.
+    // PostgreSQL's and the object store's health checks, and the server's
+    // on a route it serves; the server keeps its blobs in that store.
     assert_eq!(
         strings(&compose["services"]["postgres"]["healthcheck"]["test"])[1],
         "pg_isready"
     );
+    assert!(compose["services"]["s3"]["healthcheck"]["test"].is_sequence());
+    let serve = strings(&compose["services"]["server"]["command"]);
+    let blobs = serve.iter().skip_while(|a| *a != "--blobs").nth(1);
+    assert!(
+        blobs.is_some_and(|b| b.starts_with("s3://") && b.contains("endpoint=http://s3:")),
+        "{serve:?}"
+    );
+    // Its settings are ones the S3 client takes.
+    aobake_server::blobs::open(blobs.unwrap()).unwrap();
     let check = strings(&compose["services"]["server"]["healthcheck"]["test"]);
     let path = check
         .last()
