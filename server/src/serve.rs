@@ -35,9 +35,10 @@ pub struct ServeArgs {
     pub database: Option<String>,
     /// Where blobs (uploads, assets, checkpoints) live: empty for a folder
     /// in --data (the embedded default), a directory, or an S3-compatible
-    /// bucket for several servers, `s3://BUCKET[/PREFIX][?endpoint=URL&
-    /// region=R&allow_http=true…]` (any `object_store` S3 setting; the
-    /// credentials from AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY).
+    /// bucket that several servers share,
+    /// `s3://BUCKET[/PREFIX]?endpoint=URL&region=R&allow_http=true` (each
+    /// query pair any `object_store` S3 setting; the credentials from
+    /// AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY).
     #[arg(long, env = "AOBAKE_BLOBS")]
     pub blobs: Option<String>,
     /// Address to listen on; port 0 picks a free one.
