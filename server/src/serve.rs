@@ -160,6 +160,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let mut state = AppState::new(store.clone(), blobs, policy, limits);
     state.graph.sample_rays = args.job_rays;
     store.listen(state.jobs_ready.clone()).await?;
+    state.share_events().await?;
     let listener = tokio::net::TcpListener::bind(args.listen)
         .await
         .with_context(|| format!("cannot listen on {}", args.listen))?;

@@ -47,7 +47,7 @@ impl Default for ServerLimits {
 }
 
 /// A change a browser or a waiting client hears about.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BakeEvent {
     /// The bake.
     pub id: i64,
@@ -157,8 +157,12 @@ pub struct AppState {
     pub jobs_ready: Arc<Notify>,
     /// Set when the server shuts down: long polls answer at once.
     pub shutting_down: Arc<std::sync::atomic::AtomicBool>,
-    /// Bake state and progress changes.
+    /// Bake state and progress changes, as this server's listeners hear
+    /// them.
     pub events: broadcast::Sender<BakeEvent>,
+    /// Where several servers share the store (PostgreSQL): publishes an
+    /// event to every server's `events`, this one's included ([`AppState::share_events`]).
+    shared_events: Option<tokio::sync::mpsc::UnboundedSender<BakeEvent>>,
     /// Per-token request rate.
     pub limiter: Arc<Limiter>,
     /// Whole blobs read into memory at once (each may be as large as the
@@ -211,6 +215,7 @@ impl AppState {
             jobs_ready: Arc::new(Notify::new()),
             shutting_down: Arc::default(),
             events: broadcast::channel(1024).0,
+            shared_events: None,
             limiter: Arc::new(Limiter::new(limits.requests_per_second)),
             blob_reads: Arc::new(tokio::sync::Semaphore::new(8)),
             metrics: Arc::new(Metrics::new()),
@@ -251,13 +256,29 @@ impl AppState {
     }
 
     /// Tells listeners about a bake (progress inside a running job: no
-    /// job became ready, so no worker is woken).
+    /// job became ready, so no worker is woken): on every server that
+    /// shares the store, or on this one.
     pub fn publish(&self, bake: &crate::store::BakeRow) {
-        let _ = self.events.send(BakeEvent {
+        let event = BakeEvent {
             id: bake.id,
             state: bake.state,
             done: bake.done_work,
             total: bake.total_work,
-        });
+        };
+        let local = match &self.shared_events {
+            Some(shared) => shared.send(event).err().map(|e| e.0),
+            None => Some(event),
+        };
+        if let Some(event) = local {
+            let _ = self.events.send(event);
+        }
+    }
+
+    /// Hears bake events from the other servers on the store and sends
+    /// this one's to them, where the store is shared (see
+    /// [`crate::store::Store::share_events`]); else events stay here.
+    pub async fn share_events(&mut self) -> crate::store::Result<()> {
+        self.shared_events = self.store.share_events(self.events.clone()).await?;
+        Ok(())
     }
 }

@@ -239,6 +239,17 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn listen(&self, _ready: std::sync::Arc<tokio::sync::Notify>) -> Result<()> {
         Ok(())
     }
+    /// Shares bake events among the servers on this store: a sender whose
+    /// events reach every server's `events` (this one's included, in the
+    /// order sent), where several servers can share the store
+    /// (PostgreSQL's NOTIFY); `None` where one server owns it and
+    /// broadcasts its own.
+    async fn share_events(
+        &self,
+        _events: tokio::sync::broadcast::Sender<crate::state::BakeEvent>,
+    ) -> Result<Option<tokio::sync::mpsc::UnboundedSender<crate::state::BakeEvent>>> {
+        Ok(None)
+    }
 }
 
 #[cfg(test)]

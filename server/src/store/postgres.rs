@@ -15,6 +15,7 @@ use sqlx::postgres::{PgConnection, PgListener, PgPool, PgPoolOptions};
 
 use super::Result;
 use super::queue::{Backend, Durability, SqlStore, sql_conn};
+use crate::state::BakeEvent;
 
 sql_conn!(PgConnection, sqlx::Postgres);
 
@@ -98,7 +99,54 @@ impl Backend for Postgres {
         });
         Ok(())
     }
+
+    async fn share_events(
+        &self,
+        events: tokio::sync::broadcast::Sender<BakeEvent>,
+    ) -> Result<Option<tokio::sync::mpsc::UnboundedSender<BakeEvent>>> {
+        let mut listener = PgListener::connect_with(&self.pool).await?;
+        listener.listen(BAKE_EVENTS).await?;
+        let heard = events.clone();
+        tokio::spawn(async move {
+            loop {
+                match listener.recv().await {
+                    Ok(n) => match serde_json::from_str(n.payload()) {
+                        Ok(event) => {
+                            let _ = heard.send(event);
+                        }
+                        Err(e) => eprintln!("error: a bake event that does not parse: {e}"),
+                    },
+                    Err(e) => {
+                        eprintln!("error: LISTEN {BAKE_EVENTS}: {e}");
+                        tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+                    }
+                }
+            }
+        });
+        // One task sends this server's events, in order; one the database
+        // cannot take still reaches this server's listeners.
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<BakeEvent>();
+        let pool = self.pool.clone();
+        tokio::spawn(async move {
+            while let Some(event) = rx.recv().await {
+                let payload = serde_json::to_string(&event).expect("events serialise");
+                let sent = sqlx::query("SELECT pg_notify($1, $2)")
+                    .bind(BAKE_EVENTS)
+                    .bind(payload)
+                    .execute(&pool)
+                    .await;
+                if let Err(e) = sent {
+                    eprintln!("error: NOTIFY {BAKE_EVENTS}: {e}");
+                    let _ = events.send(event);
+                }
+            }
+        });
+        Ok(Some(tx))
+    }
 }
+
+/// The channel bake events travel on between servers (JSON payloads).
+const BAKE_EVENTS: &str = "aobake_bakes";
 
 #[cfg(test)]
 mod tests {
@@ -110,5 +158,13 @@ mod tests {
         // Claims made at once by many connections never hand out one job
         // twice (FOR UPDATE SKIP LOCKED).
         super::super::suite::concurrent_claims_are_exclusive(std::sync::Arc::new(store)).await;
+        // Two servers on the database: each hears the other's bake events.
+        let a = super::PgStore::connect(&pg.url).await.unwrap();
+        let b = super::PgStore::connect(&pg.url).await.unwrap();
+        super::super::suite::bake_events_reach_every_server(
+            std::sync::Arc::new(a),
+            std::sync::Arc::new(b),
+        )
+        .await;
     }
 }

@@ -241,6 +241,14 @@ pub(super) trait Backend: Send + Sync + std::fmt::Debug + 'static {
         Ok(())
     }
 
+    /// See [`Store::share_events`]; a single-server engine shares none.
+    async fn share_events(
+        &self,
+        _events: tokio::sync::broadcast::Sender<crate::state::BakeEvent>,
+    ) -> Result<Option<tokio::sync::mpsc::UnboundedSender<crate::state::BakeEvent>>> {
+        Ok(None)
+    }
+
     /// A statement with the dialect's placeholders expanded.
     fn sql(text: &str) -> Stmt {
         let mut sql = text.to_owned();
@@ -994,5 +1002,12 @@ impl<B: Backend> Store for SqlStore<B> {
 
     async fn listen(&self, ready: Arc<tokio::sync::Notify>) -> Result<()> {
         self.backend.listen(ready).await
+    }
+
+    async fn share_events(
+        &self,
+        events: tokio::sync::broadcast::Sender<crate::state::BakeEvent>,
+    ) -> Result<Option<tokio::sync::mpsc::UnboundedSender<crate::state::BakeEvent>>> {
+        self.backend.share_events(events).await
     }
 }

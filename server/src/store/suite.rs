@@ -541,3 +541,37 @@ pub(crate) async fn concurrent_claims_are_exclusive(store: std::sync::Arc<dyn St
     let end = store.bake(created.id).await.unwrap().unwrap();
     assert_eq!(end.state, BakeState::Done);
 }
+
+/// Two servers on one store that shares events (`a` and `b`, each an
+/// [`crate::state::AppState`] over its own connection): a bake event one
+/// publishes reaches the other's listeners, and its own, once each.
+pub(crate) async fn bake_events_reach_every_server(
+    a: std::sync::Arc<dyn Store>,
+    b: std::sync::Arc<dyn Store>,
+) {
+    use crate::state::{AppState, BakeEvent, ServerLimits};
+    let dir = tempfile::tempdir().unwrap();
+    let blobs = std::sync::Arc::new(crate::blobs::LocalBlobs::open(dir.path()).unwrap());
+    let state = |store| AppState::new(store, blobs.clone(), policy(), ServerLimits::default());
+    let (mut on_a, mut on_b) = (state(a.clone()), state(b));
+    on_a.share_events().await.unwrap();
+    on_b.share_events().await.unwrap();
+    let (mut heard_a, mut heard_b) = (on_a.events.subscribe(), on_b.events.subscribe());
+    let c = character(a.as_ref()).await;
+    let row = a.create_bake(&bake(&c, "events")).await.unwrap();
+    on_a.publish(&row);
+    let expected = BakeEvent {
+        id: row.id,
+        state: row.state,
+        done: row.done_work,
+        total: row.total_work,
+    };
+    let within = std::time::Duration::from_secs(10);
+    for heard in [&mut heard_a, &mut heard_b] {
+        let event = tokio::time::timeout(within, heard.recv()).await;
+        assert_eq!(event.unwrap().unwrap(), expected);
+    }
+    // Once each: nothing more arrives.
+    tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+    assert!(heard_a.try_recv().is_err() && heard_b.try_recv().is_err());
+}
