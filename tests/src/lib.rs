@@ -67,6 +67,9 @@ pub struct Options {
     pub job_rays: Option<u64>,
     /// `--blobs`, when not the data directory (an S3 bucket: [`TestS3`]).
     pub blobs: Option<String>,
+    /// `--database`, when not SQLite in the data directory (PostgreSQL:
+    /// [`TestPostgres`]).
+    pub database: Option<String>,
 }
 
 impl Default for Options {
@@ -79,6 +82,7 @@ impl Default for Options {
             header_timeout_secs: 10.0,
             job_rays: None,
             blobs: None,
+            database: None,
         }
     }
 }
@@ -146,6 +150,7 @@ impl TestEnv {
             .args(["--header-timeout-secs", &o.header_timeout_secs.to_string()])
             .args(o.job_rays.map(|r| format!("--job-rays={r}")))
             .args(o.blobs.as_ref().map(|b| format!("--blobs={b}")))
+            .args(o.database.as_ref().map(|d| format!("--database={d}")))
             .env("AOBAKE_ADMIN_TOKEN", ADMIN)
             .stdout(Stdio::null())
             .stderr(log)
@@ -424,5 +429,118 @@ impl Drop for TestS3 {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+/// A throwaway PostgreSQL server for tests: `initdb` into a temporary
+/// directory and `pg_ctl start` on a free port (as the `postgres` user
+/// when running as root, since PostgreSQL refuses to run as root).
+/// Stopped on drop.
+#[derive(Debug)]
+pub struct TestPostgres {
+    dir: tempfile::TempDir,
+    bin: PathBuf,
+    as_postgres: bool,
+    /// Connection URL.
+    pub url: String,
+}
+
+impl TestPostgres {
+    fn run(&self, program: &str, args: &[&str]) -> std::process::Output {
+        let exe = self.bin.join(program);
+        let mut cmd = if self.as_postgres {
+            let mut c = Command::new("runuser");
+            c.args(["-u", "postgres", "--"]).arg(&exe);
+            c
+        } else {
+            Command::new(&exe)
+        };
+        cmd.args(args)
+            .output()
+            .unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()))
+    }
+
+    /// Starts one. PostgreSQL 15's binaries must be installed (`.ci/run`
+    /// installs Debian's `postgresql`); their folder is `pg_config
+    /// --bindir`.
+    pub fn start() -> Self {
+        let bindir = Command::new("pg_config")
+            .arg("--bindir")
+            .output()
+            .expect("pg_config is missing: install PostgreSQL (apt-get install postgresql)");
+        let bin = PathBuf::from(String::from_utf8_lossy(&bindir.stdout).trim());
+        let as_postgres = Command::new("id")
+            .arg("-u")
+            .output()
+            .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+        let dir = tempfile::tempdir().unwrap();
+        if as_postgres {
+            let ids = |flag: &str| -> u32 {
+                let o = Command::new("id")
+                    .args([flag, "postgres"])
+                    .output()
+                    .unwrap();
+                String::from_utf8_lossy(&o.stdout).trim().parse().unwrap()
+            };
+            std::os::unix::fs::chown(dir.path(), Some(ids("-u")), Some(ids("-g"))).unwrap();
+        }
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let data = dir.path().join("pg");
+        let data = data.to_str().unwrap();
+        let mut pg = Self {
+            bin,
+            as_postgres,
+            url: format!("postgres://aobake@127.0.0.1:{port}/postgres"),
+            dir,
+        };
+        let out = pg.run(
+            "initdb",
+            &["-D", data, "-A", "trust", "-U", "aobake", "--no-sync"],
+        );
+        assert!(
+            out.status.success(),
+            "initdb: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let options = format!(
+            "-p {port} -k {} -c listen_addresses=127.0.0.1 -c fsync=off",
+            pg.dir.path().display()
+        );
+        let log = pg.dir.path().join("pg.log");
+        let out = pg.run(
+            "pg_ctl",
+            &[
+                "-D",
+                data,
+                "-o",
+                &options,
+                "-l",
+                log.to_str().unwrap(),
+                "-w",
+                "start",
+            ],
+        );
+        assert!(
+            out.status.success(),
+            "pg_ctl start: {}{}",
+            String::from_utf8_lossy(&out.stderr),
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+        pg.url = format!("postgres://aobake@127.0.0.1:{port}/postgres");
+        pg
+    }
+}
+
+impl Drop for TestPostgres {
+    fn drop(&mut self) {
+        let data = self.dir.path().join("pg");
+        let _ = self.run(
+            "pg_ctl",
+            &["-D", data.to_str().unwrap(), "-m", "immediate", "stop"],
+        );
     }
 }

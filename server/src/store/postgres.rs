@@ -152,7 +152,7 @@ const BAKE_EVENTS: &str = "aobake_bakes";
 mod tests {
     #[tokio::test]
     async fn the_shared_store_suite_passes_on_postgres() {
-        let pg = super::super::suite::TestPostgres::start();
+        let pg = aobake_e2e::TestPostgres::start();
         let store = super::PgStore::connect(&pg.url).await.unwrap();
         super::super::suite::run_all(&store).await;
         // Claims made at once by many connections never hand out one job

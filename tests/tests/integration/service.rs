@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use aobake_e2e::{ADMIN, Options, TestEnv, TestS3, character};
+use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
 
 use crate::util::{QUICK, asset, local_bake, submit, upload};
 
@@ -379,17 +379,34 @@ fn assert_served_with_etag_and_ranges(env: &TestEnv, b: &serde_json::Value) {
 
 #[test]
 fn progress_arrives_as_server_sent_events() {
-    use std::io::BufRead as _;
     let mut env = TestEnv::start(Options::default());
     let digest = upload(&env, &character("RiggedSimple"));
     let (_, b) = submit(&env, &digest, 16);
     let id = b["id"].as_i64().unwrap();
+    let url = env.url.clone();
+    let events = follow_events(&url, id, || {
+        env.start_worker(&[]);
+    });
+    assert_eq!(events[0]["state"], "queued");
+    assert!(events.len() >= 3, "{events:?}");
+    let progress: Vec<i64> = events.iter().map(|e| e["done"].as_i64().unwrap()).collect();
+    assert!(progress.windows(2).all(|w| w[0] <= w[1]), "{progress:?}");
+    assert_eq!(
+        progress.last(),
+        events.last().unwrap()["total"].as_i64().as_ref()
+    );
+}
+
+/// Bake `id`'s server-sent events from the server at `url`, from its
+/// current state (`start` runs once the stream is open) to `done`.
+fn follow_events(url: &str, id: i64, start: impl FnOnce()) -> Vec<serde_json::Value> {
+    use std::io::BufRead as _;
     let agent: ureq::Agent = ureq::Agent::config_builder()
         .timeout_global(Some(Duration::from_secs(120)))
         .build()
         .into();
     let mut res = agent
-        .get(format!("{}/v1/bakes/{id}/events", env.url))
+        .get(format!("{url}/v1/bakes/{id}/events"))
         .header("authorization", format!("Bearer {ADMIN}"))
         .call()
         .unwrap();
@@ -397,8 +414,7 @@ fn progress_arrives_as_server_sent_events() {
         res.headers()["content-type"].to_str().unwrap(),
         "text/event-stream"
     );
-    // The first event is the current state, before any worker runs.
-    env.start_worker(&[]);
+    start();
     let reader = std::io::BufReader::new(res.body_mut().as_reader());
     let mut events = Vec::new();
     for line in reader.lines() {
@@ -413,14 +429,39 @@ fn progress_arrives_as_server_sent_events() {
             }
         }
     }
+    events
+}
+
+#[test]
+fn two_servers_on_one_postgres_and_bucket_serve_one_bake() {
+    // Servers A and B share PostgreSQL and an S3 bucket. The character is
+    // uploaded and the bake submitted through B, a worker works through A,
+    // and a client follows the bake's progress on B.
+    let (pg, s3) = (TestPostgres::start(), TestS3::start());
+    let shared = || Options {
+        database: Some(pg.url.clone()),
+        blobs: Some(s3.url.clone()),
+        ..Options::default()
+    };
+    let mut a = TestEnv::start(shared());
+    let b = TestEnv::start(shared());
+    let rigged = character("RiggedSimple");
+    let digest = upload(&b, &rigged);
+    let (status, bake) = submit(&b, &digest, 16);
+    assert_eq!(status, 202, "{bake}");
+    let id = bake["id"].as_i64().unwrap();
+    let events = follow_events(&b.url, id, || {
+        a.start_worker(&[]);
+    });
+    // B's client heard the progress A's worker made, in order, to the end.
     assert_eq!(events[0]["state"], "queued");
     assert!(events.len() >= 3, "{events:?}");
     let progress: Vec<i64> = events.iter().map(|e| e["done"].as_i64().unwrap()).collect();
     assert!(progress.windows(2).all(|w| w[0] <= w[1]), "{progress:?}");
-    assert_eq!(
-        progress.last(),
-        events.last().unwrap()["total"].as_i64().as_ref()
-    );
+    // Either server serves the asset, the same bytes as `aobake bake`.
+    let done = a.wait_bake(id, Duration::from_secs(60));
+    assert!(asset(&a, &done) == local_bake(a.dir.path(), &rigged, 16));
+    assert!(asset(&b, &done) == asset(&a, &done));
 }
 
 #[test]
