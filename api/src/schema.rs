@@ -49,7 +49,7 @@ impl utoipa::ToSchema for Digest {}
 
 /// What every authenticated operation may answer besides its own
 /// responses: a malformed request, a missing or unknown token, a token
-/// without the scope, too many requests.
+/// without the scope, too many requests, a database that does not answer.
 #[derive(Debug, utoipa::IntoResponses)]
 pub enum Refusals {
     /// Bad request.
@@ -80,4 +80,11 @@ pub enum Refusals {
         content_type = "application/problem+json"
     )]
     RateLimited(crate::Problem),
+    /// The database does not answer (`Retry-After` says when to try again).
+    #[response(
+        status = 503,
+        description = "The database does not answer; retry after Retry-After seconds",
+        content_type = "application/problem+json"
+    )]
+    Unavailable(crate::Problem),
 }

@@ -45,6 +45,10 @@ pub enum ApiError {
     /// Too many requests for this token.
     #[error("too many requests; retry after {0} s")]
     RateLimited(u64),
+    /// The database does not answer (restarting, unreachable): the
+    /// request can be sent again after this many seconds.
+    #[error("the database is not answering; retry after {0} s")]
+    Unavailable(u64),
     /// A bug or an outage; the detail is logged, not sent.
     #[error("internal error: {0}")]
     Internal(String),
@@ -86,6 +90,11 @@ impl ApiError {
                 "rate_limited",
                 "Too many requests",
             ),
+            Self::Unavailable(_) => (
+                StatusCode::SERVICE_UNAVAILABLE,
+                "unavailable",
+                "Service unavailable",
+            ),
             Self::Internal(_) => (
                 StatusCode::INTERNAL_SERVER_ERROR,
                 "internal",
@@ -119,7 +128,7 @@ impl IntoResponse for ApiError {
             header::CONTENT_TYPE,
             HeaderValue::from_static("application/problem+json"),
         );
-        if let Self::RateLimited(s) = self {
+        if let Self::RateLimited(s) | Self::Unavailable(s) = self {
             res.headers_mut()
                 .insert(header::RETRY_AFTER, HeaderValue::from(s));
         }
@@ -138,8 +147,33 @@ impl From<StoreError> for ApiError {
         match e {
             StoreError::LeaseLost(m) | StoreError::Conflict(m) => Self::Conflict(m),
             StoreError::NotFound(m) => Self::NotFound(m),
+            StoreError::Database(e) if unreachable(&e) => {
+                eprintln!("error: the database is not answering: {e}");
+                Self::Unavailable(DATABASE_RETRY_SECS)
+            }
             other => Self::Internal(other.to_string()),
         }
+    }
+}
+
+/// What a client is told to wait while the database does not answer.
+const DATABASE_RETRY_SECS: u64 = 2;
+
+/// Whether `e` says the database could not be reached (down, restarting,
+/// its connections gone), not that a query failed.
+fn unreachable(e: &sqlx::Error) -> bool {
+    match e {
+        sqlx::Error::Io(_)
+        | sqlx::Error::PoolTimedOut
+        | sqlx::Error::PoolClosed
+        | sqlx::Error::WorkerCrashed
+        | sqlx::Error::Tls(_) => true,
+        // SQLSTATE classes 08 (connection exception) and 57P (operator
+        // intervention: shutting down, cannot connect now).
+        sqlx::Error::Database(d) => d
+            .code()
+            .is_some_and(|c| c.starts_with("08") || c.starts_with("57P")),
+        _ => false,
     }
 }
 

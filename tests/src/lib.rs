@@ -441,6 +441,7 @@ pub struct TestPostgres {
     dir: tempfile::TempDir,
     bin: PathBuf,
     as_postgres: bool,
+    port: u16,
     /// Connection URL.
     pub url: String,
 }
@@ -491,9 +492,10 @@ impl TestPostgres {
             .port();
         let data = dir.path().join("pg");
         let data = data.to_str().unwrap();
-        let mut pg = Self {
+        let pg = Self {
             bin,
             as_postgres,
+            port,
             url: format!("postgres://aobake@127.0.0.1:{port}/postgres"),
             dir,
         };
@@ -506,16 +508,46 @@ impl TestPostgres {
             "initdb: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let options = format!(
-            "-p {port} -k {} -c listen_addresses=127.0.0.1 -c fsync=off",
-            pg.dir.path().display()
-        );
-        let log = pg.dir.path().join("pg.log");
-        let out = pg.run(
+        pg.start_again();
+        pg
+    }
+
+    /// Stops the server at once (`pg_ctl stop -m immediate`), as a crash
+    /// or a restart would.
+    pub fn stop(&self) {
+        let data = self.dir.path().join("pg");
+        let out = self.run(
             "pg_ctl",
             &[
                 "-D",
-                data,
+                data.to_str().unwrap(),
+                "-m",
+                "immediate",
+                "-w",
+                "stop",
+            ],
+        );
+        assert!(
+            out.status.success(),
+            "pg_ctl stop: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+
+    /// Starts the server on its data and port (after [`TestPostgres::stop`]).
+    pub fn start_again(&self) {
+        let data = self.dir.path().join("pg");
+        let options = format!(
+            "-p {} -k {} -c listen_addresses=127.0.0.1 -c fsync=off",
+            self.port,
+            self.dir.path().display()
+        );
+        let log = self.dir.path().join("pg.log");
+        let out = self.run(
+            "pg_ctl",
+            &[
+                "-D",
+                data.to_str().unwrap(),
                 "-o",
                 &options,
                 "-l",
@@ -530,8 +562,6 @@ impl TestPostgres {
             String::from_utf8_lossy(&out.stderr),
             std::fs::read_to_string(&log).unwrap_or_default()
         );
-        pg.url = format!("postgres://aobake@127.0.0.1:{port}/postgres");
-        pg
     }
 }
 

@@ -33,6 +33,9 @@ impl PgStore {
     pub async fn connect(url: &str) -> Result<Self> {
         let pool = PgPoolOptions::new()
             .max_connections(16)
+            // While the database is down a request waits this long for a
+            // connection, then gets a 503 with Retry-After.
+            .acquire_timeout(std::time::Duration::from_secs(3))
             .connect(url)
             .await?;
         sqlx::migrate!("migrations/postgres").run(&pool).await?;

@@ -4,7 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use aobake_e2e::{ADMIN, Options, TestEnv, character};
+use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, character};
 use rand::RngExt as _;
 use serde_json::Value;
 
@@ -125,6 +125,58 @@ fn a_server_killed_mid_bake_restarts_and_finishes_the_same() {
     std::thread::sleep(Duration::from_millis(500));
     // Same port, so the workers find it again.
     env.start_server_on(url.trim_start_matches("http://"));
+    let bake = env.wait_bake(id, Duration::from_secs(180));
+    assert_counted_once(&bake, &jobs(&env, id));
+    assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
+}
+
+#[test]
+fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
+    let pg = TestPostgres::start();
+    let mut env = TestEnv::start(Options {
+        database: Some(pg.url.clone()),
+        lease_secs: 2.0,
+        ..Options::default()
+    });
+    let cm = character("CesiumMan");
+    let digest = upload(&env, &cm);
+    let (_, b) = submit(&env, &digest, 64);
+    let id = b["id"].as_i64().unwrap();
+    env.start_worker(&[]);
+    env.start_worker(&[]);
+    let started = Instant::now();
+    loop {
+        let (_, now) = env
+            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+            .unwrap();
+        if now["jobs_done"].as_i64().unwrap() >= 4 {
+            break;
+        }
+        assert!(started.elapsed() < Duration::from_secs(120), "{now}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    pg.stop();
+    // While it is down a request is told to come back, not failed.
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .build()
+        .into();
+    let res = agent
+        .get(format!("{}/v1/bakes/{id}", env.url))
+        .header("authorization", format!("Bearer {ADMIN}"))
+        .call()
+        .unwrap();
+    assert_eq!(res.status().as_u16(), 503);
+    let retry: u64 = res.headers()["retry-after"]
+        .to_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!((1..=30).contains(&retry), "{retry}");
+    std::thread::sleep(Duration::from_secs(3));
+    pg.start_again();
+    // The workers went on waiting; the bake finishes, every job counted
+    // once, the same bytes as `aobake bake`.
     let bake = env.wait_bake(id, Duration::from_secs(180));
     assert_counted_once(&bake, &jobs(&env, id));
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
