@@ -7,9 +7,10 @@ use serde::{Serialize, de::DeserializeOwned};
 use sha2::{Digest as _, Sha256};
 
 use crate::types::{
-    BakeRequest, BakeView, CheckpointRef, CheckpointRequest, CompleteRequest, Completion,
-    FailRequest, HeartbeatReply, HeartbeatRequest, Lease, LeaseRequest, NewToken, NewTokenRequest,
-    Problem, TokenRequest, Uploaded, Whoami,
+    BakeRequest, BakeView, CheckpointRef, CheckpointRequest, CompleteManyReply,
+    CompleteManyRequest, CompleteRequest, Completion, FailRequest, HeartbeatReply,
+    HeartbeatRequest, JobCompletion, Lease, LeaseManyRequest, LeaseRequest, Leases, NewToken,
+    NewTokenRequest, Problem, TokenRequest, Uploaded, Whoami,
 };
 
 /// The longest a call waits in all on a server that answers 429 before it
@@ -327,6 +328,49 @@ impl Client {
                 tracer: tracer.map(str::to_owned),
             },
         )
+    }
+
+    /// Waits up to `wait_secs` for jobs for a process's idle slots
+    /// `workers` (1 to 64 ids): at most one each, in that order, none
+    /// when no job came in time.
+    pub fn lease_many(
+        &self,
+        workers: &[String],
+        wait_secs: u64,
+        tracer: Option<&str>,
+    ) -> Result<Vec<Lease>> {
+        let leases: Option<Leases> = self.post(
+            "/v1/jobs/leases",
+            &LeaseManyRequest {
+                workers: workers.to_vec(),
+                wait_secs,
+                tracer: tracer.map(str::to_owned),
+            },
+        )?;
+        Ok(leases.map(|l| l.leases).unwrap_or_default())
+    }
+
+    /// Completes several jobs (1 to 64) in one request: one outcome per
+    /// item, in order, a refused one with the status and problem that
+    /// `complete` would have got.
+    pub fn complete_many(&self, items: &[JobCompletion]) -> Result<Vec<Result<()>>> {
+        let reply: CompleteManyReply = self.post_for(
+            "/v1/jobs/completions",
+            &CompleteManyRequest {
+                completions: items.to_vec(),
+            },
+        )?;
+        Ok(reply
+            .results
+            .into_iter()
+            .map(|r| match r.problem {
+                None => Ok(()),
+                Some(problem) => Err(ApiError::Status {
+                    status: problem.status,
+                    problem: Box::new(problem),
+                }),
+            })
+            .collect())
     }
 
     /// Extends the lease; `true` asks the job to stop.

@@ -374,6 +374,77 @@ pub struct LeaseRequest {
     pub tracer: Option<String>,
 }
 
+/// `POST /v1/jobs/leases`: jobs for several idle slots of one worker
+/// process in one request.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct LeaseManyRequest {
+    /// The idle slots' worker ids (1 to 64, each 1 to 200 characters, no
+    /// repeats): each gets at most one job.
+    #[cfg_attr(feature = "schema", schema(min_items = 1, max_items = 64))]
+    pub workers: Vec<String>,
+    /// Seconds to wait for a first job before answering 204 (at most 60).
+    #[serde(default)]
+    #[cfg_attr(feature = "schema", schema(maximum = 60))]
+    pub wait_secs: u64,
+    /// What casts the process's rays, as in `LeaseRequest`.
+    #[serde(default)]
+    #[cfg_attr(feature = "schema", schema(max_length = 200))]
+    pub tracer: Option<String>,
+}
+
+/// Leased jobs, at most one per slot asked for, in the order asked; fewer
+/// slots than asked get one when fewer jobs are ready.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct Leases {
+    /// The leases; each job's `worker` names its slot.
+    pub leases: Vec<Lease>,
+}
+
+/// One job's completion in `POST /v1/jobs/completions`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct JobCompletion {
+    /// The job.
+    pub job: i64,
+    /// Its lease token.
+    pub token: String,
+    /// Its outputs (blobs already stored) and timings.
+    pub completion: Completion,
+}
+
+/// `POST /v1/jobs/completions`: several jobs' completions in one request
+/// and one transaction.
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct CompleteManyRequest {
+    /// 1 to 64 completions.
+    #[cfg_attr(feature = "schema", schema(min_items = 1, max_items = 64))]
+    pub completions: Vec<JobCompletion>,
+}
+
+/// What became of each completion, in the order sent.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct CompleteManyReply {
+    /// One result per completion sent.
+    pub results: Vec<CompletionResult>,
+}
+
+/// One completion's outcome: recorded, or refused with the problem a
+/// single `complete` would have answered (409 when the lease is gone, 400
+/// `missing_blob` when an output was not stored).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct CompletionResult {
+    /// The job.
+    pub job: i64,
+    /// Why it was refused; absent when it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub problem: Option<Problem>,
+}
+
 /// Token and progress.
 #[derive(Debug, Deserialize, Serialize)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
@@ -469,7 +540,7 @@ pub struct NewToken {
 }
 
 /// The problem+json body.
-#[derive(Debug, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
 pub struct Problem {
     /// A URI naming the problem type.

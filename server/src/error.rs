@@ -106,24 +106,32 @@ impl ApiError {
 
 pub use aobake_api::Problem;
 
-impl IntoResponse for ApiError {
-    fn into_response(self) -> Response {
+impl ApiError {
+    /// The problem+json body that tells a client of this error (an
+    /// internal error is logged here, and named only generically).
+    pub fn problem(&self) -> Problem {
         let (status, code, title) = self.parts();
-        let detail = match &self {
+        let detail = match self {
             Self::Internal(d) => {
                 eprintln!("error: internal: {d}");
                 "the server failed; the error was logged".to_owned()
             }
             other => other.to_string(),
         };
-        let body = Problem {
+        Problem {
             kind: format!("https://aobake.dev/problems/{code}"),
             title: title.to_owned(),
             status: status.as_u16(),
             detail,
             code: code.to_owned(),
-        };
-        let mut res = (status, axum::Json(body)).into_response();
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let (status, _, _) = self.parts();
+        let mut res = (status, axum::Json(self.problem())).into_response();
         res.headers_mut().insert(
             header::CONTENT_TYPE,
             HeaderValue::from_static("application/problem+json"),

@@ -1,8 +1,8 @@
 //! The lease loop (DESIGN §8): lease, run, heartbeat, checkpoint, complete.
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
 
 use aobake_core::{
@@ -13,7 +13,7 @@ use aobake_core::{
     },
 };
 
-use aobake_api::{ApiError, CheckpointRef, Client, Completion, Lease, OutputRef};
+use aobake_api::{ApiError, CheckpointRef, Client, Completion, JobCompletion, Lease, OutputRef};
 
 /// How soon a moved progress is sent, at most (see the heartbeat loop).
 const PROGRESS_EVERY: Duration = Duration::from_secs(1);
@@ -48,8 +48,21 @@ pub struct WorkerConfig {
 /// Imported inputs of recent bakes, by bake id.
 type InputCache = Mutex<HashMap<i64, Arc<BakeInputs>>>;
 
-/// Runs until SIGTERM (or SIGINT): each of `concurrency` threads leases
-/// and runs jobs.
+/// The most completions one request carries (the server's limit).
+const MAX_BATCH: usize = 64;
+
+/// A finished job's completion on its way to the server, and where its
+/// slot hears the answer.
+struct Finished {
+    item: JobCompletion,
+    answer: mpsc::Sender<Result<(), String>>,
+}
+
+/// Runs until SIGTERM (or SIGINT): `concurrency` slots, one thread each,
+/// run jobs that one dispatcher leases for all idle slots in one request,
+/// and finished jobs are completed together in one request while another
+/// is on its way (group commit), so scheduling costs a request per batch,
+/// not two per job.
 pub fn run(config: WorkerConfig) -> Result<(), String> {
     let shutdown = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
@@ -58,54 +71,138 @@ pub fn run(config: WorkerConfig) -> Result<(), String> {
     }
     let client = Client::with_timeout(&config.server, &config.token, Duration::from_secs(120));
     let cache: Arc<InputCache> = Arc::default();
+    let slots = config.concurrency.max(1);
+    // Each slot is a worker of its own to the server: one job at a time.
+    let ids: Vec<String> = (0..slots)
+        .map(|slot| {
+            if slots > 1 {
+                format!("{}/{slot}", config.id)
+            } else {
+                config.id.clone()
+            }
+        })
+        .collect();
+    let (free_tx, free_rx) = mpsc::channel::<usize>();
+    let (done_tx, done_rx) = mpsc::channel::<Finished>();
     std::thread::scope(|scope| {
-        for slot in 0..config.concurrency.max(1) {
-            let (client, config, shutdown, cache) = (&client, &config, &shutdown, &cache);
+        let client = &client;
+        scope.spawn(move || complete_batches(client, &done_rx));
+        let mut to_slots = Vec::with_capacity(slots);
+        for slot in 0..slots {
+            let (tx, rx) = mpsc::channel::<Lease>();
+            to_slots.push(tx);
+            let (free, done) = (free_tx.clone(), done_tx.clone());
+            let (config, shutdown, cache) = (&config, &shutdown, &cache);
             scope.spawn(move || {
-                let id = if config.concurrency > 1 {
-                    format!("{}/{slot}", config.id)
-                } else {
-                    config.id.clone()
-                };
-                lease_loop(client, config, &id, shutdown, cache);
+                for lease in rx {
+                    run_leased(client, config, lease, shutdown, cache, &done);
+                    let _ = free.send(slot);
+                }
             });
         }
+        // The slots hold the completer's senders now: it ends after them.
+        drop(done_tx);
+        dispatch(client, &config, &ids, &shutdown, &free_rx, &to_slots);
+        // Slots finish their jobs (or stop them at shutdown's deadline),
+        // then end.
+        drop(to_slots);
     });
     eprintln!("worker {}: stopped", config.id);
     Ok(())
 }
 
-fn lease_loop(
+/// Leases jobs for the idle slots, one request for all of them, until
+/// shutdown.
+fn dispatch(
     client: &Client,
     config: &WorkerConfig,
-    id: &str,
+    ids: &[String],
     shutdown: &AtomicBool,
-    cache: &InputCache,
+    freed: &mpsc::Receiver<usize>,
+    slots: &[mpsc::Sender<Lease>],
 ) {
     let mut failures = 0u32;
     // The process's tracer (installed by `aobake worker --gpu`), told to
     // the server until a request has gone through.
     let tracer = aobake_core::trace::engine::tracer_label();
     let mut told = false;
+    let mut idle: BTreeSet<usize> = (0..ids.len()).collect();
     while !shutdown.load(Ordering::Relaxed) {
-        let leased = client.lease(id, config.wait_secs, (!told).then_some(tracer.as_str()));
+        if idle.is_empty() {
+            // Every slot is busy: wait for one, looking at shutdown.
+            match freed.recv_timeout(Duration::from_millis(200)) {
+                Ok(slot) => {
+                    idle.insert(slot);
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => continue,
+                Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            }
+        }
+        idle.extend(freed.try_iter());
+        let asked: Vec<String> = idle.iter().map(|&s| ids[s].clone()).collect();
+        let leased =
+            client.lease_many(&asked, config.wait_secs, (!told).then_some(tracer.as_str()));
         told |= leased.is_ok();
         match leased {
-            Ok(Some(lease)) => {
+            Ok(leases) => {
                 failures = 0;
-                if shutdown.load(Ordering::Relaxed) {
-                    // Leased while we were told to stop: give it back.
-                    let _ = client.release(lease.job.id, &lease.token);
-                    break;
+                for lease in leases {
+                    let slot = lease
+                        .job
+                        .worker
+                        .as_deref()
+                        .and_then(|w| ids.iter().position(|id| id == w))
+                        .filter(|s| idle.contains(s));
+                    match slot {
+                        Some(s) if !shutdown.load(Ordering::Relaxed) => {
+                            idle.remove(&s);
+                            if let Err(mpsc::SendError(lease)) = slots[s].send(lease) {
+                                let _ = client.release(lease.job.id, &lease.token);
+                            }
+                        }
+                        // Leased while we were told to stop (or, against
+                        // the protocol, for no idle slot): give it back.
+                        _ => {
+                            let _ = client.release(lease.job.id, &lease.token);
+                        }
+                    }
                 }
-                run_leased(client, config, lease, shutdown, cache);
             }
-            Ok(None) => {}
             Err(e) => {
                 failures += 1;
                 let wait = Duration::from_millis(200 * u64::from(failures.min(25)));
-                eprintln!("worker {id}: cannot lease ({e}); retrying in {wait:?}");
+                eprintln!(
+                    "worker {}: cannot lease ({e}); retrying in {wait:?}",
+                    config.id
+                );
                 std::thread::sleep(wait);
+            }
+        }
+    }
+}
+
+/// Sends finished jobs' completions, all that are waiting in one request,
+/// and tells each slot its answer; ends when every slot has ended.
+fn complete_batches(client: &Client, finished: &mpsc::Receiver<Finished>) {
+    while let Ok(first) = finished.recv() {
+        let mut batch = vec![first];
+        batch.extend(finished.try_iter().take(MAX_BATCH - 1));
+        let items: Vec<JobCompletion> = batch.iter().map(|f| f.item.clone()).collect();
+        match with_retries(|| client.complete_many(&items)) {
+            Ok(results) => {
+                let mut results = results.into_iter();
+                for f in batch {
+                    let answer = match results.next() {
+                        Some(r) => r.map_err(|e| e.to_string()),
+                        None => Err("the server gave no answer for it".to_owned()),
+                    };
+                    let _ = f.answer.send(answer);
+                }
+            }
+            Err(e) => {
+                for f in batch {
+                    let _ = f.answer.send(Err(e.to_string()));
+                }
             }
         }
     }
@@ -364,6 +461,7 @@ fn run_leased(
     lease: Lease,
     shutdown: &AtomicBool,
     cache: &InputCache,
+    finished: &mpsc::Sender<Finished>,
 ) {
     let job = lease.job.id;
     let flags = Flags::default();
@@ -443,9 +541,19 @@ fn run_leased(
                 })
                 .collect();
             let timings = serde_json::to_value(out.timings).unwrap_or_default();
-            let done = uploaded.and_then(|outputs| {
-                let completion = Completion { outputs, timings };
-                with_retries(|| client.complete(job, &lease.token, completion.clone()))
+            let done = uploaded.map_err(|e| e.to_string()).and_then(|outputs| {
+                let (answer, heard) = mpsc::channel();
+                let item = JobCompletion {
+                    job,
+                    token: lease.token.clone(),
+                    completion: Completion { outputs, timings },
+                };
+                finished
+                    .send(Finished { item, answer })
+                    .map_err(|_| "the completer has ended".to_owned())?;
+                heard
+                    .recv()
+                    .map_err(|_| "the completer gave no answer".to_owned())?
             });
             match done {
                 Ok(()) => eprintln!(

@@ -10,8 +10,9 @@ pub(super) struct WorkerArgs {
     /// A token with the worker scope.
     #[arg(long, env = "AOBAKE_TOKEN", hide_env_values = true)]
     token: String,
-    /// Jobs at once.
-    #[arg(long, default_value_t = 1)]
+    /// Jobs at once, one thread each: the idle ones are leased jobs in
+    /// one request, and jobs that finish together are completed in one.
+    #[arg(long, env = "AOBAKE_CONCURRENCY", default_value_t = 1)]
     concurrency: usize,
     /// This worker's name (default: host name and process id).
     #[arg(long)]

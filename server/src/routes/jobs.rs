@@ -5,9 +5,11 @@
 
 use aobake_api::schema::{Digest, Refusals};
 use aobake_api::{
-    CheckpointRequest, CompleteRequest, FailRequest, HeartbeatReply, HeartbeatRequest,
-    LeaseRequest, TokenRequest,
+    CheckpointRequest, CompleteManyReply, CompleteManyRequest, CompleteRequest, CompletionResult,
+    FailRequest, HeartbeatReply, HeartbeatRequest, LeaseManyRequest, LeaseRequest, Leases,
+    TokenRequest,
 };
+use std::collections::BTreeSet;
 use std::time::Duration;
 
 use axum::{
@@ -24,12 +26,17 @@ use crate::{
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, Body},
     state::AppState,
-    store::Lease,
+    store::{Completing, Lease},
 };
+
+/// The most jobs one `leases` or `completions` request may carry.
+const MAX_BATCH: usize = 64;
 
 pub(super) fn router() -> Router<AppState> {
     Router::new()
         .route("/v1/jobs/lease", post(lease))
+        .route("/v1/jobs/leases", post(lease_many))
+        .route("/v1/jobs/completions", post(complete_many))
         .route("/v1/jobs/{id}/heartbeat", post(heartbeat))
         .route("/v1/jobs/{id}/checkpoint", post(checkpoint))
         .route("/v1/jobs/{id}/complete", post(complete))
@@ -46,39 +53,90 @@ pub(crate) async fn lease(
     _caller: Need<Worker>,
     Body(req): Body<LeaseRequest>,
 ) -> ApiResult<Response> {
-    if req.worker.is_empty() || req.worker.len() > 200 {
+    let leases = wait_for_leases(&state, vec![req.worker], req.wait_secs, req.tracer).await?;
+    Ok(match leases.into_iter().next() {
+        Some(lease) => Json(lease).into_response(),
+        None => StatusCode::NO_CONTENT.into_response(),
+    })
+}
+
+#[utoipa::path(post, path = "/v1/jobs/leases", tag = "worker protocol", request_body = LeaseManyRequest,
+    security(("bearer" = ["worker"])),
+    responses((status = 200, description = "One to all of the slots got a job", body = Leases), (status = 204, description = "No job within wait_secs"), Refusals))]
+pub(crate) async fn lease_many(
+    State(state): State<AppState>,
+    _caller: Need<Worker>,
+    Body(req): Body<LeaseManyRequest>,
+) -> ApiResult<Response> {
+    if req.workers.is_empty() || req.workers.len() > MAX_BATCH {
+        return Err(ApiError::bad(
+            "bad_workers",
+            format!("a lease request names 1 to {MAX_BATCH} workers"),
+        ));
+    }
+    if req.workers.iter().collect::<BTreeSet<_>>().len() != req.workers.len() {
+        return Err(ApiError::bad(
+            "bad_workers",
+            "a lease request names each worker once",
+        ));
+    }
+    let leases = wait_for_leases(&state, req.workers, req.wait_secs, req.tracer).await?;
+    Ok(if leases.is_empty() {
+        StatusCode::NO_CONTENT.into_response()
+    } else {
+        Json(Leases { leases }).into_response()
+    })
+}
+
+/// Leases for `workers`, waiting up to `wait_secs` (at most 60) for a
+/// first job; empty when none came.
+async fn wait_for_leases(
+    state: &AppState,
+    workers: Vec<String>,
+    wait_secs: u64,
+    tracer: Option<String>,
+) -> ApiResult<Vec<Lease>> {
+    if workers.iter().any(|w| w.is_empty() || w.len() > 200) {
         return Err(ApiError::bad(
             "bad_worker",
             "worker ids are 1 to 200 characters",
         ));
     }
-    if let Some(tracer) = &req.tracer {
+    if let Some(tracer) = &tracer {
         if tracer.is_empty() || tracer.len() > 200 {
             return Err(ApiError::bad(
                 "bad_tracer",
                 "a worker's tracer is 1 to 200 characters",
             ));
         }
-        state.store.worker_tracer(&req.worker, tracer).await?;
+        for worker in &workers {
+            state.store.worker_tracer(worker, tracer).await?;
+        }
     }
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(req.wait_secs.min(60));
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(wait_secs.min(60));
     loop {
         // Register interest before looking, so a job made available between
         // the look and the wait still wakes us.
         let notified = state.jobs_ready.notified();
-        if let Some(lease) = state.store.lease(&req.worker, &state.policy).await? {
-            if let Some(bake) = state.store.bake(lease.bake.id).await? {
-                state.announce(&bake);
+        let leases = state.store.lease_many(&workers, &state.policy).await?;
+        if !leases.is_empty() {
+            let bakes: BTreeSet<i64> = leases.iter().map(|l| l.bake.id).collect();
+            for id in bakes {
+                if let Some(bake) = state.store.bake(id).await? {
+                    state.announce(&bake);
+                }
             }
-            return Ok(Json(lease).into_response());
+            return Ok(leases);
         }
-        state.store.worker_seen(&req.worker, "idle", None).await?;
+        for worker in &workers {
+            state.store.worker_seen(worker, "idle", None).await?;
+        }
         let now = tokio::time::Instant::now();
         let stopping = state
             .shutting_down
             .load(std::sync::atomic::Ordering::SeqCst);
         if now >= deadline || stopping {
-            return Ok(StatusCode::NO_CONTENT.into_response());
+            return Ok(Vec::new());
         }
         // Retry delays and lease expiries free jobs without a notification:
         // look again at least every second.
@@ -154,6 +212,70 @@ pub(crate) async fn complete(
         .await?;
     state.announce(&bake);
     Ok(StatusCode::NO_CONTENT)
+}
+
+#[utoipa::path(post, path = "/v1/jobs/completions", tag = "worker protocol", request_body = CompleteManyRequest,
+    security(("bearer" = ["worker"])),
+    responses((status = 200, description = "One result per completion: recorded, or the problem that refused it", body = CompleteManyReply), Refusals))]
+pub(crate) async fn complete_many(
+    State(state): State<AppState>,
+    _caller: Need<Worker>,
+    Body(req): Body<CompleteManyRequest>,
+) -> ApiResult<Json<CompleteManyReply>> {
+    if req.completions.is_empty() || req.completions.len() > MAX_BATCH {
+        return Err(ApiError::bad(
+            "bad_completions",
+            format!("a completions request carries 1 to {MAX_BATCH} completions"),
+        ));
+    }
+    // Outputs must be stored before a completion can name them: an item
+    // naming a missing blob is refused on its own, as `complete` would.
+    let mut refused = Vec::with_capacity(req.completions.len());
+    let mut items = Vec::with_capacity(req.completions.len());
+    for c in req.completions {
+        let mut problem = None;
+        for o in &c.completion.outputs {
+            if let Err(e) = require_blob(&state, &o.digest).await {
+                problem = Some(e);
+                break;
+            }
+        }
+        if problem.is_none() {
+            items.push(Completing {
+                job: c.job,
+                token: c.token,
+                completion: c.completion,
+            });
+        }
+        refused.push((c.job, problem));
+    }
+    let mut recorded = state.store.complete_many(&items).await?.into_iter();
+    let mut announced = BTreeSet::new();
+    let mut results = Vec::with_capacity(refused.len());
+    for (job, problem) in refused {
+        let problem = match problem {
+            Some(e) => Some(e),
+            None => match recorded.next() {
+                Some(Ok(bake)) => {
+                    // Every answer for a bake is its row after the batch:
+                    // announce it once.
+                    if announced.insert(bake.id) {
+                        state.announce(&bake);
+                    }
+                    None
+                }
+                Some(Err(e)) => Some(ApiError::from(e)),
+                None => Some(ApiError::Internal(format!(
+                    "job {job}: no answer from the store"
+                ))),
+            },
+        };
+        results.push(CompletionResult {
+            job,
+            problem: problem.map(|e| e.problem()),
+        });
+    }
+    Ok(Json(CompleteManyReply { results }))
 }
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/fail", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = FailRequest,

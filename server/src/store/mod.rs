@@ -103,6 +103,17 @@ pub struct Beat {
     pub bake: BakeRow,
 }
 
+/// One completion of a batch: the job, its lease token and its outputs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Completing {
+    /// The job.
+    pub job: i64,
+    /// Its current lease token.
+    pub token: String,
+    /// What it produced.
+    pub completion: Completion,
+}
+
 /// A token as stored (its hash, never the secret).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TokenRow {
@@ -185,8 +196,19 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     ) -> Result<Vec<BakeRow>>;
     /// A bake's jobs in graph order.
     async fn jobs(&self, bake: i64) -> Result<Vec<JobRow>>;
+    /// Leases up to one ready job for each of `workers` (a worker
+    /// process's idle slots), most urgent first, in one transaction: the
+    /// leases come in the order of `workers`, each job's `worker` naming
+    /// its slot, and slots left over get nothing.
+    async fn lease_many(&self, workers: &[String], policy: &QueuePolicy) -> Result<Vec<Lease>>;
     /// Leases the most urgent ready job for `worker`, if any.
-    async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>>;
+    async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>> {
+        Ok(self
+            .lease_many(&[worker.to_owned()], policy)
+            .await?
+            .into_iter()
+            .next())
+    }
     /// Extends a lease and records progress; says whether the job should
     /// stop (its bake was cancelled; paused does not stop it) and whether
     /// its progress moved.
@@ -199,8 +221,22 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     ) -> Result<Beat>;
     /// Records a checkpoint for the next attempt.
     async fn checkpoint(&self, job: i64, token: &str, checkpoint: &CheckpointRef) -> Result<()>;
+    /// Completes several jobs in one transaction, each as `complete`
+    /// would: one answer per item, in order, so a lost lease refuses its
+    /// own item only. The outer error is the database's, for all of them.
+    async fn complete_many(&self, items: &[Completing]) -> Result<Vec<Result<BakeRow>>>;
     /// Completes a job with its outputs; returns its bake afterwards.
-    async fn complete(&self, job: i64, token: &str, completion: &Completion) -> Result<BakeRow>;
+    async fn complete(&self, job: i64, token: &str, completion: &Completion) -> Result<BakeRow> {
+        let item = Completing {
+            job,
+            token: token.to_owned(),
+            completion: completion.clone(),
+        };
+        self.complete_many(std::slice::from_ref(&item))
+            .await?
+            .pop()
+            .unwrap_or_else(|| Err(StoreError::NotFound(format!("job {job}"))))
+    }
     /// Fails an attempt; `retryable` false kills the job at once.
     async fn fail(
         &self,

@@ -10,6 +10,7 @@
 //! `{deps}` the comma-separated graph indices of the dependencies of the
 //! row `jobs`, and `{for_update}` / `{skip_locked}` the row-lock suffixes.
 
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::ops::DerefMut;
 use std::sync::Arc;
 
@@ -18,8 +19,9 @@ use sqlx::{FromRow, postgres::PgRow, sqlite::SqliteRow};
 
 use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
 use super::{
-    Action, BakeRow, BakeState, Beat, CheckpointRef, Completion, JobRow, JobState, Lease, NewBake,
-    QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow, WorkerRow, lease_token,
+    Action, BakeRow, BakeState, Beat, CheckpointRef, Completing, Completion, JobRow, JobState,
+    Lease, NewBake, QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow,
+    WorkerRow, lease_token,
 };
 
 /// A value bound to a placeholder.
@@ -86,6 +88,20 @@ impl Stmt {
         self.args.push(value.into());
         self
     }
+
+    /// Binds the next placeholders, one per value (see [`placeholders`]).
+    pub(super) fn bind_all<T: Into<Arg>>(mut self, values: impl IntoIterator<Item = T>) -> Self {
+        self.args.extend(values.into_iter().map(Into::into));
+        self
+    }
+}
+
+/// `n` placeholders from `$first` on, for an `IN (…)` list.
+fn placeholders(first: usize, n: usize) -> String {
+    (first..first + n)
+        .map(|i| format!("${i}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Builds a driver's argument list from bound values.
@@ -345,14 +361,20 @@ async fn leased<B: Backend>(c: &mut B::Conn, job: i64, token: &str) -> Result<Jo
     job_by_id::<B>(c, job).await
 }
 
-/// After `job` completed: each dependent has one dependency fewer, and
-/// those with none left become available. Touches only the job's direct
-/// dependents, so a completion costs the same however large the bake.
-async fn release_dependents<B: Backend>(c: &mut B::Conn, job: i64) -> Result<()> {
-    // CASE sees the count before this update: 1 means this was the last.
+/// After `jobs` completed: each dependent has as many dependencies fewer
+/// as it had among them, and those with none left become available.
+/// Touches only the jobs' direct dependents, so a completion costs the
+/// same however large the bake.
+async fn release_dependents<B: Backend>(c: &mut B::Conn, jobs: &[i64]) -> Result<()> {
+    if jobs.is_empty() {
+        return Ok(());
+    }
+    // Every placeholder list is the same `jobs`; SET sees the row before
+    // this update.
+    let list = placeholders(1, jobs.len());
     c.execute(
-        B::sql("UPDATE jobs SET pending_deps = pending_deps - 1, state = CASE WHEN state = 'blocked' AND pending_deps = 1 THEN 'available' ELSE state END WHERE id IN (SELECT job_id FROM job_deps WHERE dep_id = $1)")
-            .bind(job),
+        B::sql(&format!("UPDATE jobs SET pending_deps = pending_deps - (SELECT COUNT(*) FROM job_deps d WHERE d.job_id = jobs.id AND d.dep_id IN ({list})), state = CASE WHEN state = 'blocked' AND pending_deps = (SELECT COUNT(*) FROM job_deps d WHERE d.job_id = jobs.id AND d.dep_id IN ({list})) THEN 'available' ELSE state END WHERE id IN (SELECT job_id FROM job_deps WHERE dep_id IN ({list}))"))
+            .bind_all(jobs.iter().copied()),
     )
     .await?;
     Ok(())
@@ -389,9 +411,9 @@ async fn fail_bake_if_dead<B: Backend>(c: &mut B::Conn, bake: i64) -> Result<()>
 /// (`routes::jobs`'s long poll), so two seconds miss none.
 const GPU_WAITING_MS: u32 = 2000;
 
-/// Claims the first ready job of the most urgent bake this worker is not
-/// kept off: index lookups, however many jobs are queued. Claimers on
-/// other connections skip the rows each other locked.
+/// Claims up to `limit` ready jobs, in order, from the most urgent bakes
+/// this worker is not kept off: index lookups, however many jobs are
+/// queued. Claimers on other connections skip the rows each other locked.
 ///
 /// Tracing jobs prefer GPU workers: a CPU worker passes over them while a
 /// GPU worker that may take the bake is waiting for a job (idle, and
@@ -402,12 +424,8 @@ async fn claim<B: Backend>(
     c: &mut B::Conn,
     worker: &str,
     policy: &QueuePolicy,
-) -> Result<Option<i64>> {
-    // Retries whose delay has passed are ready again.
-    c.execute(B::sql(
-        "UPDATE jobs SET state = 'available' WHERE state = 'retryable' AND run_at <= {now}",
-    ))
-    .await?;
+    limit: usize,
+) -> Result<Vec<i64>> {
     let bakes: Vec<(i64,)> = c
         .all(
             B::sql("SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = $1 AND f.failures >= $2 AND EXISTS (SELECT 1 FROM workers o WHERE o.id != $1 AND o.last_seen > {now} - 60000 AND NOT EXISTS (SELECT 1 FROM worker_failures g WHERE g.bake_id = b.id AND g.worker = o.id AND g.failures >= $2))) ORDER BY b.priority DESC, b.id LIMIT 8")
@@ -416,29 +434,79 @@ async fn claim<B: Backend>(
         )
         .await?;
     let tracing = JobSpec::TRACING_KINDS.map(|k| format!("'{k}'")).join(", ");
+    let mut ids = Vec::new();
     for (bake,) in bakes {
-        let id = c
-            .scalar(
-                B::sql(&format!("SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' AND NOT (kind IN ({tracing}) AND EXISTS (SELECT 1 FROM workers me WHERE me.id = $2 AND me.tracer = 'cpu') AND EXISTS (SELECT 1 FROM workers g WHERE g.id != $2 AND g.tracer LIKE 'gpu%' AND g.state = 'idle' AND g.last_seen > {{now}} - {GPU_WAITING_MS} AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = $1 AND f.worker = g.id AND f.failures >= $3))) ORDER BY idx LIMIT 1{{skip_locked}}"))
+        let more: Vec<(i64,)> = c
+            .all(
+                B::sql(&format!("SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' AND NOT (kind IN ({tracing}) AND EXISTS (SELECT 1 FROM workers me WHERE me.id = $2 AND me.tracer = 'cpu') AND EXISTS (SELECT 1 FROM workers g WHERE g.id != $2 AND g.tracer LIKE 'gpu%' AND g.state = 'idle' AND g.last_seen > {{now}} - {GPU_WAITING_MS} AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = $1 AND f.worker = g.id AND f.failures >= $3))) ORDER BY idx LIMIT $4{{skip_locked}}"))
                     .bind(bake)
                     .bind(worker)
-                    .bind(policy.worker_failures),
+                    .bind(policy.worker_failures)
+                    .bind(i64::try_from(limit - ids.len()).unwrap_or(i64::MAX)),
             )
             .await?;
-        if id.is_some() {
-            return Ok(id);
+        ids.extend(more.into_iter().map(|(id,)| id));
+        if ids.len() >= limit {
+            break;
         }
     }
-    Ok(None)
+    Ok(ids)
+}
+
+/// Splits a batch's workers into those that would claim alike: workers
+/// with no failures to be kept off for and the same tracer see the same
+/// jobs, so one claim serves them all; a worker with failures claims on
+/// its own. Groups hold indices into `workers`, in its order.
+async fn claim_groups<B: Backend>(
+    c: &mut B::Conn,
+    workers: &[String],
+    policy: &QueuePolicy,
+) -> Result<Vec<Vec<usize>>> {
+    match workers.len() {
+        0 => return Ok(Vec::new()),
+        1 => return Ok(vec![vec![0]]),
+        _ => {}
+    }
+    let known: Vec<(String, Option<String>)> = c
+        .all(
+            B::sql(&format!(
+                "SELECT id, tracer FROM workers WHERE id IN ({})",
+                placeholders(1, workers.len())
+            ))
+            .bind_all(workers),
+        )
+        .await?;
+    let failing: Vec<(String,)> = c
+        .all(
+            B::sql(&format!(
+                "SELECT DISTINCT worker FROM worker_failures WHERE failures >= $1 AND worker IN ({})",
+                placeholders(2, workers.len())
+            ))
+            .bind(policy.worker_failures)
+            .bind_all(workers),
+        )
+        .await?;
+    let tracer: HashMap<&str, Option<&str>> = known
+        .iter()
+        .map(|(id, t)| (id.as_str(), t.as_deref()))
+        .collect();
+    let failing: BTreeSet<&str> = failing.iter().map(|(w,)| w.as_str()).collect();
+    let mut groups: Vec<(Option<Option<&str>>, Vec<usize>)> = Vec::new();
+    for (i, w) in workers.iter().enumerate() {
+        // `None`: a group of its own.
+        let key =
+            (!failing.contains(w.as_str())).then(|| tracer.get(w.as_str()).copied().flatten());
+        match groups.iter_mut().find(|(k, _)| key.is_some() && *k == key) {
+            Some((_, group)) => group.push(i),
+            None => groups.push((key, vec![i])),
+        }
+    }
+    Ok(groups.into_iter().map(|(_, g)| g).collect())
 }
 
 /// What a leased job reads: the outputs of its dependencies, in graph
 /// order, and its bake's uploads.
-async fn lease_inputs<B: Backend>(
-    c: &mut B::Conn,
-    job: &JobRow,
-    bake: &BakeRow,
-) -> Result<(Vec<Completion>, Vec<UploadRef>)> {
+async fn lease_inputs<B: Backend>(c: &mut B::Conn, job: &JobRow) -> Result<Vec<Completion>> {
     let mut inputs = Vec::new();
     if !job.deps.is_empty() {
         let deps: Vec<(Option<String>, Option<String>)> = c
@@ -454,6 +522,12 @@ async fn lease_inputs<B: Backend>(
             });
         }
     }
+    Ok(inputs)
+}
+
+/// The uploads a bake's jobs read: whether each is a bundle, character
+/// first.
+async fn bake_uploads<B: Backend>(c: &mut B::Conn, bake: &BakeRow) -> Result<Vec<UploadRef>> {
     let mut uploads = Vec::new();
     for digest in std::iter::once(&bake.character).chain(&bake.clips) {
         let bundle: Option<bool> = c
@@ -464,7 +538,33 @@ async fn lease_inputs<B: Backend>(
             bundle: bundle.unwrap_or(false),
         });
     }
-    Ok((inputs, uploads))
+    Ok(uploads)
+}
+
+/// What a batch of completions adds to one bake.
+#[derive(Debug, Default)]
+struct BakeCounts {
+    work: i64,
+    jobs: i64,
+    asset: Option<String>,
+    report: Option<String>,
+    plot: Option<String>,
+}
+
+impl BakeCounts {
+    fn add(&mut self, work: i64, done: &Completion) {
+        self.work += work;
+        self.jobs += 1;
+        for o in &done.outputs {
+            let slot = match o.name.as_str() {
+                "asset" => &mut self.asset,
+                "report.json" => &mut self.report,
+                "plot.png" => &mut self.plot,
+                _ => continue,
+            };
+            slot.get_or_insert_with(|| o.digest.clone());
+        }
+    }
 }
 
 /// Applies a control to a bake whose row the transaction holds.
@@ -681,45 +781,74 @@ impl<B: Backend> Store for SqlStore<B> {
         rows.into_iter().map(RawJob::cook).collect()
     }
 
-    async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>> {
+    async fn lease_many(&self, workers: &[String], policy: &QueuePolicy) -> Result<Vec<Lease>> {
         in_tx!(self, Durability::Queue, |c| {
-            let Some(id) = claim::<B>(c, worker, policy).await? else {
-                return Ok(None);
-            };
-            let token = lease_token();
-            let job: RawJob = c
-                .one(
-                    B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0 WHERE id = $4 RETURNING *, {deps} AS deps")
-                        .bind(&token)
-                        .bind(worker)
-                        .bind(policy.lease_ms)
-                        .bind(id),
-                )
-                .await?;
-            let expires_at = job.lease_expires_at.unwrap_or_default();
-            let job = job.cook()?;
-            let bake = c
-                .one::<RawBake>(
-                    B::sql("UPDATE bakes SET state = CASE WHEN state = 'queued' THEN 'running' ELSE state END, updated_at = CASE WHEN state = 'queued' THEN {now} ELSE updated_at END WHERE id = $1 RETURNING *")
-                        .bind(job.bake_id),
-                )
-                .await?
-                .cook()?;
-            let (inputs, uploads) = lease_inputs::<B>(c, &job, &bake).await?;
-            c.execute(
-                B::sql("INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES ($1, 'busy', $2, {now}, {now}) ON CONFLICT (id) DO UPDATE SET state = 'busy', job_id = $2, last_seen = {now}")
-                    .bind(worker)
-                    .bind(id),
-            )
+            // Retries whose delay has passed are ready again.
+            c.execute(B::sql(
+                "UPDATE jobs SET state = 'available' WHERE state = 'retryable' AND run_at <= {now}",
+            ))
             .await?;
-            Ok(Some(Lease {
-                job,
-                token,
-                expires_at,
-                bake,
-                inputs,
-                uploads,
-            }))
+            let mut claimed: Vec<(usize, i64)> = Vec::new();
+            for group in claim_groups::<B>(c, workers, policy).await? {
+                let ids = claim::<B>(c, &workers[group[0]], policy, group.len()).await?;
+                claimed.extend(group.into_iter().zip(ids));
+            }
+            // In the batch's order: the first slot asked leases first.
+            claimed.sort_unstable();
+            let mut leases = Vec::new();
+            // A batch's jobs mostly share a bake: each bake is advanced
+            // and its uploads looked up once.
+            let mut bakes: HashMap<i64, (BakeRow, Vec<UploadRef>)> = HashMap::new();
+            for (slot, id) in claimed {
+                let worker = &workers[slot];
+                let token = lease_token();
+                let job: RawJob = c
+                    .one(
+                        B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0 WHERE id = $4 RETURNING *, {deps} AS deps")
+                            .bind(&token)
+                            .bind(worker)
+                            .bind(policy.lease_ms)
+                            .bind(id),
+                    )
+                    .await?;
+                let expires_at = job.lease_expires_at.unwrap_or_default();
+                let job = job.cook()?;
+                if let std::collections::hash_map::Entry::Vacant(e) = bakes.entry(job.bake_id) {
+                    let bake = c
+                        .one::<RawBake>(
+                            B::sql("UPDATE bakes SET state = CASE WHEN state = 'queued' THEN 'running' ELSE state END, updated_at = CASE WHEN state = 'queued' THEN {now} ELSE updated_at END WHERE id = $1 RETURNING *")
+                                .bind(job.bake_id),
+                        )
+                        .await?
+                        .cook()?;
+                    let uploads = bake_uploads::<B>(c, &bake).await?;
+                    e.insert((bake, uploads));
+                }
+                let (bake, uploads) = &bakes[&job.bake_id];
+                let inputs = lease_inputs::<B>(c, &job).await?;
+                leases.push(Lease {
+                    job,
+                    token,
+                    expires_at,
+                    bake: bake.clone(),
+                    inputs,
+                    uploads: uploads.clone(),
+                });
+            }
+            if !leases.is_empty() {
+                let rows = (0..leases.len())
+                    .map(|i| format!("(${}, 'busy', ${}, {{now}}, {{now}})", 2 * i + 1, 2 * i + 2))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                let mut upsert = B::sql(&format!(
+                    "INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES {rows} ON CONFLICT (id) DO UPDATE SET state = 'busy', job_id = excluded.job_id, last_seen = excluded.last_seen"
+                ));
+                for l in &leases {
+                    upsert = upsert.bind(l.job.worker.clone()).bind(l.job.id);
+                }
+                c.execute(upsert).await?;
+            }
+            Ok(leases)
         })
     }
 
@@ -772,47 +901,75 @@ impl<B: Backend> Store for SqlStore<B> {
         })
     }
 
-    async fn complete(&self, job: i64, token: &str, done: &Completion) -> Result<BakeRow> {
-        let digest = |name: &str| {
-            done.outputs
-                .iter()
-                .find(|o| o.name == name)
-                .map(|o| o.digest.clone())
-        };
+    async fn complete_many(&self, items: &[Completing]) -> Result<Vec<Result<BakeRow>>> {
         in_tx!(self, Durability::Acknowledged, |c| {
-            // Four statements: the completion (only with the current lease
-            // token), the bake's counts (publishing the asset, report
-            // and plot when this job produced them), the dependents, the worker.
-            let row: Option<(i64, i64, Option<String>)> = c
-                .optional(
-                    B::sql("UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {now} WHERE id = $3 AND lease_token = $4 AND state = 'running' RETURNING bake_id, work, worker")
-                        .bind(serde_json::to_string(&done.outputs)?)
-                        .bind(done.timings.to_string())
-                        .bind(job)
-                        .bind(token),
+            // Per job, two statements: the completion (only with the
+            // current lease token) and its dependents; per bake, its
+            // counts (publishing the asset, report and plot when a job
+            // produced them); per worker, its state; one wake.
+            let mut done: Vec<Result<(i64, i64)>> = Vec::with_capacity(items.len());
+            // Per bake: work and jobs done, and the outputs it publishes.
+            let mut counts: BTreeMap<i64, BakeCounts> = BTreeMap::new();
+            let mut idle: BTreeSet<String> = BTreeSet::new();
+            for item in items {
+                let row: Option<(i64, i64, Option<String>)> = c
+                    .optional(
+                        B::sql("UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {now} WHERE id = $3 AND lease_token = $4 AND state = 'running' RETURNING bake_id, work, worker")
+                            .bind(serde_json::to_string(&item.completion.outputs)?)
+                            .bind(item.completion.timings.to_string())
+                            .bind(item.job)
+                            .bind(&item.token),
+                    )
+                    .await?;
+                let Some((bake_id, work, worker)) = row else {
+                    done.push(Err(StoreError::LeaseLost(format!(
+                        "job {} is not leased with this token",
+                        item.job
+                    ))));
+                    continue;
+                };
+                counts
+                    .entry(bake_id)
+                    .or_default()
+                    .add(work, &item.completion);
+                idle.extend(worker);
+                done.push(Ok((item.job, bake_id)));
+            }
+            let completed: Vec<i64> = done.iter().flatten().map(|&(job, _)| job).collect();
+            release_dependents::<B>(c, &completed).await?;
+            let mut bakes = HashMap::new();
+            for (bake_id, n) in counts {
+                let bake = c
+                    .one::<RawBake>(
+                        B::sql("UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + $2, updated_at = {now}, state = CASE WHEN jobs_done + $2 = jobs_total THEN 'done' ELSE state END, asset = COALESCE($3, asset), report = COALESCE($4, report), plot = COALESCE($5, plot), finished_at = CASE WHEN jobs_done + $2 = jobs_total THEN {now} ELSE finished_at END WHERE id = $6 RETURNING *")
+                            .bind(n.work)
+                            .bind(n.jobs)
+                            .bind(n.asset)
+                            .bind(n.report)
+                            .bind(n.plot)
+                            .bind(bake_id),
+                    )
+                    .await?
+                    .cook()?;
+                bakes.insert(bake_id, bake);
+            }
+            if !idle.is_empty() {
+                c.execute(
+                    B::sql(&format!(
+                        "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {{now}} WHERE id IN ({})",
+                        placeholders(1, idle.len())
+                    ))
+                    .bind_all(&idle),
                 )
                 .await?;
-            let Some((bake_id, work, worker)) = row else {
-                return Err(StoreError::LeaseLost(format!(
-                    "job {job} is not leased with this token"
-                )));
-            };
-            let bake = c
-                .one::<RawBake>(
-                    B::sql("UPDATE bakes SET done_work = done_work + $1, jobs_done = jobs_done + 1, updated_at = {now}, state = CASE WHEN jobs_done + 1 = jobs_total THEN 'done' ELSE state END, asset = COALESCE($2, asset), report = COALESCE($3, report), plot = COALESCE($4, plot), finished_at = CASE WHEN jobs_done + 1 = jobs_total THEN {now} ELSE finished_at END WHERE id = $5 RETURNING *")
-                        .bind(work)
-                        .bind(digest("asset"))
-                        .bind(digest("report.json"))
-                        .bind(digest("plot.png"))
-                        .bind(bake_id),
-                )
-                .await?
-                .cook()?;
-            release_dependents::<B>(c, job).await?;
-            c.execute(B::sql(WORKER_IDLE).bind(worker.unwrap_or_default()))
-                .await?;
-            B::wake(c).await?;
-            Ok(bake)
+            }
+            if !bakes.is_empty() {
+                B::wake(c).await?;
+            }
+            Ok(done
+                .into_iter()
+                .map(|r| r.map(|(_, id)| bakes[&id].clone()))
+                .collect())
         })
     }
 

@@ -78,6 +78,7 @@ pub(crate) async fn run_all(store: &dyn Store) {
     cancel_pause_resume_retry(store).await;
     a_worker_that_keeps_failing_a_bake_is_kept_off_it(store).await;
     tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store).await;
+    a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store).await;
 }
 
 /// With no other worker to take its jobs, a failing worker goes on
@@ -135,8 +136,110 @@ async fn a_worker_that_keeps_failing_a_bake_is_kept_off_it(store: &dyn Store) {
             .await
             .unwrap();
     }
-    let other = store.lease("careful", &p).await.unwrap().unwrap();
-    assert_eq!(other.job.bake_id, created.id);
+    // In one batch with a worker that may take the bake, each is judged
+    // on its own: the careful slot gets the bake's job, the clumsy none.
+    let batch = store
+        .lease_many(&["clumsy".to_owned(), "careful".to_owned()], &p)
+        .await
+        .unwrap();
+    assert_eq!(batch.len(), 1, "{batch:?}");
+    assert_eq!(batch[0].job.worker.as_deref(), Some("careful"));
+    assert_eq!(batch[0].job.bake_id, created.id);
+}
+
+/// A batch leases at most one job per slot, in the slots' order; its
+/// completions are judged one by one (a stale token refuses only its own),
+/// and a dependent whose dependencies complete in one batch counts them
+/// all.
+async fn a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store: &dyn Store) {
+    let c = character(store).await;
+    let job = |kind: &str, deps: Vec<usize>| NewJob {
+        kind: kind.into(),
+        spec: json!({"kind": kind}),
+        work: 3,
+        deps,
+    };
+    let b = store
+        .create_bake(&NewBake {
+            key: "b".repeat(64),
+            character: c.clone(),
+            clips: vec![],
+            method: "vertex-linear".into(),
+            params: json!({}),
+            priority: 3000,
+            jobs: vec![
+                job("sample", vec![]),
+                job("sample", vec![]),
+                job("sample", vec![]),
+                job("fit", vec![0, 1, 2]),
+            ],
+            max_attempts: 2,
+        })
+        .await
+        .unwrap();
+    let p = policy();
+    let slots: Vec<String> = (0..3).map(|i| format!("proc/{i}")).collect();
+    let leases = store.lease_many(&slots, &p).await.unwrap();
+    let got: Vec<_> = leases
+        .iter()
+        .map(|l| (l.job.bake_id, l.job.index, l.job.worker.clone().unwrap()))
+        .collect();
+    assert_eq!(
+        got,
+        (0..3)
+            .map(|i| (b.id, i as i64, slots[i].clone()))
+            .collect::<Vec<_>>()
+    );
+    assert!(leases.iter().all(|l| l.uploads[0].digest == c));
+    let tokens: std::collections::BTreeSet<_> = leases.iter().map(|l| &l.token).collect();
+    assert_eq!(tokens.len(), 3, "every lease has its own token");
+    let item = |l: &super::Lease, token: &str| super::Completing {
+        job: l.job.id,
+        token: token.to_owned(),
+        completion: done("ao"),
+    };
+    let answers = store
+        .complete_many(&[
+            item(&leases[0], &leases[0].token),
+            item(&leases[1], "stale"),
+            item(&leases[2], &leases[2].token),
+            item(&leases[0], &leases[0].token),
+        ])
+        .await
+        .unwrap();
+    let lost = |r: &super::Result<super::BakeRow>| matches!(r, Err(StoreError::LeaseLost(_)));
+    assert!(answers[0].is_ok() && answers[2].is_ok(), "{answers:?}");
+    assert!(lost(&answers[1]) && lost(&answers[3]), "{answers:?}");
+    let mid = answers[0].as_ref().unwrap();
+    assert_eq!((mid.jobs_done, mid.done_work), (2, 6));
+    assert_eq!(answers[2].as_ref().unwrap(), mid);
+    // Two of the fit's three dependencies completed in that batch.
+    let waiting = store.lease_many(&slots[..1], &p).await.unwrap();
+    assert!(
+        waiting.iter().all(|l| l.job.bake_id != b.id),
+        "the fit waits for its third dependency: {waiting:?}"
+    );
+    for l in &waiting {
+        store.release(l.job.id, &l.token).await.unwrap();
+    }
+    store
+        .complete(leases[1].job.id, &leases[1].token, &done("ao"))
+        .await
+        .unwrap();
+    let fit = store.lease_many(&slots, &p).await.unwrap();
+    assert_eq!((fit[0].job.bake_id, fit[0].job.index), (b.id, 3));
+    assert_eq!(fit[0].inputs.len(), 3);
+    let end = store
+        .complete_many(&[item(&fit[0], &fit[0].token)])
+        .await
+        .unwrap();
+    assert_eq!(end[0].as_ref().unwrap().state, BakeState::Done);
+    for l in &fit[1..] {
+        store.release(l.job.id, &l.token).await.unwrap();
+    }
+    let workers = store.workers().await.unwrap();
+    let state = |id: &str| workers.iter().find(|w| w.id == id).unwrap().state.clone();
+    assert_eq!(state("proc/0"), "idle");
 }
 
 async fn tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store: &dyn Store) {

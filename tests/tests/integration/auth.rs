@@ -32,6 +32,8 @@ const ROUTES: &[(&str, &str, &str)] = &[
     ("GET", "/v1/cache/{key}", "read"),
     ("GET", "/v1/assets/{digest}", "read"),
     ("POST", "/v1/jobs/lease", "worker"),
+    ("POST", "/v1/jobs/leases", "worker"),
+    ("POST", "/v1/jobs/completions", "worker"),
     ("POST", "/v1/jobs/{id}/heartbeat", "worker"),
     ("POST", "/v1/jobs/{id}/checkpoint", "worker"),
     ("POST", "/v1/jobs/{id}/complete", "worker"),

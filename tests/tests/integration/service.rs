@@ -2,6 +2,8 @@
 
 use std::time::Duration;
 
+use serde_json::json;
+
 use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
 
 use crate::util::{QUICK, asset, local_bake, submit, upload};
@@ -464,6 +466,127 @@ fn two_servers_on_one_postgres_and_bucket_serve_one_bake() {
     assert!(asset(&b, &done) == asset(&a, &done));
 }
 
+/// The batch protocol on the wire: a lease request names a process's idle
+/// slots and gets a job for each, in order; a completions request is
+/// answered item by item, each refused as `complete` would refuse it,
+/// the rest recorded.
+#[test]
+fn the_worker_protocol_leases_and_completes_in_batches() {
+    let env = TestEnv::start(Options {
+        job_rays: Some(0),
+        ..Options::default()
+    });
+    let digest = upload(&env, &character("RiggedSimple"));
+    let (status, b) = submit(&env, &digest, 12);
+    assert_eq!(status, 202, "{b}");
+    let id = b["id"].as_i64().unwrap();
+    let worker = env.token(&["worker"]);
+    let post = |path: &str, body: serde_json::Value| {
+        env.request("POST", path, &worker, Some(body)).unwrap()
+    };
+    let many: Vec<String> = (0..65).map(|i| format!("p/{i}")).collect();
+    for (body, code) in [
+        (json!({"workers": []}), "bad_workers"),
+        (json!({ "workers": many }), "bad_workers"),
+        (json!({"workers": ["p/0", "p/0"]}), "bad_workers"),
+        (json!({"workers": ["p/0", ""]}), "bad_worker"),
+    ] {
+        let (status, answer) = post("/v1/jobs/leases", body.clone());
+        assert_eq!(
+            (status, answer["code"].as_str()),
+            (400, Some(code)),
+            "{body}: {answer}"
+        );
+    }
+    let (status, answer) = post("/v1/jobs/completions", json!({"completions": []}));
+    assert_eq!(
+        (status, answer["code"].as_str()),
+        (400, Some("bad_completions")),
+        "{answer}"
+    );
+
+    // Twelve poses in jobs of four: three reference samples are ready.
+    let slots = ["p/0", "p/1", "p/2"];
+    let (status, got) = post(
+        "/v1/jobs/leases",
+        json!({"workers": slots, "wait_secs": 10}),
+    );
+    assert_eq!(status, 200, "{got}");
+    let leases = got["leases"].as_array().unwrap();
+    let workers: Vec<&str> = leases
+        .iter()
+        .map(|l| l["job"]["worker"].as_str().unwrap())
+        .collect();
+    assert_eq!(workers, slots, "{got}");
+    let mut ids: Vec<i64> = leases
+        .iter()
+        .map(|l| l["job"]["id"].as_i64().unwrap())
+        .collect();
+    ids.dedup();
+    assert_eq!(ids.len(), 3, "{got}");
+    assert!(leases.iter().all(|l| l["bake"]["id"] == id), "{got}");
+
+    let item = |l: &serde_json::Value, token: &serde_json::Value, outputs: serde_json::Value| json!({"job": l["job"]["id"], "token": token, "completion": {"outputs": outputs, "timings": {}}});
+    let missing = json!([{"name": "ao-reference", "digest": "0".repeat(64)}]);
+    let (status, answer) = post(
+        "/v1/jobs/completions",
+        json!({"completions": [
+            item(&leases[0], &leases[0]["token"], missing),
+            item(&leases[1], &json!("stale"), json!([])),
+            item(&leases[2], &leases[2]["token"], json!([])),
+        ]}),
+    );
+    assert_eq!(status, 200, "{answer}");
+    let results = answer["results"].as_array().unwrap();
+    let refusal = |i: usize| {
+        (
+            results[i]["job"].clone(),
+            results[i]["problem"]["status"].as_u64(),
+            results[i]["problem"]["code"].as_str(),
+        )
+    };
+    assert_eq!(
+        refusal(0),
+        (
+            leases[0]["job"]["id"].clone(),
+            Some(400),
+            Some("missing_blob")
+        ),
+        "{answer}"
+    );
+    assert_eq!(
+        refusal(1),
+        (leases[1]["job"]["id"].clone(), Some(409), Some("conflict")),
+        "{answer}"
+    );
+    assert!(results[2].get("problem").is_none(), "{answer}");
+    let (_, bake) = env
+        .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap();
+    assert_eq!(bake["jobs_done"], 1, "only the third was recorded: {bake}");
+    // The refused two are still leased: completed properly, they count.
+    let (status, answer) = post(
+        "/v1/jobs/completions",
+        json!({"completions": [
+            item(&leases[0], &leases[0]["token"], json!([])),
+            item(&leases[1], &leases[1]["token"], json!([])),
+        ]}),
+    );
+    assert_eq!(status, 200, "{answer}");
+    assert!(
+        answer["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|r| r.get("problem").is_none()),
+        "{answer}"
+    );
+    let (_, bake) = env
+        .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap();
+    assert_eq!(bake["jobs_done"], 3, "{bake}");
+}
+
 #[test]
 fn requests_over_the_rate_get_429_with_retry_after() {
     let env = TestEnv::start(Options {
@@ -737,7 +860,12 @@ fn workers_share_a_bakes_fit_work_and_the_asset_is_byte_identical() {
     // Checkpoints at most every 60 s of work: none of this bake's jobs
     // runs that long, so none saves one (fast poses cost the server no
     // saves).
-    env.start_worker(&[("AOBAKE_CHECKPOINT_SECS", "60")]);
+    // One worker runs two jobs at once (its idle slots leased in one
+    // request, completions sent together), the other one.
+    env.start_worker(&[
+        ("AOBAKE_CHECKPOINT_SECS", "60"),
+        ("AOBAKE_CONCURRENCY", "2"),
+    ]);
     env.start_worker(&[("AOBAKE_CHECKPOINT_SECS", "60")]);
     let fox = character("Fox");
     let digest = upload(&env, &fox);
@@ -767,6 +895,15 @@ fn workers_share_a_bakes_fit_work_and_the_asset_is_byte_identical() {
             "{j}"
         );
     }
+    // Every job ran on one of the three slots, some on the two-slot
+    // worker's.
+    let ran: Vec<&str> = jobs.iter().filter_map(|j| j["worker"].as_str()).collect();
+    assert_eq!(ran.len(), jobs.len(), "{bake}");
+    assert!(
+        ran.iter().all(|w| ["w0/0", "w0/1", "w1"].contains(w)),
+        "{ran:?}"
+    );
+    assert!(ran.iter().any(|w| w.starts_with("w0/")), "{ran:?}");
     let local = local_bake(env.dir.path(), &fox, 24);
     assert!(
         asset(&env, &bake) == local,
