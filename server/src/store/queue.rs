@@ -814,13 +814,19 @@ impl<B: Backend> Store for SqlStore<B> {
                 let expires_at = job.lease_expires_at.unwrap_or_default();
                 let job = job.cook()?;
                 if let std::collections::hash_map::Entry::Vacant(e) = bakes.entry(job.bake_id) {
-                    let bake = c
-                        .one::<RawBake>(
-                            B::sql("UPDATE bakes SET state = CASE WHEN state = 'queued' THEN 'running' ELSE state END, updated_at = CASE WHEN state = 'queued' THEN {now} ELSE updated_at END WHERE id = $1 RETURNING *")
+                    // Only a queued bake's row is written (it starts
+                    // running): a running one's is read without its lock,
+                    // which completions hold while they count.
+                    let started = c
+                        .optional::<RawBake>(
+                            B::sql("UPDATE bakes SET state = 'running', updated_at = {now} WHERE id = $1 AND state = 'queued' RETURNING *")
                                 .bind(job.bake_id),
                         )
-                        .await?
-                        .cook()?;
+                        .await?;
+                    let bake = match started {
+                        Some(row) => row.cook()?,
+                        None => bake_by_id::<B>(c, job.bake_id, false).await?,
+                    };
                     let uploads = bake_uploads::<B>(c, &bake).await?;
                     e.insert((bake, uploads));
                 }
