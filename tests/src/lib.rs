@@ -9,6 +9,7 @@
 //! `cargo test --workspace` builds (or `cargo build --bin aobake`).
 
 pub mod hostile;
+pub mod netns;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -70,6 +71,9 @@ pub struct Options {
     /// `--database`, when not SQLite in the data directory (PostgreSQL:
     /// [`TestPostgres`]).
     pub database: Option<String>,
+    /// The host of a [`netns::TestNet`] the server runs on (on its
+    /// address, port 8080), when not this one.
+    pub host: Option<netns::Host>,
 }
 
 impl Default for Options {
@@ -83,6 +87,7 @@ impl Default for Options {
             job_rays: None,
             blobs: None,
             database: None,
+            host: None,
         }
     }
 }
@@ -124,9 +129,14 @@ impl TestEnv {
         self.dir.path().join("data")
     }
 
-    /// (Re)starts the server on the same data directory, on a free port.
+    /// (Re)starts the server on the same data directory, on a free port
+    /// (or its host's address, port 8080).
     pub fn start_server(&mut self) {
-        self.start_server_on("127.0.0.1:0");
+        let listen = match &self.options.host {
+            Some(h) => format!("{}:8080", h.addr),
+            None => "127.0.0.1:0".to_owned(),
+        };
+        self.start_server_on(&listen);
     }
 
     /// (Re)starts the server on the same data directory and `listen`.
@@ -139,7 +149,11 @@ impl TestEnv {
             .open(self.dir.path().join("server.log"))
             .expect("log");
         let o = &self.options;
-        let child = Command::new(binary())
+        let mut command = match &o.host {
+            Some(h) => h.command(binary()),
+            None => Command::new(binary()),
+        };
+        let child = command
             .args(["serve", "--listen", listen, "--workers", "0"])
             .arg("--data")
             .arg(self.data())
@@ -200,12 +214,25 @@ impl TestEnv {
 
     /// Starts a worker process with extra environment; returns its index.
     pub fn start_worker(&mut self, env: &[(&str, &str)]) -> usize {
+        self.spawn_worker(None, env)
+    }
+
+    /// Starts a worker process for this server on `host` of a
+    /// [`netns::TestNet`], named after the host; returns its index.
+    pub fn start_worker_in(&mut self, host: &netns::Host, env: &[(&str, &str)]) -> usize {
+        self.spawn_worker(Some(host), env)
+    }
+
+    fn spawn_worker(&mut self, host: Option<&netns::Host>, env: &[(&str, &str)]) -> usize {
         let token = self.token(&["worker"]);
         let i = self.workers.len();
         let log =
             std::fs::File::create(self.dir.path().join(format!("worker-{i}.log"))).expect("log");
-        let mut cmd = Command::new(binary());
-        cmd.args(["worker", "--server", &self.url, "--id", &format!("w{i}")])
+        let (mut cmd, id) = match host {
+            Some(h) => (h.command(binary()), h.ns.clone()),
+            None => (Command::new(binary()), format!("w{i}")),
+        };
+        cmd.args(["worker", "--server", &self.url, "--id", &id])
             .args([
                 "--heartbeat-secs",
                 &(self.options.lease_secs / 4.0).to_string(),
@@ -383,13 +410,28 @@ pub struct TestS3 {
 impl TestS3 {
     /// Starts the server and makes the bucket.
     pub fn start() -> Self {
+        Self::start_on(None)
+    }
+
+    /// Starts one on `host` of a [`netns::TestNet`], on its address.
+    pub fn start_in(host: &netns::Host) -> Self {
+        Self::start_on(Some(host))
+    }
+
+    fn start_on(host: Option<&netns::Host>) -> Self {
         let program = std::env::var("AOBAKE_MOTO_SERVER").unwrap_or_else(|_| "moto_server".into());
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .expect("a free port")
-            .port();
-        let child = Command::new(&program)
-            .args(["-H", "127.0.0.1", "-p", &port.to_string()])
+        let (addr, port, mut command) = match host {
+            Some(h) => (h.addr.as_str(), 9000, h.command(&program)),
+            None => {
+                let port = std::net::TcpListener::bind("127.0.0.1:0")
+                    .and_then(|l| l.local_addr())
+                    .expect("a free port")
+                    .port();
+                ("127.0.0.1", port, Command::new(&program))
+            }
+        };
+        let child = command
+            .args(["-H", addr, "-p", &port.to_string()])
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -402,13 +444,13 @@ impl TestS3 {
         let server = Self {
             child,
             url: format!(
-                "s3://aobake-test/blobs?endpoint=http://127.0.0.1:{port}&allow_http=true\
+                "s3://aobake-test/blobs?endpoint=http://{addr}:{port}&allow_http=true\
                  &region=us-east-1&access_key_id=test&secret_access_key=test"
             ),
         };
         // Up when it answers; the bucket then (moto takes unsigned requests).
         let started = Instant::now();
-        let bucket = format!("http://127.0.0.1:{port}/aobake-test");
+        let bucket = format!("http://{addr}:{port}/aobake-test");
         loop {
             match ureq::put(&bucket).send_empty() {
                 Ok(_) => break,
@@ -441,6 +483,10 @@ pub struct TestPostgres {
     dir: tempfile::TempDir,
     bin: PathBuf,
     as_postgres: bool,
+    /// The host whose namespace it runs in, if not this one's.
+    host: Option<netns::Host>,
+    /// The address it listens on.
+    addr: String,
     port: u16,
     /// Connection URL.
     pub url: String,
@@ -449,12 +495,19 @@ pub struct TestPostgres {
 impl TestPostgres {
     fn run(&self, program: &str, args: &[&str]) -> std::process::Output {
         let exe = self.bin.join(program);
-        let mut cmd = if self.as_postgres {
-            let mut c = Command::new("runuser");
-            c.args(["-u", "postgres", "--"]).arg(&exe);
-            c
-        } else {
-            Command::new(&exe)
+        let mut cmd = match (&self.host, self.as_postgres) {
+            (Some(h), true) => {
+                let mut c = h.command("runuser");
+                c.args(["-u", "postgres", "--"]).arg(&exe);
+                c
+            }
+            (Some(h), false) => h.command(&exe),
+            (None, true) => {
+                let mut c = Command::new("runuser");
+                c.args(["-u", "postgres", "--"]).arg(&exe);
+                c
+            }
+            (None, false) => Command::new(&exe),
         };
         cmd.args(args)
             .output()
@@ -465,6 +518,16 @@ impl TestPostgres {
     /// installs Debian's `postgresql`); their folder is `pg_config
     /// --bindir`.
     pub fn start() -> Self {
+        Self::start_on(None)
+    }
+
+    /// Starts one on `host` of a [`netns::TestNet`], on its address and
+    /// PostgreSQL's port, taking any client on the network.
+    pub fn start_in(host: &netns::Host) -> Self {
+        Self::start_on(Some(host.clone()))
+    }
+
+    fn start_on(host: Option<netns::Host>) -> Self {
         let bindir = Command::new("pg_config")
             .arg("--bindir")
             .output()
@@ -485,18 +548,27 @@ impl TestPostgres {
             };
             std::os::unix::fs::chown(dir.path(), Some(ids("-u")), Some(ids("-g"))).unwrap();
         }
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port();
+        let (addr, port) = match &host {
+            // The namespace is the host's own: the usual port is free.
+            Some(h) => (h.addr.clone(), 5432),
+            None => {
+                let port = std::net::TcpListener::bind("127.0.0.1:0")
+                    .unwrap()
+                    .local_addr()
+                    .unwrap()
+                    .port();
+                ("127.0.0.1".to_owned(), port)
+            }
+        };
         let data = dir.path().join("pg");
         let data = data.to_str().unwrap();
         let pg = Self {
             bin,
             as_postgres,
+            url: format!("postgres://aobake@{addr}:{port}/postgres"),
+            host,
+            addr,
             port,
-            url: format!("postgres://aobake@127.0.0.1:{port}/postgres"),
             dir,
         };
         let out = pg.run(
@@ -508,6 +580,15 @@ impl TestPostgres {
             "initdb: {}",
             String::from_utf8_lossy(&out.stderr)
         );
+        if pg.host.is_some() {
+            // Clients come from the other hosts of the test network.
+            use std::io::Write as _;
+            std::fs::OpenOptions::new()
+                .append(true)
+                .open(pg.dir.path().join("pg/pg_hba.conf"))
+                .and_then(|mut f| f.write_all(b"host all all 0.0.0.0/0 trust\n"))
+                .expect("pg_hba.conf");
+        }
         pg.start_again();
         pg
     }
@@ -538,9 +619,10 @@ impl TestPostgres {
     pub fn start_again(&self) {
         let data = self.dir.path().join("pg");
         let options = format!(
-            "-p {} -k {} -c listen_addresses=127.0.0.1 -c fsync=off",
+            "-p {} -k {} -c listen_addresses={} -c fsync=off",
             self.port,
-            self.dir.path().display()
+            self.dir.path().display(),
+            self.addr
         );
         let log = self.dir.path().join("pg.log");
         let out = self.run(

@@ -5,6 +5,8 @@
 mod auth;
 #[path = "integration/bad_input.rs"]
 mod bad_input;
+#[path = "integration/cluster.rs"]
+mod cluster;
 #[path = "integration/crashes.rs"]
 mod crashes;
 #[path = "integration/cubemap.rs"]
