@@ -80,10 +80,11 @@ pub enum Refusals {
         content_type = "application/problem+json"
     )]
     RateLimited(crate::Problem),
-    /// The database does not answer (`Retry-After` says when to try again).
+    /// The database or the blob store does not answer (`Retry-After` says
+    /// when to try again).
     #[response(
         status = 503,
-        description = "The database does not answer; retry after Retry-After seconds",
+        description = "The database or the blob store does not answer; retry after Retry-After seconds",
         content_type = "application/problem+json"
     )]
     Unavailable(crate::Problem),

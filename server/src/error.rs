@@ -167,6 +167,9 @@ impl From<StoreError> for ApiError {
 /// What a client is told to wait while the database does not answer.
 const DATABASE_RETRY_SECS: u64 = 2;
 
+/// What a client is told to wait while the blob store does not answer.
+const BLOBS_RETRY_SECS: u64 = 5;
+
 /// Whether `e` says the database could not be reached (down, restarting,
 /// its connections gone), not that a query failed.
 fn unreachable(e: &sqlx::Error) -> bool {
@@ -190,6 +193,10 @@ impl From<BlobError> for ApiError {
         match e {
             BlobError::DigestMismatch { .. } | BlobError::BadDigest(_) => {
                 Self::bad("bad_digest", e.to_string())
+            }
+            BlobError::Store(_) if e.unreachable() => {
+                eprintln!("error: {e}");
+                Self::Unavailable(BLOBS_RETRY_SECS)
             }
             BlobError::Io(_) | BlobError::Store(_) | BlobError::Config(_) => {
                 Self::Internal(e.to_string())

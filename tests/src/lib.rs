@@ -467,6 +467,15 @@ impl TestS3 {
     }
 }
 
+impl TestS3 {
+    /// Kills the server, as an outage would (moto keeps its objects in
+    /// memory: they are gone).
+    pub fn stop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
 impl Drop for TestS3 {
     fn drop(&mut self) {
         let _ = self.child.kill();

@@ -41,6 +41,29 @@ pub enum BlobError {
     Config(String),
 }
 
+impl BlobError {
+    /// Whether the store could not be reached (down, refusing, timing
+    /// out, cut off), not that the request was wrong: a client may try
+    /// again later.
+    pub fn unreachable(&self) -> bool {
+        use object_store::client::{HttpError, HttpErrorKind};
+        let Self::Store(e) = self else {
+            return false;
+        };
+        let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+        while let Some(err) = source {
+            if let Some(http) = err.downcast_ref::<HttpError>() {
+                return matches!(
+                    http.kind(),
+                    HttpErrorKind::Connect | HttpErrorKind::Timeout | HttpErrorKind::Interrupted
+                );
+            }
+            source = err.source();
+        }
+        false
+    }
+}
+
 /// The blob store `url` names: `s3://…` ([`ObjectBlobs::from_url`]), or a
 /// directory (`file:///path`, or a plain path) for [`LocalBlobs`].
 pub fn open(url: &str) -> Result<std::sync::Arc<dyn Blobs>, BlobError> {

@@ -8,9 +8,11 @@
 //! there; two writers racing on one large blob write the same bytes).
 
 use std::sync::Arc;
+use std::time::Duration;
 
 use object_store::{
-    ObjectStore, ObjectStoreExt as _, PutMode, PutOptions, PutPayload, WriteMultipart,
+    ClientOptions, ObjectStore, ObjectStoreExt as _, PutMode, PutOptions, PutPayload, RetryConfig,
+    WriteMultipart,
     aws::{AmazonS3Builder, AmazonS3ConfigKey},
     path::Path,
 };
@@ -47,7 +49,17 @@ impl ObjectBlobs {
         if bucket.is_empty() {
             return Err(bad("no bucket".into()));
         }
-        let mut builder = AmazonS3Builder::from_env().with_bucket_name(bucket);
+        // A store that does not answer fails a request within about ten
+        // seconds (the API answers 503 then), not object_store's three
+        // minutes of retries; a query pair may say otherwise.
+        let mut builder = AmazonS3Builder::from_env()
+            .with_bucket_name(bucket)
+            .with_retry(RetryConfig {
+                max_retries: 3,
+                retry_timeout: Duration::from_secs(10),
+                ..RetryConfig::default()
+            })
+            .with_client_options(ClientOptions::new().with_connect_timeout(Duration::from_secs(3)));
         for pair in query.split('&').filter(|p| !p.is_empty()) {
             let (key, value) = pair
                 .split_once('=')

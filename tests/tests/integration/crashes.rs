@@ -4,7 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, character};
+use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
 use rand::RngExt as _;
 use serde_json::Value;
 
@@ -180,6 +180,56 @@ fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
     let bake = env.wait_bake(id, Duration::from_secs(180));
     assert_counted_once(&bake, &jobs(&env, id));
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
+}
+
+#[test]
+fn an_s3_outage_answers_503_with_retry_after() {
+    let mut s3 = TestS3::start();
+    let env = TestEnv::start(Options {
+        blobs: Some(s3.url.clone()),
+        ..Options::default()
+    });
+    let digest = upload(&env, &character("RiggedSimple"));
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .build()
+        .into();
+    let get = || {
+        agent
+            .get(format!("{}/v1/assets/{digest}", env.url))
+            .header("authorization", format!("Bearer {ADMIN}"))
+            .call()
+            .unwrap()
+    };
+    assert_eq!(get().status().as_u16(), 200);
+    s3.stop();
+    // Reads and uploads while the store is down are told to come back,
+    // within the store client's bounded retries, not failed with 500.
+    let started = Instant::now();
+    let read = get();
+    let fox = std::fs::read(character("Fox")).unwrap();
+    let (status, problem, headers) = env.post_bytes(
+        "/v1/characters?name=Fox.glb",
+        ADMIN,
+        "model/gltf-binary",
+        &fox,
+    );
+    assert!(
+        started.elapsed() < Duration::from_secs(40),
+        "{:?}",
+        started.elapsed()
+    );
+    assert_eq!(read.status().as_u16(), 503);
+    assert_eq!(read.headers()["retry-after"].to_str().unwrap(), "5");
+    assert_eq!(
+        (status, problem["code"].as_str()),
+        (503, Some("unavailable")),
+        "{problem}"
+    );
+    assert!(
+        headers.iter().any(|(k, v)| k == "retry-after" && v == "5"),
+        "{headers:?}"
+    );
 }
 
 #[test]

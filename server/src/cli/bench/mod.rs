@@ -3,6 +3,7 @@
 mod bake;
 mod cubemap;
 mod grid;
+mod load;
 mod service;
 mod tables;
 
@@ -51,6 +52,10 @@ enum What {
     /// Status-request latency (p50, p99) under concurrent pollers, and the
     /// server's memory.
     Api(service::ApiArgs),
+    /// One or two servers under a studio's load for a bounded time:
+    /// pollers, server-sent-event listeners, uploads and completing jobs;
+    /// 5xx answers, status latency and memory per interval.
+    Load(load::LoadArgs),
     /// Preview render time per panel (the model's AO on the GPU, raster,
     /// readback) on every adapter among Vulkan and GL, and a frame's GTAO
     /// pass beside the model's evaluation with their per-pixel errors.
@@ -224,6 +229,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         What::Linear(a) => tables::linear(a),
         What::Queue(a) => service::queue(a),
         What::Api(a) => service::api(a),
+        What::Load(a) => load::load(a),
         What::Preview(a) => super::preview::bench(a),
         What::Cubemap(a) => cubemap::run(a),
         What::Bake(a) => bake::run(a),

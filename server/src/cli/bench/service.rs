@@ -59,7 +59,10 @@ pub(super) struct ApiArgs {
 }
 
 /// The store at `database`, or SQLite at `file`.
-async fn open_store(database: Option<&str>, file: &Path) -> anyhow::Result<Arc<dyn Store>> {
+pub(super) async fn open_store(
+    database: Option<&str>,
+    file: &Path,
+) -> anyhow::Result<Arc<dyn Store>> {
     Ok(match database {
         Some(url) => Arc::new(PgStore::connect(url).await?),
         None => Arc::new(SqliteStore::open(file).await?),
@@ -116,9 +119,14 @@ pub(super) fn queue(args: &QueueArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Queues `jobs` jobs without dependencies in bakes of 1000 (whose keys
-/// start with `tag`) on `store`.
-async fn fill_queue(store: &dyn Store, tag: &str, jobs: usize) -> anyhow::Result<()> {
+/// Queues `jobs` jobs without dependencies in bakes of `per_bake` (whose
+/// keys start with `tag`) on `store`.
+pub(super) async fn fill_queue(
+    store: &dyn Store,
+    tag: &str,
+    jobs: usize,
+    per_bake: usize,
+) -> anyhow::Result<Vec<i64>> {
     let character = format!("{:064x}", 0xc0ffee);
     store
         .put_upload(&UploadRow {
@@ -129,19 +137,19 @@ async fn fill_queue(store: &dyn Store, tag: &str, jobs: usize) -> anyhow::Result
             summary: json!({}),
         })
         .await?;
-    let per_bake = 1000;
+    let mut ids = Vec::new();
     for b in 0..jobs.div_ceil(per_bake) {
         let n = per_bake.min(jobs - b * per_bake);
         let key = format!("{tag}-{b}-{}", std::process::id());
-        store.create_bake(&new_bake(&character, key, n)).await?;
+        ids.push(store.create_bake(&new_bake(&character, key, n)).await?.id);
     }
-    Ok(())
+    Ok(ids)
 }
 
 /// Lease + complete through the store trait; returns jobs per second.
 async fn store_queue(args: &QueueArgs, dir: &Path, run: usize) -> anyhow::Result<f64> {
     let store = open_store(args.database.as_deref(), &dir.join("bench.db")).await?;
-    fill_queue(&*store, &format!("store-{run}"), args.jobs).await?;
+    fill_queue(&*store, &format!("store-{run}"), args.jobs, 1000).await?;
     let policy = QueuePolicy::default();
     let started = Instant::now();
     let tasks: Vec<_> = (0..args.workers)
@@ -193,9 +201,9 @@ fn slot_ids(w: usize, batch: u16) -> Vec<String> {
 }
 
 /// A real `aobake serve` on a free port, killed on drop.
-struct Server {
+pub(super) struct Server {
     child: Child,
-    url: String,
+    pub(super) url: String,
     token: String,
 }
 
@@ -208,6 +216,16 @@ impl Drop for Server {
 
 impl Server {
     fn start(dir: &Path, database: Option<&str>) -> anyhow::Result<Self> {
+        Self::start_with(dir, database, None)
+    }
+
+    /// Starts one on `dir`, on `database` (SQLite in `dir` without), with
+    /// its blobs in `blobs` (`dir`'s own without).
+    pub(super) fn start_with(
+        dir: &Path,
+        database: Option<&str>,
+        blobs: Option<&Path>,
+    ) -> anyhow::Result<Self> {
         let token = crate::auth::new_token();
         let mut cmd = Command::new(std::env::current_exe()?);
         cmd.args(["serve", "--listen", "127.0.0.1:0", "--workers", "0"])
@@ -219,6 +237,9 @@ impl Server {
             .stderr(Stdio::null());
         if let Some(url) = database {
             cmd.args(["--database", url]);
+        }
+        if let Some(blobs) = blobs {
+            cmd.arg("--blobs").arg(blobs);
         }
         let child = cmd.spawn().context("cannot start aobake serve")?;
         let started = Instant::now();
@@ -235,7 +256,7 @@ impl Server {
     }
 
     /// Resident and peak memory of the server process, in MiB.
-    fn memory_mib(&self) -> (f64, f64) {
+    pub(super) fn memory_mib(&self) -> (f64, f64) {
         let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id()))
             .unwrap_or_default();
         let field = |name: &str| {
@@ -249,7 +270,7 @@ impl Server {
         (field("VmRSS:"), field("VmHWM:"))
     }
 
-    fn api(&self) -> Client {
+    pub(super) fn api(&self) -> Client {
         Client::new(&self.url, &self.token)
     }
 }
@@ -290,7 +311,7 @@ fn http_queue(
     // starts, so the server schedules exactly `jobs` of them.
     rt.block_on(async {
         let store = open_store(args.database.as_deref(), &dir.join("aobake.db")).await?;
-        fill_queue(&*store, &format!("http-{run}"), args.jobs).await
+        fill_queue(&*store, &format!("http-{run}"), args.jobs, 1000).await
     })?;
     let server = Server::start(dir, args.database.as_deref())?;
     let api = server.api();
