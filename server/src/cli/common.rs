@@ -87,6 +87,17 @@ pub(super) fn pose(file: &Path, args: &PoseArgs, limits: &Limits) -> anyhow::Res
 
 /// The median of `v` (the mean of the middle two when their number is
 /// even): what the benchmarks quote on noisy shared machines.
+/// A clap value parser for a positive, finite number (seconds, rates):
+/// what `Duration::from_secs_f64` and a rate may take.
+pub(super) fn positive(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && v > 0.0 && v <= 1e9 {
+        Ok(v)
+    } else {
+        Err(format!("{s} is not a positive number (at most 1e9)"))
+    }
+}
+
 pub(super) fn median(v: &[f64]) -> f64 {
     let mut s = v.to_vec();
     s.sort_by(f64::total_cmp);

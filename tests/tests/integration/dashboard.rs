@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use aobake_e2e::{ADMIN, Options, TestEnv, character};
 use fantoccini::{Client, ClientBuilder, Locator};
 use serde_json::{Value, json};
+use std::os::unix::process::CommandExt as _;
 
 use crate::util::{quick_params, upload};
 
@@ -35,8 +36,11 @@ impl Driver {
             .expect(
                 "the dashboard test needs Chromium's WebDriver: apt-get install chromium chromium-driver",
             );
+        // A process group of its own, so dropping it ends the browsers it
+        // started too, even those of a session a failed test left open.
         let child = Command::new(binary)
             .arg(format!("--port={port}"))
+            .process_group(0)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -56,6 +60,12 @@ impl Driver {
 
 impl Drop for Driver {
     fn drop(&mut self) {
+        if let Ok(pid) = i32::try_from(self.child.id()) {
+            let _ = nix::sys::signal::killpg(
+                nix::unistd::Pid::from_raw(pid),
+                nix::sys::signal::Signal::SIGKILL,
+            );
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
@@ -854,5 +864,6 @@ fn the_viewer_plays_every_method_and_matches_aobake_preview() {
         let disabled = eval(&c, "return document.querySelector('input[name=viewer-mode][value=static]').disabled").await;
         assert_eq!(disabled, json!(true));
         shot(&c, "10-viewer-cubemap").await;
+        c.close().await.unwrap();
     });
 }

@@ -16,6 +16,7 @@ use aobake_api::{Client, Completion, JobCompletion, NewTokenRequest, OutputRef};
 use serde_json::json;
 
 use super::service::{Server, fill_queue, open_store};
+use crate::cli::common::positive;
 
 /// Arguments of `aobake bench load`.
 #[derive(Debug, clap::Args)]
@@ -29,25 +30,25 @@ pub(super) struct LoadArgs {
     #[arg(long)]
     database: Option<String>,
     /// Seconds of load.
-    #[arg(long, default_value_t = 300.0)]
+    #[arg(long, default_value_t = 300.0, value_parser = positive)]
     secs: f64,
-    /// Clients polling a bake's status.
-    #[arg(long, default_value_t = 500)]
-    pollers: usize,
+    /// Clients polling a bake's status (a thread each).
+    #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(0..=20_000))]
+    pollers: u32,
     /// Milliseconds between one poller's requests.
     #[arg(long, default_value_t = 1000)]
     poll_ms: u64,
-    /// Clients listening to `GET /v1/events`.
-    #[arg(long, default_value_t = 200)]
-    sse: usize,
+    /// Clients listening to `GET /v1/events` (a thread each).
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(0..=20_000))]
+    sse: u32,
     /// Milliseconds between character uploads (each a new glTF).
     #[arg(long, default_value_t = 1000)]
     upload_ms: u64,
     /// Jobs completed per second (through the first server).
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_parser = positive)]
     jobs_per_sec: f64,
     /// Seconds per printed interval.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = positive)]
     every: f64,
 }
 
@@ -145,11 +146,11 @@ pub(super) fn load(args: &LoadArgs) -> anyhow::Result<()> {
     let (mut events, mut uploads, mut jobs_done) = (0, 0, 0);
     let disconnects = AtomicU64::new(0);
     std::thread::scope(|s| {
-        for i in 0..args.pollers {
+        for i in 0..args.pollers as usize {
             let (url, read, bakes, tally) = (&urls[i % urls.len()], &read, &bakes, &tally);
             s.spawn(move || poll(url, read, bakes, args.poll_ms, deadline, tally));
         }
-        for i in 0..args.sse {
+        for i in 0..args.sse as usize {
             let (url, read, tally, disconnects) =
                 (&urls[i % urls.len()], &read, &tally, &disconnects);
             s.spawn(move || listen(url, read, deadline, tally, disconnects));

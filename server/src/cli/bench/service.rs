@@ -50,7 +50,7 @@ pub(super) struct ApiArgs {
     #[arg(long, default_value_t = 200)]
     pollers: usize,
     /// Seconds to poll.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = crate::cli::common::positive)]
     secs: f64,
     /// Pause between one poller's requests, in milliseconds (0: as fast
     /// as the server answers).
