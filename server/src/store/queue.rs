@@ -425,6 +425,7 @@ async fn claim<B: Backend>(
     worker: &str,
     policy: &QueuePolicy,
     limit: usize,
+    taken: &[i64],
 ) -> Result<Vec<i64>> {
     let bakes: Vec<(i64,)> = c
         .all(
@@ -435,14 +436,22 @@ async fn claim<B: Backend>(
         .await?;
     let tracing = JobSpec::TRACING_KINDS.map(|k| format!("'{k}'")).join(", ");
     let mut ids = Vec::new();
+    // Jobs this transaction claimed for other slots are still `available`
+    // to it (its own row locks do not skip them): leave them out.
+    let taken_clause = if taken.is_empty() {
+        String::new()
+    } else {
+        format!(" AND id NOT IN ({})", placeholders(5, taken.len()))
+    };
     for (bake,) in bakes {
         let more: Vec<(i64,)> = c
             .all(
-                B::sql(&format!("SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' AND NOT (kind IN ({tracing}) AND EXISTS (SELECT 1 FROM workers me WHERE me.id = $2 AND me.tracer = 'cpu') AND EXISTS (SELECT 1 FROM workers g WHERE g.id != $2 AND g.tracer LIKE 'gpu%' AND g.state = 'idle' AND g.last_seen > {{now}} - {GPU_WAITING_MS} AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = $1 AND f.worker = g.id AND f.failures >= $3))) ORDER BY idx LIMIT $4{{skip_locked}}"))
+                B::sql(&format!("SELECT id FROM jobs WHERE bake_id = $1 AND state = 'available' AND NOT (kind IN ({tracing}) AND EXISTS (SELECT 1 FROM workers me WHERE me.id = $2 AND me.tracer = 'cpu') AND EXISTS (SELECT 1 FROM workers g WHERE g.id != $2 AND g.tracer LIKE 'gpu%' AND g.state = 'idle' AND g.last_seen > {{now}} - {GPU_WAITING_MS} AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = $1 AND f.worker = g.id AND f.failures >= $3))){taken_clause} ORDER BY idx LIMIT $4{{skip_locked}}"))
                     .bind(bake)
                     .bind(worker)
                     .bind(policy.worker_failures)
-                    .bind(i64::try_from(limit - ids.len()).unwrap_or(i64::MAX)),
+                    .bind(i64::try_from(limit - ids.len()).unwrap_or(i64::MAX))
+                    .bind_all(taken.iter().copied()),
             )
             .await?;
         ids.extend(more.into_iter().map(|(id,)| id));
@@ -788,9 +797,15 @@ impl<B: Backend> Store for SqlStore<B> {
                 "UPDATE jobs SET state = 'available' WHERE state = 'retryable' AND run_at <= {now}",
             ))
             .await?;
+            if workers.iter().collect::<BTreeSet<_>>().len() != workers.len() {
+                return Err(StoreError::Conflict(
+                    "a batch of leases names a worker twice".into(),
+                ));
+            }
             let mut claimed: Vec<(usize, i64)> = Vec::new();
             for group in claim_groups::<B>(c, workers, policy).await? {
-                let ids = claim::<B>(c, &workers[group[0]], policy, group.len()).await?;
+                let taken: Vec<i64> = claimed.iter().map(|&(_, id)| id).collect();
+                let ids = claim::<B>(c, &workers[group[0]], policy, group.len(), &taken).await?;
                 claimed.extend(group.into_iter().zip(ids));
             }
             // In the batch's order: the first slot asked leases first.
@@ -802,15 +817,19 @@ impl<B: Backend> Store for SqlStore<B> {
             for (slot, id) in claimed {
                 let worker = &workers[slot];
                 let token = lease_token();
-                let job: RawJob = c
-                    .one(
-                        B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0 WHERE id = $4 RETURNING *, {deps} AS deps")
+                let Some(job) = c
+                    .optional::<RawJob>(
+                        B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0 WHERE id = $4 AND state = 'available' RETURNING *, {deps} AS deps")
                             .bind(&token)
                             .bind(worker)
                             .bind(policy.lease_ms)
                             .bind(id),
                     )
-                    .await?;
+                    .await?
+                else {
+                    // Claimed twice in one batch: never, by `taken`.
+                    continue;
+                };
                 let expires_at = job.lease_expires_at.unwrap_or_default();
                 let job = job.cook()?;
                 if let std::collections::hash_map::Entry::Vacant(e) = bakes.entry(job.bake_id) {
@@ -909,10 +928,10 @@ impl<B: Backend> Store for SqlStore<B> {
 
     async fn complete_many(&self, items: &[Completing]) -> Result<Vec<Result<BakeRow>>> {
         in_tx!(self, Durability::Acknowledged, |c| {
-            // Per job, two statements: the completion (only with the
-            // current lease token) and its dependents; per bake, its
-            // counts (publishing the asset, report and plot when a job
-            // produced them); per worker, its state; one wake.
+            // A statement per job: its completion (only with the current
+            // lease token); per bake, its counts (publishing the asset,
+            // report and plot when a job produced them); then one for
+            // the dependents, one for the workers, one wake.
             let mut done: Vec<Result<(i64, i64)>> = Vec::with_capacity(items.len());
             // Per bake: work and jobs done, and the outputs it publishes.
             let mut counts: BTreeMap<i64, BakeCounts> = BTreeMap::new();
@@ -942,7 +961,6 @@ impl<B: Backend> Store for SqlStore<B> {
                 done.push(Ok((item.job, bake_id)));
             }
             let completed: Vec<i64> = done.iter().flatten().map(|&(job, _)| job).collect();
-            release_dependents::<B>(c, &completed).await?;
             let mut bakes = HashMap::new();
             for (bake_id, n) in counts {
                 let bake = c
@@ -959,6 +977,9 @@ impl<B: Backend> Store for SqlStore<B> {
                     .cook()?;
                 bakes.insert(bake_id, bake);
             }
+            // After the bakes' rows, locked in id order: two batches of
+            // one bake, which share dependents, take their locks in turn.
+            release_dependents::<B>(c, &completed).await?;
             if !idle.is_empty() {
                 c.execute(
                     B::sql(&format!(

@@ -79,6 +79,48 @@ pub(crate) async fn run_all(store: &dyn Store) {
     a_worker_that_keeps_failing_a_bake_is_kept_off_it(store).await;
     tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store).await;
     a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store).await;
+    a_batch_split_by_failures_leases_each_job_once(store).await;
+}
+
+/// A slot with failures on record claims apart from the others (its own
+/// bakes to be kept off); the jobs it claimed must not go to the others
+/// too.
+async fn a_batch_split_by_failures_leases_each_job_once(store: &dyn Store) {
+    let c = character(store).await;
+    let p = QueuePolicy {
+        worker_failures: 1,
+        ..policy()
+    };
+    // One failure on another bake puts slot 0 in a group of its own.
+    let mut other = bake(&c, &"e".repeat(64));
+    other.priority = 4000;
+    let other = store.create_bake(&other).await.unwrap();
+    let l = store.lease("split/0", &p).await.unwrap().unwrap();
+    assert_eq!(l.job.bake_id, other.id);
+    store
+        .fail(l.job.id, &l.token, "oops", true, &p)
+        .await
+        .unwrap();
+    store.control(other.id, Action::Cancel).await.unwrap();
+    let mut b = bake(&c, &"f".repeat(64));
+    b.priority = 5000;
+    let b = store.create_bake(&b).await.unwrap();
+    let slots: Vec<String> = (0..3).map(|i| format!("split/{i}")).collect();
+    let leases = store.lease_many(&slots, &p).await.unwrap();
+    let ids: std::collections::BTreeSet<i64> = leases.iter().map(|l| l.job.id).collect();
+    assert_eq!(ids.len(), leases.len(), "a job leased twice: {leases:?}");
+    // The bake's two ready jobs, once each (a third slot may get an
+    // earlier case's job).
+    let ours: Vec<_> = leases.iter().filter(|l| l.job.bake_id == b.id).collect();
+    assert_eq!(ours.len(), 2, "{leases:?}");
+    assert!(ours.iter().all(|l| l.job.attempts == 1), "{leases:?}");
+    for l in &leases {
+        store.release(l.job.id, &l.token).await.unwrap();
+    }
+    let twice = store
+        .lease_many(&["split/0".to_owned(), "split/0".to_owned()], &p)
+        .await;
+    assert!(matches!(twice, Err(StoreError::Conflict(_))), "{twice:?}");
 }
 
 /// With no other worker to take its jobs, a failing worker goes on
