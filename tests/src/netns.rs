@@ -50,6 +50,22 @@ fn ip(args: &[&str]) -> Output {
     out
 }
 
+/// A `10.231.X` subnet no route of this namespace uses yet (a run that
+/// was killed may have left its veth behind), starting from one derived
+/// from the process id.
+fn free_subnet() -> String {
+    let start = std::process::id() % 250;
+    (0..250)
+        .map(|i| format!("10.231.{}", (start + i) % 250))
+        .find(|net| {
+            Command::new("ip")
+                .args(["route", "show", &format!("{net}.0/24")])
+                .output()
+                .is_ok_and(|o| o.stdout.is_empty())
+        })
+        .expect("a free 10.231.X.0/24 subnet")
+}
+
 impl TestNet {
     /// Makes the bridge and joins the test process to it.
     pub fn new() -> Self {
@@ -58,7 +74,7 @@ impl TestNet {
         ip(&["netns", "add", &switch]);
         let net = Self {
             own_link: format!("{prefix}t"),
-            subnet: format!("10.231.{}", std::process::id() % 250),
+            subnet: free_subnet(),
             prefix,
             switch,
             hosts: Vec::new(),

@@ -208,6 +208,41 @@ fn complete_batches(client: &Client, finished: &mpsc::Receiver<Finished>) {
     }
 }
 
+/// Uploads a finished job's outputs and hands its completion to the
+/// completer; returns the server's answer for it.
+fn deliver(
+    client: &Client,
+    job: i64,
+    token: &str,
+    out: JobOutput,
+    finished: &mpsc::Sender<Finished>,
+) -> Result<(), String> {
+    let outputs = out
+        .outputs
+        .iter()
+        .map(|o| {
+            with_retries(|| client.put_blob(&o.bytes)).map(|digest| OutputRef {
+                name: o.name.clone(),
+                digest,
+            })
+        })
+        .collect::<Result<Vec<OutputRef>, ApiError>>()
+        .map_err(|e| e.to_string())?;
+    let timings = serde_json::to_value(out.timings).unwrap_or_default();
+    let (answer, heard) = mpsc::channel();
+    let item = JobCompletion {
+        job,
+        token: token.to_owned(),
+        completion: Completion { outputs, timings },
+    };
+    finished
+        .send(Finished { item, answer })
+        .map_err(|_| "the completer has ended".to_owned())?;
+    heard
+        .recv()
+        .map_err(|_| "the completer gave no answer".to_owned())?
+}
+
 /// Stop requests shared by the compute and heartbeat threads.
 #[derive(Debug, Default)]
 struct Flags {
@@ -524,46 +559,23 @@ fn run_leased(
                 .unwrap_or_default();
             Err(JobError::Failed(format!("the job panicked: {what}")))
         });
+        // The outputs go up and the completion waits for its batch while
+        // the heartbeats go on: a slow store or a long batch does not
+        // lose the lease.
+        let r = r.map(|out| deliver(client, job, &lease.token, out, finished));
         flags.done.store(true, Ordering::Relaxed);
         r
     });
     let spec = &lease.job.spec;
     match result {
-        Ok(out) => {
-            let uploaded: Result<Vec<OutputRef>, ApiError> = out
-                .outputs
-                .iter()
-                .map(|o| {
-                    with_retries(|| client.put_blob(&o.bytes)).map(|digest| OutputRef {
-                        name: o.name.clone(),
-                        digest,
-                    })
-                })
-                .collect();
-            let timings = serde_json::to_value(out.timings).unwrap_or_default();
-            let done = uploaded.map_err(|e| e.to_string()).and_then(|outputs| {
-                let (answer, heard) = mpsc::channel();
-                let item = JobCompletion {
-                    job,
-                    token: lease.token.clone(),
-                    completion: Completion { outputs, timings },
-                };
-                finished
-                    .send(Finished { item, answer })
-                    .map_err(|_| "the completer has ended".to_owned())?;
-                heard
-                    .recv()
-                    .map_err(|_| "the completer gave no answer".to_owned())?
-            });
-            match done {
-                Ok(()) => eprintln!(
-                    "job {job} ({}) done in {:.2} s",
-                    spec["kind"],
-                    started.elapsed().as_secs_f64()
-                ),
-                Err(e) => eprintln!("job {job}: completion refused: {e}"),
-            }
-        }
+        Ok(done) => match done {
+            Ok(()) => eprintln!(
+                "job {job} ({}) done in {:.2} s",
+                spec["kind"],
+                started.elapsed().as_secs_f64()
+            ),
+            Err(e) => eprintln!("job {job}: completion refused: {e}"),
+        },
         Err(JobError::Stopped(Stop(why))) => {
             // Give the lease back if it is still ours (a stop asked by the
             // server or by shutdown); a lost lease answers 409, harmlessly.

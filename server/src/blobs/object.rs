@@ -11,8 +11,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use object_store::{
-    ClientOptions, ObjectStore, ObjectStoreExt as _, PutMode, PutOptions, PutPayload, RetryConfig,
-    WriteMultipart,
+    ClientConfigKey, ObjectStore, ObjectStoreExt as _, PutMode, PutOptions, PutPayload,
+    RetryConfig, WriteMultipart,
     aws::{AmazonS3Builder, AmazonS3ConfigKey},
     path::Path,
 };
@@ -49,17 +49,21 @@ impl ObjectBlobs {
         if bucket.is_empty() {
             return Err(bad("no bucket".into()));
         }
-        // A store that does not answer fails a request within about ten
-        // seconds (the API answers 503 then), not object_store's three
-        // minutes of retries; a query pair may say otherwise.
+        // A store that does not answer fails a request soon (the API
+        // answers 503 then): it connects within 3 s, and retries start
+        // within 10 s of the first try, not over object_store's three
+        // minutes. `AWS_*` variables and query pairs may say otherwise.
         let mut builder = AmazonS3Builder::from_env()
             .with_bucket_name(bucket)
             .with_retry(RetryConfig {
                 max_retries: 3,
                 retry_timeout: Duration::from_secs(10),
                 ..RetryConfig::default()
-            })
-            .with_client_options(ClientOptions::new().with_connect_timeout(Duration::from_secs(3)));
+            });
+        let connect = AmazonS3ConfigKey::Client(ClientConfigKey::ConnectTimeout);
+        if builder.get_config_value(&connect).is_none() {
+            builder = builder.with_config(connect, "3s");
+        }
         for pair in query.split('&').filter(|p| !p.is_empty()) {
             let (key, value) = pair
                 .split_once('=')

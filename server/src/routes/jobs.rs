@@ -9,7 +9,7 @@ use aobake_api::{
     FailRequest, HeartbeatReply, HeartbeatRequest, LeaseManyRequest, LeaseRequest, Leases,
     TokenRequest,
 };
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
 use axum::{
@@ -184,8 +184,14 @@ pub(crate) async fn checkpoint(
 }
 
 async fn require_blob(state: &AppState, digest: &str) -> ApiResult<()> {
+    stored(&*state.blobs, digest).await
+}
+
+/// `Ok` when `digest` names a stored blob, else 400 `missing_blob` (or
+/// the store's own error).
+async fn stored(blobs: &dyn crate::blobs::Blobs, digest: &str) -> ApiResult<()> {
     crate::blobs::check_digest(digest)?;
-    if state.blobs.len(digest).await?.is_none() {
+    if blobs.len(digest).await?.is_none() {
         return Err(ApiError::bad(
             "missing_blob",
             format!("blob {digest} was not uploaded"),
@@ -228,18 +234,42 @@ pub(crate) async fn complete_many(
             format!("a completions request carries 1 to {MAX_BATCH} completions"),
         ));
     }
-    // Outputs must be stored before a completion can name them: an item
-    // naming a missing blob is refused on its own, as `complete` would.
+    // Outputs must be stored before a completion names them. Each digest
+    // is looked up once, all at once: a missing one refuses only the items
+    // that name it, as `complete` would; a store that does not answer
+    // fails the whole request (503, and the worker sends it again).
+    let digests: BTreeSet<String> = req
+        .completions
+        .iter()
+        .flat_map(|c| c.completion.outputs.iter().map(|o| o.digest.clone()))
+        .collect();
+    let mut lookups = tokio::task::JoinSet::new();
+    for digest in digests {
+        let blobs = state.blobs.clone();
+        lookups.spawn(async move {
+            let found = stored(&*blobs, &digest).await;
+            (digest, found)
+        });
+    }
+    let mut missing: BTreeMap<String, Problem> = BTreeMap::new();
+    while let Some(joined) = lookups.join_next().await {
+        let (digest, found) = joined.map_err(|e| ApiError::Internal(e.to_string()))?;
+        match found {
+            Ok(()) => {}
+            Err(e @ ApiError::Unavailable(_)) => return Err(e),
+            Err(e) => {
+                missing.insert(digest, e.problem());
+            }
+        }
+    }
     let mut refused = Vec::with_capacity(req.completions.len());
     let mut items = Vec::with_capacity(req.completions.len());
     for c in req.completions {
-        let mut problem = None;
-        for o in &c.completion.outputs {
-            if let Err(e) = require_blob(&state, &o.digest).await {
-                problem = Some(e);
-                break;
-            }
-        }
+        let problem = c
+            .completion
+            .outputs
+            .iter()
+            .find_map(|o| missing.get(&o.digest).cloned());
         if problem.is_none() {
             items.push(Completing {
                 job: c.job,
@@ -254,7 +284,7 @@ pub(crate) async fn complete_many(
     let mut results = Vec::with_capacity(refused.len());
     for (job, problem) in refused {
         let problem = match problem {
-            Some(e) => Some(e),
+            Some(p) => Some(p),
             None => match recorded.next() {
                 Some(Ok(bake)) => {
                     // Every answer for a bake is its row after the batch:
@@ -264,16 +294,13 @@ pub(crate) async fn complete_many(
                     }
                     None
                 }
-                Some(Err(e)) => Some(ApiError::from(e)),
-                None => Some(ApiError::Internal(format!(
-                    "job {job}: no answer from the store"
-                ))),
+                Some(Err(e)) => Some(ApiError::from(e).problem()),
+                None => Some(
+                    ApiError::Internal(format!("job {job}: no answer from the store")).problem(),
+                ),
             },
         };
-        results.push(CompletionResult {
-            job,
-            problem: problem.map(|e| e.problem()),
-        });
+        results.push(CompletionResult { job, problem });
     }
     Ok(Json(CompleteManyReply { results }))
 }

@@ -59,10 +59,29 @@ fn a_cluster_in_network_namespaces_finishes_a_bake_through_a_cut_link_and_kills(
             std::thread::sleep(Duration::from_millis(50));
         }
     };
-    // Mid-bake: worker 1's link is cut (it runs on, unheard), worker 3
-    // is killed; then, once the others have moved the bake on, server A
-    // dies too.
+    // Mid-bake, while workers 1 and 3 each hold a job: worker 1's link
+    // is cut (it runs on, unheard), worker 3 is killed; then, once the
+    // others have moved the bake on, server A dies too.
     wait_for(&a, 3);
+    let started = Instant::now();
+    loop {
+        let (_, now) = a
+            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+            .unwrap();
+        let holds =
+            |host: &aobake_e2e::netns::Host| {
+                now["jobs"].as_array().unwrap().iter().any(|j| {
+                    j["state"] == "running" && j["worker"].as_str() == Some(host.ns.as_str())
+                })
+            };
+        if holds(&w[0]) && holds(&w[2]) {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "workers 1 and 3 never held jobs at once: {now}"
+        );
+    }
     net.cut(&w[0]);
     a.kill_worker(w3);
     let then = jobs_done(&b);

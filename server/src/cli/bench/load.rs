@@ -97,7 +97,11 @@ pub(super) fn load(args: &LoadArgs) -> anyhow::Result<()> {
     // The bakes the pollers read and the worker completes: queued in the
     // store before the servers start, 100 jobs each, as many as the run
     // completes.
-    let jobs = (args.jobs_per_sec * args.secs).ceil() as usize + 100;
+    let jobs = (args.jobs_per_sec * args.secs).ceil() + 100.0;
+    if jobs > 1e7 {
+        bail!("--jobs-per-sec × --secs asks for {jobs:.0} jobs; at most 10 million are queued");
+    }
+    let jobs = jobs as usize;
     let rt = tokio::runtime::Runtime::new()?;
     let data = |i: usize| dir.path().join(format!("server-{i}"));
     let bakes = rt.block_on(async {
