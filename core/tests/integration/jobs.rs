@@ -326,7 +326,7 @@ fn parameters_come_from_one_schema_with_named_errors() {
     let w = defaults.work(1000, 10, 0);
     assert_eq!(
         w,
-        (1536 + 32 + 10 + 8) as u128 * 1000 * 256,
+        (2048 + 32 + 10 + 8) as u128 * 1000 * 256,
         "reference, random held-out, clip frames and the noise re-trace"
     );
 }

@@ -512,7 +512,7 @@ fn cross_validation_over_clips_chooses_the_reference_rows() {
     }
     // Cubes scaled, turned and moved one at a time gain from perturbed
     // frames; the fox needs random poses (here all three rows, with the
-    // default 1536 poses random poses and frames; perturbed frames alone
+    // default 2048 poses random poses and frames; perturbed frames alone
     // score over a dB worse).
     assert_eq!(chosen[0], Rows::Perturbed);
     assert_ne!(chosen[1], Rows::Perturbed);

@@ -34,7 +34,7 @@ pub(super) struct BakeRequestArgs {
 #[derive(Debug, Clone, Default, clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub(super) struct ParamArgs {
-    /// Reference poses to trace. Default: 1536 for the vertex methods,
+    /// Reference poses to trace. Default: 2048 for the vertex methods,
     /// 256 otherwise.
     #[arg(long)]
     poses: Option<usize>,
