@@ -128,9 +128,7 @@ async fn wait_for_leases(
             }
             return Ok(leases);
         }
-        for worker in &workers {
-            state.store.worker_seen(worker, "idle", None).await?;
-        }
+        state.store.workers_idle(&workers).await?;
         let now = tokio::time::Instant::now();
         let stopping = state
             .shutting_down

@@ -255,8 +255,9 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn control(&self, bake: i64, action: Action) -> Result<BakeRow>;
     /// Sets a bake's priority.
     async fn set_priority(&self, bake: i64, priority: i64) -> Result<BakeRow>;
-    /// Records that a worker is alive (and what it runs).
-    async fn worker_seen(&self, worker: &str, state: &str, job: Option<i64>) -> Result<()>;
+    /// Records that `workers` are alive and waiting for a job, in one
+    /// transaction (a worker process's idle slots, at each long poll).
+    async fn workers_idle(&self, workers: &[String]) -> Result<()>;
     /// Records what casts a worker's rays (`cpu`, or `gpu: ADAPTER`).
     async fn worker_tracer(&self, worker: &str, tracer: &str) -> Result<()>;
     /// Every worker, most recently seen first.

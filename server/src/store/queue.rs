@@ -1096,13 +1096,20 @@ impl<B: Backend> Store for SqlStore<B> {
         })
     }
 
-    async fn worker_seen(&self, worker: &str, state: &str, job: Option<i64>) -> Result<()> {
+    async fn workers_idle(&self, workers: &[String]) -> Result<()> {
+        // Once each: an upsert may not touch a row twice.
+        let workers: BTreeSet<&String> = workers.iter().collect();
+        if workers.is_empty() {
+            return Ok(());
+        }
+        let rows = (1..=workers.len())
+            .map(|i| format!("(${i}, 'idle', NULL, {{now}}, {{now}})"))
+            .collect::<Vec<_>>()
+            .join(", ");
         in_tx!(self, Durability::Queue, |c| {
             c.execute(
-                B::sql("INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES ($1, $2, $3, {now}, {now}) ON CONFLICT (id) DO UPDATE SET state = $2, job_id = $3, last_seen = {now}")
-                    .bind(worker)
-                    .bind(state)
-                    .bind(job),
+                B::sql(&format!("INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES {rows} ON CONFLICT (id) DO UPDATE SET state = 'idle', job_id = NULL, last_seen = excluded.last_seen"))
+                    .bind_all(workers.iter().map(|w| w.as_str())),
             )
             .await?;
             Ok(())

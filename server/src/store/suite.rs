@@ -121,6 +121,23 @@ async fn a_batch_split_by_failures_leases_each_job_once(store: &dyn Store) {
         .lease_many(&["split/0".to_owned(), "split/0".to_owned()], &p)
         .await;
     assert!(matches!(twice, Err(StoreError::Conflict(_))), "{twice:?}");
+    // Idle slots are marked in one go, a repeated one once; a busy one
+    // (split/1, holding a job now) and a new one too.
+    let held = store.lease("split/1", &p).await.unwrap().unwrap();
+    let busy = store.workers().await.unwrap();
+    let before = busy.iter().find(|w| w.id == "split/1").unwrap();
+    assert_eq!(
+        (before.state.as_str(), before.job_id),
+        ("busy", Some(held.job.id))
+    );
+    let idle = ["split/0", "split/1", "split/0", "split/new"].map(str::to_owned);
+    store.workers_idle(&idle).await.unwrap();
+    let workers = store.workers().await.unwrap();
+    for id in ["split/0", "split/1", "split/new"] {
+        let w = workers.iter().find(|w| w.id == id).unwrap();
+        assert_eq!((w.state.as_str(), w.job_id), ("idle", None), "{w:?}");
+    }
+    store.release(held.job.id, &held.token).await.unwrap();
 }
 
 /// With no other worker to take its jobs, a failing worker goes on
@@ -291,7 +308,7 @@ async fn tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store: &d
     let created = store.create_bake(&b).await.unwrap();
     let p = policy();
     store.worker_tracer("gpu", "gpu: an adapter").await.unwrap();
-    store.worker_seen("gpu", "idle", None).await.unwrap();
+    store.workers_idle(&["gpu".to_owned()]).await.unwrap();
     store.worker_tracer("cpu", "cpu").await.unwrap();
     // A GPU worker is waiting: the CPU worker leaves the samples to it
     // (and may take another bake's work).
