@@ -81,6 +81,7 @@ fn a_cluster_in_network_namespaces_finishes_a_bake_through_a_cut_link_and_kills(
             started.elapsed() < Duration::from_secs(60),
             "workers 1 and 3 never held jobs at once: {now}"
         );
+        std::thread::sleep(Duration::from_millis(20));
     }
     net.cut(&w[0]);
     a.kill_worker(w3);
