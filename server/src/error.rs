@@ -11,7 +11,7 @@ use axum::{
 use crate::{blobs::BlobError, store::StoreError};
 
 /// Why a request failed.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, thiserror::Error)]
 pub enum ApiError {
     /// The request is malformed or names something invalid.
     #[error("{detail}")]

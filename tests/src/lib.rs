@@ -367,22 +367,46 @@ impl TestEnv {
     /// Waits until the bake ends (done, failed or cancelled), or panics
     /// after `timeout`.
     pub fn wait_bake(&self, id: i64, timeout: Duration) -> Value {
+        self.wait_for_bake(id, timeout, "finish", |b| {
+            matches!(b["state"].as_str(), Some("done" | "failed" | "cancelled"))
+        })
+    }
+
+    /// Waits until at least `jobs` of the bake's jobs are done (mid-bake,
+    /// for a test to disturb it), or panics after `timeout` or when the
+    /// bake failed.
+    pub fn wait_jobs_done(&self, id: i64, jobs: i64, timeout: Duration) -> Value {
+        self.wait_for_bake(id, timeout, &format!("reach {jobs} jobs done"), |b| {
+            assert_ne!(b["state"], "failed", "{b}");
+            b["jobs_done"].as_i64().unwrap_or(0) >= jobs
+        })
+    }
+
+    /// Polls the bake until `reached` says so; returns the bake then, or
+    /// panics after `timeout` saying what it waited to `what`.
+    pub fn wait_for_bake(
+        &self,
+        id: i64,
+        timeout: Duration,
+        what: &str,
+        reached: impl Fn(&Value) -> bool,
+    ) -> Value {
         let started = Instant::now();
         loop {
             let (status, b) = self
                 .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
                 .expect("status");
             assert_eq!(status, 200, "{b}");
-            if matches!(b["state"].as_str(), Some("done" | "failed" | "cancelled")) {
+            if reached(&b) {
                 return b;
             }
             assert!(
                 started.elapsed() < timeout,
-                "bake {id} did not finish in {timeout:?}: {b}\nserver: {}\nworkers: {}",
+                "bake {id} did not {what} in {timeout:?}: {b}\nserver: {}\nworkers: {}",
                 self.server_log(),
                 self.worker_logs()
             );
-            std::thread::sleep(Duration::from_millis(100));
+            std::thread::sleep(Duration::from_millis(50));
         }
     }
 }

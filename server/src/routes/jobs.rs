@@ -120,10 +120,11 @@ async fn wait_for_leases(
         let notified = state.jobs_ready.notified();
         let leases = state.store.lease_many(&workers, &state.policy).await?;
         if !leases.is_empty() {
-            let bakes: BTreeSet<i64> = leases.iter().map(|l| l.bake.id).collect();
-            for id in bakes {
-                if let Some(bake) = state.store.bake(id).await? {
-                    state.announce(&bake);
+            // Each lease carries its bake's row as the lease left it.
+            let mut announced = BTreeSet::new();
+            for l in &leases {
+                if announced.insert(l.bake.id) {
+                    state.announce(&l.bake);
                 }
             }
             return Ok(leases);
@@ -173,16 +174,12 @@ pub(crate) async fn checkpoint(
     ApiPath(id): ApiPath<i64>,
     Body(req): Body<CheckpointRequest>,
 ) -> ApiResult<StatusCode> {
-    require_blob(&state, &req.checkpoint.blob).await?;
+    stored(&*state.blobs, &req.checkpoint.blob).await?;
     state
         .store
         .checkpoint(id, &req.token, &req.checkpoint)
         .await?;
     Ok(StatusCode::NO_CONTENT)
-}
-
-async fn require_blob(state: &AppState, digest: &str) -> ApiResult<()> {
-    stored(&*state.blobs, digest).await
 }
 
 /// `Ok` when `digest` names a stored blob, else 400 `missing_blob` (or
@@ -207,14 +204,15 @@ pub(crate) async fn complete(
     ApiPath(id): ApiPath<i64>,
     Body(req): Body<CompleteRequest>,
 ) -> ApiResult<StatusCode> {
-    for o in &req.completion.outputs {
-        require_blob(&state, &o.digest).await?;
-    }
-    let bake = state
-        .store
-        .complete(id, &req.token, &req.completion)
-        .await?;
-    state.announce(&bake);
+    let item = Completing {
+        job: id,
+        token: req.token,
+        completion: req.completion,
+    };
+    record(&state, vec![item])
+        .await?
+        .pop()
+        .unwrap_or_else(|| Err(ApiError::Internal(format!("job {id}: no answer"))))?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -232,12 +230,35 @@ pub(crate) async fn complete_many(
             format!("a completions request carries 1 to {MAX_BATCH} completions"),
         ));
     }
-    // Outputs must be stored before a completion names them. Each digest
-    // is looked up once, all at once: a missing one refuses only the items
-    // that name it, as `complete` would; a store that does not answer
-    // fails the whole request (503, and the worker sends it again).
-    let digests: BTreeSet<String> = req
+    let jobs: Vec<i64> = req.completions.iter().map(|c| c.job).collect();
+    let items = req
         .completions
+        .into_iter()
+        .map(|c| Completing {
+            job: c.job,
+            token: c.token,
+            completion: c.completion,
+        })
+        .collect();
+    let results = jobs
+        .into_iter()
+        .zip(record(&state, items).await?)
+        .map(|(job, answer)| CompletionResult {
+            job,
+            problem: answer.err().map(|e| e.problem()),
+        })
+        .collect();
+    Ok(Json(CompleteManyReply { results }))
+}
+
+/// Records completions in one store transaction, each as `complete`
+/// would: one answer per item, in order. Outputs must be stored before a
+/// completion names them; each digest is looked up once, all at once, and
+/// a missing one refuses only the items that name it. The outer error
+/// (a blob store or database that does not answer: 503) fails them all,
+/// and the worker sends them again.
+async fn record(state: &AppState, items: Vec<Completing>) -> ApiResult<Vec<ApiResult<()>>> {
+    let digests: BTreeSet<String> = items
         .iter()
         .flat_map(|c| c.completion.outputs.iter().map(|o| o.digest.clone()))
         .collect();
@@ -249,58 +270,53 @@ pub(crate) async fn complete_many(
             (digest, found)
         });
     }
-    let mut missing: BTreeMap<String, Problem> = BTreeMap::new();
+    let mut missing: BTreeMap<String, ApiError> = BTreeMap::new();
     while let Some(joined) = lookups.join_next().await {
         let (digest, found) = joined.map_err(|e| ApiError::Internal(e.to_string()))?;
         match found {
             Ok(()) => {}
             Err(e @ ApiError::Unavailable(_)) => return Err(e),
             Err(e) => {
-                missing.insert(digest, e.problem());
+                missing.insert(digest, e);
             }
         }
     }
-    let mut refused = Vec::with_capacity(req.completions.len());
-    let mut items = Vec::with_capacity(req.completions.len());
-    for c in req.completions {
-        let problem = c
-            .completion
-            .outputs
-            .iter()
-            .find_map(|o| missing.get(&o.digest).cloned());
-        if problem.is_none() {
-            items.push(Completing {
-                job: c.job,
-                token: c.token,
-                completion: c.completion,
-            });
-        }
-        refused.push((c.job, problem));
-    }
-    let mut recorded = state.store.complete_many(&items).await?.into_iter();
+    let refusals: Vec<Option<ApiError>> = items
+        .iter()
+        .map(|c| {
+            c.completion
+                .outputs
+                .iter()
+                .find_map(|o| missing.get(&o.digest).cloned())
+        })
+        .collect();
+    let ready: Vec<Completing> = items
+        .into_iter()
+        .zip(&refusals)
+        .filter_map(|(c, refused)| refused.is_none().then_some(c))
+        .collect();
+    let mut recorded = state.store.complete_many(&ready).await?.into_iter();
     let mut announced = BTreeSet::new();
-    let mut results = Vec::with_capacity(refused.len());
-    for (job, problem) in refused {
-        let problem = match problem {
-            Some(p) => Some(p),
-            None => match recorded.next() {
+    Ok(refusals
+        .into_iter()
+        .map(|refused| {
+            if let Some(e) = refused {
+                return Err(e);
+            }
+            match recorded.next() {
                 Some(Ok(bake)) => {
                     // Every answer for a bake is its row after the batch:
                     // announce it once.
                     if announced.insert(bake.id) {
                         state.announce(&bake);
                     }
-                    None
+                    Ok(())
                 }
-                Some(Err(e)) => Some(ApiError::from(e).problem()),
-                None => Some(
-                    ApiError::Internal(format!("job {job}: no answer from the store")).problem(),
-                ),
-            },
-        };
-        results.push(CompletionResult { job, problem });
-    }
-    Ok(Json(CompleteManyReply { results }))
+                Some(Err(e)) => Err(ApiError::from(e)),
+                None => Err(ApiError::Internal("the store gave no answer".into())),
+            }
+        })
+        .collect())
 }
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/fail", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = FailRequest,

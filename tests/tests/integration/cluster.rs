@@ -4,7 +4,7 @@
 //! are cut and processes killed mid-bake; the bake must end the same as
 //! `aobake bake`'s.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use aobake_e2e::netns::TestNet;
 use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
@@ -40,53 +40,30 @@ fn a_cluster_in_network_namespaces_finishes_a_bake_through_a_cut_link_and_kills(
     let (status, bake) = submit(&a, &digest, 48);
     assert_eq!(status, 202, "{bake}");
     let id = bake["id"].as_i64().unwrap();
-    let jobs_done = |env: &TestEnv| {
-        let (_, now) = env
-            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
-            .unwrap();
-        assert_ne!(now["state"], "failed", "{now}");
-        now["jobs_done"].as_i64().unwrap_or(0)
-    };
-    let wait_for = |env: &TestEnv, jobs: i64| {
-        let started = Instant::now();
-        while jobs_done(env) < jobs {
-            assert!(
-                started.elapsed() < Duration::from_secs(120),
-                "the bake stalled before {jobs} jobs\n{}{}",
-                env.server_log(),
-                env.worker_logs()
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
-    };
     // Mid-bake, while workers 1 and 3 each hold a job: worker 1's link
     // is cut (it runs on, unheard), worker 3 is killed; then, once the
     // others have moved the bake on, server A dies too.
-    wait_for(&a, 3);
-    let started = Instant::now();
-    loop {
-        let (_, now) = a
-            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
-            .unwrap();
-        let holds =
-            |host: &aobake_e2e::netns::Host| {
+    a.wait_jobs_done(id, 3, Duration::from_secs(120));
+    a.wait_for_bake(
+        id,
+        Duration::from_secs(60),
+        "run jobs on workers 1 and 3 at once",
+        |now| {
+            let holds = |host: &aobake_e2e::netns::Host| {
                 now["jobs"].as_array().unwrap().iter().any(|j| {
                     j["state"] == "running" && j["worker"].as_str() == Some(host.ns.as_str())
                 })
             };
-        if holds(&w[0]) && holds(&w[2]) {
-            break;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "workers 1 and 3 never held jobs at once: {now}"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+            holds(&w[0]) && holds(&w[2])
+        },
+    );
     net.cut(&w[0]);
     a.kill_worker(w3);
-    let then = jobs_done(&b);
-    wait_for(&b, then + 2);
+    let (_, now) = b
+        .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap();
+    let then = now["jobs_done"].as_i64().unwrap();
+    b.wait_jobs_done(id, then + 2, Duration::from_secs(120));
     a.kill_server();
 
     let done = b.wait_bake(id, Duration::from_secs(300));

@@ -109,17 +109,7 @@ fn a_server_killed_mid_bake_restarts_and_finishes_the_same() {
     let id = b["id"].as_i64().unwrap();
     env.start_worker(&[]);
     env.start_worker(&[]);
-    let started = Instant::now();
-    loop {
-        let (_, now) = env
-            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
-            .unwrap();
-        if now["jobs_done"].as_i64().unwrap() >= 4 {
-            break;
-        }
-        assert!(started.elapsed() < Duration::from_secs(120), "{now}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    env.wait_jobs_done(id, 4, Duration::from_secs(120));
     let url = env.url.clone();
     env.kill_server();
     std::thread::sleep(Duration::from_millis(500));
@@ -144,17 +134,7 @@ fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
     let id = b["id"].as_i64().unwrap();
     env.start_worker(&[]);
     env.start_worker(&[]);
-    let started = Instant::now();
-    loop {
-        let (_, now) = env
-            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
-            .unwrap();
-        if now["jobs_done"].as_i64().unwrap() >= 4 {
-            break;
-        }
-        assert!(started.elapsed() < Duration::from_secs(120), "{now}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    env.wait_jobs_done(id, 4, Duration::from_secs(120));
     pg.stop();
     // While it is down a request is told to come back, not failed.
     let agent: ureq::Agent = ureq::Agent::config_builder()

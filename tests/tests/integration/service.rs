@@ -675,17 +675,7 @@ fn a_worker_stopped_with_sigterm_finishes_its_job_and_leases_no_more() {
     let (_, b) = submit(&env, &digest, 64);
     let id = b["id"].as_i64().unwrap();
     let w = env.start_worker(&[]);
-    let started = std::time::Instant::now();
-    loop {
-        let (_, now) = env
-            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
-            .unwrap();
-        if now["jobs_done"].as_i64().unwrap() >= 2 {
-            break;
-        }
-        assert!(started.elapsed() < Duration::from_secs(60));
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    env.wait_jobs_done(id, 2, Duration::from_secs(60));
     env.signal_worker(w, nix::sys::signal::Signal::SIGTERM);
     let started = std::time::Instant::now();
     while !env.worker_exited(w) {

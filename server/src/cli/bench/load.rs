@@ -12,10 +12,10 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::bail;
-use aobake_api::{Client, Completion, JobCompletion, NewTokenRequest, OutputRef};
+use aobake_api::{Client, NewTokenRequest};
 use serde_json::json;
 
-use super::service::{Server, fill_queue, open_store};
+use super::service::{Server, completions, fill_queue, open_store};
 use crate::cli::common::positive;
 
 /// Arguments of `aobake bench load`.
@@ -394,21 +394,7 @@ fn work(url: &str, token: &str, per_sec: f64, deadline: Instant, tally: &Tally, 
         if leases.is_empty() {
             break;
         }
-        let items: Vec<JobCompletion> = leases
-            .iter()
-            .map(|l| JobCompletion {
-                job: l.job.id,
-                token: l.token.clone(),
-                completion: Completion {
-                    outputs: vec![OutputRef {
-                        name: "ao-reference".into(),
-                        digest: blob.clone(),
-                    }],
-                    timings: json!({}),
-                },
-            })
-            .collect();
-        let answers = client.complete_many(&items);
+        let answers = client.complete_many(&completions(&leases, &blob));
         tally.answer(answers.as_ref().map(|_| 200).map_err(|_| ()), &[200]);
         let ok = answers.map_or(0, |a| a.iter().filter(|r| r.is_ok()).count()) as u64;
         tally.jobs.fetch_add(ok, Ordering::Relaxed);

@@ -200,6 +200,24 @@ fn slot_ids(w: usize, batch: u16) -> Vec<String> {
     (0..batch).map(|s| format!("bench-{w}/{s}")).collect()
 }
 
+/// Completions of `leases`, each naming the stored `blob` as its output.
+pub(super) fn completions(leases: &[aobake_api::Lease], blob: &str) -> Vec<JobCompletion> {
+    leases
+        .iter()
+        .map(|l| JobCompletion {
+            job: l.job.id,
+            token: l.token.clone(),
+            completion: Completion {
+                outputs: vec![OutputRef {
+                    name: "ao-reference".into(),
+                    digest: blob.to_owned(),
+                }],
+                timings: json!({}),
+            },
+        })
+        .collect()
+}
+
 /// A real `aobake serve` on a free port, killed on drop.
 pub(super) struct Server {
     child: Child,
@@ -331,26 +349,11 @@ fn http_queue(
                     let client = Client::new(url, token);
                     let slots = slot_ids(w, args.batch);
                     let mut n = 0;
-                    let completion = Completion {
-                        outputs: vec![OutputRef {
-                            name: "ao-reference".into(),
-                            digest: blob.clone(),
-                        }],
-                        timings: json!({}),
-                    };
                     while let Ok(leases) = client.lease_many(&slots, 0, None) {
                         if leases.is_empty() {
                             break;
                         }
-                        let items: Vec<_> = leases
-                            .iter()
-                            .map(|l| JobCompletion {
-                                job: l.job.id,
-                                token: l.token.clone(),
-                                completion: completion.clone(),
-                            })
-                            .collect();
-                        let Ok(done) = client.complete_many(&items) else {
+                        let Ok(done) = client.complete_many(&completions(&leases, blob)) else {
                             break;
                         };
                         n += done.iter().filter(|d| d.is_ok()).count();
