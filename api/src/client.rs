@@ -13,8 +13,8 @@ use crate::types::{
     NewTokenRequest, Problem, TokenRequest, Uploaded, Whoami,
 };
 
-/// The longest a call waits in all on a server that answers 429 before it
-/// fails with that status.
+/// The longest a call waits in all on a server that answers 429 (or 503
+/// with a `Retry-After`) before it fails with that status.
 const MAX_RATE_WAIT: Duration = Duration::from_secs(300);
 
 /// The content type of a `.gltf` and its side files as one body.
@@ -128,9 +128,11 @@ impl Client {
     }
 
     /// Sends `request` until the server stops answering 429 (over its
-    /// request rate), waiting what each answer's `Retry-After` asks (1 to
-    /// 30 s) and at most [`MAX_RATE_WAIT`] in all, then checks the status.
-    /// A busy server slows a caller down; it does not fail it.
+    /// request rate) or 503 with a `Retry-After` (its database or blob
+    /// store is not answering), waiting what each answer's `Retry-After`
+    /// asks (1 to 30 s) and at most [`MAX_RATE_WAIT`] in all, then checks
+    /// the status. A busy or recovering server slows a caller down; it
+    /// does not fail it.
     fn send(
         &self,
         request: impl Fn() -> std::result::Result<Response, ureq::Error>,
@@ -138,7 +140,12 @@ impl Client {
         let mut waited = Duration::ZERO;
         loop {
             let res = request().map_err(|e| self.transport(e))?;
-            if res.status().as_u16() != 429 || waited >= MAX_RATE_WAIT {
+            let come_back = match res.status().as_u16() {
+                429 => true,
+                503 => res.headers().contains_key("retry-after"),
+                _ => false,
+            };
+            if !come_back || waited >= MAX_RATE_WAIT {
                 return self.check(res);
             }
             let wait = Duration::from_secs(
@@ -484,6 +491,14 @@ mod tests {
         let started = std::time::Instant::now();
         let bytes = Client::new(&base, "t").get_blob("d").unwrap();
         assert_eq!(bytes, b"abc");
+        assert!(started.elapsed() >= Duration::from_secs(1), "it waited");
+        // A 503 that says when to come back is waited out too.
+        let base = serve(vec![
+            "HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+            "HTTP/1.1 200 OK\r\nContent-Length: 3\r\nConnection: close\r\n\r\nabc",
+        ]);
+        let started = std::time::Instant::now();
+        assert_eq!(Client::new(&base, "t").get_blob("d").unwrap(), b"abc");
         assert!(started.elapsed() >= Duration::from_secs(1), "it waited");
         // Other failures are not retried.
         let base = serve(vec![

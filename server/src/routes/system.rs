@@ -94,13 +94,9 @@ pub(crate) async fn healthz() -> &'static str {
 }
 
 /// Readiness: the database answers (no token).
-#[utoipa::path(get, path = "/readyz", tag = "system", responses((status = 200, description = "Ready", body = String), (status = 500, description = "The database does not answer", body = Problem, content_type = "application/problem+json")))]
+#[utoipa::path(get, path = "/readyz", tag = "system", responses((status = 200, description = "Ready", body = String), (status = 503, description = "The database does not answer (Retry-After says when to look again)", body = Problem, content_type = "application/problem+json")))]
 pub(crate) async fn ready(State(state): State<AppState>) -> ApiResult<&'static str> {
-    state
-        .store
-        .ping()
-        .await
-        .map_err(|e| ApiError::Internal(e.to_string()))?;
+    state.store.ping().await?;
     Ok("ready")
 }
 

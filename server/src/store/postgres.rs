@@ -87,45 +87,25 @@ impl Backend for Postgres {
     }
 
     async fn listen(&self, ready: Arc<tokio::sync::Notify>) -> Result<()> {
-        let mut listener = PgListener::connect_with(&self.pool).await?;
-        listener.listen("aobake_jobs").await?;
-        tokio::spawn(async move {
-            loop {
-                match listener.recv().await {
-                    Ok(_) => ready.notify_waiters(),
-                    Err(e) => {
-                        eprintln!("error: LISTEN aobake_jobs: {e}");
-                        tokio::time::sleep(std::time::Duration::from_secs(1)).await;
-                    }
-                }
-            }
-        });
-        Ok(())
+        listen_on(&self.pool, "aobake_jobs", move |_| ready.notify_waiters()).await
     }
 
     async fn share_events(
         &self,
         events: tokio::sync::broadcast::Sender<BakeEvent>,
     ) -> Result<Option<tokio::sync::mpsc::UnboundedSender<BakeEvent>>> {
-        let mut listener = PgListener::connect_with(&self.pool).await?;
-        listener.listen(BAKE_EVENTS).await?;
         let heard = events.clone();
-        tokio::spawn(async move {
-            loop {
-                match listener.recv().await {
-                    Ok(n) => match serde_json::from_str(n.payload()) {
-                        Ok(event) => {
-                            let _ = heard.send(event);
-                        }
-                        Err(e) => eprintln!("error: a bake event that does not parse: {e}"),
-                    },
-                    Err(e) => {
-                        eprintln!("error: LISTEN {BAKE_EVENTS}: {e}");
-                        tokio::time::sleep(std::time::Duration::from_secs(1)).await;
-                    }
+        listen_on(
+            &self.pool,
+            BAKE_EVENTS,
+            move |payload| match serde_json::from_str(payload) {
+                Ok(event) => {
+                    let _ = heard.send(event);
                 }
-            }
-        });
+                Err(e) => eprintln!("error: a bake event that does not parse: {e}"),
+            },
+        )
+        .await?;
         // One task sends this server's events, in order; one the database
         // cannot take still reaches this server's listeners.
         let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<BakeEvent>();
@@ -146,6 +126,30 @@ impl Backend for Postgres {
         });
         Ok(Some(tx))
     }
+}
+
+/// Listens on `channel` on a connection of its own and calls `heard`
+/// with each payload, for as long as the server runs (the listener
+/// reconnects after an error, which is logged).
+async fn listen_on(
+    pool: &sqlx::PgPool,
+    channel: &'static str,
+    heard: impl Fn(&str) + Send + 'static,
+) -> Result<()> {
+    let mut listener = PgListener::connect_with(pool).await?;
+    listener.listen(channel).await?;
+    tokio::spawn(async move {
+        loop {
+            match listener.recv().await {
+                Ok(n) => heard(n.payload()),
+                Err(e) => {
+                    eprintln!("error: LISTEN {channel}: {e}");
+                    tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+                }
+            }
+        }
+    });
+    Ok(())
 }
 
 /// The channel bake events travel on between servers (JSON payloads).

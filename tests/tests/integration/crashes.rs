@@ -153,6 +153,9 @@ fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
         .parse()
         .unwrap();
     assert!((1..=30).contains(&retry), "{retry}");
+    // The readiness probe says the same, so a load balancer looks elsewhere.
+    let probe = agent.get(format!("{}/readyz", env.url)).call().unwrap();
+    assert_eq!(probe.status().as_u16(), 503);
     std::thread::sleep(Duration::from_secs(3));
     pg.start_again();
     // The workers went on waiting; the bake finishes, every job counted

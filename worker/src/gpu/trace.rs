@@ -24,22 +24,18 @@ use wgpu::util::DeviceExt as _;
 
 use super::{ErrorScopes, Gpu, GpuError};
 
-/// Invocations per point: a 50k-vertex mesh is 800k invocations, enough
-/// to fill a large GPU.
-const LANES: u32 = TRACE_LANES;
-/// Points per workgroup.
-const POINTS_PER_GROUP: u32 = WORKGROUP_SIZE / LANES;
+/// Points per workgroup (`TRACE_LANES` invocations per point: a
+/// 50k-vertex mesh is 800k invocations, enough to fill a large GPU).
+const POINTS_PER_GROUP: u32 = WORKGROUP_SIZE / TRACE_LANES;
 /// Most invocations per dispatch: short dispatches keep a desktop GPU's
 /// watchdog away and let progress be reported.
 const MAX_INVOCATIONS: u64 = 1 << 22;
 /// Points per dispatch: within the invocation cap.
-const PER_DISPATCH: u64 = MAX_INVOCATIONS / LANES as u64;
+const PER_DISPATCH: u64 = MAX_INVOCATIONS / TRACE_LANES as u64;
 // A dispatch's workgroups fit the dispatch grid.
 const _: () = assert!(
     PER_DISPATCH / POINTS_PER_GROUP as u64 <= super::MAX_GROUPS as u64 * super::MAX_GROUPS as u64
 );
-/// The shader's traversal stack.
-const STACK: usize = TRACE_STACK as usize;
 
 /// core's estimators on a wgpu adapter with compute shaders.
 #[derive(Debug)]
@@ -221,7 +217,7 @@ impl<'g> GpuTracer<'g> {
         let mut infos = Vec::with_capacity(batch.scenes.len());
         for scene in &batch.scenes {
             match scene.gpu_info() {
-                Some(info) if 7 * info.depth < STACK => infos.push(info),
+                Some(info) if 7 * info.depth < TRACE_STACK as usize => infos.push(info),
                 _ => return Ok(None),
             }
         }
@@ -325,7 +321,7 @@ impl<'g> GpuTracer<'g> {
         let binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
-        let rays_per_lane = batch.samples.div_ceil(LANES);
+        let rays_per_lane = batch.samples.div_ceil(TRACE_LANES);
         // Geometry and points of the part's scenes.
         let mut nodes: Vec<u32> = Vec::new();
         let mut triangles: Vec<f32> = Vec::new();
