@@ -26,7 +26,7 @@ use crate::{
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, Body},
     state::AppState,
-    store::{Completing, Lease},
+    store::{JobCompletion, Lease},
 };
 
 /// The most jobs one `leases` or `completions` request may carry.
@@ -204,7 +204,7 @@ pub(crate) async fn complete(
     ApiPath(id): ApiPath<i64>,
     Body(req): Body<CompleteRequest>,
 ) -> ApiResult<StatusCode> {
-    let item = Completing {
+    let item = JobCompletion {
         job: id,
         token: req.token,
         completion: req.completion,
@@ -231,18 +231,9 @@ pub(crate) async fn complete_many(
         ));
     }
     let jobs: Vec<i64> = req.completions.iter().map(|c| c.job).collect();
-    let items = req
-        .completions
-        .into_iter()
-        .map(|c| Completing {
-            job: c.job,
-            token: c.token,
-            completion: c.completion,
-        })
-        .collect();
     let results = jobs
         .into_iter()
-        .zip(record(&state, items).await?)
+        .zip(record(&state, req.completions).await?)
         .map(|(job, answer)| CompletionResult {
             job,
             problem: answer.err().map(|e| e.problem()),
@@ -257,7 +248,7 @@ pub(crate) async fn complete_many(
 /// a missing one refuses only the items that name it. The outer error
 /// (a blob store or database that does not answer: 503) fails them all,
 /// and the worker sends them again.
-async fn record(state: &AppState, items: Vec<Completing>) -> ApiResult<Vec<ApiResult<()>>> {
+async fn record(state: &AppState, items: Vec<JobCompletion>) -> ApiResult<Vec<ApiResult<()>>> {
     let digests: BTreeSet<String> = items
         .iter()
         .flat_map(|c| c.completion.outputs.iter().map(|o| o.digest.clone()))
@@ -290,7 +281,7 @@ async fn record(state: &AppState, items: Vec<Completing>) -> ApiResult<Vec<ApiRe
                 .find_map(|o| missing.get(&o.digest).cloned())
         })
         .collect();
-    let ready: Vec<Completing> = items
+    let ready: Vec<JobCompletion> = items
         .into_iter()
         .zip(&refusals)
         .filter_map(|(c, refused)| refused.is_none().then_some(c))

@@ -27,8 +27,8 @@ pub use postgres::PgStore;
 pub use sqlite::SqliteStore;
 
 pub use aobake_api::{
-    Action, BakeRow, BakeState, CheckpointRef, Completion, JobRow, JobState, Lease, OutputRef,
-    UploadRef, UploadRow, WorkerRow,
+    Action, BakeRow, BakeState, CheckpointRef, Completion, JobCompletion, JobRow, JobState, Lease,
+    OutputRef, UploadRef, UploadRow, WorkerRow,
 };
 
 /// A failed store operation.
@@ -101,17 +101,6 @@ pub struct Beat {
     pub moved: bool,
     /// The job's bake.
     pub bake: BakeRow,
-}
-
-/// One completion of a batch: the job, its lease token and its outputs.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Completing {
-    /// The job.
-    pub job: i64,
-    /// Its current lease token.
-    pub token: String,
-    /// What it produced.
-    pub completion: Completion,
 }
 
 /// A token as stored (its hash, never the secret).
@@ -224,10 +213,10 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// Completes several jobs in one transaction, each as `complete`
     /// would: one answer per item, in order, so a lost lease refuses its
     /// own item only. The outer error is the database's, for all of them.
-    async fn complete_many(&self, items: &[Completing]) -> Result<Vec<Result<BakeRow>>>;
+    async fn complete_many(&self, items: &[JobCompletion]) -> Result<Vec<Result<BakeRow>>>;
     /// Completes a job with its outputs; returns its bake afterwards.
     async fn complete(&self, job: i64, token: &str, completion: &Completion) -> Result<BakeRow> {
-        let item = Completing {
+        let item = JobCompletion {
             job,
             token: token.to_owned(),
             completion: completion.clone(),

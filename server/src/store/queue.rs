@@ -19,7 +19,7 @@ use sqlx::{FromRow, postgres::PgRow, sqlite::SqliteRow};
 
 use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
 use super::{
-    Action, BakeRow, BakeState, Beat, CheckpointRef, Completing, Completion, JobRow, JobState,
+    Action, BakeRow, BakeState, Beat, CheckpointRef, Completion, JobCompletion, JobRow, JobState,
     Lease, NewBake, QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow,
     WorkerRow, lease_token,
 };
@@ -926,7 +926,7 @@ impl<B: Backend> Store for SqlStore<B> {
         })
     }
 
-    async fn complete_many(&self, items: &[Completing]) -> Result<Vec<Result<BakeRow>>> {
+    async fn complete_many(&self, items: &[JobCompletion]) -> Result<Vec<Result<BakeRow>>> {
         in_tx!(self, Durability::Acknowledged, |c| {
             // A statement per job: its completion (only with the current
             // lease token); per bake, its counts (publishing the asset,

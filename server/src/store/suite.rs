@@ -252,7 +252,7 @@ async fn a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store: &dyn
     assert!(leases.iter().all(|l| l.uploads[0].digest == c));
     let tokens: std::collections::BTreeSet<_> = leases.iter().map(|l| &l.token).collect();
     assert_eq!(tokens.len(), 3, "every lease has its own token");
-    let item = |l: &super::Lease, token: &str| super::Completing {
+    let item = |l: &super::Lease, token: &str| super::JobCompletion {
         job: l.job.id,
         token: token.to_owned(),
         completion: done("ao"),

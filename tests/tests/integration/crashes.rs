@@ -97,19 +97,27 @@ fn workers_killed_at_random_moments_change_no_byte() {
     );
 }
 
+/// CesiumMan's bake (64 poses) with two workers, once four of its jobs
+/// are done: a bake to disturb mid-way. Returns the character and the
+/// bake's id.
+fn cesium_man_under_way(env: &mut TestEnv) -> (std::path::PathBuf, i64) {
+    let cm = character("CesiumMan");
+    let digest = upload(env, &cm);
+    let (_, b) = submit(env, &digest, 64);
+    let id = b["id"].as_i64().unwrap();
+    env.start_worker(&[]);
+    env.start_worker(&[]);
+    env.wait_jobs_done(id, 4, Duration::from_secs(120));
+    (cm, id)
+}
+
 #[test]
 fn a_server_killed_mid_bake_restarts_and_finishes_the_same() {
     let mut env = TestEnv::start(Options {
         lease_secs: 2.0,
         ..Options::default()
     });
-    let cm = character("CesiumMan");
-    let digest = upload(&env, &cm);
-    let (_, b) = submit(&env, &digest, 64);
-    let id = b["id"].as_i64().unwrap();
-    env.start_worker(&[]);
-    env.start_worker(&[]);
-    env.wait_jobs_done(id, 4, Duration::from_secs(120));
+    let (cm, id) = cesium_man_under_way(&mut env);
     let url = env.url.clone();
     env.kill_server();
     std::thread::sleep(Duration::from_millis(500));
@@ -128,13 +136,7 @@ fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
         lease_secs: 2.0,
         ..Options::default()
     });
-    let cm = character("CesiumMan");
-    let digest = upload(&env, &cm);
-    let (_, b) = submit(&env, &digest, 64);
-    let id = b["id"].as_i64().unwrap();
-    env.start_worker(&[]);
-    env.start_worker(&[]);
-    env.wait_jobs_done(id, 4, Duration::from_secs(120));
+    let (cm, id) = cesium_man_under_way(&mut env);
     pg.stop();
     // While it is down a request is told to come back, not failed.
     let agent: ureq::Agent = ureq::Agent::config_builder()

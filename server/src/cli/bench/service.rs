@@ -165,7 +165,7 @@ async fn store_queue(args: &QueueArgs, dir: &Path, run: usize) -> anyhow::Result
                     }
                     let items: Vec<_> = leases
                         .iter()
-                        .map(|l| crate::store::Completing {
+                        .map(|l| crate::store::JobCompletion {
                             job: l.job.id,
                             token: l.token.clone(),
                             completion: crate::store::Completion {
