@@ -13,9 +13,11 @@
 //   0 and 1; the direction numbers come from the host), mapped as core's
 //   `sampling.rs` maps them, with its sine and cosine polynomial (the
 //   `wide` crate's, after Agner Fog), fused where the CPU build fuses.
-// * Traversal: core's 8-wide BVH with exact child boxes (trace/bvh.rs),
-//   a stack per invocation; leaves of at most three triangles, tested
-//   with obvhs's `RtTriangle::intersect` (Möller–Trumbore, double-sided).
+// * Traversal: core's 8-wide BVH (trace/bvh.rs), its child boxes exact
+//   or quantised to bytes and rounded outwards (the pipeline constant
+//   QUANTISED, core's NodeLayout), a stack per invocation; leaves of at
+//   most three triangles, tested with obvhs's `RtTriangle::intersect`
+//   (Möller–Trumbore, double-sided).
 // * The ground: a solid half-space or a finite double-sided square, as
 //   `LocalGround::hit`.
 
@@ -27,7 +29,9 @@ const KROON: u32 = 3u;             // closest hit: Σ facing·(1 − t/D)^α, ba
 
 // The largest finite f32: "no limit" (WGSL has no infinity literal).
 const FAR: f32 = 3.4028235e38;
-const EMPTY_SLOT: u32 = 255u;
+// The node layout (core's trace::engine::NodeLayout): false, the exact
+// one, 16 vec4 a node; true, the quantised one, 6 vec4 a node.
+override QUANTISED: bool = false;
 // Traversal stack entries: 7 per level of an 8-wide tree; the host
 // refuses a deeper tree.
 const STACK: u32 = 96u;
@@ -111,9 +115,14 @@ var<private> stack_near: array<f32, STACK>;
 // A node's inner children that the ray enters, farthest first.
 var<private> child_near: array<f32, 8>;
 var<private> child_index: array<u32, 8>;
-// 16 vec4 per node: child boxes (min x, y, z, max x, y, z of the eight
-// children, two vec4 each, as f32 bits), first indices (two vec4), the
-// eight counts as bytes (one vec4, xy used).
+// Exact: 16 vec4 per node: child boxes (min x, y, z, max x, y, z of the
+// eight children, two vec4 each, as f32 bits), first indices (two vec4),
+// the eight counts as bytes (255: an empty slot; one vec4, xy used).
+// Quantised: 6 vec4 per node: the grid's origin p (xyz, f32 bits) and
+// step exponents (w, a byte per axis); first indices with the count in
+// their top 3 bits (7: an empty slot; two vec4); the child boxes as bytes
+// q, the plane p + q · 2^(e − 127), in the exact layout's order (three
+// vec4). See Bvh8::gpu_nodes and gpu_nodes_quantised.
 @group(0) @binding(1) var<storage, read> nodes: array<vec4<u32>>;
 // Three vec4 per triangle: v0.xyz e1.x | e1.yz e2.xy | e2.z ng.xyz.
 @group(0) @binding(2) var<storage, read> triangles: array<vec4<f32>>;
@@ -290,17 +299,51 @@ fn safe_inverse(x: f32) -> f32 {
     return 1.0 / x;
 }
 
-fn child_counts(node: u32) -> vec2<u32> {
-    return nodes[16u * node + 14u].xy;
+// vec4 per node.
+fn node_size() -> u32 {
+    return select(16u, 6u, QUANTISED);
 }
 
-fn count_of(counts: vec2<u32>, c: u32) -> u32 {
-    let word = select(counts.x, counts.y, c >= 4u);
-    return (word >> (8u * (c & 3u))) & 0xffu;
+// Children 4·half … 4·half + 3: their first node or triangle, and their
+// counts (0: inner, 1–3: triangles, EMPTY: an empty slot).
+struct Children {
+    first: vec4<u32>,
+    count: vec4<u32>,
 }
 
-fn box_lanes(node: u32, field: u32, half: u32) -> vec4<f32> {
-    return bitcast<vec4<f32>>(nodes[16u * node + 2u * field + half]);
+const EMPTY: u32 = 255u;
+
+fn children(base: u32, half: u32) -> Children {
+    if (QUANTISED) {
+        let words = nodes[base + 1u + half];
+        let count = words >> vec4<u32>(29u);
+        return Children(
+            words & vec4<u32>(0x1fffffffu),
+            select(count, vec4<u32>(EMPTY), count == vec4<u32>(7u)),
+        );
+    }
+    let counts = nodes[base + 14u];
+    let word = select(counts.x, counts.y, half == 1u);
+    return Children(
+        nodes[base + 12u + half],
+        (vec4<u32>(word) >> vec4<u32>(0u, 8u, 16u, 24u)) & vec4<u32>(255u),
+    );
+}
+
+// Box planes `field` (0–2: min x, y, z; 3–5: max x, y, z) of children
+// 4·half … 4·half + 3; `head` is a quantised node's first vec4. The
+// quantised plane is p + q · s with q · s exact, so it rounds once, fused
+// or not, as the host checked it.
+fn box_lanes(base: u32, head: vec4<u32>, field: u32, half: u32) -> vec4<f32> {
+    if (QUANTISED) {
+        let word = 2u * field + half;
+        let bytes = nodes[base + 3u + word / 4u][word % 4u];
+        let q = vec4<f32>((vec4<u32>(bytes) >> vec4<u32>(0u, 8u, 16u, 24u)) & vec4<u32>(255u));
+        let axis = field % 3u;
+        let step = bitcast<f32>(((head.w >> (8u * axis)) & 255u) << 23u);
+        return vec4<f32>(bitcast<f32>(head[axis])) + q * step;
+    }
+    return bitcast<vec4<f32>>(nodes[base + 2u * field + half]);
 }
 
 // The BVH of scene `s` along the ray: with `any`, whether a triangle lies
@@ -323,32 +366,34 @@ fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: 
     var top = 0u;
     var current = 0u;
     loop {
-        let node = s.first_node + current;
-        let counts = child_counts(node);
+        let base = (s.first_node + current) * node_size();
+        var head = vec4<u32>(0u);
+        if (QUANTISED) {
+            head = nodes[base];
+        }
         // Inner children entered, sorted by entry distance, farthest first.
         var pending = 0u;
         for (var half = 0u; half < 2u; half = half + 1u) {
             var near = vec4<f32>(s.tmin);
             var far = vec4<f32>(tmax);
             for (var a = 0u; a < 3u; a = a + 1u) {
-                let lo = box_lanes(node, a, half);
-                let hi = box_lanes(node, a + 3u, half);
+                let lo = box_lanes(base, head, a, half);
+                let hi = box_lanes(base, head, a + 3u, half);
                 let n = select(lo, hi, neg[a]);
                 let f = select(hi, lo, neg[a]);
                 near = max(near, (n - vec4<f32>(origin[a])) * inv[a]);
                 far = min(far, (f - vec4<f32>(origin[a])) * inv[a]);
             }
-            let firsts = nodes[16u * node + 12u + half];
+            let kids = children(base, half);
             for (var k = 0u; k < 4u; k = k + 1u) {
-                let c = 4u * half + k;
-                let count = count_of(counts, c);
+                let count = kids.count[k];
                 // The second half's boxes were tested against a ray the
                 // first half's leaves may have shortened: that culls only
                 // children that cannot hold a closer hit.
-                if (count == EMPTY_SLOT || !(near[k] <= far[k])) {
+                if (count == EMPTY || !(near[k] <= far[k])) {
                     continue;
                 }
-                let first = firsts[k];
+                let first = kids.first[k];
                 if (count == 0u) {
                     var j = pending;
                     // Sorted for the closest hit only: an any-hit ray

@@ -15,7 +15,7 @@ use glam::Vec3A;
 use obvhs::{cwbvh::CwBvh, ray::Ray, rt_triangle::RtTriangle};
 use wide::f32x8;
 
-use super::engine::GPU_NODE_WORDS;
+use super::engine::{GPU_NODE_WORDS, GPU_QUANTISED_NODE_WORDS};
 
 /// Child slot of an internal node: the child's box and what it is.
 #[derive(Clone, Copy)]
@@ -115,6 +115,70 @@ impl Bvh8 {
         out
     }
 
+    /// The nodes for a GPU tracer in [`NodeLayout::Quantised`],
+    /// [`GPU_QUANTISED_NODE_WORDS`] words each:
+    ///
+    /// * words 0–2: `p`, the grid's origin (the children's lowest corner),
+    ///   as f32 bits; word 3: the grid step of each axis as an f32
+    ///   exponent byte (`s = 2^(e − 127)`, x in the low byte);
+    /// * words 4–11: child `c`'s first node or triangle, with its count in
+    ///   the top 3 bits (0: an inner node, 1–3: a leaf's triangles, 7: an
+    ///   empty slot);
+    /// * words 12–23: the child boxes as bytes `q`, the plane being
+    ///   `p + q · s`: min x of children 0–3, then of 4–7, min y, min z,
+    ///   max x, max y, max z the same way.
+    ///
+    /// The bytes are rounded outwards and checked in the arithmetic the
+    /// shader uses (`q · s` is exact, so one rounding whether fused or
+    /// not), so each decoded box contains its exact box: a ray's slab test
+    /// (monotonic in the planes) enters every child it enters with exact
+    /// boxes.
+    pub(crate) fn gpu_nodes_quantised(&self) -> Vec<u32> {
+        let mut out = Vec::with_capacity(self.nodes.len() * GPU_QUANTISED_NODE_WORDS);
+        for node in &self.nodes {
+            let lo: [[f32; 8]; 3] = node.lo.map(|l| l.to_array());
+            let hi: [[f32; 8]; 3] = node.hi.map(|h| h.to_array());
+            let used: Vec<usize> = (0..8).filter(|&c| !node.is_empty(c)).collect();
+            let mut planes = [[0u8; 8]; 6];
+            let mut head = [0u32; 4];
+            for a in 0..3 {
+                let p = used.iter().map(|&c| lo[a][c]).fold(f32::INFINITY, f32::min);
+                let top = used
+                    .iter()
+                    .map(|&c| hi[a][c])
+                    .fold(f32::NEG_INFINITY, f32::max);
+                let (p, e) = if used.is_empty() {
+                    (0.0, 127)
+                } else {
+                    (p, grid_exponent(p, top))
+                };
+                let s = step(e);
+                head[a] = p.to_bits();
+                head[3] |= e << (8 * a);
+                for &c in &used {
+                    planes[a][c] = quantise_down(p, s, lo[a][c]);
+                    planes[a + 3][c] = quantise_up(p, s, hi[a][c]);
+                }
+            }
+            out.extend(head);
+            out.extend((0..8).map(|c| {
+                let count = if node.is_empty(c) {
+                    QUANTISED_EMPTY
+                } else {
+                    u32::from(node.count[c])
+                };
+                debug_assert!(node.first[c] < 1 << 29);
+                node.first[c] | count << 29
+            }));
+            for field in &planes {
+                for half in field.chunks_exact(4) {
+                    out.push(u32::from_le_bytes([half[0], half[1], half[2], half[3]]));
+                }
+            }
+        }
+        out
+    }
+
     /// Nodes on the longest path from the root.
     pub(crate) fn depth(&self) -> usize {
         let mut deepest = 1;
@@ -200,6 +264,61 @@ impl Bvh8 {
     }
 }
 
+/// The count of an empty child slot in [`Bvh8::gpu_nodes_quantised`].
+pub(crate) const QUANTISED_EMPTY: u32 = 7;
+
+/// The grid step `2^(e − 127)` of exponent byte `e` (1..=254).
+fn step(e: u32) -> f32 {
+    f32::from_bits(e << 23)
+}
+
+/// A plane of the quantised grid as the shader decodes it.
+pub(crate) fn plane(p: f32, s: f32, q: u8) -> f32 {
+    p + f32::from(q) * s
+}
+
+/// The finest step exponent whose 255 steps from `p` reach `top`.
+fn grid_exponent(p: f32, top: f32) -> u32 {
+    let reaches = |e: u32| plane(p, step(e), u8::MAX) >= top;
+    let extent = f64::from(top) - f64::from(p);
+    let guess = if extent > 0.0 {
+        ((extent / 255.0).log2().ceil() as i64 + 127).clamp(1, 254) as u32
+    } else {
+        1
+    };
+    let mut e = guess;
+    while e < 254 && !reaches(e) {
+        e += 1;
+    }
+    while e > 1 && reaches(e - 1) {
+        e -= 1;
+    }
+    e
+}
+
+/// The largest byte whose plane is at or below `x`.
+fn quantise_down(p: f32, s: f32, x: f32) -> u8 {
+    let mut q = ((f64::from(x) - f64::from(p)) / f64::from(s))
+        .floor()
+        .clamp(0.0, 255.0) as u8;
+    while q > 0 && plane(p, s, q) > x {
+        q -= 1;
+    }
+    q
+}
+
+/// The smallest byte whose plane is at or above `x` (255 at most: the
+/// grid's exponent makes 255 reach the node's top).
+fn quantise_up(p: f32, s: f32, x: f32) -> u8 {
+    let mut q = ((f64::from(x) - f64::from(p)) / f64::from(s))
+        .ceil()
+        .clamp(0.0, 255.0) as u8;
+    while q < u8::MAX && plane(p, s, q) < x {
+        q += 1;
+    }
+    q
+}
+
 /// Node `i` with exact child boxes, and its bounds; `bounds` must hold
 /// those of its child nodes.
 fn convert(
@@ -241,4 +360,63 @@ fn convert(
         count,
     };
     (node, all)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trace::{Scene, SceneOptions, engine::NodeLayout, shapes};
+
+    /// Every child box of the benchmark mesh's tree decoded from its bytes
+    /// contains the exact box and exceeds it by at most two grid steps a
+    /// side; links, counts and empty slots survive the packing.
+    #[test]
+    fn quantised_boxes_contain_the_exact_ones_and_stay_tight() {
+        let mesh = shapes::timing_mesh();
+        let scene = Scene::new(&mesh.positions, &mesh.triangles, &SceneOptions::default()).unwrap();
+        let exact = scene.gpu_nodes(NodeLayout::Exact);
+        let packed = scene.gpu_nodes(NodeLayout::Quantised);
+        let nodes = exact.len() / GPU_NODE_WORDS;
+        assert!(nodes > 1000);
+        assert_eq!(packed.len(), nodes * GPU_QUANTISED_NODE_WORDS);
+        let (mut children, mut loose) = (0, 0.0f64);
+        for n in 0..nodes {
+            let x = &exact[n * GPU_NODE_WORDS..(n + 1) * GPU_NODE_WORDS];
+            let q = &packed[n * GPU_QUANTISED_NODE_WORDS..(n + 1) * GPU_QUANTISED_NODE_WORDS];
+            let counts: Vec<u8> = x[56..58].iter().flat_map(|w| w.to_le_bytes()).collect();
+            for c in 0..8 {
+                let word = q[4 + c];
+                let count = word >> 29;
+                if counts[c] == u8::MAX {
+                    assert_eq!(count, QUANTISED_EMPTY, "node {n} child {c}");
+                    continue;
+                }
+                assert_eq!(count, u32::from(counts[c]));
+                assert_eq!(word & ((1 << 29) - 1), x[48 + c]);
+                children += 1;
+                for a in 0..3 {
+                    let p = f32::from_bits(q[a]);
+                    let s = step((q[3] >> (8 * a)) & 0xff);
+                    let byte = |field: usize| {
+                        let w = q[12 + 2 * field + c / 4];
+                        w.to_le_bytes()[c % 4]
+                    };
+                    let (lo, hi) = (
+                        f32::from_bits(x[8 * a + c]),
+                        f32::from_bits(x[8 * (a + 3) + c]),
+                    );
+                    let (qlo, qhi) = (plane(p, s, byte(a)), plane(p, s, byte(a + 3)));
+                    assert!(qlo <= lo && qhi >= hi, "node {n} child {c} axis {a}");
+                    assert!(lo - qlo <= 2.0 * s && qhi - hi <= 2.0 * s);
+                    loose += f64::from((qhi - qlo) - (hi - lo)) / f64::from(255.0 * s);
+                }
+            }
+        }
+        // On average each axis grows by about a step in 255 of the grid.
+        let mean = loose / (3 * children) as f64;
+        assert!(
+            mean < 2.0 / 255.0,
+            "boxes grew by {mean} of their node's extent"
+        );
+    }
 }

@@ -198,8 +198,36 @@ pub fn tracer_label() -> String {
     engine().map_or_else(|| "cpu".to_owned(), |e| e.label())
 }
 
-/// Words per node of [`Scene::gpu_nodes`].
+/// How a GPU tracer's nodes store their eight child boxes
+/// ([`Scene::gpu_nodes`]). Either way the tree and the triangles are the
+/// CPU's, and a ray's hits are the same but at float ties: quantised
+/// boxes only ever contain the exact ones, so a traversal visits every
+/// node it would visit with exact boxes, and perhaps a few more.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+pub enum NodeLayout {
+    /// The boxes as f32, [`GPU_NODE_WORDS`] words (256 bytes) a node.
+    #[default]
+    Exact,
+    /// The boxes as bytes on a grid over the node's own box (Ylitie et
+    /// al. 2017's compression, rounded outwards), [`GPU_QUANTISED_NODE_WORDS`]
+    /// words (96 bytes) a node: fewer bytes fetched per node visited.
+    Quantised,
+}
+
+impl NodeLayout {
+    /// Words per node.
+    pub fn words(self) -> usize {
+        match self {
+            NodeLayout::Exact => GPU_NODE_WORDS,
+            NodeLayout::Quantised => GPU_QUANTISED_NODE_WORDS,
+        }
+    }
+}
+
+/// Words per node of [`Scene::gpu_nodes`] in [`NodeLayout::Exact`].
 pub const GPU_NODE_WORDS: usize = 64;
+/// Words per node of [`Scene::gpu_nodes`] in [`NodeLayout::Quantised`].
+pub const GPU_QUANTISED_NODE_WORDS: usize = 24;
 /// Floats per triangle of [`Scene::gpu_triangles`].
 pub const GPU_TRIANGLE_FLOATS: usize = 12;
 

@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{
     bvh::Bvh8,
-    engine::{GPU_TRIANGLE_FLOATS, GpuSceneInfo},
+    engine::{GPU_TRIANGLE_FLOATS, GpuSceneInfo, NodeLayout},
     error::TraceError,
 };
 
@@ -364,11 +364,12 @@ impl Scene {
         })
     }
 
-    /// The wide BVH's nodes for a GPU tracer ([`GPU_NODE_WORDS`] words
-    /// each; see `bvh.rs`), empty without triangles or with another tree.
-    pub fn gpu_nodes(&self) -> Vec<u32> {
-        match &self.accel {
-            Accel::Wide(bvh) => bvh.gpu_nodes(),
+    /// The wide BVH's nodes for a GPU tracer, `layout.words()` words
+    /// each (see `bvh.rs`), empty without triangles or with another tree.
+    pub fn gpu_nodes(&self, layout: NodeLayout) -> Vec<u32> {
+        match (&self.accel, layout) {
+            (Accel::Wide(bvh), NodeLayout::Exact) => bvh.gpu_nodes(),
+            (Accel::Wide(bvh), NodeLayout::Quantised) => bvh.gpu_nodes_quantised(),
             _ => Vec::new(),
         }
     }

@@ -277,6 +277,18 @@ impl Gpu {
         size: u64,
         submission: wgpu::SubmissionIndex,
     ) -> Result<Vec<u8>, GpuError> {
+        self.read_with(staging, size, submission, <[u8]>::to_vec)
+    }
+
+    /// Waits for `submission` and hands the first `size` bytes of a
+    /// `MAP_READ` buffer to `f` where they are mapped (no copy first).
+    pub(crate) fn read_with<T>(
+        &self,
+        staging: &wgpu::Buffer,
+        size: u64,
+        submission: wgpu::SubmissionIndex,
+        f: impl FnOnce(&[u8]) -> T,
+    ) -> Result<T, GpuError> {
         let slice = staging.slice(..size);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
@@ -291,12 +303,11 @@ impl Gpu {
         rx.recv()
             .map_err(|e| GpuError::Readback(e.to_string()))?
             .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let bytes = slice
+        let out = f(&slice
             .get_mapped_range()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .to_vec();
+            .map_err(|e| GpuError::Readback(e.to_string()))?);
         staging.unmap();
-        Ok(bytes)
+        Ok(out)
     }
 }
 

@@ -14,7 +14,7 @@
 
 use aobake_core::trace::{
     RayBatch, RayEngine, Tally, TraceError,
-    engine::{Estimator, GPU_NODE_WORDS, GPU_TRIANGLE_FLOATS, GpuSceneInfo, sobol_directions},
+    engine::{Estimator, GPU_TRIANGLE_FLOATS, GpuSceneInfo, NodeLayout, sobol_directions},
 };
 use aobake_shaders::{
     TRACE_LANES, TRACE_STACK, TraceParams, TracePoint, TraceScene, TraceTally, WORKGROUP_SIZE,
@@ -24,6 +24,8 @@ use wgpu::util::DeviceExt as _;
 
 use super::{ErrorScopes, Gpu, GpuError};
 
+/// Bytes of the two resolved timestamps.
+const TIMER_BYTES: u64 = 16;
 /// Points per workgroup (`TRACE_LANES` invocations per point: a
 /// 50k-vertex mesh is 800k invocations, enough to fill a large GPU).
 const POINTS_PER_GROUP: u32 = WORKGROUP_SIZE / TRACE_LANES;
@@ -41,6 +43,7 @@ const _: () = assert!(
 #[derive(Debug)]
 pub struct GpuTracer<'g> {
     gpu: &'g Gpu,
+    layout: NodeLayout,
     pipeline: wgpu::ComputePipeline,
     sobol: [[u32; 4]; 8],
     /// Buffers kept between batches (allocating them is a large part of
@@ -59,8 +62,9 @@ struct Buffers {
     tallies: Option<wgpu::Buffer>,
     staging: Option<wgpu::Buffer>,
     /// Two timestamps around the compute pass, where the adapter has
-    /// timestamp queries.
-    timer: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+    /// timestamp queries, and the buffer they resolve to (copied behind
+    /// the tallies in `staging`, so one mapping reads both).
+    timer: Option<(wgpu::QuerySet, wgpu::Buffer)>,
 }
 
 /// Running totals of the tracer's work in this process.
@@ -154,8 +158,13 @@ struct Part {
 }
 
 impl<'g> GpuTracer<'g> {
-    /// Builds the pipeline on `gpu`.
+    /// Builds the pipeline on `gpu`, with the default node layout.
     pub fn new(gpu: &'g Gpu) -> Result<Self, GpuError> {
+        Self::with_layout(gpu, NodeLayout::default())
+    }
+
+    /// Builds the pipeline on `gpu` for nodes in `layout`.
+    pub fn with_layout(gpu: &'g Gpu, layout: NodeLayout) -> Result<Self, GpuError> {
         let device = &gpu.device;
         let scope = ErrorScopes::push(device);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -167,7 +176,13 @@ impl<'g> GpuTracer<'g> {
             layout: None,
             module: &module,
             entry_point: Some("cs_trace"),
-            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[(
+                    "QUANTISED",
+                    f64::from(u8::from(layout == NodeLayout::Quantised)),
+                )],
+                ..Default::default()
+            },
             cache: None,
         });
         if let Some(e) = scope.pop() {
@@ -180,6 +195,7 @@ impl<'g> GpuTracer<'g> {
         });
         Ok(Self {
             gpu,
+            layout,
             pipeline,
             sobol,
             buffers: std::sync::Mutex::default(),
@@ -203,6 +219,11 @@ impl<'g> GpuTracer<'g> {
     /// The adapter as a person reads it.
     pub fn adapter(&self) -> String {
         self.gpu.label()
+    }
+
+    /// How the nodes of the trees it traces are laid out.
+    pub fn layout(&self) -> NodeLayout {
+        self.layout
     }
 
     /// Traces `batch` on the GPU: one tally per point (per point and scene
@@ -330,9 +351,10 @@ impl<'g> GpuTracer<'g> {
             .iter()
             .zip(&infos[part.scenes.clone()])
         {
-            let first_node = (nodes.len() / GPU_NODE_WORDS) as u32;
+            let words = self.layout.words();
+            let first_node = (nodes.len() / words) as u32;
             let first_triangle = (triangles.len() / GPU_TRIANGLE_FLOATS) as u32;
-            let scene_nodes = scene.gpu_nodes();
+            let scene_nodes = scene.gpu_nodes(self.layout);
             nodes.extend(&scene_nodes);
             triangles.extend(scene.gpu_triangles());
             scenes.push(scene_constants(
@@ -340,7 +362,7 @@ impl<'g> GpuTracer<'g> {
                 info,
                 first_node,
                 first_triangle,
-                (scene_nodes.len() / GPU_NODE_WORDS) as u32,
+                (scene_nodes.len() / words) as u32,
             ));
         }
         let tally_count = if batch.shared {
@@ -429,14 +451,16 @@ impl<'g> GpuTracer<'g> {
             U::STORAGE | U::COPY_SRC,
             "trace tallies",
         );
+        let timed = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let read_bytes = tally_bytes + if timed { TIMER_BYTES } else { 0 };
         ensure(
             device,
             &mut buffers.staging,
-            tally_bytes,
+            read_bytes,
             U::MAP_READ | U::COPY_DST,
             "trace readback",
         );
-        if buffers.timer.is_none() && device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+        if buffers.timer.is_none() && timed {
             let set = device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("trace timer"),
                 ty: wgpu::QueryType::Timestamp,
@@ -444,17 +468,11 @@ impl<'g> GpuTracer<'g> {
             });
             let resolve = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("trace timer resolve"),
-                size: 16,
+                size: TIMER_BYTES,
                 usage: U::QUERY_RESOLVE | U::COPY_SRC,
                 mapped_at_creation: false,
             });
-            let read = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("trace timer readback"),
-                size: 16,
-                usage: U::MAP_READ | U::COPY_DST,
-                mapped_at_creation: false,
-            });
-            buffers.timer = Some((set, resolve, read));
+            buffers.timer = Some((set, resolve));
         }
         let (Some(nodes_buffer), Some(triangles_buffer), Some(scenes_buffer), Some(points_buffer)) = (
             &buffers.nodes,
@@ -535,7 +553,7 @@ impl<'g> GpuTracer<'g> {
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("trace"),
-                timestamp_writes: buffers.timer.as_ref().map(|(set, _, _)| {
+                timestamp_writes: buffers.timer.as_ref().map(|(set, _)| {
                     wgpu::ComputePassTimestampWrites {
                         query_set: set,
                         beginning_of_pass_write_index: Some(0),
@@ -550,9 +568,9 @@ impl<'g> GpuTracer<'g> {
             }
         }
         encoder.copy_buffer_to_buffer(tallies_buffer, 0, staging, 0, tally_bytes);
-        if let Some((set, resolve, read)) = &buffers.timer {
+        if let Some((set, resolve)) = &buffers.timer {
             encoder.resolve_query_set(set, 0..2, resolve, 0);
-            encoder.copy_buffer_to_buffer(resolve, 0, read, 0, 16);
+            encoder.copy_buffer_to_buffer(resolve, 0, staging, tally_bytes, TIMER_BYTES);
         }
         let waiting = std::time::Instant::now();
         let submission = self.gpu.queue.submit(Some(encoder.finish()));
@@ -564,21 +582,30 @@ impl<'g> GpuTracer<'g> {
             *buffers = Buffers::default();
             return Err(PartError::OutOfMemory);
         }
-        let bytes = self
+        let period = f64::from(queue.get_timestamp_period());
+        let (tallies, kernel_ns) = self
             .gpu
-            .read_range(staging, tally_bytes, submission.clone())
+            .read_with(staging, read_bytes, submission, |bytes| {
+                let (tallies, ticks) = bytes.split_at(tally_bytes as usize);
+                let raw: &[TraceTally] = bytemuck::cast_slice(tallies);
+                let tallies: Vec<Tally> = raw
+                    .iter()
+                    .map(|t| Tally {
+                        hits: t.hits,
+                        back: t.back,
+                        sum: f64::from(t.sum),
+                        direction: Vec3A::from_array(t.direction),
+                    })
+                    .collect();
+                let tick = |k: usize| {
+                    ticks
+                        .get(8 * k..8 * k + 8)
+                        .map_or(0, |b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+                };
+                let kernel_ns = (tick(1).saturating_sub(tick(0)) as f64 * period) as u64;
+                (tallies, kernel_ns)
+            })
             .map_err(PartError::Gpu)?;
-        let kernel_ns = match &buffers.timer {
-            Some((_, _, read)) => {
-                let ticks = self
-                    .gpu
-                    .read_range(read, 16, submission)
-                    .map_err(PartError::Gpu)?;
-                let t: &[u64] = bytemuck::cast_slice(&ticks);
-                (t[1].saturating_sub(t[0]) as f64 * f64::from(queue.get_timestamp_period())) as u64
-            }
-            None => 0,
-        };
         {
             use std::sync::atomic::Ordering::Relaxed;
             let s = &self.stats;
@@ -592,16 +619,7 @@ impl<'g> GpuTracer<'g> {
                 .fetch_add(waiting.elapsed().as_nanos() as u64, Relaxed);
             s.kernel_ns.fetch_add(kernel_ns, Relaxed);
         }
-        let raw: &[TraceTally] = bytemuck::cast_slice(&bytes);
-        Ok(raw
-            .iter()
-            .map(|t| Tally {
-                hits: t.hits,
-                back: t.back,
-                sum: f64::from(t.sum),
-                direction: Vec3A::from_array(t.direction),
-            })
-            .collect())
+        Ok(tallies)
     }
 }
 

@@ -8,29 +8,36 @@ use aobake_core::{
     Limits, Pose, Upload, import_character,
     trace::{
         Axis, Falloff, Ground, KroonParams, Scene, SceneOptions, SurfaceMesh, SurfaceParams,
-        VolumeParams, engine::set_engine, kroon_occlusion, no_progress, shapes, surface_occlusion,
-        trace_poses, vertex_occlusion, volume_occlusion,
+        VolumeParams, engine::NodeLayout, engine::set_engine, kroon_occlusion, no_progress, shapes,
+        surface_occlusion, trace_poses, vertex_occlusion, volume_occlusion,
     },
 };
 use aobake_worker::gpu::{Gpu, GpuTracer};
 use glam::Vec3;
 use std::sync::Arc;
 
-/// The tracer on the best adapter of `backends`, for the whole process.
-fn tracer(backends: aobake_worker::gpu::Backends) -> Arc<GpuTracer<'static>> {
+/// The tracers on the best adapter of `backends`, for the whole process:
+/// one per node layout.
+fn tracers(backends: aobake_worker::gpu::Backends) -> Vec<Arc<GpuTracer<'static>>> {
     let gpu = Gpu::with_backends(backends)
         .unwrap_or_else(|e| panic!("a {backends:?} adapter (lavapipe or llvmpipe): {e}"));
     let gpu: &'static Gpu = Box::leak(Box::new(gpu));
-    let tracer = GpuTracer::new(gpu).expect("the trace pipeline");
-    eprintln!("adapter: {}", tracer.adapter());
-    Arc::new(tracer)
+    [NodeLayout::Exact, NodeLayout::Quantised]
+        .into_iter()
+        .map(|layout| Arc::new(GpuTracer::with_layout(gpu, layout).expect("the trace pipeline")))
+        .collect()
 }
 
-fn both_adapters() -> [Arc<GpuTracer<'static>>; 2] {
-    [
-        tracer(aobake_worker::gpu::Backends::VULKAN),
-        tracer(aobake_worker::gpu::Backends::GL),
-    ]
+/// Every tracer of both adapters, each layout.
+fn both_adapters() -> Vec<Arc<GpuTracer<'static>>> {
+    let mut all = tracers(aobake_worker::gpu::Backends::VULKAN);
+    all.extend(tracers(aobake_worker::gpu::Backends::GL));
+    all
+}
+
+/// Says which tracer the asserts that follow are about.
+fn announce(gpu: &GpuTracer<'_>) {
+    eprintln!("adapter: {}, {:?} nodes", gpu.adapter(), gpu.layout());
 }
 
 /// `f` traced by the CPU, then by `gpu` twice; the GPU must have traced
@@ -145,6 +152,7 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
         ..params
     };
     for gpu in both_adapters() {
+        announce(&gpu);
         let (cpu, first, second) = cpu_and_gpu(&gpu, || {
             vertex_occlusion(&scene, &surface, &params, &no_progress).unwrap()
         });
@@ -234,6 +242,7 @@ fn the_sphere_over_a_floor_and_the_sphere_estimators_hold_on_the_gpu() {
     };
 
     for gpu in both_adapters() {
+        announce(&gpu);
         for (samples, blender_rmse) in [(64, 0.0096), (256, 0.0034)] {
             let params = SurfaceParams {
                 samples,

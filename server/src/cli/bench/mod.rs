@@ -103,10 +103,12 @@ struct TraceArgs {
     #[arg(long)]
     threads: Option<usize>,
     /// Tracers to time, comma-separated, in turn within each repetition:
-    /// `cpu` (the traversal kernels above) and `gpu` (the wgpu compute
-    /// tracer, aobake's wide BVH, on the best adapter with compute; its
-    /// time includes the upload and the readback). With both, the figures
-    /// of the same run are compared, and the values too.
+    /// `cpu` (the traversal kernels above), `gpu` (the wgpu compute
+    /// tracer, aobake's wide BVH with exact boxes, on the best adapter with
+    /// compute; its time includes the upload and the readback) and
+    /// `gpu-quantised` (the same with the boxes as bytes: 96-byte nodes
+    /// instead of 256). With several, the figures of the same run are
+    /// compared, and the values too.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
     tracer: Vec<BenchTracer>,
     /// Also bake with Blender: the path of `bake_vertex_ao.py` (in
@@ -129,6 +131,7 @@ enum Quality {
 enum BenchTracer {
     Cpu,
     Gpu,
+    GpuQuantised,
 }
 
 /// Which tracers a tracing bench times, and how often.
@@ -137,9 +140,10 @@ struct TracerRuns {
     /// Timed runs of each tracer (medians are quoted).
     #[arg(long, default_value_t = 3)]
     repeat: usize,
-    /// Tracers to time in turn within each run, comma-separated: `cpu`
-    /// and `gpu` (the wgpu compute tracer on the best adapter with
-    /// compute; its times include uploads and readbacks).
+    /// Tracers to time in turn within each run, comma-separated: `cpu`,
+    /// `gpu` (the wgpu compute tracer on the best adapter with compute;
+    /// its times include uploads and readbacks) and `gpu-quantised` (the
+    /// same with its tree's boxes as bytes).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
     tracer: Vec<BenchTracer>,
 }
@@ -161,14 +165,19 @@ fn bench_tracers(list: &[BenchTracer]) -> anyhow::Result<Vec<Timed>> {
     list.iter()
         .map(|t| match t {
             BenchTracer::Cpu => Ok(("cpu".to_owned(), None)),
-            BenchTracer::Gpu => {
-                use aobake_worker::gpu::{GpuMode, trace::install};
-                let (label, _) =
-                    install(GpuMode::Require).map_err(|e| anyhow::anyhow!("--tracer gpu: {e}"))?;
-                println!("GPU tracer: {label}");
-                let engine = aobake_core::trace::engine::engine();
-                aobake_core::trace::engine::set_engine(None);
-                Ok(("gpu".to_owned(), engine))
+            BenchTracer::Gpu | BenchTracer::GpuQuantised => {
+                use aobake_core::trace::{RayEngine, engine::NodeLayout};
+                use aobake_worker::gpu::{Gpu, GpuTracer};
+                let (name, layout) = match t {
+                    BenchTracer::Gpu => ("gpu", NodeLayout::Exact),
+                    _ => ("gpu-quantised", NodeLayout::Quantised),
+                };
+                let tracer = Gpu::shared()
+                    .and_then(|gpu| GpuTracer::with_layout(gpu, layout))
+                    .map_err(|e| anyhow::anyhow!("--tracer {name}: {e}"))?;
+                println!("GPU tracer: {} ({layout:?} nodes)", tracer.label());
+                let engine: std::sync::Arc<dyn RayEngine> = std::sync::Arc::new(tracer);
+                Ok((name.to_owned(), Some(engine)))
             }
         })
         .collect()
