@@ -134,49 +134,10 @@ impl Bvh8 {
     /// (monotonic in the planes) enters every child it enters with exact
     /// boxes.
     pub(crate) fn gpu_nodes_quantised(&self) -> Vec<u32> {
-        let mut out = Vec::with_capacity(self.nodes.len() * GPU_QUANTISED_NODE_WORDS);
-        for node in &self.nodes {
-            let lo: [[f32; 8]; 3] = node.lo.map(|l| l.to_array());
-            let hi: [[f32; 8]; 3] = node.hi.map(|h| h.to_array());
-            let used: Vec<usize> = (0..8).filter(|&c| !node.is_empty(c)).collect();
-            let mut planes = [[0u8; 8]; 6];
-            let mut head = [0u32; 4];
-            for a in 0..3 {
-                let p = used.iter().map(|&c| lo[a][c]).fold(f32::INFINITY, f32::min);
-                let top = used
-                    .iter()
-                    .map(|&c| hi[a][c])
-                    .fold(f32::NEG_INFINITY, f32::max);
-                let (p, e) = if used.is_empty() {
-                    (0.0, 127)
-                } else {
-                    (p, grid_exponent(p, top))
-                };
-                let s = step(e);
-                head[a] = p.to_bits();
-                head[3] |= e << (8 * a);
-                for &c in &used {
-                    planes[a][c] = quantise_down(p, s, lo[a][c]);
-                    planes[a + 3][c] = quantise_up(p, s, hi[a][c]);
-                }
-            }
-            out.extend(head);
-            out.extend((0..8).map(|c| {
-                let count = if node.is_empty(c) {
-                    QUANTISED_EMPTY
-                } else {
-                    u32::from(node.count[c])
-                };
-                debug_assert!(node.first[c] < 1 << 29);
-                node.first[c] | count << 29
-            }));
-            for field in &planes {
-                for half in field.chunks_exact(4) {
-                    out.push(u32::from_le_bytes([half[0], half[1], half[2], half[3]]));
-                }
-            }
-        }
-        out
+        use rayon::prelude::*;
+        let nodes: Vec<[u32; GPU_QUANTISED_NODE_WORDS]> =
+            self.nodes.par_iter().map(quantised_node).collect();
+        nodes.into_iter().flatten().collect()
     }
 
     /// Nodes on the longest path from the root.
@@ -264,6 +225,53 @@ impl Bvh8 {
     }
 }
 
+/// One node in [`Bvh8::gpu_nodes_quantised`]'s layout.
+fn quantised_node(node: &Node) -> [u32; GPU_QUANTISED_NODE_WORDS] {
+    let lo: [[f32; 8]; 3] = node.lo.map(|l| l.to_array());
+    let hi: [[f32; 8]; 3] = node.hi.map(|h| h.to_array());
+    let used = |c: &usize| !node.is_empty(*c);
+    let mut out = [0u32; GPU_QUANTISED_NODE_WORDS];
+    let mut planes = [[0u8; 8]; 6];
+    for a in 0..3 {
+        let p = (0..8)
+            .filter(used)
+            .map(|c| lo[a][c])
+            .fold(f32::INFINITY, f32::min);
+        let top = (0..8)
+            .filter(used)
+            .map(|c| hi[a][c])
+            .fold(f32::NEG_INFINITY, f32::max);
+        let (p, e) = if p <= top {
+            (p, grid_exponent(p, top))
+        } else {
+            // No child: any grid.
+            (0.0, 127)
+        };
+        let s = step(e);
+        out[a] = p.to_bits();
+        out[3] |= e << (8 * a);
+        for c in (0..8).filter(used) {
+            planes[a][c] = quantise_down(p, s, lo[a][c]);
+            planes[a + 3][c] = quantise_up(p, s, hi[a][c]);
+        }
+    }
+    for c in 0..8 {
+        let count = if node.is_empty(c) {
+            QUANTISED_EMPTY
+        } else {
+            u32::from(node.count[c])
+        };
+        debug_assert!(node.first[c] < 1 << 29);
+        out[4 + c] = node.first[c] | count << 29;
+    }
+    for (f, field) in planes.iter().enumerate() {
+        for (h, half) in field.chunks_exact(4).enumerate() {
+            out[12 + 2 * f + h] = u32::from_le_bytes([half[0], half[1], half[2], half[3]]);
+        }
+    }
+    out
+}
+
 /// The count of an empty child slot in [`Bvh8::gpu_nodes_quantised`].
 pub(crate) const QUANTISED_EMPTY: u32 = 7;
 
@@ -296,11 +304,11 @@ fn grid_exponent(p: f32, top: f32) -> u32 {
     e
 }
 
-/// The largest byte whose plane is at or below `x`.
+/// The largest byte whose plane is at or below `x` (`s` is a power of
+/// two, so its reciprocal is exact; the guess is corrected in the
+/// shader's arithmetic).
 fn quantise_down(p: f32, s: f32, x: f32) -> u8 {
-    let mut q = ((f64::from(x) - f64::from(p)) / f64::from(s))
-        .floor()
-        .clamp(0.0, 255.0) as u8;
+    let mut q = ((x - p) * s.recip()).floor().clamp(0.0, 255.0) as u8;
     while q > 0 && plane(p, s, q) > x {
         q -= 1;
     }
@@ -310,9 +318,7 @@ fn quantise_down(p: f32, s: f32, x: f32) -> u8 {
 /// The smallest byte whose plane is at or above `x` (255 at most: the
 /// grid's exponent makes 255 reach the node's top).
 fn quantise_up(p: f32, s: f32, x: f32) -> u8 {
-    let mut q = ((f64::from(x) - f64::from(p)) / f64::from(s))
-        .ceil()
-        .clamp(0.0, 255.0) as u8;
+    let mut q = ((x - p) * s.recip()).ceil().clamp(0.0, 255.0) as u8;
     while q < u8::MAX && plane(p, s, q) < x {
         q += 1;
     }

@@ -791,7 +791,7 @@ fn kroon_batch(
     };
     let samples = params.samples;
     Ok(trace_batch(&batch, progress)?
-        .iter()
+        .par_iter()
         .map(|t| {
             if 2 * t.back > samples {
                 return 1.0;

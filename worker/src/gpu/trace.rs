@@ -343,20 +343,23 @@ impl<'g> GpuTracer<'g> {
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
         let rays_per_lane = batch.samples.div_ceil(TRACE_LANES);
-        // Geometry and points of the part's scenes.
-        let mut nodes: Vec<u32> = Vec::new();
-        let mut triangles: Vec<f32> = Vec::new();
+        // Geometry and points of the part's scenes, converted in parallel.
+        use rayon::prelude::*;
+        let words = self.layout.words();
+        let geometry: Vec<(Vec<u32>, Vec<f32>)> = batch.scenes[part.scenes.clone()]
+            .par_iter()
+            .map(|scene| (scene.gpu_nodes(self.layout), scene.gpu_triangles()))
+            .collect();
+        let mut nodes: Vec<u32> = Vec::with_capacity(geometry.iter().map(|g| g.0.len()).sum());
+        let mut triangles: Vec<f32> = Vec::with_capacity(geometry.iter().map(|g| g.1.len()).sum());
         let mut scenes = Vec::with_capacity(part.scenes.len());
-        for (scene, info) in batch.scenes[part.scenes.clone()]
-            .iter()
-            .zip(&infos[part.scenes.clone()])
+        for ((scene_nodes, scene_triangles), info) in
+            geometry.iter().zip(&infos[part.scenes.clone()])
         {
-            let words = self.layout.words();
             let first_node = (nodes.len() / words) as u32;
             let first_triangle = (triangles.len() / GPU_TRIANGLE_FLOATS) as u32;
-            let scene_nodes = scene.gpu_nodes(self.layout);
-            nodes.extend(&scene_nodes);
-            triangles.extend(scene.gpu_triangles());
+            nodes.extend(scene_nodes);
+            triangles.extend(scene_triangles);
             scenes.push(scene_constants(
                 batch,
                 info,
@@ -386,7 +389,6 @@ impl<'g> GpuTracer<'g> {
         if part.points.is_empty() {
             return Ok(Vec::new());
         }
-        use rayon::prelude::*;
         let points: Vec<TracePoint> = batch.points[part.points.clone()]
             .par_iter()
             .map(|p| TracePoint {
@@ -589,7 +591,7 @@ impl<'g> GpuTracer<'g> {
                 let (tallies, ticks) = bytes.split_at(tally_bytes as usize);
                 let raw: &[TraceTally] = bytemuck::cast_slice(tallies);
                 let tallies: Vec<Tally> = raw
-                    .iter()
+                    .par_iter()
                     .map(|t| Tally {
                         hits: t.hits,
                         back: t.back,

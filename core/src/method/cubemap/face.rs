@@ -21,8 +21,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::trace::{KroonParams, TraceError};
 
+use rayon::prelude::*;
+
 use super::{
-    field::{face_points, face_slices},
+    field::{face_points, face_scenes, trace_face},
     geometry::Spheroid,
 };
 
@@ -71,16 +73,28 @@ impl FaceField {
         self.shells * self.resolution * self.resolution
     }
 
-    /// Stores time sample `time`'s slice (`[shell][texel]` bytes, the
-    /// order of `field::face_points`).
-    pub fn insert(&mut self, time: usize, slice: &[u8]) {
+    /// Stores consecutive time samples from `first` on: `slices` holds
+    /// whole slices (`[shell][texel]` bytes each, the order of
+    /// `field::face_points`), one after another. Each texel's block is
+    /// written by one thread, a run of time samples at a time.
+    pub fn insert(&mut self, first: usize, slices: &[u8]) {
         let texels = self.resolution * self.resolution;
-        debug_assert_eq!(slice.len(), self.slice_len());
-        for k in 0..self.shells {
-            for t in 0..texels {
-                self.values[(t * self.shells + k) * self.times + time] = slice[k * texels + t];
-            }
-        }
+        let n = self.slice_len();
+        debug_assert_eq!(slices.len() % n.max(1), 0);
+        let count = slices.len() / n.max(1);
+        let (shells, times) = (self.shells, self.times);
+        debug_assert!(first + count <= times);
+        self.values
+            .par_chunks_mut(shells * times)
+            .enumerate()
+            .for_each(|(t, block)| {
+                for (k, row) in block.chunks_exact_mut(times).enumerate() {
+                    let column = k * texels + t;
+                    for (i, v) in row[first..first + count].iter_mut().enumerate() {
+                        *v = slices[i * n + column];
+                    }
+                }
+            });
     }
 
     /// Texel `t`'s (shell × time) block, shell-major.
@@ -183,9 +197,7 @@ impl Part {
                 self.first
             ));
         }
-        for (i, slice) in self.slices.chunks_exact(n).enumerate() {
-            field.insert(next + i, slice);
-        }
+        field.insert(next, &self.slices);
         Ok(next + count)
     }
 }
@@ -234,29 +246,38 @@ pub fn compute_face<E>(
     save: &mut dyn FnMut(Part, usize) -> Result<(), E>,
 ) -> Result<(), FaceError<E>> {
     let points = face_points(&sampling.spheroid, face, sampling.resolution);
-    let batch = checkpoint_batch(field.times);
-    let mut part = Part {
-        first: next,
-        slices: Vec::with_capacity(batch * points.len()),
+    let times = field.times;
+    let batch = checkpoint_batch(times);
+    let end_of = |first: usize| (first + batch).min(times);
+    let mut frames =
+        |first: usize| -> Vec<Vec<Vec3>> { (first..end_of(first)).map(&mut *positions).collect() };
+    // A checkpoint's time samples are traced as one batch; the next
+    // batch's meshes are built while it traces (a GPU tracer leaves the
+    // CPU idle meanwhile).
+    let mut scenes = if next < times {
+        face_scenes(&frames(next), triangles)?
+    } else {
+        Vec::new()
     };
-    // A checkpoint's time samples are traced as one batch.
-    while part.first < field.times {
-        let end = (part.first + batch).min(field.times);
-        let frames: Vec<Vec<Vec3>> = (part.first..end).map(&mut *positions).collect();
-        let slices = face_slices(&frames, triangles, &points, face, &sampling.kroon)?;
-        for (t, ao) in (part.first..end).zip(slices) {
-            let slice: Vec<u8> = ao.into_iter().map(quantise).collect();
-            field.insert(t, &slice);
-            part.slices.extend(slice);
-        }
-        let full = std::mem::replace(
-            &mut part,
-            Part {
-                first: end,
-                slices: Vec::with_capacity(batch * points.len()),
-            },
+    let mut first = next;
+    while first < times {
+        let end = end_of(first);
+        let upcoming = (end < times).then(|| frames(end));
+        let (slices, built) = rayon::join(
+            || trace_face(&scenes, &points, face, &sampling.kroon),
+            || upcoming.map(|f| face_scenes(&f, triangles)).transpose(),
         );
-        save(full, end).map_err(FaceError::Stopped)?;
+        let mut part = Part {
+            first,
+            slices: Vec::with_capacity((end - first) * points.len()),
+        };
+        for slice in slices? {
+            part.slices.extend(slice.into_iter().map(quantise));
+        }
+        field.insert(first, &part.slices);
+        save(part, end).map_err(FaceError::Stopped)?;
+        scenes = built?.unwrap_or_default();
+        first = end;
     }
     Ok(())
 }

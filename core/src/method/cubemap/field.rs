@@ -56,10 +56,26 @@ pub fn face_slices(
     face: usize,
     params: &KroonParams,
 ) -> Result<Vec<Vec<f32>>, TraceError> {
-    let scenes = frames
+    trace_face(&face_scenes(frames, triangles)?, points, face, params)
+}
+
+/// The posed meshes (time samples) of a batch as scenes, built in
+/// parallel.
+pub fn face_scenes(frames: &[Vec<Vec3>], triangles: &[[u32; 3]]) -> Result<Vec<Scene>, TraceError> {
+    frames
         .par_iter()
         .map(|positions| Scene::new(positions, triangles, &SceneOptions::default()))
-        .collect::<Result<Vec<_>, _>>()?;
+        .collect()
+}
+
+/// Occlusion at `points` (from [`face_points`]) of face `face` around
+/// `scenes`, traced as one batch: a slice per scene.
+pub fn trace_face(
+    scenes: &[Scene],
+    points: &[Vec3],
+    face: usize,
+    params: &KroonParams,
+) -> Result<Vec<Vec<f32>>, TraceError> {
     let params = KroonParams {
         // Faces must not share scrambles: texel i of every face would
         // otherwise trace the same directions.
