@@ -181,7 +181,9 @@ impl<'g> GpuTracer<'g> {
                     "QUANTISED",
                     f64::from(u8::from(layout == NodeLayout::Quantised)),
                 )],
-                ..Default::default()
+                // Every invocation writes its slot of `partial` before the
+                // barrier that precedes any read.
+                zero_initialize_workgroup_memory: false,
             },
             cache: None,
         });

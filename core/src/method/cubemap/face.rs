@@ -17,11 +17,10 @@
 //!   the asset, do not depend on where the job was interrupted.
 
 use glam::Vec3;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::trace::{KroonParams, TraceError};
-
-use rayon::prelude::*;
 
 use super::{
     field::{face_points, face_scenes, trace_face},
