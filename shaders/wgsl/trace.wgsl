@@ -32,6 +32,8 @@ const FAR: f32 = 3.4028235e38;
 // The node layout (core's trace::engine::NodeLayout): false, the exact
 // one, 16 vec4 a node; true, the quantised one, 6 vec4 a node.
 override QUANTISED: bool = false;
+// The count of an empty child slot (as `children` returns it).
+const EMPTY: u32 = 255u;
 // Traversal stack entries: 7 per level of an 8-wide tree; the host
 // refuses a deeper tree.
 const STACK: u32 = 96u;
@@ -310,8 +312,6 @@ struct Children {
     first: vec4<u32>,
     count: vec4<u32>,
 }
-
-const EMPTY: u32 = 255u;
 
 fn children(base: u32, half: u32) -> Children {
     if (QUANTISED) {

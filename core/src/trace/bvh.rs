@@ -13,6 +13,7 @@
 
 use glam::Vec3A;
 use obvhs::{cwbvh::CwBvh, ray::Ray, rt_triangle::RtTriangle};
+use rayon::prelude::*;
 use wide::f32x8;
 
 use super::engine::{GPU_NODE_WORDS, GPU_QUANTISED_NODE_WORDS};
@@ -115,7 +116,8 @@ impl Bvh8 {
         out
     }
 
-    /// The nodes for a GPU tracer in [`NodeLayout::Quantised`],
+    /// The nodes for a GPU tracer in
+    /// [`NodeLayout::Quantised`](super::engine::NodeLayout::Quantised),
     /// [`GPU_QUANTISED_NODE_WORDS`] words each:
     ///
     /// * words 0–2: `p`, the grid's origin (the children's lowest corner),
@@ -132,9 +134,12 @@ impl Bvh8 {
     /// shader uses (`q · s` is exact, so one rounding whether fused or
     /// not), so each decoded box contains its exact box: a ray's slab test
     /// (monotonic in the planes) enters every child it enters with exact
-    /// boxes.
+    /// boxes. A GPU may flush subnormal floats to zero: coordinates in
+    /// the subnormal band are first moved outwards out of it (to 0 or
+    /// ±2⁻¹²⁶), so every plane decoded near zero is a multiple of 2⁻¹²⁶
+    /// or lies on the safe side of zero, and containment holds flushed or
+    /// not.
     pub(crate) fn gpu_nodes_quantised(&self) -> Vec<u32> {
-        use rayon::prelude::*;
         let nodes: Vec<[u32; GPU_QUANTISED_NODE_WORDS]> =
             self.nodes.par_iter().map(quantised_node).collect();
         nodes.into_iter().flatten().collect()
@@ -227,8 +232,8 @@ impl Bvh8 {
 
 /// One node in [`Bvh8::gpu_nodes_quantised`]'s layout.
 fn quantised_node(node: &Node) -> [u32; GPU_QUANTISED_NODE_WORDS] {
-    let lo: [[f32; 8]; 3] = node.lo.map(|l| l.to_array());
-    let hi: [[f32; 8]; 3] = node.hi.map(|h| h.to_array());
+    let lo: [[f32; 8]; 3] = node.lo.map(|l| l.to_array().map(below_subnormals));
+    let hi: [[f32; 8]; 3] = node.hi.map(|h| h.to_array().map(|x| -below_subnormals(-x)));
     let used = |c: &usize| !node.is_empty(*c);
     let mut out = [0u32; GPU_QUANTISED_NODE_WORDS];
     let mut planes = [[0u8; 8]; 6];
@@ -274,6 +279,16 @@ fn quantised_node(node: &Node) -> [u32; GPU_QUANTISED_NODE_WORDS] {
 
 /// The count of an empty child slot in [`Bvh8::gpu_nodes_quantised`].
 pub(crate) const QUANTISED_EMPTY: u32 = 7;
+
+/// `x`, or where it is subnormal the next value at or below it that is
+/// not (0 or −2⁻¹²⁶): a plane no GPU's flushing can move.
+fn below_subnormals(x: f32) -> f32 {
+    if x.is_subnormal() {
+        if x > 0.0 { 0.0 } else { -f32::MIN_POSITIVE }
+    } else {
+        x
+    }
+}
 
 /// The grid step `2^(e − 127)` of exponent byte `e` (1..=254).
 fn step(e: u32) -> f32 {
@@ -424,5 +439,68 @@ mod tests {
             mean < 2.0 / 255.0,
             "boxes grew by {mean} of their node's extent"
         );
+    }
+
+    /// Planes decoded from a node's bytes, as the shader decodes them:
+    /// IEEE, or with subnormal inputs and results flushed to zero.
+    fn decoded(words: &[u32], field: usize, c: usize, flush: bool) -> f32 {
+        let ftz = |x: f32| if flush && x.is_subnormal() { 0.0 } else { x };
+        let a = field % 3;
+        let p = ftz(f32::from_bits(words[a]));
+        let s = step((words[3] >> (8 * a)) & 0xff);
+        let q = words[12 + 2 * field + c / 4].to_le_bytes()[c % 4];
+        ftz(plane(p, s, q))
+    }
+
+    /// Degenerate children: a point, a flat box, boxes in the subnormal
+    /// band and straddling zero, far from the origin, and empty slots.
+    #[test]
+    fn degenerate_and_subnormal_boxes_stay_contained_flushed_or_not() {
+        let tiny = f32::MIN_POSITIVE / 4.0;
+        let boxes: [([f32; 3], [f32; 3]); 6] = [
+            ([0.25; 3], [0.25; 3]),
+            ([-1.0, 0.5, 0.5], [1.0, 0.5, 0.5]),
+            ([-tiny, tiny, -tiny], [tiny, 2.0 * tiny, -tiny / 2.0]),
+            ([-3.0 * tiny, -1e-30, 0.0], [-tiny, 1e-30, tiny]),
+            ([1e6, -1e6, 3.0], [1e6 + 1.0, -1e6 + 0.5, 3.0]),
+            ([0.0; 3], [1e-3; 3]),
+        ];
+        let mut node = EMPTY_NODE;
+        for (c, (lo, hi)) in boxes.iter().enumerate() {
+            let (mut l, mut h) = (node.lo.map(|v| v.to_array()), node.hi.map(|v| v.to_array()));
+            for a in 0..3 {
+                l[a][c] = lo[a];
+                h[a][c] = hi[a];
+            }
+            node.lo = l.map(f32x8::from);
+            node.hi = h.map(f32x8::from);
+            node.first[c] = 10 * c as u32;
+            node.count[c] = (c % 4) as u8;
+        }
+        let words = quantised_node(&node);
+        for (c, (lo, hi)) in boxes.iter().enumerate() {
+            assert_eq!(words[4 + c] >> 29, (c % 4) as u32);
+            assert_eq!(words[4 + c] & ((1 << 29) - 1), 10 * c as u32);
+            for flush in [false, true] {
+                for a in 0..3 {
+                    let (ql, qh) = (
+                        decoded(&words, a, c, flush),
+                        decoded(&words, a + 3, c, flush),
+                    );
+                    assert!(
+                        ql <= lo[a] && qh >= hi[a],
+                        "child {c} axis {a} flush {flush}: [{ql}, {qh}] against [{}, {}]",
+                        lo[a],
+                        hi[a]
+                    );
+                }
+            }
+        }
+        for c in boxes.len()..8 {
+            assert_eq!(words[4 + c] >> 29, QUANTISED_EMPTY);
+        }
+        // An all-empty node still packs (any grid; every slot empty).
+        let empty = quantised_node(&EMPTY_NODE);
+        assert!((0..8).all(|c| empty[4 + c] >> 29 == QUANTISED_EMPTY));
     }
 }

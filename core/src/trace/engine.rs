@@ -201,8 +201,11 @@ pub fn tracer_label() -> String {
 /// How a GPU tracer's nodes store their eight child boxes
 /// ([`Scene::gpu_nodes`]). Either way the tree and the triangles are the
 /// CPU's, and a ray's hits are the same but at float ties: quantised
-/// boxes only ever contain the exact ones, so a traversal visits every
-/// node it would visit with exact boxes, and perhaps a few more.
+/// boxes only ever contain the exact ones, so at a given ray length a
+/// node enters every child that it enters with exact boxes (perhaps a
+/// few more), and the any-hit answer and the closest hit come out the
+/// same (only the order of the visits may differ). Bakes use the exact
+/// layout; `aobake bench … --tracer gpu-quantised` times the other.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
 pub enum NodeLayout {
     /// The boxes as f32, [`GPU_NODE_WORDS`] words (256 bytes) a node.
@@ -216,7 +219,7 @@ pub enum NodeLayout {
 
 impl NodeLayout {
     /// Words per node.
-    pub fn words(self) -> usize {
+    pub const fn words(self) -> usize {
         match self {
             NodeLayout::Exact => GPU_NODE_WORDS,
             NodeLayout::Quantised => GPU_QUANTISED_NODE_WORDS,

@@ -20,10 +20,14 @@ use aobake_shaders::{
     TRACE_LANES, TRACE_STACK, TraceParams, TracePoint, TraceScene, TraceTally, WORKGROUP_SIZE,
 };
 use glam::Vec3A;
+use rayon::prelude::*;
 use wgpu::util::DeviceExt as _;
 
 use super::{ErrorScopes, Gpu, GpuError};
 
+// trace.wgsl's node_size(): 16 vec4 a node exact, 6 quantised.
+const _: () =
+    assert!(NodeLayout::Exact.words() == 16 * 4 && NodeLayout::Quantised.words() == 6 * 4);
 /// Bytes of the two resolved timestamps.
 const TIMER_BYTES: u64 = 16;
 /// Points per workgroup (`TRACE_LANES` invocations per point: a
@@ -345,8 +349,8 @@ impl<'g> GpuTracer<'g> {
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
         let rays_per_lane = batch.samples.div_ceil(TRACE_LANES);
-        // Geometry and points of the part's scenes, converted in parallel.
-        use rayon::prelude::*;
+        // Geometry and points of the part's scenes, converted in parallel
+        // (before the buffers are locked).
         let words = self.layout.words();
         let geometry: Vec<(Vec<u32>, Vec<f32>)> = batch.scenes[part.scenes.clone()]
             .par_iter()
@@ -376,6 +380,10 @@ impl<'g> GpuTracer<'g> {
             part.points.len()
         } as u64;
         let tally_bytes = tally_count * size_of::<TraceTally>() as u64;
+        let timed = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        // The readback buffer holds the tallies and, behind them, the
+        // timestamps.
+        let read_bytes = tally_bytes + if timed { TIMER_BYTES } else { 0 };
         let largest = [
             4 * nodes.len() as u64,
             4 * triangles.len() as u64,
@@ -385,7 +393,7 @@ impl<'g> GpuTracer<'g> {
         .into_iter()
         .max()
         .unwrap_or(0);
-        if largest > binding {
+        if largest > binding || read_bytes > limits.max_buffer_size {
             return Err(PartError::TooLarge);
         }
         if part.points.is_empty() {
@@ -455,8 +463,6 @@ impl<'g> GpuTracer<'g> {
             U::STORAGE | U::COPY_SRC,
             "trace tallies",
         );
-        let timed = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let read_bytes = tally_bytes + if timed { TIMER_BYTES } else { 0 };
         ensure(
             device,
             &mut buffers.staging,
@@ -587,29 +593,35 @@ impl<'g> GpuTracer<'g> {
             return Err(PartError::OutOfMemory);
         }
         let period = f64::from(queue.get_timestamp_period());
-        let (tallies, kernel_ns) = self
+        // Copied out as they are: nothing parallel runs while the buffers
+        // are locked (a rayon thread waiting in a parallel loop may take up
+        // another job's trace, which would then wait on this lock).
+        let (raw, kernel_ns) = self
             .gpu
             .read_with(staging, read_bytes, submission, |bytes| {
                 let (tallies, ticks) = bytes.split_at(tally_bytes as usize);
-                let raw: &[TraceTally] = bytemuck::cast_slice(tallies);
-                let tallies: Vec<Tally> = raw
-                    .par_iter()
-                    .map(|t| Tally {
-                        hits: t.hits,
-                        back: t.back,
-                        sum: f64::from(t.sum),
-                        direction: Vec3A::from_array(t.direction),
-                    })
-                    .collect();
                 let tick = |k: usize| {
                     ticks
                         .get(8 * k..8 * k + 8)
                         .map_or(0, |b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
                 };
                 let kernel_ns = (tick(1).saturating_sub(tick(0)) as f64 * period) as u64;
-                (tallies, kernel_ns)
+                (
+                    bytemuck::pod_collect_to_vec::<u8, TraceTally>(tallies),
+                    kernel_ns,
+                )
             })
             .map_err(PartError::Gpu)?;
+        drop(guard);
+        let tallies: Vec<Tally> = raw
+            .par_iter()
+            .map(|t| Tally {
+                hits: t.hits,
+                back: t.back,
+                sum: f64::from(t.sum),
+                direction: Vec3A::from_array(t.direction),
+            })
+            .collect();
         {
             use std::sync::atomic::Ordering::Relaxed;
             let s = &self.stats;

@@ -6,8 +6,9 @@
 //!   the ray noise at the default 64 rays and the encodings' own
 //!   coefficient steps), texel-major (`[texel][shell][time]`) so that each
 //!   texel's (shell × time) block is contiguous for the encoders. At the
-//!   defaults (128², 8 shells, 255 times) that is 33 MiB, the bulk of a
-//!   face job's memory.
+//!   defaults (128², 8 shells, 255 times) that is 33 MiB; a batch being
+//!   traced (8 time samples, 1M points) holds about as much again in its
+//!   tallies, and the next batch's meshes (built meanwhile) are small.
 //! * [`Part`]: the slices of a run of consecutive time samples, as
 //!   computed (`[time][shell][texel]`). A checkpoint stores only the parts
 //!   made since the one before, as blobs, and a small [`Manifest`] listing
@@ -231,10 +232,11 @@ pub enum FaceError<E> {
 }
 
 /// Computes time samples `next..field.times` of `face` into `field`:
-/// `positions(m)` is the posed mesh at time sample `m`. After every
-/// [`checkpoint_batch`] time samples (and at the end) the new slices go to
-/// `save` as a [`Part`]; an `Err` from it stops the computation, keeping
-/// what was saved.
+/// `positions(m)` is the posed mesh at time sample `m` (called on this
+/// thread, a batch ahead: the next batch's scenes are built while one
+/// traces). After every [`checkpoint_batch`] time samples (and at the
+/// end) the new slices go to `save` as a [`Part`]; an `Err` from it stops
+/// the computation, keeping what was saved.
 pub fn compute_face<E>(
     sampling: &FaceSampling,
     face: usize,

@@ -49,7 +49,8 @@ fn face_slice(
 /// Occlusion at `points` (from [`face_points`]) around several posed
 /// meshes (time samples), traced as one batch: one dispatch on a GPU
 /// tracer.
-pub fn face_slices(
+#[cfg(test)]
+fn face_slices(
     frames: &[Vec<Vec3>],
     triangles: &[[u32; 3]],
     points: &[Vec3],

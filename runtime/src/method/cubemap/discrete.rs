@@ -29,8 +29,8 @@ pub const WINDOW: usize = 5;
 pub const MIN_SPACING: usize = 32;
 /// The coefficient bound.
 pub const BOUND: f64 = 4.0;
-/// Candidates [`breakpoints`] sorts before it looks further.
-const HEAD_CANDIDATES: usize = 64;
+/// Candidates [`breakpoints`] sorts at a time.
+const CANDIDATE_RUN: usize = 64;
 
 /// The breakpoints of a cyclic curve (Algorithm 1), ascending.
 pub fn breakpoints(values: &[f32]) -> [usize; SEGMENTS] {
@@ -68,19 +68,20 @@ pub fn breakpoints(values: &[f32]) -> [usize; SEGMENTS] {
             }
         }
     };
-    // The breakpoints are nearly always among the first few dozen
-    // candidates: those are sorted first (a selection puts them in
-    // front), and the rest only when they do not suffice.
-    let head = HEAD_CANDIDATES.min(n);
-    if head < n {
-        jumps.select_nth_unstable_by(head - 1, order);
-    }
-    let (front, rest) = jumps.split_at_mut(head);
-    front.sort_unstable_by(order);
-    take(front, &mut found);
-    if found.len() < SEGMENTS && !rest.is_empty() {
-        rest.sort_unstable_by(order);
-        take(rest, &mut found);
+    // The candidates in order, a run at a time: a selection puts the
+    // next run in front of the rest, and only the run is sorted. The
+    // breakpoints are usually in the first run or two, so most of the
+    // candidates are never sorted.
+    let mut rest: &mut [(usize, f64)] = &mut jumps;
+    while found.len() < SEGMENTS && !rest.is_empty() {
+        let run = CANDIDATE_RUN.min(rest.len());
+        if run < rest.len() {
+            rest.select_nth_unstable_by(run - 1, order);
+        }
+        let (front, back) = std::mem::take(&mut rest).split_at_mut(run);
+        front.sort_unstable_by(order);
+        take(front, &mut found);
+        rest = back;
     }
     found.sort_unstable();
     let mut out = [0; SEGMENTS];

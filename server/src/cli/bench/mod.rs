@@ -107,8 +107,8 @@ struct TraceArgs {
     /// tracer, aobake's wide BVH with exact boxes, on the best adapter with
     /// compute; its time includes the upload and the readback) and
     /// `gpu-quantised` (the same with the boxes as bytes: 96-byte nodes
-    /// instead of 256). With several, the figures of the same run are
-    /// compared, and the values too.
+    /// instead of 256) and `free` (no rays cast). With several, the
+    /// figures of the same run are compared, and the values too.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
     tracer: Vec<BenchTracer>,
     /// Also bake with Blender: the path of `bake_vertex_ao.py` (in
@@ -132,6 +132,29 @@ enum BenchTracer {
     Cpu,
     Gpu,
     GpuQuantised,
+    /// No rays cast (every ray a miss): what the job costs besides
+    /// tracing, the floor under any tracer's time.
+    Free,
+}
+
+/// The `free` tracer: every tally empty, at once.
+#[derive(Debug)]
+struct FreeTracer;
+
+impl aobake_core::trace::RayEngine for FreeTracer {
+    fn label(&self) -> String {
+        "free (no rays cast)".into()
+    }
+
+    fn trace(
+        &self,
+        batch: &aobake_core::trace::RayBatch<'_>,
+        progress: aobake_core::trace::Progress<'_>,
+    ) -> Result<Option<Vec<aobake_core::trace::Tally>>, aobake_core::trace::TraceError> {
+        let tallies = vec![aobake_core::trace::Tally::default(); batch.tallies()];
+        progress(tallies.len());
+        Ok(Some(tallies))
+    }
 }
 
 /// Which tracers a tracing bench times, and how often.
@@ -142,8 +165,9 @@ struct TracerRuns {
     repeat: usize,
     /// Tracers to time in turn within each run, comma-separated: `cpu`,
     /// `gpu` (the wgpu compute tracer on the best adapter with compute;
-    /// its times include uploads and readbacks) and `gpu-quantised` (the
-    /// same with its tree's boxes as bytes).
+    /// its times include uploads and readbacks), `gpu-quantised` (the
+    /// same with its tree's boxes as bytes) and `free` (no rays cast:
+    /// what the work costs besides tracing).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
     tracer: Vec<BenchTracer>,
 }
@@ -165,6 +189,10 @@ fn bench_tracers(list: &[BenchTracer]) -> anyhow::Result<Vec<Timed>> {
     list.iter()
         .map(|t| match t {
             BenchTracer::Cpu => Ok(("cpu".to_owned(), None)),
+            BenchTracer::Free => Ok((
+                "free".to_owned(),
+                Some(std::sync::Arc::new(FreeTracer) as _),
+            )),
             BenchTracer::Gpu | BenchTracer::GpuQuantised => {
                 use aobake_core::trace::{RayEngine, engine::NodeLayout};
                 use aobake_worker::gpu::{Gpu, GpuTracer};
