@@ -352,7 +352,9 @@ fn box_lanes(base: u32, head: vec4<u32>, field: u32, half: u32) -> vec4<f32> {
 // the same order per child), leaves as they come, and the inner children
 // that the ray enters are pushed farthest first, with their entry
 // distance, so the nearest is visited next and a node that starts beyond
-// a closer hit is dropped when popped (any-hit rays keep the slot order).
+// a closer hit is dropped when popped (any-hit rays push the children in
+// slot order, without their distance: nothing is dropped before a hit
+// ends them).
 // Only the work depends on the order: the CPU's answer is the same (the
 // closest hit is the closest in any order).
 fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: bool) -> Hit {
@@ -394,12 +396,19 @@ fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: 
                     continue;
                 }
                 let first = kids.first[k];
+                if (count == 0u && any) {
+                    // An any-hit ray takes the children in slot order and
+                    // never drops one: straight onto the stack.
+                    if (top < STACK) {
+                        stack[top] = first;
+                        top = top + 1u;
+                    }
+                    continue;
+                }
                 if (count == 0u) {
                     var j = pending;
-                    // Sorted for the closest hit only: an any-hit ray
-                    // stops at the first hit, and sorting cost more than
-                    // it saved there (lavapipe).
-                    while (!any && j > 0u && child_near[j - 1u] < near[k]) {
+                    // A closest-hit ray: sorted by entry distance.
+                    while (j > 0u && child_near[j - 1u] < near[k]) {
                         child_near[j] = child_near[j - 1u];
                         child_index[j] = child_index[j - 1u];
                         j = j - 1u;
@@ -434,7 +443,7 @@ fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: 
                 return best;
             }
             top = top - 1u;
-            if (stack_near[top] <= tmax) {
+            if (any || stack_near[top] <= tmax) {
                 current = stack[top];
                 break;
             }
