@@ -101,18 +101,25 @@ pub struct TraceStats {
 
 impl std::fmt::Display for TraceStats {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // Rays and rates in G when there are billions, else in M (a small
+        // run on a software adapter would read 0.00 G).
+        let (scale, unit) = if self.rays >= 1_000_000_000 {
+            (1e9, "G")
+        } else {
+            (1e6, "M")
+        };
         let rate = |s: f64| {
             if s > 0.0 {
-                self.rays as f64 / s / 1e9
+                self.rays as f64 / s / scale
             } else {
                 0.0
             }
         };
         write!(
             f,
-            "{} submissions, {:.2} G rays: {:.2} s in the tracer ({:.2} Grays/s), {:.2} s waiting for the GPU",
+            "{} submissions, {:.2} {unit} rays: {:.2} s in the tracer ({:.2} {unit}rays/s), {:.2} s waiting for the GPU",
             self.batches,
-            self.rays as f64 / 1e9,
+            self.rays as f64 / scale,
             self.wall_s,
             rate(self.wall_s),
             self.wait_s
@@ -120,7 +127,7 @@ impl std::fmt::Display for TraceStats {
         if self.kernel_s > 0.0 {
             write!(
                 f,
-                ", {:.2} s in its compute passes ({:.2} Grays/s)",
+                ", {:.2} s in its compute passes ({:.2} {unit}rays/s)",
                 self.kernel_s,
                 rate(self.kernel_s)
             )?;
@@ -768,5 +775,35 @@ pub fn install(mode: GpuMode) -> Result<(String, Option<String>), GpuError> {
             ))
         }
         Err(e) => Err(e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TraceStats;
+
+    #[test]
+    fn stats_read_in_the_unit_of_their_size() {
+        let stats = |rays| TraceStats {
+            batches: 3,
+            rays,
+            wall_s: 2.0,
+            kernel_s: 1.0,
+            wait_s: 1.5,
+        };
+        let small = stats(5_000_000).to_string();
+        assert!(
+            small.contains("5.00 M rays") && small.contains("(2.50 Mrays/s)"),
+            "{small}"
+        );
+        assert!(small.contains("compute passes (5.00 Mrays/s)"), "{small}");
+        let large = stats(3_000_000_000).to_string();
+        assert!(large.starts_with("3 submissions, 3.00 G rays"), "{large}");
+        assert!(large.contains("(1.50 Grays/s)"), "{large}");
+        let untimed = TraceStats {
+            kernel_s: 0.0,
+            ..stats(1)
+        };
+        assert!(!untimed.to_string().contains("compute passes"));
     }
 }
