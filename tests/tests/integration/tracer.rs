@@ -40,12 +40,18 @@ fn a_bake_traced_on_the_gpu_casts_the_cpus_rays_and_says_so() {
         gpu_report["timings"]
     );
     // The same rays through the same arithmetic: on Mesa's software
-    // adapters (what CI has) the very same asset; a hardware GPU may differ
-    // where a ray grazes an edge, so there the model's quality must agree.
+    // adapters (what CI has) this bake's very asset (a bake with poses
+    // that pass parts through each other can differ at a float tie; see
+    // worker's extreme_poses_of_a_bake_agree_with_the_cpu_but_at_ties); a
+    // hardware GPU may differ where a ray grazes an edge, so there the
+    // model's quality must agree.
+    let psnr = |r: &serde_json::Value| {
+        r["evaluation"]["training_clip_frames"]["model"]["mean"]["psnr_db"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("no training-frame PSNR in {r}"))
+    };
+    assert!((psnr(&cpu_report) - psnr(&gpu_report)).abs() < 0.05);
     if adapter.contains("llvmpipe") || adapter.contains("lavapipe") {
         assert!(cpu == gpu, "the GPU tracer's asset differs from the CPU's");
-    } else {
-        let psnr = |r: &serde_json::Value| r["evaluation"]["model"]["psnr_db"].as_f64().unwrap();
-        assert!((psnr(&cpu_report) - psnr(&gpu_report)).abs() < 0.05);
     }
 }
