@@ -63,16 +63,15 @@ pub(super) fn load_inputs(
         .iter()
         .map(|p| super::load::upload(p, limits))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let inputs = BakeInputs::load(&character, &clips, limits).with_context(|| {
-        format!(
-            "cannot import {} {}",
-            file.display(),
-            clip_files
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(" ")
-        )
+    // The error names the input (`character` or `clips[i]`) and carries
+    // its import error in its message: one line, not a chain that repeats
+    // it.
+    let inputs = BakeInputs::load(&character, &clips, limits).map_err(|e| {
+        let files: Vec<String> = std::iter::once(file)
+            .chain(clip_files.iter().map(PathBuf::as_path))
+            .map(|p| p.display().to_string())
+            .collect();
+        anyhow::anyhow!("cannot import {}: {e}", files.join(", "))
     })?;
     for w in &inputs.warnings {
         eprintln!("warning: {w}");
@@ -119,12 +118,45 @@ fn write(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// Fails now, not after the bake, when a file cannot be written where
+/// `path` says: its folder must exist and take a new file.
+fn check_writable(path: &Path, what: &str) -> anyhow::Result<()> {
+    if path.is_dir() {
+        bail!("{what} {} is a folder: name a file", path.display());
+    }
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !folder.is_dir() {
+        bail!(
+            "cannot write {what} {}: the folder {} does not exist",
+            path.display(),
+            folder.display()
+        );
+    }
+    tempfile::NamedTempFile::new_in(folder).with_context(|| {
+        format!(
+            "cannot write {what} {}: the folder {} does not take new files",
+            path.display(),
+            folder.display()
+        )
+    })?;
+    Ok(())
+}
+
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let limits = Limits::default();
     let r = &args.request;
     let params = r.params.params(r.method)?;
     if args.out == args.report {
         bail!("--out and --report must be different files");
+    }
+    check_writable(&args.out, "--out")?;
+    check_writable(&args.report, "--report")?;
+    match &args.plot {
+        Some(plot) => check_writable(plot, "--plot")?,
+        None => check_writable(&args.report.with_extension("png"), "the plot")?,
     }
     let inputs = load_inputs(&r.file, &r.clips, &limits)?;
     let bake = Bake::new(&inputs, params)?;

@@ -276,3 +276,60 @@ fn memory_stays_bounded_over_repeated_hostile_uploads() {
     );
     assert!(idle <= start + 48, "{idle} MiB once idle, from {start} MiB");
 }
+
+/// `aobake bake` refuses an output it could not write before it traces
+/// anything, and names a broken file once, in one line.
+#[test]
+fn the_bake_command_checks_its_outputs_first_and_names_a_broken_file_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let bake = |character: &std::path::Path, out: &std::path::Path| {
+        std::process::Command::new(aobake_e2e::binary())
+            .arg("bake")
+            .arg(character)
+            .args([
+                "--method",
+                "vertex-linear",
+                "--poses",
+                "8",
+                "--samples",
+                "8",
+            ])
+            .arg("--out")
+            .arg(out)
+            .arg("--report")
+            .arg(dir.path().join("report.json"))
+            .args(["--tracer", "cpu"])
+            .output()
+            .unwrap()
+    };
+    let fox = character("Fox");
+    let run = bake(&fox, &dir.path().join("missing").join("fox.aob"));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains("cannot write --out") && stderr.contains("does not exist"),
+        "{stderr}"
+    );
+    // Refused before the character was even read: no header line, no
+    // report.
+    assert!(!stderr.contains("vertices"), "{stderr}");
+    assert!(!dir.path().join("report.json").exists());
+
+    let truncated = dir.path().join("truncated.glb");
+    std::fs::write(&truncated, &std::fs::read(&fox).unwrap()[..5000]).unwrap();
+    let run = bake(&truncated, &dir.path().join("fox.aob"));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert_eq!(
+        stderr.matches("malformed GLB container").count(),
+        1,
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains(&format!(
+            "cannot import {}: character:",
+            truncated.display()
+        )),
+        "{stderr}"
+    );
+}
