@@ -466,3 +466,35 @@ fn eval_reads_an_asset_of_every_method() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("aobake preview"), "{}", stderr(&out));
 }
+
+#[test]
+fn the_free_tracer_is_reported_as_work_besides_tracing_not_as_a_speed() {
+    let fox = sample("Fox/Fox.glb");
+    let out = aobake(&[
+        "bench",
+        "grid",
+        fox.to_str().unwrap(),
+        "--resolution",
+        "8",
+        "--rays",
+        "16",
+        "--repeat",
+        "1",
+        "--tracer",
+        "free,cpu",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    // Compared with the tracer that casts rays, whatever the order given.
+    assert!(
+        stdout.contains("grid slab: its work besides tracing (no rays cast) takes"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("run 1 (free): no rays cast"), "{stdout}");
+    for nonsense in ["free traces", "free:", "cells free against"] {
+        assert!(!stdout.contains(nonsense), "{nonsense}\n{stdout}");
+    }
+    let alone = aobake(&["bench", "grid", fox.to_str().unwrap(), "--tracer", "free"]);
+    assert!(!alone.status.success());
+    assert!(stderr(&alone).contains("casts rays"), "{}", stderr(&alone));
+}

@@ -124,12 +124,19 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             let vertex_s = started.elapsed().as_secs_f64();
             let face_rate = points * f64::from(args.rays) / face_s / 1e9;
             let vertex_rate = vertex_rays / vertex_s / 1e9;
-            println!(
-                "run {} ({name}): face {face_s:.2} s ({:.1} Mrays/s, {parts} checkpoints), vertices {vertex_s:.2} s ({:.1} Mrays/s)",
-                run + 1,
-                face_rate * 1e3,
-                vertex_rate * 1e3
-            );
+            if super::casts_rays(name) {
+                println!(
+                    "run {} ({name}): face {face_s:.2} s ({:.1} Mrays/s, {parts} checkpoints), vertices {vertex_s:.2} s ({:.1} Mrays/s)",
+                    run + 1,
+                    face_rate * 1e3,
+                    vertex_rate * 1e3
+                );
+            } else {
+                println!(
+                    "run {} ({name}): no rays cast: face {face_s:.2} s ({parts} checkpoints), vertices {vertex_s:.2} s",
+                    run + 1,
+                );
+            }
             face_rates[t].push(face_rate);
             vertex_rates[t].push(vertex_rate);
         }
@@ -149,7 +156,11 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     super::compare_tracers("face job", &tracers, &face_rates);
     super::compare_tracers("vertex tracer, same poses", &tracers, &vertex_rates);
     super::tracer_summaries(&tracers);
-    for ((name, _), rates) in tracers.iter().zip(&face_rates) {
+    for ((name, _), rates) in tracers
+        .iter()
+        .zip(&face_rates)
+        .filter(|((name, _), _)| super::casts_rays(name))
+    {
         let full = CubemapOptions::default().points() as f64 * f64::from(args.rays)
             / (median(rates) * 1e9);
         println!(

@@ -63,11 +63,15 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
                 Ok(())
             })?;
             let seconds = started.elapsed().as_secs_f64();
-            println!(
-                "run {} ({name}): {seconds:.3} s, {:.1} Mrays/s",
-                run + 1,
-                rays / seconds / 1e6
-            );
+            if super::casts_rays(name) {
+                println!(
+                    "run {} ({name}): {seconds:.3} s, {:.1} Mrays/s",
+                    run + 1,
+                    rays / seconds / 1e6
+                );
+            } else {
+                println!("run {} ({name}): no rays cast: {seconds:.3} s", run + 1);
+            }
             rates[t].push(rays / seconds / 1e9);
             cells[t] = traced;
         }
@@ -76,7 +80,12 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     super::compare_tracers("grid slab", &tracers, &rates);
     super::tracer_summaries(&tracers);
     // The same rays: cells whose occluded fraction differs.
-    for ((name, _), other) in tracers.iter().zip(&cells).skip(1) {
+    for ((name, _), other) in tracers
+        .iter()
+        .zip(&cells)
+        .skip(1)
+        .filter(|((name, _), _)| super::casts_rays(name))
+    {
         let differ = other
             .iter()
             .zip(&cells[0])

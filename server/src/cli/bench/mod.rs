@@ -183,8 +183,15 @@ type Timed = (
 fn bench_tracers(list: &[BenchTracer]) -> anyhow::Result<Vec<Timed>> {
     let mut list = list.to_vec();
     list.dedup();
+    // The tracers that cast rays first: `free` is compared with them.
+    list.sort_by_key(|t| *t == BenchTracer::Free);
     if list.is_empty() {
         bail!("--tracer names no tracer");
+    }
+    if list == [BenchTracer::Free] {
+        bail!(
+            "--tracer free is compared with a tracer that casts rays: name one too (such as cpu,free)"
+        );
     }
     list.iter()
         .map(|t| match t {
@@ -221,24 +228,64 @@ fn tracer_summaries(tracers: &[Timed]) {
     }
 }
 
-/// Prints each tracer's median rate and every other tracer's speed
-/// against the first (median of the runs' ratios); `rates[t]` holds the
-/// runs of tracer `t`, in G rays per second.
-fn compare_tracers(what: &str, tracers: &[Timed], rates: &[Vec<f64>]) {
-    for ((name, _), r) in tracers.iter().zip(rates) {
-        println!(
-            "{what}, {name}: median {:.3} Grays/s over {} runs",
-            median(r),
-            r.len()
-        );
+/// The name of the tracer that casts no rays.
+const FREE: &str = "free";
+
+/// Whether the tracer named `name` casts rays (all but `free`): its rate,
+/// speed and values mean something.
+fn casts_rays(name: &str) -> bool {
+    name != FREE
+}
+
+/// "N run(s)".
+fn runs(n: usize) -> String {
+    if n == 1 {
+        "1 run".to_owned()
+    } else {
+        format!("{n} runs")
     }
-    for ((name, _), r) in tracers.iter().zip(rates).skip(1) {
-        let ratios: Vec<f64> = r.iter().zip(&rates[0]).map(|(a, b)| a / b).collect();
-        println!(
-            "{what}: {name} traces {:.2}x as fast as {} (median of pairs)",
-            median(&ratios),
-            tracers[0].0
-        );
+}
+
+/// Prints each tracer's median rate and every other tracer's speed
+/// against the first that casts rays (median of the runs' ratios);
+/// `rates[t]` holds the runs of tracer `t`, in G rays per second (for
+/// `free`, the rays the work stands for over its time). `free` is given
+/// as the share of that tracer's time that is not tracing.
+fn compare_tracers(what: &str, tracers: &[Timed], rates: &[Vec<f64>]) {
+    let base = tracers.iter().position(|(name, _)| casts_rays(name));
+    for ((name, _), r) in tracers.iter().zip(rates) {
+        if casts_rays(name) {
+            println!(
+                "{what}, {name}: median {:.3} Grays/s over {}",
+                median(r),
+                runs(r.len())
+            );
+        }
+    }
+    let Some(base) = base else {
+        return;
+    };
+    let base_name = &tracers[base].0;
+    for (t, ((name, _), r)) in tracers.iter().zip(rates).enumerate() {
+        if t == base {
+            continue;
+        }
+        // Rates over the same rays: their ratio is the inverse of the
+        // times'.
+        let ratios: Vec<f64> = r.iter().zip(&rates[base]).map(|(a, b)| a / b).collect();
+        if casts_rays(name) {
+            println!(
+                "{what}: {name} traces {:.2}x as fast as {base_name} (median over {})",
+                median(&ratios),
+                runs(ratios.len())
+            );
+        } else {
+            println!(
+                "{what}: its work besides tracing (no rays cast) takes {:.1} % of {base_name}'s time (median over {})",
+                100.0 / median(&ratios),
+                runs(ratios.len())
+            );
+        }
     }
 }
 
@@ -436,12 +483,20 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
                     &params,
                 )
             })??;
-            println!(
-                "[{r}] aobake ({name}): BVH {:.1} ms, trace {:.3} s: {:.2} Mrays/s",
-                run.build_s * 1e3,
-                run.trace_s,
-                rays / run.trace_s / 1e6
-            );
+            if casts_rays(name) {
+                println!(
+                    "[{r}] aobake ({name}): BVH {:.1} ms, trace {:.3} s: {:.2} Mrays/s",
+                    run.build_s * 1e3,
+                    run.trace_s,
+                    rays / run.trace_s / 1e6
+                );
+            } else {
+                println!(
+                    "[{r}] aobake ({name}): BVH {:.1} ms, no rays cast: {:.3} s",
+                    run.build_s * 1e3,
+                    run.trace_s,
+                );
+            }
             ours[k].push(run);
         }
         if let Some(script) = &args.blender {
@@ -464,6 +519,14 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
                 .map(|r| r.build_s + r.trace_s)
                 .collect::<Vec<_>>(),
         );
+        if !casts_rays(name) {
+            println!(
+                "aobake ({name}) median of {}: BVH build {:.1} ms, no rays cast: {traced:.3} s",
+                runs.len(),
+                build * 1e3,
+            );
+            continue;
+        }
         println!(
             "aobake ({name}) median of {}: BVH build {:.1} ms, trace {:.3} s, {:.2} Mrays/s = {:.3} Grays/s ({:.2} M vertex-samples/s with the build)",
             runs.len(),
@@ -481,6 +544,15 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
                 .zip(&ours[0])
                 .map(|(other, first)| other.trace_s / first.trace_s)
                 .collect();
+            if !casts_rays(name) {
+                println!(
+                    "the work besides tracing (no rays cast) takes {:.1} % of {}'s trace time (median over {})",
+                    100.0 * median(&pairs),
+                    rows[0].0,
+                    self::runs(pairs.len())
+                );
+                continue;
+            }
             let speed: Vec<f64> = pairs.iter().map(|p| 1.0 / p).collect();
             println!(
                 "trace time {name} / {}: {:.3}x median of pairs ({name} traces {:.1}x as fast)",
