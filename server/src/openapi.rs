@@ -97,6 +97,41 @@ pub fn yaml() -> String {
 
 #[cfg(test)]
 mod tests {
+    use utoipa::OpenApi as _;
+
+    /// Every path parameter is in its path's template and every template
+    /// variable is a path parameter (a query parameter declared in the
+    /// path once slipped through).
+    #[test]
+    fn path_parameters_are_the_templates_variables() {
+        use utoipa::openapi::path::ParameterIn;
+        let doc = super::ApiDoc::openapi();
+        for (path, item) in &doc.paths.paths {
+            let variables: Vec<&str> = path
+                .split('{')
+                .skip(1)
+                .filter_map(|s| s.split('}').next())
+                .collect();
+            let operations = [
+                &item.get, &item.put, &item.post, &item.delete, &item.patch,
+            ];
+            for op in operations.into_iter().flatten() {
+                let params = op.parameters.as_deref().unwrap_or_default();
+                let in_path: Vec<&str> = params
+                    .iter()
+                    .filter(|p| matches!(p.parameter_in, ParameterIn::Path))
+                    .map(|p| p.name.as_str())
+                    .collect();
+                for name in &in_path {
+                    assert!(variables.contains(name), "{path}: `{name}` is not in the path");
+                }
+                for v in &variables {
+                    assert!(in_path.contains(v), "{path}: `{{{v}}}` is not a path parameter");
+                }
+            }
+        }
+    }
+
     #[test]
     fn the_committed_spec_is_the_generated_one() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../api-spec/openapi.yaml");

@@ -128,6 +128,7 @@ fn shown(name: &str) -> Option<String> {
 /// The optional name of an upload sent as a raw body (multipart uploads
 /// name it with the main part's file name).
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(crate) struct NameQuery {
     /// The uploaded file's name, as the uploader knows it (`Fox.glb`).
     name: Option<String>,
