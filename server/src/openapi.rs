@@ -112,9 +112,7 @@ mod tests {
                 .skip(1)
                 .filter_map(|s| s.split('}').next())
                 .collect();
-            let operations = [
-                &item.get, &item.put, &item.post, &item.delete, &item.patch,
-            ];
+            let operations = [&item.get, &item.put, &item.post, &item.delete, &item.patch];
             for op in operations.into_iter().flatten() {
                 let params = op.parameters.as_deref().unwrap_or_default();
                 let in_path: Vec<&str> = params
@@ -123,10 +121,16 @@ mod tests {
                     .map(|p| p.name.as_str())
                     .collect();
                 for name in &in_path {
-                    assert!(variables.contains(name), "{path}: `{name}` is not in the path");
+                    assert!(
+                        variables.contains(name),
+                        "{path}: `{name}` is not in the path"
+                    );
                 }
                 for v in &variables {
-                    assert!(in_path.contains(v), "{path}: `{{{v}}}` is not a path parameter");
+                    assert!(
+                        in_path.contains(v),
+                        "{path}: `{{{v}}}` is not a path parameter"
+                    );
                 }
             }
         }

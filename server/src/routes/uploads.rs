@@ -177,7 +177,7 @@ async fn store_upload(
 
 #[utoipa::path(post, path = "/v1/characters", tag = "uploads", params(NameQuery),
     request_body(description = "A .glb or self-contained .gltf as the body, a bundle of a .gltf and its side files, or multipart/form-data whose first part is the .gltf and whose other parts are its side files, each named by its file name",
-        content((Vec<u8> = "model/gltf-binary"), (Vec<u8> = "model/gltf+json"), (Vec<u8> = "application/vnd.aobake.bundle"), (MultipartUpload = "multipart/form-data"))),
+        content((FileBytes = "model/gltf-binary"), (FileBytes = "model/gltf+json"), (FileBytes = "application/vnd.aobake.bundle"), (MultipartUpload = "multipart/form-data"))),
     security(("bearer" = ["submit"])),
     responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn post_character(
@@ -204,13 +204,19 @@ pub(crate) async fn post_character(
     store_upload(&state, &upload, "character", summary).await
 }
 
+/// A file's bytes as a request body (OpenAPI's binary string).
+#[derive(utoipa::ToSchema)]
+#[schema(value_type = String, format = Binary)]
+#[allow(dead_code)] // documents the body; it is read as raw bytes
+pub(crate) struct FileBytes(Vec<u8>);
+
 /// A `.gltf` and its side files as `multipart/form-data`.
 #[derive(utoipa::ToSchema)]
 #[allow(dead_code)] // documents the form; the parts are read one by one
 pub(crate) struct MultipartUpload {
     /// The `.gltf` first, then each side file as a part named by the file
     /// name its URIs use.
-    files: Vec<Vec<u8>>,
+    files: Vec<FileBytes>,
 }
 
 #[derive(Debug, Deserialize, utoipa::ToSchema)]
@@ -223,7 +229,7 @@ pub(crate) struct ClipsQuery {
 
 #[utoipa::path(post, path = "/v1/clips", tag = "uploads", params(("character" = String, Query, description = "The character whose skeleton the clips drive"), ("name" = Option<String>, Query, description = "The uploaded file's name")),
     request_body(description = "A glTF file of animations, sent as for POST /v1/characters",
-        content((Vec<u8> = "model/gltf-binary"), (Vec<u8> = "model/gltf+json"), (Vec<u8> = "application/vnd.aobake.bundle"), (MultipartUpload = "multipart/form-data"))),
+        content((FileBytes = "model/gltf-binary"), (FileBytes = "model/gltf+json"), (FileBytes = "application/vnd.aobake.bundle"), (MultipartUpload = "multipart/form-data"))),
     security(("bearer" = ["submit"])),
     responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn post_clips(
