@@ -131,6 +131,17 @@ fn read_u32(bytes: &[u8], at: usize) -> Option<u32> {
 impl<'a> Container<'a> {
     pub(crate) fn parse(bytes: &'a [u8]) -> Result<Self, ImportError> {
         if !bytes.starts_with(GLB_MAGIC) {
+            // Not a GLB: it must be JSON, an object. Say what the file is
+            // not, rather than where a JSON parser gave up on it.
+            match bytes.iter().find(|b| !b.is_ascii_whitespace()) {
+                None => return Err(ImportError::Json("the file is empty".into())),
+                Some(b'{') => {}
+                Some(_) => {
+                    return Err(ImportError::Json(
+                        "the file is neither a GLB (it does not start with `glTF`) nor glTF JSON (it does not start with `{`)".into(),
+                    ));
+                }
+            }
             return Ok(Self {
                 json: bytes,
                 bin: None,
@@ -314,6 +325,21 @@ pub(crate) fn resolve_uri(uri: &str, path: &str) -> Result<UriTarget, ImportErro
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_file_that_is_neither_glb_nor_json_is_named_as_such() {
+        let said = |bytes: &[u8]| match Container::parse(bytes) {
+            Err(ImportError::Json(m)) => m,
+            other => panic!("{:?}", other.map(|c| c.json.len())),
+        };
+        assert_eq!(said(b""), "the file is empty");
+        assert_eq!(said(b" \n\t"), "the file is empty");
+        for junk in [&b"hello world"[..], b"\x89PNG\r\n", b"[1, 2]"] {
+            assert!(said(junk).contains("neither a GLB"), "{junk:?}");
+        }
+        // JSON objects (after whitespace) go on to the JSON parser.
+        assert!(Container::parse(b"  {\"asset\": {}}").is_ok());
+    }
 
     #[test]
     fn uris_resolve_only_to_data_or_relative_names() {
