@@ -191,14 +191,14 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
         );
     } else {
         eprintln!(
-            "{}: {} vertices, {} triangles; {} joint-angle parameters, {} handle coordinates; training on {:?}, testing on {:?}",
+            "{}: {} vertices, {} triangles; {} joint-angle parameters, {} handle coordinates; training clips: {}; test clips: {}",
             args.request.file.display(),
             character.vertex_count(),
             character.triangles.len(),
             plan.joint_angles.len(),
             plan.handles.len(),
-            names(&plan.train),
-            names(&plan.test),
+            names(&plan.train).join(", "),
+            names(&plan.test).join(", "),
         );
     }
     let outputs = run_with_progress(bake, &HashMap::new(), None)?;
@@ -394,7 +394,7 @@ fn vertex_summary(report: &Report) -> String {
                     .map(|r| format!("; fitted to {}", rows_name(r)))
                     .unwrap_or_default()
                     + &f.basis
-                        .map(|r| format!("; basis of {r} rows"))
+                        .map(|r| format!("; basis of {r} row{}", if r == 1 { "" } else { "s" }))
                         .unwrap_or_default(),
             ));
         }
@@ -402,7 +402,7 @@ fn vertex_summary(report: &Report) -> String {
     out.push_str(&format!(
         "frames of the training clips, fresh rays ({}): {} PSNR {:.2} dB, MAE {:.4}; static average of training clip frames {:.2} dB, MAE {:.4} ({:+.2} dB, MAE ×{:.2})
 ground truth's own noise ({} poses traced twice): RMSE {:.4}, MAE {:.4} (PSNR {:.2} dB): model errors near it are noise
-held-out random poses ({}): {:.2} dB against {:.2} dB; times: trace {:.1} s + {:.1} s, fit {:.2} s
+held-out random poses ({}): {:.2} dB against {:.2} dB for the static average; times: reference trace {:.1} s, held-out trace {:.1} s, fit {:.2} s
 ",
         c.model.frames,
         report.method,
@@ -465,7 +465,7 @@ fn basis_name(rank: usize, threshold: f32) -> String {
             (1.0 / threshold).round()
         )
     } else {
-        format!("{rank} rows")
+        format!("{rank} row{}", if rank == 1 { "" } else { "s" })
     }
 }
 
