@@ -184,6 +184,49 @@ pub(super) struct Args {
 /// bake key and the asset have them.
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let p = args.params.params(args.method)?;
-    println!("{}", serde_json::to_string_pretty(&p.canonical())?);
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&shortest(p.canonical()))?
+    );
     Ok(())
+}
+
+/// `v` with every number that is an f32 (the parameters' floats, widened)
+/// written as that f32's shortest decimal, as a person set it: 0.1, not
+/// 0.10000000149011612. Read back as an f32 it is the same value.
+fn shortest(v: serde_json::Value) -> serde_json::Value {
+    use serde_json::Value;
+    match v {
+        Value::Number(n) if n.is_f64() => {
+            let x = n.as_f64().expect("an f64");
+            let narrow = x as f32;
+            if f64::from(narrow) != x {
+                return Value::Number(n);
+            }
+            narrow
+                .to_string()
+                .parse::<f64>()
+                .ok()
+                .and_then(serde_json::Number::from_f64)
+                .map_or(Value::Number(n), Value::Number)
+        }
+        Value::Array(a) => Value::Array(a.into_iter().map(shortest).collect()),
+        Value::Object(o) => Value::Object(o.into_iter().map(|(k, v)| (k, shortest(v))).collect()),
+        other => other,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn floats_print_as_the_f32_a_person_set() {
+        let v = serde_json::json!({"a": f64::from(0.1f32), "b": [f64::from(0.6f32), 3], "c": 0.1, "d": 1e-3});
+        let tidy = super::shortest(v);
+        assert_eq!(
+            tidy.to_string(),
+            r#"{"a":0.1,"b":[0.6,3],"c":0.1,"d":0.001}"#
+        );
+        // The same f32 when read back.
+        assert_eq!(tidy["a"].as_f64().unwrap() as f32, 0.1f32);
+    }
 }
