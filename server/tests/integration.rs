@@ -586,3 +586,22 @@ fn params_prints_the_methods_own_parameters() {
         assert_eq!(p["method"], method);
     }
 }
+
+/// A client command without a token says where it looked for one.
+#[test]
+fn a_client_without_a_token_says_where_it_looked() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_aobake"))
+        .args(["status", "1", "--data"])
+        .arg(dir.path().join("nowhere"))
+        .env_remove("AOBAKE_TOKEN")
+        .env_remove("AOBAKE_DATA")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let said = stderr(&out);
+    assert!(
+        said.contains("--token") && said.contains("nowhere/admin.token"),
+        "{said}"
+    );
+}

@@ -54,7 +54,12 @@ impl Conn {
             .token
             .clone()
             .or_else(|| read("admin.token"))
-            .context("no token: pass --token or set AOBAKE_TOKEN")?;
+            .with_context(|| {
+                format!(
+                    "no token: pass --token or set AOBAKE_TOKEN (there is no {}: run this where `aobake serve` keeps its data, or point --data at that folder)",
+                    self.data.join("admin.token").display()
+                )
+            })?;
         Ok(Client::new(server.trim(), token.trim()))
     }
 }
