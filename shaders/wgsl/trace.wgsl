@@ -330,18 +330,32 @@ fn children(base: u32, half: u32) -> Children {
     );
 }
 
+// A quantised node's grid: its origin p and per-axis step s (a plane is
+// p + q · s), decoded once per node visited; unused for exact nodes.
+struct Grid {
+    origin: vec3<f32>,
+    step: vec3<f32>,
+}
+
+fn grid(base: u32) -> Grid {
+    if (!QUANTISED) {
+        return Grid(vec3<f32>(0.0), vec3<f32>(0.0));
+    }
+    let head = nodes[base];
+    let e = (vec3<u32>(head.w) >> vec3<u32>(0u, 8u, 16u)) & vec3<u32>(255u);
+    return Grid(bitcast<vec3<f32>>(head.xyz), bitcast<vec3<f32>>(e << vec3<u32>(23u)));
+}
+
 // Box planes `field` (0–2: min x, y, z; 3–5: max x, y, z) of children
-// 4·half … 4·half + 3; `head` is a quantised node's first vec4. The
-// quantised plane is p + q · s with q · s exact, so it rounds once, fused
-// or not, as the host checked it.
-fn box_lanes(base: u32, head: vec4<u32>, field: u32, half: u32) -> vec4<f32> {
+// 4·half … 4·half + 3. The quantised plane is p + q · s with q · s exact,
+// so it rounds once, fused or not, as the host checked it.
+fn box_lanes(base: u32, g: Grid, field: u32, half: u32) -> vec4<f32> {
     if (QUANTISED) {
         let word = 2u * field + half;
         let bytes = nodes[base + 3u + word / 4u][word % 4u];
         let q = vec4<f32>((vec4<u32>(bytes) >> vec4<u32>(0u, 8u, 16u, 24u)) & vec4<u32>(255u));
         let axis = field % 3u;
-        let step = bitcast<f32>(((head.w >> (8u * axis)) & 255u) << 23u);
-        return vec4<f32>(bitcast<f32>(head[axis])) + q * step;
+        return vec4<f32>(g.origin[axis]) + q * g.step[axis];
     }
     return bitcast<vec4<f32>>(nodes[base + 2u * field + half]);
 }
@@ -369,18 +383,15 @@ fn traverse(s: SceneInfo, origin: vec3<f32>, dir: vec3<f32>, tmax_in: f32, any: 
     var current = 0u;
     loop {
         let base = (s.first_node + current) * node_size();
-        var head = vec4<u32>(0u);
-        if (QUANTISED) {
-            head = nodes[base];
-        }
+        let g = grid(base);
         // Inner children entered, sorted by entry distance, farthest first.
         var pending = 0u;
         for (var half = 0u; half < 2u; half = half + 1u) {
             var near = vec4<f32>(s.tmin);
             var far = vec4<f32>(tmax);
             for (var a = 0u; a < 3u; a = a + 1u) {
-                let lo = box_lanes(base, head, a, half);
-                let hi = box_lanes(base, head, a + 3u, half);
+                let lo = box_lanes(base, g, a, half);
+                let hi = box_lanes(base, g, a + 3u, half);
                 let n = select(lo, hi, neg[a]);
                 let f = select(hi, lo, neg[a]);
                 near = max(near, (n - vec4<f32>(origin[a])) * inv[a]);

@@ -278,7 +278,7 @@ fn quantised_node(node: &Node) -> [u32; GPU_QUANTISED_NODE_WORDS] {
 }
 
 /// The count of an empty child slot in [`Bvh8::gpu_nodes_quantised`].
-pub(crate) const QUANTISED_EMPTY: u32 = 7;
+const QUANTISED_EMPTY: u32 = 7;
 
 /// `x`, or where it is subnormal the next value at or below it that is
 /// not (0 or −2⁻¹²⁶): a plane no GPU's flushing can move.
@@ -296,7 +296,7 @@ fn step(e: u32) -> f32 {
 }
 
 /// A plane of the quantised grid as the shader decodes it.
-pub(crate) fn plane(p: f32, s: f32, q: u8) -> f32 {
+fn plane(p: f32, s: f32, q: u8) -> f32 {
     p + f32::from(q) * s
 }
 
@@ -416,17 +416,12 @@ mod tests {
                 assert_eq!(word & ((1 << 29) - 1), x[48 + c]);
                 children += 1;
                 for a in 0..3 {
-                    let p = f32::from_bits(q[a]);
                     let s = step((q[3] >> (8 * a)) & 0xff);
-                    let byte = |field: usize| {
-                        let w = q[12 + 2 * field + c / 4];
-                        w.to_le_bytes()[c % 4]
-                    };
                     let (lo, hi) = (
                         f32::from_bits(x[8 * a + c]),
                         f32::from_bits(x[8 * (a + 3) + c]),
                     );
-                    let (qlo, qhi) = (plane(p, s, byte(a)), plane(p, s, byte(a + 3)));
+                    let (qlo, qhi) = (decoded(q, a, c, false), decoded(q, a + 3, c, false));
                     assert!(qlo <= lo && qhi >= hi, "node {n} child {c} axis {a}");
                     assert!(lo - qlo <= 2.0 * s && qhi - hi <= 2.0 * s);
                     loose += f64::from((qhi - qlo) - (hi - lo)) / f64::from(255.0 * s);

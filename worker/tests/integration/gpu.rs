@@ -3,7 +3,7 @@
 //! CPU evaluation of the same fitted models.
 
 use aobake_core::{
-    Limits, Pose, Upload,
+    Limits, Pose,
     bake::{BakeParams, Plan},
     import_character,
     method::Method,
@@ -35,12 +35,7 @@ fn worst(a: &[f32], b: &[f32]) -> f32 {
 
 #[test]
 fn every_vertex_method_matches_the_cpu() {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../tests/data/characters/RiggedFigure/RiggedFigure.glb"
-    );
-    let bytes = std::fs::read(path).unwrap();
-    let imported = import_character(Upload::single(&bytes), &Limits::default()).unwrap();
+    let imported = super::bundled("RiggedFigure");
     let c = &imported.character;
     let gpu = gpu();
 
@@ -249,11 +244,7 @@ fn cubemap(
         bake::{Bake, BakeInputs, UploadBytes, bake_in_process},
         method::cubemap::model::CubemapModel,
     };
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../tests/data/characters/CesiumMan/CesiumMan.glb"
-    );
-    let bytes = std::fs::read(path).unwrap();
+    let bytes = super::bundled_bytes("CesiumMan");
     let inputs = BakeInputs::load(&UploadBytes::single(bytes), &[], &Limits::default()).unwrap();
     let mut p = small_cubemap(method, 8, 3, 24, 16);
     p.cubemap.continuous_layout = layout;

@@ -8,12 +8,11 @@
 //! (look at them before committing).
 
 use aobake_core::{
-    Limits, Upload,
+    Limits,
     bake::preview::{Ground, Subject},
     bake::screen_space::{Gtao, ScreenSpaceInfo, Surface},
     bake::{BakeParams, Camera, Panel, Plan, RenderFrame, RenderScene, Renderer},
     image::{HEAT_MAP, Image},
-    import_character,
     method::Method,
     method::vertex::Model,
     trace::{AoBlock, SceneOptions, no_progress, trace_poses},
@@ -59,12 +58,7 @@ struct Fixture {
 }
 
 fn fixture() -> Fixture {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../tests/data/characters/RiggedFigure/RiggedFigure.glb"
-    );
-    let bytes = std::fs::read(path).unwrap();
-    let imported = import_character(Upload::single(&bytes), &Limits::default()).unwrap();
+    let imported = super::bundled("RiggedFigure");
     let c = imported.character;
     let mut params = BakeParams::new(Method::VertexLinear);
     params.poses = 48;

@@ -5,7 +5,7 @@
 //! the CPU tracer's own tolerances; the same bits run to run.
 
 use aobake_core::{
-    Limits, Pose, Upload, import_character,
+    Pose,
     trace::{
         Axis, Falloff, Ground, KroonParams, Scene, SceneOptions, SurfaceMesh, SurfaceParams,
         VolumeParams, engine::NodeLayout, engine::set_engine, kroon_occlusion, no_progress, shapes,
@@ -126,15 +126,7 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
         falloff: Falloff::None,
     };
     // A skinned character in three poses: one batch of three scenes.
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../tests/data/characters/RiggedFigure/RiggedFigure.glb"
-    );
-    let imported = import_character(
-        Upload::single(&std::fs::read(path).unwrap()),
-        &Limits::default(),
-    )
-    .unwrap();
+    let imported = super::bundled("RiggedFigure");
     let c = &imported.character;
     let poses: Vec<Pose> = [0.0, 0.5, 1.0]
         .iter()
@@ -393,27 +385,15 @@ fn a_batch_beyond_the_adapters_binding_limit_is_split_not_refused() {
 fn extreme_poses_of_a_bake_agree_with_the_cpu_but_at_ties() {
     use aobake_core::bake::{BakeParams, Plan, ReferenceSource};
     use aobake_core::method::Method;
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../tests/data/characters/Fox/Fox.glb"
-    );
-    let imported = import_character(
-        Upload::single(&std::fs::read(path).unwrap()),
-        &Limits::default(),
-    )
-    .unwrap();
+    let imported = super::bundled("Fox");
     let c = &imported.character;
     let mut p = BakeParams::new(Method::VertexLinear);
     p.poses = 96;
     p.samples = 32;
     p.reference = ReferenceSource::Perturbed;
+    // The bake's own rays.
+    let params = p.surface();
     let poses = Plan::new(c, &imported.clips, p).unwrap().reference_poses();
-    let params = SurfaceParams {
-        samples: 32,
-        max_distance: f32::INFINITY,
-        seed: 0,
-        falloff: Falloff::None,
-    };
     let gpu = &tracers(aobake_worker::gpu::Backends::VULKAN)[0];
     announce(gpu);
     let (cpu, first, second) = cpu_and_gpu(gpu, || {

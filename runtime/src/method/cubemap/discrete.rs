@@ -32,14 +32,12 @@ pub const BOUND: f64 = 4.0;
 /// Candidates [`breakpoints`] sorts at a time.
 const CANDIDATE_RUN: usize = 64;
 
-/// The breakpoints of a cyclic curve (Algorithm 1), ascending.
-pub fn breakpoints(values: &[f32]) -> [usize; SEGMENTS] {
+/// Algorithm 1's candidates: each sample `i` of a cyclic curve with the
+/// difference between the windows before and from it.
+fn jumps(values: &[f32]) -> Vec<(usize, f64)> {
     let n = values.len();
-    if n == 0 {
-        return [0; SEGMENTS];
-    }
     let at = |i: isize| values[i.rem_euclid(n as isize) as usize] as f64;
-    let mut jumps: Vec<(usize, f64)> = (0..n)
+    (0..n)
         .map(|i| {
             let (mut l, mut r) = (0.0, 0.0);
             for k in 0..=WINDOW as isize {
@@ -48,7 +46,16 @@ pub fn breakpoints(values: &[f32]) -> [usize; SEGMENTS] {
             }
             (i, (l - r).abs())
         })
-        .collect();
+        .collect()
+}
+
+/// The breakpoints of a cyclic curve (Algorithm 1), ascending.
+pub fn breakpoints(values: &[f32]) -> [usize; SEGMENTS] {
+    let n = values.len();
+    if n == 0 {
+        return [0; SEGMENTS];
+    }
+    let mut jumps = jumps(values);
     // Largest difference first, ties by index: a total order, so the
     // candidates come in one sequence however they are sorted.
     let order = |a: &(usize, f64), b: &(usize, f64)| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0));
@@ -301,15 +308,7 @@ mod tests {
     /// pass.
     fn breakpoints_by_full_sort(values: &[f32]) -> Vec<usize> {
         let n = values.len();
-        let at = |i: isize| f64::from(values[i.rem_euclid(n as isize) as usize]);
-        let mut jumps: Vec<(usize, f64)> = (0..n)
-            .map(|i| {
-                let (l, r): (f64, f64) = (0..=WINDOW as isize)
-                    .map(|k| (at(i as isize - 1 - k), at(i as isize + k)))
-                    .fold((0.0, 0.0), |(l, r), (a, b)| (l + a, r + b));
-                (i, (l - r).abs())
-            })
-            .collect();
+        let mut jumps = jumps(values);
         jumps.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
         let spacing = MIN_SPACING.min(n / SEGMENTS).max(1);
         let mut found: Vec<usize> = Vec::new();

@@ -238,7 +238,7 @@ fn casts_rays(name: &str) -> bool {
 }
 
 /// "N run(s)".
-fn runs(n: usize) -> String {
+fn run_count(n: usize) -> String {
     if n == 1 {
         "1 run".to_owned()
     } else {
@@ -258,7 +258,7 @@ fn compare_tracers(what: &str, tracers: &[Timed], rates: &[Vec<f64>]) {
             println!(
                 "{what}, {name}: median {:.3} Grays/s over {}",
                 median(r),
-                runs(r.len())
+                run_count(r.len())
             );
         }
     }
@@ -277,13 +277,13 @@ fn compare_tracers(what: &str, tracers: &[Timed], rates: &[Vec<f64>]) {
             println!(
                 "{what}: {name} traces {:.2}x as fast as {base_name} (median over {})",
                 median(&ratios),
-                runs(ratios.len())
+                run_count(ratios.len())
             );
         } else {
             println!(
                 "{what}: its work besides tracing (no rays cast) takes {:.1} % of {base_name}'s time (median over {})",
                 100.0 / median(&ratios),
-                runs(ratios.len())
+                run_count(ratios.len())
             );
         }
     }
@@ -549,7 +549,7 @@ fn trace(args: &TraceArgs) -> anyhow::Result<()> {
                     "the work besides tracing (no rays cast) takes {:.1} % of {}'s trace time (median over {})",
                     100.0 * median(&pairs),
                     rows[0].0,
-                    self::runs(pairs.len())
+                    run_count(pairs.len())
                 );
                 continue;
             }
