@@ -1,4 +1,7 @@
-//! `aobake inspect`.
+//! `aobake inspect`: what a glTF character holds, or a baked asset
+//! (`inspect/asset.rs`), told apart by the asset's magic bytes.
+
+mod asset;
 
 use std::path::PathBuf;
 
@@ -8,7 +11,8 @@ use serde::Serialize;
 /// Arguments of `aobake inspect`.
 #[derive(Debug, clap::Args)]
 pub(super) struct Args {
-    /// glTF files (.glb, or .gltf with its buffers beside it).
+    /// glTF files (.glb, or .gltf with its buffers beside it) or baked
+    /// assets (.aob, checked whole: every checksum and the model).
     #[arg(required = true)]
     files: Vec<PathBuf>,
     /// Print one JSON object per file (a JSON array) instead of text.
@@ -19,24 +23,43 @@ pub(super) struct Args {
 #[derive(Serialize)]
 struct Report {
     file: String,
+    kind: &'static str,
     #[serde(flatten)]
     summary: Summary,
     warnings: Vec<String>,
+}
+
+/// One file's report.
+#[derive(Serialize)]
+#[serde(untagged)]
+enum Described {
+    Character(Report),
+    Asset(Box<asset::Report>),
 }
 
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let limits = Limits::default();
     let mut reports = Vec::new();
     for file in &args.files {
-        let imported = super::load::character(file, &limits)?;
-        let report = Report {
-            file: file.display().to_string(),
-            summary: Summary::of(&imported.character, &imported.clips),
-            warnings: imported.warnings,
+        let report = if asset::is_asset(file)? {
+            let report = asset::describe(file)?;
+            if !args.json {
+                asset::print_text(&report);
+            }
+            Described::Asset(Box::new(report))
+        } else {
+            let imported = super::load::character(file, &limits)?;
+            let report = Report {
+                file: file.display().to_string(),
+                kind: "character",
+                summary: Summary::of(&imported.character, &imported.clips),
+                warnings: imported.warnings,
+            };
+            if !args.json {
+                print_text(&report);
+            }
+            Described::Character(report)
         };
-        if !args.json {
-            print_text(&report);
-        }
         reports.push(report);
     }
     if args.json {

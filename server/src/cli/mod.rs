@@ -30,8 +30,10 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Describe glTF characters: meshes, vertices, triangles, skins, joints,
-    /// morph targets, clips, pose parameters, bounds over all clips.
+    /// Describe glTF characters (meshes, vertices, triangles, skins, joints,
+    /// morph targets, clips, pose parameters, bounds over all clips) or
+    /// baked assets (method, format, keys, the model's shape, sections;
+    /// every checksum checked).
     Inspect(inspect::Args),
     /// Pose a character at a clip time (or in its bind pose) and write the
     /// skinned mesh as PLY, in aobake's vertex order.

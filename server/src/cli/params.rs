@@ -194,7 +194,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
 /// `v` with every number that is an f32 (the parameters' floats, widened)
 /// written as that f32's shortest decimal, as a person set it: 0.1, not
 /// 0.10000000149011612. Read back as an f32 it is the same value.
-fn shortest(v: serde_json::Value) -> serde_json::Value {
+pub(super) fn shortest(v: serde_json::Value) -> serde_json::Value {
     use serde_json::Value;
     match v {
         Value::Number(n) if n.is_f64() => {

@@ -206,7 +206,7 @@ fn eval_gives_per_vertex_ao_at_a_pose() {
 }
 
 #[test]
-fn eval_refuses_damaged_newer_and_foreign_assets() {
+fn eval_and_inspect_refuse_damaged_newer_and_foreign_assets() {
     let dir = tempfile::tempdir().unwrap();
     let baked = run_bake(dir.path(), "m", &["--method", "static-average"]);
     assert!(baked.status.success(), "{}", stderr(&baked));
@@ -230,6 +230,24 @@ fn eval_refuses_damaged_newer_and_foreign_assets() {
     assert!(!out.status.success());
     assert!(
         stderr(&out).contains("checksum mismatch"),
+        "{}",
+        stderr(&out)
+    );
+    let out = aobake(&["inspect", bad.to_str().unwrap()]);
+    assert!(!out.status.success(), "inspect checks every checksum");
+    assert!(
+        stderr(&out).contains("checksum mismatch in section COEF"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::write(&bad, &good[..good.len() - 100]).unwrap();
+    let out = aobake(&["inspect", bad.to_str().unwrap()]);
+    assert!(
+        !out.status.success(),
+        "a truncated asset is not a glTF file"
+    );
+    assert!(
+        stderr(&out).contains("truncated") && !stderr(&out).contains("glTF"),
         "{}",
         stderr(&out)
     );
@@ -349,7 +367,7 @@ fn bench_bake_times_every_stage_and_each_step_of_the_fits() {
 /// read for grids); a cubemap, which holds occlusion cast into space, is
 /// refused with a message that says where to look instead.
 #[test]
-fn eval_reads_an_asset_of_every_method() {
+fn eval_and_inspect_read_an_asset_of_every_method() {
     let dir = tempfile::tempdir().unwrap();
     let truck = sample("CesiumMilkTruck/CesiumMilkTruck.glb");
     let rigged = sample("RiggedSimple/RiggedSimple.glb");
@@ -465,6 +483,79 @@ fn eval_reads_an_asset_of_every_method() {
     ]);
     assert!(!out.status.success());
     assert!(stderr(&out).contains("aobake preview"), "{}", stderr(&out));
+
+    // `inspect` reads each asset whole, beside a character, and says what
+    // the bake made.
+    let assets =
+        ["linear", "clustered", "grid", "cube"].map(|n| dir.path().join(format!("{n}.aob")));
+    let mut args = vec!["inspect", "--json", rigged.to_str().unwrap()];
+    args.extend(assets.iter().map(|a| a.to_str().unwrap()));
+    let out = aobake(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let reports: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(reports[0]["kind"], "character");
+    assert_eq!(reports[0]["vertices"], 160);
+    for (r, name) in
+        reports.as_array().unwrap()[1..]
+            .iter()
+            .zip(["linear", "clustered", "grid", "cube"])
+    {
+        let report: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(dir.path().join(format!("{name}.json"))).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(r["kind"], "asset", "{name}");
+        assert_eq!(r["header"]["bake_key"], report["bake_key"], "{name}");
+        let bytes = std::fs::metadata(dir.path().join(format!("{name}.aob")))
+            .unwrap()
+            .len();
+        assert_eq!(r["bytes"], bytes, "{name}");
+        let tags: Vec<&str> = r["sections"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s["tag"].as_str().unwrap())
+            .collect();
+        assert!(
+            tags.contains(&"COEF") || tags.contains(&"RGBA") || tags.contains(&"TEXL"),
+            "{name}: {tags:?}"
+        );
+    }
+    let model = |i: usize| &reports[i]["model"];
+    assert_eq!(reports[1]["method"], "vertex-linear");
+    assert_eq!(model(1)["vertices"], 160);
+    assert_eq!(reports[2]["method"], "vertex-clustered");
+    assert!(
+        model(2)["structure"]
+            .as_str()
+            .unwrap()
+            .starts_with("2 pose clusters"),
+        "{}",
+        model(2)
+    );
+    assert_eq!(reports[3]["method"], "grid");
+    assert_eq!(model(3)["resolution"], serde_json::json!([8, 8]));
+    assert!(!model(3)["parts"].as_array().unwrap().is_empty());
+    assert_eq!(reports[4]["method"], "cubemap-discrete");
+    assert_eq!(model(4)["clip"], "animation_0");
+    assert_eq!(
+        (
+            model(4)["resolution"].clone(),
+            model(4)["shells"].clone(),
+            model(4)["times"].clone()
+        ),
+        (8.into(), 2.into(), 4.into())
+    );
+
+    let out = aobake(&["inspect", assets[1].to_str().unwrap()]);
+    let text = super::stdout(&out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(text.contains("method       vertex-clustered"), "{text}");
+    assert!(
+        text.contains("checksums match and the model reads whole"),
+        "{text}"
+    );
+    assert!(text.contains("rig          "), "{text}");
 }
 
 #[test]

@@ -48,6 +48,14 @@ impl Model {
         }
     }
 
+    /// Weights per pose: the length of [`Model::weights`].
+    pub fn weight_count(&self) -> usize {
+        match self.form() {
+            FormRef::Dense(f) => f.weight_count(),
+            FormRef::Sparse(s) => s.rows,
+        }
+    }
+
     /// Bytes of the model's numbers: coefficients, maps, cluster centres
     /// and axes.
     pub fn bytes(&self) -> usize {

@@ -92,10 +92,7 @@ impl VertexAo {
 
     /// Weights per pose ([`VertexAo::weights`]' length).
     pub fn weight_count(&self) -> usize {
-        match self.model.form() {
-            super::FormRef::Dense(f) => f.weight_count(),
-            super::FormRef::Sparse(s) => s.rows,
-        }
+        self.model.weight_count()
     }
 
     /// The node of this name, to set each frame with

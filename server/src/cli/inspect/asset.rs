@@ -1,0 +1,367 @@
+//! `aobake inspect` on a baked asset: what it holds, read and checked
+//! whole as an engine would read it (`docs/asset-format.md`).
+
+use std::path::Path;
+
+use anyhow::Context as _;
+use aobake_core::{
+    asset::{Container, Data},
+    method::{
+        Family, Method,
+        cubemap::model::{CubemapModel, Encoding},
+        grid::model::GridModel,
+        vertex::{Layout, Model},
+    },
+};
+use serde::Serialize;
+
+/// What `aobake inspect` reports for an asset.
+#[derive(Serialize)]
+pub(super) struct Report {
+    file: String,
+    kind: &'static str,
+    /// File size.
+    bytes: usize,
+    /// Format `major.minor`.
+    format: String,
+    method: Method,
+    sections: Vec<SectionInfo>,
+    model: ModelInfo,
+    /// The JSON header as written.
+    header: serde_json::Value,
+}
+
+#[derive(Serialize)]
+struct SectionInfo {
+    tag: String,
+    #[serde(rename = "type")]
+    element: &'static str,
+    count: usize,
+    /// Bytes of its elements.
+    bytes: usize,
+}
+
+/// The model's shape, by family.
+#[derive(Serialize)]
+#[serde(tag = "family", rename_all = "kebab-case")]
+enum ModelInfo {
+    Vertex {
+        vertices: usize,
+        /// Weights computed per pose (`Model::weights`' length).
+        weights_per_pose: usize,
+        /// Bytes of the model's numbers.
+        model_bytes: usize,
+        /// Nodes of the rig an engine poses it by; `None` before format 1.4.
+        rig_nodes: Option<usize>,
+        /// One line on the model's structure.
+        structure: String,
+    },
+    Cubemap {
+        clip: String,
+        duration: f32,
+        times: usize,
+        resolution: usize,
+        shells: usize,
+        cubemaps: usize,
+        encoding: Encoding,
+        /// Texels per side of the static ground; `None`: no ground.
+        ground_resolution: Option<usize>,
+    },
+    Grid {
+        parts: Vec<String>,
+        /// Cells per edge of the smallest and largest grid.
+        resolution: [usize; 2],
+        cones: bool,
+        /// `T_clip`'s samples per axis (0 without cones).
+        tclip_resolution: usize,
+        /// Vertices the static base holds offsets for; `None`: no base.
+        base_vertices: Option<usize>,
+        /// Texels per side of the static base's ground.
+        ground_resolution: Option<usize>,
+    },
+}
+
+/// Whether `path` starts with the asset magic.
+pub(super) fn is_asset(path: &Path) -> anyhow::Result<bool> {
+    use std::io::Read as _;
+    let mut head = [0u8; 8];
+    let mut file =
+        std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut read = 0;
+    while read < head.len() {
+        match file.read(&mut head[read..]) {
+            Ok(0) => break,
+            Ok(n) => read += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
+        }
+    }
+    Ok(read == head.len() && head == aobake_core::asset::MAGIC)
+}
+
+/// Reads and checks the asset at `path`: every checksum, then the model
+/// as its family's reader takes it.
+pub(super) fn describe(path: &Path) -> anyhow::Result<Report> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let container =
+        Container::from_bytes(&bytes).with_context(|| format!("cannot read {}", path.display()))?;
+    let model = model_info(&container).with_context(|| {
+        format!(
+            "{} is a {} asset whose model cannot be read",
+            path.display(),
+            container.method
+        )
+    })?;
+    let header = serde_json::from_str(&container.header)
+        .with_context(|| format!("cannot read {}'s header", path.display()))?;
+    Ok(Report {
+        file: path.display().to_string(),
+        kind: "asset",
+        bytes: bytes.len(),
+        format: format!("{}.{}", container.version.0, container.version.1),
+        method: container.method,
+        sections: container
+            .sections
+            .iter()
+            .map(|s| {
+                let (element, size) = element(&s.data);
+                SectionInfo {
+                    tag: String::from_utf8_lossy(&s.tag).into_owned(),
+                    element,
+                    count: s.data.len(),
+                    bytes: s.data.len() * size,
+                }
+            })
+            .collect(),
+        model,
+        header,
+    })
+}
+
+/// A section's element type's name and size.
+fn element(data: &Data) -> (&'static str, usize) {
+    match data {
+        Data::F16(_) => ("f16", 2),
+        Data::F32(_) => ("f32", 4),
+        Data::U8(_) => ("u8", 1),
+        Data::U16(_) => ("u16", 2),
+        Data::U32(_) => ("u32", 4),
+    }
+}
+
+fn model_info(container: &Container) -> anyhow::Result<ModelInfo> {
+    Ok(match container.method.family() {
+        Family::Vertex => {
+            let (model, header) = Model::from_container(container)?;
+            ModelInfo::Vertex {
+                vertices: model.vertices(),
+                weights_per_pose: model.weight_count(),
+                model_bytes: model.bytes(),
+                rig_nodes: header.rig.as_ref().map(|r| r.nodes.len()),
+                structure: structure(&model, &header.layout),
+            }
+        }
+        Family::Cubemap => {
+            let (model, header) = CubemapModel::from_container(container)?;
+            let layout = &model.layout;
+            ModelInfo::Cubemap {
+                clip: header.clip,
+                duration: layout.duration,
+                times: layout.times,
+                resolution: layout.resolution,
+                shells: layout.spheroid.shells,
+                cubemaps: layout.cubemaps(),
+                encoding: layout.encoding,
+                ground_resolution: model.ground.as_ref().map(|g| g.square.resolution),
+            }
+        }
+        Family::Grid => {
+            let (model, header) = GridModel::from_container(container)?;
+            let resolutions = model.parts.iter().map(|p| p.grid.resolution);
+            ModelInfo::Grid {
+                parts: model.parts.iter().map(|p| p.name.clone()).collect(),
+                resolution: [
+                    resolutions.clone().min().unwrap_or(0),
+                    resolutions.max().unwrap_or(0),
+                ],
+                cones: header.cones,
+                tclip_resolution: header.tclip_resolution,
+                base_vertices: model.base.as_ref().map(|b| b.vertex_offsets.len()),
+                ground_resolution: model.base.as_ref().map(|b| b.ground.square.resolution),
+            }
+        }
+    })
+}
+
+/// One line on a vertex model's structure.
+fn structure(model: &Model, layout: &Layout) -> String {
+    let basis = |rows: usize, sparse: bool| match (rows, sparse) {
+        (0, _) => String::new(),
+        (r, false) => format!("; an eigen-AO basis of {r} rows"),
+        (r, true) => format!("; an eigen-AO basis of {r} sparse rows"),
+    };
+    match (model, layout) {
+        (
+            Model::VertexLinear(angles, _),
+            Layout::VertexLinear {
+                sparse,
+                features,
+                components,
+                basis: rows,
+                ..
+            },
+        ) => {
+            let projection = match components {
+                0 => String::new(),
+                c => format!(", projected on {c} principal directions"),
+            };
+            format!(
+                "linear in {} joint-angle parameters as {} features{projection}{}",
+                angles.names.len(),
+                name(features),
+                basis(*rows, *sparse),
+            )
+        }
+        (
+            Model::VertexClustered(handles, m),
+            Layout::VertexClustered {
+                base,
+                basis: rows,
+                sparse,
+                ..
+            },
+        ) => format!(
+            "{} pose clusters over {} handle coordinates, {} dimensions each{}{}",
+            m.clusters.len(),
+            handles.len(),
+            m.dimensions,
+            if base.is_some() {
+                ", on a vertex-linear base"
+            } else {
+                ""
+            },
+            basis(*rows, *sparse),
+        ),
+        _ => "one occlusion per vertex, the same in every pose".into(),
+    }
+}
+
+/// A serde enum's name, as the header writes it.
+fn name(value: &impl Serialize) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::String(s)) => s,
+        _ => "?".into(),
+    }
+}
+
+/// Prints `r` for a person.
+pub(super) fn print_text(r: &Report) {
+    let h = &r.header;
+    let text = |key: &str| h[key].as_str().unwrap_or("?").to_owned();
+    let checksums = r.sections.len() + 1;
+    println!("{}", r.file);
+    println!(
+        "  asset        aobake asset format {}, {} bytes; all {checksums} checksums match and the model reads whole",
+        r.format, r.bytes
+    );
+    println!(
+        "  method       {} (algorithm {}), written by {}",
+        r.method,
+        h["algorithm_version"],
+        text("generator")
+    );
+    println!("  bake key     {}", text("bake_key"));
+    println!(
+        "  character    {} (sha256 of its upload)",
+        text("character")
+    );
+    let clips = h["clips"].as_array().map_or(0, Vec::len);
+    if clips == 0 {
+        println!("  clips        the character's own");
+    } else {
+        println!("  clips        {clips} uploads beside the character");
+    }
+    match &r.model {
+        ModelInfo::Vertex {
+            vertices,
+            weights_per_pose,
+            model_bytes,
+            rig_nodes,
+            structure,
+        } => {
+            println!("  model        {vertices} vertices; {structure}");
+            println!(
+                "  run time     {weights_per_pose} {} per pose; the model's numbers take {model_bytes} bytes",
+                if *weights_per_pose == 1 {
+                    "weight"
+                } else {
+                    "weights"
+                }
+            );
+            match rig_nodes {
+                Some(n) => println!("  rig          {n} nodes: an engine poses it by node name"),
+                None => println!(
+                    "  rig          none (written before format 1.4): evaluate it with the character's glTF, or bake again"
+                ),
+            }
+        }
+        ModelInfo::Cubemap {
+            clip,
+            duration,
+            times,
+            resolution,
+            shells,
+            cubemaps,
+            encoding,
+            ground_resolution,
+        } => {
+            println!("  model        clip {clip} ({duration:.3} s) at {times} times");
+            println!(
+                "  cubemaps     {cubemaps}, each six {resolution}² faces ({shells} shells, {} encoding)",
+                name(encoding)
+            );
+            match ground_resolution {
+                Some(n) => println!("  ground       a static ground texture of {n}² texels"),
+                None => println!("  ground       none: the cubemaps alone everywhere"),
+            }
+        }
+        ModelInfo::Grid {
+            parts,
+            resolution: [lo, hi],
+            cones,
+            tclip_resolution,
+            base_vertices,
+            ground_resolution,
+        } => {
+            let cells = if lo == hi {
+                format!("{lo}³ cells each")
+            } else {
+                format!("{lo}³ to {hi}³ cells")
+            };
+            println!("  model        {} rigid parts, {cells}", parts.len());
+            println!("  parts        {}", parts.join(", "));
+            if *cones {
+                println!("  cones        baked, T_clip {tclip_resolution}³");
+            } else {
+                println!("  cones        none: occlusion only");
+            }
+            match (base_vertices, ground_resolution) {
+                (Some(v), Some(g)) => {
+                    println!("  static base  offsets at {v} vertices and a {g}² ground texture")
+                }
+                _ => println!("  static base  none: the grids alone"),
+            }
+        }
+    }
+    println!(
+        "  params       {}",
+        super::super::params::shortest(h["params"].clone())
+    );
+    println!("  sections");
+    for s in &r.sections {
+        println!(
+            "    {:<6} {:<4} {:>12} values {:>12} bytes",
+            s.tag, s.element, s.count, s.bytes
+        );
+    }
+}
