@@ -568,7 +568,7 @@ impl Bake<'_> {
             2 * (character.vertex_count() + truth.ground.len()),
             &|_| (average_v.clone(), average_g.clone()),
         ));
-        let plot = slices_png(&model)
+        let plot = slices_png(&model, &variants)
             .map_err(|e| JobError::Failed(format!("cannot draw the slices: {e}")))?;
         let evaluation = GridEvaluation {
             frames: truth
@@ -647,13 +647,20 @@ impl Bake<'_> {
 }
 
 /// Each part's grid as three slices through its middle (x, y and z
-/// constant), dark where occluded, a row per part.
-fn slices_png(model: &GridModel) -> Result<Vec<u8>, String> {
-    const SIDE: usize = 128;
-    const GAP: usize = 8;
+/// constant), dark where occluded, a row per part named with its cells;
+/// the title gives the held-out errors of the baked variant and of the
+/// static average (`variants`, baked first, static average last).
+fn slices_png(model: &GridModel, variants: &[GridVariant]) -> Result<Vec<u8>, String> {
+    use plotters::prelude::*;
+    const SIDE: usize = 160;
+    const GAP: usize = 12;
+    const LABEL: usize = 22;
+    const TOP: usize = 70;
+    crate::image::register_plot_font()?;
     let rows = model.parts.len();
     let width = 3 * SIDE + 4 * GAP;
-    let height = rows * SIDE + (rows + 1) * GAP;
+    let height = TOP + rows * (LABEL + SIDE + GAP);
+    let row_top = |r: usize| TOP + r * (LABEL + SIDE + GAP);
     let mut rgb = vec![255u8; 3 * width * height];
     for (r, part) in model.parts.iter().enumerate() {
         let n = part.grid.resolution;
@@ -669,12 +676,60 @@ fn slices_png(model: &GridModel) -> Result<Vec<u8>, String> {
                     };
                     let v = part.occlusion[(z * n + y) * n + x];
                     let shade = 255 - v;
-                    let (ox, oy) = (GAP + axis * (SIDE + GAP) + px, GAP + r * (SIDE + GAP) + py);
+                    let (ox, oy) = (GAP + axis * (SIDE + GAP) + px, row_top(r) + LABEL + py);
                     let i = 3 * (oy * width + ox);
                     rgb[i..i + 3].copy_from_slice(&[shade, shade, shade]);
                 }
             }
         }
+    }
+    {
+        let root =
+            BitMapBackend::with_buffer(&mut rgb, (width as u32, height as u32)).into_drawing_area();
+        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+        let text = |s: String, x: usize, y: usize, size: u32| {
+            root.draw(&Text::new(s, (x as i32, y as i32), ("sans-serif", size)))
+        };
+        text(
+            "grid: each part's cells through its middle, dark = occluded".into(),
+            GAP,
+            6,
+            15,
+        )
+        .map_err(e)?;
+        let psnr = |v: &GridVariant| {
+            format!(
+                "{} {:.1} dB at vertices, {:.1} dB on the ground",
+                v.name, v.vertices.mean.psnr_db, v.ground.mean.psnr_db
+            )
+        };
+        let average = variants.iter().find(|v| v.name == "static average");
+        if let (Some(baked), Some(average)) = (variants.first(), average) {
+            let frames = baked.vertices.frames;
+            let judged = format!("judged on {frames} clip frames against fresh rays:");
+            text(format!("{judged} {}", psnr(baked)), GAP, 26, 11).map_err(e)?;
+            text(format!("the baseline: {}", psnr(average)), GAP, 40, 11).map_err(e)?;
+        }
+        for (axis, label) in [
+            "x = middle: z →, y ↑",
+            "y = middle: x →, z ↑",
+            "z = middle: x →, y ↑",
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            text(label.into(), GAP + axis * (SIDE + GAP), TOP - 16, 11).map_err(e)?;
+        }
+        for (r, part) in model.parts.iter().enumerate() {
+            let n = part.grid.resolution;
+            let size = 2.0 * part.grid.half;
+            let label = format!(
+                "{}: {n}³ cells over {:.3} × {:.3} × {:.3}",
+                part.name, size.x, size.y, size.z
+            );
+            text(label, GAP, row_top(r) + 4, 12).map_err(e)?;
+        }
+        root.present().map_err(e)?;
     }
     Ok(encode_rgb_png(&rgb, width as u32, height as u32)?)
 }
@@ -788,5 +843,80 @@ pub(super) fn part_slices(k: usize, part: &PartGrid) -> crate::image::FloatImage
         width: n,
         height: n * n,
         channels,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::asset::metrics::{Errors, FrameError};
+
+    /// The plot's pixels as RGB rows.
+    fn decode(png: &[u8]) -> (usize, usize, Vec<u8>) {
+        let mut reader = png::Decoder::new(std::io::Cursor::new(png))
+            .read_info()
+            .unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        buf.truncate(info.buffer_size());
+        (info.width as usize, info.height as usize, buf)
+    }
+
+    #[test]
+    fn the_slices_show_each_parts_cells_under_a_labelled_title() {
+        let n = 4;
+        // Occluded exactly where x is the middle cell: the x = middle
+        // slice is dark all over, the y and z slices in one column.
+        let occlusion = (0..n * n * n)
+            .map(|i| if i % n == n / 2 { 200 } else { 0 })
+            .collect();
+        let part = PartGrid {
+            name: "hull".into(),
+            joint: 0,
+            node: 0,
+            grid: GridBox {
+                centre: glam::Vec3::ZERO,
+                half: glam::Vec3::ONE,
+                resolution: n,
+            },
+            boundary_max: 1.0,
+            inside: 0,
+            occlusion,
+            directions: None,
+        };
+        let model = GridModel {
+            parts: vec![part],
+            tclip: None,
+            base: None,
+        };
+        let errors = Errors::of(&[FrameError::of(&[0.5, 0.5], &[0.4, 0.6])]);
+        let variant = |name: &str| GridVariant {
+            name: name.into(),
+            description: String::new(),
+            bytes: 0,
+            vertices: errors.clone(),
+            ground: errors.clone(),
+        };
+        let variants = [variant("grids"), variant("static average")];
+        let (width, height, rgb) = decode(&slices_png(&model, &variants).unwrap());
+        let pixel = |x: usize, y: usize| &rgb[3 * (y * width + x)..3 * (y * width + x) + 3];
+        let ink = |y0: usize, y1: usize| {
+            (y0..y1).any(|y| (0..width).any(|x| pixel(x, y) != [255, 255, 255]))
+        };
+        // Title, the errors, the column heads and the part's name are
+        // drawn above the slices, which start at 70 + 22.
+        assert!(ink(0, 20), "a title");
+        assert!(ink(24, 54), "the errors of the baked variant and the baseline");
+        assert!(ink(70, 92), "the part's name");
+        let (top, side, gap) = (92, 160, 12);
+        // x = middle slice: every cell is 200, drawn as 255 − 200.
+        for (x, y) in [(gap + 1, top + 1), (gap + side - 2, top + side - 2)] {
+            assert_eq!(pixel(x, y), [55, 55, 55], "({x}, {y})");
+        }
+        // z = middle slice: the middle column is dark, the first is open.
+        let z0 = gap + 2 * (side + gap);
+        assert_eq!(pixel(z0 + side / 2 + 5, top + 10), [55, 55, 55]);
+        assert_eq!(pixel(z0 + 5, top + 10), [255, 255, 255]);
+        assert_eq!(height, top + side + gap);
     }
 }
