@@ -33,7 +33,7 @@ struct Report {
 #[derive(Serialize)]
 #[serde(untagged)]
 enum Described {
-    Character(Report),
+    Character(Box<Report>),
     Asset(Box<asset::Report>),
 }
 
@@ -58,7 +58,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             if !args.json {
                 print_text(&report);
             }
-            Described::Character(report)
+            Described::Character(Box::new(report))
         };
         reports.push(report);
     }
