@@ -7,6 +7,8 @@ mod util;
 mod cubemap;
 #[path = "integration/grid.rs"]
 mod grid;
+#[path = "integration/hostile_assets.rs"]
+mod hostile_assets;
 #[path = "integration/jobs.rs"]
 mod jobs;
 #[path = "integration/malformed.rs"]

@@ -906,7 +906,10 @@ mod tests {
         // Title, the errors, the column heads and the part's name are
         // drawn above the slices, which start at 70 + 22.
         assert!(ink(0, 20), "a title");
-        assert!(ink(24, 54), "the errors of the baked variant and the baseline");
+        assert!(
+            ink(24, 54),
+            "the errors of the baked variant and the baseline"
+        );
         assert!(ink(70, 92), "the part's name");
         let (top, side, gap) = (92, 160, 12);
         // x = middle slice: every cell is 200, drawn as 255 − 200.

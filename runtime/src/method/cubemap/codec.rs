@@ -8,10 +8,11 @@
 //! the layout and the section's length, so a hostile file with valid
 //! checksums is refused with a message.
 
+use half::f16;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    ALGORITHM_VERSION,
+    ALGORITHM_VERSION, continuous,
     geometry::FACES,
     model::{CubemapLayout, CubemapModel, Encoding},
 };
@@ -129,6 +130,7 @@ impl CubemapModel {
                 layout.texel_bytes()
             )));
         }
+        check_coefficients(&layout, texels)?;
         let ground = match header.ground {
             Some(g) => Some(GroundBase::read(container, g.square, g.gain, b"GOFS")?),
             None => None,
@@ -142,6 +144,31 @@ impl CubemapModel {
             header,
         ))
     }
+}
+
+/// Checks that every half-float coefficient of a continuous encoding is
+/// a finite number: an infinite one times a basis value of 0 would decode
+/// as NaN. (A texel's 64 bytes are 16 in each of four cubemaps; its first
+/// 50 hold the 25 coefficients, so cubemaps 0 to 2 hold eight each and
+/// cubemap 3 one.) The discrete encoding's bytes are all numbers.
+fn check_coefficients(l: &CubemapLayout, texels: &[u8]) -> Result<(), AssetError> {
+    if l.encoding == Encoding::Discrete {
+        return Ok(());
+    }
+    let per_cubemap = FACES * l.resolution * l.resolution * 16;
+    let halves = continuous::BASIS * continuous::BASIS;
+    for (c, cubemap) in texels.chunks(per_cubemap).enumerate() {
+        let in_this = halves.saturating_sub(8 * c).min(8);
+        for texel in cubemap.chunks_exact(16) {
+            if texel[..2 * in_this]
+                .chunks_exact(2)
+                .any(|h| !f16::from_le_bytes([h[0], h[1]]).is_finite())
+            {
+                return Err(bad("TEXL holds a coefficient that is not a finite number"));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Checks a layout's numbers before anything is computed from them.
@@ -197,7 +224,11 @@ mod tests {
             encoding,
             duration: 1.5,
         };
-        let texels = (0..layout.texel_bytes()).map(|i| (i * 37) as u8).collect();
+        // Any bytes, but each odd one (a half float's high byte, for the
+        // continuous encodings) below 0x40: finite coefficients.
+        let texels = (0..layout.texel_bytes())
+            .map(|i| (i * 37) as u8 & if i % 2 == 1 { 0x3f } else { 0xff })
+            .collect();
         CubemapModel {
             layout,
             texels,
@@ -221,6 +252,19 @@ mod tests {
     }
 
     #[test]
+    fn the_phase_is_a_number_for_any_time_and_duration() {
+        let mut l = model(Encoding::Discrete).layout;
+        assert_eq!(l.phase(2.25), 0.5);
+        assert_eq!(l.phase(-0.375), 0.75);
+        assert_eq!(l.phase(f32::NAN), 0.0);
+        // A clip of a subnormal duration, late: the ratio overflows.
+        l.duration = 1e-40;
+        assert_eq!(l.phase(1e9), 0.0);
+        l.duration = 0.0;
+        assert_eq!(l.phase(1.0), 0.0);
+    }
+
+    #[test]
     fn a_hostile_layout_is_refused_by_name() {
         type Break = fn(&mut CubemapModel);
         let cases: [(&str, Break); 5] = [
@@ -232,16 +276,42 @@ mod tests {
                 m.texels.pop();
             }),
         ];
-        for (what, break_it) in cases {
-            let mut m = model(Encoding::Discrete);
-            break_it(&mut m);
+        let refusal = |m: &CubemapModel| {
             let c = Container::from_bytes(
                 &m.to_container(AssetHeaderFields::for_tests(), "walk")
                     .to_bytes(),
             )
             .unwrap();
-            let e = CubemapModel::from_container(&c).unwrap_err().to_string();
+            CubemapModel::from_container(&c).unwrap_err().to_string()
+        };
+        for (what, break_it) in cases {
+            let mut m = model(Encoding::Discrete);
+            break_it(&mut m);
+            let e = refusal(&m);
             assert!(e.contains(what), "{what}: {e}");
+        }
+        // An infinite coefficient would decode as NaN where its basis
+        // value is 0: in cubemap 0 (texel 5's fourth), and in cubemap 3's
+        // one coefficient; bytes after a texel's 50th are not
+        // coefficients.
+        let res = model(Encoding::Continuous).layout.resolution;
+        let per_cubemap = FACES * res * res * 16;
+        for (at, refused) in [
+            (5 * 16 + 6, true),
+            (3 * per_cubemap + 7 * 16, true),
+            (3 * per_cubemap + 7 * 16 + 2, false),
+        ] {
+            for encoding in [Encoding::Continuous, Encoding::Thirds] {
+                let mut m = model(encoding);
+                m.texels[at..at + 2].copy_from_slice(&f16::INFINITY.to_le_bytes());
+                if refused {
+                    let e = refusal(&m);
+                    assert!(e.contains("not a finite number"), "{at}: {e}");
+                } else {
+                    let c = m.to_container(AssetHeaderFields::for_tests(), "walk");
+                    assert!(CubemapModel::from_container(&c).is_ok(), "{at}");
+                }
+            }
         }
     }
 }

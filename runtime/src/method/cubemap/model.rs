@@ -128,10 +128,13 @@ impl CubemapLayout {
         fade * (top + fy * (bottom - top))
     }
 
-    /// The phase of clip time `t` (seconds), cyclic.
+    /// The phase of clip time `t` (seconds), cyclic; 0 for a clip of no
+    /// duration, and where `t / duration` is not a finite number (a NaN
+    /// time, or a ratio beyond f32: no phase is nearer than another).
     pub fn phase(&self, t: f32) -> f32 {
-        if self.duration > 0.0 {
-            (t / self.duration).rem_euclid(1.0)
+        let cycles = t / self.duration;
+        if self.duration > 0.0 && cycles.is_finite() {
+            cycles.rem_euclid(1.0)
         } else {
             0.0
         }

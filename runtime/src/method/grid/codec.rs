@@ -224,8 +224,11 @@ impl GridModel {
             let Data::F32(v) = container.section(b"TCLP")? else {
                 return Err(bad("TCLP must be f32"));
             };
-            if v.len() != 2 * r * r || v.iter().any(|x| !x.is_finite()) {
-                return Err(bad(&format!("TCLP must hold {} finite numbers", 2 * r * r)));
+            if v.len() != 2 * r * r || v.iter().any(|x| !(0.0..=1.0).contains(x)) {
+                return Err(bad(&format!(
+                    "TCLP must hold {} numbers in [0, 1]",
+                    2 * r * r
+                )));
             }
             Some(TClip {
                 resolution: r,
@@ -421,6 +424,14 @@ mod tests {
             let e = GridModel::from_container(&c).unwrap_err().to_string();
             assert!(e.contains(what), "{what}: {e}");
         }
+        // T_clip's occlusions and blends are fractions; 1e30 would turn a
+        // lookup into inf − inf.
+        let mut m = model(true);
+        m.tclip.as_mut().unwrap().values[3][1] = 1e30;
+        let c = Container::from_bytes(&m.to_container(AssetHeaderFields::for_tests()).to_bytes())
+            .unwrap();
+        let e = GridModel::from_container(&c).unwrap_err().to_string();
+        assert!(e.contains("TCLP must hold") && e.contains("[0, 1]"), "{e}");
         let m = model(false);
         assert!(m.check_palette(2).is_ok());
         assert!(m.check_palette(1).is_err());

@@ -69,8 +69,13 @@ impl Model {
     /// The per-pose weights (joint angles and a 1, blended projections, or
     /// `[1]`), computed once per pose on the CPU, in double precision from
     /// the local transforms on and rounded once at the end.
+    ///
+    /// A degenerate pose (a node scaled to zero above the body root, whose
+    /// frame the handles are measured in; transforms of infinite size)
+    /// gives features that are not numbers: each weight that is not a
+    /// finite number counts as 0, so the AO stays a number in [0, 1].
     pub fn weights(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f32> {
-        match self {
+        let mut weights = match self {
             Self::StaticAverage(_) => vec![1.0],
             Self::VertexLinear(layout, m) => m.weights_f64(&layout.params_f64(skeleton, locals)),
             Self::VertexClustered(handles, m) => {
@@ -81,7 +86,11 @@ impl Model {
                     .unwrap_or_default();
                 m.weights_with_f64(&handles.handles_f64(skeleton, locals), &angles)
             }
+        };
+        for w in weights.iter_mut().filter(|w| !w.is_finite()) {
+            *w = 0.0;
         }
+        weights
     }
 
     /// AO of every vertex for weights from [`Model::weights`].
