@@ -270,7 +270,8 @@ pub struct BakeRequest {
     pub method: String,
     /// Overrides of the method's default parameters (`aobake params
     /// --method M` lists them), by name; dotted names or nested objects
-    /// for method options.
+    /// for method options. Unknown names and another method's options
+    /// are refused (400).
     #[serde(default)]
     #[cfg_attr(feature = "schema", schema(value_type = Object))]
     pub params: serde_json::Map<String, serde_json::Value>,
@@ -650,7 +651,8 @@ impl JobState {
 pub enum Scope {
     /// See bakes, reports, published assets, previews, workers.
     Read,
-    /// Upload, read back what was uploaded, and bake.
+    /// Everything `read` allows; upload, read back what was uploaded,
+    /// and bake.
     Submit,
     /// Run jobs.
     Worker,
@@ -675,5 +677,12 @@ impl Scope {
     /// The scope named `s`.
     pub fn parse(s: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|x| x.name() == s)
+    }
+
+    /// Whether a token with this scope may do what `other` allows:
+    /// `admin` everything, `submit` also `read` (a build system follows
+    /// and fetches the bakes it submits).
+    pub fn includes(self, other: Self) -> bool {
+        self == other || self == Self::Admin || (self == Self::Submit && other == Self::Read)
     }
 }

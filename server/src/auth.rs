@@ -35,12 +35,13 @@ pub struct Caller {
 }
 
 impl Caller {
-    /// Whether the caller has `scope` (or `admin`).
+    /// Whether the caller has `scope`, or one that includes it
+    /// ([`Scope::includes`]: `admin` all, `submit` `read`).
     pub fn has(&self, scope: Scope) -> bool {
-        self.scopes.contains(&scope) || self.scopes.contains(&Scope::Admin)
+        self.scopes.iter().any(|s| s.includes(scope))
     }
 
-    /// Refuses with 403 unless the caller has `scope` (or `admin`).
+    /// Refuses with 403 unless the caller has `scope` ([`Caller::has`]).
     pub fn require(&self, scope: Scope) -> Result<(), ApiError> {
         if self.has(scope) {
             Ok(())

@@ -585,6 +585,26 @@ fn params_prints_the_methods_own_parameters() {
         assert_eq!(sections, [own], "{method}");
         assert_eq!(p["method"], method);
     }
+    // A flag of another method is refused, not silently dropped.
+    for args in [
+        &["--method", "grid", "--ridge", "0.5"][..],
+        &["--method", "vertex-linear", "--pose-clusters", "3"],
+    ] {
+        let out = aobake(&[&["params"][..], args].concat());
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            stderr(&out).contains("is an option of vertex-"),
+            "{}",
+            stderr(&out)
+        );
+    }
+    // --ridge fixes vertex-linear's ridge instead of a cross-validated one.
+    let out = aobake(&["params", "--method", "vertex-linear", "--ridge", "0.5"]);
+    let p: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (&p["linear"]["ridge"], &p["linear"]["ridge_cv"]),
+        (&0.5.into(), &false.into())
+    );
 }
 
 /// A client command without a token says where it looked for one.

@@ -102,13 +102,21 @@ pub fn run(config: WorkerConfig) -> Result<(), String> {
         }
         // The slots hold the completer's senders now: it ends after them.
         drop(done_tx);
-        dispatch(client, &config, &ids, &shutdown, &free_rx, &to_slots);
+        let dispatched = dispatch(client, &config, &ids, &shutdown, &free_rx, &to_slots);
         // Slots finish their jobs (or stop them at shutdown's deadline),
         // then end.
         drop(to_slots);
-    });
+        dispatched
+    })?;
     eprintln!("worker {}: stopped", config.id);
     Ok(())
+}
+
+/// Whether a refused lease will be refused again however long the worker
+/// waits: a token that is not valid or lacks the `worker` scope, or an
+/// address that is not an aobake server's API (400, 404).
+fn refused_for_good(e: &ApiError) -> bool {
+    matches!(e.status(), Some(400 | 401 | 403 | 404))
 }
 
 /// Leases jobs for the idle slots, one request for all of them, until
@@ -120,7 +128,7 @@ fn dispatch(
     shutdown: &AtomicBool,
     freed: &mpsc::Receiver<usize>,
     slots: &[mpsc::Sender<Lease>],
-) {
+) -> Result<(), String> {
     let mut failures = 0u32;
     // The process's tracer (installed by `aobake worker --gpu`), told to
     // the server until a request has gone through.
@@ -168,6 +176,15 @@ fn dispatch(
                     }
                 }
             }
+            Err(e) if refused_for_good(&e) => {
+                // Stop as at SIGTERM: jobs running now stop at their
+                // deadline, and their leases pass to other workers.
+                shutdown.store(true, Ordering::Relaxed);
+                return Err(format!(
+                    "worker {}: the server at {} refused to lease jobs ({e}); check --server and the token (it needs the worker scope)",
+                    config.id, config.server
+                ));
+            }
             Err(e) => {
                 failures += 1;
                 let wait = Duration::from_millis(200 * u64::from(failures.min(25)));
@@ -179,6 +196,7 @@ fn dispatch(
             }
         }
     }
+    Ok(())
 }
 
 /// Sends finished jobs' completions, all that are waiting in one request,

@@ -462,6 +462,16 @@ impl BakedAsset {
         })
     }
 
+    /// The clip a cubemap asset was baked over (it darkens the world as
+    /// that clip plays); `None` for the other families, which follow any
+    /// pose.
+    pub fn clip(&self) -> Option<&str> {
+        match &self.model {
+            AssetModel::Cubemap(_, clip) => Some(clip),
+            AssetModel::Vertex(_) | AssetModel::Grid(..) => None,
+        }
+    }
+
     /// The model to preview and the tracing parameters of its ground
     /// truth (a grid's as its evaluation traces it; a cubemap's ground
     /// truth is Eq. 3.1, what it stores, in the model itself).

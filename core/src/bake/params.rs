@@ -201,19 +201,32 @@ impl BakeParams {
         let mut v = serde_json::to_value(self).expect("params serialise");
         let map = v.as_object_mut().expect("an object");
         // Each method keeps its own options' block, and only that one.
-        let own = match self.method {
-            Method::StaticAverage => None,
-            Method::VertexLinear => Some("linear"),
-            Method::VertexClustered => Some("clustered"),
-            Method::CubemapDiscrete | Method::CubemapContinuous => Some("cubemap"),
-            Method::Grid => Some("grid"),
-        };
-        for block in ["linear", "clustered", "cubemap", "grid"] {
+        let own = own_block(self.method);
+        for (block, _) in BLOCKS {
             if own != Some(block) {
                 map.remove(block);
             }
         }
         v
+    }
+}
+
+/// The methods' option blocks and whose each is.
+const BLOCKS: [(&str, &str); 4] = [
+    ("linear", "vertex-linear"),
+    ("clustered", "vertex-clustered"),
+    ("cubemap", "cubemap-discrete and cubemap-continuous"),
+    ("grid", "grid"),
+];
+
+/// The block of options `method` reads, if it has one.
+fn own_block(method: Method) -> Option<&'static str> {
+    match method {
+        Method::StaticAverage => None,
+        Method::VertexLinear => Some("linear"),
+        Method::VertexClustered => Some("clustered"),
+        Method::CubemapDiscrete | Method::CubemapContinuous => Some("cubemap"),
+        Method::Grid => Some("grid"),
     }
 }
 
@@ -263,6 +276,20 @@ impl BakeParams {
                 continue;
             }
             let path: Vec<&str> = key.split('.').collect();
+            // Another method's option would be dropped from the key and
+            // never read: a mistake to name, not to ignore.
+            if let Some((_, whose)) = BLOCKS
+                .iter()
+                .find(|(b, _)| *b == path[0] && own_block(method) != Some(b))
+            {
+                return Err(BakeError::Override(format!(
+                    "{key:?} is an option of {whose}, which a {method} bake does not read{}",
+                    match own_block(method) {
+                        Some(own) => format!(" (its own are under \"{own}\")"),
+                        None => String::new(),
+                    }
+                )));
+            }
             merge(&mut value, &path, v.clone(), key)?;
         }
         let params: Self =
@@ -429,6 +456,37 @@ mod tests {
     use super::*;
 
     const GOLDEN_KEY: &str = "358653a81b5a8f57e62ba845d0102b20a142875ad484b5e6e00d5d4d2bef2dff";
+
+    #[test]
+    fn another_methods_options_are_refused_by_name_and_the_own_read() {
+        let o = |v: Value| v.as_object().unwrap().clone();
+        for (method, key) in [
+            (Method::VertexLinear, "clustered.alpha"),
+            (Method::VertexClustered, "linear.ridge"),
+            (Method::Grid, "cubemap.resolution"),
+            (Method::StaticAverage, "grid.rays"),
+        ] {
+            let e = BakeParams::with_overrides(method, &o(serde_json::json!({ key: 3 })))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(key) && e.contains(&format!("a {method} bake does not read")),
+                "{e}"
+            );
+            // The whole block, as JSON, too.
+            let (block, option) = key.split_once('.').unwrap();
+            let nested = serde_json::json!({ block: { option: 3 } });
+            assert!(BakeParams::with_overrides(method, &o(nested)).is_err());
+        }
+        let p = BakeParams::with_overrides(
+            Method::VertexClustered,
+            &o(serde_json::json!({"clustered.alpha": 3.0})),
+        )
+        .unwrap();
+        assert_eq!(p.clustered.alpha, 3.0);
+        // An asset's header (its method's block only) reads back.
+        assert_eq!(BakeParams::from_canonical(&p.canonical()).unwrap(), p);
+    }
 
     #[test]
     fn key_depends_on_what_matters_only() {

@@ -271,7 +271,16 @@ pub(super) fn fetch(args: &FetchArgs) -> anyhow::Result<()> {
             code: NOT_BAKED,
             message: format!("no finished bake for key {key}"),
         })?,
-        (None, Some(id)) => api.bake(id)?,
+        (None, Some(id)) => match api.bake(id) {
+            Err(e) if e.status() == Some(404) => {
+                return Err(Exit {
+                    code: NOT_BAKED,
+                    message: format!("no bake {id} on this server"),
+                }
+                .into());
+            }
+            other => other?,
+        },
         (None, None) => bail!("give a bake id or --key"),
     };
     let bake = &view.bake;

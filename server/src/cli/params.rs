@@ -74,6 +74,8 @@ pub(super) struct ParamArgs {
     eval_fps: Option<f32>,
     /// vertex-linear, vertex-clustered: ridge weight λ per pose on
     /// standardised pose coordinates; 0 is the pseudo-inverse.
+    /// vertex-linear otherwise picks λ by cross-validation over clips:
+    /// this flag fixes it (and sets linear.ridge_cv=false).
     #[arg(long)]
     ridge: Option<f64>,
     /// vertex-linear: drop coefficients whose effect is below this much AO
@@ -138,13 +140,18 @@ impl ParamArgs {
         opt!(centering, "clustered.centering");
         opt!(clamp, "clustered.clamp");
         if let Some(r) = self.ridge {
-            let key = match method {
-                Method::VertexClustered => "clustered.ridge",
-                // vertex-linear's; the other methods have no ridge of their
-                // own and ignore it.
-                _ => "linear.ridge",
-            };
-            set(key, json!(r));
+            match method {
+                Method::VertexClustered => set("clustered.ridge", json!(r)),
+                // The ridge given, not one cross-validation picks
+                // (`--param linear.ridge_cv=true` below keeps it picking).
+                Method::VertexLinear => {
+                    set("linear.ridge", json!(r));
+                    set("linear.ridge_cv", json!(false));
+                }
+                _ => bail!(
+                    "--ridge is an option of vertex-linear and vertex-clustered, not {method}"
+                ),
+            }
         }
         if !self.train_clips.is_empty() {
             set("train_clips", json!(self.train_clips));

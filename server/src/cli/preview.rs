@@ -85,6 +85,13 @@ impl Loaded {
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let loaded = Loaded::new(&args.asset, &args.file, args.clips.as_deref())?;
     let clip = find_clip(&loaded.clips, &args.clip)?;
+    if let Some(baked) = loaded.asset.clip().filter(|&c| c != args.clip) {
+        bail!(
+            "{} holds cubemaps of clip {baked:?}: they darken the world as that clip plays, not {:?}; preview it with --clip {baked:?}",
+            args.asset.display(),
+            args.clip
+        );
+    }
     let gpu = Gpu::shared().context("no GPU adapter for the preview")?;
     let mut renderer = PreviewRenderer::new(gpu)?;
     let subject = loaded.subject()?;

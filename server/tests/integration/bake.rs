@@ -589,3 +589,43 @@ fn the_free_tracer_is_reported_as_work_besides_tracing_not_as_a_speed() {
     assert!(!alone.status.success());
     assert!(stderr(&alone).contains("casts rays"), "{}", stderr(&alone));
 }
+
+#[test]
+fn a_cubemap_previews_only_the_clip_it_was_baked_over() {
+    let dir = tempfile::tempdir().unwrap();
+    let fox = sample("Fox/Fox.glb");
+    let asset = dir.path().join("walk.aob");
+    let out = aobake(&[
+        "bake",
+        fox.to_str().unwrap(),
+        "--method",
+        "cubemap-discrete",
+        "--param",
+        r#"cubemap={"clip":"Walk","resolution":4,"shells":2,"times":4,"rays":4,"eval_points":8,"eval_ground":8,"eval_rays":4,"eval_times":2,"ground_resolution":8}"#,
+        "--out",
+        asset.to_str().unwrap(),
+        "--report",
+        dir.path().join("walk.json").to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let png = dir.path().join("p.png");
+    let out = aobake(&[
+        "preview",
+        asset.to_str().unwrap(),
+        fox.to_str().unwrap(),
+        "--clip",
+        "Survey",
+        "--time",
+        "0.3",
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success(), "Walk's cubemaps shown under Survey");
+    assert!(
+        stderr(&out).contains("cubemaps of clip \"Walk\"")
+            && stderr(&out).contains("--clip \"Walk\""),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!png.exists());
+}

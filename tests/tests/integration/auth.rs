@@ -1,5 +1,5 @@
-//! A wrong or missing token gets 401, a token without the scope 403, on
-//! every route (the health probes excepted: load balancers call them
+//! A wrong or missing token gets 401, a token without the scope (or one
+//! that includes it: `admin` all, `submit` `read`) 403, on every route (the health probes excepted: load balancers call them
 //! without a token).
 
 use aobake_e2e::{Options, TestEnv};
@@ -128,7 +128,9 @@ fn every_route_refuses_missing_wrong_and_unscoped_tokens() {
                 assert_eq!(answer["code"], "unauthorized");
             }
             for (s, token) in &tokens {
-                if *s == scope || scope == ANY {
+                // `submit` includes `read`: a build system follows and
+                // fetches the bakes it submits.
+                if *s == scope || scope == ANY || (*s == "submit" && scope == "read") {
                     // The status alone: an event stream never ends.
                     let status = status_only(&env, method, &path, token);
                     assert!(
@@ -227,6 +229,9 @@ fn uploaded_sources_need_submit_and_outputs_need_read() {
         bytes == source,
         "a submit token reads back what was uploaded"
     );
+    // …and, including `read`, follows its bakes and fetches outputs.
+    let (status, _, _) = raw(&env, "GET", "/v1/bakes", &submitter, b"");
+    assert_eq!(status, 200);
 
     // An output (any blob that is not an upload) reads with `read`.
     let output = b"an output a worker published".to_vec();
@@ -304,5 +309,46 @@ fn unknown_routes_and_wrong_methods_are_problems_too() {
                 "{method} {path}: {headers:?}"
             );
         }
+    }
+}
+
+/// A worker whose token the server refuses (not valid, or without the
+/// `worker` scope) will be refused however long it waits: it exits with
+/// an error that says what to check, instead of retrying forever under a
+/// supervisor.
+#[test]
+fn a_worker_with_a_refused_token_exits_saying_why() {
+    let env = TestEnv::start(Options::default());
+    for (token, status) in [
+        ("not-a-token".to_owned(), "401"),
+        (env.token(&["read"]), "403"),
+    ] {
+        let mut child = std::process::Command::new(aobake_e2e::binary())
+            .args(["worker", "--server", &env.url, "--id", "refused"])
+            .args(["--token", &token])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        let exit = loop {
+            if let Some(exit) = child.try_wait().unwrap() {
+                break exit;
+            }
+            if std::time::Instant::now() > deadline {
+                let _ = child.kill();
+                panic!("a worker with a refused token ({status}) kept retrying");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        };
+        let mut stderr = String::new();
+        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+        assert!(!exit.success(), "{stderr}");
+        assert!(
+            stderr.contains("refused to lease jobs")
+                && stderr.contains(status)
+                && stderr.contains("worker scope"),
+            "{stderr}"
+        );
     }
 }

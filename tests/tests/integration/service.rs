@@ -67,6 +67,13 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
     let out = env.aobake(&["fetch", "--key", &"0".repeat(64), "--out", "x.aob"]);
     assert_eq!(out.status.code(), Some(4));
     assert!(!env.dir.path().join("x.aob").exists());
+    // Nor for an id the server has never had.
+    let out = env.aobake(&["fetch", "999", "--out", "x.aob"]);
+    assert_eq!(out.status.code(), Some(4));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("no bake 999"),
+        "{out:?}"
+    );
 
     // Versions of the character, newest first.
     let (_, versions) = env

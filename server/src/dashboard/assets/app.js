@@ -68,7 +68,9 @@ const ago = (ms) => {
   return s < 60 ? `${s} s ago` : s < 3600 ? `${Math.round(s / 60)} min ago` : when(ms);
 };
 const fmt = (x, digits = 4) => (typeof x === "number" && isFinite(x) ? x.toFixed(digits) : "—");
-const can = (scope) => !!me && (me.scopes.includes(scope) || me.scopes.includes("admin"));
+// As the server checks: admin includes every scope, submit includes read.
+const can = (scope) => !!me && (me.scopes.includes(scope) || me.scopes.includes("admin")
+  || (scope === "read" && me.scopes.includes("submit")));
 const finished = (state) => ["done", "failed", "cancelled"].includes(state);
 
 class ApiError extends Error {
