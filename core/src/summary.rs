@@ -61,7 +61,9 @@ pub struct Summary {
     /// Kirk & Arikan handle numbers (6 per joint).
     pub handle_parameters: usize,
     /// Bounds of the posed mesh over every clip frame (30 fps and every
-    /// key) and the bind pose: `[min, max]`.
+    /// key), or in the bind pose when there are no clips: `[min, max]`.
+    /// (The bind pose is left out otherwise: it may lie far from every
+    /// frame, such as a z-up rest pose that the clips stand up.)
     pub bounds: [[f32; 3]; 2],
     /// Length of the bounds' diagonal.
     pub diagonal: f32,
@@ -77,7 +79,9 @@ impl Summary {
                 .into_iter()
                 .map(move |t| Pose::sample(&character.skeleton, clip, t))
         });
-        let (lo, hi) = std::iter::once(Pose::bind(character))
+        let bind = clips.is_empty().then(|| Pose::bind(character));
+        let (lo, hi) = bind
+            .into_iter()
             .chain(clip_poses)
             .filter_map(|p| bounds(character.skin(&p).positions))
             .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))

@@ -81,6 +81,52 @@ fn inspect_json_reports_counts_of_several_files() {
     assert!(r[1]["diagonal"].as_f64().unwrap() > 0.0);
 }
 
+/// A file that cannot be read is named, the others are still described,
+/// and the command exits 1.
+#[test]
+fn inspect_goes_on_past_a_file_it_cannot_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.glb");
+    std::fs::write(&bad, b"not a glTF").unwrap();
+    let good = sample("RiggedSimple/RiggedSimple.glb");
+    let files = [bad.to_str().unwrap(), good.to_str().unwrap()];
+    let out = aobake(&[&["inspect"][..], &files].concat());
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stdout(&out).contains("vertices     160"),
+        "{}",
+        stdout(&out)
+    );
+    assert!(
+        stderr(&out).contains("bad.glb") && stderr(&out).contains("1 of 2 files could not be read"),
+        "{}",
+        stderr(&out)
+    );
+    let out = aobake(&[&["inspect", "--json"][..], &files].concat());
+    assert_eq!(out.status.code(), Some(1));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (&r[0]["kind"], &r[1]["kind"]),
+        (&"error".into(), &"character".into())
+    );
+    assert!(r[0]["error"].as_str().unwrap().contains("GLB"), "{}", r[0]);
+}
+
+/// CesiumMan rests lying along z (y from −0.57 to 0.57) and its clip
+/// stands him up: the bounds are the frames', not the rest pose's.
+#[test]
+fn inspect_bounds_are_the_clip_frames() {
+    let out = aobake(&[
+        "inspect",
+        "--json",
+        sample("CesiumMan/CesiumMan.glb").to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let [lo, hi] = [0, 1].map(|i| r[0]["bounds"][i][1].as_f64().unwrap());
+    assert!(lo > -0.1 && hi > 1.4, "y from {lo} to {hi}");
+}
+
 #[test]
 fn inspect_text_names_clips() {
     let out = aobake(&[

@@ -35,37 +35,70 @@ struct Report {
 enum Described {
     Character(Box<Report>),
     Asset(Box<asset::Report>),
+    /// A file that could not be read, and why.
+    Failed {
+        file: String,
+        kind: &'static str,
+        error: String,
+    },
 }
 
+/// Describes every file; one that cannot be read is reported (as an error
+/// line, or an entry with `"kind": "error"` in `--json`) and the others
+/// still are, and the command then exits 1.
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let limits = Limits::default();
     let mut reports = Vec::new();
+    let mut failed = Vec::new();
     for file in &args.files {
-        let report = if asset::is_asset(file)? {
-            let report = asset::describe(file)?;
-            if !args.json {
-                asset::print_text(&report);
+        match describe(file, &limits) {
+            Ok(report) => {
+                if !args.json {
+                    match &report {
+                        Described::Character(r) => print_text(r),
+                        Described::Asset(r) => asset::print_text(r),
+                        Described::Failed { .. } => {}
+                    }
+                }
+                reports.push(report);
             }
-            Described::Asset(Box::new(report))
-        } else {
-            let imported = super::load::character(file, &limits)?;
-            let report = Report {
-                file: file.display().to_string(),
-                kind: "character",
-                summary: Summary::of(&imported.character, &imported.clips),
-                warnings: imported.warnings,
-            };
-            if !args.json {
-                print_text(&report);
+            Err(e) if args.files.len() == 1 => return Err(e),
+            Err(e) => {
+                eprintln!("error: {e:#}");
+                reports.push(Described::Failed {
+                    file: file.display().to_string(),
+                    kind: "error",
+                    error: format!("{e:#}"),
+                });
+                failed.push(file.display().to_string());
             }
-            Described::Character(Box::new(report))
-        };
-        reports.push(report);
+        }
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&reports)?);
     }
+    if !failed.is_empty() {
+        anyhow::bail!(
+            "{} of {} files could not be read: {}",
+            failed.len(),
+            args.files.len(),
+            failed.join(", ")
+        );
+    }
     Ok(())
+}
+
+fn describe(file: &std::path::Path, limits: &Limits) -> anyhow::Result<Described> {
+    if asset::is_asset(file)? {
+        return Ok(Described::Asset(Box::new(asset::describe(file)?)));
+    }
+    let imported = super::load::character(file, limits)?;
+    Ok(Described::Character(Box::new(Report {
+        file: file.display().to_string(),
+        kind: "character",
+        summary: Summary::of(&imported.character, &imported.clips),
+        warnings: imported.warnings,
+    })))
 }
 
 fn print_text(r: &Report) {
@@ -108,8 +141,19 @@ fn print_text(r: &Report) {
     }
     let [lo, hi] = s.bounds;
     println!(
-        "  bounds       [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}] over all clips (diagonal {:.4})",
-        lo[0], lo[1], lo[2], hi[0], hi[1], hi[2], s.diagonal
+        "  bounds       [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}] {} (diagonal {:.4})",
+        lo[0],
+        lo[1],
+        lo[2],
+        hi[0],
+        hi[1],
+        hi[2],
+        if s.clips.is_empty() {
+            "in the bind pose (no clips)"
+        } else {
+            "over every clip frame"
+        },
+        s.diagonal
     );
     for w in &r.warnings {
         println!("  warning      {w}");

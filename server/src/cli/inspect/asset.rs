@@ -341,7 +341,7 @@ pub(super) fn print_text(r: &Report) {
             println!("  model        {} rigid parts, {cells}", parts.len());
             println!("  parts        {}", parts.join(", "));
             if *cones {
-                println!("  cones        baked, T_clip {tclip_resolution}³");
+                println!("  cones        baked, T_clip {tclip_resolution}² entries");
             } else {
                 println!("  cones        none: occlusion only");
             }
