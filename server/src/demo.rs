@@ -26,7 +26,7 @@ pub(crate) async fn run(url: &str, token: &str) -> anyhow::Result<()> {
         })?;
         let id = bake.bake.id;
         println!(
-            "demo: baking the bundled Fox (vertex-clustered) as bake {id}\n\n  open {url}/#token={}&next=/bakes/{id}\n\nto watch it in the dashboard (or `aobake status {id}`)",
+            "demo: baking the bundled Fox (vertex-clustered, seed {seed}: a fresh bake each time) as bake {id}\n\n  open {url}/#token={}&next=/bakes/{id}\n\nto watch it in the dashboard (or `aobake status {id}`)",
             dashboard.token
         );
         anyhow::Ok(())

@@ -652,7 +652,7 @@ impl Bake<'_> {
 /// static average (`variants`, baked first, static average last).
 fn slices_png(model: &GridModel, variants: &[GridVariant]) -> Result<Vec<u8>, String> {
     use plotters::prelude::*;
-    const SIDE: usize = 160;
+    const SIDE: usize = 200;
     const GAP: usize = 12;
     const LABEL: usize = 22;
     const TOP: usize = 70;
@@ -699,16 +699,18 @@ fn slices_png(model: &GridModel, variants: &[GridVariant]) -> Result<Vec<u8>, St
         .map_err(e)?;
         let psnr = |v: &GridVariant| {
             format!(
-                "{} {:.1} dB at vertices, {:.1} dB on the ground",
+                "{}: {:.1} dB, {:.1} dB",
                 v.name, v.vertices.mean.psnr_db, v.ground.mean.psnr_db
             )
         };
         let average = variants.iter().find(|v| v.name == "static average");
         if let (Some(baked), Some(average)) = (variants.first(), average) {
             let frames = baked.vertices.frames;
-            let judged = format!("judged on {frames} clip frames against fresh rays:");
-            text(format!("{judged} {}", psnr(baked)), GAP, 26, 11).map_err(e)?;
-            text(format!("the baseline: {}", psnr(average)), GAP, 40, 11).map_err(e)?;
+            let judged =
+                format!("PSNR at the vertices, on the ground; {frames} clip frames, fresh rays:");
+            text(judged, GAP, 26, 11).map_err(e)?;
+            let line = format!("{};   {}", psnr(baked), psnr(average));
+            text(line, GAP, 40, 11).map_err(e)?;
         }
         for (axis, label) in [
             "x = middle: z →, y ↑",
@@ -911,7 +913,7 @@ mod tests {
             "the errors of the baked variant and the baseline"
         );
         assert!(ink(70, 92), "the part's name");
-        let (top, side, gap) = (92, 160, 12);
+        let (top, side, gap) = (92, 200, 12);
         // x = middle slice: every cell is 200, drawn as 255 − 200.
         for (x, y) in [(gap + 1, top + 1), (gap + side - 2, top + side - 2)] {
             assert_eq!(pixel(x, y), [55, 55, 55], "({x}, {y})");
