@@ -271,6 +271,31 @@ fn errors_are_clear_and_exit_nonzero() {
     let out = aobake(&["inspect", dir.path().join("missing.glb").to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(stderr(&out).contains("cannot read"), "{}", stderr(&out));
+
+    // A negative number reaches the parameter's own check, not clap's
+    // "unexpected argument".
+    let out = aobake(&[
+        "params",
+        "--method",
+        "vertex-linear",
+        "--max-distance",
+        "-1",
+    ]);
+    assert!(
+        stderr(&out).contains("max_distance must be positive"),
+        "{}",
+        stderr(&out)
+    );
+    // A server address without its scheme is named, with the fix.
+    let server = ["--server", "127.0.0.1:8080", "--token", "t"];
+    for args in [&["status", "1"][..], &["worker"]] {
+        let out = aobake(&[args, &server[..]].concat());
+        assert!(
+            stderr(&out).contains("is not a URL") && stderr(&out).contains("http://127.0.0.1:8080"),
+            "{args:?}: {}",
+            stderr(&out)
+        );
+    }
 }
 
 #[test]

@@ -176,8 +176,18 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
     ) {
         let setup = bake.cubemap_setup()?;
         let o = &setup.options;
+        let rays = (o.points() * u64::from(o.rays)) as f64;
+        let rays = if rays >= 1e9 {
+            format!("{:.2} G rays", rays / 1e9)
+        } else {
+            format!("{:.1} M rays", rays / 1e6)
+        };
+        let encoding = match serde_json::to_value(encoding) {
+            Ok(serde_json::Value::String(name)) => name,
+            _ => format!("{encoding:?}"),
+        };
         eprintln!(
-            "{}: {} vertices, {} triangles; clip {} ({:.2} s); {encoding:?} cubemaps of {}² texels, {} shells, {} time samples, {} rays per point ({:.2} G rays)",
+            "{}: {} vertices, {} triangles; clip {} ({:.2} s); cubemaps ({encoding} encoding) of {}² texels, {} shells, {} time samples, {} rays per point ({rays})",
             args.request.file.display(),
             character.vertex_count(),
             character.triangles.len(),
@@ -187,7 +197,6 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
             o.shells,
             o.times,
             o.rays,
-            (o.points() * u64::from(o.rays)) as f64 / 1e9,
         );
     } else {
         eprintln!(
@@ -326,7 +335,7 @@ fn cubemap_summary(report: &CubemapReport) -> String {
     let l = &report.layout;
     let t = &report.timings;
     let mut out = format!(
-        "{} on clip {}: {}² texels, {} shells, {} time samples; {} bytes of texels
+        "{} on clip {}: {}² texels, {} shells, {} time samples; {} bytes of model (texels and any static ground)
 ground truth at {} random times: {} points in space ({} inside the mesh left out), {} on the ground ({} under the character left out), {} rays each; its own noise RMSE {:.4}
 | variant | bytes | space RMSE | space too dark MSE | space too bright MSE | ground RMSE | ground too dark MSE | ground too bright MSE | fit RMSE |
 |---|---|---|---|---|---|---|---|---|

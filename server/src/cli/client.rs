@@ -60,7 +60,10 @@ impl Conn {
                     self.data.join("admin.token").display()
                 )
             })?;
-        Ok(Client::new(server.trim(), token.trim()))
+        Ok(Client::new(
+            super::common::server_url(&server)?,
+            token.trim(),
+        ))
     }
 }
 
@@ -223,7 +226,7 @@ pub(super) fn status(args: &StatusArgs) -> anyhow::Result<()> {
     }
     let b = &view.bake;
     println!(
-        "bake {}: {} ({} of {} units), {} {}; key {}",
+        "bake {}: {} ({} of {} units), {}; jobs: {}; key {}",
         args.id,
         b.state.as_str(),
         view.progress.done,
@@ -231,7 +234,8 @@ pub(super) fn status(args: &StatusArgs) -> anyhow::Result<()> {
         b.method,
         states
             .iter()
-            .map(|(s, n)| format!("{n} {s}"))
+            // The dashboard's word for a job waiting for a worker.
+            .map(|(s, n)| format!("{n} {}", if *s == "available" { "queued" } else { s }))
             .collect::<Vec<_>>()
             .join(", "),
         b.key,

@@ -85,6 +85,19 @@ pub(super) fn pose(file: &Path, args: &PoseArgs, limits: &Limits) -> anyhow::Res
     })
 }
 
+/// A server address as `--server` takes it: a URL with its scheme, such
+/// as `http://127.0.0.1:8080` (without one the HTTP client answers only
+/// "invalid format").
+pub(super) fn server_url(s: &str) -> anyhow::Result<&str> {
+    let s = s.trim();
+    if !(s.starts_with("http://") || s.starts_with("https://")) {
+        bail!(
+            "the server address {s:?} is not a URL: write it with its scheme, such as http://{s}"
+        );
+    }
+    Ok(s.trim_end_matches('/'))
+}
+
 /// The median of `v` (the mean of the middle two when their number is
 /// even): what the benchmarks quote on noisy shared machines.
 /// A clap value parser for a positive, finite number (seconds, rates):

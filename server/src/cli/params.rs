@@ -53,7 +53,7 @@ pub(super) struct ParamArgs {
     samples: Option<u32>,
     /// Hits farther than this (model units) do not occlude. Default: no
     /// limit.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     max_distance: Option<f32>,
     /// Seed of poses, ray directions and k-means: the same seed gives the
     /// same asset, byte for byte.
@@ -70,18 +70,18 @@ pub(super) struct ParamArgs {
     #[arg(long)]
     eval_poses: Option<usize>,
     /// Frame rate at which test clips are evaluated.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     eval_fps: Option<f32>,
     /// vertex-linear, vertex-clustered: ridge weight λ per pose on
     /// standardised pose coordinates; 0 is the pseudo-inverse.
     /// vertex-linear otherwise picks λ by cross-validation over clips:
     /// this flag fixes it (and sets linear.ridge_cv=false).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     ridge: Option<f64>,
     /// vertex-linear: drop coefficients whose effect is below this much AO
     /// per standard deviation of their joint angle, and store the rest
     /// sparse.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     threshold: Option<f32>,
     /// vertex-clustered: pose clusters m.
     #[arg(long)]
@@ -94,7 +94,7 @@ pub(super) struct ParamArgs {
     #[arg(long)]
     vertex_clusters: Option<usize>,
     /// vertex-clustered: MLS blend falloff α (Kirk & Arikan Eq. 5).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     alpha: Option<f32>,
     /// vertex-clustered: centre each pose cluster on the global mean AO
     /// (the paper's Eq. 1) or on its own mean.
@@ -102,7 +102,7 @@ pub(super) struct ParamArgs {
     centering: Option<String>,
     /// vertex-clustered: clamp whitened PCA coordinates to ± this many
     /// standard deviations (0: off).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     clamp: Option<f32>,
     /// Any parameter by its name in `aobake params` (dotted for method
     /// options, such as `clustered.vertex_tolerance=0.01`); the value is

@@ -24,7 +24,8 @@ pub(super) struct Args {
     /// The character it was baked for.
     file: PathBuf,
     /// A second glTF file whose animations drive the character, bound to
-    /// its nodes by name. Its clips are searched before the character's.
+    /// its nodes by name. Its clips are searched before the character's
+    /// own.
     #[arg(long)]
     clips: Option<PathBuf>,
     /// The clip to show (see `aobake inspect`).

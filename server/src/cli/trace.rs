@@ -33,11 +33,11 @@ pub(super) struct Args {
     samples: u32,
     /// Hits farther than this (model units) do not occlude. Default: no
     /// limit.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     max_distance: Option<f32>,
     /// Obscurance instead of AO: a hit at distance d counts e^(−τd), with
     /// τ given here per model unit (Kontkanen & Aila Eq. 2).
-    #[arg(long, value_name = "TAU")]
+    #[arg(long, value_name = "TAU", allow_negative_numbers = true)]
     obscurance: Option<f32>,
     /// Add a ground plane below the mesh: a solid half-space, or a square
     /// with --ground-half-size.
@@ -53,7 +53,7 @@ pub(super) struct Args {
     ground_height: Option<f32>,
     /// Make the ground a square of this half edge, centred under the mesh
     /// (as the Blender reference baker does), instead of infinite.
-    #[arg(long, requires = "ground")]
+    #[arg(long, requires = "ground", allow_negative_numbers = true)]
     ground_half_size: Option<f32>,
     /// Seed of the ray directions: the same seed gives the same output,
     /// whatever the thread count.

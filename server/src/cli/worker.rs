@@ -54,12 +54,13 @@ pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
         GpuChoice::Off => TracerChoice::Cpu,
         GpuChoice::Require => TracerChoice::Gpu,
     };
+    let server = super::common::server_url(&args.server)?.to_owned();
     tracer.install()?;
     let host = std::fs::read_to_string("/etc/hostname")
         .map(|h| h.trim().to_owned())
         .unwrap_or_else(|_| "worker".into());
     aobake_worker::run(aobake_worker::WorkerConfig {
-        server: args.server.clone(),
+        server,
         token: args.token.clone(),
         concurrency: args.concurrency,
         id: args

@@ -36,6 +36,14 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
         .to_owned();
     assert_eq!(key.len(), 64, "{stdout}");
     assert!(stdout.contains("frames of the training clips"), "{stdout}");
+    let out = env.aobake(&["status", "1"]);
+    let status = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        status.starts_with("bake 1: done")
+            && status.contains("; jobs: ")
+            && status.contains(" completed"),
+        "{status}"
+    );
 
     let fetched = env.dir.path().join("svc.aob");
     let out = env.aobake(&["fetch", "--key", &key, "--out", fetched.to_str().unwrap()]);
