@@ -10,7 +10,7 @@ use crate::types::{
     BakeRequest, BakeView, CheckpointRef, CheckpointRequest, CompleteManyReply,
     CompleteManyRequest, CompleteRequest, Completion, FailRequest, HeartbeatReply,
     HeartbeatRequest, JobCompletion, Lease, LeaseManyRequest, LeaseRequest, Leases, NewToken,
-    NewTokenRequest, Problem, TokenRequest, Uploaded, Whoami,
+    NewTokenRequest, Problem, TokenRequest, TokenView, Uploaded, Whoami,
 };
 
 /// The longest a call waits in all on a server that answers 429 (or 503
@@ -316,6 +316,23 @@ impl Client {
     /// `POST /v1/tokens` (admin).
     pub fn create_token(&self, request: &NewTokenRequest) -> Result<NewToken> {
         self.post_for("/v1/tokens", request)
+    }
+
+    /// `GET /v1/tokens`: every token, newest first (needs `admin`).
+    pub fn tokens(&self) -> Result<Vec<TokenView>> {
+        self.get("/v1/tokens")
+    }
+
+    /// `DELETE /v1/tokens/{id}`: revokes a token (needs `admin`); it is
+    /// refused from its next request on.
+    pub fn revoke_token(&self, id: &str) -> Result<()> {
+        self.send(|| {
+            self.agent
+                .delete(self.url(&format!("/v1/tokens/{id}")))
+                .header("authorization", &self.auth)
+                .call()
+        })?;
+        Ok(())
     }
 
     /// Waits up to `wait_secs` for a job; `tracer` tells the server what

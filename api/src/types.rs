@@ -517,6 +517,24 @@ pub struct Whoami {
     pub scopes: Vec<String>,
 }
 
+/// A token as `GET /v1/tokens` lists it: never its secret.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct TokenView {
+    /// sha256 of the secret, lower-case hex: what `DELETE /v1/tokens/{id}`
+    /// takes.
+    #[cfg_attr(feature = "schema", schema(pattern = "^[0-9a-f]{64}$"))]
+    pub id: String,
+    /// Its name.
+    pub name: String,
+    /// Its scopes.
+    pub scopes: Vec<String>,
+    /// Milliseconds since the epoch.
+    pub created_at: i64,
+    /// Whether it is the token of this request.
+    pub current: bool,
+}
+
 /// `POST /v1/tokens`.
 #[derive(Debug, Deserialize, Serialize)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]

@@ -72,6 +72,8 @@ impl Modify for BearerAuth {
         jobs::put_blob,
         system::workers,
         system::create_token,
+        system::tokens,
+        system::revoke_token,
         system::healthz,
         system::ready,
         system::metrics,

@@ -17,7 +17,7 @@ use aobake_core::{
     bake::{Bake, BakeParams, BakedAsset, bake_in_process},
     method::{
         Method,
-        cubemap::CubemapOptions,
+        cubemap::{ContinuousLayout, CubemapOptions},
         grid::{GridOptions, base::Receiver, model::GridModel},
     },
 };
@@ -29,8 +29,9 @@ use serde_json::Value;
 
 use super::util;
 
-/// A bake of `file` (a bundled character) with small settings.
-fn bake(file: &str, method: Method) -> (Vec<u8>, Character, Vec<Clip>) {
+/// A bake of `file` (a bundled character) with small settings (a
+/// continuous cubemap in Kroon's thirds layout with `thirds`).
+fn bake(file: &str, method: Method, thirds: bool) -> (Vec<u8>, Character, Vec<Clip>) {
     let imported = util::load(&util::repo().join("tests/data/characters").join(file));
     let mut p = BakeParams::new(method);
     p.poses = 24;
@@ -48,6 +49,11 @@ fn bake(file: &str, method: Method) -> (Vec<u8>, Character, Vec<Clip>) {
         eval_rays: 4,
         eval_times: 2,
         ground_resolution: 8,
+        continuous_layout: if thirds {
+            ContinuousLayout::Thirds
+        } else {
+            ContinuousLayout::Cosine
+        },
         ..CubemapOptions::default()
     };
     p.grid = GridOptions {
@@ -393,20 +399,43 @@ fn assets_mutated_inside_valid_checksums_are_refused_or_read_safely() {
     let iterations = env("AOBAKE_MUTATIONS", 400) as usize;
     let seed = env("AOBAKE_MUTATION_SEED", 0);
     let seeds = [
-        ("RiggedFigure/RiggedFigure.glb", Method::StaticAverage),
-        ("RiggedFigure/RiggedFigure.glb", Method::VertexLinear),
-        ("RiggedFigure/RiggedFigure.glb", Method::VertexClustered),
-        ("RiggedSimple/RiggedSimple.glb", Method::CubemapDiscrete),
-        ("RiggedSimple/RiggedSimple.glb", Method::CubemapContinuous),
-        ("CesiumMilkTruck/CesiumMilkTruck.glb", Method::Grid),
+        (
+            "RiggedFigure/RiggedFigure.glb",
+            Method::StaticAverage,
+            false,
+        ),
+        ("RiggedFigure/RiggedFigure.glb", Method::VertexLinear, false),
+        (
+            "RiggedFigure/RiggedFigure.glb",
+            Method::VertexClustered,
+            false,
+        ),
+        (
+            "RiggedSimple/RiggedSimple.glb",
+            Method::CubemapDiscrete,
+            false,
+        ),
+        (
+            "RiggedSimple/RiggedSimple.glb",
+            Method::CubemapContinuous,
+            false,
+        ),
+        (
+            "RiggedSimple/RiggedSimple.glb",
+            Method::CubemapContinuous,
+            true,
+        ),
+        ("CesiumMilkTruck/CesiumMilkTruck.glb", Method::Grid, false),
     ];
     let mut failures = Vec::new();
     let mut accepted = 0;
-    for (file, method) in seeds {
-        let (asset, character, clips) = bake(file, method);
+    for (file, method, thirds) in seeds {
+        let (asset, character, clips) = bake(file, method, thirds);
         read_and_evaluate(&asset, &character, &clips).expect("the unmutated asset");
         let original = Container::from_bytes(&asset).unwrap();
-        let mut rng = ChaCha8Rng::seed_from_u64(seed << 16 | u64::from(method.code()));
+        let mut rng = ChaCha8Rng::seed_from_u64(
+            seed << 16 | u64::from(method.code()) << 1 | u64::from(thirds),
+        );
         for i in 0..iterations {
             let mut c = original.clone();
             let what: Vec<String> = (0..rng.random_range(1..=3))
@@ -426,19 +455,27 @@ fn assets_mutated_inside_valid_checksums_are_refused_or_read_safely() {
                     .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                     .unwrap_or_default(),
             };
-            failures.push(format!("{method} #{i} ({}): {failure}", what.join("; ")));
+            let name = if thirds {
+                "cubemap-continuous (thirds)"
+            } else {
+                method.name()
+            };
+            failures.push(format!("{name} #{i} ({}): {failure}", what.join("; ")));
         }
     }
     assert!(
         failures.is_empty(),
         "{} of {} mutated assets failed ({accepted} read), the first:\n{}",
         failures.len(),
-        6 * iterations,
+        seeds.len() * iterations,
         failures[..failures.len().min(20)].join("\n")
     );
     // The mutations reach the readers' checks (some are harmless, such as
     // a changed generator or parameter, and read), not only the parser's.
-    assert!(accepted > 0 && accepted < 6 * iterations, "{accepted}");
+    assert!(
+        accepted > 0 && accepted < seeds.len() * iterations,
+        "{accepted}"
+    );
 }
 
 #[test]
@@ -447,7 +484,7 @@ fn a_degenerate_pose_gives_numbers() {
     // vertex-clustered measures its handles in, has no inverse; and
     // translations at the edge of f32.
     for method in [Method::VertexLinear, Method::VertexClustered] {
-        let (asset, _, _) = bake("RiggedFigure/RiggedFigure.glb", method);
+        let (asset, _, _) = bake("RiggedFigure/RiggedFigure.glb", method, false);
         let Asset::Vertex(mut ao) = Asset::from_bytes(&asset).unwrap() else {
             panic!("a vertex asset");
         };

@@ -321,7 +321,8 @@ pub(super) struct TokenArgs {
 enum TokenCommand {
     /// Create a token (needs an admin token); prints it once.
     Create {
-        /// Scopes: read, submit, worker, admin (repeat for several).
+        /// Scopes: read, submit (includes read), worker, admin (all;
+        /// repeat for several).
         #[arg(long = "scope", required = true)]
         scopes: Vec<String>,
         /// A name to recognise it by.
@@ -330,14 +331,96 @@ enum TokenCommand {
         #[command(flatten)]
         conn: Conn,
     },
+    /// List every token, newest first: id, name, scopes, age (needs an
+    /// admin token; the secrets are not stored, so not shown).
+    List {
+        /// Print JSON (`GET /v1/tokens`) instead of a table.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        conn: Conn,
+    },
+    /// Revoke a token by its id (as `token list` shows it, or a unique
+    /// start of it): it is refused from its next request on (needs
+    /// another admin token).
+    Revoke {
+        /// The token's id, or its first characters (at least 8).
+        id: String,
+        #[command(flatten)]
+        conn: Conn,
+    },
 }
 
 pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
-    let TokenCommand::Create { scopes, name, conn } = &args.what;
-    let created = conn.api()?.create_token(&NewTokenRequest {
-        name: name.clone(),
-        scopes: scopes.clone(),
-    })?;
-    println!("{}", created.token);
+    match &args.what {
+        TokenCommand::Create { scopes, name, conn } => {
+            let created = conn.api()?.create_token(&NewTokenRequest {
+                name: name.clone(),
+                scopes: scopes.clone(),
+            })?;
+            println!("{}", created.token);
+        }
+        TokenCommand::List { json, conn } => {
+            let tokens = conn.api()?.tokens()?;
+            if *json {
+                println!("{}", serde_json::to_string_pretty(&tokens)?);
+                return Ok(());
+            }
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_millis() as i64);
+            println!("{:<12}  {:<24}  {:<22}  created", "id", "name", "scopes");
+            for t in &tokens {
+                println!(
+                    "{:<12}  {:<24}  {:<22}  {} ago{}",
+                    &t.id[..12.min(t.id.len())],
+                    t.name,
+                    t.scopes.join(","),
+                    age(now - t.created_at),
+                    if t.current { " (this token)" } else { "" }
+                );
+            }
+        }
+        TokenCommand::Revoke { id, conn } => {
+            let api = conn.api()?;
+            if id.len() < 8 {
+                bail!(
+                    "give at least the first 8 characters of the token's id (`aobake token list`)"
+                );
+            }
+            let matching: Vec<_> = api
+                .tokens()?
+                .into_iter()
+                .filter(|t| t.id.starts_with(id.as_str()))
+                .collect();
+            let token = match matching.as_slice() {
+                [one] => one,
+                [] => bail!("no token's id starts with {id} (`aobake token list` shows them)"),
+                _ => bail!(
+                    "{} tokens' ids start with {id}: give more of it",
+                    matching.len()
+                ),
+            };
+            api.revoke_token(&token.id)?;
+            println!(
+                "revoked {} ({}, {})",
+                &token.id[..12],
+                token.name,
+                token.scopes.join(",")
+            );
+        }
+    }
     Ok(())
+}
+
+/// A duration in milliseconds as a person reads an age: 40 s, 12 min,
+/// 5 h, 3 days.
+fn age(ms: i64) -> String {
+    let s = ms.max(0) / 1000;
+    match s {
+        0..60 => format!("{s} s"),
+        60..3600 => format!("{} min", s / 60),
+        3600..86_400 => format!("{} h", s / 3600),
+        _ => format!("{} days", s / 86_400),
+    }
 }

@@ -1,7 +1,7 @@
 //! Workers, tokens, health and metrics.
 
 use aobake_api::schema::Refusals;
-use aobake_api::{NewToken, NewTokenRequest, Whoami};
+use aobake_api::{NewToken, NewTokenRequest, TokenView, Whoami};
 use axum::{
     Json, Router,
     extract::State,
@@ -13,7 +13,7 @@ use axum::{
 use crate::{
     auth::{Admin, Need, Read, new_token, token_hash},
     error::{ApiError, ApiResult, Problem},
-    extract::Body,
+    extract::{ApiPath, Body},
     state::AppState,
     store::WorkerRow,
 };
@@ -22,7 +22,8 @@ pub(super) fn router() -> Router<AppState> {
     Router::new()
         .route("/v1/workers", get(workers))
         .route("/v1/whoami", get(whoami))
-        .route("/v1/tokens", post(create_token))
+        .route("/v1/tokens", post(create_token).get(tokens))
+        .route("/v1/tokens/{id}", axum::routing::delete(revoke_token))
         .route("/healthz", get(healthz))
         .route("/readyz", get(ready))
         .route("/metrics", get(metrics))
@@ -85,6 +86,57 @@ pub(crate) async fn create_token(
             scopes: req.scopes,
         }),
     ))
+}
+
+#[utoipa::path(get, path = "/v1/tokens", tag = "system",
+    security(("bearer" = ["admin"])),
+    responses((status = 200, description = "Every token, newest first: its id (the sha256 of the secret, which is not stored), name, scopes and age", body = Vec<TokenView>), Refusals))]
+pub(crate) async fn tokens(
+    State(state): State<AppState>,
+    caller: Need<Admin>,
+) -> ApiResult<Json<Vec<TokenView>>> {
+    let rows = state.store.tokens().await?;
+    Ok(Json(
+        rows.into_iter()
+            .map(|(hash, row)| TokenView {
+                current: hash == caller.0.hash,
+                id: hash,
+                name: row.name,
+                scopes: row.scopes,
+                created_at: row.created_at,
+            })
+            .collect(),
+    ))
+}
+
+#[utoipa::path(delete, path = "/v1/tokens/{id}", tag = "system",
+    params(("id" = String, Path, description = "The token's id, as `GET /v1/tokens` lists it")),
+    security(("bearer" = ["admin"])),
+    responses((status = 204, description = "Revoked: refused from its next request on"),
+        (status = 400, description = "Not a token id", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such token", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The token of this request: revoke it with another admin token", body = Problem, content_type = "application/problem+json"),
+        Refusals))]
+pub(crate) async fn revoke_token(
+    State(state): State<AppState>,
+    caller: Need<Admin>,
+    ApiPath(id): ApiPath<String>,
+) -> ApiResult<StatusCode> {
+    if crate::blobs::check_digest(&id).is_err() {
+        return Err(ApiError::bad(
+            "bad_token_id",
+            "a token id is 64 lower-case hex digits, as GET /v1/tokens lists it",
+        ));
+    }
+    if id == caller.0.hash {
+        return Err(ApiError::Conflict(
+            "this is the token of this request: revoke it with another admin token, so that one is left".into(),
+        ));
+    }
+    if !state.store.delete_token(&id).await? {
+        return Err(ApiError::NotFound(format!("no token {id}")));
+    }
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// Liveness: the process answers (no token: load balancers call it).

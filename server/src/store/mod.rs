@@ -110,6 +110,8 @@ pub struct TokenRow {
     pub name: String,
     /// Scopes.
     pub scopes: Vec<String>,
+    /// Milliseconds since the epoch.
+    pub created_at: i64,
 }
 
 /// How leases and retries behave.
@@ -255,6 +257,11 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()>;
     /// A token by hash.
     async fn token(&self, hash: &str) -> Result<Option<TokenRow>>;
+    /// Every token, newest first, by hash (the secrets are not stored).
+    async fn tokens(&self) -> Result<Vec<(String, TokenRow)>>;
+    /// Deletes a token: from its next request on it is refused (401).
+    /// Whether there was one.
+    async fn delete_token(&self, hash: &str) -> Result<bool>;
     /// Jobs per state, and lease expiries so far.
     async fn queue_stats(&self) -> Result<(Vec<(JobState, i64)>, i64)>;
     /// Whether the database answers.

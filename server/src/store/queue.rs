@@ -1152,16 +1152,39 @@ impl<B: Backend> Store for SqlStore<B> {
     }
 
     async fn token(&self, hash: &str) -> Result<Option<TokenRow>> {
-        let row: Option<(String, String)> = self
+        let row: Option<(String, String, i64)> = self
             .backend
             .read()
             .await?
-            .optional(B::sql("SELECT name, scopes FROM tokens WHERE hash = $1").bind(hash))
+            .optional(
+                B::sql("SELECT name, scopes, created_at FROM tokens WHERE hash = $1").bind(hash),
+            )
             .await?;
-        Ok(row.map(|(name, scopes)| TokenRow {
-            name,
-            scopes: scopes.split(',').map(str::to_owned).collect(),
-        }))
+        Ok(row.map(|(name, scopes, created_at)| token_row(name, &scopes, created_at)))
+    }
+
+    async fn tokens(&self) -> Result<Vec<(String, TokenRow)>> {
+        let rows: Vec<(String, String, String, i64)> = self
+            .backend
+            .read()
+            .await?
+            .all(B::sql(
+                "SELECT hash, name, scopes, created_at FROM tokens ORDER BY created_at DESC, hash",
+            ))
+            .await?;
+        Ok(rows
+            .into_iter()
+            .map(|(hash, name, scopes, created_at)| (hash, token_row(name, &scopes, created_at)))
+            .collect())
+    }
+
+    async fn delete_token(&self, hash: &str) -> Result<bool> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            let deleted = c
+                .execute(B::sql("DELETE FROM tokens WHERE hash = $1").bind(hash))
+                .await?;
+            Ok(deleted > 0)
+        })
     }
 
     async fn queue_stats(&self) -> Result<(Vec<(JobState, i64)>, i64)> {
@@ -1200,5 +1223,14 @@ impl<B: Backend> Store for SqlStore<B> {
         events: tokio::sync::broadcast::Sender<crate::state::BakeEvent>,
     ) -> Result<Option<tokio::sync::mpsc::UnboundedSender<crate::state::BakeEvent>>> {
         self.backend.share_events(events).await
+    }
+}
+
+/// A token's row from its columns (scopes comma-separated).
+fn token_row(name: String, scopes: &str, created_at: i64) -> TokenRow {
+    TokenRow {
+        name,
+        scopes: scopes.split(',').map(str::to_owned).collect(),
+        created_at,
     }
 }

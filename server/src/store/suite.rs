@@ -80,6 +80,35 @@ pub(crate) async fn run_all(store: &dyn Store) {
     tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store).await;
     a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store).await;
     a_batch_split_by_failures_leases_each_job_once(store).await;
+    tokens_are_listed_newest_first_and_deleted(store).await;
+}
+
+async fn tokens_are_listed_newest_first_and_deleted(store: &dyn Store) {
+    let before = store.tokens().await.unwrap().len();
+    store
+        .create_token(&"1".repeat(64), "ci", &["read".into(), "submit".into()])
+        .await
+        .unwrap();
+    // Another millisecond on the database's clock: newest first.
+    tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    store
+        .create_token(&"2".repeat(64), "farm", &["worker".into()])
+        .await
+        .unwrap();
+    let listed = store.tokens().await.unwrap();
+    assert_eq!(listed.len(), before + 2);
+    let (newest, row) = &listed[0];
+    assert_eq!(
+        (newest.as_str(), row.name.as_str()),
+        ("2".repeat(64).as_str(), "farm")
+    );
+    let ci = &listed[1].1;
+    assert_eq!(ci.scopes, ["read", "submit"]);
+    assert!(ci.created_at > 1_600_000_000_000 && ci.created_at <= row.created_at);
+    assert!(store.delete_token(&"1".repeat(64)).await.unwrap());
+    assert!(!store.delete_token(&"1".repeat(64)).await.unwrap(), "gone");
+    assert_eq!(store.token(&"1".repeat(64)).await.unwrap(), None);
+    assert!(store.token(&"2".repeat(64)).await.unwrap().is_some());
 }
 
 /// A slot with failures on record claims apart from the others (its own

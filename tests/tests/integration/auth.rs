@@ -43,6 +43,8 @@ const ROUTES: &[(&str, &str, &str)] = &[
     ("PUT", "/v1/blobs/{digest}", "worker"),
     ("GET", "/v1/workers", "read"),
     ("POST", "/v1/tokens", "admin"),
+    ("GET", "/v1/tokens", "admin"),
+    ("DELETE", "/v1/tokens/{id}", "admin"),
     ("GET", "/metrics", "read"),
 ];
 
@@ -351,4 +353,69 @@ fn a_worker_with_a_refused_token_exits_saying_why() {
             "{stderr}"
         );
     }
+}
+
+/// Tokens are listed (never their secrets) and revoked: a revoked token is
+/// refused from its next request on; an admin cannot revoke the token it
+/// calls with (one must be left).
+#[test]
+fn tokens_are_listed_and_revoked_at_once() {
+    let env = TestEnv::start(Options::default());
+    let out = env.aobake(&["token", "create", "--scope", "submit", "--name", "ci"]);
+    assert!(out.status.success(), "{out:?}");
+    let ci = String::from_utf8_lossy(&out.stdout).trim().to_owned();
+    assert_eq!(env.request("GET", "/v1/bakes", &ci, None).unwrap().0, 200);
+
+    let out = env.aobake(&["token", "list", "--json"]);
+    let listed: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let listed = listed.as_array().unwrap();
+    assert_eq!(listed[0]["name"], "ci", "newest first: {listed:?}");
+    assert!(
+        !out.stdout.windows(ci.len()).any(|w| w == ci.as_bytes()),
+        "no secret listed"
+    );
+    let id = listed[0]["id"].as_str().unwrap().to_owned();
+    let admin = listed.iter().find(|t| t["current"] == true).unwrap();
+    assert_eq!(admin["scopes"], json!(["admin"]));
+    let table = env.aobake(&["token", "list"]);
+    let table = String::from_utf8_lossy(&table.stdout);
+    assert!(
+        table.contains(&id[..12]) && table.contains("(this token)"),
+        "{table}"
+    );
+
+    let out = env.aobake(&["token", "revoke", &id[..10]]);
+    assert!(out.status.success(), "{out:?}");
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("revoked"),
+        "{out:?}"
+    );
+    let (status, problem) = env.request("GET", "/v1/bakes", &ci, None).unwrap();
+    assert_eq!(status, 401, "a revoked token is refused at once: {problem}");
+    let out = env.aobake(&["token", "revoke", &id[..10]]);
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("no token's id starts with"),
+        "{out:?}"
+    );
+
+    let own = admin["id"].as_str().unwrap();
+    let (status, problem) = env
+        .request(
+            "DELETE",
+            &format!("/v1/tokens/{own}"),
+            aobake_e2e::ADMIN,
+            None,
+        )
+        .unwrap();
+    assert_eq!(status, 409, "{problem}");
+    let (status, _) = env
+        .request(
+            "DELETE",
+            &format!("/v1/tokens/{}", "0".repeat(64)),
+            aobake_e2e::ADMIN,
+            None,
+        )
+        .unwrap();
+    assert_eq!(status, 404);
 }

@@ -146,13 +146,14 @@ impl CubemapModel {
     }
 }
 
-/// Checks that every half-float coefficient of a continuous encoding is
-/// a finite number: an infinite one times a basis value of 0 would decode
-/// as NaN. (A texel's 64 bytes are 16 in each of four cubemaps; its first
-/// 50 hold the 25 coefficients, so cubemaps 0 to 2 hold eight each and
-/// cubemap 3 one.) The discrete encoding's bytes are all numbers.
+/// Checks that every half-float coefficient of the continuous (cosine)
+/// encoding is a finite number: an infinite one times a basis value of 0
+/// would decode as NaN. (A texel's 64 bytes are 16 in each of four
+/// cubemaps; its first 50 hold the 25 coefficients, so cubemaps 0 to 2
+/// hold eight each and cubemap 3 one.) The discrete and the thirds
+/// encodings store quantised integers: any bytes are numbers.
 fn check_coefficients(l: &CubemapLayout, texels: &[u8]) -> Result<(), AssetError> {
-    if l.encoding == Encoding::Discrete {
+    if l.encoding != Encoding::Continuous {
         return Ok(());
     }
     let per_cubemap = FACES * l.resolution * l.resolution * 16;
@@ -290,27 +291,27 @@ mod tests {
             let e = refusal(&m);
             assert!(e.contains(what), "{what}: {e}");
         }
-        // An infinite coefficient would decode as NaN where its basis
-        // value is 0: in cubemap 0 (texel 5's fourth), and in cubemap 3's
-        // one coefficient; bytes after a texel's 50th are not
-        // coefficients.
+        // An infinite coefficient of the cosine layout would decode as
+        // NaN where its basis value is 0: in cubemap 0 (texel 5's
+        // fourth), and in cubemap 3's one coefficient; bytes after a
+        // texel's 50th are not coefficients.
         let res = model(Encoding::Continuous).layout.resolution;
         let per_cubemap = FACES * res * res * 16;
-        for (at, refused) in [
-            (5 * 16 + 6, true),
-            (3 * per_cubemap + 7 * 16, true),
-            (3 * per_cubemap + 7 * 16 + 2, false),
+        for (at, encoding, refused) in [
+            (5 * 16 + 6, Encoding::Continuous, true),
+            (3 * per_cubemap + 7 * 16, Encoding::Continuous, true),
+            (3 * per_cubemap + 7 * 16 + 2, Encoding::Continuous, false),
+            // Thirds' bytes are quantised integers, not half floats.
+            (5 * 16 + 6, Encoding::Thirds, false),
         ] {
-            for encoding in [Encoding::Continuous, Encoding::Thirds] {
-                let mut m = model(encoding);
-                m.texels[at..at + 2].copy_from_slice(&f16::INFINITY.to_le_bytes());
-                if refused {
-                    let e = refusal(&m);
-                    assert!(e.contains("not a finite number"), "{at}: {e}");
-                } else {
-                    let c = m.to_container(AssetHeaderFields::for_tests(), "walk");
-                    assert!(CubemapModel::from_container(&c).is_ok(), "{at}");
-                }
+            let mut m = model(encoding);
+            m.texels[at..at + 2].copy_from_slice(&f16::INFINITY.to_le_bytes());
+            if refused {
+                let e = refusal(&m);
+                assert!(e.contains("not a finite number"), "{at}: {e}");
+            } else {
+                let c = m.to_container(AssetHeaderFields::for_tests(), "walk");
+                assert!(CubemapModel::from_container(&c).is_ok(), "{at}");
             }
         }
     }
