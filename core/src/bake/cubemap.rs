@@ -350,7 +350,14 @@ impl Bake<'_> {
             if e == baked && (e == Encoding::Discrete || r == residuals) {
                 continue;
             }
-            let (name, text) = describe(e, r);
+            let (name, mut text) = describe(e, r);
+            if model.ground.is_some() {
+                // Its ground columns compare with the baked encoding's
+                // "without the static ground" row.
+                text.push_str(
+                    "; without a static ground (the asset's is fitted to its own encoding)",
+                );
+            }
             encoded.push((name, text, self.encode(&setup, &faces, e, r)?));
         }
         let layout = model.layout;

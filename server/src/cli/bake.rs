@@ -368,6 +368,13 @@ ground truth at {} random times: {} points in space ({} inside the mesh left out
             v.fit.map_or("-".to_owned(), |f| format!("{:.4}", f.rmse)),
         ));
     }
+    // What the table's rows are, where their names alone mislead.
+    if e.variants.iter().any(|v| v.name == "static ground texture") {
+        out.push_str(&format!(
+            "the first row is the asset: {} with its static ground; the rows after it have none (compare their ground columns with \"… without the static ground\"), but \"static ground texture\": the texture alone on the ground and the cubemap elsewhere, so its space columns are the first row's\n",
+            report.method
+        ));
+    }
     out.push_str(&format!(
         "times: faces {:.1} s, encode {:.2} s, ground truth {:.1} s, evaluate {:.1} s\n",
         t.reference_trace_s, t.fit_s, t.test_trace_s, t.evaluate_s
