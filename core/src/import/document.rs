@@ -373,7 +373,7 @@ fn check_images(
             && upload.side_file(&name).is_none()
         {
             warnings.push(format!(
-                "images[{i}]: {name:?} was not uploaded (AO does not need images)"
+                "images[{i}]: {name:?} is not among the files given with the glTF (AO does not need images)"
             ));
         }
     }

@@ -32,8 +32,9 @@ pub enum ImportError {
         /// Why it is refused.
         reason: &'static str,
     },
-    /// A buffer's file was not uploaded with the glTF.
-    #[error("{path}: file {name:?} was not uploaded with the glTF (uploaded: {available})")]
+    /// A buffer's file is not among the files given with the glTF (the
+    /// upload's parts, or the files beside a `.gltf` on the command line).
+    #[error("{path}: file {name:?} is not among the files given with the glTF (given: {available})")]
     MissingFile {
         /// Where the reference is, e.g. `buffers[0].uri`.
         path: String,

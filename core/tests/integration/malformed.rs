@@ -157,7 +157,7 @@ fn side_files_resolve_by_name_only() {
     let err = import_with(&main, &other).unwrap_err();
     assert_eq!(
         err.to_string(),
-        "buffers[0].uri: file \"rig.bin\" was not uploaded with the glTF (uploaded: other.bin)"
+        "buffers[0].uri: file \"rig.bin\" is not among the files given with the glTF (given: other.bin)"
     );
 }
 
