@@ -477,10 +477,12 @@ pub fn charts_png(
     );
     let (chart_w, chart_h) = (cell_w * times as u32, cell_h * shells as u32);
     let (label_h, gap) = (44u32, 14u32);
+    // The title, and a line on how to read the charts.
+    const HEAD: u32 = 58;
     let columns = 1 + 2 * encodings.len() as u32;
     let width = columns * chart_w + (columns + 1) * gap;
     let row_h = chart_h + label_h + gap;
-    let height = 40 + row_h * texels.len().max(1) as u32;
+    let height = HEAD + row_h * texels.len().max(1) as u32;
     let mut rgb = vec![255u8; (width * height * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area();
@@ -492,10 +494,18 @@ pub fn charts_png(
             ("sans-serif", 18),
         ))
         .map_err(e)?;
+        root.draw(&Text::new(
+            format!(
+                "each chart: time across ({times} samples, one cycle), distance up ({shells} shells, the innermost at the bottom); grey: occlusion, white open, black blocked; error: red too dark, blue too bright, ±0.1 saturates"
+            ),
+            (gap as i32, 34),
+            ("sans-serif", 13),
+        ))
+        .map_err(e)?;
         let heat = crate::image::HEAT_MAP;
         for (row, &(name, (face, texel), err)) in texels.iter().enumerate() {
             let input = input_block(faces, face, texel);
-            let y0 = 40 + row as i32 * row_h as i32;
+            let y0 = HEAD as i32 + row as i32 * row_h as i32;
             let d = texel_direction(face, texel % res, texel / res, res);
             let caption = format!(
                 "{name} texel of {} (face {face}, texel {texel}, direction {:.2} {:.2} {:.2}): RMSE {:.4}",
