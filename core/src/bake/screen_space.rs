@@ -121,7 +121,7 @@ pub struct ScreenFrame {
 }
 
 /// Errors against per-pixel ray-traced AO on one surface.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SurfaceErrors {
     /// Pixels compared.
     pub pixels: usize,
@@ -129,6 +129,9 @@ pub struct SurfaceErrors {
     pub gtao: FrameError,
     /// The baked model, where it shades this surface.
     pub model: Option<FrameError>,
+    /// Where it is not judged here, why.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_not_judged: Option<String>,
     /// The per-vertex ray-traced AO interpolated across triangles: the
     /// best any per-vertex storage can do at these pixels.
     pub per_vertex_truth: FrameError,
@@ -194,14 +197,18 @@ impl ScreenSpaceInfo {
                 }
             }
         }
+        // Where the model is judged against per-pixel AO, and else why not.
+        let cubemap = "a cubemap stores Kroon's Eq. 3.1 (occlusion cast into space), not this AO: the bake's report judges it against its own truth";
         let (model_on_character, model_on_ground) = match model {
-            PreviewModel::Vertex(_) => (true, false),
-            // The cubemap's ground stores Kroon's Eq. 3.1, not Eq. 1: its
-            // report judges it against its own truth.
-            PreviewModel::Cubemap(..) => (false, false),
-            PreviewModel::Grid(..) => (true, true),
+            PreviewModel::Vertex(_) => (
+                None,
+                Some("a vertex asset shades the character, not the ground"),
+            ),
+            PreviewModel::Cubemap(..) => (Some(cubemap), Some(cubemap)),
+            PreviewModel::Grid(..) => (None, None),
         };
-        let judge = |pixels: &[usize], up: Option<Vec3>, with_model: bool| {
+        let judge = |pixels: &[usize], up: Option<Vec3>, not_judged: Option<&str>| {
+            let with_model = not_judged.is_none();
             if pixels.is_empty() {
                 return Ok(None);
             }
@@ -220,6 +227,7 @@ impl ScreenSpaceInfo {
                 pixels: pixels.len(),
                 gtao: FrameError::of(&pick(&screen.gtao), &truth),
                 model: with_model.then(|| FrameError::of(&pick(&screen.model), &truth)),
+                model_not_judged: not_judged.map(str::to_owned),
                 per_vertex_truth: FrameError::of(&pick(&screen.truth), &truth),
             }))
         };
@@ -244,9 +252,11 @@ impl ScreenSpaceInfo {
         let mut out = String::new();
         for (name, errors) in [("character", &self.character), ("ground", &self.ground)] {
             let Some(e) = errors else { continue };
-            let model = e.model.map_or("—".to_owned(), |m| {
-                format!("{:.4} ({:.1} dB)", m.rmse, m.psnr_db)
-            });
+            let model = match (e.model, &e.model_not_judged) {
+                (Some(m), _) => format!("{:.4} ({:.1} dB)", m.rmse, m.psnr_db),
+                (None, Some(why)) => format!("not judged ({why})"),
+                (None, None) => "—".to_owned(),
+            };
             out.push_str(&format!(
                 "  {name} ({} pixels): RMSE against per-pixel ray-traced AO: baked model {model}, GTAO {:.4} ({:.1} dB), per-vertex truth {:.4}\n",
                 e.pixels, e.gtao.rmse, e.gtao.psnr_db, e.per_vertex_truth.rmse

@@ -327,7 +327,7 @@ fn the_screen_space_comparison_judges_the_model_and_gtao_per_pixel() {
     let mut frame = f.frame.clone();
     frame.weights = vec![1.0];
     let wrong = measure(&mut r, &closed, &frame);
-    let wrong_model = wrong.character.unwrap().model.unwrap();
+    let wrong_model = wrong.character.as_ref().unwrap().model.unwrap();
     assert!(
         wrong_model.rmse > model.rmse + 0.3,
         "closed {} against baked {}",
@@ -335,7 +335,7 @@ fn the_screen_space_comparison_judges_the_model_and_gtao_per_pixel() {
         model.rmse
     );
     // GTAO does not depend on the model.
-    assert_eq!(wrong.character.unwrap().gtao, character.gtao);
+    assert_eq!(wrong.character.as_ref().unwrap().gtao, character.gtao);
 }
 
 #[test]
@@ -542,8 +542,12 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
     let still = &baked.previews[0].0;
     assert_eq!(still.width, 4 * aobake_core::bake::preview::STILL_PANEL);
     let screen = still.screen_space.as_ref().expect("a still's baseline");
-    let ground = screen.ground.expect("ground pixels");
+    let ground = screen.ground.as_ref().expect("ground pixels");
     assert!(ground.model.is_none() && ground.pixels > 100);
+    assert!(
+        ground.model_not_judged.as_deref().unwrap_or("").contains("Eq. 3.1"),
+        "{ground:?}"
+    );
     assert!(
         baked.previews[3].0.screen_space.is_none(),
         "not on an animation"

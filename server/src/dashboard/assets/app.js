@@ -498,7 +498,8 @@ function previewFigure(p, url) {
 function screenSpaceTable(s) {
   const row = (name, e) => e && h("tr", {},
     h("td", {}, `${name} (${e.pixels} px)`),
-    h("td", { class: "num" }, e.model ? fmt(e.model.rmse) : "—"),
+    e.model ? h("td", { class: "num" }, fmt(e.model.rmse))
+      : h("td", { class: "num", title: e.model_not_judged || "" }, "—"),
     h("td", { class: "num" }, fmt(e.gtao.rmse)),
     h("td", { class: "num" }, fmt(e.per_vertex_truth.rmse)));
   return h("div", { class: "screen-space" },
