@@ -1,8 +1,8 @@
 //! Bearer tokens with scopes (DESIGN §9): `read` (everything a dashboard
 //! or CI shows: bakes, published assets, reports, previews, workers, but
-//! not the uploaded sources), `submit` (uploads, their bytes, and bakes
-//! and their control), `worker` (the job protocol and blobs) and `admin`
-//! (all of them, and tokens).
+//! not the uploaded sources), `submit` (all of `read`, and uploads, their
+//! bytes, and bakes and their control), `worker` (the job protocol and
+//! blobs) and `admin` (all of them, and tokens).
 //! Only a token's sha256 is stored; a token is 32 random bytes in hex.
 
 use axum::{extract::FromRequestParts, http::request::Parts};

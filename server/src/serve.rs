@@ -132,6 +132,17 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         max_bake_work: args.max_bake_work,
         ..ServerLimits::default()
     };
+    // The tokens the previous start on this data folder made are revoked:
+    // its admin secret (the file now gets a new one) and its local
+    // workers' must not stay valid. An admin token from the environment
+    // is the operator's to keep; it is never revoked here.
+    let own_tokens = args.data.join("own-tokens");
+    if let Ok(previous) = std::fs::read_to_string(&own_tokens) {
+        for hash in previous.lines().map(str::trim).filter(|h| !h.is_empty()) {
+            store.delete_token(hash).await?;
+        }
+    }
+    let mut made = Vec::new();
     let admin = match std::env::var(ADMIN_TOKEN_ENV) {
         Ok(t) if !t.is_empty() => t,
         _ => {
@@ -139,6 +150,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             let path = args.data.join("admin.token");
             write_private(&path, &t)?;
             println!("admin token: {t} (also in {})", path.display());
+            made.push(token_hash(&t));
             t
         }
     };
@@ -150,6 +162,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         )
         .await?;
     let worker_token = new_token();
+    made.push(token_hash(&worker_token));
     store
         .create_token(
             &token_hash(&worker_token),
@@ -157,6 +170,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             &[Scope::Worker.name().to_owned()],
         )
         .await?;
+    write_private(&own_tokens, &(made.join("\n") + "\n"))?;
     let mut state = AppState::new(store.clone(), blobs, policy, limits);
     state.graph.sample_rays = args.job_rays;
     store.listen(state.jobs_ready.clone()).await?;
@@ -209,6 +223,11 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 };
                 tokio::select! {
                     status = child.wait() => {
+                        let refused = aobake_worker::RunError::REFUSED_EXIT;
+                        if matches!(&status, Ok(s) if s.code() == Some(i32::from(refused))) {
+                            eprintln!("worker {slot}: the server refuses its token (revoked?); not restarting it");
+                            return;
+                        }
                         restarts += 1;
                         let wait = Duration::from_millis(250 * u64::from(restarts.min(20)));
                         eprintln!("worker {slot} exited ({status:?}); restarting in {wait:?}");

@@ -110,6 +110,11 @@ fn inspect_goes_on_past_a_file_it_cannot_read() {
         (&"error".into(), &"character".into())
     );
     assert!(r[0]["error"].as_str().unwrap().contains("GLB"), "{}", r[0]);
+    // Alone, as JSON too.
+    let out = aobake(&["inspect", "--json", files[0]]);
+    assert_eq!(out.status.code(), Some(1));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r[0]["kind"], "error");
 }
 
 /// CesiumMan rests lying along z (y from −0.57 to 0.57) and its clip

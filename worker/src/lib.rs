@@ -18,4 +18,4 @@
 pub mod gpu;
 pub mod runner;
 
-pub use runner::{WorkerConfig, run};
+pub use runner::{RunError, WorkerConfig, run};

@@ -63,11 +63,11 @@ struct Finished {
 /// and finished jobs are completed together in one request while another
 /// is on its way (group commit), so scheduling costs a request per batch,
 /// not two per job.
-pub fn run(config: WorkerConfig) -> Result<(), String> {
+pub fn run(config: WorkerConfig) -> Result<(), RunError> {
     let shutdown = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
         signal_hook::flag::register(signal, shutdown.clone())
-            .map_err(|e| format!("cannot handle signals: {e}"))?;
+            .map_err(|e| RunError::Setup(format!("cannot handle signals: {e}")))?;
     }
     let client = Client::with_timeout(&config.server, &config.token, Duration::from_secs(120));
     let cache: Arc<InputCache> = Arc::default();
@@ -112,11 +112,34 @@ pub fn run(config: WorkerConfig) -> Result<(), String> {
     Ok(())
 }
 
-/// Whether a refused lease will be refused again however long the worker
-/// waits: a token that is not valid or lacks the `worker` scope, or an
-/// address that is not an aobake server's API (400, 404).
-fn refused_for_good(e: &ApiError) -> bool {
-    matches!(e.status(), Some(400 | 401 | 403 | 404))
+/// Why a worker stopped other than at SIGTERM.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// It could not start.
+    #[error("{0}")]
+    Setup(String),
+    /// The server refused its leases in a way that waiting does not
+    /// mend (`aobake worker` exits with [`RunError::REFUSED_EXIT`], and
+    /// `aobake serve` does not restart a local worker that does).
+    #[error("{0}")]
+    Refused(String),
+}
+
+impl RunError {
+    /// The exit code of a worker whose leases are refused for good.
+    pub const REFUSED_EXIT: u8 = 3;
+}
+
+/// What to check when a lease is refused in a way that waiting does not
+/// mend; `None` for a refusal worth retrying.
+fn refused_for_good(e: &ApiError) -> Option<&'static str> {
+    Some(match e.status()? {
+        401 => "the token is not valid on this server (revoked, or never created here)",
+        403 => "the token lacks the worker scope",
+        404 => "--server is not the address of an aobake server",
+        400 => "the server refused the request as it was sent (--concurrency, --id)",
+        _ => return None,
+    })
 }
 
 /// Leases jobs for the idle slots, one request for all of them, until
@@ -128,7 +151,7 @@ fn dispatch(
     shutdown: &AtomicBool,
     freed: &mpsc::Receiver<usize>,
     slots: &[mpsc::Sender<Lease>],
-) -> Result<(), String> {
+) -> Result<(), RunError> {
     let mut failures = 0u32;
     // The process's tracer (installed by `aobake worker --gpu`), told to
     // the server until a request has gone through.
@@ -176,14 +199,15 @@ fn dispatch(
                     }
                 }
             }
-            Err(e) if refused_for_good(&e) => {
+            Err(e) if refused_for_good(&e).is_some() => {
                 // Stop as at SIGTERM: jobs running now stop at their
                 // deadline, and their leases pass to other workers.
                 shutdown.store(true, Ordering::Relaxed);
-                return Err(format!(
-                    "worker {}: the server at {} refused to lease jobs ({e}); check --server and the token (it needs the worker scope)",
+                let check = refused_for_good(&e).unwrap_or_default();
+                return Err(RunError::Refused(format!(
+                    "worker {}: the server at {} refused to lease jobs ({e}): {check}",
                     config.id, config.server
-                ));
+                )));
             }
             Err(e) => {
                 failures += 1;

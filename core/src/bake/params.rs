@@ -283,7 +283,7 @@ impl BakeParams {
                 .find(|(b, _)| *b == path[0] && own_block(method) != Some(b))
             {
                 return Err(BakeError::Override(format!(
-                    "{key:?} is an option of {whose}, which a {method} bake does not read{}",
+                    "{key:?} is an option of {whose}; a {method} bake does not take it{}",
                     match own_block(method) {
                         Some(own) => format!(" (its own are under \"{own}\")"),
                         None => String::new(),
@@ -312,7 +312,15 @@ impl BakeParams {
             .transpose()
             .map_err(|e| BakeError::Override(format!("method: {e}")))?
             .ok_or_else(|| BakeError::Override("the parameters name no method".into()))?;
-        Self::with_overrides(method, map)
+        // Another method's block is not read (and was not written by
+        // `canonical`): a header that has one is read without it.
+        let own = own_block(method);
+        let map: Map<String, Value> = map
+            .iter()
+            .filter(|(k, _)| own == Some(k.as_str()) || !BLOCKS.iter().any(|(b, _)| b == k))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
+        Self::with_overrides(method, &map)
     }
 
     /// Checks every parameter's range; the error names the parameter.
@@ -470,7 +478,7 @@ mod tests {
                 .unwrap_err()
                 .to_string();
             assert!(
-                e.contains(key) && e.contains(&format!("a {method} bake does not read")),
+                e.contains(key) && e.contains(&format!("a {method} bake does not take it")),
                 "{e}"
             );
             // The whole block, as JSON, too.
@@ -484,8 +492,12 @@ mod tests {
         )
         .unwrap();
         assert_eq!(p.clustered.alpha, 3.0);
-        // An asset's header (its method's block only) reads back.
+        // An asset's header (its method's block only) reads back, and one
+        // with every block (as a writer that kept them would have it)
+        // reads as the method's own.
         assert_eq!(BakeParams::from_canonical(&p.canonical()).unwrap(), p);
+        let every = serde_json::to_value(&p).unwrap();
+        assert_eq!(BakeParams::from_canonical(&every).unwrap(), p);
     }
 
     #[test]

@@ -34,7 +34,9 @@ pub enum ImportError {
     },
     /// A buffer's file is not among the files given with the glTF (the
     /// upload's parts, or the files beside a `.gltf` on the command line).
-    #[error("{path}: file {name:?} is not among the files given with the glTF (given: {available})")]
+    #[error(
+        "{path}: file {name:?} is not among the files given with the glTF (given: {available})"
+    )]
     MissingFile {
         /// Where the reference is, e.g. `buffers[0].uri`.
         path: String,

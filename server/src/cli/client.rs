@@ -321,8 +321,8 @@ pub(super) struct TokenArgs {
 enum TokenCommand {
     /// Create a token (needs an admin token); prints it once.
     Create {
-        /// Scopes: read, submit (includes read), worker, admin (all;
-        /// repeat for several).
+        /// A scope: read, submit (which includes read), worker or admin
+        /// (every scope). Repeat the flag for several.
         #[arg(long = "scope", required = true)]
         scopes: Vec<String>,
         /// A name to recognise it by.
@@ -373,7 +373,7 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
             for t in &tokens {
                 println!(
                     "{:<12}  {:<24}  {:<22}  {} ago{}",
-                    &t.id[..12.min(t.id.len())],
+                    t.id.get(..12).unwrap_or(&t.id),
                     t.name,
                     t.scopes.join(","),
                     age(now - t.created_at),
@@ -391,7 +391,7 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
             let matching: Vec<_> = api
                 .tokens()?
                 .into_iter()
-                .filter(|t| t.id.starts_with(id.as_str()))
+                .filter(|t| t.id.starts_with(&id.to_ascii_lowercase()))
                 .collect();
             let token = match matching.as_slice() {
                 [one] => one,
@@ -404,7 +404,7 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
             api.revoke_token(&token.id)?;
             println!(
                 "revoked {} ({}, {})",
-                &token.id[..12],
+                token.id.get(..12).unwrap_or(&token.id),
                 token.name,
                 token.scopes.join(",")
             );

@@ -90,12 +90,17 @@ pub(super) fn pose(file: &Path, args: &PoseArgs, limits: &Limits) -> anyhow::Res
 /// "invalid format").
 pub(super) fn server_url(s: &str) -> anyhow::Result<&str> {
     let s = s.trim();
-    if !(s.starts_with("http://") || s.starts_with("https://")) {
-        bail!(
+    match s.split_once("://") {
+        Some((scheme, _)) if ["http", "https"].contains(&scheme.to_ascii_lowercase().as_str()) => {
+            Ok(s.trim_end_matches('/'))
+        }
+        Some((scheme, _)) => {
+            bail!("the server address {s:?} is not http:// or https:// but {scheme}://")
+        }
+        None => bail!(
             "the server address {s:?} is not a URL: write it with its scheme, such as http://{s}"
-        );
+        ),
     }
-    Ok(s.trim_end_matches('/'))
 }
 
 /// The median of `v` (the mean of the middle two when their number is

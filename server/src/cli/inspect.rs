@@ -44,8 +44,8 @@ enum Described {
 }
 
 /// Describes every file; one that cannot be read is reported (as an error
-/// line, or an entry with `"kind": "error"` in `--json`) and the others
-/// still are, and the command then exits 1.
+/// line, or an entry with `"kind": "error"` in `--json`, even when it is
+/// the only one) and the others still are, and the command then exits 1.
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let limits = Limits::default();
     let mut reports = Vec::new();
@@ -62,7 +62,8 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
                 }
                 reports.push(report);
             }
-            Err(e) if args.files.len() == 1 => return Err(e),
+            // One file as text: its error is the command's.
+            Err(e) if args.files.len() == 1 && !args.json => return Err(e),
             Err(e) => {
                 eprintln!("error: {e:#}");
                 reports.push(Described::Failed {

@@ -12,10 +12,12 @@ pub(super) struct WorkerArgs {
     token: String,
     /// Jobs at once, one thread each: the idle ones are leased jobs in
     /// one request, and jobs that finish together are completed in one.
-    #[arg(long, env = "AOBAKE_CONCURRENCY", default_value_t = 1)]
-    concurrency: usize,
-    /// This worker's name (default: host name and process id).
-    #[arg(long)]
+    #[arg(long, env = "AOBAKE_CONCURRENCY", default_value_t = 1,
+        value_parser = clap::value_parser!(u64).range(1..=64))]
+    concurrency: u64,
+    /// This worker's name (default: host name and process id; at most
+    /// 120 characters).
+    #[arg(long, value_parser = worker_id)]
     id: Option<String>,
     /// Seconds between heartbeats (well under the server's lease).
     #[arg(long, default_value_t = 5.0)]
@@ -62,7 +64,7 @@ pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
     aobake_worker::run(aobake_worker::WorkerConfig {
         server,
         token: args.token.clone(),
-        concurrency: args.concurrency,
+        concurrency: args.concurrency as usize,
         id: args
             .id
             .clone()
@@ -73,5 +75,23 @@ pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
         shutdown_secs: args.shutdown_secs,
         fault: std::env::var("AOBAKE_FAULT").ok(),
     })
-    .map_err(anyhow::Error::msg)
+    .map_err(|e| match e {
+        aobake_worker::RunError::Refused(message) => super::client::Exit {
+            code: aobake_worker::RunError::REFUSED_EXIT,
+            message,
+        }
+        .into(),
+        aobake_worker::RunError::Setup(message) => anyhow::Error::msg(message),
+    })
+}
+
+/// `--id`: a name the server takes (its slots add `/N`).
+fn worker_id(s: &str) -> Result<String, String> {
+    if s.is_empty() || s.len() > 120 {
+        return Err(format!(
+            "a worker id has 1 to 120 characters, not {}",
+            s.len()
+        ));
+    }
+    Ok(s.to_owned())
 }

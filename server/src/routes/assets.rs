@@ -37,7 +37,8 @@ pub(crate) async fn asset(
 ) -> ApiResult<Response> {
     crate::blobs::check_digest(&digest)?;
     // Sources need submit, everything else read: a caller with both (an
-    // admin, a dashboard token) is let through without asking the store.
+    // admin, or a submit token, which includes read) is let through
+    // without asking the store.
     if !(caller.has(Scope::Read) && caller.has(Scope::Submit)) {
         let mut source = false;
         for kind in ["character", "clips"] {

@@ -231,7 +231,7 @@ fn uploaded_sources_need_submit_and_outputs_need_read() {
         bytes == source,
         "a submit token reads back what was uploaded"
     );
-    // …and, including `read`, follows its bakes and fetches outputs.
+    // …and, including `read`, follows its bakes.
     let (status, _, _) = raw(&env, "GET", "/v1/bakes", &submitter, b"");
     assert_eq!(status, 200);
 
@@ -251,6 +251,15 @@ fn uploaded_sources_need_submit_and_outputs_need_read() {
         "GET",
         &format!("/v1/assets/{out_digest}"),
         &reader,
+        b"",
+    );
+    assert_eq!((status, bytes), (200, output.clone()));
+    // `submit` includes `read`: it fetches outputs too.
+    let (status, _, bytes) = raw(
+        &env,
+        "GET",
+        &format!("/v1/assets/{out_digest}"),
+        &submitter,
         b"",
     );
     assert_eq!((status, bytes), (200, output));
@@ -321,9 +330,17 @@ fn unknown_routes_and_wrong_methods_are_problems_too() {
 #[test]
 fn a_worker_with_a_refused_token_exits_saying_why() {
     let env = TestEnv::start(Options::default());
-    for (token, status) in [
-        ("not-a-token".to_owned(), "401"),
-        (env.token(&["read"]), "403"),
+    for (token, status, check) in [
+        (
+            "not-a-token".to_owned(),
+            "401",
+            "the token is not valid on this server",
+        ),
+        (
+            env.token(&["read"]),
+            "403",
+            "the token lacks the worker scope",
+        ),
     ] {
         let mut child = std::process::Command::new(aobake_e2e::binary())
             .args(["worker", "--server", &env.url, "--id", "refused"])
@@ -345,11 +362,11 @@ fn a_worker_with_a_refused_token_exits_saying_why() {
         };
         let mut stderr = String::new();
         std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
-        assert!(!exit.success(), "{stderr}");
+        assert_eq!(exit.code(), Some(3), "{stderr}");
         assert!(
             stderr.contains("refused to lease jobs")
                 && stderr.contains(status)
-                && stderr.contains("worker scope"),
+                && stderr.contains(check),
             "{stderr}"
         );
     }
@@ -360,7 +377,7 @@ fn a_worker_with_a_refused_token_exits_saying_why() {
 /// calls with (one must be left).
 #[test]
 fn tokens_are_listed_and_revoked_at_once() {
-    let env = TestEnv::start(Options::default());
+    let mut env = TestEnv::start(Options::default());
     let out = env.aobake(&["token", "create", "--scope", "submit", "--name", "ci"]);
     assert!(out.status.success(), "{out:?}");
     let ci = String::from_utf8_lossy(&out.stdout).trim().to_owned();
@@ -409,6 +426,13 @@ fn tokens_are_listed_and_revoked_at_once() {
         )
         .unwrap();
     assert_eq!(status, 409, "{problem}");
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("another admin token"),
+        "{problem}"
+    );
     let (status, _) = env
         .request(
             "DELETE",
@@ -418,4 +442,34 @@ fn tokens_are_listed_and_revoked_at_once() {
         )
         .unwrap();
     assert_eq!(status, 404);
+    let (status, problem) = env
+        .request("DELETE", "/v1/tokens/not-an-id", aobake_e2e::ADMIN, None)
+        .unwrap();
+    assert_eq!(
+        (status, &problem["code"]),
+        (400, &json!("bad_token_id")),
+        "{problem}"
+    );
+
+    // A restart revokes the local workers' token of the start before (an
+    // admin token from the environment stays).
+    let local = |env: &TestEnv| -> Vec<String> {
+        let (_, listed) = env
+            .request("GET", "/v1/tokens", aobake_e2e::ADMIN, None)
+            .unwrap();
+        listed
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|t| t["name"] == "local workers")
+            .map(|t| t["id"].as_str().unwrap().to_owned())
+            .collect()
+    };
+    let before = local(&env);
+    assert_eq!(before.len(), 1);
+    env.kill_server();
+    env.start_server();
+    let after = local(&env);
+    assert_eq!(after.len(), 1, "{after:?}");
+    assert_ne!(after, before, "a new one, the old one revoked");
 }

@@ -545,7 +545,11 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
     let ground = screen.ground.as_ref().expect("ground pixels");
     assert!(ground.model.is_none() && ground.pixels > 100);
     assert!(
-        ground.model_not_judged.as_deref().unwrap_or("").contains("Eq. 3.1"),
+        ground
+            .model_not_judged
+            .as_deref()
+            .unwrap_or("")
+            .contains("Eq. 3.1"),
         "{ground:?}"
     );
     assert!(
