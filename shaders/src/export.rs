@@ -25,7 +25,7 @@ use crate::{CUBEMAP_AO, CUBEMAP_AO_VS, GRID_AO, GRID_AO_VS, VERTEX_AO, VERTEX_AO
 
 /// What the MSL files say about the extra buffer that holds the byte sizes
 /// of the runtime-sized arrays.
-pub const MSL_SIZES_NOTE: &str = "buffer slot after the last resource: a uint per runtime-sized storage buffer, its size in bytes, in declaration order";
+pub const MSL_SIZES_NOTE: &str = "buffer slot after the last buffer: a uint per runtime-sized storage buffer, its size in bytes, in the order the slots below name (naga's, not the bindings')";
 
 /// A target language and version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -287,7 +287,10 @@ pub fn translate(
             let (text, _) =
                 msl::write_string(module, info, &options, &msl::PipelineOptions::default())
                     .map_err(|e| fail(e.to_string()))?;
-            let text = format!("// Sizes: {MSL_SIZES_NOTE}.\n{text}");
+            let text = format!(
+                "// Sizes: {MSL_SIZES_NOTE}.\n{}{text}",
+                msl_manifest(&bindings, buffers)
+            );
             vec![file(format!("{name}.metal"), text.into_bytes())]
         }
         Target::SpirV13 => {
@@ -415,26 +418,83 @@ struct Binding {
     binding: ResourceBinding,
     writable: bool,
     texture: bool,
+    /// The WGSL variable's name.
+    name: String,
+    /// naga's handle index (the `size{i}` of MSL's `_mslBufferSizes`),
+    /// for a runtime-sized storage buffer.
+    sized: Option<usize>,
 }
 
-/// The module's bound resources in declaration order (buffers, and the
-/// vertex-stage evaluator's textures, read with `textureLoad`: no
-/// samplers).
+/// The module's bound resources (buffers, and the vertex-stage
+/// evaluator's textures, read with `textureLoad`: no samplers) in the
+/// WGSL's binding order: the order the files declare them in. (naga's own
+/// order is the order it met them in, which a function of a prepended
+/// common file that reads a global changes.)
 fn bindings(module: &naga::Module) -> Vec<Binding> {
-    module
+    let mut all: Vec<Binding> = module
         .global_variables
         .iter()
-        .filter_map(|(_, g)| {
+        .filter_map(|(handle, g)| {
             let binding = g.binding?;
-            let texture = matches!(module.types[g.ty].inner, TypeInner::Image { .. });
+            let inner = &module.types[g.ty].inner;
+            let texture = matches!(inner, TypeInner::Image { .. });
             let writable = matches!(g.space, AddressSpace::Storage { access } if access.contains(StorageAccess::STORE));
+            let runtime_sized = |inner: &TypeInner| {
+                matches!(inner, TypeInner::Array { size: naga::ArraySize::Dynamic, .. })
+            };
+            let sized = matches!(g.space, AddressSpace::Storage { .. })
+                && match inner {
+                    TypeInner::Struct { members, .. } => members
+                        .last()
+                        .is_some_and(|m| runtime_sized(&module.types[m.ty].inner)),
+                    other => runtime_sized(other),
+                };
             Some(Binding {
                 binding,
                 writable,
                 texture,
+                name: g.name.clone().unwrap_or_default(),
+                sized: sized.then(|| handle.index()),
             })
         })
-        .collect()
+        .collect();
+    all.sort_by_key(|b| (b.binding.group, b.binding.binding));
+    all
+}
+
+/// The Metal file's slots as a comment at its top: each WGSL resource's
+/// `[[buffer(i)]]` or `[[texture(i)]]`, and which buffer each field of
+/// `_mslBufferSizes` sizes (naga numbers them by its own order).
+fn msl_manifest(bindings: &[Binding], sizes_slot: u8) -> String {
+    let (mut buffers, mut textures) = (0u8, 0u8);
+    let mut lines =
+        vec!["// Slots (the WGSL's @group(0) @binding(b) in binding order):".to_owned()];
+    for b in bindings {
+        let slot = if b.texture {
+            textures += 1;
+            format!("[[texture({})]]", textures - 1)
+        } else {
+            buffers += 1;
+            format!("[[buffer({})]]", buffers - 1)
+        };
+        lines.push(format!(
+            "//   @binding({}) {}: {slot}",
+            b.binding.binding, b.name
+        ));
+    }
+    let mut sized: Vec<&Binding> = bindings.iter().filter(|b| b.sized.is_some()).collect();
+    sized.sort_by_key(|b| b.sized);
+    if !sized.is_empty() {
+        let fields: Vec<String> = sized
+            .iter()
+            .map(|b| format!("size{} = {} in bytes", b.sized.unwrap_or_default(), b.name))
+            .collect();
+        lines.push(format!(
+            "//   [[buffer({sizes_slot})]]: _mslBufferSizes {{ {} }} (the fields the functions use)",
+            fields.join("; ")
+        ));
+    }
+    lines.join("\n") + "\n"
 }
 
 #[cfg(test)]
@@ -635,5 +695,69 @@ mod tests {
             "{msl}"
         );
         assert!(msl.contains("kernel void cs_main(") && msl.contains("kernel void cs_sparse("));
+    }
+
+    /// Every Metal file's slots follow the WGSL's bindings, as
+    /// docs/engines.md says: buffers numbered in binding order, textures
+    /// too; read from the WGSL source, not from naga. (naga's own order
+    /// put cubemap_ao's binding 4 at slot 0.)
+    #[test]
+    fn every_metal_file_numbers_its_slots_in_binding_order() {
+        let files = export_all().unwrap();
+        let mut checked = 0;
+        for f in files.iter().filter(|f| f.path.starts_with("msl2_1/")) {
+            let msl = String::from_utf8(f.bytes.clone()).unwrap();
+            let name = f
+                .path
+                .trim_start_matches("msl2_1/")
+                .trim_end_matches(".metal");
+            // The composed source, common files included.
+            let (_, wgsl) = runtime_sources()
+                .into_iter()
+                .find(|(n, _)| *n == name)
+                .unwrap();
+            // `@group(0) @binding(N) var<…> NAME: TYPE` or `var NAME: texture_…`.
+            let mut resources: Vec<(u32, String, bool)> = wgsl
+                .lines()
+                .filter_map(|line| {
+                    let rest = line.trim().strip_prefix("@group(0) @binding(")?;
+                    let (n, rest) = rest.split_once(')')?;
+                    let decl = rest.trim().strip_prefix("var")?;
+                    let decl = decl.split_once('>').map_or(decl, |(_, after)| after);
+                    let (var, ty) = decl.split_once(':')?;
+                    Some((
+                        n.parse().ok()?,
+                        var.trim().to_owned(),
+                        ty.trim().starts_with("texture"),
+                    ))
+                })
+                .collect();
+            resources.sort();
+            assert!(!resources.is_empty(), "{name}");
+            let (mut buffers, mut textures) = (0, 0);
+            for (_, var, texture) in &resources {
+                let slot = if *texture {
+                    textures += 1;
+                    format!("{var} [[texture({})]]", textures - 1)
+                } else {
+                    buffers += 1;
+                    format!("{var} [[buffer({})]]", buffers - 1)
+                };
+                assert!(msl.contains(&slot), "{name}: no `{slot}`");
+                checked += 1;
+            }
+            // The sizes' fields are the ones the comment names.
+            let fields: Vec<&str> = msl
+                .lines()
+                .filter_map(|l| l.trim().strip_prefix("uint size")?.strip_suffix(';'))
+                .collect();
+            for field in fields {
+                assert!(
+                    msl.contains(&format!("size{field} = ")),
+                    "{name}: size{field} unnamed"
+                );
+            }
+        }
+        assert!(checked > 20, "{checked}");
     }
 }

@@ -508,3 +508,37 @@ fn a_degenerate_pose_gives_numbers() {
         }
     }
 }
+
+/// Blended animations give quaternions a little off unit length; the
+/// runtime poses by the rotation they stand for, not the skew a scaled
+/// quaternion's matrix would add to vertex-clustered's handles.
+#[test]
+fn a_rotation_off_unit_length_poses_as_the_unit_one() {
+    let (asset, _, _) = bake(
+        "RiggedFigure/RiggedFigure.glb",
+        Method::VertexClustered,
+        false,
+    );
+    let Asset::Vertex(mut ao) = Asset::from_bytes(&asset).unwrap() else {
+        panic!("a vertex asset");
+    };
+    let node = ao.skeleton().nodes.len() / 2;
+    let rest = ao.skeleton().nodes[node].rest;
+    let turned = Quat::from_rotation_x(0.6) * rest.rotation;
+    let mut at = |scale: f32| {
+        ao.reset();
+        let mut t = rest;
+        t.rotation = turned * scale;
+        assert!(ao.set_local(node, t));
+        ao.evaluate()
+    };
+    let unit = at(1.0);
+    for scale in [0.5, 0.98, 1.02, 2.0] {
+        let worst = at(scale)
+            .iter()
+            .zip(&unit)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-5, "×{scale}: {worst}");
+    }
+}

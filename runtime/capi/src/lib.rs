@@ -311,6 +311,10 @@ pub unsafe extern "C" fn aobake_vertex_ao_set_local(
         fail(format!("node {node}'s transform is not finite"));
         return false;
     }
+    if local.rotation.length_squared() == 0.0 {
+        fail(format!("node {node}'s rotation is the zero quaternion"));
+        return false;
+    }
     if !h.set_local(node, local) {
         fail(format!("node {node} of {}", h.skeleton().nodes.len()));
         return false;

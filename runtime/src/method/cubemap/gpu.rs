@@ -27,7 +27,7 @@ pub struct CubemapGpu {
     pub texels: Vec<u32>,
     /// The static ground: its texels per side (0 without one), then the
     /// bits of its square's min x, min z and side and of its gain, then
-    /// its offsets' f32 bits (x fastest): what `cubemap_ground_offset`
+    /// its offsets' f32 bits (x fastest): what `ground_offset`
     /// reads (at least one word).
     pub ground: Vec<u32>,
 }

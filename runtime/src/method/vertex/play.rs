@@ -104,7 +104,17 @@ impl VertexAo {
     /// Sets one node's local transform (translation, rotation, scale in its
     /// parent's frame, as the engine's animation gives it). `false`, and
     /// nothing changed, for a node the rig does not have.
-    pub fn set_local(&mut self, node: usize, local: Transform) -> bool {
+    ///
+    /// A rotation that is not of unit length (blended animations drift
+    /// off it) is normalised: the handles vertex-clustered reads move with
+    /// the matrix a quaternion makes, which a length other than 1 skews.
+    /// Unit rotations (within 1e-6 in the squared length) are kept bit for
+    /// bit.
+    pub fn set_local(&mut self, node: usize, mut local: Transform) -> bool {
+        let n2 = local.rotation.length_squared();
+        if n2 > 0.0 && n2.is_finite() && (n2 - 1.0).abs() > 1e-6 {
+            local.rotation = local.rotation / n2.sqrt();
+        }
         match self.locals.get_mut(node) {
             Some(l) => {
                 *l = local;
