@@ -113,7 +113,7 @@ impl VertexAo {
     pub fn set_local(&mut self, node: usize, mut local: Transform) -> bool {
         let n2 = local.rotation.length_squared();
         if n2 > 0.0 && n2.is_finite() && (n2 - 1.0).abs() > 1e-6 {
-            local.rotation = local.rotation / n2.sqrt();
+            local.rotation /= n2.sqrt();
         }
         match self.locals.get_mut(node) {
             Some(l) => {
