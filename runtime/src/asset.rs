@@ -112,5 +112,23 @@ mod tests {
             other => panic!("read as {:?}", other.method()),
         }
         assert_eq!(Asset::from_bytes(b"junk").unwrap_err(), AssetError::Magic);
+
+        // Each family's own reader names another family's asset instead
+        // of a field its header lacks.
+        let container = Container::from_bytes(&bytes).unwrap();
+        let not = |e: AssetError| match e {
+            AssetError::Unsupported(m) => m,
+            other => panic!("{other}"),
+        };
+        let e = not(GridModel::from_container(&container).unwrap_err());
+        assert_eq!(e, "a cubemap-discrete asset is not a grid");
+        let e = not(crate::method::vertex::Model::from_container(&container).unwrap_err());
+        assert_eq!(e, "a cubemap-discrete asset is not a vertex method's");
+        let e = not(VertexAo::from_container(&container).unwrap_err());
+        assert_eq!(e, "a cubemap-discrete asset is not a vertex method's");
+        let mut grid = container.clone();
+        grid.method = crate::Method::Grid;
+        let e = not(CubemapModel::from_container(&grid).unwrap_err());
+        assert_eq!(e, "a grid asset is not a cubemap");
     }
 }

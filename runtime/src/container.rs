@@ -163,6 +163,10 @@ pub enum AssetError {
     /// Sound, but without what the reader was asked for.
     #[error("the asset cannot do this: {0}")]
     Unsupported(String),
+    /// Sound, but what the caller gave it does not fit it (a palette
+    /// shorter than its parts need).
+    #[error("the input does not fit the asset: {0}")]
+    Mismatch(String),
 }
 
 fn tag_name(tag: [u8; 4]) -> String {

@@ -82,9 +82,12 @@ pub struct GltfExport {
 }
 
 /// Exports `upload` (the character the asset was baked for) with the AO of
-/// `asset` (a vertex method's).
+/// `asset` (a vertex method's); the static `_AO` averages the frames of
+/// the character's clips and of `clips` (a second file's animations,
+/// bound by node name, as a bake takes them).
 pub fn export_gltf(
     upload: Upload<'_>,
+    clips: Option<Upload<'_>>,
     limits: &Limits,
     asset: &Container,
 ) -> Result<GltfExport, GltfExportError> {
@@ -101,7 +104,21 @@ pub fn export_gltf(
     let v = character.vertex_count();
 
     let imported = &source.imported;
-    let (static_ao, frames) = static_ao(&model, &imported.character.skeleton, &imported.clips);
+    let mut all_clips = imported.clips.clone();
+    let mut warnings = Vec::new();
+    if let Some(clips) = clips {
+        let (more, clip_warnings) = crate::import_clips(clips, character, limits)
+            .map_err(|e| GltfExportError::Unsupported(format!("the clips: {e}")))?;
+        all_clips.extend(more);
+        warnings.extend(clip_warnings);
+    }
+    let (static_ao, frames) = static_ao(&model, &imported.character.skeleton, &all_clips);
+    if frames == 0 {
+        warnings.push(
+            "no clips: _AO is the AO at rest (give the clips the asset was baked with, --clips)"
+                .to_owned(),
+        );
+    }
     let (rows, coefficients) = match &model {
         Model::StaticAverage(_) => (0, Vec::new()),
         _ => rows_per_vertex(&model)?,
@@ -110,7 +127,6 @@ pub fn export_gltf(
 
     let mut out = Glb::default();
     let mut json = source.json;
-    let mut warnings = Vec::new();
     // Every buffer into the one: views move by their buffer's offset.
     let bases: Vec<usize> = source.buffers.iter().map(|b| out.append(b)).collect();
     for view in existing(&mut json, "bufferViews") {
@@ -333,16 +349,14 @@ pub(crate) fn static_ao(
 /// past row R), and R.
 fn rows_per_vertex(model: &Model) -> Result<(usize, Vec<f32>), GltfExportError> {
     let v = model.vertices();
-    let rows = match model.form() {
-        FormRef::Dense(f) => f.weight_count(),
-        FormRef::Sparse(s) => s.rows,
-    };
+    let rows = model.weight_count();
     if rows > MAX_ROWS {
         let fix = match model {
             Model::VertexClustered(..) => {
-                "fewer pose clusters or dimensions (`--param clustered.pose_clusters=4 \
-                 --param clustered.dimensions=4`; the eigen-AO basis is kept only where it \
-                 saves multiply-adds, and MLS leaves most clusters out of each pose)"
+                "an eigen-AO basis of the whole model (`--param clustered.basis_cv=false \
+                 --param clustered.basis=32`: 33 rows; cross-validation keeps a basis only \
+                 where it saves multiply-adds, and the linear base and every pose cluster \
+                 otherwise each add their rows)"
             }
             _ => {
                 "an eigen-AO basis (`--param linear.basis_cv=false`: `linear.basis` rows, 32 by default)"

@@ -255,9 +255,10 @@ bool aobake_grid_occlusion(const struct AobakeGrid *grid, const float *palette, 
  * [`aobake_grid_occlusion`], plus the asset's static base when it has
  * one (`gain · grids + offset`, clamped; see `docs/engines.md`).
  * `receivers` is NULL (no receiver takes an offset) or `count` values:
- * the receiver's vertex index in the character (its offset), -1 for a
- * point of the ground (the base's ground texture), -2 for any other
- * surface.
+ * the receiver's vertex index in the character (its offset; with a
+ * static base, an index past the character's vertices is refused), -1
+ * for a point of the ground (the base's ground texture), -2 for any
+ * other surface.
  *
  * # Safety
  * As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`

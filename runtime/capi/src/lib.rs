@@ -707,9 +707,10 @@ pub unsafe extern "C" fn aobake_grid_occlusion(
 /// [`aobake_grid_occlusion`], plus the asset's static base when it has
 /// one (`gain · grids + offset`, clamped; see `docs/engines.md`).
 /// `receivers` is NULL (no receiver takes an offset) or `count` values:
-/// the receiver's vertex index in the character (its offset), -1 for a
-/// point of the ground (the base's ground texture), -2 for any other
-/// surface.
+/// the receiver's vertex index in the character (its offset; with a
+/// static base, an index past the character's vertices is refused), -1
+/// for a point of the ground (the base's ground texture), -2 for any
+/// other surface.
 ///
 /// # Safety
 /// As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`
@@ -738,12 +739,22 @@ pub unsafe extern "C" fn aobake_grid_ao(
         // SAFETY: the caller promises `count` readable values.
         unsafe { std::slice::from_raw_parts(receivers, count) }.to_vec()
     };
+    // With a static base, a vertex's offset is its own: an index past the
+    // character's vertices is a caller's mistake, not offset 0.
+    let vertices = g.0.base.as_ref().map(|b| b.vertex_offsets.len());
     let mut values = Vec::with_capacity(count);
-    for (&(p, n, part), &kind) in r.receivers.iter().zip(&kinds) {
+    for (i, (&(p, n, part), &kind)) in r.receivers.iter().zip(&kinds).enumerate() {
         let receiver = match kind {
             -1 => Receiver::Ground,
             -2 => Receiver::Other,
             index => match usize::try_from(index) {
+                Ok(index) if vertices.is_some_and(|v| index >= v) => {
+                    fail(format!(
+                        "receiver {i}: vertex {index} of {} (the character the asset was baked for)",
+                        vertices.unwrap_or_default()
+                    ));
+                    return false;
+                }
                 Ok(index) => Receiver::Vertex { index, part },
                 Err(_) => {
                     fail(format!("receiver kind {index}: a vertex index, -1 or -2"));

@@ -55,6 +55,11 @@ pub(super) struct Args {
     /// docs/engines.md).
     #[arg(long, requires_all = ["asset", "file"])]
     gltf: Option<PathBuf>,
+    /// With --gltf: a second glTF file whose animations drive the
+    /// character, bound to its nodes by name (as `aobake bake --clips`
+    /// took them): `_AO` averages its clips' frames too.
+    #[arg(long, requires = "gltf")]
+    clips: Option<PathBuf>,
     /// Write a cubemap asset's decoded faces, or a grid asset's parts as
     /// z-slices, as OpenEXR files into this folder (created if missing),
     /// and the static ground's texture, when the asset has one.
@@ -82,20 +87,28 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         export_exr(asset, exr, &args.times)?;
     }
     match (&args.asset, &args.file, &args.gltf) {
-        (Some(asset), Some(file), Some(out)) => export_gltf(asset, file, out),
+        (Some(asset), Some(file), Some(out)) => {
+            export_gltf(asset, file, args.clips.as_deref(), out)
+        }
         _ => Ok(()),
     }
 }
 
 /// `--gltf OUT.glb`: the character with the asset's AO.
-fn export_gltf(asset: &Path, file: &Path, out: &Path) -> anyhow::Result<()> {
+fn export_gltf(asset: &Path, file: &Path, clips: Option<&Path>, out: &Path) -> anyhow::Result<()> {
     let bytes = std::fs::read(asset).with_context(|| format!("cannot read {}", asset.display()))?;
     let container = Container::from_bytes(&bytes)
         .with_context(|| format!("cannot read {}", asset.display()))?;
     let limits = Limits::default();
     let upload = super::load::upload(file, &limits)?;
-    let export = aobake_core::asset::gltf::export_gltf(upload.upload(), &limits, &container)
-        .with_context(|| format!("cannot export {} with {}", file.display(), asset.display()))?;
+    let clips = clips.map(|c| super::load::upload(c, &limits)).transpose()?;
+    let export = aobake_core::asset::gltf::export_gltf(
+        upload.upload(),
+        clips.as_ref().map(|c| c.upload()),
+        &limits,
+        &container,
+    )
+    .with_context(|| format!("cannot export {} with {}", file.display(), asset.display()))?;
     for w in &export.warnings {
         eprintln!("warning: {w}");
     }

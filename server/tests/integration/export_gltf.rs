@@ -130,9 +130,9 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
             } else {
                 &[
                     "--param",
-                    "clustered.pose_clusters=4",
+                    "clustered.basis_cv=false",
                     "--param",
-                    "clustered.dimensions=4",
+                    "clustered.basis=32",
                 ]
             };
             for part in fix {
@@ -226,3 +226,93 @@ const AT_KEYS: f64 = 1e-6;
 /// The same between keys, where the run time's slerp runs in single
 /// precision and the script's in double (measured: up to 3.5·10⁻⁶).
 const BETWEEN_KEYS: f64 = 1e-5;
+
+/// The character's GLB with its animations taken out (JSON chunk
+/// rewritten, binary chunk kept).
+fn without_animations(glb: &[u8]) -> Vec<u8> {
+    let u32_at = |i: usize| u32::from_le_bytes(glb[i..i + 4].try_into().unwrap()) as usize;
+    let json_len = u32_at(12);
+    let mut json: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    json.as_object_mut().unwrap().remove("animations");
+    let mut text = serde_json::to_vec(&json).unwrap();
+    text.resize(text.len().next_multiple_of(4), b' ');
+    let rest = &glb[20 + json_len..];
+    let mut out = Vec::new();
+    out.extend(b"glTF");
+    out.extend(2u32.to_le_bytes());
+    out.extend(((12 + 8 + text.len() + rest.len()) as u32).to_le_bytes());
+    out.extend((text.len() as u32).to_le_bytes());
+    out.extend(b"JSON");
+    out.extend(&text);
+    out.extend(rest);
+    out
+}
+
+/// A character whose clips come in a second file: `--clips` gives the
+/// static `_AO` their frames; without them the export warns that it is
+/// the AO at rest.
+#[test]
+fn clips_from_a_second_file_feed_the_static_ao() {
+    let dir = tempfile::tempdir().unwrap();
+    let animated = repo().join("tests/data/characters/RiggedSimple/RiggedSimple.glb");
+    let still = dir.path().join("still.glb");
+    std::fs::write(
+        &still,
+        without_animations(&std::fs::read(&animated).unwrap()),
+    )
+    .unwrap();
+    let asset = dir.path().join("a.aob");
+    let bake = aobake(&[
+        "bake",
+        still.to_str().unwrap(),
+        "--clips",
+        animated.to_str().unwrap(),
+        "--method",
+        "vertex-linear",
+        "--poses",
+        "24",
+        "--samples",
+        "8",
+        "--eval-poses",
+        "2",
+        "--out",
+        asset.to_str().unwrap(),
+        "--report",
+        dir.path().join("a.json").to_str().unwrap(),
+    ]);
+    assert!(bake.status.success(), "{}", stderr(&bake));
+    let frames = |clips: Option<&Path>| {
+        let glb = dir.path().join("out.glb");
+        let mut args = vec![
+            "export".to_owned(),
+            asset.display().to_string(),
+            still.display().to_string(),
+            "--gltf".to_owned(),
+            glb.display().to_string(),
+        ];
+        if let Some(c) = clips {
+            args.extend(["--clips".to_owned(), c.display().to_string()]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = aobake(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let bytes = std::fs::read(&glb).unwrap();
+        let len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        let doc: serde_json::Value = serde_json::from_slice(&bytes[20..20 + len]).unwrap();
+        (
+            doc["extras"]["aobake"]["static"]["frames"]
+                .as_u64()
+                .unwrap(),
+            stderr(&out),
+        )
+    };
+    let (none, warned) = frames(None);
+    assert_eq!(none, 0);
+    assert!(
+        warned.contains("no clips: _AO is the AO at rest"),
+        "{warned}"
+    );
+    let (some, quiet) = frames(Some(&animated));
+    assert!(some > 10, "{some}");
+    assert!(!quiet.contains("no clips"), "{quiet}");
+}

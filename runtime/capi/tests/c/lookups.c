@@ -95,6 +95,15 @@ int main(int argc, char **argv) {
                "a short palette was taken");
         EXPECT(aobake_grid_occlusion(g, palette, m / 16, points, normals, parts, count, out),
                "%s", aobake_last_error());
+        if (count > 0) {
+            /* A vertex past the character's: refused, not given offset 0. */
+            int64_t kept = kinds[0];
+            kinds[0] = (int64_t)1 << 40;
+            EXPECT(!aobake_grid_ao(g, palette, m / 16, points, normals, parts, kinds, count, out + count),
+                   "a vertex past the character was taken");
+            EXPECT(strstr(aobake_last_error(), "vertex") != NULL, "%s", aobake_last_error());
+            kinds[0] = kept;
+        }
         EXPECT(aobake_grid_ao(g, palette, m / 16, points, normals, parts, kinds, count, out + count),
                "%s", aobake_last_error());
         written = 2 * count;

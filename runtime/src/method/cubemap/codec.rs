@@ -105,6 +105,12 @@ impl CubemapModel {
 
     /// Reads a model back, checking the layout and the section's length.
     pub fn from_container(container: &Container) -> Result<(Self, CubemapHeader), AssetError> {
+        if container.method.family() != crate::Family::Cubemap {
+            return Err(AssetError::Unsupported(format!(
+                "a {} asset is not a cubemap",
+                container.method.name()
+            )));
+        }
         let header: CubemapHeader = container.header()?;
         if header.method != container.method {
             return Err(bad("the header's method differs from the preamble's"));

@@ -175,6 +175,14 @@ impl GridModel {
 
     /// Reads a model back, checking the layout and the sections' lengths.
     pub fn from_container(container: &Container) -> Result<(Self, GridHeader), AssetError> {
+        // Another family's asset is named before its header is read as a
+        // grid's (which would only say a field is missing).
+        if container.method != Method::Grid {
+            return Err(AssetError::Unsupported(format!(
+                "a {} asset is not a grid",
+                container.method.name()
+            )));
+        }
         let header: GridHeader = container.header()?;
         if header.method != Method::Grid || container.method != Method::Grid {
             return Err(bad("the asset is not a grid"));
@@ -276,8 +284,8 @@ impl GridModel {
     /// palette entry must exist.
     pub fn check_palette(&self, joints: usize) -> Result<(), AssetError> {
         match self.parts.iter().find(|p| p.joint >= joints) {
-            Some(p) => Err(bad(&format!(
-                "part {:?} follows palette entry {}, but the character has {joints}",
+            Some(p) => Err(AssetError::Mismatch(format!(
+                "part {:?} follows palette entry {}, but the palette has {joints} entries",
                 p.name, p.joint
             ))),
             None => Ok(()),
@@ -434,6 +442,11 @@ mod tests {
         assert!(e.contains("TCLP must hold") && e.contains("[0, 1]"), "{e}");
         let m = model(false);
         assert!(m.check_palette(2).is_ok());
-        assert!(m.check_palette(1).is_err());
+        let e = m.check_palette(1).unwrap_err();
+        assert!(
+            matches!(e, AssetError::Mismatch(_)),
+            "the caller's palette, not the file: {e}"
+        );
+        assert!(e.to_string().contains("the palette has 1 entries"), "{e}");
     }
 }

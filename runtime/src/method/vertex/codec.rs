@@ -222,6 +222,12 @@ impl Model {
     /// Reads a model back from its container, checking every length
     /// against the header.
     pub fn from_container(container: &Container) -> Result<(Self, AssetHeader), AssetError> {
+        if container.method.family() != crate::Family::Vertex {
+            return Err(AssetError::Unsupported(format!(
+                "a {} asset is not a vertex method's",
+                container.method.name()
+            )));
+        }
         let header: AssetHeader = container.header()?;
         if header.method != container.method {
             return Err(bad("the header's method differs from the preamble's"));

@@ -44,12 +44,6 @@ impl VertexAo {
 
     /// [`VertexAo::from_bytes`] for a container already read.
     pub fn from_container(container: &Container) -> Result<Self, AssetError> {
-        if !matches!(container.method.family(), crate::Family::Vertex) {
-            return Err(AssetError::Unsupported(format!(
-                "a {} asset is not a vertex method's",
-                container.method.name()
-            )));
-        }
         let (model, header) = Model::from_container(container)?;
         Self::new(model, header)
     }
