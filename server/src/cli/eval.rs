@@ -60,9 +60,32 @@ fn refuse<T>(args: &Args, container: &Container, e: AssetUseError) -> anyhow::Re
     let (asset, file) = (args.asset.display(), args.file.display());
     match e {
         AssetUseError::Unreadable(e) => bail!("cannot read {asset}: {e}"),
-        AssetUseError::Mismatch(e) => bail!("{asset} does not fit {file}: {e}"),
+        AssetUseError::Mismatch(e) => match other_character(args, container) {
+            Some(note) => bail!("{asset} does not fit {file}: {note} ({e})"),
+            None => bail!("{asset} does not fit {file}: {e}"),
+        },
         AssetUseError::Unsupported(e) => {
             bail!("{asset} is a {} asset: {e}", container.method)
         }
     }
+}
+
+/// Why, when the asset names another character upload than `args.file`
+/// (a GLB's digest is its bytes'): the likely cause of a mismatch, put
+/// before any advice about how the asset was baked.
+fn other_character(args: &Args, container: &Container) -> Option<String> {
+    let header: serde_json::Value = serde_json::from_str(&container.header).ok()?;
+    let baked_for = header["character"].as_str()?;
+    let bytes = std::fs::read(&args.file)
+        .ok()
+        .filter(|b| b.starts_with(b"glTF"))?;
+    let digest = aobake_core::digest::sha256_hex(&bytes);
+    (digest != baked_for).then(|| {
+        format!(
+            "it was baked for another character upload ({}…; {} is {}…)",
+            baked_for.get(..12).unwrap_or(baked_for),
+            args.file.display(),
+            &digest[..12]
+        )
+    })
 }

@@ -268,7 +268,8 @@ fn eval_and_inspect_refuse_damaged_newer_and_foreign_assets() {
     let out = eval(&dir.path().join("m.aob"), "RiggedSimple/RiggedSimple.glb");
     assert!(!out.status.success());
     assert!(
-        stderr(&out).contains("baked for 370 vertices"),
+        stderr(&out).contains("baked for 370 vertices")
+            && stderr(&out).contains("it was baked for another character upload"),
         "{}",
         stderr(&out)
     );
@@ -524,6 +525,11 @@ fn eval_and_inspect_read_an_asset_of_every_method() {
     let model = |i: usize| &reports[i]["model"];
     assert_eq!(reports[1]["method"], "vertex-linear");
     assert_eq!(model(1)["vertices"], 160);
+    assert_eq!(
+        model(1)["rig_named"],
+        model(1)["rig_nodes"],
+        "RiggedSimple names its nodes"
+    );
     assert_eq!(reports[2]["method"], "vertex-clustered");
     assert!(
         model(2)["structure"]

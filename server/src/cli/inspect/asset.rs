@@ -53,6 +53,9 @@ enum ModelInfo {
         model_bytes: usize,
         /// Nodes of the rig an engine poses it by; `None` before format 1.4.
         rig_nodes: Option<usize>,
+        /// Of those, the ones with a name (an engine finds the others by
+        /// index).
+        rig_named: Option<usize>,
         /// One line on the model's structure.
         structure: String,
     },
@@ -158,6 +161,10 @@ fn model_info(container: &Container) -> anyhow::Result<ModelInfo> {
                 weights_per_pose: model.weight_count(),
                 model_bytes: model.bytes(),
                 rig_nodes: header.rig.as_ref().map(|r| r.nodes.len()),
+                rig_named: header
+                    .rig
+                    .as_ref()
+                    .map(|r| r.nodes.iter().filter(|n| n.name.is_some()).count()),
                 structure: structure(&model, &header.layout),
             }
         }
@@ -287,6 +294,7 @@ pub(super) fn print_text(r: &Report) {
             weights_per_pose,
             model_bytes,
             rig_nodes,
+            rig_named,
             structure,
         } => {
             println!("  model        {vertices} vertices; {structure}");
@@ -298,9 +306,22 @@ pub(super) fn print_text(r: &Report) {
                     "weights"
                 }
             );
-            match rig_nodes {
-                Some(n) => println!("  rig          {n} nodes: an engine poses it by node name"),
-                None => println!(
+            let poses = r.method != Method::StaticAverage;
+            match (rig_nodes, rig_named) {
+                (Some(n), _) if !poses => {
+                    println!("  rig          {n} nodes (a static average reads no pose)")
+                }
+                (Some(n), Some(named)) if named == n => {
+                    println!("  rig          {n} nodes: an engine poses it by node name")
+                }
+                (Some(n), Some(0)) => println!(
+                    "  rig          {n} nodes, none named: an engine poses them by index (the parameters call node k `node k`)"
+                ),
+                (Some(n), Some(named)) => println!(
+                    "  rig          {n} nodes, {named} named: an engine poses those by name and the others by index"
+                ),
+                (Some(n), None) => println!("  rig          {n} nodes"),
+                (None, _) => println!(
                     "  rig          none (written before format 1.4): evaluate it with the character's glTF, or bake again"
                 ),
             }
