@@ -13,7 +13,19 @@
 use aobake_runtime::{Asset, method::cubemap::geometry::FACE_NAMES};
 use glam::Vec3;
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// Prints the error as a person reads it (`main` returning it would print
+/// its `Debug` form).
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let path = args.next().ok_or("usage: cubemap_ao ASSET [SECONDS]")?;
     let seconds: f32 = args.next().map_or(Ok(0.0), |s| s.parse())?;

@@ -19,7 +19,19 @@ use aobake_runtime::{
 };
 use glam::{Mat4, Vec3};
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// Prints the error as a person reads it (`main` returning it would print
+/// its `Debug` form).
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let asset = args.next().ok_or("usage: grid_ao ASSET [PALETTE.json]")?;
     let container = Container::from_bytes(&std::fs::read(&asset)?)?;

@@ -21,7 +21,19 @@ use std::collections::BTreeMap;
 
 use aobake_runtime::{method::vertex::VertexAo, rig::Transform};
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// Prints the error as a person reads it (`main` returning it would print
+/// its `Debug` form).
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let asset = args.next().ok_or("usage: vertex_ao ASSET [POSE.json]")?;
     let mut ao = VertexAo::from_bytes(&std::fs::read(&asset)?)?;

@@ -339,13 +339,22 @@ pub unsafe extern "C" fn aobake_vertex_ao_reset(ao: *mut AobakeVertexAo) {
 /// # Safety
 /// `out` must be NULL or point to `len` writable floats.
 unsafe fn fill(values: &[f32], out: *mut f32, len: usize, what: &str) -> bool {
-    if out.is_null() || len != values.len() {
+    if out.is_null() && !values.is_empty() {
         fail(format!(
-            "{what}: {} values to write, the buffer holds {len}{}",
-            values.len(),
-            if out.is_null() { " (NULL)" } else { "" }
+            "{what} is NULL: it must hold {} floats",
+            values.len()
         ));
         return false;
+    }
+    if len != values.len() {
+        fail(format!(
+            "{what}: {} values to write, the buffer holds {len}",
+            values.len()
+        ));
+        return false;
+    }
+    if values.is_empty() {
+        return true;
     }
     // SAFETY: the caller promises `len` writable floats at `out`, which is
     // not NULL, and `len` is the source's length.

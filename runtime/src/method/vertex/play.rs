@@ -52,7 +52,7 @@ impl VertexAo {
     pub fn new(model: Model, header: AssetHeader) -> Result<Self, AssetError> {
         let Some(skeleton) = header.rig.clone() else {
             return Err(AssetError::Unsupported(
-                "the asset has no rig (it was written before format 1.4): bake it again to pose it by node name".into(),
+                "it has no rig (it was written before format 1.4): bake it again to pose it by node name".into(),
             ));
         };
         let locals = skeleton.rest_locals();
