@@ -3,6 +3,9 @@
 
 /// Arguments of `aobake worker`.
 #[derive(Debug, clap::Args)]
+#[command(
+    after_help = "Runs until SIGTERM or SIGINT (jobs then finish, or stop at a checkpoint and give their leases back). Exits 3 when the server refuses its leases in a way that waiting does not mend (a token that is not valid or lacks the worker scope, an address that is not an aobake server), saying what to check; `aobake serve` does not restart a local worker that does."
+)]
 pub(super) struct WorkerArgs {
     /// The server's URL.
     #[arg(long, env = "AOBAKE_SERVER")]
