@@ -562,6 +562,20 @@ fn eval_and_inspect_read_an_asset_of_every_method() {
         "{text}"
     );
     assert!(text.contains("rig          "), "{text}");
+    // What an engine binds: the grid's palette entries, the cubemap's
+    // spheroid.
+    let out = aobake(&[
+        "inspect",
+        assets[2].to_str().unwrap(),
+        assets[3].to_str().unwrap(),
+    ]);
+    let text = super::stdout(&out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        text.contains("(palette entry 0)") && text.contains("palette      at least"),
+        "{text}"
+    );
+    assert!(text.contains("spheroid     centre ["), "{text}");
 }
 
 #[test]

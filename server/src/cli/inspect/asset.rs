@@ -341,8 +341,26 @@ pub(super) fn print_text(r: &Report) {
                 "  cubemaps     {cubemaps}, each six {resolution}² faces ({shells} shells, {} encoding)",
                 name(encoding)
             );
+            let s = &h["layout"]["spheroid"];
+            println!(
+                "  spheroid     centre {}, radii {}; shells from {} to {} × the radii",
+                numbers(&s["centre"]),
+                numbers(&s["radii"]),
+                s["inner"],
+                s["outer"]
+            );
             match ground_resolution {
-                Some(n) => println!("  ground       a static ground texture of {n}² texels"),
+                Some(n) => {
+                    let g = &h["ground"];
+                    let q = &g["square"];
+                    println!(
+                        "  ground       a static ground texture of {n}² texels: corner {} (x, z), side {}, at height {}; gain {}",
+                        numbers(&q["min"]),
+                        q["size"],
+                        q["height"],
+                        g["gain"]
+                    );
+                }
                 None => println!("  ground       none: the cubemaps alone everywhere"),
             }
         }
@@ -360,7 +378,23 @@ pub(super) fn print_text(r: &Report) {
                 format!("{lo}³ to {hi}³ cells")
             };
             println!("  model        {} rigid parts, {cells}", parts.len());
-            println!("  parts        {}", parts.join(", "));
+            // Each part's palette entry: the matrix an engine passes for it.
+            let entries: Vec<u64> = h["parts"]
+                .as_array()
+                .map(|a| a.iter().filter_map(|p| p["joint"].as_u64()).collect())
+                .unwrap_or_default();
+            let named: Vec<String> = parts
+                .iter()
+                .zip(&entries)
+                .map(|(name, j)| format!("{name} (palette entry {j})"))
+                .collect();
+            println!("  parts        {}", named.join(", "));
+            if let Some(last) = entries.iter().max() {
+                println!(
+                    "  palette      at least {} matrices (the skinning palette; a rigid part's entry is its node's world matrix)",
+                    last + 1
+                );
+            }
             if *cones {
                 println!("  cones        baked, T_clip {tclip_resolution}² entries");
             } else {
@@ -385,4 +419,10 @@ pub(super) fn print_text(r: &Report) {
             s.tag, s.element, s.count, s.bytes
         );
     }
+}
+
+/// A JSON array of numbers as `[a, b, c]` with the f32 a person set
+/// (`aobake params`' shortest form).
+fn numbers(v: &serde_json::Value) -> String {
+    super::super::params::shortest(v.clone()).to_string()
 }
