@@ -164,6 +164,16 @@ impl BakeInputs {
             clip_digests.push(upload.digest());
         }
         all.extend(imported.clips);
+        // Clips are chosen by name (`--clip`, train and test clips): a
+        // repeated name reaches only the first of its clips.
+        for (i, clip) in all.iter().enumerate() {
+            if all[..i].iter().any(|c| c.name == clip.name) {
+                warnings.push(format!(
+                    "two clips are named {:?} (the same file given as the character and as --clips?): a clip chosen by that name is the first one",
+                    clip.name
+                ));
+            }
+        }
         Ok(Self {
             character: imported.character,
             clips: all,
@@ -177,6 +187,37 @@ impl BakeInputs {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_clip_name_given_twice_is_warned_about() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/data/characters/RiggedSimple/RiggedSimple.glb"
+        );
+        let bytes = std::fs::read(path).unwrap();
+        let limits = Limits::default();
+        let alone = BakeInputs::load(&UploadBytes::single(bytes.clone()), &[], &limits).unwrap();
+        assert!(
+            !alone.warnings.iter().any(|w| w.contains("two clips")),
+            "{:?}",
+            alone.warnings
+        );
+        let twice = BakeInputs::load(
+            &UploadBytes::single(bytes.clone()),
+            &[UploadBytes::single(bytes)],
+            &limits,
+        )
+        .unwrap();
+        assert_eq!(twice.clips.len(), 2);
+        assert!(
+            twice
+                .warnings
+                .iter()
+                .any(|w| w.contains("two clips are named \"animation_0\"")),
+            "{:?}",
+            twice.warnings
+        );
+    }
 
     #[test]
     fn a_bundle_blob_hashes_to_the_upload_digest_and_reads_back() {
