@@ -205,8 +205,17 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let workers = args.workers.unwrap_or(cores);
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let mut supervisors = Vec::new();
+    // Mesa's drivers, which a worker opens to look for a GPU, print
+    // "XDG_RUNTIME_DIR is invalid or not set" at every start where the
+    // variable is unset (a service, a container): give the local workers
+    // a private one under the data folder instead.
+    let runtime_dir = match std::env::var_os("XDG_RUNTIME_DIR") {
+        Some(_) => None,
+        None => Some(private_dir(&args.data.join("run"))?),
+    };
     for slot in 0..workers {
         let url = url.clone();
+        let runtime_dir = runtime_dir.clone();
         let token = worker_token.clone();
         let threads = (cores / workers.max(1)).max(1);
         let mut stop = stop_rx.clone();
@@ -214,7 +223,8 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         supervisors.push(tokio::spawn(async move {
             let mut restarts = 0u32;
             loop {
-                let mut child = match spawn_worker(&url, &token, slot, threads, lease_secs) {
+                let spawned = spawn_worker(&url, &token, slot, threads, lease_secs, runtime_dir.as_deref());
+                let mut child = match spawned {
                     Ok(c) => c,
                     Err(e) => {
                         eprintln!("error: cannot start worker {slot}: {e:#}");
@@ -288,18 +298,35 @@ fn spawn_worker(
     slot: usize,
     threads: usize,
     lease_secs: f64,
+    runtime_dir: Option<&Path>,
 ) -> anyhow::Result<Child> {
     let exe = std::env::current_exe().context("cannot find the aobake binary")?;
     let id = format!("local-{slot}-{}", std::process::id());
-    Command::new(exe)
+    let mut command = Command::new(exe);
+    command
         .args(["worker", "--server", url, "--id", &id])
         .arg("--heartbeat-secs")
         .arg((lease_secs / 4.0).to_string())
         .env("AOBAKE_TOKEN", token)
         .env("RAYON_NUM_THREADS", threads.to_string())
-        .kill_on_drop(true)
-        .spawn()
-        .context("cannot start a worker process")
+        .kill_on_drop(true);
+    if let Some(dir) = runtime_dir {
+        command.env("XDG_RUNTIME_DIR", dir);
+    }
+    command.spawn().context("cannot start a worker process")
+}
+
+/// `dir`, created if missing, readable by this user only (as a runtime
+/// directory must be).
+fn private_dir(dir: &Path) -> anyhow::Result<std::path::PathBuf> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
+            .with_context(|| format!("cannot restrict {}", dir.display()))?;
+    }
+    Ok(dir.to_path_buf())
 }
 
 async fn terminate(child: &mut Child) {

@@ -701,3 +701,58 @@ fn a_client_without_a_token_says_where_it_looked() {
         "{said}"
     );
 }
+
+/// `aobake serve` run as a service (no `XDG_RUNTIME_DIR`): its local
+/// workers get a private runtime folder under the data folder, so Mesa's
+/// drivers, which they open to look for a GPU, print no
+/// "XDG_RUNTIME_DIR is invalid" errors at every start.
+#[test]
+fn local_workers_get_a_runtime_folder_and_print_no_mesa_noise() {
+    use std::io::Read as _;
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let mut serve = Command::new(env!("CARGO_BIN_EXE_aobake"))
+        .args([
+            "serve",
+            "--listen",
+            "127.0.0.1:0",
+            "--workers",
+            "1",
+            "--data",
+        ])
+        .arg(&data)
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("AOBAKE_ADMIN_TOKEN")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The worker has looked for its GPU and polled once by then.
+    std::thread::sleep(std::time::Duration::from_secs(6));
+    let _ = Command::new("kill")
+        .args(["-TERM", &serve.id().to_string()])
+        .status();
+    let mut text = String::new();
+    serve
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    serve
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    let _ = serve.wait();
+    assert!(text.contains("listening on"), "{text}");
+    assert!(!text.contains("XDG_RUNTIME_DIR"), "{text}");
+    let run = data.join("run");
+    assert!(run.is_dir(), "{text}");
+    use std::os::unix::fs::PermissionsExt as _;
+    assert_eq!(
+        std::fs::metadata(&run).unwrap().permissions().mode() & 0o777,
+        0o700
+    );
+}
