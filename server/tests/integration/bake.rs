@@ -540,7 +540,7 @@ fn eval_and_inspect_read_an_asset_of_every_method() {
         model(2)
     );
     assert_eq!(reports[3]["method"], "grid");
-    assert_eq!(model(3)["resolution"], serde_json::json!([8, 8]));
+    assert_eq!(model(3)["cells_per_edge"], serde_json::json!([8, 8]));
     assert!(!model(3)["parts"].as_array().unwrap().is_empty());
     assert_eq!(reports[4]["method"], "cubemap-discrete");
     assert_eq!(model(4)["clip"], "animation_0");

@@ -73,7 +73,7 @@ enum ModelInfo {
     Grid {
         parts: Vec<String>,
         /// Cells per edge of the smallest and largest grid.
-        resolution: [usize; 2],
+        cells_per_edge: [usize; 2],
         cones: bool,
         /// `T_clip`'s samples per axis (0 without cones).
         tclip_resolution: usize,
@@ -187,7 +187,7 @@ fn model_info(container: &Container) -> anyhow::Result<ModelInfo> {
             let resolutions = model.parts.iter().map(|p| p.grid.resolution);
             ModelInfo::Grid {
                 parts: model.parts.iter().map(|p| p.name.clone()).collect(),
-                resolution: [
+                cells_per_edge: [
                     resolutions.clone().min().unwrap_or(0),
                     resolutions.max().unwrap_or(0),
                 ],
@@ -366,7 +366,7 @@ pub(super) fn print_text(r: &Report) {
         }
         ModelInfo::Grid {
             parts,
-            resolution: [lo, hi],
+            cells_per_edge: [lo, hi],
             cones,
             tclip_resolution,
             base_vertices,
