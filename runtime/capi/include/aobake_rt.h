@@ -8,6 +8,33 @@
 #include <stdbool.h>
 
 /**
+ * `aobake_vertex_ao_gpu_words`' arrays: the dense blocks
+ * (`AOBAKE_GPU_BLOCK_WORDS` words each; none for a sparse model).
+ */
+#define AOBAKE_GPU_BLOCKS 0
+
+/**
+ * The f16 coefficients, two per word (element 2i in the low half).
+ */
+#define AOBAKE_GPU_COEFFICIENTS 1
+
+/**
+ * Dense: the blocks' vertex-cluster maps one after another; sparse: the
+ * `vertices + 1` row offsets.
+ */
+#define AOBAKE_GPU_MAPS 2
+
+/**
+ * Sparse: each coefficient's row, u16 two per word.
+ */
+#define AOBAKE_GPU_SPARSE_ROWS 3
+
+/**
+ * Words per dense block in `AOBAKE_GPU_BLOCKS`.
+ */
+#define AOBAKE_GPU_BLOCK_WORDS 8
+
+/**
  * A cubemap asset. Opaque to C.
  */
 typedef struct AobakeCubemap AobakeCubemap;
@@ -87,6 +114,32 @@ size_t aobake_vertex_ao_vertices(const struct AobakeVertexAo *ao);
  * `ao` must be NULL or a live handle.
  */
 size_t aobake_vertex_ao_weight_count(const struct AobakeVertexAo *ao);
+
+/**
+ * The GPU form of the asset's coefficients, as the evaluators in
+ * `shaders/` read them (`vertex_ao.wgsl`'s bindings 1 to 3 and 6, and
+ * their translations; `docs/engines.md`): sets `*words` to the length in
+ * words of array `which` (`AOBAKE_GPU_BLOCKS`, `_COEFFICIENTS`, `_MAPS`
+ * or `_SPARSE_ROWS`) and copies it to `out` when `out` is not NULL (then
+ * `len` must be at least `*words`). Call it with `out` NULL to size the
+ * buffer. `false` for a NULL handle, an unknown array, a short buffer, or
+ * a model too large for 32-bit GPU indices.
+ *
+ * # Safety
+ * `ao` must be NULL or a live handle; `out` NULL or `len` writable
+ * words; `words` a writable `size_t`.
+ */
+bool aobake_vertex_ao_gpu_words(const struct AobakeVertexAo *ao, uint32_t which, uint32_t *out, size_t len, size_t *words);
+
+/**
+ * Whether the GPU form is sparse (evaluate with `cs_sparse`, reading the
+ * row offsets and `AOBAKE_GPU_SPARSE_ROWS`) or dense (`cs_main`, reading
+ * the blocks and maps); `false` for NULL.
+ *
+ * # Safety
+ * `ao` must be NULL or a live handle.
+ */
+bool aobake_vertex_ao_gpu_sparse(const struct AobakeVertexAo *ao);
 
 /**
  * Nodes of the rig (0 for NULL).

@@ -42,7 +42,10 @@ use aobake_runtime::{
             base::Receiver,
             model::{GridModel, PartPose, Terms},
         },
-        vertex::VertexAo,
+        vertex::{
+            VertexAo,
+            form::{FormRef, GpuArrays},
+        },
     },
     rig::Transform,
 };
@@ -203,6 +206,97 @@ pub unsafe extern "C" fn aobake_vertex_ao_vertices(ao: *const AobakeVertexAo) ->
 pub unsafe extern "C" fn aobake_vertex_ao_weight_count(ao: *const AobakeVertexAo) -> usize {
     // SAFETY: forwarded from the caller.
     unsafe { handle(ao) }.map_or(0, VertexAo::weight_count)
+}
+
+/// `aobake_vertex_ao_gpu_words`' arrays: the dense blocks
+/// (`AOBAKE_GPU_BLOCK_WORDS` words each; none for a sparse model).
+pub const AOBAKE_GPU_BLOCKS: u32 = 0;
+/// The f16 coefficients, two per word (element 2i in the low half).
+pub const AOBAKE_GPU_COEFFICIENTS: u32 = 1;
+/// Dense: the blocks' vertex-cluster maps one after another; sparse: the
+/// `vertices + 1` row offsets.
+pub const AOBAKE_GPU_MAPS: u32 = 2;
+/// Sparse: each coefficient's row, u16 two per word.
+pub const AOBAKE_GPU_SPARSE_ROWS: u32 = 3;
+/// Words per dense block in `AOBAKE_GPU_BLOCKS`.
+pub const AOBAKE_GPU_BLOCK_WORDS: usize = 8;
+const _: () = assert!(AOBAKE_GPU_BLOCK_WORDS == aobake_runtime::method::vertex::form::BLOCK_WORDS);
+
+/// The GPU form of the asset's coefficients, as the evaluators in
+/// `shaders/` read them (`vertex_ao.wgsl`'s bindings 1 to 3 and 6, and
+/// their translations; `docs/engines.md`): sets `*words` to the length in
+/// words of array `which` (`AOBAKE_GPU_BLOCKS`, `_COEFFICIENTS`, `_MAPS`
+/// or `_SPARSE_ROWS`) and copies it to `out` when `out` is not NULL (then
+/// `len` must be at least `*words`). Call it with `out` NULL to size the
+/// buffer. `false` for a NULL handle, an unknown array, a short buffer, or
+/// a model too large for 32-bit GPU indices.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `out` NULL or `len` writable
+/// words; `words` a writable `size_t`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_gpu_words(
+    ao: *const AobakeVertexAo,
+    which: u32,
+    out: *mut u32,
+    len: usize,
+    words: *mut usize,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    let Some(h) = (unsafe { handle(ao) }) else {
+        return false;
+    };
+    let arrays = match GpuArrays::new(h.model().form()) {
+        Ok(a) => a,
+        Err(e) => {
+            fail(format!("the model has no GPU form: {e}"));
+            return false;
+        }
+    };
+    let array: Vec<u32> = match which {
+        AOBAKE_GPU_BLOCKS => arrays.blocks.concat(),
+        AOBAKE_GPU_COEFFICIENTS => arrays.coefficients,
+        AOBAKE_GPU_MAPS => arrays.maps,
+        AOBAKE_GPU_SPARSE_ROWS => arrays.sparse_rows,
+        other => {
+            fail(format!(
+                "array {other}: AOBAKE_GPU_BLOCKS (0) to AOBAKE_GPU_SPARSE_ROWS (3)"
+            ));
+            return false;
+        }
+    };
+    // SAFETY: the caller passes a writable `size_t`, or NULL.
+    let Some(words) = (unsafe { words.as_mut() }) else {
+        fail("words is NULL");
+        return false;
+    };
+    *words = array.len();
+    if out.is_null() {
+        return true;
+    }
+    if len < array.len() {
+        fail(format!(
+            "out holds {len} words, the array has {}",
+            array.len()
+        ));
+        return false;
+    }
+    // SAFETY: the caller promises `len` writable words at `out`, which is
+    // not NULL, and `len` is at least the array's length.
+    unsafe { std::ptr::copy_nonoverlapping(array.as_ptr(), out, array.len()) };
+    true
+}
+
+/// Whether the GPU form is sparse (evaluate with `cs_sparse`, reading the
+/// row offsets and `AOBAKE_GPU_SPARSE_ROWS`) or dense (`cs_main`, reading
+/// the blocks and maps); `false` for NULL.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_gpu_sparse(ao: *const AobakeVertexAo) -> bool {
+    // SAFETY: forwarded from the caller.
+    unsafe { handle(ao) }.is_some_and(|h| matches!(h.model().form(), FormRef::Sparse(_)))
 }
 
 /// Nodes of the rig (0 for NULL).

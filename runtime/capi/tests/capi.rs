@@ -309,3 +309,77 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
     assert!(rust.iter().any(|&a| a > 0.0), "some occlusion");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `aobake_vertex_ao_gpu_words` hands a C engine the arrays the GPU
+/// evaluators read (the runtime's `GpuArrays`), sized by a first call;
+/// dense and sparse models, and the refusals.
+#[test]
+fn the_gpu_arrays_reach_c_as_the_runtime_packs_them() {
+    use aobake_rt::{
+        AOBAKE_GPU_BLOCKS, AOBAKE_GPU_COEFFICIENTS, AOBAKE_GPU_MAPS, AOBAKE_GPU_SPARSE_ROWS,
+        aobake_last_error, aobake_vertex_ao_free, aobake_vertex_ao_gpu_sparse,
+        aobake_vertex_ao_gpu_words, aobake_vertex_ao_open,
+    };
+    use aobake_runtime::method::vertex::form::GpuArrays;
+    let mut sparse_params = BakeParams::new(Method::VertexLinear);
+    sparse_params.poses = 48;
+    sparse_params.samples = 16;
+    sparse_params.eval_poses = 2;
+    sparse_params.linear.threshold = 0.01;
+    let assets = [
+        bake_rigged_figure(Method::VertexClustered).0,
+        bake("RiggedFigure", sparse_params).0,
+    ];
+    let last_error = || {
+        // SAFETY: NULL or a C string valid until the next failing call.
+        let e = aobake_last_error();
+        assert!(!e.is_null());
+        unsafe { std::ffi::CStr::from_ptr(e) }
+            .to_string_lossy()
+            .into_owned()
+    };
+    let mut kinds = Vec::new();
+    for asset in &assets {
+        let want = GpuArrays::new(VertexAo::from_bytes(asset).unwrap().model().form()).unwrap();
+        kinds.push(want.sparse);
+        // SAFETY: `asset` holds `len` readable bytes.
+        let ao = unsafe { aobake_vertex_ao_open(asset.as_ptr(), asset.len()) };
+        assert!(!ao.is_null());
+        // SAFETY: a live handle.
+        assert_eq!(unsafe { aobake_vertex_ao_gpu_sparse(ao) }, want.sparse);
+        for (which, expected) in [
+            (AOBAKE_GPU_BLOCKS, want.blocks.concat()),
+            (AOBAKE_GPU_COEFFICIENTS, want.coefficients.clone()),
+            (AOBAKE_GPU_MAPS, want.maps.clone()),
+            (AOBAKE_GPU_SPARSE_ROWS, want.sparse_rows.clone()),
+        ] {
+            let mut words = usize::MAX;
+            // SAFETY: a live handle, NULL out, a writable `words`.
+            let sized = unsafe {
+                aobake_vertex_ao_gpu_words(ao, which, std::ptr::null_mut(), 0, &mut words)
+            };
+            assert!(sized && words == expected.len(), "array {which}");
+            let mut out = vec![0u32; words];
+            // SAFETY: `out` holds `words` writable words.
+            let copied = unsafe {
+                aobake_vertex_ao_gpu_words(ao, which, out.as_mut_ptr(), out.len(), &mut words)
+            };
+            assert!(copied && out == expected, "array {which}");
+            if words > 0 {
+                // SAFETY: one word fewer than the array is writable.
+                let short = unsafe {
+                    aobake_vertex_ao_gpu_words(ao, which, out.as_mut_ptr(), words - 1, &mut words)
+                };
+                assert!(!short && last_error().contains("out holds"));
+            }
+        }
+        let mut words = 0;
+        // SAFETY: a live handle, NULL out, a writable `words`.
+        let unknown =
+            unsafe { aobake_vertex_ao_gpu_words(ao, 9, std::ptr::null_mut(), 0, &mut words) };
+        assert!(!unknown && last_error().contains("array 9"));
+        // SAFETY: a live handle, freed once.
+        unsafe { aobake_vertex_ao_free(ao) };
+    }
+    assert_eq!(kinds, [false, true], "one dense model and one sparse");
+}
