@@ -331,9 +331,9 @@ fn the_gpu_arrays_reach_c_as_the_runtime_packs_them() {
         bake("RiggedFigure", sparse_params).0,
     ];
     let last_error = || {
-        // SAFETY: NULL or a C string valid until the next failing call.
         let e = aobake_last_error();
         assert!(!e.is_null());
+        // SAFETY: not NULL: a C string valid until the next failing call.
         unsafe { std::ffi::CStr::from_ptr(e) }
             .to_string_lossy()
             .into_owned()
