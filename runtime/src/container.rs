@@ -85,6 +85,23 @@ impl Data {
         self.len() == 0
     }
 
+    /// The element type as `docs/asset-format.md` names it.
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            Self::F16(_) => "f16",
+            Self::F32(_) => "f32",
+            Self::U8(_) => "u8",
+            Self::U16(_) => "u16",
+            Self::U32(_) => "u32",
+        }
+    }
+
+    /// Bytes of the elements (the section's data, without its record and
+    /// padding).
+    pub fn byte_len(&self) -> usize {
+        self.len() * Self::element_size(self.code()).unwrap_or_default()
+    }
+
     fn write_le(&self, out: &mut Vec<u8>) {
         match self {
             Self::F16(v) => v.iter().for_each(|x| out.extend(x.to_le_bytes())),

@@ -247,30 +247,15 @@ pub fn translate(
             vec![file(format!("{name}.hlsl"), text.into_bytes())]
         }
         Target::Msl21 => {
-            // Buffers in declaration order, then the sizes buffer.
-            let (mut buffers, mut textures) = (0u8, 0u8);
-            let resources: msl::BindingMap = bindings
-                .iter()
-                .map(|b| {
-                    let target = if b.texture {
-                        textures += 1;
-                        msl::BindTarget {
-                            texture: Some(textures - 1),
-                            ..msl::BindTarget::default()
-                        }
-                    } else {
-                        buffers += 1;
-                        msl::BindTarget {
-                            buffer: Some(buffers - 1),
-                            mutable: b.writable,
-                            ..msl::BindTarget::default()
-                        }
-                    };
-                    (b.binding, target)
-                })
-                .collect();
+            // Buffers in binding order, then the sizes buffer.
+            let slots = msl_slots(&bindings);
+            let buffers = slots.iter().filter(|s| s.buffer.is_some()).count() as u8;
             let per_entry = msl::EntryPointResources {
-                resources,
+                resources: bindings
+                    .iter()
+                    .zip(&slots)
+                    .map(|(b, s)| (b.binding, s.clone()))
+                    .collect(),
                 immediates_buffer: None,
                 sizes_buffer: Some(buffers),
             };
@@ -289,7 +274,7 @@ pub fn translate(
                     .map_err(|e| fail(e.to_string()))?;
             let text = format!(
                 "// Sizes: {MSL_SIZES_NOTE}.\n{}{text}",
-                msl_manifest(&bindings, buffers)
+                msl_manifest(&bindings, &slots, buffers)
             );
             vec![file(format!("{name}.metal"), text.into_bytes())]
         }
@@ -462,20 +447,38 @@ fn bindings(module: &naga::Module) -> Vec<Binding> {
     all
 }
 
+/// Each binding's Metal slot: buffers and textures numbered apart, each in
+/// binding order.
+fn msl_slots(bindings: &[Binding]) -> Vec<msl::BindTarget> {
+    let (mut buffers, mut textures) = (0u8, 0u8);
+    bindings
+        .iter()
+        .map(|b| {
+            let mut slot = msl::BindTarget::default();
+            if b.texture {
+                slot.texture = Some(textures);
+                textures += 1;
+            } else {
+                slot.buffer = Some(buffers);
+                slot.mutable = b.writable;
+                buffers += 1;
+            }
+            slot
+        })
+        .collect()
+}
+
 /// The Metal file's slots as a comment at its top: each WGSL resource's
 /// `[[buffer(i)]]` or `[[texture(i)]]`, and which buffer each field of
 /// `_mslBufferSizes` sizes (naga numbers them by its own order).
-fn msl_manifest(bindings: &[Binding], sizes_slot: u8) -> String {
-    let (mut buffers, mut textures) = (0u8, 0u8);
+fn msl_manifest(bindings: &[Binding], slots: &[msl::BindTarget], sizes_slot: u8) -> String {
     let mut lines =
         vec!["// Slots (the WGSL's @group(0) @binding(b) in binding order):".to_owned()];
-    for b in bindings {
-        let slot = if b.texture {
-            textures += 1;
-            format!("[[texture({})]]", textures - 1)
-        } else {
-            buffers += 1;
-            format!("[[buffer({})]]", buffers - 1)
+    for (b, target) in bindings.iter().zip(slots) {
+        let slot = match (target.buffer, target.texture) {
+            (Some(i), _) => format!("[[buffer({i})]]"),
+            (_, Some(i)) => format!("[[texture({i})]]"),
+            _ => String::new(),
         };
         lines.push(format!(
             "//   @binding({}) {}: {slot}",

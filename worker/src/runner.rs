@@ -199,17 +199,16 @@ fn dispatch(
                     }
                 }
             }
-            Err(e) if refused_for_good(&e).is_some() => {
-                // Stop as at SIGTERM: jobs running now stop at their
-                // deadline, and their leases pass to other workers.
-                shutdown.store(true, Ordering::Relaxed);
-                let check = refused_for_good(&e).unwrap_or_default();
-                return Err(RunError::Refused(format!(
-                    "worker {}: the server at {} refused to lease jobs ({e}): {check}",
-                    config.id, config.server
-                )));
-            }
             Err(e) => {
+                if let Some(check) = refused_for_good(&e) {
+                    // Stop as at SIGTERM: jobs running now stop at their
+                    // deadline, and their leases pass to other workers.
+                    shutdown.store(true, Ordering::Relaxed);
+                    return Err(RunError::Refused(format!(
+                        "worker {}: the server at {} refused to lease jobs ({e}): {check}",
+                        config.id, config.server
+                    )));
+                }
                 failures += 1;
                 let wait = Duration::from_millis(200 * u64::from(failures.min(25)));
                 eprintln!(

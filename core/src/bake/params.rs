@@ -201,23 +201,19 @@ impl BakeParams {
         let mut v = serde_json::to_value(self).expect("params serialise");
         let map = v.as_object_mut().expect("an object");
         // Each method keeps its own options' block, and only that one.
-        let own = own_block(self.method);
-        for (block, _) in BLOCKS {
-            if own != Some(block) {
-                map.remove(block);
-            }
-        }
+        map.retain(|key, _| !foreign_block(self.method, key));
         v
     }
 }
 
-/// The methods' option blocks and whose each is.
-const BLOCKS: [(&str, &str); 4] = [
-    ("linear", "vertex-linear"),
-    ("clustered", "vertex-clustered"),
-    ("cubemap", "cubemap-discrete and cubemap-continuous"),
-    ("grid", "grid"),
-];
+/// The methods' option blocks.
+const BLOCKS: [&str; 4] = ["linear", "clustered", "cubemap", "grid"];
+
+/// Whether `key` (a top-level parameter name) is the option block of
+/// another method than `method`: one it neither reads nor keys on.
+fn foreign_block(method: Method, key: &str) -> bool {
+    BLOCKS.contains(&key) && own_block(method) != Some(key)
+}
 
 /// The block of options `method` reads, if it has one.
 fn own_block(method: Method) -> Option<&'static str> {
@@ -278,12 +274,15 @@ impl BakeParams {
             let path: Vec<&str> = key.split('.').collect();
             // Another method's option would be dropped from the key and
             // never read: a mistake to name, not to ignore.
-            if let Some((_, whose)) = BLOCKS
-                .iter()
-                .find(|(b, _)| *b == path[0] && own_block(method) != Some(b))
-            {
+            if foreign_block(method, path[0]) {
+                let whose: Vec<&str> = Method::ALL
+                    .into_iter()
+                    .filter(|&m| own_block(m) == Some(path[0]))
+                    .map(Method::name)
+                    .collect();
                 return Err(BakeError::Override(format!(
-                    "{key:?} is an option of {whose}; a {method} bake does not take it{}",
+                    "{key:?} is an option of {}; a {method} bake does not take it{}",
+                    whose.join(" and "),
                     match own_block(method) {
                         Some(own) => format!(" (its own are under \"{own}\")"),
                         None => String::new(),
@@ -314,12 +313,8 @@ impl BakeParams {
             .ok_or_else(|| BakeError::Override("the parameters name no method".into()))?;
         // Another method's block is not read (and was not written by
         // `canonical`): a header that has one is read without it.
-        let own = own_block(method);
-        let map: Map<String, Value> = map
-            .iter()
-            .filter(|(k, _)| own == Some(k.as_str()) || !BLOCKS.iter().any(|(b, _)| b == k))
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
+        let mut map = map.clone();
+        map.retain(|key, _| !foreign_block(method, key));
         Self::with_overrides(method, &map)
     }
 

@@ -32,6 +32,7 @@
 use std::{
     cell::RefCell,
     ffi::{CStr, CString, c_char},
+    sync::OnceLock,
 };
 
 use aobake_runtime::{
@@ -54,7 +55,7 @@ use glam::{Mat4, Quat, Vec3};
 /// A vertex-method asset (static average, vertex-linear or
 /// vertex-clustered), its rig and the pose being set. Opaque to C.
 #[derive(Debug)]
-pub struct AobakeVertexAo(VertexAo);
+pub struct AobakeVertexAo(VertexAo, OnceLock<Result<GpuArrays, String>>);
 
 /// A node's local transform, as glTF and engines animate it: translation,
 /// rotation (unit quaternion x, y, z, w) and scale, in the parent's frame.
@@ -157,7 +158,7 @@ pub unsafe extern "C" fn aobake_vertex_ao_open(
     // SAFETY: forwarded from the caller.
     unsafe {
         open(bytes, len, "vertex", |a| match a {
-            Asset::Vertex(ao) => Some(AobakeVertexAo(*ao)),
+            Asset::Vertex(ao) => Some(AobakeVertexAo(*ao, OnceLock::new())),
             _ => None,
         })
     }
@@ -242,22 +243,28 @@ pub unsafe extern "C" fn aobake_vertex_ao_gpu_words(
     len: usize,
     words: *mut usize,
 ) -> bool {
-    // SAFETY: forwarded from the caller.
-    let Some(h) = (unsafe { handle(ao) }) else {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(h) = (unsafe { ao.as_ref() }) else {
+        fail("the handle is NULL");
         return false;
     };
-    let arrays = match GpuArrays::new(h.model().form()) {
+    // Packed once per handle: an engine asks for each array twice (its
+    // size, then its words).
+    let packed = h.1.get_or_init(|| {
+        GpuArrays::new(h.0.model().form()).map_err(|e| format!("the model has no GPU form: {e}"))
+    });
+    let arrays = match packed {
         Ok(a) => a,
         Err(e) => {
-            fail(format!("the model has no GPU form: {e}"));
+            fail(e.clone());
             return false;
         }
     };
-    let array: Vec<u32> = match which {
-        AOBAKE_GPU_BLOCKS => arrays.blocks.concat(),
-        AOBAKE_GPU_COEFFICIENTS => arrays.coefficients,
-        AOBAKE_GPU_MAPS => arrays.maps,
-        AOBAKE_GPU_SPARSE_ROWS => arrays.sparse_rows,
+    let array: &[u32] = match which {
+        AOBAKE_GPU_BLOCKS => arrays.blocks.as_flattened(),
+        AOBAKE_GPU_COEFFICIENTS => &arrays.coefficients,
+        AOBAKE_GPU_MAPS => &arrays.maps,
+        AOBAKE_GPU_SPARSE_ROWS => &arrays.sparse_rows,
         other => {
             fail(format!(
                 "array {other}: AOBAKE_GPU_BLOCKS (0) to AOBAKE_GPU_SPARSE_ROWS (3)"

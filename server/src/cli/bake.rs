@@ -182,10 +182,7 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
         } else {
             format!("{:.1} M rays", rays / 1e6)
         };
-        let encoding = match serde_json::to_value(encoding) {
-            Ok(serde_json::Value::String(name)) => name,
-            _ => format!("{encoding:?}"),
-        };
+        let encoding = super::common::serde_name(&encoding);
         eprintln!(
             "{}: {} vertices, {} triangles; clip {} ({:.2} s); cubemaps ({encoding} encoding) of {}² texels, {} shells, {} time samples, {} rays per point ({rays})",
             args.request.file.display(),

@@ -373,7 +373,7 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
             for t in &tokens {
                 println!(
                     "{:<12}  {:<24}  {:<22}  {} ago{}",
-                    t.id.get(..12).unwrap_or(&t.id),
+                    short_id(&t.id),
                     t.name,
                     t.scopes.join(","),
                     age(now - t.created_at),
@@ -388,10 +388,11 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
                     "give at least the first 8 characters of the token's id (`aobake token list`)"
                 );
             }
+            let prefix = id.to_ascii_lowercase();
             let matching: Vec<_> = api
                 .tokens()?
                 .into_iter()
-                .filter(|t| t.id.starts_with(&id.to_ascii_lowercase()))
+                .filter(|t| t.id.starts_with(&prefix))
                 .collect();
             let token = match matching.as_slice() {
                 [one] => one,
@@ -404,13 +405,18 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
             api.revoke_token(&token.id)?;
             println!(
                 "revoked {} ({}, {})",
-                token.id.get(..12).unwrap_or(&token.id),
+                short_id(&token.id),
                 token.name,
                 token.scopes.join(",")
             );
         }
     }
     Ok(())
+}
+
+/// A token id's first 12 characters, as `token list` shows it.
+fn short_id(id: &str) -> &str {
+    id.get(..12).unwrap_or(id)
 }
 
 /// A duration in milliseconds as a person reads an age: 40 s, 12 min,

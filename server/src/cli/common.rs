@@ -85,6 +85,15 @@ pub(super) fn pose(file: &Path, args: &PoseArgs, limits: &Limits) -> anyhow::Res
     })
 }
 
+/// A serde enum's name, as headers and reports write it (`discrete`,
+/// `rotation-vector`).
+pub(super) fn serde_name(value: &impl serde::Serialize) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::String(s)) => s,
+        _ => "?".into(),
+    }
+}
+
 /// A server address as `--server` takes it: a URL with its scheme, such
 /// as `http://127.0.0.1:8080` (without one the HTTP client answers only
 /// "invalid format").

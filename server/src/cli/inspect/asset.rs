@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::Context as _;
 use aobake_core::{
-    asset::{Container, Data},
+    asset::Container,
     method::{
         Family, Method,
         cubemap::model::{CubemapModel, Encoding},
@@ -14,6 +14,8 @@ use aobake_core::{
     },
 };
 use serde::Serialize;
+
+use super::super::common::serde_name;
 
 /// What `aobake inspect` reports for an asset.
 #[derive(Serialize)]
@@ -71,7 +73,7 @@ enum ModelInfo {
         ground_resolution: Option<usize>,
     },
     Grid {
-        parts: Vec<String>,
+        parts: Vec<PartSummary>,
         /// Cells per edge of the smallest and largest grid.
         cells_per_edge: [usize; 2],
         cones: bool,
@@ -84,22 +86,23 @@ enum ModelInfo {
     },
 }
 
+/// A grid asset's part: its name and the palette entry (the skinning
+/// matrix) that poses it.
+#[derive(Serialize)]
+struct PartSummary {
+    name: String,
+    palette_entry: usize,
+}
+
 /// Whether `path` starts with the asset magic.
 pub(super) fn is_asset(path: &Path) -> anyhow::Result<bool> {
     use std::io::Read as _;
-    let mut head = [0u8; 8];
-    let mut file =
-        std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let mut read = 0;
-    while read < head.len() {
-        match file.read(&mut head[read..]) {
-            Ok(0) => break,
-            Ok(n) => read += n,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
-        }
-    }
-    Ok(read == head.len() && head == aobake_core::asset::MAGIC)
+    let magic = aobake_core::asset::MAGIC;
+    let mut head = Vec::with_capacity(magic.len());
+    std::fs::File::open(path)
+        .and_then(|f| f.take(magic.len() as u64).read_to_end(&mut head))
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    Ok(head == magic)
 }
 
 /// Reads and checks the asset at `path`: every checksum, then the model
@@ -126,14 +129,11 @@ pub(super) fn describe(path: &Path) -> anyhow::Result<Report> {
         sections: container
             .sections
             .iter()
-            .map(|s| {
-                let (element, size) = element(&s.data);
-                SectionInfo {
-                    tag: String::from_utf8_lossy(&s.tag).into_owned(),
-                    element,
-                    count: s.data.len(),
-                    bytes: s.data.len() * size,
-                }
+            .map(|s| SectionInfo {
+                tag: String::from_utf8_lossy(&s.tag).into_owned(),
+                element: s.data.type_name(),
+                count: s.data.len(),
+                bytes: s.data.byte_len(),
             })
             .collect(),
         model,
@@ -141,30 +141,17 @@ pub(super) fn describe(path: &Path) -> anyhow::Result<Report> {
     })
 }
 
-/// A section's element type's name and size.
-fn element(data: &Data) -> (&'static str, usize) {
-    match data {
-        Data::F16(_) => ("f16", 2),
-        Data::F32(_) => ("f32", 4),
-        Data::U8(_) => ("u8", 1),
-        Data::U16(_) => ("u16", 2),
-        Data::U32(_) => ("u32", 4),
-    }
-}
-
 fn model_info(container: &Container) -> anyhow::Result<ModelInfo> {
     Ok(match container.method.family() {
         Family::Vertex => {
             let (model, header) = Model::from_container(container)?;
+            let rig = header.rig.as_ref();
             ModelInfo::Vertex {
                 vertices: model.vertices(),
                 weights_per_pose: model.weight_count(),
                 model_bytes: model.bytes(),
-                rig_nodes: header.rig.as_ref().map(|r| r.nodes.len()),
-                rig_named: header
-                    .rig
-                    .as_ref()
-                    .map(|r| r.nodes.iter().filter(|n| n.name.is_some()).count()),
+                rig_nodes: rig.map(|r| r.nodes.len()),
+                rig_named: rig.map(|r| r.nodes.iter().filter(|n| n.name.is_some()).count()),
                 structure: structure(&model, &header.layout),
             }
         }
@@ -186,7 +173,14 @@ fn model_info(container: &Container) -> anyhow::Result<ModelInfo> {
             let (model, header) = GridModel::from_container(container)?;
             let resolutions = model.parts.iter().map(|p| p.grid.resolution);
             ModelInfo::Grid {
-                parts: model.parts.iter().map(|p| p.name.clone()).collect(),
+                parts: model
+                    .parts
+                    .iter()
+                    .map(|p| PartSummary {
+                        name: p.name.clone(),
+                        palette_entry: p.joint,
+                    })
+                    .collect(),
                 cells_per_edge: [
                     resolutions.clone().min().unwrap_or(0),
                     resolutions.max().unwrap_or(0),
@@ -225,7 +219,7 @@ fn structure(model: &Model, layout: &Layout) -> String {
             format!(
                 "linear in {} joint-angle parameters as {} features{projection}{}",
                 angles.names.len(),
-                name(features),
+                serde_name(features),
                 basis(*rows, *sparse),
             )
         }
@@ -250,14 +244,6 @@ fn structure(model: &Model, layout: &Layout) -> String {
             basis(*rows, *sparse),
         ),
         _ => "one occlusion per vertex, the same in every pose".into(),
-    }
-}
-
-/// A serde enum's name, as the header writes it.
-fn name(value: &impl Serialize) -> String {
-    match serde_json::to_value(value) {
-        Ok(serde_json::Value::String(s)) => s,
-        _ => "?".into(),
     }
 }
 
@@ -339,7 +325,7 @@ pub(super) fn print_text(r: &Report) {
             println!("  model        clip {clip} ({duration:.3} s) at {times} times");
             println!(
                 "  cubemaps     {cubemaps}, each six {resolution}² faces ({shells} shells, {} encoding)",
-                name(encoding)
+                serde_name(encoding)
             );
             let s = &h["layout"]["spheroid"];
             println!(
@@ -379,17 +365,12 @@ pub(super) fn print_text(r: &Report) {
             };
             println!("  model        {} rigid parts, {cells}", parts.len());
             // Each part's palette entry: the matrix an engine passes for it.
-            let entries: Vec<u64> = h["parts"]
-                .as_array()
-                .map(|a| a.iter().filter_map(|p| p["joint"].as_u64()).collect())
-                .unwrap_or_default();
             let named: Vec<String> = parts
                 .iter()
-                .zip(&entries)
-                .map(|(name, j)| format!("{name} (palette entry {j})"))
+                .map(|p| format!("{} (palette entry {})", p.name, p.palette_entry))
                 .collect();
             println!("  parts        {}", named.join(", "));
-            if let Some(last) = entries.iter().max() {
+            if let Some(last) = parts.iter().map(|p| p.palette_entry).max() {
                 println!(
                     "  palette      at least {} matrices (the skinning palette; a rigid part's entry is its node's world matrix)",
                     last + 1
