@@ -8,6 +8,55 @@
 #include <stdbool.h>
 
 /**
+ * The version of the C ABI this header describes: a program compiled
+ * against one header checks at load that
+ * `aobake_rt_abi_version() == AOBAKE_RT_ABI_VERSION`. It changes when a
+ * function, constant or struct of the header changes incompatibly; new
+ * functions alone do not change it.
+ */
+#define AOBAKE_RT_ABI_VERSION 1
+
+/**
+ * `aobake_cubemap_gpu_words`' arrays: the texels, four words each
+ * (`cubemap_ao.wgsl`'s binding 1).
+ */
+#define AOBAKE_CUBEMAP_GPU_TEXELS 0
+
+/**
+ * The static ground's words (binding 4): texels per side (0 without a
+ * static ground), the f32 bits of its square's min x, min z and side
+ * and of its gain, then its offsets (x fastest).
+ */
+#define AOBAKE_CUBEMAP_GPU_GROUND 1
+
+/**
+ * `aobake_grid_gpu_words`' arrays: the parts' infos, four words each
+ * (cells per edge, index of the first cell, the f32 bits of the base's
+ * gain at the part's vertices, padding; `grid_ao.wgsl`'s binding 1).
+ */
+#define AOBAKE_GRID_GPU_INFOS 0
+
+/**
+ * The cells, one word each (RGBA8, R in the low byte), part after part,
+ * then T_clip's f32 pairs (binding 2).
+ */
+#define AOBAKE_GRID_GPU_CELLS 1
+
+/**
+ * The static base's offset per vertex of the character (f32 bits; none
+ * without a base): the `offset` a vertex shader passes to `grid_ao`.
+ */
+#define AOBAKE_GRID_GPU_VERTEX_OFFSETS 2
+
+/**
+ * The static base's ground texture as `common/ground_texture.wgsl`
+ * reads it: texels per side (0 without a base), the f32 bits of its
+ * square's min x, min z and side and of its gain, then its offsets (x
+ * fastest).
+ */
+#define AOBAKE_GRID_GPU_GROUND 3
+
+/**
  * `aobake_vertex_ao_gpu_words`' arrays: the dense blocks
  * (`AOBAKE_GPU_BLOCK_WORDS` words each; none for a sparse model).
  */
@@ -51,6 +100,72 @@ typedef struct AobakeGrid AobakeGrid;
 typedef struct AobakeVertexAo AobakeVertexAo;
 
 /**
+ * The constant fields of the GPU lookups' `Params` uniform
+ * (`shaders/wgsl/common/cubemap_lookup.wgsl`); an engine adds the
+ * per-dispatch ones (`points`, `phase`, `row_stride`, `on_ground`).
+ */
+typedef struct AobakeCubemapGpu {
+  /**
+   * xyz: the spheroid's centre; w: the outer scaling.
+   */
+  float centre[4];
+  /**
+   * xyz: the spheroid's radii; w: the inner scaling.
+   */
+  float radii[4];
+  /**
+   * Texels per face edge.
+   */
+  uint32_t resolution;
+  /**
+   * Shells.
+   */
+  uint32_t shells;
+  /**
+   * Time samples.
+   */
+  uint32_t times;
+  /**
+   * 0 discrete, 1 continuous (cosine layout), 2 continuous (Kroon's
+   * thirds layout).
+   */
+  uint32_t encoding;
+} AobakeCubemapGpu;
+
+/**
+ * The constant fields of the GPU lookups' `Params` uniform
+ * (`shaders/wgsl/common/grid_lookup.wgsl`); an engine adds the
+ * per-dispatch ones (`points`, `row_stride`).
+ */
+typedef struct AobakeGridGpu {
+  /**
+   * Parts.
+   */
+  uint32_t parts;
+  /**
+   * 1 when the cones are baked.
+   */
+  uint32_t cones;
+  /**
+   * T_clip's samples per axis (0 without cones).
+   */
+  uint32_t tclip_resolution;
+  /**
+   * Index in the cells of T_clip's first f32.
+   */
+  uint32_t tclip_offset;
+  /**
+   * 1 when the asset has a static base.
+   */
+  uint32_t base;
+  /**
+   * The base's ground gain (0 without a base); `Params.ground_gain`
+   * holds its bits.
+   */
+  float ground_gain;
+} AobakeGridGpu;
+
+/**
  * A node's local transform, as glTF and engines animate it: translation,
  * rotation (unit quaternion x, y, z, w) and scale, in the parent's frame.
  */
@@ -78,6 +193,214 @@ extern "C" {
  * NULL if none has. Valid until the next failing call on this thread.
  */
 const char *aobake_last_error(void);
+
+/**
+ * The C ABI version of the loaded library (`AOBAKE_RT_ABI_VERSION` of
+ * the header it was built with).
+ */
+uint32_t aobake_rt_abi_version(void);
+
+/**
+ * The loaded library's version (aobake's release, as "0.1.0"), a static
+ * NUL-terminated string.
+ */
+const char *aobake_rt_version(void);
+
+/**
+ * Reads a cubemap asset (`cubemap-discrete` or `cubemap-continuous`) from
+ * `len` bytes at `bytes`; NULL on failure.
+ *
+ * # Safety
+ * `bytes` must point to `len` readable bytes.
+ */
+struct AobakeCubemap *aobake_cubemap_open(const uint8_t *bytes, size_t len);
+
+/**
+ * Frees a cubemap handle (NULL is ignored).
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle from `aobake_cubemap_open`.
+ */
+void aobake_cubemap_free(struct AobakeCubemap *cubemap);
+
+/**
+ * The baked clip's duration in seconds (the cycle), 0 for NULL.
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle.
+ */
+float aobake_cubemap_duration(const struct AobakeCubemap *cubemap);
+
+/**
+ * Writes the occlusion the character casts at `count` points (`3 ·
+ * count` floats, x y z, in the character's space as baked) at `seconds`
+ * of its clip to `out` (`count` floats). `false` on NULL.
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle; `points` NULL or `3 · count`
+ * readable floats; `out` NULL or `count` writable floats.
+ */
+bool aobake_cubemap_occlusion(const struct AobakeCubemap *cubemap, float seconds, const float *points, size_t count, float *out);
+
+/**
+ * As [`aobake_cubemap_occlusion`] for points of the ground plane: with
+ * the asset's static ground, `gain · occlusion + offset`, clamped (see
+ * `docs/engines.md`).
+ *
+ * # Safety
+ * As [`aobake_cubemap_occlusion`].
+ */
+bool aobake_cubemap_ground_ao(const struct AobakeCubemap *cubemap, float seconds, const float *points, size_t count, float *out);
+
+/**
+ * The phase of the clip at `seconds` (the fraction of its cycle, 0 to
+ * 1; 0 for a time that is not finite): the GPU lookups' `Params.phase`
+ * at that time. 0 for NULL.
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle.
+ */
+float aobake_cubemap_phase(const struct AobakeCubemap *cubemap, float seconds);
+
+/**
+ * Writes the constant fields of the GPU lookups' `Params` to `out`
+ * (`docs/engines.md`). `false` for NULL or a cubemap too large for
+ * 32-bit GPU indices.
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle; `out` NULL or writable.
+ */
+bool aobake_cubemap_gpu_params(const struct AobakeCubemap *cubemap, struct AobakeCubemapGpu *out);
+
+/**
+ * The GPU lookups' arrays as they read them, uploaded once per asset:
+ * sets `*words` to the length in words of array `which`
+ * (`AOBAKE_CUBEMAP_GPU_TEXELS` or `_GROUND`) and copies it to `out` when
+ * `out` is not NULL (then `len` must be at least `*words`). Call it with
+ * `out` NULL to size the buffer. `false` for a NULL handle, an unknown
+ * array or a short buffer.
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle; `out` NULL or `len` writable
+ * words; `words` a writable `size_t`.
+ */
+bool aobake_cubemap_gpu_words(const struct AobakeCubemap *cubemap, uint32_t which, uint32_t *out, size_t len, size_t *words);
+
+/**
+ * Reads a grid asset from `len` bytes at `bytes`; NULL on failure.
+ *
+ * # Safety
+ * `bytes` must point to `len` readable bytes.
+ */
+struct AobakeGrid *aobake_grid_open(const uint8_t *bytes, size_t len);
+
+/**
+ * Frees a grid handle (NULL is ignored).
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle from `aobake_grid_open`.
+ */
+void aobake_grid_free(struct AobakeGrid *grid);
+
+/**
+ * Parts (rigid bodies with a grid each), 0 for NULL.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle.
+ */
+size_t aobake_grid_part_count(const struct AobakeGrid *grid);
+
+/**
+ * Matrices the palette must hold: the highest joint a part follows, plus
+ * one (0 for NULL).
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle.
+ */
+size_t aobake_grid_palette_len(const struct AobakeGrid *grid);
+
+/**
+ * Writes the occlusion every part casts at `count` receivers to `out`
+ * (`count` floats), the parts posed by the frame's skinning `palette`
+ * (`palette_len` column-major 4 × 4 matrices, world from bind, as the
+ * renderer skins with). `points` and `normals` are `3 · count` floats
+ * (world space, unit normals); `parts` is NULL (no receiver is on a
+ * part, as the ground) or `count` part indices, -1 for none: a receiver
+ * on a part takes its own part by the self-occlusion rule. These are
+ * the paper's grids alone; [`aobake_grid_ao`] adds the asset's static
+ * base.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle; each pointer NULL or holding the
+ * counts above.
+ */
+bool aobake_grid_occlusion(const struct AobakeGrid *grid, const float *palette, size_t palette_len, const float *points, const float *normals, const int64_t *parts, size_t count, float *out);
+
+/**
+ * Writes the AO an engine shows at `count` receivers to `out`: as
+ * [`aobake_grid_occlusion`], plus the asset's static base when it has
+ * one (`gain · grids + offset`, clamped; see `docs/engines.md`).
+ * `receivers` is NULL (no receiver takes an offset) or `count` values:
+ * the receiver's vertex index in the character (its offset; with a
+ * static base, an index past the character's vertices is refused), -1
+ * for a point of the ground (the base's ground texture), -2 for any
+ * other surface.
+ *
+ * # Safety
+ * As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`
+ * values.
+ */
+bool aobake_grid_ao(const struct AobakeGrid *grid, const float *palette, size_t palette_len, const float *points, const float *normals, const int64_t *parts, const int64_t *receivers, size_t count, float *out);
+
+/**
+ * The palette entry (joint) part `part` follows, or -1 for a part the
+ * asset does not have (or NULL). A vertex on a part is one whose
+ * heaviest skin joint is that part's joint: the `parts` the lookups
+ * take.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle.
+ */
+int64_t aobake_grid_part_joint(const struct AobakeGrid *grid, size_t part);
+
+/**
+ * Writes the constant fields of the GPU lookups' `Params` to `out`
+ * (`docs/engines.md`). `false` for NULL or a grid too large for 32-bit
+ * GPU indices.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle; `out` NULL or writable.
+ */
+bool aobake_grid_gpu_params(const struct AobakeGrid *grid, struct AobakeGridGpu *out);
+
+/**
+ * The GPU lookups' arrays as they read them, uploaded once per asset:
+ * sets `*words` to the length in words of array `which`
+ * (`AOBAKE_GRID_GPU_INFOS`, `_CELLS`, `_VERTEX_OFFSETS` or `_GROUND`)
+ * and copies it to `out` when `out` is not NULL (then `len` must be at
+ * least `*words`). Call it with `out` NULL to size the buffer. `false`
+ * for a NULL handle, an unknown array or a short buffer.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle; `out` NULL or `len` writable
+ * words; `words` a writable `size_t`.
+ */
+bool aobake_grid_gpu_words(const struct AobakeGrid *grid, uint32_t which, uint32_t *out, size_t len, size_t *words);
+
+/**
+ * Writes the parts' poses for a frame, as the GPU lookups read them
+ * (`grid_ao.wgsl`'s binding 3), to `out`: per part 32 floats,
+ * `grid_from_world` then `world_from_bind`, column-major, from the
+ * frame's skinning `palette` as [`aobake_grid_occlusion`] takes it.
+ * `len` must be `32 · aobake_grid_part_count`. `false` for NULL, a
+ * short palette, a matrix that is not finite or cannot be inverted, or a
+ * buffer of another length.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle; `palette` NULL or `16 ·
+ * palette_len` readable floats; `out` NULL or `len` writable floats.
+ */
+bool aobake_grid_gpu_poses(const struct AobakeGrid *grid, const float *palette, size_t palette_len, float *out, size_t len);
 
 /**
  * Reads a vertex-method asset from `len` bytes at `bytes` (copied; the
@@ -206,118 +529,6 @@ bool aobake_vertex_ao_weights(const struct AobakeVertexAo *ao, float *out, size_
  * floats.
  */
 bool aobake_vertex_ao_evaluate(const struct AobakeVertexAo *ao, float *out, size_t len);
-
-/**
- * Reads a cubemap asset (`cubemap-discrete` or `cubemap-continuous`) from
- * `len` bytes at `bytes`; NULL on failure.
- *
- * # Safety
- * `bytes` must point to `len` readable bytes.
- */
-struct AobakeCubemap *aobake_cubemap_open(const uint8_t *bytes, size_t len);
-
-/**
- * Frees a cubemap handle (NULL is ignored).
- *
- * # Safety
- * `cubemap` must be NULL or a live handle from `aobake_cubemap_open`.
- */
-void aobake_cubemap_free(struct AobakeCubemap *cubemap);
-
-/**
- * The baked clip's duration in seconds (the cycle), 0 for NULL.
- *
- * # Safety
- * `cubemap` must be NULL or a live handle.
- */
-float aobake_cubemap_duration(const struct AobakeCubemap *cubemap);
-
-/**
- * Writes the occlusion the character casts at `count` points (`3 ·
- * count` floats, x y z, in the character's space as baked) at `seconds`
- * of its clip to `out` (`count` floats). `false` on NULL.
- *
- * # Safety
- * `cubemap` must be NULL or a live handle; `points` NULL or `3 · count`
- * readable floats; `out` NULL or `count` writable floats.
- */
-bool aobake_cubemap_occlusion(const struct AobakeCubemap *cubemap, float seconds, const float *points, size_t count, float *out);
-
-/**
- * As [`aobake_cubemap_occlusion`] for points of the ground plane: with
- * the asset's static ground, `gain · occlusion + offset`, clamped (see
- * `docs/engines.md`).
- *
- * # Safety
- * As [`aobake_cubemap_occlusion`].
- */
-bool aobake_cubemap_ground_ao(const struct AobakeCubemap *cubemap, float seconds, const float *points, size_t count, float *out);
-
-/**
- * Reads a grid asset from `len` bytes at `bytes`; NULL on failure.
- *
- * # Safety
- * `bytes` must point to `len` readable bytes.
- */
-struct AobakeGrid *aobake_grid_open(const uint8_t *bytes, size_t len);
-
-/**
- * Frees a grid handle (NULL is ignored).
- *
- * # Safety
- * `grid` must be NULL or a live handle from `aobake_grid_open`.
- */
-void aobake_grid_free(struct AobakeGrid *grid);
-
-/**
- * Parts (rigid bodies with a grid each), 0 for NULL.
- *
- * # Safety
- * `grid` must be NULL or a live handle.
- */
-size_t aobake_grid_part_count(const struct AobakeGrid *grid);
-
-/**
- * Matrices the palette must hold: the highest joint a part follows, plus
- * one (0 for NULL).
- *
- * # Safety
- * `grid` must be NULL or a live handle.
- */
-size_t aobake_grid_palette_len(const struct AobakeGrid *grid);
-
-/**
- * Writes the occlusion every part casts at `count` receivers to `out`
- * (`count` floats), the parts posed by the frame's skinning `palette`
- * (`palette_len` column-major 4 × 4 matrices, world from bind, as the
- * renderer skins with). `points` and `normals` are `3 · count` floats
- * (world space, unit normals); `parts` is NULL (no receiver is on a
- * part, as the ground) or `count` part indices, -1 for none: a receiver
- * on a part takes its own part by the self-occlusion rule. These are
- * the paper's grids alone; [`aobake_grid_ao`] adds the asset's static
- * base.
- *
- * # Safety
- * `grid` must be NULL or a live handle; each pointer NULL or holding the
- * counts above.
- */
-bool aobake_grid_occlusion(const struct AobakeGrid *grid, const float *palette, size_t palette_len, const float *points, const float *normals, const int64_t *parts, size_t count, float *out);
-
-/**
- * Writes the AO an engine shows at `count` receivers to `out`: as
- * [`aobake_grid_occlusion`], plus the asset's static base when it has
- * one (`gain · grids + offset`, clamped; see `docs/engines.md`).
- * `receivers` is NULL (no receiver takes an offset) or `count` values:
- * the receiver's vertex index in the character (its offset; with a
- * static base, an index past the character's vertices is refused), -1
- * for a point of the ground (the base's ground texture), -2 for any
- * other surface.
- *
- * # Safety
- * As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`
- * values.
- */
-bool aobake_grid_ao(const struct AobakeGrid *grid, const float *palette, size_t palette_len, const float *points, const float *normals, const int64_t *parts, const int64_t *receivers, size_t count, float *out);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -161,6 +161,11 @@ fn run_c(exe: &Path, args: &[&Path], out: &Path) -> Vec<f32> {
         .collect()
 }
 
+/// Raw words written among floats.
+fn words(floats: &[f32]) -> Vec<u32> {
+    floats.iter().map(|x| x.to_bits()).collect()
+}
+
 /// Receivers as lookups.c reads them: `px py pz nx ny nz part kind` a
 /// line.
 fn receivers_text(receivers: &[(glam::Vec3, glam::Vec3, i64, i64)]) -> String {
@@ -178,9 +183,10 @@ fn receivers_text(receivers: &[(glam::Vec3, glam::Vec3, i64, i64)]) -> String {
 #[test]
 fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
     use aobake_runtime::method::{
-        cubemap::CubemapModel,
+        cubemap::{CubemapModel, gpu::CubemapGpu},
         grid::{
             base::Receiver,
+            gpu::GridGpu,
             model::{GridModel, Terms},
         },
     };
@@ -234,7 +240,22 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
                 .map(|(p, _, _, _)| model.ground_ao(*p, phase)),
         )
         .collect();
+    let (c, gpu_words) = c.split_at(rust.len());
     assert_eq!(c, rust, "cubemap lookups bit for bit");
+    // Then the GPU form as the runtime packs it, and the phase.
+    let gpu = CubemapGpu::new(&model).unwrap();
+    let expected: Vec<u32> = gpu
+        .centre
+        .iter()
+        .chain(&gpu.radii)
+        .map(|x| x.to_bits())
+        .chain([gpu.resolution, gpu.shells, gpu.times, gpu.encoding])
+        .chain([phase.to_bits()])
+        .chain(gpu.texels.iter().copied())
+        .chain(gpu.ground.iter().copied())
+        .collect();
+    assert!(gpu.ground.len() > 5, "the static ground's texture");
+    assert_eq!(words(gpu_words), expected, "the cubemap's GPU form");
     assert_ne!(
         c[..64],
         c[64..],
@@ -305,7 +326,36 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
         model.ao(&poses, p, n, receiver)
     });
     let rust: Vec<f32> = grids.chain(on_base).collect();
+    let (c, gpu_words) = c.split_at(rust.len());
     assert_eq!(c, rust, "grid lookups bit for bit");
+    // Then the GPU form as the runtime packs it, each part's joint, the
+    // base's offsets and ground, and the frame's poses.
+    let gpu = GridGpu::new(&model).unwrap();
+    let mut expected = vec![
+        gpu.parts(),
+        gpu.cones,
+        gpu.tclip_resolution,
+        gpu.tclip_offset,
+        gpu.base,
+        gpu.ground_gain,
+    ];
+    for part in &model.parts {
+        let joint = part.joint as u64;
+        expected.extend([joint as u32, (joint >> 32) as u32]);
+    }
+    expected.extend(gpu.infos.as_flattened());
+    expected.extend(&gpu.cells);
+    expected.extend(base.vertex_offsets.iter().map(|x| x.to_bits()));
+    expected.extend(base.ground.gpu_words());
+    for pose in &poses {
+        let matrices = [pose.grid_from_world, pose.world_from_bind];
+        expected.extend(
+            matrices
+                .iter()
+                .flat_map(|m| m.to_cols_array().map(f32::to_bits)),
+        );
+    }
+    assert_eq!(words(gpu_words), expected, "the grid's GPU form");
     assert!(rust.iter().any(|&a| a > 0.0), "some occlusion");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -11,8 +11,15 @@
  * second: for a cubemap, the occlusion and the AO on its static ground
  * (aobake_cubemap_ground_ao); for a grid, the grids alone
  * (aobake_grid_occlusion) and the AO on the static base
- * (aobake_grid_ao). Also checks that the other kind of asset and a short
- * palette are refused with a reason. Exits non-zero on anything unexpected. */
+ * (aobake_grid_ao). Then the asset's GPU form as an engine uploads it,
+ * raw 32-bit words: for a cubemap, its AobakeCubemapGpu, the phase at
+ * SECONDS and the arrays AOBAKE_CUBEMAP_GPU_TEXELS and _GROUND; for a
+ * grid, its AobakeGridGpu, each part's joint, the arrays
+ * AOBAKE_GRID_GPU_INFOS, _CELLS, _VERTEX_OFFSETS and _GROUND, and the
+ * parts' poses for PALETTE. Also checks the ABI version, that the other
+ * kind of asset and a short palette are refused with a reason, and that a
+ * NaN point is refused. Exits non-zero on anything unexpected. */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -50,8 +57,21 @@ static float *numbers(const char *path, size_t *count) {
     return v;
 }
 
+/* Writes array `which` of a GPU form, sized by a first call, to f. */
+#define DUMP_WORDS(f, get, handle, which) do { \
+    size_t words_ = 0; \
+    EXPECT(get(handle, which, NULL, 0, &words_), "size of %s: %s", #which, aobake_last_error()); \
+    uint32_t *w_ = malloc(words_ * sizeof *w_ + 1); \
+    EXPECT(get(handle, which, w_, words_, &words_), "%s: %s", #which, aobake_last_error()); \
+    fwrite(w_, sizeof *w_, words_, f); \
+    free(w_); \
+} while (0)
+
 int main(int argc, char **argv) {
     EXPECT(argc == 6, "usage: lookups cubemap|grid ASSET SECONDS|PALETTE POINTS OUT");
+    EXPECT(aobake_rt_abi_version() == AOBAKE_RT_ABI_VERSION, "ABI %u, header %u",
+           aobake_rt_abi_version(), AOBAKE_RT_ABI_VERSION);
+    EXPECT(strlen(aobake_rt_version()) > 0, "no version");
     size_t len;
     uint8_t *bytes = slurp(argv[2], &len);
     size_t n;
@@ -68,8 +88,9 @@ int main(int argc, char **argv) {
         parts[i] = (int64_t)receivers[8 * i + 6];
         kinds[i] = (int64_t)receivers[8 * i + 7];
     }
-    size_t written = count;
     float *out = malloc(2 * count * sizeof *out);
+    FILE *f = fopen(argv[5], "wb");
+    EXPECT(f, "cannot write %s", argv[5]);
 
     if (strcmp(argv[1], "cubemap") == 0) {
         EXPECT(aobake_grid_open(bytes, len) == NULL, "a cubemap opened as a grid");
@@ -81,7 +102,22 @@ int main(int argc, char **argv) {
                "%s", aobake_last_error());
         EXPECT(aobake_cubemap_ground_ao(c, strtof(argv[3], NULL), points, count, out + count),
                "%s", aobake_last_error());
-        written = 2 * count;
+        fwrite(out, sizeof *out, 2 * count, f);
+        if (count > 0) {
+            float kept = points[1];
+            points[1] = NAN;
+            EXPECT(!aobake_cubemap_occlusion(c, 0.0f, points, count, out),
+                   "a NaN point was taken");
+            EXPECT(strstr(aobake_last_error(), "not finite"), "%s", aobake_last_error());
+            points[1] = kept;
+        }
+        AobakeCubemapGpu params;
+        EXPECT(aobake_cubemap_gpu_params(c, &params), "%s", aobake_last_error());
+        fwrite(&params, sizeof params, 1, f);
+        float phase = aobake_cubemap_phase(c, strtof(argv[3], NULL));
+        fwrite(&phase, sizeof phase, 1, f);
+        DUMP_WORDS(f, aobake_cubemap_gpu_words, c, AOBAKE_CUBEMAP_GPU_TEXELS);
+        DUMP_WORDS(f, aobake_cubemap_gpu_words, c, AOBAKE_CUBEMAP_GPU_GROUND);
         aobake_cubemap_free(c);
     } else {
         EXPECT(aobake_cubemap_open(bytes, len) == NULL, "a grid opened as a cubemap");
@@ -106,13 +142,50 @@ int main(int argc, char **argv) {
         }
         EXPECT(aobake_grid_ao(g, palette, m / 16, points, normals, parts, kinds, count, out + count),
                "%s", aobake_last_error());
-        written = 2 * count;
+        fwrite(out, sizeof *out, 2 * count, f);
+        if (count > 0) {
+            /* A NaN normal, and a joint's matrix that cannot be inverted:
+               refused with the reason, not NaN occlusion. */
+            float kept = normals[0];
+            normals[0] = NAN;
+            EXPECT(!aobake_grid_occlusion(g, palette, m / 16, points, normals, parts, count, out),
+                   "a NaN normal was taken");
+            EXPECT(strstr(aobake_last_error(), "normals: item 0 is not finite"), "%s",
+                   aobake_last_error());
+            normals[0] = kept;
+            size_t joint = (size_t)aobake_grid_part_joint(g, 0);
+            float matrix[16];
+            memcpy(matrix, palette + 16 * joint, sizeof matrix);
+            memset(palette + 16 * joint, 0, sizeof matrix);
+            EXPECT(!aobake_grid_occlusion(g, palette, m / 16, points, normals, parts, count, out),
+                   "a singular matrix was taken");
+            EXPECT(strstr(aobake_last_error(), "cannot be inverted"), "%s", aobake_last_error());
+            memcpy(palette + 16 * joint, matrix, sizeof matrix);
+        }
+        AobakeGridGpu params;
+        EXPECT(aobake_grid_gpu_params(g, &params), "%s", aobake_last_error());
+        EXPECT(params.parts == aobake_grid_part_count(g), "%u parts", params.parts);
+        fwrite(&params, sizeof params, 1, f);
+        for (size_t k = 0; k < params.parts; k++) {
+            int64_t joint = aobake_grid_part_joint(g, k);
+            EXPECT(joint >= 0 && (size_t)joint < m / 16, "part %zu: joint %lld", k, (long long)joint);
+            fwrite(&joint, sizeof joint, 1, f);
+        }
+        EXPECT(aobake_grid_part_joint(g, params.parts) == -1, "a part past the last");
+        DUMP_WORDS(f, aobake_grid_gpu_words, g, AOBAKE_GRID_GPU_INFOS);
+        DUMP_WORDS(f, aobake_grid_gpu_words, g, AOBAKE_GRID_GPU_CELLS);
+        DUMP_WORDS(f, aobake_grid_gpu_words, g, AOBAKE_GRID_GPU_VERTEX_OFFSETS);
+        DUMP_WORDS(f, aobake_grid_gpu_words, g, AOBAKE_GRID_GPU_GROUND);
+        float *poses = malloc(32 * params.parts * sizeof *poses);
+        EXPECT(!aobake_grid_gpu_poses(g, palette, m / 16, poses, 32 * params.parts - 1),
+               "a short poses buffer was taken");
+        EXPECT(aobake_grid_gpu_poses(g, palette, m / 16, poses, 32 * params.parts),
+               "%s", aobake_last_error());
+        fwrite(poses, sizeof *poses, 32 * params.parts, f);
+        free(poses);
         free(palette);
         aobake_grid_free(g);
     }
-    FILE *f = fopen(argv[5], "wb");
-    EXPECT(f, "cannot write %s", argv[5]);
-    fwrite(out, sizeof *out, written, f);
     fclose(f);
     printf("%zu receivers\n", count);
     free(bytes); free(receivers); free(points); free(normals); free(parts); free(kinds); free(out);

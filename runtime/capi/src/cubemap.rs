@@ -1,0 +1,267 @@
+//! Kroon's cubemaps: the occlusion a character casts at points of space
+//! at a time of its clip, on the CPU or in the form the GPU lookups read.
+
+use std::sync::OnceLock;
+
+use aobake_runtime::{
+    Asset,
+    method::cubemap::{CubemapModel, gpu::CubemapGpu},
+};
+use glam::Vec3;
+
+use crate::{copy_words, fail, floats, free, open, out_floats};
+
+/// A cubemap asset. Opaque to C.
+#[derive(Debug)]
+pub struct AobakeCubemap(CubemapModel, OnceLock<Result<CubemapGpu, String>>);
+
+/// Reads a cubemap asset (`cubemap-discrete` or `cubemap-continuous`) from
+/// `len` bytes at `bytes`; NULL on failure.
+///
+/// # Safety
+/// `bytes` must point to `len` readable bytes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_open(bytes: *const u8, len: usize) -> *mut AobakeCubemap {
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        open(bytes, len, "cubemap", |a| match a {
+            Asset::Cubemap { model, .. } => Some(AobakeCubemap(model, OnceLock::new())),
+            _ => None,
+        })
+    }
+}
+
+/// Frees a cubemap handle (NULL is ignored).
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle from `aobake_cubemap_open`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_free(cubemap: *mut AobakeCubemap) {
+    // SAFETY: forwarded from the caller.
+    unsafe { free(cubemap) }
+}
+
+/// The baked clip's duration in seconds (the cycle), 0 for NULL.
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_duration(cubemap: *const AobakeCubemap) -> f32 {
+    // SAFETY: the caller passes NULL or a live handle.
+    unsafe { cubemap.as_ref() }.map_or(0.0, |c| c.0.layout.duration)
+}
+
+/// Writes the occlusion the character casts at `count` points (`3 ·
+/// count` floats, x y z, in the character's space as baked) at `seconds`
+/// of its clip to `out` (`count` floats). `false` on NULL.
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle; `points` NULL or `3 · count`
+/// readable floats; `out` NULL or `count` writable floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_occlusion(
+    cubemap: *const AobakeCubemap,
+    seconds: f32,
+    points: *const f32,
+    count: usize,
+    out: *mut f32,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        cubemap_lookup(
+            cubemap,
+            seconds,
+            points,
+            count,
+            out,
+            CubemapModel::occlusion,
+        )
+    }
+}
+
+/// As [`aobake_cubemap_occlusion`] for points of the ground plane: with
+/// the asset's static ground, `gain · occlusion + offset`, clamped (see
+/// `docs/engines.md`).
+///
+/// # Safety
+/// As [`aobake_cubemap_occlusion`].
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_ground_ao(
+    cubemap: *const AobakeCubemap,
+    seconds: f32,
+    points: *const f32,
+    count: usize,
+    out: *mut f32,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        cubemap_lookup(
+            cubemap,
+            seconds,
+            points,
+            count,
+            out,
+            CubemapModel::ground_ao,
+        )
+    }
+}
+
+/// `look` at `count` points at `seconds`, into `out`.
+///
+/// # Safety
+/// As [`aobake_cubemap_occlusion`].
+unsafe fn cubemap_lookup(
+    cubemap: *const AobakeCubemap,
+    seconds: f32,
+    points: *const f32,
+    count: usize,
+    out: *mut f32,
+    look: fn(&CubemapModel, Vec3, f32) -> f32,
+) -> bool {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(c) = (unsafe { cubemap.as_ref() }) else {
+        fail("the handle is NULL");
+        return false;
+    };
+    // SAFETY: forwarded from the caller.
+    let Some(points) = (unsafe { floats(points, count, 3, "points") }) else {
+        return false;
+    };
+    // SAFETY: forwarded from the caller.
+    let Some(out) = (unsafe { out_floats(out, count, count, "occlusion") }) else {
+        return false;
+    };
+    let phase = c.0.layout.phase(seconds);
+    for (o, p) in out.iter_mut().zip(points.chunks_exact(3)) {
+        *o = look(&c.0, Vec3::from_slice(p), phase);
+    }
+    true
+}
+
+/// The phase of the clip at `seconds` (the fraction of its cycle, 0 to
+/// 1; 0 for a time that is not finite): the GPU lookups' `Params.phase`
+/// at that time. 0 for NULL.
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_phase(cubemap: *const AobakeCubemap, seconds: f32) -> f32 {
+    // SAFETY: the caller passes NULL or a live handle.
+    unsafe { cubemap.as_ref() }.map_or(0.0, |c| c.0.layout.phase(seconds))
+}
+
+/// The constant fields of the GPU lookups' `Params` uniform
+/// (`shaders/wgsl/common/cubemap_lookup.wgsl`); an engine adds the
+/// per-dispatch ones (`points`, `phase`, `row_stride`, `on_ground`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AobakeCubemapGpu {
+    /// xyz: the spheroid's centre; w: the outer scaling.
+    pub centre: [f32; 4],
+    /// xyz: the spheroid's radii; w: the inner scaling.
+    pub radii: [f32; 4],
+    /// Texels per face edge.
+    pub resolution: u32,
+    /// Shells.
+    pub shells: u32,
+    /// Time samples.
+    pub times: u32,
+    /// 0 discrete, 1 continuous (cosine layout), 2 continuous (Kroon's
+    /// thirds layout).
+    pub encoding: u32,
+}
+
+/// `aobake_cubemap_gpu_words`' arrays: the texels, four words each
+/// (`cubemap_ao.wgsl`'s binding 1).
+pub const AOBAKE_CUBEMAP_GPU_TEXELS: u32 = 0;
+/// The static ground's words (binding 4): texels per side (0 without a
+/// static ground), the f32 bits of its square's min x, min z and side
+/// and of its gain, then its offsets (x fastest).
+pub const AOBAKE_CUBEMAP_GPU_GROUND: u32 = 1;
+
+/// The asset's GPU form, packed once per handle.
+fn cubemap_gpu(c: &AobakeCubemap) -> Option<&CubemapGpu> {
+    let packed = c.1.get_or_init(|| {
+        CubemapGpu::new(&c.0).map_err(|e| format!("the cubemap has no GPU form: {e}"))
+    });
+    match packed {
+        Ok(gpu) => Some(gpu),
+        Err(e) => {
+            fail(e.clone());
+            None
+        }
+    }
+}
+
+/// Writes the constant fields of the GPU lookups' `Params` to `out`
+/// (`docs/engines.md`). `false` for NULL or a cubemap too large for
+/// 32-bit GPU indices.
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle; `out` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_gpu_params(
+    cubemap: *const AobakeCubemap,
+    out: *mut AobakeCubemapGpu,
+) -> bool {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(gpu) = (unsafe { cubemap.as_ref() }).and_then(cubemap_gpu) else {
+        if cubemap.is_null() {
+            fail("the handle is NULL");
+        }
+        return false;
+    };
+    // SAFETY: the caller passes NULL or a writable struct.
+    let Some(out) = (unsafe { out.as_mut() }) else {
+        fail("out is NULL");
+        return false;
+    };
+    *out = AobakeCubemapGpu {
+        centre: gpu.centre,
+        radii: gpu.radii,
+        resolution: gpu.resolution,
+        shells: gpu.shells,
+        times: gpu.times,
+        encoding: gpu.encoding,
+    };
+    true
+}
+
+/// The GPU lookups' arrays as they read them, uploaded once per asset:
+/// sets `*words` to the length in words of array `which`
+/// (`AOBAKE_CUBEMAP_GPU_TEXELS` or `_GROUND`) and copies it to `out` when
+/// `out` is not NULL (then `len` must be at least `*words`). Call it with
+/// `out` NULL to size the buffer. `false` for a NULL handle, an unknown
+/// array or a short buffer.
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle; `out` NULL or `len` writable
+/// words; `words` a writable `size_t`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_gpu_words(
+    cubemap: *const AobakeCubemap,
+    which: u32,
+    out: *mut u32,
+    len: usize,
+    words: *mut usize,
+) -> bool {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(gpu) = (unsafe { cubemap.as_ref() }).and_then(cubemap_gpu) else {
+        if cubemap.is_null() {
+            fail("the handle is NULL");
+        }
+        return false;
+    };
+    let array: &[u32] = match which {
+        AOBAKE_CUBEMAP_GPU_TEXELS => &gpu.texels,
+        AOBAKE_CUBEMAP_GPU_GROUND => &gpu.ground,
+        other => {
+            fail(format!(
+                "array {other}: AOBAKE_CUBEMAP_GPU_TEXELS (0) or AOBAKE_CUBEMAP_GPU_GROUND (1)"
+            ));
+            return false;
+        }
+    };
+    // SAFETY: forwarded from the caller.
+    unsafe { copy_words(array, out, len, words) }
+}

@@ -1,0 +1,362 @@
+//! Vertex-method assets (static average, vertex-linear,
+//! vertex-clustered): open, pose by node name, weights or per-vertex AO,
+//! and the coefficients' GPU form.
+
+use std::{
+    ffi::{CStr, c_char},
+    sync::OnceLock,
+};
+
+use aobake_runtime::{
+    Asset,
+    method::vertex::{
+        VertexAo,
+        form::{FormRef, GpuArrays},
+    },
+    rig::Transform,
+};
+use glam::{Quat, Vec3};
+
+use crate::{copy_words, fail, fill, free, open};
+
+/// A vertex-method asset (static average, vertex-linear or
+/// vertex-clustered), its rig and the pose being set. Opaque to C.
+#[derive(Debug)]
+pub struct AobakeVertexAo(VertexAo, OnceLock<Result<GpuArrays, String>>);
+
+/// A node's local transform, as glTF and engines animate it: translation,
+/// rotation (unit quaternion x, y, z, w) and scale, in the parent's frame.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AobakeTransform {
+    /// Translation.
+    pub translation: [f32; 3],
+    /// Rotation, x y z w.
+    pub rotation: [f32; 4],
+    /// Scale per axis.
+    pub scale: [f32; 3],
+}
+
+impl From<Transform> for AobakeTransform {
+    fn from(t: Transform) -> Self {
+        Self {
+            translation: t.translation.to_array(),
+            rotation: t.rotation.to_array(),
+            scale: t.scale.to_array(),
+        }
+    }
+}
+
+/// Reads a vertex-method asset from `len` bytes at `bytes` (copied; the
+/// caller may free them after). NULL on failure: not an asset, damaged,
+/// not a vertex method, or written before asset format 1.4 (no rig).
+///
+/// # Safety
+/// `bytes` must point to `len` readable bytes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_open(
+    bytes: *const u8,
+    len: usize,
+) -> *mut AobakeVertexAo {
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        open(bytes, len, "vertex", |a| match a {
+            Asset::Vertex(ao) => Some(AobakeVertexAo(*ao, OnceLock::new())),
+            _ => None,
+        })
+    }
+}
+
+/// Frees a handle from `aobake_vertex_ao_open` (NULL is ignored).
+///
+/// # Safety
+/// `ao` must be NULL or a handle from `aobake_vertex_ao_open` not yet
+/// freed.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_free(ao: *mut AobakeVertexAo) {
+    // SAFETY: forwarded from the caller.
+    unsafe { free(ao) }
+}
+
+/// The handle behind a pointer, or an error for NULL.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+unsafe fn handle<'a>(ao: *const AobakeVertexAo) -> Option<&'a VertexAo> {
+    // SAFETY: the caller passes NULL or a live handle.
+    let h = unsafe { ao.as_ref() }.map(|h| &h.0);
+    if h.is_none() {
+        fail("the handle is NULL");
+    }
+    h
+}
+
+/// Vertices the asset covers, in aobake's vertex order (0 for NULL).
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_vertices(ao: *const AobakeVertexAo) -> usize {
+    // SAFETY: forwarded from the caller.
+    unsafe { handle(ao) }.map_or(0, VertexAo::vertices)
+}
+
+/// Weights per pose: the length `aobake_vertex_ao_weights` fills (0 for
+/// NULL).
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_weight_count(ao: *const AobakeVertexAo) -> usize {
+    // SAFETY: forwarded from the caller.
+    unsafe { handle(ao) }.map_or(0, VertexAo::weight_count)
+}
+
+/// `aobake_vertex_ao_gpu_words`' arrays: the dense blocks
+/// (`AOBAKE_GPU_BLOCK_WORDS` words each; none for a sparse model).
+pub const AOBAKE_GPU_BLOCKS: u32 = 0;
+/// The f16 coefficients, two per word (element 2i in the low half).
+pub const AOBAKE_GPU_COEFFICIENTS: u32 = 1;
+/// Dense: the blocks' vertex-cluster maps one after another; sparse: the
+/// `vertices + 1` row offsets.
+pub const AOBAKE_GPU_MAPS: u32 = 2;
+/// Sparse: each coefficient's row, u16 two per word.
+pub const AOBAKE_GPU_SPARSE_ROWS: u32 = 3;
+/// Words per dense block in `AOBAKE_GPU_BLOCKS`.
+pub const AOBAKE_GPU_BLOCK_WORDS: usize = 8;
+const _: () = assert!(AOBAKE_GPU_BLOCK_WORDS == aobake_runtime::method::vertex::form::BLOCK_WORDS);
+
+/// The GPU form of the asset's coefficients, as the evaluators in
+/// `shaders/` read them (`vertex_ao.wgsl`'s bindings 1 to 3 and 6, and
+/// their translations; `docs/engines.md`): sets `*words` to the length in
+/// words of array `which` (`AOBAKE_GPU_BLOCKS`, `_COEFFICIENTS`, `_MAPS`
+/// or `_SPARSE_ROWS`) and copies it to `out` when `out` is not NULL (then
+/// `len` must be at least `*words`). Call it with `out` NULL to size the
+/// buffer. `false` for a NULL handle, an unknown array, a short buffer, or
+/// a model too large for 32-bit GPU indices.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `out` NULL or `len` writable
+/// words; `words` a writable `size_t`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_gpu_words(
+    ao: *const AobakeVertexAo,
+    which: u32,
+    out: *mut u32,
+    len: usize,
+    words: *mut usize,
+) -> bool {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(h) = (unsafe { ao.as_ref() }) else {
+        fail("the handle is NULL");
+        return false;
+    };
+    // Packed once per handle: an engine asks for each array twice (its
+    // size, then its words).
+    let packed = h.1.get_or_init(|| {
+        GpuArrays::new(h.0.model().form()).map_err(|e| format!("the model has no GPU form: {e}"))
+    });
+    let arrays = match packed {
+        Ok(a) => a,
+        Err(e) => {
+            fail(e.clone());
+            return false;
+        }
+    };
+    let array: &[u32] = match which {
+        AOBAKE_GPU_BLOCKS => arrays.blocks.as_flattened(),
+        AOBAKE_GPU_COEFFICIENTS => &arrays.coefficients,
+        AOBAKE_GPU_MAPS => &arrays.maps,
+        AOBAKE_GPU_SPARSE_ROWS => &arrays.sparse_rows,
+        other => {
+            fail(format!(
+                "array {other}: AOBAKE_GPU_BLOCKS (0) to AOBAKE_GPU_SPARSE_ROWS (3)"
+            ));
+            return false;
+        }
+    };
+    // SAFETY: forwarded from the caller.
+    unsafe { copy_words(array, out, len, words) }
+}
+
+/// Whether the GPU form is sparse (evaluate with `cs_sparse`, reading the
+/// row offsets and `AOBAKE_GPU_SPARSE_ROWS`) or dense (`cs_main`, reading
+/// the blocks and maps); `false` for NULL.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_gpu_sparse(ao: *const AobakeVertexAo) -> bool {
+    // SAFETY: forwarded from the caller.
+    unsafe { handle(ao) }.is_some_and(|h| matches!(h.model().form(), FormRef::Sparse(_)))
+}
+
+/// Nodes of the rig (0 for NULL).
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_node_count(ao: *const AobakeVertexAo) -> usize {
+    // SAFETY: forwarded from the caller.
+    unsafe { handle(ao) }.map_or(0, |h| h.skeleton().nodes.len())
+}
+
+/// The node named `name` (NUL-terminated UTF-8), or -1 if the rig has
+/// none (or on NULL).
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `name` NULL or a NUL-terminated
+/// string.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_node(
+    ao: *const AobakeVertexAo,
+    name: *const c_char,
+) -> i64 {
+    // SAFETY: forwarded from the caller.
+    let Some(h) = (unsafe { handle(ao) }) else {
+        return -1;
+    };
+    if name.is_null() {
+        fail("name is NULL");
+        return -1;
+    }
+    // SAFETY: the caller passes a NUL-terminated string.
+    let Ok(name) = unsafe { CStr::from_ptr(name) }.to_str() else {
+        fail("the name is not UTF-8");
+        return -1;
+    };
+    match h.node(name) {
+        Some(n) => n as i64,
+        None => {
+            fail(format!("the rig has no node named {name:?}"));
+            -1
+        }
+    }
+}
+
+/// Writes node `node`'s rest transform to `out`; `false` for a node the
+/// rig does not have.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `out` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_rest(
+    ao: *const AobakeVertexAo,
+    node: usize,
+    out: *mut AobakeTransform,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    let Some(h) = (unsafe { handle(ao) }) else {
+        return false;
+    };
+    let Some(n) = h.skeleton().nodes.get(node) else {
+        fail(format!("node {node} of {}", h.skeleton().nodes.len()));
+        return false;
+    };
+    // SAFETY: the caller passes NULL or a writable transform.
+    match unsafe { out.as_mut() } {
+        Some(out) => {
+            *out = n.rest.into();
+            true
+        }
+        None => {
+            fail("out is NULL");
+            false
+        }
+    }
+}
+
+/// Sets node `node`'s local transform for the next weights or
+/// evaluation. `false`, and nothing changed, for a node the rig does not
+/// have or a transform that is not finite.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `local` NULL or readable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_set_local(
+    ao: *mut AobakeVertexAo,
+    node: usize,
+    local: *const AobakeTransform,
+) -> bool {
+    // SAFETY: the caller passes NULL or a live handle, used by one thread.
+    let Some(h) = (unsafe { ao.as_mut() }).map(|h| &mut h.0) else {
+        fail("the handle is NULL");
+        return false;
+    };
+    // SAFETY: the caller passes NULL or a readable transform.
+    let Some(t) = (unsafe { local.as_ref() }) else {
+        fail("local is NULL");
+        return false;
+    };
+    let local = Transform {
+        translation: Vec3::from_array(t.translation),
+        rotation: Quat::from_array(t.rotation),
+        scale: Vec3::from_array(t.scale),
+    };
+    if !(local.translation.is_finite() && local.rotation.is_finite() && local.scale.is_finite()) {
+        fail(format!("node {node}'s transform is not finite"));
+        return false;
+    }
+    if local.rotation.length_squared() == 0.0 {
+        fail(format!("node {node}'s rotation is the zero quaternion"));
+        return false;
+    }
+    if !h.set_local(node, local) {
+        fail(format!("node {node} of {}", h.skeleton().nodes.len()));
+        return false;
+    }
+    true
+}
+
+/// Puts every node back at its rest transform.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_reset(ao: *mut AobakeVertexAo) {
+    // SAFETY: the caller passes NULL or a live handle, used by one thread.
+    if let Some(h) = unsafe { ao.as_mut() } {
+        h.0.reset();
+    }
+}
+
+/// Writes the current pose's weights (`aobake_vertex_ao_weight_count` of
+/// them) to `out`; `false` if `len` is not that count.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `out` NULL or `len` writable
+/// floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_weights(
+    ao: *const AobakeVertexAo,
+    out: *mut f32,
+    len: usize,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    match unsafe { handle(ao) } {
+        // SAFETY: forwarded from the caller.
+        Some(h) => unsafe { fill(&h.weights(), out, len, "weights") },
+        None => false,
+    }
+}
+
+/// Writes every vertex's AO in the current pose (0 open … 1 blocked;
+/// `aobake_vertex_ao_vertices` of them) to `out`; `false` if `len` is not
+/// that count.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `out` NULL or `len` writable
+/// floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_evaluate(
+    ao: *const AobakeVertexAo,
+    out: *mut f32,
+    len: usize,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    match unsafe { handle(ao) } {
+        // SAFETY: forwarded from the caller.
+        Some(h) => unsafe { fill(&h.evaluate(), out, len, "evaluate") },
+        None => false,
+    }
+}
