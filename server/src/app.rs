@@ -62,13 +62,39 @@ async fn declared_length(State(limit): State<u64>, req: Request, next: Next) -> 
 /// (or a timeout) cannot cancel it half-way: a store operation cancelled
 /// inside `BEGIN` would leave its pooled connection in a transaction
 /// (sqlx's `begin` is not cancel-safe, transact-rs/sqlx#4385), and an
-/// accepted request must finish what it started.
-async fn to_completion(req: Request, next: Next) -> Response {
-    match tokio::spawn(next.run(req)).await {
+/// accepted request must finish what it started. A handler that only
+/// waits (a long poll) learns from [`ClientGone`] that nobody waits for
+/// its answer any more.
+async fn to_completion(mut req: Request, next: Next) -> Response {
+    // Dropped with this future: when the client's connection closes, or
+    // when the handler has answered.
+    let (present, gone) = tokio::sync::watch::channel(());
+    req.extensions_mut().insert(ClientGone(gone));
+    let answer = tokio::spawn(next.run(req)).await;
+    drop(present);
+    match answer {
         Ok(res) => res,
         Err(e) => axum::response::IntoResponse::into_response(ApiError::Internal(format!(
             "the handler failed: {e}"
         ))),
+    }
+}
+
+/// Whether the client that sent a request has gone: its connection closed
+/// before the answer (hyper then drops the request's future, and with it
+/// [`to_completion`]'s side of this channel).
+#[derive(Debug, Clone)]
+pub struct ClientGone(tokio::sync::watch::Receiver<()>);
+
+impl ClientGone {
+    /// Whether the client has gone.
+    pub fn is_gone(&self) -> bool {
+        self.0.has_changed().is_err()
+    }
+
+    /// Resolves when the client has gone.
+    pub async fn wait(&mut self) {
+        while self.0.changed().await.is_ok() {}
     }
 }
 

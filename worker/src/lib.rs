@@ -9,8 +9,9 @@
 //!   runs core's job function on its own (compute) thread while a second
 //!   thread heartbeats, uploads checkpoints as the job saves them and its
 //!   outputs at the end, and completes with its lease token. SIGTERM stops
-//!   leasing; a running job finishes or, past the deadline, stops at its
-//!   next checkpoint and gives its lease back.
+//!   leasing at once (an open long poll is abandoned: the server drops it
+//!   with its connection); a running job finishes or, past the deadline,
+//!   stops at its next checkpoint and gives its lease back.
 //! * the HTTP calls: [`aobake_api::Client`].
 //! * [`gpu`]: a wgpu device on whatever adapter the machine has, and the
 //!   run-time evaluation of the vertex methods in WGSL.

@@ -153,6 +153,7 @@ fn dispatch(
     slots: &[mpsc::Sender<Lease>],
 ) -> Result<(), RunError> {
     let mut failures = 0u32;
+    let poller = Poller::start(client.clone(), config.wait_secs);
     // The process's tracer (installed by `aobake worker --gpu`), told to
     // the server until a request has gone through.
     let tracer = aobake_core::trace::engine::tracer_label();
@@ -171,8 +172,10 @@ fn dispatch(
         }
         idle.extend(freed.try_iter());
         let asked: Vec<String> = idle.iter().map(|&s| ids[s].clone()).collect();
-        let leased =
-            client.lease_many(&asked, config.wait_secs, (!told).then_some(tracer.as_str()));
+        let Some(leased) = poller.lease(asked, (!told).then(|| tracer.clone()), shutdown) else {
+            // Shutdown during the long poll: stop waiting for it.
+            break;
+        };
         told |= leased.is_ok();
         match leased {
             Ok(leases) => {
@@ -220,6 +223,60 @@ fn dispatch(
         }
     }
     Ok(())
+}
+
+/// Lease requests on a thread of their own. A long poll (up to
+/// `wait_secs`) blocks in its request and cannot be interrupted, so at
+/// SIGTERM an idle worker stops waiting for it instead of holding its
+/// exit for the rest of the poll (`docker stop` kills after 10 s). Leases
+/// that arrive after dispatch stopped listening are given back; a request
+/// still open when the process exits is dropped with its connection, and
+/// the server drops the poll with it.
+struct Poller {
+    requests: mpsc::Sender<(Vec<String>, Option<String>)>,
+    answers: mpsc::Receiver<aobake_api::client::Result<Vec<Lease>>>,
+}
+
+impl Poller {
+    /// A poller asking for jobs on `client`'s server, each request waiting
+    /// up to `wait_secs` there.
+    fn start(client: Client, wait_secs: u64) -> Self {
+        let (requests, asked) = mpsc::channel::<(Vec<String>, Option<String>)>();
+        let (answer, answers) = mpsc::channel();
+        // Detached, not scoped: the process must not wait for a poll.
+        std::thread::spawn(move || {
+            for (workers, tracer) in asked {
+                let leased = client.lease_many(&workers, wait_secs, tracer.as_deref());
+                if let Err(mpsc::SendError(Ok(late))) = answer.send(leased) {
+                    for lease in late {
+                        let _ = client.release(lease.job.id, &lease.token);
+                    }
+                }
+            }
+        });
+        Self { requests, answers }
+    }
+
+    /// Leases for the slots `workers` (telling the server `tracer`), or
+    /// `None` when `shutdown` came first (or the poller is gone).
+    fn lease(
+        &self,
+        workers: Vec<String>,
+        tracer: Option<String>,
+        shutdown: &AtomicBool,
+    ) -> Option<aobake_api::client::Result<Vec<Lease>>> {
+        self.requests.send((workers, tracer)).ok()?;
+        loop {
+            match self.answers.recv_timeout(Duration::from_millis(100)) {
+                Ok(answer) => return Some(answer),
+                Err(mpsc::RecvTimeoutError::Timeout) if shutdown.load(Ordering::Relaxed) => {
+                    return None;
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Err(mpsc::RecvTimeoutError::Disconnected) => return None,
+            }
+        }
+    }
 }
 
 /// Sends finished jobs' completions, all that are waiting in one request,

@@ -13,7 +13,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
 use axum::{
-    Json, Router,
+    Extension, Json, Router,
     body::Bytes,
     extract::State,
     http::StatusCode,
@@ -22,6 +22,7 @@ use axum::{
 };
 
 use crate::{
+    app::ClientGone,
     auth::{Need, Worker},
     error::{ApiError, ApiResult, Problem},
     extract::{ApiPath, Body},
@@ -51,9 +52,10 @@ pub(super) fn router() -> Router<AppState> {
 pub(crate) async fn lease(
     State(state): State<AppState>,
     _caller: Need<Worker>,
+    gone: Option<Extension<ClientGone>>,
     Body(req): Body<LeaseRequest>,
 ) -> ApiResult<Response> {
-    let leases = wait_for_leases(&state, vec![req.worker], req.wait_secs, req.tracer).await?;
+    let leases = wait_for_leases(&state, vec![req.worker], req.wait_secs, req.tracer, gone).await?;
     Ok(match leases.into_iter().next() {
         Some(lease) => Json(lease).into_response(),
         None => StatusCode::NO_CONTENT.into_response(),
@@ -66,6 +68,7 @@ pub(crate) async fn lease(
 pub(crate) async fn lease_many(
     State(state): State<AppState>,
     _caller: Need<Worker>,
+    gone: Option<Extension<ClientGone>>,
     Body(req): Body<LeaseManyRequest>,
 ) -> ApiResult<Response> {
     if req.workers.is_empty() || req.workers.len() > MAX_BATCH {
@@ -80,7 +83,7 @@ pub(crate) async fn lease_many(
             "a lease request names each worker once",
         ));
     }
-    let leases = wait_for_leases(&state, req.workers, req.wait_secs, req.tracer).await?;
+    let leases = wait_for_leases(&state, req.workers, req.wait_secs, req.tracer, gone).await?;
     Ok(if leases.is_empty() {
         StatusCode::NO_CONTENT.into_response()
     } else {
@@ -89,13 +92,17 @@ pub(crate) async fn lease_many(
 }
 
 /// Leases for `workers`, waiting up to `wait_secs` (at most 60) for a
-/// first job; empty when none came.
+/// first job; empty when none came, or once the worker that asked has
+/// gone (its connection closed: a worker stopped mid-poll, or killed), so
+/// that no job is leased to a worker that will never run it.
 async fn wait_for_leases(
     state: &AppState,
     workers: Vec<String>,
     wait_secs: u64,
     tracer: Option<String>,
+    gone: Option<Extension<ClientGone>>,
 ) -> ApiResult<Vec<Lease>> {
+    let mut gone = gone.map(|Extension(g)| g);
     if workers.iter().any(|w| w.is_empty() || w.len() > 200) {
         return Err(ApiError::bad(
             "bad_worker",
@@ -115,6 +122,9 @@ async fn wait_for_leases(
     }
     let deadline = tokio::time::Instant::now() + Duration::from_secs(wait_secs.min(60));
     loop {
+        if gone.as_ref().is_some_and(ClientGone::is_gone) {
+            return Ok(Vec::new());
+        }
         // Register interest before looking, so a job made available between
         // the look and the wait still wakes us.
         let notified = state.jobs_ready.notified();
@@ -140,7 +150,16 @@ async fn wait_for_leases(
         // Retry delays and lease expiries free jobs without a notification:
         // look again at least every second.
         let nap = (deadline - now).min(Duration::from_secs(1));
-        let _ = tokio::time::timeout(nap, notified).await;
+        let client_gone = async {
+            match gone.as_mut() {
+                Some(g) => g.wait().await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            _ = tokio::time::timeout(nap, notified) => {}
+            () = client_gone => {}
+        }
     }
 }
 

@@ -716,6 +716,60 @@ fn a_worker_stopped_with_sigterm_finishes_its_job_and_leases_no_more() {
     assert_eq!(end["state"], "done");
 }
 
+/// An idle worker is inside a long poll (20 s by default) most of the
+/// time: SIGTERM stops it without waiting for the poll to end, and the
+/// abandoned poll leases nothing to it after it has gone.
+#[test]
+fn an_idle_worker_stops_at_once_on_sigterm_and_its_abandoned_poll_takes_no_job() {
+    let mut env = TestEnv::start(Options::default());
+    let w = env.start_worker(&[]);
+    let started = std::time::Instant::now();
+    loop {
+        let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
+        if workers.as_array().is_some_and(|a| !a.is_empty()) {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "the worker never polled"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Well inside its first poll.
+    std::thread::sleep(Duration::from_millis(500));
+    env.signal_worker(w, nix::sys::signal::Signal::SIGTERM);
+    let signalled = std::time::Instant::now();
+    while !env.worker_exited(w) {
+        assert!(
+            signalled.elapsed() < Duration::from_secs(5),
+            "an idle worker took over 5 s to stop (its poll has 19 s to run)\n{}",
+            env.worker_logs()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(
+        env.worker_logs().contains("stopped"),
+        "{}",
+        env.worker_logs()
+    );
+    // A bake submitted now waits for a worker: the gone worker's poll
+    // was dropped with its connection, not left to lease a job to it.
+    let digest = upload(&env, &character("RiggedSimple"));
+    let (_, b) = submit(&env, &digest, 8);
+    let id = b["id"].as_i64().unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    let (_, bake) = env
+        .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap();
+    let jobs = bake["jobs"].as_array().unwrap();
+    assert!(jobs.iter().all(|j| j["attempts"] == 0), "{bake}");
+    env.start_worker(&[]);
+    let end = env.wait_bake(id, Duration::from_secs(120));
+    assert_eq!(end["state"], "done", "{end}");
+    let jobs = end["jobs"].as_array().unwrap();
+    assert!(jobs.iter().all(|j| j["attempts"] == 1), "{end}");
+}
+
 #[test]
 fn clips_and_multi_file_characters_upload_and_bake() {
     let mut env = TestEnv::start(Options::default());
