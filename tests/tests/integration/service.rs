@@ -718,9 +718,10 @@ fn a_worker_stopped_with_sigterm_finishes_its_job_and_leases_no_more() {
 
 /// An idle worker is inside a long poll (20 s by default) most of the
 /// time: SIGTERM stops it without waiting for the poll to end, and the
-/// abandoned poll leases nothing to it after it has gone.
+/// abandoned poll leases nothing to it after it has gone; nor does the
+/// poll of a worker killed outright.
 #[test]
-fn an_idle_worker_stops_at_once_on_sigterm_and_its_abandoned_poll_takes_no_job() {
+fn an_idle_worker_stops_at_once_on_sigterm_and_a_gone_workers_poll_takes_no_job() {
     let mut env = TestEnv::start(Options::default());
     let w = env.start_worker(&[]);
     let started = std::time::Instant::now();
@@ -752,8 +753,28 @@ fn an_idle_worker_stops_at_once_on_sigterm_and_its_abandoned_poll_takes_no_job()
         "{}",
         env.worker_logs()
     );
-    // A bake submitted now waits for a worker: the gone worker's poll
-    // was dropped with its connection, not left to lease a job to it.
+    // A worker killed mid-poll (SIGKILL: no chance to say anything).
+    let killed = env.start_worker(&[]);
+    let started = std::time::Instant::now();
+    loop {
+        let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
+        let polling = workers
+            .as_array()
+            .is_some_and(|a| a.iter().any(|w| w["id"] == "w1"));
+        if polling {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "w1 never polled: {workers}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    env.kill_worker(killed);
+    // A bake submitted now waits for a worker: the gone workers' polls
+    // were dropped with their connections, not left to lease jobs to
+    // them.
     let digest = upload(&env, &character("RiggedSimple"));
     let (_, b) = submit(&env, &digest, 8);
     let id = b["id"].as_i64().unwrap();
