@@ -84,7 +84,8 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
         .collect();
     let (free_tx, free_rx) = mpsc::channel::<usize>();
     let (done_tx, done_rx) = mpsc::channel::<Finished>();
-    std::thread::scope(|scope| {
+    let poller = Poller::start(client.clone(), config.wait_secs);
+    let stopped = std::thread::scope(|scope| {
         let client = &client;
         scope.spawn(move || complete_batches(client, &done_rx));
         let mut to_slots = Vec::with_capacity(slots);
@@ -102,12 +103,16 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
         }
         // The slots hold the completer's senders now: it ends after them.
         drop(done_tx);
-        let dispatched = dispatch(client, &config, &ids, &shutdown, &free_rx, &to_slots);
+        let dispatched = dispatch(
+            client, &poller, &config, &ids, &shutdown, &free_rx, &to_slots,
+        );
         // Slots finish their jobs (or stop them at shutdown's deadline),
         // then end.
         drop(to_slots);
         dispatched
-    })?;
+    });
+    poller.finish();
+    stopped?;
     eprintln!("worker {}: stopped", config.id);
     Ok(())
 }
@@ -146,6 +151,7 @@ fn refused_for_good(e: &ApiError) -> Option<&'static str> {
 /// shutdown.
 fn dispatch(
     client: &Client,
+    poller: &Poller,
     config: &WorkerConfig,
     ids: &[String],
     shutdown: &AtomicBool,
@@ -153,7 +159,6 @@ fn dispatch(
     slots: &[mpsc::Sender<Lease>],
 ) -> Result<(), RunError> {
     let mut failures = 0u32;
-    let poller = Poller::start(client.clone(), config.wait_secs);
     // The process's tracer (installed by `aobake worker --gpu`), told to
     // the server until a request has gone through.
     let tracer = aobake_core::trace::engine::tracer_label();
@@ -172,9 +177,10 @@ fn dispatch(
         }
         idle.extend(freed.try_iter());
         let asked: Vec<String> = idle.iter().map(|&s| ids[s].clone()).collect();
-        let Some(leased) = poller.lease(asked, (!told).then(|| tracer.clone()), shutdown) else {
+        let leased = match poller.lease(asked, (!told).then(|| tracer.clone()), shutdown)? {
+            Polled::Answer(answer) => answer,
             // Shutdown during the long poll: stop waiting for it.
-            break;
+            Polled::Stopping => break,
         };
         told |= leased.is_ok();
         match leased {
@@ -218,7 +224,10 @@ fn dispatch(
                     "worker {}: cannot lease ({e}); retrying in {wait:?}",
                     config.id
                 );
-                std::thread::sleep(wait);
+                let until = Instant::now() + wait;
+                while Instant::now() < until && !shutdown.load(Ordering::Relaxed) {
+                    std::thread::sleep(Duration::from_millis(50));
+                }
             }
         }
     }
@@ -228,13 +237,26 @@ fn dispatch(
 /// Lease requests on a thread of their own. A long poll (up to
 /// `wait_secs`) blocks in its request and cannot be interrupted, so at
 /// SIGTERM an idle worker stops waiting for it instead of holding its
-/// exit for the rest of the poll (`docker stop` kills after 10 s). Leases
-/// that arrive after dispatch stopped listening are given back; a request
-/// still open when the process exits is dropped with its connection, and
-/// the server drops the poll with it.
+/// exit for the rest of the poll (`docker stop` kills after 10 s). An
+/// answer is handed over only to a dispatcher that takes it (a rendezvous
+/// channel: none waits in a buffer to be dropped), and leases that arrive
+/// after dispatch stopped listening are given back; a request still open
+/// when the process exits is dropped with its connection, and the server
+/// ends the poll with it.
 struct Poller {
     requests: mpsc::Sender<(Vec<String>, Option<String>)>,
     answers: mpsc::Receiver<aobake_api::client::Result<Vec<Lease>>>,
+    /// Held while late leases are given back: [`Poller::finish`] waits
+    /// for it.
+    releasing: Arc<Mutex<()>>,
+}
+
+/// What [`Poller::lease`] got.
+enum Polled {
+    /// The server's answer.
+    Answer(aobake_api::client::Result<Vec<Lease>>),
+    /// Shutdown came first.
+    Stopping,
 }
 
 impl Poller {
@@ -242,40 +264,67 @@ impl Poller {
     /// up to `wait_secs` there.
     fn start(client: Client, wait_secs: u64) -> Self {
         let (requests, asked) = mpsc::channel::<(Vec<String>, Option<String>)>();
-        let (answer, answers) = mpsc::channel();
+        let (answer, answers) = mpsc::sync_channel(0);
+        let releasing: Arc<Mutex<()>> = Arc::default();
+        let held = releasing.clone();
         // Detached, not scoped: the process must not wait for a poll.
         std::thread::spawn(move || {
             for (workers, tracer) in asked {
                 let leased = client.lease_many(&workers, wait_secs, tracer.as_deref());
+                // Held from before the hand-over: `finish` drops the
+                // receiver, then waits here for the leases it refused.
+                let _releasing = held.lock().unwrap_or_else(|e| e.into_inner());
                 if let Err(mpsc::SendError(Ok(late))) = answer.send(leased) {
                     for lease in late {
-                        let _ = client.release(lease.job.id, &lease.token);
+                        if let Err(e) = client.release(lease.job.id, &lease.token) {
+                            eprintln!(
+                                "cannot give back job {} leased as the worker stopped ({e}); its lease will expire",
+                                lease.job.id
+                            );
+                        }
                     }
                 }
             }
         });
-        Self { requests, answers }
+        Self {
+            requests,
+            answers,
+            releasing,
+        }
     }
 
-    /// Leases for the slots `workers` (telling the server `tracer`), or
-    /// `None` when `shutdown` came first (or the poller is gone).
+    /// Leases for the slots `workers` (telling the server `tracer`), unless
+    /// `shutdown` comes first.
     fn lease(
         &self,
         workers: Vec<String>,
         tracer: Option<String>,
         shutdown: &AtomicBool,
-    ) -> Option<aobake_api::client::Result<Vec<Lease>>> {
-        self.requests.send((workers, tracer)).ok()?;
+    ) -> Result<Polled, RunError> {
+        let gone = || RunError::Setup("the lease thread stopped".to_owned());
+        self.requests.send((workers, tracer)).map_err(|_| gone())?;
         loop {
             match self.answers.recv_timeout(Duration::from_millis(100)) {
-                Ok(answer) => return Some(answer),
+                Ok(answer) => return Ok(Polled::Answer(answer)),
                 Err(mpsc::RecvTimeoutError::Timeout) if shutdown.load(Ordering::Relaxed) => {
-                    return None;
+                    return Ok(Polled::Stopping);
                 }
                 Err(mpsc::RecvTimeoutError::Timeout) => {}
-                Err(mpsc::RecvTimeoutError::Disconnected) => return None,
+                Err(mpsc::RecvTimeoutError::Disconnected) => return Err(gone()),
             }
         }
+    }
+
+    /// Stops listening; waits while leases that came too late are being
+    /// given back (not for an open poll).
+    fn finish(self) {
+        let Self {
+            requests,
+            answers,
+            releasing,
+        } = self;
+        drop((requests, answers));
+        drop(releasing.lock());
     }
 }
 

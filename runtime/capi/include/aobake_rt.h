@@ -8,11 +8,13 @@
 #include <stdbool.h>
 
 /**
- * The version of the C ABI this header describes: a program compiled
- * against one header checks at load that
- * `aobake_rt_abi_version() == AOBAKE_RT_ABI_VERSION`. It changes when a
- * function, constant or struct of the header changes incompatibly; new
- * functions alone do not change it.
+ * The version of the C ABI this header describes. It changes when a
+ * function, constant or struct of the header changes incompatibly (new
+ * functions alone do not change it), so a plugin checks at load that
+ * `aobake_rt_abi_version() == AOBAKE_RT_ABI_VERSION`: a library that
+ * passes means what the header says by every function both have (one
+ * older than the header may lack functions added since: the loader
+ * names them).
  */
 #define AOBAKE_RT_ABI_VERSION 1
 
@@ -43,16 +45,20 @@
 #define AOBAKE_GRID_GPU_CELLS 1
 
 /**
- * The static base's offset per vertex of the character (f32 bits; none
- * without a base): the `offset` a vertex shader passes to `grid_ao`.
+ * The static base's offset per vertex of the character (f32 bits; no
+ * words without a base, when `grid_ao`'s offset is 0): the `offset` a
+ * vertex shader passes to `grid_ao`, a vertex attribute.
  */
 #define AOBAKE_GRID_GPU_VERTEX_OFFSETS 2
 
 /**
- * The static base's ground texture as `common/ground_texture.wgsl`
- * reads it: texels per side (0 without a base), the f32 bits of its
- * square's min x, min z and side and of its gain, then its offsets (x
- * fastest).
+ * The static base's ground texture as `common/ground_texture.wgsl`'s
+ * `ground_offset` reads it: texels per side (0 without a base), the f32
+ * bits of its square's min x, min z and side and of its gain, then its
+ * offsets (x fastest). The grid lookups have no binding for it: an
+ * engine's ground shader computes the offset it passes to `grid_ao`
+ * (with that function, or from the offsets as a filtered texture,
+ * `docs/engines.md`).
  */
 #define AOBAKE_GRID_GPU_GROUND 3
 
@@ -100,11 +106,13 @@ typedef struct AobakeGrid AobakeGrid;
 typedef struct AobakeVertexAo AobakeVertexAo;
 
 /**
- * The constant fields of the GPU lookups' `Params` uniform
- * (`shaders/wgsl/common/cubemap_lookup.wgsl`); an engine adds the
- * per-dispatch ones (`points`, `phase`, `row_stride`, `on_ground`).
+ * The GPU lookups' `Params` uniform (`shaders/wgsl/common/
+ * cubemap_lookup.wgsl`), field for field and byte for byte: an engine
+ * copies it whole into the uniform buffer after filling the fields of a
+ * dispatch or draw (`points`, `phase`, `row_stride`, `on_ground`), which
+ * `aobake_cubemap_gpu_params` sets to 0.
  */
-typedef struct AobakeCubemapGpu {
+typedef struct AobakeCubemapGpuParams {
   /**
    * xyz: the spheroid's centre; w: the outer scaling.
    */
@@ -130,18 +138,48 @@ typedef struct AobakeCubemapGpu {
    * thirds layout).
    */
   uint32_t encoding;
-} AobakeCubemapGpu;
+  /**
+   * The engine's: points to evaluate (compute shader).
+   */
+  uint32_t points;
+  /**
+   * The engine's: the phase at the frame's time
+   * (`aobake_cubemap_phase`).
+   */
+  float phase;
+  /**
+   * The engine's: points per row of the dispatch grid (workgroups in
+   * x × 64; compute shader).
+   */
+  uint32_t row_stride;
+  /**
+   * The engine's: 1 for points on the ground plane (the static
+   * ground's `cubemap_ground_ao`), 0 for points anywhere.
+   */
+  uint32_t on_ground;
+} AobakeCubemapGpuParams;
 
 /**
- * The constant fields of the GPU lookups' `Params` uniform
- * (`shaders/wgsl/common/grid_lookup.wgsl`); an engine adds the
- * per-dispatch ones (`points`, `row_stride`).
+ * The GPU lookups' `Params` uniform (`shaders/wgsl/common/
+ * grid_lookup.wgsl`), field for field and byte for byte: an engine
+ * copies it whole into the uniform buffer after filling the fields of a
+ * dispatch (`points`, `row_stride`), which `aobake_grid_gpu_params` sets
+ * to 0.
  */
-typedef struct AobakeGridGpu {
+typedef struct AobakeGridGpuParams {
   /**
    * Parts.
    */
   uint32_t parts;
+  /**
+   * The engine's: receivers to evaluate (compute shader).
+   */
+  uint32_t points;
+  /**
+   * The engine's: receivers per row of the dispatch grid (workgroups
+   * in x × 64; compute shader).
+   */
+  uint32_t row_stride;
   /**
    * 1 when the cones are baked.
    */
@@ -159,11 +197,11 @@ typedef struct AobakeGridGpu {
    */
   uint32_t base;
   /**
-   * The base's ground gain (0 without a base); `Params.ground_gain`
-   * holds its bits.
+   * The base's ground gain (0 without a base); the shader reads its
+   * bits as a u32.
    */
   float ground_gain;
-} AobakeGridGpu;
+} AobakeGridGpuParams;
 
 /**
  * A node's local transform, as glTF and engines animate it: translation,
@@ -238,7 +276,8 @@ float aobake_cubemap_duration(const struct AobakeCubemap *cubemap);
  *
  * # Safety
  * `cubemap` must be NULL or a live handle; `points` NULL or `3 · count`
- * readable floats; `out` NULL or `count` writable floats.
+ * readable floats; `out` NULL or `count` writable floats, not
+ * overlapping `points`.
  */
 bool aobake_cubemap_occlusion(const struct AobakeCubemap *cubemap, float seconds, const float *points, size_t count, float *out);
 
@@ -263,22 +302,23 @@ bool aobake_cubemap_ground_ao(const struct AobakeCubemap *cubemap, float seconds
 float aobake_cubemap_phase(const struct AobakeCubemap *cubemap, float seconds);
 
 /**
- * Writes the constant fields of the GPU lookups' `Params` to `out`
- * (`docs/engines.md`). `false` for NULL or a cubemap too large for
+ * Writes the GPU lookups' `Params` to `out`, the fields of a dispatch
+ * at 0 (`docs/engines.md`). `false` for NULL or a cubemap too large for
  * 32-bit GPU indices.
  *
  * # Safety
  * `cubemap` must be NULL or a live handle; `out` NULL or writable.
  */
-bool aobake_cubemap_gpu_params(const struct AobakeCubemap *cubemap, struct AobakeCubemapGpu *out);
+bool aobake_cubemap_gpu_params(const struct AobakeCubemap *cubemap, struct AobakeCubemapGpuParams *out);
 
 /**
  * The GPU lookups' arrays as they read them, uploaded once per asset:
  * sets `*words` to the length in words of array `which`
  * (`AOBAKE_CUBEMAP_GPU_TEXELS` or `_GROUND`) and copies it to `out` when
  * `out` is not NULL (then `len` must be at least `*words`). Call it with
- * `out` NULL to size the buffer. `false` for a NULL handle, an unknown
- * array or a short buffer.
+ * `out` NULL to size the buffer. `false` for a NULL handle, a cubemap
+ * too large for 32-bit GPU indices, an unknown array or a short buffer
+ * (`*words` is still set).
  *
  * # Safety
  * `cubemap` must be NULL or a live handle; `out` NULL or `len` writable
@@ -332,7 +372,7 @@ size_t aobake_grid_palette_len(const struct AobakeGrid *grid);
  *
  * # Safety
  * `grid` must be NULL or a live handle; each pointer NULL or holding the
- * counts above.
+ * counts above; `out` overlapping none of the inputs.
  */
 bool aobake_grid_occlusion(const struct AobakeGrid *grid, const float *palette, size_t palette_len, const float *points, const float *normals, const int64_t *parts, size_t count, float *out);
 
@@ -348,15 +388,17 @@ bool aobake_grid_occlusion(const struct AobakeGrid *grid, const float *palette, 
  *
  * # Safety
  * As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`
- * values.
+ * values (not overlapping `out` either).
  */
 bool aobake_grid_ao(const struct AobakeGrid *grid, const float *palette, size_t palette_len, const float *points, const float *normals, const int64_t *parts, const int64_t *receivers, size_t count, float *out);
 
 /**
  * The palette entry (joint) part `part` follows, or -1 for a part the
- * asset does not have (or NULL). A vertex on a part is one whose
- * heaviest skin joint is that part's joint: the `parts` the lookups
- * take.
+ * asset does not have (or NULL). The bake puts a vertex of the
+ * character on the part of its heaviest skin influence (the first of
+ * equal weights, in its `JOINTS_0`/`WEIGHTS_0` order), or on none when
+ * that joint has no part (it carries no triangle): the `parts` the
+ * lookups take, and the `own` of the GPU lookups.
  *
  * # Safety
  * `grid` must be NULL or a live handle.
@@ -364,14 +406,14 @@ bool aobake_grid_ao(const struct AobakeGrid *grid, const float *palette, size_t 
 int64_t aobake_grid_part_joint(const struct AobakeGrid *grid, size_t part);
 
 /**
- * Writes the constant fields of the GPU lookups' `Params` to `out`
- * (`docs/engines.md`). `false` for NULL or a grid too large for 32-bit
- * GPU indices.
+ * Writes the GPU lookups' `Params` to `out`, the fields of a dispatch
+ * at 0 (`docs/engines.md`). `false` for NULL or a grid too large for
+ * 32-bit GPU indices.
  *
  * # Safety
  * `grid` must be NULL or a live handle; `out` NULL or writable.
  */
-bool aobake_grid_gpu_params(const struct AobakeGrid *grid, struct AobakeGridGpu *out);
+bool aobake_grid_gpu_params(const struct AobakeGrid *grid, struct AobakeGridGpuParams *out);
 
 /**
  * The GPU lookups' arrays as they read them, uploaded once per asset:
@@ -379,7 +421,8 @@ bool aobake_grid_gpu_params(const struct AobakeGrid *grid, struct AobakeGridGpu 
  * (`AOBAKE_GRID_GPU_INFOS`, `_CELLS`, `_VERTEX_OFFSETS` or `_GROUND`)
  * and copies it to `out` when `out` is not NULL (then `len` must be at
  * least `*words`). Call it with `out` NULL to size the buffer. `false`
- * for a NULL handle, an unknown array or a short buffer.
+ * for a NULL handle, a grid too large for 32-bit GPU indices, an unknown
+ * array or a short buffer (`*words` is still set).
  *
  * # Safety
  * `grid` must be NULL or a live handle; `out` NULL or `len` writable
@@ -398,7 +441,8 @@ bool aobake_grid_gpu_words(const struct AobakeGrid *grid, uint32_t which, uint32
  *
  * # Safety
  * `grid` must be NULL or a live handle; `palette` NULL or `16 ·
- * palette_len` readable floats; `out` NULL or `len` writable floats.
+ * palette_len` readable floats; `out` NULL or `len` writable floats, not
+ * overlapping `palette`.
  */
 bool aobake_grid_gpu_poses(const struct AobakeGrid *grid, const float *palette, size_t palette_len, float *out, size_t len);
 

@@ -9,7 +9,7 @@ use aobake_runtime::{
 };
 use glam::Vec3;
 
-use crate::{copy_words, fail, floats, free, open, out_floats};
+use crate::{copy_words, fail, finite_floats, free, open, out_floats};
 
 /// A cubemap asset. Opaque to C.
 #[derive(Debug)]
@@ -57,7 +57,8 @@ pub unsafe extern "C" fn aobake_cubemap_duration(cubemap: *const AobakeCubemap) 
 ///
 /// # Safety
 /// `cubemap` must be NULL or a live handle; `points` NULL or `3 · count`
-/// readable floats; `out` NULL or `count` writable floats.
+/// readable floats; `out` NULL or `count` writable floats, not
+/// overlapping `points`.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_cubemap_occlusion(
     cubemap: *const AobakeCubemap,
@@ -124,7 +125,7 @@ unsafe fn cubemap_lookup(
         return false;
     };
     // SAFETY: forwarded from the caller.
-    let Some(points) = (unsafe { floats(points, count, 3, "points") }) else {
+    let Some(points) = (unsafe { finite_floats(points, count, 3, "points") }) else {
         return false;
     };
     // SAFETY: forwarded from the caller.
@@ -150,12 +151,14 @@ pub unsafe extern "C" fn aobake_cubemap_phase(cubemap: *const AobakeCubemap, sec
     unsafe { cubemap.as_ref() }.map_or(0.0, |c| c.0.layout.phase(seconds))
 }
 
-/// The constant fields of the GPU lookups' `Params` uniform
-/// (`shaders/wgsl/common/cubemap_lookup.wgsl`); an engine adds the
-/// per-dispatch ones (`points`, `phase`, `row_stride`, `on_ground`).
+/// The GPU lookups' `Params` uniform (`shaders/wgsl/common/
+/// cubemap_lookup.wgsl`), field for field and byte for byte: an engine
+/// copies it whole into the uniform buffer after filling the fields of a
+/// dispatch or draw (`points`, `phase`, `row_stride`, `on_ground`), which
+/// `aobake_cubemap_gpu_params` sets to 0.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AobakeCubemapGpu {
+pub struct AobakeCubemapGpuParams {
     /// xyz: the spheroid's centre; w: the outer scaling.
     pub centre: [f32; 4],
     /// xyz: the spheroid's radii; w: the inner scaling.
@@ -169,6 +172,17 @@ pub struct AobakeCubemapGpu {
     /// 0 discrete, 1 continuous (cosine layout), 2 continuous (Kroon's
     /// thirds layout).
     pub encoding: u32,
+    /// The engine's: points to evaluate (compute shader).
+    pub points: u32,
+    /// The engine's: the phase at the frame's time
+    /// (`aobake_cubemap_phase`).
+    pub phase: f32,
+    /// The engine's: points per row of the dispatch grid (workgroups in
+    /// x × 64; compute shader).
+    pub row_stride: u32,
+    /// The engine's: 1 for points on the ground plane (the static
+    /// ground's `cubemap_ground_ao`), 0 for points anywhere.
+    pub on_ground: u32,
 }
 
 /// `aobake_cubemap_gpu_words`' arrays: the texels, four words each
@@ -193,8 +207,8 @@ fn cubemap_gpu(c: &AobakeCubemap) -> Option<&CubemapGpu> {
     }
 }
 
-/// Writes the constant fields of the GPU lookups' `Params` to `out`
-/// (`docs/engines.md`). `false` for NULL or a cubemap too large for
+/// Writes the GPU lookups' `Params` to `out`, the fields of a dispatch
+/// at 0 (`docs/engines.md`). `false` for NULL or a cubemap too large for
 /// 32-bit GPU indices.
 ///
 /// # Safety
@@ -202,7 +216,7 @@ fn cubemap_gpu(c: &AobakeCubemap) -> Option<&CubemapGpu> {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_cubemap_gpu_params(
     cubemap: *const AobakeCubemap,
-    out: *mut AobakeCubemapGpu,
+    out: *mut AobakeCubemapGpuParams,
 ) -> bool {
     // SAFETY: the caller passes NULL or a live handle.
     let Some(gpu) = (unsafe { cubemap.as_ref() }).and_then(cubemap_gpu) else {
@@ -216,13 +230,17 @@ pub unsafe extern "C" fn aobake_cubemap_gpu_params(
         fail("out is NULL");
         return false;
     };
-    *out = AobakeCubemapGpu {
+    *out = AobakeCubemapGpuParams {
         centre: gpu.centre,
         radii: gpu.radii,
         resolution: gpu.resolution,
         shells: gpu.shells,
         times: gpu.times,
         encoding: gpu.encoding,
+        points: 0,
+        phase: 0.0,
+        row_stride: 0,
+        on_ground: 0,
     };
     true
 }
@@ -231,8 +249,9 @@ pub unsafe extern "C" fn aobake_cubemap_gpu_params(
 /// sets `*words` to the length in words of array `which`
 /// (`AOBAKE_CUBEMAP_GPU_TEXELS` or `_GROUND`) and copies it to `out` when
 /// `out` is not NULL (then `len` must be at least `*words`). Call it with
-/// `out` NULL to size the buffer. `false` for a NULL handle, an unknown
-/// array or a short buffer.
+/// `out` NULL to size the buffer. `false` for a NULL handle, a cubemap
+/// too large for 32-bit GPU indices, an unknown array or a short buffer
+/// (`*words` is still set).
 ///
 /// # Safety
 /// `cubemap` must be NULL or a live handle; `out` NULL or `len` writable

@@ -14,7 +14,7 @@ use aobake_runtime::{
 };
 use glam::{Mat4, Vec3};
 
-use crate::{copy_words, fail, floats, free, open, out_floats};
+use crate::{copy_words, fail, finite_floats, floats, free, open, out_floats};
 
 /// A grid asset. Opaque to C.
 #[derive(Debug)]
@@ -89,8 +89,8 @@ impl GridReceivers<'_> {
 }
 
 /// The grids posed by `palette_len` matrices at `palette`, or the reason
-/// they cannot be: a short palette, a matrix that is not finite, or one
-/// that cannot be inverted.
+/// they cannot be: a short palette, or a part's matrix that is not finite
+/// or cannot be inverted (matrices no part follows are not checked).
 ///
 /// # Safety
 /// `palette` must be NULL or point to `16 · palette_len` readable floats.
@@ -111,7 +111,7 @@ unsafe fn posed(g: &AobakeGrid, palette: *const f32, palette_len: usize) -> Opti
         .position(|p| !(p.grid_from_world.is_finite() && p.world_from_bind.is_finite()));
     if let Some(k) = singular {
         fail(format!(
-            "palette: matrix {} (part {k}'s joint) cannot be inverted",
+            "palette: matrix {} (part {k}'s joint) is not finite or cannot be inverted",
             g.0.parts[k].joint
         ));
         return None;
@@ -141,9 +141,9 @@ unsafe fn grid_receivers<'a>(
     // SAFETY: forwarded from the caller.
     let poses = unsafe { posed(g, palette, palette_len) }?;
     // SAFETY: forwarded from the caller.
-    let points = unsafe { floats(points, count, 3, "points") }?;
+    let points = unsafe { finite_floats(points, count, 3, "points") }?;
     // SAFETY: forwarded from the caller.
-    let normals = unsafe { floats(normals, count, 3, "normals") }?;
+    let normals = unsafe { finite_floats(normals, count, 3, "normals") }?;
     let parts = if parts.is_null() || count == 0 {
         None
     } else {
@@ -179,7 +179,7 @@ unsafe fn grid_receivers<'a>(
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle; each pointer NULL or holding the
-/// counts above.
+/// counts above; `out` overlapping none of the inputs.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_occlusion(
     grid: *const AobakeGrid,
@@ -219,7 +219,7 @@ pub unsafe extern "C" fn aobake_grid_occlusion(
 ///
 /// # Safety
 /// As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`
-/// values.
+/// values (not overlapping `out` either).
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_ao(
     grid: *const AobakeGrid,
@@ -283,9 +283,11 @@ pub unsafe extern "C" fn aobake_grid_ao(
 }
 
 /// The palette entry (joint) part `part` follows, or -1 for a part the
-/// asset does not have (or NULL). A vertex on a part is one whose
-/// heaviest skin joint is that part's joint: the `parts` the lookups
-/// take.
+/// asset does not have (or NULL). The bake puts a vertex of the
+/// character on the part of its heaviest skin influence (the first of
+/// equal weights, in its `JOINTS_0`/`WEIGHTS_0` order), or on none when
+/// that joint has no part (it carries no triangle): the `parts` the
+/// lookups take, and the `own` of the GPU lookups.
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle.
@@ -305,14 +307,21 @@ pub unsafe extern "C" fn aobake_grid_part_joint(grid: *const AobakeGrid, part: u
     }
 }
 
-/// The constant fields of the GPU lookups' `Params` uniform
-/// (`shaders/wgsl/common/grid_lookup.wgsl`); an engine adds the
-/// per-dispatch ones (`points`, `row_stride`).
+/// The GPU lookups' `Params` uniform (`shaders/wgsl/common/
+/// grid_lookup.wgsl`), field for field and byte for byte: an engine
+/// copies it whole into the uniform buffer after filling the fields of a
+/// dispatch (`points`, `row_stride`), which `aobake_grid_gpu_params` sets
+/// to 0.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AobakeGridGpu {
+pub struct AobakeGridGpuParams {
     /// Parts.
     pub parts: u32,
+    /// The engine's: receivers to evaluate (compute shader).
+    pub points: u32,
+    /// The engine's: receivers per row of the dispatch grid (workgroups
+    /// in x × 64; compute shader).
+    pub row_stride: u32,
     /// 1 when the cones are baked.
     pub cones: u32,
     /// T_clip's samples per axis (0 without cones).
@@ -321,8 +330,8 @@ pub struct AobakeGridGpu {
     pub tclip_offset: u32,
     /// 1 when the asset has a static base.
     pub base: u32,
-    /// The base's ground gain (0 without a base); `Params.ground_gain`
-    /// holds its bits.
+    /// The base's ground gain (0 without a base); the shader reads its
+    /// bits as a u32.
     pub ground_gain: f32,
 }
 
@@ -333,13 +342,17 @@ pub const AOBAKE_GRID_GPU_INFOS: u32 = 0;
 /// The cells, one word each (RGBA8, R in the low byte), part after part,
 /// then T_clip's f32 pairs (binding 2).
 pub const AOBAKE_GRID_GPU_CELLS: u32 = 1;
-/// The static base's offset per vertex of the character (f32 bits; none
-/// without a base): the `offset` a vertex shader passes to `grid_ao`.
+/// The static base's offset per vertex of the character (f32 bits; no
+/// words without a base, when `grid_ao`'s offset is 0): the `offset` a
+/// vertex shader passes to `grid_ao`, a vertex attribute.
 pub const AOBAKE_GRID_GPU_VERTEX_OFFSETS: u32 = 2;
-/// The static base's ground texture as `common/ground_texture.wgsl`
-/// reads it: texels per side (0 without a base), the f32 bits of its
-/// square's min x, min z and side and of its gain, then its offsets (x
-/// fastest).
+/// The static base's ground texture as `common/ground_texture.wgsl`'s
+/// `ground_offset` reads it: texels per side (0 without a base), the f32
+/// bits of its square's min x, min z and side and of its gain, then its
+/// offsets (x fastest). The grid lookups have no binding for it: an
+/// engine's ground shader computes the offset it passes to `grid_ao`
+/// (with that function, or from the offsets as a filtered texture,
+/// `docs/engines.md`).
 pub const AOBAKE_GRID_GPU_GROUND: u32 = 3;
 
 /// The asset's GPU form, packed once per handle; the reason set for NULL
@@ -365,16 +378,16 @@ unsafe fn grid_gpu<'a>(grid: *const AobakeGrid) -> Option<(&'a AobakeGrid, &'a G
     }
 }
 
-/// Writes the constant fields of the GPU lookups' `Params` to `out`
-/// (`docs/engines.md`). `false` for NULL or a grid too large for 32-bit
-/// GPU indices.
+/// Writes the GPU lookups' `Params` to `out`, the fields of a dispatch
+/// at 0 (`docs/engines.md`). `false` for NULL or a grid too large for
+/// 32-bit GPU indices.
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle; `out` NULL or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_gpu_params(
     grid: *const AobakeGrid,
-    out: *mut AobakeGridGpu,
+    out: *mut AobakeGridGpuParams,
 ) -> bool {
     // SAFETY: forwarded from the caller.
     let Some((_, gpu)) = (unsafe { grid_gpu(grid) }) else {
@@ -385,8 +398,10 @@ pub unsafe extern "C" fn aobake_grid_gpu_params(
         fail("out is NULL");
         return false;
     };
-    *out = AobakeGridGpu {
+    *out = AobakeGridGpuParams {
         parts: gpu.parts(),
+        points: 0,
+        row_stride: 0,
         cones: gpu.cones,
         tclip_resolution: gpu.tclip_resolution,
         tclip_offset: gpu.tclip_offset,
@@ -401,7 +416,8 @@ pub unsafe extern "C" fn aobake_grid_gpu_params(
 /// (`AOBAKE_GRID_GPU_INFOS`, `_CELLS`, `_VERTEX_OFFSETS` or `_GROUND`)
 /// and copies it to `out` when `out` is not NULL (then `len` must be at
 /// least `*words`). Call it with `out` NULL to size the buffer. `false`
-/// for a NULL handle, an unknown array or a short buffer.
+/// for a NULL handle, a grid too large for 32-bit GPU indices, an unknown
+/// array or a short buffer (`*words` is still set).
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle; `out` NULL or `len` writable
@@ -454,7 +470,8 @@ pub unsafe extern "C" fn aobake_grid_gpu_words(
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle; `palette` NULL or `16 ·
-/// palette_len` readable floats; `out` NULL or `len` writable floats.
+/// palette_len` readable floats; `out` NULL or `len` writable floats, not
+/// overlapping `palette`.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_gpu_poses(
     grid: *const AobakeGrid,

@@ -158,8 +158,8 @@ unsafe fn fill(values: &[f32], out: *mut f32, len: usize, what: &str) -> bool {
     }
 }
 
-/// `count · width` finite floats at `data`, or the reason they are not:
-/// NULL, a count that overflows, or an item with a NaN or an infinity.
+/// `count · width` floats at `data`, or the reason they are not: NULL,
+/// or a count that overflows.
 ///
 /// # Safety
 /// `data` must be NULL or point to `count · width` readable floats.
@@ -182,7 +182,22 @@ unsafe fn floats<'a>(
     }
     // SAFETY: the caller promises `count · width` readable floats at
     // `data`, which is not NULL.
-    let values = unsafe { std::slice::from_raw_parts(data, len) };
+    Some(unsafe { std::slice::from_raw_parts(data, len) })
+}
+
+/// [`floats`], each a finite number: an item with a NaN or an infinity
+/// is refused, named by its index.
+///
+/// # Safety
+/// As [`floats`].
+unsafe fn finite_floats<'a>(
+    data: *const f32,
+    count: usize,
+    width: usize,
+    what: &str,
+) -> Option<&'a [f32]> {
+    // SAFETY: forwarded from the caller.
+    let values = unsafe { floats(data, count, width, what) }?;
     if let Some(bad) = values.iter().position(|x| !x.is_finite()) {
         fail(format!("{what}: item {} is not finite", bad / width));
         return None;
@@ -191,8 +206,9 @@ unsafe fn floats<'a>(
 }
 
 /// Sets `*words` to `array`'s length and copies it to `out` unless `out`
-/// is NULL (then `len` must be at least the length): the two calls of
-/// every `*_gpu_words` function, sizing then filling.
+/// is NULL (then `len` must be at least the length; `*words` is set
+/// even when it is not): the two calls of every `*_gpu_words` function,
+/// sizing then filling.
 ///
 /// # Safety
 /// `out` must be NULL or point to `len` writable words; `words` NULL or a
@@ -220,11 +236,13 @@ unsafe fn copy_words(array: &[u32], out: *mut u32, len: usize, words: *mut usize
     true
 }
 
-/// The version of the C ABI this header describes: a program compiled
-/// against one header checks at load that
-/// `aobake_rt_abi_version() == AOBAKE_RT_ABI_VERSION`. It changes when a
-/// function, constant or struct of the header changes incompatibly; new
-/// functions alone do not change it.
+/// The version of the C ABI this header describes. It changes when a
+/// function, constant or struct of the header changes incompatibly (new
+/// functions alone do not change it), so a plugin checks at load that
+/// `aobake_rt_abi_version() == AOBAKE_RT_ABI_VERSION`: a library that
+/// passes means what the header says by every function both have (one
+/// older than the header may lack functions added since: the loader
+/// names them).
 pub const AOBAKE_RT_ABI_VERSION: u32 = 1;
 
 /// The C ABI version of the loaded library (`AOBAKE_RT_ABI_VERSION` of

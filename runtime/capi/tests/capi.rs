@@ -244,12 +244,23 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
     assert_eq!(c, rust, "cubemap lookups bit for bit");
     // Then the GPU form as the runtime packs it, and the phase.
     let gpu = CubemapGpu::new(&model).unwrap();
-    let expected: Vec<u32> = gpu
-        .centre
+    // The params byte for byte as the shaders' uniform (the fields of a
+    // dispatch at 0).
+    let uniform = aobake_shaders::mirror::CubemapAoParams {
+        centre: gpu.centre,
+        radii: gpu.radii,
+        resolution: gpu.resolution,
+        shells: gpu.shells,
+        times: gpu.times,
+        encoding: gpu.encoding,
+        points: 0,
+        phase: 0.0,
+        row_stride: 0,
+        on_ground: 0,
+    };
+    let expected: Vec<u32> = bytemuck::cast_slice::<u8, u32>(bytemuck::bytes_of(&uniform))
         .iter()
-        .chain(&gpu.radii)
-        .map(|x| x.to_bits())
-        .chain([gpu.resolution, gpu.shells, gpu.times, gpu.encoding])
+        .copied()
         .chain([phase.to_bits()])
         .chain(gpu.texels.iter().copied())
         .chain(gpu.ground.iter().copied())
@@ -331,14 +342,17 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
     // Then the GPU form as the runtime packs it, each part's joint, the
     // base's offsets and ground, and the frame's poses.
     let gpu = GridGpu::new(&model).unwrap();
-    let mut expected = vec![
-        gpu.parts(),
-        gpu.cones,
-        gpu.tclip_resolution,
-        gpu.tclip_offset,
-        gpu.base,
-        gpu.ground_gain,
-    ];
+    let uniform = aobake_shaders::mirror::GridAoParams {
+        parts: gpu.parts(),
+        points: 0,
+        row_stride: 0,
+        cones: gpu.cones,
+        tclip_resolution: gpu.tclip_resolution,
+        tclip_offset: gpu.tclip_offset,
+        base: gpu.base,
+        ground_gain: gpu.ground_gain,
+    };
+    let mut expected: Vec<u32> = bytemuck::cast_slice(bytemuck::bytes_of(&uniform)).to_vec();
     for part in &model.parts {
         let joint = part.joint as u64;
         expected.extend([joint as u32, (joint >> 32) as u32]);
@@ -432,4 +446,175 @@ fn the_gpu_arrays_reach_c_as_the_runtime_packs_them() {
         unsafe { aobake_vertex_ao_free(ao) };
     }
     assert_eq!(kinds, [false, true], "one dense model and one sparse");
+}
+
+/// The cubemap's and grid's GPU forms refuse a NULL handle, an unknown
+/// array and a short buffer with the reason, and describe an asset baked
+/// without a static ground or base as the shaders expect it: a ground
+/// of one word (0) and no vertex offsets.
+#[test]
+fn the_volume_gpu_forms_refuse_what_is_wrong_and_say_when_there_is_no_base() {
+    use aobake_rt::{
+        AOBAKE_CUBEMAP_GPU_GROUND, AOBAKE_CUBEMAP_GPU_TEXELS, AOBAKE_GRID_GPU_GROUND,
+        AOBAKE_GRID_GPU_INFOS, AOBAKE_GRID_GPU_VERTEX_OFFSETS, AobakeCubemapGpuParams,
+        AobakeGridGpuParams, aobake_cubemap_free, aobake_cubemap_gpu_params,
+        aobake_cubemap_gpu_words, aobake_cubemap_open, aobake_grid_free, aobake_grid_gpu_params,
+        aobake_grid_gpu_poses, aobake_grid_gpu_words, aobake_grid_open, aobake_grid_part_count,
+        aobake_last_error,
+    };
+    let last_error = || {
+        // SAFETY: not NULL after a failing call: a C string valid until
+        // the next failing call.
+        unsafe { std::ffi::CStr::from_ptr(aobake_last_error()) }
+            .to_string_lossy()
+            .into_owned()
+    };
+    let null_cubemap = std::ptr::null();
+    let null_grid = std::ptr::null();
+    let mut words = 0usize;
+    // SAFETY: NULL handles are allowed; `words` is writable.
+    unsafe {
+        let mut cp = std::mem::zeroed::<AobakeCubemapGpuParams>();
+        assert!(!aobake_cubemap_gpu_params(null_cubemap, &mut cp));
+        assert!(last_error().contains("NULL"));
+        assert!(!aobake_cubemap_gpu_words(
+            null_cubemap,
+            0,
+            std::ptr::null_mut(),
+            0,
+            &mut words
+        ));
+        let mut gp = std::mem::zeroed::<AobakeGridGpuParams>();
+        assert!(!aobake_grid_gpu_params(null_grid, &mut gp));
+        assert!(!aobake_grid_gpu_words(
+            null_grid,
+            0,
+            std::ptr::null_mut(),
+            0,
+            &mut words
+        ));
+        assert!(last_error().contains("NULL"));
+    }
+
+    let mut params = BakeParams::new(Method::CubemapDiscrete);
+    params.samples = 8;
+    params.cubemap.resolution = 4;
+    params.cubemap.times = 8;
+    params.cubemap.eval_times = 1;
+    params.cubemap.static_ground = false;
+    let (asset, _, _) = bake("CesiumMan", params);
+    // SAFETY: `asset` holds `len` readable bytes; the handle is live
+    // until freed at the end; `out` holds what each call is told.
+    unsafe {
+        let c = aobake_cubemap_open(asset.as_ptr(), asset.len());
+        assert!(!c.is_null(), "{}", last_error());
+        let mut ground = [9u32; 4];
+        assert!(aobake_cubemap_gpu_words(
+            c,
+            AOBAKE_CUBEMAP_GPU_GROUND,
+            ground.as_mut_ptr(),
+            ground.len(),
+            &mut words
+        ));
+        assert_eq!((words, ground[0]), (1, 0), "no static ground: one word, 0");
+        assert!(aobake_cubemap_gpu_words(
+            c,
+            AOBAKE_CUBEMAP_GPU_TEXELS,
+            std::ptr::null_mut(),
+            0,
+            &mut words
+        ));
+        let mut short = vec![0u32; words - 1];
+        assert!(!aobake_cubemap_gpu_words(
+            c,
+            AOBAKE_CUBEMAP_GPU_TEXELS,
+            short.as_mut_ptr(),
+            short.len(),
+            &mut words
+        ));
+        assert!(last_error().contains("out holds"), "{}", last_error());
+        assert!(!aobake_cubemap_gpu_words(
+            c,
+            2,
+            std::ptr::null_mut(),
+            0,
+            &mut words
+        ));
+        assert!(last_error().contains("array 2"), "{}", last_error());
+        aobake_cubemap_free(c);
+    }
+
+    let mut params = BakeParams::new(Method::Grid);
+    params.grid.resolution = 4;
+    params.grid.rays = 8;
+    params.grid.eval_frames = 1;
+    params.grid.eval_rays = 8;
+    params.grid.eval_ground = 8;
+    params.grid.static_base = false;
+    let (asset, character, clips) = bake("CesiumMilkTruck", params);
+    let palette: Vec<f32> = character
+        .joint_matrices(&Pose::sample(&character.skeleton, &clips[0], 0.2))
+        .iter()
+        .flat_map(|m| m.to_cols_array())
+        .collect();
+    // SAFETY: as above; `palette` holds 16 floats a matrix.
+    unsafe {
+        let g = aobake_grid_open(asset.as_ptr(), asset.len());
+        assert!(!g.is_null(), "{}", last_error());
+        let mut gp = std::mem::zeroed::<AobakeGridGpuParams>();
+        assert!(aobake_grid_gpu_params(g, &mut gp));
+        assert_eq!((gp.base, gp.ground_gain), (0, 0.0), "no static base");
+        assert!(aobake_grid_gpu_words(
+            g,
+            AOBAKE_GRID_GPU_VERTEX_OFFSETS,
+            std::ptr::null_mut(),
+            0,
+            &mut words
+        ));
+        assert_eq!(words, 0, "no vertex offsets without a base");
+        let mut ground = [9u32; 2];
+        assert!(aobake_grid_gpu_words(
+            g,
+            AOBAKE_GRID_GPU_GROUND,
+            ground.as_mut_ptr(),
+            ground.len(),
+            &mut words
+        ));
+        assert_eq!((words, ground[0]), (1, 0), "no ground texture: one word, 0");
+        let mut infos = vec![0u32; 4 * aobake_grid_part_count(g) - 1];
+        assert!(!aobake_grid_gpu_words(
+            g,
+            AOBAKE_GRID_GPU_INFOS,
+            infos.as_mut_ptr(),
+            infos.len(),
+            &mut words
+        ));
+        assert_eq!(words, infos.len() + 1, "sized even when refused");
+        assert!(!aobake_grid_gpu_words(
+            g,
+            4,
+            std::ptr::null_mut(),
+            0,
+            &mut words
+        ));
+        assert!(last_error().contains("array 4"), "{}", last_error());
+        let parts = aobake_grid_part_count(g);
+        let mut poses = vec![0f32; 32 * parts + 1];
+        assert!(!aobake_grid_gpu_poses(
+            g,
+            palette.as_ptr(),
+            palette.len() / 16,
+            poses.as_mut_ptr(),
+            poses.len()
+        ));
+        assert!(last_error().contains("poses"), "{}", last_error());
+        assert!(aobake_grid_gpu_poses(
+            g,
+            palette.as_ptr(),
+            palette.len() / 16,
+            poses.as_mut_ptr(),
+            32 * parts
+        ));
+        aobake_grid_free(g);
+    }
 }

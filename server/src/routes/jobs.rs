@@ -129,6 +129,14 @@ async fn wait_for_leases(
         // the look and the wait still wakes us.
         let notified = state.jobs_ready.notified();
         let leases = state.store.lease_many(&workers, &state.policy).await?;
+        if !leases.is_empty() && gone.as_ref().is_some_and(ClientGone::is_gone) {
+            // The worker went while its jobs were being leased: give them
+            // back now rather than at their leases' expiry.
+            for l in &leases {
+                state.store.release(l.job.id, &l.token).await?;
+            }
+            return Ok(Vec::new());
+        }
         if !leases.is_empty() {
             // Each lease carries its bake's row as the lease left it.
             let mut announced = BTreeSet::new();

@@ -783,7 +783,12 @@ fn an_idle_worker_stops_at_once_on_sigterm_and_a_gone_workers_poll_takes_no_job(
         .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
         .unwrap();
     let jobs = bake["jobs"].as_array().unwrap();
-    assert!(jobs.iter().all(|j| j["attempts"] == 0), "{bake}");
+    assert!(!jobs.is_empty(), "{bake}");
+    assert!(
+        jobs.iter()
+            .all(|j| j["attempts"] == 0 && j["worker"].is_null()),
+        "{bake}"
+    );
     env.start_worker(&[]);
     let end = env.wait_bake(id, Duration::from_secs(120));
     assert_eq!(end["state"], "done", "{end}");

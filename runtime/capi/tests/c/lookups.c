@@ -12,9 +12,9 @@
  * (aobake_cubemap_ground_ao); for a grid, the grids alone
  * (aobake_grid_occlusion) and the AO on the static base
  * (aobake_grid_ao). Then the asset's GPU form as an engine uploads it,
- * raw 32-bit words: for a cubemap, its AobakeCubemapGpu, the phase at
+ * raw 32-bit words: for a cubemap, its AobakeCubemapGpuParams, the phase at
  * SECONDS and the arrays AOBAKE_CUBEMAP_GPU_TEXELS and _GROUND; for a
- * grid, its AobakeGridGpu, each part's joint, the arrays
+ * grid, its AobakeGridGpuParams, each part's joint, the arrays
  * AOBAKE_GRID_GPU_INFOS, _CELLS, _VERTEX_OFFSETS and _GROUND, and the
  * parts' poses for PALETTE. Also checks the ABI version, that the other
  * kind of asset and a short palette are refused with a reason, and that a
@@ -104,14 +104,17 @@ int main(int argc, char **argv) {
                "%s", aobake_last_error());
         fwrite(out, sizeof *out, 2 * count, f);
         if (count > 0) {
-            float kept = points[1];
-            points[1] = NAN;
+            /* A NaN in the last point: refused, and nothing written. */
+            float kept = points[3 * count - 2];
+            points[3 * count - 2] = NAN;
+            for (size_t i = 0; i < count; i++) out[i] = -7.0f;
             EXPECT(!aobake_cubemap_occlusion(c, 0.0f, points, count, out),
                    "a NaN point was taken");
             EXPECT(strstr(aobake_last_error(), "not finite"), "%s", aobake_last_error());
-            points[1] = kept;
+            for (size_t i = 0; i < count; i++) EXPECT(out[i] == -7.0f, "out[%zu] written", i);
+            points[3 * count - 2] = kept;
         }
-        AobakeCubemapGpu params;
+        AobakeCubemapGpuParams params;
         EXPECT(aobake_cubemap_gpu_params(c, &params), "%s", aobake_last_error());
         fwrite(&params, sizeof params, 1, f);
         float phase = aobake_cubemap_phase(c, strtof(argv[3], NULL));
@@ -132,13 +135,16 @@ int main(int argc, char **argv) {
         EXPECT(aobake_grid_occlusion(g, palette, m / 16, points, normals, parts, count, out),
                "%s", aobake_last_error());
         if (count > 0) {
-            /* A vertex past the character's: refused, not given offset 0. */
-            int64_t kept = kinds[0];
-            kinds[0] = (int64_t)1 << 40;
+            /* A vertex past the character's (the last receiver): refused,
+               not given offset 0, and nothing written. */
+            int64_t kept = kinds[count - 1];
+            kinds[count - 1] = (int64_t)1 << 40;
+            for (size_t i = 0; i < count; i++) out[count + i] = -7.0f;
             EXPECT(!aobake_grid_ao(g, palette, m / 16, points, normals, parts, kinds, count, out + count),
                    "a vertex past the character was taken");
             EXPECT(strstr(aobake_last_error(), "vertex") != NULL, "%s", aobake_last_error());
-            kinds[0] = kept;
+            for (size_t i = 0; i < count; i++) EXPECT(out[count + i] == -7.0f, "out[%zu] written", i);
+            kinds[count - 1] = kept;
         }
         EXPECT(aobake_grid_ao(g, palette, m / 16, points, normals, parts, kinds, count, out + count),
                "%s", aobake_last_error());
@@ -162,7 +168,7 @@ int main(int argc, char **argv) {
             EXPECT(strstr(aobake_last_error(), "cannot be inverted"), "%s", aobake_last_error());
             memcpy(palette + 16 * joint, matrix, sizeof matrix);
         }
-        AobakeGridGpu params;
+        AobakeGridGpuParams params;
         EXPECT(aobake_grid_gpu_params(g, &params), "%s", aobake_last_error());
         EXPECT(params.parts == aobake_grid_part_count(g), "%u parts", params.parts);
         fwrite(&params, sizeof params, 1, f);
