@@ -468,7 +468,17 @@ impl Bake<'_> {
         let character = &self.inputs.character;
         let clips = &self.inputs.clips;
         let traced = Instant::now();
-        let truth = GroundTruth::trace(&self.grid_inputs(&parts))
+        let inputs = self.grid_inputs(&parts);
+        // The static base's `sample` jobs (among `deps`) traced the
+        // training frames at the vertices already, as the static average
+        // needs them.
+        let training_vertices = if o.static_base {
+            let frames = inputs.training_frames().len();
+            Some(stack_blocks(deps, VERTEX_TRUTH, character.vertex_count(), frames)?.values)
+        } else {
+            None
+        };
+        let truth = GroundTruth::trace(&inputs, training_vertices.as_deref())
             .map_err(|e| JobError::Invalid(e.to_string()))?;
         let trace_s = traced.elapsed().as_secs_f64();
         let started = Instant::now();

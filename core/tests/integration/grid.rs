@@ -11,6 +11,7 @@ use aobake_core::{
         Method,
         grid::{
             GridOptions, PartsMode,
+            evaluate::{GroundTruth, Inputs},
             field::{self, Slab, finish, part_scene, trace_layers},
             model::{GridModel, PartGrid, Terms},
             tclip::TClip,
@@ -307,4 +308,50 @@ fn a_skinned_character_has_no_rigid_parts_but_has_joint_parts() {
     assert!(parts.len() > 10, "{}", parts.len());
     let vertices: usize = parts.iter().map(|p| p.vertices.len()).sum();
     assert_eq!(vertices, imported.character.vertex_count());
+}
+
+/// The evaluation's static average takes the training frames' truth at
+/// the vertices from the static base's `sample` jobs, which traced it
+/// with the same function and seed, instead of tracing it again: the same
+/// values bit for bit, and that many rays fewer.
+#[test]
+fn the_evaluation_reuses_the_sample_jobs_vertex_truth_with_the_same_values() {
+    let truck = truck();
+    let params = quick();
+    let o = &params.grid;
+    let parts = aobake_core::method::grid::parts::parts(&truck.character, o.parts).unwrap();
+    let inputs = Inputs {
+        character: &truck.character,
+        clips: &truck.clips,
+        train: &[0],
+        test: &[0],
+        parts: &parts,
+        options: o,
+        max_distance: o.distance(&truck.character, &parts),
+        seed: 11,
+    };
+    let frames = inputs.training_frames();
+    // What the `sample` jobs hand over: the frames at the vertices (and
+    // at the base's texels, which the evaluation does not use).
+    let known: Vec<f32> = inputs
+        .trace_frames(&frames, &[Vec3::ZERO])
+        .unwrap()
+        .into_iter()
+        .flat_map(|v| v.vertices)
+        .collect();
+    let fresh = GroundTruth::trace(&inputs, None).unwrap();
+    let reused = GroundTruth::trace(&inputs, Some(&known)).unwrap();
+    assert_eq!(fresh.average, reused.average, "the static average");
+    assert_eq!(fresh.self_ao, reused.self_ao);
+    assert_eq!(fresh.noise_rmse, reused.noise_rmse);
+    for (a, b) in fresh.frames.iter().zip(&reused.frames) {
+        assert_eq!((&a.vertices, &a.ground), (&b.vertices, &b.ground));
+    }
+    let vertices = truck.character.vertex_count() as u64;
+    assert_eq!(
+        fresh.rays - reused.rays,
+        frames.len() as u64 * vertices * u64::from(o.eval_rays),
+        "the training frames' vertices are not traced again"
+    );
+    assert!(fresh.average.0.iter().any(|&a| a > 0.0));
 }

@@ -212,10 +212,21 @@ impl Inputs<'_> {
         frames: &[Frame],
         ground: &[Vec3],
     ) -> Result<Vec<Values>, TraceError> {
+        self.trace_frames_at(frames, ground, true)
+    }
+
+    /// [`Self::trace_frames`], the vertices left out (empty) unless
+    /// `at_vertices`.
+    fn trace_frames_at(
+        &self,
+        frames: &[Frame],
+        ground: &[Vec3],
+        at_vertices: bool,
+    ) -> Result<Vec<Values>, TraceError> {
         frames
             .par_iter()
             .map(|frame| {
-                let t = self.trace(frame, ground, self.seed)?;
+                let t = self.trace_at(frame, ground, self.seed, at_vertices)?;
                 Ok(Values {
                     vertices: t.vertices,
                     ground: t.ground,
@@ -229,21 +240,37 @@ impl Inputs<'_> {
     }
 
     fn trace(&self, frame: &Frame, ground: &[Vec3], seed: u64) -> Result<Traced, TraceError> {
+        self.trace_at(frame, ground, seed, true)
+    }
+
+    /// [`Self::trace`], the vertices' truth left out (empty) unless
+    /// `at_vertices`.
+    fn trace_at(
+        &self,
+        frame: &Frame,
+        ground: &[Vec3],
+        seed: u64,
+        at_vertices: bool,
+    ) -> Result<Traced, TraceError> {
         let c = self.character;
         let pose = frame.pose(c, self.clips);
         let posed = c.skin(&pose);
         let scene = Scene::new(&posed.positions, &c.triangles, &SceneOptions::default())?;
         let params = self.surface(seed);
-        let vertices = vertex_occlusion(
-            &scene,
-            &SurfaceMesh {
-                positions: &posed.positions,
-                normals: &posed.normals,
-                triangles: &c.triangles,
-            },
-            &params,
-            &no_progress,
-        )?;
+        let vertices = if at_vertices {
+            vertex_occlusion(
+                &scene,
+                &SurfaceMesh {
+                    positions: &posed.positions,
+                    normals: &posed.normals,
+                    triangles: &c.triangles,
+                },
+                &params,
+                &no_progress,
+            )?
+        } else {
+            Vec::new()
+        };
         let up = vec![Vec3::Y; ground.len()];
         let ground = surface_occlusion(&scene, ground, &up, &params, &no_progress)?;
         Ok(Traced {
@@ -299,8 +326,15 @@ impl Inputs<'_> {
 
 impl GroundTruth {
     /// Draws the frames and the ground (seeded by `inputs.seed`) and
-    /// traces them.
-    pub fn trace(inputs: &Inputs<'_>) -> Result<Self, TraceError> {
+    /// traces them. `training_vertices`, when given, is the truth of the
+    /// static average's frames at the vertices (frame after frame) as
+    /// [`Inputs::trace_frames`] traced it for the static base's `sample`
+    /// jobs: the same values, so they are not traced again (only the
+    /// ground is, at this evaluation's points).
+    pub fn trace(
+        inputs: &Inputs<'_>,
+        training_vertices: Option<&[f32]>,
+    ) -> Result<Self, TraceError> {
         let o = inputs.options;
         let c = inputs.character;
         let seed = inputs.seed;
@@ -358,13 +392,27 @@ impl GroundTruth {
                 rmse(&first.ground, &again.ground) / 2f64.sqrt(),
             );
         }
-        let training = inputs.trace_frames(&average, &ground)?;
+        let vertices = c.vertex_count();
+        let known = training_vertices.filter(|v| v.len() == average.len() * vertices);
+        let training = match known {
+            Some(known) => inputs
+                .trace_frames_at(&average, &ground, false)?
+                .into_iter()
+                .zip(known.chunks_exact(vertices.max(1)))
+                .map(|(traced, v)| Values {
+                    vertices: v.to_vec(),
+                    ground: traced.ground,
+                })
+                .collect(),
+            None => inputs.trace_frames(&average, &ground)?,
+        };
         let mean = mean_of(&training);
         let static_average = (mean.vertices, mean.ground);
-        let traced_frames = (eval.len() + average.len() + 1) as u64;
         let self_ao = inputs.self_occlusion()?;
-        let rays = (traced_frames * (c.vertex_count() + ground.len()) as u64
-            + c.vertex_count() as u64)
+        let at_vertices =
+            (eval.len() + 1 + if known.is_some() { 0 } else { average.len() } + 1) as u64;
+        let at_ground = (eval.len() + average.len() + 1) as u64;
+        let rays = (at_vertices * vertices as u64 + at_ground * ground.len() as u64)
             * u64::from(o.eval_rays);
         Ok(Self {
             frames,
