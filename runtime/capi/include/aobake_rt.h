@@ -64,7 +64,11 @@
 
 /**
  * `aobake_vertex_ao_gpu_words`' arrays: the dense blocks
- * (`AOBAKE_GPU_BLOCK_WORDS` words each; none for a sparse model).
+ * (`AOBAKE_GPU_BLOCK_WORDS` words each, `vertex_ao.wgsl`'s `BlockInfo`:
+ * rows, columns, the first coefficient's offset in f16 elements, the
+ * map's offset in `AOBAKE_GPU_MAPS` (0xffffffff: the columns are the
+ * vertices), the first weight's index, three words of padding; none for
+ * a sparse model).
  */
 #define AOBAKE_GPU_BLOCKS 0
 
@@ -262,7 +266,8 @@ struct AobakeCubemap *aobake_cubemap_open(const uint8_t *bytes, size_t len);
 void aobake_cubemap_free(struct AobakeCubemap *cubemap);
 
 /**
- * The baked clip's duration in seconds (the cycle), 0 for NULL.
+ * The baked clip's duration in seconds (the cycle), 0 for NULL (with
+ * the reason set).
  *
  * # Safety
  * `cubemap` must be NULL or a live handle.
@@ -271,8 +276,11 @@ float aobake_cubemap_duration(const struct AobakeCubemap *cubemap);
 
 /**
  * Writes the occlusion the character casts at `count` points (`3 ·
- * count` floats, x y z, in the character's space as baked) at `seconds`
- * of its clip to `out` (`count` floats). `false` on NULL.
+ * count` finite floats, x y z, in the character's space as baked: an
+ * engine that places the character elsewhere takes its points through
+ * the inverse of that placement) at `seconds` of its clip (finite) to
+ * `out` (`count` floats). `false` on NULL or input that is not finite,
+ * with nothing written.
  *
  * # Safety
  * `cubemap` must be NULL or a live handle; `points` NULL or `3 · count`
@@ -294,7 +302,7 @@ bool aobake_cubemap_ground_ao(const struct AobakeCubemap *cubemap, float seconds
 /**
  * The phase of the clip at `seconds` (the fraction of its cycle, 0 to
  * 1; 0 for a time that is not finite): the GPU lookups' `Params.phase`
- * at that time. 0 for NULL.
+ * at that time. 0 for NULL (with the reason set).
  *
  * # Safety
  * `cubemap` must be NULL or a live handle.
@@ -325,6 +333,17 @@ bool aobake_cubemap_gpu_params(const struct AobakeCubemap *cubemap, struct Aobak
  * words; `words` a writable `size_t`.
  */
 bool aobake_cubemap_gpu_words(const struct AobakeCubemap *cubemap, uint32_t which, uint32_t *out, size_t len, size_t *words);
+
+/**
+ * Writes the height (y, in the character's space as baked) of the ground
+ * plane the asset's static ground lies on to `out`: where
+ * `aobake_cubemap_ground_ao`'s points are. `false` for NULL or an asset
+ * without a static ground.
+ *
+ * # Safety
+ * `cubemap` must be NULL or a live handle; `out` NULL or writable.
+ */
+bool aobake_cubemap_ground_height(const struct AobakeCubemap *cubemap, float *out);
 
 /**
  * Reads a grid asset from `len` bytes at `bytes`; NULL on failure.
@@ -363,12 +382,13 @@ size_t aobake_grid_palette_len(const struct AobakeGrid *grid);
  * Writes the occlusion every part casts at `count` receivers to `out`
  * (`count` floats), the parts posed by the frame's skinning `palette`
  * (`palette_len` column-major 4 × 4 matrices, world from bind, as the
- * renderer skins with). `points` and `normals` are `3 · count` floats
- * (world space, unit normals); `parts` is NULL (no receiver is on a
- * part, as the ground) or `count` part indices, -1 for none: a receiver
- * on a part takes its own part by the self-occlusion rule. These are
- * the paper's grids alone; [`aobake_grid_ao`] adds the asset's static
- * base.
+ * renderer skins with; see [`aobake_grid_part_name`]). `points` and
+ * `normals` are `3 · count` finite floats in the palette's world
+ * (normals are normalised; a zero one is refused); `parts` is NULL (no
+ * receiver is on a part, as the ground) or `count` part indices, -1 for
+ * none: a receiver on a part takes its own part by the self-occlusion
+ * rule. These are the paper's grids alone; [`aobake_grid_ao`] adds the
+ * asset's static base.
  *
  * # Safety
  * `grid` must be NULL or a live handle; each pointer NULL or holding the
@@ -384,7 +404,13 @@ bool aobake_grid_occlusion(const struct AobakeGrid *grid, const float *palette, 
  * the receiver's vertex index in the character (its offset; with a
  * static base, an index past the character's vertices is refused), -1
  * for a point of the ground (the base's ground texture), -2 for any
- * other surface.
+ * other surface (the ground's gain, no offset: the base knows nothing
+ * of it, so a surface the bake did not see, such as another level of
+ * detail, is better served by [`aobake_grid_occlusion`]). The base's
+ * ground texture lies in the space the palette was baked in: an engine
+ * that places the character elsewhere looks up in the character's
+ * space (its points, normals and palette taken through the inverse of
+ * the placement).
  *
  * # Safety
  * As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`
@@ -447,6 +473,30 @@ bool aobake_grid_gpu_words(const struct AobakeGrid *grid, uint32_t which, uint32
 bool aobake_grid_gpu_poses(const struct AobakeGrid *grid, const float *palette, size_t palette_len, float *out, size_t len);
 
 /**
+ * The name of part `part` (its node's, NUL-terminated UTF-8; valid until
+ * the handle is freed), or NULL for a part the asset does not have (or
+ * NULL). The palette entry `aobake_grid_part_joint(grid, part)` is that
+ * node's `world_from_bind`: its world matrix times its inverse bind
+ * matrix when it is a skin's joint, its world matrix when it is a rigid
+ * mesh's node; entries no part follows are not read.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle.
+ */
+const char *aobake_grid_part_name(const struct AobakeGrid *grid, size_t part);
+
+/**
+ * Writes the height (y, in the space the palette was baked in) of the
+ * ground plane the asset's static base lies on to `out`: where the
+ * ground receivers of `aobake_grid_ao` are. `false` for NULL or an asset
+ * without a static base.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle; `out` NULL or writable.
+ */
+bool aobake_grid_ground_height(const struct AobakeGrid *grid, float *out);
+
+/**
  * Reads a vertex-method asset from `len` bytes at `bytes` (copied; the
  * caller may free them after). NULL on failure: not an asset, damaged,
  * not a vertex method, or written before asset format 1.4 (no rig).
@@ -485,7 +535,10 @@ size_t aobake_vertex_ao_weight_count(const struct AobakeVertexAo *ao);
 /**
  * The GPU form of the asset's coefficients, as the evaluators in
  * `shaders/` read them (`vertex_ao.wgsl`'s bindings 1 to 3 and 6, and
- * their translations; `docs/engines.md`): sets `*words` to the length in
+ * their translations; `docs/engines.md`; its `Params` are the vertices,
+ * the blocks, and the dispatch's row stride). An array of no words is
+ * bound, where a shader binds it, as one word of 0: a GPU binding
+ * cannot be empty. Sets `*words` to the length in
  * words of array `which` (`AOBAKE_GPU_BLOCKS`, `_COEFFICIENTS`, `_MAPS`
  * or `_SPARSE_ROWS`) and copies it to `out` when `out` is not NULL (then
  * `len` must be at least `*words`). Call it with `out` NULL to size the

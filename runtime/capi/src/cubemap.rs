@@ -41,19 +41,29 @@ pub unsafe extern "C" fn aobake_cubemap_free(cubemap: *mut AobakeCubemap) {
     unsafe { free(cubemap) }
 }
 
-/// The baked clip's duration in seconds (the cycle), 0 for NULL.
+/// The baked clip's duration in seconds (the cycle), 0 for NULL (with
+/// the reason set).
 ///
 /// # Safety
 /// `cubemap` must be NULL or a live handle.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_cubemap_duration(cubemap: *const AobakeCubemap) -> f32 {
     // SAFETY: the caller passes NULL or a live handle.
-    unsafe { cubemap.as_ref() }.map_or(0.0, |c| c.0.layout.duration)
+    match unsafe { cubemap.as_ref() } {
+        Some(c) => c.0.layout.duration,
+        None => {
+            fail("the handle is NULL");
+            0.0
+        }
+    }
 }
 
 /// Writes the occlusion the character casts at `count` points (`3 ·
-/// count` floats, x y z, in the character's space as baked) at `seconds`
-/// of its clip to `out` (`count` floats). `false` on NULL.
+/// count` finite floats, x y z, in the character's space as baked: an
+/// engine that places the character elsewhere takes its points through
+/// the inverse of that placement) at `seconds` of its clip (finite) to
+/// `out` (`count` floats). `false` on NULL or input that is not finite,
+/// with nothing written.
 ///
 /// # Safety
 /// `cubemap` must be NULL or a live handle; `points` NULL or `3 · count`
@@ -124,12 +134,16 @@ unsafe fn cubemap_lookup(
         fail("the handle is NULL");
         return false;
     };
+    if !seconds.is_finite() {
+        fail(format!("seconds is {seconds}, not a time"));
+        return false;
+    }
     // SAFETY: forwarded from the caller.
     let Some(points) = (unsafe { finite_floats(points, count, 3, "points") }) else {
         return false;
     };
     // SAFETY: forwarded from the caller.
-    let Some(out) = (unsafe { out_floats(out, count, count, "occlusion") }) else {
+    let Some(out) = (unsafe { out_floats(out, count, count, "occlusion values") }) else {
         return false;
     };
     let phase = c.0.layout.phase(seconds);
@@ -141,14 +155,20 @@ unsafe fn cubemap_lookup(
 
 /// The phase of the clip at `seconds` (the fraction of its cycle, 0 to
 /// 1; 0 for a time that is not finite): the GPU lookups' `Params.phase`
-/// at that time. 0 for NULL.
+/// at that time. 0 for NULL (with the reason set).
 ///
 /// # Safety
 /// `cubemap` must be NULL or a live handle.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_cubemap_phase(cubemap: *const AobakeCubemap, seconds: f32) -> f32 {
     // SAFETY: the caller passes NULL or a live handle.
-    unsafe { cubemap.as_ref() }.map_or(0.0, |c| c.0.layout.phase(seconds))
+    match unsafe { cubemap.as_ref() } {
+        Some(c) => c.0.layout.phase(seconds),
+        None => {
+            fail("the handle is NULL");
+            0.0
+        }
+    }
 }
 
 /// The GPU lookups' `Params` uniform (`shaders/wgsl/common/
@@ -283,4 +303,38 @@ pub unsafe extern "C" fn aobake_cubemap_gpu_words(
     };
     // SAFETY: forwarded from the caller.
     unsafe { copy_words(array, out, len, words) }
+}
+
+/// Writes the height (y, in the character's space as baked) of the ground
+/// plane the asset's static ground lies on to `out`: where
+/// `aobake_cubemap_ground_ao`'s points are. `false` for NULL or an asset
+/// without a static ground.
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle; `out` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_cubemap_ground_height(
+    cubemap: *const AobakeCubemap,
+    out: *mut f32,
+) -> bool {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(c) = (unsafe { cubemap.as_ref() }) else {
+        fail("the handle is NULL");
+        return false;
+    };
+    let Some(ground) = &c.0.ground else {
+        fail("the asset has no static ground (baked with cubemap.static_ground = false)");
+        return false;
+    };
+    // SAFETY: the caller passes NULL or a writable float.
+    match unsafe { out.as_mut() } {
+        Some(out) => {
+            *out = ground.square.height;
+            true
+        }
+        None => {
+            fail("out is NULL");
+            false
+        }
+    }
 }

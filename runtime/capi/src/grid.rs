@@ -2,7 +2,10 @@
 //! posed by the frame's skinning palette, on the CPU or in the form the
 //! GPU lookups read.
 
-use std::sync::OnceLock;
+use std::{
+    ffi::{CString, c_char},
+    sync::OnceLock,
+};
 
 use aobake_runtime::{
     Asset,
@@ -18,7 +21,12 @@ use crate::{copy_words, fail, finite_floats, floats, free, open, out_floats};
 
 /// A grid asset. Opaque to C.
 #[derive(Debug)]
-pub struct AobakeGrid(GridModel, OnceLock<Result<GridGpu, String>>);
+pub struct AobakeGrid(
+    GridModel,
+    OnceLock<Result<GridGpu, String>>,
+    /// The parts' names as C strings.
+    Vec<CString>,
+);
 
 /// Reads a grid asset from `len` bytes at `bytes`; NULL on failure.
 ///
@@ -29,7 +37,14 @@ pub unsafe extern "C" fn aobake_grid_open(bytes: *const u8, len: usize) -> *mut 
     // SAFETY: forwarded from the caller.
     unsafe {
         open(bytes, len, "grid", |a| match a {
-            Asset::Grid { model, .. } => Some(AobakeGrid(model, OnceLock::new())),
+            Asset::Grid { model, .. } => {
+                let names = model
+                    .parts
+                    .iter()
+                    .map(|p| CString::new(p.name.replace('\0', " ")).unwrap_or_default())
+                    .collect();
+                Some(AobakeGrid(model, OnceLock::new(), names))
+            }
             _ => None,
         })
     }
@@ -78,11 +93,19 @@ struct GridReceivers<'a> {
 }
 
 impl GridReceivers<'_> {
-    /// Receiver `i`'s point, normal and part.
+    /// Receiver `i`'s point, unit normal and part (a normal that is not
+    /// of unit length is normalised; one that is, to within f32's
+    /// rounding, is taken as it is).
     fn get(&self, i: usize) -> (Vec3, Vec3, Option<usize>) {
+        let n = Vec3::from_slice(&self.normals[3 * i..]);
+        let n = if (n.length_squared() - 1.0).abs() > 1e-6 {
+            n.normalize()
+        } else {
+            n
+        };
         (
             Vec3::from_slice(&self.points[3 * i..]),
-            Vec3::from_slice(&self.normals[3 * i..]),
+            n,
             self.parts.and_then(|k| usize::try_from(k[i]).ok()),
         )
     }
@@ -144,6 +167,13 @@ unsafe fn grid_receivers<'a>(
     let points = unsafe { finite_floats(points, count, 3, "points") }?;
     // SAFETY: forwarded from the caller.
     let normals = unsafe { finite_floats(normals, count, 3, "normals") }?;
+    if let Some(i) = normals
+        .chunks_exact(3)
+        .position(|n| Vec3::from_slice(n).length_squared() < 1e-12)
+    {
+        fail(format!("normals: item {i} has no direction (zero length)"));
+        return None;
+    }
     let parts = if parts.is_null() || count == 0 {
         None
     } else {
@@ -170,12 +200,13 @@ unsafe fn grid_receivers<'a>(
 /// Writes the occlusion every part casts at `count` receivers to `out`
 /// (`count` floats), the parts posed by the frame's skinning `palette`
 /// (`palette_len` column-major 4 × 4 matrices, world from bind, as the
-/// renderer skins with). `points` and `normals` are `3 · count` floats
-/// (world space, unit normals); `parts` is NULL (no receiver is on a
-/// part, as the ground) or `count` part indices, -1 for none: a receiver
-/// on a part takes its own part by the self-occlusion rule. These are
-/// the paper's grids alone; [`aobake_grid_ao`] adds the asset's static
-/// base.
+/// renderer skins with; see [`aobake_grid_part_name`]). `points` and
+/// `normals` are `3 · count` finite floats in the palette's world
+/// (normals are normalised; a zero one is refused); `parts` is NULL (no
+/// receiver is on a part, as the ground) or `count` part indices, -1 for
+/// none: a receiver on a part takes its own part by the self-occlusion
+/// rule. These are the paper's grids alone; [`aobake_grid_ao`] adds the
+/// asset's static base.
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle; each pointer NULL or holding the
@@ -198,7 +229,7 @@ pub unsafe extern "C" fn aobake_grid_occlusion(
         return false;
     };
     // SAFETY: forwarded from the caller.
-    let Some(out) = (unsafe { out_floats(out, count, count, "occlusion") }) else {
+    let Some(out) = (unsafe { out_floats(out, count, count, "occlusion values") }) else {
         return false;
     };
     for (i, o) in out.iter_mut().enumerate() {
@@ -215,7 +246,13 @@ pub unsafe extern "C" fn aobake_grid_occlusion(
 /// the receiver's vertex index in the character (its offset; with a
 /// static base, an index past the character's vertices is refused), -1
 /// for a point of the ground (the base's ground texture), -2 for any
-/// other surface.
+/// other surface (the ground's gain, no offset: the base knows nothing
+/// of it, so a surface the bake did not see, such as another level of
+/// detail, is better served by [`aobake_grid_occlusion`]). The base's
+/// ground texture lies in the space the palette was baked in: an engine
+/// that places the character elsewhere looks up in the character's
+/// space (its points, normals and palette taken through the inverse of
+/// the placement).
 ///
 /// # Safety
 /// As [`aobake_grid_occlusion`]; `receivers` NULL or holding `count`
@@ -265,7 +302,7 @@ pub unsafe extern "C" fn aobake_grid_ao(
         }
     }
     // SAFETY: forwarded from the caller.
-    let Some(out) = (unsafe { out_floats(out, count, count, "occlusion") }) else {
+    let Some(out) = (unsafe { out_floats(out, count, count, "occlusion values") }) else {
         return false;
     };
     for (i, o) in out.iter_mut().enumerate() {
@@ -490,7 +527,7 @@ pub unsafe extern "C" fn aobake_grid_gpu_poses(
         return false;
     };
     // SAFETY: forwarded from the caller.
-    let Some(out) = (unsafe { out_floats(out, len, 32 * poses.len(), "poses") }) else {
+    let Some(out) = (unsafe { out_floats(out, len, 32 * poses.len(), "poses' floats") }) else {
         return false;
     };
     for (o, pose) in out.chunks_exact_mut(32).zip(&poses) {
@@ -498,4 +535,63 @@ pub unsafe extern "C" fn aobake_grid_gpu_poses(
         pose.world_from_bind.write_cols_to_slice(&mut o[16..]);
     }
     true
+}
+
+/// The name of part `part` (its node's, NUL-terminated UTF-8; valid until
+/// the handle is freed), or NULL for a part the asset does not have (or
+/// NULL). The palette entry `aobake_grid_part_joint(grid, part)` is that
+/// node's `world_from_bind`: its world matrix times its inverse bind
+/// matrix when it is a skin's joint, its world matrix when it is a rigid
+/// mesh's node; entries no part follows are not read.
+///
+/// # Safety
+/// `grid` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_part_name(
+    grid: *const AobakeGrid,
+    part: usize,
+) -> *const c_char {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(g) = (unsafe { grid.as_ref() }) else {
+        fail("the handle is NULL");
+        return std::ptr::null();
+    };
+    match g.2.get(part) {
+        Some(name) => name.as_ptr(),
+        None => {
+            fail(format!("part {part} of {}", g.2.len()));
+            std::ptr::null()
+        }
+    }
+}
+
+/// Writes the height (y, in the space the palette was baked in) of the
+/// ground plane the asset's static base lies on to `out`: where the
+/// ground receivers of `aobake_grid_ao` are. `false` for NULL or an asset
+/// without a static base.
+///
+/// # Safety
+/// `grid` must be NULL or a live handle; `out` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_ground_height(grid: *const AobakeGrid, out: *mut f32) -> bool {
+    // SAFETY: the caller passes NULL or a live handle.
+    let Some(g) = (unsafe { grid.as_ref() }) else {
+        fail("the handle is NULL");
+        return false;
+    };
+    let Some(base) = &g.0.base else {
+        fail("the asset has no static base (baked with grid.static_base = false)");
+        return false;
+    };
+    // SAFETY: the caller passes NULL or a writable float.
+    match unsafe { out.as_mut() } {
+        Some(out) => {
+            *out = base.ground.square.height;
+            true
+        }
+        None => {
+            fail("out is NULL");
+            false
+        }
+    }
 }

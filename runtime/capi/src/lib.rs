@@ -127,7 +127,7 @@ unsafe fn out_floats<'a>(
 ) -> Option<&'a mut [f32]> {
     if len != want {
         fail(format!(
-            "{what}: {want} values to write, the buffer holds {len}"
+            "out: the {what} are {want} floats, the buffer holds {len}"
         ));
         return None;
     }
@@ -135,7 +135,7 @@ unsafe fn out_floats<'a>(
         return Some(&mut []);
     }
     if out.is_null() {
-        fail(format!("{what} is NULL: it must hold {want} floats"));
+        fail(format!("out is NULL: the {what} are {want} floats"));
         return None;
     }
     // SAFETY: the caller promises `len` writable floats at `out`, which is

@@ -113,7 +113,11 @@ pub unsafe extern "C" fn aobake_vertex_ao_weight_count(ao: *const AobakeVertexAo
 }
 
 /// `aobake_vertex_ao_gpu_words`' arrays: the dense blocks
-/// (`AOBAKE_GPU_BLOCK_WORDS` words each; none for a sparse model).
+/// (`AOBAKE_GPU_BLOCK_WORDS` words each, `vertex_ao.wgsl`'s `BlockInfo`:
+/// rows, columns, the first coefficient's offset in f16 elements, the
+/// map's offset in `AOBAKE_GPU_MAPS` (0xffffffff: the columns are the
+/// vertices), the first weight's index, three words of padding; none for
+/// a sparse model).
 pub const AOBAKE_GPU_BLOCKS: u32 = 0;
 /// The f16 coefficients, two per word (element 2i in the low half).
 pub const AOBAKE_GPU_COEFFICIENTS: u32 = 1;
@@ -128,7 +132,10 @@ const _: () = assert!(AOBAKE_GPU_BLOCK_WORDS == aobake_runtime::method::vertex::
 
 /// The GPU form of the asset's coefficients, as the evaluators in
 /// `shaders/` read them (`vertex_ao.wgsl`'s bindings 1 to 3 and 6, and
-/// their translations; `docs/engines.md`): sets `*words` to the length in
+/// their translations; `docs/engines.md`; its `Params` are the vertices,
+/// the blocks, and the dispatch's row stride). An array of no words is
+/// bound, where a shader binds it, as one word of 0: a GPU binding
+/// cannot be empty. Sets `*words` to the length in
 /// words of array `which` (`AOBAKE_GPU_BLOCKS`, `_COEFFICIENTS`, `_MAPS`
 /// or `_SPARSE_ROWS`) and copies it to `out` when `out` is not NULL (then
 /// `len` must be at least `*words`). Call it with `out` NULL to size the
@@ -356,7 +363,7 @@ pub unsafe extern "C" fn aobake_vertex_ao_evaluate(
     // SAFETY: forwarded from the caller.
     match unsafe { handle(ao) } {
         // SAFETY: forwarded from the caller.
-        Some(h) => unsafe { fill(&h.evaluate(), out, len, "evaluate") },
+        Some(h) => unsafe { fill(&h.evaluate(), out, len, "AO values") },
         None => false,
     }
 }

@@ -618,3 +618,142 @@ fn the_volume_gpu_forms_refuse_what_is_wrong_and_say_when_there_is_no_base() {
         aobake_grid_free(g);
     }
 }
+
+/// What a C engine needs beside the lookups: each grid part's node name
+/// (to fill the palette), the ground planes' heights, and refusals of a
+/// time or a normal that means nothing; a normal of another length is
+/// normalised.
+#[test]
+fn c_engines_get_part_names_and_ground_heights_and_bad_input_is_refused() {
+    use aobake_rt::{
+        aobake_cubemap_free, aobake_cubemap_ground_height, aobake_cubemap_occlusion,
+        aobake_cubemap_open, aobake_grid_free, aobake_grid_ground_height, aobake_grid_occlusion,
+        aobake_grid_open, aobake_grid_palette_len, aobake_grid_part_count, aobake_grid_part_joint,
+        aobake_grid_part_name, aobake_last_error,
+    };
+    use aobake_runtime::method::{cubemap::CubemapModel, grid::model::GridModel};
+    let last_error = || {
+        // SAFETY: not NULL after a failing call: a C string valid until
+        // the next failing call.
+        unsafe { std::ffi::CStr::from_ptr(aobake_last_error()) }
+            .to_string_lossy()
+            .into_owned()
+    };
+
+    let mut params = BakeParams::new(Method::CubemapDiscrete);
+    params.samples = 8;
+    params.cubemap.resolution = 4;
+    params.cubemap.times = 8;
+    params.cubemap.eval_times = 1;
+    let (asset, _, _) = bake("CesiumMan", params);
+    let container = aobake_runtime::Container::from_bytes(&asset).unwrap();
+    let (model, _) = CubemapModel::from_container(&container).unwrap();
+    let height = model.ground.as_ref().unwrap().square.height;
+    let point = model.layout.spheroid.centre;
+    // SAFETY: `asset` holds `len` readable bytes; the handle lives until
+    // freed; each buffer holds what its call is told.
+    unsafe {
+        let c = aobake_cubemap_open(asset.as_ptr(), asset.len());
+        let mut h = f32::NAN;
+        assert!(aobake_cubemap_ground_height(c, &mut h));
+        assert_eq!(h, height);
+        let mut out = [5.0f32];
+        assert!(!aobake_cubemap_occlusion(
+            c,
+            f32::NAN,
+            point.as_ref().as_ptr(),
+            1,
+            out.as_mut_ptr()
+        ));
+        assert!(last_error().contains("seconds"), "{}", last_error());
+        assert_eq!(out, [5.0], "nothing written");
+        aobake_cubemap_free(c);
+    }
+
+    let mut params = BakeParams::new(Method::Grid);
+    params.grid.resolution = 4;
+    params.grid.rays = 8;
+    params.grid.eval_frames = 1;
+    params.grid.eval_rays = 8;
+    params.grid.eval_ground = 8;
+    params.grid.average_frames = 2;
+    let (asset, character, clips) = bake("CesiumMilkTruck", params);
+    let container = aobake_runtime::Container::from_bytes(&asset).unwrap();
+    let (model, _) = GridModel::from_container(&container).unwrap();
+    let matrices = character.joint_matrices(&Pose::sample(&character.skeleton, &clips[0], 0.2));
+    let palette: Vec<f32> = matrices.iter().flat_map(|m| m.to_cols_array()).collect();
+    let centre = model.poses(&matrices)[0]
+        .grid_from_world
+        .inverse()
+        .transform_point3(glam::Vec3::splat(0.5));
+    // SAFETY: as above.
+    unsafe {
+        let g = aobake_grid_open(asset.as_ptr(), asset.len());
+        for (k, part) in model.parts.iter().enumerate() {
+            let name = aobake_grid_part_name(g, k);
+            assert!(!name.is_null());
+            assert_eq!(std::ffi::CStr::from_ptr(name).to_str().unwrap(), part.name);
+            assert_eq!(aobake_grid_part_joint(g, k), part.joint as i64);
+            // The palette entry is that node's: the character's joint of
+            // that name.
+            let node = character.joints[part.joint].node;
+            assert_eq!(character.skeleton.label(node), part.name);
+        }
+        assert!(aobake_grid_part_name(g, aobake_grid_part_count(g)).is_null());
+        let mut h = f32::NAN;
+        assert!(aobake_grid_ground_height(g, &mut h));
+        assert_eq!(h, model.base.as_ref().unwrap().ground.square.height);
+        let n = aobake_grid_palette_len(g);
+        let point = [centre.x, centre.y - 0.3, centre.z];
+        let mut unit = [0f32];
+        assert!(aobake_grid_occlusion(
+            g,
+            palette.as_ptr(),
+            n,
+            point.as_ptr(),
+            [0.0f32, 1.0, 0.0].as_ptr(),
+            std::ptr::null(),
+            1,
+            unit.as_mut_ptr()
+        ));
+        let mut long = [0f32];
+        assert!(aobake_grid_occlusion(
+            g,
+            palette.as_ptr(),
+            n,
+            point.as_ptr(),
+            [0.0f32, 3.0, 0.0].as_ptr(),
+            std::ptr::null(),
+            1,
+            long.as_mut_ptr()
+        ));
+        assert_eq!(unit, long, "a normal of length 3 is normalised");
+        let mut down = [0f32];
+        assert!(aobake_grid_occlusion(
+            g,
+            palette.as_ptr(),
+            n,
+            point.as_ptr(),
+            [0.0f32, -1.0, 0.0].as_ptr(),
+            std::ptr::null(),
+            1,
+            down.as_mut_ptr()
+        ));
+        assert!(
+            unit[0] > 0.0 && unit != down,
+            "the normal matters: {unit:?} {down:?}"
+        );
+        assert!(!aobake_grid_occlusion(
+            g,
+            palette.as_ptr(),
+            n,
+            point.as_ptr(),
+            [0.0f32; 3].as_ptr(),
+            std::ptr::null(),
+            1,
+            long.as_mut_ptr()
+        ));
+        assert!(last_error().contains("zero length"), "{}", last_error());
+        aobake_grid_free(g);
+    }
+}
