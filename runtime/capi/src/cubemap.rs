@@ -9,7 +9,7 @@ use aobake_runtime::{
 };
 use glam::Vec3;
 
-use crate::{copy_words, fail, finite_floats, free, open, out_floats};
+use crate::{copy_words, fail, finite_floats, free, live, open, out_floats, packed, put};
 
 /// A cubemap asset. Opaque to C.
 #[derive(Debug)]
@@ -48,14 +48,8 @@ pub unsafe extern "C" fn aobake_cubemap_free(cubemap: *mut AobakeCubemap) {
 /// `cubemap` must be NULL or a live handle.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_cubemap_duration(cubemap: *const AobakeCubemap) -> f32 {
-    // SAFETY: the caller passes NULL or a live handle.
-    match unsafe { cubemap.as_ref() } {
-        Some(c) => c.0.layout.duration,
-        None => {
-            fail("the handle is NULL");
-            0.0
-        }
-    }
+    // SAFETY: forwarded from the caller.
+    unsafe { live(cubemap) }.map_or(0.0, |c| c.0.layout.duration)
 }
 
 /// Writes the occlusion the character casts at `count` points (`3 ·
@@ -129,9 +123,8 @@ unsafe fn cubemap_lookup(
     out: *mut f32,
     look: fn(&CubemapModel, Vec3, f32) -> f32,
 ) -> bool {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(c) = (unsafe { cubemap.as_ref() }) else {
-        fail("the handle is NULL");
+    // SAFETY: forwarded from the caller.
+    let Some(c) = (unsafe { live(cubemap) }) else {
         return false;
     };
     if !seconds.is_finite() {
@@ -161,14 +154,8 @@ unsafe fn cubemap_lookup(
 /// `cubemap` must be NULL or a live handle.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_cubemap_phase(cubemap: *const AobakeCubemap, seconds: f32) -> f32 {
-    // SAFETY: the caller passes NULL or a live handle.
-    match unsafe { cubemap.as_ref() } {
-        Some(c) => c.0.layout.phase(seconds),
-        None => {
-            fail("the handle is NULL");
-            0.0
-        }
-    }
+    // SAFETY: forwarded from the caller.
+    unsafe { live(cubemap) }.map_or(0.0, |c| c.0.layout.phase(seconds))
 }
 
 /// The GPU lookups' `Params` uniform (`shaders/wgsl/common/
@@ -213,18 +200,17 @@ pub const AOBAKE_CUBEMAP_GPU_TEXELS: u32 = 0;
 /// and of its gain, then its offsets (x fastest).
 pub const AOBAKE_CUBEMAP_GPU_GROUND: u32 = 1;
 
-/// The asset's GPU form, packed once per handle.
-fn cubemap_gpu(c: &AobakeCubemap) -> Option<&CubemapGpu> {
-    let packed = c.1.get_or_init(|| {
+/// The GPU form of the cubemap at `cubemap`, packed once per handle, or
+/// why there is none (NULL, or too large for 32-bit GPU indices).
+///
+/// # Safety
+/// `cubemap` must be NULL or a live handle.
+unsafe fn cubemap_gpu<'a>(cubemap: *const AobakeCubemap) -> Option<&'a CubemapGpu> {
+    // SAFETY: forwarded from the caller.
+    let c = unsafe { live(cubemap) }?;
+    packed(&c.1, || {
         CubemapGpu::new(&c.0).map_err(|e| format!("the cubemap has no GPU form: {e}"))
-    });
-    match packed {
-        Ok(gpu) => Some(gpu),
-        Err(e) => {
-            fail(e.clone());
-            None
-        }
-    }
+    })
 }
 
 /// Writes the GPU lookups' `Params` to `out`, the fields of a dispatch
@@ -238,19 +224,11 @@ pub unsafe extern "C" fn aobake_cubemap_gpu_params(
     cubemap: *const AobakeCubemap,
     out: *mut AobakeCubemapGpuParams,
 ) -> bool {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(gpu) = (unsafe { cubemap.as_ref() }).and_then(cubemap_gpu) else {
-        if cubemap.is_null() {
-            fail("the handle is NULL");
-        }
+    // SAFETY: forwarded from the caller.
+    let Some(gpu) = (unsafe { cubemap_gpu(cubemap) }) else {
         return false;
     };
-    // SAFETY: the caller passes NULL or a writable struct.
-    let Some(out) = (unsafe { out.as_mut() }) else {
-        fail("out is NULL");
-        return false;
-    };
-    *out = AobakeCubemapGpuParams {
+    let params = AobakeCubemapGpuParams {
         centre: gpu.centre,
         radii: gpu.radii,
         resolution: gpu.resolution,
@@ -262,7 +240,8 @@ pub unsafe extern "C" fn aobake_cubemap_gpu_params(
         row_stride: 0,
         on_ground: 0,
     };
-    true
+    // SAFETY: the caller passes NULL or a writable struct.
+    unsafe { put(out, params) }
 }
 
 /// The GPU lookups' arrays as they read them, uploaded once per asset:
@@ -284,11 +263,8 @@ pub unsafe extern "C" fn aobake_cubemap_gpu_words(
     len: usize,
     words: *mut usize,
 ) -> bool {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(gpu) = (unsafe { cubemap.as_ref() }).and_then(cubemap_gpu) else {
-        if cubemap.is_null() {
-            fail("the handle is NULL");
-        }
+    // SAFETY: forwarded from the caller.
+    let Some(gpu) = (unsafe { cubemap_gpu(cubemap) }) else {
         return false;
     };
     let array: &[u32] = match which {
@@ -317,9 +293,8 @@ pub unsafe extern "C" fn aobake_cubemap_ground_height(
     cubemap: *const AobakeCubemap,
     out: *mut f32,
 ) -> bool {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(c) = (unsafe { cubemap.as_ref() }) else {
-        fail("the handle is NULL");
+    // SAFETY: forwarded from the caller.
+    let Some(c) = (unsafe { live(cubemap) }) else {
         return false;
     };
     let Some(ground) = &c.0.ground else {
@@ -327,14 +302,5 @@ pub unsafe extern "C" fn aobake_cubemap_ground_height(
         return false;
     };
     // SAFETY: the caller passes NULL or a writable float.
-    match unsafe { out.as_mut() } {
-        Some(out) => {
-            *out = ground.square.height;
-            true
-        }
-        None => {
-            fail("out is NULL");
-            false
-        }
-    }
+    unsafe { put(out, ground.square.height) }
 }

@@ -17,7 +17,7 @@ use aobake_runtime::{
 };
 use glam::{Mat4, Vec3};
 
-use crate::{copy_words, fail, finite_floats, floats, free, open, out_floats};
+use crate::{copy_words, fail, finite_floats, floats, free, live, open, out_floats, packed, put};
 
 /// A grid asset. Opaque to C.
 #[derive(Debug)]
@@ -156,11 +156,8 @@ unsafe fn grid_receivers<'a>(
     parts: *const i64,
     count: usize,
 ) -> Option<(&'a AobakeGrid, GridReceivers<'a>)> {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(g) = (unsafe { grid.as_ref() }) else {
-        fail("the handle is NULL");
-        return None;
-    };
+    // SAFETY: forwarded from the caller.
+    let g = unsafe { live(grid) }?;
     // SAFETY: forwarded from the caller.
     let poses = unsafe { posed(g, palette, palette_len) }?;
     // SAFETY: forwarded from the caller.
@@ -330,9 +327,8 @@ pub unsafe extern "C" fn aobake_grid_ao(
 /// `grid` must be NULL or a live handle.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_part_joint(grid: *const AobakeGrid, part: usize) -> i64 {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(g) = (unsafe { grid.as_ref() }) else {
-        fail("the handle is NULL");
+    // SAFETY: forwarded from the caller.
+    let Some(g) = (unsafe { live(grid) }) else {
         return -1;
     };
     match g.0.parts.get(part) {
@@ -392,27 +388,18 @@ pub const AOBAKE_GRID_GPU_VERTEX_OFFSETS: u32 = 2;
 /// `docs/engines.md`).
 pub const AOBAKE_GRID_GPU_GROUND: u32 = 3;
 
-/// The asset's GPU form, packed once per handle; the reason set for NULL
-/// or a grid too large for 32-bit GPU indices.
+/// The grid at `grid` and its GPU form, packed once per handle, or why
+/// there is none (NULL, or too large for 32-bit GPU indices).
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle.
 unsafe fn grid_gpu<'a>(grid: *const AobakeGrid) -> Option<(&'a AobakeGrid, &'a GridGpu)> {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(g) = (unsafe { grid.as_ref() }) else {
-        fail("the handle is NULL");
-        return None;
-    };
-    let packed = g
-        .1
-        .get_or_init(|| GridGpu::new(&g.0).map_err(|e| format!("the grid has no GPU form: {e}")));
-    match packed {
-        Ok(gpu) => Some((g, gpu)),
-        Err(e) => {
-            fail(e.clone());
-            None
-        }
-    }
+    // SAFETY: forwarded from the caller.
+    let g = unsafe { live(grid) }?;
+    let gpu = packed(&g.1, || {
+        GridGpu::new(&g.0).map_err(|e| format!("the grid has no GPU form: {e}"))
+    })?;
+    Some((g, gpu))
 }
 
 /// Writes the GPU lookups' `Params` to `out`, the fields of a dispatch
@@ -430,12 +417,7 @@ pub unsafe extern "C" fn aobake_grid_gpu_params(
     let Some((_, gpu)) = (unsafe { grid_gpu(grid) }) else {
         return false;
     };
-    // SAFETY: the caller passes NULL or a writable struct.
-    let Some(out) = (unsafe { out.as_mut() }) else {
-        fail("out is NULL");
-        return false;
-    };
-    *out = AobakeGridGpuParams {
+    let params = AobakeGridGpuParams {
         parts: gpu.parts(),
         points: 0,
         row_stride: 0,
@@ -445,7 +427,8 @@ pub unsafe extern "C" fn aobake_grid_gpu_params(
         base: gpu.base,
         ground_gain: f32::from_bits(gpu.ground_gain),
     };
-    true
+    // SAFETY: the caller passes NULL or a writable struct.
+    unsafe { put(out, params) }
 }
 
 /// The GPU lookups' arrays as they read them, uploaded once per asset:
@@ -517,9 +500,8 @@ pub unsafe extern "C" fn aobake_grid_gpu_poses(
     out: *mut f32,
     len: usize,
 ) -> bool {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(g) = (unsafe { grid.as_ref() }) else {
-        fail("the handle is NULL");
+    // SAFETY: forwarded from the caller.
+    let Some(g) = (unsafe { live(grid) }) else {
         return false;
     };
     // SAFETY: forwarded from the caller.
@@ -551,9 +533,8 @@ pub unsafe extern "C" fn aobake_grid_part_name(
     grid: *const AobakeGrid,
     part: usize,
 ) -> *const c_char {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(g) = (unsafe { grid.as_ref() }) else {
-        fail("the handle is NULL");
+    // SAFETY: forwarded from the caller.
+    let Some(g) = (unsafe { live(grid) }) else {
         return std::ptr::null();
     };
     match g.2.get(part) {
@@ -574,9 +555,8 @@ pub unsafe extern "C" fn aobake_grid_part_name(
 /// `grid` must be NULL or a live handle; `out` NULL or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_ground_height(grid: *const AobakeGrid, out: *mut f32) -> bool {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(g) = (unsafe { grid.as_ref() }) else {
-        fail("the handle is NULL");
+    // SAFETY: forwarded from the caller.
+    let Some(g) = (unsafe { live(grid) }) else {
         return false;
     };
     let Some(base) = &g.0.base else {
@@ -584,14 +564,5 @@ pub unsafe extern "C" fn aobake_grid_ground_height(grid: *const AobakeGrid, out:
         return false;
     };
     // SAFETY: the caller passes NULL or a writable float.
-    match unsafe { out.as_mut() } {
-        Some(out) => {
-            *out = base.ground.square.height;
-            true
-        }
-        None => {
-            fail("out is NULL");
-            false
-        }
-    }
+    unsafe { put(out, base.ground.square.height) }
 }

@@ -38,6 +38,7 @@
 use std::{
     cell::RefCell,
     ffi::{CString, c_char},
+    sync::OnceLock,
 };
 
 use aobake_runtime::Asset;
@@ -111,6 +112,53 @@ unsafe fn free<T>(handle: *mut T) {
     if !handle.is_null() {
         // SAFETY: the caller passes a live handle made by Box::into_raw.
         drop(unsafe { Box::from_raw(handle) });
+    }
+}
+
+/// The handle `handle` points to, or NULL's error.
+///
+/// # Safety
+/// `handle` must be NULL or a live handle.
+unsafe fn live<'a, T>(handle: *const T) -> Option<&'a T> {
+    // SAFETY: the caller passes NULL or a live handle.
+    let h = unsafe { handle.as_ref() };
+    if h.is_none() {
+        fail("the handle is NULL");
+    }
+    h
+}
+
+/// Writes `value` to `out`, or NULL's error.
+///
+/// # Safety
+/// `out` must be NULL or writable.
+unsafe fn put<T>(out: *mut T, value: T) -> bool {
+    // SAFETY: the caller passes NULL or a writable `T`.
+    match unsafe { out.as_mut() } {
+        Some(out) => {
+            *out = value;
+            true
+        }
+        None => {
+            fail("out is NULL");
+            false
+        }
+    }
+}
+
+/// A handle's GPU form, packed by `pack` on first use and kept (an
+/// engine asks for each array twice: its size, then its words), or why
+/// it has none.
+fn packed<G>(
+    cell: &OnceLock<Result<G, String>>,
+    pack: impl FnOnce() -> Result<G, String>,
+) -> Option<&G> {
+    match cell.get_or_init(pack) {
+        Ok(gpu) => Some(gpu),
+        Err(e) => {
+            fail(e.clone());
+            None
+        }
     }
 }
 

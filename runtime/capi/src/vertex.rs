@@ -17,7 +17,7 @@ use aobake_runtime::{
 };
 use glam::{Quat, Vec3};
 
-use crate::{copy_words, fail, fill, free, open};
+use crate::{copy_words, fail, fill, free, live, open, packed, put};
 
 /// A vertex-method asset (static average, vertex-linear or
 /// vertex-clustered), its rig and the pose being set. Opaque to C.
@@ -83,12 +83,8 @@ pub unsafe extern "C" fn aobake_vertex_ao_free(ao: *mut AobakeVertexAo) {
 /// # Safety
 /// `ao` must be NULL or a live handle.
 unsafe fn handle<'a>(ao: *const AobakeVertexAo) -> Option<&'a VertexAo> {
-    // SAFETY: the caller passes NULL or a live handle.
-    let h = unsafe { ao.as_ref() }.map(|h| &h.0);
-    if h.is_none() {
-        fail("the handle is NULL");
-    }
-    h
+    // SAFETY: forwarded from the caller.
+    unsafe { live(ao) }.map(|h| &h.0)
 }
 
 /// Vertices the asset covers, in aobake's vertex order (0 for NULL).
@@ -153,22 +149,15 @@ pub unsafe extern "C" fn aobake_vertex_ao_gpu_words(
     len: usize,
     words: *mut usize,
 ) -> bool {
-    // SAFETY: the caller passes NULL or a live handle.
-    let Some(h) = (unsafe { ao.as_ref() }) else {
-        fail("the handle is NULL");
+    // SAFETY: forwarded from the caller.
+    let Some(h) = (unsafe { live(ao) }) else {
         return false;
     };
-    // Packed once per handle: an engine asks for each array twice (its
-    // size, then its words).
-    let packed = h.1.get_or_init(|| {
+    let packed = packed(&h.1, || {
         GpuArrays::new(h.0.model().form()).map_err(|e| format!("the model has no GPU form: {e}"))
     });
-    let arrays = match packed {
-        Ok(a) => a,
-        Err(e) => {
-            fail(e.clone());
-            return false;
-        }
+    let Some(arrays) = packed else {
+        return false;
     };
     let array: &[u32] = match which {
         AOBAKE_GPU_BLOCKS => arrays.blocks.as_flattened(),
@@ -261,16 +250,7 @@ pub unsafe extern "C" fn aobake_vertex_ao_rest(
         return false;
     };
     // SAFETY: the caller passes NULL or a writable transform.
-    match unsafe { out.as_mut() } {
-        Some(out) => {
-            *out = n.rest.into();
-            true
-        }
-        None => {
-            fail("out is NULL");
-            false
-        }
-    }
+    unsafe { put(out, n.rest.into()) }
 }
 
 /// Sets node `node`'s local transform for the next weights or
