@@ -243,9 +243,9 @@ pub unsafe extern "C" fn aobake_grid_occlusion(
 /// the receiver's vertex index in the character (its offset; with a
 /// static base, an index past the character's vertices is refused), -1
 /// for a point of the ground (the base's ground texture), -2 for any
-/// other surface (the ground's gain, no offset: the base knows nothing
-/// of it, so a surface the bake did not see, such as another level of
-/// detail, is better served by [`aobake_grid_occlusion`]). The base's
+/// other surface (the grids alone, as [`aobake_grid_occlusion`]: the
+/// base knows nothing of a surface the bake did not see, such as
+/// another object or level of detail). The base's
 /// ground texture lies in the space the palette was baked in: an engine
 /// that places the character elsewhere looks up in the character's
 /// space (its points, normals and palette taken through the inverse of
