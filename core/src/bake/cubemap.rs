@@ -32,7 +32,7 @@ use crate::{
         },
         face::{FaceError, FaceField, Manifest, Part, checkpoint_batch, compute_face},
         geometry::FACES,
-        ground,
+        ground::{self, TexelTruth},
         model::{CubemapLayout, CubemapModel, Encoding},
         setup::Setup,
     },
@@ -49,6 +49,11 @@ use super::{
 /// The output of `assemble` holding the static ground texture alone (the
 /// mean truth per texel, f32 little-endian), for the report.
 const STILL_GROUND: &str = "ground-static";
+
+/// The output of `assemble` holding the truth the static ground is fitted
+/// to ([`TexelTruth::to_bytes`]), so that `evaluate` fits the other
+/// encodings' grounds to it without tracing it again.
+const GROUND_TRUTH: &str = "ground-truth";
 
 /// The step name of a face job's checkpoints.
 const FACE_STEP: &str = "face";
@@ -279,13 +284,15 @@ impl Bake<'_> {
         let mut out = JobOutput::default();
         if setup.options.static_ground {
             let kroon = setup.options.kroon(&setup.spheroid, self.plan.params.seed);
-            let (ground, still) =
-                ground::fit(&setup, &model, &kroon, setup.options.ground_resolution)
-                    .map_err(|e| JobError::Invalid(e.to_string()))?;
+            let texels = TexelTruth::trace(&setup, &kroon, setup.options.ground_resolution)
+                .map_err(|e| JobError::Invalid(e.to_string()))?;
+            let (ground, still) = texels.fit(&setup, &model);
             model.ground = Some(ground);
-            // The texture alone, for the report's static ground baseline.
+            // The texture alone, for the report's static ground baseline,
+            // and the truth the other encodings' grounds are fitted to.
             let bytes: Vec<u8> = still.offsets.iter().flat_map(|x| x.to_le_bytes()).collect();
             out.push(STILL_GROUND, bytes);
+            out.push(GROUND_TRUTH, texels.to_bytes());
         }
         let asset = model
             .to_container(self.header(), &setup.clip.name)
@@ -310,6 +317,14 @@ impl Bake<'_> {
             .map_err(|e| JobError::Invalid(e.to_string()))?;
         let trace_s = traced.elapsed().as_secs_f64();
         let started = Instant::now();
+        // The static ground's truth (assemble's), when the asset has one.
+        let texels = match assembled.get(GROUND_TRUTH) {
+            Some(bytes) if model.ground.is_some() => Some(
+                TexelTruth::from_bytes(&setup, setup.options.ground_resolution, bytes)
+                    .map_err(JobError::Invalid)?,
+            ),
+            _ => None,
+        };
         // The baked encoding first, then the others from the same fields.
         let baked = model.layout.encoding;
         let residuals = setup.options.residuals;
@@ -351,14 +366,23 @@ impl Bake<'_> {
                 continue;
             }
             let (name, mut text) = describe(e, r);
-            if model.ground.is_some() {
-                // Its ground columns compare with the baked encoding's
+            let mut other = self.encode(&setup, &faces, e, r)?;
+            match (&model.ground, &texels) {
+                // As it would be baked: on a static ground fitted to its
+                // own lookups, from the same truth as the asset's.
+                (Some(_), Some(texels)) => {
+                    other.ground = Some(texels.fit(&setup, &other).0);
+                    text.push_str("; on a static ground fitted to it");
+                }
+                // An `assemble` from before the truth was handed over:
+                // its ground columns compare with the baked encoding's
                 // "without the static ground" row.
-                text.push_str(
+                (Some(_), None) => text.push_str(
                     "; without a static ground (the asset's is fitted to its own encoding)",
-                );
+                ),
+                (None, _) => {}
             }
-            encoded.push((name, text, self.encode(&setup, &faces, e, r)?));
+            encoded.push((name, text, other));
         }
         let layout = model.layout;
         let mut variants: Vec<VariantErrors> = Vec::new();

@@ -128,6 +128,9 @@ fn both_encodings_bake_in_process_and_beat_the_static_cubemap_on_unseen_points()
         ("SpinningCube", spinning_cube()),
     ] {
         let inputs = util::inputs(&imported.character, &imported.clips);
+        // Each bake's rows by name: another encoding's row in one bake is
+        // that encoding as it would be baked.
+        let mut reports = Vec::new();
         for (method, layout) in [
             (Method::CubemapDiscrete, ContinuousLayout::Cosine),
             (Method::CubemapContinuous, ContinuousLayout::Cosine),
@@ -200,6 +203,22 @@ fn both_encodings_bake_in_process_and_beat_the_static_cubemap_on_unseen_points()
             }
             assert_eq!(r.charts.len(), 3);
             assert!(baked.plot.starts_with(b"\x89PNG"));
+            reports.push(v.clone());
+        }
+        // Every encoding judged in another's bake (on a static ground
+        // fitted to it, from the same truth) scores what its own bake
+        // scores, off the ground and on it.
+        for own in &reports {
+            for other in &reports {
+                let theirs = other.iter().find(|v| v.name == own[0].name).unwrap();
+                assert_eq!(
+                    (theirs.bytes, &theirs.space, &theirs.ground),
+                    (own[0].bytes, &own[0].space, &own[0].ground),
+                    "{name}: {} in {}'s bake",
+                    own[0].name,
+                    other[0].name
+                );
+            }
         }
     }
 }

@@ -46,40 +46,116 @@ pub fn square(setup: &Setup<'_>, resolution: usize) -> GroundSquare {
     }
 }
 
-/// The ground base of `model` over `GROUND_TIMES` of the clip's time
-/// samples, from the truth (Eq. 3.1 at every texel centre, as the field is
-/// traced, with `kroon`'s rays and seed) and the model's lookups there;
-/// and, for comparison, the static ground bake those samples give (the
-/// mean truth per texel, gain 0).
-pub fn fit(
-    setup: &Setup<'_>,
-    model: &CubemapModel,
-    kroon: &KroonParams,
-    resolution: usize,
-) -> Result<(GroundBase, GroundBase), TraceError> {
-    let square = square(setup, resolution);
-    let texels = square.texel_centres();
-    let step = setup.times.len().div_ceil(GROUND_TIMES).max(1);
-    let samples: Vec<usize> = (0..setup.times.len()).step_by(step).collect();
-    let traced: Vec<(Vec<f32>, Vec<f32>)> = samples
-        .par_iter()
-        .map(|&m| {
-            let scene = Scene::new(
-                &setup.positions(m),
-                &setup.character.triangles,
-                &SceneOptions::default(),
-            )?;
-            let truth = kroon_occlusion(&scene, &texels, None, kroon, &no_progress)?;
-            let phase = model.layout.phase(setup.times[m]);
-            let cube = texels.iter().map(|&p| model.occlusion(p, phase)).collect();
-            Ok((truth, cube))
+/// The truth on the ground plane the static ground is fitted to: Eq. 3.1
+/// at every texel centre of `square` (as the field is traced, with the
+/// bake's Kroon rays and seed) at `GROUND_TIMES` of the clip's time
+/// samples. It does not depend on the encoding, so `assemble` traces it
+/// once and `evaluate` fits every other encoding's ground to it too.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TexelTruth {
+    /// The texture's square.
+    pub square: GroundSquare,
+    /// The clip's time samples (indices into the setup's times).
+    pub samples: Vec<usize>,
+    /// Per sample, the truth at every texel centre (x fastest).
+    pub truth: Vec<Vec<f32>>,
+}
+
+impl TexelTruth {
+    /// Traces the truth at the texel centres of a `resolution`² square
+    /// under the spheroid.
+    pub fn trace(
+        setup: &Setup<'_>,
+        kroon: &KroonParams,
+        resolution: usize,
+    ) -> Result<Self, TraceError> {
+        let square = square(setup, resolution);
+        let texels = square.texel_centres();
+        let samples = Self::samples(setup);
+        let truth = samples
+            .par_iter()
+            .map(|&m| {
+                let scene = Scene::new(
+                    &setup.positions(m),
+                    &setup.character.triangles,
+                    &SceneOptions::default(),
+                )?;
+                kroon_occlusion(&scene, &texels, None, kroon, &no_progress)
+            })
+            .collect::<Result<_, TraceError>>()?;
+        Ok(Self {
+            square,
+            samples,
+            truth,
         })
-        .collect::<Result<_, TraceError>>()?;
-    let (truth, cube): (Vec<Vec<f32>>, Vec<Vec<f32>>) = traced.into_iter().unzip();
-    let still = GroundBase {
-        square,
-        gain: 0.0,
-        offsets: least_squares::offsets(&truth, &cube, |_| 0.0),
-    };
-    Ok((least_squares::ground(square, &truth, &cube), still))
+    }
+
+    /// The clip's time samples the ground is fitted over.
+    fn samples(setup: &Setup<'_>) -> Vec<usize> {
+        let step = setup.times.len().div_ceil(GROUND_TIMES).max(1);
+        (0..setup.times.len()).step_by(step).collect()
+    }
+
+    /// The ground base of `model` fitted to this truth and the model's
+    /// lookups at the same texels and times; and, for comparison, the
+    /// static ground bake the truth gives alone (its mean per texel, gain
+    /// 0).
+    pub fn fit(&self, setup: &Setup<'_>, model: &CubemapModel) -> (GroundBase, GroundBase) {
+        let texels = self.square.texel_centres();
+        let cube: Vec<Vec<f32>> = self
+            .samples
+            .iter()
+            .map(|&m| {
+                let phase = model.layout.phase(setup.times[m]);
+                texels.iter().map(|&p| model.occlusion(p, phase)).collect()
+            })
+            .collect();
+        let still = GroundBase {
+            square: self.square,
+            gain: 0.0,
+            offsets: least_squares::offsets(&self.truth, &cube, |_| 0.0),
+        };
+        (
+            least_squares::ground(self.square, &self.truth, &cube),
+            still,
+        )
+    }
+
+    /// The truth as bytes (f32 little-endian, sample after sample), for
+    /// the hand-over from `assemble` to `evaluate`.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        self.truth
+            .iter()
+            .flatten()
+            .flat_map(|x| x.to_le_bytes())
+            .collect()
+    }
+
+    /// The truth [`Self::to_bytes`] wrote for `setup` and `resolution`,
+    /// or why the bytes are not it.
+    pub fn from_bytes(setup: &Setup<'_>, resolution: usize, bytes: &[u8]) -> Result<Self, String> {
+        let square = square(setup, resolution);
+        let samples = Self::samples(setup);
+        let texels = square.texels();
+        if bytes.len() != 4 * texels * samples.len() {
+            return Err(format!(
+                "the ground's truth holds {} bytes, not {} texels × {} times",
+                bytes.len(),
+                texels,
+                samples.len()
+            ));
+        }
+        let values: Vec<f32> = bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        Ok(Self {
+            square,
+            samples,
+            truth: values
+                .chunks_exact(texels.max(1))
+                .map(<[f32]>::to_vec)
+                .collect(),
+        })
+    }
 }
