@@ -231,6 +231,9 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                         return;
                     }
                 };
+                // Held, not given to `wait` (which closes a child's stdin
+                // first): the worker stops when it closes.
+                let _pipe = child.stdin.take();
                 tokio::select! {
                     status = child.wait() => {
                         let refused = aobake_worker::RunError::REFUSED_EXIT;
@@ -304,11 +307,22 @@ fn spawn_worker(
     let id = format!("local-{slot}-{}", std::process::id());
     let mut command = Command::new(exe);
     command
-        .args(["worker", "--server", url, "--id", &id])
+        .args([
+            "worker",
+            "--server",
+            url,
+            "--id",
+            &id,
+            "--stop-at-stdin-end",
+        ])
         .arg("--heartbeat-secs")
         .arg((lease_secs / 4.0).to_string())
         .env("AOBAKE_TOKEN", token)
         .env("RAYON_NUM_THREADS", threads.to_string())
+        // A pipe this process holds the writing end of: it closes when
+        // serve exits however it exits (SIGKILL, a crash), and the worker
+        // stops then instead of polling a server that has gone.
+        .stdin(std::process::Stdio::piped())
         .kill_on_drop(true);
     if let Some(dir) = runtime_dir {
         command.env("XDG_RUNTIME_DIR", dir);

@@ -756,3 +756,82 @@ fn local_workers_get_a_runtime_folder_and_print_no_mesa_noise() {
         0o700
     );
 }
+
+/// The pids of `pid`'s children (any of its threads may have started
+/// them).
+fn children(pid: u32) -> Vec<u32> {
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return Vec::new();
+    };
+    tasks
+        .flatten()
+        .filter_map(|t| std::fs::read_to_string(t.path().join("children")).ok())
+        .flat_map(|c| {
+            c.split_whitespace()
+                .filter_map(|p| p.parse().ok())
+                .collect::<Vec<u32>>()
+        })
+        .collect()
+}
+
+/// Whether process `pid` still runs (not gone, not a zombie).
+fn running(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
+        // The state follows the command's closing parenthesis.
+        stat.rsplit_once(") ")
+            .is_some_and(|(_, rest)| !rest.starts_with('Z') && !rest.starts_with('X'))
+    })
+}
+
+/// `aobake serve` killed outright (SIGKILL: no chance to stop its
+/// workers) does not leave its local workers polling a server that has
+/// gone: the pipe it gave them closes, and they stop.
+#[test]
+fn local_workers_stop_when_serve_is_killed_outright() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let log = std::fs::File::create(dir.path().join("serve.log")).unwrap();
+    let mut serve = Command::new(env!("CARGO_BIN_EXE_aobake"))
+        .args([
+            "serve",
+            "--listen",
+            "127.0.0.1:0",
+            "--workers",
+            "1",
+            "--data",
+        ])
+        .arg(&data)
+        .stdout(log.try_clone().unwrap())
+        .stderr(log)
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let worker = loop {
+        if let Some(&w) = children(serve.id()).first() {
+            break w;
+        }
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(30),
+            "no local worker started"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    // Well into its first long poll.
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    assert!(running(worker));
+    serve.kill().unwrap();
+    serve.wait().unwrap();
+    let killed = std::time::Instant::now();
+    while running(worker) && killed.elapsed() < std::time::Duration::from_secs(10) {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let outlived = running(worker);
+    if outlived {
+        let _ = Command::new("kill")
+            .args(["-KILL", &worker.to_string()])
+            .status();
+    }
+    let text = std::fs::read_to_string(dir.path().join("serve.log")).unwrap();
+    assert!(!outlived, "the worker outlived its serve by 10 s\n{text}");
+    assert!(text.contains("has gone; stopping"), "{text}");
+}

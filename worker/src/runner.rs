@@ -40,6 +40,10 @@ pub struct WorkerConfig {
     /// On SIGTERM, a running job may take this long to finish before it is
     /// stopped at its next checkpoint and its lease given back.
     pub shutdown_secs: u64,
+    /// Stop as at SIGTERM when standard input reaches its end (the pipe
+    /// `aobake serve` gives its local workers closes when it exits, even
+    /// when killed outright).
+    pub stop_at_stdin_end: bool,
     /// A fault to inject, for crash tests: `after_checkpoint` aborts the
     /// process right after a checkpoint is saved (`AOBAKE_FAULT`).
     pub fault: Option<String>,
@@ -68,6 +72,16 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
     for signal in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
         signal_hook::flag::register(signal, shutdown.clone())
             .map_err(|e| RunError::Setup(format!("cannot handle signals: {e}")))?;
+    }
+    if config.stop_at_stdin_end {
+        let (shutdown, id) = (shutdown.clone(), config.id.clone());
+        std::thread::spawn(move || {
+            // Nothing is written to the pipe: it only ends.
+            let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
+            if !shutdown.swap(true, Ordering::Relaxed) {
+                eprintln!("worker {id}: the process that started it has gone; stopping");
+            }
+        });
     }
     let client = Client::with_timeout(&config.server, &config.token, Duration::from_secs(120));
     let cache: Arc<InputCache> = Arc::default();

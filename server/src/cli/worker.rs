@@ -41,6 +41,11 @@ pub(super) struct WorkerArgs {
     /// stops at its next checkpoint and gives its lease back.
     #[arg(long, default_value_t = 20)]
     shutdown_secs: u64,
+    /// Stop as at SIGTERM when standard input reaches its end: `aobake
+    /// serve` gives its local workers a pipe, so that they do not outlive
+    /// it even when it is killed outright.
+    #[arg(long, hide = true)]
+    stop_at_stdin_end: bool,
 }
 
 /// `--gpu`.
@@ -76,6 +81,7 @@ pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
         heartbeat_secs: args.heartbeat_secs,
         checkpoint_secs: args.checkpoint_secs,
         shutdown_secs: args.shutdown_secs,
+        stop_at_stdin_end: args.stop_at_stdin_end,
         fault: std::env::var("AOBAKE_FAULT").ok(),
     })
     .map_err(|e| match e {
