@@ -621,6 +621,12 @@ impl Bake<'_> {
             })
             .collect();
         let cells: u64 = model.parts.iter().map(|p| p.occlusion.len() as u64).sum();
+        // The static base's `sample` jobs: its frames at the vertices and
+        // the ground texture's texels.
+        let base_rays = model.base.as_ref().map_or(0, |b| {
+            (o.average_frames * (character.vertex_count() + b.ground.square.texels())) as u64
+                * u64::from(o.eval_rays)
+        });
         let report = GridReport {
             method: plan.params.method,
             bake_key: self.header().bake_key,
@@ -636,7 +642,7 @@ impl Bake<'_> {
                 handle_coordinates: plan.handles.len(),
             },
             parts: part_reports,
-            rays: cells * u64::from(o.rays) + truth.rays,
+            rays: cells * u64::from(o.rays) + base_rays + truth.rays,
             timings,
             sizes: Sizes {
                 asset_bytes: asset.len(),
@@ -764,7 +770,8 @@ pub struct GridReport {
     pub character: CharacterInfo,
     /// Every part's grid.
     pub parts: Vec<PartReport>,
-    /// Rays traced: the cells and the ground truth.
+    /// Rays traced: the cells, the static base's frames and the
+    /// evaluation's ground truth ([`crate::method::grid::GridOptions::rays_total`]).
     pub rays: u64,
     /// Stage times (`reference_trace_s`: the slabs, summed).
     pub timings: Timings,

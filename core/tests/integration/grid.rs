@@ -208,6 +208,14 @@ fn grids_bake_in_process_and_beat_no_occlusion_between_parts_on_unseen_frames() 
             let (model, header) = GridModel::from_container(&container).unwrap();
             assert_eq!((header.cones, model.parts.len()), (cones, parts));
             assert_eq!(r.sizes.asset_bytes, baked.asset.len());
+            // The rays it counts are the rays the service bounds.
+            assert_eq!(
+                u128::from(r.rays),
+                bake.plan
+                    .params
+                    .grid
+                    .rays_total(parts, imported.character.vertex_count())
+            );
             assert_eq!(
                 r.parts
                     .iter()

@@ -364,7 +364,7 @@ fn evaluate_grid(model: &GridModel, vertices: usize) -> Result<(), String> {
     for p in [Vec3::ZERO, Vec3::splat(0.2), Vec3::splat(1e6)] {
         for receiver in [
             Receiver::Ground,
-            Receiver::Other,
+            Receiver::Other { part: Some(0) },
             Receiver::Vertex {
                 index: 0,
                 part: Some(0),

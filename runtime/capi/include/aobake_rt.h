@@ -362,7 +362,8 @@ struct AobakeGrid *aobake_grid_open(const uint8_t *bytes, size_t len);
 void aobake_grid_free(struct AobakeGrid *grid);
 
 /**
- * Parts (rigid bodies with a grid each), 0 for NULL.
+ * Parts (rigid bodies with a grid each), 0 for NULL (with the reason
+ * set).
  *
  * # Safety
  * `grid` must be NULL or a live handle.
@@ -371,7 +372,7 @@ size_t aobake_grid_part_count(const struct AobakeGrid *grid);
 
 /**
  * Matrices the palette must hold: the highest joint a part follows, plus
- * one (0 for NULL).
+ * one (0 for NULL, with the reason set).
  *
  * # Safety
  * `grid` must be NULL or a live handle.
@@ -400,13 +401,14 @@ bool aobake_grid_occlusion(const struct AobakeGrid *grid, const float *palette, 
  * Writes the AO an engine shows at `count` receivers to `out`: as
  * [`aobake_grid_occlusion`], plus the asset's static base when it has
  * one (`gain · grids + offset`, clamped; see `docs/engines.md`).
- * `receivers` is NULL (no receiver takes an offset) or `count` values:
+ * `receivers` is NULL or `count` values:
  * the receiver's vertex index in the character (its offset; with a
  * static base, an index past the character's vertices is refused), -1
  * for a point of the ground (the base's ground texture), -2 for any
- * other surface (the grids alone, as [`aobake_grid_occlusion`]: the
- * base knows nothing of a surface the bake did not see, such as
- * another object or level of detail). The base's
+ * other surface (the grids alone, as [`aobake_grid_occlusion`] gives
+ * them with the receiver's part: the base knows nothing of a surface the
+ * bake did not see, such as another object or level of detail); NULL
+ * takes every receiver as -2. The base's
  * ground texture lies in the space the palette was baked in: an engine
  * that places the character elsewhere looks up in the character's
  * space (its points, normals and palette taken through the inverse of

@@ -60,25 +60,26 @@ pub unsafe extern "C" fn aobake_grid_free(grid: *mut AobakeGrid) {
     unsafe { free(grid) }
 }
 
-/// Parts (rigid bodies with a grid each), 0 for NULL.
+/// Parts (rigid bodies with a grid each), 0 for NULL (with the reason
+/// set).
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_part_count(grid: *const AobakeGrid) -> usize {
-    // SAFETY: the caller passes NULL or a live handle.
-    unsafe { grid.as_ref() }.map_or(0, |g| g.0.parts.len())
+    // SAFETY: forwarded from the caller.
+    unsafe { live(grid) }.map_or(0, |g| g.0.parts.len())
 }
 
 /// Matrices the palette must hold: the highest joint a part follows, plus
-/// one (0 for NULL).
+/// one (0 for NULL, with the reason set).
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_grid_palette_len(grid: *const AobakeGrid) -> usize {
-    // SAFETY: the caller passes NULL or a live handle.
-    unsafe { grid.as_ref() }.map_or(0, |g| {
+    // SAFETY: forwarded from the caller.
+    unsafe { live(grid) }.map_or(0, |g| {
         g.0.parts.iter().map(|p| p.joint + 1).max().unwrap_or(0)
     })
 }
@@ -99,7 +100,9 @@ impl GridReceivers<'_> {
     fn get(&self, i: usize) -> (Vec3, Vec3, Option<usize>) {
         let n = Vec3::from_slice(&self.normals[3 * i..]);
         let n = if (n.length_squared() - 1.0).abs() > 1e-6 {
-            n.normalize()
+            // Scaled first: a tiny normal is still a direction, and a huge
+            // one does not overflow its length.
+            (n / n.abs().max_element()).normalize()
         } else {
             n
         };
@@ -166,7 +169,7 @@ unsafe fn grid_receivers<'a>(
     let normals = unsafe { finite_floats(normals, count, 3, "normals") }?;
     if let Some(i) = normals
         .chunks_exact(3)
-        .position(|n| Vec3::from_slice(n).length_squared() < 1e-12)
+        .position(|n| Vec3::from_slice(n).abs().max_element() == 0.0)
     {
         fail(format!("normals: item {i} has no direction (zero length)"));
         return None;
@@ -239,13 +242,14 @@ pub unsafe extern "C" fn aobake_grid_occlusion(
 /// Writes the AO an engine shows at `count` receivers to `out`: as
 /// [`aobake_grid_occlusion`], plus the asset's static base when it has
 /// one (`gain · grids + offset`, clamped; see `docs/engines.md`).
-/// `receivers` is NULL (no receiver takes an offset) or `count` values:
+/// `receivers` is NULL or `count` values:
 /// the receiver's vertex index in the character (its offset; with a
 /// static base, an index past the character's vertices is refused), -1
 /// for a point of the ground (the base's ground texture), -2 for any
-/// other surface (the grids alone, as [`aobake_grid_occlusion`]: the
-/// base knows nothing of a surface the bake did not see, such as
-/// another object or level of detail). The base's
+/// other surface (the grids alone, as [`aobake_grid_occlusion`] gives
+/// them with the receiver's part: the base knows nothing of a surface the
+/// bake did not see, such as another object or level of detail); NULL
+/// takes every receiver as -2. The base's
 /// ground texture lies in the space the palette was baked in: an engine
 /// that places the character elsewhere looks up in the character's
 /// space (its points, normals and palette taken through the inverse of
@@ -308,7 +312,7 @@ pub unsafe extern "C" fn aobake_grid_ao(
             -1 => Receiver::Ground,
             index => match usize::try_from(index) {
                 Ok(index) => Receiver::Vertex { index, part },
-                Err(_) => Receiver::Other,
+                Err(_) => Receiver::Other { part },
             },
         };
         *o = g.0.ao(&r.poses, p, n, receiver);

@@ -328,7 +328,9 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
     let on_base = receivers.iter().map(|&(p, n, k, kind)| {
         let receiver = match kind {
             -1 => Receiver::Ground,
-            -2 => Receiver::Other,
+            -2 => Receiver::Other {
+                part: usize::try_from(k).ok(),
+            },
             index => Receiver::Vertex {
                 index: index as usize,
                 part: usize::try_from(k).ok(),
@@ -728,6 +730,19 @@ fn c_engines_get_part_names_and_ground_heights_and_bad_input_is_refused() {
             long.as_mut_ptr()
         ));
         assert_eq!(unit, long, "a normal of length 3 is normalised");
+        for y in [1e-30f32, 3e30] {
+            assert!(aobake_grid_occlusion(
+                g,
+                palette.as_ptr(),
+                n,
+                point.as_ptr(),
+                [0.0f32, y, 0.0].as_ptr(),
+                std::ptr::null(),
+                1,
+                long.as_mut_ptr()
+            ));
+            assert_eq!(unit, long, "a normal of length {y} is a direction");
+        }
         let mut down = [0f32];
         assert!(aobake_grid_occlusion(
             g,

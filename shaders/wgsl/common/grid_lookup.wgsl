@@ -145,11 +145,12 @@ fn grid_occlusion(p: vec3<f32>, n: vec3<f32>, own: u32) -> f32 {
 }
 
 
-// The occlusion an engine shows at a receiver (GridModel::ao): with a
-// static base, grid_occlusion times the gain of the receiver's part (the
-// ground's for NO_PART) plus `offset` (a vertex's VOFS value, a ground
-// point's bilinear GOFS value, 0 elsewhere), clamped to [0, 1]; without,
-// grid_occlusion alone.
+// The occlusion an engine shows at a vertex of the character or a point of
+// the ground (GridModel::ao): with a static base, grid_occlusion times the
+// gain of the receiver's part (the ground's for NO_PART) plus `offset` (a
+// vertex's VOFS value, a ground point's bilinear GOFS value), clamped to
+// [0, 1]; without, grid_occlusion alone. Any other surface (one the base
+// knows nothing of) takes grid_occlusion alone.
 fn grid_ao(p: vec3<f32>, n: vec3<f32>, own: u32, offset: f32) -> f32 {
     let g = grid_occlusion(p, n, own);
     if (params.base == 0u) {

@@ -393,7 +393,14 @@ impl GroundTruth {
             );
         }
         let vertices = c.vertex_count();
-        let known = training_vertices.filter(|v| v.len() == average.len() * vertices);
+        if let Some(v) = training_vertices.filter(|v| v.len() != average.len() * vertices) {
+            return Err(TraceError::Invalid(format!(
+                "the static average's vertex truth holds {} values, not {} frames × {vertices} vertices",
+                v.len(),
+                average.len()
+            )));
+        }
+        let known = training_vertices;
         let training = match known {
             Some(known) => inputs
                 .trace_frames_at(&average, &ground, false)?

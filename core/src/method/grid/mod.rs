@@ -192,15 +192,24 @@ impl GridOptions {
     }
 
     /// Rays a whole bake of `parts` parts over `vertices` vertices traces
-    /// (cells, the static base's frames, then the evaluation's): what the
-    /// service bounds.
+    /// (cells, the static base's frames, then the evaluation's, which
+    /// takes the base's frames at the vertices from the base instead of
+    /// tracing them again, and each vertex's self-occlusion): what the
+    /// service bounds, and what the report counts.
     pub fn rays_total(&self, parts: usize, vertices: usize) -> u128 {
         let cells = u128::from(self.cells()) * parts as u128 * u128::from(self.rays);
-        let frames = (self.eval_frames + self.average_frames + 1) as u128;
+        let average = self.average_frames as u128;
         let base = u128::from(self.static_base)
-            * self.average_frames as u128
+            * average
             * (vertices + self.ground_resolution.pow(2)) as u128;
-        cells + (frames * (vertices + self.eval_ground) as u128 + base) * u128::from(self.eval_rays)
+        // The evaluated frames and the noise estimate at the vertices and
+        // on the ground; the base's frames on the ground, and at the
+        // vertices unless the base traced them.
+        let at_vertices =
+            (self.eval_frames + 1) as u128 + u128::from(!self.static_base) * average + 1;
+        let on_ground = (self.eval_frames + 1) as u128 + average;
+        let evaluation = at_vertices * vertices as u128 + on_ground * self.eval_ground as u128;
+        cells + (base + evaluation) * u128::from(self.eval_rays)
     }
 }
 

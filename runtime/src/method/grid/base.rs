@@ -33,7 +33,7 @@ pub use crate::method::ground::{GroundBase, GroundSquare};
 pub struct StaticBase {
     /// Per vertex of the character, the offset (f16 values).
     pub vertex_offsets: Vec<f32>,
-    /// Per part, the gain of the grids' change at its vertices (receivers
+    /// Per part, the gain of the grids' change at its vertices (vertices
     /// of no part take the ground's).
     pub part_gains: Vec<f32>,
     /// The ground.
@@ -61,7 +61,11 @@ pub enum Receiver {
     /// as unknown surfaces: RMSE 0.33 against 0.53 on the milk truck,
     /// whose ground gain is 0.002; 0.216 against 0.213 and 0.131 against
     /// 0.124 on the robot and Fox, gains 1.0 and 1.5).
-    Other,
+    Other {
+        /// The part it is on, if any (its own part by the self-occlusion
+        /// rule).
+        part: Option<usize>,
+    },
 }
 
 impl Receiver {
@@ -88,7 +92,7 @@ impl StaticBase {
                 self.vertex_offsets.get(index).copied().unwrap_or(0.0),
             ),
             Receiver::Ground => (self.ground.gain, self.ground.offset(p)),
-            Receiver::Other => (1.0, 0.0),
+            Receiver::Other { .. } => (1.0, 0.0),
         }
     }
 }

@@ -232,8 +232,8 @@ impl GridModel {
     /// [0, 1].
     pub fn ao(&self, poses: &[PartPose], p: Vec3, n: Vec3, receiver: Receiver) -> f32 {
         let own = match receiver {
-            Receiver::Vertex { part, .. } => part,
-            Receiver::Ground | Receiver::Other => None,
+            Receiver::Vertex { part, .. } | Receiver::Other { part } => part,
+            Receiver::Ground => None,
         };
         let grids = self.occlusion(poses, p, n, own, Terms::All);
         match &self.base {
@@ -342,7 +342,8 @@ mod tests {
         let open = model.occlusion(&poses, Vec3::ZERO, Vec3::Y, None, Terms::All);
         assert!((ao(Receiver::Ground) - (0.75 * open + 0.125).min(1.0)).abs() < 1e-6);
         // Any other surface: the grids alone.
-        assert_eq!(ao(Receiver::Other), open.min(1.0));
+        assert_eq!(ao(Receiver::Other { part: None }), open.min(1.0));
+        assert_eq!(ao(Receiver::Other { part: Some(1) }), on_1.min(1.0));
         assert_eq!(model.offset(Receiver::Ground, Vec3::ZERO), 0.125);
         assert_eq!(model.offset(vertex(1, None), Vec3::ZERO), -0.5);
         // Without a base, the grids alone.
