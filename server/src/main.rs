@@ -33,7 +33,39 @@ fn quiet_on_closed_pipe() {
     }));
 }
 
+/// Where no desktop session is (a container, a service, CI:
+/// `XDG_RUNTIME_DIR` unset), Mesa's Vulkan device-select layer still
+/// tries to reach a Wayland display at every Vulkan instance a command
+/// opens (wgpu enables the Wayland surface extension wherever it exists),
+/// and libwayland prints "error: XDG_RUNTIME_DIR is invalid or not set in
+/// the environment" twice per command, which reads as a failure. Without
+/// a session that layer has no display to choose a device by, so the
+/// process runs itself again in place (exec: the same pid, arguments and
+/// streams) with the layer off (`NODEVICE_SELECT=1`), unless a device was
+/// chosen through it (`MESA_VK_DEVICE_SELECT`). Setting the variable
+/// in-process would need `unsafe`, which this workspace forbids.
+#[cfg(target_os = "linux")]
+fn no_display_layer_without_a_session() {
+    use std::os::unix::process::CommandExt as _;
+    let unset = |name: &str| std::env::var_os(name).is_none();
+    if !(unset("XDG_RUNTIME_DIR") && unset("NODEVICE_SELECT") && unset("MESA_VK_DEVICE_SELECT")) {
+        return;
+    }
+    let Ok(exe) = std::env::current_exe() else {
+        return;
+    };
+    let mut args = std::env::args_os();
+    let mut again = std::process::Command::new(exe);
+    if let Some(arg0) = args.next() {
+        again.arg0(arg0);
+    }
+    // Returns only if the exec failed: then go on as we are.
+    let _ = again.args(args).env("NODEVICE_SELECT", "1").exec();
+}
+
 fn main() -> std::process::ExitCode {
+    #[cfg(target_os = "linux")]
+    no_display_layer_without_a_session();
     let cli = aobake_server::cli::Cli::parse();
     if !cli.is_service() {
         quiet_on_closed_pipe();

@@ -835,3 +835,42 @@ fn local_workers_stop_when_serve_is_killed_outright() {
     assert!(!outlived, "the worker outlived its serve by 10 s\n{text}");
     assert!(text.contains("has gone; stopping"), "{text}");
 }
+
+/// A command that opens the GPU where no desktop session is (a container,
+/// CI: no `XDG_RUNTIME_DIR`) prints no Wayland errors from Mesa's
+/// device-select layer, and bakes the same bytes.
+#[test]
+fn a_bake_without_a_session_prints_no_display_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let bake = |name: &str, session: bool| {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_aobake"));
+        command
+            .args(["bake", "--method", "vertex-linear", "--poses", "16"])
+            .args(["--samples", "16", "--out"])
+            .arg(dir.path().join(format!("{name}.aob")))
+            .arg("--report")
+            .arg(dir.path().join(format!("{name}.json")))
+            .arg(sample("RiggedSimple/RiggedSimple.glb"))
+            .env_remove("NODEVICE_SELECT")
+            .env_remove("MESA_VK_DEVICE_SELECT");
+        if session {
+            command.env("XDG_RUNTIME_DIR", dir.path());
+        } else {
+            command.env_remove("XDG_RUNTIME_DIR");
+        }
+        let out = command.output().unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        (
+            stderr(&out),
+            std::fs::read(dir.path().join(format!("{name}.aob"))).unwrap(),
+        )
+    };
+    let (said, without) = bake("without", false);
+    assert!(!said.contains("XDG_RUNTIME_DIR"), "{said}");
+    assert!(
+        said.contains("tracing on") || said.contains("tracer"),
+        "{said}"
+    );
+    let (_, with) = bake("with", true);
+    assert_eq!(without, with, "the same bytes with and without a session");
+}
