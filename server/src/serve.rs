@@ -137,19 +137,38 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     // workers' must not stay valid. An admin token from the environment
     // is the operator's to keep; it is never revoked here.
     let own_tokens = args.data.join("own-tokens");
-    if let Ok(previous) = std::fs::read_to_string(&own_tokens) {
-        for hash in previous.lines().map(str::trim).filter(|h| !h.is_empty()) {
-            store.delete_token(hash).await?;
-        }
+    let previous = std::fs::read_to_string(&own_tokens).unwrap_or_default();
+    let previous: Vec<&str> = previous
+        .lines()
+        .map(str::trim)
+        .filter(|h| !h.is_empty())
+        .collect();
+    for hash in &previous {
+        store.delete_token(hash).await?;
     }
     let mut made = Vec::new();
+    let admin_file = args.data.join("admin.token");
     let admin = match std::env::var(ADMIN_TOKEN_ENV) {
-        Ok(t) if !t.is_empty() => t,
+        Ok(t) if !t.is_empty() => {
+            // The file holds a token an earlier start generated, revoked
+            // above: clients read it by default, so it goes too.
+            let stale = std::fs::read_to_string(&admin_file)
+                .is_ok_and(|old| previous.contains(&token_hash(old.trim()).as_str()));
+            if stale {
+                std::fs::remove_file(&admin_file).with_context(|| {
+                    format!("cannot remove the revoked {}", admin_file.display())
+                })?;
+                println!(
+                    "removed {} (an earlier start's admin token, now revoked; {ADMIN_TOKEN_ENV} is the admin token)",
+                    admin_file.display()
+                );
+            }
+            t
+        }
         _ => {
             let t = new_token();
-            let path = args.data.join("admin.token");
-            write_private(&path, &t)?;
-            println!("admin token: {t} (also in {})", path.display());
+            write_private(&admin_file, &t)?;
+            println!("admin token: {t} (also in {})", admin_file.display());
             made.push(token_hash(&t));
             t
         }
@@ -170,6 +189,25 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             &[Scope::Worker.name().to_owned()],
         )
         .await?;
+    // The demo's dashboard token (read and submit, printed in a URL) is
+    // this start's too: the next start revokes it with the others.
+    let demo_token = if args.demo {
+        let t = new_token();
+        made.push(token_hash(&t));
+        store
+            .create_token(
+                &token_hash(&t),
+                "demo dashboard",
+                &[
+                    Scope::Read.name().to_owned(),
+                    Scope::Submit.name().to_owned(),
+                ],
+            )
+            .await?;
+        Some(t)
+    } else {
+        None
+    };
     write_private(&own_tokens, &(made.join("\n") + "\n"))?;
     let mut state = AppState::new(store.clone(), blobs, policy, limits);
     state.graph.sample_rays = args.job_rays;
@@ -254,10 +292,10 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             }
         }));
     }
-    if args.demo {
+    if let Some(dashboard) = demo_token {
         let (url, admin) = (url.clone(), admin.clone());
         tokio::spawn(async move {
-            if let Err(e) = crate::demo::run(&url, &admin).await {
+            if let Err(e) = crate::demo::run(&url, &admin, &dashboard).await {
                 eprintln!("error: the demo bake could not be submitted: {e:#}");
             }
         });

@@ -874,3 +874,113 @@ fn a_bake_without_a_session_prints_no_display_errors() {
     let (_, with) = bake("with", true);
     assert_eq!(without, with, "the same bytes with and without a session");
 }
+
+/// Starts `aobake serve --workers 0` on `data` (with `admin` as its admin
+/// token when given) and waits for its URL; `extra` are more flags.
+fn start_serve(data: &Path, admin: Option<&str>, extra: &[&str]) -> (std::process::Child, String) {
+    let url_file = data.join("server.url");
+    let _ = std::fs::remove_file(&url_file);
+    let mut command = Command::new(env!("CARGO_BIN_EXE_aobake"));
+    command
+        .args([
+            "serve",
+            "--listen",
+            "127.0.0.1:0",
+            "--workers",
+            "0",
+            "--data",
+        ])
+        .arg(data)
+        .args(extra)
+        .stdout(std::fs::File::create(data.with_extension("stdout")).unwrap())
+        .stderr(std::process::Stdio::null());
+    match admin {
+        Some(t) => command.env("AOBAKE_ADMIN_TOKEN", t),
+        None => command.env_remove("AOBAKE_ADMIN_TOKEN"),
+    };
+    let child = command.spawn().unwrap();
+    let started = std::time::Instant::now();
+    loop {
+        if let Ok(url) = std::fs::read_to_string(&url_file) {
+            return (child, url);
+        }
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(30),
+            "serve did not start"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+/// Stops `serve` as an operator does (SIGTERM) and waits for it.
+fn stop_serve(mut serve: std::process::Child) {
+    let _ = Command::new("kill")
+        .args(["-TERM", &serve.id().to_string()])
+        .status();
+    serve.wait().unwrap();
+}
+
+/// Switching `aobake serve` to an admin token of one's own leaves no
+/// revoked token file for clients to pick up, the demo's dashboard token
+/// goes with the start that made it, and a client whose token is refused
+/// is told where it came from.
+#[test]
+fn a_restart_leaves_no_revoked_token_behind_and_a_refusal_names_the_tokens_source() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let (serve, _) = start_serve(&data, None, &["--demo"]);
+    let generated = std::fs::read_to_string(data.join("admin.token")).unwrap();
+    // The demo uploads and submits through the API: wait for its line.
+    let started = std::time::Instant::now();
+    while !std::fs::read_to_string(data.with_extension("stdout"))
+        .unwrap()
+        .contains("demo:")
+    {
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(60),
+            "no demo"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    stop_serve(serve);
+    // A client folder that kept the old token file.
+    let stale = dir.path().join("stale");
+    std::fs::create_dir(&stale).unwrap();
+    std::fs::write(stale.join("admin.token"), &generated).unwrap();
+
+    let admin = "an-admin-token-of-the-operators-own-0123456789";
+    let (serve, url) = start_serve(&data, Some(admin), &[]);
+    let said = std::fs::read_to_string(data.with_extension("stdout")).unwrap();
+    assert!(!data.join("admin.token").exists(), "{said}");
+    assert!(said.contains("now revoked"), "{said}");
+    let list = Command::new(env!("CARGO_BIN_EXE_aobake"))
+        .args([
+            "token", "list", "--json", "--server", &url, "--token", admin,
+        ])
+        .output()
+        .unwrap();
+    assert!(list.status.success(), "{}", stderr(&list));
+    let tokens: serde_json::Value = serde_json::from_slice(&list.stdout).unwrap();
+    let names: Vec<&str> = tokens
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["name"].as_str().unwrap())
+        .collect();
+    assert!(!names.contains(&"demo dashboard"), "{names:?}");
+    let refused = Command::new(env!("CARGO_BIN_EXE_aobake"))
+        .args(["status", "1", "--server", &url, "--data"])
+        .arg(&stale)
+        .env_remove("AOBAKE_TOKEN")
+        .output()
+        .unwrap();
+    stop_serve(serve);
+    assert!(!refused.status.success());
+    let text = stderr(&refused);
+    assert!(
+        text.contains("refused the token from")
+            && text.contains("admin.token")
+            && text.contains("401"),
+        "{text}"
+    );
+}

@@ -367,8 +367,17 @@ ground truth at {} random times: {} points in space ({} inside the mesh left out
     }
     // What the table's rows are, where their names alone mislead.
     if e.variants.iter().any(|v| v.name == "static ground texture") {
+        let others_grounded = e
+            .variants
+            .iter()
+            .any(|v| v.description.contains("on a static ground fitted to it"));
+        let others = if others_grounded {
+            "the other encodings each on a static ground fitted to it, as their own bakes would be; the uncompressed field and its time average have none"
+        } else {
+            "the rows after it have none"
+        };
         out.push_str(&format!(
-            "the first row is the asset: {} with its static ground; the rows after it have none (compare their ground columns with \"… without the static ground\"), but \"static ground texture\": the texture alone on the ground and the cubemap elsewhere, so its space columns are the first row's\n",
+            "the first row is the asset: {} with its static ground; {others} (compare their ground columns with \"… without the static ground\"); \"static ground texture\" is the texture alone on the ground and the cubemap elsewhere, so its space columns are the first row's\n",
             report.method
         ));
     }

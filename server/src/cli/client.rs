@@ -32,6 +32,27 @@ pub(super) struct Conn {
     data: PathBuf,
 }
 
+/// Where this process's token came from (a command talks to one server
+/// with one token), for an error that refuses it.
+static TOKEN_SOURCE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+
+/// `err`, saying where its token came from when the server refused it
+/// (401): a token file left by an earlier `aobake serve`, or a variable
+/// set long ago, is otherwise hard to tell from a typo.
+pub fn explain_refusal(err: anyhow::Error) -> anyhow::Error {
+    let refused = err.chain().any(|cause| {
+        cause
+            .downcast_ref::<aobake_api::ApiError>()
+            .is_some_and(|e| e.status() == Some(401))
+    });
+    match TOKEN_SOURCE.get() {
+        Some(source) if refused => {
+            err.context(format!("the server refused the token from {source}"))
+        }
+        _ => err,
+    }
+}
+
 /// Ends the process with this exit code (after printing the message).
 #[derive(Debug, thiserror::Error)]
 #[error("{message}")]
@@ -50,6 +71,11 @@ impl Conn {
             .clone()
             .or_else(|| read("server.url"))
             .unwrap_or_else(|| "http://127.0.0.1:8080".to_owned());
+        let source = match &self.token {
+            Some(_) => "--token or AOBAKE_TOKEN".to_owned(),
+            None => self.data.join("admin.token").display().to_string(),
+        };
+        let _ = TOKEN_SOURCE.set(source);
         let token = self
             .token
             .clone()

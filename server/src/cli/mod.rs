@@ -113,9 +113,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             print!("{}", crate::openapi::yaml());
             Ok(())
         }
-        Command::Submit(args) => client::submit(&args),
-        Command::Status(args) => client::status(&args),
-        Command::Fetch(args) => client::fetch(&args),
-        Command::Token(args) => client::token(&args),
+        Command::Submit(args) => client::submit(&args).map_err(client::explain_refusal),
+        Command::Status(args) => client::status(&args).map_err(client::explain_refusal),
+        Command::Fetch(args) => client::fetch(&args).map_err(client::explain_refusal),
+        Command::Token(args) => client::token(&args).map_err(client::explain_refusal),
     }
 }
