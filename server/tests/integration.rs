@@ -898,18 +898,20 @@ fn start_serve(data: &Path, admin: Option<&str>, extra: &[&str]) -> (std::proces
         Some(t) => command.env("AOBAKE_ADMIN_TOKEN", t),
         None => command.env_remove("AOBAKE_ADMIN_TOKEN"),
     };
-    let child = command.spawn().unwrap();
+    let mut child = command.spawn().unwrap();
     let started = std::time::Instant::now();
-    loop {
+    let url = loop {
         if let Ok(url) = std::fs::read_to_string(&url_file) {
-            return (child, url);
+            break url;
         }
-        assert!(
-            started.elapsed() < std::time::Duration::from_secs(30),
-            "serve did not start"
-        );
+        if started.elapsed() > std::time::Duration::from_secs(30) {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("serve did not start");
+        }
         std::thread::sleep(std::time::Duration::from_millis(50));
-    }
+    };
+    (child, url)
 }
 
 /// Stops `serve` as an operator does (SIGTERM) and waits for it.
