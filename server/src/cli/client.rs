@@ -281,7 +281,8 @@ pub(super) struct FetchArgs {
     /// The bake id.
     #[arg(required_unless_present = "key", conflicts_with = "key")]
     id: Option<i64>,
-    /// The bake key (what CI knows before it bakes).
+    /// The bake key (what CI knows before it bakes: `aobake key` computes
+    /// it from the files and parameters).
     #[arg(long)]
     key: Option<String>,
     /// Where to write the asset.

@@ -11,6 +11,7 @@ mod common;
 mod eval;
 mod export;
 mod inspect;
+mod key;
 mod load;
 mod params;
 mod pose;
@@ -51,6 +52,10 @@ enum Command {
     /// Print a method's bake parameters with their defaults (and any
     /// flags applied) as JSON: the names `--param` and the API take.
     Params(params::Args),
+    /// Print the bake key of a character, its clips and the parameters,
+    /// without baking: what `fetch --key` looks up, so CI can fetch a
+    /// cached asset before deciding to submit.
+    Key(key::Args),
     /// Evaluate a baked asset (per-vertex or grid) at a pose and write
     /// per-vertex AO as CSV.
     Eval(eval::Args),
@@ -101,6 +106,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Trace(args) => trace::run(&args),
         Command::Bake(args) => bake::run(&args),
         Command::Params(args) => params::run(&args),
+        Command::Key(args) => key::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Export(args) => export::run(&args),
         Command::Preview(args) => preview::run(&args),

@@ -36,6 +36,17 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
         .to_owned();
     assert_eq!(key.len(), 64, "{stdout}");
     assert!(stdout.contains("frames of the training clips"), "{stdout}");
+    // CI computes the same key without baking: `aobake key` on the same
+    // file and flags.
+    let mut args = vec!["key", cm_arg, "--poses", "24"];
+    args.extend(QUICK);
+    let out = env.aobake(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), key);
     let out = env.aobake(&["status", "1"]);
     let status = String::from_utf8_lossy(&out.stdout);
     assert!(
