@@ -159,10 +159,13 @@ impl TracerChoice {
             TracerChoice::Auto => GpuMode::Auto,
         };
         let (label, note) = install(mode).map_err(|e| anyhow::anyhow!("--tracer gpu: {e}"))?;
-        if let Some(note) = note {
-            eprintln!("{note}");
-        }
-        eprintln!("tracer: {label}");
+        // One write for both lines: local workers share serve's stderr,
+        // and `eprintln!` writes a line in pieces that others' interleave.
+        let said = match note {
+            Some(note) => format!("{note}\ntracer: {label}\n"),
+            None => format!("tracer: {label}\n"),
+        };
+        let _ = std::io::Write::write_all(&mut std::io::stderr().lock(), said.as_bytes());
         Ok(label)
     }
 }

@@ -112,6 +112,21 @@ fn export_gltf(asset: &Path, file: &Path, clips: Option<&Path>, out: &Path) -> a
     for w in &export.warnings {
         eprintln!("warning: {w}");
     }
+    // The vertex counts agree (or the export would have failed), but a
+    // different upload may still be another mesh with as many vertices.
+    let header: serde_json::Value = serde_json::from_str(&container.header).unwrap_or_default();
+    if let Some(baked_for) = header["character"].as_str() {
+        let digest = upload.digest();
+        if digest != baked_for {
+            eprintln!(
+                "warning: {} was baked for another character upload ({}…; {} is {}…): the vertex counts agree, so its AO is written, but check that this is the same mesh",
+                asset.display(),
+                baked_for.get(..12).unwrap_or(baked_for),
+                file.display(),
+                &digest[..12]
+            );
+        }
+    }
     std::fs::write(out, &export.glb).with_context(|| format!("cannot write {}", out.display()))?;
     eprintln!(
         "wrote {} ({} bytes): _AO over {} clip frames, COLOR_0, {} coefficient rows in {} _AO_BASIS attributes",

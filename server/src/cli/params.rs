@@ -48,7 +48,7 @@ pub(super) struct ParamArgs {
     /// vertex-clustered, clips otherwise.
     #[arg(long, value_parser = ["random", "clips", "mixed", "perturbed", "cv"])]
     reference: Option<String>,
-    /// Rays per vertex and pose.
+    /// Rays per vertex and pose. Default: 256.
     #[arg(long)]
     samples: Option<u32>,
     /// Hits farther than this (model units) do not occlude. Default: no

@@ -315,4 +315,21 @@ fn clips_from_a_second_file_feed_the_static_ao() {
     let (some, quiet) = frames(Some(&animated));
     assert!(some > 10, "{some}");
     assert!(!quiet.contains("no clips"), "{quiet}");
+    assert!(!quiet.contains("another character"), "{quiet}");
+    // The file with the animations has as many vertices but is another
+    // upload than the one baked: written, with a warning.
+    let glb = dir.path().join("other.glb");
+    let out = aobake(&[
+        "export",
+        asset.to_str().unwrap(),
+        animated.to_str().unwrap(),
+        "--gltf",
+        glb.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("was baked for another character upload"),
+        "{}",
+        stderr(&out)
+    );
 }

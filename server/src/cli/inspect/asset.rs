@@ -272,7 +272,8 @@ pub(super) fn print_text(r: &Report) {
     if clips == 0 {
         println!("  clips        the character's own");
     } else {
-        println!("  clips        {clips} uploads beside the character");
+        let uploads = if clips == 1 { "upload" } else { "uploads" };
+        println!("  clips        {clips} {uploads} beside the character");
     }
     match &r.model {
         ModelInfo::Vertex {
