@@ -41,7 +41,10 @@ use crate::{
         Family,
         vertex::{FormRef, Model, check_character},
     },
-    rig::pose::Pose,
+    rig::{
+        clip::{Clip, Interpolation, Property},
+        pose::Pose,
+    },
 };
 
 /// Most coefficient rows an export stores as vertex attributes (16 VEC4).
@@ -106,9 +109,18 @@ pub fn export_gltf(
     let imported = &source.imported;
     let mut all_clips = imported.clips.clone();
     let mut warnings = Vec::new();
+    // The second file's clips, bound to the character's nodes: written
+    // into the file as animations too (but those the character's file
+    // has already, as when it is given as its own clips).
+    let mut added_clips = Vec::new();
     if let Some(clips) = clips {
         let (more, clip_warnings) = crate::import_clips(clips, character, limits)
             .map_err(|e| GltfExportError::Unsupported(format!("the clips: {e}")))?;
+        added_clips = more
+            .iter()
+            .filter(|c| !imported.clips.contains(c))
+            .cloned()
+            .collect();
         all_clips.extend(more);
         warnings.extend(clip_warnings);
     }
@@ -251,6 +263,9 @@ pub fn export_gltf(
     }
     color_names.sort();
     color_names.dedup();
+    for clip in &added_clips {
+        write_animation(&mut json, &mut out, clip);
+    }
 
     let sections: Map<String, Value> = asset
         .sections
@@ -306,6 +321,51 @@ pub fn export_gltf(
         rows,
         frames,
     })
+}
+
+/// Writes `clip` into the file as an animation, its keys into `out`: a
+/// second file's clip, already bound to the character's nodes (a
+/// skeleton's node index is the file's).
+fn write_animation(json: &mut Value, out: &mut Glb, clip: &Clip) {
+    let mut channels = Vec::with_capacity(clip.channels.len());
+    let mut samplers = Vec::with_capacity(clip.channels.len());
+    for c in &clip.channels {
+        let input = out.data_accessor(json, &c.times, "SCALAR", None);
+        // Animation inputs must state their bounds.
+        let (lo, hi) = c
+            .times
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &t| {
+                (lo.min(t), hi.max(t))
+            });
+        json["accessors"][input]["min"] = json!([lo]);
+        json["accessors"][input]["max"] = json!([hi]);
+        let (kind, path) = match c.property {
+            Property::Translation => ("VEC3", "translation"),
+            Property::Rotation => ("VEC4", "rotation"),
+            Property::Scale => ("VEC3", "scale"),
+            Property::Weights => ("SCALAR", "weights"),
+        };
+        let output = out.data_accessor(json, &c.values, kind, None);
+        samplers.push(json!({
+            "input": input,
+            "output": output,
+            "interpolation": match c.interpolation {
+                Interpolation::Step => "STEP",
+                Interpolation::Linear => "LINEAR",
+                Interpolation::CubicSpline => "CUBICSPLINE",
+            },
+        }));
+        channels.push(json!({
+            "sampler": samplers.len() - 1,
+            "target": { "node": c.node, "path": path },
+        }));
+    }
+    array(json, "animations").push(json!({
+        "name": clip.name,
+        "channels": channels,
+        "samplers": samplers,
+    }));
 }
 
 /// The model's AO averaged over the clips' frames at [`FPS`] (at most
@@ -439,9 +499,22 @@ impl Glb {
         at
     }
 
-    /// A FLOAT accessor of `kind` over `values` in a view of its own; its
-    /// index.
+    /// A FLOAT vertex attribute accessor of `kind` over `values` in a view
+    /// of its own; its index.
     fn accessor(&mut self, json: &mut Value, values: &[f32], kind: &str) -> usize {
+        self.data_accessor(json, values, kind, Some(34962))
+    }
+
+    /// A FLOAT accessor of `kind` over `values` in a view of its own, the
+    /// view bound to `target` (34962: vertex attributes; `None` for other
+    /// data, as animation keys); its index.
+    fn data_accessor(
+        &mut self,
+        json: &mut Value,
+        values: &[f32],
+        kind: &str,
+        target: Option<u32>,
+    ) -> usize {
         let width = match kind {
             "SCALAR" => 1,
             "VEC3" => 3,
@@ -450,12 +523,15 @@ impl Glb {
         let bytes: Vec<u8> = values.iter().flat_map(|x| x.to_le_bytes()).collect();
         let offset = self.append(&bytes);
         let views = array(json, "bufferViews");
-        views.push(json!({
+        let mut view = json!({
             "buffer": 0,
             "byteOffset": offset,
             "byteLength": bytes.len(),
-            "target": 34962,
-        }));
+        });
+        if let Some(target) = target {
+            view["target"] = target.into();
+        }
+        views.push(view);
         let view = views.len() - 1;
         let accessors = array(json, "accessors");
         accessors.push(json!({

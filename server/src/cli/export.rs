@@ -57,7 +57,8 @@ pub(super) struct Args {
     gltf: Option<PathBuf>,
     /// With --gltf: a second glTF file whose animations drive the
     /// character, bound to its nodes by name (as `aobake bake --clips`
-    /// took them): `_AO` averages its clips' frames too.
+    /// took them): `_AO` averages its clips' frames too, and they are
+    /// written into the GLB as animations.
     #[arg(long, requires = "gltf")]
     clips: Option<PathBuf>,
     /// Write a cubemap asset's decoded faces, or a grid asset's parts as

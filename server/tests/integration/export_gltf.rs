@@ -315,6 +315,25 @@ fn clips_from_a_second_file_feed_the_static_ao() {
     let (some, quiet) = frames(Some(&animated));
     assert!(some > 10, "{some}");
     assert!(!quiet.contains("no clips"), "{quiet}");
+    // The second file's clips are in the GLB as animations: it plays
+    // alone, with the same keys, and is valid glTF.
+    let out_glb = dir.path().join("out.glb");
+    if let Some((errors, codes)) = validator_errors(&out_glb) {
+        assert_eq!(errors, 0, "{codes}");
+    }
+    let load = |path: &Path| {
+        let bytes = std::fs::read(path).unwrap();
+        let upload = aobake_core::Upload {
+            main: &bytes,
+            side_files: &[],
+        };
+        aobake_core::import_character(upload, &aobake_core::Limits::default())
+            .unwrap()
+            .clips
+    };
+    let exported = load(&out_glb);
+    assert!(!exported.is_empty());
+    assert_eq!(exported, load(&animated), "the clips, key for key");
     assert!(!quiet.contains("another character"), "{quiet}");
     // The file with the animations has as many vertices but is another
     // upload than the one baked: written, with a warning.
