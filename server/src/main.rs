@@ -33,40 +33,62 @@ fn quiet_on_closed_pipe() {
     }));
 }
 
-/// Where no desktop session is (a container, a service, CI:
-/// `XDG_RUNTIME_DIR` unset), Mesa's Vulkan device-select layer still
-/// tries to reach a Wayland display at every Vulkan instance a command
-/// opens (wgpu enables the Wayland surface extension wherever it exists),
-/// and libwayland prints "error: XDG_RUNTIME_DIR is invalid or not set in
-/// the environment" twice per command, which reads as a failure. Without
-/// a session that layer has no display to choose a device by, so the
-/// process runs itself again in place (exec: the same pid, arguments and
-/// streams) with the layer off (`NODEVICE_SELECT=1`), unless a device was
-/// chosen through it (`MESA_VK_DEVICE_SELECT`). Setting the variable
-/// in-process would need `unsafe`, which this workspace forbids.
+/// Where no desktop session is (a container, a service, CI: no absolute
+/// `XDG_RUNTIME_DIR`, no `DISPLAY` or `WAYLAND_DISPLAY`), Mesa's Vulkan
+/// device-select layer still tries to reach a Wayland display at every
+/// Vulkan instance a command opens (wgpu enables the Wayland surface
+/// extension wherever it exists), and libwayland prints "error:
+/// XDG_RUNTIME_DIR is invalid or not set in the environment" twice per
+/// command, which reads as a failure. Without a session that layer has no
+/// display to choose a device by, so a command that opens the GPU runs
+/// itself again in place (exec: the same pid, arguments and streams) with
+/// the layer off (`NODEVICE_SELECT=1`), unless a device was chosen
+/// through it (`MESA_VK_DEVICE_SELECT`, `DRI_PRIME`). Setting the
+/// variable in-process would need `unsafe`, which this workspace forbids.
 #[cfg(target_os = "linux")]
 fn no_display_layer_without_a_session() {
     use std::os::unix::process::CommandExt as _;
-    let unset = |name: &str| std::env::var_os(name).is_none();
-    if !(unset("XDG_RUNTIME_DIR") && unset("NODEVICE_SELECT") && unset("MESA_VK_DEVICE_SELECT")) {
+    let set = |name: &str| std::env::var_os(name).is_some_and(|v| !v.is_empty());
+    let runtime_dir =
+        std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| std::path::Path::new(&d).is_absolute());
+    let session = runtime_dir || set("DISPLAY") || set("WAYLAND_DISPLAY");
+    let chosen = set("NODEVICE_SELECT") || set("MESA_VK_DEVICE_SELECT") || set("DRI_PRIME");
+    if session || chosen {
         return;
     }
+    let mut args = std::env::args_os();
+    let Some(arg0) = args.next() else {
+        return;
+    };
+    // Only when this binary is the program (not, say, the dynamic
+    // loader that started it, or a wrapper).
     let Ok(exe) = std::env::current_exe() else {
         return;
     };
-    let mut args = std::env::args_os();
-    let mut again = std::process::Command::new(exe);
-    if let Some(arg0) = args.next() {
-        again.arg0(arg0);
+    if exe.file_name() != std::path::Path::new(&arg0).file_name() {
+        return;
     }
-    // Returns only if the exec failed: then go on as we are.
-    let _ = again.args(args).env("NODEVICE_SELECT", "1").exec();
+    let failed = std::process::Command::new(exe)
+        .arg0(&arg0)
+        .args(args)
+        .env("NODEVICE_SELECT", "1")
+        .exec();
+    // The exec failed and we go on as we are; it had already put SIGPIPE
+    // back to its default (death), which Rust's runtime ignores: a write
+    // to a closed pipe or socket must stay an error, not end the process.
+    let _ = signal_hook::flag::register(
+        signal_hook::consts::SIGPIPE,
+        std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false)),
+    );
+    let _ = failed;
 }
 
 fn main() -> std::process::ExitCode {
-    #[cfg(target_os = "linux")]
-    no_display_layer_without_a_session();
     let cli = aobake_server::cli::Cli::parse();
+    #[cfg(target_os = "linux")]
+    if cli.opens_gpu() {
+        no_display_layer_without_a_session();
+    }
     if !cli.is_service() {
         quiet_on_closed_pipe();
     }

@@ -152,8 +152,10 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         Ok(t) if !t.is_empty() => {
             // The file holds a token an earlier start generated, revoked
             // above: clients read it by default, so it goes too.
-            let stale = std::fs::read_to_string(&admin_file)
-                .is_ok_and(|old| previous.contains(&token_hash(old.trim()).as_str()));
+            // (Unless it is the token the operator now gives.)
+            let stale = std::fs::read_to_string(&admin_file).is_ok_and(|old| {
+                old.trim() != t && previous.contains(&token_hash(old.trim()).as_str())
+            });
             if stale {
                 std::fs::remove_file(&admin_file).with_context(|| {
                     format!("cannot remove the revoked {}", admin_file.display())
@@ -248,8 +250,9 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     // variable is unset (a service, a container): give the local workers
     // a private one under the data folder instead.
     let runtime_dir = match std::env::var_os("XDG_RUNTIME_DIR") {
-        Some(_) => None,
-        None => Some(private_dir(&args.data.join("run"))?),
+        // libwayland takes only an absolute path.
+        Some(d) if Path::new(&d).is_absolute() => None,
+        _ => Some(private_dir(&args.data.join("run"))?),
     };
     for slot in 0..workers {
         let url = url.clone();

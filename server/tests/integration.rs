@@ -837,16 +837,63 @@ fn local_workers_stop_when_serve_is_killed_outright() {
 }
 
 /// A command that opens the GPU where no desktop session is (a container,
-/// CI: no `XDG_RUNTIME_DIR`) prints no Wayland errors from Mesa's
-/// device-select layer, and bakes the same bytes.
+/// CI: no `XDG_RUNTIME_DIR`, no display) runs itself again in place with
+/// Mesa's device-select layer off: the same pid, now with
+/// `NODEVICE_SELECT=1`, and no Wayland errors; not where a device was
+/// chosen through the layer; and a bake writes the same bytes either way.
 #[test]
-fn a_bake_without_a_session_prints_no_display_errors() {
+fn a_gpu_command_without_a_session_turns_off_the_display_layer_in_place() {
     let dir = tempfile::tempdir().unwrap();
+    // A worker of a server that is not there: it opens the GPU, then
+    // retries its lease until stopped.
+    let worker = |chosen: bool| {
+        let log = dir.path().join(format!("worker-{chosen}.log"));
+        let mut command = Command::new(env!("CARGO_BIN_EXE_aobake"));
+        command
+            .args(["worker", "--server", "http://127.0.0.1:9", "--token", "t"])
+            .env_remove("XDG_RUNTIME_DIR")
+            .env_remove("DISPLAY")
+            .env_remove("WAYLAND_DISPLAY")
+            .env_remove("DRI_PRIME")
+            .env_remove("NODEVICE_SELECT")
+            .env_remove("MESA_VK_DEVICE_SELECT")
+            .stdout(std::process::Stdio::null())
+            .stderr(std::fs::File::create(&log).unwrap());
+        if chosen {
+            command.env("MESA_VK_DEVICE_SELECT", "list-not");
+        }
+        let mut child = command.spawn().unwrap();
+        // Past its tracer's line, into its lease retries.
+        let started = std::time::Instant::now();
+        while !std::fs::read_to_string(&log)
+            .unwrap()
+            .contains("cannot lease")
+            && started.elapsed() < std::time::Duration::from_secs(30)
+        {
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let environ = std::fs::read(format!("/proc/{}/environ", child.id())).unwrap_or_default();
+        let _ = Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status();
+        child.wait().unwrap();
+        let off = environ
+            .split(|&b| b == 0)
+            .any(|v| v == b"NODEVICE_SELECT=1");
+        (off, std::fs::read_to_string(&log).unwrap())
+    };
+    let (off, said) = worker(false);
+    assert!(off, "the same pid runs with the layer off\n{said}");
+    assert!(said.contains("tracer"), "{said}");
+    assert!(!said.contains("XDG_RUNTIME_DIR"), "{said}");
+    let (off, said) = worker(true);
+    assert!(!off, "a device chosen through the layer keeps it\n{said}");
+
     let bake = |name: &str, session: bool| {
         let mut command = Command::new(env!("CARGO_BIN_EXE_aobake"));
         command
             .args(["bake", "--method", "vertex-linear", "--poses", "16"])
-            .args(["--samples", "16", "--out"])
+            .args(["--samples", "16", "--tracer", "cpu", "--out"])
             .arg(dir.path().join(format!("{name}.aob")))
             .arg("--report")
             .arg(dir.path().join(format!("{name}.json")))
@@ -860,19 +907,13 @@ fn a_bake_without_a_session_prints_no_display_errors() {
         }
         let out = command.output().unwrap();
         assert!(out.status.success(), "{}", stderr(&out));
-        (
-            stderr(&out),
-            std::fs::read(dir.path().join(format!("{name}.aob"))).unwrap(),
-        )
+        std::fs::read(dir.path().join(format!("{name}.aob"))).unwrap()
     };
-    let (said, without) = bake("without", false);
-    assert!(!said.contains("XDG_RUNTIME_DIR"), "{said}");
-    assert!(
-        said.contains("tracing on") || said.contains("tracer"),
-        "{said}"
+    assert_eq!(
+        bake("without", false),
+        bake("with", true),
+        "the same bytes with and without a session"
     );
-    let (_, with) = bake("with", true);
-    assert_eq!(without, with, "the same bytes with and without a session");
 }
 
 /// Starts `aobake serve --workers 0` on `data` (with `admin` as its admin
@@ -893,7 +934,7 @@ fn start_serve(data: &Path, admin: Option<&str>, extra: &[&str]) -> (std::proces
         .arg(data)
         .args(extra)
         .stdout(std::fs::File::create(data.with_extension("stdout")).unwrap())
-        .stderr(std::process::Stdio::null());
+        .stderr(std::fs::File::create(data.with_extension("stderr")).unwrap());
     match admin {
         Some(t) => command.env("AOBAKE_ADMIN_TOKEN", t),
         None => command.env_remove("AOBAKE_ADMIN_TOKEN"),
@@ -907,7 +948,8 @@ fn start_serve(data: &Path, admin: Option<&str>, extra: &[&str]) -> (std::proces
         if started.elapsed() > std::time::Duration::from_secs(30) {
             let _ = child.kill();
             let _ = child.wait();
-            panic!("serve did not start");
+            let said = std::fs::read_to_string(data.with_extension("stderr")).unwrap_or_default();
+            panic!("serve did not start\n{said}");
         }
         std::thread::sleep(std::time::Duration::from_millis(50));
     };
@@ -985,4 +1027,82 @@ fn a_restart_leaves_no_revoked_token_behind_and_a_refusal_names_the_tokens_sourc
             && text.contains("401"),
         "{text}"
     );
+}
+
+/// `aobake key` gives the key `aobake bake` writes into the asset, for
+/// every family, with clips from another file and parameters set by
+/// `--param`, on `.gltf` files.
+#[test]
+fn key_is_the_baked_assets_key_for_every_family() {
+    let dir = tempfile::tempdir().unwrap();
+    let robot = repo().join("tests/data/scenes/RigidRobot/RigidRobot.gltf");
+    let cube = repo().join("tests/data/scenes/SpinningCube/SpinningCube.gltf");
+    let grid = [
+        "grid.resolution=4",
+        "grid.rays=8",
+        "grid.eval_frames=1",
+        "grid.eval_rays=8",
+        "grid.eval_ground=8",
+        "grid.average_frames=2",
+    ];
+    let cubemap = [
+        "cubemap.resolution=4",
+        "cubemap.times=8",
+        "cubemap.rays=8",
+        "cubemap.eval_times=1",
+        "cubemap.eval_points=16",
+        "cubemap.eval_ground=16",
+        "cubemap.eval_rays=8",
+    ];
+    let cases: [(&Path, &str, &[&str]); 3] = [
+        (&robot, "grid", &grid),
+        (&cube, "cubemap-discrete", &cubemap),
+        (&robot, "vertex-linear", &["samples=8"]),
+    ];
+    for (file, method, params) in cases {
+        let mut args: Vec<String> = vec![
+            file.display().to_string(),
+            "--clips".into(),
+            file.display().to_string(),
+            "--method".into(),
+            method.into(),
+            "--poses".into(),
+            "16".into(),
+        ];
+        for p in params {
+            args.extend(["--param".into(), (*p).to_owned()]);
+        }
+        let run = |command: &str, extra: &[String]| {
+            let out = Command::new(env!("CARGO_BIN_EXE_aobake"))
+                .arg(command)
+                .args(&args)
+                .args(extra)
+                .output()
+                .unwrap();
+            assert!(out.status.success(), "{command} {method}: {}", stderr(&out));
+            out
+        };
+        let key = stdout(&run("key", &[]));
+        let asset = dir.path().join(format!("{method}.aob"));
+        run(
+            "bake",
+            &[
+                "--out".into(),
+                asset.display().to_string(),
+                "--report".into(),
+                dir.path()
+                    .join(format!("{method}.json"))
+                    .display()
+                    .to_string(),
+            ],
+        );
+        let bytes = std::fs::read(&asset).unwrap();
+        let text = String::from_utf8_lossy(&bytes);
+        let baked = text
+            .split("\"bake_key\":\"")
+            .nth(1)
+            .and_then(|s| s.get(..64))
+            .unwrap();
+        assert_eq!(key.trim(), baked, "{method}");
+    }
 }

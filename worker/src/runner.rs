@@ -15,6 +15,15 @@ use aobake_core::{
 
 use aobake_api::{ApiError, CheckpointRef, Client, Completion, JobCompletion, Lease, OutputRef};
 
+/// `eprintln!` in one write: `aobake serve`'s local workers share its
+/// stderr, and `eprintln!` writes a line in pieces that theirs interleave.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        let line = format!("{}\n", format_args!($($arg)*));
+        let _ = std::io::Write::write_all(&mut std::io::stderr().lock(), line.as_bytes());
+    }};
+}
+
 /// How soon a moved progress is sent, at most (see the heartbeat loop).
 const PROGRESS_EVERY: Duration = Duration::from_secs(1);
 
@@ -79,7 +88,7 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
             // Nothing is written to the pipe: it only ends.
             let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
             if !shutdown.swap(true, Ordering::Relaxed) {
-                eprintln!("worker {id}: the process that started it has gone; stopping");
+                say!("worker {id}: the process that started it has gone; stopping");
             }
         });
     }
@@ -127,7 +136,7 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
     });
     poller.finish();
     stopped?;
-    eprintln!("worker {}: stopped", config.id);
+    say!("worker {}: stopped", config.id);
     Ok(())
 }
 
@@ -234,7 +243,7 @@ fn dispatch(
                 }
                 failures += 1;
                 let wait = Duration::from_millis(200 * u64::from(failures.min(25)));
-                eprintln!(
+                say!(
                     "worker {}: cannot lease ({e}); retrying in {wait:?}",
                     config.id
                 );
@@ -291,7 +300,7 @@ impl Poller {
                 if let Err(mpsc::SendError(Ok(late))) = answer.send(leased) {
                     for lease in late {
                         if let Err(e) = client.release(lease.job.id, &lease.token) {
-                            eprintln!(
+                            say!(
                                 "cannot give back job {} leased as the worker stopped ({e}); its lease will expire",
                                 lease.job.id
                             );
@@ -465,7 +474,7 @@ impl JobSink for Sink<'_> {
         match saved {
             Ok(()) => {
                 if self.fault == Some("after_checkpoint") {
-                    eprintln!("fault injected after checkpoint {}", checkpoint.cursor);
+                    say!("fault injected after checkpoint {}", checkpoint.cursor);
                     std::process::abort();
                 }
             }
@@ -474,7 +483,7 @@ impl JobSink for Sink<'_> {
             }
             // A checkpoint that cannot be saved costs only the work since
             // the last one; the job goes on.
-            Err(e) => eprintln!("job {}: checkpoint not saved: {e}", self.job),
+            Err(e) => say!("job {}: checkpoint not saved: {e}", self.job),
         }
         self.stop()
     }
@@ -489,7 +498,7 @@ impl JobSink for Sink<'_> {
             // The job keeps the part and offers it again at its next
             // checkpoint; until then no checkpoint is recorded.
             Err(e) => {
-                eprintln!("job {}: checkpoint part not saved: {e}", self.job);
+                say!("job {}: checkpoint part not saved: {e}", self.job);
                 None
             }
         }
@@ -587,7 +596,7 @@ fn execute(
             // asset is good, so the job ends saying why there are no
             // previews rather than failing the bake.
             Err(e @ crate::gpu::GpuError::NoAdapter(_)) => {
-                eprintln!("no previews: {e}");
+                say!("no previews: {e}");
                 Ok(aobake_core::bake::preview::unavailable(&e.to_string()))
             }
             Err(e) => Err(JobError::Failed(format!("no GPU for previews: {e}"))),
@@ -642,7 +651,7 @@ fn with_retries<T>(mut call: impl FnMut() -> Result<T, ApiError>) -> Result<T, A
     let mut wait = Duration::from_millis(500);
     for _ in 0..2 {
         match call() {
-            Err(e) if e.is_transient() => eprintln!("retrying after: {e}"),
+            Err(e) if e.is_transient() => say!("retrying after: {e}"),
             other => return other,
         }
         std::thread::sleep(wait);
@@ -703,7 +712,7 @@ fn run_leased(
                         }
                     }
                     Err(e) if e.is_lease_lost() => flags.lost.store(true, Ordering::Relaxed),
-                    Err(e) => eprintln!("job {job}: heartbeat failed: {e}"),
+                    Err(e) => say!("job {job}: heartbeat failed: {e}"),
                 }
             }
         });
@@ -730,23 +739,23 @@ fn run_leased(
     let spec = &lease.job.spec;
     match result {
         Ok(done) => match done {
-            Ok(()) => eprintln!(
+            Ok(()) => say!(
                 "job {job} ({}) done in {:.2} s",
                 spec["kind"],
                 started.elapsed().as_secs_f64()
             ),
-            Err(e) => eprintln!("job {job}: completion refused: {e}"),
+            Err(e) => say!("job {job}: completion refused: {e}"),
         },
         Err(JobError::Stopped(Stop(why))) => {
             // Give the lease back if it is still ours (a stop asked by the
             // server or by shutdown); a lost lease answers 409, harmlessly.
             let _ = client.release(job, &lease.token);
-            eprintln!("job {job}: stopped ({why})");
+            say!("job {job}: stopped ({why})");
         }
         Err(e) => {
-            eprintln!("job {job} failed: {e}");
+            say!("job {job} failed: {e}");
             if let Err(e) = client.fail(job, &lease.token, &e.to_string(), e.retryable()) {
-                eprintln!("job {job}: failure not recorded: {e}");
+                say!("job {job}: failure not recorded: {e}");
             }
         }
     }

@@ -9,7 +9,7 @@ use super::params::BakeRequestArgs;
 /// Arguments of `aobake key`.
 #[derive(Debug, clap::Args)]
 #[command(
-    after_help = "The key is what `aobake bake`, `aobake submit` and the service give a bake of these files and parameters (its asset's header carries it), so a CI job can do: `KEY=$(aobake key FILE --method M ...)`, then `aobake fetch --key \"$KEY\" --out A.aob` (exit 4: not baked yet) or `aobake submit FILE --method M ... --wait`. The files are read and imported as a bake would (a file it cannot bake is refused here too); nothing is traced."
+    after_help = "The key is what `aobake bake`, `aobake submit` and the service give a bake of these files and parameters (its asset's header carries it), so a CI job can do: `KEY=$(aobake key FILE --method M ...)`, then `aobake fetch --key \"$KEY\" --out A.aob` (exit 4: not baked yet) or `aobake submit FILE --method M ... --wait`. The files are read and imported, and the parameters checked, as a bake here would (with this program's default import limits: a server's own limits, and its bound on a bake's work, are not checked); nothing is traced."
 )]
 pub(super) struct Args {
     #[command(flatten)]

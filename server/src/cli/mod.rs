@@ -96,6 +96,16 @@ impl Cli {
     pub fn is_service(&self) -> bool {
         matches!(self.command, Command::Serve(_) | Command::Worker(_))
     }
+
+    /// Whether the command opens a GPU adapter (Vulkan or GL through
+    /// wgpu): a bake or a worker looking for the GPU tracer, previews,
+    /// benchmarks.
+    pub fn opens_gpu(&self) -> bool {
+        matches!(
+            self.command,
+            Command::Bake(_) | Command::Preview(_) | Command::Worker(_) | Command::Bench(_)
+        )
+    }
 }
 
 /// Runs a parsed command line.
