@@ -108,7 +108,7 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
     let (free_tx, free_rx) = mpsc::channel::<usize>();
     let (done_tx, done_rx) = mpsc::channel::<Finished>();
     let poller = Poller::start(client.clone(), config.wait_secs);
-    let stopped = std::thread::scope(|scope| {
+    let dispatched = std::thread::scope(|scope| {
         let client = &client;
         scope.spawn(move || complete_batches(client, &done_rx));
         let mut to_slots = Vec::with_capacity(slots);
@@ -129,13 +129,16 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
         let dispatched = dispatch(
             client, &poller, &config, &ids, &shutdown, &free_rx, &to_slots,
         );
+        // No more leases are taken: an open poll's answer is given back as
+        // soon as it comes, not held while busy slots finish their jobs
+        // (with concurrency above 1 that can outlast its lease).
+        poller.finish();
         // Slots finish their jobs (or stop them at shutdown's deadline),
         // then end.
         drop(to_slots);
         dispatched
     });
-    poller.finish();
-    stopped?;
+    dispatched?;
     say!("worker {}: stopped", config.id);
     Ok(())
 }
@@ -294,8 +297,11 @@ impl Poller {
         std::thread::spawn(move || {
             for (workers, tracer) in asked {
                 let leased = client.lease_many(&workers, wait_secs, tracer.as_deref());
-                // Held from before the hand-over: `finish` drops the
-                // receiver, then waits here for the leases it refused.
+                // Held through the hand-over: `finish` drops the receiver,
+                // then waits while the leases it refused are given back.
+                // (An answer that arrives in the instant between `finish`
+                // and the process's exit is not given back: its leases
+                // expire.)
                 let _releasing = held.lock().unwrap_or_else(|e| e.into_inner());
                 if let Err(mpsc::SendError(Ok(late))) = answer.send(leased) {
                     for lease in late {

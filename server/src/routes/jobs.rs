@@ -132,8 +132,15 @@ async fn wait_for_leases(
         if !leases.is_empty() && gone.as_ref().is_some_and(ClientGone::is_gone) {
             // The worker went while its jobs were being leased: give them
             // back now rather than at their leases' expiry.
+            // Each on its own: one that fails expires, the others do not
+            // wait for it.
             for l in &leases {
-                state.store.release(l.job.id, &l.token).await?;
+                if let Err(e) = state.store.release(l.job.id, &l.token).await {
+                    eprintln!(
+                        "error: job {} stays leased to a worker that went, until its lease expires: {e}",
+                        l.job.id
+                    );
+                }
             }
             return Ok(Vec::new());
         }
