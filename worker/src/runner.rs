@@ -564,7 +564,9 @@ fn execute(
             timings: serde_json::from_value(d.timings.clone()).unwrap_or_default(),
             outputs: Vec::new(),
         };
-        for o in &d.outputs {
+        // Only what the job reads (not, say, a cubemap ground's truth for
+        // a preview).
+        for o in d.outputs.iter().filter(|o| spec.reads(&o.name)) {
             let bytes = client
                 .get_blob(&o.digest)
                 .map_err(|e| JobError::Failed(format!("cannot fetch {}: {e}", o.name)))?;

@@ -53,7 +53,7 @@ const STILL_GROUND: &str = "ground-static";
 /// The output of `assemble` holding the truth the static ground is fitted
 /// to ([`TexelTruth::to_bytes`]), so that `evaluate` fits the other
 /// encodings' grounds to it without tracing it again.
-const GROUND_TRUTH: &str = "ground-truth";
+pub(super) const GROUND_TRUTH: &str = "ground-truth";
 
 /// The step name of a face job's checkpoints.
 const FACE_STEP: &str = "face";

@@ -115,6 +115,14 @@ impl JobSpec {
         }
     }
 
+    /// Whether the job reads a dependency's output named `output`: every
+    /// one, but the cubemap ground's truth (a megabyte or more), which
+    /// only `evaluate` reads, so other jobs' workers do not fetch it and
+    /// the in-process runner does not hand it to them either.
+    pub fn reads(&self, output: &str) -> bool {
+        output != super::cubemap::GROUND_TRUTH || matches!(self, Self::Evaluate)
+    }
+
     /// The kinds of the jobs that cast rays (what a queue offers GPU
     /// workers first): those whose [`JobSpec::traces`] holds.
     pub const TRACING_KINDS: [&'static str; 4] = ["sample", "face", "slab", "preview-truth"];
@@ -466,6 +474,16 @@ pub(super) fn decode_with<M, H, E: std::fmt::Display>(
 #[cfg(test)]
 mod tests {
     use super::{JobSpec, PoseSet};
+
+    #[test]
+    fn only_evaluate_reads_the_cubemap_grounds_truth() {
+        let truth = super::super::cubemap::GROUND_TRUTH;
+        assert!(JobSpec::Evaluate.reads(truth));
+        for spec in [JobSpec::Preview, JobSpec::Assemble, JobSpec::Fit] {
+            assert!(!spec.reads(truth), "{spec:?}");
+            assert!(spec.reads("asset"), "{spec:?}");
+        }
+    }
 
     #[test]
     fn the_tracing_kinds_are_the_jobs_that_trace() {

@@ -93,7 +93,29 @@ pub fn run_graph(
         let out = match known.get(&job.spec) {
             Some(o) => o.clone(),
             None => {
-                let deps: Vec<&JobOutput> = job.deps.iter().map(|&d| &outputs[d]).collect();
+                // What the job reads of each dependency, as a worker
+                // fetches it (a copy only where something is left out).
+                let deps: Vec<std::borrow::Cow<'_, JobOutput>> = job
+                    .deps
+                    .iter()
+                    .map(|&d| {
+                        let dep = &outputs[d];
+                        if dep.outputs.iter().all(|o| job.spec.reads(&o.name)) {
+                            std::borrow::Cow::Borrowed(dep)
+                        } else {
+                            std::borrow::Cow::Owned(JobOutput {
+                                timings: dep.timings.clone(),
+                                outputs: dep
+                                    .outputs
+                                    .iter()
+                                    .filter(|o| job.spec.reads(&o.name))
+                                    .cloned()
+                                    .collect(),
+                            })
+                        }
+                    })
+                    .collect();
+                let deps: Vec<&JobOutput> = deps.iter().map(AsRef::as_ref).collect();
                 match (&job.spec, renderer.as_deref_mut()) {
                     (JobSpec::Preview, Some(r)) => bake.preview(&deps, r)?,
                     (spec, _) => {
