@@ -104,7 +104,7 @@ pub fn run_graph(
                             std::borrow::Cow::Borrowed(dep)
                         } else {
                             std::borrow::Cow::Owned(JobOutput {
-                                timings: dep.timings.clone(),
+                                timings: dep.timings,
                                 outputs: dep
                                     .outputs
                                     .iter()
