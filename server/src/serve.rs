@@ -182,31 +182,12 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             &[Scope::Admin.name().to_owned()],
         )
         .await?;
-    let worker_token = new_token();
-    made.push(token_hash(&worker_token));
-    store
-        .create_token(
-            &token_hash(&worker_token),
-            "local workers",
-            &[Scope::Worker.name().to_owned()],
-        )
-        .await?;
+    let worker_token = own_token(&*store, &mut made, "local workers", &[Scope::Worker]).await?;
     // The demo's dashboard token (read and submit, printed in a URL) is
     // this start's too: the next start revokes it with the others.
     let demo_token = if args.demo {
-        let t = new_token();
-        made.push(token_hash(&t));
-        store
-            .create_token(
-                &token_hash(&t),
-                "demo dashboard",
-                &[
-                    Scope::Read.name().to_owned(),
-                    Scope::Submit.name().to_owned(),
-                ],
-            )
-            .await?;
-        Some(t)
+        let scopes = [Scope::Read, Scope::Submit];
+        Some(own_token(&*store, &mut made, "demo dashboard", &scopes).await?)
     } else {
         None
     };
@@ -334,6 +315,22 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     .await?;
     reaper.abort();
     Ok(())
+}
+
+/// A new token of `scopes` named `name`, stored, its hash added to `made`
+/// (this start's own tokens, which the next start revokes).
+async fn own_token(
+    store: &dyn Store,
+    made: &mut Vec<String>,
+    name: &str,
+    scopes: &[Scope],
+) -> anyhow::Result<String> {
+    let token = new_token();
+    let hash = token_hash(&token);
+    let scopes: Vec<String> = scopes.iter().map(|s| s.name().to_owned()).collect();
+    store.create_token(&hash, name, &scopes).await?;
+    made.push(hash);
+    Ok(token)
 }
 
 fn spawn_worker(

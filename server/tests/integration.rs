@@ -5,6 +5,8 @@ use std::{
     process::{Command, Output},
 };
 
+use nix::sys::signal::Signal;
+
 #[path = "integration/bake.rs"]
 mod bake;
 #[path = "integration/docker.rs"]
@@ -711,16 +713,7 @@ fn local_workers_get_a_runtime_folder_and_print_no_mesa_noise() {
     use std::io::Read as _;
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
-    let mut serve = Command::new(env!("CARGO_BIN_EXE_aobake"))
-        .args([
-            "serve",
-            "--listen",
-            "127.0.0.1:0",
-            "--workers",
-            "1",
-            "--data",
-        ])
-        .arg(&data)
+    let mut serve = serve_command(&data, 1)
         .env_remove("XDG_RUNTIME_DIR")
         .env_remove("AOBAKE_ADMIN_TOKEN")
         .stdout(std::process::Stdio::piped())
@@ -729,9 +722,7 @@ fn local_workers_get_a_runtime_folder_and_print_no_mesa_noise() {
         .unwrap();
     // The worker has looked for its GPU and polled once by then.
     std::thread::sleep(std::time::Duration::from_secs(6));
-    let _ = Command::new("kill")
-        .args(["-TERM", &serve.id().to_string()])
-        .status();
+    signal(serve.id(), Signal::SIGTERM);
     let mut text = String::new();
     serve
         .stderr
@@ -755,6 +746,23 @@ fn local_workers_get_a_runtime_folder_and_print_no_mesa_noise() {
         std::fs::metadata(&run).unwrap().permissions().mode() & 0o777,
         0o700
     );
+}
+
+/// `aobake serve --listen 127.0.0.1:0 --workers N --data DATA`.
+fn serve_command(data: &Path, workers: usize) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_aobake"));
+    command
+        .args(["serve", "--listen", "127.0.0.1:0", "--workers"])
+        .arg(workers.to_string())
+        .arg("--data")
+        .arg(data);
+    command
+}
+
+/// Sends `signal` to process `pid` (gone already: nothing to do).
+fn signal(pid: u32, signal: Signal) {
+    let pid = nix::unistd::Pid::from_raw(i32::try_from(pid).expect("a pid"));
+    let _ = nix::sys::signal::kill(pid, signal);
 }
 
 /// The pids of `pid`'s children (any of its threads may have started
@@ -791,16 +799,7 @@ fn local_workers_stop_when_serve_is_killed_outright() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     let log = std::fs::File::create(dir.path().join("serve.log")).unwrap();
-    let mut serve = Command::new(env!("CARGO_BIN_EXE_aobake"))
-        .args([
-            "serve",
-            "--listen",
-            "127.0.0.1:0",
-            "--workers",
-            "1",
-            "--data",
-        ])
-        .arg(&data)
+    let mut serve = serve_command(&data, 1)
         .stdout(log.try_clone().unwrap())
         .stderr(log)
         .spawn()
@@ -827,9 +826,7 @@ fn local_workers_stop_when_serve_is_killed_outright() {
     }
     let outlived = running(worker);
     if outlived {
-        let _ = Command::new("kill")
-            .args(["-KILL", &worker.to_string()])
-            .status();
+        signal(worker, Signal::SIGKILL);
     }
     let text = std::fs::read_to_string(dir.path().join("serve.log")).unwrap();
     assert!(!outlived, "the worker outlived its serve by 10 s\n{text}");
@@ -873,9 +870,7 @@ fn a_gpu_command_without_a_session_turns_off_the_display_layer_in_place() {
             std::thread::sleep(std::time::Duration::from_millis(50));
         }
         let environ = std::fs::read(format!("/proc/{}/environ", child.id())).unwrap_or_default();
-        let _ = Command::new("kill")
-            .args(["-TERM", &child.id().to_string()])
-            .status();
+        signal(child.id(), Signal::SIGTERM);
         child.wait().unwrap();
         let off = environ
             .split(|&b| b == 0)
@@ -921,17 +916,8 @@ fn a_gpu_command_without_a_session_turns_off_the_display_layer_in_place() {
 fn start_serve(data: &Path, admin: Option<&str>, extra: &[&str]) -> (std::process::Child, String) {
     let url_file = data.join("server.url");
     let _ = std::fs::remove_file(&url_file);
-    let mut command = Command::new(env!("CARGO_BIN_EXE_aobake"));
+    let mut command = serve_command(data, 0);
     command
-        .args([
-            "serve",
-            "--listen",
-            "127.0.0.1:0",
-            "--workers",
-            "0",
-            "--data",
-        ])
-        .arg(data)
         .args(extra)
         .stdout(std::fs::File::create(data.with_extension("stdout")).unwrap())
         .stderr(std::fs::File::create(data.with_extension("stderr")).unwrap());
@@ -958,9 +944,7 @@ fn start_serve(data: &Path, admin: Option<&str>, extra: &[&str]) -> (std::proces
 
 /// Stops `serve` as an operator does (SIGTERM) and waits for it.
 fn stop_serve(mut serve: std::process::Child) {
-    let _ = Command::new("kill")
-        .args(["-TERM", &serve.id().to_string()])
-        .status();
+    signal(serve.id(), Signal::SIGTERM);
     serve.wait().unwrap();
 }
 

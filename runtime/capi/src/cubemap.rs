@@ -9,7 +9,7 @@ use aobake_runtime::{
 };
 use glam::Vec3;
 
-use crate::{copy_words, fail, finite_floats, free, live, open, out_floats, packed, put};
+use crate::{copy_array, fail, finite_floats, free, live, open, out_floats, packed, put};
 
 /// A cubemap asset. Opaque to C.
 #[derive(Debug)]
@@ -267,18 +267,20 @@ pub unsafe extern "C" fn aobake_cubemap_gpu_words(
     let Some(gpu) = (unsafe { cubemap_gpu(cubemap) }) else {
         return false;
     };
-    let array: &[u32] = match which {
-        AOBAKE_CUBEMAP_GPU_TEXELS => &gpu.texels,
-        AOBAKE_CUBEMAP_GPU_GROUND => &gpu.ground,
-        other => {
-            fail(format!(
-                "array {other}: AOBAKE_CUBEMAP_GPU_TEXELS (0) or AOBAKE_CUBEMAP_GPU_GROUND (1)"
-            ));
-            return false;
-        }
-    };
+    let named: [(u32, &str, &[u32]); 2] = [
+        (
+            AOBAKE_CUBEMAP_GPU_TEXELS,
+            "AOBAKE_CUBEMAP_GPU_TEXELS",
+            &gpu.texels,
+        ),
+        (
+            AOBAKE_CUBEMAP_GPU_GROUND,
+            "AOBAKE_CUBEMAP_GPU_GROUND",
+            &gpu.ground,
+        ),
+    ];
     // SAFETY: forwarded from the caller.
-    unsafe { copy_words(array, out, len, words) }
+    unsafe { copy_array(which, &named, out, len, words) }
 }
 
 /// Writes the height (y, in the character's space as baked) of the ground

@@ -17,13 +17,13 @@ use aobake_runtime::{
 };
 use glam::{Mat4, Vec3};
 
-use crate::{copy_words, fail, finite_floats, floats, free, live, open, out_floats, packed, put};
+use crate::{copy_array, fail, finite_floats, floats, free, live, open, out_floats, packed, put};
 
 /// A grid asset. Opaque to C.
 #[derive(Debug)]
 pub struct AobakeGrid(
     GridModel,
-    OnceLock<Result<GridGpu, String>>,
+    OnceLock<Result<GridForm, String>>,
     /// The parts' names as C strings.
     Vec<CString>,
 );
@@ -392,18 +392,37 @@ pub const AOBAKE_GRID_GPU_VERTEX_OFFSETS: u32 = 2;
 /// `docs/engines.md`).
 pub const AOBAKE_GRID_GPU_GROUND: u32 = 3;
 
-/// The grid at `grid` and its GPU form, packed once per handle, or why
-/// there is none (NULL, or too large for 32-bit GPU indices).
+/// Everything `aobake_grid_gpu_words` hands out: the grids' GPU form and
+/// the static base's words.
+#[derive(Debug)]
+struct GridForm {
+    grids: GridGpu,
+    /// The base's offset per vertex (f32 bits; none without a base).
+    vertex_offsets: Vec<u32>,
+    /// The base's ground texture's words (one word, 0, without a base).
+    ground: Vec<u32>,
+}
+
+/// The GPU form of the grid at `grid`, packed once per handle (an engine
+/// asks for each array twice), or why there is none (NULL, or too large
+/// for 32-bit GPU indices).
 ///
 /// # Safety
 /// `grid` must be NULL or a live handle.
-unsafe fn grid_gpu<'a>(grid: *const AobakeGrid) -> Option<(&'a AobakeGrid, &'a GridGpu)> {
+unsafe fn grid_gpu<'a>(grid: *const AobakeGrid) -> Option<&'a GridForm> {
     // SAFETY: forwarded from the caller.
     let g = unsafe { live(grid) }?;
-    let gpu = packed(&g.1, || {
-        GridGpu::new(&g.0).map_err(|e| format!("the grid has no GPU form: {e}"))
-    })?;
-    Some((g, gpu))
+    packed(&g.1, || {
+        let grids = GridGpu::new(&g.0).map_err(|e| format!("the grid has no GPU form: {e}"))?;
+        let base = g.0.base.as_ref();
+        Ok(GridForm {
+            grids,
+            vertex_offsets: base.map_or_else(Vec::new, |b| {
+                b.vertex_offsets.iter().map(|x| x.to_bits()).collect()
+            }),
+            ground: base.map_or_else(|| vec![0], |b| b.ground.gpu_words()),
+        })
+    })
 }
 
 /// Writes the GPU lookups' `Params` to `out`, the fields of a dispatch
@@ -418,7 +437,7 @@ pub unsafe extern "C" fn aobake_grid_gpu_params(
     out: *mut AobakeGridGpuParams,
 ) -> bool {
     // SAFETY: forwarded from the caller.
-    let Some((_, gpu)) = (unsafe { grid_gpu(grid) }) else {
+    let Some(GridForm { grids: gpu, .. }) = (unsafe { grid_gpu(grid) }) else {
         return false;
     };
     let params = AobakeGridGpuParams {
@@ -455,33 +474,33 @@ pub unsafe extern "C" fn aobake_grid_gpu_words(
     words: *mut usize,
 ) -> bool {
     // SAFETY: forwarded from the caller.
-    let Some((g, gpu)) = (unsafe { grid_gpu(grid) }) else {
+    let Some(gpu) = (unsafe { grid_gpu(grid) }) else {
         return false;
     };
-    let base = g.0.base.as_ref();
-    let owned: Vec<u32>;
-    let array: &[u32] = match which {
-        AOBAKE_GRID_GPU_INFOS => gpu.infos.as_flattened(),
-        AOBAKE_GRID_GPU_CELLS => &gpu.cells,
-        AOBAKE_GRID_GPU_VERTEX_OFFSETS => {
-            owned = base.map_or_else(Vec::new, |b| {
-                b.vertex_offsets.iter().map(|x| x.to_bits()).collect()
-            });
-            &owned
-        }
-        AOBAKE_GRID_GPU_GROUND => {
-            owned = base.map_or_else(|| vec![0], |b| b.ground.gpu_words());
-            &owned
-        }
-        other => {
-            fail(format!(
-                "array {other}: AOBAKE_GRID_GPU_INFOS (0) to AOBAKE_GRID_GPU_GROUND (3)"
-            ));
-            return false;
-        }
-    };
+    let named: [(u32, &str, &[u32]); 4] = [
+        (
+            AOBAKE_GRID_GPU_INFOS,
+            "AOBAKE_GRID_GPU_INFOS",
+            gpu.grids.infos.as_flattened(),
+        ),
+        (
+            AOBAKE_GRID_GPU_CELLS,
+            "AOBAKE_GRID_GPU_CELLS",
+            &gpu.grids.cells,
+        ),
+        (
+            AOBAKE_GRID_GPU_VERTEX_OFFSETS,
+            "AOBAKE_GRID_GPU_VERTEX_OFFSETS",
+            &gpu.vertex_offsets,
+        ),
+        (
+            AOBAKE_GRID_GPU_GROUND,
+            "AOBAKE_GRID_GPU_GROUND",
+            &gpu.ground,
+        ),
+    ];
     // SAFETY: forwarded from the caller.
-    unsafe { copy_words(array, out, len, words) }
+    unsafe { copy_array(which, &named, out, len, words) }
 }
 
 /// Writes the parts' poses for a frame, as the GPU lookups read them

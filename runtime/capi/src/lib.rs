@@ -284,6 +284,33 @@ unsafe fn copy_words(array: &[u32], out: *mut u32, len: usize, words: *mut usize
     true
 }
 
+/// [`copy_words`] for array `which` of a GPU form: `arrays` holds each
+/// array's constant, its name and its words. An unknown `which` is
+/// refused, naming the arrays there are.
+///
+/// # Safety
+/// As [`copy_words`].
+unsafe fn copy_array(
+    which: u32,
+    arrays: &[(u32, &str, &[u32])],
+    out: *mut u32,
+    len: usize,
+    words: *mut usize,
+) -> bool {
+    match arrays.iter().find(|(k, _, _)| *k == which) {
+        // SAFETY: forwarded from the caller.
+        Some((_, _, array)) => unsafe { copy_words(array, out, len, words) },
+        None => {
+            let known: Vec<String> = arrays
+                .iter()
+                .map(|(k, name, _)| format!("{name} ({k})"))
+                .collect();
+            fail(format!("array {which}: {}", known.join(", ")));
+            false
+        }
+    }
+}
+
 /// The version of the C ABI this header describes. It changes when a
 /// function, constant or struct of the header changes incompatibly (new
 /// functions alone do not change it), so a plugin checks at load that

@@ -17,7 +17,7 @@ use aobake_runtime::{
 };
 use glam::{Quat, Vec3};
 
-use crate::{copy_words, fail, fill, free, live, open, packed, put};
+use crate::{copy_array, fail, fill, free, live, open, packed, put};
 
 /// A vertex-method asset (static average, vertex-linear or
 /// vertex-clustered), its rig and the pose being set. Opaque to C.
@@ -159,20 +159,26 @@ pub unsafe extern "C" fn aobake_vertex_ao_gpu_words(
     let Some(arrays) = packed else {
         return false;
     };
-    let array: &[u32] = match which {
-        AOBAKE_GPU_BLOCKS => arrays.blocks.as_flattened(),
-        AOBAKE_GPU_COEFFICIENTS => &arrays.coefficients,
-        AOBAKE_GPU_MAPS => &arrays.maps,
-        AOBAKE_GPU_SPARSE_ROWS => &arrays.sparse_rows,
-        other => {
-            fail(format!(
-                "array {other}: AOBAKE_GPU_BLOCKS (0) to AOBAKE_GPU_SPARSE_ROWS (3)"
-            ));
-            return false;
-        }
-    };
+    let named: [(u32, &str, &[u32]); 4] = [
+        (
+            AOBAKE_GPU_BLOCKS,
+            "AOBAKE_GPU_BLOCKS",
+            arrays.blocks.as_flattened(),
+        ),
+        (
+            AOBAKE_GPU_COEFFICIENTS,
+            "AOBAKE_GPU_COEFFICIENTS",
+            &arrays.coefficients,
+        ),
+        (AOBAKE_GPU_MAPS, "AOBAKE_GPU_MAPS", &arrays.maps),
+        (
+            AOBAKE_GPU_SPARSE_ROWS,
+            "AOBAKE_GPU_SPARSE_ROWS",
+            &arrays.sparse_rows,
+        ),
+    ];
     // SAFETY: forwarded from the caller.
-    unsafe { copy_words(array, out, len, words) }
+    unsafe { copy_array(which, &named, out, len, words) }
 }
 
 /// Whether the GPU form is sparse (evaluate with `cs_sparse`, reading the

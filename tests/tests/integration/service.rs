@@ -727,6 +727,27 @@ fn a_worker_stopped_with_sigterm_finishes_its_job_and_leases_no_more() {
     assert_eq!(end["state"], "done");
 }
 
+/// Waits until worker `id` has polled (`GET /v1/workers` lists it), then
+/// half a second more: well inside its first long poll.
+fn wait_polling(env: &TestEnv, id: &str) {
+    let started = std::time::Instant::now();
+    loop {
+        let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
+        if workers
+            .as_array()
+            .is_some_and(|a| a.iter().any(|w| w["id"] == id))
+        {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "{id} never polled: {workers}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+}
+
 /// An idle worker is inside a long poll (20 s by default) most of the
 /// time: SIGTERM stops it without waiting for the poll to end, and the
 /// abandoned poll leases nothing to it after it has gone; nor does the
@@ -735,20 +756,7 @@ fn a_worker_stopped_with_sigterm_finishes_its_job_and_leases_no_more() {
 fn an_idle_worker_stops_at_once_on_sigterm_and_a_gone_workers_poll_takes_no_job() {
     let mut env = TestEnv::start(Options::default());
     let w = env.start_worker(&[]);
-    let started = std::time::Instant::now();
-    loop {
-        let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
-        if workers.as_array().is_some_and(|a| !a.is_empty()) {
-            break;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(30),
-            "the worker never polled"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    // Well inside its first poll.
-    std::thread::sleep(Duration::from_millis(500));
+    wait_polling(&env, "w0");
     env.signal_worker(w, nix::sys::signal::Signal::SIGTERM);
     let signalled = std::time::Instant::now();
     while !env.worker_exited(w) {
@@ -766,22 +774,7 @@ fn an_idle_worker_stops_at_once_on_sigterm_and_a_gone_workers_poll_takes_no_job(
     );
     // A worker killed mid-poll (SIGKILL: no chance to say anything).
     let killed = env.start_worker(&[]);
-    let started = std::time::Instant::now();
-    loop {
-        let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
-        let polling = workers
-            .as_array()
-            .is_some_and(|a| a.iter().any(|w| w["id"] == "w1"));
-        if polling {
-            break;
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(30),
-            "w1 never polled: {workers}"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    std::thread::sleep(Duration::from_millis(500));
+    wait_polling(&env, "w1");
     env.kill_worker(killed);
     // A bake submitted now waits for a worker: the gone workers' polls
     // were dropped with their connections, not left to lease jobs to
