@@ -621,7 +621,8 @@ bool aobake_vertex_ao_weights(const struct AobakeVertexAo *ao, float *out, size_
 /**
  * Writes every vertex's AO in the current pose (0 open … 1 blocked;
  * `aobake_vertex_ao_vertices` of them) to `out`; `false` if `len` is not
- * that count.
+ * that count. It writes straight into `out`, allocating nothing in
+ * proportion to the vertices, so a player reuses one buffer a frame.
  *
  * # Safety
  * `ao` must be NULL or a live handle; `out` NULL or `len` writable

@@ -17,7 +17,7 @@ use aobake_runtime::{
 };
 use glam::{Quat, Vec3};
 
-use crate::{copy_array, fail, fill, free, live, open, packed, put};
+use crate::{copy_array, fail, fill, free, live, open, out_floats, packed, put};
 
 /// A vertex-method asset (static average, vertex-linear or
 /// vertex-clustered), its rig and the pose being set. Opaque to C.
@@ -335,7 +335,8 @@ pub unsafe extern "C" fn aobake_vertex_ao_weights(
 
 /// Writes every vertex's AO in the current pose (0 open … 1 blocked;
 /// `aobake_vertex_ao_vertices` of them) to `out`; `false` if `len` is not
-/// that count.
+/// that count. It writes straight into `out`, allocating nothing in
+/// proportion to the vertices, so a player reuses one buffer a frame.
 ///
 /// # Safety
 /// `ao` must be NULL or a live handle; `out` NULL or `len` writable
@@ -347,9 +348,15 @@ pub unsafe extern "C" fn aobake_vertex_ao_evaluate(
     len: usize,
 ) -> bool {
     // SAFETY: forwarded from the caller.
-    match unsafe { handle(ao) } {
-        // SAFETY: forwarded from the caller.
-        Some(h) => unsafe { fill(&h.evaluate(), out, len, "AO values") },
-        None => false,
-    }
+    let Some(h) = (unsafe { handle(ao) }) else {
+        return false;
+    };
+    // SAFETY: forwarded from the caller.
+    let Some(out) = (unsafe { out_floats(out, len, h.vertices(), "AO values") }) else {
+        return false;
+    };
+    // Straight into the caller's buffer: nothing in proportion to the
+    // vertices is allocated per frame.
+    h.evaluate_into(out);
+    true
 }

@@ -3,6 +3,8 @@
 //! through the shared library with the same numbers as the Rust runtime.
 
 use std::{
+    alloc::{GlobalAlloc, Layout, System},
+    cell::Cell,
     path::{Path, PathBuf},
     process::Command,
 };
@@ -14,6 +16,59 @@ use aobake_core::{
     method::Method,
 };
 use aobake_runtime::method::vertex::VertexAo;
+
+/// The system allocator, counting each thread's allocations (calls and
+/// bytes), so that a test measures what one call allocates.
+struct Counting;
+
+thread_local! {
+    static ALLOCATED: Cell<(usize, usize)> = const { Cell::new((0, 0)) };
+}
+
+fn count(bytes: usize) {
+    // Not counted while the thread is being torn down.
+    let _ = ALLOCATED.try_with(|a| {
+        let (calls, total) = a.get();
+        a.set((calls + 1, total + bytes));
+    });
+}
+
+// SAFETY: every call is forwarded to the system allocator unchanged.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count(layout.size());
+        // SAFETY: forwarded from the caller.
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count(layout.size());
+        // SAFETY: forwarded from the caller.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count(new_size);
+        // SAFETY: forwarded from the caller.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded from the caller.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+/// What `f` allocated on this thread: calls and bytes.
+fn allocated(f: impl FnOnce()) -> (usize, usize) {
+    let before = ALLOCATED.with(Cell::get);
+    f();
+    let after = ALLOCATED.with(Cell::get);
+    (after.0 - before.0, after.1 - before.1)
+}
 
 fn crate_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -135,6 +190,59 @@ fn a_c_program_plays_an_asset_as_the_runtime_does() {
         assert!(ao.iter().any(|&a| a > 0.0), "{method:?}: some occlusion");
     }
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A player's frame allocates nothing in proportion to the vertices:
+/// `aobake_vertex_ao_evaluate` writes into the caller's buffer and
+/// allocates exactly what computing the pose's weights does (a few floats
+/// per joint), and both give the runtime's numbers.
+#[test]
+fn evaluating_a_pose_allocates_only_its_weights() {
+    use aobake_rt::{
+        AobakeTransform, aobake_vertex_ao_evaluate, aobake_vertex_ao_free, aobake_vertex_ao_open,
+        aobake_vertex_ao_set_local, aobake_vertex_ao_vertices, aobake_vertex_ao_weight_count,
+        aobake_vertex_ao_weights,
+    };
+    for method in [Method::VertexLinear, Method::VertexClustered] {
+        let (asset, character, clips) = bake_rigged_figure(method);
+        // SAFETY: `asset` holds `len` readable bytes.
+        let ao = unsafe { aobake_vertex_ao_open(asset.as_ptr(), asset.len()) };
+        assert!(!ao.is_null());
+        let pose = Pose::sample(&character.skeleton, &clips[0], 0.7);
+        for (n, t) in pose.locals.iter().enumerate() {
+            let t = AobakeTransform::from(*t);
+            // SAFETY: a live handle and a readable transform.
+            assert!(unsafe { aobake_vertex_ao_set_local(ao, n, &t) });
+        }
+        // SAFETY: a live handle.
+        let (vertices, count) = unsafe {
+            (
+                aobake_vertex_ao_vertices(ao),
+                aobake_vertex_ao_weight_count(ao),
+            )
+        };
+        let (mut values, mut weights) = (vec![0.0f32; vertices], vec![0.0f32; count]);
+        // SAFETY: a live handle and `count` writable floats.
+        let for_weights = allocated(|| {
+            assert!(unsafe { aobake_vertex_ao_weights(ao, weights.as_mut_ptr(), count) })
+        });
+        // SAFETY: a live handle and `vertices` writable floats.
+        let for_values = allocated(|| {
+            assert!(unsafe { aobake_vertex_ao_evaluate(ao, values.as_mut_ptr(), vertices) })
+        });
+        assert_eq!(
+            for_values, for_weights,
+            "{method:?}: evaluating allocates what the weights do (calls, bytes)"
+        );
+        let mut rust = VertexAo::from_bytes(&asset).unwrap();
+        for (n, t) in pose.locals.iter().enumerate() {
+            assert!(rust.set_local(n, *t));
+        }
+        assert_eq!(weights, rust.weights(), "{method:?}: weights bit for bit");
+        assert_eq!(values, rust.evaluate(), "{method:?}: AO bit for bit");
+        // SAFETY: a live handle, freed once.
+        unsafe { aobake_vertex_ao_free(ao) };
+    }
 }
 
 /// Runs `exe` with `args` on the library it was built with; the floats it

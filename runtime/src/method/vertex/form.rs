@@ -55,8 +55,17 @@ impl LinearForm {
 
     /// AO of every vertex for one pose's weights.
     pub fn evaluate(&self, weights: &[f32]) -> Vec<f32> {
-        assert_eq!(weights.len(), self.weight_count(), "one weight per row");
         let mut out = vec![0.0f32; self.vertices];
+        self.evaluate_into(weights, &mut out);
+        out
+    }
+
+    /// [`LinearForm::evaluate`] into `out`, one value per vertex, without
+    /// allocating.
+    pub fn evaluate_into(&self, weights: &[f32], out: &mut [f32]) {
+        assert_eq!(weights.len(), self.weight_count(), "one weight per row");
+        assert_eq!(out.len(), self.vertices, "one value per vertex");
+        out.fill(0.0);
         let mut w = weights;
         for block in &self.blocks {
             let (mine, rest) = w.split_at(block.rows);
@@ -79,7 +88,6 @@ impl LinearForm {
             }
         }
         out.iter_mut().for_each(|x| *x = x.clamp(0.0, 1.0));
-        out
     }
 
     /// Coefficient and map bytes (f16 values, u16 or u32 map entries).
@@ -150,19 +158,25 @@ impl SparseForm {
 
     /// AO of every vertex for one pose's weights.
     pub fn evaluate(&self, weights: &[f32]) -> Vec<f32> {
+        let mut out = vec![0.0f32; self.vertices];
+        self.evaluate_into(weights, &mut out);
+        out
+    }
+
+    /// [`SparseForm::evaluate`] into `out`, one value per vertex, without
+    /// allocating.
+    pub fn evaluate_into(&self, weights: &[f32], out: &mut [f32]) {
         assert_eq!(weights.len(), self.rows, "one weight per row");
-        self.offsets
-            .windows(2)
-            .map(|w| {
-                let r = w[0] as usize..w[1] as usize;
-                self.rows_of[r.clone()]
-                    .iter()
-                    .zip(&self.values[r])
-                    .map(|(&k, c)| weights[usize::from(k)] * c.to_f32())
-                    .sum::<f32>()
-                    .clamp(0.0, 1.0)
-            })
-            .collect()
+        assert_eq!(out.len(), self.vertices, "one value per vertex");
+        for (o, w) in out.iter_mut().zip(self.offsets.windows(2)) {
+            let r = w[0] as usize..w[1] as usize;
+            *o = self.rows_of[r.clone()]
+                .iter()
+                .zip(&self.values[r])
+                .map(|(&k, c)| weights[usize::from(k)] * c.to_f32())
+                .sum::<f32>()
+                .clamp(0.0, 1.0);
+        }
     }
 
     /// Offsets, row indices and values.
@@ -196,6 +210,40 @@ pub enum FormRef<'a> {
     Sparse(&'a SparseForm),
 }
 
+impl FormRef<'_> {
+    /// Vertices.
+    pub fn vertices(self) -> usize {
+        match self {
+            Self::Dense(f) => f.vertices,
+            Self::Sparse(s) => s.vertices,
+        }
+    }
+
+    /// Weights per pose.
+    pub fn weight_count(self) -> usize {
+        match self {
+            Self::Dense(f) => f.weight_count(),
+            Self::Sparse(s) => s.rows,
+        }
+    }
+
+    /// AO of every vertex for one pose's weights.
+    pub fn evaluate(self, weights: &[f32]) -> Vec<f32> {
+        let mut out = vec![0.0f32; self.vertices()];
+        self.evaluate_into(weights, &mut out);
+        out
+    }
+
+    /// AO of every vertex for one pose's weights, into `out` (one value
+    /// per vertex) without allocating.
+    pub fn evaluate_into(self, weights: &[f32], out: &mut [f32]) {
+        match self {
+            Self::Dense(f) => f.evaluate_into(weights, out),
+            Self::Sparse(s) => s.evaluate_into(weights, out),
+        }
+    }
+}
+
 impl Coefficients {
     /// Borrowed.
     pub fn as_ref(&self) -> FormRef<'_> {
@@ -207,18 +255,12 @@ impl Coefficients {
 
     /// Vertices.
     pub fn vertices(&self) -> usize {
-        match self {
-            Self::Dense(f) => f.vertices,
-            Self::Sparse(s) => s.vertices,
-        }
+        self.as_ref().vertices()
     }
 
     /// AO of every vertex for one pose's weights.
     pub fn evaluate(&self, weights: &[f32]) -> Vec<f32> {
-        match self {
-            Self::Dense(f) => f.evaluate(weights),
-            Self::Sparse(s) => s.evaluate(weights),
-        }
+        self.as_ref().evaluate(weights)
     }
 
     /// Bytes of the coefficients (and maps or offsets).

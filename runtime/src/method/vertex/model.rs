@@ -50,10 +50,7 @@ impl Model {
 
     /// Weights per pose: the length of [`Model::weights`].
     pub fn weight_count(&self) -> usize {
-        match self.form() {
-            FormRef::Dense(f) => f.weight_count(),
-            FormRef::Sparse(s) => s.rows,
-        }
+        self.form().weight_count()
     }
 
     /// Bytes of the model's numbers: coefficients, maps, cluster centres
@@ -95,10 +92,7 @@ impl Model {
 
     /// AO of every vertex for weights from [`Model::weights`].
     pub fn evaluate_weights(&self, weights: &[f32]) -> Vec<f32> {
-        match self.form() {
-            FormRef::Dense(f) => f.evaluate(weights),
-            FormRef::Sparse(s) => s.evaluate(weights),
-        }
+        self.form().evaluate(weights)
     }
 
     /// AO of every vertex in a pose (one local transform per node of

@@ -138,4 +138,14 @@ impl VertexAo {
     pub fn evaluate(&self) -> Vec<f32> {
         self.model.evaluate_weights(&self.weights())
     }
+
+    /// [`VertexAo::evaluate`] into `out` ([`VertexAo::vertices`] values),
+    /// so that a player reuses one buffer: nothing in proportion to the
+    /// vertices is allocated (only the weights, a few per joint).
+    ///
+    /// # Panics
+    /// If `out` does not hold one value per vertex.
+    pub fn evaluate_into(&self, out: &mut [f32]) {
+        self.model.form().evaluate_into(&self.weights(), out);
+    }
 }
