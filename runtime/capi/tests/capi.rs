@@ -222,13 +222,15 @@ fn evaluating_a_pose_allocates_only_its_weights() {
             )
         };
         let (mut values, mut weights) = (vec![0.0f32; vertices], vec![0.0f32; count]);
-        // SAFETY: a live handle and `count` writable floats.
         let for_weights = allocated(|| {
-            assert!(unsafe { aobake_vertex_ao_weights(ao, weights.as_mut_ptr(), count) })
+            // SAFETY: a live handle and `count` writable floats.
+            let written = unsafe { aobake_vertex_ao_weights(ao, weights.as_mut_ptr(), count) };
+            assert!(written);
         });
-        // SAFETY: a live handle and `vertices` writable floats.
         let for_values = allocated(|| {
-            assert!(unsafe { aobake_vertex_ao_evaluate(ao, values.as_mut_ptr(), vertices) })
+            // SAFETY: a live handle and `vertices` writable floats.
+            let written = unsafe { aobake_vertex_ao_evaluate(ao, values.as_mut_ptr(), vertices) };
+            assert!(written);
         });
         assert_eq!(
             for_values, for_weights,
