@@ -182,7 +182,15 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             &[Scope::Admin.name().to_owned()],
         )
         .await?;
-    let worker_token = own_token(&*store, &mut made, "local workers", &[Scope::Worker]).await?;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let workers = args.workers.unwrap_or(cores);
+    // Only a start with local workers makes them a token: the servers of a
+    // fleet, whose workers run elsewhere, leave none in the shared tokens.
+    let worker_token = if workers > 0 {
+        own_token(&*store, &mut made, "local workers", &[Scope::Worker]).await?
+    } else {
+        String::new()
+    };
     // The demo's dashboard token (read and submit, printed in a URL) is
     // this start's too: the next start revokes it with the others.
     let demo_token = if args.demo {
@@ -222,8 +230,6 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             }
         })
     };
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let workers = args.workers.unwrap_or(cores);
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let mut supervisors = Vec::new();
     // Mesa's drivers, which a worker opens to look for a GPU, print
