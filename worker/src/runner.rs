@@ -522,8 +522,7 @@ fn inputs(client: &Client, lease: &Lease, cache: &InputCache) -> Result<Arc<Bake
     }
     let fetch = |i: usize| -> Result<UploadBytes, JobError> {
         let u = &lease.uploads[i];
-        let blob = client
-            .get_blob(&u.digest)
+        let blob = with_retries(|| client.get_blob(&u.digest))
             .map_err(|e| JobError::Failed(format!("cannot fetch upload {}: {e}", u.digest)))?;
         UploadBytes::from_blob(&blob, u.bundle).map_err(|e| JobError::Invalid(e.to_string()))
     };
@@ -567,8 +566,7 @@ fn execute(
         // Only what the job reads (not, say, a cubemap ground's truth for
         // a preview).
         for o in d.outputs.iter().filter(|o| spec.reads(&o.name)) {
-            let bytes = client
-                .get_blob(&o.digest)
+            let bytes = with_retries(|| client.get_blob(&o.digest))
                 .map_err(|e| JobError::Failed(format!("cannot fetch {}: {e}", o.name)))?;
             out.outputs.push(Output {
                 name: o.name.clone(),
@@ -581,8 +579,7 @@ fn execute(
         Some(c) => Some(Checkpoint {
             step: c.step.clone(),
             cursor: c.cursor as u64,
-            data: client
-                .get_blob(&c.blob)
+            data: with_retries(|| client.get_blob(&c.blob))
                 .map_err(|e| JobError::Failed(format!("cannot fetch the checkpoint: {e}")))?,
         }),
         None => None,
@@ -652,20 +649,45 @@ fn wide_pool() -> Option<&'static rayon::ThreadPool> {
     .as_ref()
 }
 
-/// Retries a call that failed on the network or with a 5xx (three tries,
-/// 0.5 s then 1 s apart): finished work is worth a second try. A 409 after
-/// a retry means an earlier try went through, or the lease is gone.
-fn with_retries<T>(mut call: impl FnMut() -> Result<T, ApiError>) -> Result<T, ApiError> {
-    let mut wait = Duration::from_millis(500);
-    for _ in 0..2 {
+/// How long a worker keeps trying a call that failed on the network or
+/// with a 5xx: a server restarting (a rolling update, a crash and its
+/// supervisor), a database or blob store failing over. Finished work is
+/// worth the wait, and a lease outlives a short outage: a completion that
+/// arrives after the job was leased again gets 409, which ends the tries.
+const RETRY_FOR: Duration = Duration::from_secs(300);
+
+/// Retries a call that failed on the network or with a 5xx, 0.5 s, then
+/// 1, 2, 4 and 5 s apart, for up to [`RETRY_FOR`]. A 409 after a retry
+/// means an earlier try went through, or the lease is gone.
+fn with_retries<T>(call: impl FnMut() -> Result<T, ApiError>) -> Result<T, ApiError> {
+    retry_transient(RETRY_FOR, Duration::from_millis(500), call)
+}
+
+/// [`with_retries`] over `window`, the first wait `first`, each next one
+/// twice the last up to 5 s; it says why it waits at the first retry and
+/// every 30 s after.
+fn retry_transient<T>(
+    window: Duration,
+    first: Duration,
+    mut call: impl FnMut() -> Result<T, ApiError>,
+) -> Result<T, ApiError> {
+    let started = Instant::now();
+    let mut wait = first;
+    let mut said: Option<Instant> = None;
+    loop {
         match call() {
-            Err(e) if e.is_transient() => say!("retrying after: {e}"),
+            Err(e) if e.is_transient() && started.elapsed() + wait <= window => {
+                if said.is_none_or(|t| t.elapsed() >= Duration::from_secs(30)) {
+                    let left = window.saturating_sub(started.elapsed()).as_secs();
+                    say!("retrying (for up to {left} s more) after: {e}");
+                    said = Some(Instant::now());
+                }
+            }
             other => return other,
         }
         std::thread::sleep(wait);
-        wait *= 2;
+        wait = (wait * 2).min(Duration::from_secs(5));
     }
-    call()
 }
 
 fn run_leased(
@@ -762,9 +784,81 @@ fn run_leased(
         }
         Err(e) => {
             say!("job {job} failed: {e}");
-            if let Err(e) = client.fail(job, &lease.token, &e.to_string(), e.retryable()) {
+            let why = e.to_string();
+            if let Err(e) = with_retries(|| client.fail(job, &lease.token, &why, e.retryable())) {
                 say!("job {job}: failure not recorded: {e}");
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unreachable() -> ApiError {
+        ApiError::Transport {
+            base: "http://127.0.0.1:1".into(),
+            message: "Connection refused".into(),
+        }
+    }
+
+    fn answered(status: u16) -> ApiError {
+        ApiError::Status {
+            status,
+            problem: Box::new(aobake_api::types::Problem {
+                kind: "about:blank".into(),
+                title: "t".into(),
+                status,
+                detail: "d".into(),
+                code: "c".into(),
+            }),
+        }
+    }
+
+    /// A server away for longer than a few quick tries (here 6 refusals,
+    /// 0.15 s and more) is waited for, within the window.
+    #[test]
+    fn a_call_is_retried_while_the_server_is_away() {
+        let mut tries = 0;
+        let got = retry_transient(Duration::from_secs(5), Duration::from_millis(5), || {
+            tries += 1;
+            if tries <= 6 {
+                Err(unreachable())
+            } else {
+                Ok(tries)
+            }
+        });
+        assert_eq!(got.unwrap(), 7);
+    }
+
+    /// Past the window the last error comes back; an answer that is not
+    /// transient (409: the lease is gone) ends the tries at once.
+    #[test]
+    fn tries_end_with_the_window_or_a_lasting_answer() {
+        let started = Instant::now();
+        let mut tries = 0;
+        let got: Result<(), _> = retry_transient(
+            Duration::from_millis(300),
+            Duration::from_millis(10),
+            || {
+                tries += 1;
+                Err(answered(502))
+            },
+        );
+        assert_eq!(got.unwrap_err().status(), Some(502));
+        assert!(
+            started.elapsed() < Duration::from_secs(2),
+            "{:?}",
+            started.elapsed()
+        );
+        assert!((3..=30).contains(&tries), "{tries}");
+        let mut tries = 0;
+        let got: Result<(), _> = retry_transient(Duration::from_secs(60), Duration::ZERO, || {
+            tries += 1;
+            Err(answered(409))
+        });
+        assert!(got.unwrap_err().is_lease_lost());
+        assert_eq!(tries, 1);
     }
 }

@@ -128,6 +128,40 @@ fn a_server_killed_mid_bake_restarts_and_finishes_the_same() {
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
 }
 
+/// A server away for several seconds (a restart) costs the workers no
+/// work: what they finish meanwhile is handed in when it is back, within
+/// the lease, so no job runs twice.
+#[test]
+fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 120.0,
+        ..Options::default()
+    });
+    let (cm, id) = cesium_man_under_way(&mut env);
+    let url = env.url.clone();
+    let before = jobs(&env, id);
+    env.kill_server();
+    // Longer than a job takes here, so that jobs finish while it is away.
+    std::thread::sleep(Duration::from_secs(6));
+    env.start_server_on(url.trim_start_matches("http://"));
+    let bake = env.wait_bake(id, Duration::from_secs(100));
+    let after = jobs(&env, id);
+    assert_counted_once(&bake, &after);
+    let running = |jobs: &[Value]| -> Vec<i64> {
+        jobs.iter()
+            .filter(|j| j["state"] == "running")
+            .map(|j| j["id"].as_i64().unwrap())
+            .collect()
+    };
+    assert!(
+        !running(&before).is_empty(),
+        "jobs were running at the kill"
+    );
+    let twice: Vec<&Value> = after.iter().filter(|j| j["attempts"] != 1).collect();
+    assert!(twice.is_empty(), "jobs run again: {twice:?}");
+    assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
+}
+
 #[test]
 fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
     let pg = TestPostgres::start();
