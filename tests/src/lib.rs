@@ -355,13 +355,18 @@ impl TestEnv {
 
     /// Runs the `aobake` CLI against this server with the admin token.
     pub fn aobake(&self, args: &[&str]) -> Output {
-        Command::new(binary())
+        self.aobake_command(args).output().expect("aobake runs")
+    }
+
+    /// The command [`TestEnv::aobake`] runs, to spawn.
+    pub fn aobake_command(&self, args: &[&str]) -> Command {
+        let mut command = Command::new(binary());
+        command
             .args(args)
             .env("AOBAKE_SERVER", &self.url)
             .env("AOBAKE_TOKEN", ADMIN)
-            .current_dir(self.dir.path())
-            .output()
-            .expect("aobake runs")
+            .current_dir(self.dir.path());
+        command
     }
 
     /// Waits until the bake ends (done, failed or cancelled), or panics

@@ -8,7 +8,7 @@ use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
 use rand::RngExt as _;
 use serde_json::Value;
 
-use crate::util::{asset, local_bake, submit, upload};
+use crate::util::{QUICK, asset, local_bake, submit, upload};
 
 fn jobs(env: &TestEnv, id: i64) -> Vec<Value> {
     let (_, b) = env
@@ -130,7 +130,8 @@ fn a_server_killed_mid_bake_restarts_and_finishes_the_same() {
 
 /// A server away for several seconds (a restart) costs the workers no
 /// work: what they finish meanwhile is handed in when it is back, within
-/// the lease, so no job runs twice.
+/// the lease, so no job runs twice. A `submit --wait` following the bake
+/// waits for the server too and ends with the bake.
 #[test]
 fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
     let mut env = TestEnv::start(Options {
@@ -140,6 +141,29 @@ fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
     let (cm, id) = cesium_man_under_way(&mut env);
     let url = env.url.clone();
     let before = jobs(&env, id);
+    // The same request joins the bake under way and follows it.
+    let mut args = vec!["submit", cm.to_str().unwrap(), "--poses", "64", "--wait"];
+    args.extend(QUICK);
+    let (out, err) = (
+        env.dir.path().join("follow.out"),
+        env.dir.path().join("follow.err"),
+    );
+    let mut follower = env
+        .aobake_command(&args)
+        .stdout(std::fs::File::create(&out).unwrap())
+        .stderr(std::fs::File::create(&err).unwrap())
+        .spawn()
+        .unwrap();
+    let read = |path: &std::path::Path| std::fs::read_to_string(path).unwrap_or_default();
+    let started = Instant::now();
+    while !read(&out).contains(&format!("bake {id}: key")) {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "no submit: {}",
+            read(&err)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
     env.kill_server();
     // Longer than a job takes here, so that jobs finish while it is away.
     std::thread::sleep(Duration::from_secs(6));
@@ -159,6 +183,15 @@ fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
     );
     let twice: Vec<&Value> = after.iter().filter(|j| j["attempts"] != 1).collect();
     assert!(twice.is_empty(), "jobs run again: {twice:?}");
+    let followed = follower.wait().unwrap();
+    let (stdout, stderr) = (read(&out), read(&err));
+    assert!(
+        followed.success()
+            && stdout.contains(&format!("bake {id} done"))
+            && stderr.contains("asking again")
+            && stderr.contains("the server answers again"),
+        "{stdout}\n{stderr}"
+    );
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
 }
 
