@@ -45,13 +45,33 @@ pub enum ApiError {
     /// Too many requests for this token.
     #[error("too many requests; retry after {0} s")]
     RateLimited(u64),
-    /// The database does not answer (restarting, unreachable): the
-    /// request can be sent again after this many seconds.
-    #[error("the database is not answering; retry after {0} s")]
-    Unavailable(u64),
+    /// The database or the blob store does not answer (restarting,
+    /// unreachable): the request can be sent again after this many
+    /// seconds.
+    #[error("{0} is not answering; retry after {1} s")]
+    Unavailable(Outage, u64),
     /// A bug or an outage; the detail is logged, not sent.
     #[error("internal error: {0}")]
     Internal(String),
+}
+
+/// What a 503 says does not answer, so that an operator looks in the
+/// right place.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outage {
+    /// SQLite or PostgreSQL.
+    Database,
+    /// The blob store (local disk, or an S3-compatible bucket).
+    Blobs,
+}
+
+impl std::fmt::Display for Outage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Database => "the database",
+            Self::Blobs => "the blob store",
+        })
+    }
 }
 
 impl ApiError {
@@ -90,7 +110,7 @@ impl ApiError {
                 "rate_limited",
                 "Too many requests",
             ),
-            Self::Unavailable(_) => (
+            Self::Unavailable(..) => (
                 StatusCode::SERVICE_UNAVAILABLE,
                 "unavailable",
                 "Service unavailable",
@@ -136,7 +156,7 @@ impl IntoResponse for ApiError {
             header::CONTENT_TYPE,
             HeaderValue::from_static("application/problem+json"),
         );
-        if let Self::RateLimited(s) | Self::Unavailable(s) = self {
+        if let Self::RateLimited(s) | Self::Unavailable(_, s) = self {
             res.headers_mut()
                 .insert(header::RETRY_AFTER, HeaderValue::from(s));
         }
@@ -157,7 +177,7 @@ impl From<StoreError> for ApiError {
             StoreError::NotFound(m) => Self::NotFound(m),
             StoreError::Database(e) if unreachable(&e) => {
                 eprintln!("error: the database is not answering: {e}");
-                Self::Unavailable(DATABASE_RETRY_SECS)
+                Self::Unavailable(Outage::Database, DATABASE_RETRY_SECS)
             }
             other => Self::Internal(other.to_string()),
         }
@@ -168,7 +188,7 @@ impl From<StoreError> for ApiError {
 const DATABASE_RETRY_SECS: u64 = 2;
 
 /// What a client is told to wait while the blob store does not answer.
-const BLOBS_RETRY_SECS: u64 = 5;
+pub(crate) const BLOBS_RETRY_SECS: u64 = 5;
 
 /// Whether `e` says the database could not be reached (down, restarting,
 /// its connections gone), not that a query failed.
@@ -195,8 +215,8 @@ impl From<BlobError> for ApiError {
                 Self::bad("bad_digest", e.to_string())
             }
             BlobError::Store(_) if e.unreachable() => {
-                eprintln!("error: {e}");
-                Self::Unavailable(BLOBS_RETRY_SECS)
+                eprintln!("error: not answering (503): {e}");
+                Self::Unavailable(Outage::Blobs, BLOBS_RETRY_SECS)
             }
             BlobError::Io(_) | BlobError::Store(_) | BlobError::Config(_) => {
                 Self::Internal(e.to_string())

@@ -300,7 +300,7 @@ async fn record(state: &AppState, items: Vec<JobCompletion>) -> ApiResult<Vec<Ap
         let (digest, found) = joined.map_err(|e| ApiError::Internal(e.to_string()))?;
         match found {
             Ok(()) => {}
-            Err(e @ ApiError::Unavailable(_)) => return Err(e),
+            Err(e @ ApiError::Unavailable(..)) => return Err(e),
             Err(e) => {
                 missing.insert(digest, e);
             }

@@ -12,7 +12,7 @@ use axum::{
 
 use crate::{
     auth::{Admin, Need, Read, new_token, token_hash},
-    error::{ApiError, ApiResult, Problem},
+    error::{ApiError, ApiResult, BLOBS_RETRY_SECS, Outage, Problem},
     extract::{ApiPath, Body},
     state::AppState,
     store::WorkerRow,
@@ -146,11 +146,27 @@ pub(crate) async fn healthz() -> &'static str {
 }
 
 /// Readiness: the database answers (no token).
-#[utoipa::path(get, path = "/readyz", tag = "system", responses((status = 200, description = "Ready", body = String), (status = 503, description = "The database does not answer (Retry-After says when to look again)", body = Problem, content_type = "application/problem+json")))]
+#[utoipa::path(get, path = "/readyz", tag = "system", responses((status = 200, description = "Ready", body = String), (status = 503, description = "The database or the blob store does not answer (the detail names which; Retry-After says when to look again)", body = Problem, content_type = "application/problem+json")))]
 pub(crate) async fn ready(State(state): State<AppState>) -> ApiResult<&'static str> {
     state.store.ping().await?;
+    // The blob store answers a question about a blob it does not hold
+    // (a HEAD on a bucket), within a probe's patience: the S3 client's
+    // own retries can take longer.
+    let absent = "0".repeat(64);
+    match tokio::time::timeout(BLOBS_PROBE, state.blobs.len(&absent)).await {
+        Ok(answer) => answer?,
+        Err(_) => {
+            eprintln!(
+                "error: the blob store did not answer the readiness probe in {BLOBS_PROBE:?}"
+            );
+            return Err(ApiError::Unavailable(Outage::Blobs, BLOBS_RETRY_SECS));
+        }
+    };
     Ok("ready")
 }
+
+/// How long the readiness probe waits for the blob store.
+const BLOBS_PROBE: std::time::Duration = std::time::Duration::from_secs(3);
 
 #[utoipa::path(get, path = "/metrics", tag = "system",
     security(("bearer" = ["read"])),

@@ -223,8 +223,10 @@ fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
         .unwrap();
     assert!((1..=30).contains(&retry), "{retry}");
     // The readiness probe says the same, so a load balancer looks elsewhere.
-    let probe = agent.get(format!("{}/readyz", env.url)).call().unwrap();
+    let mut probe = agent.get(format!("{}/readyz", env.url)).call().unwrap();
     assert_eq!(probe.status().as_u16(), 503);
+    let text = probe.body_mut().read_to_string().unwrap();
+    assert!(text.contains("the database is not answering"), "{text}");
     std::thread::sleep(Duration::from_secs(3));
     pg.start_again();
     // The workers went on waiting; the bake finishes, every job counted
@@ -278,10 +280,22 @@ fn an_s3_outage_answers_503_with_retry_after() {
         (503, Some("unavailable")),
         "{problem}"
     );
+    // It names what is down, so an operator looks at the store, not at
+    // the database.
+    let detail = problem["detail"].as_str().unwrap_or_default();
+    assert!(
+        detail.starts_with("the blob store is not answering"),
+        "{detail}"
+    );
     assert!(
         headers.iter().any(|(k, v)| k == "retry-after" && v == "5"),
         "{headers:?}"
     );
+    // The readiness probe says the same, so a load balancer looks elsewhere.
+    let mut probe = agent.get(format!("{}/readyz", env.url)).call().unwrap();
+    assert_eq!(probe.status().as_u16(), 503);
+    let text = probe.body_mut().read_to_string().unwrap();
+    assert!(text.contains("the blob store is not answering"), "{text}");
 }
 
 #[test]
