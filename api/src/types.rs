@@ -226,7 +226,9 @@ pub enum Action {
 pub struct WorkerRow {
     /// Its id.
     pub id: String,
-    /// `idle`, `busy` or `stopped`.
+    /// `idle`, `busy`, or `stopped`: not seen for a lease's length (it
+    /// exited, was killed or is cut off; a live worker polls or
+    /// heartbeats well within a lease).
     pub state: String,
     /// The job it runs.
     pub job_id: Option<i64>,

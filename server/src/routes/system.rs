@@ -36,7 +36,7 @@ pub(crate) async fn workers(
     State(state): State<AppState>,
     _caller: Need<Read>,
 ) -> ApiResult<Json<Vec<WorkerRow>>> {
-    Ok(Json(state.store.workers().await?))
+    Ok(Json(state.store.workers(state.policy.lease_ms).await?))
 }
 
 #[utoipa::path(get, path = "/v1/whoami", tag = "system",

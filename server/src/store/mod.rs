@@ -251,8 +251,11 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn workers_idle(&self, workers: &[String]) -> Result<()>;
     /// Records what casts a worker's rays (`cpu`, or `gpu: ADAPTER`).
     async fn worker_tracer(&self, worker: &str, tracer: &str) -> Result<()>;
-    /// Every worker, most recently seen first.
-    async fn workers(&self) -> Result<Vec<WorkerRow>>;
+    /// Every worker, most recently seen first; one not seen for
+    /// `gone_after_ms` is `stopped`, with no job (it exited, was killed
+    /// or is cut off: a live worker polls or heartbeats well within a
+    /// lease).
+    async fn workers(&self, gone_after_ms: i64) -> Result<Vec<WorkerRow>>;
     /// Stores a token's hash.
     async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()>;
     /// A token by hash.

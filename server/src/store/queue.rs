@@ -1128,12 +1128,15 @@ impl<B: Backend> Store for SqlStore<B> {
         })
     }
 
-    async fn workers(&self) -> Result<Vec<WorkerRow>> {
+    async fn workers(&self, gone_after_ms: i64) -> Result<Vec<WorkerRow>> {
         let rows: Vec<RawWorker> = self
             .backend
             .read()
             .await?
-            .all(B::sql("SELECT * FROM workers ORDER BY last_seen DESC, id"))
+            .all(
+                B::sql("SELECT id, CASE WHEN last_seen < {now} - $1 THEN 'stopped' ELSE state END AS state, CASE WHEN last_seen < {now} - $1 THEN NULL ELSE job_id END AS job_id, last_seen, started_at, tracer FROM workers ORDER BY last_seen DESC, id")
+                    .bind(gone_after_ms),
+            )
             .await?;
         Ok(rows.into_iter().map(RawWorker::cook).collect())
     }

@@ -153,7 +153,7 @@ async fn a_batch_split_by_failures_leases_each_job_once(store: &dyn Store) {
     // Idle slots are marked in one go, a repeated one once; a busy one
     // (split/1, holding a job now) and a new one too.
     let held = store.lease("split/1", &p).await.unwrap().unwrap();
-    let busy = store.workers().await.unwrap();
+    let busy = store.workers(60_000).await.unwrap();
     let before = busy.iter().find(|w| w.id == "split/1").unwrap();
     assert_eq!(
         (before.state.as_str(), before.job_id),
@@ -161,11 +161,24 @@ async fn a_batch_split_by_failures_leases_each_job_once(store: &dyn Store) {
     );
     let idle = ["split/0", "split/1", "split/0", "split/new"].map(str::to_owned);
     store.workers_idle(&idle).await.unwrap();
-    let workers = store.workers().await.unwrap();
+    let workers = store.workers(60_000).await.unwrap();
     for id in ["split/0", "split/1", "split/new"] {
         let w = workers.iter().find(|w| w.id == id).unwrap();
         assert_eq!((w.state.as_str(), w.job_id), ("idle", None), "{w:?}");
     }
+    // A worker not seen for the given time is listed as stopped, with no
+    // job, whatever it last said (the row itself is kept as it was).
+    store.release(held.job.id, &held.token).await.unwrap();
+    let held = store.lease("split/1", &p).await.unwrap().unwrap();
+    tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    let gone = store.workers(5).await.unwrap();
+    let busy = store.workers(60_000).await.unwrap();
+    for id in ["split/0", "split/1", "split/new"] {
+        let w = gone.iter().find(|w| w.id == id).unwrap();
+        assert_eq!((w.state.as_str(), w.job_id), ("stopped", None), "{w:?}");
+    }
+    let w = busy.iter().find(|w| w.id == "split/1").unwrap();
+    assert_eq!((w.state.as_str(), w.job_id), ("busy", Some(held.job.id)));
     store.release(held.job.id, &held.token).await.unwrap();
 }
 
@@ -325,7 +338,7 @@ async fn a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store: &dyn
     for l in &fit[1..] {
         store.release(l.job.id, &l.token).await.unwrap();
     }
-    let workers = store.workers().await.unwrap();
+    let workers = store.workers(60_000).await.unwrap();
     let state = |id: &str| workers.iter().find(|w| w.id == id).unwrap().state.clone();
     assert_eq!(state("proc/0"), "idle");
 }
@@ -359,7 +372,7 @@ async fn tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store: &d
         (second.job.bake_id, second.job.kind.as_str()),
         (created.id, "sample")
     );
-    let workers = store.workers().await.unwrap();
+    let workers = store.workers(60_000).await.unwrap();
     let tracer = |id: &str| workers.iter().find(|w| w.id == id).unwrap().tracer.clone();
     assert_eq!(
         (tracer("gpu").as_str(), tracer("cpu").as_str()),
