@@ -174,6 +174,7 @@ impl From<StoreError> for ApiError {
     fn from(e: StoreError) -> Self {
         match e {
             StoreError::LeaseLost(m) | StoreError::Conflict(m) => Self::Conflict(m),
+            e @ StoreError::Revoked(_) => Self::Conflict(e.to_string()),
             StoreError::NotFound(m) => Self::NotFound(m),
             StoreError::Database(e) if unreachable(&e) => {
                 eprintln!("error: the database is not answering: {e}");

@@ -15,7 +15,7 @@ use crate::{
     auth::{Scope, new_token, token_hash},
     blobs::{self, Blobs, LocalBlobs},
     state::{AppState, ServerLimits},
-    store::{PgStore, QueuePolicy, SqliteStore, Store},
+    store::{PgStore, QueuePolicy, SqliteStore, Store, StoreError},
 };
 
 /// The environment variable that gives `aobake serve` its admin token
@@ -143,13 +143,22 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         .map(str::trim)
         .filter(|h| !h.is_empty())
         .collect();
-    for hash in &previous {
+    let given = std::env::var(ADMIN_TOKEN_ENV)
+        .ok()
+        .filter(|t| !t.is_empty());
+    let given_hash = given.as_deref().map(token_hash);
+    // (Not the one the operator now gives, such as an earlier start's
+    // generated secret kept: revoking it would keep it off for good.)
+    for hash in previous
+        .iter()
+        .filter(|&&h| Some(h) != given_hash.as_deref())
+    {
         store.delete_token(hash).await?;
     }
     let mut made = Vec::new();
     let admin_file = args.data.join("admin.token");
-    let admin = match std::env::var(ADMIN_TOKEN_ENV) {
-        Ok(t) if !t.is_empty() => {
+    let admin = match given {
+        Some(t) => {
             // The file holds a token an earlier start generated, revoked
             // above: clients read it by default, so it goes too.
             // (Unless it is the token the operator now gives.)
@@ -167,7 +176,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             }
             t
         }
-        _ => {
+        None => {
             let t = new_token();
             write_private(&admin_file, &t)?;
             println!("admin token: {t} (also in {})", admin_file.display());
@@ -175,13 +184,22 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             t
         }
     };
-    store
+    match store
         .create_token(
             &token_hash(&admin),
             "admin",
             &[Scope::Admin.name().to_owned()],
         )
-        .await?;
+        .await
+    {
+        // A revoked secret stays revoked, on every server of a fleet and
+        // across restarts: this start goes on without it (the other
+        // tokens, and other admin tokens, still work).
+        Err(StoreError::Revoked(_)) => eprintln!(
+            "warning: {ADMIN_TOKEN_ENV} was revoked (aobake token revoke) and stays revoked: it is refused; set a new secret (aobake token create --scope admin makes one)"
+        ),
+        other => other?,
+    }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let workers = args.workers.unwrap_or(cores);
     // Only a start with local workers makes them a token: the servers of a

@@ -1021,6 +1021,63 @@ fn a_restart_leaves_no_revoked_token_behind_and_a_refusal_names_the_tokens_sourc
     );
 }
 
+/// A revoked admin secret stays revoked when a server starts with it
+/// again (a restart, another server of a fleet): the start says so and
+/// goes on without it, and the other admin token still works.
+#[test]
+fn a_revoked_admin_token_stays_revoked_across_restarts() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let leaked = "an-admin-token-that-leaked-0123456789abcdef";
+    let aobake = |url: &str, token: &str, args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_aobake"))
+            .args(args)
+            .args(["--server", url, "--token", token])
+            .output()
+            .unwrap()
+    };
+    let (serve, url) = start_serve(&data, Some(leaked), 0, &[]);
+    let made = aobake(
+        &url,
+        leaked,
+        &["token", "create", "--scope", "admin", "--name", "ops"],
+    );
+    assert!(made.status.success(), "{}", stderr(&made));
+    let other = String::from_utf8(made.stdout).unwrap().trim().to_owned();
+    let list = aobake(&url, &other, &["token", "list", "--json"]);
+    let tokens: serde_json::Value = serde_json::from_slice(&list.stdout).unwrap();
+    let id = tokens
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["name"] == "admin")
+        .unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_owned();
+    let revoked = aobake(&url, &other, &["token", "revoke", &id]);
+    assert!(revoked.status.success(), "{}", stderr(&revoked));
+    stop_serve(serve);
+
+    let (serve, url) = start_serve(&data, Some(leaked), 0, &[]);
+    let said = std::fs::read_to_string(data.with_extension("stderr")).unwrap();
+    let refused = aobake(&url, leaked, &["token", "list"]);
+    let still = aobake(&url, &other, &["token", "list", "--json"]);
+    stop_serve(serve);
+    assert!(said.contains("AOBAKE_ADMIN_TOKEN was revoked"), "{said}");
+    assert!(!refused.status.success() && stderr(&refused).contains("401"));
+    assert!(still.status.success(), "{}", stderr(&still));
+    let tokens: serde_json::Value = serde_json::from_slice(&still.stdout).unwrap();
+    assert!(
+        tokens
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|t| t["id"] != id.as_str()),
+        "{tokens}"
+    );
+}
+
 /// `aobake key` gives the key `aobake bake` writes into the asset, for
 /// every family, with clips from another file and parameters set by
 /// `--param`, on `.gltf` files.

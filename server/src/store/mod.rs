@@ -44,6 +44,10 @@ pub enum StoreError {
     /// The request conflicts with the bake's state.
     #[error("{0}")]
     Conflict(String),
+    /// The token was revoked (at this time, ms since the epoch), and a
+    /// revoked secret is never valid again.
+    #[error("the token was revoked (at {0} ms since the epoch) and stays revoked")]
+    Revoked(i64),
     /// The database failed.
     #[error("database: {0}")]
     Database(#[from] sqlx::Error),
@@ -256,14 +260,15 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// or is cut off: a live worker polls or heartbeats well within a
     /// lease).
     async fn workers(&self, gone_after_ms: i64) -> Result<Vec<WorkerRow>>;
-    /// Stores a token's hash.
+    /// Stores a token's hash; [`StoreError::Revoked`] for one revoked
+    /// before.
     async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()>;
     /// A token by hash.
     async fn token(&self, hash: &str) -> Result<Option<TokenRow>>;
     /// Every token, newest first, by hash (the secrets are not stored).
     async fn tokens(&self) -> Result<Vec<(String, TokenRow)>>;
-    /// Deletes a token: from its next request on it is refused (401).
-    /// Whether there was one.
+    /// Deletes a token: from its next request on it is refused (401),
+    /// and it can never be created again. Whether there was one.
     async fn delete_token(&self, hash: &str) -> Result<bool>;
     /// Jobs per state, and lease expiries so far.
     async fn queue_stats(&self) -> Result<(Vec<(JobState, i64)>, i64)>;

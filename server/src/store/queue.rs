@@ -1143,6 +1143,14 @@ impl<B: Backend> Store for SqlStore<B> {
 
     async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()> {
         in_tx!(self, Durability::Acknowledged, |c| {
+            let revoked: Option<(i64,)> = c
+                .optional(
+                    B::sql("SELECT revoked_at FROM revoked_tokens WHERE hash = $1").bind(hash),
+                )
+                .await?;
+            if let Some((at,)) = revoked {
+                return Err(StoreError::Revoked(at));
+            }
             c.execute(
                 B::sql("INSERT INTO tokens (hash, name, scopes, created_at) VALUES ($1, $2, $3, {now}) ON CONFLICT (hash) DO UPDATE SET name = excluded.name, scopes = excluded.scopes")
                     .bind(hash)
@@ -1186,6 +1194,11 @@ impl<B: Backend> Store for SqlStore<B> {
             let deleted = c
                 .execute(B::sql("DELETE FROM tokens WHERE hash = $1").bind(hash))
                 .await?;
+            c.execute(
+                B::sql("INSERT INTO revoked_tokens (hash, revoked_at) VALUES ($1, {now}) ON CONFLICT (hash) DO NOTHING")
+                    .bind(hash),
+            )
+            .await?;
             Ok(deleted > 0)
         })
     }

@@ -109,6 +109,16 @@ async fn tokens_are_listed_newest_first_and_deleted(store: &dyn Store) {
     assert!(!store.delete_token(&"1".repeat(64)).await.unwrap(), "gone");
     assert_eq!(store.token(&"1".repeat(64)).await.unwrap(), None);
     assert!(store.token(&"2".repeat(64)).await.unwrap().is_some());
+    // A revoked secret stays revoked: creating it again (a server started
+    // with it as its admin token) is refused, and it stays unknown.
+    let again = store
+        .create_token(&"1".repeat(64), "admin", &["admin".into()])
+        .await;
+    assert!(
+        matches!(again, Err(StoreError::Revoked(at)) if at >= ci.created_at),
+        "{again:?}"
+    );
+    assert_eq!(store.token(&"1".repeat(64)).await.unwrap(), None);
 }
 
 /// A slot with failures on record claims apart from the others (its own
