@@ -87,6 +87,10 @@ pub struct BakeRow {
     pub total_work: i64,
     /// Units of work of completed jobs.
     pub done_work: i64,
+    /// Work units the running jobs have done so far (their progress):
+    /// with `done_work`, what a progress bar shows.
+    #[serde(default)]
+    pub running_work: i64,
     /// Jobs in all.
     pub jobs_total: i64,
     /// Jobs completed.

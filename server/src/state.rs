@@ -53,10 +53,29 @@ pub struct BakeEvent {
     pub id: i64,
     /// Its state.
     pub state: crate::store::BakeState,
-    /// Units done.
+    /// Units done, the running jobs' progress included: what the bake's
+    /// view says (`progress.done`).
     pub done: i64,
     /// Units in all.
     pub total: i64,
+}
+
+impl BakeEvent {
+    /// The event that tells of `bake` as it is.
+    pub fn of(bake: &crate::store::BakeRow) -> Self {
+        Self {
+            id: bake.id,
+            state: bake.state,
+            done: progress_done(bake),
+            total: bake.total_work,
+        }
+    }
+}
+
+/// A bake's units done: its finished jobs' work and its running jobs'
+/// progress.
+pub fn progress_done(bake: &crate::store::BakeRow) -> i64 {
+    (bake.done_work + bake.running_work).min(bake.total_work)
 }
 
 #[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
@@ -259,12 +278,7 @@ impl AppState {
     /// job became ready, so no worker is woken): on every server that
     /// shares the store, or on this one.
     pub fn publish(&self, bake: &crate::store::BakeRow) {
-        let event = BakeEvent {
-            id: bake.id,
-            state: bake.state,
-            done: bake.done_work,
-            total: bake.total_work,
-        };
+        let event = BakeEvent::of(bake);
         let local = match &self.shared_events {
             Some(shared) => shared.send(event).err().map(|e| e.0),
             None => Some(event),

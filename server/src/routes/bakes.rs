@@ -47,15 +47,9 @@ pub(super) fn router() -> Router<AppState> {
 }
 
 fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
-    let running: i64 = jobs
-        .iter()
-        .flatten()
-        .filter(|j| j.state == crate::store::JobState::Running)
-        .map(|j| j.progress)
-        .sum();
     BakeView {
         progress: Progress {
-            done: (bake.done_work + running).min(bake.total_work),
+            done: crate::state::progress_done(&bake),
             total: bake.total_work,
         },
         bake,
@@ -350,7 +344,7 @@ pub(crate) async fn cache(
 
 #[utoipa::path(get, path = "/v1/events", tag = "bakes",
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Server-sent events: `bake` with {id, state, done, total} whenever any bake changes (a dashboard's bakes list)", content_type = "text/event-stream", body = String), Refusals))]
+    responses((status = 200, description = "Server-sent events: `bake` with {id, state, done, total} whenever any bake or one of its jobs changes (a job leased, moving or finished; `done` is the view's `progress.done`, running jobs' progress included, so two events can carry the same numbers); a dashboard's bakes list", content_type = "text/event-stream", body = String), Refusals))]
 pub(crate) async fn all_events(
     State(state): State<AppState>,
     _caller: Need<Read>,
@@ -372,7 +366,7 @@ fn bake_event(e: &crate::state::BakeEvent) -> Event {
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/events", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Server-sent events: `bake` events with id, state, done and total", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "Server-sent events: `bake` events with id, state, done (the view's `progress.done`) and total, first the bake as it is, then at each change of it or its jobs", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn events(
     State(state): State<AppState>,
     _caller: Need<Read>,
@@ -380,12 +374,7 @@ pub(crate) async fn events(
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
     let rx = state.events.subscribe();
     let bake = find(&state, id).await?;
-    let first = crate::state::BakeEvent {
-        id,
-        state: bake.state,
-        done: bake.done_work,
-        total: bake.total_work,
-    };
+    let first = crate::state::BakeEvent::of(&bake);
     let initial = tokio_stream::once(Ok(bake_event(&first)));
     let updates = BroadcastStream::new(rx).filter_map(move |e| match e {
         Ok(e) if e.id == id => Some(Ok(bake_event(&e))),

@@ -325,16 +325,35 @@ const JOB_SELECT: &str = "SELECT jobs.*, {deps} AS deps FROM jobs";
 const WORKER_IDLE: &str =
     "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {now} WHERE id = $1";
 
+/// A bake's columns and its running jobs' progress, which a view and an
+/// event add to the finished jobs' work (`BakeRow::running_work`).
+const BAKE_COLUMNS: &str = "bakes.*, (SELECT CAST(COALESCE(SUM(r.progress), 0) AS BIGINT) FROM jobs r WHERE r.bake_id = bakes.id AND r.state = 'running') AS running_work";
+
 async fn bake_by_id<B: Backend>(c: &mut B::Conn, id: i64, lock: bool) -> Result<BakeRow> {
     let text = if lock {
         "SELECT * FROM bakes WHERE id = $1{for_update}"
     } else {
         "SELECT * FROM bakes WHERE id = $1"
     };
-    c.optional::<RawBake>(B::sql(text).bind(id))
+    let bake = c
+        .optional::<RawBake>(B::sql(text).bind(id))
         .await?
         .ok_or_else(|| StoreError::NotFound(format!("bake {id}")))?
-        .cook()
+        .cook()?;
+    with_running_work::<B>(c, bake).await
+}
+
+/// `bake` with its running jobs' progress, for a row read or written
+/// without it (a locked read, `RETURNING`).
+async fn with_running_work<B: Backend>(c: &mut B::Conn, mut bake: BakeRow) -> Result<BakeRow> {
+    let (running,): (i64,) = c
+        .one(
+            B::sql("SELECT CAST(COALESCE(SUM(progress), 0) AS BIGINT) FROM jobs WHERE bake_id = $1 AND state = 'running'")
+                .bind(bake.id),
+        )
+        .await?;
+    bake.running_work = running;
+    Ok(bake)
 }
 
 async fn job_by_id<B: Backend>(c: &mut B::Conn, id: i64) -> Result<JobRow> {
@@ -737,7 +756,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .backend
             .read()
             .await?
-            .optional(B::sql("SELECT * FROM bakes WHERE id = $1").bind(id))
+            .optional(B::sql(&format!("SELECT {BAKE_COLUMNS} FROM bakes WHERE id = $1")).bind(id))
             .await?;
         row.map(RawBake::cook).transpose()
     }
@@ -748,7 +767,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .read()
             .await?
             .optional(
-                B::sql("SELECT * FROM bakes WHERE key = $1 AND state IN ('done', 'queued', 'running', 'paused') ORDER BY state = 'done' DESC, id DESC LIMIT 1")
+                B::sql(&format!("SELECT {BAKE_COLUMNS} FROM bakes WHERE key = $1 AND state IN ('done', 'queued', 'running', 'paused') ORDER BY state = 'done' DESC, id DESC LIMIT 1"))
                     .bind(key),
             )
             .await?;
@@ -766,7 +785,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .read()
             .await?
             .all(
-                B::sql("SELECT * FROM bakes WHERE (CAST($1 AS TEXT) IS NULL OR character = $1) AND (CAST($2 AS TEXT) IS NULL OR method = $2) ORDER BY id DESC LIMIT $3")
+                B::sql(&format!("SELECT {BAKE_COLUMNS} FROM bakes WHERE (CAST($1 AS TEXT) IS NULL OR character = $1) AND (CAST($2 AS TEXT) IS NULL OR method = $2) ORDER BY id DESC LIMIT $3"))
                     .bind(character)
                     .bind(method)
                     .bind(limit),
@@ -843,7 +862,7 @@ impl<B: Backend> Store for SqlStore<B> {
                         )
                         .await?;
                     let bake = match started {
-                        Some(row) => row.cook()?,
+                        Some(row) => with_running_work::<B>(c, row.cook()?).await?,
                         None => bake_by_id::<B>(c, job.bake_id, false).await?,
                     };
                     let uploads = bake_uploads::<B>(c, &bake).await?;
@@ -975,7 +994,7 @@ impl<B: Backend> Store for SqlStore<B> {
                     )
                     .await?
                     .cook()?;
-                bakes.insert(bake_id, bake);
+                bakes.insert(bake_id, with_running_work::<B>(c, bake).await?);
             }
             // After the bakes' rows, locked in id order: two batches of
             // one bake, which share dependents, take their locks in turn.

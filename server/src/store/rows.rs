@@ -36,6 +36,10 @@ pub(super) struct RawBake {
     priority: i64,
     total_work: i64,
     done_work: i64,
+    /// Computed where a query selects it ([`super::queue`]'s
+    /// `RUNNING_WORK`); else filled in after.
+    #[sqlx(default)]
+    running_work: i64,
     jobs_total: i64,
     jobs_done: i64,
     asset: Option<String>,
@@ -60,6 +64,7 @@ impl RawBake {
             priority: self.priority,
             total_work: self.total_work,
             done_work: self.done_work,
+            running_work: self.running_work,
             jobs_total: self.jobs_total,
             jobs_done: self.jobs_done,
             asset: self.asset,

@@ -432,6 +432,19 @@ async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {
     let beat = store.heartbeat(a.job.id, &a.token, 1, &p).await.unwrap();
     assert!(!beat.stop && beat.moved);
     assert_eq!(beat.bake.id, a.job.bake_id);
+    // The running job's progress is the bake's running work, wherever the
+    // bake's row is read: what its events and its view's bar show.
+    assert_eq!((beat.bake.done_work, beat.bake.running_work), (0, 1));
+    let read = store.bake(b.id).await.unwrap().unwrap();
+    let listed = store.bakes(Some(&c), None, 10).await.unwrap();
+    let by_key = store.bake_for_key(&"1".repeat(64)).await.unwrap().unwrap();
+    for row in [
+        &read,
+        &by_key,
+        listed.iter().find(|l| l.id == b.id).unwrap(),
+    ] {
+        assert_eq!(row.running_work, 1, "{row:?}");
+    }
     // The same progress again: nothing moved.
     let beat = store.heartbeat(a.job.id, &a.token, 1, &p).await.unwrap();
     assert!(!beat.stop && !beat.moved);
@@ -455,7 +468,7 @@ async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {
         .complete(b2.job.id, &b2.token, &done("ao"))
         .await
         .unwrap();
-    assert_eq!((mid.done_work, mid.jobs_done), (4, 2));
+    assert_eq!((mid.done_work, mid.jobs_done, mid.running_work), (4, 2, 0));
     let fit = store.lease("w1", &p).await.unwrap().unwrap();
     assert_eq!(fit.job.index, 2);
     assert_eq!(fit.inputs.len(), 2, "one entry per dependency");
@@ -661,12 +674,7 @@ pub(crate) async fn bake_events_reach_every_server(
     let c = character(a.as_ref()).await;
     let row = a.create_bake(&bake(&c, "events")).await.unwrap();
     on_a.publish(&row);
-    let expected = BakeEvent {
-        id: row.id,
-        state: row.state,
-        done: row.done_work,
-        total: row.total_work,
-    };
+    let expected = BakeEvent::of(&row);
     let within = std::time::Duration::from_secs(10);
     for heard in [&mut heard_a, &mut heard_b] {
         let event = tokio::time::timeout(within, heard.recv()).await;
