@@ -156,8 +156,17 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         store.delete_token(hash).await?;
     }
     let mut made = Vec::new();
+    // The tokens this start makes are named after it, so that `token
+    // list` on a fleet tells whose each is.
+    let origin = format!(
+        "serve on {}, {}",
+        host_name(),
+        std::path::absolute(&args.data)
+            .unwrap_or_else(|_| args.data.clone())
+            .display()
+    );
     let admin_file = args.data.join("admin.token");
-    let admin = match given {
+    let (admin, admin_name) = match given {
         Some(t) => {
             // The file holds a token an earlier start generated, revoked
             // above: clients read it by default, so it goes too.
@@ -174,20 +183,21 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                     admin_file.display()
                 );
             }
-            t
+            // One name on every server that shares it.
+            (t, "admin".to_owned())
         }
         None => {
             let t = new_token();
             write_private(&admin_file, &t)?;
             println!("admin token: {t} (also in {})", admin_file.display());
             made.push(token_hash(&t));
-            t
+            (t, format!("admin ({origin})"))
         }
     };
     match store
         .create_token(
             &token_hash(&admin),
-            "admin",
+            &admin_name,
             &[Scope::Admin.name().to_owned()],
         )
         .await
@@ -205,7 +215,8 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     // Only a start with local workers makes them a token: the servers of a
     // fleet, whose workers run elsewhere, leave none in the shared tokens.
     let worker_token = if workers > 0 {
-        own_token(&*store, &mut made, "local workers", &[Scope::Worker]).await?
+        let name = format!("local workers ({origin})");
+        own_token(&*store, &mut made, &name, &[Scope::Worker]).await?
     } else {
         String::new()
     };
@@ -213,7 +224,8 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     // this start's too: the next start revokes it with the others.
     let demo_token = if args.demo {
         let scopes = [Scope::Read, Scope::Submit];
-        Some(own_token(&*store, &mut made, "demo dashboard", &scopes).await?)
+        let name = format!("demo dashboard ({origin})");
+        Some(own_token(&*store, &mut made, &name, &scopes).await?)
     } else {
         None
     };
@@ -343,6 +355,15 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
 
 /// A new token of `scopes` named `name`, stored, its hash added to `made`
 /// (this start's own tokens, which the next start revokes).
+/// This machine's name (`/etc/hostname`), or `localhost`.
+pub fn host_name() -> String {
+    std::fs::read_to_string("/etc/hostname")
+        .map(|h| h.trim().to_owned())
+        .ok()
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "localhost".into())
+}
+
 async fn own_token(
     store: &dyn Store,
     made: &mut Vec<String>,

@@ -962,8 +962,33 @@ fn stop_serve(mut serve: std::process::Child) {
 fn a_restart_leaves_no_revoked_token_behind_and_a_refusal_names_the_tokens_source() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
-    let (serve, _) = start_serve(&data, None, 1, &["--demo"]);
+    let (serve, first_url) = start_serve(&data, None, 1, &["--demo"]);
     let generated = std::fs::read_to_string(data.join("admin.token")).unwrap();
+    // The tokens a start makes are named after it (host, data folder).
+    let list = Command::new(env!("CARGO_BIN_EXE_aobake"))
+        .args(["token", "list", "--json", "--server", &first_url, "--token"])
+        .arg(generated.trim())
+        .output()
+        .unwrap();
+    assert!(list.status.success(), "{}", stderr(&list));
+    let tokens: serde_json::Value = serde_json::from_slice(&list.stdout).unwrap();
+    let mut names: Vec<&str> = tokens
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["name"].as_str().unwrap())
+        .collect();
+    names.sort_unstable();
+    let origin = format!(
+        " (serve on {}, {})",
+        aobake_server::serve::host_name(),
+        std::path::absolute(&data).unwrap().display()
+    );
+    assert_eq!(
+        names,
+        ["admin", "demo dashboard", "local workers"].map(|n| format!("{n}{origin}")),
+        "{tokens}"
+    );
     // The demo uploads and submits through the API: wait for its line.
     let started = std::time::Instant::now();
     while !std::fs::read_to_string(data.with_extension("stdout"))

@@ -66,9 +66,7 @@ pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
     };
     let server = super::common::server_url(&args.server)?.to_owned();
     tracer.install()?;
-    let host = std::fs::read_to_string("/etc/hostname")
-        .map(|h| h.trim().to_owned())
-        .unwrap_or_else(|_| "worker".into());
+    let host = crate::serve::host_name();
     aobake_worker::run(aobake_worker::WorkerConfig {
         server,
         token: args.token.clone(),
