@@ -133,7 +133,7 @@ impl ApiError {
         let (status, code, title) = self.parts();
         let detail = match self {
             Self::Internal(d) => {
-                eprintln!("error: internal: {d}");
+                log_line!("error: internal: {d}");
                 "the server failed; the error was logged".to_owned()
             }
             other => other.to_string(),
@@ -177,7 +177,7 @@ impl From<StoreError> for ApiError {
             e @ StoreError::Revoked(_) => Self::Conflict(e.to_string()),
             StoreError::NotFound(m) => Self::NotFound(m),
             StoreError::Database(e) if unreachable(&e) => {
-                eprintln!("error: the database is not answering: {e}");
+                log_line!("error: the database is not answering: {e}");
                 Self::Unavailable(Outage::Database, DATABASE_RETRY_SECS)
             }
             other => Self::Internal(other.to_string()),
@@ -216,7 +216,7 @@ impl From<BlobError> for ApiError {
                 Self::bad("bad_digest", e.to_string())
             }
             BlobError::Store(_) if e.unreachable() => {
-                eprintln!("error: not answering (503): {e}");
+                log_line!("error: not answering (503): {e}");
                 Self::Unavailable(Outage::Blobs, BLOBS_RETRY_SECS)
             }
             BlobError::Io(_) | BlobError::Store(_) | BlobError::Config(_) => {

@@ -29,6 +29,14 @@
 //! (`python3 tools/import-graph.py server <layers>`). The wire types and
 //! the HTTP client are the `aobake-api` crate's.
 
+/// A line of the server's log on stderr: stamped and written at once,
+/// as its workers' lines are ([`aobake_worker::say!`]).
+macro_rules! log_line {
+    ($($arg:tt)*) => {
+        aobake_worker::say!($($arg)*)
+    };
+}
+
 pub mod app;
 pub mod auth;
 pub mod blobs;

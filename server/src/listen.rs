@@ -34,7 +34,7 @@ pub async fn serve(
                 Ok(a) => a,
                 // Out of file descriptors and the like: wait, go on.
                 Err(e) => {
-                    eprintln!("error: accept: {e}");
+                    log_line!("error: accept: {e}");
                     tokio::time::sleep(Duration::from_millis(50)).await;
                     continue;
                 }

@@ -101,7 +101,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     // threads, so memory a burst of uploads freed goes back to the system
     // while the server idles, not at its next allocation.
     if let Err(e) = tikv_jemalloc_ctl::background_thread::write(true) {
-        eprintln!("warning: jemalloc's background purging is off: {e}");
+        log_line!("warning: jemalloc's background purging is off: {e}");
     }
     std::fs::create_dir_all(&args.data)
         .with_context(|| format!("cannot create {}", args.data.display()))?;
@@ -205,7 +205,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         // A revoked secret stays revoked, on every server of a fleet and
         // across restarts: this start goes on without it (the other
         // tokens, and other admin tokens, still work).
-        Err(StoreError::Revoked(_)) => eprintln!(
+        Err(StoreError::Revoked(_)) => log_line!(
             "warning: {ADMIN_TOKEN_ENV} was revoked (aobake token revoke) and stays revoked: it is refused; set a new secret (aobake token create --scope admin makes one)"
         ),
         other => other?,
@@ -255,7 +255,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 match state.store.reap().await {
                     Ok(n) if n > 0 => state.jobs_ready.notify_waiters(),
                     Ok(_) => {}
-                    Err(e) => eprintln!("error: reaping leases: {e}"),
+                    Err(e) => log_line!("error: reaping leases: {e}"),
                 }
             }
         })
@@ -285,7 +285,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 let mut child = match spawned {
                     Ok(c) => c,
                     Err(e) => {
-                        eprintln!("error: cannot start worker {slot}: {e:#}");
+                        log_line!("error: cannot start worker {slot}: {e:#}");
                         return;
                     }
                 };
@@ -296,12 +296,12 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                     status = child.wait() => {
                         let refused = aobake_worker::RunError::REFUSED_EXIT;
                         if matches!(&status, Ok(s) if s.code() == Some(i32::from(refused))) {
-                            eprintln!("worker {slot}: the server refuses its token (revoked?); not restarting it");
+                            log_line!("worker {slot}: the server refuses its token (revoked?); not restarting it");
                             return;
                         }
                         restarts += 1;
                         let wait = Duration::from_millis(250 * u64::from(restarts.min(20)));
-                        eprintln!("worker {slot} exited ({status:?}); restarting in {wait:?}");
+                        log_line!("worker {slot} exited ({status:?}); restarting in {wait:?}");
                         tokio::time::sleep(wait).await;
                     }
                     _ = stop.changed() => {
@@ -316,7 +316,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         let (url, admin) = (url.clone(), admin.clone());
         tokio::spawn(async move {
             if let Err(e) = crate::demo::run(&url, &admin, &dashboard).await {
-                eprintln!("error: the demo bake could not be submitted: {e:#}");
+                log_line!("error: the demo bake could not be submitted: {e:#}");
             }
         });
     }
@@ -332,7 +332,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         }
         #[cfg(not(unix))]
         let _ = ctrl_c.await;
-        eprintln!("shutting down: ending long polls, stopping local workers");
+        log_line!("shutting down: ending long polls, stopping local workers");
         // Long polls answer at once; local workers get SIGTERM, finish (or
         // give back) their jobs while the API still serves their
         // completions, and exit; then the API stops.

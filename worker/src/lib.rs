@@ -16,6 +16,27 @@
 //! * [`gpu`]: a wgpu device on whatever adapter the machine has, and the
 //!   run-time evaluation of the vertex methods in WGSL.
 
+/// `eprintln!` in one write, stamped with the time (UTC, RFC 3339), for
+/// the worker's and the server's logs: `aobake serve`'s local workers
+/// share its stderr, and `eprintln!` writes a line in pieces that theirs
+/// interleave; the stamp tells when a job ended or a retry began, in a
+/// log of many processes.
+#[macro_export]
+macro_rules! say {
+    ($($arg:tt)*) => {
+        $crate::say_line(format_args!($($arg)*))
+    };
+}
+
+/// What [`say!`] writes: `args` as one stamped line on stderr.
+pub fn say_line(args: std::fmt::Arguments<'_>) {
+    let line = format!(
+        "{} {args}\n",
+        humantime::format_rfc3339_millis(std::time::SystemTime::now())
+    );
+    let _ = std::io::Write::write_all(&mut std::io::stderr().lock(), line.as_bytes());
+}
+
 pub mod gpu;
 pub mod runner;
 

@@ -15,15 +15,6 @@ use aobake_core::{
 
 use aobake_api::{ApiError, CheckpointRef, Client, Completion, JobCompletion, Lease, OutputRef};
 
-/// `eprintln!` in one write: `aobake serve`'s local workers share its
-/// stderr, and `eprintln!` writes a line in pieces that theirs interleave.
-macro_rules! say {
-    ($($arg:tt)*) => {{
-        let line = format!("{}\n", format_args!($($arg)*));
-        let _ = std::io::Write::write_all(&mut std::io::stderr().lock(), line.as_bytes());
-    }};
-}
-
 /// How soon a moved progress is sent, at most (see the heartbeat loop).
 const PROGRESS_EVERY: Duration = Duration::from_secs(1);
 

@@ -136,7 +136,7 @@ async fn wait_for_leases(
             // wait for it.
             for l in &leases {
                 if let Err(e) = state.store.release(l.job.id, &l.token).await {
-                    eprintln!(
+                    log_line!(
                         "error: job {} stays leased to a worker that went, until its lease expires: {e}",
                         l.job.id
                     );

@@ -156,7 +156,7 @@ pub(crate) async fn ready(State(state): State<AppState>) -> ApiResult<&'static s
     match tokio::time::timeout(BLOBS_PROBE, state.blobs.len(&absent)).await {
         Ok(answer) => answer?,
         Err(_) => {
-            eprintln!(
+            log_line!(
                 "error: the blob store did not answer the readiness probe in {BLOBS_PROBE:?}"
             );
             return Err(ApiError::Unavailable(Outage::Blobs, BLOBS_RETRY_SECS));

@@ -102,7 +102,7 @@ impl Backend for Postgres {
                 Ok(event) => {
                     let _ = heard.send(event);
                 }
-                Err(e) => eprintln!("error: a bake event that does not parse: {e}"),
+                Err(e) => log_line!("error: a bake event that does not parse: {e}"),
             },
         )
         .await?;
@@ -119,7 +119,7 @@ impl Backend for Postgres {
                     .execute(&pool)
                     .await;
                 if let Err(e) = sent {
-                    eprintln!("error: NOTIFY {BAKE_EVENTS}: {e}");
+                    log_line!("error: NOTIFY {BAKE_EVENTS}: {e}");
                     let _ = events.send(event);
                 }
             }
@@ -143,7 +143,7 @@ async fn listen_on(
             match listener.recv().await {
                 Ok(n) => heard(n.payload()),
                 Err(e) => {
-                    eprintln!("error: LISTEN {channel}: {e}");
+                    log_line!("error: LISTEN {channel}: {e}");
                     tokio::time::sleep(std::time::Duration::from_secs(1)).await;
                 }
             }

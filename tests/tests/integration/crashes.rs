@@ -183,6 +183,18 @@ fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
     );
     let twice: Vec<&Value> = after.iter().filter(|j| j["attempts"] != 1).collect();
     assert!(twice.is_empty(), "jobs run again: {twice:?}");
+    // Each worker line says when it was written (UTC), so a log tells when
+    // the retries began and the jobs ended.
+    let logs = env.worker_logs();
+    let lines: Vec<&str> = logs
+        .lines()
+        .filter(|l| l.contains(" done in ") || l.contains("retrying"))
+        .collect();
+    assert!(lines.len() >= 2, "{logs}");
+    for line in lines {
+        let stamp = line.split(' ').next().unwrap();
+        assert!(humantime::parse_rfc3339(stamp).is_ok(), "{line}");
+    }
     let followed = follower.wait().unwrap();
     let (stdout, stderr) = (read(&out), read(&err));
     assert!(
