@@ -79,6 +79,56 @@ impl ApiError {
 /// Results of calls.
 pub type Result<T, E = ApiError> = std::result::Result<T, E>;
 
+impl ApiError {
+    /// Worth waiting out: the server unreachable (restarting, a rolling
+    /// update), or a gateway's or a recovering server's 502, 503 or 504.
+    /// A 500 is more often a fault that repeats.
+    pub fn is_outage(&self) -> bool {
+        match self {
+            Self::Transport { .. } => true,
+            Self::Status { status, .. } => matches!(status, 502..=504),
+            Self::Decode { .. } => false,
+        }
+    }
+}
+
+/// Tries `call` again while it fails transiently: an outage
+/// ([`ApiError::is_outage`]) for up to `window` from the first try and
+/// while `keep_on()` says so, any other 5xx three times in all. The waits
+/// start at `first` and double up to 5 s; `waiting` hears each error
+/// before its wait, with the time left in the window. A 409 (a lease
+/// gone), any 4xx, or the window's end gives the error back.
+pub fn retry<T>(
+    window: Duration,
+    first: Duration,
+    mut keep_on: impl FnMut() -> bool,
+    mut waiting: impl FnMut(&ApiError, Duration),
+    mut call: impl FnMut() -> Result<T>,
+) -> Result<T> {
+    let started = std::time::Instant::now();
+    let (mut wait, mut tries) = (first, 0);
+    loop {
+        tries += 1;
+        match call() {
+            Err(e) if e.is_transient() => {
+                let left = window.saturating_sub(started.elapsed());
+                let more = if e.is_outage() {
+                    left >= wait
+                } else {
+                    tries < 3
+                };
+                if !more || !keep_on() {
+                    return Err(e);
+                }
+                waiting(&e, left);
+            }
+            other => return other,
+        }
+        std::thread::sleep(wait);
+        wait = (wait * 2).min(Duration::from_secs(5));
+    }
+}
+
 type Response = ureq::http::Response<ureq::Body>;
 
 /// A connection to the server with a bearer token.
@@ -479,6 +529,100 @@ mod tests {
     use std::io::{BufRead as _, BufReader, Write as _};
 
     use super::*;
+
+    fn unreachable() -> ApiError {
+        ApiError::Transport {
+            base: "http://127.0.0.1:1".into(),
+            message: "Connection refused".into(),
+        }
+    }
+
+    fn answered(status: u16) -> ApiError {
+        ApiError::Status {
+            status,
+            problem: Box::new(Problem {
+                kind: "about:blank".into(),
+                title: "t".into(),
+                status,
+                detail: "d".into(),
+                code: "c".into(),
+            }),
+        }
+    }
+
+    /// `retry` with a short first wait, always keeping on, counting the
+    /// calls and the waits it was told of.
+    fn tries(
+        window: Duration,
+        mut answer: impl FnMut(usize) -> Result<usize>,
+    ) -> (Result<usize>, usize, usize) {
+        let (mut calls, mut waits) = (0, 0);
+        let got = retry(
+            window,
+            Duration::from_millis(2),
+            || true,
+            |_, _| waits += 1,
+            || {
+                calls += 1;
+                answer(calls)
+            },
+        );
+        (got, calls, waits)
+    }
+
+    /// A server away for longer than a few quick tries (6 refusals, and a
+    /// 503 and a 502 between) is waited for within the window.
+    #[test]
+    fn an_outage_is_waited_out_within_the_window() {
+        let (got, calls, waits) = tries(Duration::from_secs(10), |n| match n {
+            1..=4 => Err(unreachable()),
+            5 => Err(answered(503)),
+            6 => Err(answered(502)),
+            _ => Ok(n),
+        });
+        assert_eq!((got.unwrap(), calls, waits), (7, 7, 6));
+    }
+
+    /// Past the window an outage's last error comes back; a 500 (a fault
+    /// that tends to repeat) is tried three times in all; a 409 (the lease
+    /// is gone) or a 4xx ends the tries at once.
+    #[test]
+    fn tries_end_with_the_window_a_repeated_fault_or_a_lasting_answer() {
+        let started = std::time::Instant::now();
+        let (got, calls, _) = tries(Duration::from_secs(1), |_| Err(unreachable()));
+        assert!(got.unwrap_err().is_outage());
+        assert!(calls >= 3, "{calls}");
+        assert!(
+            started.elapsed() < Duration::from_secs(5),
+            "{:?}",
+            started.elapsed()
+        );
+        let (got, calls, waits) = tries(Duration::from_secs(60), |_| Err(answered(500)));
+        assert_eq!((got.unwrap_err().status(), calls, waits), (Some(500), 3, 2));
+        for status in [409, 404] {
+            let (got, calls, _) = tries(Duration::from_secs(60), |_| Err(answered(status)));
+            assert_eq!((got.unwrap_err().status(), calls), (Some(status), 1));
+        }
+    }
+
+    /// `keep_on` saying no (a worker past its shutdown deadline) ends an
+    /// outage's tries.
+    #[test]
+    fn tries_end_when_told_to_stop() {
+        let mut asked = 0;
+        let got: Result<()> = retry(
+            Duration::from_secs(60),
+            Duration::from_millis(1),
+            || {
+                asked += 1;
+                asked < 3
+            },
+            |_, _| {},
+            || Err(unreachable()),
+        );
+        assert!(got.is_err());
+        assert_eq!(asked, 3);
+    }
 
     /// A server on a free port that answers its connections, one request
     /// each, with `answers` in turn; returns its address.

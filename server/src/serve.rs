@@ -153,7 +153,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         .iter()
         .filter(|&&h| Some(h) != given_hash.as_deref())
     {
-        store.delete_token(hash).await?;
+        store.delete_token(hash, false).await?;
     }
     let mut made = Vec::new();
     // The tokens this start makes are named after it, so that `token
@@ -353,8 +353,6 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A new token of `scopes` named `name`, stored, its hash added to `made`
-/// (this start's own tokens, which the next start revokes).
 /// This machine's name (`/etc/hostname`), or `localhost`.
 pub fn host_name() -> String {
     std::fs::read_to_string("/etc/hostname")
@@ -364,6 +362,8 @@ pub fn host_name() -> String {
         .unwrap_or_else(|| "localhost".into())
 }
 
+/// A new token of `scopes` named `name`, stored, its hash added to `made`
+/// (this start's own tokens, which the next start revokes).
 async fn own_token(
     store: &dyn Store,
     made: &mut Vec<String>,

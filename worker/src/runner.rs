@@ -101,7 +101,8 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
     let poller = Poller::start(client.clone(), config.wait_secs);
     let dispatched = std::thread::scope(|scope| {
         let client = &client;
-        scope.spawn(move || complete_batches(client, &done_rx));
+        let patience = Patience::new(&shutdown, &config);
+        scope.spawn(move || complete_batches(client, patience, &done_rx));
         let mut to_slots = Vec::with_capacity(slots);
         for slot in 0..slots {
             let (tx, rx) = mpsc::channel::<Lease>();
@@ -350,12 +351,12 @@ impl Poller {
 
 /// Sends finished jobs' completions, all that are waiting in one request,
 /// and tells each slot its answer; ends when every slot has ended.
-fn complete_batches(client: &Client, finished: &mpsc::Receiver<Finished>) {
+fn complete_batches(client: &Client, patience: Patience<'_>, finished: &mpsc::Receiver<Finished>) {
     while let Ok(first) = finished.recv() {
         let mut batch = vec![first];
         batch.extend(finished.try_iter().take(MAX_BATCH - 1));
         let items: Vec<JobCompletion> = batch.iter().map(|f| f.item.clone()).collect();
-        match with_retries(|| client.complete_many(&items)) {
+        match patience.call(|| client.complete_many(&items)) {
             Ok(results) => {
                 let mut results = results.into_iter();
                 for f in batch {
@@ -379,6 +380,7 @@ fn complete_batches(client: &Client, finished: &mpsc::Receiver<Finished>) {
 /// completer; returns the server's answer for it.
 fn deliver(
     client: &Client,
+    patience: Patience<'_>,
     job: i64,
     token: &str,
     out: JobOutput,
@@ -388,10 +390,12 @@ fn deliver(
         .outputs
         .iter()
         .map(|o| {
-            with_retries(|| client.put_blob(&o.bytes)).map(|digest| OutputRef {
-                name: o.name.clone(),
-                digest,
-            })
+            patience
+                .call(|| client.put_blob(&o.bytes))
+                .map(|digest| OutputRef {
+                    name: o.name.clone(),
+                    digest,
+                })
         })
         .collect::<Result<Vec<OutputRef>, ApiError>>()
         .map_err(|e| e.to_string())?;
@@ -424,6 +428,7 @@ struct Flags {
 
 struct Sink<'a> {
     client: &'a Client,
+    patience: Patience<'a>,
     job: i64,
     token: &'a str,
     flags: &'a Flags,
@@ -502,18 +507,25 @@ impl JobSink for Sink<'_> {
     }
 
     fn load_part(&mut self, digest: &str) -> Result<Vec<u8>, JobError> {
-        with_retries(|| self.client.get_blob(digest))
+        self.patience
+            .call(|| self.client.get_blob(digest))
             .map_err(|e| JobError::Failed(format!("cannot fetch checkpoint part {digest}: {e}")))
     }
 }
 
-fn inputs(client: &Client, lease: &Lease, cache: &InputCache) -> Result<Arc<BakeInputs>, JobError> {
+fn inputs(
+    client: &Client,
+    patience: Patience<'_>,
+    lease: &Lease,
+    cache: &InputCache,
+) -> Result<Arc<BakeInputs>, JobError> {
     if let Some(i) = cache.lock().expect("cache lock").get(&lease.bake.id) {
         return Ok(i.clone());
     }
     let fetch = |i: usize| -> Result<UploadBytes, JobError> {
         let u = &lease.uploads[i];
-        let blob = with_retries(|| client.get_blob(&u.digest))
+        let blob = patience
+            .call(|| client.get_blob(&u.digest))
             .map_err(|e| JobError::Failed(format!("cannot fetch upload {}: {e}", u.digest)))?;
         UploadBytes::from_blob(&blob, u.bundle).map_err(|e| JobError::Invalid(e.to_string()))
     };
@@ -537,6 +549,7 @@ fn inputs(client: &Client, lease: &Lease, cache: &InputCache) -> Result<Arc<Bake
 
 fn execute(
     client: &Client,
+    patience: Patience<'_>,
     config: &WorkerConfig,
     lease: &Lease,
     flags: &Flags,
@@ -546,7 +559,7 @@ fn execute(
         .map_err(|e| JobError::Invalid(format!("job spec: {e}")))?;
     let params = BakeParams::from_canonical(&lease.bake.params)
         .map_err(|e| JobError::Invalid(format!("bake params: {e}")))?;
-    let inputs = inputs(client, lease, cache)?;
+    let inputs = inputs(client, patience, lease, cache)?;
     let bake = Bake::new(&inputs, params)?;
     let mut deps = Vec::with_capacity(lease.inputs.len());
     for d in &lease.inputs {
@@ -557,7 +570,8 @@ fn execute(
         // Only what the job reads (not, say, a cubemap ground's truth for
         // a preview).
         for o in d.outputs.iter().filter(|o| spec.reads(&o.name)) {
-            let bytes = with_retries(|| client.get_blob(&o.digest))
+            let bytes = patience
+                .call(|| client.get_blob(&o.digest))
                 .map_err(|e| JobError::Failed(format!("cannot fetch {}: {e}", o.name)))?;
             out.outputs.push(Output {
                 name: o.name.clone(),
@@ -570,7 +584,8 @@ fn execute(
         Some(c) => Some(Checkpoint {
             step: c.step.clone(),
             cursor: c.cursor as u64,
-            data: with_retries(|| client.get_blob(&c.blob))
+            data: patience
+                .call(|| client.get_blob(&c.blob))
                 .map_err(|e| JobError::Failed(format!("cannot fetch the checkpoint: {e}")))?,
         }),
         None => None,
@@ -578,6 +593,7 @@ fn execute(
     let dep_refs: Vec<&JobOutput> = deps.iter().collect();
     let mut sink = Sink {
         client,
+        patience,
         job: lease.job.id,
         token: &lease.token,
         flags,
@@ -640,44 +656,51 @@ fn wide_pool() -> Option<&'static rayon::ThreadPool> {
     .as_ref()
 }
 
-/// How long a worker keeps trying a call that failed on the network or
-/// with a 5xx: a server restarting (a rolling update, a crash and its
-/// supervisor), a database or blob store failing over. Finished work is
-/// worth the wait, and a lease outlives a short outage: a completion that
-/// arrives after the job was leased again gets 409, which ends the tries.
+/// How long a worker keeps trying a call while the server is away (a
+/// restart, a rolling update, a database or blob store failing over):
+/// finished work is worth the wait, and a lease outlives a short outage.
+/// A completion that arrives after the job was leased again gets 409,
+/// which ends the tries.
 const RETRY_FOR: Duration = Duration::from_secs(300);
 
-/// Retries a call that failed on the network or with a 5xx, 0.5 s, then
-/// 1, 2, 4 and 5 s apart, for up to [`RETRY_FOR`]. A 409 after a retry
-/// means an earlier try went through, or the lease is gone.
-fn with_retries<T>(call: impl FnMut() -> Result<T, ApiError>) -> Result<T, ApiError> {
-    retry_transient(RETRY_FOR, Duration::from_millis(500), call)
+/// Tries calls again through an outage ([`aobake_api::client::retry`]):
+/// for up to [`RETRY_FOR`], and once shutdown is asked for, for at most
+/// its deadline more, so that a worker still stops in time. It says why it
+/// waits at the first retry and every 30 s after.
+#[derive(Debug, Clone, Copy)]
+struct Patience<'a> {
+    shutdown: &'a AtomicBool,
+    grace: Duration,
 }
 
-/// [`with_retries`] over `window`, the first wait `first`, each next one
-/// twice the last up to 5 s; it says why it waits at the first retry and
-/// every 30 s after.
-fn retry_transient<T>(
-    window: Duration,
-    first: Duration,
-    mut call: impl FnMut() -> Result<T, ApiError>,
-) -> Result<T, ApiError> {
-    let started = Instant::now();
-    let mut wait = first;
-    let mut said: Option<Instant> = None;
-    loop {
-        match call() {
-            Err(e) if e.is_transient() && started.elapsed() + wait <= window => {
-                if said.is_none_or(|t| t.elapsed() >= Duration::from_secs(30)) {
-                    let left = window.saturating_sub(started.elapsed()).as_secs();
-                    say!("retrying (for up to {left} s more) after: {e}");
-                    said = Some(Instant::now());
-                }
-            }
-            other => return other,
+impl<'a> Patience<'a> {
+    fn new(shutdown: &'a AtomicBool, config: &WorkerConfig) -> Self {
+        Self {
+            shutdown,
+            grace: Duration::from_secs(config.shutdown_secs),
         }
-        std::thread::sleep(wait);
-        wait = (wait * 2).min(Duration::from_secs(5));
+    }
+
+    fn call<T>(&self, call: impl FnMut() -> Result<T, ApiError>) -> Result<T, ApiError> {
+        let mut stopping: Option<Instant> = None;
+        let keep_on = || {
+            !self.shutdown.load(Ordering::Relaxed)
+                || stopping.get_or_insert_with(Instant::now).elapsed() < self.grace
+        };
+        let mut said: Option<Instant> = None;
+        let waiting = |e: &ApiError, left: Duration| {
+            if said.is_none_or(|t| t.elapsed() >= Duration::from_secs(30)) {
+                say!("retrying (for up to {} s more) after: {e}", left.as_secs());
+                said = Some(Instant::now());
+            }
+        };
+        aobake_api::client::retry(
+            RETRY_FOR,
+            Duration::from_millis(500),
+            keep_on,
+            waiting,
+            call,
+        )
     }
 }
 
@@ -692,6 +715,7 @@ fn run_leased(
     let job = lease.job.id;
     let flags = Flags::default();
     let started = Instant::now();
+    let patience = Patience::new(shutdown, config);
     let result = std::thread::scope(|scope| {
         // Heartbeats run off the compute thread, so a long pose never
         // starves the lease.
@@ -740,7 +764,7 @@ fn run_leased(
         // A panic in a job must not leave the heartbeat thread extending
         // the lease forever: it becomes a retryable failure.
         let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            execute(client, config, &lease, &flags, cache)
+            execute(client, patience, config, &lease, &flags, cache)
         }))
         .unwrap_or_else(|panic| {
             let what = panic
@@ -753,7 +777,7 @@ fn run_leased(
         // The outputs go up and the completion waits for its batch while
         // the heartbeats go on: a slow store or a long batch does not
         // lose the lease.
-        let r = r.map(|out| deliver(client, job, &lease.token, out, finished));
+        let r = r.map(|out| deliver(client, patience, job, &lease.token, out, finished));
         flags.done.store(true, Ordering::Relaxed);
         r
     });
@@ -776,80 +800,9 @@ fn run_leased(
         Err(e) => {
             say!("job {job} failed: {e}");
             let why = e.to_string();
-            if let Err(e) = with_retries(|| client.fail(job, &lease.token, &why, e.retryable())) {
+            if let Err(e) = patience.call(|| client.fail(job, &lease.token, &why, e.retryable())) {
                 say!("job {job}: failure not recorded: {e}");
             }
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn unreachable() -> ApiError {
-        ApiError::Transport {
-            base: "http://127.0.0.1:1".into(),
-            message: "Connection refused".into(),
-        }
-    }
-
-    fn answered(status: u16) -> ApiError {
-        ApiError::Status {
-            status,
-            problem: Box::new(aobake_api::types::Problem {
-                kind: "about:blank".into(),
-                title: "t".into(),
-                status,
-                detail: "d".into(),
-                code: "c".into(),
-            }),
-        }
-    }
-
-    /// A server away for longer than a few quick tries (here 6 refusals,
-    /// 0.15 s and more) is waited for, within the window.
-    #[test]
-    fn a_call_is_retried_while_the_server_is_away() {
-        let mut tries = 0;
-        let got = retry_transient(Duration::from_secs(5), Duration::from_millis(5), || {
-            tries += 1;
-            if tries <= 6 {
-                Err(unreachable())
-            } else {
-                Ok(tries)
-            }
-        });
-        assert_eq!(got.unwrap(), 7);
-    }
-
-    /// Past the window the last error comes back; an answer that is not
-    /// transient (409: the lease is gone) ends the tries at once.
-    #[test]
-    fn tries_end_with_the_window_or_a_lasting_answer() {
-        let started = Instant::now();
-        let mut tries = 0;
-        let got: Result<(), _> = retry_transient(
-            Duration::from_millis(300),
-            Duration::from_millis(10),
-            || {
-                tries += 1;
-                Err(answered(502))
-            },
-        );
-        assert_eq!(got.unwrap_err().status(), Some(502));
-        assert!(
-            started.elapsed() < Duration::from_secs(2),
-            "{:?}",
-            started.elapsed()
-        );
-        assert!((3..=30).contains(&tries), "{tries}");
-        let mut tries = 0;
-        let got: Result<(), _> = retry_transient(Duration::from_secs(60), Duration::ZERO, || {
-            tries += 1;
-            Err(answered(409))
-        });
-        assert!(got.unwrap_err().is_lease_lost());
-        assert_eq!(tries, 1);
     }
 }

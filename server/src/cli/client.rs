@@ -181,22 +181,43 @@ const AWAY_FOR: Duration = Duration::from_secs(300);
 /// Follows a bake until it ends, with a progress bar; prints the summary.
 fn wait(api: &Client, id: i64) -> anyhow::Result<()> {
     let bar = super::trace::progress_bar(1, "baking");
-    let mut away = Away::default();
+    // Through an outage: says so once, and again when the server answers.
+    let mut away = false;
+    let mut ask = |call: &dyn Fn() -> aobake_api::client::Result<_>| {
+        let answer = aobake_api::client::retry(
+            AWAY_FOR,
+            Duration::from_secs(1),
+            || true,
+            |e, left| {
+                if !away {
+                    bar.suspend(|| {
+                        eprintln!(
+                            "{e}; the bake goes on there: asking again for up to {} s",
+                            left.as_secs()
+                        );
+                    });
+                    away = true;
+                }
+            },
+            call,
+        );
+        if answer.is_ok() && std::mem::take(&mut away) {
+            bar.suspend(|| eprintln!("the server answers again"));
+        }
+        answer.with_context(|| {
+            format!("cannot follow bake {id}; it may still finish: `aobake status {id}`")
+        })
+    };
     loop {
-        let Some(view) = away.call(&bar, id, || api.bake(id))? else {
-            continue;
-        };
+        let view: BakeView =
+            serde_json::from_slice(&ask(&|| api.get_bytes(&format!("/v1/bakes/{id}")))?)?;
         bar.set_length(u64::try_from(view.progress.total).unwrap_or(1));
         bar.set_position(u64::try_from(view.progress.done).unwrap_or(0));
         bar.set_message(running_jobs(&view));
         let b = &view.bake;
         match b.state {
             BakeState::Done => {
-                let report = loop {
-                    if let Some(r) = away.call(&bar, id, || api.report(id))? {
-                        break r;
-                    }
-                };
+                let report = ask(&|| api.report(id))?;
                 bar.finish_and_clear();
                 let report: BakeReport = serde_json::from_slice(&report)?;
                 println!(
@@ -215,54 +236,6 @@ fn wait(api: &Client, id: i64) -> anyhow::Result<()> {
                 );
             }
             _ => std::thread::sleep(Duration::from_millis(500)),
-        }
-    }
-}
-
-/// Since when a followed server has not answered.
-#[derive(Debug, Default)]
-struct Away(Option<std::time::Instant>);
-
-impl Away {
-    /// `call`'s answer; `None`, after a second's wait, while the server
-    /// cannot be reached or fails (5xx) and has not for [`AWAY_FOR`]; the
-    /// error past that or for any other failure.
-    fn call<T>(
-        &mut self,
-        bar: &indicatif::ProgressBar,
-        id: i64,
-        call: impl FnOnce() -> aobake_api::client::Result<T>,
-    ) -> anyhow::Result<Option<T>> {
-        match call() {
-            Ok(t) => {
-                if self.0.take().is_some() {
-                    bar.suspend(|| eprintln!("the server answers again"));
-                }
-                Ok(Some(t))
-            }
-            Err(e) if e.is_transient() => {
-                let since = *self.0.get_or_insert_with(|| {
-                    bar.suspend(|| {
-                        eprintln!(
-                            "{e}; the bake goes on there: asking again for up to {} s",
-                            AWAY_FOR.as_secs()
-                        );
-                    });
-                    std::time::Instant::now()
-                });
-                if since.elapsed() >= AWAY_FOR {
-                    bar.finish_and_clear();
-                    return Err(e).with_context(|| {
-                        format!(
-                            "gave up following bake {id} after {} s; it may still finish: `aobake status {id}`",
-                            AWAY_FOR.as_secs()
-                        )
-                    });
-                }
-                std::thread::sleep(Duration::from_secs(1));
-                Ok(None)
-            }
-            Err(e) => Err(e.into()),
         }
     }
 }

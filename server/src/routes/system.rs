@@ -133,7 +133,7 @@ pub(crate) async fn revoke_token(
             "this is the token of this request: revoke it with another admin token, so that one is left".into(),
         ));
     }
-    if !state.store.delete_token(&id).await? {
+    if !state.store.delete_token(&id, true).await? {
         return Err(ApiError::NotFound(format!("no token {id}")));
     }
     Ok(StatusCode::NO_CONTENT)

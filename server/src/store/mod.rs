@@ -267,9 +267,13 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn token(&self, hash: &str) -> Result<Option<TokenRow>>;
     /// Every token, newest first, by hash (the secrets are not stored).
     async fn tokens(&self) -> Result<Vec<(String, TokenRow)>>;
-    /// Deletes a token: from its next request on it is refused (401),
-    /// and it can never be created again. Whether there was one.
-    async fn delete_token(&self, hash: &str) -> Result<bool>;
+    /// Deletes a token: from its next request on it is refused (401).
+    /// Revoked (`revoke`: an admin's `DELETE /v1/tokens/{id}`), it can
+    /// never be created again, nor is it valid if a create raced the
+    /// revocation; a token `serve` rotates out at its next start is only
+    /// deleted (an operator may have adopted that secret as the fleet's
+    /// `AOBAKE_ADMIN_TOKEN`). Whether there was one.
+    async fn delete_token(&self, hash: &str, revoke: bool) -> Result<bool>;
     /// Jobs per state, and lease expiries so far.
     async fn queue_stats(&self) -> Result<(Vec<(JobState, i64)>, i64)>;
     /// Whether the database answers.

@@ -325,33 +325,49 @@ const JOB_SELECT: &str = "SELECT jobs.*, {deps} AS deps FROM jobs";
 const WORKER_IDLE: &str =
     "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {now} WHERE id = $1";
 
-/// A bake's columns and its running jobs' progress, which a view and an
-/// event add to the finished jobs' work (`BakeRow::running_work`).
-const BAKE_COLUMNS: &str = "bakes.*, (SELECT CAST(COALESCE(SUM(r.progress), 0) AS BIGINT) FROM jobs r WHERE r.bake_id = bakes.id AND r.state = 'running') AS running_work";
+/// The progress of bake `$1`'s running jobs, which a view and an event
+/// add to its finished jobs' work (`BakeRow::running_work`).
+const RUNNING_WORK: &str = "SELECT CAST(COALESCE(SUM(r.progress), 0) AS BIGINT) FROM jobs r WHERE r.bake_id = $1 AND r.state = 'running'";
+
+/// A bake's columns with [`RUNNING_WORK`], read in one statement (one
+/// snapshot: a completion cannot fall between the two numbers).
+fn bake_columns() -> String {
+    format!(
+        "bakes.*, ({}) AS running_work",
+        RUNNING_WORK.replace("$1", "bakes.id")
+    )
+}
 
 async fn bake_by_id<B: Backend>(c: &mut B::Conn, id: i64, lock: bool) -> Result<BakeRow> {
-    let text = if lock {
-        "SELECT * FROM bakes WHERE id = $1{for_update}"
+    let bake = if lock {
+        // The lock is on the row alone; the jobs' progress is read after,
+        // under it.
+        let row = c
+            .optional::<RawBake>(B::sql("SELECT * FROM bakes WHERE id = $1{for_update}").bind(id))
+            .await?;
+        match row {
+            Some(row) => Some(with_running_work::<B>(c, row.cook()?).await?),
+            None => None,
+        }
     } else {
-        "SELECT * FROM bakes WHERE id = $1"
-    };
-    let bake = c
-        .optional::<RawBake>(B::sql(text).bind(id))
+        c.optional::<RawBake>(
+            B::sql(&format!(
+                "SELECT {} FROM bakes WHERE id = $1",
+                bake_columns()
+            ))
+            .bind(id),
+        )
         .await?
-        .ok_or_else(|| StoreError::NotFound(format!("bake {id}")))?
-        .cook()?;
-    with_running_work::<B>(c, bake).await
+        .map(RawBake::cook)
+        .transpose()?
+    };
+    bake.ok_or_else(|| StoreError::NotFound(format!("bake {id}")))
 }
 
 /// `bake` with its running jobs' progress, for a row read or written
 /// without it (a locked read, `RETURNING`).
 async fn with_running_work<B: Backend>(c: &mut B::Conn, mut bake: BakeRow) -> Result<BakeRow> {
-    let (running,): (i64,) = c
-        .one(
-            B::sql("SELECT CAST(COALESCE(SUM(progress), 0) AS BIGINT) FROM jobs WHERE bake_id = $1 AND state = 'running'")
-                .bind(bake.id),
-        )
-        .await?;
+    let (running,): (i64,) = c.one(B::sql(RUNNING_WORK).bind(bake.id)).await?;
     bake.running_work = running;
     Ok(bake)
 }
@@ -756,7 +772,13 @@ impl<B: Backend> Store for SqlStore<B> {
             .backend
             .read()
             .await?
-            .optional(B::sql(&format!("SELECT {BAKE_COLUMNS} FROM bakes WHERE id = $1")).bind(id))
+            .optional(
+                B::sql(&format!(
+                    "SELECT {} FROM bakes WHERE id = $1",
+                    bake_columns()
+                ))
+                .bind(id),
+            )
             .await?;
         row.map(RawBake::cook).transpose()
     }
@@ -767,7 +789,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .read()
             .await?
             .optional(
-                B::sql(&format!("SELECT {BAKE_COLUMNS} FROM bakes WHERE key = $1 AND state IN ('done', 'queued', 'running', 'paused') ORDER BY state = 'done' DESC, id DESC LIMIT 1"))
+                B::sql(&format!("SELECT {} FROM bakes WHERE key = $1 AND state IN ('done', 'queued', 'running', 'paused') ORDER BY state = 'done' DESC, id DESC LIMIT 1", bake_columns()))
                     .bind(key),
             )
             .await?;
@@ -785,7 +807,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .read()
             .await?
             .all(
-                B::sql(&format!("SELECT {BAKE_COLUMNS} FROM bakes WHERE (CAST($1 AS TEXT) IS NULL OR character = $1) AND (CAST($2 AS TEXT) IS NULL OR method = $2) ORDER BY id DESC LIMIT $3"))
+                B::sql(&format!("SELECT {} FROM bakes WHERE (CAST($1 AS TEXT) IS NULL OR character = $1) AND (CAST($2 AS TEXT) IS NULL OR method = $2) ORDER BY id DESC LIMIT $3", bake_columns()))
                     .bind(character)
                     .bind(method)
                     .bind(limit),
@@ -862,7 +884,9 @@ impl<B: Backend> Store for SqlStore<B> {
                         )
                         .await?;
                     let bake = match started {
-                        Some(row) => with_running_work::<B>(c, row.cook()?).await?,
+                        // A bake that was queued has no running work yet:
+                        // its jobs leased now start at 0.
+                        Some(row) => row.cook()?,
                         None => bake_by_id::<B>(c, job.bake_id, false).await?,
                     };
                     let uploads = bake_uploads::<B>(c, &bake).await?;
@@ -1187,7 +1211,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .read()
             .await?
             .optional(
-                B::sql("SELECT name, scopes, created_at FROM tokens WHERE hash = $1").bind(hash),
+                B::sql("SELECT name, scopes, created_at FROM tokens WHERE hash = $1 AND NOT EXISTS (SELECT 1 FROM revoked_tokens r WHERE r.hash = tokens.hash)").bind(hash),
             )
             .await?;
         Ok(row.map(|(name, scopes, created_at)| token_row(name, &scopes, created_at)))
@@ -1199,7 +1223,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .read()
             .await?
             .all(B::sql(
-                "SELECT hash, name, scopes, created_at FROM tokens ORDER BY created_at DESC, hash",
+                "SELECT hash, name, scopes, created_at FROM tokens WHERE NOT EXISTS (SELECT 1 FROM revoked_tokens r WHERE r.hash = tokens.hash) ORDER BY created_at DESC, hash",
             ))
             .await?;
         Ok(rows
@@ -1208,16 +1232,18 @@ impl<B: Backend> Store for SqlStore<B> {
             .collect())
     }
 
-    async fn delete_token(&self, hash: &str) -> Result<bool> {
+    async fn delete_token(&self, hash: &str, revoke: bool) -> Result<bool> {
         in_tx!(self, Durability::Acknowledged, |c| {
             let deleted = c
                 .execute(B::sql("DELETE FROM tokens WHERE hash = $1").bind(hash))
                 .await?;
-            c.execute(
-                B::sql("INSERT INTO revoked_tokens (hash, revoked_at) VALUES ($1, {now}) ON CONFLICT (hash) DO NOTHING")
-                    .bind(hash),
-            )
-            .await?;
+            if revoke && deleted > 0 {
+                c.execute(
+                    B::sql("INSERT INTO revoked_tokens (hash, revoked_at) VALUES ($1, {now}) ON CONFLICT (hash) DO NOTHING")
+                        .bind(hash),
+                )
+                .await?;
+            }
             Ok(deleted > 0)
         })
     }

@@ -36,8 +36,8 @@ pub(super) struct RawBake {
     priority: i64,
     total_work: i64,
     done_work: i64,
-    /// Computed where a query selects it ([`super::queue`]'s
-    /// `RUNNING_WORK`); else filled in after.
+    /// Computed where a query selects it (`bake_columns` in
+    /// [`super::queue`]); else filled in after, or 0 where it is.
     #[sqlx(default)]
     running_work: i64,
     jobs_total: i64,

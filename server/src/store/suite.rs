@@ -105,8 +105,11 @@ async fn tokens_are_listed_newest_first_and_deleted(store: &dyn Store) {
     let ci = &listed[1].1;
     assert_eq!(ci.scopes, ["read", "submit"]);
     assert!(ci.created_at > 1_600_000_000_000 && ci.created_at <= row.created_at);
-    assert!(store.delete_token(&"1".repeat(64)).await.unwrap());
-    assert!(!store.delete_token(&"1".repeat(64)).await.unwrap(), "gone");
+    assert!(store.delete_token(&"1".repeat(64), true).await.unwrap());
+    assert!(
+        !store.delete_token(&"1".repeat(64), true).await.unwrap(),
+        "gone"
+    );
     assert_eq!(store.token(&"1".repeat(64)).await.unwrap(), None);
     assert!(store.token(&"2".repeat(64)).await.unwrap().is_some());
     // A revoked secret stays revoked: creating it again (a server started
@@ -119,6 +122,20 @@ async fn tokens_are_listed_newest_first_and_deleted(store: &dyn Store) {
         "{again:?}"
     );
     assert_eq!(store.token(&"1".repeat(64)).await.unwrap(), None);
+    // A token only deleted (serve rotating its own out) may come back; an
+    // unknown one revoked is not recorded.
+    assert!(store.delete_token(&"2".repeat(64), false).await.unwrap());
+    store
+        .create_token(&"2".repeat(64), "farm", &["worker".into()])
+        .await
+        .unwrap();
+    assert!(store.token(&"2".repeat(64)).await.unwrap().is_some());
+    assert!(!store.delete_token(&"3".repeat(64), true).await.unwrap());
+    store
+        .create_token(&"3".repeat(64), "ci", &["read".into()])
+        .await
+        .unwrap();
+    assert!(store.token(&"3".repeat(64)).await.unwrap().is_some());
 }
 
 /// A slot with failures on record claims apart from the others (its own
@@ -460,10 +477,14 @@ async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {
         )
         .await
         .unwrap();
-    store
+    // A completion's row has the other running job's progress, and the
+    // finished job's work counted once, as done.
+    store.heartbeat(b2.job.id, &b2.token, 1, &p).await.unwrap();
+    let first = store
         .complete(a.job.id, &a.token, &done("ao"))
         .await
         .unwrap();
+    assert_eq!((first.done_work, first.running_work), (2, 1));
     let mid = store
         .complete(b2.job.id, &b2.token, &done("ao"))
         .await
