@@ -70,6 +70,14 @@ enum Command {
     Preview(preview::Args),
     /// Run the bake service: the HTTP API on SQLite and local disk under
     /// --data, with local worker processes.
+    ///
+    /// The admin token is AOBAKE_ADMIN_TOKEN when set, else a new one each
+    /// start, written to DATA/admin.token (each start revokes the tokens
+    /// the previous one generated). Several servers share one PostgreSQL
+    /// (--database) and one S3-compatible bucket (--blobs): give them the
+    /// same AOBAKE_ADMIN_TOKEN, and --workers 0 where the workers run
+    /// elsewhere (`aobake worker`, with a token from `aobake token create
+    /// --scope worker`). docs/service.md has the whole story.
     Serve(Box<crate::serve::ServeArgs>),
     /// Run jobs for a server (a separate process; many may run on many
     /// machines).
