@@ -419,6 +419,9 @@ fn deliver(
 struct Flags {
     /// The lease is gone or the bake was cancelled: drop the job.
     lost: AtomicBool,
+    /// The server said to stop (the bake was paused or cancelled), as
+    /// against a lease refused (409).
+    called_off: AtomicBool,
     /// Shutdown past its deadline: stop and give the lease back.
     release: AtomicBool,
     /// The job finished; the heartbeat thread ends.
@@ -442,8 +445,14 @@ struct Sink<'a> {
 impl Sink<'_> {
     /// Whether to stop now: the lease is lost or shutdown asks for it.
     fn stop(&self) -> Result<(), Stop> {
+        if self.flags.called_off.load(Ordering::Relaxed) {
+            return Err(Stop("the bake was paused or cancelled".into()));
+        }
         if self.flags.lost.load(Ordering::Relaxed) {
-            return Err(Stop("the lease was lost".into()));
+            return Err(Stop(
+                "the lease was lost: it expired and was taken back, or the bake was cancelled"
+                    .into(),
+            ));
         }
         if self.flags.release.load(Ordering::Relaxed) {
             return Err(Stop("shutting down".into()));
@@ -753,6 +762,7 @@ fn run_leased(
                 match client.heartbeat(job, &lease.token, progress) {
                     Ok(stop) => {
                         if stop {
+                            flags.called_off.store(true, Ordering::Relaxed);
                             flags.lost.store(true, Ordering::Relaxed);
                         }
                     }

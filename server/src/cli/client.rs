@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{Context as _, bail};
-use aobake_api::{BakeRequest, BakeState, BakeView, Client, JobState, NewTokenRequest};
+use aobake_api::{BakeRequest, BakeState, BakeView, Client, JobState, NewTokenRequest, TokenView};
 use aobake_core::{Limits, bake::BakeReport, method::Method};
 use serde_json::Value;
 
@@ -430,10 +430,20 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
             let now = std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(0, |d| d.as_millis() as i64);
-            println!("{:<12}  {:<24}  {:<22}  created", "id", "name", "scopes");
+            // Columns as wide as their longest entry (the names serve
+            // gives its own tokens run long).
+            let width = |of: &dyn Fn(&TokenView) -> usize, least: usize| {
+                tokens.iter().map(of).fold(least, usize::max)
+            };
+            let names = width(&|t| t.name.chars().count(), 4);
+            let scopes = width(&|t| t.scopes.join(",").len(), 6);
+            println!(
+                "{:<12}  {:<names$}  {:<scopes$}  created",
+                "id", "name", "scopes"
+            );
             for t in &tokens {
                 println!(
-                    "{:<12}  {:<24}  {:<22}  {} ago{}",
+                    "{:<12}  {:<names$}  {:<scopes$}  {} ago{}",
                     short_id(&t.id),
                     t.name,
                     t.scopes.join(","),

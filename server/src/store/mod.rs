@@ -258,7 +258,8 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// Every worker, most recently seen first; one not seen for
     /// `gone_after_ms` is `stopped`, with no job (it exited, was killed
     /// or is cut off: a live worker polls or heartbeats well within a
-    /// lease).
+    /// lease), and a busy one whose job is no longer its running job (the
+    /// bake cancelled, the lease taken back) is `idle`.
     async fn workers(&self, gone_after_ms: i64) -> Result<Vec<WorkerRow>>;
     /// Stores a token's hash; [`StoreError::Revoked`] for one revoked
     /// before.

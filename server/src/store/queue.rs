@@ -1177,7 +1177,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .read()
             .await?
             .all(
-                B::sql("SELECT id, CASE WHEN last_seen < {now} - $1 THEN 'stopped' ELSE state END AS state, CASE WHEN last_seen < {now} - $1 THEN NULL ELSE job_id END AS job_id, last_seen, started_at, tracer FROM workers ORDER BY last_seen DESC, id")
+                B::sql("SELECT id, CASE WHEN last_seen < {now} - $1 THEN 'stopped' WHEN state = 'busy' AND NOT EXISTS (SELECT 1 FROM jobs j WHERE j.id = workers.job_id AND j.state = 'running' AND j.worker = workers.id) THEN 'idle' ELSE state END AS state, CASE WHEN last_seen < {now} - $1 THEN NULL WHEN EXISTS (SELECT 1 FROM jobs j WHERE j.id = workers.job_id AND j.state = 'running' AND j.worker = workers.id) THEN job_id END AS job_id, last_seen, started_at, tracer FROM workers ORDER BY last_seen DESC, id")
                     .bind(gone_after_ms),
             )
             .await?;

@@ -206,7 +206,16 @@ async fn a_batch_split_by_failures_leases_each_job_once(store: &dyn Store) {
     }
     let w = busy.iter().find(|w| w.id == "split/1").unwrap();
     assert_eq!((w.state.as_str(), w.job_id), ("busy", Some(held.job.id)));
-    store.release(held.job.id, &held.token).await.unwrap();
+    // A slot whose job stopped running without it (its bake cancelled:
+    // the worker's release is refused) is idle at once, not busy until
+    // its next poll.
+    store
+        .control(held.job.bake_id, Action::Cancel)
+        .await
+        .unwrap();
+    let after = store.workers(60_000).await.unwrap();
+    let w = after.iter().find(|w| w.id == "split/1").unwrap();
+    assert_eq!((w.state.as_str(), w.job_id), ("idle", None), "{w:?}");
 }
 
 /// With no other worker to take its jobs, a failing worker goes on

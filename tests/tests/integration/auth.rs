@@ -394,12 +394,23 @@ fn tokens_are_listed_and_revoked_at_once() {
     let id = listed[0]["id"].as_str().unwrap().to_owned();
     let admin = listed.iter().find(|t| t["current"] == true).unwrap();
     assert_eq!(admin["scopes"], json!(["admin"]));
+    // A long name (as serve gives its own tokens) widens its column: the
+    // table stays aligned.
+    let long = "a name longer than the column was, 0123456789";
+    let made = env.aobake(&["token", "create", "--scope", "read", "--name", long]);
+    assert!(made.status.success(), "{made:?}");
     let table = env.aobake(&["token", "list"]);
     let table = String::from_utf8_lossy(&table.stdout);
     assert!(
-        table.contains(&id[..12]) && table.contains("(this token)"),
+        table.contains(&id[..12]) && table.contains("(this token)") && table.contains(long),
         "{table}"
     );
+    let mut rows = table.lines();
+    let column = rows.next().unwrap().find("created").unwrap();
+    for row in rows {
+        let (before, after) = row.split_at(column);
+        assert!(before.ends_with("  ") && !after.starts_with(' '), "{table}");
+    }
 
     let out = env.aobake(&["token", "revoke", &id[..10]]);
     assert!(out.status.success(), "{out:?}");
