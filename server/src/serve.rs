@@ -249,13 +249,34 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     // Leases that expire without a heartbeat free their jobs.
     let reaper = {
         let state = state.clone();
+        // No lease is reaped in the first lease's length after this server
+        // starts or its database answers again: workers whose heartbeats
+        // could not get through meanwhile (a restart, an outage longer
+        // than a lease) renew theirs first, and their jobs keep their
+        // attempts.
+        let grace = Duration::from_millis(u64::try_from(state.policy.lease_ms).unwrap_or(0));
         tokio::spawn(async move {
+            let mut hold_until = Some(tokio::time::Instant::now() + grace);
             loop {
                 tokio::time::sleep(Duration::from_millis(500)).await;
+                match hold_until {
+                    // The database is down: wait for it to answer.
+                    None => {
+                        if state.store.ping().await.is_ok() {
+                            hold_until = Some(tokio::time::Instant::now() + grace);
+                        }
+                        continue;
+                    }
+                    Some(t) if tokio::time::Instant::now() < t => continue,
+                    Some(_) => {}
+                }
                 match state.store.reap().await {
                     Ok(n) if n > 0 => state.jobs_ready.notify_waiters(),
                     Ok(_) => {}
-                    Err(e) => log_line!("error: reaping leases: {e}"),
+                    Err(e) => {
+                        log_line!("error: reaping leases: {e}");
+                        hold_until = None;
+                    }
                 }
             }
         })
