@@ -137,6 +137,24 @@ pub struct Client {
     base: String,
     auth: String,
     agent: ureq::Agent,
+    notice: Notice,
+}
+
+/// Hears a line ([`Client::with_notice`]).
+type Listener = dyn Fn(&str) + Send + Sync;
+
+/// Who hears that a call waits out a 503 ([`Client::with_notice`]).
+#[derive(Clone, Default)]
+struct Notice(Option<std::sync::Arc<Listener>>);
+
+impl std::fmt::Debug for Notice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.is_some() {
+            "Notice(set)"
+        } else {
+            "Notice(none)"
+        })
+    }
 }
 
 impl Client {
@@ -156,7 +174,17 @@ impl Client {
                 .http_status_as_error(false)
                 .build()
                 .into(),
+            notice: Notice::default(),
         }
+    }
+
+    /// This client, telling `notice` when a call begins to wait out a 503
+    /// (a line: what the server said and how long the call may wait), so
+    /// that a wait through an outage is not taken for a hang.
+    #[must_use]
+    pub fn with_notice(mut self, notice: impl Fn(&str) + Send + Sync + 'static) -> Self {
+        self.notice = Notice(Some(std::sync::Arc::new(notice)));
+        self
     }
 
     fn url(&self, path: &str) -> String {
@@ -198,6 +226,7 @@ impl Client {
             if !come_back || waited >= MAX_RATE_WAIT {
                 return self.check(res);
             }
+            let unavailable = res.status().as_u16() == 503;
             let wait = Duration::from_secs(
                 res.headers()
                     .get("retry-after")
@@ -206,6 +235,19 @@ impl Client {
                     .unwrap_or(1)
                     .clamp(1, 30),
             );
+            if let (Notice(Some(notice)), true, true) =
+                (&self.notice, unavailable, waited.is_zero())
+            {
+                let said = match self.check(res) {
+                    Err(ApiError::Status { problem, .. }) => problem.detail,
+                    _ => String::new(),
+                };
+                notice(&format!(
+                    "{} answered 503 ({said}); asking again for up to {} s",
+                    self.base,
+                    MAX_RATE_WAIT.as_secs()
+                ));
+            }
             std::thread::sleep(wait);
             waited += wait;
         }
@@ -653,14 +695,28 @@ mod tests {
         let bytes = Client::new(&base, "t").get_blob("d").unwrap();
         assert_eq!(bytes, b"abc");
         assert!(started.elapsed() >= Duration::from_secs(1), "it waited");
-        // A 503 that says when to come back is waited out too.
+        // A 503 that says when to come back is waited out too, and the
+        // client's notice hears of it once, with what the server said.
         let base = serve(vec![
+            "HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\nContent-Length: 33\r\nConnection: close\r\n\r\nthe blob store is not answering\r\n",
             "HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
             "HTTP/1.1 200 OK\r\nContent-Length: 3\r\nConnection: close\r\n\r\nabc",
         ]);
+        let heard = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
+        let into = heard.clone();
+        let client = Client::new(&base, "t").with_notice(move |line| {
+            into.lock().unwrap().push(line.to_owned());
+        });
         let started = std::time::Instant::now();
-        assert_eq!(Client::new(&base, "t").get_blob("d").unwrap(), b"abc");
-        assert!(started.elapsed() >= Duration::from_secs(1), "it waited");
+        assert_eq!(client.get_blob("d").unwrap(), b"abc");
+        assert!(started.elapsed() >= Duration::from_secs(2), "it waited");
+        let heard = heard.lock().unwrap();
+        assert_eq!(heard.len(), 1, "{heard:?}");
+        assert!(
+            heard[0].contains("answered 503 (the blob store is not answering")
+                && heard[0].contains("asking again for up to 300 s"),
+            "{heard:?}"
+        );
         // Other failures are not retried.
         let base = serve(vec![
             "HTTP/1.1 503 Service Unavailable\r\nContent-Length: 4\r\nConnection: close\r\n\r\ndown",

@@ -83,7 +83,8 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
             }
         });
     }
-    let client = Client::with_timeout(&config.server, &config.token, Duration::from_secs(120));
+    let client = Client::with_timeout(&config.server, &config.token, Duration::from_secs(120))
+        .with_notice(|line| say!("{line}"));
     let cache: Arc<InputCache> = Arc::default();
     let slots = config.concurrency.max(1);
     // Each slot is a worker of its own to the server: one job at a time.

@@ -86,10 +86,11 @@ impl Conn {
                     self.data.join("admin.token").display()
                 )
             })?;
-        Ok(Client::new(
-            super::common::server_url(&server)?,
-            token.trim(),
-        ))
+        // A wait through an outage says so, rather than look like a hang.
+        Ok(
+            Client::new(super::common::server_url(&server)?, token.trim())
+                .with_notice(|line| eprintln!("{line}")),
+        )
     }
 }
 

@@ -262,6 +262,12 @@ fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
     assert_counted_once(&bake, &after);
     let twice: Vec<&Value> = after.iter().filter(|j| j["attempts"] != 1).collect();
     assert!(twice.is_empty(), "jobs run again: {twice:?}");
+    // The workers said why they waited.
+    let logs = env.worker_logs();
+    assert!(
+        logs.contains("answered 503 (the database is not answering"),
+        "{logs}"
+    );
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
 }
 
