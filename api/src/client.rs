@@ -321,6 +321,18 @@ impl Client {
         Ok(())
     }
 
+    /// Applies `action` (`cancel`, `pause`, `resume` or `retry`) to bake
+    /// `id`; the bake's view after.
+    pub fn control(&self, id: i64, action: &str) -> Result<BakeView> {
+        let res = self.send(|| {
+            self.agent
+                .post(self.url(&format!("/v1/bakes/{id}/{action}")))
+                .header("authorization", &self.auth)
+                .send_empty()
+        })?;
+        self.read_json(res)
+    }
+
     /// The bytes at `path`, whatever their size.
     pub fn get_bytes(&self, path: &str) -> Result<Vec<u8>> {
         let mut res = self.send(|| {

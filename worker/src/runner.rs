@@ -420,7 +420,7 @@ fn deliver(
 struct Flags {
     /// The lease is gone or the bake was cancelled: drop the job.
     lost: AtomicBool,
-    /// The server said to stop (the bake was paused or cancelled), as
+    /// The server said to stop (the bake was cancelled, or ended), as
     /// against a lease refused (409).
     called_off: AtomicBool,
     /// Shutdown past its deadline: stop and give the lease back.
@@ -447,7 +447,7 @@ impl Sink<'_> {
     /// Whether to stop now: the lease is lost or shutdown asks for it.
     fn stop(&self) -> Result<(), Stop> {
         if self.flags.called_off.load(Ordering::Relaxed) {
-            return Err(Stop("the bake was paused or cancelled".into()));
+            return Err(Stop("the bake was cancelled".into()));
         }
         if self.flags.lost.load(Ordering::Relaxed) {
             return Err(Stop(

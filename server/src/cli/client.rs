@@ -310,6 +310,28 @@ pub(super) fn status(args: &StatusArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Arguments of `aobake cancel`, `pause`, `resume` and `retry`.
+#[derive(Debug, clap::Args)]
+pub(super) struct ControlArgs {
+    /// The bake id.
+    id: i64,
+    #[command(flatten)]
+    conn: Conn,
+}
+
+/// Applies `action` to a bake and prints its state after.
+pub(super) fn control(args: &ControlArgs, action: &str) -> anyhow::Result<()> {
+    let view = args.conn.api()?.control(args.id, action)?;
+    println!(
+        "bake {}: {} ({} of {} units)",
+        args.id,
+        view.bake.state.as_str(),
+        view.progress.done,
+        view.progress.total
+    );
+    Ok(())
+}
+
 /// Arguments of `aobake fetch`.
 #[derive(Debug, clap::Args)]
 pub(super) struct FetchArgs {

@@ -86,6 +86,18 @@ enum Command {
     Submit(Box<client::SubmitArgs>),
     /// Show a bake's state and progress.
     Status(client::StatusArgs),
+    /// Cancel a queued, running or paused bake: its running jobs stop at
+    /// their next heartbeat and no job is leased again (`retry` takes it
+    /// up again).
+    Cancel(client::ControlArgs),
+    /// Pause a queued or running bake: no new job of it is leased (running
+    /// ones finish).
+    Pause(client::ControlArgs),
+    /// Resume a paused bake.
+    Resume(client::ControlArgs),
+    /// Queue a failed or cancelled bake again: its unfinished jobs with
+    /// fresh attempts (what finished is kept).
+    Retry(client::ControlArgs),
     /// Download a finished bake's asset by bake id or bake key (exit 4 when
     /// there is none).
     Fetch(client::FetchArgs),
@@ -139,6 +151,10 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Submit(args) => client::submit(&args).map_err(client::explain_refusal),
         Command::Status(args) => client::status(&args).map_err(client::explain_refusal),
+        Command::Cancel(args) => client::control(&args, "cancel").map_err(client::explain_refusal),
+        Command::Pause(args) => client::control(&args, "pause").map_err(client::explain_refusal),
+        Command::Resume(args) => client::control(&args, "resume").map_err(client::explain_refusal),
+        Command::Retry(args) => client::control(&args, "retry").map_err(client::explain_refusal),
         Command::Fetch(args) => client::fetch(&args).map_err(client::explain_refusal),
         Command::Token(args) => client::token(&args).map_err(client::explain_refusal),
     }

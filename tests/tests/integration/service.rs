@@ -405,6 +405,42 @@ fn assert_served_with_etag_and_ranges(env: &TestEnv, b: &serde_json::Value) {
     assert_eq!(r.status().as_u16(), 400);
 }
 
+/// `aobake pause`, `resume`, `cancel` and `retry` drive a bake as the
+/// API's actions do, and a refused one says why.
+#[test]
+fn the_cli_pauses_resumes_cancels_and_retries_a_bake() {
+    let env = TestEnv::start(Options::default());
+    let digest = upload(&env, &character("RiggedSimple"));
+    let (_, b) = submit(&env, &digest, 8);
+    let id = b["id"].as_i64().unwrap().to_string();
+    let run = |action: &str| {
+        let out = env.aobake(&[action, &id]);
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    // No worker runs: the bake stays queued between the actions.
+    for (action, state) in [
+        ("pause", "paused"),
+        ("resume", "queued"),
+        ("cancel", "cancelled"),
+        ("retry", "queued"),
+    ] {
+        let (ok, stdout, stderr) = run(action);
+        assert!(
+            ok && stdout.starts_with(&format!("bake {id}: {state} (")),
+            "{action}: {stdout}{stderr}"
+        );
+    }
+    let (ok, _, stderr) = run("resume");
+    assert!(
+        !ok && stderr.contains("409") && stderr.contains("only a paused bake can be resumed"),
+        "{stderr}"
+    );
+}
+
 #[test]
 fn progress_arrives_as_server_sent_events() {
     let mut env = TestEnv::start(Options::default());
