@@ -738,6 +738,9 @@ fn run_leased(
             let prompt = PROGRESS_EVERY.min(period);
             let mut sent = 0;
             let mut shutdown_since: Option<Instant> = None;
+            // Failing heartbeats are said once, then every 30 s, and their
+            // end once: an outage does not fill the log a line a second.
+            let mut failing: Option<(Instant, Instant)> = None;
             while !flags.done.load(Ordering::Relaxed) {
                 let tick = Instant::now();
                 while !flags.done.load(Ordering::Relaxed) {
@@ -760,7 +763,15 @@ fn run_leased(
                 }
                 let progress = flags.progress.load(Ordering::Relaxed);
                 sent = progress;
-                match client.heartbeat(job, &lease.token, progress) {
+                let beat = client.heartbeat(job, &lease.token, progress);
+                if let (Ok(_), Some((since, _))) = (&beat, failing) {
+                    say!(
+                        "job {job}: heartbeats get through again after {:.0} s",
+                        since.elapsed().as_secs_f64()
+                    );
+                    failing = None;
+                }
+                match beat {
                     Ok(stop) => {
                         if stop {
                             flags.called_off.store(true, Ordering::Relaxed);
@@ -768,7 +779,20 @@ fn run_leased(
                         }
                     }
                     Err(e) if e.is_lease_lost() => flags.lost.store(true, Ordering::Relaxed),
-                    Err(e) => say!("job {job}: heartbeat failed: {e}"),
+                    Err(e) => match &mut failing {
+                        None => {
+                            say!("job {job}: heartbeat failed: {e}");
+                            failing = Some((Instant::now(), Instant::now()));
+                        }
+                        Some((since, said)) if said.elapsed() >= Duration::from_secs(30) => {
+                            say!(
+                                "job {job}: heartbeats failing for {:.0} s: {e}",
+                                since.elapsed().as_secs_f64()
+                            );
+                            *said = Instant::now();
+                        }
+                        Some(_) => {}
+                    },
                 }
             }
         });

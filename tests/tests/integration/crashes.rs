@@ -194,6 +194,12 @@ fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
     // Work was handed in (or fetched) through the outage, not dropped.
     let logs = env.worker_logs();
     assert!(logs.contains("retrying (for up to"), "{logs}");
+    // A job's failing heartbeats are said once (then every 30 s), not a
+    // line a second.
+    for job in &before {
+        let said = format!("job {}: heartbeat failed", job["id"]);
+        assert!(logs.matches(&said).count() <= 1, "{logs}");
+    }
     let twice: Vec<&Value> = after.iter().filter(|j| j["attempts"] != 1).collect();
     assert!(twice.is_empty(), "jobs run again: {twice:?}");
     // Each worker line says when it was written (UTC), so a log tells when
