@@ -235,8 +235,9 @@ impl Client {
                     .unwrap_or(1)
                     .clamp(1, 30),
             );
-            if let (Notice(Some(notice)), true, true) =
-                (&self.notice, unavailable, waited.is_zero())
+            if let Some(notice) = &self.notice.0
+                && unavailable
+                && waited.is_zero()
             {
                 let said = match self.check(res) {
                     Err(ApiError::Status { problem, .. }) => problem.detail,

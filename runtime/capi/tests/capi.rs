@@ -112,6 +112,18 @@ fn bake_rigged_figure(method: Method) -> (Vec<u8>, aobake_core::Character, Vec<a
     bake("RiggedFigure", params)
 }
 
+/// Grid parameters for a bake of seconds: 4³ cells, few rays, one
+/// evaluation frame.
+fn tiny_grid() -> BakeParams {
+    let mut params = BakeParams::new(Method::Grid);
+    params.grid.resolution = 4;
+    params.grid.rays = 8;
+    params.grid.eval_frames = 1;
+    params.grid.eval_rays = 8;
+    params.grid.eval_ground = 8;
+    params
+}
+
 /// A bundled character baked in process with `params`: the asset, the
 /// character and its clips.
 fn bake(
@@ -656,12 +668,7 @@ fn the_volume_gpu_forms_refuse_what_is_wrong_and_say_when_there_is_no_base() {
         aobake_cubemap_free(c);
     }
 
-    let mut params = BakeParams::new(Method::Grid);
-    params.grid.resolution = 4;
-    params.grid.rays = 8;
-    params.grid.eval_frames = 1;
-    params.grid.eval_rays = 8;
-    params.grid.eval_ground = 8;
+    let mut params = tiny_grid();
     params.grid.static_base = false;
     let (asset, character, clips) = bake("CesiumMilkTruck", params);
     let palette: Vec<f32> = character
@@ -782,12 +789,7 @@ fn c_engines_get_part_names_and_ground_heights_and_bad_input_is_refused() {
         aobake_cubemap_free(c);
     }
 
-    let mut params = BakeParams::new(Method::Grid);
-    params.grid.resolution = 4;
-    params.grid.rays = 8;
-    params.grid.eval_frames = 1;
-    params.grid.eval_rays = 8;
-    params.grid.eval_ground = 8;
+    let mut params = tiny_grid();
     params.grid.average_frames = 2;
     let (asset, character, clips) = bake("CesiumMilkTruck", params);
     let container = aobake_runtime::Container::from_bytes(&asset).unwrap();
@@ -817,67 +819,40 @@ fn c_engines_get_part_names_and_ground_heights_and_bad_input_is_refused() {
         assert_eq!(h, model.base.as_ref().unwrap().ground.square.height);
         let n = aobake_grid_palette_len(g);
         let point = [centre.x, centre.y - 0.3, centre.z];
-        let mut unit = [0f32];
-        assert!(aobake_grid_occlusion(
-            g,
-            palette.as_ptr(),
-            n,
-            point.as_ptr(),
-            [0.0f32, 1.0, 0.0].as_ptr(),
-            std::ptr::null(),
-            1,
-            unit.as_mut_ptr()
-        ));
-        let mut long = [0f32];
-        assert!(aobake_grid_occlusion(
-            g,
-            palette.as_ptr(),
-            n,
-            point.as_ptr(),
-            [0.0f32, 3.0, 0.0].as_ptr(),
-            std::ptr::null(),
-            1,
-            long.as_mut_ptr()
-        ));
-        assert_eq!(unit, long, "a normal of length 3 is normalised");
-        for y in [1e-30f32, 3e30] {
-            assert!(aobake_grid_occlusion(
+        // The point's occlusion with `normal`, or `None` when refused.
+        let look = |normal: [f32; 3]| {
+            let mut out = [0f32];
+            aobake_grid_occlusion(
                 g,
                 palette.as_ptr(),
                 n,
                 point.as_ptr(),
-                [0.0f32, y, 0.0].as_ptr(),
+                normal.as_ptr(),
                 std::ptr::null(),
                 1,
-                long.as_mut_ptr()
-            ));
-            assert_eq!(unit, long, "a normal of length {y} is a direction");
+                out.as_mut_ptr(),
+            )
+            .then_some(out[0])
+        };
+        let unit = look([0.0, 1.0, 0.0]).unwrap();
+        assert_eq!(
+            look([0.0, 3.0, 0.0]),
+            Some(unit),
+            "a normal of length 3 is normalised"
+        );
+        for y in [1e-30f32, 3e30] {
+            assert_eq!(
+                look([0.0, y, 0.0]),
+                Some(unit),
+                "a normal of length {y} is a direction"
+            );
         }
-        let mut down = [0f32];
-        assert!(aobake_grid_occlusion(
-            g,
-            palette.as_ptr(),
-            n,
-            point.as_ptr(),
-            [0.0f32, -1.0, 0.0].as_ptr(),
-            std::ptr::null(),
-            1,
-            down.as_mut_ptr()
-        ));
+        let down = look([0.0, -1.0, 0.0]).unwrap();
         assert!(
-            unit[0] > 0.0 && unit != down,
+            unit > 0.0 && unit != down,
             "the normal matters: {unit:?} {down:?}"
         );
-        assert!(!aobake_grid_occlusion(
-            g,
-            palette.as_ptr(),
-            n,
-            point.as_ptr(),
-            [0.0f32; 3].as_ptr(),
-            std::ptr::null(),
-            1,
-            long.as_mut_ptr()
-        ));
+        assert_eq!(look([0.0; 3]), None);
         assert!(last_error().contains("zero length"), "{}", last_error());
         aobake_grid_free(g);
     }

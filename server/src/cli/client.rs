@@ -182,43 +182,20 @@ const AWAY_FOR: Duration = Duration::from_secs(300);
 /// Follows a bake until it ends, with a progress bar; prints the summary.
 fn wait(api: &Client, id: i64) -> anyhow::Result<()> {
     let bar = super::trace::progress_bar(1, "baking");
-    // Through an outage: says so once, and again when the server answers.
-    let mut away = false;
-    let mut ask = |call: &dyn Fn() -> aobake_api::client::Result<_>| {
-        let answer = aobake_api::client::retry(
-            AWAY_FOR,
-            Duration::from_secs(1),
-            || true,
-            |e, left| {
-                if !away {
-                    bar.suspend(|| {
-                        eprintln!(
-                            "{e}; the bake goes on there: asking again for up to {} s",
-                            left.as_secs()
-                        );
-                    });
-                    away = true;
-                }
-            },
-            call,
-        );
-        if answer.is_ok() && std::mem::take(&mut away) {
-            bar.suspend(|| eprintln!("the server answers again"));
-        }
-        answer.with_context(|| {
-            format!("cannot follow bake {id}; it may still finish: `aobake status {id}`")
-        })
+    let mut follow = Follow {
+        bar: &bar,
+        id,
+        away: false,
     };
     loop {
-        let view: BakeView =
-            serde_json::from_slice(&ask(&|| api.get_bytes(&format!("/v1/bakes/{id}")))?)?;
+        let view = follow.ask(|| api.bake(id))?;
         bar.set_length(u64::try_from(view.progress.total).unwrap_or(1));
         bar.set_position(u64::try_from(view.progress.done).unwrap_or(0));
         bar.set_message(running_jobs(&view));
         let b = &view.bake;
         match b.state {
             BakeState::Done => {
-                let report = ask(&|| api.report(id))?;
+                let report = follow.ask(|| api.report(id))?;
                 bar.finish_and_clear();
                 let report: BakeReport = serde_json::from_slice(&report)?;
                 println!(
@@ -238,6 +215,45 @@ fn wait(api: &Client, id: i64) -> anyhow::Result<()> {
             }
             _ => std::thread::sleep(Duration::from_millis(500)),
         }
+    }
+}
+
+/// A bake followed through outages of its server: says so once, and
+/// again when the server answers.
+struct Follow<'a> {
+    bar: &'a indicatif::ProgressBar,
+    id: i64,
+    away: bool,
+}
+
+impl Follow<'_> {
+    /// `call`'s answer, asked again through an outage for [`AWAY_FOR`].
+    fn ask<T>(&mut self, call: impl FnMut() -> aobake_api::client::Result<T>) -> anyhow::Result<T> {
+        let (bar, away) = (self.bar, &mut self.away);
+        let answer = aobake_api::client::retry(
+            AWAY_FOR,
+            Duration::from_secs(1),
+            || true,
+            |e, left| {
+                if !*away {
+                    bar.suspend(|| {
+                        eprintln!(
+                            "{e}; the bake goes on there: asking again for up to {} s",
+                            left.as_secs()
+                        );
+                    });
+                    *away = true;
+                }
+            },
+            call,
+        );
+        if answer.is_ok() && std::mem::take(&mut self.away) {
+            bar.suspend(|| eprintln!("the server answers again"));
+        }
+        let id = self.id;
+        answer.with_context(|| {
+            format!("cannot follow bake {id}; it may still finish: `aobake status {id}`")
+        })
     }
 }
 

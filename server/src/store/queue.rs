@@ -331,11 +331,14 @@ const RUNNING_WORK: &str = "SELECT CAST(COALESCE(SUM(r.progress), 0) AS BIGINT) 
 
 /// A bake's columns with [`RUNNING_WORK`], read in one statement (one
 /// snapshot: a completion cannot fall between the two numbers).
-fn bake_columns() -> String {
-    format!(
-        "bakes.*, ({}) AS running_work",
-        RUNNING_WORK.replace("$1", "bakes.id")
-    )
+fn bake_columns() -> &'static str {
+    static COLUMNS: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
+        format!(
+            "bakes.*, ({}) AS running_work",
+            RUNNING_WORK.replace("$1", "bakes.id")
+        )
+    });
+    &COLUMNS
 }
 
 async fn bake_by_id<B: Backend>(c: &mut B::Conn, id: i64, lock: bool) -> Result<BakeRow> {
@@ -1177,7 +1180,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .read()
             .await?
             .all(
-                B::sql("SELECT id, CASE WHEN last_seen < {now} - $1 THEN 'stopped' WHEN state = 'busy' AND NOT EXISTS (SELECT 1 FROM jobs j WHERE j.id = workers.job_id AND j.state = 'running' AND j.worker = workers.id) THEN 'idle' ELSE state END AS state, CASE WHEN last_seen < {now} - $1 THEN NULL WHEN EXISTS (SELECT 1 FROM jobs j WHERE j.id = workers.job_id AND j.state = 'running' AND j.worker = workers.id) THEN job_id END AS job_id, last_seen, started_at, tracer FROM workers ORDER BY last_seen DESC, id")
+                B::sql("SELECT id, CASE WHEN gone THEN 'stopped' WHEN state = 'busy' AND holding IS NULL THEN 'idle' ELSE state END AS state, CASE WHEN gone THEN NULL ELSE holding END AS job_id, last_seen, started_at, tracer FROM (SELECT w.*, w.last_seen < {now} - $1 AS gone, (SELECT j.id FROM jobs j WHERE j.id = w.job_id AND j.state = 'running' AND j.worker = w.id) AS holding FROM workers w) seen ORDER BY last_seen DESC, id")
                     .bind(gone_after_ms),
             )
             .await?;
