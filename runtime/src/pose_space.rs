@@ -134,6 +134,14 @@ impl JointAngles {
     /// visible in the AO.
     pub fn params_f64(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f64> {
         let mut out = Vec::with_capacity(self.len());
+        self.params_f64_into(skeleton, locals, &mut out);
+        out
+    }
+
+    /// [`JointAngles::params_f64`] into `out` (cleared first): nothing is
+    /// allocated once `out` has held a pose's parameters.
+    pub fn params_f64_into(&self, skeleton: &Skeleton, locals: &[Transform], out: &mut Vec<f64>) {
+        out.clear();
         for &j in &self.joints {
             let rest = skeleton.nodes[j].rest.rotation.as_dquat();
             let now = locals[j].rotation.as_dquat();
@@ -157,7 +165,6 @@ impl JointAngles {
                 }
             }));
         }
-        out
     }
 
     /// Parameters → local transforms: the rest transforms with the
@@ -235,9 +242,24 @@ impl Handles {
     /// [`Handles::handles`] in double precision from the single-precision
     /// transforms: what the run time blends and projects.
     pub fn handles_f64(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f64> {
-        let world = skeleton.world_from_node_f64(locals);
-        let root_from_world = self.root.map_or(DAffine3::IDENTITY, |r| world[r].inverse());
         let mut out = Vec::with_capacity(self.len());
+        self.handles_f64_into(skeleton, locals, &mut Vec::new(), &mut out);
+        out
+    }
+
+    /// [`Handles::handles_f64`] into `out` (cleared first), with `world`
+    /// for the nodes' world transforms: nothing is allocated once both
+    /// have held a pose.
+    pub fn handles_f64_into(
+        &self,
+        skeleton: &Skeleton,
+        locals: &[Transform],
+        world: &mut Vec<DAffine3>,
+        out: &mut Vec<f64>,
+    ) {
+        skeleton.world_from_node_f64_into(locals, world);
+        let root_from_world = self.root.map_or(DAffine3::IDENTITY, |r| world[r].inverse());
+        out.clear();
         for (&j, offset) in self.joints.iter().zip(&self.offsets) {
             let root_from_joint = root_from_world * world[j];
             out.extend(root_from_joint.translation.to_array());
@@ -247,7 +269,6 @@ impl Handles {
                     .to_array(),
             );
         }
-        out
     }
 
     /// The handle vector of a pose (one local transform per node of

@@ -86,7 +86,17 @@ impl Skeleton {
     /// [`Skeleton::world_from_node`] in double precision (what the run
     /// time's per-pose step reads).
     pub fn world_from_node_f64(&self, locals: &[Transform]) -> Vec<DAffine3> {
-        let mut world = vec![DAffine3::IDENTITY; self.nodes.len()];
+        let mut world = Vec::new();
+        self.world_from_node_f64_into(locals, &mut world);
+        world
+    }
+
+    /// [`Skeleton::world_from_node_f64`] into `world` (cleared first), so
+    /// that a player reuses one buffer: nothing is allocated once it has
+    /// held a pose.
+    pub fn world_from_node_f64_into(&self, locals: &[Transform], world: &mut Vec<DAffine3>) {
+        world.clear();
+        world.resize(self.nodes.len(), DAffine3::IDENTITY);
         for &i in &self.order {
             let l = &locals[i];
             let local = DAffine3::from_scale_rotation_translation(
@@ -99,7 +109,6 @@ impl Skeleton {
                 None => local,
             };
         }
-        world
     }
 
     /// Whether the hierarchy is sound: every parent a node of this

@@ -105,7 +105,10 @@ typedef struct AobakeGrid AobakeGrid;
 
 /**
  * A vertex-method asset (static average, vertex-linear or
- * vertex-clustered), its rig and the pose being set. Opaque to C.
+ * vertex-clustered), its rig and the pose being set, the GPU form once
+ * asked for, and the per-pose step's buffers (behind a lock: the
+ * weights and the evaluation take a `const` handle, which several
+ * threads may share). Opaque to C.
  */
 typedef struct AobakeVertexAo AobakeVertexAo;
 
@@ -610,7 +613,8 @@ void aobake_vertex_ao_reset(struct AobakeVertexAo *ao);
 
 /**
  * Writes the current pose's weights (`aobake_vertex_ao_weight_count` of
- * them) to `out`; `false` if `len` is not that count.
+ * them) to `out`; `false` if `len` is not that count. Allocates nothing
+ * once the handle has computed a pose.
  *
  * # Safety
  * `ao` must be NULL or a live handle; `out` NULL or `len` writable
@@ -621,8 +625,9 @@ bool aobake_vertex_ao_weights(const struct AobakeVertexAo *ao, float *out, size_
 /**
  * Writes every vertex's AO in the current pose (0 open … 1 blocked;
  * `aobake_vertex_ao_vertices` of them) to `out`; `false` if `len` is not
- * that count. It writes straight into `out`, allocating nothing in
- * proportion to the vertices, so a player reuses one buffer a frame.
+ * that count. It writes straight into `out`, and once the handle has
+ * computed a pose it allocates nothing, so a player's frame does not
+ * touch the heap.
  *
  * # Safety
  * `ao` must be NULL or a live handle; `out` NULL or `len` writable

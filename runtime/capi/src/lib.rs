@@ -191,21 +191,6 @@ unsafe fn out_floats<'a>(
     Some(unsafe { std::slice::from_raw_parts_mut(out, want) })
 }
 
-/// Copies `values` to `len` floats at `out` if the lengths agree.
-///
-/// # Safety
-/// `out` must be NULL or point to `len` writable floats.
-unsafe fn fill(values: &[f32], out: *mut f32, len: usize, what: &str) -> bool {
-    // SAFETY: forwarded from the caller.
-    match unsafe { out_floats(out, len, values.len(), what) } {
-        Some(out) => {
-            out.copy_from_slice(values);
-            true
-        }
-        None => false,
-    }
-}
-
 /// `count · width` floats at `data`, or the reason they are not: NULL,
 /// or a count that overflows.
 ///

@@ -4,25 +4,40 @@
 
 use std::{
     ffi::{CStr, c_char},
-    sync::OnceLock,
+    sync::{Mutex, MutexGuard, OnceLock, PoisonError},
 };
 
 use aobake_runtime::{
     Asset,
     method::vertex::{
-        VertexAo,
+        PoseScratch, VertexAo,
         form::{FormRef, GpuArrays},
     },
     rig::Transform,
 };
 use glam::{Quat, Vec3};
 
-use crate::{copy_array, fail, fill, free, live, open, out_floats, packed, put};
+use crate::{copy_array, fail, free, live, open, out_floats, packed, put};
 
 /// A vertex-method asset (static average, vertex-linear or
-/// vertex-clustered), its rig and the pose being set. Opaque to C.
+/// vertex-clustered), its rig and the pose being set, the GPU form once
+/// asked for, and the per-pose step's buffers (behind a lock: the
+/// weights and the evaluation take a `const` handle, which several
+/// threads may share). Opaque to C.
 #[derive(Debug)]
-pub struct AobakeVertexAo(VertexAo, OnceLock<Result<GpuArrays, String>>);
+pub struct AobakeVertexAo(
+    VertexAo,
+    OnceLock<Result<GpuArrays, String>>,
+    Mutex<PoseScratch>,
+);
+
+impl AobakeVertexAo {
+    /// The per-pose step's buffers (a lock no call can poison: a panic
+    /// does not cross the C ABI).
+    fn scratch(&self) -> MutexGuard<'_, PoseScratch> {
+        self.2.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
 
 /// A node's local transform, as glTF and engines animate it: translation,
 /// rotation (unit quaternion x, y, z, w) and scale, in the parent's frame.
@@ -61,7 +76,7 @@ pub unsafe extern "C" fn aobake_vertex_ao_open(
     // SAFETY: forwarded from the caller.
     unsafe {
         open(bytes, len, "vertex", |a| match a {
-            Asset::Vertex(ao) => Some(AobakeVertexAo(*ao, OnceLock::new())),
+            Asset::Vertex(ao) => Some(AobakeVertexAo(*ao, OnceLock::new(), Mutex::default())),
             _ => None,
         })
     }
@@ -314,7 +329,8 @@ pub unsafe extern "C" fn aobake_vertex_ao_reset(ao: *mut AobakeVertexAo) {
 }
 
 /// Writes the current pose's weights (`aobake_vertex_ao_weight_count` of
-/// them) to `out`; `false` if `len` is not that count.
+/// them) to `out`; `false` if `len` is not that count. Allocates nothing
+/// once the handle has computed a pose.
 ///
 /// # Safety
 /// `ao` must be NULL or a live handle; `out` NULL or `len` writable
@@ -326,17 +342,22 @@ pub unsafe extern "C" fn aobake_vertex_ao_weights(
     len: usize,
 ) -> bool {
     // SAFETY: forwarded from the caller.
-    match unsafe { handle(ao) } {
-        // SAFETY: forwarded from the caller.
-        Some(h) => unsafe { fill(&h.weights(), out, len, "weights") },
-        None => false,
-    }
+    let Some(h) = (unsafe { live(ao) }) else {
+        return false;
+    };
+    // SAFETY: forwarded from the caller.
+    let Some(out) = (unsafe { out_floats(out, len, h.0.weight_count(), "weights") }) else {
+        return false;
+    };
+    h.0.weights_into(&mut h.scratch(), out);
+    true
 }
 
 /// Writes every vertex's AO in the current pose (0 open … 1 blocked;
 /// `aobake_vertex_ao_vertices` of them) to `out`; `false` if `len` is not
-/// that count. It writes straight into `out`, allocating nothing in
-/// proportion to the vertices, so a player reuses one buffer a frame.
+/// that count. It writes straight into `out`, and once the handle has
+/// computed a pose it allocates nothing, so a player's frame does not
+/// touch the heap.
 ///
 /// # Safety
 /// `ao` must be NULL or a live handle; `out` NULL or `len` writable
@@ -348,15 +369,13 @@ pub unsafe extern "C" fn aobake_vertex_ao_evaluate(
     len: usize,
 ) -> bool {
     // SAFETY: forwarded from the caller.
-    let Some(h) = (unsafe { handle(ao) }) else {
+    let Some(h) = (unsafe { live(ao) }) else {
         return false;
     };
     // SAFETY: forwarded from the caller.
-    let Some(out) = (unsafe { out_floats(out, len, h.vertices(), "AO values") }) else {
+    let Some(out) = (unsafe { out_floats(out, len, h.0.vertices(), "AO values") }) else {
         return false;
     };
-    // Straight into the caller's buffer: nothing in proportion to the
-    // vertices is allocated per frame.
-    h.evaluate_into(out);
+    h.0.evaluate_into(&mut h.scratch(), out);
     true
 }

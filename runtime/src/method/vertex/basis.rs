@@ -27,23 +27,55 @@ impl Basis {
 
     /// [`Basis::apply`] in double precision, rounded once at the end.
     pub fn apply_f64(&self, weights: &[f64]) -> Vec<f32> {
+        let mut out = vec![0.0; self.rank + 1];
+        self.apply_f64_into(weights, &mut Vec::new(), &mut out);
+        out
+    }
+
+    /// [`Basis::apply_f64`] into `out` (`rank + 1` values), summing in
+    /// `sums`: nothing is allocated once `sums` has held a pose's.
+    pub fn apply_f64_into(&self, weights: &[f64], sums: &mut Vec<f64>, out: &mut [f32]) {
         assert_eq!(weights.len(), self.inputs, "one weight per input");
-        let mut out: Vec<f64> = self.offset.iter().map(|&o| -f64::from(o)).collect();
+        assert_eq!(out.len(), self.rank + 1, "one value per basis row and a 1");
+        sums.clear();
+        sums.extend(self.offset.iter().map(|&o| -f64::from(o)));
         for (row, &w) in self.mix.chunks_exact(self.rank).zip(weights) {
             if w != 0.0 {
-                out.iter_mut()
+                sums.iter_mut()
                     .zip(row)
                     .for_each(|(o, &m)| *o += w * f64::from(m));
             }
         }
-        out.push(1.0);
-        out.into_iter().map(|x| x as f32).collect()
+        sums.push(1.0);
+        out.iter_mut()
+            .zip(sums.iter())
+            .for_each(|(o, &x)| *o = x as f32);
     }
 
     /// Bytes of the mix and offsets (f32).
     pub fn bytes(&self) -> usize {
         4 * (self.mix.len() + self.offset.len())
     }
+}
+
+/// A model's unrounded weights `w` as the weights of its form: through
+/// the basis when it has one, else rounded, into `out` (`sums` as for
+/// [`Basis::apply_f64_into`]).
+pub(crate) fn finish(w: &[f64], basis: Option<&Basis>, sums: &mut Vec<f64>, out: &mut [f32]) {
+    match basis {
+        Some(b) => b.apply_f64_into(w, sums, out),
+        None => {
+            assert_eq!(out.len(), w.len(), "one value per weight");
+            out.iter_mut().zip(w).for_each(|(o, &x)| *o = x as f32);
+        }
+    }
+}
+
+/// [`finish`] into a new vector.
+pub(crate) fn finished(w: &[f64], basis: Option<&Basis>) -> Vec<f32> {
+    let mut out = vec![0.0; basis.map_or(w.len(), |b| b.rank + 1)];
+    finish(w, basis, &mut Vec::new(), &mut out);
+    out
 }
 
 #[cfg(test)]

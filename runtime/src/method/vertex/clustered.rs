@@ -6,9 +6,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::basis::Basis;
+use super::basis::{Basis, finish, finished};
 use super::form::Coefficients;
 use super::linear::VertexLinear;
+use super::model::StepBuffers;
 use crate::pose_space::JointAngles;
 
 /// MLS weights below this are dropped (and the rest renormalised), so a
@@ -94,24 +95,33 @@ impl VertexClustered {
 
     /// [`VertexClustered::blend_weights`] of an unrounded handle vector.
     pub fn blend_weights_f64(&self, h: &[f64]) -> Vec<f64> {
-        let d2: Vec<f64> = self
-            .clusters
-            .iter()
-            .map(|c| {
-                c.center
-                    .iter()
-                    .zip(h)
-                    .map(|(&a, &b)| (b - f64::from(a)).powi(2))
-                    .sum()
-            })
-            .collect();
-        if let Some(hit) = d2.iter().position(|&d| d == 0.0) {
-            return (0..d2.len()).map(|j| f64::from(j == hit)).collect();
+        let mut w = Vec::with_capacity(self.clusters.len());
+        self.blend_weights_f64_into(h, &mut w);
+        w
+    }
+
+    /// [`VertexClustered::blend_weights_f64`] into `w` (cleared first).
+    pub(crate) fn blend_weights_f64_into(&self, h: &[f64], w: &mut Vec<f64>) {
+        w.clear();
+        // Squared distances to the centres, then in place their logs'
+        // weights.
+        w.extend(self.clusters.iter().map(|c| {
+            c.center
+                .iter()
+                .zip(h)
+                .map(|(&a, &b)| (b - f64::from(a)).powi(2))
+                .sum::<f64>()
+        }));
+        if let Some(hit) = w.iter().position(|&d| d == 0.0) {
+            for (j, x) in w.iter_mut().enumerate() {
+                *x = f64::from(j == hit);
+            }
+            return;
         }
         let alpha = f64::from(self.alpha);
-        let logs: Vec<f64> = d2.iter().map(|&d| -0.5 * alpha * d.ln()).collect();
-        let top = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let mut w: Vec<f64> = logs.iter().map(|&l| (l - top).exp()).collect();
+        w.iter_mut().for_each(|d| *d = -0.5 * alpha * d.ln());
+        let top = w.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        w.iter_mut().for_each(|l| *l = (*l - top).exp());
         let sum: f64 = w.iter().sum();
         w.iter_mut().for_each(|x| *x /= sum);
         w.iter_mut()
@@ -119,7 +129,6 @@ impl VertexClustered {
             .for_each(|x| *x = 0.0);
         let sum: f64 = w.iter().sum();
         w.iter_mut().for_each(|x| *x /= sum);
-        w
     }
 
     /// The per-pose weights of the linear form: `[1]` for the mean, then
@@ -141,14 +150,38 @@ impl VertexClustered {
     /// [`VertexClustered::weights_with`] of unrounded handles and joint
     /// angles, in double precision until the end.
     pub fn weights_with_f64(&self, h: &[f64], angles: &[f64]) -> Vec<f32> {
+        let mut b = StepBuffers::default();
+        self.unrounded_weights_into(h, angles, &mut b);
+        finished(&b.unrounded, self.basis.as_ref())
+    }
+
+    /// [`VertexClustered::weights_with_f64`] into `out` (one value per
+    /// weight), with buffers that allocate nothing once they have held a
+    /// pose.
+    pub(crate) fn weights_with_f64_into(
+        &self,
+        h: &[f64],
+        angles: &[f64],
+        b: &mut StepBuffers,
+        out: &mut [f32],
+    ) {
+        self.unrounded_weights_into(h, angles, b);
+        finish(&b.unrounded, self.basis.as_ref(), &mut b.basis, out);
+    }
+
+    /// The weights before the basis, unrounded, into `b.unrounded`.
+    fn unrounded_weights_into(&self, h: &[f64], angles: &[f64], b: &mut StepBuffers) {
         assert_eq!(h.len(), self.handles, "one number per handle coordinate");
-        let omega = self.blend_weights_f64(h);
-        let mut out: Vec<f64> = Vec::with_capacity(1 + self.clusters.len() * self.rows());
+        self.blend_weights_f64_into(h, &mut b.omega);
+        let out = &mut b.unrounded;
+        out.clear();
         match &self.base {
-            Some(base) => out.extend(base.weights.unrounded_weights(angles)),
+            Some(base) => base
+                .weights
+                .unrounded_weights_into(angles, &mut b.linear, out),
             None => out.push(1.0),
         }
-        for (cluster, &w) in self.clusters.iter().zip(&omega) {
+        for (cluster, &w) in self.clusters.iter().zip(&b.omega) {
             for r in 0..self.dimensions {
                 let axis = &cluster.axes[r * self.handles..(r + 1) * self.handles];
                 let y: f64 = axis
@@ -167,10 +200,6 @@ impl VertexClustered {
             if self.centering == Centering::Cluster {
                 out.push(w);
             }
-        }
-        match &self.basis {
-            Some(b) => b.apply_f64(&out),
-            None => out.into_iter().map(|x| x as f32).collect(),
         }
     }
 

@@ -5,8 +5,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::basis::Basis;
+use super::basis::{Basis, finish, finished};
 use super::form::Coefficients;
+use super::model::StepBuffers;
 use crate::pose_space::Range;
 
 /// What vertex-linear is linear in, per rotated joint (translations are
@@ -48,11 +49,18 @@ impl Features {
 
     /// [`Features::expand`] in double precision.
     pub fn expand_f64(self, angles: &[f64], rotations: usize) -> Vec<f64> {
+        let mut out = Vec::with_capacity(self.count(angles.len(), rotations));
+        self.expand_f64_into(angles, rotations, &mut out);
+        out
+    }
+
+    /// [`Features::expand_f64`] into `out` (cleared first).
+    pub fn expand_f64_into(self, angles: &[f64], rotations: usize, out: &mut Vec<f64>) {
+        out.clear();
         match self {
-            Self::RotationVector => angles.to_vec(),
+            Self::RotationVector => out.extend_from_slice(angles),
             Self::Matrix => {
                 let (rot, rest) = angles.split_at(3 * rotations);
-                let mut out = Vec::with_capacity(self.count(angles.len(), rotations));
                 for r in rot.chunks_exact(3) {
                     let m = glam::DMat3::from_quat(glam::DQuat::from_scaled_axis(
                         glam::DVec3::from_slice(r),
@@ -60,7 +68,6 @@ impl Features {
                     out.extend(m.to_cols_array());
                 }
                 out.extend_from_slice(rest);
-                out
             }
         }
     }
@@ -142,43 +149,60 @@ impl VertexLinear {
     /// that barely moved can be 10⁵, which would make single precision's
     /// rounding along the way visible in the AO.
     pub fn weights_f64(&self, angles: &[f64]) -> Vec<f32> {
-        let w = self.unrounded_weights(angles);
-        match &self.basis {
-            Some(b) => b.apply_f64(&w),
-            None => w.into_iter().map(|x| x as f32).collect(),
-        }
+        finished(&self.unrounded_weights(angles), self.basis.as_ref())
+    }
+
+    /// [`VertexLinear::weights_f64`] into `out` (one value per weight),
+    /// with buffers that allocate nothing once they have held a pose.
+    pub(crate) fn weights_f64_into(&self, angles: &[f64], b: &mut StepBuffers, out: &mut [f32]) {
+        b.unrounded.clear();
+        self.unrounded_weights_into(angles, &mut b.linear, &mut b.unrounded);
+        finish(&b.unrounded, self.basis.as_ref(), &mut b.basis, out);
     }
 
     /// The weights before the basis, unrounded (what vertex-clustered's
     /// linear base contributes).
     pub fn unrounded_weights(&self, angles: &[f64]) -> Vec<f64> {
+        let mut out = Vec::new();
+        self.unrounded_weights_into(angles, &mut Default::default(), &mut out);
+        out
+    }
+
+    /// [`VertexLinear::unrounded_weights`] appended to `out`, with two
+    /// buffers for the clamped angles and their features.
+    pub(crate) fn unrounded_weights_into(
+        &self,
+        angles: &[f64],
+        [clamped, standard]: &mut [Vec<f64>; 2],
+        out: &mut Vec<f64>,
+    ) {
         assert_eq!(angles.len(), self.ranges.len(), "one number per angle");
-        let clamped: Vec<f64> = angles
-            .iter()
-            .zip(&self.ranges)
-            .map(|(&x, r)| x.clamp(f64::from(r.min), f64::from(r.max)))
-            .collect();
-        let standard: Vec<f64> = self
-            .features
-            .expand_f64(&clamped, self.rotations)
-            .iter()
+        clamped.clear();
+        clamped.extend(
+            angles
+                .iter()
+                .zip(&self.ranges)
+                .map(|(&x, r)| x.clamp(f64::from(r.min), f64::from(r.max))),
+        );
+        self.features
+            .expand_f64_into(clamped, self.rotations, standard);
+        // One feature per mean and scale (an asset's reader checks they
+        // agree).
+        standard.truncate(self.mean.len().min(self.inv_std.len()));
+        standard
+            .iter_mut()
             .zip(self.mean.iter().zip(&self.inv_std))
-            .map(|(&x, (&m, &s))| (x - f64::from(m)) * f64::from(s))
-            .collect();
-        let mut w: Vec<f64> = match &self.projection {
-            Some(d) => d
-                .chunks_exact(standard.len())
-                .map(|row| {
-                    row.iter()
-                        .zip(&standard)
-                        .map(|(&a, b)| f64::from(a) * b)
-                        .sum()
-                })
-                .collect(),
-            None => standard,
-        };
-        w.push(1.0);
-        w
+            .for_each(|(x, (&m, &s))| *x = (*x - f64::from(m)) * f64::from(s));
+        match &self.projection {
+            Some(d) => out.extend(d.chunks_exact(standard.len()).map(|row| {
+                row.iter()
+                    .zip(standard.iter())
+                    .map(|(&a, b)| f64::from(a) * b)
+                    .sum::<f64>()
+            })),
+            None => out.extend_from_slice(standard),
+        }
+        out.push(1.0);
     }
 
     /// AO of every vertex at these joint angles.

@@ -20,7 +20,7 @@ pub use clustered::{Centering, LinearBase, PoseCluster, VertexClustered};
 pub use codec::{AssetHeader, Layout, UNITS};
 pub use form::{Block, Coefficients, FormRef, LinearForm, SparseForm};
 pub use linear::{Features, VertexLinear};
-pub use model::Model;
+pub use model::{Model, PoseScratch};
 pub use play::VertexAo;
 
 /// Version of the vertex methods' algorithms, part of the bake key: bump

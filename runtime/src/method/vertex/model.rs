@@ -2,6 +2,8 @@
 //! features it reads, evaluated per pose from the nodes' local transforms.
 
 use super::{FormRef, average::StaticAverage, clustered::VertexClustered, linear::VertexLinear};
+use glam::DAffine3;
+
 use crate::{
     Method,
     pose_space::{Handles, JointAngles},
@@ -72,22 +74,51 @@ impl Model {
     /// gives features that are not numbers: each weight that is not a
     /// finite number counts as 0, so the AO stays a number in [0, 1].
     pub fn weights(&self, skeleton: &Skeleton, locals: &[Transform]) -> Vec<f32> {
-        let mut weights = match self {
-            Self::StaticAverage(_) => vec![1.0],
-            Self::VertexLinear(layout, m) => m.weights_f64(&layout.params_f64(skeleton, locals)),
-            Self::VertexClustered(handles, m) => {
-                let angles = m
-                    .base
-                    .as_ref()
-                    .map(|b| b.joint_angles.params_f64(skeleton, locals))
-                    .unwrap_or_default();
-                m.weights_with_f64(&handles.handles_f64(skeleton, locals), &angles)
+        let mut out = vec![0.0; self.weight_count()];
+        self.weights_into(skeleton, locals, &mut PoseScratch::default(), &mut out);
+        out
+    }
+
+    /// [`Model::weights`] into `out` ([`Model::weight_count`] values),
+    /// with `scratch` for the steps between: once `scratch` has held a
+    /// pose, nothing is allocated, so an engine's frame need not touch the
+    /// heap.
+    ///
+    /// # Panics
+    /// If `out` does not hold one value per weight.
+    pub fn weights_into(
+        &self,
+        skeleton: &Skeleton,
+        locals: &[Transform],
+        scratch: &mut PoseScratch,
+        out: &mut [f32],
+    ) {
+        assert_eq!(out.len(), self.weight_count(), "one value per weight");
+        let PoseScratch {
+            world,
+            handles,
+            angles,
+            step,
+            ..
+        } = scratch;
+        match self {
+            Self::StaticAverage(_) => out.fill(1.0),
+            Self::VertexLinear(layout, m) => {
+                layout.params_f64_into(skeleton, locals, angles);
+                m.weights_f64_into(angles, step, out);
             }
-        };
-        for w in weights.iter_mut().filter(|w| !w.is_finite()) {
+            Self::VertexClustered(layout, m) => {
+                match &m.base {
+                    Some(b) => b.joint_angles.params_f64_into(skeleton, locals, angles),
+                    None => angles.clear(),
+                }
+                layout.handles_f64_into(skeleton, locals, world, handles);
+                m.weights_with_f64_into(handles, angles, step, out);
+            }
+        }
+        for w in out.iter_mut().filter(|w| !w.is_finite()) {
             *w = 0.0;
         }
-        weights
     }
 
     /// AO of every vertex for weights from [`Model::weights`].
@@ -110,4 +141,37 @@ impl Model {
             FormRef::Dense(_) => weights.iter().filter(|&&w| w != 0.0).count() as f64,
         }
     }
+}
+
+/// The buffers of one pose's step from local transforms to weights
+/// ([`Model::weights_into`]; [`crate::method::vertex::VertexAo::evaluate_into`]
+/// keeps the weights here too). A player keeps one per character it
+/// animates (or per thread); it grows to the model's sizes at the first
+/// pose and then allocates nothing.
+#[derive(Debug, Clone, Default)]
+pub struct PoseScratch {
+    /// World transforms of the nodes (the handles are measured in them).
+    world: Vec<DAffine3>,
+    /// The handle vector.
+    handles: Vec<f64>,
+    /// The joint angles.
+    angles: Vec<f64>,
+    /// The per-method steps' buffers.
+    step: StepBuffers,
+    /// The weights, for an evaluation.
+    pub(crate) weights: Vec<f32>,
+}
+
+/// The buffers of the methods' per-pose steps ([`VertexLinear`]'s and
+/// [`VertexClustered`]'s `_into` functions).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct StepBuffers {
+    /// The clamped angles and their standardised features.
+    pub(crate) linear: [Vec<f64>; 2],
+    /// The clusters' blend weights.
+    pub(crate) omega: Vec<f64>,
+    /// The weights before the basis, unrounded.
+    pub(crate) unrounded: Vec<f64>,
+    /// The basis's sums.
+    pub(crate) basis: Vec<f64>,
 }

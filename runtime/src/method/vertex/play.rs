@@ -6,18 +6,22 @@
 //!
 //! ```no_run
 //! # fn main() -> Result<(), aobake_runtime::AssetError> {
-//! use aobake_runtime::{method::vertex::VertexAo, rig::Transform};
+//! use aobake_runtime::method::vertex::{PoseScratch, VertexAo};
 //! let bytes = std::fs::read("fox.aobake").expect("the asset");
 //! let mut ao = VertexAo::from_bytes(&bytes)?;
 //! let head = ao.node("b_Head_05").expect("the rig has the node");
+//! // Once per character: the AO buffer and the per-pose step's scratch.
+//! let (mut per_vertex, mut scratch) = (vec![0.0; ao.vertices()], PoseScratch::default());
+//! // Per frame: set the animated nodes, evaluate (no allocation after the
+//! // first frame).
 //! let mut local = ao.skeleton().nodes[head].rest;
 //! local.rotation = glam::Quat::from_rotation_y(0.3) * local.rotation;
 //! ao.set_local(head, local);
-//! let per_vertex: Vec<f32> = ao.evaluate();
+//! ao.evaluate_into(&mut scratch, &mut per_vertex);
 //! # Ok(()) }
 //! ```
 
-use super::{AssetHeader, Model};
+use super::{AssetHeader, Model, PoseScratch};
 use crate::{
     container::{AssetError, Container},
     rig::{Skeleton, Transform},
@@ -125,7 +129,9 @@ impl VertexAo {
 
     /// Every node back to its rest transform.
     pub fn reset(&mut self) {
-        self.locals = self.skeleton.rest_locals();
+        for (local, node) in self.locals.iter_mut().zip(&self.skeleton.nodes) {
+            *local = node.rest;
+        }
     }
 
     /// The weights of the current pose, one per coefficient row: what a
@@ -134,18 +140,34 @@ impl VertexAo {
         self.model.weights(&self.skeleton, &self.locals)
     }
 
+    /// [`VertexAo::weights`] into `out` ([`VertexAo::weight_count`]
+    /// values), with `scratch` for the steps between: once `scratch` has
+    /// held a pose, nothing is allocated.
+    ///
+    /// # Panics
+    /// If `out` does not hold one value per weight.
+    pub fn weights_into(&self, scratch: &mut PoseScratch, out: &mut [f32]) {
+        self.model
+            .weights_into(&self.skeleton, &self.locals, scratch, out);
+    }
+
     /// The AO of every vertex in the current pose, in [0, 1].
     pub fn evaluate(&self) -> Vec<f32> {
         self.model.evaluate_weights(&self.weights())
     }
 
     /// [`VertexAo::evaluate`] into `out` ([`VertexAo::vertices`] values),
-    /// so that a player reuses one buffer: nothing in proportion to the
-    /// vertices is allocated (only the weights, a few per joint).
+    /// with `scratch` for the pose's weights and the steps to them: a
+    /// player keeps one buffer and one scratch per character, and once the
+    /// scratch has held a pose a frame allocates nothing.
     ///
     /// # Panics
     /// If `out` does not hold one value per vertex.
-    pub fn evaluate_into(&self, out: &mut [f32]) {
-        self.model.form().evaluate_into(&self.weights(), out);
+    pub fn evaluate_into(&self, scratch: &mut PoseScratch, out: &mut [f32]) {
+        let mut weights = std::mem::take(&mut scratch.weights);
+        weights.resize(self.weight_count(), 0.0);
+        self.weights_into(scratch, &mut weights);
+        self.model.form().evaluate_into(&weights, out);
+        scratch.weights = weights;
     }
 }
