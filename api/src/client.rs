@@ -10,7 +10,7 @@ use crate::types::{
     BakeRequest, BakeView, CheckpointRef, CheckpointRequest, CompleteManyReply,
     CompleteManyRequest, CompleteRequest, Completion, FailRequest, HeartbeatReply,
     HeartbeatRequest, JobCompletion, Lease, LeaseManyRequest, LeaseRequest, Leases, NewToken,
-    NewTokenRequest, Problem, TokenRequest, TokenView, Uploaded, Whoami,
+    NewTokenRequest, Problem, TokenRequest, TokenView, Uploaded, Whoami, WorkersStopped,
 };
 
 /// The longest a call waits in all on a server that answers 429 (or 503
@@ -138,6 +138,8 @@ pub struct Client {
     auth: String,
     agent: ureq::Agent,
     notice: Notice,
+    /// The longest a call waits out 429s and 503s in all.
+    rate_wait: Duration,
 }
 
 /// Hears a line ([`Client::with_notice`]).
@@ -175,7 +177,17 @@ impl Client {
                 .build()
                 .into(),
             notice: Notice::default(),
+            rate_wait: MAX_RATE_WAIT,
         }
+    }
+
+    /// This client, waiting out 429s and 503s for at most `wait` in all a
+    /// call ([`MAX_RATE_WAIT`] unless set): zero answers them at once, as
+    /// a process on its way out wants.
+    #[must_use]
+    pub fn with_rate_wait(mut self, wait: Duration) -> Self {
+        self.rate_wait = wait;
+        self
     }
 
     /// This client, telling `notice` when a call begins to wait out a 503
@@ -223,7 +235,7 @@ impl Client {
                 503 => res.headers().contains_key("retry-after"),
                 _ => false,
             };
-            if !come_back || waited >= MAX_RATE_WAIT {
+            if !come_back || waited >= self.rate_wait {
                 return self.check(res);
             }
             let unavailable = res.status().as_u16() == 503;
@@ -246,7 +258,7 @@ impl Client {
                 notice(&format!(
                     "{} answered 503 ({said}); asking again for up to {} s",
                     self.base,
-                    MAX_RATE_WAIT.as_secs()
+                    self.rate_wait.as_secs()
                 ));
             }
             std::thread::sleep(wait);
@@ -554,6 +566,18 @@ impl Client {
             &format!("/v1/jobs/{job}/release"),
             &TokenRequest {
                 token: token.to_owned(),
+            },
+        )
+    }
+
+    /// Tells the server that these worker ids (a process's slots) have
+    /// stopped: `GET /v1/workers` lists them as stopped at once instead of
+    /// a lease after they were last seen.
+    pub fn workers_stopped(&self, workers: &[String]) -> Result<()> {
+        self.post_empty(
+            "/v1/workers/stopped",
+            &WorkersStopped {
+                workers: workers.to_vec(),
             },
         )
     }

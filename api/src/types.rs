@@ -230,8 +230,9 @@ pub enum Action {
 pub struct WorkerRow {
     /// Its id.
     pub id: String,
-    /// `idle`, `busy`, or `stopped`: not seen for a lease's length (it
-    /// exited, was killed or is cut off; a live worker polls or
+    /// `idle`, `busy`, or `stopped`: it said so on its way out
+    /// (`POST /v1/workers/stopped`), or was not seen for a lease's length
+    /// (it exited, was killed or is cut off; a live worker polls or
     /// heartbeats well within a lease).
     pub state: String,
     /// The job it runs.
@@ -398,6 +399,16 @@ pub struct LeaseManyRequest {
     #[serde(default)]
     #[cfg_attr(feature = "schema", schema(max_length = 200))]
     pub tracer: Option<String>,
+}
+
+/// `POST /v1/workers/stopped`: the slots of a worker process that is
+/// exiting (after its jobs finished or were given back).
+#[derive(Debug, Deserialize, Serialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct WorkersStopped {
+    /// The slots' worker ids (1 to 64, each 1 to 200 characters).
+    #[cfg_attr(feature = "schema", schema(min_items = 1, max_items = 64))]
+    pub workers: Vec<String>,
 }
 
 /// Leased jobs, at most one per slot asked for, in the order asked; fewer

@@ -68,6 +68,7 @@ impl Modify for BearerAuth {
         jobs::complete_many,
         jobs::fail,
         jobs::release,
+        jobs::workers_stopped,
         jobs::get_blob,
         jobs::put_blob,
         system::workers,

@@ -132,6 +132,17 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
         dispatched
     });
     dispatched?;
+    // One quick try: a worker on its way out does not wait for a server
+    // that is away (it is then listed as stopped a lease after it was last
+    // seen, as a killed one is).
+    let quick = Client::with_timeout(&config.server, &config.token, Duration::from_secs(3))
+        .with_rate_wait(Duration::ZERO);
+    if let Err(e) = quick.workers_stopped(&ids) {
+        say!(
+            "worker {}: could not tell the server it stopped ({e}); it is listed as stopped once its lease's length has passed",
+            config.id
+        );
+    }
     say!("worker {}: stopped", config.id);
     Ok(())
 }

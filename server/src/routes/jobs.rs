@@ -7,7 +7,7 @@ use aobake_api::schema::{Digest, Refusals};
 use aobake_api::{
     CheckpointRequest, CompleteManyReply, CompleteManyRequest, CompleteRequest, CompletionResult,
     FailRequest, HeartbeatReply, HeartbeatRequest, LeaseManyRequest, LeaseRequest, Leases,
-    TokenRequest,
+    TokenRequest, WorkersStopped,
 };
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
@@ -43,6 +43,7 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/jobs/{id}/complete", post(complete))
         .route("/v1/jobs/{id}/fail", post(fail))
         .route("/v1/jobs/{id}/release", post(release))
+        .route("/v1/workers/stopped", post(workers_stopped))
         .route("/v1/blobs/{digest}", get(get_blob).put(put_blob))
 }
 
@@ -71,24 +72,53 @@ pub(crate) async fn lease_many(
     gone: Option<Extension<ClientGone>>,
     Body(req): Body<LeaseManyRequest>,
 ) -> ApiResult<Response> {
-    if req.workers.is_empty() || req.workers.len() > MAX_BATCH {
-        return Err(ApiError::bad(
-            "bad_workers",
-            format!("a lease request names 1 to {MAX_BATCH} workers"),
-        ));
-    }
-    if req.workers.iter().collect::<BTreeSet<_>>().len() != req.workers.len() {
-        return Err(ApiError::bad(
-            "bad_workers",
-            "a lease request names each worker once",
-        ));
-    }
+    check_slots(&req.workers, "a lease request")?;
     let leases = wait_for_leases(&state, req.workers, req.wait_secs, req.tracer, gone).await?;
     Ok(if leases.is_empty() {
         StatusCode::NO_CONTENT.into_response()
     } else {
         Json(Leases { leases }).into_response()
     })
+}
+
+/// A worker process's slots as a request names them: 1 to
+/// [`MAX_BATCH`], each once, each id 1 to 200 characters.
+fn check_slots(workers: &[String], what: &str) -> ApiResult<()> {
+    if workers.is_empty() || workers.len() > MAX_BATCH {
+        return Err(ApiError::bad(
+            "bad_workers",
+            format!("{what} names 1 to {MAX_BATCH} workers"),
+        ));
+    }
+    if workers.iter().collect::<BTreeSet<_>>().len() != workers.len() {
+        return Err(ApiError::bad(
+            "bad_workers",
+            format!("{what} names each worker once"),
+        ));
+    }
+    if workers.iter().any(|w| w.is_empty() || w.len() > 200) {
+        return Err(ApiError::bad(
+            "bad_worker",
+            "worker ids are 1 to 200 characters",
+        ));
+    }
+    Ok(())
+}
+
+#[utoipa::path(post, path = "/v1/workers/stopped", tag = "worker protocol", request_body = WorkersStopped,
+    security(("bearer" = ["worker"])),
+    responses((status = 204, description = "Recorded: the workers are listed as stopped"), Refusals))]
+pub(crate) async fn workers_stopped(
+    State(state): State<AppState>,
+    _caller: Need<Worker>,
+    Body(req): Body<WorkersStopped>,
+) -> ApiResult<StatusCode> {
+    check_slots(&req.workers, "a stop")?;
+    state.store.workers_stopped(&req.workers).await?;
+    // A stopped GPU worker no longer holds tracing jobs back from CPU
+    // workers: wake the waiting polls.
+    state.jobs_ready.notify_waiters();
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// Leases for `workers`, waiting up to `wait_secs` (at most 60) for a
@@ -121,8 +151,15 @@ async fn wait_for_leases(
         }
     }
     let deadline = tokio::time::Instant::now() + Duration::from_secs(wait_secs.min(60));
+    let mut first = true;
     loop {
         if gone.as_ref().is_some_and(ClientGone::is_gone) {
+            return Ok(Vec::new());
+        }
+        // A process that said it stopped while this poll was open no
+        // longer listens for its answer: no job for it, and it stays
+        // listed as stopped.
+        if !first && !state.store.workers_still_waiting(&workers).await? {
             return Ok(Vec::new());
         }
         // Register interest before looking, so a job made available between
@@ -154,7 +191,12 @@ async fn wait_for_leases(
             }
             return Ok(leases);
         }
-        state.store.workers_idle(&workers).await?;
+        if first {
+            // A poll's first look says the slots are alive and waiting
+            // (again, after a stop); later looks only while they still are.
+            state.store.workers_idle(&workers).await?;
+            first = false;
+        }
         let now = tokio::time::Instant::now();
         let stopping = state
             .shutting_down

@@ -255,6 +255,17 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn workers_idle(&self, workers: &[String]) -> Result<()>;
     /// Records what casts a worker's rays (`cpu`, or `gpu: ADAPTER`).
     async fn worker_tracer(&self, worker: &str, tracer: &str) -> Result<()>;
+    /// Records that `workers` have stopped (a worker process exiting
+    /// gracefully): listed as `stopped` at once, with no job, not idle GPU
+    /// workers that tracing jobs wait for, and not other workers that a
+    /// bake kept off a failing worker waits for. A worker id that polls
+    /// again is idle again.
+    async fn workers_stopped(&self, workers: &[String]) -> Result<()>;
+    /// Within one long poll, after [`Store::workers_idle`] began it:
+    /// records again that `workers` are waiting, unless one of them has
+    /// said it stopped since (then `false`, and nothing is changed: the
+    /// process no longer listens for this poll's answer).
+    async fn workers_still_waiting(&self, workers: &[String]) -> Result<bool>;
     /// Every worker, most recently seen first; one not seen for
     /// `gone_after_ms` is `stopped`, with no job (it exited, was killed
     /// or is cut off: a live worker polls or heartbeats well within a

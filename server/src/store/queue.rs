@@ -467,7 +467,7 @@ async fn claim<B: Backend>(
 ) -> Result<Vec<i64>> {
     let bakes: Vec<(i64,)> = c
         .all(
-            B::sql("SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = $1 AND f.failures >= $2 AND EXISTS (SELECT 1 FROM workers o WHERE o.id != $1 AND o.last_seen > {now} - 60000 AND NOT EXISTS (SELECT 1 FROM worker_failures g WHERE g.bake_id = b.id AND g.worker = o.id AND g.failures >= $2))) ORDER BY b.priority DESC, b.id LIMIT 8")
+            B::sql("SELECT b.id FROM bakes b WHERE b.state IN ('queued', 'running') AND EXISTS (SELECT 1 FROM jobs j WHERE j.bake_id = b.id AND j.state = 'available') AND NOT EXISTS (SELECT 1 FROM worker_failures f WHERE f.bake_id = b.id AND f.worker = $1 AND f.failures >= $2 AND EXISTS (SELECT 1 FROM workers o WHERE o.id != $1 AND o.state != 'stopped' AND o.last_seen > {now} - 60000 AND NOT EXISTS (SELECT 1 FROM worker_failures g WHERE g.bake_id = b.id AND g.worker = o.id AND g.failures >= $2))) ORDER BY b.priority DESC, b.id LIMIT 8")
                 .bind(worker)
                 .bind(policy.worker_failures),
         )
@@ -1156,6 +1156,42 @@ impl<B: Backend> Store for SqlStore<B> {
             c.execute(
                 B::sql(&format!("INSERT INTO workers (id, state, job_id, last_seen, started_at) VALUES {rows} ON CONFLICT (id) DO UPDATE SET state = 'idle', job_id = NULL, last_seen = excluded.last_seen"))
                     .bind_all(workers.iter().map(|w| w.as_str())),
+            )
+            .await?;
+            Ok(())
+        })
+    }
+
+    async fn workers_still_waiting(&self, workers: &[String]) -> Result<bool> {
+        let workers: BTreeSet<&String> = workers.iter().collect();
+        if workers.is_empty() {
+            return Ok(true);
+        }
+        in_tx!(self, Durability::Queue, |c| {
+            let waiting = c
+                .execute(
+                    B::sql(&format!(
+                        "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {{now}} WHERE id IN ({}) AND state != 'stopped'",
+                        placeholders(1, workers.len())
+                    ))
+                    .bind_all(workers.iter().map(|w| w.as_str())),
+                )
+                .await?;
+            Ok(waiting == workers.len() as u64)
+        })
+    }
+
+    async fn workers_stopped(&self, workers: &[String]) -> Result<()> {
+        if workers.is_empty() {
+            return Ok(());
+        }
+        in_tx!(self, Durability::Queue, |c| {
+            c.execute(
+                B::sql(&format!(
+                    "UPDATE workers SET state = 'stopped', job_id = NULL WHERE id IN ({})",
+                    placeholders(1, workers.len())
+                ))
+                .bind_all(workers.iter().map(String::as_str)),
             )
             .await?;
             Ok(())

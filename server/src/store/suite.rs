@@ -78,6 +78,7 @@ pub(crate) async fn run_all(store: &dyn Store) {
     cancel_pause_resume_retry(store).await;
     a_worker_that_keeps_failing_a_bake_is_kept_off_it(store).await;
     tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store).await;
+    a_stopped_worker_is_listed_so_at_once_and_holds_no_job_back(store).await;
     a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store).await;
     a_batch_split_by_failures_leases_each_job_once(store).await;
     tokens_are_listed_newest_first_and_deleted(store).await;
@@ -230,6 +231,9 @@ async fn a_lone_worker_is_never_kept_off(store: &dyn Store) {
         worker_failures: 1,
         ..policy()
     };
+    // A worker that stopped and said so is not one to wait for.
+    store.workers_idle(&["leaver".to_owned()]).await.unwrap();
+    store.workers_stopped(&["leaver".to_owned()]).await.unwrap();
     for attempt in 1..=4 {
         let l = store.lease("alone", &p).await.unwrap();
         let l = l.unwrap_or_else(|| panic!("attempt {attempt}: the lone worker was kept off"));
@@ -414,6 +418,47 @@ async fn tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store: &d
         (tracer("gpu").as_str(), tracer("cpu").as_str()),
         ("gpu: an adapter", "cpu")
     );
+}
+
+/// A worker process that says it stopped is listed as stopped at once,
+/// with no job (not a lease later), and an idle GPU worker that stopped
+/// holds no tracing job back from CPU workers; polling again revives it.
+async fn a_stopped_worker_is_listed_so_at_once_and_holds_no_job_back(store: &dyn Store) {
+    let c = character(store).await;
+    let mut b = bake(&c, &"8".repeat(64));
+    b.priority = 3000;
+    let created = store.create_bake(&b).await.unwrap();
+    let p = policy();
+    let leaving = ["gpu/0".to_owned(), "gpu/1".to_owned()];
+    for w in &leaving {
+        store.worker_tracer(w, "gpu: an adapter").await.unwrap();
+    }
+    store.workers_idle(&leaving).await.unwrap();
+    store.worker_tracer("cpu/0", "cpu").await.unwrap();
+    store.workers_stopped(&leaving).await.unwrap();
+    // A poll that was open when they stopped does not mark them waiting
+    // again.
+    assert!(!store.workers_still_waiting(&leaving).await.unwrap());
+    let workers = store.workers(60_000).await.unwrap();
+    for id in &leaving {
+        let w = workers.iter().find(|w| &w.id == id).unwrap();
+        assert_eq!((w.state.as_str(), w.job_id), ("stopped", None), "{w:?}");
+    }
+    let l = store.lease("cpu/0", &p).await.unwrap().unwrap();
+    assert_eq!(
+        (l.job.bake_id, l.job.kind.as_str()),
+        (created.id, "sample"),
+        "a stopped GPU worker held the tracing job back"
+    );
+    store.workers_idle(&leaving[..1]).await.unwrap();
+    assert!(store.workers_still_waiting(&leaving[..1]).await.unwrap());
+    let workers = store.workers(60_000).await.unwrap();
+    let w = workers.iter().find(|w| w.id == "gpu/0").unwrap();
+    assert_eq!(w.state, "idle", "{w:?}");
+    // The cases after this one lease their own bakes' jobs, on CPU
+    // workers.
+    store.workers_stopped(&leaving).await.unwrap();
+    store.control(created.id, Action::Cancel).await.unwrap();
 }
 
 async fn uploads_are_idempotent(store: &dyn Store) {

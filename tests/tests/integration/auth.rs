@@ -39,6 +39,7 @@ const ROUTES: &[(&str, &str, &str)] = &[
     ("POST", "/v1/jobs/{id}/complete", "worker"),
     ("POST", "/v1/jobs/{id}/fail", "worker"),
     ("POST", "/v1/jobs/{id}/release", "worker"),
+    ("POST", "/v1/workers/stopped", "worker"),
     ("GET", "/v1/blobs/{digest}", "worker"),
     ("PUT", "/v1/blobs/{digest}", "worker"),
     ("GET", "/v1/workers", "read"),

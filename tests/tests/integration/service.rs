@@ -785,12 +785,18 @@ fn wait_polling(env: &TestEnv, id: &str) {
 }
 
 /// An idle worker is inside a long poll (20 s by default) most of the
-/// time: SIGTERM stops it without waiting for the poll to end, and the
+/// time: SIGTERM stops it without waiting for the poll to end, it tells
+/// the server so (listed as stopped at once, not a lease later), and the
 /// abandoned poll leases nothing to it after it has gone; nor does the
 /// poll of a worker killed outright.
 #[test]
 fn an_idle_worker_stops_at_once_on_sigterm_and_a_gone_workers_poll_takes_no_job() {
-    let mut env = TestEnv::start(Options::default());
+    // A lease far longer than the stop: without the worker's word the
+    // server would list it as idle for 30 s.
+    let mut env = TestEnv::start(Options {
+        lease_secs: 30.0,
+        ..Options::default()
+    });
     let w = env.start_worker(&[]);
     wait_polling(&env, "w0");
     env.signal_worker(w, nix::sys::signal::Signal::SIGTERM);
@@ -803,10 +809,22 @@ fn an_idle_worker_stops_at_once_on_sigterm_and_a_gone_workers_poll_takes_no_job(
         );
         std::thread::sleep(Duration::from_millis(20));
     }
+    let logs = env.worker_logs();
     assert!(
-        env.worker_logs().contains("stopped"),
-        "{}",
-        env.worker_logs()
+        logs.contains("stopped") && !logs.contains("could not tell the server"),
+        "{logs}"
+    );
+    let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
+    let w0 = workers
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|w| w["id"] == "w0")
+        .unwrap();
+    assert_eq!(
+        (&w0["state"], &w0["job_id"]),
+        (&json!("stopped"), &serde_json::Value::Null),
+        "{workers}"
     );
     // A worker killed mid-poll (SIGKILL: no chance to say anything).
     let killed = env.start_worker(&[]);
