@@ -42,6 +42,16 @@ pub enum ApiError {
     /// The body is over the limit.
     #[error("the body is over the limit of {0} bytes")]
     TooLarge(u64),
+    /// A byte range the blob does not have (or a malformed one): 416
+    /// with `Content-Range: bytes */LEN`, which tells a resuming client
+    /// (`curl -C -`, `wget -c`) the file is complete.
+    #[error("cannot serve {range:?} of {len} bytes")]
+    RangeNotSatisfiable {
+        /// The `Range` header as sent.
+        range: String,
+        /// The blob's length.
+        len: u64,
+    },
     /// Too many requests for this token.
     #[error("too many requests; retry after {0} s")]
     RateLimited(u64),
@@ -105,6 +115,11 @@ impl ApiError {
                 "too_large",
                 "Payload too large",
             ),
+            Self::RangeNotSatisfiable { .. } => (
+                StatusCode::RANGE_NOT_SATISFIABLE,
+                "bad_range",
+                "Range not satisfiable",
+            ),
             Self::RateLimited(_) => (
                 StatusCode::TOO_MANY_REQUESTS,
                 "rate_limited",
@@ -159,6 +174,12 @@ impl IntoResponse for ApiError {
         if let Self::RateLimited(s) | Self::Unavailable(_, s) = self {
             res.headers_mut()
                 .insert(header::RETRY_AFTER, HeaderValue::from(s));
+        }
+        if let Self::RangeNotSatisfiable { len, .. } = self {
+            res.headers_mut().insert(
+                header::CONTENT_RANGE,
+                HeaderValue::from_str(&format!("bytes */{len}")).expect("digits"),
+            );
         }
         if matches!(self, Self::Unauthorized) {
             res.headers_mut().insert(

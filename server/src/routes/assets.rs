@@ -26,9 +26,9 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/previews/{digest}", get(preview))
 }
 
-#[utoipa::path(get, path = "/v1/assets/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the bytes"), ("If-None-Match" = Option<String>, Header, description = "An ETag"), ("Range" = Option<String>, Header, description = "One byte range")),
+#[utoipa::path(get, path = "/v1/assets/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the bytes"), ("If-None-Match" = Option<String>, Header, description = "An ETag"), ("Range" = Option<String>, Header, description = "One byte range (several are served whole)"), ("If-Range" = Option<String>, Header, description = "The range only if this is still the ETag; otherwise the whole blob")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The bytes (an uploaded source needs `submit`: 403 for `read` alone)", content_type = "application/octet-stream", body = Vec<u8>), (status = 206, description = "The requested range", content_type = "application/octet-stream", body = Vec<u8>), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "The bytes (an uploaded source needs `submit`: 403 for `read` alone)", content_type = "application/octet-stream", body = Vec<u8>), (status = 206, description = "The requested range", content_type = "application/octet-stream", body = Vec<u8>), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 416, description = "A byte range the blob does not have, or a malformed one; `Content-Range: bytes */LEN` gives the length", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn asset(
     State(state): State<AppState>,
     caller: Caller,
@@ -101,15 +101,26 @@ async fn serve(
     if matches {
         return Ok((StatusCode::NOT_MODIFIED, common).into_response());
     }
-    let range = headers.get(header::RANGE).and_then(|v| v.to_str().ok());
+    // RFC 9110: a range in another unit than bytes is ignored, and so is
+    // any range when If-Range names another representation (an ETag other
+    // than this one, or a date: these blobs have none).
+    let range = headers
+        .get(header::RANGE)
+        .and_then(|v| v.to_str().ok())
+        .filter(|r| r.trim_start().starts_with("bytes="))
+        .filter(|_| {
+            headers
+                .get(header::IF_RANGE)
+                .is_none_or(|v| v.as_bytes() == etag.as_bytes())
+        });
     if let Some(range) = range {
+        // A malformed or unsatisfiable byte range is a 416, whose
+        // Content-Range tells a resuming client the whole length.
         let ranges = http_range_header::parse_range_header(range)
             .and_then(|r| r.validate(len))
-            .map_err(|_| {
-                ApiError::bad(
-                    "bad_range",
-                    format!("cannot serve {range:?} of {len} bytes"),
-                )
+            .map_err(|_| ApiError::RangeNotSatisfiable {
+                range: range.to_owned(),
+                len,
             })?;
         // One range is served as 206; several are served whole (RFC 9110
         // lets a server ignore a multi-range request).

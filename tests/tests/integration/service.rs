@@ -366,7 +366,8 @@ fn a_service_on_s3_blobs_bakes_the_same_bytes_and_serves_ranges() {
 }
 
 /// The asset of bake `b`: a 304 for its ETag, a 206 for a byte range, a
-/// 400 for a range past its end.
+/// 416 with its length for a range it does not have, and the whole of it
+/// when If-Range names something else.
 fn assert_served_with_etag_and_ranges(env: &TestEnv, b: &serde_json::Value) {
     let asset_digest = b["asset"].as_str().unwrap();
     let agent: ureq::Agent = ureq::Agent::config_builder()
@@ -396,13 +397,48 @@ fn assert_served_with_etag_and_ranges(env: &TestEnv, b: &serde_json::Value) {
         format!("bytes 8-15/{}", whole.len())
     );
     assert_eq!(r.body_mut().read_to_vec().unwrap(), &whole[8..16]);
-    let r = agent
-        .get(&url)
-        .header("authorization", &auth)
-        .header("range", "bytes=999999999-")
-        .call()
-        .unwrap();
-    assert_eq!(r.status().as_u16(), 400);
+    let len = whole.len();
+    // A resume of a file already whole (curl -C -, wget -c), a range past
+    // the end and a malformed one: 416 with the length, which tells the
+    // client it has it all.
+    for range in [format!("bytes={len}-"), "bytes=999999999-".into(), "bytes=9-2".into()] {
+        let r = agent
+            .get(&url)
+            .header("authorization", &auth)
+            .header("range", &range)
+            .call()
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 416, "{range}");
+        assert_eq!(
+            r.headers()["content-range"].to_str().unwrap(),
+            format!("bytes */{len}"),
+            "{range}"
+        );
+        assert_eq!(
+            r.headers()["content-type"].to_str().unwrap(),
+            "application/problem+json"
+        );
+    }
+    // If-Range naming another representation, or a unit other than
+    // bytes: the whole blob (RFC 9110 §13.1.5, §14.2); its own ETag: the
+    // range.
+    for (if_range, range, status) in [
+        ("\"other\"".to_owned(), "bytes=0-9", 200),
+        ("Sat, 28 Nov 2026 00:00:00 GMT".to_owned(), "bytes=0-9", 200),
+        (format!("\"{asset_digest}\""), "bytes=0-9", 206),
+        (format!("\"{asset_digest}\""), "lines=0-9", 200),
+    ] {
+        let mut r = agent
+            .get(&url)
+            .header("authorization", &auth)
+            .header("range", range)
+            .header("if-range", &if_range)
+            .call()
+            .unwrap();
+        assert_eq!(r.status().as_u16(), status, "{if_range} {range}");
+        let body = r.body_mut().read_to_vec().unwrap();
+        assert_eq!(body, if status == 206 { &whole[..10] } else { &whole[..] });
+    }
 }
 
 /// `aobake pause`, `resume`, `cancel` and `retry` drive a bake as the
