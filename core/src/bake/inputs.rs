@@ -42,6 +42,25 @@ impl UploadBytes {
         self.upload().digest()
     }
 
+    /// Leaves out the side files the main file does not refer to, so that
+    /// a client that sends a folder's every file gets the digest of one
+    /// that sends what the glTF uses (the command line's); returns the
+    /// names left out. A main file that cannot be read keeps them all:
+    /// its import says what is wrong.
+    pub fn keep_referenced(&mut self, limits: &Limits) -> Vec<String> {
+        if self.side_files.is_empty() {
+            return Vec::new();
+        }
+        let Ok(used) = crate::import::referenced_files(&self.main, limits) else {
+            return Vec::new();
+        };
+        let (kept, left): (Vec<SideFile>, Vec<SideFile>) = std::mem::take(&mut self.side_files)
+            .into_iter()
+            .partition(|f| used.contains(&f.name));
+        self.side_files = kept;
+        left.into_iter().map(|f| f.name).collect()
+    }
+
     /// Whether the upload is more than one file.
     pub fn is_bundle(&self) -> bool {
         !self.side_files.is_empty()
@@ -187,6 +206,78 @@ impl BakeInputs {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Parts a glTF does not refer to are left out and named; the digest
+    /// is then that of the files it uses, hashed as docs/asset-format.md
+    /// says.
+    #[test]
+    fn only_the_files_the_gltf_uses_are_kept() {
+        let main = br#"{"asset":{"version":"2.0"},"buffers":[{"uri":"rig.bin","byteLength":4}],"images":[{"uri":"skin%20a.png"}]}"#.to_vec();
+        let file = |name: &str, bytes: &[u8]| SideFile {
+            name: name.into(),
+            bytes: bytes.to_vec(),
+        };
+        let mut sent = UploadBytes {
+            main: main.clone(),
+            side_files: vec![
+                file("notes.txt", b"x"),
+                file("skin a.png", b"png"),
+                file("rig.bin", b"1234"),
+            ],
+        };
+        assert_eq!(sent.keep_referenced(&Limits::default()), ["notes.txt"]);
+        let used = UploadBytes {
+            main: main.clone(),
+            side_files: vec![file("rig.bin", b"1234"), file("skin a.png", b"png")],
+        };
+        assert_eq!(sent.digest(), used.digest());
+        // The documented stream: main, then the side files sorted by name,
+        // each length a u64 LE.
+        let mut stream = Vec::new();
+        stream.extend((main.len() as u64).to_le_bytes());
+        stream.extend(&main);
+        for (name, bytes) in [("rig.bin", &b"1234"[..]), ("skin a.png", b"png")] {
+            stream.extend((name.len() as u64).to_le_bytes());
+            stream.extend(name.as_bytes());
+            stream.extend((bytes.len() as u64).to_le_bytes());
+            stream.extend(bytes);
+        }
+        assert_eq!(used.to_blob(), stream);
+        assert_eq!(used.digest(), crate::digest::sha256_hex(&stream));
+        // A main file that cannot be read keeps everything: its import
+        // says why.
+        let mut broken = UploadBytes {
+            main: b"{".to_vec(),
+            side_files: vec![file("rig.bin", b"1234")],
+        };
+        assert!(broken.keep_referenced(&Limits::default()).is_empty());
+        assert_eq!(broken.side_files.len(), 1);
+    }
+
+    /// docs/asset-format.md's table of algorithm versions is the code's.
+    #[test]
+    fn the_docs_list_the_algorithm_versions() {
+        use aobake_runtime::method::{cubemap, grid, vertex};
+        let docs = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../docs/asset-format.md"
+        ))
+        .unwrap();
+        for (family, version) in [
+            ("vertex", vertex::ALGORITHM_VERSION),
+            ("grid", grid::ALGORITHM_VERSION),
+            ("cubemap", cubemap::ALGORITHM_VERSION),
+        ] {
+            let row = docs
+                .lines()
+                .find(|l| l.starts_with(&format!("| {family} |")))
+                .unwrap_or_else(|| panic!("no row for {family}"));
+            assert!(
+                row.ends_with(&format!("| {version} |")),
+                "{family} is at version {version}: {row}"
+            );
+        }
+    }
 
     #[test]
     fn a_clip_name_given_twice_is_warned_about() {

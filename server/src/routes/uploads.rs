@@ -189,19 +189,43 @@ pub(crate) async fn post_character(
     let (upload, part_name) = read_upload(&state, req).await?;
     let name = file_name(q.name.or(part_name));
     let limits = state.import_limits.clone();
-    let (summary, upload) = tokio::task::spawn_blocking(move || {
+    let (summary, upload, left_out) = tokio::task::spawn_blocking(move || {
+        let mut upload = upload;
+        let left_out = upload.keep_referenced(&limits);
         let imported = import_character(upload.upload(), &limits)?;
         let mut s = serde_json::to_value(Summary::of(&imported.character, &imported.clips))
             .expect("summaries serialise");
         s["warnings"] = serde_json::json!(imported.warnings);
         s["name"] = serde_json::json!(name);
         s["scene"] = serde_json::json!(imported.name.as_deref().and_then(shown));
-        Ok::<_, aobake_core::ImportError>((s, upload))
+        Ok::<_, aobake_core::ImportError>((s, upload, left_out))
     })
     .await
     .map_err(|e| ApiError::Internal(e.to_string()))?
     .map_err(|e| ApiError::Unprocessable(format!("the character cannot be imported: {e}")))?;
-    store_upload(&state, &upload, "character", summary).await
+    let reply = store_upload(&state, &upload, "character", summary).await?;
+    Ok(telling(reply, &left_out))
+}
+
+/// The reply to an upload, its warnings telling which files sent with it
+/// were left out (the glTF does not refer to them). Said to this upload
+/// only: the stored summary describes the character, not how it came.
+fn telling(
+    (status, Json(mut uploaded)): (StatusCode, Json<Uploaded>),
+    left_out: &[String],
+) -> (StatusCode, Json<Uploaded>) {
+    if !left_out.is_empty() {
+        let notes = left_out.iter().map(|name| {
+            serde_json::json!(format!(
+                "{name:?} is not a file the glTF refers to: left out (the upload's digest covers only the files it uses)"
+            ))
+        });
+        match uploaded.summary["warnings"].as_array_mut() {
+            Some(w) => w.extend(notes),
+            None => uploaded.summary["warnings"] = notes.collect(),
+        }
+    }
+    (status, Json(uploaded))
 }
 
 /// A file's bytes as a request body (OpenAPI's binary string).
@@ -242,7 +266,9 @@ pub(crate) async fn post_clips(
     let (upload, part_name) = read_upload(&state, req).await?;
     let name = file_name(q.name.or(part_name));
     let limits = state.import_limits.clone();
-    let (summary, upload) = tokio::task::spawn_blocking(move || {
+    let (summary, upload, left_out) = tokio::task::spawn_blocking(move || {
+        let mut upload = upload;
+        let left_out = upload.keep_referenced(&limits);
         let c = import_character(character.upload(), &limits)
             .map_err(|e| format!("the stored character no longer imports: {e}"))?;
         let (clips, warnings) = import_clips(upload.upload(), &c.character, &limits)
@@ -257,12 +283,14 @@ pub(crate) async fn post_clips(
         Ok((
             serde_json::json!({"clips": names, "warnings": warnings, "character": c.character.vertex_count(), "name": name}),
             upload,
+            left_out,
         ))
     })
     .await
     .map_err(|e| ApiError::Internal(e.to_string()))?
     .map_err(ApiError::Unprocessable)?;
-    store_upload(&state, &upload, "clips", summary).await
+    let reply = store_upload(&state, &upload, "clips", summary).await?;
+    Ok(telling(reply, &left_out))
 }
 
 /// An upload's bytes, checked to be of `kind`.

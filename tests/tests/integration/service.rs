@@ -950,6 +950,24 @@ fn clips_and_multi_file_characters_upload_and_bake() {
         &body,
     );
     assert_eq!((status, &again["summary"]), (200, &uploaded["summary"]));
+    // With a file the glTF does not use (a folder sent whole): that part
+    // is left out and said so, and the digest, hence the cache key, is the
+    // same.
+    let mut extra = body[..body.len() - format!("--{boundary}--\r\n").len()].to_vec();
+    extra.extend(format!(
+        "--{boundary}\r\nContent-Disposition: form-data; name=\"files\"; filename=\"notes.txt\"\r\n\r\nnot a buffer\r\n--{boundary}--\r\n"
+    ).bytes());
+    let (status, with_extra, _) = env.post_bytes(
+        "/v1/characters",
+        ADMIN,
+        &format!("multipart/form-data; boundary={boundary}"),
+        &extra,
+    );
+    assert_eq!(status, 200, "{with_extra}");
+    assert_eq!(with_extra["digest"], uploaded["digest"], "{with_extra}");
+    let warnings = with_extra["summary"]["warnings"].to_string();
+    assert!(warnings.contains("notes.txt") && warnings.contains("left out"), "{with_extra}");
+    assert!(!uploaded["summary"]["warnings"].to_string().contains("notes.txt"));
     // Without its side file the .gltf is refused by name.
     let (status, refused, _) = env.post_bytes(
         "/v1/characters",
