@@ -199,6 +199,16 @@ impl Client {
         self
     }
 
+    /// The server's URL, as given (without a trailing `/`).
+    pub fn base(&self) -> &str {
+        &self.base
+    }
+
+    /// Whether `other` talks to the same server with the same token.
+    pub fn same_as(&self, other: &Self) -> bool {
+        (&self.base, &self.auth) == (&other.base, &other.auth)
+    }
+
     fn url(&self, path: &str) -> String {
         format!("{}{path}", self.base)
     }

@@ -64,6 +64,18 @@ pub struct Exit {
 }
 
 impl Conn {
+    /// A client made again from the files `aobake serve` writes, when it
+    /// differs from `api`: a server on port 0 that restarted on another
+    /// port (`DIR/server.url`), or whose restart revoked the admin token
+    /// it had generated (`DIR/admin.token`). `None` when both came from
+    /// flags or the environment, or nothing changed.
+    fn fresh(&self, api: &Client) -> Option<Client> {
+        if self.server.is_some() && self.token.is_some() {
+            return None;
+        }
+        self.api().ok().filter(|now| !now.same_as(api))
+    }
+
     fn api(&self) -> anyhow::Result<Client> {
         let read = |name: &str| std::fs::read_to_string(self.data.join(name)).ok();
         let server = self
@@ -169,7 +181,7 @@ pub(super) fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
         bake.bake.state.as_str()
     );
     if args.wait {
-        wait(&api, id)?;
+        wait(&args.conn, &api, id)?;
     }
     Ok(())
 }
@@ -180,22 +192,24 @@ pub(super) fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
 const AWAY_FOR: Duration = Duration::from_secs(300);
 
 /// Follows a bake until it ends, with a progress bar; prints the summary.
-fn wait(api: &Client, id: i64) -> anyhow::Result<()> {
+fn wait(conn: &Conn, api: &Client, id: i64) -> anyhow::Result<()> {
     let bar = super::trace::progress_bar(1, "baking");
     let mut follow = Follow {
         bar: &bar,
         id,
         away: false,
+        conn,
+        api: std::cell::RefCell::new(api.clone()),
     };
     loop {
-        let view = follow.ask(|| api.bake(id))?;
+        let view = follow.ask(|api| api.bake(id))?;
         bar.set_length(u64::try_from(view.progress.total).unwrap_or(1));
         bar.set_position(u64::try_from(view.progress.done).unwrap_or(0));
         bar.set_message(running_jobs(&view));
         let b = &view.bake;
         match b.state {
             BakeState::Done => {
-                let report = follow.ask(|| api.report(id))?;
+                let report = follow.ask(|api| api.report(id))?;
                 bar.finish_and_clear();
                 let report: BakeReport = serde_json::from_slice(&report)?;
                 println!(
@@ -219,22 +233,49 @@ fn wait(api: &Client, id: i64) -> anyhow::Result<()> {
 }
 
 /// A bake followed through outages of its server: says so once, and
-/// again when the server answers.
+/// again when the server answers; follows a server that moved
+/// ([`Conn::moved`]).
 struct Follow<'a> {
     bar: &'a indicatif::ProgressBar,
     id: i64,
     away: bool,
+    conn: &'a Conn,
+    api: std::cell::RefCell<Client>,
 }
 
 impl Follow<'_> {
     /// `call`'s answer, asked again through an outage for [`AWAY_FOR`].
-    fn ask<T>(&mut self, call: impl FnMut() -> aobake_api::client::Result<T>) -> anyhow::Result<T> {
-        let (bar, away) = (self.bar, &mut self.away);
+    fn ask<T>(
+        &mut self,
+        mut call: impl FnMut(&Client) -> aobake_api::client::Result<T>,
+    ) -> anyhow::Result<T> {
+        let (bar, away, conn, api) = (self.bar, &mut self.away, self.conn, &self.api);
+        // A server that `aobake serve` restarted on this data folder may
+        // have a new port or a new admin token: follow it there.
+        let refresh = |away: &mut bool| {
+            let fresh = conn.fresh(&api.borrow());
+            let moved = fresh.is_some();
+            if let Some(now) = fresh {
+                bar.suspend(|| {
+                    eprintln!(
+                        "the server was started again (its files in {} changed): following it at {}",
+                        conn.data.display(),
+                        now.base()
+                    );
+                });
+                *api.borrow_mut() = now;
+                *away = false;
+            }
+            moved
+        };
         let answer = aobake_api::client::retry(
             AWAY_FOR,
             Duration::from_secs(1),
             || true,
             |e, left| {
+                if refresh(away) {
+                    return;
+                }
                 if !*away {
                     bar.suspend(|| {
                         eprintln!(
@@ -245,8 +286,13 @@ impl Follow<'_> {
                     *away = true;
                 }
             },
-            call,
+            || call(&api.borrow()),
         );
+        // A refused token whose file a restart rewrote: ask again with it.
+        let answer = match answer {
+            Err(e) if e.status() == Some(401) && refresh(away) => call(&api.borrow()),
+            other => other,
+        };
         if answer.is_ok() && std::mem::take(&mut self.away) {
             bar.suspend(|| eprintln!("the server answers again"));
         }
@@ -538,5 +584,40 @@ fn age(ms: i64) -> String {
         60..3600 => format!("{} min", s / 60),
         3600..86_400 => format!("{} h", s / 3600),
         _ => format!("{} days", s / 86_400),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A client made from `aobake serve`'s files is made again when a
+    /// restart rewrote them (a new port, a new generated admin token), and
+    /// not when nothing changed or both came from flags.
+    #[test]
+    fn a_client_from_the_data_folder_follows_its_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str, text: &str| std::fs::write(dir.path().join(name), text).unwrap();
+        write("server.url", "http://127.0.0.1:4001\n");
+        write("admin.token", "first\n");
+        let conn = |server: Option<&str>, token: Option<&str>| Conn {
+            server: server.map(str::to_owned),
+            token: token.map(str::to_owned),
+            data: dir.path().to_owned(),
+        };
+        let from_files = conn(None, None);
+        let api = from_files.api().unwrap();
+        assert_eq!(api.base(), "http://127.0.0.1:4001");
+        assert!(from_files.fresh(&api).is_none(), "nothing changed");
+        write("admin.token", "second\n");
+        let renewed = from_files.fresh(&api).expect("a new token");
+        assert_eq!(renewed.base(), "http://127.0.0.1:4001");
+        write("server.url", "http://127.0.0.1:4002\n");
+        let moved = from_files.fresh(&renewed).expect("a new port");
+        assert_eq!(moved.base(), "http://127.0.0.1:4002");
+        // Given on the command line (or in the environment): kept.
+        let flags = conn(Some("http://127.0.0.1:4001"), Some("mine"));
+        let api = flags.api().unwrap();
+        assert!(flags.fresh(&api).is_none());
     }
 }

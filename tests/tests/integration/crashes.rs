@@ -225,6 +225,48 @@ fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, poses));
 }
 
+/// `submit --wait` that took the server's address from the data folder
+/// (as on one machine) follows a server started again on another port:
+/// port 0 picks a new one at each start, and `DIR/server.url` says which.
+#[test]
+fn submit_wait_follows_a_server_restarted_on_another_port() {
+    let mut env = TestEnv::start(Options::default());
+    let rig = character("RiggedSimple");
+    let data = env.data();
+    let mut args = vec!["submit", rig.to_str().unwrap(), "--poses", "8", "--wait"];
+    args.extend(QUICK);
+    args.extend(["--data", data.to_str().unwrap()]);
+    let dir = env.dir.path().to_owned();
+    let (out, err) = (dir.join("moved.out"), dir.join("moved.err"));
+    let mut follower = env
+        .aobake_command(&args)
+        .env_remove("AOBAKE_SERVER")
+        .stdout(std::fs::File::create(&out).unwrap())
+        .stderr(std::fs::File::create(&err).unwrap())
+        .spawn()
+        .unwrap();
+    let read = |path: &std::path::Path| std::fs::read_to_string(path).unwrap_or_default();
+    let started = Instant::now();
+    // No worker yet: the bake waits while the server moves.
+    while !read(&out).contains(": key") {
+        assert!(started.elapsed() < Duration::from_secs(30), "no submit: {}", read(&err));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let before = env.url.clone();
+    env.kill_server();
+    env.start_server();
+    assert_ne!(env.url, before, "port 0 picked the same port again");
+    env.start_worker(&[]);
+    let followed = follower.wait().unwrap();
+    let (stdout, stderr) = (read(&out), read(&err));
+    assert!(
+        followed.success()
+            && stdout.contains(" done: asset ")
+            && stderr.contains(&format!("following it at {}", env.url)),
+        "{stdout}\n{stderr}"
+    );
+}
+
 #[test]
 fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
     let pg = TestPostgres::start();
