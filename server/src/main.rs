@@ -95,12 +95,11 @@ fn main() -> std::process::ExitCode {
     match aobake_server::cli::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(err) => {
-            if let Some(exit) = err.downcast_ref::<aobake_server::cli::client::Exit>() {
-                eprintln!("{}", exit.message);
-                return std::process::ExitCode::from(exit.code);
+            match err.downcast_ref::<aobake_server::cli::client::Exit>() {
+                Some(exit) => eprintln!("{}", exit.message),
+                None => eprintln!("error: {err:#}"),
             }
-            eprintln!("error: {err:#}");
-            std::process::ExitCode::FAILURE
+            std::process::ExitCode::from(aobake_server::cli::exit_code(&err))
         }
     }
 }

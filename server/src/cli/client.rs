@@ -221,11 +221,15 @@ fn wait(conn: &Conn, api: &Client, id: i64) -> anyhow::Result<()> {
             }
             BakeState::Failed | BakeState::Cancelled => {
                 bar.finish_and_clear();
-                bail!(
-                    "bake {id} {}: {}",
-                    b.state.as_str(),
-                    b.error.as_deref().unwrap_or("no reason recorded")
-                );
+                return Err(Exit {
+                    code: super::exit::BAKE_FAILED,
+                    message: format!(
+                        "error: bake {id} {}: {}",
+                        b.state.as_str(),
+                        b.error.as_deref().unwrap_or("no reason recorded")
+                    ),
+                }
+                .into());
             }
             _ => std::thread::sleep(Duration::from_millis(500)),
         }
@@ -411,20 +415,18 @@ pub(super) struct FetchArgs {
     conn: Conn,
 }
 
-/// Exit code when no finished bake exists, so CI can branch on it.
-pub const NOT_BAKED: u8 = 4;
 
 pub(super) fn fetch(args: &FetchArgs) -> anyhow::Result<()> {
     let api = args.conn.api()?;
     let view = match (&args.key, args.id) {
         (Some(key), _) => api.cached(key)?.ok_or_else(|| Exit {
-            code: NOT_BAKED,
+            code: super::exit::NOT_BAKED,
             message: format!("no finished bake for key {key}"),
         })?,
         (None, Some(id)) => match api.bake(id) {
             Err(e) if e.status() == Some(404) => {
                 return Err(Exit {
-                    code: NOT_BAKED,
+                    code: super::exit::NOT_BAKED,
                     message: format!("no bake {id} on this server"),
                 }
                 .into());
@@ -436,7 +438,7 @@ pub(super) fn fetch(args: &FetchArgs) -> anyhow::Result<()> {
     let bake = &view.bake;
     let Some(asset) = &bake.asset else {
         return Err(Exit {
-            code: NOT_BAKED,
+            code: super::exit::NOT_BAKED,
             message: format!("bake {} is {}, not done", bake.id, bake.state.as_str()),
         }
         .into());
@@ -445,7 +447,11 @@ pub(super) fn fetch(args: &FetchArgs) -> anyhow::Result<()> {
     if aobake_core::digest::sha256_hex(&bytes) != *asset {
         bail!("the asset's bytes do not match its digest {asset}");
     }
-    std::fs::write(&args.out, &bytes)
+    // Whole or not at all: a pipeline that finds the file finds the asset.
+    let mut part = args.out.clone().into_os_string();
+    part.push(".part");
+    std::fs::write(&part, &bytes)
+        .and_then(|()| std::fs::rename(&part, &args.out))
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     println!(
         "wrote {} ({} bytes) from bake {}",

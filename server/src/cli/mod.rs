@@ -23,7 +23,7 @@ use clap::{Parser, Subcommand};
 
 /// aobake: pose-dependent ambient occlusion for animated glTF characters.
 #[derive(Debug, Parser)]
-#[command(name = "aobake", version, about, long_about = None)]
+#[command(name = "aobake", version, about, long_about = None, after_help = EXIT_CODES)]
 pub struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -129,6 +129,64 @@ impl Cli {
 }
 
 /// Runs a parsed command line.
+/// The exit codes, as `aobake --help` lists them.
+const EXIT_CODES: &str = "Exit codes (for scripts to branch on):
+  0  success
+  1  failed (a cause not below)
+  2  the command line is wrong
+  3  worker: the server refuses its leases for good (token, scope, address)
+  4  fetch: no finished bake for that id or key
+  5  the input was refused: a file that does not import, a parameter out of range,
+     or a request the server answered 4xx (a bake that does not exist, an action
+     its state forbids)
+  6  the server refused the token (401) or its scope (403)
+  7  the server could not be reached or failed (5xx, after waiting out an outage):
+     try again later
+  8  submit --wait: the bake failed or was cancelled
+141  stdout was closed (a pipe into head)";
+
+/// What a script can branch on ([`EXIT_CODES`]).
+pub mod exit {
+    /// Failed for a cause not below.
+    pub const FAILED: u8 = 1;
+    /// `fetch`: no finished bake.
+    pub const NOT_BAKED: u8 = 4;
+    /// The input was refused, here or by the server (a 4xx).
+    pub const BAD_INPUT: u8 = 5;
+    /// The server refused the token or its scope.
+    pub const TOKEN: u8 = 6;
+    /// The server could not be reached or failed.
+    pub const UNAVAILABLE: u8 = 7;
+    /// `submit --wait`: the bake failed or was cancelled.
+    pub const BAKE_FAILED: u8 = 8;
+}
+
+/// The exit code for `err` ([`EXIT_CODES`]): by the first cause that
+/// says; an [`client::Exit`] carries its own.
+pub fn exit_code(err: &anyhow::Error) -> u8 {
+    use aobake_api::ApiError;
+    for cause in err.chain() {
+        if let Some(e) = cause.downcast_ref::<client::Exit>() {
+            return e.code;
+        }
+        if let Some(e) = cause.downcast_ref::<ApiError>() {
+            return match e {
+                ApiError::Status {
+                    status: 401 | 403, ..
+                } => exit::TOKEN,
+                ApiError::Status { status, .. } if *status >= 500 => exit::UNAVAILABLE,
+                ApiError::Status { .. } => exit::BAD_INPUT,
+                ApiError::Transport { .. } => exit::UNAVAILABLE,
+                ApiError::Decode { .. } => exit::FAILED,
+            };
+        }
+        if cause.is::<aobake_core::ImportError>() || cause.is::<aobake_core::bake::BakeError>() {
+            return exit::BAD_INPUT;
+        }
+    }
+    exit::FAILED
+}
+
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Inspect(args) => inspect::run(&args),

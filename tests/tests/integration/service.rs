@@ -441,6 +441,62 @@ fn assert_served_with_etag_and_ranges(env: &TestEnv, b: &serde_json::Value) {
     }
 }
 
+/// The client commands' exit codes tell a pipeline what went wrong
+/// (`aobake --help` lists them): input refused 5, token refused 6, server
+/// unreachable 7, the followed bake cancelled 8.
+#[test]
+fn client_exit_codes_tell_failures_apart() {
+    let env = TestEnv::start(Options::default());
+    let code = |out: &std::process::Output| out.status.code();
+    // A bake that does not exist; a file that does not import.
+    assert_eq!(code(&env.aobake(&["status", "424242"])), Some(5));
+    let truncated = env.dir.path().join("truncated.glb");
+    let glb = std::fs::read(character("RiggedSimple")).unwrap();
+    std::fs::write(&truncated, &glb[..glb.len() / 2]).unwrap();
+    let out = env.aobake(&["submit", truncated.to_str().unwrap(), "--method", "vertex-linear"]);
+    assert_eq!(code(&out), Some(5), "{}", String::from_utf8_lossy(&out.stderr));
+    // A token the server does not know; a server that is not there.
+    let out = env
+        .aobake_command(&["status", "1"])
+        .env("AOBAKE_TOKEN", "not-a-token")
+        .output()
+        .unwrap();
+    assert_eq!(code(&out), Some(6), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = env
+        .aobake_command(&["status", "1"])
+        .env("AOBAKE_SERVER", "http://127.0.0.1:1")
+        .output()
+        .unwrap();
+    assert_eq!(code(&out), Some(7), "{}", String::from_utf8_lossy(&out.stderr));
+    // The bake submit --wait follows is cancelled (no worker runs it).
+    let rig = character("RiggedSimple");
+    let mut args = vec!["submit", rig.to_str().unwrap(), "--poses", "8", "--wait"];
+    args.extend(QUICK);
+    let out_path = env.dir.path().join("cancelled.out");
+    let mut follower = env
+        .aobake_command(&args)
+        .stdout(std::fs::File::create(&out_path).unwrap())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let id = loop {
+        let out = std::fs::read_to_string(&out_path).unwrap_or_default();
+        if let Some(rest) = out.strip_prefix("bake ")
+            && let Some((id, _)) = rest.split_once(':')
+        {
+            break id.to_owned();
+        }
+        assert!(started.elapsed() < Duration::from_secs(30), "no submit");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(env.aobake(&["cancel", &id]).status.success());
+    let done = follower.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&done.stderr);
+    assert_eq!(code(&done), Some(8), "{stderr}");
+    assert!(stderr.contains(&format!("bake {id} cancelled")), "{stderr}");
+}
+
 /// `aobake pause`, `resume`, `cancel` and `retry` drive a bake as the
 /// API's actions do, and a refused one says why.
 #[test]
