@@ -24,7 +24,8 @@ pub(crate) async fn run(url: &str, token: &str, dashboard: &str) -> anyhow::Resu
         let bake = api.submit(&BakeRequest::new(c.digest, "vertex-clustered", params))?;
         let id = bake.bake.id;
         println!(
-            "demo: baking the bundled Fox (vertex-clustered, seed {seed}: a fresh bake each time) as bake {id}\n\n  open {url}/#token={dashboard}&next=/bakes/{id}\n\nto watch it in the dashboard (or `aobake status {id}`)"
+            "{} demo: baking the bundled Fox (vertex-clustered, seed {seed}: a fresh bake each time) as bake {id}\n\n  open {url}/#token={dashboard}&next=/bakes/{id}\n\nto watch it in the dashboard (or `aobake status {id}`)",
+            aobake_worker::stamp()
         );
         anyhow::Ok(())
     })

@@ -2,6 +2,7 @@
 //! under one data directory) with local worker processes it spawns and
 //! restarts, a lease reaper, and graceful shutdown.
 
+use aobake_worker::stamp;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -179,7 +180,8 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                     format!("cannot remove the revoked {}", admin_file.display())
                 })?;
                 println!(
-                    "removed {} (an earlier start's admin token, now revoked; {ADMIN_TOKEN_ENV} is the admin token)",
+                    "{} removed {} (an earlier start's admin token, now revoked; {ADMIN_TOKEN_ENV} is the admin token)",
+                    stamp(),
                     admin_file.display()
                 );
             }
@@ -189,7 +191,13 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         None => {
             let t = new_token();
             write_private(&admin_file, &t)?;
-            println!("admin token: {t} (also in {})", admin_file.display());
+            // Its path, not the secret: a log (a CI job's, a service
+            // manager's) is read by more people than the token is for.
+            println!(
+                "{} admin token: generated into {} (the aobake commands here read it; `cat` it to sign in to the dashboard)",
+                stamp(),
+                admin_file.display()
+            );
             made.push(token_hash(&t));
             (t, format!("admin ({origin})"))
         }
@@ -239,10 +247,11 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         .with_context(|| format!("cannot listen on {}", args.listen))?;
     let url = format!("http://{}", listener.local_addr()?);
     write_private(&args.data.join("server.url"), &url)?;
-    println!("listening on {url}");
+    println!("{} listening on {url}", stamp());
     if !args.demo {
         println!(
-            "dashboard: {url}/ (sign in with a token from `aobake token create --scope read`)"
+            "{} dashboard: {url}/ (sign in with a token from `aobake token create --scope read`)",
+            stamp()
         );
     }
 

@@ -739,6 +739,16 @@ fn local_workers_get_a_runtime_folder_and_print_no_mesa_noise() {
     let _ = serve.wait();
     assert!(text.contains("listening on"), "{text}");
     assert!(!text.contains("XDG_RUNTIME_DIR"), "{text}");
+    // Its lines say when (the start's too, and the local worker's
+    // tracer), and the generated admin secret is in its file, not in the
+    // log.
+    for said in ["listening on", "admin token: generated into", "tracer: "] {
+        let line = text.lines().find(|l| l.contains(said)).unwrap_or_else(|| panic!("{said}: {text}"));
+        let stamp = line.split(' ').next().unwrap();
+        assert!(humantime::parse_rfc3339(stamp).is_ok(), "{line}");
+    }
+    let secret = std::fs::read_to_string(data.join("admin.token")).unwrap();
+    assert!(!text.contains(secret.trim()), "{text}");
     let run = data.join("run");
     assert!(run.is_dir(), "{text}");
     use std::os::unix::fs::PermissionsExt as _;

@@ -28,12 +28,14 @@ macro_rules! say {
     };
 }
 
+/// The time now as [`say!`] stamps a line: UTC, RFC 3339, milliseconds.
+pub fn stamp() -> String {
+    humantime::format_rfc3339_millis(std::time::SystemTime::now()).to_string()
+}
+
 /// What [`say!`] writes: `args` as one stamped line on stderr.
 pub fn say_line(args: std::fmt::Arguments<'_>) {
-    let line = format!(
-        "{} {args}\n",
-        humantime::format_rfc3339_millis(std::time::SystemTime::now())
-    );
+    let line = format!("{} {args}\n", stamp());
     let _ = std::io::Write::write_all(&mut std::io::stderr().lock(), line.as_bytes());
 }
 

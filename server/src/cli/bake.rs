@@ -160,7 +160,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     }
     let inputs = load_inputs(&r.file, &r.clips, &limits)?;
     let bake = Bake::new(&inputs, params)?;
-    args.tracer.install()?;
+    args.tracer.install(false)?;
     with_threads(args.threads, || run_bake(args, &bake))?
 }
 

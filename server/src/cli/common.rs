@@ -149,9 +149,9 @@ pub(super) enum TracerChoice {
 }
 
 impl TracerChoice {
-    /// Installs the choice for the process and prints which tracer runs;
-    /// returns its label.
-    pub(super) fn install(self) -> anyhow::Result<String> {
+    /// Installs the choice for the process and prints which tracer runs,
+    /// stamped as log lines when `log` (a worker's); returns its label.
+    pub(super) fn install(self, log: bool) -> anyhow::Result<String> {
         use aobake_worker::gpu::{GpuMode, trace::install};
         let mode = match self {
             TracerChoice::Cpu => GpuMode::Off,
@@ -159,13 +159,17 @@ impl TracerChoice {
             TracerChoice::Auto => GpuMode::Auto,
         };
         let (label, note) = install(mode).map_err(|e| anyhow::anyhow!("--tracer gpu: {e}"))?;
-        // One write for both lines: local workers share serve's stderr,
-        // and `eprintln!` writes a line in pieces that others' interleave.
-        let said = match note {
-            Some(note) => format!("{note}\ntracer: {label}\n"),
-            None => format!("tracer: {label}\n"),
-        };
-        let _ = std::io::Write::write_all(&mut std::io::stderr().lock(), said.as_bytes());
+        // One write a line: local workers share serve's stderr.
+        for line in note.iter().chain([&format!("tracer: {label}")]) {
+            if log {
+                aobake_worker::say!("{line}");
+            } else {
+                let _ = std::io::Write::write_all(
+                    &mut std::io::stderr().lock(),
+                    format!("{line}\n").as_bytes(),
+                );
+            }
+        }
         Ok(label)
     }
 }

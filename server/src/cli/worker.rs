@@ -65,7 +65,7 @@ pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
         GpuChoice::Require => TracerChoice::Gpu,
     };
     let server = super::common::server_url(&args.server)?.to_owned();
-    tracer.install()?;
+    tracer.install(true)?;
     let host = crate::serve::host_name();
     aobake_worker::run(aobake_worker::WorkerConfig {
         server,
