@@ -703,15 +703,28 @@ impl<'a> Patience<'a> {
     }
 
     fn call<T>(&self, call: impl FnMut() -> Result<T, ApiError>) -> Result<T, ApiError> {
-        let mut stopping: Option<Instant> = None;
-        let keep_on = || {
-            !self.shutdown.load(Ordering::Relaxed)
-                || stopping.get_or_insert_with(Instant::now).elapsed() < self.grace
+        // When shutdown was first seen during these tries.
+        let stopping: std::cell::Cell<Option<Instant>> = std::cell::Cell::default();
+        let since_stop = || {
+            self.shutdown.load(Ordering::Relaxed).then(|| {
+                let at = stopping.get().unwrap_or_else(Instant::now);
+                stopping.set(Some(at));
+                at.elapsed()
+            })
         };
+        let keep_on = || since_stop().is_none_or(|s| s < self.grace);
         let mut said: Option<Instant> = None;
         let waiting = |e: &ApiError, left: Duration| {
             if said.is_none_or(|t| t.elapsed() >= Duration::from_secs(30)) {
-                say!("retrying (for up to {} s more) after: {e}", left.as_secs());
+                // A stopping worker tries for what is left of its
+                // --shutdown-secs, not the whole window.
+                match since_stop() {
+                    Some(s) => say!(
+                        "retrying (for up to {} s more: the worker is stopping) after: {e}",
+                        left.min(self.grace.saturating_sub(s)).as_secs()
+                    ),
+                    None => say!("retrying (for up to {} s more) after: {e}", left.as_secs()),
+                }
                 said = Some(Instant::now());
             }
         };
@@ -850,5 +863,33 @@ fn run_leased(
                 say!("job {job}: failure not recorded: {e}");
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A stopping worker tries a call through an outage for its
+    /// `--shutdown-secs`, not the whole 5-minute window.
+    #[test]
+    fn a_stopping_worker_gives_up_after_its_grace() {
+        let shutdown = AtomicBool::new(true);
+        let patience = Patience {
+            shutdown: &shutdown,
+            grace: Duration::from_secs(1),
+        };
+        let started = Instant::now();
+        let mut tries = 0;
+        let answer: Result<(), ApiError> = patience.call(|| {
+            tries += 1;
+            Err(ApiError::Transport {
+                base: "http://127.0.0.1:1".into(),
+                message: "connection refused".into(),
+            })
+        });
+        assert!(answer.is_err());
+        assert!(tries >= 2, "it tried again: {tries}");
+        assert!(started.elapsed() < Duration::from_secs(10), "{:?}", started.elapsed());
     }
 }
