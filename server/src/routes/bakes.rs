@@ -272,9 +272,15 @@ pub(crate) async fn report(
     ApiPath(id): ApiPath<i64>,
 ) -> ApiResult<Response> {
     let bake = find(&state, id).await?;
-    let digest = bake
-        .report
-        .ok_or_else(|| ApiError::NotFound(format!("bake {id} has no report yet")))?;
+    // A bake that ended without one says so, not "yet".
+    let digest = bake.report.ok_or_else(|| {
+        ApiError::NotFound(match bake.state {
+            crate::store::BakeState::Failed | crate::store::BakeState::Cancelled => {
+                format!("bake {id} was {}: it has no report", bake.state.as_str())
+            }
+            _ => format!("bake {id} has no report yet"),
+        })
+    })?;
     let bytes = state
         .read_blob(&digest, None)
         .await?

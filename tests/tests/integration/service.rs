@@ -495,6 +495,15 @@ fn client_exit_codes_tell_failures_apart() {
     let stderr = String::from_utf8_lossy(&done.stderr);
     assert_eq!(code(&done), Some(8), "{stderr}");
     assert!(stderr.contains(&format!("bake {id} cancelled")), "{stderr}");
+    // Its report is not "yet" to come.
+    let (status, problem) = env
+        .request("GET", &format!("/v1/bakes/{id}/report"), ADMIN, None)
+        .unwrap();
+    assert_eq!(status, 404);
+    assert_eq!(
+        problem["detail"],
+        format!("bake {id} was cancelled: it has no report")
+    );
 }
 
 /// `aobake pause`, `resume`, `cancel` and `retry` drive a bake as the
