@@ -139,6 +139,41 @@ mod tests {
         }
     }
 
+    /// A body that is not JSON (assets, blobs, previews, viewer bundles)
+    /// is a binary string, which generated clients read as bytes, never
+    /// an array of integers.
+    #[test]
+    fn binary_bodies_are_binary_strings() {
+        let doc: serde_json::Value =
+            serde_json::to_value(super::ApiDoc::openapi()).expect("the spec serialises");
+        let mut checked = 0;
+        for (path, item) in doc["paths"].as_object().unwrap() {
+            for (method, op) in item.as_object().unwrap() {
+                let bodies = op["responses"]
+                    .as_object()
+                    .into_iter()
+                    .flatten()
+                    .map(|(_, r)| &r["content"])
+                    .chain([&op["requestBody"]["content"]]);
+                for content in bodies.filter_map(serde_json::Value::as_object) {
+                    for (kind, media) in content {
+                        if kind.contains("json") || kind.starts_with("multipart/") {
+                            continue;
+                        }
+                        let schema = &media["schema"];
+                        assert!(
+                            schema["$ref"] == "#/components/schemas/FileBytes"
+                                || schema["type"] == "string",
+                            "{method} {path} {kind}: {schema}"
+                        );
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert!(checked >= 8, "{checked}");
+    }
+
     #[test]
     fn the_committed_spec_is_the_generated_one() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../api-spec/openapi.yaml");

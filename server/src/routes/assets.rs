@@ -28,7 +28,7 @@ pub(super) fn router() -> Router<AppState> {
 
 #[utoipa::path(get, path = "/v1/assets/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the bytes"), ("If-None-Match" = Option<String>, Header, description = "An ETag"), ("Range" = Option<String>, Header, description = "One byte range (several are served whole)"), ("If-Range" = Option<String>, Header, description = "The range only if this is still the ETag; otherwise the whole blob")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The bytes (an uploaded source needs `submit`: 403 for `read` alone)", content_type = "application/octet-stream", body = Vec<u8>), (status = 206, description = "The requested range", content_type = "application/octet-stream", body = Vec<u8>), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 416, description = "A byte range the blob does not have, or a malformed one; `Content-Range: bytes */LEN` gives the length", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "The bytes (an uploaded source needs `submit`: 403 for `read` alone)", content_type = "application/octet-stream", body = crate::routes::uploads::FileBytes), (status = 206, description = "The requested range", content_type = "application/octet-stream", body = crate::routes::uploads::FileBytes), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 416, description = "A byte range the blob does not have, or a malformed one; `Content-Range: bytes */LEN` gives the length", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn asset(
     State(state): State<AppState>,
     caller: Caller,
@@ -51,7 +51,7 @@ pub(crate) async fn asset(
 
 #[utoipa::path(get, path = "/v1/previews/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the PNG, from GET /v1/bakes/{id}/previews"), ("If-None-Match" = Option<String>, Header, description = "An ETag")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The PNG (an APNG for an animation)", content_type = "image/png", body = Vec<u8>), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "No such preview", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "The PNG (an APNG for an animation)", content_type = "image/png", body = crate::routes::uploads::FileBytes), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "No such preview", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn preview(
     State(state): State<AppState>,
     _caller: Need<Read>,

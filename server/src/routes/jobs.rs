@@ -420,7 +420,7 @@ pub(crate) async fn release(
 
 #[utoipa::path(get, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = Digest, Path, description = "sha256 of the bytes")),
     security(("bearer" = ["worker"])),
-    responses((status = 200, description = "The bytes", content_type = "application/octet-stream", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "The bytes", content_type = "application/octet-stream", body = crate::routes::uploads::FileBytes), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn get_blob(
     State(state): State<AppState>,
     _caller: Need<Worker>,
@@ -433,7 +433,7 @@ pub(crate) async fn get_blob(
     Ok(bytes.into_response())
 }
 
-#[utoipa::path(put, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = Digest, Path, description = "sha256 of the bytes")), request_body(content = Vec<u8>, content_type = "application/octet-stream"),
+#[utoipa::path(put, path = "/v1/blobs/{digest}", tag = "worker protocol", params(("digest" = Digest, Path, description = "sha256 of the bytes")), request_body(content = crate::routes::uploads::FileBytes, content_type = "application/octet-stream"),
     security(("bearer" = ["worker"])),
     responses((status = 204, description = "Stored"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn put_blob(

@@ -228,10 +228,12 @@ fn telling(
     (status, Json(uploaded))
 }
 
-/// A file's bytes as a request body (OpenAPI's binary string).
+/// A file's bytes as a request or response body (OpenAPI's binary
+/// string, which generated clients read as bytes, not as an array of
+/// integers).
 #[derive(utoipa::ToSchema)]
 #[schema(value_type = String, format = Binary)]
-#[allow(dead_code)] // documents the body; it is read as raw bytes
+#[allow(dead_code)] // documents the body; it is read and sent as raw bytes
 pub(crate) struct FileBytes(Vec<u8>);
 
 /// A `.gltf` and its side files as `multipart/form-data`.

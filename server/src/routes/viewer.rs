@@ -165,7 +165,7 @@ fn viewer_error(e: ViewerError) -> ApiError {
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/viewer", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["submit"])),
-    responses((status = 200, description = "The viewer's scene: an `AOVW` bundle (JSON description, then typed arrays; see docs/engines.md)", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "The viewer's scene: an `AOVW` bundle (JSON description, then typed arrays; see docs/engines.md)", content_type = "application/vnd.aobake.viewer", body = crate::routes::uploads::FileBytes), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn scene(
     State(state): State<AppState>,
     _caller: Need<Submit>,
@@ -207,7 +207,7 @@ pub(crate) struct FramesQuery {
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/viewer/frames", tag = "bakes", params(("id" = i64, Path, description = "Bake id"), FramesQuery),
     security(("bearer" = ["submit"])),
-    responses((status = 200, description = "One clip's frames: an `AOVW` bundle", content_type = "application/vnd.aobake.viewer", body = Vec<u8>), (status = 404, description = "No such bake or clip", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "One clip's frames: an `AOVW` bundle", content_type = "application/vnd.aobake.viewer", body = crate::routes::uploads::FileBytes), (status = 404, description = "No such bake or clip", body = Problem, content_type = "application/problem+json"), (status = 409, description = "No asset yet", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn frames(
     State(state): State<AppState>,
     _caller: Need<Submit>,
