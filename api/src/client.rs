@@ -7,7 +7,7 @@ use serde::{Serialize, de::DeserializeOwned};
 use sha2::{Digest as _, Sha256};
 
 use crate::types::{
-    BakeRequest, BakeView, CheckpointRef, CheckpointRequest, CompleteManyReply,
+    BakeKey, BakeRequest, BakeView, CheckpointRef, CheckpointRequest, CompleteManyReply,
     CompleteManyRequest, CompleteRequest, Completion, FailRequest, HeartbeatReply,
     HeartbeatRequest, JobCompletion, Lease, LeaseManyRequest, LeaseRequest, Leases, NewToken,
     NewTokenRequest, Problem, TokenRequest, TokenView, Uploaded, Whoami, WorkersStopped,
@@ -578,6 +578,12 @@ impl Client {
                 token: token.to_owned(),
             },
         )
+    }
+
+    /// The bake key the server gives `request` (its `priority` aside),
+    /// without uploading or baking.
+    pub fn key(&self, request: &BakeRequest) -> Result<BakeKey> {
+        self.post_for("/v1/keys", request)
     }
 
     /// Tells the server that these worker ids (a process's slots) have

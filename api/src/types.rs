@@ -286,6 +286,23 @@ pub struct BakeRequest {
     pub priority: i64,
 }
 
+/// `POST /v1/keys`: the bake key a request would have, computed by the
+/// server (the same code as a bake's) without uploading or baking; then
+/// `GET /v1/cache/{key}` answers the finished bake, if there is one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
+pub struct BakeKey {
+    /// The key: sha256 of the canonical request (docs/asset-format.md).
+    #[cfg_attr(feature = "schema", schema(pattern = "^[0-9a-f]{64}$"))]
+    pub key: String,
+    /// The method's algorithm version, which the key includes.
+    pub algorithm_version: u32,
+    /// The parameters with every default filled in, as the key hashes
+    /// them.
+    #[cfg_attr(feature = "schema", schema(value_type = Object))]
+    pub params: serde_json::Value,
+}
+
 /// Progress of a bake in units of work.
 #[derive(Debug, Serialize, Deserialize)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]

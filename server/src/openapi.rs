@@ -56,6 +56,7 @@ impl Modify for BearerAuth {
         bakes::patch,
         bakes::control,
         bakes::cache,
+        bakes::key,
         bakes::events,
         bakes::all_events,
         system::whoami,

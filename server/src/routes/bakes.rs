@@ -3,7 +3,7 @@
 //! events, control, and the cache by bake key that CI reads.
 
 use aobake_api::schema::{Digest, Refusals};
-use aobake_api::{BakeRequest, BakeView, PatchBody, PreviewItem, PreviewList, Progress};
+use aobake_api::{BakeKey, BakeRequest, BakeView, PatchBody, PreviewItem, PreviewList, Progress};
 use std::convert::Infallible;
 use std::time::Duration;
 
@@ -43,6 +43,7 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/events", get(all_events))
         .route("/v1/bakes/{id}/{action}", post(control))
         .route("/v1/cache/{key}", get(cache))
+        .route("/v1/keys", post(key))
         .route("/v1/characters/{digest}/bakes", get(versions))
 }
 
@@ -346,6 +347,29 @@ pub(crate) async fn cache(
             "no finished bake for key {key}"
         ))),
     }
+}
+
+#[utoipa::path(post, path = "/v1/keys", tag = "bakes", request_body = BakeRequest,
+    security(("bearer" = ["read"])),
+    responses((status = 200, description = "The key a bake of this request has (its priority aside), computed without uploading or baking: the digests need not be uploads yet. GET /v1/cache/{key} then answers the finished bake", body = BakeKey), Refusals))]
+pub(crate) async fn key(
+    _caller: Need<Read>,
+    Body(req): Body<BakeRequest>,
+) -> ApiResult<Json<BakeKey>> {
+    let method: Method = req
+        .method
+        .parse()
+        .map_err(|e: String| ApiError::bad("bad_method", e))?;
+    for digest in std::iter::once(&req.character).chain(&req.clips) {
+        crate::blobs::check_digest(digest)?;
+    }
+    let params = BakeParams::with_overrides(method, &req.params)
+        .map_err(|e| ApiError::bad("bad_params", e.to_string()))?;
+    Ok(Json(BakeKey {
+        key: bake_key(&req.character, &req.clips, &params),
+        algorithm_version: aobake_core::method::algorithm_version(method),
+        params: params.canonical(),
+    }))
 }
 
 #[utoipa::path(get, path = "/v1/events", tag = "bakes",

@@ -43,6 +43,7 @@ const ROUTES: &[(&str, &str, &str)] = &[
     ("GET", "/v1/blobs/{digest}", "worker"),
     ("PUT", "/v1/blobs/{digest}", "worker"),
     ("GET", "/v1/workers", "read"),
+    ("POST", "/v1/keys", "read"),
     ("POST", "/v1/tokens", "admin"),
     ("GET", "/v1/tokens", "admin"),
     ("DELETE", "/v1/tokens/{id}", "admin"),

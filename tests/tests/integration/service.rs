@@ -6,7 +6,7 @@ use serde_json::json;
 
 use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
 
-use crate::util::{QUICK, asset, local_bake, submit, upload};
+use crate::util::{QUICK, asset, local_bake, quick_params, submit, upload};
 
 #[test]
 fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
@@ -47,6 +47,27 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), key);
+    // And a client without the command line, from the file's sha256 and
+    // the request it would send: POST /v1/keys.
+    let digest = aobake_core::digest::sha256_hex(&std::fs::read(&cm).unwrap());
+    let request = json!({"character": digest, "method": "vertex-linear", "params": quick_params(24)});
+    let (status, computed) = env.request("POST", "/v1/keys", ADMIN, Some(request)).unwrap();
+    assert_eq!((status, &computed["key"]), (200, &json!(key)), "{computed}");
+    assert_eq!(computed["algorithm_version"], 9, "{computed}");
+    assert_eq!(computed["params"]["poses"], 24, "{computed}");
+    // Digests need not be uploads; a malformed one, an unknown method or
+    // parameter is refused by name.
+    let unseen = json!({"character": "ab".repeat(32), "method": "grid"});
+    let (status, _) = env.request("POST", "/v1/keys", ADMIN, Some(unseen)).unwrap();
+    assert_eq!(status, 200);
+    for (bad, code) in [
+        (json!({"character": "nothex", "method": "grid"}), "bad_digest"),
+        (json!({"character": digest, "method": "nope"}), "bad_method"),
+        (json!({"character": digest, "method": "grid", "params": {"rays": -1}}), "bad_params"),
+    ] {
+        let (status, problem) = env.request("POST", "/v1/keys", ADMIN, Some(bad)).unwrap();
+        assert_eq!((status, problem["code"].as_str()), (400, Some(code)), "{problem}");
+    }
     let out = env.aobake(&["status", "1"]);
     let status = String::from_utf8_lossy(&out.stdout);
     assert!(
