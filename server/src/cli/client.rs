@@ -400,9 +400,9 @@ pub(super) fn control(args: &ControlArgs, action: &str) -> anyhow::Result<()> {
 
 /// Arguments of `aobake fetch`.
 #[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("which").required(true).args(["id", "key"])))]
 pub(super) struct FetchArgs {
-    /// The bake id.
-    #[arg(required_unless_present = "key", conflicts_with = "key")]
+    /// The bake id (or --key).
     id: Option<i64>,
     /// The bake key (what CI knows before it bakes: `aobake key` computes
     /// it from the files and parameters).

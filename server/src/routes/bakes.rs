@@ -396,7 +396,7 @@ fn bake_event(e: &crate::state::BakeEvent) -> Event {
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/events", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Server-sent events: `bake` events with id, state, done (the view's `progress.done`) and total, first the bake as it is, then at each change of it or its jobs", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "Server-sent events: `bake` events with id, state, done (the view's `progress.done`) and total, first the bake as it is, then at each change of it or its jobs. The stream stays open after the bake ends (a retry can start it again, and a browser's EventSource reconnects to a closed stream): a follower stops at the state it waits for (done, failed, cancelled)", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn events(
     State(state): State<AppState>,
     _caller: Need<Read>,

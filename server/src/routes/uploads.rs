@@ -176,7 +176,7 @@ async fn store_upload(
 }
 
 #[utoipa::path(post, path = "/v1/characters", tag = "uploads", params(NameQuery),
-    request_body(description = "A .glb or self-contained .gltf as the body, a bundle of a .gltf and its side files, or multipart/form-data whose first part is the .gltf and whose other parts are its side files, each named by its file name",
+    request_body(description = "A .glb or self-contained .gltf as the body, a bundle of a .gltf and its side files, or multipart/form-data whose first part is the .gltf and whose other parts are its side files: each part's file name (its Content-Disposition filename, else its field name) is the name the glTF's URI resolves to; parts it does not refer to are left out, with a warning",
         content((FileBytes = "model/gltf-binary"), (FileBytes = "model/gltf+json"), (FileBytes = "application/vnd.aobake.bundle"), (MultipartUpload = "multipart/form-data"))),
     security(("bearer" = ["submit"])),
     responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
