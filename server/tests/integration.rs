@@ -743,7 +743,10 @@ fn local_workers_get_a_runtime_folder_and_print_no_mesa_noise() {
     // tracer), and the generated admin secret is in its file, not in the
     // log.
     for said in ["listening on", "admin token: generated into", "tracer: "] {
-        let line = text.lines().find(|l| l.contains(said)).unwrap_or_else(|| panic!("{said}: {text}"));
+        let line = text
+            .lines()
+            .find(|l| l.contains(said))
+            .unwrap_or_else(|| panic!("{said}: {text}"));
         let stamp = line.split(' ').next().unwrap();
         assert!(humantime::parse_rfc3339(stamp).is_ok(), "{line}");
     }

@@ -890,6 +890,10 @@ mod tests {
         });
         assert!(answer.is_err());
         assert!(tries >= 2, "it tried again: {tries}");
-        assert!(started.elapsed() < Duration::from_secs(10), "{:?}", started.elapsed());
+        assert!(
+            started.elapsed() < Duration::from_secs(10),
+            "{:?}",
+            started.elapsed()
+        );
     }
 }

@@ -246,7 +246,11 @@ fn a_frame_allocates_nothing_after_the_first() {
         let (_, first) = frame(0.2, &mut weights, &mut values);
         assert!(first.0 > 0, "{method:?}: the first frame sizes the buffers");
         let (pose, next) = frame(0.7, &mut weights, &mut values);
-        assert_eq!(next, (0, 0), "{method:?}: a later frame allocates (calls, bytes)");
+        assert_eq!(
+            next,
+            (0, 0),
+            "{method:?}: a later frame allocates (calls, bytes)"
+        );
         let mut rust = VertexAo::from_bytes(&asset).unwrap();
         for (n, t) in pose.locals.iter().enumerate() {
             assert!(rust.set_local(n, *t));

@@ -415,7 +415,6 @@ pub(super) struct FetchArgs {
     conn: Conn,
 }
 
-
 pub(super) fn fetch(args: &FetchArgs) -> anyhow::Result<()> {
     let api = args.conn.api()?;
     let view = match (&args.key, args.id) {

@@ -249,7 +249,11 @@ fn submit_wait_follows_a_server_restarted_on_another_port() {
     let started = Instant::now();
     // No worker yet: the bake waits while the server moves.
     while !read(&out).contains(": key") {
-        assert!(started.elapsed() < Duration::from_secs(30), "no submit: {}", read(&err));
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "no submit: {}",
+            read(&err)
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     let before = env.url.clone();

@@ -50,23 +50,38 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
     // And a client without the command line, from the file's sha256 and
     // the request it would send: POST /v1/keys.
     let digest = aobake_core::digest::sha256_hex(&std::fs::read(&cm).unwrap());
-    let request = json!({"character": digest, "method": "vertex-linear", "params": quick_params(24)});
-    let (status, computed) = env.request("POST", "/v1/keys", ADMIN, Some(request)).unwrap();
+    let request =
+        json!({"character": digest, "method": "vertex-linear", "params": quick_params(24)});
+    let (status, computed) = env
+        .request("POST", "/v1/keys", ADMIN, Some(request))
+        .unwrap();
     assert_eq!((status, &computed["key"]), (200, &json!(key)), "{computed}");
     assert_eq!(computed["algorithm_version"], 9, "{computed}");
     assert_eq!(computed["params"]["poses"], 24, "{computed}");
     // Digests need not be uploads; a malformed one, an unknown method or
     // parameter is refused by name.
     let unseen = json!({"character": "ab".repeat(32), "method": "grid"});
-    let (status, _) = env.request("POST", "/v1/keys", ADMIN, Some(unseen)).unwrap();
+    let (status, _) = env
+        .request("POST", "/v1/keys", ADMIN, Some(unseen))
+        .unwrap();
     assert_eq!(status, 200);
     for (bad, code) in [
-        (json!({"character": "nothex", "method": "grid"}), "bad_digest"),
+        (
+            json!({"character": "nothex", "method": "grid"}),
+            "bad_digest",
+        ),
         (json!({"character": digest, "method": "nope"}), "bad_method"),
-        (json!({"character": digest, "method": "grid", "params": {"rays": -1}}), "bad_params"),
+        (
+            json!({"character": digest, "method": "grid", "params": {"rays": -1}}),
+            "bad_params",
+        ),
     ] {
         let (status, problem) = env.request("POST", "/v1/keys", ADMIN, Some(bad)).unwrap();
-        assert_eq!((status, problem["code"].as_str()), (400, Some(code)), "{problem}");
+        assert_eq!(
+            (status, problem["code"].as_str()),
+            (400, Some(code)),
+            "{problem}"
+        );
     }
     let out = env.aobake(&["status", "1"]);
     let status = String::from_utf8_lossy(&out.stdout);
@@ -422,7 +437,11 @@ fn assert_served_with_etag_and_ranges(env: &TestEnv, b: &serde_json::Value) {
     // A resume of a file already whole (curl -C -, wget -c), a range past
     // the end and a malformed one: 416 with the length, which tells the
     // client it has it all.
-    for range in [format!("bytes={len}-"), "bytes=999999999-".into(), "bytes=9-2".into()] {
+    for range in [
+        format!("bytes={len}-"),
+        "bytes=999999999-".into(),
+        "bytes=9-2".into(),
+    ] {
         let r = agent
             .get(&url)
             .header("authorization", &auth)
@@ -458,7 +477,14 @@ fn assert_served_with_etag_and_ranges(env: &TestEnv, b: &serde_json::Value) {
             .unwrap();
         assert_eq!(r.status().as_u16(), status, "{if_range} {range}");
         let body = r.body_mut().read_to_vec().unwrap();
-        assert_eq!(body, if status == 206 { &whole[..10] } else { &whole[..] });
+        assert_eq!(
+            body,
+            if status == 206 {
+                &whole[..10]
+            } else {
+                &whole[..]
+            }
+        );
     }
 }
 
@@ -474,27 +500,47 @@ fn client_exit_codes_tell_failures_apart() {
     let truncated = env.dir.path().join("truncated.glb");
     let glb = std::fs::read(character("RiggedSimple")).unwrap();
     std::fs::write(&truncated, &glb[..glb.len() / 2]).unwrap();
-    let out = env.aobake(&["submit", truncated.to_str().unwrap(), "--method", "vertex-linear"]);
-    assert_eq!(code(&out), Some(5), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = env.aobake(&[
+        "submit",
+        truncated.to_str().unwrap(),
+        "--method",
+        "vertex-linear",
+    ]);
+    assert_eq!(
+        code(&out),
+        Some(5),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     // A token the server does not know; a server that is not there.
     let out = env
         .aobake_command(&["status", "1"])
         .env("AOBAKE_TOKEN", "not-a-token")
         .output()
         .unwrap();
-    assert_eq!(code(&out), Some(6), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        code(&out),
+        Some(6),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let out = env
         .aobake_command(&["status", "1"])
         .env("AOBAKE_SERVER", "http://127.0.0.1:1")
         .output()
         .unwrap();
-    assert_eq!(code(&out), Some(7), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        code(&out),
+        Some(7),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     // The bake submit --wait follows is cancelled (no worker runs it).
     let rig = character("RiggedSimple");
     let mut args = vec!["submit", rig.to_str().unwrap(), "--poses", "8", "--wait"];
     args.extend(QUICK);
     let out_path = env.dir.path().join("cancelled.out");
-    let mut follower = env
+    let follower = env
         .aobake_command(&args)
         .stdout(std::fs::File::create(&out_path).unwrap())
         .stderr(std::process::Stdio::piped())
@@ -1052,8 +1098,15 @@ fn clips_and_multi_file_characters_upload_and_bake() {
     assert_eq!(status, 200, "{with_extra}");
     assert_eq!(with_extra["digest"], uploaded["digest"], "{with_extra}");
     let warnings = with_extra["summary"]["warnings"].to_string();
-    assert!(warnings.contains("notes.txt") && warnings.contains("left out"), "{with_extra}");
-    assert!(!uploaded["summary"]["warnings"].to_string().contains("notes.txt"));
+    assert!(
+        warnings.contains("notes.txt") && warnings.contains("left out"),
+        "{with_extra}"
+    );
+    assert!(
+        !uploaded["summary"]["warnings"]
+            .to_string()
+            .contains("notes.txt")
+    );
     // Without its side file the .gltf is refused by name.
     let (status, refused, _) = env.post_bytes(
         "/v1/characters",
