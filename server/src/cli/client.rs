@@ -238,7 +238,7 @@ fn wait(conn: &Conn, api: &Client, id: i64) -> anyhow::Result<()> {
 
 /// A bake followed through outages of its server: says so once, and
 /// again when the server answers; follows a server that moved
-/// ([`Conn::moved`]).
+/// ([`Conn::fresh`]).
 struct Follow<'a> {
     bar: &'a indicatif::ProgressBar,
     id: i64,
@@ -446,18 +446,34 @@ pub(super) fn fetch(args: &FetchArgs) -> anyhow::Result<()> {
     if aobake_core::digest::sha256_hex(&bytes) != *asset {
         bail!("the asset's bytes do not match its digest {asset}");
     }
-    // Whole or not at all: a pipeline that finds the file finds the asset.
-    let mut part = args.out.clone().into_os_string();
-    part.push(".part");
-    std::fs::write(&part, &bytes)
-        .and_then(|()| std::fs::rename(&part, &args.out))
-        .with_context(|| format!("cannot write {}", args.out.display()))?;
-    println!(
+    write_whole(&args.out, &bytes)?;
+    // On stderr: `--out /dev/stdout` pipes the asset alone.
+    eprintln!(
         "wrote {} ({} bytes) from bake {}",
         args.out.display(),
         bytes.len(),
         bake.id
     );
+    Ok(())
+}
+
+/// Writes `bytes` to `out` whole or not at all, so that a pipeline that
+/// finds the file finds the asset: a temporary file beside it, renamed
+/// into place (removed if anything fails). Where `out` is not a regular
+/// file (`/dev/stdout`, a pipe), straight into it.
+fn write_whole(out: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    let cannot = || format!("cannot write {}", out.display());
+    if std::fs::metadata(out).is_ok_and(|m| !m.is_file()) {
+        return std::fs::write(out, bytes).with_context(cannot);
+    }
+    let dir = match out.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).with_context(cannot)?;
+    tmp.write_all(bytes).with_context(cannot)?;
+    tmp.persist(out).map_err(|e| e.error).with_context(cannot)?;
     Ok(())
 }
 

@@ -128,7 +128,6 @@ impl Cli {
     }
 }
 
-/// Runs a parsed command line.
 /// The exit codes, as `aobake --help` lists them.
 const EXIT_CODES: &str = "Exit codes (for scripts to branch on):
   0  success
@@ -136,12 +135,12 @@ const EXIT_CODES: &str = "Exit codes (for scripts to branch on):
   2  the command line is wrong
   3  worker: the server refuses its leases for good (token, scope, address)
   4  fetch: no finished bake for that id or key
-  5  the input was refused: a file that does not import, a parameter out of range,
-     or a request the server answered 4xx (a bake that does not exist, an action
-     its state forbids)
+  5  the input was refused: a file that does not import (a character or an
+     asset), a parameter out of range, or a request the server answered 4xx (a
+     bake that does not exist, an action its state forbids)
   6  the server refused the token (401) or its scope (403)
-  7  the server could not be reached or failed (5xx, after waiting out an outage):
-     try again later
+  7  the server could not be reached, failed (5xx) or stayed too busy (429), after
+     waiting out an outage: try again later
   8  submit --wait: the bake failed or was cancelled
 141  stdout was closed (a pipe into head)";
 
@@ -174,19 +173,28 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
                 ApiError::Status {
                     status: 401 | 403, ..
                 } => exit::TOKEN,
+                // A 429 or 408 arrives after the client waited it out:
+                // the server is busy, not the input wrong.
+                ApiError::Status {
+                    status: 408 | 429, ..
+                } => exit::UNAVAILABLE,
                 ApiError::Status { status, .. } if *status >= 500 => exit::UNAVAILABLE,
                 ApiError::Status { .. } => exit::BAD_INPUT,
                 ApiError::Transport { .. } => exit::UNAVAILABLE,
                 ApiError::Decode { .. } => exit::FAILED,
             };
         }
-        if cause.is::<aobake_core::ImportError>() || cause.is::<aobake_core::bake::BakeError>() {
+        if cause.is::<aobake_core::ImportError>()
+            || cause.is::<aobake_core::bake::BakeError>()
+            || cause.is::<aobake_core::asset::AssetError>()
+        {
             return exit::BAD_INPUT;
         }
     }
     exit::FAILED
 }
 
+/// Runs a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Inspect(args) => inspect::run(&args),

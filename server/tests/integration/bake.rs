@@ -257,7 +257,8 @@ fn eval_and_inspect_refuse_damaged_newer_and_foreign_assets() {
     std::fs::write(&bad, &newer).unwrap();
     let out = eval(&bad, "RiggedFigure/RiggedFigure.glb");
     assert!(!out.status.success(), "a newer asset must fail");
-    assert_eq!(out.status.code(), Some(1));
+    // The input is refused (aobake --help's exit codes).
+    assert_eq!(out.status.code(), Some(5));
     assert!(
         stderr(&out).contains("asset format 7.")
             && stderr(&out).contains("is newer than this reader"),

@@ -101,6 +101,17 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
         String::from_utf8_lossy(&out.stderr)
     );
     let service = std::fs::read(&fetched).unwrap();
+    // Into a pipe, as a script does: straight through, the same bytes
+    // (and no temporary file is left beside the one it wrote).
+    let piped = env.aobake(&["fetch", "--key", &key, "--out", "/dev/stdout"]);
+    assert!(piped.status.success(), "{}", String::from_utf8_lossy(&piped.stderr));
+    assert!(piped.stdout == service, "{} bytes", piped.stdout.len());
+    let beside: Vec<_> = std::fs::read_dir(env.dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".tmp"))
+        .collect();
+    assert!(beside.is_empty(), "{beside:?}");
     let local = local_bake(env.dir.path(), &cm, 24);
     assert!(
         service == local,
