@@ -108,7 +108,7 @@ typedef struct AobakeGrid AobakeGrid;
  * vertex-clustered), its rig and the pose being set, the GPU form once
  * asked for, and the per-pose step's buffers (behind a lock: the
  * weights and the evaluation take a `const` handle, which several
- * threads may share). Opaque to C.
+ * threads may share while none sets a node). Opaque to C.
  */
 typedef struct AobakeVertexAo AobakeVertexAo;
 

@@ -104,19 +104,25 @@ async fn serve(
     // RFC 9110: a range in another unit than bytes is ignored, and so is
     // any range when If-Range names another representation (an ETag other
     // than this one, or a date: these blobs have none).
+    // (The unit is case-insensitive: `Bytes=` is read as `bytes=`.)
     let range = headers
         .get(header::RANGE)
         .and_then(|v| v.to_str().ok())
-        .filter(|r| r.trim_start().starts_with("bytes="))
+        .and_then(|r| {
+            let r = r.trim_start();
+            let (unit, set) = r.split_at_checked(6)?;
+            unit.eq_ignore_ascii_case("bytes=")
+                .then(|| (r, format!("bytes={set}")))
+        })
         .filter(|_| {
             headers
                 .get(header::IF_RANGE)
                 .is_none_or(|v| v.as_bytes() == etag.as_bytes())
         });
-    if let Some(range) = range {
+    if let Some((range, bytes_range)) = range {
         // A malformed or unsatisfiable byte range is a 416, whose
         // Content-Range tells a resuming client the whole length.
-        let ranges = http_range_header::parse_range_header(range)
+        let ranges = http_range_header::parse_range_header(&bytes_range)
             .and_then(|r| r.validate(len))
             .map_err(|_| ApiError::RangeNotSatisfiable {
                 range: range.to_owned(),

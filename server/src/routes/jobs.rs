@@ -56,7 +56,9 @@ pub(crate) async fn lease(
     gone: Option<Extension<ClientGone>>,
     Body(req): Body<LeaseRequest>,
 ) -> ApiResult<Response> {
-    let leases = wait_for_leases(&state, vec![req.worker], req.wait_secs, req.tracer, gone).await?;
+    let workers = vec![req.worker];
+    check_slots(&workers, "a lease request")?;
+    let leases = wait_for_leases(&state, workers, req.wait_secs, req.tracer, gone).await?;
     Ok(match leases.into_iter().next() {
         Some(lease) => Json(lease).into_response(),
         None => StatusCode::NO_CONTENT.into_response(),
@@ -121,7 +123,7 @@ pub(crate) async fn workers_stopped(
     Ok(StatusCode::NO_CONTENT)
 }
 
-/// Leases for `workers`, waiting up to `wait_secs` (at most 60) for a
+/// Leases for `workers` ([`check_slots`]), waiting up to `wait_secs` (at most 60) for a
 /// first job; empty when none came, or once the worker that asked has
 /// gone (its connection closed: a worker stopped mid-poll, or killed), so
 /// that no job is leased to a worker that will never run it.
@@ -133,12 +135,6 @@ async fn wait_for_leases(
     gone: Option<Extension<ClientGone>>,
 ) -> ApiResult<Vec<Lease>> {
     let mut gone = gone.map(|Extension(g)| g);
-    if workers.iter().any(|w| w.is_empty() || w.len() > 200) {
-        return Err(ApiError::bad(
-            "bad_worker",
-            "worker ids are 1 to 200 characters",
-        ));
-    }
     if let Some(tracer) = &tracer {
         if tracer.is_empty() || tracer.len() > 200 {
             return Err(ApiError::bad(

@@ -258,7 +258,9 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// Records that `workers` have stopped (a worker process exiting
     /// gracefully): listed as `stopped` at once, with no job, not idle GPU
     /// workers that tracing jobs wait for, and not other workers that a
-    /// bake kept off a failing worker waits for. A worker id that polls
+    /// bake kept off a failing worker waits for; no lease goes to them
+    /// after, and a job still leased to them (leased as the process went)
+    /// is given back, its attempt not counted. A worker id that polls
     /// again is idle again.
     async fn workers_stopped(&self, workers: &[String]) -> Result<()>;
     /// Within one long poll, after [`Store::workers_idle`] began it:

@@ -846,6 +846,33 @@ impl<B: Backend> Store for SqlStore<B> {
                     "a batch of leases names a worker twice".into(),
                 ));
             }
+            // A slot whose process said it stopped gets no job: the poll
+            // asking for it is abandoned. Its row is locked first, so a
+            // stop either commits before this and is seen here, or waits
+            // and then gives back what this leased (`workers_stopped`).
+            let stopped: Vec<(String,)> = c
+                .all(
+                    B::sql(&format!(
+                        "SELECT id FROM workers WHERE id IN ({}) AND state = 'stopped'{{for_update}}",
+                        placeholders(1, workers.len())
+                    ))
+                    .bind_all(workers.iter().map(String::as_str)),
+                )
+                .await?;
+            let live: Vec<String>;
+            let workers = if stopped.is_empty() {
+                workers
+            } else {
+                live = workers
+                    .iter()
+                    .filter(|w| !stopped.iter().any(|(s,)| s == *w))
+                    .cloned()
+                    .collect();
+                if live.is_empty() {
+                    return Ok(Vec::new());
+                }
+                &live[..]
+            };
             let mut claimed: Vec<(usize, i64)> = Vec::new();
             for group in claim_groups::<B>(c, workers, policy).await? {
                 let taken: Vec<i64> = claimed.iter().map(|&(_, id)| id).collect();
@@ -1185,15 +1212,32 @@ impl<B: Backend> Store for SqlStore<B> {
         if workers.is_empty() {
             return Ok(());
         }
+        let list = placeholders(1, workers.len());
         in_tx!(self, Durability::Queue, |c| {
+            // The rows first: a lease of these slots under way finishes
+            // before this goes on (it locks them), one after sees them
+            // stopped.
             c.execute(
                 B::sql(&format!(
-                    "UPDATE workers SET state = 'stopped', job_id = NULL WHERE id IN ({})",
-                    placeholders(1, workers.len())
+                    "UPDATE workers SET state = 'stopped', job_id = NULL WHERE id IN ({list})"
                 ))
                 .bind_all(workers.iter().map(String::as_str)),
             )
             .await?;
+            // A job still leased to them was leased as the process went
+            // (its poll's answer was never read): it is given back as a
+            // release would, its attempt not counted.
+            let given_back = c
+                .execute(
+                    B::sql(&format!(
+                        "UPDATE jobs SET state = 'available', lease_token = NULL, lease_expires_at = NULL, attempts = attempts - 1 WHERE state = 'running' AND worker IN ({list})"
+                    ))
+                    .bind_all(workers.iter().map(String::as_str)),
+                )
+                .await?;
+            if given_back > 0 {
+                B::wake(c).await?;
+            }
             Ok(())
         })
     }

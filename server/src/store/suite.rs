@@ -450,6 +450,18 @@ async fn a_stopped_worker_is_listed_so_at_once_and_holds_no_job_back(store: &dyn
         (created.id, "sample"),
         "a stopped GPU worker held the tracing job back"
     );
+    // No lease goes to a stopped slot (a poll open as it stopped), and a
+    // job leased to a slot as it stopped is given back, its attempt not
+    // counted.
+    let batch = store.lease_many(&leaving, &p).await.unwrap();
+    assert!(batch.is_empty(), "{batch:?}");
+    store.workers_stopped(&["cpu/0".to_owned()]).await.unwrap();
+    let again = store.lease("cpu/1", &p).await.unwrap().unwrap();
+    assert_eq!(
+        (again.job.id, again.job.attempts),
+        (l.job.id, 1),
+        "the stopped slot's job, given back"
+    );
     store.workers_idle(&leaving[..1]).await.unwrap();
     assert!(store.workers_still_waiting(&leaving[..1]).await.unwrap());
     let workers = store.workers(60_000).await.unwrap();
