@@ -565,6 +565,13 @@ pub struct TokenView {
     pub scopes: Vec<String>,
     /// Milliseconds since the epoch.
     pub created_at: i64,
+    /// When it stops being valid (ms since the epoch); absent: never.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expires_at: Option<i64>,
+    /// When a request last used it (ms since the epoch, to the minute);
+    /// absent: never used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_used_at: Option<i64>,
     /// Whether it is the token of this request.
     pub current: bool,
 }
@@ -578,6 +585,10 @@ pub struct NewTokenRequest {
     /// Its scopes.
     #[cfg_attr(feature = "schema", schema(schema_with = crate::schema::scopes))]
     pub scopes: Vec<String>,
+    /// Seconds it is valid for (1 s to 10 years); absent: until revoked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "schema", schema(minimum = 1, maximum = 315_360_000))]
+    pub expires_in_secs: Option<u64>,
 }
 
 /// The new token: shown once, stored hashed.
@@ -590,6 +601,9 @@ pub struct NewToken {
     pub name: String,
     /// Its scopes.
     pub scopes: Vec<String>,
+    /// When it stops being valid (ms since the epoch); absent: never.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expires_at: Option<i64>,
 }
 
 /// The problem+json body.

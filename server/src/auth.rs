@@ -73,6 +73,21 @@ impl FromRequestParts<AppState> for Caller {
             .token(&hash)
             .await?
             .ok_or(ApiError::Unauthorized)?;
+        let now = now_ms();
+        if let Some(at) = row.expires_at
+            && at <= now
+        {
+            return Err(ApiError::TokenExpired(at));
+        }
+        // When it was last used, to the minute: at most one write a
+        // minute per token and server, and a failed one costs the request
+        // nothing.
+        if row
+            .last_used_at
+            .is_none_or(|t| now - t >= LAST_USED_EVERY_MS)
+        {
+            let _ = state.store.token_used(&hash).await;
+        }
         let caller = Self {
             name: row.name,
             scopes: row.scopes.iter().filter_map(|s| Scope::parse(s)).collect(),
@@ -81,6 +96,17 @@ impl FromRequestParts<AppState> for Caller {
         state.limiter.check(&caller.hash)?;
         Ok(caller)
     }
+}
+
+/// How stale a token's `last_used_at` may get before a request writes it
+/// again.
+const LAST_USED_EVERY_MS: i64 = 60_000;
+
+/// Milliseconds since the epoch.
+fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX))
 }
 
 /// A scope as a type, for [`Need`].

@@ -27,6 +27,9 @@ pub enum ApiError {
     /// No or unknown bearer token.
     #[error("a valid bearer token is required")]
     Unauthorized,
+    /// The token's time ran out (ms since the epoch when it did).
+    #[error("this token expired at {}; make another (aobake token create --expires-in …)", humantime::format_rfc3339_seconds(std::time::UNIX_EPOCH + std::time::Duration::from_millis(u64::try_from(*.0).unwrap_or(0))))]
+    TokenExpired(i64),
     /// The token lacks the scope.
     #[error("this token lacks the {0:?} scope")]
     Forbidden(&'static str),
@@ -102,6 +105,7 @@ impl ApiError {
                 "The upload cannot be used",
             ),
             Self::Unauthorized => (StatusCode::UNAUTHORIZED, "unauthorized", "Unauthorized"),
+            Self::TokenExpired(_) => (StatusCode::UNAUTHORIZED, "token_expired", "Unauthorized"),
             Self::Forbidden(_) => (StatusCode::FORBIDDEN, "forbidden", "Forbidden"),
             Self::NotFound(_) => (StatusCode::NOT_FOUND, "not_found", "Not found"),
             Self::MethodNotAllowed(_) => (
@@ -181,7 +185,7 @@ impl IntoResponse for ApiError {
                 HeaderValue::from_str(&format!("bytes */{len}")).expect("digits"),
             );
         }
-        if matches!(self, Self::Unauthorized) {
+        if matches!(self, Self::Unauthorized | Self::TokenExpired(_)) {
             res.headers_mut().insert(
                 header::WWW_AUTHENTICATE,
                 HeaderValue::from_static("Bearer realm=\"aobake\""),

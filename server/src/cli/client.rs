@@ -495,11 +495,17 @@ enum TokenCommand {
         /// A name to recognise it by.
         #[arg(long, default_value = "cli")]
         name: String,
+        /// How long it is valid, such as `90d`, `12h` or `30min` (a CI
+        /// secret that expires need not be remembered to be revoked).
+        /// Default: until revoked.
+        #[arg(long, value_parser = humantime::parse_duration)]
+        expires_in: Option<std::time::Duration>,
         #[command(flatten)]
         conn: Conn,
     },
-    /// List every token, newest first: id, name, scopes, age (needs an
-    /// admin token; the secrets are not stored, so not shown).
+    /// List every token, newest first: id, name, scopes, age, when it
+    /// expires and when it was last used (needs an admin token; the
+    /// secrets are not stored, so not shown).
     List {
         /// Print JSON (`GET /v1/tokens`) instead of a table.
         #[arg(long)]
@@ -520,10 +526,17 @@ enum TokenCommand {
 
 pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
     match &args.what {
-        TokenCommand::Create { scopes, name, conn } => {
+        TokenCommand::Create {
+            scopes,
+            name,
+            expires_in,
+            conn,
+        } => {
             let created = conn.api()?.create_token(&NewTokenRequest {
                 name: name.clone(),
                 scopes: scopes.clone(),
+                // Whole seconds, at least one.
+                expires_in_secs: expires_in.map(|d| d.as_secs().max(1)),
             })?;
             println!("{}", created.token);
         }
@@ -536,26 +549,50 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
             let now = std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(0, |d| d.as_millis() as i64);
+            let expires = |t: &TokenView| match t.expires_at {
+                None => "never".to_owned(),
+                Some(at) if at <= now => format!("expired {} ago", age(now - at)),
+                Some(at) => format!("in {}", age(at - now)),
+            };
+            let rows: Vec<[String; 6]> = tokens
+                .iter()
+                .map(|t| {
+                    [
+                        short_id(&t.id).to_owned(),
+                        t.name.clone(),
+                        t.scopes.join(","),
+                        format!("{} ago", age(now - t.created_at)),
+                        expires(t),
+                        t.last_used_at
+                            .map_or("never".to_owned(), |at| format!("{} ago", age(now - at))),
+                    ]
+                })
+                .collect();
+            let head =
+                ["id", "name", "scopes", "created", "expires", "last used"].map(String::from);
             // Columns as wide as their longest entry (the names serve
             // gives its own tokens run long).
-            let width = |of: &dyn Fn(&TokenView) -> usize, least: usize| {
-                tokens.iter().map(of).fold(least, usize::max)
+            let widths: Vec<usize> = (0..6)
+                .map(|c| {
+                    rows.iter()
+                        .chain([&head])
+                        .map(|r| r[c].chars().count())
+                        .max()
+                        .unwrap_or(0)
+                })
+                .collect();
+            let line = |r: &[String; 6]| {
+                let cells: Vec<String> = r
+                    .iter()
+                    .zip(&widths)
+                    .map(|(cell, &w)| format!("{cell:<w$}"))
+                    .collect();
+                cells.join("  ").trim_end().to_owned()
             };
-            let names = width(&|t| t.name.chars().count(), 4);
-            let scopes = width(&|t| t.scopes.join(",").len(), 6);
-            println!(
-                "{:<12}  {:<names$}  {:<scopes$}  created",
-                "id", "name", "scopes"
-            );
-            for t in &tokens {
-                println!(
-                    "{:<12}  {:<names$}  {:<scopes$}  {} ago{}",
-                    short_id(&t.id),
-                    t.name,
-                    t.scopes.join(","),
-                    age(now - t.created_at),
-                    if t.current { " (this token)" } else { "" }
-                );
+            println!("{}", line(&head));
+            for (t, r) in tokens.iter().zip(&rows) {
+                let this = if t.current { "  (this token)" } else { "" };
+                println!("{}{this}", line(r));
             }
         }
         TokenCommand::Revoke { id, conn } => {

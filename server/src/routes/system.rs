@@ -73,10 +73,26 @@ pub(crate) async fn create_token(
             format!("unknown scope {bad:?}; the scopes are read, submit, worker, admin"),
         ));
     }
+    const TEN_YEARS: u64 = 315_360_000;
+    let expires_at = match req.expires_in_secs {
+        None => None,
+        Some(s @ 1..=TEN_YEARS) => {
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_millis() as i64);
+            Some(now + 1000 * s as i64)
+        }
+        Some(s) => {
+            return Err(ApiError::bad(
+                "bad_expiry",
+                format!("expires_in_secs is 1 to {TEN_YEARS} (ten years), not {s}"),
+            ));
+        }
+    };
     let token = new_token();
     state
         .store
-        .create_token(&token_hash(&token), &req.name, &req.scopes)
+        .create_token_until(&token_hash(&token), &req.name, &req.scopes, expires_at)
         .await?;
     Ok((
         StatusCode::CREATED,
@@ -84,13 +100,14 @@ pub(crate) async fn create_token(
             token,
             name: req.name,
             scopes: req.scopes,
+            expires_at,
         }),
     ))
 }
 
 #[utoipa::path(get, path = "/v1/tokens", tag = "system",
     security(("bearer" = ["admin"])),
-    responses((status = 200, description = "Every token, newest first: its id (the sha256 of the secret, which is not stored), name, scopes and age", body = Vec<TokenView>), Refusals))]
+    responses((status = 200, description = "Every token, newest first: its id (the sha256 of the secret, which is not stored), name, scopes, age, expiry (an expired one is listed until revoked) and last use", body = Vec<TokenView>), Refusals))]
 pub(crate) async fn tokens(
     State(state): State<AppState>,
     caller: Need<Admin>,
@@ -104,6 +121,8 @@ pub(crate) async fn tokens(
                 name: row.name,
                 scopes: row.scopes,
                 created_at: row.created_at,
+                expires_at: row.expires_at,
+                last_used_at: row.last_used_at,
             })
             .collect(),
     ))

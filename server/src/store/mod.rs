@@ -116,6 +116,10 @@ pub struct TokenRow {
     pub scopes: Vec<String>,
     /// Milliseconds since the epoch.
     pub created_at: i64,
+    /// When it stops being valid (ms since the epoch); `None`: never.
+    pub expires_at: Option<i64>,
+    /// When a request last used it (ms since the epoch, to the minute).
+    pub last_used_at: Option<i64>,
 }
 
 /// How leases and retries behave.
@@ -276,9 +280,22 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn workers(&self, gone_after_ms: i64) -> Result<Vec<WorkerRow>>;
     /// Stores a token's hash; [`StoreError::Revoked`] for one revoked
     /// before.
-    async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()>;
-    /// A token by hash.
+    async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()> {
+        self.create_token_until(hash, name, scopes, None).await
+    }
+    /// [`Store::create_token`] valid until `expires_at` (ms since the
+    /// epoch; `None`: no end).
+    async fn create_token_until(
+        &self,
+        hash: &str,
+        name: &str,
+        scopes: &[String],
+        expires_at: Option<i64>,
+    ) -> Result<()>;
+    /// A token by hash, expired or not (the caller says which).
     async fn token(&self, hash: &str) -> Result<Option<TokenRow>>;
+    /// Records that the token was used now.
+    async fn token_used(&self, hash: &str) -> Result<()>;
     /// Every token, newest first, by hash (the secrets are not stored).
     async fn tokens(&self) -> Result<Vec<(String, TokenRow)>>;
     /// Deletes a token: from its next request on it is refused (401).

@@ -17,7 +17,7 @@ use std::sync::Arc;
 use aobake_core::bake::JobSpec;
 use sqlx::{FromRow, postgres::PgRow, sqlite::SqliteRow};
 
-use super::rows::{RawBake, RawJob, RawUpload, RawWorker};
+use super::rows::{RawBake, RawJob, RawToken, RawUpload, RawWorker};
 use super::{
     Action, BakeRow, BakeState, Beat, CheckpointRef, Completion, JobCompletion, JobRow, JobState,
     Lease, NewBake, QueuePolicy, Result, Store, StoreError, TokenRow, UploadRef, UploadRow,
@@ -1267,7 +1267,13 @@ impl<B: Backend> Store for SqlStore<B> {
         Ok(rows.into_iter().map(RawWorker::cook).collect())
     }
 
-    async fn create_token(&self, hash: &str, name: &str, scopes: &[String]) -> Result<()> {
+    async fn create_token_until(
+        &self,
+        hash: &str,
+        name: &str,
+        scopes: &[String],
+        expires_at: Option<i64>,
+    ) -> Result<()> {
         in_tx!(self, Durability::Acknowledged, |c| {
             let revoked: Option<(i64,)> = c
                 .optional(
@@ -1278,10 +1284,11 @@ impl<B: Backend> Store for SqlStore<B> {
                 return Err(StoreError::Revoked(at));
             }
             c.execute(
-                B::sql("INSERT INTO tokens (hash, name, scopes, created_at) VALUES ($1, $2, $3, {now}) ON CONFLICT (hash) DO UPDATE SET name = excluded.name, scopes = excluded.scopes")
+                B::sql("INSERT INTO tokens (hash, name, scopes, created_at, expires_at) VALUES ($1, $2, $3, {now}, $4) ON CONFLICT (hash) DO UPDATE SET name = excluded.name, scopes = excluded.scopes, expires_at = excluded.expires_at")
                     .bind(hash)
                     .bind(name)
-                    .bind(scopes.join(",")),
+                    .bind(scopes.join(","))
+                    .bind(expires_at),
             )
             .await?;
             Ok(())
@@ -1289,30 +1296,35 @@ impl<B: Backend> Store for SqlStore<B> {
     }
 
     async fn token(&self, hash: &str) -> Result<Option<TokenRow>> {
-        let row: Option<(String, String, i64)> = self
+        let row: Option<RawToken> = self
             .backend
             .read()
             .await?
             .optional(
-                B::sql("SELECT name, scopes, created_at FROM tokens WHERE hash = $1 AND NOT EXISTS (SELECT 1 FROM revoked_tokens r WHERE r.hash = tokens.hash)").bind(hash),
+                B::sql("SELECT hash, name, scopes, created_at, expires_at, last_used_at FROM tokens WHERE hash = $1 AND NOT EXISTS (SELECT 1 FROM revoked_tokens r WHERE r.hash = tokens.hash)").bind(hash),
             )
             .await?;
-        Ok(row.map(|(name, scopes, created_at)| token_row(name, &scopes, created_at)))
+        Ok(row.map(|r| r.cook().1))
+    }
+
+    async fn token_used(&self, hash: &str) -> Result<()> {
+        in_tx!(self, Durability::Queue, |c| {
+            c.execute(B::sql("UPDATE tokens SET last_used_at = {now} WHERE hash = $1").bind(hash))
+                .await?;
+            Ok(())
+        })
     }
 
     async fn tokens(&self) -> Result<Vec<(String, TokenRow)>> {
-        let rows: Vec<(String, String, String, i64)> = self
+        let rows: Vec<RawToken> = self
             .backend
             .read()
             .await?
             .all(B::sql(
-                "SELECT hash, name, scopes, created_at FROM tokens WHERE NOT EXISTS (SELECT 1 FROM revoked_tokens r WHERE r.hash = tokens.hash) ORDER BY created_at DESC, hash",
+                "SELECT hash, name, scopes, created_at, expires_at, last_used_at FROM tokens WHERE NOT EXISTS (SELECT 1 FROM revoked_tokens r WHERE r.hash = tokens.hash) ORDER BY created_at DESC, hash",
             ))
             .await?;
-        Ok(rows
-            .into_iter()
-            .map(|(hash, name, scopes, created_at)| (hash, token_row(name, &scopes, created_at)))
-            .collect())
+        Ok(rows.into_iter().map(RawToken::cook).collect())
     }
 
     async fn delete_token(&self, hash: &str, revoke: bool) -> Result<bool> {
@@ -1367,14 +1379,5 @@ impl<B: Backend> Store for SqlStore<B> {
         events: tokio::sync::broadcast::Sender<crate::state::BakeEvent>,
     ) -> Result<Option<tokio::sync::mpsc::UnboundedSender<crate::state::BakeEvent>>> {
         self.backend.share_events(events).await
-    }
-}
-
-/// A token's row from its columns (scopes comma-separated).
-fn token_row(name: String, scopes: &str, created_at: i64) -> TokenRow {
-    TokenRow {
-        name,
-        scopes: scopes.split(',').map(str::to_owned).collect(),
-        created_at,
     }
 }

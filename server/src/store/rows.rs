@@ -1,7 +1,9 @@
 //! Rows as both backends store them, decoded by one `sqlx::FromRow` derive
 //! (generic over the database), then turned into the store's types.
 
-use super::{BakeRow, BakeState, CheckpointRef, JobRow, JobState, Result, UploadRow, WorkerRow};
+use super::{
+    BakeRow, BakeState, CheckpointRef, JobRow, JobState, Result, TokenRow, UploadRow, WorkerRow,
+};
 
 #[derive(sqlx::FromRow)]
 pub(super) struct RawUpload {
@@ -154,5 +156,32 @@ impl RawWorker {
             started_at: self.started_at,
             tracer: self.tracer,
         }
+    }
+}
+
+/// A token's row as the database holds it.
+#[derive(sqlx::FromRow)]
+pub(super) struct RawToken {
+    hash: String,
+    name: String,
+    scopes: String,
+    created_at: i64,
+    expires_at: Option<i64>,
+    last_used_at: Option<i64>,
+}
+
+impl RawToken {
+    /// Its hash and row.
+    pub(super) fn cook(self) -> (String, TokenRow) {
+        (
+            self.hash,
+            TokenRow {
+                name: self.name,
+                scopes: self.scopes.split(',').map(str::to_owned).collect(),
+                created_at: self.created_at,
+                expires_at: self.expires_at,
+                last_used_at: self.last_used_at,
+            },
+        )
     }
 }

@@ -82,6 +82,28 @@ pub(crate) async fn run_all(store: &dyn Store) {
     a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store).await;
     a_batch_split_by_failures_leases_each_job_once(store).await;
     tokens_are_listed_newest_first_and_deleted(store).await;
+    tokens_expire_and_record_their_use(store).await;
+}
+
+/// A token keeps its expiry (the caller judges it) and records its use.
+async fn tokens_expire_and_record_their_use(store: &dyn Store) {
+    let hash = "9".repeat(64);
+    store
+        .create_token_until(&hash, "brief", &["read".into()], Some(1_000))
+        .await
+        .unwrap();
+    let row = store.token(&hash).await.unwrap().unwrap();
+    assert_eq!((row.expires_at, row.last_used_at), (Some(1_000), None));
+    store.token_used(&hash).await.unwrap();
+    let row = store.token(&hash).await.unwrap().unwrap();
+    assert!(
+        row.last_used_at.is_some_and(|t| t >= row.created_at),
+        "{row:?}"
+    );
+    let listed = store.tokens().await.unwrap();
+    let (_, listed) = listed.iter().find(|(h, _)| *h == hash).unwrap();
+    assert_eq!(listed, &row);
+    assert!(store.delete_token(&hash, true).await.unwrap());
 }
 
 async fn tokens_are_listed_newest_first_and_deleted(store: &dyn Store) {

@@ -414,6 +414,62 @@ fn tokens_are_listed_and_revoked_at_once() {
         assert!(before.ends_with("  ") && !after.starts_with(' '), "{table}");
     }
 
+    // The ci token was used: its last use is listed (the admin's too).
+    let ci_row = table.lines().find(|l| l.starts_with(&id[..12])).unwrap();
+    assert!(ci_row.ends_with(" s ago"), "{table}");
+
+    // A token that expires works until then, and is refused after with a
+    // reason; the list says it expired.
+    let out = env.aobake(&[
+        "token",
+        "create",
+        "--scope",
+        "read",
+        "--name",
+        "brief",
+        "--expires-in",
+        "2s",
+    ]);
+    assert!(out.status.success(), "{out:?}");
+    let brief = String::from_utf8_lossy(&out.stdout).trim().to_owned();
+    assert_eq!(
+        env.request("GET", "/v1/bakes", &brief, None).unwrap().0,
+        200
+    );
+    std::thread::sleep(std::time::Duration::from_millis(2200));
+    let (status, problem) = env.request("GET", "/v1/bakes", &brief, None).unwrap();
+    assert_eq!(
+        (status, problem["code"].as_str()),
+        (401, Some("token_expired")),
+        "{problem}"
+    );
+    assert!(
+        problem["detail"].as_str().unwrap().contains("expired at"),
+        "{problem}"
+    );
+    let out = env
+        .aobake_command(&["status", "1"])
+        .env("AOBAKE_TOKEN", &brief)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(6), "{out:?}");
+    let table = env.aobake(&["token", "list"]);
+    let table = String::from_utf8_lossy(&table.stdout);
+    let brief_row = table.lines().find(|l| l.contains("brief")).unwrap();
+    assert!(
+        brief_row.contains("  expired ") && brief_row.contains(" s ago"),
+        "{table}"
+    );
+    let (status, _) = env
+        .request(
+            "POST",
+            "/v1/tokens",
+            aobake_e2e::ADMIN,
+            Some(json!({"name": "x", "scopes": ["read"], "expires_in_secs": 0})),
+        )
+        .unwrap();
+    assert_eq!(status, 400);
+
     let out = env.aobake(&["token", "revoke", &id[..10]]);
     assert!(out.status.success(), "{out:?}");
     assert!(

@@ -121,6 +121,7 @@ pub(super) fn load(args: &LoadArgs) -> anyhow::Result<()> {
             .create_token(&NewTokenRequest {
                 name: format!("load-{scope}"),
                 scopes: vec![scope.to_owned()],
+                expires_in_secs: None,
             })?
             .token)
     };

@@ -337,6 +337,7 @@ fn http_queue(
         .create_token(&NewTokenRequest {
             name: "bench".to_owned(),
             scopes: vec!["worker".to_owned()],
+            expires_in_secs: None,
         })?
         .token;
     let blob = Client::new(&server.url, &worker_token).put_blob(b"x")?;
