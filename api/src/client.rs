@@ -131,10 +131,41 @@ pub fn retry<T>(
 
 type Response = ureq::http::Response<ureq::Body>;
 
+/// The servers a client may ask: one, or several of one fleet (they
+/// share a database and blob store), the one that answered last first.
+#[derive(Debug)]
+struct Servers {
+    urls: Vec<String>,
+    current: std::sync::atomic::AtomicUsize,
+}
+
+impl Servers {
+    fn new(urls: Vec<String>) -> Self {
+        Self {
+            urls,
+            current: std::sync::atomic::AtomicUsize::new(0),
+        }
+    }
+
+    fn current(&self) -> &str {
+        let i = self.current.load(std::sync::atomic::Ordering::Relaxed);
+        &self.urls[i % self.urls.len()]
+    }
+
+    /// Moves on to the next server; returns it.
+    fn next(&self) -> &str {
+        let i = self
+            .current
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            + 1;
+        &self.urls[i % self.urls.len()]
+    }
+}
+
 /// A connection to the server with a bearer token.
 #[derive(Debug, Clone)]
 pub struct Client {
-    base: String,
+    servers: std::sync::Arc<Servers>,
     auth: String,
     agent: ureq::Agent,
     notice: Notice,
@@ -169,7 +200,7 @@ impl Client {
     /// A client whose calls each take at most `timeout`.
     pub fn with_timeout(base: &str, token: &str, timeout: Duration) -> Self {
         Self {
-            base: base.trim_end_matches('/').to_owned(),
+            servers: std::sync::Arc::new(Servers::new(vec![base.trim_end_matches('/').to_owned()])),
             auth: format!("Bearer {token}"),
             agent: ureq::Agent::config_builder()
                 .timeout_global(Some(timeout))
@@ -199,32 +230,68 @@ impl Client {
         self
     }
 
-    /// The server's URL, as given (without a trailing `/`).
-    pub fn base(&self) -> &str {
-        &self.base
+    /// This client, asking `others` too (servers of the same fleet: one
+    /// database, one blob store) when the one it asks cannot be reached:
+    /// a worker goes on through a server that is down without a load
+    /// balancer. Clones share where they are.
+    #[must_use]
+    pub fn with_fallbacks(mut self, others: &[String]) -> Self {
+        let mut urls = self.servers.urls.clone();
+        urls.extend(others.iter().map(|u| u.trim_end_matches('/').to_owned()));
+        self.servers = std::sync::Arc::new(Servers::new(urls));
+        self
     }
 
-    /// Whether `other` talks to the same server with the same token.
+    /// The URL of the server it asks now (without a trailing `/`).
+    pub fn base(&self) -> String {
+        self.servers.current().to_owned()
+    }
+
+    /// Whether `other` talks to the same servers with the same token.
     pub fn same_as(&self, other: &Self) -> bool {
-        (&self.base, &self.auth) == (&other.base, &other.auth)
+        (&self.servers.urls, &self.auth) == (&other.servers.urls, &other.auth)
     }
 
     fn url(&self, path: &str) -> String {
-        format!("{}{path}", self.base)
+        format!("{}{path}", self.servers.current())
     }
 
     fn transport(&self, e: impl std::fmt::Display) -> ApiError {
         ApiError::Transport {
-            base: self.base.clone(),
+            base: self.base(),
             message: e.to_string(),
         }
     }
 
     fn decode(&self, e: impl std::fmt::Display) -> ApiError {
         ApiError::Decode {
-            base: self.base.clone(),
+            base: self.base(),
             message: e.to_string(),
         }
+    }
+
+    /// `request`'s response, from the next servers of the fleet in turn
+    /// when the one asked cannot be reached (each once); the transport
+    /// error of the first when none can.
+    fn reach(
+        &self,
+        request: &impl Fn() -> std::result::Result<Response, ureq::Error>,
+    ) -> Result<Response> {
+        let first = match request() {
+            Ok(res) => return Ok(res),
+            Err(e) => self.transport(e),
+        };
+        for _ in 1..self.servers.urls.len() {
+            let gone = self.base();
+            let next = self.servers.next().to_owned();
+            if let Ok(res) = request() {
+                if let Some(notice) = &self.notice.0 {
+                    notice(&format!("{gone} cannot be reached: going on with {next}"));
+                }
+                return Ok(res);
+            }
+        }
+        Err(first)
     }
 
     /// Sends `request` until the server stops answering 429 (over its
@@ -239,7 +306,7 @@ impl Client {
     ) -> Result<Response> {
         let mut waited = Duration::ZERO;
         loop {
-            let res = request().map_err(|e| self.transport(e))?;
+            let res = self.reach(&request)?;
             let come_back = match res.status().as_u16() {
                 429 => true,
                 503 => res.headers().contains_key("retry-after"),
@@ -267,7 +334,7 @@ impl Client {
                 };
                 notice(&format!(
                     "{} answered 503 ({said}); asking again for up to {} s",
-                    self.base,
+                    self.base(),
                     self.rate_wait.as_secs()
                 ));
             }

@@ -214,16 +214,27 @@ impl TestEnv {
 
     /// Starts a worker process with extra environment; returns its index.
     pub fn start_worker(&mut self, env: &[(&str, &str)]) -> usize {
-        self.spawn_worker(None, env)
+        self.spawn_worker(None, None, env)
     }
 
     /// Starts a worker process for this server on `host` of a
     /// [`netns::TestNet`], named after the host; returns its index.
     pub fn start_worker_in(&mut self, host: &netns::Host, env: &[(&str, &str)]) -> usize {
-        self.spawn_worker(Some(host), env)
+        self.spawn_worker(Some(host), None, env)
     }
 
-    fn spawn_worker(&mut self, host: Option<&netns::Host>, env: &[(&str, &str)]) -> usize {
+    /// Starts a worker process given `servers` as its `--server` (this
+    /// server's URL and others, comma-separated); returns its index.
+    pub fn start_worker_for(&mut self, servers: &str) -> usize {
+        self.spawn_worker(None, Some(servers), &[])
+    }
+
+    fn spawn_worker(
+        &mut self,
+        host: Option<&netns::Host>,
+        servers: Option<&str>,
+        env: &[(&str, &str)],
+    ) -> usize {
         let token = self.token(&["worker"]);
         let i = self.workers.len();
         let log =
@@ -232,17 +243,23 @@ impl TestEnv {
             Some(h) => (h.command(binary()), h.ns.clone()),
             None => (Command::new(binary()), format!("w{i}")),
         };
-        cmd.args(["worker", "--server", &self.url, "--id", &id])
-            .args([
-                "--heartbeat-secs",
-                &(self.options.lease_secs / 4.0).to_string(),
-            ])
-            .env("AOBAKE_TOKEN", token)
-            .env("RAYON_NUM_THREADS", "1")
-            // Every checkpoint saved: the crash tests resume from them.
-            .env("AOBAKE_CHECKPOINT_SECS", "0")
-            .stdout(Stdio::null())
-            .stderr(log);
+        cmd.args([
+            "worker",
+            "--server",
+            servers.unwrap_or(&self.url),
+            "--id",
+            &id,
+        ])
+        .args([
+            "--heartbeat-secs",
+            &(self.options.lease_secs / 4.0).to_string(),
+        ])
+        .env("AOBAKE_TOKEN", token)
+        .env("RAYON_NUM_THREADS", "1")
+        // Every checkpoint saved: the crash tests resume from them.
+        .env("AOBAKE_CHECKPOINT_SECS", "0")
+        .stdout(Stdio::null())
+        .stderr(log);
         for (k, v) in env {
             cmd.env(k, v);
         }

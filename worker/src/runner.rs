@@ -23,6 +23,9 @@ const PROGRESS_EVERY: Duration = Duration::from_secs(1);
 pub struct WorkerConfig {
     /// The server's base URL.
     pub server: String,
+    /// Other servers of the same fleet, asked in turn when the one asked
+    /// cannot be reached.
+    pub fallbacks: Vec<String>,
     /// A token with the `worker` scope.
     pub token: String,
     /// Jobs run at once (one thread each).
@@ -84,6 +87,7 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
         });
     }
     let client = Client::with_timeout(&config.server, &config.token, Duration::from_secs(120))
+        .with_fallbacks(&config.fallbacks)
         .with_notice(|line| say!("{line}"));
     let cache: Arc<InputCache> = Arc::default();
     let slots = config.concurrency.max(1);
@@ -135,7 +139,8 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
     // One quick try: a worker on its way out does not wait for a server
     // that is away (it is then listed as stopped a lease after it was last
     // seen, as a killed one is).
-    let quick = Client::with_timeout(&config.server, &config.token, Duration::from_secs(3))
+    let quick = Client::with_timeout(&client.base(), &config.token, Duration::from_secs(3))
+        .with_fallbacks(&config.fallbacks)
         .with_rate_wait(Duration::ZERO);
     if let Err(e) = quick.workers_stopped(&ids) {
         say!(
@@ -245,7 +250,8 @@ fn dispatch(
                     shutdown.store(true, Ordering::Relaxed);
                     return Err(RunError::Refused(format!(
                         "worker {}: the server at {} refused to lease jobs ({e}): {check}",
-                        config.id, config.server
+                        config.id,
+                        client.base()
                     )));
                 }
                 failures += 1;

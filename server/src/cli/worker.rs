@@ -7,7 +7,9 @@
     after_help = "Runs until SIGTERM or SIGINT (jobs then finish, or stop at a checkpoint and give their leases back). Exits 3 when the server refuses its leases in a way that waiting does not mend (a token that is not valid or lacks the worker scope, an address that is not an aobake server), saying what to check; `aobake serve` does not restart a local worker that does."
 )]
 pub(super) struct WorkerArgs {
-    /// The server's URL.
+    /// The server's URL; for a fleet without a load balancer, several,
+    /// comma-separated (servers on one database and blob store): when the
+    /// one it asks cannot be reached, the worker goes on with the next.
     #[arg(long, env = "AOBAKE_SERVER")]
     server: String,
     /// A token with the worker scope.
@@ -64,11 +66,17 @@ pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
         GpuChoice::Off => TracerChoice::Cpu,
         GpuChoice::Require => TracerChoice::Gpu,
     };
-    let server = super::common::server_url(&args.server)?.to_owned();
+    let mut servers = args
+        .server
+        .split(',')
+        .map(|s| super::common::server_url(s).map(str::to_owned))
+        .collect::<anyhow::Result<Vec<String>>>()?;
+    let server = servers.remove(0);
     tracer.install(true)?;
     let host = crate::serve::host_name();
     aobake_worker::run(aobake_worker::WorkerConfig {
         server,
+        fallbacks: servers,
         token: args.token.clone(),
         concurrency: args.concurrency as usize,
         id: args

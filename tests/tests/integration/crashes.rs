@@ -271,6 +271,48 @@ fn submit_wait_follows_a_server_restarted_on_another_port() {
     );
 }
 
+/// A fleet without a load balancer: workers given every server's address
+/// go on with the next when the one they ask dies mid-bake, so its jobs
+/// keep their leases (no server reaps them, none runs twice) and the bake
+/// ends as `aobake bake`'s.
+#[test]
+fn workers_go_on_with_another_server_when_theirs_dies() {
+    let pg = TestPostgres::start();
+    let shared = tempfile::tempdir().unwrap();
+    let on = Options {
+        database: Some(pg.url.clone()),
+        blobs: Some(shared.path().to_str().unwrap().to_owned()),
+        lease_secs: 3.0,
+        ..Options::default()
+    };
+    let mut a = TestEnv::start(on.clone());
+    let b = TestEnv::start(on);
+    let servers = format!("{},{}", a.url, b.url);
+    a.start_worker_for(&servers);
+    a.start_worker_for(&servers);
+    let cm = character("CesiumMan");
+    let digest = upload(&a, &cm);
+    let poses = 48;
+    let (_, bake) = submit(&a, &digest, poses);
+    let id = bake["id"].as_i64().unwrap();
+    a.wait_jobs_done(id, 2, Duration::from_secs(120));
+    a.kill_server();
+    let done = b.wait_bake(id, Duration::from_secs(240));
+    let logs = a.worker_logs();
+    assert_eq!(done["state"], "done", "{done}\n{logs}");
+    assert!(
+        logs.contains(&format!(
+            "{} cannot be reached: going on with {}",
+            a.url, b.url
+        )),
+        "{logs}"
+    );
+    let jobs: Vec<Value> = jobs(&b, id);
+    let twice: Vec<&Value> = jobs.iter().filter(|j| j["attempts"] != 1).collect();
+    assert!(twice.is_empty(), "jobs run again: {twice:?}\n{logs}");
+    assert!(asset(&b, &done) == local_bake(b.dir.path(), &cm, poses));
+}
+
 #[test]
 fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
     let pg = TestPostgres::start();
