@@ -8,7 +8,7 @@ use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
 use rand::RngExt as _;
 use serde_json::Value;
 
-use crate::util::{QUICK, asset, local_bake, submit, upload};
+use crate::util::{Follower, QUICK, asset, local_bake, submit, upload};
 
 fn jobs(env: &TestEnv, id: i64) -> Vec<Value> {
     let (_, b) = env
@@ -159,26 +159,8 @@ fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
         "--wait",
     ];
     args.extend(QUICK);
-    let (out, err) = (
-        env.dir.path().join("follow.out"),
-        env.dir.path().join("follow.err"),
-    );
-    let mut follower = env
-        .aobake_command(&args)
-        .stdout(std::fs::File::create(&out).unwrap())
-        .stderr(std::fs::File::create(&err).unwrap())
-        .spawn()
-        .unwrap();
-    let read = |path: &std::path::Path| std::fs::read_to_string(path).unwrap_or_default();
-    let started = Instant::now();
-    while !read(&out).contains(&format!("bake {id}: key")) {
-        assert!(
-            started.elapsed() < Duration::from_secs(30),
-            "no submit: {}",
-            read(&err)
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let mut follower = Follower::spawn(env.aobake_command(&args), env.dir.path(), "follow");
+    assert_eq!(follower.submitted(), id, "the same bake");
     let before = jobs(&env, id);
     env.kill_server();
     // Longer than a job takes here, so that jobs finish while it is away.
@@ -213,8 +195,8 @@ fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
         let stamp = line.split(' ').next().unwrap();
         assert!(humantime::parse_rfc3339(stamp).is_ok(), "{line}");
     }
-    let followed = follower.wait().unwrap();
-    let (stdout, stderr) = (read(&out), read(&err));
+    let followed = follower.child.wait().unwrap();
+    let (stdout, stderr) = (follower.stdout(), follower.stderr());
     assert!(
         followed.success()
             && stdout.contains(&format!("bake {id} done"))
@@ -236,33 +218,18 @@ fn submit_wait_follows_a_server_restarted_on_another_port() {
     let mut args = vec!["submit", rig.to_str().unwrap(), "--poses", "8", "--wait"];
     args.extend(QUICK);
     args.extend(["--data", data.to_str().unwrap()]);
-    let dir = env.dir.path().to_owned();
-    let (out, err) = (dir.join("moved.out"), dir.join("moved.err"));
-    let mut follower = env
-        .aobake_command(&args)
-        .env_remove("AOBAKE_SERVER")
-        .stdout(std::fs::File::create(&out).unwrap())
-        .stderr(std::fs::File::create(&err).unwrap())
-        .spawn()
-        .unwrap();
-    let read = |path: &std::path::Path| std::fs::read_to_string(path).unwrap_or_default();
-    let started = Instant::now();
+    let mut command = env.aobake_command(&args);
+    command.env_remove("AOBAKE_SERVER");
+    let mut follower = Follower::spawn(command, env.dir.path(), "moved");
     // No worker yet: the bake waits while the server moves.
-    while !read(&out).contains(": key") {
-        assert!(
-            started.elapsed() < Duration::from_secs(30),
-            "no submit: {}",
-            read(&err)
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    follower.submitted();
     let before = env.url.clone();
     env.kill_server();
     env.start_server();
     assert_ne!(env.url, before, "port 0 picked the same port again");
     env.start_worker(&[]);
-    let followed = follower.wait().unwrap();
-    let (stdout, stderr) = (read(&out), read(&err));
+    let followed = follower.child.wait().unwrap();
+    let (stdout, stderr) = (follower.stdout(), follower.stderr());
     assert!(
         followed.success()
             && stdout.contains(" done: asset ")

@@ -6,7 +6,7 @@ use serde_json::json;
 
 use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
 
-use crate::util::{QUICK, asset, local_bake, quick_params, submit, upload};
+use crate::util::{Follower, QUICK, asset, local_bake, quick_params, submit, upload};
 
 #[test]
 fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
@@ -510,73 +510,38 @@ fn assert_served_with_etag_and_ranges(env: &TestEnv, b: &serde_json::Value) {
 #[test]
 fn client_exit_codes_tell_failures_apart() {
     let env = TestEnv::start(Options::default());
-    let code = |out: &std::process::Output| out.status.code();
+    let exits = |mut command: std::process::Command, code: i32| {
+        let out = command.output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{stderr}");
+    };
     // A bake that does not exist; a file that does not import.
-    assert_eq!(code(&env.aobake(&["status", "424242"])), Some(5));
+    exits(env.aobake_command(&["status", "424242"]), 5);
     let truncated = env.dir.path().join("truncated.glb");
     let glb = std::fs::read(character("RiggedSimple")).unwrap();
     std::fs::write(&truncated, &glb[..glb.len() / 2]).unwrap();
-    let out = env.aobake(&[
-        "submit",
-        truncated.to_str().unwrap(),
-        "--method",
-        "vertex-linear",
-    ]);
-    assert_eq!(
-        code(&out),
-        Some(5),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let truncated = truncated.to_str().unwrap();
+    exits(
+        env.aobake_command(&["submit", truncated, "--method", "vertex-linear"]),
+        5,
     );
     // A token the server does not know; a server that is not there.
-    let out = env
-        .aobake_command(&["status", "1"])
-        .env("AOBAKE_TOKEN", "not-a-token")
-        .output()
-        .unwrap();
-    assert_eq!(
-        code(&out),
-        Some(6),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let out = env
-        .aobake_command(&["status", "1"])
-        .env("AOBAKE_SERVER", "http://127.0.0.1:1")
-        .output()
-        .unwrap();
-    assert_eq!(
-        code(&out),
-        Some(7),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let mut command = env.aobake_command(&["status", "1"]);
+    command.env("AOBAKE_TOKEN", "not-a-token");
+    exits(command, 6);
+    let mut command = env.aobake_command(&["status", "1"]);
+    command.env("AOBAKE_SERVER", "http://127.0.0.1:1");
+    exits(command, 7);
     // The bake submit --wait follows is cancelled (no worker runs it).
     let rig = character("RiggedSimple");
     let mut args = vec!["submit", rig.to_str().unwrap(), "--poses", "8", "--wait"];
     args.extend(QUICK);
-    let out_path = env.dir.path().join("cancelled.out");
-    let follower = env
-        .aobake_command(&args)
-        .stdout(std::fs::File::create(&out_path).unwrap())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let started = std::time::Instant::now();
-    let id = loop {
-        let out = std::fs::read_to_string(&out_path).unwrap_or_default();
-        if let Some(rest) = out.strip_prefix("bake ")
-            && let Some((id, _)) = rest.split_once(':')
-        {
-            break id.to_owned();
-        }
-        assert!(started.elapsed() < Duration::from_secs(30), "no submit");
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let mut follower = Follower::spawn(env.aobake_command(&args), env.dir.path(), "cancelled");
+    let id = follower.submitted().to_string();
     assert!(env.aobake(&["cancel", &id]).status.success());
-    let done = follower.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&done.stderr);
-    assert_eq!(code(&done), Some(8), "{stderr}");
+    let done = follower.child.wait().unwrap();
+    let stderr = follower.stderr();
+    assert_eq!(done.code(), Some(8), "{stderr}");
     assert!(stderr.contains(&format!("bake {id} cancelled")), "{stderr}");
     // Its report is not "yet" to come.
     let (status, problem) = env

@@ -154,3 +154,59 @@ pub(crate) fn asset(env: &TestEnv, bake: &Value) -> Vec<u8> {
         .read_to_vec()
         .unwrap()
 }
+
+/// `aobake submit … --wait` running in the background, its stdout and
+/// stderr in files, as a pipeline's step runs it.
+pub(crate) struct Follower {
+    pub(crate) child: std::process::Child,
+    out: std::path::PathBuf,
+    err: std::path::PathBuf,
+}
+
+impl Follower {
+    /// Spawns `command` with its output in `dir/NAME.out` and `.err`.
+    pub(crate) fn spawn(mut command: std::process::Command, dir: &Path, name: &str) -> Self {
+        let (out, err) = (
+            dir.join(format!("{name}.out")),
+            dir.join(format!("{name}.err")),
+        );
+        let child = command
+            .stdout(std::fs::File::create(&out).unwrap())
+            .stderr(std::fs::File::create(&err).unwrap())
+            .spawn()
+            .unwrap();
+        Self { child, out, err }
+    }
+
+    /// What it printed so far on stdout.
+    pub(crate) fn stdout(&self) -> String {
+        std::fs::read_to_string(&self.out).unwrap_or_default()
+    }
+
+    /// What it printed so far on stderr.
+    pub(crate) fn stderr(&self) -> String {
+        std::fs::read_to_string(&self.err).unwrap_or_default()
+    }
+
+    /// The bake id of its first line (`bake N: key K, STATE`), once it
+    /// submitted; panics after 30 s.
+    pub(crate) fn submitted(&self) -> i64 {
+        let started = std::time::Instant::now();
+        loop {
+            let id = self
+                .stdout()
+                .strip_prefix("bake ")
+                .and_then(|rest| rest.split_once(": key"))
+                .and_then(|(id, _)| id.parse().ok());
+            if let Some(id) = id {
+                return id;
+            }
+            assert!(
+                started.elapsed() < std::time::Duration::from_secs(30),
+                "no submit: {}",
+                self.stderr()
+            );
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+    }
+}
