@@ -133,6 +133,179 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         max_bake_work: args.max_bake_work,
         ..ServerLimits::default()
     };
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let workers = args.workers.unwrap_or(cores);
+    let Tokens {
+        admin,
+        worker: worker_token,
+        demo: demo_token,
+    } = start_tokens(&*store, &args, workers).await?;
+    let mut state = AppState::new(store.clone(), blobs, policy, limits);
+    state.graph.sample_rays = args.job_rays;
+    store.listen(state.jobs_ready.clone()).await?;
+    state.share_events().await?;
+    let listener = tokio::net::TcpListener::bind(args.listen)
+        .await
+        .with_context(|| format!("cannot listen on {}", args.listen))?;
+    let url = format!("http://{}", listener.local_addr()?);
+    write_private(&args.data.join("server.url"), &url)?;
+    println!("{} listening on {url}", stamp());
+    if !args.demo {
+        println!(
+            "{} dashboard: {url}/ (sign in with a token from `aobake token create --scope read`)",
+            stamp()
+        );
+    }
+
+    // Leases that expire without a heartbeat free their jobs.
+    let reaper = {
+        let state = state.clone();
+        // No lease is reaped in the first lease's length after this server
+        // starts or its database answers again: workers whose heartbeats
+        // could not get through meanwhile (a restart, an outage longer
+        // than a lease) renew theirs first, and their jobs keep their
+        // attempts.
+        let grace = Duration::from_millis(u64::try_from(state.policy.lease_ms).unwrap_or(0));
+        tokio::spawn(async move {
+            let mut hold_until = Some(tokio::time::Instant::now() + grace);
+            loop {
+                tokio::time::sleep(Duration::from_millis(500)).await;
+                match hold_until {
+                    // The database is down: wait for it to answer.
+                    None => {
+                        if state.store.ping().await.is_ok() {
+                            hold_until = Some(tokio::time::Instant::now() + grace);
+                        }
+                        continue;
+                    }
+                    Some(t) if tokio::time::Instant::now() < t => continue,
+                    Some(_) => {}
+                }
+                match state.store.reap().await {
+                    Ok(n) if n > 0 => state.jobs_ready.notify_waiters(),
+                    Ok(_) => {}
+                    Err(e) => {
+                        log_line!("error: reaping leases: {e}");
+                        hold_until = None;
+                    }
+                }
+            }
+        })
+    };
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let mut supervisors = Vec::new();
+    // Mesa's drivers, which a worker opens to look for a GPU, print
+    // "XDG_RUNTIME_DIR is invalid or not set" at every start where the
+    // variable is unset (a service, a container): give the local workers
+    // a private one under the data folder instead.
+    let runtime_dir = match std::env::var_os("XDG_RUNTIME_DIR") {
+        // libwayland takes only an absolute path.
+        Some(d) if Path::new(&d).is_absolute() => None,
+        _ => Some(private_dir(&args.data.join("run"))?),
+    };
+    for slot in 0..workers {
+        // (Made exactly when there are local workers.)
+        let Some(token) = worker_token.clone() else {
+            break;
+        };
+        let url = url.clone();
+        let runtime_dir = runtime_dir.clone();
+        let threads = (cores / workers.max(1)).max(1);
+        let mut stop = stop_rx.clone();
+        let lease_secs = args.lease_secs;
+        supervisors.push(tokio::spawn(async move {
+            let mut restarts = 0u32;
+            loop {
+                let spawned = spawn_worker(&url, &token, slot, threads, lease_secs, runtime_dir.as_deref());
+                let mut child = match spawned {
+                    Ok(c) => c,
+                    Err(e) => {
+                        log_line!("error: cannot start worker {slot}: {e:#}");
+                        return;
+                    }
+                };
+                // Held, not given to `wait` (which closes a child's stdin
+                // first): the worker stops when it closes.
+                let _pipe = child.stdin.take();
+                tokio::select! {
+                    status = child.wait() => {
+                        let refused = aobake_worker::RunError::REFUSED_EXIT;
+                        if matches!(&status, Ok(s) if s.code() == Some(i32::from(refused))) {
+                            log_line!("worker {slot}: the server refuses its token (revoked?); not restarting it");
+                            return;
+                        }
+                        restarts += 1;
+                        let wait = Duration::from_millis(250 * u64::from(restarts.min(20)));
+                        log_line!("worker {slot} exited ({status:?}); restarting in {wait:?}");
+                        tokio::time::sleep(wait).await;
+                    }
+                    _ = stop.changed() => {
+                        terminate(&mut child).await;
+                        return;
+                    }
+                }
+            }
+        }));
+    }
+    if let Some(dashboard) = demo_token {
+        let (url, admin) = (url.clone(), admin.clone());
+        tokio::spawn(async move {
+            if let Err(e) = crate::demo::run(&url, &admin, &dashboard).await {
+                log_line!("error: the demo bake could not be submitted: {e:#}");
+            }
+        });
+    }
+    let stopping = state.clone();
+    let shutdown = async move {
+        let ctrl_c = tokio::signal::ctrl_c();
+        #[cfg(unix)]
+        {
+            let mut term =
+                tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+                    .expect("SIGTERM handler");
+            tokio::select! { _ = ctrl_c => {}, _ = term.recv() => {} }
+        }
+        #[cfg(not(unix))]
+        let _ = ctrl_c.await;
+        log_line!("shutting down: ending long polls, stopping local workers");
+        // Long polls answer at once; local workers get SIGTERM, finish (or
+        // give back) their jobs while the API still serves their
+        // completions, and exit; then the API stops.
+        stopping.shut_down();
+        let _ = stop_tx.send(true);
+        for s in supervisors {
+            let _ = s.await;
+        }
+    };
+    crate::listen::serve(
+        listener,
+        app(state),
+        Duration::from_secs_f64(args.header_timeout_secs),
+        shutdown,
+    )
+    .await?;
+    reaper.abort();
+    Ok(())
+}
+
+/// The secrets a start uses: the admin token, its local workers' and the
+/// demo dashboard's (each `None` when not made).
+struct Tokens {
+    admin: String,
+    worker: Option<String>,
+    demo: Option<String>,
+}
+
+/// Sets up this start's tokens. The tokens the previous start on this data
+/// folder generated are deleted first; the admin token comes from
+/// `AOBAKE_ADMIN_TOKEN` or is generated into `DIR/admin.token`; local
+/// workers (`workers` > 0) and `--demo` get tokens of their own, which the
+/// next start deletes in turn (`DIR/own-tokens`).
+async fn start_tokens(
+    store: &dyn Store,
+    args: &ServeArgs,
+    workers: usize,
+) -> anyhow::Result<Tokens> {
     // The tokens the previous start on this data folder made are revoked:
     // its admin secret (the file now gets a new one) and its local
     // workers' must not stay valid. An admin token from the environment
@@ -218,169 +391,29 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         ),
         other => other?,
     }
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let workers = args.workers.unwrap_or(cores);
     // Only a start with local workers makes them a token: the servers of a
     // fleet, whose workers run elsewhere, leave none in the shared tokens.
-    let worker_token = if workers > 0 {
+    let worker = if workers > 0 {
         let name = format!("local workers ({origin})");
-        own_token(&*store, &mut made, &name, &[Scope::Worker]).await?
+        Some(own_token(store, &mut made, &name, &[Scope::Worker]).await?)
     } else {
-        String::new()
+        None
     };
     // The demo's dashboard token (read and submit, printed in a URL) is
     // this start's too: the next start revokes it with the others.
-    let demo_token = if args.demo {
+    let demo = if args.demo {
         let scopes = [Scope::Read, Scope::Submit];
         let name = format!("demo dashboard ({origin})");
-        Some(own_token(&*store, &mut made, &name, &scopes).await?)
+        Some(own_token(store, &mut made, &name, &scopes).await?)
     } else {
         None
     };
     write_private(&own_tokens, &(made.join("\n") + "\n"))?;
-    let mut state = AppState::new(store.clone(), blobs, policy, limits);
-    state.graph.sample_rays = args.job_rays;
-    store.listen(state.jobs_ready.clone()).await?;
-    state.share_events().await?;
-    let listener = tokio::net::TcpListener::bind(args.listen)
-        .await
-        .with_context(|| format!("cannot listen on {}", args.listen))?;
-    let url = format!("http://{}", listener.local_addr()?);
-    write_private(&args.data.join("server.url"), &url)?;
-    println!("{} listening on {url}", stamp());
-    if !args.demo {
-        println!(
-            "{} dashboard: {url}/ (sign in with a token from `aobake token create --scope read`)",
-            stamp()
-        );
-    }
-
-    // Leases that expire without a heartbeat free their jobs.
-    let reaper = {
-        let state = state.clone();
-        // No lease is reaped in the first lease's length after this server
-        // starts or its database answers again: workers whose heartbeats
-        // could not get through meanwhile (a restart, an outage longer
-        // than a lease) renew theirs first, and their jobs keep their
-        // attempts.
-        let grace = Duration::from_millis(u64::try_from(state.policy.lease_ms).unwrap_or(0));
-        tokio::spawn(async move {
-            let mut hold_until = Some(tokio::time::Instant::now() + grace);
-            loop {
-                tokio::time::sleep(Duration::from_millis(500)).await;
-                match hold_until {
-                    // The database is down: wait for it to answer.
-                    None => {
-                        if state.store.ping().await.is_ok() {
-                            hold_until = Some(tokio::time::Instant::now() + grace);
-                        }
-                        continue;
-                    }
-                    Some(t) if tokio::time::Instant::now() < t => continue,
-                    Some(_) => {}
-                }
-                match state.store.reap().await {
-                    Ok(n) if n > 0 => state.jobs_ready.notify_waiters(),
-                    Ok(_) => {}
-                    Err(e) => {
-                        log_line!("error: reaping leases: {e}");
-                        hold_until = None;
-                    }
-                }
-            }
-        })
-    };
-    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
-    let mut supervisors = Vec::new();
-    // Mesa's drivers, which a worker opens to look for a GPU, print
-    // "XDG_RUNTIME_DIR is invalid or not set" at every start where the
-    // variable is unset (a service, a container): give the local workers
-    // a private one under the data folder instead.
-    let runtime_dir = match std::env::var_os("XDG_RUNTIME_DIR") {
-        // libwayland takes only an absolute path.
-        Some(d) if Path::new(&d).is_absolute() => None,
-        _ => Some(private_dir(&args.data.join("run"))?),
-    };
-    for slot in 0..workers {
-        let url = url.clone();
-        let runtime_dir = runtime_dir.clone();
-        let token = worker_token.clone();
-        let threads = (cores / workers.max(1)).max(1);
-        let mut stop = stop_rx.clone();
-        let lease_secs = args.lease_secs;
-        supervisors.push(tokio::spawn(async move {
-            let mut restarts = 0u32;
-            loop {
-                let spawned = spawn_worker(&url, &token, slot, threads, lease_secs, runtime_dir.as_deref());
-                let mut child = match spawned {
-                    Ok(c) => c,
-                    Err(e) => {
-                        log_line!("error: cannot start worker {slot}: {e:#}");
-                        return;
-                    }
-                };
-                // Held, not given to `wait` (which closes a child's stdin
-                // first): the worker stops when it closes.
-                let _pipe = child.stdin.take();
-                tokio::select! {
-                    status = child.wait() => {
-                        let refused = aobake_worker::RunError::REFUSED_EXIT;
-                        if matches!(&status, Ok(s) if s.code() == Some(i32::from(refused))) {
-                            log_line!("worker {slot}: the server refuses its token (revoked?); not restarting it");
-                            return;
-                        }
-                        restarts += 1;
-                        let wait = Duration::from_millis(250 * u64::from(restarts.min(20)));
-                        log_line!("worker {slot} exited ({status:?}); restarting in {wait:?}");
-                        tokio::time::sleep(wait).await;
-                    }
-                    _ = stop.changed() => {
-                        terminate(&mut child).await;
-                        return;
-                    }
-                }
-            }
-        }));
-    }
-    if let Some(dashboard) = demo_token {
-        let (url, admin) = (url.clone(), admin.clone());
-        tokio::spawn(async move {
-            if let Err(e) = crate::demo::run(&url, &admin, &dashboard).await {
-                log_line!("error: the demo bake could not be submitted: {e:#}");
-            }
-        });
-    }
-    let stopping = state.clone();
-    let shutdown = async move {
-        let ctrl_c = tokio::signal::ctrl_c();
-        #[cfg(unix)]
-        {
-            let mut term =
-                tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-                    .expect("SIGTERM handler");
-            tokio::select! { _ = ctrl_c => {}, _ = term.recv() => {} }
-        }
-        #[cfg(not(unix))]
-        let _ = ctrl_c.await;
-        log_line!("shutting down: ending long polls, stopping local workers");
-        // Long polls answer at once; local workers get SIGTERM, finish (or
-        // give back) their jobs while the API still serves their
-        // completions, and exit; then the API stops.
-        stopping.shut_down();
-        let _ = stop_tx.send(true);
-        for s in supervisors {
-            let _ = s.await;
-        }
-    };
-    crate::listen::serve(
-        listener,
-        app(state),
-        Duration::from_secs_f64(args.header_timeout_secs),
-        shutdown,
-    )
-    .await?;
-    reaper.abort();
-    Ok(())
+    Ok(Tokens {
+        admin,
+        worker,
+        demo,
+    })
 }
 
 /// This machine's name (`/etc/hostname`), or `localhost`.
