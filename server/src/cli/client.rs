@@ -121,6 +121,11 @@ pub(super) struct SubmitArgs {
     /// summary.
     #[arg(long)]
     wait: bool,
+    /// Print the bake as JSON (`GET /v1/bakes/{id}` without its jobs: id,
+    /// key, state, asset, report, …), once submitted, or with --wait once
+    /// it ended, and nothing else on stdout: for scripts.
+    #[arg(long)]
+    json: bool,
     #[command(flatten)]
     conn: Conn,
 }
@@ -175,13 +180,17 @@ pub(super) fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
     aobake_core::bake::BakeParams::with_overrides(r.method, &overrides)?;
     let bake = submit_files(&api, &r.file, &r.clips, r.method, overrides, args.priority)?;
     let id = bake.bake.id;
-    println!(
-        "bake {id}: key {}, {}",
-        bake.bake.key,
-        bake.bake.state.as_str()
-    );
+    if !args.wait && args.json {
+        println!("{}", serde_json::to_string(&bake.bake)?);
+    } else if !args.json {
+        println!(
+            "bake {id}: key {}, {}",
+            bake.bake.key,
+            bake.bake.state.as_str()
+        );
+    }
     if args.wait {
-        wait(&args.conn, &api, id)?;
+        wait(&args.conn, &api, id, args.json)?;
     }
     Ok(())
 }
@@ -191,8 +200,9 @@ pub(super) fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
 /// without it.
 const AWAY_FOR: Duration = Duration::from_secs(300);
 
-/// Follows a bake until it ends, with a progress bar; prints the summary.
-fn wait(conn: &Conn, api: &Client, id: i64) -> anyhow::Result<()> {
+/// Follows a bake until it ends, with a progress bar; prints the summary
+/// (`json`: the bake's row as JSON, whatever its end).
+fn wait(conn: &Conn, api: &Client, id: i64, json: bool) -> anyhow::Result<()> {
     let bar = super::trace::progress_bar(1, "baking");
     let mut follow = Follow {
         bar: &bar,
@@ -207,7 +217,17 @@ fn wait(conn: &Conn, api: &Client, id: i64) -> anyhow::Result<()> {
         bar.set_position(u64::try_from(view.progress.done).unwrap_or(0));
         bar.set_message(running_jobs(&view));
         let b = &view.bake;
+        if json
+            && matches!(
+                b.state,
+                BakeState::Done | BakeState::Failed | BakeState::Cancelled
+            )
+        {
+            bar.finish_and_clear();
+            println!("{}", serde_json::to_string(b)?);
+        }
         match b.state {
+            BakeState::Done if json => return Ok(()),
             BakeState::Done => {
                 let report = follow.ask(|api| api.report(id))?;
                 bar.finish_and_clear();

@@ -47,6 +47,31 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), key);
+    // For scripts: `submit --json [--wait]` prints the bake alone, here
+    // the finished one (the same key: the cache answers).
+    for wait in [false, true] {
+        let mut args = vec!["submit", cm_arg, "--poses", "24", "--json"];
+        args.extend(QUICK);
+        if wait {
+            args.push("--wait");
+        }
+        let out = env.aobake(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let printed: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(
+            (&printed["key"], &printed["state"]),
+            (&json!(key), &json!("done"))
+        );
+        assert_eq!(
+            printed["asset"].as_str().map(str::len),
+            Some(64),
+            "{printed}"
+        );
+    }
     // And a client without the command line, from the file's sha256 and
     // the request it would send: POST /v1/keys.
     let digest = aobake_core::digest::sha256_hex(&std::fs::read(&cm).unwrap());
