@@ -25,6 +25,7 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/tokens", post(create_token).get(tokens))
         .route("/v1/tokens/{id}", axum::routing::delete(revoke_token))
         .route("/healthz", get(healthz))
+        .route("/v1/openapi.yaml", get(openapi))
         .route("/readyz", get(ready))
         .route("/metrics", get(metrics))
 }
@@ -156,6 +157,14 @@ pub(crate) async fn revoke_token(
         return Err(ApiError::NotFound(format!("no token {id}")));
     }
     Ok(StatusCode::NO_CONTENT)
+}
+
+/// This API's OpenAPI document (no token: client generators fetch it;
+/// the same as `api-spec/openapi.yaml` and `aobake openapi`).
+#[utoipa::path(get, path = "/v1/openapi.yaml", tag = "system", responses((status = 200, description = "The OpenAPI 3.1 document of this API", content_type = "application/yaml", body = String)))]
+pub(crate) async fn openapi() -> impl IntoResponse {
+    static SPEC: std::sync::LazyLock<String> = std::sync::LazyLock::new(crate::openapi::yaml);
+    ([(header::CONTENT_TYPE, "application/yaml")], SPEC.as_str())
 }
 
 /// Liveness: the process answers (no token: load balancers call it).

@@ -51,7 +51,11 @@ const ROUTES: &[(&str, &str, &str)] = &[
 ];
 
 /// Unauthenticated on purpose: load balancers probe them.
-const PUBLIC: &[(&str, &str)] = &[("GET", "/healthz"), ("GET", "/readyz")];
+const PUBLIC: &[(&str, &str)] = &[
+    ("GET", "/healthz"),
+    ("GET", "/readyz"),
+    ("GET", "/v1/openapi.yaml"),
+];
 
 /// Concrete paths for a route template (every action of `{action}`).
 fn concrete(template: &str) -> Vec<String> {
@@ -154,6 +158,19 @@ fn every_route_refuses_missing_wrong_and_unscoped_tokens() {
     for (method, probe) in PUBLIC {
         assert_eq!(env.request(method, probe, "", None).unwrap().0, 200);
     }
+    // The spec a client generator fetches is the committed one.
+    let served = ureq::get(format!("{}/v1/openapi.yaml", env.url))
+        .call()
+        .unwrap()
+        .into_body()
+        .read_to_string()
+        .unwrap();
+    let committed =
+        std::fs::read_to_string(aobake_e2e::repo().join("api-spec/openapi.yaml")).unwrap();
+    assert!(
+        served == committed,
+        "GET /v1/openapi.yaml is not api-spec/openapi.yaml"
+    );
 }
 
 /// The status of a request, its body left unread.
