@@ -109,6 +109,54 @@ fn now_ms() -> i64 {
         .map_or(0, |d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX))
 }
 
+/// How often an open event stream asks whether its token is still valid.
+const STREAM_RECHECK: std::time::Duration = std::time::Duration::from_secs(5);
+
+impl Caller {
+    /// `events` for as long as this caller's token stays valid: the
+    /// stream ends within [`STREAM_RECHECK`] of the token being revoked
+    /// or expiring, so an open dashboard tab stops hearing what its
+    /// token may no longer read (its reconnection then gets the 401 and
+    /// its reason). An outage of the database ends nothing.
+    pub fn while_valid<S, T>(
+        &self,
+        state: &AppState,
+        events: S,
+    ) -> impl tokio_stream::Stream<Item = T> + Send + use<S, T>
+    where
+        S: tokio_stream::Stream<Item = T> + Send + 'static,
+        T: Send + 'static,
+    {
+        use tokio_stream::StreamExt as _;
+        let (ended, watch) = tokio::sync::watch::channel(());
+        let (store, hash) = (state.store.clone(), self.hash.clone());
+        tokio::spawn(async move {
+            loop {
+                tokio::select! {
+                    // The stream was dropped: the client went.
+                    () = ended.closed() => return,
+                    () = tokio::time::sleep(STREAM_RECHECK) => {}
+                }
+                let valid = match store.token(&hash).await {
+                    Ok(Some(row)) => row.expires_at.is_none_or(|at| at > now_ms()),
+                    Ok(None) => false,
+                    Err(_) => true,
+                };
+                if !valid {
+                    let _ = ended.send(());
+                    return;
+                }
+            }
+        });
+        let end = tokio_stream::wrappers::WatchStream::from_changes(watch).map(|()| None);
+        events
+            .map(Some)
+            .merge(end)
+            .take_while(Option::is_some)
+            .filter_map(|e| e)
+    }
+}
+
 /// A scope as a type, for [`Need`].
 pub trait NeedScope: Send + Sync + 'static {
     /// The scope.

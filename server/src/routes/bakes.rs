@@ -377,14 +377,15 @@ pub(crate) async fn key(
     responses((status = 200, description = "Server-sent events: `bake` with {id, state, done, total} whenever any bake or one of its jobs changes (a job leased, moving or finished; `done` is the view's `progress.done`, running jobs' progress included, so two events can carry the same numbers); a dashboard's bakes list", content_type = "text/event-stream", body = String), Refusals))]
 pub(crate) async fn all_events(
     State(state): State<AppState>,
-    _caller: Need<Read>,
+    caller: Need<Read>,
 ) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
     let updates = BroadcastStream::new(state.events.subscribe()).filter_map(|e| match e {
         Ok(e) => Some(Ok(bake_event(&e))),
         // A slow listener that missed events is told to reload.
         Err(_) => Some(Ok(Event::default().event("lagged").data("reload"))),
     });
-    Sse::new(updates).keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
+    Sse::new(caller.0.while_valid(&state, updates))
+        .keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
 }
 
 fn bake_event(e: &crate::state::BakeEvent) -> Event {
@@ -396,10 +397,10 @@ fn bake_event(e: &crate::state::BakeEvent) -> Event {
 
 #[utoipa::path(get, path = "/v1/bakes/{id}/events", tag = "bakes", params(("id" = i64, Path, description = "Bake id")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Server-sent events: `bake` events with id, state, done (the view's `progress.done`) and total, first the bake as it is, then at each change of it or its jobs. The stream stays open after the bake ends (a retry can start it again, and a browser's EventSource reconnects to a closed stream): a follower stops at the state it waits for (done, failed, cancelled)", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 200, description = "Server-sent events: `bake` events with id, state, done (the view's `progress.done`) and total, first the bake as it is, then at each change of it or its jobs. The stream ends within 5 s of its token being revoked or expiring; otherwise it stays open after the bake ends (a retry can start it again, and a browser's EventSource reconnects to a closed stream): a follower stops at the state it waits for (done, failed, cancelled)", content_type = "text/event-stream", body = String), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn events(
     State(state): State<AppState>,
-    _caller: Need<Read>,
+    caller: Need<Read>,
     ApiPath(id): ApiPath<i64>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
     let rx = state.events.subscribe();
@@ -410,6 +411,8 @@ pub(crate) async fn events(
         Ok(e) if e.id == id => Some(Ok(bake_event(&e))),
         _ => None,
     });
-    Ok(Sse::new(initial.chain(updates))
-        .keep_alive(KeepAlive::new().interval(Duration::from_secs(15))))
+    Ok(
+        Sse::new(caller.0.while_valid(&state, initial.chain(updates)))
+            .keep_alive(KeepAlive::new().interval(Duration::from_secs(15))),
+    )
 }

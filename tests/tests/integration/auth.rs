@@ -567,3 +567,61 @@ fn tokens_are_listed_and_revoked_at_once() {
         "{after:?}"
     );
 }
+
+/// An open event stream (a dashboard tab) ends soon after its token is
+/// revoked or expires, so it stops hearing what the token may no longer
+/// read; its reconnection then gets the 401.
+#[test]
+fn an_event_stream_ends_when_its_token_is_revoked_or_expires() {
+    use std::io::Read as _;
+    use std::time::{Duration, Instant};
+    let env = TestEnv::start(Options::default());
+    // Streams /v1/events with `token` on a thread; says when it ended.
+    let listen = |token: String| {
+        let url = format!("{}/v1/events", env.url);
+        let (tx, rx) = std::sync::mpsc::channel::<Instant>();
+        std::thread::spawn(move || {
+            let res = ureq::get(&url)
+                .header("authorization", format!("Bearer {token}"))
+                .call()
+                .unwrap();
+            let mut sink = Vec::new();
+            let _ = res.into_body().into_reader().read_to_end(&mut sink);
+            let _ = tx.send(Instant::now());
+        });
+        rx
+    };
+    let create = |body: serde_json::Value| {
+        let (status, made) = env
+            .request("POST", "/v1/tokens", aobake_e2e::ADMIN, Some(body))
+            .unwrap();
+        assert_eq!(status, 201, "{made}");
+        made["token"].as_str().unwrap().to_owned()
+    };
+    let revoked = create(json!({"name": "tab", "scopes": ["read"]}));
+    let expiring = create(json!({"name": "brief tab", "scopes": ["read"], "expires_in_secs": 2}));
+    let (a, b) = (listen(revoked.clone()), listen(expiring.clone()));
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(a.try_recv().is_err(), "a valid token's stream stays open");
+    let id = aobake_core::digest::sha256_hex(revoked.as_bytes());
+    let (status, _) = env
+        .request(
+            "DELETE",
+            &format!("/v1/tokens/{id}"),
+            aobake_e2e::ADMIN,
+            None,
+        )
+        .unwrap();
+    assert_eq!(status, 204);
+    let at = Instant::now();
+    let ended = a
+        .recv_timeout(Duration::from_secs(15))
+        .expect("the revoked token's stream ended");
+    assert!(ended - at < Duration::from_secs(8), "{:?}", ended - at);
+    b.recv_timeout(Duration::from_secs(15))
+        .expect("the expired token's stream ended");
+    assert_eq!(
+        env.request("GET", "/v1/events", &expiring, None).unwrap().0,
+        401
+    );
+}
