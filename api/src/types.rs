@@ -237,6 +237,9 @@ pub struct WorkerRow {
     pub state: String,
     /// The job it runs.
     pub job_id: Option<i64>,
+    /// The bake of the job it runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bake_id: Option<i64>,
     /// Last contact (ms since the epoch).
     pub last_seen: i64,
     /// First contact.

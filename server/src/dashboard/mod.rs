@@ -19,6 +19,7 @@ const INDEX: &str = include_str!("assets/index.html");
 const APP: &str = include_str!("assets/app.js");
 const VIEWER: &str = include_str!("assets/viewer.js");
 const STYLE: &str = include_str!("assets/style.css");
+const ICON: &str = include_str!("assets/icon.svg");
 
 const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob:; connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
 
@@ -39,6 +40,12 @@ pub(crate) fn router() -> Router<AppState> {
         .route(
             "/dashboard/style.css",
             get(|| async { file(STYLE, "text/css; charset=utf-8") }),
+        )
+        // The tab's icon (without one, browsers ask for /favicon.ico and
+        // log its 404 as an error on every page).
+        .route(
+            "/dashboard/icon.svg",
+            get(|| async { file(ICON, "image/svg+xml") }),
         )
 }
 
@@ -68,7 +75,11 @@ mod tests {
 
     #[test]
     fn the_page_loads_only_files_this_module_serves() {
-        for path in ["/dashboard/app.js", "/dashboard/style.css"] {
+        for path in [
+            "/dashboard/app.js",
+            "/dashboard/style.css",
+            "/dashboard/icon.svg",
+        ] {
             assert!(INDEX.contains(path), "{path}");
         }
         assert!(!INDEX.contains("http://") && !INDEX.contains("https://"));

@@ -1260,7 +1260,7 @@ impl<B: Backend> Store for SqlStore<B> {
             .read()
             .await?
             .all(
-                B::sql("SELECT id, CASE WHEN gone THEN 'stopped' WHEN state = 'busy' AND holding IS NULL THEN 'idle' ELSE state END AS state, CASE WHEN gone THEN NULL ELSE holding END AS job_id, last_seen, started_at, tracer FROM (SELECT w.*, w.last_seen < {now} - $1 AS gone, (SELECT j.id FROM jobs j WHERE j.id = w.job_id AND j.state = 'running' AND j.worker = w.id) AS holding FROM workers w) seen ORDER BY last_seen DESC, id")
+                B::sql("SELECT id, CASE WHEN gone THEN 'stopped' WHEN state = 'busy' AND holding IS NULL THEN 'idle' ELSE state END AS state, CASE WHEN gone THEN NULL ELSE holding END AS job_id, CASE WHEN gone THEN NULL ELSE holding_bake END AS bake_id, last_seen, started_at, tracer FROM (SELECT w.*, w.last_seen < {now} - $1 AS gone, j.id AS holding, j.bake_id AS holding_bake FROM workers w LEFT JOIN jobs j ON j.id = w.job_id AND j.state = 'running' AND j.worker = w.id) seen ORDER BY last_seen DESC, id")
                     .bind(gone_after_ms),
             )
             .await?;

@@ -206,8 +206,8 @@ async fn a_batch_split_by_failures_leases_each_job_once(store: &dyn Store) {
     let busy = store.workers(60_000).await.unwrap();
     let before = busy.iter().find(|w| w.id == "split/1").unwrap();
     assert_eq!(
-        (before.state.as_str(), before.job_id),
-        ("busy", Some(held.job.id))
+        (before.state.as_str(), before.job_id, before.bake_id),
+        ("busy", Some(held.job.id), Some(held.job.bake_id))
     );
     let idle = ["split/0", "split/1", "split/0", "split/new"].map(str::to_owned);
     store.workers_idle(&idle).await.unwrap();

@@ -314,6 +314,16 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
             .request("GET", &format!("/v1/bakes/{other}"), ADMIN, None)
             .unwrap();
         assert_eq!(b["state"], "cancelled", "the server agrees");
+        // Its cancelled jobs are counted in a column of their own, and the
+        // numbers' headers sit over them (right-aligned like the cells).
+        let cancelled = wait_for(&c, "the cancelled jobs counted", "[...document.querySelectorAll('#stages [data-count=\"cancelled\"]')].reduce((n, td) => n + Number(td.textContent), 0)", Duration::from_secs(20)).await;
+        let listed = b["jobs"].as_array().unwrap().iter().filter(|j| j["state"] == "cancelled").count();
+        assert_eq!(cancelled, json!(listed), "{b}");
+        // Its parameters as they were given (f32 values without f64 noise).
+        let params = wait_for(&c, "the parameters", "document.querySelector('#params') && document.querySelector('#params').textContent", Duration::from_secs(20)).await;
+        assert!(params.as_str().unwrap().contains("\"range_margin\": 0.1,"), "{params}");
+        let aligned = eval(&c, "return [...document.querySelectorAll('#stages thead th')].map(th => th.classList.contains('num'))").await;
+        assert_eq!(aligned, json!([false, true, true, true, true, true, true, true]));
         shot(&c, "4-bake-cancelled").await;
 
         // Workers: the one worker, with its tracer and last heartbeat.
@@ -364,6 +374,30 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         let note = eval(&c, "return document.querySelector('#viewer-status').textContent").await;
         assert!(note.as_str().unwrap().contains("submit scope"), "{note}");
         shot(&c, "6-read-only").await;
+
+        // Signing out stops the page: the stream goes offline, and a bake
+        // that moves meanwhile does not redraw the form under the typing.
+        c.find(Locator::Css("#who a")).await.unwrap().click().await.unwrap();
+        wait_for(&c, "the sign-in form", "document.querySelector('form.login')", Duration::from_secs(20)).await;
+        eval(&c, "document.querySelector('form.login input').value = 'half typed'; return null").await;
+        submit(&env, ADMIN, &digest, 8);
+        std::thread::sleep(Duration::from_secs(2));
+        let state = eval(&c, "return [document.getElementById('live').textContent, document.querySelector('form.login input').value, !!document.querySelector('main .error')]").await;
+        assert_eq!(state, json!(["offline", "half typed", false]));
+        // A sign-in link pasted into the sign-in page signs in.
+        eval(&c, &format!("location.hash = '#token={reader}&next=/workers'; return null")).await;
+        wait_for(&c, "the workers page from a link", "location.hash === '#/workers' && document.querySelector('tr[data-worker]')", Duration::from_secs(20)).await;
+        // A token the server refuses says why (here: it expired).
+        let (_, brief) = env
+            .request("POST", "/v1/tokens", ADMIN, Some(json!({"name": "brief", "scopes": ["read"], "expires_in_secs": 1})))
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(1500));
+        let brief = brief["token"].as_str().unwrap();
+        eval(&c, &format!("location.hash = '#token={brief}'; return null")).await;
+        let said = wait_for(&c, "the refusal's reason", "document.querySelector('form.login') && document.querySelector('main .error') && document.querySelector('main .error').textContent", Duration::from_secs(20)).await;
+        assert!(said.as_str().unwrap().contains("expired at"), "{said}");
+        c.goto(&format!("{}/#token={reader}", env.url)).await.unwrap();
+        wait_for(&c, "signed in again", &row, Duration::from_secs(20)).await;
 
         // A grid bake's page: its parts, every variant and the slices.
         let truck = upload(&env, &character("CesiumMilkTruck"));

@@ -81,15 +81,25 @@ class ApiError extends Error {
   }
 }
 
+// The sign-in page after the server refused `sent` (401), with its
+// reason (expired, revoked); nothing when another token is in use by then
+// (a request still under way from before a sign-out or a new sign-in).
+async function refused(res, sent) {
+  let problem = { title: "unauthorized" };
+  try { problem = await res.json(); } catch (_) { /* not JSON */ }
+  if (token === sent && sent !== null) {
+    signOut(`The server did not accept this token${problem.detail ? `: ${problem.detail}` : "."}`);
+  }
+  return new ApiError(401, problem);
+}
+
 async function api(path, options = {}) {
+  const sent = token;
   const res = await fetch(path, {
     ...options,
-    headers: { authorization: `Bearer ${token}`, ...(options.headers || {}) },
+    headers: { authorization: `Bearer ${sent}`, ...(options.headers || {}) },
   });
-  if (res.status === 401) {
-    signOut("The server did not accept this token.");
-    throw new ApiError(401, { title: "unauthorized" });
-  }
+  if (res.status === 401) throw await refused(res, sent);
   if (!res.ok) {
     let problem = {};
     try { problem = await res.json(); } catch (_) { /* not JSON */ }
@@ -114,10 +124,17 @@ async function events(path, signal, onEvent) {
   let wait = 500;
   while (!signal.aborted) {
     try {
+      const sent = token;
       const res = await fetch(path, {
-        headers: { authorization: `Bearer ${token}`, accept: "text/event-stream" },
+        headers: { authorization: `Bearer ${sent}`, accept: "text/event-stream" },
         signal,
       });
+      // Refused (revoked, expired: the server also ends a stream whose
+      // token is): stop listening; the sign-in page says why.
+      if (res.status === 401) {
+        await refused(res, sent);
+        return;
+      }
       if (!res.ok) throw new Error(`HTTP ${res.status}`);
       live.textContent = "live";
       live.classList.add("on");
@@ -179,9 +196,22 @@ function setBar(bar, done, total, state) {
 
 const badge = (state) => h("span", { class: `badge ${state}`, "data-state": state }, state);
 
-// replaceChildren without the nulls that conditional parts leave.
+// replaceChildren without the nulls that conditional parts leave; the
+// tables in it (or around it) get their headers aligned.
 function fill(el, ...nodes) {
   el.replaceChildren(...nodes.flat().filter((n) => n !== null && n !== undefined && n !== false));
+  const around = el.closest("table");
+  for (const table of around ? [around] : el.querySelectorAll("table")) alignHeads(table);
+}
+
+// A header sits over its numbers: right-aligned where its column's cells
+// are (class num), so a figure is not read under the next column's name.
+function alignHeads(table) {
+  const rows = [...table.rows];
+  const head = rows.find((r) => r.cells.length && [...r.cells].every((c) => c.tagName === "TH"));
+  const body = rows.find((r) => [...r.cells].some((c) => c.tagName === "TD"));
+  if (!head || !body) return;
+  [...head.cells].forEach((th, i) => th.classList.toggle("num", !!body.cells[i]?.classList.contains("num")));
 }
 
 function show(...nodes) {
@@ -198,6 +228,13 @@ function signOut(message) {
   localStorage.removeItem(TOKEN_KEY);
   token = null;
   me = null;
+  // The page's requests and event streams stop with it: nothing redraws
+  // the sign-in form under what someone is typing.
+  if (page) page.abort();
+  page = null;
+  const live = document.getElementById("live");
+  live.textContent = "offline";
+  live.classList.remove("on");
   signIn(message);
 }
 
@@ -293,7 +330,7 @@ function stagesTable(jobs) {
     st.worked += j.state === "completed" ? j.work : j.progress;
   }
   return h("table", { id: "stages" },
-    h("thead", {}, h("tr", {}, ...["Stage", "Jobs", "Done", "Running", "Queued", "Failed", "Work"]
+    h("thead", {}, h("tr", {}, ...["Stage", "Jobs", "Done", "Running", "Queued", "Failed", "Cancelled", "Work"]
       .map((t) => h("th", {}, t)))),
     h("tbody", {}, ...[...stages].map(([kind, st]) => h("tr", { "data-stage": kind },
       h("td", {}, kind),
@@ -302,6 +339,7 @@ function stagesTable(jobs) {
       h("td", { class: "num", "data-count": "running" }, st.running),
       h("td", { class: "num", "data-count": "queued" }, st.queued),
       h("td", { class: st.failed ? "num error" : "num", "data-count": "failed" }, st.failed),
+      h("td", { class: "num", "data-count": "cancelled" }, st.cancelled),
       h("td", { class: "num" }, `${st.worked}/${st.work}`)))));
 }
 
@@ -661,7 +699,10 @@ async function bakePage(signal, id) {
     h("h2", {}, "Jobs"),
     jobs,
     h("h2", {}, "Parameters"),
-    h("pre", { class: "mono" }, JSON.stringify(bake.params, null, 2)),
+    // f32 parameters as people wrote them (0.1, not 0.10000000149011612):
+    // seven significant digits are all an f32 holds.
+    h("pre", { class: "mono", id: "params" }, JSON.stringify(bake.params,
+      (_, v) => (typeof v === "number" && !Number.isInteger(v) ? Number(v.toPrecision(7)) : v), 2)),
   );
   loadResults();
   const later = throttle(() => refresh().catch(() => {}), 400);
@@ -683,7 +724,8 @@ async function workersPage(signal) {
     fill(tbody, ...workers.map((w) => h("tr", { "data-worker": w.id },
       h("td", { class: "mono" }, w.id),
       h("td", {}, badge(w.state)),
-      h("td", { class: "num" }, w.job_id ?? ""),
+      h("td", {}, w.job_id == null ? ""
+        : h("a", { href: `#/bakes/${w.bake_id}` }, `bake #${w.bake_id}`, h("span", { class: "muted" }, ` (job ${w.job_id})`))),
       h("td", { class: "tracer" }, w.tracer ?? "cpu"),
       h("td", { "data-seen": w.last_seen }, ago(w.last_seen)),
       h("td", { class: "muted" }, when(w.started_at)))));
@@ -692,12 +734,14 @@ async function workersPage(signal) {
   show(h("h1", {}, "Workers"),
     h("table", {}, h("thead", {}, h("tr", {}, ...["Worker", "State", "Job", "Tracer", "Last heartbeat", "Started"]
       .map((t) => h("th", {}, t)))), tbody));
-  // Relative times tick locally; the list is re-read when a bake changes.
+  // Relative times tick locally; the list is re-read when a bake changes
+  // and every 10 s (idle workers poll without any bake changing).
+  const later = throttle(() => draw().catch(() => {}), 1000);
   const tick = setInterval(() => {
     for (const td of tbody.querySelectorAll("[data-seen]")) td.textContent = ago(Number(td.dataset.seen));
   }, 1000);
-  signal.addEventListener("abort", () => clearInterval(tick));
-  const later = throttle(() => draw().catch(() => {}), 1000);
+  const reread = setInterval(later, 10000);
+  signal.addEventListener("abort", () => { clearInterval(tick); clearInterval(reread); });
   events("/v1/events", signal, () => later());
 }
 
@@ -786,8 +830,13 @@ async function start() {
   }
   fill(document.getElementById("who"), `${me.name} (${me.scopes.join(", ")}) `,
     h("a", { href: "#/", onclick: (ev) => { ev.preventDefault(); signOut(); } }, "sign out"));
-  window.onhashchange = () => route();
   route();
 }
 
+// Every address change routes, signed in or not: a `#token=` link pasted
+// into the sign-in page signs in with it.
+window.onhashchange = () => {
+  if (/^#token=/.test(location.hash)) start();
+  else if (token && me) route();
+};
 start();
