@@ -356,7 +356,7 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         let who = eval(&c, "return document.getElementById('who').textContent").await;
         assert!(who.as_str().unwrap().contains("admin"), "{who}");
 
-        // A read-only token sees everything, the actions disabled and why.
+        // A read-only token sees the bakes, the actions disabled and why.
         c.goto(&format!("{}/#token={reader}", env.url)).await.unwrap();
         wait_for(&c, "the bakes list", &row, Duration::from_secs(20)).await;
         c.goto(&format!("{}/#/bakes/{id}", env.url)).await.unwrap();
@@ -398,6 +398,10 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert!(said.as_str().unwrap().contains("expired at"), "{said}");
         c.goto(&format!("{}/#token={reader}", env.url)).await.unwrap();
         wait_for(&c, "signed in again", &row, Duration::from_secs(20)).await;
+        // An address that names no bake says so.
+        c.goto(&format!("{}/#/bakes/abc", env.url)).await.unwrap();
+        let h1 = wait_for(&c, "the no-such-bake page", "document.querySelector('main h1').textContent === 'No such bake' && document.querySelector('main').innerText", Duration::from_secs(20)).await;
+        assert!(h1.as_str().unwrap().contains("not a bake number"), "{h1}");
 
         // A grid bake's page: its parts, every variant and the slices.
         let truck = upload(&env, &character("CesiumMilkTruck"));

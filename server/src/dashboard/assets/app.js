@@ -252,7 +252,7 @@ function signIn(message) {
       start();
     } },
       h("label", {}, "An API token (", h("code", {}, "aobake token create --scope read"),
-        "; a read token sees everything, actions need the submit scope):"),
+        "; a read token sees the bakes, their reports and previews; the actions and the 3D viewer, which shows the character's mesh, need the submit scope):"),
       input,
       h("button", { type: "submit" }, "Sign in")),
   );
@@ -788,7 +788,10 @@ async function route() {
     a.classList.toggle("active", a.dataset.nav === (parts[0] || "bakes"));
   }
   try {
-    if (parts[0] === "bakes" && parts[1]) await bakePage(signal, Number(parts[1]));
+    if (parts[0] === "bakes" && parts[1] && !/^[1-9][0-9]*$/.test(parts[1])) {
+      show(h("h1", {}, "No such bake"), h("p", {}, `“${parts[1]}” is not a bake number: `,
+        h("a", { href: "#/" }, "the bakes"), "."));
+    } else if (parts[0] === "bakes" && parts[1]) await bakePage(signal, Number(parts[1]));
     else if (parts[0] === "workers") await workersPage(signal);
     else if (parts[0] === "versions") await versionsPage(signal, parts[1], parts[2]);
     else await bakesPage(signal);
