@@ -131,6 +131,16 @@ pub fn retry<T>(
 
 type Response = ureq::http::Response<ureq::Body>;
 
+/// An HTTP agent whose calls each take at most `timeout`, every status an
+/// answer (the client reads problems itself).
+fn agent(timeout: Duration) -> ureq::Agent {
+    ureq::Agent::config_builder()
+        .timeout_global(Some(timeout))
+        .http_status_as_error(false)
+        .build()
+        .into()
+}
+
 /// The servers a client may ask: one, or several of one fleet (they
 /// share a database and blob store), the one that answered last first.
 #[derive(Debug)]
@@ -147,18 +157,33 @@ impl Servers {
         }
     }
 
-    fn current(&self) -> &str {
-        let i = self.current.load(std::sync::atomic::Ordering::Relaxed);
-        &self.urls[i % self.urls.len()]
+    /// The index of the server asked first.
+    fn index(&self) -> usize {
+        self.current.load(std::sync::atomic::Ordering::Relaxed) % self.urls.len()
     }
 
-    /// Moves on to the next server; returns it.
-    fn next(&self) -> &str {
-        let i = self
-            .current
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-            + 1;
-        &self.urls[i % self.urls.len()]
+    fn current(&self) -> &str {
+        &self.urls[self.index()]
+    }
+}
+
+/// Whether a request failed before any server could have seen it (no
+/// connection was made), so another server of the fleet may take it as it
+/// is: a request that timed out or broke after it was sent may have been
+/// done, and is left to [`retry`] on the same server.
+fn never_arrived(e: &ureq::Error) -> bool {
+    use std::io::ErrorKind;
+    match e {
+        ureq::Error::ConnectionFailed | ureq::Error::HostNotFound => true,
+        ureq::Error::Timeout(t) => matches!(t, ureq::Timeout::Connect | ureq::Timeout::Resolve),
+        ureq::Error::Io(io) => matches!(
+            io.kind(),
+            ErrorKind::ConnectionRefused
+                | ErrorKind::AddrNotAvailable
+                | ErrorKind::HostUnreachable
+                | ErrorKind::NetworkUnreachable
+        ),
+        _ => false,
     }
 }
 
@@ -202,13 +227,19 @@ impl Client {
         Self {
             servers: std::sync::Arc::new(Servers::new(vec![base.trim_end_matches('/').to_owned()])),
             auth: format!("Bearer {token}"),
-            agent: ureq::Agent::config_builder()
-                .timeout_global(Some(timeout))
-                .http_status_as_error(false)
-                .build()
-                .into(),
+            agent: agent(timeout),
             notice: Notice::default(),
             rate_wait: MAX_RATE_WAIT,
+        }
+    }
+
+    /// This client (its servers, where it is among them, its token and
+    /// notice) with calls that each take at most `timeout`.
+    #[must_use]
+    pub fn timed(&self, timeout: Duration) -> Self {
+        Self {
+            agent: agent(timeout),
+            ..self.clone()
         }
     }
 
@@ -252,10 +283,6 @@ impl Client {
         (&self.servers.urls, &self.auth) == (&other.servers.urls, &other.auth)
     }
 
-    fn url(&self, path: &str) -> String {
-        format!("{}{path}", self.servers.current())
-    }
-
     fn transport(&self, e: impl std::fmt::Display) -> ApiError {
         ApiError::Transport {
             base: self.base(),
@@ -270,28 +297,45 @@ impl Client {
         }
     }
 
-    /// `request`'s response, from the next servers of the fleet in turn
-    /// when the one asked cannot be reached (each once); the transport
-    /// error of the first when none can.
+    /// `request`'s response (it is given the server's URL), from the next
+    /// servers of the fleet in turn when the one asked cannot be reached
+    /// ([`never_arrived`]), each once; the first error when none answers.
+    /// Threads share where they are: the first to move on says so, the
+    /// others follow it.
     fn reach(
         &self,
-        request: &impl Fn() -> std::result::Result<Response, ureq::Error>,
+        request: &impl Fn(&str) -> std::result::Result<Response, ureq::Error>,
     ) -> Result<Response> {
-        let first = match request() {
+        let urls = &self.servers.urls;
+        let start = self.servers.index();
+        let first = match request(&urls[start]) {
             Ok(res) => return Ok(res),
-            Err(e) => self.transport(e),
+            Err(e) => e,
         };
-        for _ in 1..self.servers.urls.len() {
-            let gone = self.base();
-            let next = self.servers.next().to_owned();
-            if let Ok(res) = request() {
-                if let Some(notice) = &self.notice.0 {
-                    notice(&format!("{gone} cannot be reached: going on with {next}"));
+        if never_arrived(&first) {
+            for k in 1..urls.len() {
+                let i = (start + k) % urls.len();
+                if let Ok(res) = request(&urls[i]) {
+                    let moved = self.servers.current.compare_exchange(
+                        start,
+                        i,
+                        std::sync::atomic::Ordering::Relaxed,
+                        std::sync::atomic::Ordering::Relaxed,
+                    );
+                    if let (Ok(_), Some(notice)) = (moved, &self.notice.0) {
+                        notice(&format!(
+                            "{} cannot be reached: going on with {}",
+                            urls[start], urls[i]
+                        ));
+                    }
+                    return Ok(res);
                 }
-                return Ok(res);
             }
         }
-        Err(first)
+        Err(ApiError::Transport {
+            base: urls[start].clone(),
+            message: first.to_string(),
+        })
     }
 
     /// Sends `request` until the server stops answering 429 (over its
@@ -302,7 +346,7 @@ impl Client {
     /// does not fail it.
     fn send(
         &self,
-        request: impl Fn() -> std::result::Result<Response, ureq::Error>,
+        request: impl Fn(&str) -> std::result::Result<Response, ureq::Error>,
     ) -> Result<Response> {
         let mut waited = Duration::ZERO;
         loop {
@@ -376,9 +420,9 @@ impl Client {
     }
 
     fn get<R: DeserializeOwned>(&self, path: &str) -> Result<R> {
-        let res = self.send(|| {
+        let res = self.send(|base| {
             self.agent
-                .get(self.url(path))
+                .get(format!("{base}{path}"))
                 .header("authorization", &self.auth)
                 .call()
         })?;
@@ -387,9 +431,9 @@ impl Client {
 
     /// Posts `body`; `None` when the server answers 204.
     fn post<T: Serialize, R: DeserializeOwned>(&self, path: &str, body: &T) -> Result<Option<R>> {
-        let res = self.send(|| {
+        let res = self.send(|base| {
             self.agent
-                .post(self.url(path))
+                .post(format!("{base}{path}"))
                 .header("authorization", &self.auth)
                 .send_json(body)
         })?;
@@ -414,9 +458,9 @@ impl Client {
     /// Applies `action` (`cancel`, `pause`, `resume` or `retry`) to bake
     /// `id`; the bake's view after.
     pub fn control(&self, id: i64, action: &str) -> Result<BakeView> {
-        let res = self.send(|| {
+        let res = self.send(|base| {
             self.agent
-                .post(self.url(&format!("/v1/bakes/{id}/{action}")))
+                .post(format!("{base}/v1/bakes/{id}/{action}"))
                 .header("authorization", &self.auth)
                 .send_empty()
         })?;
@@ -425,9 +469,9 @@ impl Client {
 
     /// The bytes at `path`, whatever their size.
     pub fn get_bytes(&self, path: &str) -> Result<Vec<u8>> {
-        let mut res = self.send(|| {
+        let mut res = self.send(|base| {
             self.agent
-                .get(self.url(path))
+                .get(format!("{base}{path}"))
                 .header("authorization", &self.auth)
                 .call()
         })?;
@@ -440,9 +484,9 @@ impl Client {
 
     fn upload(&self, path: &str, bytes: &[u8], bundle: bool, name: &str) -> Result<Uploaded> {
         let content_type = if bundle { BUNDLE } else { "model/gltf-binary" };
-        let res = self.send(|| {
+        let res = self.send(|base| {
             self.agent
-                .post(self.url(path))
+                .post(format!("{base}{path}"))
                 .query("name", name)
                 .header("authorization", &self.auth)
                 .header("content-type", content_type)
@@ -520,9 +564,9 @@ impl Client {
     /// `DELETE /v1/tokens/{id}`: revokes a token (needs `admin`); it is
     /// refused from its next request on.
     pub fn revoke_token(&self, id: &str) -> Result<()> {
-        self.send(|| {
+        self.send(|base| {
             self.agent
-                .delete(self.url(&format!("/v1/tokens/{id}")))
+                .delete(format!("{base}/v1/tokens/{id}"))
                 .header("authorization", &self.auth)
                 .call()
         })?;
@@ -676,9 +720,9 @@ impl Client {
             .iter()
             .map(|b| format!("{b:02x}"))
             .collect();
-        self.send(|| {
+        self.send(|base| {
             self.agent
-                .put(self.url(&format!("/v1/blobs/{digest}")))
+                .put(format!("{base}/v1/blobs/{digest}"))
                 .header("authorization", &self.auth)
                 .send(bytes)
         })?;
@@ -803,6 +847,44 @@ mod tests {
             }
         });
         format!("http://{addr}")
+    }
+
+    /// Threads that find their server gone go on with the next of the
+    /// fleet, and it is said once; a request that reached a server which
+    /// then failed to answer is not sent to another (it may have been
+    /// done).
+    #[test]
+    fn a_client_goes_on_with_the_next_server_only_when_none_was_reached() {
+        let ok = "HTTP/1.1 200 OK\r\nContent-Length: 3\r\nConnection: close\r\n\r\nabc";
+        let live = serve(vec![ok; 4]);
+        let heard = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
+        let into = heard.clone();
+        let client = Client::new("http://127.0.0.1:1", "t")
+            .with_fallbacks(std::slice::from_ref(&live))
+            .with_notice(move |line| into.lock().unwrap().push(line.to_owned()));
+        std::thread::scope(|scope| {
+            for _ in 0..4 {
+                let client = client.clone();
+                scope.spawn(move || assert_eq!(client.get_blob("d").unwrap(), b"abc"));
+            }
+        });
+        assert_eq!(client.base(), live);
+        let heard = heard.lock().unwrap();
+        assert_eq!(
+            *heard,
+            [format!(
+                "http://127.0.0.1:1 cannot be reached: going on with {live}"
+            )]
+        );
+        // A server that took the request and closed without an answer.
+        let mute = serve(vec!["", ""]);
+        let other = serve(vec![ok]);
+        let client = Client::new(&mute, "t").with_fallbacks(std::slice::from_ref(&other));
+        assert!(matches!(
+            client.get_blob("d"),
+            Err(ApiError::Transport { base, .. }) if base == mute
+        ));
+        assert_eq!(client.base(), mute);
     }
 
     #[test]

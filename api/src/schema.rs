@@ -62,7 +62,7 @@ pub enum Refusals {
     /// No or unknown token.
     #[response(
         status = 401,
-        description = "No or unknown token",
+        description = "No or unknown token, or one that expired (code token_expired, the detail says when)",
         content_type = "application/problem+json"
     )]
     Unauthorized(crate::Problem),

@@ -588,11 +588,15 @@ pub struct NewTokenRequest {
     /// Its scopes.
     #[cfg_attr(feature = "schema", schema(schema_with = crate::schema::scopes))]
     pub scopes: Vec<String>,
-    /// Seconds it is valid for (1 s to 10 years); absent: until revoked.
+    /// Seconds it is valid for (1 s to [`MAX_TOKEN_SECS`], ten years);
+    /// absent: until revoked.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "schema", schema(minimum = 1, maximum = 315_360_000))]
     pub expires_in_secs: Option<u64>,
 }
+
+/// The longest a token may be made valid for: ten years, in seconds.
+pub const MAX_TOKEN_SECS: u64 = 315_360_000;
 
 /// The new token: shown once, stored hashed.
 #[derive(Debug, Deserialize, Serialize)]

@@ -80,13 +80,26 @@ impl FromRequestParts<AppState> for Caller {
             return Err(ApiError::TokenExpired(at));
         }
         // When it was last used, to the minute: at most one write a
-        // minute per token and server, and a failed one costs the request
-        // nothing.
-        if row
-            .last_used_at
-            .is_none_or(|t| now - t >= LAST_USED_EVERY_MS)
-        {
-            let _ = state.store.token_used(&hash).await;
+        // minute per token and server (this server's own record decides,
+        // whatever the row says), off the request's path; a failed one
+        // costs nothing.
+        let due = {
+            let mut uses = state
+                .token_uses
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            let last = uses.entry(hash.clone()).or_insert(i64::MIN);
+            let due = now.saturating_sub(*last) >= LAST_USED_EVERY_MS;
+            if due {
+                *last = now;
+            }
+            due
+        };
+        if due {
+            let (store, hash) = (state.store.clone(), hash.clone());
+            tokio::spawn(async move {
+                let _ = store.token_used(&hash, now).await;
+            });
         }
         let caller = Self {
             name: row.name,
@@ -102,8 +115,8 @@ impl FromRequestParts<AppState> for Caller {
 /// again.
 const LAST_USED_EVERY_MS: i64 = 60_000;
 
-/// Milliseconds since the epoch.
-fn now_ms() -> i64 {
+/// Milliseconds since the epoch, by this server's clock.
+pub(crate) fn now_ms() -> i64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX))

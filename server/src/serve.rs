@@ -15,6 +15,7 @@ use crate::{
     app::app,
     auth::{Scope, new_token, token_hash},
     blobs::{self, Blobs, LocalBlobs},
+    error::ApiError,
     state::{AppState, ServerLimits},
     store::{PgStore, QueuePolicy, SqliteStore, Store, StoreError},
 };
@@ -390,6 +391,18 @@ async fn start_tokens(
             "warning: {ADMIN_TOKEN_ENV} was revoked (aobake token revoke) and stays revoked: it is refused; set a new secret (aobake token create --scope admin makes one)"
         ),
         other => other?,
+    }
+    // So does an expired one: a start keeps a secret's expiry.
+    if let Some(at) = store
+        .token(&token_hash(&admin))
+        .await?
+        .and_then(|row| row.expires_at)
+        .filter(|&at| at <= crate::auth::now_ms())
+    {
+        log_line!(
+            "warning: {ADMIN_TOKEN_ENV} expired ({}) and stays expired: it is refused; set a new secret (aobake token create --scope admin makes one)",
+            ApiError::TokenExpired(at)
+        );
     }
     // Only a start with local workers makes them a token: the servers of a
     // fleet, whose workers run elsewhere, leave none in the shared tokens.

@@ -189,6 +189,9 @@ pub struct AppState {
     pub blob_reads: Arc<tokio::sync::Semaphore>,
     /// Request metrics.
     pub metrics: Arc<Metrics>,
+    /// When this server last recorded each token's use (ms since the
+    /// epoch, by hash): a write at most once a minute per token.
+    pub token_uses: Arc<std::sync::Mutex<std::collections::HashMap<String, i64>>>,
     /// How new bakes are cut into jobs.
     pub graph: aobake_core::bake::GraphOptions,
 }
@@ -238,6 +241,7 @@ impl AppState {
             limiter: Arc::new(Limiter::new(limits.requests_per_second)),
             blob_reads: Arc::new(tokio::sync::Semaphore::new(8)),
             metrics: Arc::new(Metrics::new()),
+            token_uses: Arc::default(),
             graph: aobake_core::bake::GraphOptions::default(),
         }
     }

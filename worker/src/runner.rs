@@ -139,8 +139,8 @@ pub fn run(config: WorkerConfig) -> Result<(), RunError> {
     // One quick try: a worker on its way out does not wait for a server
     // that is away (it is then listed as stopped a lease after it was last
     // seen, as a killed one is).
-    let quick = Client::with_timeout(&client.base(), &config.token, Duration::from_secs(3))
-        .with_fallbacks(&config.fallbacks)
+    let quick = client
+        .timed(Duration::from_secs(3))
         .with_rate_wait(Duration::ZERO);
     if let Err(e) = quick.workers_stopped(&ids) {
         say!(

@@ -374,7 +374,7 @@ pub(crate) async fn key(
 
 #[utoipa::path(get, path = "/v1/events", tag = "bakes",
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Server-sent events: `bake` with {id, state, done, total} whenever any bake or one of its jobs changes (a job leased, moving or finished; `done` is the view's `progress.done`, running jobs' progress included, so two events can carry the same numbers); a dashboard's bakes list", content_type = "text/event-stream", body = String), Refusals))]
+    responses((status = 200, description = "Server-sent events: `bake` with {id, state, done, total} whenever any bake or one of its jobs changes (a job leased, moving or finished; `done` is the view's `progress.done`, running jobs' progress included, so two events can carry the same numbers); a dashboard's bakes list. The stream ends within 5 s of its token being revoked or expiring", content_type = "text/event-stream", body = String), Refusals))]
 pub(crate) async fn all_events(
     State(state): State<AppState>,
     caller: Need<Read>,

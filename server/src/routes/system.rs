@@ -74,19 +74,14 @@ pub(crate) async fn create_token(
             format!("unknown scope {bad:?}; the scopes are read, submit, worker, admin"),
         ));
     }
-    const TEN_YEARS: u64 = 315_360_000;
+    const LONGEST: u64 = aobake_api::MAX_TOKEN_SECS;
     let expires_at = match req.expires_in_secs {
         None => None,
-        Some(s @ 1..=TEN_YEARS) => {
-            let now = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_millis() as i64);
-            Some(now + 1000 * s as i64)
-        }
+        Some(s @ 1..=LONGEST) => Some(crate::auth::now_ms() + 1000 * s as i64),
         Some(s) => {
             return Err(ApiError::bad(
                 "bad_expiry",
-                format!("expires_in_secs is 1 to {TEN_YEARS} (ten years), not {s}"),
+                format!("expires_in_secs is 1 to {LONGEST} (ten years), not {s}"),
             ));
         }
     };

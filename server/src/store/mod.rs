@@ -294,8 +294,10 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     ) -> Result<()>;
     /// A token by hash, expired or not (the caller says which).
     async fn token(&self, hash: &str) -> Result<Option<TokenRow>>;
-    /// Records that the token was used now.
-    async fn token_used(&self, hash: &str) -> Result<()>;
+    /// Records that the token was used at `at` (ms since the epoch, the
+    /// caller's clock), unless its last use on record is within a minute
+    /// of it.
+    async fn token_used(&self, hash: &str, at: i64) -> Result<()>;
     /// Every token, newest first, by hash (the secrets are not stored).
     async fn tokens(&self) -> Result<Vec<(String, TokenRow)>>;
     /// Deletes a token: from its next request on it is refused (401).

@@ -1284,7 +1284,7 @@ impl<B: Backend> Store for SqlStore<B> {
                 return Err(StoreError::Revoked(at));
             }
             c.execute(
-                B::sql("INSERT INTO tokens (hash, name, scopes, created_at, expires_at) VALUES ($1, $2, $3, {now}, $4) ON CONFLICT (hash) DO UPDATE SET name = excluded.name, scopes = excluded.scopes, expires_at = excluded.expires_at")
+                B::sql("INSERT INTO tokens (hash, name, scopes, created_at, expires_at) VALUES ($1, $2, $3, {now}, $4) ON CONFLICT (hash) DO UPDATE SET name = excluded.name, scopes = excluded.scopes")
                     .bind(hash)
                     .bind(name)
                     .bind(scopes.join(","))
@@ -1307,10 +1307,14 @@ impl<B: Backend> Store for SqlStore<B> {
         Ok(row.map(|r| r.cook().1))
     }
 
-    async fn token_used(&self, hash: &str) -> Result<()> {
+    async fn token_used(&self, hash: &str, at: i64) -> Result<()> {
         in_tx!(self, Durability::Queue, |c| {
-            c.execute(B::sql("UPDATE tokens SET last_used_at = {now} WHERE hash = $1").bind(hash))
-                .await?;
+            c.execute(
+                B::sql("UPDATE tokens SET last_used_at = $2 WHERE hash = $1 AND (last_used_at IS NULL OR last_used_at <= $2 - 60000)")
+                    .bind(hash)
+                    .bind(at),
+            )
+            .await?;
             Ok(())
         })
     }

@@ -600,7 +600,13 @@ fn an_event_stream_ends_when_its_token_is_revoked_or_expires() {
     };
     let revoked = create(json!({"name": "tab", "scopes": ["read"]}));
     let expiring = create(json!({"name": "brief tab", "scopes": ["read"], "expires_in_secs": 2}));
-    let (a, b) = (listen(revoked.clone()), listen(expiring.clone()));
+    let kept = create(json!({"name": "kept tab", "scopes": ["read"]}));
+    let opened = Instant::now();
+    let (a, b, c) = (
+        listen(revoked.clone()),
+        listen(expiring.clone()),
+        listen(kept),
+    );
     std::thread::sleep(Duration::from_millis(500));
     assert!(a.try_recv().is_err(), "a valid token's stream stays open");
     let id = aobake_core::digest::sha256_hex(revoked.as_bytes());
@@ -624,4 +630,7 @@ fn an_event_stream_ends_when_its_token_is_revoked_or_expires() {
         env.request("GET", "/v1/events", &expiring, None).unwrap().0,
         401
     );
+    // A valid token's stream outlives two of the checks (every 5 s).
+    std::thread::sleep(Duration::from_secs(11).saturating_sub(opened.elapsed()));
+    assert!(c.try_recv().is_err(), "a valid token's stream stays open");
 }

@@ -1,7 +1,8 @@
 // The aobake dashboard: plain JavaScript against the HTTP API, no build
 // step. Live updates come from the API's server-sent events (read with
 // fetch, so the bearer token travels in a header, never in a URL); pages
-// re-read what an event says has changed and never poll.
+// re-read what an event says has changed (the workers page also every
+// 10 s: idle workers poll without any bake changing).
 //
 // The token comes from the URL fragment (`#token=…`, which browsers do not
 // send to servers; `aobake serve --demo` prints such a URL) or from the
@@ -67,6 +68,16 @@ const ago = (ms) => {
   const s = Math.max(0, Math.round((Date.now() - ms) / 1000));
   return s < 60 ? `${s} s ago` : s < 3600 ? `${Math.round(s / 60)} min ago` : when(ms);
 };
+// An f32 value (stored as the f64 it widens to) in the fewest digits
+// that give the same f32; any other value as it is.
+const shortestF32 = (v) => {
+  if (typeof v !== "number" || Number.isInteger(v) || Math.fround(v) !== v) return v;
+  for (let p = 1; p < 9; p += 1) {
+    const short = Number(v.toPrecision(p));
+    if (Math.fround(short) === v) return short;
+  }
+  return v;
+};
 const fmt = (x, digits = 4) => (typeof x === "number" && isFinite(x) ? x.toFixed(digits) : "—");
 // As the server checks: admin includes every scope, submit includes read.
 const can = (scope) => !!me && (me.scopes.includes(scope) || me.scopes.includes("admin")
@@ -118,7 +129,8 @@ async function imageUrl(path, digest) {
   return blobUrls.get(digest);
 }
 
-// Server-sent events over fetch; reconnects until the page goes away.
+// Server-sent events over fetch; reconnects until the page goes away or
+// the token is refused.
 async function events(path, signal, onEvent) {
   const live = document.getElementById("live");
   let wait = 500;
@@ -699,13 +711,11 @@ async function bakePage(signal, id) {
     h("h2", {}, "Jobs"),
     jobs,
     h("h2", {}, "Parameters"),
-    // f32 parameters as people wrote them (0.1, not 0.10000000149011612):
-    // seven significant digits are all an f32 holds.
-    h("pre", { class: "mono", id: "params" }, JSON.stringify(bake.params,
-      (_, v) => (typeof v === "number" && !Number.isInteger(v) ? Number(v.toPrecision(7)) : v), 2)),
+    // f32 parameters as people wrote them (0.1, not 0.10000000149011612).
+    h("pre", { class: "mono", id: "params" }, JSON.stringify(bake.params, (_, v) => shortestF32(v), 2)),
   );
   loadResults();
-  const later = throttle(() => refresh().catch(() => {}), 400);
+  const later = throttle(() => { if (!signal.aborted) refresh().catch(() => {}); }, 400);
   events(`/v1/bakes/${id}/events`, signal, (type, data) => {
     if (type !== "bake") return;
     const e = JSON.parse(data);
@@ -736,7 +746,7 @@ async function workersPage(signal) {
       .map((t) => h("th", {}, t)))), tbody));
   // Relative times tick locally; the list is re-read when a bake changes
   // and every 10 s (idle workers poll without any bake changing).
-  const later = throttle(() => draw().catch(() => {}), 1000);
+  const later = throttle(() => { if (!signal.aborted) draw().catch(() => {}); }, 1000);
   const tick = setInterval(() => {
     for (const td of tbody.querySelectorAll("[data-seen]")) td.textContent = ago(Number(td.dataset.seen));
   }, 1000);
@@ -823,7 +833,11 @@ async function start() {
     token = fragment.token;
     localStorage.setItem(TOKEN_KEY, token);
     history.replaceState(null, "", `${location.pathname}#${fragment.next}`);
+  } else if (location.hash.startsWith("#token=")) {
+    // A link without a token: the bakes, not the link again.
+    history.replaceState(null, "", `${location.pathname}#/`);
   }
+  me = null;
   if (!token) return signIn();
   try {
     me = await json("/v1/whoami");
