@@ -155,6 +155,51 @@ fn submit(env: &TestEnv, token: &str, character: &str, poses: usize) -> i64 {
     b["id"].as_i64().unwrap()
 }
 
+/// A paused bake's page says the jobs under way finish first (a pause
+/// leases nothing new), and stops saying it once they did.
+#[test]
+fn a_paused_bake_says_its_running_jobs_finish_first() {
+    // A lease far longer than the test: the frozen worker keeps its job.
+    let mut env = TestEnv::start(Options {
+        lease_secs: 60.0,
+        ..Options::default()
+    });
+    let w = env.start_worker(&[]);
+    let driver = Driver::start();
+    let digest = upload(&env, &character("CesiumMan"));
+    let id = submit(&env, ADMIN, &digest, 96);
+    // A job under way, its worker frozen so that it stays so.
+    env.wait_for_bake(id, Duration::from_secs(60), "run a job", |b| {
+        b["jobs"]
+            .as_array()
+            .is_some_and(|jobs| jobs.iter().any(|j| j["state"] == "running"))
+    });
+    env.signal_worker(w, nix::sys::signal::Signal::SIGSTOP);
+    let (status, paused) = env
+        .request("POST", &format!("/v1/bakes/{id}/pause"), ADMIN, None)
+        .unwrap();
+    assert_eq!(
+        (status, &paused["state"]),
+        (200, &json!("paused")),
+        "{paused}"
+    );
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let c = browser(&driver).await;
+        c.goto(&format!("{}/#token={ADMIN}&next=/bakes/{id}", env.url))
+            .await
+            .unwrap();
+        let said = wait_for(&c, "the pausing note", "document.querySelector('#pausing') && document.querySelector('#pausing').textContent", Duration::from_secs(20)).await;
+        assert_eq!(said, json!(" 1 running job finishes first"));
+        env.signal_worker(w, nix::sys::signal::Signal::SIGCONT);
+        wait_for(&c, "the job finished", "document.querySelector('#state [data-state=\"paused\"]') && !document.querySelector('#pausing')", Duration::from_secs(120)).await;
+        c.close().await.unwrap();
+    });
+}
+
 #[test]
 fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
     let mut env = TestEnv::start(Options::default());

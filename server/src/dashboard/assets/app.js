@@ -208,6 +208,14 @@ function setBar(bar, done, total, state) {
 
 const badge = (state) => h("span", { class: `badge ${state}`, "data-state": state }, state);
 
+// A bake's state as its page shows it: a pause leases nothing new, and the
+// jobs under way finish first, which the badge says.
+function stateBadge(bake) {
+  const running = bake.state === "paused" ? bake.jobs.filter((j) => j.state === "running").length : 0;
+  return [badge(bake.state), running ? h("span", { class: "muted", id: "pausing" },
+    ` ${running} running ${running === 1 ? "job finishes" : "jobs finish"} first`) : null];
+}
+
 // replaceChildren without the nulls that conditional parts leave; the
 // tables in it (or around it) get their headers aligned.
 function fill(el, ...nodes) {
@@ -565,7 +573,7 @@ function screenSpaceTable(s) {
 async function bakePage(signal, id) {
   let bake = await json(`/v1/bakes/${id}`);
   const bar = progressBar(bake.progress.done, bake.progress.total, bake.state);
-  const state = h("span", { id: "state" }, badge(bake.state));
+  const state = h("span", { id: "state" }, ...stateBadge(bake));
   const count = h("span", { class: "mono", id: "count" }, `${bake.progress.done}/${bake.progress.total}`);
   // Jobs: a summary by stage with the time left, the running and failed
   // jobs, and every job folded away (a vertex bake has hundreds).
@@ -678,7 +686,7 @@ async function bakePage(signal, id) {
   async function refresh() {
     bake = await json(`/v1/bakes/${id}`);
     setBar(bar, bake.progress.done, bake.progress.total, bake.state);
-    fill(state, badge(bake.state));
+    fill(state, ...stateBadge(bake));
     count.textContent = `${bake.progress.done}/${bake.progress.total}`;
     drawJobs();
     drawDetails();
