@@ -156,9 +156,10 @@ fn submit(env: &TestEnv, token: &str, character: &str, poses: usize) -> i64 {
 }
 
 /// A paused bake's page says the jobs under way finish first (a pause
-/// leases nothing new), and stops saying it once they did.
+/// leases nothing new), and stops saying it once they did; a queued
+/// bake's page says how many bakes run before it.
 #[test]
-fn a_paused_bake_says_its_running_jobs_finish_first() {
+fn a_paused_bake_says_its_running_jobs_finish_first_and_a_queued_one_its_place() {
     // A lease far longer than the test: the frozen worker keeps its job.
     let mut env = TestEnv::start(Options {
         lease_secs: 60.0,
@@ -187,11 +188,22 @@ fn a_paused_bake_says_its_running_jobs_finish_first() {
         .enable_all()
         .build()
         .unwrap();
+    // Two bakes wait in the queue meanwhile (a paused one is not ahead).
+    let second = submit(&env, ADMIN, &digest, 8);
+    let third = submit(&env, ADMIN, &digest, 16);
     rt.block_on(async {
         let c = browser(&driver).await;
-        c.goto(&format!("{}/#token={ADMIN}&next=/bakes/{id}", env.url))
-            .await
-            .unwrap();
+        for (bake, place) in [
+            (second, "Queued: it runs next when a worker is free."),
+            (third, "Queued behind 1 bake (higher priority, or as high and older)."),
+        ] {
+            c.goto(&format!("{}/#token={ADMIN}&next=/bakes/{bake}", env.url))
+                .await
+                .unwrap();
+            let said = wait_for(&c, "the queue's place", "document.querySelector('#queue') && document.querySelector('#queue').textContent", Duration::from_secs(20)).await;
+            assert_eq!(said, json!(place), "bake {bake}");
+        }
+        c.goto(&format!("{}/#/bakes/{id}", env.url)).await.unwrap();
         let said = wait_for(&c, "the pausing note", "document.querySelector('#pausing') && document.querySelector('#pausing').textContent", Duration::from_secs(20)).await;
         assert_eq!(said, json!(" 1 running job finishes first"));
         env.signal_worker(w, nix::sys::signal::Signal::SIGCONT);

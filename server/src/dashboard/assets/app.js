@@ -376,8 +376,8 @@ function duration(s) {
 function makeEta() {
   const samples = []; // [ms, done]
   return (done, total, state) => {
-    if (finished(state) || state === "paused") {
-      samples.length = 0; // a pause is not a slow rate
+    if (finished(state) || state === "paused" || state === "queued") {
+      samples.length = 0; // a pause or a wait in the queue is not a slow rate
       return state === "paused" ? "paused" : "";
     }
     const now = Date.now();
@@ -596,7 +596,20 @@ async function bakePage(signal, id) {
   };
   drawJobs();
   eta.textContent = estimate(bake.progress.done, bake.progress.total, bake.state);
-  const jobs = h("div", {}, stages, eta, h("h3", {}, "Running and failed"), active, folded);
+  // A queued bake's place: the bakes with work that run before it (higher
+  // priority, or as high and older; the server leases in that order).
+  const queue = h("p", { id: "queue", class: "muted" });
+  const drawQueue = async () => {
+    if (bake.state !== "queued") return fill(queue);
+    const all = await json("/v1/bakes?limit=1000");
+    const ahead = all.filter((b) => b.id !== bake.id && (b.state === "queued" || b.state === "running")
+      && (b.priority > bake.priority || (b.priority === bake.priority && b.id < bake.id))).length;
+    queue.textContent = ahead === 0
+      ? "Queued: it runs next when a worker is free."
+      : `Queued behind ${ahead} ${ahead === 1 ? "bake" : "bakes"} (higher priority, or as high and older).`;
+  };
+  drawQueue().catch(() => {});
+  const jobs = h("div", {}, stages, queue, eta, h("h3", {}, "Running and failed"), active, folded);
   const results = h("div", { id: "results" });
   // The 3D viewer, once the bake has its asset: it shows the character's
   // mesh, which needs the submit scope as the uploads do.
@@ -689,6 +702,7 @@ async function bakePage(signal, id) {
     fill(state, ...stateBadge(bake));
     count.textContent = `${bake.progress.done}/${bake.progress.total}`;
     drawJobs();
+    drawQueue().catch(() => {});
     drawDetails();
     drawActions();
     drawViewer();
