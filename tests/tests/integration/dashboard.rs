@@ -200,9 +200,16 @@ fn a_paused_bake_says_its_running_jobs_finish_first_and_a_queued_one_its_place()
             c.goto(&format!("{}/#token={ADMIN}&next=/bakes/{bake}", env.url))
                 .await
                 .unwrap();
-            let said = wait_for(&c, "the queue's place", "document.querySelector('#queue') && document.querySelector('#queue').textContent", Duration::from_secs(20)).await;
+            // This bake's page, not the one before it.
+            let page = format!("document.querySelector('main h1') && document.querySelector('main h1').textContent.startsWith('Bake #{bake} ') && document.querySelector('#queue') && document.querySelector('#queue').textContent");
+            let said = wait_for(&c, "the queue's place", &page, Duration::from_secs(20)).await;
             assert_eq!(said, json!(place), "bake {bake}");
         }
+        // Raised above the other, the third runs next.
+        eval(&c, "const p = document.querySelector('#priority'); p.value = '5'; p.form.requestSubmit(); return null").await;
+        wait_for(&c, "the new place", "document.querySelector('#queue').textContent === 'Queued: it runs next when a worker is free.'", Duration::from_secs(20)).await;
+        let (_, raised) = env.request("GET", &format!("/v1/bakes/{third}"), ADMIN, None).unwrap();
+        assert_eq!(raised["priority"], 5, "the server agrees");
         c.goto(&format!("{}/#/bakes/{id}", env.url)).await.unwrap();
         let said = wait_for(&c, "the pausing note", "document.querySelector('#pausing') && document.querySelector('#pausing').textContent", Duration::from_secs(20)).await;
         assert_eq!(said, json!(" 1 running job finishes first"));

@@ -658,11 +658,30 @@ async function bakePage(signal, id) {
     retry: button("Retry", "retry"),
     download: h("button", { "data-action": "download", disabled: true, onclick: download }, "Download asset"),
   };
+  // Priority: higher runs first (PATCH /v1/bakes/{id}).
+  const priority = h("input", { type: "number", step: 1, id: "priority", "aria-label": "Priority (higher runs first)" });
+  priority.value = bake.priority;
+  const setPriority = async (ev) => {
+    ev.preventDefault();
+    fill(status);
+    try {
+      await api(`/v1/bakes/${id}`, { method: "PATCH", headers: { "content-type": "application/json" },
+        body: JSON.stringify({ priority: Math.trunc(Number(priority.value)) }) });
+      await refresh();
+    } catch (e) {
+      fill(status, failure(e));
+    }
+  };
+  const prioritySet = h("button", { type: "submit", "data-action": "priority", disabled: true,
+    title: mayAct ? "higher runs first" : "needs a token with the submit scope" }, "Set priority");
   const actions = h("div", { class: "actions" }, Object.values(buttons),
+    h("form", { class: "priority", onsubmit: setPriority }, priority, prioritySet),
     mayAct ? null : h("span", { class: "note", id: "read-only" },
-      `Your token “${me.name}” can read only: cancel, pause, resume and retry need the submit scope.`));
+      `Your token “${me.name}” can read only: cancel, pause, resume, retry and the priority need the submit scope.`));
   const drawActions = () => {
     const s = bake.state;
+    priority.disabled = prioritySet.disabled = !mayAct || finished(s);
+    if (document.activeElement !== priority) priority.value = bake.priority;
     buttons.cancel.disabled = !mayAct || finished(s);
     buttons.pause.disabled = !mayAct || !(s === "queued" || s === "running");
     buttons.resume.disabled = !mayAct || s !== "paused";
