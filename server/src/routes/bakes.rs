@@ -48,9 +48,24 @@ pub(super) fn router() -> Router<AppState> {
 }
 
 fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
+    // With its jobs, from them: the bake's row and its jobs are read one
+    // after the other, and a heartbeat between the two would show a job
+    // further on than the bar.
+    let done = match &jobs {
+        Some(jobs) => jobs
+            .iter()
+            .map(|j| match j.state {
+                crate::store::JobState::Completed => j.work,
+                crate::store::JobState::Running => j.progress,
+                _ => 0,
+            })
+            .sum::<i64>()
+            .min(bake.total_work),
+        None => crate::state::progress_done(&bake),
+    };
     BakeView {
         progress: Progress {
-            done: crate::state::progress_done(&bake),
+            done,
             total: bake.total_work,
         },
         bake,
