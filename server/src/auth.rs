@@ -74,9 +74,7 @@ impl FromRequestParts<AppState> for Caller {
             .await?
             .ok_or(ApiError::Unauthorized)?;
         let now = now_ms();
-        if let Some(at) = row.expires_at
-            && at <= now
-        {
+        if let Some(at) = row.expired(now) {
             return Err(ApiError::TokenExpired(at));
         }
         // When it was last used, to the minute: at most one write a
@@ -151,7 +149,7 @@ impl Caller {
                     () = tokio::time::sleep(STREAM_RECHECK) => {}
                 }
                 let valid = match store.token(&hash).await {
-                    Ok(Some(row)) => row.expires_at.is_none_or(|at| at > now_ms()),
+                    Ok(Some(row)) => row.expired(now_ms()).is_none(),
                     Ok(None) => false,
                     Err(_) => true,
                 };

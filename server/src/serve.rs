@@ -396,8 +396,7 @@ async fn start_tokens(
     if let Some(at) = store
         .token(&token_hash(&admin))
         .await?
-        .and_then(|row| row.expires_at)
-        .filter(|&at| at <= crate::auth::now_ms())
+        .and_then(|row| row.expired(crate::auth::now_ms()))
     {
         log_line!(
             "warning: {ADMIN_TOKEN_ENV} expired ({}) and stays expired: it is refused; set a new secret (aobake token create --scope admin makes one)",

@@ -566,9 +566,7 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&tokens)?);
                 return Ok(());
             }
-            let now = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_millis() as i64);
+            let now = crate::auth::now_ms();
             let expires = |t: &TokenView| match t.expires_at {
                 None => "never".to_owned(),
                 Some(at) if at <= now => format!("expired {} ago", age(now - at)),

@@ -122,6 +122,14 @@ pub struct TokenRow {
     pub last_used_at: Option<i64>,
 }
 
+impl TokenRow {
+    /// When it expired, if it had by `now` (ms since the epoch): what
+    /// every check of a token's time asks.
+    pub fn expired(&self, now: i64) -> Option<i64> {
+        self.expires_at.filter(|&at| at <= now)
+    }
+}
+
 /// How leases and retries behave.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QueuePolicy {

@@ -1053,12 +1053,9 @@ fn clips_and_multi_file_characters_upload_and_bake() {
         body.extend(b"\r\n");
     }
     body.extend(format!("--{boundary}--\r\n").bytes());
-    let (status, uploaded, _) = env.post_bytes(
-        "/v1/characters",
-        ADMIN,
-        &format!("multipart/form-data; boundary={boundary}"),
-        &body,
-    );
+    let multipart = format!("multipart/form-data; boundary={boundary}");
+    let post = |path: &str, body: &[u8]| env.post_bytes(path, ADMIN, &multipart, body);
+    let (status, uploaded, _) = post("/v1/characters", &body);
     assert_eq!(status, 201, "{uploaded}");
     let (_, glb_upload, _) = env.post_bytes("/v1/characters", ADMIN, "model/gltf-binary", &glb);
     assert_ne!(
@@ -1081,12 +1078,7 @@ fn clips_and_multi_file_characters_upload_and_bake() {
     );
     // Uploaded again under another name: the stored summary, the first
     // name, as every page shows it.
-    let (status, again, _) = env.post_bytes(
-        "/v1/characters?name=again.gltf",
-        ADMIN,
-        &format!("multipart/form-data; boundary={boundary}"),
-        &body,
-    );
+    let (status, again, _) = post("/v1/characters?name=again.gltf", &body);
     assert_eq!((status, &again["summary"]), (200, &uploaded["summary"]));
     // With a file the glTF does not use (a folder sent whole): that part
     // is left out and said so, and the digest, hence the cache key, is the
@@ -1095,12 +1087,7 @@ fn clips_and_multi_file_characters_upload_and_bake() {
     extra.extend(format!(
         "--{boundary}\r\nContent-Disposition: form-data; name=\"files\"; filename=\"notes.txt\"\r\n\r\nnot a buffer\r\n--{boundary}--\r\n"
     ).bytes());
-    let (status, with_extra, _) = env.post_bytes(
-        "/v1/characters",
-        ADMIN,
-        &format!("multipart/form-data; boundary={boundary}"),
-        &extra,
-    );
+    let (status, with_extra, _) = post("/v1/characters", &extra);
     assert_eq!(status, 200, "{with_extra}");
     assert_eq!(with_extra["digest"], uploaded["digest"], "{with_extra}");
     let warnings = with_extra["summary"]["warnings"].to_string();
