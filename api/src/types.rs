@@ -384,7 +384,9 @@ pub struct PatchBody {
     pub priority: i64,
 }
 
-/// `POST /v1/jobs/lease`.
+/// `POST /v1/jobs/lease`. A worker asks only while it holds no job: a job
+/// still leased to it (an answer it never got) is answered again, with
+/// the same token and attempt and its lease renewed.
 #[derive(Debug, Deserialize, Serialize)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
 pub struct LeaseRequest {
@@ -403,7 +405,8 @@ pub struct LeaseRequest {
 }
 
 /// `POST /v1/jobs/leases`: jobs for several idle slots of one worker
-/// process in one request.
+/// process in one request. A slot still holding a lease (an answer it
+/// never got) gets that job again, same token and attempt, lease renewed.
 #[derive(Debug, Deserialize, Serialize)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
 pub struct LeaseManyRequest {

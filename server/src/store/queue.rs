@@ -873,32 +873,73 @@ impl<B: Backend> Store for SqlStore<B> {
                 }
                 &live[..]
             };
-            let mut claimed: Vec<(usize, i64)> = Vec::new();
-            for group in claim_groups::<B>(c, workers, policy).await? {
-                let taken: Vec<i64> = claimed.iter().map(|&(_, id)| id).collect();
-                let ids = claim::<B>(c, &workers[group[0]], policy, group.len(), &taken).await?;
-                claimed.extend(group.into_iter().zip(ids));
+            // A slot asks only while it holds no job, so a job running
+            // under its name is one whose lease never reached it (the
+            // answer was lost: a server that died after committing it, a
+            // dropped connection) or one a process restarted under the
+            // same name lost. It is handed to the slot again, with the
+            // same lease and attempt, instead of waiting out its lease to
+            // run a second time.
+            let held: Vec<(i64, String, String)> = c
+                .all(
+                    B::sql(&format!(
+                        "SELECT id, worker, lease_token FROM jobs WHERE state = 'running' AND worker IN ({}) ORDER BY id{{for_update}}",
+                        placeholders(1, workers.len())
+                    ))
+                    .bind_all(workers.iter().map(String::as_str)),
+                )
+                .await?;
+            let mut grants: Vec<(usize, i64, Option<String>)> = Vec::new();
+            for (id, worker, token) in held {
+                let slot = workers.iter().position(|w| *w == worker);
+                if let Some(slot) = slot.filter(|s| !grants.iter().any(|g| g.0 == *s)) {
+                    grants.push((slot, id, Some(token)));
+                }
             }
+            let asking: Vec<usize> = (0..workers.len())
+                .filter(|s| !grants.iter().any(|g| g.0 == *s))
+                .collect();
+            let names: Vec<String> = asking.iter().map(|&s| workers[s].clone()).collect();
+            let mut claimed: Vec<(usize, i64)> = Vec::new();
+            for group in claim_groups::<B>(c, &names, policy).await? {
+                let taken: Vec<i64> = claimed.iter().map(|&(_, id)| id).collect();
+                let ids = claim::<B>(c, &names[group[0]], policy, group.len(), &taken).await?;
+                claimed.extend(group.into_iter().map(|g| asking[g]).zip(ids));
+            }
+            grants.extend(claimed.into_iter().map(|(slot, id)| (slot, id, None)));
             // In the batch's order: the first slot asked leases first.
-            claimed.sort_unstable();
+            grants.sort_unstable();
             let mut leases = Vec::new();
             // A batch's jobs mostly share a bake: each bake is advanced
             // and its uploads looked up once.
             let mut bakes: HashMap<i64, (BakeRow, Vec<UploadRef>)> = HashMap::new();
-            for (slot, id) in claimed {
+            for (slot, id, again) in grants {
                 let worker = &workers[slot];
-                let token = lease_token();
-                let Some(job) = c
-                    .optional::<RawJob>(
-                        B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0 WHERE id = $4 AND state = 'available' RETURNING *, {deps} AS deps")
-                            .bind(&token)
-                            .bind(worker)
-                            .bind(policy.lease_ms)
-                            .bind(id),
-                    )
-                    .await?
-                else {
-                    // Claimed twice in one batch: never, by `taken`.
+                let granted = match again {
+                    Some(token) => c
+                        .optional::<RawJob>(
+                            B::sql("UPDATE jobs SET lease_expires_at = {now} + $1 WHERE id = $2 AND state = 'running' RETURNING *, {deps} AS deps")
+                                .bind(policy.lease_ms)
+                                .bind(id),
+                        )
+                        .await?
+                        .map(|job| (job, token)),
+                    None => {
+                        let token = lease_token();
+                        c.optional::<RawJob>(
+                            B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0 WHERE id = $4 AND state = 'available' RETURNING *, {deps} AS deps")
+                                .bind(&token)
+                                .bind(worker)
+                                .bind(policy.lease_ms)
+                                .bind(id),
+                        )
+                        .await?
+                        .map(|job| (job, token))
+                    }
+                };
+                // Claimed twice in one batch: never, by `taken`; a held
+                // job is locked.
+                let Some((job, token)) = granted else {
                     continue;
                 };
                 let expires_at = job.lease_expires_at.unwrap_or_default();

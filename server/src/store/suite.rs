@@ -79,6 +79,7 @@ pub(crate) async fn run_all(store: &dyn Store) {
     a_worker_that_keeps_failing_a_bake_is_kept_off_it(store).await;
     tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store).await;
     a_stopped_worker_is_listed_so_at_once_and_holds_no_job_back(store).await;
+    a_slot_asking_again_gets_the_lease_it_never_heard(store).await;
     a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store).await;
     a_batch_split_by_failures_leases_each_job_once(store).await;
     tokens_are_listed_newest_first_and_deleted(store).await;
@@ -500,6 +501,41 @@ async fn a_stopped_worker_is_listed_so_at_once_and_holds_no_job_back(store: &dyn
     // The cases after this one lease their own bakes' jobs, on CPU
     // workers.
     store.workers_stopped(&leaving).await.unwrap();
+    store.control(created.id, Action::Cancel).await.unwrap();
+}
+
+/// A slot asks only while it holds no job: a job still running under its
+/// name is a lease whose answer it never got (a server that died after
+/// committing it), so asking again hands the same job back, same token,
+/// same attempt, lease renewed, beside new jobs for the other slots.
+async fn a_slot_asking_again_gets_the_lease_it_never_heard(store: &dyn Store) {
+    let c = character(store).await;
+    let mut b = bake(&c, &"9".repeat(64));
+    b.priority = 3001;
+    let created = store.create_bake(&b).await.unwrap();
+    let mut p = policy();
+    p.lease_ms = 1_000;
+    let slots = ["lost/0".to_owned(), "lost/1".to_owned()];
+    let lost = store.lease(&slots[0], &p).await.unwrap().unwrap();
+    assert_eq!(lost.job.bake_id, created.id);
+    p.lease_ms = 60_000;
+    let batch = store.lease_many(&slots, &p).await.unwrap();
+    assert_eq!(batch.len(), 2, "{batch:?}");
+    let (again, other) = (&batch[0], &batch[1]);
+    assert_eq!(
+        (again.job.id, again.token.as_str(), again.job.attempts),
+        (lost.job.id, lost.token.as_str(), 1),
+        "the lost lease, handed again"
+    );
+    assert!(again.expires_at >= lost.expires_at + 30_000, "{again:?}");
+    assert_eq!(again.job.worker.as_deref(), Some("lost/0"));
+    assert_ne!(other.job.id, lost.job.id);
+    assert_eq!(other.job.worker.as_deref(), Some("lost/1"));
+    // The lease it renewed is the one it holds: the job completes with it.
+    store
+        .complete(again.job.id, &again.token, &done("samples"))
+        .await
+        .unwrap();
     store.control(created.id, Action::Cancel).await.unwrap();
 }
 
