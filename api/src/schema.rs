@@ -63,7 +63,8 @@ pub enum Refusals {
     #[response(
         status = 401,
         description = "No or unknown token, or one that expired (code token_expired, the detail says when)",
-        content_type = "application/problem+json"
+        content_type = "application/problem+json",
+        headers(("WWW-Authenticate" = String, description = "`Bearer realm=\"aobake\"`"))
     )]
     Unauthorized(crate::Problem),
     /// The token lacks the scope.
@@ -77,7 +78,8 @@ pub enum Refusals {
     #[response(
         status = 429,
         description = "Too many requests",
-        content_type = "application/problem+json"
+        content_type = "application/problem+json",
+        headers(("Retry-After" = u64, description = "Seconds to wait before trying again"))
     )]
     RateLimited(crate::Problem),
     /// The database or the blob store does not answer (`Retry-After` says
@@ -85,7 +87,8 @@ pub enum Refusals {
     #[response(
         status = 503,
         description = "The database or the blob store does not answer; retry after Retry-After seconds",
-        content_type = "application/problem+json"
+        content_type = "application/problem+json",
+        headers(("Retry-After" = u64, description = "Seconds to wait before trying again"))
     )]
     Unavailable(crate::Problem),
 }

@@ -22,58 +22,142 @@ use crate::{
 
 pub(super) fn router() -> Router<AppState> {
     Router::new()
-        .route("/v1/assets/{digest}", get(asset))
-        .route("/v1/previews/{digest}", get(preview))
+        .route("/v1/assets/{digest}", get(asset).head(asset_head))
+        .route("/v1/previews/{digest}", get(preview).head(preview_head))
 }
 
 #[utoipa::path(get, path = "/v1/assets/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the bytes"), ("If-None-Match" = Option<String>, Header, description = "An ETag"), ("Range" = Option<String>, Header, description = "One byte range (several are served whole)"), ("If-Range" = Option<String>, Header, description = "The range only if this is still the ETag; otherwise the whole blob")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The bytes (an uploaded source needs `submit`: 403 for `read` alone)", content_type = "application/octet-stream", body = crate::routes::uploads::FileBytes), (status = 206, description = "The requested range", content_type = "application/octet-stream", body = crate::routes::uploads::FileBytes), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 416, description = "A byte range the blob does not have, or a malformed one; `Content-Range: bytes */LEN` gives the length", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses(
+        (status = 200, description = "The bytes (an uploaded source needs `submit`: 403 for `read` alone)", content_type = "application/octet-stream", body = crate::routes::uploads::FileBytes,
+            headers(("ETag" = String, description = "The digest in quotes: a strong validator, for If-None-Match and If-Range"), ("Accept-Ranges" = String, description = "`bytes`"), ("Cache-Control" = String, description = "`private, max-age=31536000, immutable`: a digest's bytes never change"), ("Content-Length" = u64, description = "The bytes' length"))),
+        (status = 206, description = "The requested range", content_type = "application/octet-stream", body = crate::routes::uploads::FileBytes,
+            headers(("Content-Range" = String, description = "`bytes FIRST-LAST/LEN`"), ("ETag" = String, description = "The digest in quotes"), ("Content-Length" = u64, description = "The range's length"))),
+        (status = 304, description = "Not modified (If-None-Match)", headers(("ETag" = String, description = "The digest in quotes"))),
+        (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"),
+        (status = 416, description = "A byte range the blob does not have, or a malformed one", body = Problem, content_type = "application/problem+json",
+            headers(("Content-Range" = String, description = "`bytes */LEN`: the blob's length, which tells a resuming client it has it all"))),
+        Refusals))]
 pub(crate) async fn asset(
     State(state): State<AppState>,
     caller: Caller,
     ApiPath(digest): ApiPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
-    crate::blobs::check_digest(&digest)?;
-    // Sources need submit, everything else read: a caller with both (an
-    // admin, or a submit token, which includes read) is let through
-    // without asking the store.
+    let_through(&state, &caller, &digest).await?;
+    serve(
+        &state,
+        &digest,
+        &headers,
+        "application/octet-stream",
+        Body::Bytes,
+    )
+    .await
+}
+
+#[utoipa::path(head, path = "/v1/assets/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the bytes"), ("If-None-Match" = Option<String>, Header, description = "An ETag"), ("Range" = Option<String>, Header, description = "One byte range"), ("If-Range" = Option<String>, Header, description = "The range only if this is still the ETag")),
+    security(("bearer" = ["read"])),
+    responses(
+        (status = 200, description = "GET's headers without the bytes: whether a digest is there, and its length", headers(("ETag" = String, description = "The digest in quotes"), ("Accept-Ranges" = String, description = "`bytes`"), ("Cache-Control" = String, description = "As GET's"), ("Content-Length" = u64, description = "The bytes' length"))),
+        (status = 206, description = "GET's headers for the range", headers(("Content-Range" = String, description = "`bytes FIRST-LAST/LEN`"), ("Content-Length" = u64, description = "The range's length"))),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, description = "Not found (no body)"),
+        (status = 416, description = "A byte range the blob does not have", headers(("Content-Range" = String, description = "`bytes */LEN`"))),
+        Refusals))]
+pub(crate) async fn asset_head(
+    State(state): State<AppState>,
+    caller: Caller,
+    ApiPath(digest): ApiPath<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    let_through(&state, &caller, &digest).await?;
+    serve(
+        &state,
+        &digest,
+        &headers,
+        "application/octet-stream",
+        Body::None,
+    )
+    .await
+}
+
+/// Sources need submit, everything else read: a caller with both (an
+/// admin, or a submit token, which includes read) is let through without
+/// asking the store.
+async fn let_through(state: &AppState, caller: &Caller, digest: &str) -> ApiResult<()> {
+    crate::blobs::check_digest(digest)?;
     if !(caller.has(Scope::Read) && caller.has(Scope::Submit)) {
         let mut source = false;
         for kind in ["character", "clips"] {
-            source |= state.store.upload(&digest, kind).await?.is_some();
+            source |= state.store.upload(digest, kind).await?.is_some();
         }
         caller.require(if source { Scope::Submit } else { Scope::Read })?;
     }
-    serve(&state, &digest, &headers, "application/octet-stream").await
+    Ok(())
 }
 
 #[utoipa::path(get, path = "/v1/previews/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the PNG, from GET /v1/bakes/{id}/previews"), ("If-None-Match" = Option<String>, Header, description = "An ETag")),
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "The PNG (an APNG for an animation)", content_type = "image/png", body = crate::routes::uploads::FileBytes), (status = 304, description = "Not modified (If-None-Match)"), (status = 404, description = "No such preview", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses(
+        (status = 200, description = "The PNG (an APNG for an animation)", content_type = "image/png", body = crate::routes::uploads::FileBytes,
+            headers(("ETag" = String, description = "The digest in quotes"), ("Cache-Control" = String, description = "`private, max-age=31536000, immutable`"), ("Content-Length" = u64, description = "The PNG's length"))),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, description = "No such preview", body = Problem, content_type = "application/problem+json"),
+        Refusals))]
 pub(crate) async fn preview(
     State(state): State<AppState>,
     _caller: Need<Read>,
     ApiPath(digest): ApiPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
-    crate::blobs::check_digest(&digest)?;
-    // Only PNGs are served as images: another blob under this route would
-    // be a lie about its type.
-    let head = state.read_blob(&digest, Some((0, 8))).await?;
+    a_png(&state, &digest).await?;
+    serve(&state, &digest, &headers, "image/png", Body::Bytes).await
+}
+
+#[utoipa::path(head, path = "/v1/previews/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the PNG"), ("If-None-Match" = Option<String>, Header, description = "An ETag")),
+    security(("bearer" = ["read"])),
+    responses(
+        (status = 200, description = "GET's headers without the PNG", headers(("ETag" = String, description = "The digest in quotes"), ("Content-Length" = u64, description = "The PNG's length"))),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, description = "No such preview (no body)"),
+        Refusals))]
+pub(crate) async fn preview_head(
+    State(state): State<AppState>,
+    _caller: Need<Read>,
+    ApiPath(digest): ApiPath<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    a_png(&state, &digest).await?;
+    serve(&state, &digest, &headers, "image/png", Body::None).await
+}
+
+/// Only PNGs are served as images: another blob under the previews'
+/// route would be a lie about its type.
+async fn a_png(state: &AppState, digest: &str) -> ApiResult<()> {
+    crate::blobs::check_digest(digest)?;
+    let head = state.read_blob(digest, Some((0, 8))).await?;
     if head.as_deref() != Some(b"\x89PNG\r\n\x1a\n".as_slice()) {
         return Err(ApiError::NotFound(format!("no preview {digest}")));
     }
-    serve(&state, &digest, &headers, "image/png").await
+    Ok(())
 }
 
-/// A blob by digest with its content type, `ETag`, and ranges.
+/// Whether a response carries the bytes (GET) or only their headers
+/// (HEAD, which reads none).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Body {
+    Bytes,
+    None,
+}
+
+/// A blob by digest with its content type, `ETag`, and ranges; with
+/// [`Body::None`] (HEAD) the same status and headers, no byte read.
 async fn serve(
     state: &AppState,
     digest: &str,
     headers: &HeaderMap,
     content_type: &'static str,
+    body: Body,
 ) -> ApiResult<Response> {
     let digest = digest.to_owned();
     crate::blobs::check_digest(&digest)?;
@@ -119,6 +203,7 @@ async fn serve(
                 .get(header::IF_RANGE)
                 .is_none_or(|v| v.as_bytes() == etag.as_bytes())
         });
+    let mut span = None;
     if let Some((range, bytes_range)) = range {
         // A malformed or unsatisfiable byte range is a 416, whose
         // Content-Range tells a resuming client the whole length.
@@ -131,30 +216,32 @@ async fn serve(
         // One range is served as 206; several are served whole (RFC 9110
         // lets a server ignore a multi-range request).
         if let [r] = ranges.as_slice() {
-            let (start, end) = (*r.start(), *r.end() + 1);
-            let bytes = state
-                .read_blob(&digest, Some((start, end)))
-                .await?
-                .ok_or_else(|| ApiError::NotFound(format!("no asset {digest}")))?;
-            let content_range = format!("bytes {start}-{}/{len}", end - 1);
-            return Ok((
-                StatusCode::PARTIAL_CONTENT,
-                common,
-                [(header::CONTENT_RANGE, content_range)],
-                bytes,
-            )
-                .into_response());
+            span = Some((*r.start(), *r.end() + 1));
         }
     }
-    let bytes = state
-        .read_blob(&digest, None)
-        .await?
-        .ok_or_else(|| ApiError::NotFound(format!("no asset {digest}")))?;
-    Ok((
-        StatusCode::OK,
-        common,
-        [(header::CONTENT_TYPE, content_type)],
-        bytes,
-    )
-        .into_response())
+    let (status, length) = match span {
+        Some((start, end)) => (StatusCode::PARTIAL_CONTENT, end - start),
+        None => (StatusCode::OK, len),
+    };
+    let mut res = match body {
+        Body::Bytes => state
+            .read_blob(&digest, span)
+            .await?
+            .ok_or_else(|| ApiError::NotFound(format!("no asset {digest}")))?
+            .into_response(),
+        // HEAD: the length GET would send, and no body.
+        Body::None => [(header::CONTENT_LENGTH, HeaderValue::from(length))].into_response(),
+    };
+    *res.status_mut() = status;
+    let h = res.headers_mut();
+    h.extend(common);
+    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    if let Some((start, end)) = span {
+        let content_range = format!("bytes {start}-{}/{len}", end - 1);
+        h.insert(
+            header::CONTENT_RANGE,
+            HeaderValue::from_str(&content_range).expect("digits"),
+        );
+    }
+    Ok(res)
 }

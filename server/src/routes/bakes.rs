@@ -14,7 +14,7 @@ use aobake_core::{
 use axum::{
     Json, Router,
     extract::State,
-    http::StatusCode,
+    http::{StatusCode, header},
     response::{
         IntoResponse, Response,
         sse::{Event, KeepAlive, Sse},
@@ -75,7 +75,7 @@ fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
 
 #[utoipa::path(post, path = "/v1/bakes", tag = "bakes", request_body = BakeRequest,
     security(("bearer" = ["submit"])),
-    responses((status = 202, description = "Accepted (or already running)", body = BakeView), (status = 200, description = "Already baked: the finished bake", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 202, description = "Accepted (or already running)", body = BakeView, headers(("Location" = String, description = "The bake (`/v1/bakes/{id}`)"))), (status = 200, description = "Already baked: the finished bake", body = BakeView, headers(("Location" = String, description = "The bake (`/v1/bakes/{id}`)"))), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn submit(
     State(state): State<AppState>,
     _caller: Need<Submit>,
@@ -130,7 +130,8 @@ pub(crate) async fn submit(
         } else {
             StatusCode::ACCEPTED
         };
-        return Ok((status, Json(view(existing, None))).into_response());
+        let location = bake_location(existing.id);
+        return Ok((status, location, Json(view(existing, None))).into_response());
     }
     let (jobs, params) = jobs;
     let bake = state
@@ -147,7 +148,13 @@ pub(crate) async fn submit(
         })
         .await?;
     state.announce(&bake);
-    Ok((StatusCode::ACCEPTED, Json(view(bake, None))).into_response())
+    let location = bake_location(bake.id);
+    Ok((StatusCode::ACCEPTED, location, Json(view(bake, None))).into_response())
+}
+
+/// `Location` of a bake a submit answers with.
+fn bake_location(id: i64) -> [(header::HeaderName, String); 1] {
+    [(header::LOCATION, format!("/v1/bakes/{id}"))]
 }
 
 /// Filters of bake lists.

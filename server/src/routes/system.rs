@@ -169,7 +169,7 @@ pub(crate) async fn healthz() -> &'static str {
 }
 
 /// Readiness: the database answers (no token).
-#[utoipa::path(get, path = "/readyz", tag = "system", responses((status = 200, description = "Ready", body = String), (status = 503, description = "The database or the blob store does not answer (the detail names which; Retry-After says when to look again)", body = Problem, content_type = "application/problem+json")))]
+#[utoipa::path(get, path = "/readyz", tag = "system", responses((status = 200, description = "Ready", body = String), (status = 503, description = "The database or the blob store does not answer (the detail names which)", body = Problem, content_type = "application/problem+json", headers(("Retry-After" = u64, description = "Seconds to wait before looking again")))))]
 pub(crate) async fn ready(State(state): State<AppState>) -> ApiResult<&'static str> {
     state.store.ping().await?;
     // The blob store answers a question about a blob it does not hold

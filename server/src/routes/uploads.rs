@@ -15,7 +15,7 @@ use axum::{
     Json, Router,
     body::Bytes,
     extract::{FromRequest, Multipart, Request, State},
-    http::{StatusCode, header},
+    http::{HeaderName, StatusCode, header},
     routing::{get, post},
 };
 use serde::Deserialize;
@@ -179,13 +179,13 @@ async fn store_upload(
     request_body(description = "A .glb or self-contained .gltf as the body, a bundle of a .gltf and its side files, or multipart/form-data whose first part is the .gltf and whose other parts are its side files: each part's file name (its Content-Disposition filename, else its field name) is the name the glTF's URI resolves to; parts it does not refer to are left out, with a warning",
         content((FileBytes = "model/gltf-binary"), (FileBytes = "model/gltf+json"), (FileBytes = "application/vnd.aobake.bundle"), (MultipartUpload = "multipart/form-data"))),
     security(("bearer" = ["submit"])),
-    responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 201, description = "Stored", body = Uploaded, headers(("Location" = String, description = "The upload's record (GET)"))), (status = 200, description = "Already stored", body = Uploaded, headers(("Location" = String, description = "The upload's record (GET)"))), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn post_character(
     State(state): State<AppState>,
     _caller: Need<Submit>,
     ApiQuery(q): ApiQuery<NameQuery>,
     req: Request,
-) -> ApiResult<(StatusCode, Json<Uploaded>)> {
+) -> ApiResult<(StatusCode, [(HeaderName, String); 1], Json<Uploaded>)> {
     let (upload, part_name) = read_upload(&state, req).await?;
     let name = file_name(q.name.or(part_name));
     let limits = state.import_limits.clone();
@@ -204,16 +204,18 @@ pub(crate) async fn post_character(
     .map_err(|e| ApiError::Internal(e.to_string()))?
     .map_err(|e| ApiError::Unprocessable(format!("the character cannot be imported: {e}")))?;
     let reply = store_upload(&state, &upload, "character", summary).await?;
-    Ok(telling(reply, &left_out))
+    Ok(telling(reply, "characters", &left_out))
 }
 
-/// The reply to an upload, its warnings telling which files sent with it
-/// were left out (the glTF does not refer to them). Said to this upload
-/// only: the stored summary describes the character, not how it came.
+/// The reply to an upload: `Location` is its record under
+/// `/v1/{collection}/`, and its warnings tell which files sent with it were
+/// left out (the glTF does not refer to them). Said to this upload only:
+/// the stored summary describes the character, not how it came.
 fn telling(
     (status, Json(mut uploaded)): (StatusCode, Json<Uploaded>),
+    collection: &str,
     left_out: &[String],
-) -> (StatusCode, Json<Uploaded>) {
+) -> (StatusCode, [(HeaderName, String); 1], Json<Uploaded>) {
     if !left_out.is_empty() {
         let notes = left_out.iter().map(|name| {
             serde_json::json!(format!(
@@ -225,7 +227,8 @@ fn telling(
             None => uploaded.summary["warnings"] = notes.collect(),
         }
     }
-    (status, Json(uploaded))
+    let location = format!("/v1/{collection}/{}", uploaded.digest);
+    (status, [(header::LOCATION, location)], Json(uploaded))
 }
 
 /// A file's bytes as a request or response body (OpenAPI's binary
@@ -257,13 +260,13 @@ pub(crate) struct ClipsQuery {
     request_body(description = "A glTF file of animations, sent as for POST /v1/characters",
         content((FileBytes = "model/gltf-binary"), (FileBytes = "model/gltf+json"), (FileBytes = "application/vnd.aobake.bundle"), (MultipartUpload = "multipart/form-data"))),
     security(("bearer" = ["submit"])),
-    responses((status = 201, description = "Stored", body = Uploaded), (status = 200, description = "Already stored", body = Uploaded), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 201, description = "Stored", body = Uploaded, headers(("Location" = String, description = "The upload's record (GET)"))), (status = 200, description = "Already stored", body = Uploaded, headers(("Location" = String, description = "The upload's record (GET)"))), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 413, description = "Body over the limit", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn post_clips(
     State(state): State<AppState>,
     _caller: Need<Submit>,
     ApiQuery(q): ApiQuery<ClipsQuery>,
     req: Request,
-) -> ApiResult<(StatusCode, Json<Uploaded>)> {
+) -> ApiResult<(StatusCode, [(HeaderName, String); 1], Json<Uploaded>)> {
     let character = load_upload(&state, &q.character, "character").await?;
     let (upload, part_name) = read_upload(&state, req).await?;
     let name = file_name(q.name.or(part_name));
@@ -292,7 +295,7 @@ pub(crate) async fn post_clips(
     .map_err(|e| ApiError::Internal(e.to_string()))?
     .map_err(ApiError::Unprocessable)?;
     let reply = store_upload(&state, &upload, "clips", summary).await?;
-    Ok(telling(reply, &left_out))
+    Ok(telling(reply, "clips", &left_out))
 }
 
 /// An upload's bytes, checked to be of `kind`.

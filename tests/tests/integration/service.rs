@@ -413,7 +413,20 @@ fn assets_are_served_with_etag_and_ranges() {
     let mut env = TestEnv::start(Options::default());
     env.start_worker(&[]);
     let digest = upload(&env, &character("RiggedSimple"));
-    let (_, b) = submit(&env, &digest, 8);
+    // A submit's Location is the bake, there to follow.
+    let request =
+        json!({"character": digest, "method": "vertex-linear", "params": quick_params(8)});
+    let (status, b, headers) = env.post_bytes(
+        "/v1/bakes",
+        ADMIN,
+        "application/json",
+        request.to_string().as_bytes(),
+    );
+    assert_eq!(status, 202, "{b}");
+    let location = &headers.iter().find(|(k, _)| k == "location").unwrap().1;
+    assert_eq!(*location, format!("/v1/bakes/{}", b["id"]));
+    let (_, followed) = env.request("GET", location, ADMIN, None).unwrap();
+    assert_eq!(followed["id"], b["id"]);
     let b = env.wait_bake(b["id"].as_i64().unwrap(), Duration::from_secs(120));
     assert_eq!(b["state"], "done", "{b}");
     assert_served_with_etag_and_ranges(&env, &b);
@@ -461,6 +474,45 @@ fn assert_served_with_etag_and_ranges(env: &TestEnv, b: &serde_json::Value) {
         .unwrap();
     assert_eq!(r.status().as_u16(), 304);
     assert!(r.body_mut().read_to_vec().unwrap().is_empty());
+    // HEAD: GET's status and headers (the length of the whole, or of the
+    // range) and no body; 404 for a digest that is not there.
+    let head = |range: Option<&str>, digest: &str| {
+        let mut req = agent
+            .head(format!("{}/v1/assets/{digest}", env.url))
+            .header("authorization", &auth);
+        if let Some(range) = range {
+            req = req.header("range", range);
+        }
+        let mut r = req.call().unwrap();
+        let header = |name: &str| {
+            r.headers()
+                .get(name)
+                .map(|v| v.to_str().unwrap().to_owned())
+        };
+        let got = (
+            r.status().as_u16(),
+            header("content-length"),
+            header("content-range"),
+            header("etag"),
+        );
+        assert!(r.body_mut().read_to_vec().unwrap().is_empty());
+        got
+    };
+    let etag = Some(format!("\"{asset_digest}\""));
+    assert_eq!(
+        head(None, asset_digest),
+        (200, Some(whole.len().to_string()), None, etag.clone())
+    );
+    assert_eq!(
+        head(Some("bytes=8-15"), asset_digest),
+        (
+            206,
+            Some("8".into()),
+            Some(format!("bytes 8-15/{}", whole.len())),
+            etag
+        )
+    );
+    assert_eq!(head(None, &"0".repeat(64)).0, 404);
     let mut r = agent
         .get(&url)
         .header("authorization", &auth)

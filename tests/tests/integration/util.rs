@@ -26,14 +26,20 @@ pub(crate) fn quick_params(poses: usize) -> Value {
 pub(crate) fn upload(env: &TestEnv, path: &Path) -> String {
     let bytes = std::fs::read(path).unwrap();
     let name = path.file_name().unwrap().to_str().unwrap();
-    let (status, body, _) = env.post_bytes(
+    let (status, body, headers) = env.post_bytes(
         &format!("/v1/characters?name={name}"),
         ADMIN,
         "model/gltf-binary",
         &bytes,
     );
     assert!(status == 201 || status == 200, "{status} {body}");
-    body["digest"].as_str().unwrap().to_owned()
+    let digest = body["digest"].as_str().unwrap().to_owned();
+    let location = headers.iter().find(|(k, _)| k == "location");
+    assert_eq!(
+        location.map(|(_, v)| v.as_str()),
+        Some(format!("/v1/characters/{digest}").as_str())
+    );
+    digest
 }
 
 /// Submits a vertex-linear bake; returns the answer.
