@@ -398,7 +398,9 @@ pub struct LeaseRequest {
     #[cfg_attr(feature = "schema", schema(maximum = 60))]
     pub wait_secs: u64,
     /// What casts the worker's rays: `cpu`, or `gpu: ` and the adapter;
-    /// shown in `GET /v1/workers`.
+    /// shown in `GET /v1/workers`. A process sends it with its first
+    /// request, which marks it started (`started_at`), also under an id
+    /// used before.
     #[serde(default)]
     #[cfg_attr(feature = "schema", schema(max_length = 200))]
     pub tracer: Option<String>,

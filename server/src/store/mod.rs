@@ -265,7 +265,9 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// Records that `workers` are alive and waiting for a job, in one
     /// transaction (a worker process's idle slots, at each long poll).
     async fn workers_idle(&self, workers: &[String]) -> Result<()>;
-    /// Records what casts a worker's rays (`cpu`, or `gpu: ADAPTER`).
+    /// Records what casts a worker's rays (`cpu`, or `gpu: ADAPTER`), which
+    /// a process tells in its first lease request: the worker (re)started
+    /// now, so its `started_at` is now, also under a name used before.
     async fn worker_tracer(&self, worker: &str, tracer: &str) -> Result<()>;
     /// Records that `workers` have stopped (a worker process exiting
     /// gracefully): listed as `stopped` at once, with no job, not idle GPU

@@ -1286,7 +1286,7 @@ impl<B: Backend> Store for SqlStore<B> {
     async fn worker_tracer(&self, worker: &str, tracer: &str) -> Result<()> {
         in_tx!(self, Durability::Queue, |c| {
             c.execute(
-                B::sql("INSERT INTO workers (id, state, job_id, last_seen, started_at, tracer) VALUES ($1, 'idle', NULL, {now}, {now}, $2) ON CONFLICT (id) DO UPDATE SET tracer = $2, last_seen = {now}")
+                B::sql("INSERT INTO workers (id, state, job_id, last_seen, started_at, tracer) VALUES ($1, 'idle', NULL, {now}, {now}, $2) ON CONFLICT (id) DO UPDATE SET tracer = $2, last_seen = {now}, started_at = {now}")
                     .bind(worker)
                     .bind(tracer),
             )

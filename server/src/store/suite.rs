@@ -80,6 +80,7 @@ pub(crate) async fn run_all(store: &dyn Store) {
     tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store).await;
     a_stopped_worker_is_listed_so_at_once_and_holds_no_job_back(store).await;
     a_slot_asking_again_gets_the_lease_it_never_heard(store).await;
+    a_worker_started_again_under_its_name_is_listed_as_started_then(store).await;
     a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store).await;
     a_batch_split_by_failures_leases_each_job_once(store).await;
     tokens_are_listed_newest_first_and_deleted(store).await;
@@ -537,6 +538,27 @@ async fn a_slot_asking_again_gets_the_lease_it_never_heard(store: &dyn Store) {
         .await
         .unwrap();
     store.control(created.id, Action::Cancel).await.unwrap();
+}
+
+/// A process tells its tracer once, as it starts: one that starts again
+/// under a name used before (`aobake serve` restarting a local worker) is
+/// listed as started then, not at the first start.
+async fn a_worker_started_again_under_its_name_is_listed_as_started_then(store: &dyn Store) {
+    let started = |workers: Vec<super::WorkerRow>| {
+        workers
+            .into_iter()
+            .find(|w| w.id == "again")
+            .map(|w| w.started_at)
+            .unwrap()
+    };
+    store.worker_tracer("again", "cpu").await.unwrap();
+    let first = started(store.workers(60_000).await.unwrap());
+    tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    store.workers_idle(&["again".to_owned()]).await.unwrap();
+    assert_eq!(started(store.workers(60_000).await.unwrap()), first);
+    store.worker_tracer("again", "cpu").await.unwrap();
+    assert!(started(store.workers(60_000).await.unwrap()) > first);
+    store.workers_stopped(&["again".to_owned()]).await.unwrap();
 }
 
 async fn uploads_are_idempotent(store: &dyn Store) {
