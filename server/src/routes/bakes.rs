@@ -4,6 +4,7 @@
 
 use aobake_api::schema::{Digest, Refusals};
 use aobake_api::{BakeKey, BakeRequest, BakeView, PatchBody, PreviewItem, PreviewList, Progress};
+use std::collections::HashMap;
 use std::convert::Infallible;
 use std::time::Duration;
 
@@ -396,15 +397,25 @@ pub(crate) async fn key(
 
 #[utoipa::path(get, path = "/v1/events", tag = "bakes",
     security(("bearer" = ["read"])),
-    responses((status = 200, description = "Server-sent events: `bake` with {id, state, done, total} whenever any bake or one of its jobs changes (a job leased, moving or finished; `done` is the view's `progress.done`, running jobs' progress included, so two events can carry the same numbers); a dashboard's bakes list. The stream ends within 5 s of its token being revoked or expiring", content_type = "text/event-stream", body = String), Refusals))]
+    responses((status = 200, description = "Server-sent events: `bake` with {id, state, done, total} whenever any bake or one of its jobs changes (a job leased, moving or finished; `done` is the view's `progress.done`, running jobs' progress included; an event that says what the bake's last one said is not sent again); a dashboard's bakes list. The stream ends within 5 s of its token being revoked or expiring", content_type = "text/event-stream", body = String), Refusals))]
 pub(crate) async fn all_events(
     State(state): State<AppState>,
     caller: Need<Read>,
 ) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
-    let updates = BroadcastStream::new(state.events.subscribe()).filter_map(|e| match e {
-        Ok(e) => Some(Ok(bake_event(&e))),
+    // Each bake's last event sent: one that says the same again (a job
+    // leased at no progress, a heartbeat that moved nothing) is not sent.
+    let mut sent: HashMap<i64, crate::state::BakeEvent> = HashMap::new();
+    let updates = BroadcastStream::new(state.events.subscribe()).filter_map(move |e| match e {
+        Ok(e) => (sent.get(&e.id) != Some(&e)).then(|| {
+            let event = bake_event(&e);
+            sent.insert(e.id, e);
+            Ok(event)
+        }),
         // A slow listener that missed events is told to reload.
-        Err(_) => Some(Ok(Event::default().event("lagged").data("reload"))),
+        Err(_) => {
+            sent.clear();
+            Some(Ok(Event::default().event("lagged").data("reload")))
+        }
     });
     Sse::new(caller.0.while_valid(&state, updates))
         .keep_alive(KeepAlive::new().interval(Duration::from_secs(15)))
@@ -429,8 +440,14 @@ pub(crate) async fn events(
     let bake = find(&state, id).await?;
     let first = crate::state::BakeEvent::of(&bake);
     let initial = tokio_stream::once(Ok(bake_event(&first)));
+    // An event that says what the last one said is not sent again.
+    let mut last = first;
     let updates = BroadcastStream::new(rx).filter_map(move |e| match e {
-        Ok(e) if e.id == id => Some(Ok(bake_event(&e))),
+        Ok(e) if e.id == id && e != last => {
+            let event = bake_event(&e);
+            last = e;
+            Some(Ok(event))
+        }
         _ => None,
     });
     Ok(

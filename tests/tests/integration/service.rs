@@ -679,6 +679,8 @@ fn progress_arrives_as_server_sent_events() {
     });
     assert_eq!(events[0]["state"], "queued");
     assert!(events.len() >= 3, "{events:?}");
+    // Each event says something new: none repeats the one before.
+    assert!(events.windows(2).all(|w| w[0] != w[1]), "{events:?}");
     let progress: Vec<i64> = events.iter().map(|e| e["done"].as_i64().unwrap()).collect();
     assert!(progress.windows(2).all(|w| w[0] <= w[1]), "{progress:?}");
     assert_eq!(
