@@ -155,6 +155,119 @@ fn submit(env: &TestEnv, token: &str, character: &str, poses: usize) -> i64 {
     b["id"].as_i64().unwrap()
 }
 
+/// Every parameter of a bake view as `path → JSON text`, as the compare
+/// page lists them.
+fn flat_params(v: &Value, prefix: &str, out: &mut Vec<(String, String)>) {
+    for (k, x) in v.as_object().into_iter().flatten() {
+        let path = if prefix.is_empty() {
+            k.clone()
+        } else {
+            format!("{prefix}.{k}")
+        };
+        if x.is_object() {
+            flat_params(x, &path, out);
+        } else {
+            out.push((path, x.to_string()));
+        }
+    }
+}
+
+/// Two versions of a character side by side, reached from the versions
+/// page: what they were baked from, the parameters that differ, and each
+/// headline figure of their reports with its change, better or worse as
+/// the figure goes (PSNR up, RMSE and bytes down); a bake without a
+/// report says so instead.
+#[test]
+fn two_versions_compare_their_parameters_and_quality() {
+    let mut env = TestEnv::start(Options::default());
+    let driver = Driver::start();
+    env.start_worker(&[]);
+    let digest = upload(&env, &character("RiggedSimple"));
+    let (first, second) = (
+        submit(&env, ADMIN, &digest, 8),
+        submit(&env, ADMIN, &digest, 12),
+    );
+    let view = |id: i64| {
+        let b = env.wait_bake(id, Duration::from_secs(120));
+        assert_eq!(b["state"], "done", "{b}");
+        b
+    };
+    let (va, vb) = (view(first), view(second));
+    let report = |id: i64| {
+        env.request("GET", &format!("/v1/bakes/{id}/report"), ADMIN, None)
+            .unwrap()
+            .1
+    };
+    let (ra, rb) = (report(first), report(second));
+    let (mut pa, mut pb) = (Vec::new(), Vec::new());
+    flat_params(&va["params"], "", &mut pa);
+    flat_params(&vb["params"], "", &mut pb);
+    let differ: Vec<&String> = pa
+        .iter()
+        .filter(|(k, v)| !pb.iter().any(|(l, w)| l == k && w == v))
+        .map(|(k, _)| k)
+        .collect();
+    assert!(differ.iter().any(|k| k.ends_with("poses")), "{differ:?}");
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let c = browser(&driver).await;
+        c.goto(&format!("{}/#token={ADMIN}&next=/versions/{digest}/vertex-linear", env.url))
+            .await
+            .unwrap();
+        let link = format!("tr[data-bake=\"{second}\"] a.compare");
+        wait_for(&c, "the compare link", &format!("document.querySelector('{link}')"), Duration::from_secs(20)).await;
+        assert_eq!(
+            eval(&c, &format!("return document.querySelector('tr[data-bake=\"{first}\"] a.compare')")).await,
+            Value::Null,
+            "the first version has none before it"
+        );
+        c.find(Locator::Css(&link)).await.unwrap().click().await.unwrap();
+        wait_for(&c, "the comparison", "document.querySelector('#compare-quality')", Duration::from_secs(20)).await;
+        assert_eq!(eval(&c, "return location.hash").await, json!(format!("#/compare/{first}/{second}")));
+        let same = eval(&c, "return Object.fromEntries([...document.querySelectorAll('#compare-inputs tr[data-same]')].map(r => [r.dataset.input, r.dataset.same]))").await;
+        assert_eq!(same, json!({"character": "same", "clips": "same", "method": "same"}));
+        // The parameters that differ, each with both values.
+        let listed = eval(&c, "return [...document.querySelectorAll('#params-differ tr[data-param]')].map(r => r.dataset.param)").await;
+        let mut want: Vec<&String> = differ.clone();
+        want.sort();
+        assert_eq!(listed, json!(want));
+        let poses = eval(&c, "const r = [...document.querySelectorAll('#params-differ tr[data-param]')].find(r => r.dataset.param.endsWith('poses') && r.dataset.param.split('.').pop() === 'poses'); return r && [...r.querySelectorAll('td')].slice(1).map(td => td.textContent)").await;
+        assert_eq!(poses, json!(["8", "12"]));
+        // The figures: each change is the reports' difference, judged by
+        // the figure's direction.
+        let rows = eval(&c, "return [...document.querySelectorAll('#compare-quality tr[data-figure]')].map(r => [r.dataset.figure, Number(r.dataset.change), r.dataset.verdict])").await;
+        let rows = rows.as_array().unwrap();
+        let figure = |label: &str| {
+            rows.iter()
+                .find(|r| r[0] == label)
+                .unwrap_or_else(|| panic!("no {label:?} in {rows:?}"))
+                .clone()
+        };
+        let psnr = |r: &Value| r["evaluation"]["random_poses"]["model"]["mean"]["psnr_db"].as_f64().unwrap();
+        let row = figure("Held-out random poses: model PSNR");
+        let d = psnr(&rb) - psnr(&ra);
+        assert!((row[1].as_f64().unwrap() - d).abs() < 1e-9, "{row} against {d}");
+        let verdict = if d > 0.0 { "better" } else if d < 0.0 { "worse" } else { "same" };
+        assert_eq!(row[2], verdict, "{row}");
+        let bytes = |r: &Value| r["sizes"]["asset_bytes"].as_f64().unwrap();
+        let row = figure("Asset bytes");
+        let d = bytes(&rb) - bytes(&ra);
+        assert_eq!(row[1].as_f64().unwrap(), d, "{row}");
+        let verdict = if d < 0.0 { "better" } else if d > 0.0 { "worse" } else { "same" };
+        assert_eq!(row[2], verdict, "{row}");
+        shot(&c, "compare-versions").await;
+        // A bake without a report yet: no figures, and why.
+        let third = submit(&env, ADMIN, &digest, 16);
+        env.request("POST", &format!("/v1/bakes/{third}/cancel"), ADMIN, None).unwrap();
+        c.goto(&format!("{}/#/compare/{first}/{third}", env.url)).await.unwrap();
+        let said = wait_for(&c, "no quality to compare", "document.querySelector('#no-quality') && document.querySelector('#no-quality').textContent", Duration::from_secs(20)).await;
+        assert!(said.as_str().unwrap().contains(&format!("#{third} (cancelled)")), "{said}");
+    });
+}
+
 /// A paused bake's page says the jobs under way finish first (a pause
 /// leases nothing new), and stops saying it once they did; a queued
 /// bake's page says how many bakes run before it.
@@ -405,7 +518,7 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         let versions = wait_for(
             &c,
             "the versions",
-            "document.querySelectorAll('main tbody tr').length === 2 && [...document.querySelectorAll('main tbody tr a')].map(a => a.textContent)",
+            "document.querySelectorAll('main tbody tr').length === 2 && [...document.querySelectorAll('main tbody tr td:nth-child(2) a')].map(a => a.textContent)",
             Duration::from_secs(20),
         )
         .await;

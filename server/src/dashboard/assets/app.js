@@ -815,15 +815,139 @@ async function versionsPage(signal, character, method) {
   }
   const list = await json(`/v1/characters/${character}/bakes?method=${encodeURIComponent(method)}`);
   show(h("h1", {}, "Versions of ", characterLabel(character), ` (${method})`),
-    h("table", {}, h("thead", {}, h("tr", {}, ...["Version", "Bake", "State", "Bake key", "Asset", "Finished"]
+    h("table", {}, h("thead", {}, h("tr", {}, ...["Version", "Bake", "State", "Bake key", "Asset", "Finished", "Compare"]
       .map((t) => h("th", {}, t)))),
-      h("tbody", {}, ...list.map((b, i) => h("tr", {},
+      h("tbody", {}, ...list.map((b, i) => h("tr", { "data-bake": b.id },
         h("td", { class: "num" }, list.length - i),
         h("td", {}, h("a", { href: `#/bakes/${b.id}` }, `#${b.id}`)),
         h("td", {}, badge(b.state)),
         h("td", { class: "mono" }, short(b.key)),
         h("td", { class: "mono" }, short(b.asset) || "—"),
-        h("td", {}, when(b.finished_at)))))));
+        h("td", {}, when(b.finished_at)),
+        // Against the version before it (the list is newest first).
+        h("td", {}, list[i + 1] ? h("a", { class: "compare", href: `#/compare/${list[i + 1].id}/${b.id}` },
+          `against #${list[i + 1].id}`) : ""))))));
+}
+
+// ---------- comparing two bakes ----------
+
+// A bake's headline figures from its report, by family: each with whether
+// a larger value is better ("up") or worse ("down").
+function headline(report) {
+  const rows = [];
+  const add = (label, value, better, digits = 4, unit = "") => {
+    if (typeof value === "number" && isFinite(value)) rows.push({ label, value, better, digits, unit });
+  };
+  const ev = report?.evaluation;
+  if (!ev) return rows;
+  if (report.fit) {
+    const u = ev.unseen_clips;
+    if (u) {
+      add("Unseen clips: model PSNR", u.model_psnr_db, "up", 2, " dB");
+      add("Unseen clips: gain over the static average", u.mean_psnr_gain_db, "up", 2, " dB");
+      add("Unseen clips: worst fold's gain", u.min_psnr_gain_db, "up", 2, " dB");
+    }
+    for (const [name, c] of [["Training clip frames", ev.training_clip_frames || ev.clip_frames],
+      ["Held-out random poses", ev.random_poses]]) {
+      if (!c) continue;
+      add(`${name}: model PSNR`, c.model?.mean?.psnr_db, "up", 2, " dB");
+      add(`${name}: model RMSE`, c.model?.mean?.rmse, "down");
+    }
+    add("Multiply-adds per vertex", ev.multiply_adds_per_vertex, "down", 1);
+  } else if (report.layout || report.parts) {
+    const receivers = report.layout ? "space" : "vertices";
+    for (const v of ev.variants || []) {
+      add(`${v.name}: ${receivers} RMSE`, v[receivers]?.mean?.rmse, "down");
+      add(`${v.name}: ground RMSE`, v.ground?.mean?.rmse, "down");
+    }
+  }
+  add("Asset bytes", report.sizes?.asset_bytes, "down", 0);
+  return rows;
+}
+
+// Every parameter as `path → value`, f32 values as people wrote them.
+function flatParams(params, prefix = "", out = new Map()) {
+  for (const [k, v] of Object.entries(params || {})) {
+    const path = prefix ? `${prefix}.${k}` : k;
+    if (v && typeof v === "object" && !Array.isArray(v)) flatParams(v, path, out);
+    else out.set(path, JSON.stringify(v, (_, x) => shortestF32(x)));
+  }
+  return out;
+}
+
+// The change from a to b, signed, and whether it is better, worse or
+// neither (no change, or a figure without a direction).
+function change(a, b, better, digits, unit) {
+  const d = b - a;
+  const sign = d > 0 ? "+" : d < 0 ? "−" : "±";
+  const verdict = d === 0 ? "same" : (d > 0) === (better === "up") ? "better" : "worse";
+  return { text: `${sign}${Math.abs(d).toFixed(digits)}${unit}`, verdict, value: d };
+}
+
+async function comparePage(signal, a, b) {
+  const [bakeA, bakeB] = await Promise.all([json(`/v1/bakes/${a}`), json(`/v1/bakes/${b}`)]);
+  const reportOf = (bake) => (bake.report ? json(`/v1/bakes/${bake.id}/report`) : Promise.resolve(null));
+  const [reportA, reportB] = await Promise.all([reportOf(bakeA), reportOf(bakeB)]);
+  if (signal.aborted) return;
+  const head = (...cells) => h("thead", {}, h("tr", {}, ...cells.map((t, i) => h("th", { class: i ? "num" : null }, t))));
+  const label = (bake) => h("a", { href: `#/bakes/${bake.id}` }, `#${bake.id}`);
+
+  // What each was baked from.
+  const same = (x, y) => (x === y ? "same" : "differs");
+  const inputs = h("table", { id: "compare-inputs" },
+    h("thead", {}, h("tr", {}, h("th", {}, ""), h("th", {}, label(bakeA)), h("th", {}, label(bakeB)))),
+    h("tbody", {},
+      h("tr", { "data-input": "character", "data-same": same(bakeA.character, bakeB.character) },
+        h("td", {}, "Character"), h("td", {}, characterLabel(bakeA.character)), h("td", {}, characterLabel(bakeB.character))),
+      h("tr", { "data-input": "clips", "data-same": same(bakeA.clips.join(), bakeB.clips.join()) },
+        h("td", {}, "Clips"), ...[bakeA, bakeB].map((x) => h("td", { class: "mono" }, x.clips.map(short).join(", ") || "in the character file"))),
+      h("tr", { "data-input": "method", "data-same": same(bakeA.method, bakeB.method) },
+        h("td", {}, "Method"), h("td", {}, bakeA.method), h("td", {}, bakeB.method)),
+      h("tr", { "data-input": "state" }, h("td", {}, "State"), h("td", {}, badge(bakeA.state)), h("td", {}, badge(bakeB.state))),
+      h("tr", { "data-input": "finished" }, h("td", {}, "Finished"),
+        ...[bakeA, bakeB].map((x) => h("td", {}, when(x.finished_at) || "—")))));
+
+  // The parameters that differ; the others folded away.
+  const pa = flatParams(bakeA.params);
+  const pb = flatParams(bakeB.params);
+  const keys = [...new Set([...pa.keys(), ...pb.keys()])].sort();
+  const differ = keys.filter((k) => pa.get(k) !== pb.get(k));
+  const alike = keys.filter((k) => pa.get(k) === pb.get(k));
+  const paramRow = (k) => h("tr", { "data-param": k }, h("td", { class: "mono" }, k),
+    h("td", { class: "mono" }, pa.get(k) ?? "—"), h("td", { class: "mono" }, pb.get(k) ?? "—"));
+  const params = h("section", { id: "compare-params" },
+    h("h2", {}, "Parameters"),
+    differ.length
+      ? h("table", { id: "params-differ" }, head("Parameter", `#${a}`, `#${b}`), h("tbody", {}, differ.map(paramRow)))
+      : h("p", { class: "muted" }, "The same parameters."),
+    alike.length ? h("details", {}, h("summary", {}, `${alike.length} parameters the same`),
+      h("table", {}, h("tbody", {}, alike.map(paramRow)))) : null);
+
+  // The headline figures side by side, with the change from the first.
+  const fa = headline(reportA);
+  const fb = new Map(headline(reportB).map((f) => [f.label, f]));
+  let quality;
+  if (!reportA || !reportB) {
+    const missing = [bakeA, bakeB].filter((x) => !x.report).map((x) => `#${x.id} (${x.state})`);
+    quality = h("p", { class: "muted", id: "no-quality" }, `No quality to compare: ${missing.join(" and ")} has no report yet.`);
+  } else {
+    const shared = fa.filter((f) => fb.has(f.label));
+    quality = shared.length ? h("table", { id: "compare-quality" },
+      head("Figure", `#${a}`, `#${b}`, `Change (#${b} − #${a})`),
+      h("tbody", {}, shared.map((f) => {
+        const g = fb.get(f.label);
+        const c = change(f.value, g.value, f.better, f.digits, f.unit);
+        return h("tr", { "data-figure": f.label, "data-change": c.value, "data-verdict": c.verdict },
+          h("td", {}, f.label),
+          h("td", { class: "num" }, `${f.value.toFixed(f.digits)}${f.unit}`),
+          h("td", { class: "num" }, `${g.value.toFixed(g.digits)}${g.unit}`),
+          h("td", { class: `num ${c.verdict}` }, c.verdict === "same" ? "same" : `${c.text} (${c.verdict})`));
+      })))
+      : h("p", { class: "muted", id: "no-quality" }, "The two reports share no figure (different methods).");
+  }
+  show(h("h1", {}, "Bake ", label(bakeA), " against ", label(bakeB), " ", characterLabel(bakeB.character),
+    " ", h("span", { class: "muted" }, bakeB.method)),
+  inputs, params, h("h2", {}, "Quality"), quality);
 }
 
 // ---------- routing ----------
@@ -845,6 +969,9 @@ async function route() {
     } else if (parts[0] === "bakes" && parts[1]) await bakePage(signal, Number(parts[1]));
     else if (parts[0] === "workers") await workersPage(signal);
     else if (parts[0] === "versions") await versionsPage(signal, parts[1], parts[2]);
+    else if (parts[0] === "compare" && /^[1-9][0-9]*$/.test(parts[1]) && /^[1-9][0-9]*$/.test(parts[2])) {
+      await comparePage(signal, Number(parts[1]), Number(parts[2]));
+    }
     else await bakesPage(signal);
   } catch (e) {
     if (!signal.aborted && !(e instanceof ApiError && e.status === 401)) show(failure(e));
