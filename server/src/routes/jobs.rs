@@ -269,7 +269,7 @@ async fn stored(blobs: &dyn crate::blobs::Blobs, digest: &str) -> ApiResult<()> 
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/complete", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = CompleteRequest,
     security(("bearer" = ["worker"])),
-    responses((status = 204, description = "Completed"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
+    responses((status = 204, description = "Completed (also when this lease completed it already: a completion sent again after its answer was lost is counted once)"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn complete(
     State(state): State<AppState>,
     _caller: Need<Worker>,
@@ -290,7 +290,7 @@ pub(crate) async fn complete(
 
 #[utoipa::path(post, path = "/v1/jobs/completions", tag = "worker protocol", request_body = CompleteManyRequest,
     security(("bearer" = ["worker"])),
-    responses((status = 200, description = "One result per completion: recorded, or the problem that refused it", body = CompleteManyReply), Refusals))]
+    responses((status = 200, description = "One result per completion: recorded (or recorded before under the same lease: a completion sent again is counted once), or the problem that refused it", body = CompleteManyReply), Refusals))]
 pub(crate) async fn complete_many(
     State(state): State<AppState>,
     _caller: Need<Worker>,

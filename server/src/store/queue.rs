@@ -1046,14 +1046,18 @@ impl<B: Backend> Store for SqlStore<B> {
             // lease token); per bake, its counts (publishing the asset,
             // report and plot when a job produced them); then one for
             // the dependents, one for the workers, one wake.
-            let mut done: Vec<Result<(i64, i64)>> = Vec::with_capacity(items.len());
+            // Per item: the job, its bake, and whether it completed now
+            // (not a completion sent again).
+            let mut done: Vec<Result<(i64, i64, bool)>> = Vec::with_capacity(items.len());
             // Per bake: work and jobs done, and the outputs it publishes.
             let mut counts: BTreeMap<i64, BakeCounts> = BTreeMap::new();
             let mut idle: BTreeSet<String> = BTreeSet::new();
             for item in items {
+                // The token stays on the completed job: it recognises the
+                // same completion sent again.
                 let row: Option<(i64, i64, Option<String>)> = c
                     .optional(
-                        B::sql("UPDATE jobs SET state = 'completed', lease_token = NULL, lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {now} WHERE id = $3 AND lease_token = $4 AND state = 'running' RETURNING bake_id, work, worker")
+                        B::sql("UPDATE jobs SET state = 'completed', lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {now} WHERE id = $3 AND lease_token = $4 AND state = 'running' RETURNING bake_id, work, worker")
                             .bind(serde_json::to_string(&item.completion.outputs)?)
                             .bind(item.completion.timings.to_string())
                             .bind(item.job)
@@ -1061,10 +1065,24 @@ impl<B: Backend> Store for SqlStore<B> {
                     )
                     .await?;
                 let Some((bake_id, work, worker)) = row else {
-                    done.push(Err(StoreError::LeaseLost(format!(
-                        "job {} is not leased with this token",
-                        item.job
-                    ))));
+                    // A completion whose answer was lost (a server that
+                    // died after committing it, a dropped connection) and
+                    // that the worker sends again, here or to another
+                    // server: done already, counted once.
+                    let again: Option<i64> = c
+                        .scalar(
+                            B::sql("SELECT bake_id FROM jobs WHERE id = $1 AND lease_token = $2 AND state = 'completed'")
+                                .bind(item.job)
+                                .bind(&item.token),
+                        )
+                        .await?;
+                    done.push(match again {
+                        Some(bake_id) => Ok((item.job, bake_id, false)),
+                        None => Err(StoreError::LeaseLost(format!(
+                            "job {} is not leased with this token",
+                            item.job
+                        ))),
+                    });
                     continue;
                 };
                 counts
@@ -1072,9 +1090,15 @@ impl<B: Backend> Store for SqlStore<B> {
                     .or_default()
                     .add(work, &item.completion);
                 idle.extend(worker);
-                done.push(Ok((item.job, bake_id)));
+                done.push(Ok((item.job, bake_id, true)));
             }
-            let completed: Vec<i64> = done.iter().flatten().map(|&(job, _)| job).collect();
+            // Those completed now, not those sent again.
+            let completed: Vec<i64> = done
+                .iter()
+                .flatten()
+                .filter(|&&(_, _, now)| now)
+                .map(|&(job, _, _)| job)
+                .collect();
             let mut bakes = HashMap::new();
             for (bake_id, n) in counts {
                 let bake = c
@@ -1090,6 +1114,12 @@ impl<B: Backend> Store for SqlStore<B> {
                     .await?
                     .cook()?;
                 bakes.insert(bake_id, with_running_work::<B>(c, bake).await?);
+            }
+            // A replay's bake as it is now (its counts moved then).
+            for &(_, bake_id, _) in done.iter().flatten() {
+                if let std::collections::hash_map::Entry::Vacant(e) = bakes.entry(bake_id) {
+                    e.insert(bake_by_id::<B>(c, bake_id, false).await?);
+                }
             }
             // After the bakes' rows, locked in id order: two batches of
             // one bake, which share dependents, take their locks in turn.
@@ -1109,7 +1139,7 @@ impl<B: Backend> Store for SqlStore<B> {
             }
             Ok(done
                 .into_iter()
-                .map(|r| r.map(|(_, id)| bakes[&id].clone()))
+                .map(|r| r.map(|(_, id, _)| bakes[&id].clone()))
                 .collect())
         })
     }
