@@ -11,7 +11,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use aobake_e2e::{ADMIN, Options, TestEnv, character};
-use fantoccini::{Client, ClientBuilder, Locator};
+use fantoccini::{Client, ClientBuilder, Locator, key::Key};
 use serde_json::{Value, json};
 use std::os::unix::process::CommandExt as _;
 
@@ -450,6 +450,14 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
                 values.len() == 2 && values.iter().all(|v| v.as_f64().is_some_and(|x| x > 0.0 && x < 1.0)),
                 "model and GTAO RMSE: {screen}"
             );
+        }
+        // A vertex asset does not shade the ground: each still says so
+        // under its table, not only in the dash's tooltip.
+        let notes = eval(&c, "return [...document.querySelectorAll('#previews figure[data-kind=\"still\"] .not-judged')].map(p => p.textContent)").await;
+        let notes = notes.as_array().unwrap();
+        assert_eq!(notes.len(), 3, "{notes:?}");
+        for note in notes {
+            assert!(note.as_str().unwrap().contains("on the ground is not judged: a vertex asset shades the character"), "{note}");
         }
         let plot = eval(&c, "const i = document.querySelector('#report img'); return i && i.naturalWidth").await;
         assert!(plot.as_u64().unwrap_or(0) > 100, "the PSNR plot shows: {plot}");
@@ -1072,6 +1080,15 @@ fn the_viewer_plays_every_method_and_matches_aobake_preview() {
                       at('pointerdown', 200); at('pointermove', 260); at('pointerup', 260); return null").await;
             let (share, _, _) = viewer_pixels(&c).await.differ(&model);
             assert!(share > EDGE_SHARE, "a drag did not turn the camera: {share}");
+            // The keyboard: Home goes back to the previews' camera (the
+            // model's pixels again), an arrow key turns the view.
+            let canvas = c.find(Locator::Css("#viewer canvas")).await.unwrap();
+            canvas.send_keys(&Key::Home.to_string()).await.unwrap();
+            let (share, _, _) = viewer_pixels(&c).await.differ(&model);
+            assert!(share <= EDGE_SHARE, "Home did not go back to the previews' camera: {share}");
+            canvas.send_keys(&Key::Left.to_string()).await.unwrap();
+            let (share, _, _) = viewer_pixels(&c).await.differ(&model);
+            assert!(share > EDGE_SHARE, "an arrow key did not turn the camera: {share}");
             c.find(Locator::Css("#viewer-reset")).await.unwrap().click().await.unwrap();
             shot(&c, "9-viewer-orbited").await;
         }

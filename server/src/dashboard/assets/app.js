@@ -554,17 +554,31 @@ function previewFigure(p, url) {
 // A still's screen-space baseline (GTAO, its third panel) beside the
 // model: RMSE against per-pixel ray-traced AO, and each one's cost.
 function screenSpaceTable(s) {
-  const row = (name, e) => e && h("tr", {},
-    h("td", {}, `${name} (${e.pixels} px)`),
-    e.model ? h("td", { class: "num" }, fmt(e.model.rmse))
-      : h("td", { class: "num", title: e.model_not_judged || "" }, "—"),
-    h("td", { class: "num" }, fmt(e.gtao.rmse)),
-    h("td", { class: "num" }, fmt(e.per_vertex_truth.rmse)));
+  // Where the model is not judged (a surface its method does not shade),
+  // the dash says why in a note under the table, not only in a tooltip.
+  const unjudged = [];
+  const row = (name, e) => {
+    if (!e) return null;
+    let model;
+    if (e.model) model = h("td", { class: "num" }, fmt(e.model.rmse));
+    else {
+      if (e.model_not_judged) unjudged.push([name, e.model_not_judged]);
+      model = h("td", { class: "num", title: e.model_not_judged || "" }, e.model_not_judged ? "—*" : "—");
+    }
+    return h("tr", {},
+      h("td", {}, `${name} (${e.pixels} px)`),
+      model,
+      h("td", { class: "num" }, fmt(e.gtao.rmse)),
+      h("td", { class: "num" }, fmt(e.per_vertex_truth.rmse)));
+  };
+  const rows = [row("character", s.character), row("ground", s.ground)];
   return h("div", { class: "screen-space" },
     h("table", { class: "screen-space-errors" },
       h("caption", {}, "RMSE against per-pixel ray-traced AO"),
       h("tr", {}, h("th", {}, "surface"), h("th", {}, "baked model"), h("th", {}, "GTAO"), h("th", {}, "per-vertex truth")),
-      row("character", s.character), row("ground", s.ground)),
+      rows),
+    unjudged.length ? h("p", { class: "muted not-judged" },
+      unjudged.map(([name, why]) => `* The baked model on the ${name} is not judged: ${why}. `)) : null,
     h("p", { class: "muted" },
       `Per frame on this adapter: GTAO ${fmt(s.gtao_ms, 2)} ms (${s.fetches_per_pixel} texel reads per pixel, radius ${fmt(s.gtao.radius, 3)}), `,
       `the model's evaluation ${fmt(s.model_ms, 2)} ms.`));

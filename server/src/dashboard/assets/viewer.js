@@ -181,7 +181,10 @@ function setAttribute(gl, b, values) {
 // The viewer of bake `id`: a section that loads itself. `api(path)`
 // fetches with the page's token; `h` makes elements.
 export function viewerSection(id, { api, h }) {
-  const canvas = h("canvas", { width: 480, height: 480, class: "viewer-canvas" });
+  const canvas = h("canvas", {
+    width: 480, height: 480, class: "viewer-canvas", tabindex: 0,
+    "aria-label": "The character in 3D: drag or use the arrow keys to turn it, the wheel or + and − to zoom, Home for the previews' camera",
+  });
   const status = h("p", { class: "muted", id: "viewer-status" }, "Loading the viewer…");
   const clipSelect = h("select", { id: "viewer-clip", "aria-label": "clip" });
   const play = h("button", { id: "viewer-play" }, "Pause");
@@ -270,10 +273,7 @@ export function viewerSection(id, { api, h }) {
     };
     clipSelect.value = name;
     slider.max = meta.times.length - 1;
-    const c = meta.camera;
-    const offset = sub(c.eye, c.target);
-    const distance = Math.hypot(...offset);
-    orbit = { azimuth: Math.atan2(offset[0], offset[2]), elevation: Math.asin(offset[1] / distance), distance, home: true };
+    orbit = homeOrbit(meta.camera);
     const traced = meta.errors.length > 0;
     for (const input of section.querySelectorAll("input[name=viewer-mode]")) {
       if (input.value === "truth" || input.value === "error") {
@@ -283,6 +283,13 @@ export function viewerSection(id, { api, h }) {
       }
     }
     setFrame(meta.start || 0);
+  }
+
+  // The orbit at the previews' camera.
+  function homeOrbit(c) {
+    const offset = sub(c.eye, c.target);
+    const distance = Math.hypot(...offset);
+    return { azimuth: Math.atan2(offset[0], offset[2]), elevation: Math.asin(offset[1] / distance), distance, home: true };
   }
 
   function cameraEye() {
@@ -427,6 +434,26 @@ export function viewerSection(id, { api, h }) {
     orbit.elevation = Math.max(-1.5, Math.min(1.5, orbit.elevation + (e.clientY - drag.y) * 0.01));
     orbit.home = false;
     drag = { x: e.clientX, y: e.clientY };
+    draw();
+  });
+  // The keyboard turns and zooms as the pointer does; Home goes back to
+  // the previews' camera.
+  canvas.addEventListener("keydown", (e) => {
+    if (!orbit || !clip || e.altKey || e.ctrlKey || e.metaKey) return;
+    const turn = Math.PI / 12; // 15°
+    const elevate = (by) => Math.max(-1.5, Math.min(1.5, orbit.elevation + by));
+    switch (e.key) {
+      case "ArrowLeft": orbit.azimuth += turn; break;
+      case "ArrowRight": orbit.azimuth -= turn; break;
+      case "ArrowUp": orbit.elevation = elevate(turn); break;
+      case "ArrowDown": orbit.elevation = elevate(-turn); break;
+      case "+": case "=": orbit.distance /= 1.1; break;
+      case "-": case "_": orbit.distance *= 1.1; break;
+      case "Home": orbit = homeOrbit(clip.meta.camera); break;
+      default: return;
+    }
+    if (e.key !== "Home") orbit.home = false;
+    e.preventDefault();
     draw();
   });
   canvas.addEventListener("wheel", (e) => {
