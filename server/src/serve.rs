@@ -123,6 +123,19 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         Some(url) => blobs::open(url)?,
         None => Arc::new(LocalBlobs::open(&args.data.join("blobs"))?),
     };
+    // A bucket that is not there (or refuses these credentials) would
+    // fail every upload with a 500: refuse to start instead.
+    if let Some(url) = &args.blobs {
+        let shown = blobs::redacted(url);
+        match tokio::time::timeout(std::time::Duration::from_secs(15), blobs.probe()).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) if e.to_string().contains("NoSuchBucket") => anyhow::bail!(
+                "the blob store {shown} cannot be used: its bucket does not exist (create it first): {e}"
+            ),
+            Ok(Err(e)) => anyhow::bail!("the blob store {shown} cannot be used: {e}"),
+            Err(_) => anyhow::bail!("the blob store {shown} did not answer in 15 s"),
+        }
+    }
     let policy = QueuePolicy {
         lease_ms: (args.lease_secs * 1000.0) as i64,
         max_attempts: args.max_attempts,

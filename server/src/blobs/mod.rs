@@ -14,7 +14,7 @@ mod object;
 mod suite;
 
 pub use local::LocalBlobs;
-pub use object::{MULTIPART_BYTES, ObjectBlobs};
+pub use object::{MULTIPART_BYTES, ObjectBlobs, redacted};
 
 /// A failed blob operation.
 #[derive(Debug, thiserror::Error)]
@@ -128,4 +128,10 @@ pub trait Blobs: Send + Sync + std::fmt::Debug + 'static {
     ) -> Result<Option<Vec<u8>>, BlobError>;
     /// The blob's length, or `None`.
     async fn len(&self, digest: &str) -> Result<Option<u64>, BlobError>;
+    /// Whether the store can be used at all (a bucket that exists and
+    /// answers): what `serve` checks at its start and `/readyz` at each
+    /// probe. The default asks for a blob no one stores.
+    async fn probe(&self) -> Result<(), BlobError> {
+        self.len(&"0".repeat(64)).await.map(|_| ())
+    }
 }

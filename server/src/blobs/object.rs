@@ -40,7 +40,8 @@ impl ObjectBlobs {
     /// `allow_http`, …); credentials and the rest come from the usual
     /// `AWS_*` environment variables.
     pub fn from_url(url: &str) -> Result<Self, BlobError> {
-        let bad = |why: String| BlobError::Config(format!("--blobs {url:?}: {why}"));
+        let shown = redacted(url);
+        let bad = |why: String| BlobError::Config(format!("--blobs {shown:?}: {why}"));
         let rest = url
             .strip_prefix("s3://")
             .ok_or_else(|| bad("only s3:// URLs name an object store".into()))?;
@@ -73,6 +74,19 @@ impl ObjectBlobs {
                 .map_err(|_| bad(format!("{key:?} is not an S3 setting")))?;
             builder = builder.with_config(key, value);
         }
+        // An http:// endpoint without allow_http builds, then fails every
+        // request with "builder error": say so now.
+        let endpoint = builder.get_config_value(&AmazonS3ConfigKey::Endpoint);
+        let allow_http = AmazonS3ConfigKey::Client(ClientConfigKey::AllowHttp);
+        if endpoint
+            .as_deref()
+            .is_some_and(|e| e.starts_with("http://"))
+            && builder.get_config_value(&allow_http).as_deref() != Some("true")
+        {
+            return Err(bad(
+                "the endpoint is http://: add allow_http=true (or use https://)".into(),
+            ));
+        }
         let store = builder.build().map_err(|e| bad(e.to_string()))?;
         let prefix = Path::parse(prefix).map_err(|e| bad(e.to_string()))?;
         Ok(Self::new(Arc::new(store), prefix))
@@ -95,6 +109,28 @@ fn missing_is_none<T>(r: object_store::Result<T>) -> Result<Option<T>, BlobError
         Err(object_store::Error::NotFound { .. }) => Ok(None),
         Err(e) => Err(e.into()),
     }
+}
+
+/// `url` with the values of its secret settings (a secret key, a session
+/// token, a password) replaced by `…`, fit to be shown or logged.
+pub fn redacted(url: &str) -> String {
+    let Some((location, query)) = url.split_once('?') else {
+        return url.to_owned();
+    };
+    let pairs: Vec<String> = query
+        .split('&')
+        .map(|pair| match pair.split_once('=') {
+            Some((key, _))
+                if ["secret", "token", "password"]
+                    .iter()
+                    .any(|s| key.to_ascii_lowercase().contains(s)) =>
+            {
+                format!("{key}=…")
+            }
+            _ => pair.to_owned(),
+        })
+        .collect();
+    format!("{location}?{}", pairs.join("&"))
 }
 
 #[async_trait::async_trait]
@@ -156,6 +192,15 @@ impl Blobs for ObjectBlobs {
     async fn len(&self, digest: &str) -> Result<Option<u64>, BlobError> {
         self.head(&self.path(digest)?).await
     }
+
+    /// A listing of the prefix's first level: a HEAD on an object that is
+    /// not there answers 404 alike for a bucket that is not there, a list
+    /// does not.
+    async fn probe(&self) -> Result<(), BlobError> {
+        let prefix = (!self.prefix.as_ref().is_empty()).then_some(&self.prefix);
+        self.store.list_with_delimiter(prefix).await?;
+        Ok(())
+    }
 }
 
 #[cfg(test)]
@@ -188,6 +233,17 @@ mod tests {
             matches!(again, Err(object_store::Error::AlreadyExists { .. })),
             "{again:?}"
         );
+        // The probe passes on the bucket, and fails on one that is not
+        // there, whose HEAD on an object would answer a plain 404.
+        blobs.probe().await.unwrap();
+        let missing =
+            ObjectBlobs::from_url(&s3.url.replace("aobake-test", "no-such-bucket")).unwrap();
+        assert_eq!(missing.len(&"0".repeat(64)).await.unwrap(), None);
+        let refused = missing.probe().await.unwrap_err().to_string();
+        assert!(
+            refused.contains("no-such-bucket") || refused.contains("NoSuchBucket"),
+            "{refused}"
+        );
     }
 
     #[test]
@@ -197,5 +253,13 @@ mod tests {
         assert!(err("s3://b?color=red").contains("\"color\" is not an S3 setting"));
         assert!(err("s3://b?endpoint").contains("is not KEY=VALUE"));
         assert!(err("gs://b").contains("use s3://"));
+        let http = err("s3://b?endpoint=http://127.0.0.1:9000");
+        assert!(http.contains("add allow_http=true"), "{http}");
+        // A secret given as a setting is not echoed.
+        let said = err("s3://b?aws_secret_access_key=SECRETXYZ&bogus=1");
+        assert!(
+            said.contains("\"bogus\" is not an S3 setting") && !said.contains("SECRETXYZ"),
+            "{said}"
+        );
     }
 }

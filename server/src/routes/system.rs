@@ -172,12 +172,16 @@ pub(crate) async fn healthz() -> &'static str {
 #[utoipa::path(get, path = "/readyz", tag = "system", responses((status = 200, description = "Ready", body = String), (status = 503, description = "The database or the blob store does not answer (the detail names which)", body = Problem, content_type = "application/problem+json", headers(("Retry-After" = u64, description = "Seconds to wait before looking again")))))]
 pub(crate) async fn ready(State(state): State<AppState>) -> ApiResult<&'static str> {
     state.store.ping().await?;
-    // The blob store answers a question about a blob it does not hold
-    // (a HEAD on a bucket), within a probe's patience: the S3 client's
-    // own retries can take longer.
-    let absent = "0".repeat(64);
-    match tokio::time::timeout(BLOBS_PROBE, state.blobs.len(&absent)).await {
-        Ok(answer) => answer?,
+    // The blob store answers its probe (a bucket's listing), within a
+    // probe's patience: the S3 client's own retries can take longer.
+    match tokio::time::timeout(BLOBS_PROBE, state.blobs.probe()).await {
+        Ok(Ok(())) => {}
+        // Not ready, whatever the store answered (a bucket that is not
+        // there, settings it refuses): the log says what.
+        Ok(Err(e)) => {
+            log_line!("error: the blob store fails the readiness probe: {e}");
+            return Err(ApiError::Unavailable(Outage::Blobs, BLOBS_RETRY_SECS));
+        }
         Err(_) => {
             log_line!(
                 "error: the blob store did not answer the readiness probe in {BLOBS_PROBE:?}"

@@ -394,6 +394,41 @@ fn an_s3_outage_answers_503_with_retry_after() {
     assert!(text.contains("the blob store is not answering"), "{text}");
 }
 
+/// A server given a bucket that is not there refuses to start and names
+/// it (a HEAD on an object answers a plain 404 there, so it would have
+/// said ready and failed every upload with 500), and shows no secret
+/// given in the URL.
+#[test]
+fn serve_refuses_a_bucket_that_is_not_there() {
+    let s3 = TestS3::start();
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!(
+        "{}&aws_secret_access_key=SECRETXYZ",
+        s3.url.replace("aobake-test", "no-such-bucket")
+    );
+    let out = std::process::Command::new(aobake_e2e::binary())
+        .args([
+            "serve",
+            "--listen",
+            "127.0.0.1:0",
+            "--workers",
+            "0",
+            "--blobs",
+            &url,
+            "--data",
+        ])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("cannot be used") && stderr.contains("no-such-bucket"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("SECRETXYZ"), "{stderr}");
+}
+
 #[test]
 fn a_worker_frozen_past_its_lease_has_its_completion_refused() {
     let mut env = TestEnv::start(Options {
