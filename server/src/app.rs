@@ -19,7 +19,7 @@ use tower_http::{
 };
 
 use crate::{
-    error::ApiError,
+    error::{ApiError, InternalFailure},
     routes,
     state::{AppState, Metrics, RouteLabels},
 };
@@ -98,6 +98,28 @@ impl ClientGone {
     }
 }
 
+/// Logs an internal error with the request's id, method and path, and
+/// answers with that id in the detail, so a user's 500 leads to its log
+/// line on whichever server of a fleet answered it.
+async fn log_failures(req: Request, next: Next) -> Response {
+    let id = req
+        .headers()
+        .get("x-request-id")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("?")
+        .to_owned();
+    let (method, path) = (req.method().clone(), req.uri().path().to_owned());
+    let res = next.run(req).await;
+    let Some(InternalFailure(what)) = res.extensions().get::<InternalFailure>().cloned() else {
+        return res;
+    };
+    log_line!("error: internal, request {id} ({method} {path}): {what}");
+    let (mut parts, _) = res.into_parts();
+    parts.headers.remove(axum::http::header::CONTENT_LENGTH);
+    let body = serde_json::to_vec(&ApiError::internal_problem(&id)).unwrap_or_default();
+    Response::from_parts(parts, axum::body::Body::from(body))
+}
+
 /// 404 for a path no route serves, as problem+json like every error.
 async fn no_route(uri: axum::http::Uri) -> ApiError {
     ApiError::NotFound(format!("no route for {}", uri.path()))
@@ -129,6 +151,7 @@ pub fn app(state: AppState) -> Router {
             axum::http::StatusCode::REQUEST_TIMEOUT,
             limits.request_timeout + Duration::from_secs(60),
         ))
+        .layer(middleware::from_fn(log_failures))
         .layer(PropagateRequestIdLayer::new(request_id.clone()))
         .layer(SetRequestIdLayer::new(request_id, MakeRequestUuid))
         .with_state(state)

@@ -157,6 +157,22 @@ impl ApiError {
             }
             other => other.to_string(),
         };
+        Self::problem_saying(status, code, title, detail)
+    }
+
+    /// The problem of an internal error whose log line names `request`
+    /// (the response's `x-request-id`), as its detail says.
+    pub fn internal_problem(request: &str) -> Problem {
+        let (status, code, title) = Self::Internal(String::new()).parts();
+        Self::problem_saying(
+            status,
+            code,
+            title,
+            format!("the server failed; its log has the error under request id {request}"),
+        )
+    }
+
+    fn problem_saying(status: StatusCode, code: &str, title: &str, detail: String) -> Problem {
         Problem {
             kind: format!("https://aobake.dev/problems/{code}"),
             title: title.to_owned(),
@@ -167,9 +183,25 @@ impl ApiError {
     }
 }
 
+/// What an internal error's response carries to the layer that logs it
+/// with the request's id (`app::log_failures`).
+#[derive(Debug, Clone)]
+pub struct InternalFailure(pub String);
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let (status, _, _) = self.parts();
+        // An internal error is logged by `app::log_failures`, with the
+        // request's id, which its answer names.
+        if let Self::Internal(d) = self {
+            let mut res = (status, axum::Json(Self::internal_problem("?"))).into_response();
+            res.extensions_mut().insert(InternalFailure(d));
+            res.headers_mut().insert(
+                header::CONTENT_TYPE,
+                HeaderValue::from_static("application/problem+json"),
+            );
+            return res;
+        }
         let mut res = (status, axum::Json(self.problem())).into_response();
         res.headers_mut().insert(
             header::CONTENT_TYPE,

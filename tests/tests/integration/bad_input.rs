@@ -333,3 +333,32 @@ fn the_bake_command_checks_its_outputs_first_and_names_a_broken_file_once() {
         "{stderr}"
     );
 }
+
+/// A server that fails (its blob directory replaced by a file) answers
+/// 500 naming the request's id, and its log has the error under that id
+/// with the method and path: a user's 500 leads to its log line on
+/// whichever server of a fleet answered.
+#[test]
+fn an_internal_error_names_its_request_id_and_is_logged_under_it() {
+    let env = TestEnv::start(Options::default());
+    let blobs = env.data().join("blobs");
+    std::fs::remove_dir_all(&blobs).unwrap();
+    std::fs::write(&blobs, b"not a directory").unwrap();
+    let glb = std::fs::read(character("RiggedSimple")).unwrap();
+    let (status, body, headers) =
+        env.post_bytes("/v1/characters", ADMIN, "model/gltf-binary", &glb);
+    assert_eq!(status, 500, "{body}");
+    let id = &headers.iter().find(|(k, _)| k == "x-request-id").unwrap().1;
+    assert_eq!(body["code"], "internal");
+    assert_eq!(
+        body["detail"],
+        format!("the server failed; its log has the error under request id {id}")
+    );
+    let log = env.server_log();
+    assert!(
+        log.lines().any(|l| l.contains(&format!(
+            "error: internal, request {id} (POST /v1/characters)"
+        ))),
+        "{log}"
+    );
+}
