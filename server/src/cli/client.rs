@@ -18,9 +18,10 @@ use super::params::BakeRequestArgs;
 /// Where the service is.
 #[derive(Debug, Clone, clap::Args)]
 pub(super) struct Conn {
-    /// The server's URL. Default: `AOBAKE_SERVER`, else the URL `aobake
-    /// serve` wrote into `aobake-data/server.url`.
-    #[arg(long, env = "AOBAKE_SERVER")]
+    /// The server's URL, or a fleet's servers comma-separated (the next is
+    /// asked when one cannot be reached). Default: `AOBAKE_SERVER`, else
+    /// the URL `aobake serve` wrote into `aobake-data/server.url`.
+    #[arg(long, env = "AOBAKE_SERVER", value_parser = super::common::server_list)]
     server: Option<String>,
     /// A bearer token. Default: `AOBAKE_TOKEN`, else
     /// `aobake-data/admin.token`.
@@ -98,11 +99,17 @@ impl Conn {
                     self.data.join("admin.token").display()
                 )
             })?;
+        // A fleet's servers: the first asked first, the next when one
+        // cannot be reached.
+        let mut servers = server
+            .split(',')
+            .map(|s| super::common::server_url(s).map(str::to_owned))
+            .collect::<anyhow::Result<Vec<String>>>()?;
+        let first = servers.remove(0);
         // A wait through an outage says so, rather than look like a hang.
-        Ok(
-            Client::new(super::common::server_url(&server)?, token.trim())
-                .with_notice(|line| eprintln!("{line}")),
-        )
+        Ok(Client::new(&first, token.trim())
+            .with_fallbacks(&servers)
+            .with_notice(|line| eprintln!("{line}")))
     }
 }
 

@@ -112,6 +112,17 @@ pub(super) fn server_url(s: &str) -> anyhow::Result<&str> {
     }
 }
 
+/// `--server` as clap reads it: one server's URL, or several
+/// comma-separated (a fleet's servers), each as [`server_url`] takes it, so
+/// a malformed one is a wrong command line (exit 2).
+pub(super) fn server_list(s: &str) -> Result<String, String> {
+    let urls = s
+        .split(',')
+        .map(|u| server_url(u).map(str::to_owned).map_err(|e| e.to_string()))
+        .collect::<Result<Vec<String>, String>>()?;
+    Ok(urls.join(","))
+}
+
 /// The median of `v` (the mean of the middle two when their number is
 /// even): what the benchmarks quote on noisy shared machines.
 /// A clap value parser for a positive, finite number (seconds, rates):

@@ -10,7 +10,7 @@ pub(super) struct WorkerArgs {
     /// The server's URL; for a fleet without a load balancer, several,
     /// comma-separated (servers on one database and blob store): when the
     /// one it asks cannot be reached, the worker goes on with the next.
-    #[arg(long, env = "AOBAKE_SERVER")]
+    #[arg(long, env = "AOBAKE_SERVER", value_parser = super::common::server_list)]
     server: String,
     /// A token with the worker scope.
     #[arg(long, env = "AOBAKE_TOKEN", hide_env_values = true)]

@@ -609,6 +609,18 @@ fn client_exit_codes_tell_failures_apart() {
     let mut command = env.aobake_command(&["status", "1"]);
     command.env("AOBAKE_SERVER", "http://127.0.0.1:1");
     exits(command, 7);
+    // A fleet's servers, comma-separated: one that cannot be reached is
+    // passed over (the live one answers: no such bake); a malformed
+    // entry is a wrong command line.
+    let fleet = format!("http://127.0.0.1:1,{}", env.url);
+    exits(
+        env.aobake_command(&["status", "424242", "--server", &fleet]),
+        5,
+    );
+    exits(
+        env.aobake_command(&["status", "1", "--server", "http://127.0.0.1:1,"]),
+        2,
+    );
     // The bake submit --wait follows is cancelled (no worker runs it).
     let rig = character("RiggedSimple");
     let mut args = vec!["submit", rig.to_str().unwrap(), "--poses", "8", "--wait"];
