@@ -636,15 +636,14 @@ impl Client {
     }
 
     /// Extends the lease; `true` asks the job to stop.
-    pub fn heartbeat(&self, job: i64, token: &str, progress: u64) -> Result<bool> {
-        let reply: HeartbeatReply = self.post_for(
+    pub fn heartbeat(&self, job: i64, token: &str, progress: u64) -> Result<HeartbeatReply> {
+        self.post_for(
             &format!("/v1/jobs/{job}/heartbeat"),
             &HeartbeatRequest {
                 token: token.to_owned(),
                 progress: i64::try_from(progress).unwrap_or(i64::MAX),
             },
-        )?;
-        Ok(reply.stop)
+        )
     }
 
     /// Records a checkpoint whose blob is stored.

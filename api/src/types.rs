@@ -503,8 +503,13 @@ pub struct HeartbeatRequest {
 #[derive(Debug, Deserialize, Serialize)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
 pub struct HeartbeatReply {
-    /// The bake was cancelled: stop and drop the job.
+    /// The bake ended (cancelled, or failed by another job): stop and
+    /// drop the job.
     pub stop: bool,
+    /// The bake's state, which says why a stop was asked (`cancelled`,
+    /// `failed`).
+    #[serde(default)]
+    pub bake_state: Option<BakeState>,
 }
 
 /// A checkpoint whose blob is stored.

@@ -13,7 +13,9 @@ use aobake_core::{
     },
 };
 
-use aobake_api::{ApiError, CheckpointRef, Client, Completion, JobCompletion, Lease, OutputRef};
+use aobake_api::{
+    ApiError, BakeState, CheckpointRef, Client, Completion, JobCompletion, Lease, OutputRef,
+};
 
 /// How soon a moved progress is sent, at most (see the heartbeat loop).
 const PROGRESS_EVERY: Duration = Duration::from_secs(1);
@@ -437,9 +439,11 @@ fn deliver(
 struct Flags {
     /// The lease is gone or the bake was cancelled: drop the job.
     lost: AtomicBool,
-    /// The server said to stop (the bake was cancelled, or ended), as
-    /// against a lease refused (409).
+    /// The server said to stop (the bake was cancelled, or failed by
+    /// another job), as against a lease refused (409).
     called_off: AtomicBool,
+    /// Why it said so (`the bake is failed`), once it did.
+    why: std::sync::OnceLock<String>,
     /// Shutdown past its deadline: stop and give the lease back.
     release: AtomicBool,
     /// The job finished; the heartbeat thread ends.
@@ -464,7 +468,12 @@ impl Sink<'_> {
     /// Whether to stop now: the lease is lost or shutdown asks for it.
     fn stop(&self) -> Result<(), Stop> {
         if self.flags.called_off.load(Ordering::Relaxed) {
-            return Err(Stop("the bake was cancelled".into()));
+            let why = self
+                .flags
+                .why
+                .get()
+                .map_or("the bake ended", String::as_str);
+            return Err(Stop(why.to_owned()));
         }
         if self.flags.lost.load(Ordering::Relaxed) {
             return Err(Stop(
@@ -802,8 +811,17 @@ fn run_leased(
                     failing = None;
                 }
                 match beat {
-                    Ok(stop) => {
-                        if stop {
+                    Ok(reply) => {
+                        if reply.stop {
+                            let why = match reply.bake_state {
+                                Some(BakeState::Cancelled) => "the bake was cancelled".to_owned(),
+                                Some(BakeState::Failed) => {
+                                    "the bake failed (another of its jobs died)".to_owned()
+                                }
+                                Some(state) => format!("the bake is {}", state.as_str()),
+                                None => "the bake ended".to_owned(),
+                            };
+                            let _ = flags.why.set(why);
                             flags.called_off.store(true, Ordering::Relaxed);
                             flags.lost.store(true, Ordering::Relaxed);
                         }

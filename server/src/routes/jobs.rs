@@ -234,7 +234,10 @@ pub(crate) async fn heartbeat(
     if beat.moved {
         state.publish(&beat.bake);
     }
-    Ok(Json(HeartbeatReply { stop: beat.stop }))
+    Ok(Json(HeartbeatReply {
+        stop: beat.stop,
+        bake_state: Some(beat.bake.state),
+    }))
 }
 
 #[utoipa::path(post, path = "/v1/jobs/{id}/checkpoint", tag = "worker protocol", params(("id" = i64, Path, description = "Job id")), request_body = CheckpointRequest,

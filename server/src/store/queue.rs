@@ -437,7 +437,7 @@ async fn unblock<B: Backend>(c: &mut B::Conn, bake: i64) -> Result<()> {
 /// Marks the bake failed when one of its jobs is dead.
 async fn fail_bake_if_dead<B: Backend>(c: &mut B::Conn, bake: i64) -> Result<()> {
     c.execute(
-        B::sql("UPDATE bakes SET state = 'failed', updated_at = {now}, finished_at = {now}, error = (SELECT 'job ' || idx || ' (' || kind || ') died after ' || attempts || ' attempts: ' || COALESCE(error, 'lease expired') FROM jobs WHERE bake_id = bakes.id AND state = 'dead' ORDER BY idx LIMIT 1) WHERE id = $1 AND state IN ('queued', 'running', 'paused') AND EXISTS (SELECT 1 FROM jobs WHERE bake_id = bakes.id AND state = 'dead')")
+        B::sql("UPDATE bakes SET state = 'failed', updated_at = {now}, finished_at = {now}, error = (SELECT 'job ' || id || ' (' || kind || ', #' || idx || ' of the bake) died after ' || attempts || CASE WHEN attempts = 1 THEN ' attempt' ELSE ' attempts' END || COALESCE(' on ' || worker, '') || ': ' || COALESCE(error, 'lease expired') FROM jobs WHERE bake_id = bakes.id AND state = 'dead' ORDER BY idx LIMIT 1) WHERE id = $1 AND state IN ('queued', 'running', 'paused') AND EXISTS (SELECT 1 FROM jobs WHERE bake_id = bakes.id AND state = 'dead')")
             .bind(bake),
     )
     .await?;

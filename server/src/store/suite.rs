@@ -764,10 +764,17 @@ async fn failures_retry_then_kill_the_bake(store: &dyn Store) {
         .await
         .unwrap();
     assert_eq!(end.state, BakeState::Failed, "out of attempts");
-    assert!(
-        end.error.as_deref().unwrap().contains("broken for good"),
-        "{:?}",
-        end.error
+    // The job as the API and the workers' logs name it, its place in the
+    // bake, its last worker and its error.
+    assert_eq!(
+        end.error.as_deref(),
+        Some(
+            format!(
+                "job {} (sample, #{} of the bake) died after 2 attempts on w: broken for good",
+                again.job.id, again.job.index
+            )
+            .as_str()
+        )
     );
     let retried = store.control(b.id, Action::Retry).await.unwrap();
     assert_eq!(retried.state, BakeState::Queued);

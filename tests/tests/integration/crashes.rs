@@ -482,3 +482,52 @@ fn a_worker_frozen_past_its_lease_has_its_completion_refused() {
             .contains("aobake_lease_expiries_total 0\n")
     );
 }
+
+/// A job that dies (its worker killed, one attempt allowed) fails its
+/// bake with a reason that names the job as the API and the workers' logs
+/// do, its place in the bake, its worker and its cause; a worker that was
+/// running another of its jobs stops saying the bake failed, not that it
+/// was cancelled.
+#[test]
+fn a_dead_job_fails_its_bake_with_a_reason_that_names_it() {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 1.5,
+        max_attempts: 1,
+        ..Options::default()
+    });
+    let digest = upload(&env, &character("CesiumMan"));
+    let (_, b) = submit(&env, &digest, 48);
+    let id = b["id"].as_i64().unwrap();
+    let victim = env.start_worker(&[]);
+    env.start_worker(&[]);
+    env.wait_for_bake(id, Duration::from_secs(60), "run a job on w0", |now| {
+        now["jobs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|j| j["state"] == "running" && j["worker"] == "w0")
+    });
+    env.kill_worker(victim);
+    let end = env.wait_bake(id, Duration::from_secs(120));
+    assert_eq!(end["state"], "failed", "{end}");
+    let jobs = end["jobs"].as_array().unwrap();
+    let dead = jobs.iter().find(|j| j["state"] == "dead").unwrap();
+    assert_eq!(
+        end["error"],
+        format!(
+            "job {} ({}, #{} of the bake) died after 1 attempt on w0: lease expired",
+            dead["id"],
+            dead["kind"].as_str().unwrap(),
+            dead["index"]
+        ),
+        "{end}"
+    );
+    let logs = env.worker_logs();
+    assert!(!logs.contains("the bake was cancelled"), "{logs}");
+    for line in logs.lines().filter(|l| l.contains(": stopped (")) {
+        assert!(
+            line.contains("stopped (the bake failed (another of its jobs died))"),
+            "{line}"
+        );
+    }
+}
