@@ -498,7 +498,21 @@ fn write_whole(out: &Path, bytes: &[u8]) -> anyhow::Result<()> {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).with_context(cannot)?;
+    // A new file gets the mode any new file gets (0666 less the umask,
+    // not a temporary file's 0600: a build system shares what it fetched),
+    // a file replaced keeps its own.
+    let mut builder = tempfile::Builder::new();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder.tempfile_in(dir).with_context(cannot)?;
+    if let Ok(existing) = std::fs::metadata(out) {
+        tmp.as_file()
+            .set_permissions(existing.permissions())
+            .with_context(cannot)?;
+    }
     tmp.write_all(bytes).with_context(cannot)?;
     tmp.persist(out).map_err(|e| e.error).with_context(cannot)?;
     Ok(())

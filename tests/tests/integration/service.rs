@@ -126,6 +126,18 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
         String::from_utf8_lossy(&out.stderr)
     );
     let service = std::fs::read(&fetched).unwrap();
+    // The file has the mode any new file gets here (as one std::fs::write
+    // makes), not a temporary file's 0600; a file fetched over keeps its
+    // own.
+    use std::os::unix::fs::PermissionsExt as _;
+    let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    let reference = env.dir.path().join("reference");
+    std::fs::write(&reference, b"").unwrap();
+    assert_eq!(mode(&fetched), mode(&reference));
+    std::fs::set_permissions(&fetched, std::fs::Permissions::from_mode(0o640)).unwrap();
+    let again = env.aobake(&["fetch", "--key", &key, "--out", fetched.to_str().unwrap()]);
+    assert!(again.status.success());
+    assert_eq!(mode(&fetched), 0o640);
     // Into a pipe, as a script does: straight through, the same bytes
     // (and no temporary file is left beside the one it wrote).
     let piped = env.aobake(&["fetch", "--key", &key, "--out", "/dev/stdout"]);
