@@ -349,6 +349,7 @@ impl Client {
         request: impl Fn(&str) -> std::result::Result<Response, ureq::Error>,
     ) -> Result<Response> {
         let mut waited = Duration::ZERO;
+        let mut told = false;
         loop {
             let res = self.reach(&request)?;
             let come_back = match res.status().as_u16() {
@@ -357,6 +358,17 @@ impl Client {
                 _ => false,
             };
             if !come_back || waited >= self.rate_wait {
+                // An outage it said it waits out is said to be over.
+                if let Some(notice) = &self.notice.0
+                    && told
+                    && !come_back
+                {
+                    notice(&format!(
+                        "{} answers again after {} s",
+                        self.base(),
+                        waited.as_secs()
+                    ));
+                }
                 return self.check(res);
             }
             let unavailable = res.status().as_u16() == 503;
@@ -381,6 +393,7 @@ impl Client {
                     self.base(),
                     self.rate_wait.as_secs()
                 ));
+                told = true;
             }
             std::thread::sleep(wait);
             waited += wait;
@@ -402,7 +415,7 @@ impl Client {
                 .unwrap_or_default()
                 .to_owned(),
             status,
-            detail: body,
+            detail: gist(&body),
             code: String::new(),
         });
         Err(ApiError::Status {
@@ -729,6 +742,16 @@ impl Client {
     }
 }
 
+/// A body that is not a problem (an HTML error page of a proxy or of
+/// another server) as one short line: its words, at most 200 characters.
+fn gist(body: &str) -> String {
+    let words = body.split_whitespace().collect::<Vec<_>>().join(" ");
+    match words.char_indices().nth(200) {
+        Some((at, _)) => format!("{}… ({} bytes)", &words[..at], body.len()),
+        None => words,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::io::{BufRead as _, BufReader, Write as _};
@@ -912,12 +935,13 @@ mod tests {
         assert_eq!(client.get_blob("d").unwrap(), b"abc");
         assert!(started.elapsed() >= Duration::from_secs(2), "it waited");
         let heard = heard.lock().unwrap();
-        assert_eq!(heard.len(), 1, "{heard:?}");
+        assert_eq!(heard.len(), 2, "{heard:?}");
         assert!(
-            heard[0].contains("answered 503 (the blob store is not answering")
+            heard[0].contains("answered 503 (the blob store is not answering)")
                 && heard[0].contains("asking again for up to 300 s"),
             "{heard:?}"
         );
+        assert!(heard[1].ends_with("answers again after 2 s"), "{heard:?}");
         // Other failures are not retried.
         let base = serve(vec![
             "HTTP/1.1 503 Service Unavailable\r\nContent-Length: 4\r\nConnection: close\r\n\r\ndown",
@@ -932,6 +956,33 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+        // Another server's error page is told in one short line.
+        let page = format!(
+            "<html>\n<body>\n{}</body></html>",
+            "<p>Internal error</p>\n".repeat(40)
+        );
+        let answer = Box::leak(
+            format!(
+                "HTTP/1.1 500 Internal Server Error\r\nContent-Type: text/html\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{page}",
+                page.len()
+            )
+            .into_boxed_str(),
+        );
+        let base = serve(vec![answer]);
+        let Err(ApiError::Status { problem, .. }) = Client::new(&base, "t").get_blob("d") else {
+            panic!("a 500")
+        };
+        assert!(
+            !problem.detail.contains('\n')
+                && problem
+                    .detail
+                    .starts_with("<html> <body> <p>Internal error</p>")
+                && problem
+                    .detail
+                    .ends_with(&format!("… ({} bytes)", page.len())),
+            "{}",
+            problem.detail
+        );
     }
 
     /// An HTTP/1.1 answer with a JSON body.

@@ -91,12 +91,15 @@ pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
         fault: std::env::var("AOBAKE_FAULT").ok(),
     })
     .map_err(|e| match e {
+        // Stamped as every line of a worker's log is.
         aobake_worker::RunError::Refused(message) => super::client::Exit {
             code: aobake_worker::RunError::REFUSED_EXIT,
-            message,
+            message: format!("{} {message}", aobake_worker::stamp()),
         }
         .into(),
-        aobake_worker::RunError::Setup(message) => anyhow::Error::msg(message),
+        aobake_worker::RunError::Setup(message) => {
+            anyhow::Error::msg(format!("{} {message}", aobake_worker::stamp()))
+        }
     })
 }
 

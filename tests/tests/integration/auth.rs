@@ -395,6 +395,13 @@ fn a_worker_with_a_refused_token_exits_saying_why() {
                 && stderr.contains(check),
             "{stderr}"
         );
+        // Its last line is stamped as every line of its log is.
+        let last = stderr
+            .lines()
+            .rfind(|l| l.contains("refused to lease jobs"))
+            .unwrap();
+        let stamp = last.split(' ').next().unwrap();
+        assert!(humantime::parse_rfc3339(stamp).is_ok(), "{last}");
     }
 }
 

@@ -329,6 +329,10 @@ fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
         logs.contains("answered 503 (the database is not answering"),
         "{logs}"
     );
+    // And when it was over, as the server's log does.
+    assert!(logs.contains(" answers again after "), "{logs}");
+    let log = env.server_log();
+    assert!(log.contains("the server answers again, after "), "{log}");
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
 }
 
