@@ -33,7 +33,7 @@ pub struct ServeArgs {
     /// The metadata store: empty for SQLite in --data (the embedded
     /// default), or a PostgreSQL URL (`postgres://user@host:port/db`) for
     /// several servers and remote workers.
-    #[arg(long, env = "AOBAKE_DATABASE")]
+    #[arg(long, env = "AOBAKE_DATABASE", value_parser = postgres_url)]
     pub database: Option<String>,
     /// Where blobs (uploads, assets, checkpoints) live: empty for a folder
     /// in --data (the embedded default), a directory, or an S3-compatible
@@ -95,6 +95,18 @@ fn write_private(path: &Path, text: &str) -> anyhow::Result<()> {
         .map_err(|e| e.error)
         .with_context(cannot)?;
     Ok(())
+}
+
+/// `--database`: a PostgreSQL URL (the only other store than the
+/// embedded SQLite), so another scheme is a wrong command line.
+fn postgres_url(s: &str) -> Result<String, String> {
+    match s.split_once("://") {
+        Some(("postgres" | "postgresql", _)) => Ok(s.to_owned()),
+        _ => Err(
+            "--database takes a PostgreSQL URL (postgres://USER@HOST:PORT/DB); leave it out for SQLite in --data"
+                .to_owned(),
+        ),
+    }
 }
 
 /// Runs the server until SIGTERM or Ctrl-C.

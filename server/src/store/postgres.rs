@@ -37,7 +37,20 @@ impl PgStore {
             // connection, then gets a 503 with Retry-After.
             .acquire_timeout(std::time::Duration::from_secs(3))
             .connect(url)
-            .await?;
+            .await;
+        let pool = match pool {
+            Ok(pool) => pool,
+            // The pool says only that it timed out: one connection says
+            // why (refused, no such database, a password refused).
+            Err(sqlx::Error::PoolTimedOut) => {
+                use sqlx::Connection as _;
+                return Err(match sqlx::PgConnection::connect(url).await {
+                    Err(why) => why.into(),
+                    Ok(_) => sqlx::Error::PoolTimedOut.into(),
+                });
+            }
+            Err(e) => return Err(e.into()),
+        };
         sqlx::migrate!("migrations/postgres").run(&pool).await?;
         Ok(Self {
             backend: Postgres { pool },

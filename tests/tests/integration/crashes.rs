@@ -535,3 +535,43 @@ fn a_dead_job_fails_its_bake_with_a_reason_that_names_it() {
         );
     }
 }
+
+/// A server whose database cannot be used says why: a port that refuses
+/// (not only that a pool timed out), and another scheme than PostgreSQL's
+/// as a wrong command line.
+#[test]
+fn serve_says_why_it_cannot_use_its_database() {
+    let dir = tempfile::tempdir().unwrap();
+    let serve = |database: &str| {
+        std::process::Command::new(aobake_e2e::binary())
+            .args([
+                "serve",
+                "--listen",
+                "127.0.0.1:0",
+                "--workers",
+                "0",
+                "--database",
+                database,
+                "--data",
+            ])
+            .arg(dir.path())
+            .output()
+            .unwrap()
+    };
+    let refused = serve("postgres://aobake@127.0.0.1:1/aobake");
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{stderr}");
+    assert!(stderr.contains("Connection refused"), "{stderr}");
+    assert_eq!(
+        stderr.matches("Connection refused").count(),
+        1,
+        "said once: {stderr}"
+    );
+    let mysql = serve("mysql://x");
+    let stderr = String::from_utf8_lossy(&mysql.stderr);
+    assert_eq!(mysql.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("--database takes a PostgreSQL URL"),
+        "{stderr}"
+    );
+}
