@@ -97,6 +97,9 @@ fn write_private(path: &Path, text: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Workers not seen for this long (a day, in ms) leave `GET /v1/workers`.
+const FORGET_WORKERS_MS: i64 = 24 * 3600 * 1000;
+
 /// `--database`: a PostgreSQL URL (the only other store than the
 /// embedded SQLite), so another scheme is a wrong command line.
 fn postgres_url(s: &str) -> Result<String, String> {
@@ -194,8 +197,18 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         let grace = Duration::from_millis(u64::try_from(state.policy.lease_ms).unwrap_or(0));
         tokio::spawn(async move {
             let mut hold_until = Some(tokio::time::Instant::now() + grace);
+            let mut forgot = tokio::time::Instant::now();
             loop {
                 tokio::time::sleep(Duration::from_millis(500)).await;
+                // Once a minute: workers gone for a day leave the list
+                // (a default id is host and process id: each start adds
+                // one).
+                if forgot.elapsed() >= Duration::from_secs(60) {
+                    forgot = tokio::time::Instant::now();
+                    if let Err(e) = state.store.forget_workers(FORGET_WORKERS_MS).await {
+                        log_line!("error: forgetting gone workers: {e}");
+                    }
+                }
                 match hold_until {
                     // The database is down: wait for it to answer.
                     None => {

@@ -284,6 +284,9 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// Records that `workers` are alive and waiting for a job, in one
     /// transaction (a worker process's idle slots, at each long poll).
     async fn workers_idle(&self, workers: &[String]) -> Result<()>;
+    /// Forgets workers not seen for `gone_ms` that hold no running job;
+    /// returns how many.
+    async fn forget_workers(&self, gone_ms: i64) -> Result<u64>;
     /// Records what casts a worker's rays (`cpu`, or `gpu: ADAPTER`), which
     /// a process tells in its first lease request: the worker (re)started
     /// now, so its `started_at` is now, also under a name used before.

@@ -1313,6 +1313,16 @@ impl<B: Backend> Store for SqlStore<B> {
         })
     }
 
+    async fn forget_workers(&self, gone_ms: i64) -> Result<u64> {
+        in_tx!(self, Durability::Queue, |c| {
+            c.execute(
+                B::sql("DELETE FROM workers WHERE last_seen < {now} - $1 AND NOT EXISTS (SELECT 1 FROM jobs j WHERE j.state = 'running' AND j.worker = workers.id)")
+                    .bind(gone_ms),
+            )
+            .await
+        })
+    }
+
     async fn worker_tracer(&self, worker: &str, tracer: &str) -> Result<()> {
         in_tx!(self, Durability::Queue, |c| {
             c.execute(

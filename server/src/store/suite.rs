@@ -85,6 +85,34 @@ pub(crate) async fn run_all(store: &dyn Store) {
     a_batch_split_by_failures_leases_each_job_once(store).await;
     tokens_are_listed_newest_first_and_deleted(store).await;
     tokens_expire_and_record_their_use(store).await;
+    // Last: it forgets every other case's idle workers.
+    workers_gone_for_long_are_forgotten_unless_they_hold_a_job(store).await;
+}
+
+/// Workers not seen for long leave the list, except one still holding a
+/// running job; one seen lately stays.
+async fn workers_gone_for_long_are_forgotten_unless_they_hold_a_job(store: &dyn Store) {
+    let c = character(store).await;
+    let mut b = bake(&c, &"a".repeat(64));
+    b.priority = 4000;
+    let created = store.create_bake(&b).await.unwrap();
+    let held = store.lease("holder", &policy()).await.unwrap().unwrap();
+    assert_eq!(held.job.bake_id, created.id);
+    store.workers_idle(&["gone".to_owned()]).await.unwrap();
+    tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    store.workers_idle(&["fresh".to_owned()]).await.unwrap();
+    assert!(store.forget_workers(25).await.unwrap() >= 1);
+    let listed: Vec<String> = store
+        .workers(60_000)
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|w| w.id)
+        .collect();
+    assert!(listed.contains(&"holder".to_owned()), "{listed:?}");
+    assert!(listed.contains(&"fresh".to_owned()), "{listed:?}");
+    assert!(!listed.contains(&"gone".to_owned()), "{listed:?}");
+    store.control(created.id, Action::Cancel).await.unwrap();
 }
 
 /// A token keeps its expiry (the caller judges it) and records its use.
