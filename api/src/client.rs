@@ -540,12 +540,16 @@ impl Client {
         self.get(&format!("/v1/bakes/{id}"))
     }
 
-    /// `GET /v1/cache/{key}`: the finished bake with this key, `None` when
-    /// there is none.
-    pub fn cached(&self, key: &str) -> Result<Option<BakeView>> {
+    /// `GET /v1/cache/{key}`: the finished bake with this key, or, when
+    /// there is none, the server's word for why (none yet, or one under
+    /// way).
+    pub fn cached(&self, key: &str) -> Result<std::result::Result<BakeView, String>> {
         match self.get(&format!("/v1/cache/{key}")) {
-            Err(e) if e.status() == Some(404) => Ok(None),
-            other => other.map(Some),
+            Err(ApiError::Status {
+                status: 404,
+                problem,
+            }) => Ok(Err(problem.detail)),
+            other => other.map(Ok),
         }
     }
 

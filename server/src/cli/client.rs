@@ -445,9 +445,9 @@ pub(super) struct FetchArgs {
 pub(super) fn fetch(args: &FetchArgs) -> anyhow::Result<()> {
     let api = args.conn.api()?;
     let view = match (&args.key, args.id) {
-        (Some(key), _) => api.cached(key)?.ok_or_else(|| Exit {
+        (Some(key), _) => api.cached(key)?.map_err(|why| Exit {
             code: super::exit::NOT_BAKED,
-            message: format!("no finished bake for key {key}"),
+            message: why,
         })?,
         (None, Some(id)) => match api.bake(id) {
             Err(e) if e.status() == Some(404) => {

@@ -366,7 +366,18 @@ pub(crate) async fn cache(
     crate::blobs::check_digest(&key)?;
     match state.store.bake_for_key(&key).await? {
         Some(b) if b.state == crate::store::BakeState::Done => Ok(Json(view(b, None))),
-        _ => Err(ApiError::NotFound(format!(
+        // One under way: say which and how far, so a pipeline waits for it
+        // rather than submits again.
+        Some(b) => {
+            let done = crate::state::BakeEvent::of(&b).done;
+            Err(ApiError::NotFound(format!(
+                "no finished bake for key {key} yet: bake {} with this key is {} ({done} of {} units done)",
+                b.id,
+                b.state.as_str(),
+                b.total_work
+            )))
+        }
+        None => Err(ApiError::NotFound(format!(
             "no finished bake for key {key}"
         ))),
     }

@@ -663,6 +663,21 @@ fn the_cli_pauses_resumes_cancels_and_retries_a_bake() {
     let digest = upload(&env, &character("RiggedSimple"));
     let (_, b) = submit(&env, &digest, 8);
     let id = b["id"].as_i64().unwrap().to_string();
+    // Fetched by its key before it is done: exit 4, saying which bake
+    // has the key and how far it is, so a pipeline waits for it.
+    let out = env.aobake(&[
+        "fetch",
+        "--key",
+        b["key"].as_str().unwrap(),
+        "--out",
+        "x.aob",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(4), "{stderr}");
+    assert!(
+        stderr.contains(&format!("yet: bake {id} with this key is queued (0 of ")),
+        "{stderr}"
+    );
     let run = |action: &str| {
         let out = env.aobake(&[action, &id]);
         (
