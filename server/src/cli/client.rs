@@ -602,8 +602,14 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
                         t.scopes.join(","),
                         format!("{} ago", age(now - t.created_at)),
                         expires(t),
-                        t.last_used_at
-                            .map_or("never".to_owned(), |at| format!("{} ago", age(now - at))),
+                        // The token this listing is made with is in use
+                        // now (its use is recorded at most once a minute).
+                        if t.current {
+                            "now".to_owned()
+                        } else {
+                            t.last_used_at
+                                .map_or("never".to_owned(), |at| format!("{} ago", age(now - at)))
+                        },
                     ]
                 })
                 .collect();

@@ -448,6 +448,9 @@ fn tokens_are_listed_and_revoked_at_once() {
     // The ci token was used: its last use is listed (the admin's too).
     let ci_row = table.lines().find(|l| l.starts_with(&id[..12])).unwrap();
     assert!(ci_row.ends_with(" s ago"), "{table}");
+    // The token the listing is made with is in use now.
+    let this = table.lines().find(|l| l.ends_with("(this token)")).unwrap();
+    assert!(this.ends_with("  now  (this token)"), "{table}");
 
     // A token that expires works until then, and is refused after with a
     // reason; the list says it expired.
