@@ -559,6 +559,7 @@ enum TokenCommand {
     /// another admin token).
     Revoke {
         /// The token's id, or its first characters (at least 8).
+        #[arg(value_parser = token_id_start)]
         id: String,
         #[command(flatten)]
         conn: Conn,
@@ -642,24 +643,31 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
         }
         TokenCommand::Revoke { id, conn } => {
             let api = conn.api()?;
-            if id.len() < 8 {
-                bail!(
-                    "give at least the first 8 characters of the token's id (`aobake token list`)"
-                );
-            }
             let prefix = id.to_ascii_lowercase();
             let matching: Vec<_> = api
                 .tokens()?
                 .into_iter()
                 .filter(|t| t.id.starts_with(&prefix))
                 .collect();
+            let refused = |message: String| Exit {
+                code: super::exit::BAD_INPUT,
+                message: format!("error: {message}"),
+            };
             let token = match matching.as_slice() {
                 [one] => one,
-                [] => bail!("no token's id starts with {id} (`aobake token list` shows them)"),
-                _ => bail!(
-                    "{} tokens' ids start with {id}: give more of it",
-                    matching.len()
-                ),
+                [] => {
+                    return Err(refused(format!(
+                        "no token's id starts with {id} (`aobake token list` shows them)"
+                    ))
+                    .into());
+                }
+                _ => {
+                    return Err(refused(format!(
+                        "{} tokens' ids start with {id}: give more of it",
+                        matching.len()
+                    ))
+                    .into());
+                }
             };
             api.revoke_token(&token.id)?;
             println!(
@@ -671,6 +679,18 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// `token revoke ID`: the start of a token's id (hex), 8 characters at
+/// least, so another is a wrong command line (exit 2).
+fn token_id_start(s: &str) -> Result<String, String> {
+    if s.len() < 8 || !s.chars().all(|c| c.is_ascii_hexdigit()) {
+        return Err(
+            "give at least the first 8 characters of the token's id, as `aobake token list` shows it"
+                .to_owned(),
+        );
+    }
+    Ok(s.to_owned())
 }
 
 /// A token id's first 12 characters, as `token list` shows it.

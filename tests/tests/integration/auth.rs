@@ -512,12 +512,16 @@ fn tokens_are_listed_and_revoked_at_once() {
     );
     let (status, problem) = env.request("GET", "/v1/bakes", &ci, None).unwrap();
     assert_eq!(status, 401, "a revoked token is refused at once: {problem}");
+    // No token matches now: the input is refused (5); a start too short
+    // to name one is a wrong command line (2).
     let out = env.aobake(&["token", "revoke", &id[..10]]);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(5), "{out:?}");
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("no token's id starts with"),
         "{out:?}"
     );
+    let out = env.aobake(&["token", "revoke", &id[..4]]);
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
 
     let own = admin["id"].as_str().unwrap();
     let (status, problem) = env
