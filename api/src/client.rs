@@ -573,6 +573,11 @@ impl Client {
         self.post_for("/v1/tokens", request)
     }
 
+    /// `GET /v1/workers`: the workers the server knows, last seen first.
+    pub fn workers(&self) -> Result<Vec<crate::WorkerRow>> {
+        self.get("/v1/workers")
+    }
+
     /// `GET /v1/tokens`: every token, newest first (needs `admin`).
     pub fn tokens(&self) -> Result<Vec<TokenView>> {
         self.get("/v1/tokens")

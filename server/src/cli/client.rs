@@ -614,31 +614,12 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
                     ]
                 })
                 .collect();
-            let head =
-                ["id", "name", "scopes", "created", "expires", "last used"].map(String::from);
-            // Columns as wide as their longest entry (the names serve
-            // gives its own tokens run long).
-            let widths: Vec<usize> = (0..6)
-                .map(|c| {
-                    rows.iter()
-                        .chain([&head])
-                        .map(|r| r[c].chars().count())
-                        .max()
-                        .unwrap_or(0)
-                })
-                .collect();
-            let line = |r: &[String; 6]| {
-                let cells: Vec<String> = r
-                    .iter()
-                    .zip(&widths)
-                    .map(|(cell, &w)| format!("{cell:<w$}"))
-                    .collect();
-                cells.join("  ").trim_end().to_owned()
-            };
-            println!("{}", line(&head));
-            for (t, r) in tokens.iter().zip(&rows) {
+            let head = ["id", "name", "scopes", "created", "expires", "last used"];
+            let lines = table(head, &rows);
+            println!("{}", lines[0]);
+            for (t, line) in tokens.iter().zip(&lines[1..]) {
                 let this = if t.current { "  (this token)" } else { "" };
-                println!("{}{this}", line(r));
+                println!("{line}{this}");
             }
         }
         TokenCommand::Revoke { id, conn } => {
@@ -677,6 +658,79 @@ pub(super) fn token(args: &TokenArgs) -> anyhow::Result<()> {
                 token.scopes.join(",")
             );
         }
+    }
+    Ok(())
+}
+
+/// A table's lines, the head first: columns as wide as their longest
+/// entry (the names serve gives its own tokens run long), two spaces
+/// apart.
+fn table<const N: usize>(head: [&str; N], rows: &[[String; N]]) -> Vec<String> {
+    let head = head.map(String::from);
+    let widths: Vec<usize> = (0..N)
+        .map(|c| {
+            rows.iter()
+                .chain([&head])
+                .map(|r| r[c].chars().count())
+                .max()
+                .unwrap_or(0)
+        })
+        .collect();
+    std::iter::once(&head)
+        .chain(rows)
+        .map(|r| {
+            let cells: Vec<String> = r
+                .iter()
+                .zip(&widths)
+                .map(|(cell, &w)| format!("{cell:<w$}"))
+                .collect();
+            cells.join("  ").trim_end().to_owned()
+        })
+        .collect()
+}
+
+/// Arguments of `aobake workers`.
+#[derive(Debug, clap::Args)]
+pub(super) struct WorkersArgs {
+    /// Print JSON (`GET /v1/workers`) instead of a table.
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    conn: Conn,
+}
+
+/// `aobake workers`: the workers the server knows, as the dashboard's
+/// workers page lists them.
+pub(super) fn workers(args: &WorkersArgs) -> anyhow::Result<()> {
+    let workers = args.conn.api()?.workers()?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&workers)?);
+        return Ok(());
+    }
+    let now = crate::auth::now_ms();
+    let rows: Vec<[String; 5]> = workers
+        .iter()
+        .map(|w| {
+            let job = match (w.job_id, w.bake_id) {
+                (Some(job), Some(bake)) => format!("bake {bake}, job {job}"),
+                (Some(job), None) => format!("job {job}"),
+                _ => String::new(),
+            };
+            [
+                w.id.clone(),
+                w.state.clone(),
+                job,
+                w.tracer.clone(),
+                format!(
+                    "{} ago (started {} ago)",
+                    age(now - w.last_seen),
+                    age(now - w.started_at)
+                ),
+            ]
+        })
+        .collect();
+    for line in table(["worker", "state", "running", "tracer", "last seen"], &rows) {
+        println!("{line}");
     }
     Ok(())
 }

@@ -103,6 +103,9 @@ enum Command {
     Fetch(client::FetchArgs),
     /// Manage API tokens.
     Token(client::TokenArgs),
+    /// List the workers a server knows: each one's state (idle, busy,
+    /// stopped), the job it runs, its tracer and when it was last seen.
+    Workers(client::WorkersArgs),
     /// Print the HTTP API's OpenAPI 3.1 description (YAML).
     Openapi,
     /// Measure speed: print figures for the benchmarks that issues and
@@ -223,5 +226,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Retry(args) => client::control(&args, "retry").map_err(client::explain_refusal),
         Command::Fetch(args) => client::fetch(&args).map_err(client::explain_refusal),
         Command::Token(args) => client::token(&args).map_err(client::explain_refusal),
+        Command::Workers(args) => client::workers(&args).map_err(client::explain_refusal),
     }
 }

@@ -232,6 +232,21 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
     assert_eq!(tracers[0], "cpu", "{workers}");
     assert!(tracers[1].starts_with("gpu: "), "{workers}");
     assert_eq!(jobs.last().unwrap()["kind"], "preview");
+    // `aobake workers` lists the same two, with their tracers.
+    let listed = env.aobake(&["workers"]);
+    let table = String::from_utf8_lossy(&listed.stdout);
+    assert!(listed.status.success(), "{listed:?}");
+    assert!(table.starts_with("worker  "), "{table}");
+    for w in workers.as_array().unwrap() {
+        let row = table
+            .lines()
+            .find(|l| l.starts_with(w["id"].as_str().unwrap()))
+            .unwrap_or_else(|| panic!("{table}"));
+        assert!(
+            row.contains(w["tracer"].as_str().unwrap()) && row.contains(" ago (started "),
+            "{row}"
+        );
+    }
 
     // The previews: three stills and an animation of the held-out clip,
     // each a PNG served as an image under its digest, and each naming the
