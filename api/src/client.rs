@@ -610,18 +610,21 @@ impl Client {
                 worker: worker.to_owned(),
                 wait_secs,
                 tracer: tracer.map(str::to_owned),
+                request: None,
             },
         )
     }
 
     /// Waits up to `wait_secs` for jobs for a process's idle slots
     /// `workers` (1 to 64 ids): at most one each, in that order, none
-    /// when no job came in time.
+    /// when no job came in time. `request` is the request's nonce, sent
+    /// again unchanged when no answer came (`LeaseManyRequest::request`).
     pub fn lease_many(
         &self,
         workers: &[String],
         wait_secs: u64,
         tracer: Option<&str>,
+        request: Option<&str>,
     ) -> Result<Vec<Lease>> {
         let leases: Option<Leases> = self.post(
             "/v1/jobs/leases",
@@ -629,6 +632,7 @@ impl Client {
                 workers: workers.to_vec(),
                 wait_secs,
                 tracer: tracer.map(str::to_owned),
+                request: request.map(str::to_owned),
             },
         )?;
         Ok(leases.map(|l| l.leases).unwrap_or_default())

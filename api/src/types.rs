@@ -384,9 +384,7 @@ pub struct PatchBody {
     pub priority: i64,
 }
 
-/// `POST /v1/jobs/lease`. A worker asks only while it holds no job: a job
-/// still leased to it (an answer it never got) is answered again, with
-/// the same token and attempt and its lease renewed.
+/// `POST /v1/jobs/lease`.
 #[derive(Debug, Deserialize, Serialize)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
 pub struct LeaseRequest {
@@ -404,11 +402,14 @@ pub struct LeaseRequest {
     #[serde(default)]
     #[cfg_attr(feature = "schema", schema(max_length = 200))]
     pub tracer: Option<String>,
+    /// The request's nonce, as in `LeaseManyRequest`.
+    #[serde(default)]
+    #[cfg_attr(feature = "schema", schema(max_length = 64))]
+    pub request: Option<String>,
 }
 
 /// `POST /v1/jobs/leases`: jobs for several idle slots of one worker
-/// process in one request. A slot still holding a lease (an answer it
-/// never got) gets that job again, same token and attempt, lease renewed.
+/// process in one request.
 #[derive(Debug, Deserialize, Serialize)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
 pub struct LeaseManyRequest {
@@ -424,6 +425,16 @@ pub struct LeaseManyRequest {
     #[serde(default)]
     #[cfg_attr(feature = "schema", schema(max_length = 200))]
     pub tracer: Option<String>,
+    /// A nonce the worker sends again, unchanged, when it asks again after
+    /// getting no answer (a server that died after leasing, a dropped
+    /// connection; 1 to 64 characters): a job that request leased and
+    /// that still runs under one of its slots is answered again, with the
+    /// same token and attempt and its lease renewed, instead of waiting
+    /// out its lease to run a second time. A new request, after an
+    /// answer, takes a new nonce.
+    #[serde(default)]
+    #[cfg_attr(feature = "schema", schema(max_length = 64))]
+    pub request: Option<String>,
 }
 
 /// `POST /v1/workers/stopped`: the slots of a worker process that is

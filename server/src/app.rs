@@ -110,7 +110,6 @@ async fn log_failures(req: Request, next: Next) -> Response {
         .to_owned();
     let (method, path) = (req.method().clone(), req.uri().path().to_owned());
     let res = next.run(req).await;
-    outage_seen(res.status());
     let Some(InternalFailure(what)) = res.extensions().get::<InternalFailure>().cloned() else {
         return res;
     };
@@ -119,27 +118,6 @@ async fn log_failures(req: Request, next: Next) -> Response {
     parts.headers.remove(axum::http::header::CONTENT_LENGTH);
     let body = serde_json::to_vec(&ApiError::internal_problem(&id)).unwrap_or_default();
     Response::from_parts(parts, axum::body::Body::from(body))
-}
-
-/// When the server began answering 503 (its database or blob store not
-/// answering), while it does.
-static OUTAGE: std::sync::Mutex<Option<Instant>> = std::sync::Mutex::new(None);
-
-/// Notes an answer's status: the first 503 opens an outage (each 503 logs
-/// its own cause), and the first success after it says it ended, so the
-/// log shows when the server answered again.
-fn outage_seen(status: axum::http::StatusCode) {
-    let mut outage = OUTAGE.lock().unwrap_or_else(|e| e.into_inner());
-    if status == axum::http::StatusCode::SERVICE_UNAVAILABLE {
-        outage.get_or_insert_with(Instant::now);
-    } else if status.is_success()
-        && let Some(since) = outage.take()
-    {
-        log_line!(
-            "the server answers again, after {:.0} s of 503s",
-            since.elapsed().as_secs_f64()
-        );
-    }
 }
 
 /// 404 for a path no route serves, as problem+json like every error.

@@ -1,7 +1,9 @@
 //! One error type for the API and its one mapping to the wire: RFC 9457
 //! problem+json with `type`, `title`, `status`, `detail` and `code`.
-//! Internal errors get a generic detail; what went wrong is logged once,
-//! here, with the request's id.
+//! Internal errors get a generic detail naming the request's id; what
+//! went wrong is logged once, with that id, by `app::log_failures` (an
+//! item of a batch answer, which is not a response of its own, is logged
+//! by [`ApiError::problem`] without it).
 
 use axum::{
     http::{HeaderValue, StatusCode, header},

@@ -198,6 +198,8 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         tokio::spawn(async move {
             let mut hold_until = Some(tokio::time::Instant::now() + grace);
             let mut forgot = tokio::time::Instant::now();
+            // Since when the database has not answered, while it does not.
+            let mut down_since: Option<tokio::time::Instant> = None;
             loop {
                 tokio::time::sleep(Duration::from_millis(500)).await;
                 // Once a minute: workers gone for a day leave the list
@@ -214,6 +216,14 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                     None => {
                         if state.store.ping().await.is_ok() {
                             hold_until = Some(tokio::time::Instant::now() + grace);
+                            // The log says when an outage ended, not only
+                            // each request it failed.
+                            if let Some(since) = down_since.take() {
+                                log_line!(
+                                    "the database answers again, after {:.0} s",
+                                    since.elapsed().as_secs_f64()
+                                );
+                            }
                         }
                         continue;
                     }
@@ -226,6 +236,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                     Err(e) => {
                         log_line!("error: reaping leases: {e}");
                         hold_until = None;
+                        down_since.get_or_insert_with(tokio::time::Instant::now);
                     }
                 }
             }

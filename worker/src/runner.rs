@@ -49,8 +49,9 @@ pub struct WorkerConfig {
     /// `aobake serve` gives its local workers closes when it exits, even
     /// when killed outright).
     pub stop_at_stdin_end: bool,
-    /// A fault to inject, for crash tests: `after_checkpoint` aborts the
-    /// process right after a checkpoint is saved (`AOBAKE_FAULT`).
+    /// A fault to inject, for crash tests (`AOBAKE_FAULT`):
+    /// `after_checkpoint` aborts the process right after a checkpoint is
+    /// saved; `slow` waits 300 ms at each checkpoint step (a long job).
     pub fault: Option<String>,
 }
 
@@ -201,6 +202,9 @@ fn dispatch(
     let tracer = aobake_core::trace::engine::tracer_label();
     let mut told = false;
     let mut idle: BTreeSet<usize> = (0..ids.len()).collect();
+    // Sent again unchanged until an answer arrives: a request whose answer
+    // was lost gets what it leased (`LeaseManyRequest::request`).
+    let mut nonce = next_nonce();
     while !shutdown.load(Ordering::Relaxed) {
         if idle.is_empty() {
             // Every slot is busy: wait for one, looking at shutdown.
@@ -214,7 +218,7 @@ fn dispatch(
         }
         idle.extend(freed.try_iter());
         let asked: Vec<String> = idle.iter().map(|&s| ids[s].clone()).collect();
-        let leased = match poller.lease(asked, (!told).then(|| tracer.clone()), shutdown)? {
+        let leased = match poller.lease(asked, (!told).then(|| tracer.clone()), &nonce, shutdown)? {
             Polled::Answer(answer) => answer,
             // Shutdown during the long poll: stop waiting for it.
             Polled::Stopping => break,
@@ -223,6 +227,7 @@ fn dispatch(
         match leased {
             Ok(leases) => {
                 failures = 0;
+                nonce = next_nonce();
                 for lease in leases {
                     let slot = lease
                         .job
@@ -281,8 +286,36 @@ fn dispatch(
 /// after dispatch stopped listening are given back; a request still open
 /// when the process exits is dropped with its connection, and the server
 /// ends the poll with it.
+/// A lease request the poller sends.
+struct Ask {
+    /// The idle slots.
+    workers: Vec<String>,
+    /// The process's tracer, until a request has gone through.
+    tracer: Option<String>,
+    /// The request's nonce: the same until an answer arrives, so a
+    /// request sent again after a lost answer gets what the first leased.
+    request: String,
+}
+
+/// Lease request nonces: unique to this process (its id and start time)
+/// and to each request (a count).
+fn next_nonce() -> String {
+    static STARTED: std::sync::OnceLock<u128> = std::sync::OnceLock::new();
+    static COUNT: AtomicU64 = AtomicU64::new(0);
+    let started = STARTED.get_or_init(|| {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos())
+    });
+    format!(
+        "{}-{started:x}-{}",
+        std::process::id(),
+        COUNT.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
 struct Poller {
-    requests: mpsc::Sender<(Vec<String>, Option<String>)>,
+    requests: mpsc::Sender<Ask>,
     answers: mpsc::Receiver<aobake_api::client::Result<Vec<Lease>>>,
     /// Held while late leases are given back: [`Poller::finish`] waits
     /// for it.
@@ -301,14 +334,20 @@ impl Poller {
     /// A poller asking for jobs on `client`'s server, each request waiting
     /// up to `wait_secs` there.
     fn start(client: Client, wait_secs: u64) -> Self {
-        let (requests, asked) = mpsc::channel::<(Vec<String>, Option<String>)>();
+        let (requests, asked) = mpsc::channel::<Ask>();
         let (answer, answers) = mpsc::sync_channel(0);
         let releasing: Arc<Mutex<()>> = Arc::default();
         let held = releasing.clone();
         // Detached, not scoped: the process must not wait for a poll.
         std::thread::spawn(move || {
-            for (workers, tracer) in asked {
-                let leased = client.lease_many(&workers, wait_secs, tracer.as_deref());
+            for Ask {
+                workers,
+                tracer,
+                request,
+            } in asked
+            {
+                let leased =
+                    client.lease_many(&workers, wait_secs, tracer.as_deref(), Some(&request));
                 // Held through the hand-over: `finish` drops the receiver,
                 // then waits while the leases it refused are given back.
                 // (An answer that arrives in the instant between `finish`
@@ -340,10 +379,16 @@ impl Poller {
         &self,
         workers: Vec<String>,
         tracer: Option<String>,
+        request: &str,
         shutdown: &AtomicBool,
     ) -> Result<Polled, RunError> {
         let gone = || RunError::Setup("the lease thread stopped".to_owned());
-        self.requests.send((workers, tracer)).map_err(|_| gone())?;
+        let ask = Ask {
+            workers,
+            tracer,
+            request: request.to_owned(),
+        };
+        self.requests.send(ask).map_err(|_| gone())?;
         loop {
             match self.answers.recv_timeout(Duration::from_millis(100)) {
                 Ok(answer) => return Ok(Polled::Answer(answer)),
@@ -442,7 +487,7 @@ struct Flags {
     /// The server said to stop (the bake was cancelled, or failed by
     /// another job), as against a lease refused (409).
     called_off: AtomicBool,
-    /// Why it said so (`the bake is failed`), once it did.
+    /// Why it said so (`the bake was cancelled`), once it did.
     why: std::sync::OnceLock<String>,
     /// Shutdown past its deadline: stop and give the lease back.
     release: AtomicBool,
@@ -490,6 +535,9 @@ impl Sink<'_> {
 
 impl JobSink for Sink<'_> {
     fn checkpoint(&mut self, checkpoint: Checkpoint) -> Result<(), Stop> {
+        if self.fault == Some("slow") {
+            std::thread::sleep(Duration::from_millis(300));
+        }
         // Too soon after the last one: not worth a save (the next attempt
         // resumes from the last saved checkpoint, with the same result).
         // A stop asked for is saved first, so the work is kept.
@@ -872,7 +920,15 @@ fn run_leased(
                 spec["kind"],
                 started.elapsed().as_secs_f64()
             ),
-            Err(e) => say!("job {job}: completion refused: {e}"),
+            Err(e) => {
+                say!("job {job}: completion refused: {e}");
+                // Its attempt counts now, with why, rather than when its
+                // lease expires (one try: a lease already lost is 409).
+                let why = format!("its outputs could not be delivered: {e}");
+                if client.fail(job, &lease.token, &why, true).is_ok() {
+                    say!("job {job}: failed ({why})");
+                }
+            }
         },
         Err(JobError::Stopped(Stop(why))) => {
             // Give the lease back if it is still ours (a stop asked by the

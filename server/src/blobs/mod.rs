@@ -74,7 +74,8 @@ pub fn open(url: &str) -> Result<std::sync::Arc<dyn Blobs>, BlobError> {
         && scheme != "file"
     {
         return Err(BlobError::Config(format!(
-            "--blobs {url:?}: use s3://BUCKET[/PREFIX][?endpoint=…] or a directory"
+            "--blobs {:?}: use s3://BUCKET[/PREFIX][?endpoint=…] or a directory",
+            redacted(url)
         )));
     }
     let dir = url.strip_prefix("file://").unwrap_or(url);

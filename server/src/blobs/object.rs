@@ -78,10 +78,14 @@ impl ObjectBlobs {
         // request with "builder error": say so now.
         let endpoint = builder.get_config_value(&AmazonS3ConfigKey::Endpoint);
         let allow_http = AmazonS3ConfigKey::Client(ClientConfigKey::AllowHttp);
+        // (Truthy as object_store reads it.)
+        let allowed = builder
+            .get_config_value(&allow_http)
+            .is_some_and(|v| ["true", "1", "yes", "on"].contains(&v.to_ascii_lowercase().as_str()));
         if endpoint
             .as_deref()
             .is_some_and(|e| e.starts_with("http://"))
-            && builder.get_config_value(&allow_http).as_deref() != Some("true")
+            && !allowed
         {
             return Err(bad(
                 "the endpoint is http://: add allow_http=true (or use https://)".into(),

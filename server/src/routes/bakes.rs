@@ -419,7 +419,13 @@ pub(crate) async fn all_events(
     let updates = BroadcastStream::new(state.events.subscribe()).filter_map(move |e| match e {
         Ok(e) => (sent.get(&e.id) != Some(&e)).then(|| {
             let event = bake_event(&e);
-            sent.insert(e.id, e);
+            // A bake that ended is forgotten (a tab stays open for days),
+            // so its next event (a retry) is sent whatever it says.
+            if e.state.is_active() {
+                sent.insert(e.id, e);
+            } else {
+                sent.remove(&e.id);
+            }
             Ok(event)
         }),
         // A slow listener that missed events is told to reload.

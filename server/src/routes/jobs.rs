@@ -58,7 +58,12 @@ pub(crate) async fn lease(
 ) -> ApiResult<Response> {
     let workers = vec![req.worker];
     check_slots(&workers, "a lease request")?;
-    let leases = wait_for_leases(&state, workers, req.wait_secs, req.tracer, gone).await?;
+    let ask = Ask {
+        wait_secs: req.wait_secs,
+        tracer: req.tracer,
+        request: req.request,
+    };
+    let leases = wait_for_leases(&state, workers, ask, gone).await?;
     Ok(match leases.into_iter().next() {
         Some(lease) => Json(lease).into_response(),
         None => StatusCode::NO_CONTENT.into_response(),
@@ -75,7 +80,12 @@ pub(crate) async fn lease_many(
     Body(req): Body<LeaseManyRequest>,
 ) -> ApiResult<Response> {
     check_slots(&req.workers, "a lease request")?;
-    let leases = wait_for_leases(&state, req.workers, req.wait_secs, req.tracer, gone).await?;
+    let ask = Ask {
+        wait_secs: req.wait_secs,
+        tracer: req.tracer,
+        request: req.request,
+    };
+    let leases = wait_for_leases(&state, req.workers, ask, gone).await?;
     Ok(if leases.is_empty() {
         StatusCode::NO_CONTENT.into_response()
     } else {
@@ -123,6 +133,16 @@ pub(crate) async fn workers_stopped(
     Ok(StatusCode::NO_CONTENT)
 }
 
+/// What a lease request asks besides its slots.
+struct Ask {
+    /// Seconds to wait for a first job (at most 60).
+    wait_secs: u64,
+    /// The process's tracer, when it tells it.
+    tracer: Option<String>,
+    /// The request's nonce (`LeaseManyRequest::request`).
+    request: Option<String>,
+}
+
 /// Leases for `workers` ([`check_slots`]), waiting up to `wait_secs` (at most 60) for a
 /// first job; empty when none came, or once the worker that asked has
 /// gone (its connection closed: a worker stopped mid-poll, or killed), so
@@ -130,11 +150,23 @@ pub(crate) async fn workers_stopped(
 async fn wait_for_leases(
     state: &AppState,
     workers: Vec<String>,
-    wait_secs: u64,
-    tracer: Option<String>,
+    Ask {
+        wait_secs,
+        tracer,
+        request,
+    }: Ask,
     gone: Option<Extension<ClientGone>>,
 ) -> ApiResult<Vec<Lease>> {
     let mut gone = gone.map(|Extension(g)| g);
+    if request
+        .as_ref()
+        .is_some_and(|r| r.is_empty() || r.len() > 64)
+    {
+        return Err(ApiError::bad(
+            "bad_request_nonce",
+            "a lease request's nonce is 1 to 64 characters",
+        ));
+    }
     if let Some(tracer) = &tracer {
         if tracer.is_empty() || tracer.len() > 200 {
             return Err(ApiError::bad(
@@ -161,7 +193,10 @@ async fn wait_for_leases(
         // Register interest before looking, so a job made available between
         // the look and the wait still wakes us.
         let notified = state.jobs_ready.notified();
-        let leases = state.store.lease_many(&workers, &state.policy).await?;
+        let leases = state
+            .store
+            .lease_batch(&workers, request.as_deref(), &state.policy)
+            .await?;
         if !leases.is_empty() && gone.as_ref().is_some_and(ClientGone::is_gone) {
             // The worker went while its jobs were being leased: give them
             // back now rather than at their leases' expiry.

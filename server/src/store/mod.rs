@@ -226,7 +226,20 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// process's idle slots), most urgent first, in one transaction: the
     /// leases come in the order of `workers`, each job's `worker` naming
     /// its slot, and slots left over get nothing.
-    async fn lease_many(&self, workers: &[String], policy: &QueuePolicy) -> Result<Vec<Lease>>;
+    async fn lease_many(&self, workers: &[String], policy: &QueuePolicy) -> Result<Vec<Lease>> {
+        self.lease_batch(workers, None, policy).await
+    }
+    /// [`Store::lease_many`] for a request with a nonce (`request`): the
+    /// same request sent again, after its answer was lost, gets the jobs
+    /// it leased and that still run under its slots, with the same tokens
+    /// and attempts and their leases renewed, beside new jobs for its
+    /// other slots.
+    async fn lease_batch(
+        &self,
+        workers: &[String],
+        request: Option<&str>,
+        policy: &QueuePolicy,
+    ) -> Result<Vec<Lease>>;
     /// Leases the most urgent ready job for `worker`, if any.
     async fn lease(&self, worker: &str, policy: &QueuePolicy) -> Result<Option<Lease>> {
         Ok(self

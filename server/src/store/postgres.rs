@@ -44,10 +44,13 @@ impl PgStore {
             // why (refused, no such database, a password refused).
             Err(sqlx::Error::PoolTimedOut) => {
                 use sqlx::Connection as _;
-                return Err(match sqlx::PgConnection::connect(url).await {
-                    Err(why) => why.into(),
-                    Ok(_) => sqlx::Error::PoolTimedOut.into(),
-                });
+                let once = std::time::Duration::from_secs(10);
+                return Err(
+                    match tokio::time::timeout(once, sqlx::PgConnection::connect(url)).await {
+                        Ok(Err(why)) => why.into(),
+                        Ok(Ok(_)) | Err(_) => sqlx::Error::PoolTimedOut.into(),
+                    },
+                );
             }
             Err(e) => return Err(e.into()),
         };

@@ -834,7 +834,12 @@ impl<B: Backend> Store for SqlStore<B> {
         rows.into_iter().map(RawJob::cook).collect()
     }
 
-    async fn lease_many(&self, workers: &[String], policy: &QueuePolicy) -> Result<Vec<Lease>> {
+    async fn lease_batch(
+        &self,
+        workers: &[String],
+        request: Option<&str>,
+        policy: &QueuePolicy,
+    ) -> Result<Vec<Lease>> {
         in_tx!(self, Durability::Queue, |c| {
             // Retries whose delay has passed are ready again.
             c.execute(B::sql(
@@ -847,25 +852,31 @@ impl<B: Backend> Store for SqlStore<B> {
                 ));
             }
             // A slot whose process said it stopped gets no job: the poll
-            // asking for it is abandoned. Its row is locked first, so a
-            // stop either commits before this and is seen here, or waits
-            // and then gives back what this leased (`workers_stopped`).
-            let stopped: Vec<(String,)> = c
+            // asking for it is abandoned. The slots' rows are locked first
+            // (before any job's, the order `workers_stopped` takes too), so
+            // a stop either commits before this and is seen here, or waits
+            // and then gives back what this leased.
+            let known: Vec<(String, String)> = c
                 .all(
                     B::sql(&format!(
-                        "SELECT id FROM workers WHERE id IN ({}) AND state = 'stopped'{{for_update}}",
+                        "SELECT id, state FROM workers WHERE id IN ({}) ORDER BY id{{for_update}}",
                         placeholders(1, workers.len())
                     ))
                     .bind_all(workers.iter().map(String::as_str)),
                 )
                 .await?;
+            let stopped: Vec<&String> = known
+                .iter()
+                .filter(|(_, state)| state == "stopped")
+                .map(|(id, _)| id)
+                .collect();
             let live: Vec<String>;
             let workers = if stopped.is_empty() {
                 workers
             } else {
                 live = workers
                     .iter()
-                    .filter(|w| !stopped.iter().any(|(s,)| s == *w))
+                    .filter(|w| !stopped.contains(w))
                     .cloned()
                     .collect();
                 if live.is_empty() {
@@ -873,22 +884,27 @@ impl<B: Backend> Store for SqlStore<B> {
                 }
                 &live[..]
             };
-            // A slot asks only while it holds no job, so a job running
-            // under its name is one whose lease never reached it (the
-            // answer was lost: a server that died after committing it, a
-            // dropped connection) or one a process restarted under the
-            // same name lost. It is handed to the slot again, with the
-            // same lease and attempt, instead of waiting out its lease to
-            // run a second time.
-            let held: Vec<(i64, String, String)> = c
-                .all(
-                    B::sql(&format!(
-                        "SELECT id, worker, lease_token FROM jobs WHERE state = 'running' AND worker IN ({}) ORDER BY id{{for_update}}",
-                        placeholders(1, workers.len())
-                    ))
-                    .bind_all(workers.iter().map(String::as_str)),
-                )
-                .await?;
+            // The same request sent again (its answer was lost: a server
+            // that died after committing it, a dropped connection) gets
+            // what it leased, with the same lease and attempt, instead of
+            // the jobs waiting out their leases to run a second time. Only
+            // the request's own jobs (another process under the same id
+            // sends other nonces), of a bake still under way, not locked
+            // by another transaction (the reaper's).
+            let held: Vec<(i64, String, String)> = match request {
+                Some(request) => {
+                    c.all(
+                        B::sql(&format!(
+                            "SELECT id, worker, lease_token FROM jobs WHERE state = 'running' AND lease_request = $1 AND worker IN ({}) AND EXISTS (SELECT 1 FROM bakes b WHERE b.id = jobs.bake_id AND b.state IN ('queued', 'running', 'paused')) ORDER BY id{{skip_locked}}",
+                            placeholders(2, workers.len())
+                        ))
+                        .bind(request)
+                        .bind_all(workers.iter().map(String::as_str)),
+                    )
+                    .await?
+                }
+                None => Vec::new(),
+            };
             let mut grants: Vec<(usize, i64, Option<String>)> = Vec::new();
             for (id, worker, token) in held {
                 let slot = workers.iter().position(|w| *w == worker);
@@ -927,10 +943,11 @@ impl<B: Backend> Store for SqlStore<B> {
                     None => {
                         let token = lease_token();
                         c.optional::<RawJob>(
-                            B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0 WHERE id = $4 AND state = 'available' RETURNING *, {deps} AS deps")
+                            B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0, lease_request = $4 WHERE id = $5 AND state = 'available' RETURNING *, {deps} AS deps")
                                 .bind(&token)
                                 .bind(worker)
                                 .bind(policy.lease_ms)
+                                .bind(request)
                                 .bind(id),
                         )
                         .await?

@@ -389,7 +389,7 @@ fn work(url: &str, token: &str, per_sec: f64, deadline: Instant, tally: &Tally, 
             continue;
         }
         let slots: Vec<String> = (0..n).map(|i| format!("load/{i}")).collect();
-        let leases = client.lease_many(&slots, 0, None);
+        let leases = client.lease_many(&slots, 0, None, None);
         tally.answer(leases.as_ref().map(|_| 200).map_err(|_| ()), &[200]);
         let Ok(leases) = leases else { continue };
         if leases.is_empty() {

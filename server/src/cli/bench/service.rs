@@ -350,7 +350,7 @@ fn http_queue(
                     let client = Client::new(url, token);
                     let slots = slot_ids(w, args.batch);
                     let mut n = 0;
-                    while let Ok(leases) = client.lease_many(&slots, 0, None) {
+                    while let Ok(leases) = client.lease_many(&slots, 0, None, None) {
                         if leases.is_empty() {
                             break;
                         }
