@@ -44,15 +44,7 @@ pub(crate) async fn asset(
     ApiPath(digest): ApiPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
-    let_through(&state, &caller, &digest).await?;
-    serve(
-        &state,
-        &digest,
-        &headers,
-        "application/octet-stream",
-        Body::Bytes,
-    )
-    .await
+    an_asset(&state, &caller, &digest, &headers, Body::Bytes).await
 }
 
 #[utoipa::path(head, path = "/v1/assets/{digest}", tag = "assets", params(("digest" = Digest, Path, description = "sha256 of the bytes"), ("If-None-Match" = Option<String>, Header, description = "An ETag"), ("Range" = Option<String>, Header, description = "One byte range"), ("If-Range" = Option<String>, Header, description = "The range only if this is still the ETag")),
@@ -70,15 +62,19 @@ pub(crate) async fn asset_head(
     ApiPath(digest): ApiPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
-    let_through(&state, &caller, &digest).await?;
-    serve(
-        &state,
-        &digest,
-        &headers,
-        "application/octet-stream",
-        Body::None,
-    )
-    .await
+    an_asset(&state, &caller, &digest, &headers, Body::None).await
+}
+
+/// An asset's answer to GET or HEAD, for a caller let through.
+async fn an_asset(
+    state: &AppState,
+    caller: &Caller,
+    digest: &str,
+    headers: &HeaderMap,
+    body: Body,
+) -> ApiResult<Response> {
+    let_through(state, caller, digest).await?;
+    serve(state, digest, headers, "application/octet-stream", body).await
 }
 
 /// Sources need submit, everything else read: a caller with both (an

@@ -410,20 +410,7 @@ fn serve_refuses_a_bucket_that_is_not_there() {
         "{}&aws_secret_access_key=SECRETXYZ",
         s3.url.replace("aobake-test", "no-such-bucket")
     );
-    let out = std::process::Command::new(aobake_e2e::binary())
-        .args([
-            "serve",
-            "--listen",
-            "127.0.0.1:0",
-            "--workers",
-            "0",
-            "--blobs",
-            &url,
-            "--data",
-        ])
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let out = serve_once(&["--blobs", &url], dir.path());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{stderr}");
     assert!(
@@ -555,22 +542,7 @@ fn a_dead_job_fails_its_bake_with_a_reason_that_names_it() {
 #[test]
 fn serve_says_why_it_cannot_use_its_database() {
     let dir = tempfile::tempdir().unwrap();
-    let serve = |database: &str| {
-        std::process::Command::new(aobake_e2e::binary())
-            .args([
-                "serve",
-                "--listen",
-                "127.0.0.1:0",
-                "--workers",
-                "0",
-                "--database",
-                database,
-                "--data",
-            ])
-            .arg(dir.path())
-            .output()
-            .unwrap()
-    };
+    let serve = |database: &str| serve_once(&["--database", database], dir.path());
     let refused = serve("postgres://aobake@127.0.0.1:1/aobake");
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success(), "{stderr}");
@@ -587,4 +559,16 @@ fn serve_says_why_it_cannot_use_its_database() {
         stderr.contains("--database takes a PostgreSQL URL"),
         "{stderr}"
     );
+}
+
+/// `aobake serve ARGS` on `data` (any port, no local worker), run to its
+/// end: for a start that must be refused.
+fn serve_once(args: &[&str], data: &std::path::Path) -> std::process::Output {
+    std::process::Command::new(aobake_e2e::binary())
+        .args(["serve", "--listen", "127.0.0.1:0", "--workers", "0"])
+        .args(args)
+        .arg("--data")
+        .arg(data)
+        .output()
+        .unwrap()
 }
