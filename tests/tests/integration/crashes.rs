@@ -572,3 +572,111 @@ fn serve_once(args: &[&str], data: &std::path::Path) -> std::process::Output {
         .output()
         .unwrap()
 }
+
+/// A proxy in front of a server that drops the first answer that leased
+/// jobs: the server committed the lease, the worker never heard of it.
+/// Every request goes through it on a connection of its own.
+struct LeaseDropper {
+    url: String,
+    dropped: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl LeaseDropper {
+    fn start(server: &str) -> Self {
+        use std::io::{BufRead as _, BufReader, Read as _, Write as _};
+        use std::sync::atomic::Ordering;
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let url = format!("http://{}", listener.local_addr().unwrap());
+        let upstream = server.trim_start_matches("http://").to_owned();
+        let dropped = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = dropped.clone();
+        std::thread::spawn(move || {
+            for client in listener.incoming().flatten() {
+                let (upstream, flag) = (upstream.clone(), flag.clone());
+                std::thread::spawn(move || -> std::io::Result<()> {
+                    let mut reader = BufReader::new(client.try_clone()?);
+                    let mut client = client;
+                    loop {
+                        // One request: its head, with `Connection: close`
+                        // upstream, and its body by its length.
+                        let mut head = Vec::new();
+                        let mut length = 0usize;
+                        let mut first = String::new();
+                        loop {
+                            let mut line = String::new();
+                            if reader.read_line(&mut line)? == 0 {
+                                return Ok(());
+                            }
+                            if first.is_empty() {
+                                first = line.clone();
+                            }
+                            let lower = line.to_ascii_lowercase();
+                            if let Some(v) = lower.strip_prefix("content-length:") {
+                                length = v.trim().parse().unwrap_or(0);
+                            }
+                            if lower.starts_with("connection:") {
+                                continue;
+                            }
+                            if line == "\r\n" {
+                                head.extend_from_slice(b"Connection: close\r\n\r\n");
+                                break;
+                            }
+                            head.extend_from_slice(line.as_bytes());
+                        }
+                        let mut body = vec![0; length];
+                        reader.read_exact(&mut body)?;
+                        let mut up = std::net::TcpStream::connect(&upstream)?;
+                        up.write_all(&head)?;
+                        up.write_all(&body)?;
+                        let mut answer = Vec::new();
+                        up.read_to_end(&mut answer)?;
+                        let leased = first.starts_with("POST /v1/jobs/leases")
+                            && answer.starts_with(b"HTTP/1.1 200");
+                        if leased && !flag.swap(true, Ordering::SeqCst) {
+                            // Committed by the server, never heard of.
+                            return Ok(());
+                        }
+                        client.write_all(&answer)?;
+                        return Ok(());
+                    }
+                });
+            }
+        });
+        Self { url, dropped }
+    }
+}
+
+/// A lease whose answer is lost (the server committed it; the worker's
+/// connection closed before the answer) is not run twice: the worker
+/// asks again with the same request nonce and gets the same jobs, same
+/// attempts, so every job of the bake is attempted once and the asset is
+/// `aobake bake`'s.
+#[test]
+fn a_lease_whose_answer_was_lost_is_answered_again_not_run_twice() {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 2.0,
+        ..Options::default()
+    });
+    let proxy = LeaseDropper::start(&env.url);
+    let rigged = character("RiggedSimple");
+    let digest = upload(&env, &rigged);
+    let (_, b) = submit(&env, &digest, 8);
+    let id = b["id"].as_i64().unwrap();
+    env.start_worker_for(&proxy.url);
+    let done = env.wait_bake(id, Duration::from_secs(120));
+    let logs = env.worker_logs();
+    assert_eq!(done["state"], "done", "{done}\n{logs}");
+    assert!(
+        proxy.dropped.load(std::sync::atomic::Ordering::SeqCst),
+        "no lease answer was dropped"
+    );
+    assert!(logs.contains("cannot lease"), "{logs}");
+    let twice: Vec<&Value> = done["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|j| j["attempts"] != 1)
+        .collect();
+    assert!(twice.is_empty(), "jobs run again: {twice:?}\n{logs}");
+    assert!(asset(&env, &done) == local_bake(env.dir.path(), &rigged, 8));
+}
