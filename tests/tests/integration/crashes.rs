@@ -573,16 +573,17 @@ fn serve_once(args: &[&str], data: &std::path::Path) -> std::process::Output {
         .unwrap()
 }
 
-/// A proxy in front of a server that drops the first answer that leased
-/// jobs: the server committed the lease, the worker never heard of it.
-/// Every request goes through it on a connection of its own.
-struct LeaseDropper {
+/// A proxy in front of a server that drops the first successful answer
+/// to requests starting `what` (`POST /v1/jobs/leases`): the server
+/// committed what was asked, the worker never heard of it. Every request
+/// goes through it on a connection of its own.
+struct AnswerDropper {
     url: String,
     dropped: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
-impl LeaseDropper {
-    fn start(server: &str) -> Self {
+impl AnswerDropper {
+    fn start(server: &str, what: &'static str) -> Self {
         use std::io::{BufRead as _, BufReader, Read as _, Write as _};
         use std::sync::atomic::Ordering;
         let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
@@ -630,9 +631,8 @@ impl LeaseDropper {
                         up.write_all(&body)?;
                         let mut answer = Vec::new();
                         up.read_to_end(&mut answer)?;
-                        let leased = first.starts_with("POST /v1/jobs/leases")
-                            && answer.starts_with(b"HTTP/1.1 200");
-                        if leased && !flag.swap(true, Ordering::SeqCst) {
+                        let done = first.starts_with(what) && answer.starts_with(b"HTTP/1.1 200");
+                        if done && !flag.swap(true, Ordering::SeqCst) {
                             // Committed by the server, never heard of.
                             return Ok(());
                         }
@@ -657,7 +657,7 @@ fn a_lease_whose_answer_was_lost_is_answered_again_not_run_twice() {
         lease_secs: 2.0,
         ..Options::default()
     });
-    let proxy = LeaseDropper::start(&env.url);
+    let proxy = AnswerDropper::start(&env.url, "POST /v1/jobs/leases");
     let rigged = character("RiggedSimple");
     let digest = upload(&env, &rigged);
     let (_, b) = submit(&env, &digest, 8);
@@ -679,4 +679,35 @@ fn a_lease_whose_answer_was_lost_is_answered_again_not_run_twice() {
         .collect();
     assert!(twice.is_empty(), "jobs run again: {twice:?}\n{logs}");
     assert!(asset(&env, &done) == local_bake(env.dir.path(), &rigged, 8));
+}
+
+/// A completion whose answer is lost (the server recorded it; the
+/// worker's connection closed before the answer) is sent again and
+/// answered as the first was: the job is counted once, not refused and
+/// failed, so every job of the bake is attempted once.
+#[test]
+fn a_completion_whose_answer_was_lost_is_answered_again_and_counted_once() {
+    let mut env = TestEnv::start(Options::default());
+    let proxy = AnswerDropper::start(&env.url, "POST /v1/jobs/completions");
+    let rigged = character("RiggedSimple");
+    let digest = upload(&env, &rigged);
+    let (_, b) = submit(&env, &digest, 8);
+    let id = b["id"].as_i64().unwrap();
+    env.start_worker_for(&proxy.url);
+    let done = env.wait_bake(id, Duration::from_secs(120));
+    let logs = env.worker_logs();
+    assert_eq!(done["state"], "done", "{done}\n{logs}");
+    assert!(
+        proxy.dropped.load(std::sync::atomic::Ordering::SeqCst),
+        "no completion answer was dropped"
+    );
+    assert!(!logs.contains("completion refused"), "{logs}");
+    let twice: Vec<&Value> = done["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|j| j["attempts"] != 1)
+        .collect();
+    assert!(twice.is_empty(), "jobs run again: {twice:?}\n{logs}");
+    assert_eq!(done["jobs_done"], done["jobs_total"], "{done}");
 }
