@@ -482,12 +482,18 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         c.goto(&format!("{}/#/bakes/{other}", env.url)).await.unwrap();
         let cancel = "document.querySelector('button[data-action=\"cancel\"]')";
         wait_for(&c, "the cancel button", &format!("{cancel} && !{cancel}.disabled"), Duration::from_secs(20)).await;
-        c.find(Locator::Css("button[data-action=\"cancel\"]"))
-            .await
-            .unwrap()
-            .click()
-            .await
-            .unwrap();
+        // Cancel asks first: dismissed, nothing happens; accepted, the
+        // bake is cancelled.
+        let cancel_button = c.find(Locator::Css("button[data-action=\"cancel\"]")).await.unwrap();
+        cancel_button.click().await.unwrap();
+        let asked = c.get_alert_text().await.unwrap();
+        assert!(asked.starts_with(&format!("Cancel bake #{other}?")), "{asked}");
+        c.dismiss_alert().await.unwrap();
+        std::thread::sleep(Duration::from_millis(500));
+        let (_, b) = env.request("GET", &format!("/v1/bakes/{other}"), ADMIN, None).unwrap();
+        assert_ne!(b["state"], "cancelled", "a dismissed cancel cancelled");
+        cancel_button.click().await.unwrap();
+        c.accept_alert().await.unwrap();
         wait_for(
             &c,
             "the cancelled state",
@@ -552,6 +558,31 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         )
         .await;
         assert_eq!(disabled, json!([true, true, true, true]));
+        // Readable (WCAG AA, 4.5:1 for text this size): a disabled
+        // button's label and the live pill's.
+        wait_for(&c, "the live stream", "document.querySelector('#live.on')", Duration::from_secs(20)).await;
+        let contrast = eval(&c, r#"
+            const rgb = (s) => s.match(/[\d.]+/g).slice(0, 3).map(Number);
+            const lum = ([r, g, b]) => {
+              const f = (c) => { c /= 255; return c <= 0.03928 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4; };
+              return 0.2126 * f(r) + 0.7152 * f(g) + 0.0722 * f(b);
+            };
+            const back = (el) => {
+              for (; el; el = el.parentElement) {
+                const c = getComputedStyle(el).backgroundColor;
+                if (c !== 'transparent' && !/rgba\(.*,\s*0\)$/.test(c)) return c;
+              }
+              return 'rgb(255, 255, 255)';
+            };
+            const ratio = (el) => {
+              const a = lum(rgb(getComputedStyle(el).color)), b = lum(rgb(back(el)));
+              return (Math.max(a, b) + 0.05) / (Math.min(a, b) + 0.05);
+            };
+            return [ratio(document.querySelector('button[data-action="cancel"]')), ratio(document.getElementById('live'))];
+        "#).await;
+        for r in contrast.as_array().unwrap() {
+            assert!(r.as_f64().unwrap() >= 4.5, "{contrast}");
+        }
         let download = eval(&c, "return document.querySelector('button[data-action=\"download\"]').disabled").await;
         assert_eq!(download, json!(false), "reading the asset needs only read");
         wait_for(&c, "the previews", &format!("{images}.length === 4"), Duration::from_secs(30)).await;

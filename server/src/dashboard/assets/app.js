@@ -641,7 +641,11 @@ async function bakePage(signal, id) {
   const status = h("div");
   let loadedResults = false;
 
+  // Cancel asks first: a click that slipped would stop a long bake.
+  const confirmCancel = () => confirm(`Cancel bake #${id}? Its running jobs stop at their next heartbeat `
+    + "and no job of it is leased again; Retry takes it up again, keeping what finished.");
   const act = (action) => async () => {
+    if (action === "cancel" && !confirmCancel()) return;
     fill(status);
     try {
       await api(`/v1/bakes/${id}/${action}`, { method: "POST" });
