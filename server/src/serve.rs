@@ -198,7 +198,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         tokio::spawn(async move {
             let mut hold_until = Some(tokio::time::Instant::now() + grace);
             let mut forgot = tokio::time::Instant::now();
-            // Since when the database has not answered, while it does not.
+            // Since the database first failed a ping, while it does.
             let mut down_since: Option<tokio::time::Instant> = None;
             loop {
                 tokio::time::sleep(Duration::from_millis(500)).await;
@@ -217,13 +217,16 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                         if state.store.ping().await.is_ok() {
                             hold_until = Some(tokio::time::Instant::now() + grace);
                             // The log says when an outage ended, not only
-                            // each request it failed.
+                            // each request it failed (an error that was
+                            // not one, such as a deadlock, says nothing).
                             if let Some(since) = down_since.take() {
                                 log_line!(
                                     "the database answers again, after {:.0} s",
                                     since.elapsed().as_secs_f64()
                                 );
                             }
+                        } else {
+                            down_since.get_or_insert_with(tokio::time::Instant::now);
                         }
                         continue;
                     }
@@ -236,7 +239,6 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                     Err(e) => {
                         log_line!("error: reaping leases: {e}");
                         hold_until = None;
-                        down_since.get_or_insert_with(tokio::time::Instant::now);
                     }
                 }
             }

@@ -277,15 +277,6 @@ fn dispatch(
     Ok(())
 }
 
-/// Lease requests on a thread of their own. A long poll (up to
-/// `wait_secs`) blocks in its request and cannot be interrupted, so at
-/// SIGTERM an idle worker stops waiting for it instead of holding its
-/// exit for the rest of the poll (`docker stop` kills after 10 s). An
-/// answer is handed over only to a dispatcher that takes it (a rendezvous
-/// channel: none waits in a buffer to be dropped), and leases that arrive
-/// after dispatch stopped listening are given back; a request still open
-/// when the process exits is dropped with its connection, and the server
-/// ends the poll with it.
 /// A lease request the poller sends.
 struct Ask {
     /// The idle slots.
@@ -314,6 +305,15 @@ fn next_nonce() -> String {
     )
 }
 
+/// Lease requests on a thread of their own. A long poll (up to
+/// `wait_secs`) blocks in its request and cannot be interrupted, so at
+/// SIGTERM an idle worker stops waiting for it instead of holding its
+/// exit for the rest of the poll (`docker stop` kills after 10 s). An
+/// answer is handed over only to a dispatcher that takes it (a rendezvous
+/// channel: none waits in a buffer to be dropped), and leases that arrive
+/// after dispatch stopped listening are given back; a request still open
+/// when the process exits is dropped with its connection, and the server
+/// ends the poll with it.
 struct Poller {
     requests: mpsc::Sender<Ask>,
     answers: mpsc::Receiver<aobake_api::client::Result<Vec<Lease>>>,
@@ -920,15 +920,7 @@ fn run_leased(
                 spec["kind"],
                 started.elapsed().as_secs_f64()
             ),
-            Err(e) => {
-                say!("job {job}: completion refused: {e}");
-                // Its attempt counts now, with why, rather than when its
-                // lease expires (one try: a lease already lost is 409).
-                let why = format!("its outputs could not be delivered: {e}");
-                if client.fail(job, &lease.token, &why, true).is_ok() {
-                    say!("job {job}: failed ({why})");
-                }
-            }
+            Err(e) => say!("job {job}: completion refused: {e}"),
         },
         Err(JobError::Stopped(Stop(why))) => {
             // Give the lease back if it is still ours (a stop asked by the

@@ -203,7 +203,14 @@ async fn wait_for_leases(
             // Each on its own: one that fails expires, the others do not
             // wait for it.
             for l in &leases {
-                if let Err(e) = state.store.release(l.job.id, &l.token).await {
+                // Unless renewed since: the same request, sent again by
+                // a worker that got no answer, may have it back already.
+                let leased_until = Some(l.expires_at);
+                if let Err(e) = state
+                    .store
+                    .release_unless_renewed(l.job.id, &l.token, leased_until)
+                    .await
+                {
                     log_line!(
                         "error: job {} stays leased to a worker that went, until its lease expires: {e}",
                         l.job.id

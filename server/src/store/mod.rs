@@ -286,7 +286,18 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
         policy: &QueuePolicy,
     ) -> Result<BakeRow>;
     /// Gives a lease back without counting an attempt (graceful shutdown).
-    async fn release(&self, job: i64, token: &str) -> Result<()>;
+    async fn release(&self, job: i64, token: &str) -> Result<()> {
+        self.release_unless_renewed(job, token, None).await
+    }
+    /// [`Store::release`]; with `expires_at`, only while the lease still
+    /// expires then: a lease renewed since (the same lease request, sent
+    /// again, got it back) is kept.
+    async fn release_unless_renewed(
+        &self,
+        job: i64,
+        token: &str,
+        expires_at: Option<i64>,
+    ) -> Result<()>;
     /// Makes jobs whose leases expired retryable (or dead); returns how
     /// many.
     async fn reap(&self) -> Result<u64>;

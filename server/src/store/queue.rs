@@ -418,6 +418,25 @@ async fn release_dependents<B: Backend>(c: &mut B::Conn, jobs: &[i64]) -> Result
     Ok(())
 }
 
+/// Locks the rows of `workers` in id order: the order every transaction
+/// that takes several of them keeps (`lease_batch`, a stop, a poll), so
+/// none waits on another in a cycle.
+async fn lock_workers<'a, B: Backend>(
+    c: &mut B::Conn,
+    workers: impl ExactSizeIterator<Item = &'a str>,
+) -> Result<()> {
+    let n = workers.len();
+    c.all::<(String,)>(
+        B::sql(&format!(
+            "SELECT id FROM workers WHERE id IN ({}) ORDER BY id{{for_update}}",
+            placeholders(1, n)
+        ))
+        .bind_all(workers),
+    )
+    .await?;
+    Ok(())
+}
+
 /// Recounts the pending dependencies of the bake's blocked jobs and makes
 /// those with none available (after a retry re-blocks jobs).
 async fn unblock<B: Backend>(c: &mut B::Conn, bake: i64) -> Result<()> {
@@ -1195,9 +1214,22 @@ impl<B: Backend> Store for SqlStore<B> {
         })
     }
 
-    async fn release(&self, job: i64, token: &str) -> Result<()> {
+    async fn release_unless_renewed(
+        &self,
+        job: i64,
+        token: &str,
+        expires_at: Option<i64>,
+    ) -> Result<()> {
         in_tx!(self, Durability::Acknowledged, |c| {
             let j = leased::<B>(c, job, token).await?;
+            if let Some(at) = expires_at {
+                let now: Option<i64> = c
+                    .scalar(B::sql("SELECT lease_expires_at FROM jobs WHERE id = $1").bind(job))
+                    .await?;
+                if now != Some(at) {
+                    return Ok(());
+                }
+            }
             c.execute(
                 B::sql("UPDATE jobs SET state = 'available', lease_token = NULL, lease_expires_at = NULL, attempts = attempts - 1 WHERE id = $1")
                     .bind(job),
@@ -1283,6 +1315,7 @@ impl<B: Backend> Store for SqlStore<B> {
             return Ok(true);
         }
         in_tx!(self, Durability::Queue, |c| {
+            lock_workers::<B>(c, workers.iter().map(|w| w.as_str())).await?;
             let waiting = c
                 .execute(
                     B::sql(&format!(
@@ -1302,9 +1335,10 @@ impl<B: Backend> Store for SqlStore<B> {
         }
         let list = placeholders(1, workers.len());
         in_tx!(self, Durability::Queue, |c| {
-            // The rows first: a lease of these slots under way finishes
-            // before this goes on (it locks them), one after sees them
-            // stopped.
+            // The rows first, in id order as a lease takes them: a lease
+            // of these slots under way finishes before this goes on, one
+            // after sees them stopped.
+            lock_workers::<B>(c, workers.iter().map(String::as_str)).await?;
             c.execute(
                 B::sql(&format!(
                     "UPDATE workers SET state = 'stopped', job_id = NULL WHERE id IN ({list})"

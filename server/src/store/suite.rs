@@ -567,6 +567,16 @@ async fn a_lease_request_sent_again_gets_what_it_leased(store: &dyn Store) {
     assert_eq!(again.job.worker.as_deref(), Some("lost/0"));
     assert_ne!(other.job.id, lost.job.id);
     assert_eq!(other.job.worker.as_deref(), Some("lost/1"));
+    // The first request's give-back (its client gone) keeps a lease that
+    // was renewed since: the job still runs under its token.
+    store
+        .release_unless_renewed(lost.job.id, &lost.token, Some(lost.expires_at))
+        .await
+        .unwrap();
+    store
+        .heartbeat(lost.job.id, &lost.token, 1, &p)
+        .await
+        .expect("still leased");
     // Another request under the same slot's name is not given them.
     for l in store
         .lease_batch(&slots[..1], Some("second"), &p)

@@ -642,7 +642,7 @@ async function bakePage(signal, id) {
   let loadedResults = false;
 
   // Cancel asks first: a click that slipped would stop a long bake.
-  const confirmCancel = () => confirm(`Cancel bake #${id}? Its running jobs stop at their next heartbeat `
+  const confirmCancel = () => confirm(`Cancel bake #${id}? Its running jobs stop at their next checkpoint `
     + "and no job of it is leased again; Retry takes it up again, keeping what finished.");
   const act = (action) => async () => {
     if (action === "cancel" && !confirmCancel()) return;
