@@ -598,48 +598,47 @@ impl AnswerDropper {
                 std::thread::spawn(move || -> std::io::Result<()> {
                     let mut reader = BufReader::new(client.try_clone()?);
                     let mut client = client;
-                    {
-                        // One request: its head, with `Connection: close`
-                        // upstream, and its body by its length.
-                        let mut head = Vec::new();
-                        let mut length = 0usize;
-                        let mut first = String::new();
-                        loop {
-                            let mut line = String::new();
-                            if reader.read_line(&mut line)? == 0 {
-                                return Ok(());
-                            }
-                            if first.is_empty() {
-                                first = line.clone();
-                            }
-                            let lower = line.to_ascii_lowercase();
-                            if let Some(v) = lower.strip_prefix("content-length:") {
-                                length = v.trim().parse().unwrap_or(0);
-                            }
-                            if lower.starts_with("connection:") {
-                                continue;
-                            }
-                            if line == "\r\n" {
-                                head.extend_from_slice(b"Connection: close\r\n\r\n");
-                                break;
-                            }
-                            head.extend_from_slice(line.as_bytes());
-                        }
-                        let mut body = vec![0; length];
-                        reader.read_exact(&mut body)?;
-                        let mut up = std::net::TcpStream::connect(&upstream)?;
-                        up.write_all(&head)?;
-                        up.write_all(&body)?;
-                        let mut answer = Vec::new();
-                        up.read_to_end(&mut answer)?;
-                        let done = first.starts_with(what) && answer.starts_with(b"HTTP/1.1 200");
-                        if done && !flag.swap(true, Ordering::SeqCst) {
-                            // Committed by the server, never heard of.
+                    // One request: its head, with `Connection: close`
+                    // upstream, and its body by its length.
+                    let mut head = Vec::new();
+                    let mut length = 0usize;
+                    let mut first = String::new();
+                    loop {
+                        let mut line = String::new();
+                        if reader.read_line(&mut line)? == 0 {
                             return Ok(());
                         }
-                        client.write_all(&answer)?;
-                        return Ok(());
+                        if first.is_empty() {
+                            first = line.clone();
+                        }
+                        let lower = line.to_ascii_lowercase();
+                        if let Some(v) = lower.strip_prefix("content-length:") {
+                            length = v.trim().parse().unwrap_or(0);
+                        }
+                        if lower.starts_with("connection:") {
+                            continue;
+                        }
+                        if line == "\r\n" {
+                            head.extend_from_slice(b"Connection: close\r\n\r\n");
+                            break;
+                        }
+                        head.extend_from_slice(line.as_bytes());
                     }
+                    let mut body = vec![0; length];
+                    reader.read_exact(&mut body)?;
+                    let mut up = std::net::TcpStream::connect(&upstream)?;
+                    up.write_all(&head)?;
+                    up.write_all(&body)?;
+                    let mut answer = Vec::new();
+                    up.read_to_end(&mut answer)?;
+                    let done = first.starts_with(what) && answer.starts_with(b"HTTP/1.1 200");
+                    // The first such answer is dropped: committed by the
+                    // server, never heard of.
+                    let drop_it = done && !flag.swap(true, Ordering::SeqCst);
+                    if !drop_it {
+                        client.write_all(&answer)?;
+                    }
+                    Ok(())
                 });
             }
         });
