@@ -646,6 +646,38 @@ impl AnswerDropper {
     }
 }
 
+/// A RiggedSimple bake by one worker behind an [`AnswerDropper`] of
+/// `what`, with a 10 s lease (a job run twice shows as attempts 2 once it
+/// expires; a busy machine's slow heartbeat does not): the server, the
+/// finished bake and the worker's log, once the bake finished done with
+/// one answer dropped and every job attempted once.
+fn bake_dropping_an_answer(what: &'static str) -> (TestEnv, Value, String) {
+    let mut env = TestEnv::start(Options {
+        lease_secs: 10.0,
+        ..Options::default()
+    });
+    let proxy = AnswerDropper::start(&env.url, what);
+    let digest = upload(&env, &character("RiggedSimple"));
+    let (_, b) = submit(&env, &digest, 8);
+    let id = b["id"].as_i64().unwrap();
+    env.start_worker_for(&proxy.url);
+    let done = env.wait_bake(id, Duration::from_secs(120));
+    let logs = env.worker_logs();
+    assert_eq!(done["state"], "done", "{done}\n{logs}");
+    assert!(
+        proxy.dropped.load(std::sync::atomic::Ordering::SeqCst),
+        "no answer to {what} was dropped"
+    );
+    let twice: Vec<&Value> = done["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|j| j["attempts"] != 1)
+        .collect();
+    assert!(twice.is_empty(), "jobs run again: {twice:?}\n{logs}");
+    (env, done, logs)
+}
+
 /// A lease whose answer is lost (the server committed it; the worker's
 /// connection closed before the answer) is not run twice: the worker
 /// asks again with the same request nonce and gets the same jobs, same
@@ -653,63 +685,19 @@ impl AnswerDropper {
 /// `aobake bake`'s.
 #[test]
 fn a_lease_whose_answer_was_lost_is_answered_again_not_run_twice() {
-    // A long lease: a job run twice shows as attempts 2 once it expires,
-    // and a busy machine's slow heartbeat does not.
-    let mut env = TestEnv::start(Options {
-        lease_secs: 10.0,
-        ..Options::default()
-    });
-    let proxy = AnswerDropper::start(&env.url, "POST /v1/jobs/leases");
-    let rigged = character("RiggedSimple");
-    let digest = upload(&env, &rigged);
-    let (_, b) = submit(&env, &digest, 8);
-    let id = b["id"].as_i64().unwrap();
-    env.start_worker_for(&proxy.url);
-    let done = env.wait_bake(id, Duration::from_secs(120));
-    let logs = env.worker_logs();
-    assert_eq!(done["state"], "done", "{done}\n{logs}");
-    assert!(
-        proxy.dropped.load(std::sync::atomic::Ordering::SeqCst),
-        "no lease answer was dropped"
-    );
+    let (env, done, logs) = bake_dropping_an_answer("POST /v1/jobs/leases");
     assert!(logs.contains("cannot lease"), "{logs}");
-    let twice: Vec<&Value> = done["jobs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|j| j["attempts"] != 1)
-        .collect();
-    assert!(twice.is_empty(), "jobs run again: {twice:?}\n{logs}");
+    let rigged = character("RiggedSimple");
     assert!(asset(&env, &done) == local_bake(env.dir.path(), &rigged, 8));
 }
 
 /// A completion whose answer is lost (the server recorded it; the
 /// worker's connection closed before the answer) is sent again and
-/// answered as the first was: the job is counted once, not refused and
-/// failed, so every job of the bake is attempted once.
+/// answered as the first was: the job is counted once, never refused,
+/// so every job of the bake is attempted once.
 #[test]
 fn a_completion_whose_answer_was_lost_is_answered_again_and_counted_once() {
-    let mut env = TestEnv::start(Options::default());
-    let proxy = AnswerDropper::start(&env.url, "POST /v1/jobs/completions");
-    let rigged = character("RiggedSimple");
-    let digest = upload(&env, &rigged);
-    let (_, b) = submit(&env, &digest, 8);
-    let id = b["id"].as_i64().unwrap();
-    env.start_worker_for(&proxy.url);
-    let done = env.wait_bake(id, Duration::from_secs(120));
-    let logs = env.worker_logs();
-    assert_eq!(done["state"], "done", "{done}\n{logs}");
-    assert!(
-        proxy.dropped.load(std::sync::atomic::Ordering::SeqCst),
-        "no completion answer was dropped"
-    );
+    let (_env, done, logs) = bake_dropping_an_answer("POST /v1/jobs/completions");
     assert!(!logs.contains("completion refused"), "{logs}");
-    let twice: Vec<&Value> = done["jobs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|j| j["attempts"] != 1)
-        .collect();
-    assert!(twice.is_empty(), "jobs run again: {twice:?}\n{logs}");
     assert_eq!(done["jobs_done"], done["jobs_total"], "{done}");
 }
