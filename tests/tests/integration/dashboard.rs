@@ -265,6 +265,24 @@ fn two_versions_compare_their_parameters_and_quality() {
         c.goto(&format!("{}/#/compare/{first}/{third}", env.url)).await.unwrap();
         let said = wait_for(&c, "no quality to compare", "document.querySelector('#no-quality') && document.querySelector('#no-quality').textContent", Duration::from_secs(20)).await;
         assert!(said.as_str().unwrap().contains(&format!("#{third} (cancelled)")), "{said}");
+        // A narrow window (a phone): no page scrolls sideways, wide tables
+        // scroll inside it.
+        c.set_window_size(500, 900).await.unwrap();
+        for (page, ready) in [
+            ("#/".to_owned(), "document.querySelector('tr[data-bake] .bar')"),
+            (format!("#/bakes/{second}"), "document.querySelector('#report table')"),
+            (format!("#/compare/{first}/{second}"), "document.querySelector('#compare-quality')"),
+        ] {
+            c.goto(&format!("{}/{page}", env.url)).await.unwrap();
+            wait_for(&c, &page, ready, Duration::from_secs(20)).await;
+            let widths = eval(&c, "return [document.documentElement.scrollWidth, window.innerWidth]").await;
+            assert!(widths[0].as_u64() <= widths[1].as_u64(), "{page} scrolls sideways: {widths}");
+            let name = match page.trim_start_matches("#/") {
+                "" => "list".to_owned(),
+                p => p.replace('/', "-"),
+            };
+            shot(&c, &format!("narrow-{name}")).await;
+        }
     });
 }
 
