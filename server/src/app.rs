@@ -102,21 +102,21 @@ impl ClientGone {
 /// answers with that id in the detail, so a user's 500 leads to its log
 /// line on whichever server of a fleet answered it.
 async fn log_failures(req: Request, next: Next) -> Response {
-    let id = req
-        .headers()
-        .get("x-request-id")
-        .and_then(|v| v.to_str().ok())
-        .unwrap_or("?")
-        .to_owned();
-    let (method, path) = (req.method().clone(), req.uri().path().to_owned());
+    // Kept for a failure (cheap copies: every request passes here).
+    let id = req.headers().get("x-request-id").cloned();
+    let (method, uri) = (req.method().clone(), req.uri().clone());
     let res = next.run(req).await;
     let Some(InternalFailure(what)) = res.extensions().get::<InternalFailure>().cloned() else {
         return res;
     };
-    log_line!("error: internal, request {id} ({method} {path}): {what}");
+    let id = id.as_ref().and_then(|v| v.to_str().ok()).unwrap_or("?");
+    log_line!(
+        "error: internal, request {id} ({method} {}): {what}",
+        uri.path()
+    );
     let (mut parts, _) = res.into_parts();
     parts.headers.remove(axum::http::header::CONTENT_LENGTH);
-    let body = serde_json::to_vec(&ApiError::internal_problem(&id)).unwrap_or_default();
+    let body = serde_json::to_vec(&ApiError::internal_problem(id)).unwrap_or_default();
     Response::from_parts(parts, axum::body::Body::from(body))
 }
 

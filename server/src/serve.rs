@@ -144,9 +144,6 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         let shown = blobs::redacted(url);
         match tokio::time::timeout(std::time::Duration::from_secs(15), blobs.probe()).await {
             Ok(Ok(())) => {}
-            Ok(Err(e)) if e.to_string().contains("NoSuchBucket") => anyhow::bail!(
-                "the blob store {shown} cannot be used: its bucket does not exist (create it first): {e}"
-            ),
             Ok(Err(e)) => anyhow::bail!("the blob store {shown} cannot be used: {e}"),
             Err(_) => anyhow::bail!("the blob store {shown} did not answer in 15 s"),
         }

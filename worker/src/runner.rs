@@ -484,11 +484,9 @@ fn deliver(
 struct Flags {
     /// The lease is gone or the bake was cancelled: drop the job.
     lost: AtomicBool,
-    /// The server said to stop (the bake was cancelled, or failed by
-    /// another job), as against a lease refused (409).
-    called_off: AtomicBool,
-    /// Why it said so (`the bake was cancelled`), once it did.
-    why: std::sync::OnceLock<String>,
+    /// Why the server said to stop (`the bake was cancelled`, or failed
+    /// by another job), once it did, as against a lease refused (409).
+    called_off: std::sync::OnceLock<String>,
     /// Shutdown past its deadline: stop and give the lease back.
     release: AtomicBool,
     /// The job finished; the heartbeat thread ends.
@@ -512,13 +510,8 @@ struct Sink<'a> {
 impl Sink<'_> {
     /// Whether to stop now: the lease is lost or shutdown asks for it.
     fn stop(&self) -> Result<(), Stop> {
-        if self.flags.called_off.load(Ordering::Relaxed) {
-            let why = self
-                .flags
-                .why
-                .get()
-                .map_or("the bake ended", String::as_str);
-            return Err(Stop(why.to_owned()));
+        if let Some(why) = self.flags.called_off.get() {
+            return Err(Stop(why.clone()));
         }
         if self.flags.lost.load(Ordering::Relaxed) {
             return Err(Stop(
@@ -869,8 +862,7 @@ fn run_leased(
                                 Some(state) => format!("the bake is {}", state.as_str()),
                                 None => "the bake ended".to_owned(),
                             };
-                            let _ = flags.why.set(why);
-                            flags.called_off.store(true, Ordering::Relaxed);
+                            let _ = flags.called_off.set(why);
                             flags.lost.store(true, Ordering::Relaxed);
                         }
                     }

@@ -202,8 +202,14 @@ impl Blobs for ObjectBlobs {
     /// does not.
     async fn probe(&self) -> Result<(), BlobError> {
         let prefix = (!self.prefix.as_ref().is_empty()).then_some(&self.prefix);
-        self.store.list_with_delimiter(prefix).await?;
-        Ok(())
+        match self.store.list_with_delimiter(prefix).await {
+            Ok(_) => Ok(()),
+            // Said plainly, for `serve`'s start and the readiness log.
+            Err(e) if e.to_string().contains("NoSuchBucket") => Err(BlobError::Config(format!(
+                "its bucket does not exist (create it first): {e}"
+            ))),
+            Err(e) => Err(e.into()),
+        }
     }
 }
 

@@ -101,14 +101,10 @@ impl Conn {
             })?;
         // A fleet's servers: the first asked first, the next when one
         // cannot be reached.
-        let mut servers = server
-            .split(',')
-            .map(|s| super::common::server_url(s).map(str::to_owned))
-            .collect::<anyhow::Result<Vec<String>>>()?;
-        let first = servers.remove(0);
+        let (first, others) = super::common::servers(&server)?;
         // A wait through an outage says so, rather than look like a hang.
         Ok(Client::new(&first, token.trim())
-            .with_fallbacks(&servers)
+            .with_fallbacks(&others)
             .with_notice(|line| eprintln!("{line}")))
     }
 }

@@ -112,15 +112,22 @@ pub(super) fn server_url(s: &str) -> anyhow::Result<&str> {
     }
 }
 
-/// `--server` as clap reads it: one server's URL, or several
-/// comma-separated (a fleet's servers), each as [`server_url`] takes it, so
-/// a malformed one is a wrong command line (exit 2).
-pub(super) fn server_list(s: &str) -> Result<String, String> {
-    let urls = s
+/// A `--server` list: one server's URL, or several comma-separated (a
+/// fleet's servers), each as [`server_url`] takes it: the first, and the
+/// others to go on with when it cannot be reached.
+pub(super) fn servers(s: &str) -> anyhow::Result<(String, Vec<String>)> {
+    let mut urls = s
         .split(',')
-        .map(|u| server_url(u).map(str::to_owned).map_err(|e| e.to_string()))
-        .collect::<Result<Vec<String>, String>>()?;
-    Ok(urls.join(","))
+        .map(|u| server_url(u).map(str::to_owned))
+        .collect::<anyhow::Result<Vec<String>>>()?;
+    let first = urls.remove(0);
+    Ok((first, urls))
+}
+
+/// `--server` as clap reads it ([`servers`]), so a malformed address is a
+/// wrong command line (exit 2).
+pub(super) fn server_list(s: &str) -> Result<String, String> {
+    servers(s).map(|_| s.to_owned()).map_err(|e| e.to_string())
 }
 
 /// The median of `v` (the mean of the middle two when their number is

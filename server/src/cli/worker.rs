@@ -66,17 +66,12 @@ pub(super) fn run(args: &WorkerArgs) -> anyhow::Result<()> {
         GpuChoice::Off => TracerChoice::Cpu,
         GpuChoice::Require => TracerChoice::Gpu,
     };
-    let mut servers = args
-        .server
-        .split(',')
-        .map(|s| super::common::server_url(s).map(str::to_owned))
-        .collect::<anyhow::Result<Vec<String>>>()?;
-    let server = servers.remove(0);
+    let (server, fallbacks) = super::common::servers(&args.server)?;
     tracer.install(true)?;
     let host = crate::serve::host_name();
     aobake_worker::run(aobake_worker::WorkerConfig {
         server,
-        fallbacks: servers,
+        fallbacks,
         token: args.token.clone(),
         concurrency: args.concurrency as usize,
         id: args

@@ -369,7 +369,7 @@ pub(crate) async fn cache(
         // One under way: say which and how far, so a pipeline waits for it
         // rather than submits again.
         Some(b) => {
-            let done = crate::state::BakeEvent::of(&b).done;
+            let done = crate::state::progress_done(&b);
             Err(ApiError::NotFound(format!(
                 "no finished bake for key {key} yet: bake {} with this key is {} ({done} of {} units done)",
                 b.id,

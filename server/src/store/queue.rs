@@ -418,23 +418,28 @@ async fn release_dependents<B: Backend>(c: &mut B::Conn, jobs: &[i64]) -> Result
     Ok(())
 }
 
-/// Locks the rows of `workers` in id order: the order every transaction
+/// Locks the rows of `workers` in id order, the order every transaction
 /// that takes several of them keeps (`lease_batch`, a stop, a poll), so
-/// none waits on another in a cycle.
+/// none waits on another in a cycle; returns the ids of those stopped.
 async fn lock_workers<'a, B: Backend>(
     c: &mut B::Conn,
     workers: impl ExactSizeIterator<Item = &'a str>,
-) -> Result<()> {
+) -> Result<Vec<String>> {
     let n = workers.len();
-    c.all::<(String,)>(
-        B::sql(&format!(
-            "SELECT id FROM workers WHERE id IN ({}) ORDER BY id{{for_update}}",
-            placeholders(1, n)
-        ))
-        .bind_all(workers),
-    )
-    .await?;
-    Ok(())
+    let rows: Vec<(String, String)> = c
+        .all(
+            B::sql(&format!(
+                "SELECT id, state FROM workers WHERE id IN ({}) ORDER BY id{{for_update}}",
+                placeholders(1, n)
+            ))
+            .bind_all(workers),
+        )
+        .await?;
+    Ok(rows
+        .into_iter()
+        .filter(|(_, state)| state == "stopped")
+        .map(|(id, _)| id)
+        .collect())
 }
 
 /// Recounts the pending dependencies of the bake's blocked jobs and makes
@@ -875,20 +880,7 @@ impl<B: Backend> Store for SqlStore<B> {
             // (before any job's, the order `workers_stopped` takes too), so
             // a stop either commits before this and is seen here, or waits
             // and then gives back what this leased.
-            let known: Vec<(String, String)> = c
-                .all(
-                    B::sql(&format!(
-                        "SELECT id, state FROM workers WHERE id IN ({}) ORDER BY id{{for_update}}",
-                        placeholders(1, workers.len())
-                    ))
-                    .bind_all(workers.iter().map(String::as_str)),
-                )
-                .await?;
-            let stopped: Vec<&String> = known
-                .iter()
-                .filter(|(_, state)| state == "stopped")
-                .map(|(id, _)| id)
-                .collect();
+            let stopped = lock_workers::<B>(c, workers.iter().map(String::as_str)).await?;
             let live: Vec<String>;
             let workers = if stopped.is_empty() {
                 workers
@@ -1222,19 +1214,17 @@ impl<B: Backend> Store for SqlStore<B> {
     ) -> Result<()> {
         in_tx!(self, Durability::Acknowledged, |c| {
             let j = leased::<B>(c, job, token).await?;
-            if let Some(at) = expires_at {
-                let now: Option<i64> = c
-                    .scalar(B::sql("SELECT lease_expires_at FROM jobs WHERE id = $1").bind(job))
-                    .await?;
-                if now != Some(at) {
-                    return Ok(());
-                }
+            let released = c
+                .execute(
+                    B::sql("UPDATE jobs SET state = 'available', lease_token = NULL, lease_expires_at = NULL, attempts = attempts - 1 WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR lease_expires_at = $2)")
+                        .bind(job)
+                        .bind(expires_at),
+                )
+                .await?;
+            if released == 0 {
+                // Renewed since it was granted: kept.
+                return Ok(());
             }
-            c.execute(
-                B::sql("UPDATE jobs SET state = 'available', lease_token = NULL, lease_expires_at = NULL, attempts = attempts - 1 WHERE id = $1")
-                    .bind(job),
-            )
-            .await?;
             c.execute(B::sql(WORKER_IDLE).bind(j.worker.as_deref().unwrap_or("")))
                 .await?;
             B::wake(c).await?;

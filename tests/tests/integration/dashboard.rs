@@ -112,6 +112,15 @@ async fn browser_with(driver: &Driver, webgl: bool) -> Client {
         .expect("a Chromium session")
 }
 
+/// Runs a test's browser session to its end on a runtime of its own.
+fn block_on<F: std::future::Future>(session: F) -> F::Output {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+        .block_on(session)
+}
+
 async fn eval(c: &Client, script: &str) -> Value {
     c.execute(script, vec![]).await.unwrap()
 }
@@ -208,27 +217,53 @@ fn two_versions_compare_their_parameters_and_quality() {
         .map(|(k, _)| k)
         .collect();
     assert!(differ.iter().any(|k| k.ends_with("poses")), "{differ:?}");
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let c = browser(&driver).await;
-        c.goto(&format!("{}/#token={ADMIN}&next=/versions/{digest}/vertex-linear", env.url))
-            .await
-            .unwrap();
+        c.goto(&format!(
+            "{}/#token={ADMIN}&next=/versions/{digest}/vertex-linear",
+            env.url
+        ))
+        .await
+        .unwrap();
         let link = format!("tr[data-bake=\"{second}\"] a.compare");
-        wait_for(&c, "the compare link", &format!("document.querySelector('{link}')"), Duration::from_secs(20)).await;
+        wait_for(
+            &c,
+            "the compare link",
+            &format!("document.querySelector('{link}')"),
+            Duration::from_secs(20),
+        )
+        .await;
         assert_eq!(
-            eval(&c, &format!("return document.querySelector('tr[data-bake=\"{first}\"] a.compare')")).await,
+            eval(
+                &c,
+                &format!("return document.querySelector('tr[data-bake=\"{first}\"] a.compare')")
+            )
+            .await,
             Value::Null,
             "the first version has none before it"
         );
-        c.find(Locator::Css(&link)).await.unwrap().click().await.unwrap();
-        wait_for(&c, "the comparison", "document.querySelector('#compare-quality')", Duration::from_secs(20)).await;
-        assert_eq!(eval(&c, "return location.hash").await, json!(format!("#/compare/{first}/{second}")));
+        c.find(Locator::Css(&link))
+            .await
+            .unwrap()
+            .click()
+            .await
+            .unwrap();
+        wait_for(
+            &c,
+            "the comparison",
+            "document.querySelector('#compare-quality')",
+            Duration::from_secs(20),
+        )
+        .await;
+        assert_eq!(
+            eval(&c, "return location.hash").await,
+            json!(format!("#/compare/{first}/{second}"))
+        );
         let same = eval(&c, "return Object.fromEntries([...document.querySelectorAll('#compare-inputs tr[data-same]')].map(r => [r.dataset.input, r.dataset.same]))").await;
-        assert_eq!(same, json!({"character": "same", "clips": "same", "method": "same"}));
+        assert_eq!(
+            same,
+            json!({"character": "same", "clips": "same", "method": "same"})
+        );
         // The parameters that differ, each with both values.
         let listed = eval(&c, "return [...document.querySelectorAll('#params-differ tr[data-param]')].map(r => r.dataset.param)").await;
         let mut want: Vec<&String> = differ.clone();
@@ -246,37 +281,80 @@ fn two_versions_compare_their_parameters_and_quality() {
                 .unwrap_or_else(|| panic!("no {label:?} in {rows:?}"))
                 .clone()
         };
-        let psnr = |r: &Value| r["evaluation"]["random_poses"]["model"]["mean"]["psnr_db"].as_f64().unwrap();
+        let psnr = |r: &Value| {
+            r["evaluation"]["random_poses"]["model"]["mean"]["psnr_db"]
+                .as_f64()
+                .unwrap()
+        };
         let row = figure("Held-out random poses: model PSNR");
         let d = psnr(&rb) - psnr(&ra);
-        assert!((row[1].as_f64().unwrap() - d).abs() < 1e-9, "{row} against {d}");
-        let verdict = if d > 0.0 { "better" } else if d < 0.0 { "worse" } else { "same" };
+        assert!(
+            (row[1].as_f64().unwrap() - d).abs() < 1e-9,
+            "{row} against {d}"
+        );
+        let verdict = if d > 0.0 {
+            "better"
+        } else if d < 0.0 {
+            "worse"
+        } else {
+            "same"
+        };
         assert_eq!(row[2], verdict, "{row}");
         let bytes = |r: &Value| r["sizes"]["asset_bytes"].as_f64().unwrap();
         let row = figure("Asset bytes");
         let d = bytes(&rb) - bytes(&ra);
         assert_eq!(row[1].as_f64().unwrap(), d, "{row}");
-        let verdict = if d < 0.0 { "better" } else if d > 0.0 { "worse" } else { "same" };
+        let verdict = if d < 0.0 {
+            "better"
+        } else if d > 0.0 {
+            "worse"
+        } else {
+            "same"
+        };
         assert_eq!(row[2], verdict, "{row}");
         shot(&c, "compare-versions").await;
         // A bake without a report yet: no figures, and why.
         let third = submit(&env, ADMIN, &digest, 16);
-        env.request("POST", &format!("/v1/bakes/{third}/cancel"), ADMIN, None).unwrap();
-        c.goto(&format!("{}/#/compare/{first}/{third}", env.url)).await.unwrap();
+        env.request("POST", &format!("/v1/bakes/{third}/cancel"), ADMIN, None)
+            .unwrap();
+        c.goto(&format!("{}/#/compare/{first}/{third}", env.url))
+            .await
+            .unwrap();
         let said = wait_for(&c, "no quality to compare", "document.querySelector('#no-quality') && document.querySelector('#no-quality').textContent", Duration::from_secs(20)).await;
-        assert!(said.as_str().unwrap().contains(&format!("#{third} (cancelled)")), "{said}");
+        assert!(
+            said.as_str()
+                .unwrap()
+                .contains(&format!("#{third} (cancelled)")),
+            "{said}"
+        );
         // A narrow window (a phone): no page scrolls sideways, wide tables
         // scroll inside it.
         c.set_window_size(500, 900).await.unwrap();
         for (page, ready) in [
-            ("#/".to_owned(), "document.querySelector('tr[data-bake] .bar')"),
-            (format!("#/bakes/{second}"), "document.querySelector('#report table')"),
-            (format!("#/compare/{first}/{second}"), "document.querySelector('#compare-quality')"),
+            (
+                "#/".to_owned(),
+                "document.querySelector('tr[data-bake] .bar')",
+            ),
+            (
+                format!("#/bakes/{second}"),
+                "document.querySelector('#report table')",
+            ),
+            (
+                format!("#/compare/{first}/{second}"),
+                "document.querySelector('#compare-quality')",
+            ),
         ] {
             c.goto(&format!("{}/{page}", env.url)).await.unwrap();
             wait_for(&c, &page, ready, Duration::from_secs(20)).await;
-            let widths = eval(&c, "return [document.documentElement.scrollWidth, window.innerWidth]").await;
-            assert!(widths[0].as_u64() <= widths[1].as_u64(), "{page} scrolls sideways: {widths}");
+            let widths = eval(
+                &c,
+                "return [document.documentElement.scrollWidth, window.innerWidth]",
+            )
+            .await;
+            assert!(
+                widths[0].as_u64() <= widths[1].as_u64(),
+                "{page} scrolls sideways: {widths}"
+            );
             let name = match page.trim_start_matches("#/") {
                 "" => "list".to_owned(),
                 p => p.replace('/', "-"),
@@ -315,34 +393,43 @@ fn a_paused_bake_says_its_running_jobs_finish_first_and_a_queued_one_its_place()
         (200, &json!("paused")),
         "{paused}"
     );
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
     // Two bakes wait in the queue meanwhile (a paused one is not ahead).
     let second = submit(&env, ADMIN, &digest, 8);
     let third = submit(&env, ADMIN, &digest, 16);
-    rt.block_on(async {
+    block_on(async {
         let c = browser(&driver).await;
         for (bake, place) in [
             (second, "Queued: it runs next when a worker is free."),
-            (third, "Queued behind 1 bake (higher priority, or as high and older)."),
+            (
+                third,
+                "Queued behind 1 bake (higher priority, or as high and older).",
+            ),
         ] {
             c.goto(&format!("{}/#token={ADMIN}&next=/bakes/{bake}", env.url))
                 .await
                 .unwrap();
             // This bake's page, not the one before it.
-            let page = format!("document.querySelector('main h1') && document.querySelector('main h1').textContent.startsWith('Bake #{bake} ') && document.querySelector('#queue') && document.querySelector('#queue').textContent");
+            let page = format!(
+                "document.querySelector('main h1') && document.querySelector('main h1').textContent.startsWith('Bake #{bake} ') && document.querySelector('#queue') && document.querySelector('#queue').textContent"
+            );
             let said = wait_for(&c, "the queue's place", &page, Duration::from_secs(20)).await;
             assert_eq!(said, json!(place), "bake {bake}");
         }
         // Raised above the other, the third runs next.
         eval(&c, "const p = document.querySelector('#priority'); p.value = '5'; p.form.requestSubmit(); return null").await;
         wait_for(&c, "the new place", "document.querySelector('#queue').textContent === 'Queued: it runs next when a worker is free.'", Duration::from_secs(20)).await;
-        let (_, raised) = env.request("GET", &format!("/v1/bakes/{third}"), ADMIN, None).unwrap();
+        let (_, raised) = env
+            .request("GET", &format!("/v1/bakes/{third}"), ADMIN, None)
+            .unwrap();
         assert_eq!(raised["priority"], 5, "the server agrees");
         c.goto(&format!("{}/#/bakes/{id}", env.url)).await.unwrap();
-        let said = wait_for(&c, "the pausing note", "document.querySelector('#pausing') && document.querySelector('#pausing').textContent", Duration::from_secs(20)).await;
+        let said = wait_for(
+            &c,
+            "the pausing note",
+            "document.querySelector('#pausing') && document.querySelector('#pausing').textContent",
+            Duration::from_secs(20),
+        )
+        .await;
         assert_eq!(said, json!(" 1 running job finishes first"));
         env.signal_worker(w, nix::sys::signal::Signal::SIGCONT);
         wait_for(&c, "the job finished", "document.querySelector('#state [data-state=\"paused\"]') && !document.querySelector('#pausing')", Duration::from_secs(120)).await;
@@ -359,11 +446,7 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
     let digest = upload(&env, &character("CesiumMan"));
     // Queued with no worker yet: the page sees it at 0 first.
     let id = submit(&env, ADMIN, &digest, 24);
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let c = browser(&driver).await;
         // The token travels in the fragment and leaves the address bar.
         c.goto(&format!("{}/#token={submitter}", env.url))
@@ -373,7 +456,13 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         wait_for(&c, "the bakes list", &row, Duration::from_secs(20)).await;
         // Characters by the name they were uploaded under, not a digest.
         let label = format!("document.querySelector('tr[data-bake=\"{id}\"] .character')");
-        let name = wait_for(&c, "the character's name", &format!("{label}.dataset.named === 'yes' && {label}.textContent"), Duration::from_secs(20)).await;
+        let name = wait_for(
+            &c,
+            "the character's name",
+            &format!("{label}.dataset.named === 'yes' && {label}.textContent"),
+            Duration::from_secs(20),
+        )
+        .await;
         assert_eq!(name, json!("CesiumMan.glb"));
         let url = c.current_url().await.unwrap();
         assert!(!url.as_str().contains(&submitter), "{url}");
@@ -382,27 +471,71 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         let done0 = eval(&c, &format!("return Number({row}.dataset.done)")).await;
         assert_eq!(done0, json!(0));
         // What a person sees: an empty bar (its width is 0 px).
-        let width = eval(&c, &format!("return {row}.firstChild.getBoundingClientRect().width")).await;
+        let width = eval(
+            &c,
+            &format!("return {row}.firstChild.getBoundingClientRect().width"),
+        )
+        .await;
         assert_eq!(width.as_f64(), Some(0.0), "a queued bake's bar is empty");
         shot(&c, "1-bakes-queued").await;
 
         // The bake page: a marker on the window survives only if the page
         // is never reloaded.
         c.goto(&format!("{}/#/bakes/{id}", env.url)).await.unwrap();
-        wait_for(&c, "the bake page", "document.querySelector('#jobs')", Duration::from_secs(20)).await;
-        wait_for(&c, "the live stream", "document.querySelector('#live.on')", Duration::from_secs(20)).await;
+        wait_for(
+            &c,
+            "the bake page",
+            "document.querySelector('#jobs')",
+            Duration::from_secs(20),
+        )
+        .await;
+        wait_for(
+            &c,
+            "the live stream",
+            "document.querySelector('#live.on')",
+            Duration::from_secs(20),
+        )
+        .await;
         eval(&c, "window.__notReloaded = true; return null").await;
         // A summary by stage; every job folded away.
-        let stages = eval(&c, "return [...document.querySelectorAll('#stages tbody tr')].map(r => r.dataset.stage)").await;
+        let stages = eval(
+            &c,
+            "return [...document.querySelectorAll('#stages tbody tr')].map(r => r.dataset.stage)",
+        )
+        .await;
         assert_eq!(stages[0], json!("sample"), "{stages}");
-        assert!(stages.as_array().unwrap().contains(&json!("fit")), "{stages}");
-        assert_eq!(eval(&c, "return document.querySelector('#all-jobs').open").await, json!(false));
+        assert!(
+            stages.as_array().unwrap().contains(&json!("fit")),
+            "{stages}"
+        );
+        assert_eq!(
+            eval(&c, "return document.querySelector('#all-jobs').open").await,
+            json!(false)
+        );
         let heading = eval(&c, "return document.querySelector('main h1').textContent").await;
-        assert!(heading.as_str().unwrap().contains("CesiumMan.glb"), "{heading}");
+        assert!(
+            heading.as_str().unwrap().contains("CesiumMan.glb"),
+            "{heading}"
+        );
         // The method's own parameters only.
-        let params = eval(&c, "return Object.keys(JSON.parse(document.querySelector('main pre').textContent))").await;
-        let params: Vec<&str> = params.as_array().unwrap().iter().map(|k| k.as_str().unwrap()).collect();
-        assert!(params.contains(&"linear") && !params.iter().any(|k| ["clustered", "grid", "cubemap"].contains(k)), "{params:?}");
+        let params = eval(
+            &c,
+            "return Object.keys(JSON.parse(document.querySelector('main pre').textContent))",
+        )
+        .await;
+        let params: Vec<&str> = params
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|k| k.as_str().unwrap())
+            .collect();
+        assert!(
+            params.contains(&"linear")
+                && !params
+                    .iter()
+                    .any(|k| ["clustered", "grid", "cubemap"].contains(k)),
+            "{params:?}"
+        );
         let bar = "document.querySelector('main .bar')";
         env.start_worker(&[]);
         let mid = wait_for(
@@ -422,7 +555,10 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
             Duration::from_secs(60),
         )
         .await;
-        assert!(active == json!("running") || active == json!("retryable") || active == json!("dead"), "{active}");
+        assert!(
+            active == json!("running") || active == json!("retryable") || active == json!("dead"),
+            "{active}"
+        );
         let eta = wait_for(&c, "an estimate of the time left", "/ left \\(/.test(document.querySelector('#eta').textContent) && document.querySelector('#eta').textContent", Duration::from_secs(60)).await;
         eprintln!("{eta}");
         wait_for(
@@ -441,7 +577,13 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         )
         .await;
         // Report and previews, their images decoded.
-        wait_for(&c, "the report", "document.querySelector('#report table')", Duration::from_secs(30)).await;
+        wait_for(
+            &c,
+            "the report",
+            "document.querySelector('#report table')",
+            Duration::from_secs(30),
+        )
+        .await;
         let images = "[...document.querySelectorAll('#previews img')]";
         let loaded = wait_for(
             &c,
@@ -451,7 +593,11 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         )
         .await;
         assert_eq!(loaded, json!(4), "three stills and an animation");
-        let kinds = eval(&c, &format!("return {images}.map(i => i.closest('figure').dataset.kind)")).await;
+        let kinds = eval(
+            &c,
+            &format!("return {images}.map(i => i.closest('figure').dataset.kind)"),
+        )
+        .await;
         assert_eq!(kinds, json!(["still", "still", "still", "animation"]));
         // Each still carries the screen-space baseline beside the model:
         // the character's row has both RMSEs as numbers.
@@ -463,9 +609,14 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         let rows = screen.as_array().unwrap();
         assert_eq!(rows.len(), 3, "{screen}");
         for row in rows {
-            let values = row.as_array().unwrap_or_else(|| panic!("a still without its baseline: {screen}"));
+            let values = row
+                .as_array()
+                .unwrap_or_else(|| panic!("a still without its baseline: {screen}"));
             assert!(
-                values.len() == 2 && values.iter().all(|v| v.as_f64().is_some_and(|x| x > 0.0 && x < 1.0)),
+                values.len() == 2
+                    && values
+                        .iter()
+                        .all(|v| v.as_f64().is_some_and(|x| x > 0.0 && x < 1.0)),
                 "model and GTAO RMSE: {screen}"
             );
         }
@@ -475,40 +626,85 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         let notes = notes.as_array().unwrap();
         assert_eq!(notes.len(), 3, "{notes:?}");
         for note in notes {
-            assert!(note.as_str().unwrap().contains("on the ground is not judged: a vertex asset shades the character"), "{note}");
+            assert!(
+                note.as_str()
+                    .unwrap()
+                    .contains("on the ground is not judged: a vertex asset shades the character"),
+                "{note}"
+            );
         }
-        let plot = eval(&c, "const i = document.querySelector('#report img'); return i && i.naturalWidth").await;
-        assert!(plot.as_u64().unwrap_or(0) > 100, "the PSNR plot shows: {plot}");
-        let caption = eval(&c, "return document.querySelector('#report figcaption').textContent").await;
-        assert!(caption.as_str().unwrap().contains("training clips"), "{caption}");
+        let plot = eval(
+            &c,
+            "const i = document.querySelector('#report img'); return i && i.naturalWidth",
+        )
+        .await;
+        assert!(
+            plot.as_u64().unwrap_or(0) > 100,
+            "the PSNR plot shows: {plot}"
+        );
+        let caption = eval(
+            &c,
+            "return document.querySelector('#report figcaption').textContent",
+        )
+        .await;
+        assert!(
+            caption.as_str().unwrap().contains("training clips"),
+            "{caption}"
+        );
         // Done: every stage's jobs are done, and no time is left.
         let counted = eval(&c, "return [...document.querySelectorAll('#stages [data-count=\"done\"]')].reduce((n, td) => n + Number(td.textContent), 0) === document.querySelectorAll('#jobs tbody tr').length").await;
         assert_eq!(counted, json!(true));
-        assert_eq!(eval(&c, "return document.querySelector('#eta').textContent").await, json!(""));
-        assert_eq!(eval(&c, "return window.__notReloaded === true").await, json!(true));
+        assert_eq!(
+            eval(&c, "return document.querySelector('#eta').textContent").await,
+            json!("")
+        );
+        assert_eq!(
+            eval(&c, "return window.__notReloaded === true").await,
+            json!(true)
+        );
         let jobs = eval(&c, "return [...document.querySelectorAll('#jobs [data-state]')].every(b => b.dataset.state === 'completed')").await;
         assert_eq!(jobs, json!(true), "every job shows completed");
         // No leaked "null" (the parameters' JSON may hold real nulls).
         let text = eval(&c, "return [...document.querySelectorAll('main > :not(pre)')].map(e => e.innerText).join('\\n')").await;
         assert!(!text.as_str().unwrap().contains("null"), "{text}");
         shot(&c, "3-bake-done").await;
-        eval(&c, "document.querySelector('#report').scrollIntoView(); return null").await;
+        eval(
+            &c,
+            "document.querySelector('#report').scrollIntoView(); return null",
+        )
+        .await;
         shot(&c, "3b-bake-report").await;
 
         // Cancel: a second bake, cancelled from its page.
         let other = submit(&env, ADMIN, &digest, 40);
-        c.goto(&format!("{}/#/bakes/{other}", env.url)).await.unwrap();
+        c.goto(&format!("{}/#/bakes/{other}", env.url))
+            .await
+            .unwrap();
         let cancel = "document.querySelector('button[data-action=\"cancel\"]')";
-        wait_for(&c, "the cancel button", &format!("{cancel} && !{cancel}.disabled"), Duration::from_secs(20)).await;
+        wait_for(
+            &c,
+            "the cancel button",
+            &format!("{cancel} && !{cancel}.disabled"),
+            Duration::from_secs(20),
+        )
+        .await;
         // Cancel asks first: dismissed, nothing happens; accepted, the
         // bake is cancelled.
-        let cancel_button = c.find(Locator::Css("button[data-action=\"cancel\"]")).await.unwrap();
+        let cancel_button = c
+            .find(Locator::Css("button[data-action=\"cancel\"]"))
+            .await
+            .unwrap();
         cancel_button.click().await.unwrap();
         let asked = c.get_alert_text().await.unwrap();
-        assert!(asked.starts_with(&format!("Cancel bake #{other}?")), "{asked}");
+        assert!(
+            asked.starts_with(&format!("Cancel bake #{other}?")),
+            "{asked}"
+        );
         c.dismiss_alert().await.unwrap();
         std::thread::sleep(Duration::from_millis(500));
-        let (_, b) = env.request("GET", &format!("/v1/bakes/{other}"), ADMIN, None).unwrap();
+        let (_, b) = env
+            .request("GET", &format!("/v1/bakes/{other}"), ADMIN, None)
+            .unwrap();
         assert_ne!(b["state"], "cancelled", "a dismissed cancel cancelled");
         cancel_button.click().await.unwrap();
         c.accept_alert().await.unwrap();
@@ -526,19 +722,46 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         // Its cancelled jobs are counted in a column of their own, and the
         // numbers' headers sit over them (right-aligned like the cells).
         let cancelled = wait_for(&c, "the cancelled jobs counted", "[...document.querySelectorAll('#stages [data-count=\"cancelled\"]')].reduce((n, td) => n + Number(td.textContent), 0)", Duration::from_secs(20)).await;
-        let listed = b["jobs"].as_array().unwrap().iter().filter(|j| j["state"] == "cancelled").count();
+        let listed = b["jobs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|j| j["state"] == "cancelled")
+            .count();
         assert_eq!(cancelled, json!(listed), "{b}");
         // Its parameters as they were given (f32 values without f64 noise).
-        let params = wait_for(&c, "the parameters", "document.querySelector('#params') && document.querySelector('#params').textContent", Duration::from_secs(20)).await;
-        assert!(params.as_str().unwrap().contains("\"range_margin\": 0.1,"), "{params}");
+        let params = wait_for(
+            &c,
+            "the parameters",
+            "document.querySelector('#params') && document.querySelector('#params').textContent",
+            Duration::from_secs(20),
+        )
+        .await;
+        assert!(
+            params.as_str().unwrap().contains("\"range_margin\": 0.1,"),
+            "{params}"
+        );
         let aligned = eval(&c, "return [...document.querySelectorAll('#stages thead th')].map(th => th.classList.contains('num'))").await;
-        assert_eq!(aligned, json!([false, true, true, true, true, true, true, true]));
+        assert_eq!(
+            aligned,
+            json!([false, true, true, true, true, true, true, true])
+        );
         shot(&c, "4-bake-cancelled").await;
 
         // Workers: the one worker, with its tracer and last heartbeat.
         c.goto(&format!("{}/#/workers", env.url)).await.unwrap();
-        wait_for(&c, "the workers", "document.querySelectorAll('tr[data-worker]').length === 1", Duration::from_secs(20)).await;
-        let tracer = eval(&c, "return document.querySelector('tr[data-worker] td.tracer').textContent").await;
+        wait_for(
+            &c,
+            "the workers",
+            "document.querySelectorAll('tr[data-worker]').length === 1",
+            Duration::from_secs(20),
+        )
+        .await;
+        let tracer = eval(
+            &c,
+            "return document.querySelector('tr[data-worker] td.tracer').textContent",
+        )
+        .await;
         let (_, workers) = env.request("GET", "/v1/workers", ADMIN, None).unwrap();
         assert_eq!(tracer, workers[0]["tracer"], "the tracer the worker told");
         shot(&c, "5-workers").await;
@@ -556,20 +779,42 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         .await;
         assert_eq!(versions, json!([format!("#{other}"), format!("#{id}")]));
         let heading = wait_for(&c, "the named versions", "document.querySelector('main h1 .character').dataset.named === 'yes' && document.querySelector('main h1').textContent", Duration::from_secs(20)).await;
-        assert!(heading.as_str().unwrap().starts_with("Versions of CesiumMan.glb"), "{heading}");
+        assert!(
+            heading
+                .as_str()
+                .unwrap()
+                .starts_with("Versions of CesiumMan.glb"),
+            "{heading}"
+        );
 
         // The URL `serve --demo` prints opens the bake itself, with any
         // token the server accepts (this one is not hex).
-        c.goto(&format!("{}/#token={ADMIN}&next=/bakes/{id}", env.url)).await.unwrap();
-        wait_for(&c, "the bake page from a sign-in link", &format!("location.hash === '#/bakes/{id}' && document.querySelector('#stages')"), Duration::from_secs(20)).await;
+        c.goto(&format!("{}/#token={ADMIN}&next=/bakes/{id}", env.url))
+            .await
+            .unwrap();
+        wait_for(
+            &c,
+            "the bake page from a sign-in link",
+            &format!("location.hash === '#/bakes/{id}' && document.querySelector('#stages')"),
+            Duration::from_secs(20),
+        )
+        .await;
         let who = eval(&c, "return document.getElementById('who').textContent").await;
         assert!(who.as_str().unwrap().contains("admin"), "{who}");
 
         // A read-only token sees the bakes, the actions disabled and why.
-        c.goto(&format!("{}/#token={reader}", env.url)).await.unwrap();
+        c.goto(&format!("{}/#token={reader}", env.url))
+            .await
+            .unwrap();
         wait_for(&c, "the bakes list", &row, Duration::from_secs(20)).await;
         c.goto(&format!("{}/#/bakes/{id}", env.url)).await.unwrap();
-        wait_for(&c, "the read-only note", "document.querySelector('#read-only')", Duration::from_secs(20)).await;
+        wait_for(
+            &c,
+            "the read-only note",
+            "document.querySelector('#read-only')",
+            Duration::from_secs(20),
+        )
+        .await;
         let disabled = eval(
             &c,
             "return ['cancel','pause','resume','retry'].map(a => document.querySelector(`button[data-action=\"${a}\"]`).disabled)",
@@ -578,7 +823,13 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert_eq!(disabled, json!([true, true, true, true]));
         // Readable (WCAG AA, 4.5:1 for text this size): a disabled
         // button's label and the live pill's.
-        wait_for(&c, "the live stream", "document.querySelector('#live.on')", Duration::from_secs(20)).await;
+        wait_for(
+            &c,
+            "the live stream",
+            "document.querySelector('#live.on')",
+            Duration::from_secs(20),
+        )
+        .await;
         let contrast = eval(&c, r#"
             const rgb = (s) => s.match(/[\d.]+/g).slice(0, 3).map(Number);
             const lum = ([r, g, b]) => {
@@ -601,36 +852,86 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         for r in contrast.as_array().unwrap() {
             assert!(r.as_f64().unwrap() >= 4.5, "{contrast}");
         }
-        let download = eval(&c, "return document.querySelector('button[data-action=\"download\"]').disabled").await;
+        let download = eval(
+            &c,
+            "return document.querySelector('button[data-action=\"download\"]').disabled",
+        )
+        .await;
         assert_eq!(download, json!(false), "reading the asset needs only read");
-        wait_for(&c, "the previews", &format!("{images}.length === 4"), Duration::from_secs(30)).await;
+        wait_for(
+            &c,
+            "the previews",
+            &format!("{images}.length === 4"),
+            Duration::from_secs(30),
+        )
+        .await;
         // The viewer shows the mesh, the studio's source: not to `read`.
-        let note = eval(&c, "return document.querySelector('#viewer-status').textContent").await;
+        let note = eval(
+            &c,
+            "return document.querySelector('#viewer-status').textContent",
+        )
+        .await;
         assert!(note.as_str().unwrap().contains("submit scope"), "{note}");
         shot(&c, "6-read-only").await;
 
         // Signing out stops the page: the stream goes offline, and a bake
         // that moves meanwhile does not redraw the form under the typing.
-        c.find(Locator::Css("#who a")).await.unwrap().click().await.unwrap();
-        wait_for(&c, "the sign-in form", "document.querySelector('form.login')", Duration::from_secs(20)).await;
-        eval(&c, "document.querySelector('form.login input').value = 'half typed'; return null").await;
+        c.find(Locator::Css("#who a"))
+            .await
+            .unwrap()
+            .click()
+            .await
+            .unwrap();
+        wait_for(
+            &c,
+            "the sign-in form",
+            "document.querySelector('form.login')",
+            Duration::from_secs(20),
+        )
+        .await;
+        eval(
+            &c,
+            "document.querySelector('form.login input').value = 'half typed'; return null",
+        )
+        .await;
         submit(&env, ADMIN, &digest, 8);
         std::thread::sleep(Duration::from_secs(2));
         let state = eval(&c, "return [document.getElementById('live').textContent, document.querySelector('form.login input').value, !!document.querySelector('main .error')]").await;
         assert_eq!(state, json!(["offline", "half typed", false]));
         // A sign-in link pasted into the sign-in page signs in.
-        eval(&c, &format!("location.hash = '#token={reader}&next=/workers'; return null")).await;
-        wait_for(&c, "the workers page from a link", "location.hash === '#/workers' && document.querySelector('tr[data-worker]')", Duration::from_secs(20)).await;
+        eval(
+            &c,
+            &format!("location.hash = '#token={reader}&next=/workers'; return null"),
+        )
+        .await;
+        wait_for(
+            &c,
+            "the workers page from a link",
+            "location.hash === '#/workers' && document.querySelector('tr[data-worker]')",
+            Duration::from_secs(20),
+        )
+        .await;
         // A token the server refuses says why (here: it expired).
         let (_, brief) = env
-            .request("POST", "/v1/tokens", ADMIN, Some(json!({"name": "brief", "scopes": ["read"], "expires_in_secs": 1})))
+            .request(
+                "POST",
+                "/v1/tokens",
+                ADMIN,
+                Some(json!({"name": "brief", "scopes": ["read"], "expires_in_secs": 1})),
+            )
             .unwrap();
         std::thread::sleep(Duration::from_millis(1500));
         let brief = brief["token"].as_str().unwrap();
-        eval(&c, &format!("location.hash = '#token={brief}'; return null")).await;
+        eval(
+            &c,
+            &format!("location.hash = '#token={brief}'; return null"),
+        )
+        .await;
         let said = wait_for(&c, "the refusal's reason", "document.querySelector('form.login') && document.querySelector('main .error') && document.querySelector('main .error').textContent", Duration::from_secs(20)).await;
         assert!(said.as_str().unwrap().contains("expired at"), "{said}");
-        c.goto(&format!("{}/#token={reader}", env.url)).await.unwrap();
+        c.goto(&format!("{}/#token={reader}", env.url))
+            .await
+            .unwrap();
         wait_for(&c, "signed in again", &row, Duration::from_secs(20)).await;
         // An address that names no bake says so.
         c.goto(&format!("{}/#/bakes/abc", env.url)).await.unwrap();
@@ -644,14 +945,18 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
                 "POST",
                 "/v1/bakes",
                 ADMIN,
-                Some(json!({"character": truck, "method": "grid", "params": {"grid": {
+                Some(
+                    json!({"character": truck, "method": "grid", "params": {"grid": {
                     "resolution": 16, "rays": 64, "eval_frames": 2, "eval_ground": 64,
-                    "eval_rays": 32, "average_frames": 2}}})),
+                    "eval_rays": 32, "average_frames": 2}}}),
+                ),
             )
             .unwrap();
         assert_eq!(status, 202, "{b}");
         let grid = b["id"].as_i64().unwrap();
-        c.goto(&format!("{}/#/bakes/{grid}", env.url)).await.unwrap();
+        c.goto(&format!("{}/#/bakes/{grid}", env.url))
+            .await
+            .unwrap();
         wait_for(
             &c,
             "the finished grid bake",
@@ -671,10 +976,24 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert_eq!(first, json!("grids on a static base (cones)"));
         let plot = eval(&c, "const i = document.querySelector('#report img'); return i && i.complete && i.naturalWidth").await;
         assert!(plot.as_u64().unwrap_or(0) > 100, "the slices show: {plot}");
-        wait_for(&c, "the grid previews", &format!("{images}.length === 4"), Duration::from_secs(30)).await;
+        wait_for(
+            &c,
+            "the grid previews",
+            &format!("{images}.length === 4"),
+            Duration::from_secs(30),
+        )
+        .await;
         let text = eval(&c, "return [...document.querySelectorAll('main > :not(pre)')].map(e => e.innerText).join('\\n')").await;
-        assert!(!text.as_str().unwrap().contains("null") && !text.as_str().unwrap().contains("undefined"), "{text}");
-        eval(&c, "document.querySelector('#report').scrollIntoView(); return null").await;
+        assert!(
+            !text.as_str().unwrap().contains("null")
+                && !text.as_str().unwrap().contains("undefined"),
+            "{text}"
+        );
+        eval(
+            &c,
+            "document.querySelector('#report').scrollIntoView(); return null",
+        )
+        .await;
         shot(&c, "7-grid-report").await;
 
         // A cubemap bake's charts show at their own size, in a frame that
@@ -685,15 +1004,25 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
                 "POST",
                 "/v1/bakes",
                 ADMIN,
-                Some(json!({"character": man, "method": "cubemap-discrete", "params": {"cubemap": {
+                Some(
+                    json!({"character": man, "method": "cubemap-discrete", "params": {"cubemap": {
                     "resolution": 16, "shells": 4, "times": 16, "rays": 16, "eval_times": 2,
-                    "eval_points": 64, "eval_ground": 64, "eval_rays": 16}}})),
+                    "eval_points": 64, "eval_ground": 64, "eval_rays": 16}}}),
+                ),
             )
             .unwrap();
         assert_eq!(status, 202, "{b}");
         let cube = b["id"].as_i64().unwrap();
-        c.goto(&format!("{}/#/bakes/{cube}", env.url)).await.unwrap();
-        wait_for(&c, "the finished cubemap bake", "document.querySelector('#state [data-state=\"done\"]')", Duration::from_secs(300)).await;
+        c.goto(&format!("{}/#/bakes/{cube}", env.url))
+            .await
+            .unwrap();
+        wait_for(
+            &c,
+            "the finished cubemap bake",
+            "document.querySelector('#state [data-state=\"done\"]')",
+            Duration::from_secs(300),
+        )
+        .await;
         let chart = "document.querySelector('#report figure.zoom img')";
         let sizes = wait_for(
             &c,
@@ -703,10 +1032,19 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         )
         .await;
         assert_eq!(sizes[0], sizes[1], "shown at its own size");
-        c.find(Locator::Css("button[data-action=\"zoom\"]")).await.unwrap().click().await.unwrap();
+        c.find(Locator::Css("button[data-action=\"zoom\"]"))
+            .await
+            .unwrap()
+            .click()
+            .await
+            .unwrap();
         let fitted = eval(&c, &format!("return {chart}.getBoundingClientRect().width <= {chart}.closest('figure').getBoundingClientRect().width")).await;
         assert_eq!(fitted, json!(true), "fitted to the page");
-        eval(&c, "document.querySelector('#report').scrollIntoView(); return null").await;
+        eval(
+            &c,
+            "document.querySelector('#report').scrollIntoView(); return null",
+        )
+        .await;
         shot(&c, "7b-cubemap-charts").await;
 
         // A character with three clips: its report leads with the clips
@@ -723,7 +1061,9 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
             .unwrap();
         assert_eq!(status, 202, "{b}");
         let fox_bake = b["id"].as_i64().unwrap();
-        c.goto(&format!("{}/#/bakes/{fox_bake}", env.url)).await.unwrap();
+        c.goto(&format!("{}/#/bakes/{fox_bake}", env.url))
+            .await
+            .unwrap();
         wait_for(
             &c,
             "the finished Fox bake",
@@ -752,7 +1092,11 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         assert!(note.as_str().unwrap().contains("3 folds"), "{note}");
         // The default reference poses: the fit chose its rows, and says
         // which, with the three scores.
-        let reference = eval(&c, "return document.querySelector('#reference').textContent").await;
+        let reference = eval(
+            &c,
+            "return document.querySelector('#reference').textContent",
+        )
+        .await;
         let reference = reference.as_str().unwrap();
         assert!(
             reference.starts_with("Reference poses: ")
@@ -1096,21 +1440,30 @@ fn the_viewer_plays_every_method_and_matches_aobake_preview() {
     for b in &done {
         assert_eq!(b["state"], "done", "{b}");
     }
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
+    block_on(async {
         let c = browser_with(&driver, true).await;
         for (((name, character, _), &id), bake) in bakes.iter().zip(&ids).zip(&done) {
             let clip = open_viewer(&c, &env, id).await;
-            let text = eval(&c, "return document.querySelector('#viewer-status').textContent").await;
-            assert!(text.as_str().unwrap().starts_with(&format!("{name}: ")), "{text}");
+            let text = eval(
+                &c,
+                "return document.querySelector('#viewer-status').textContent",
+            )
+            .await;
+            assert!(
+                text.as_str().unwrap().starts_with(&format!("{name}: ")),
+                "{text}"
+            );
             if *name == "vertex-linear" {
                 // It plays: the frame moves on by itself.
                 let state = "document.querySelector('#viewer canvas').viewer.state()";
                 let first = eval(&c, &format!("return {state}.frame")).await;
-                wait_for(&c, "the clip to play", &format!("{state}.playing && {state}.frame !== {first}"), Duration::from_secs(20)).await;
+                wait_for(
+                    &c,
+                    "the clip to play",
+                    &format!("{state}.playing && {state}.frame !== {first}"),
+                    Duration::from_secs(20),
+                )
+                .await;
                 shot(&c, "8-viewer-playing").await;
             }
             let model = viewer_matches_aobake_preview(&c, &env, name, bake, character, &clip).await;
@@ -1120,29 +1473,52 @@ fn the_viewer_plays_every_method_and_matches_aobake_preview() {
             // The static average is not the model's AO.
             viewer_show(&c, &clip, 0.3, "static").await;
             let (share, _, worst) = viewer_pixels(&c).await.differ(&model);
-            eprintln!("static average against the model: {share:.4} over ±{RENDER_TOLERANCE}, worst {worst}");
-            assert!(worst > RENDER_TOLERANCE, "the static average is the model's AO");
+            eprintln!(
+                "static average against the model: {share:.4} over ±{RENDER_TOLERANCE}, worst {worst}"
+            );
+            assert!(
+                worst > RENDER_TOLERANCE,
+                "the static average is the model's AO"
+            );
             // The orbit camera: a drag turns the view.
             viewer_show(&c, &clip, 0.3, "model").await;
             eval(&c, "const cv = document.querySelector('#viewer canvas');
                       const at = (type, x) => cv.dispatchEvent(new PointerEvent(type, {clientX: x, clientY: 200, pointerId: 1, bubbles: true}));
                       at('pointerdown', 200); at('pointermove', 260); at('pointerup', 260); return null").await;
             let (share, _, _) = viewer_pixels(&c).await.differ(&model);
-            assert!(share > EDGE_SHARE, "a drag did not turn the camera: {share}");
+            assert!(
+                share > EDGE_SHARE,
+                "a drag did not turn the camera: {share}"
+            );
             // The keyboard: Home goes back to the previews' camera (the
             // model's pixels again), an arrow key turns the view.
             let canvas = c.find(Locator::Css("#viewer canvas")).await.unwrap();
             canvas.send_keys(&Key::Home.to_string()).await.unwrap();
             let (share, _, _) = viewer_pixels(&c).await.differ(&model);
-            assert!(share <= EDGE_SHARE, "Home did not go back to the previews' camera: {share}");
+            assert!(
+                share <= EDGE_SHARE,
+                "Home did not go back to the previews' camera: {share}"
+            );
             canvas.send_keys(&Key::Left.to_string()).await.unwrap();
             let (share, _, _) = viewer_pixels(&c).await.differ(&model);
-            assert!(share > EDGE_SHARE, "an arrow key did not turn the camera: {share}");
-            c.find(Locator::Css("#viewer-reset")).await.unwrap().click().await.unwrap();
+            assert!(
+                share > EDGE_SHARE,
+                "an arrow key did not turn the camera: {share}"
+            );
+            c.find(Locator::Css("#viewer-reset"))
+                .await
+                .unwrap()
+                .click()
+                .await
+                .unwrap();
             shot(&c, "9-viewer-orbited").await;
         }
         // A grid or cubemap bake has no static average in the viewer.
-        let disabled = eval(&c, "return document.querySelector('input[name=viewer-mode][value=static]').disabled").await;
+        let disabled = eval(
+            &c,
+            "return document.querySelector('input[name=viewer-mode][value=static]').disabled",
+        )
+        .await;
         assert_eq!(disabled, json!(true));
         shot(&c, "10-viewer-cubemap").await;
         c.close().await.unwrap();
