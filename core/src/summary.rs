@@ -13,6 +13,11 @@ use crate::{
 const BOUNDS_FPS: f32 = 30.0;
 /// At most this many poses per clip for the bounds.
 const MAX_BOUNDS_SAMPLES: usize = 2_000;
+/// At most this much work for the bounds over all clips, in posed nodes
+/// and skinned vertices: about a second on one core. A character of a
+/// million vertices gets 200 poses, spread over its clips; past one pose
+/// a clip, every second (third, …) clip.
+const BOUNDS_BUDGET: usize = 200_000_000;
 
 /// A clip's name and length.
 #[derive(Debug, Clone, Serialize)]
@@ -72,10 +77,16 @@ pub struct Summary {
 impl Summary {
     /// Inspects a character. Skins the mesh at every key and 30 fps frame
     /// of every clip (at most 2,000 per clip) for the bounds, so it costs
-    /// about one skinning per frame.
+    /// about one skinning per frame; a large character with many clips
+    /// gets fewer frames (at most 200 million skinned vertices and posed
+    /// nodes in all, evenly spread over its clips).
     pub fn of(character: &Character, clips: &[Clip]) -> Self {
-        let clip_poses = clips.iter().flat_map(|clip| {
-            clip.sample_times(BOUNDS_FPS, MAX_BOUNDS_SAMPLES)
+        let (stride, per_clip) = bounds_sampling(
+            character.vertex_count() + character.skeleton.nodes.len(),
+            clips.len(),
+        );
+        let clip_poses = clips.iter().step_by(stride).flat_map(|clip| {
+            clip.sample_times(BOUNDS_FPS, per_clip)
                 .into_iter()
                 .map(move |t| Pose::sample(&character.skeleton, clip, t))
         });
@@ -117,6 +128,46 @@ impl Summary {
             handle_parameters: pose_space::handles(character).len(),
             bounds: [lo.to_array(), hi.to_array()],
             diagonal: (hi - lo).length(),
+        }
+    }
+}
+
+/// Which clips (every `stride`-th) and how many poses of each the bounds
+/// sample, for poses that each cost `per_pose`: within [`BOUNDS_BUDGET`]
+/// in all, never more than [`MAX_BOUNDS_SAMPLES`] a clip.
+fn bounds_sampling(per_pose: usize, clips: usize) -> (usize, usize) {
+    let poses = (BOUNDS_BUDGET / per_pose.max(1)).max(1);
+    let stride = clips.div_ceil(poses).max(1);
+    let sampled = clips.div_ceil(stride).max(1);
+    (stride, (poses / sampled).clamp(1, MAX_BOUNDS_SAMPLES))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_bounds_stay_within_their_budget() {
+        // Small characters keep every frame of every clip (up to 2,000).
+        assert_eq!(bounds_sampling(3_000, 32), (1, MAX_BOUNDS_SAMPLES));
+        // A million vertices: 200 poses over 10 clips.
+        assert_eq!(bounds_sampling(1_000_000, 10), (1, 20));
+        // 4,096 clips of a tiny mesh: every frame still fits.
+        assert_eq!(bounds_sampling(10, 4_096), (1, MAX_BOUNDS_SAMPLES));
+        for (per_pose, clips) in [
+            (4_000_000, 4_096),
+            (1, 1),
+            (10, 4_096),
+            (50_000, 9_999),
+            (7_214, 14),
+        ] {
+            let (stride, per_clip) = bounds_sampling(per_pose, clips);
+            let poses = clips.div_ceil(stride) * per_clip;
+            assert!(
+                poses * per_pose <= BOUNDS_BUDGET.max(per_pose),
+                "{per_pose} × {clips}: {poses} poses"
+            );
+            assert!((1..=MAX_BOUNDS_SAMPLES).contains(&per_clip));
         }
     }
 }

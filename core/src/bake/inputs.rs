@@ -54,11 +54,21 @@ impl UploadBytes {
         let Ok(used) = crate::import::referenced_files(&self.main, limits) else {
             return Vec::new();
         };
-        let (kept, left): (Vec<SideFile>, Vec<SideFile>) = std::mem::take(&mut self.side_files)
+        // The files the import will use, found as the import finds them.
+        let files = crate::import::SideFiles::new(&self.side_files);
+        let mut wanted = vec![false; self.side_files.len()];
+        for name in &used {
+            if let Some(i) = files.position(name) {
+                wanted[i] = true;
+            }
+        }
+        let (kept, left): (Vec<_>, Vec<_>) = std::mem::take(&mut self.side_files)
             .into_iter()
-            .partition(|f| used.contains(&f.name));
+            .zip(wanted)
+            .partition(|(_, wanted)| *wanted);
+        let kept = kept.into_iter().map(|(f, _)| f).collect();
         self.side_files = kept;
-        left.into_iter().map(|f| f.name).collect()
+        left.into_iter().map(|(f, _)| f.name).collect()
     }
 
     /// Whether the upload is more than one file.
@@ -226,6 +236,14 @@ mod tests {
             ],
         };
         assert_eq!(sent.keep_referenced(&Limits::default()), ["notes.txt"]);
+        // Kept as the import finds them: a bare file name for a URI in a
+        // folder (what a browser sends), or a name with `./`.
+        let mut bare = UploadBytes {
+            main: br#"{"asset":{"version":"2.0"},"buffers":[{"uri":"data/rig.bin","byteLength":4},{"uri":"skin.bin","byteLength":1}]}"#.to_vec(),
+            side_files: vec![file("rig.bin", b"1234"), file("./skin.bin", b"s"), file("other.bin", b"o")],
+        };
+        assert_eq!(bare.keep_referenced(&Limits::default()), ["other.bin"]);
+        assert_eq!(bare.side_files.len(), 2);
         let used = UploadBytes {
             main: main.clone(),
             side_files: vec![file("rig.bin", b"1234"), file("skin a.png", b"png")],

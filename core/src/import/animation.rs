@@ -28,6 +28,14 @@ pub(crate) fn read_clips(
     warnings: &mut Vec<String>,
 ) -> Result<Vec<Clip>, ImportError> {
     let root = &doc.root;
+    let animations = root.animations.len() as u64;
+    if animations > limits.max_animations {
+        return Err(ImportError::limit(
+            "animation count",
+            animations,
+            limits.max_animations,
+        ));
+    }
     let acc = Accessors::new(root, &doc.buffers);
     let mut non_unit = 0usize;
     // Every channel decodes its sampler, so keys are counted per channel.
@@ -49,6 +57,7 @@ pub(crate) fn read_clips(
 
     let mut numbers_left = limits.max_keyframes.saturating_mul(NUMBERS_PER_KEY);
     let mut clips: Vec<Clip> = Vec::with_capacity(root.animations.len());
+    let mut names = std::collections::HashSet::with_capacity(root.animations.len());
     let mut unbound = 0usize;
     for (a, animation) in root.animations.iter().enumerate() {
         let mut channels = Vec::with_capacity(animation.channels.len());
@@ -213,13 +222,19 @@ pub(crate) fn read_clips(
             .clone()
             .filter(|n| !n.is_empty())
             .unwrap_or_else(|| format!("animation_{a}"));
-        if clips.iter().any(|c| c.name == name) {
-            let unique = format!("{name}_{a}");
+        if names.contains(&name) {
+            // `walk_3` may itself be taken (by a clip of that name, or an
+            // earlier renaming): the first free `_3`, `_3_3`, … .
+            let mut unique = format!("{name}_{a}");
+            while names.contains(&unique) {
+                unique = format!("{unique}_{a}");
+            }
             warnings.push(format!(
                 "animations[{a}]: name {name:?} is used twice; this one is {unique:?}"
             ));
             name = unique;
         }
+        names.insert(name.clone());
         let duration = channels
             .iter()
             .filter_map(|c| c.times.last().copied())

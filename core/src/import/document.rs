@@ -5,7 +5,7 @@ use gltf::json::{self, validation::Validate as _};
 
 use super::{
     ImportError, rules,
-    source::{Container, Upload, UriTarget, check_json_depth, resolve_uri},
+    source::{Container, SideFiles, Upload, UriTarget, check_json_shape, resolve_uri},
 };
 use crate::import::limits::Limits;
 
@@ -58,7 +58,7 @@ impl Document {
             ));
         }
         let container = Container::parse(upload.main)?;
-        check_json_depth(container.json, limits.max_json_depth)?;
+        check_json_shape(container.json, limits)?;
         let raw: serde_json::Value =
             serde_json::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
         rules::check_integer_widths(&raw)?;
@@ -79,8 +79,9 @@ impl Document {
                  as well, or a missing or strided view); ignored, since images are never decoded"
             ));
         }
-        let buffers = load_buffers(&root, upload, container.bin)?;
-        check_images(&root, upload, &mut warnings)?;
+        let side_files = SideFiles::new(upload.side_files);
+        let buffers = load_buffers(&root, upload, &side_files, container.bin, limits)?;
+        check_images(&root, &side_files, &mut warnings)?;
         Ok(Self {
             root,
             buffers,
@@ -315,32 +316,52 @@ fn node_parents(root: &json::Root) -> Result<Vec<Option<usize>>, ImportError> {
     Ok(parents)
 }
 
+/// Each buffer's bytes: its declared `byteLength` of the data its URI or
+/// the GLB's binary chunk holds. Buffers may share a side file, so the
+/// bytes they declare in all are held to the upload's limit too.
 fn load_buffers(
     root: &json::Root,
     upload: Upload<'_>,
+    side_files: &SideFiles<'_>,
     bin: Option<&[u8]>,
+    limits: &Limits,
 ) -> Result<Vec<Vec<u8>>, ImportError> {
+    let declared: u64 = root
+        .buffers
+        .iter()
+        .map(|b| b.byte_length.0)
+        .fold(0, u64::saturating_add);
+    if declared > limits.max_file_bytes {
+        return Err(ImportError::limit(
+            "bytes the buffers declare in all",
+            declared,
+            limits.max_file_bytes,
+        ));
+    }
     let mut buffers = Vec::with_capacity(root.buffers.len());
     for (i, buffer) in root.buffers.iter().enumerate() {
         let path = format!("buffers[{i}]");
-        let data: Vec<u8> = match &buffer.uri {
+        let decoded;
+        let data: &[u8] = match &buffer.uri {
             Some(uri) => match resolve_uri(uri, &format!("{path}.uri"))? {
-                UriTarget::Data(bytes) => bytes,
-                UriTarget::File(name) => upload
-                    .side_file(&name)
-                    .ok_or_else(|| ImportError::MissingFile {
-                        path: format!("{path}.uri"),
-                        name: name.clone(),
-                        available: upload.side_file_names(),
-                    })?
-                    .bytes
-                    .clone(),
+                UriTarget::Data(bytes) => {
+                    decoded = bytes;
+                    &decoded
+                }
+                UriTarget::File(name) => {
+                    &side_files
+                        .get(&name)
+                        .ok_or_else(|| ImportError::MissingFile {
+                            path: format!("{path}.uri"),
+                            name: name.clone(),
+                            available: upload.side_file_names(),
+                        })?
+                        .bytes
+                }
             },
-            None if i == 0 => bin
-                .ok_or_else(|| {
-                    ImportError::invalid(&path, "has no uri and the file has no GLB binary chunk")
-                })?
-                .to_vec(),
+            None if i == 0 => bin.ok_or_else(|| {
+                ImportError::invalid(&path, "has no uri and the file has no GLB binary chunk")
+            })?,
             None => return Err(ImportError::invalid(&path, "has no uri")),
         };
         let declared = buffer.byte_length.0;
@@ -353,9 +374,9 @@ fn load_buffers(
                 ),
             ));
         }
-        let mut data = data;
-        data.truncate(declared as usize);
-        buffers.push(data);
+        // Only the declared bytes are copied (a buffer may name a large
+        // file for a few of its bytes).
+        buffers.push(data[..declared as usize].to_vec());
     }
     Ok(buffers)
 }
@@ -364,13 +385,13 @@ fn load_buffers(
 /// does not use textures.
 fn check_images(
     root: &json::Root,
-    upload: Upload<'_>,
+    side_files: &SideFiles<'_>,
     warnings: &mut Vec<String>,
 ) -> Result<(), ImportError> {
     for (i, image) in root.images.iter().enumerate() {
         if let Some(uri) = &image.uri
             && let UriTarget::File(name) = resolve_uri(uri, &format!("images[{i}].uri"))?
-            && upload.side_file(&name).is_none()
+            && side_files.get(&name).is_none()
         {
             warnings.push(format!(
                 "images[{i}]: {name:?} is not among the files given with the glTF (AO does not need images)"
@@ -384,7 +405,7 @@ fn check_images(
 /// images), for callers that gather side files. Forbidden URIs are errors.
 pub fn referenced_files(main: &[u8], limits: &Limits) -> Result<Vec<String>, ImportError> {
     let container = Container::parse(main)?;
-    check_json_depth(container.json, limits.max_json_depth)?;
+    check_json_shape(container.json, limits)?;
     let root =
         json::Root::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
     let buffers = root

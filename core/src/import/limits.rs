@@ -29,6 +29,12 @@ pub struct Limits {
     pub max_morph_deltas: u64,
     /// Nesting depth of JSON arrays and objects.
     pub max_json_depth: usize,
+    /// Values in the JSON (numbers, strings, arrays, objects, …): parsing
+    /// builds a tree that costs tens of bytes a value, so a body of
+    /// `[0,0,0,…]` is refused before it is parsed.
+    pub max_json_values: u64,
+    /// Animations in one file.
+    pub max_animations: u64,
 }
 
 impl Limits {
@@ -47,6 +53,8 @@ impl Limits {
             max_morph_targets: 256,
             max_morph_deltas: 16_000_000,
             max_json_depth: 64,
+            max_json_values: 8_000_000,
+            max_animations: 4_096,
         }
     }
 }

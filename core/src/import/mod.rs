@@ -20,6 +20,7 @@ mod source;
 
 pub use document::referenced_files;
 pub use error::ImportError;
+pub(crate) use source::SideFiles;
 pub use source::{SideFile, Upload};
 
 use crate::{Character, Clip, Limits};
@@ -78,6 +79,7 @@ pub(crate) fn import_with_source(
     let container = source::Container::parse(upload.main)?;
     let json: serde_json::Value =
         serde_json::from_slice(container.json).map_err(|e| ImportError::Json(e.to_string()))?;
+    let side_files = source::SideFiles::new(upload.side_files);
     let images = doc
         .root
         .images
@@ -88,9 +90,7 @@ pub(crate) fn import_with_source(
             Some(uri) => Ok(
                 match source::resolve_uri(uri, &format!("images[{i}].uri"))? {
                     source::UriTarget::Data(bytes) => Some(bytes),
-                    source::UriTarget::File(name) => {
-                        upload.side_file(&name).map(|f| f.bytes.clone())
-                    }
+                    source::UriTarget::File(name) => side_files.get(&name).map(|f| f.bytes.clone()),
                 },
             ),
         })

@@ -5,10 +5,12 @@
 //! `data:` URI, decoded in memory, or the name of one of the uploaded side
 //! files.
 
+use std::collections::HashMap;
+
 use base64::Engine as _;
 use percent_encoding::percent_decode_str;
 
-use super::ImportError;
+use super::{ImportError, Limits};
 
 /// One uploaded file: its name (as the client sent it, a relative path such
 /// as `Fox.bin` or `textures/skin.png`) and its bytes.
@@ -72,29 +74,6 @@ impl<'a> Upload<'a> {
                 .sum::<u64>()
     }
 
-    /// Finds a side file by the normalised relative path a URI resolved to;
-    /// falls back to a unique file with the same last path segment, since
-    /// clients often upload `scene.bin` for a URI `data/scene.bin`.
-    pub(crate) fn side_file(&self, path: &str) -> Option<&'a SideFile> {
-        let wanted = normalize_name(path);
-        if let Some(f) = self
-            .side_files
-            .iter()
-            .find(|f| normalize_name(&f.name) == wanted)
-        {
-            return Some(f);
-        }
-        let base = wanted.rsplit('/').next().unwrap_or(&wanted);
-        let mut by_base = self
-            .side_files
-            .iter()
-            .filter(|f| normalize_name(&f.name).rsplit('/').next() == Some(base));
-        match (by_base.next(), by_base.next()) {
-            (Some(f), None) => Some(f),
-            _ => None,
-        }
-    }
-
     pub(crate) fn side_file_names(&self) -> String {
         if self.side_files.is_empty() {
             return "none".into();
@@ -102,6 +81,56 @@ impl<'a> Upload<'a> {
         let names: Vec<&str> = self.side_files.iter().map(|f| f.name.as_str()).collect();
         names.join(", ")
     }
+}
+
+/// The side files of an upload, found by the normalised relative path a
+/// URI resolves to; else by its last path segment when one file alone has
+/// it, since clients often upload `scene.bin` for a URI `data/scene.bin`.
+/// Built once per import: a lookup is a hash, not a scan of the parts.
+pub(crate) struct SideFiles<'a> {
+    files: &'a [SideFile],
+    by_path: HashMap<String, usize>,
+    /// `None` where two files share the segment.
+    by_base: HashMap<String, Option<usize>>,
+}
+
+impl<'a> SideFiles<'a> {
+    pub(crate) fn new(files: &'a [SideFile]) -> Self {
+        let mut by_path = HashMap::with_capacity(files.len());
+        let mut by_base: HashMap<String, Option<usize>> = HashMap::with_capacity(files.len());
+        for (i, f) in files.iter().enumerate() {
+            let path = normalize_name(&f.name);
+            by_base
+                .entry(last_segment(&path).to_owned())
+                .and_modify(|found| *found = None)
+                .or_insert(Some(i));
+            // The first of two files with one name, as a scan would find.
+            by_path.entry(path).or_insert(i);
+        }
+        Self {
+            files,
+            by_path,
+            by_base,
+        }
+    }
+
+    /// The index of the file `path` names.
+    pub(crate) fn position(&self, path: &str) -> Option<usize> {
+        let wanted = normalize_name(path);
+        self.by_path
+            .get(&wanted)
+            .copied()
+            .or_else(|| self.by_base.get(last_segment(&wanted)).copied().flatten())
+    }
+
+    /// The file `path` names.
+    pub(crate) fn get(&self, path: &str) -> Option<&'a SideFile> {
+        self.position(path).map(|i| &self.files[i])
+    }
+}
+
+fn last_segment(path: &str) -> &str {
+    path.rsplit('/').next().unwrap_or(path)
 }
 
 fn normalize_name(name: &str) -> String {
@@ -220,10 +249,16 @@ impl<'a> Container<'a> {
     }
 }
 
-/// Refuses JSON that nests arrays or objects deeper than `limit`, with one
-/// pass over the bytes before any parser allocates for them.
-pub(crate) fn check_json_depth(json: &[u8], limit: usize) -> Result<(), ImportError> {
+/// Refuses JSON that nests arrays or objects deeper than
+/// `limits.max_json_depth` or holds more than `limits.max_json_values`
+/// values, with one pass over the bytes before any parser allocates for
+/// them (a parsed value costs tens of bytes, so `[0,0,0,…]` would cost
+/// sixteen times its text).
+pub(crate) fn check_json_shape(json: &[u8], limits: &Limits) -> Result<(), ImportError> {
     let mut depth = 0usize;
+    // Each container and each comma outside strings starts a value (at
+    // least one value is counted per value; a key counts with its value).
+    let mut values = 1u64;
     let mut in_string = false;
     let mut escaped = false;
     for &b in json {
@@ -240,16 +275,25 @@ pub(crate) fn check_json_depth(json: &[u8], limit: usize) -> Result<(), ImportEr
             b'"' => in_string = true,
             b'{' | b'[' => {
                 depth += 1;
-                if depth > limit {
+                values += 1;
+                if depth > limits.max_json_depth {
                     return Err(ImportError::limit(
                         "JSON nesting depth",
                         depth as u64,
-                        limit as u64,
+                        limits.max_json_depth as u64,
                     ));
                 }
             }
+            b',' => values += 1,
             b'}' | b']' => depth = depth.saturating_sub(1),
             _ => {}
+        }
+        if values > limits.max_json_values {
+            return Err(ImportError::limit(
+                "values in the JSON (numbers, strings, arrays, objects)",
+                values,
+                limits.max_json_values,
+            ));
         }
     }
     Ok(())
@@ -396,8 +440,26 @@ mod tests {
 
     #[test]
     fn json_depth_ignores_brackets_in_strings() {
-        assert!(check_json_depth(br#"{"a":"[[[[[[[[[["}"#, 2).is_ok());
-        assert!(check_json_depth(br#"{"a":"\"[[[["}"#, 2).is_ok());
-        assert!(check_json_depth(b"[[[]]]", 2).is_err());
+        let depth = |max_json_depth| Limits {
+            max_json_depth,
+            ..Limits::default()
+        };
+        assert!(check_json_shape(br#"{"a":"[[[[[[[[[["}"#, &depth(2)).is_ok());
+        assert!(check_json_shape(br#"{"a":"\"[[[["}"#, &depth(2)).is_ok());
+        assert!(check_json_shape(b"[[[]]]", &depth(2)).is_err());
+    }
+
+    #[test]
+    fn json_values_are_counted_outside_strings() {
+        let values = |max_json_values| Limits {
+            max_json_values,
+            ..Limits::default()
+        };
+        // The object, its array and the array's three numbers.
+        let json = br#"{"extras":[0,0,0],"name":"a,b,c,d,e,f"}"#;
+        assert!(check_json_shape(json, &values(6)).is_ok());
+        let err = check_json_shape(json, &values(4)).unwrap_err();
+        assert_eq!(err.code(), "limit_exceeded");
+        assert!(err.to_string().contains("values in the JSON"), "{err}");
     }
 }

@@ -217,6 +217,89 @@ fn huge_declared_counts_are_refused_before_allocation() {
     assert!(import_character(Upload::single(&util::tiny_rig().glb()), &limits).is_err());
 }
 
+/// Buffers that all name one side file declare their bytes against the
+/// upload's limit together: each is a copy, so 64 buffers of a 250 MiB
+/// file would hold 16 GiB.
+#[test]
+fn buffers_sharing_a_side_file_are_held_to_the_upload_limit() {
+    let g = util::tiny_rig();
+    let (main, side) = g.with_side_file("rig.bin", "rig.bin");
+    let mut json: serde_json::Value = serde_json::from_slice(&main).unwrap();
+    let buffer = json["buffers"][0].clone();
+    let len = buffer["byteLength"].as_u64().unwrap();
+    json["buffers"] = json!(vec![buffer; 64]);
+    let main = serde_json::to_vec(&json).unwrap();
+    let limits = Limits {
+        max_file_bytes: main.len() as u64 + len * 2,
+        ..Limits::default()
+    };
+    let upload = Upload {
+        main: &main,
+        side_files: &side,
+    };
+    let err = import_character(upload, &limits).unwrap_err();
+    assert_eq!(err.code(), "limit_exceeded");
+    assert!(
+        err.to_string()
+            .starts_with(&format!("bytes the buffers declare in all is {}", 64 * len)),
+        "{err}"
+    );
+    // Under the limit they import, each holding its declared bytes.
+    assert!(import_character(upload, &Limits::default()).is_ok());
+}
+
+/// JSON of many small values (each a parsed node of tens of bytes) is
+/// refused before it is parsed.
+#[test]
+fn json_of_too_many_values_is_refused() {
+    let mut g = util::tiny_rig();
+    g.json["extras"] = json!(vec![0; 10_000]);
+    let limits = Limits {
+        max_json_values: 5_000,
+        ..Limits::default()
+    };
+    let err = import_character(Upload::single(&g.glb()), &limits).unwrap_err();
+    assert_eq!(err.code(), "limit_exceeded");
+    assert!(
+        err.to_string()
+            .starts_with("values in the JSON (numbers, strings, arrays, objects) is 5001"),
+        "{err}"
+    );
+    assert!(g.import().is_ok());
+}
+
+/// Clip names are keys (of reports, of `--held-out`): a renamed
+/// duplicate never takes a name another clip has.
+#[test]
+fn clip_names_stay_unique() {
+    let mut g = util::tiny_rig();
+    let animation = g.json["animations"][0].clone();
+    let named = |name: &str| {
+        let mut a = animation.clone();
+        a["name"] = json!(name);
+        a
+    };
+    g.json["animations"] = json!([named("walk"), named("walk_2"), named("walk")]);
+    let imported = g.import().unwrap();
+    let names: Vec<&str> = imported.clips.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["walk", "walk_2", "walk_2_2"]);
+    assert!(
+        imported
+            .warnings
+            .iter()
+            .any(|w| w.contains(r#"name "walk" is used twice; this one is "walk_2_2""#)),
+        "{:?}",
+        imported.warnings
+    );
+    // And their number is bounded (each is skinned for the summary).
+    let limits = Limits {
+        max_animations: 2,
+        ..Limits::default()
+    };
+    let err = import_character(Upload::single(&g.glb()), &limits).unwrap_err();
+    assert_eq!(err.to_string(), "animation count is 3, over the limit of 2");
+}
+
 #[test]
 fn deep_json_nesting_is_refused() {
     let mut json = String::from(r#"{"asset":{"version":"2.0"},"extras":"#);
