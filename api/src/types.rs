@@ -272,7 +272,7 @@ pub struct BakeRequest {
     /// The character's upload digest.
     #[cfg_attr(feature = "schema", schema(value_type = String, pattern = "^[0-9a-f]{64}$"))]
     pub character: String,
-    /// Clip upload digests.
+    /// Clip upload digests (at most 256, each once).
     #[serde(default)]
     #[cfg_attr(feature = "schema", schema(value_type = Vec<String>))]
     pub clips: Vec<String>,

@@ -187,6 +187,8 @@ pub struct AppState {
     /// Whole blobs read into memory at once (each may be as large as the
     /// body limit): a bound on what concurrent downloads can allocate.
     pub blob_reads: Arc<tokio::sync::Semaphore>,
+    /// Imports of untrusted uploads running at once ([`AppState::import`]).
+    pub imports: Arc<tokio::sync::Semaphore>,
     /// Request metrics.
     pub metrics: Arc<Metrics>,
     /// When this server last recorded each token's use (ms since the
@@ -240,6 +242,11 @@ impl AppState {
             shared_events: None,
             limiter: Arc::new(Limiter::new(limits.requests_per_second)),
             blob_reads: Arc::new(tokio::sync::Semaphore::new(8)),
+            imports: Arc::new(tokio::sync::Semaphore::new(
+                std::thread::available_parallelism()
+                    .map_or(1, |n| n.get().div_ceil(2))
+                    .clamp(1, 4),
+            )),
             metrics: Arc::new(Metrics::new()),
             token_uses: Arc::default(),
             graph: aobake_core::bake::GraphOptions::default(),
@@ -262,6 +269,30 @@ impl AppState {
             Some((start, end)) => self.blobs.get_range(digest, start, end).await?,
             None => self.blobs.get(digest).await?,
         })
+    }
+
+    /// Runs `work`, an import (its CPU time and memory grow with the
+    /// upload), on a blocking thread, with at most as many at once as
+    /// [`AppState::imports`] allows: a flood of uploads waits its turn
+    /// rather than taking every core and all memory. The permit stays with
+    /// the work, so a request that times out still holds it until its
+    /// import ends.
+    pub async fn import<T: Send + 'static>(
+        &self,
+        work: impl FnOnce() -> T + Send + 'static,
+    ) -> Result<T, ApiError> {
+        let permit = self
+            .imports
+            .clone()
+            .acquire_owned()
+            .await
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            work()
+        })
+        .await
+        .map_err(|e| ApiError::Internal(e.to_string()))
     }
 
     /// Ends every long poll (they answer 204), so a graceful shutdown does

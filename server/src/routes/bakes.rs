@@ -74,6 +74,10 @@ fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
     }
 }
 
+/// Clip files one bake may name: each is read into memory and imported
+/// with the character.
+const MAX_CLIP_FILES: usize = 256;
+
 #[utoipa::path(post, path = "/v1/bakes", tag = "bakes", request_body = BakeRequest,
     security(("bearer" = ["submit"])),
     responses((status = 202, description = "Accepted (or already running)", body = BakeView, headers(("Location" = String, description = "The bake (`/v1/bakes/{id}`)"))), (status = 200, description = "Already baked: the finished bake", body = BakeView, headers(("Location" = String, description = "The bake (`/v1/bakes/{id}`)"))), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
@@ -88,6 +92,22 @@ pub(crate) async fn submit(
         .map_err(|e: String| ApiError::bad("bad_method", e))?;
     let params = BakeParams::with_overrides(method, &req.params)
         .map_err(|e| ApiError::bad("bad_params", e.to_string()))?;
+    if req.clips.len() > MAX_CLIP_FILES {
+        return Err(ApiError::bad(
+            "too_many_clips",
+            format!(
+                "{} clip files, over the limit of {MAX_CLIP_FILES}: put animations together in fewer files",
+                req.clips.len()
+            ),
+        ));
+    }
+    let mut seen = std::collections::HashSet::new();
+    if let Some(twice) = req.clips.iter().find(|c| !seen.insert(c.as_str())) {
+        return Err(ApiError::bad(
+            "duplicate_clips",
+            format!("clip file {twice} is named twice"),
+        ));
+    }
     let character = load_upload(&state, &req.character, "character").await?;
     let mut clips = Vec::new();
     for c in &req.clips {
@@ -95,7 +115,7 @@ pub(crate) async fn submit(
     }
     let limits = state.import_limits.clone();
     let max_work = state.limits.max_bake_work;
-    let (key, jobs) = tokio::task::spawn_blocking(move || -> ApiResult<_> {
+    let (key, jobs) = state.import(move || -> ApiResult<_> {
         let inputs = BakeInputs::load(&character, &clips, &limits)
             .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
         let bake = Bake::new(&inputs, params.clone())
@@ -123,8 +143,7 @@ pub(crate) async fn submit(
             .collect::<Vec<_>>();
         Ok((key, (jobs, params.canonical())))
     })
-    .await
-    .map_err(|e| ApiError::Internal(e.to_string()))??;
+    .await??;
     if let Some(existing) = state.store.bake_for_key(&key).await? {
         let status = if existing.state == crate::store::BakeState::Done {
             StatusCode::OK

@@ -36,6 +36,9 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/clips/{digest}", get(get_clips))
 }
 
+/// Side files one upload may have (a `.gltf`'s buffers and images).
+const MAX_SIDE_FILES: usize = 1024;
+
 /// Reads the body: one file, a bundle, or multipart parts.
 /// An upload's bytes and, for multipart, the main part's file name.
 async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, Option<String>)> {
@@ -47,9 +50,9 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, 
         .to_owned();
     let multipart = content_type.starts_with("multipart/form-data");
     let bundle = content_type.starts_with(BUNDLE);
-    let too_large = |e: &dyn std::fmt::Display| {
-        let text = e.to_string();
-        if text.contains("length limit") || text.contains("too large") {
+    // Over the body limit (413), or cut off (400), as the rejection says.
+    let unread = |status: StatusCode, text: String| {
+        if status == StatusCode::PAYLOAD_TOO_LARGE {
             ApiError::TooLarge(state.limits.max_body_bytes)
         } else {
             ApiError::bad("bad_body", format!("cannot read the body: {text}"))
@@ -58,7 +61,7 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, 
     if !multipart {
         let bytes = Bytes::from_request(req, &())
             .await
-            .map_err(|e| too_large(&e.body_text()))?;
+            .map_err(|e| unread(e.status(), e.body_text()))?;
         if bytes.is_empty() {
             return Err(ApiError::bad(
                 "empty_body",
@@ -78,13 +81,20 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, 
     let mut main: Option<Vec<u8>> = None;
     let mut main_name = None;
     let mut side_files = Vec::new();
-    while let Some(field) = parts.next_field().await.map_err(|e| too_large(&e))? {
+    // A part's error says which: over the body limit (413), or what is
+    // malformed (cut off, no boundary: 400).
+    let part_error =
+        |e: axum::extract::multipart::MultipartError| match unread(e.status(), e.body_text()) {
+            ApiError::BadRequest { detail, .. } => ApiError::bad("bad_multipart", detail),
+            too_large => too_large,
+        };
+    while let Some(field) = parts.next_field().await.map_err(part_error)? {
         let name = field
             .file_name()
             .or(field.name())
             .unwrap_or_default()
             .to_owned();
-        let bytes = field.bytes().await.map_err(|e| too_large(&e))?.into();
+        let bytes = field.bytes().await.map_err(part_error)?.into();
         if main.is_none() {
             main = Some(bytes);
             main_name = Some(name);
@@ -93,6 +103,14 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, 
                 return Err(ApiError::bad(
                     "bad_multipart",
                     "every side file needs a file name (the name its URI uses)",
+                ));
+            }
+            if side_files.len() == MAX_SIDE_FILES {
+                return Err(ApiError::bad(
+                    "bad_multipart",
+                    format!(
+                        "more than {MAX_SIDE_FILES} side files: send the files the glTF refers to"
+                    ),
                 ));
             }
             side_files.push(SideFile { name, bytes });
@@ -189,20 +207,20 @@ pub(crate) async fn post_character(
     let (upload, part_name) = read_upload(&state, req).await?;
     let name = file_name(q.name.or(part_name));
     let limits = state.import_limits.clone();
-    let (summary, upload, left_out) = tokio::task::spawn_blocking(move || {
-        let mut upload = upload;
-        let left_out = upload.keep_referenced(&limits);
-        let imported = import_character(upload.upload(), &limits)?;
-        let mut s = serde_json::to_value(Summary::of(&imported.character, &imported.clips))
-            .expect("summaries serialise");
-        s["warnings"] = serde_json::json!(imported.warnings);
-        s["name"] = serde_json::json!(name);
-        s["scene"] = serde_json::json!(imported.name.as_deref().and_then(shown));
-        Ok::<_, aobake_core::ImportError>((s, upload, left_out))
-    })
-    .await
-    .map_err(|e| ApiError::Internal(e.to_string()))?
-    .map_err(|e| ApiError::Unprocessable(format!("the character cannot be imported: {e}")))?;
+    let (summary, upload, left_out) = state
+        .import(move || {
+            let mut upload = upload;
+            let left_out = upload.keep_referenced(&limits);
+            let imported = import_character(upload.upload(), &limits)?;
+            let mut s = serde_json::to_value(Summary::of(&imported.character, &imported.clips))
+                .expect("summaries serialise");
+            s["warnings"] = serde_json::json!(imported.warnings);
+            s["name"] = serde_json::json!(name);
+            s["scene"] = serde_json::json!(imported.name.as_deref().and_then(shown));
+            Ok::<_, aobake_core::ImportError>((s, upload, left_out))
+        })
+        .await?
+        .map_err(|e| ApiError::Unprocessable(format!("the character cannot be imported: {e}")))?;
     let reply = store_upload(&state, &upload, "character", summary).await?;
     Ok(telling(reply, "characters", &left_out))
 }
@@ -271,29 +289,32 @@ pub(crate) async fn post_clips(
     let (upload, part_name) = read_upload(&state, req).await?;
     let name = file_name(q.name.or(part_name));
     let limits = state.import_limits.clone();
-    let (summary, upload, left_out) = tokio::task::spawn_blocking(move || {
+    let (summary, upload, left_out) = state.import(move || {
         let mut upload = upload;
         let left_out = upload.keep_referenced(&limits);
-        let c = import_character(character.upload(), &limits)
-            .map_err(|e| format!("the stored character no longer imports: {e}"))?;
+        // Imported when it was uploaded: failing now is the server's
+        // fault (a changed importer), not the clips'.
+        let c = import_character(character.upload(), &limits).map_err(|e| {
+            ApiError::Internal(format!("the stored character no longer imports: {e}"))
+        })?;
         let (clips, warnings) = import_clips(upload.upload(), &c.character, &limits)
-            .map_err(|e| format!("the clips cannot be imported: {e}"))?;
+            .map_err(|e| ApiError::Unprocessable(format!("the clips cannot be imported: {e}")))?;
         if clips.is_empty() {
-            return Err("the file has no animations that drive this character".to_owned());
+            return Err(ApiError::Unprocessable(
+                "the file has no animations that drive this character".to_owned(),
+            ));
         }
         let names: Vec<serde_json::Value> = clips
             .iter()
             .map(|c| serde_json::json!({"name": c.name, "duration": c.duration}))
             .collect();
-        Ok((
+        Ok::<_, ApiError>((
             serde_json::json!({"clips": names, "warnings": warnings, "character": c.character.vertex_count(), "name": name}),
             upload,
             left_out,
         ))
     })
-    .await
-    .map_err(|e| ApiError::Internal(e.to_string()))?
-    .map_err(ApiError::Unprocessable)?;
+    .await??;
     let reply = store_upload(&state, &upload, "clips", summary).await?;
     Ok(telling(reply, "clips", &left_out))
 }

@@ -127,21 +127,21 @@ async fn load(state: &AppState, id: i64, truth: bool) -> ApiResult<Loaded> {
     }
     let limits = state.import_limits.clone();
     let params = bake.params;
-    tokio::task::spawn_blocking(move || -> ApiResult<Loaded> {
-        let inputs = BakeInputs::load(&character, &clips, &limits)
-            .map_err(|e| ApiError::Internal(format!("bake {id}'s inputs: {e}")))?;
-        let params = BakeParams::from_canonical(&params)
-            .map_err(|e| ApiError::Internal(format!("bake {id}'s parameters: {e}")))?;
-        Ok(Loaded {
-            inputs,
-            params,
-            family: method.family(),
-            asset,
-            truth: outputs,
+    state
+        .import(move || -> ApiResult<Loaded> {
+            let inputs = BakeInputs::load(&character, &clips, &limits)
+                .map_err(|e| ApiError::Internal(format!("bake {id}'s inputs: {e}")))?;
+            let params = BakeParams::from_canonical(&params)
+                .map_err(|e| ApiError::Internal(format!("bake {id}'s parameters: {e}")))?;
+            Ok(Loaded {
+                inputs,
+                params,
+                family: method.family(),
+                asset,
+                truth: outputs,
+            })
         })
-    })
-    .await
-    .map_err(internal)?
+        .await?
 }
 
 fn bundle(bundle: &Bundle) -> Response {

@@ -88,31 +88,45 @@ fn oversized_bodies_get_413_before_they_are_read() {
     let head = String::from_utf8_lossy(&answer[..n]);
     assert!(head.starts_with("HTTP/1.1 413"), "{head}");
     // Without a declared length (chunked), the limit cuts the body off as
-    // it streams: a problem+json 413 comes back before 3 MiB are sent.
-    let mut s = std::net::TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
-    write!(
-        s,
-        "POST /v1/characters HTTP/1.1\r\nHost: {addr}\r\nAuthorization: Bearer {ADMIN}\r\nContent-Type: model/gltf-binary\r\nTransfer-Encoding: chunked\r\n\r\n"
-    )
-    .unwrap();
-    let chunk = vec![7u8; 64 << 10];
-    let mut sent = 0;
-    while sent < 3 << 20 {
-        let ok = write!(s, "{:x}\r\n", chunk.len()).is_ok()
-            && s.write_all(&chunk).is_ok()
-            && s.write_all(b"\r\n").is_ok();
-        if !ok {
-            break;
+    // it streams: a problem+json 413 comes back before 3 MiB are sent, as
+    // one file or as a part of a multipart upload.
+    let chunked = |content_type: &str, first: &[u8]| {
+        let mut s = std::net::TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        write!(
+            s,
+            "POST /v1/characters HTTP/1.1\r\nHost: {addr}\r\nAuthorization: Bearer {ADMIN}\r\nContent-Type: {content_type}\r\nTransfer-Encoding: chunked\r\n\r\n{:x}\r\n",
+            first.len()
+        )
+        .unwrap();
+        s.write_all(first).unwrap();
+        s.write_all(b"\r\n").unwrap();
+        let chunk = vec![7u8; 64 << 10];
+        let mut sent = 0;
+        while sent < 3 << 20 {
+            let ok = write!(s, "{:x}\r\n", chunk.len()).is_ok()
+                && s.write_all(&chunk).is_ok()
+                && s.write_all(b"\r\n").is_ok();
+            if !ok {
+                break;
+            }
+            sent += chunk.len();
         }
-        sent += chunk.len();
+        let mut answer = Vec::new();
+        let _ = s.read_to_end(&mut answer);
+        String::from_utf8_lossy(&answer).into_owned()
+    };
+    for text in [
+        chunked("model/gltf-binary", b"glTF"),
+        chunked(
+            "multipart/form-data; boundary=XyZ",
+            b"--XyZ\r\nContent-Disposition: form-data; name=\"file\"; filename=\"a.gltf\"\r\n\r\n",
+        ),
+    ] {
+        assert!(text.starts_with("HTTP/1.1 413"), "{text}");
+        assert!(text.contains("application/problem+json"), "{text}");
+        assert!(text.contains("too_large"), "{text}");
     }
-    let mut answer = Vec::new();
-    let _ = s.read_to_end(&mut answer);
-    let text = String::from_utf8_lossy(&answer);
-    assert!(text.starts_with("HTTP/1.1 413"), "{text}");
-    assert!(text.contains("application/problem+json"), "{text}");
-    assert!(text.contains("too_large"), "{text}");
 }
 
 #[test]
@@ -145,6 +159,14 @@ fn bad_requests_name_what_is_wrong() {
             "is not a sha256 digest",
         ),
         (json!({"method": "vertex-linear"}), "character"),
+        (
+            json!({"character": digest, "method": "vertex-linear", "clips": vec!["0".repeat(64); 257]}),
+            "257 clip files, over the limit of 256",
+        ),
+        (
+            json!({"character": digest, "method": "vertex-linear", "clips": [digest, "1".repeat(64), digest]}),
+            "is named twice",
+        ),
     ];
     for (body, needle) in cases {
         let (status, answer) = env
