@@ -134,10 +134,10 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 .context("cannot open the database")?,
         ),
     };
-    let blobs: Arc<dyn Blobs> = match &args.blobs {
+    let blobs: Arc<dyn Blobs> = blobs::Watched::over(match &args.blobs {
         Some(url) => blobs::open(url)?,
         None => Arc::new(LocalBlobs::open(&args.data.join("blobs"))?),
-    };
+    });
     // A bucket that is not there (or refuses these credentials) would
     // fail every upload with a 500: refuse to start instead.
     if let Some(url) = &args.blobs {

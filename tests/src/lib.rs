@@ -451,6 +451,9 @@ pub struct TestS3 {
     child: Child,
     /// `s3://BUCKET/PREFIX?…`, what `aobake serve --blobs` takes.
     pub url: String,
+    host: Option<netns::Host>,
+    addr: String,
+    port: u16,
 }
 
 impl TestS3 {
@@ -465,16 +468,35 @@ impl TestS3 {
     }
 
     fn start_on(host: Option<&netns::Host>) -> Self {
-        let program = std::env::var("AOBAKE_MOTO_SERVER").unwrap_or_else(|_| "moto_server".into());
-        let (addr, port, mut command) = match host {
-            Some(h) => (h.addr.as_str(), 9000, h.command(&program)),
+        let (addr, port) = match host {
+            Some(h) => (h.addr.clone(), 9000),
             None => {
                 let port = std::net::TcpListener::bind("127.0.0.1:0")
                     .and_then(|l| l.local_addr())
                     .expect("a free port")
                     .port();
-                ("127.0.0.1", port, Command::new(&program))
+                ("127.0.0.1".to_owned(), port)
             }
+        };
+        let child = Self::spawn(host, &addr, port);
+        Self {
+            child,
+            url: format!(
+                "s3://aobake-test/blobs?endpoint=http://{addr}:{port}&allow_http=true\
+                 &region=us-east-1&access_key_id=test&secret_access_key=test"
+            ),
+            host: host.cloned(),
+            addr,
+            port,
+        }
+    }
+
+    /// Runs moto on `addr:port` and makes the (empty) bucket.
+    fn spawn(host: Option<&netns::Host>, addr: &str, port: u16) -> Child {
+        let program = std::env::var("AOBAKE_MOTO_SERVER").unwrap_or_else(|_| "moto_server".into());
+        let mut command = match host {
+            Some(h) => h.command(&program),
+            None => Command::new(&program),
         };
         let child = command
             .args(["-H", addr, "-p", &port.to_string()])
@@ -487,13 +509,6 @@ impl TestS3 {
                      (pip install 'moto[server]', as .ci/run does)"
                 )
             });
-        let server = Self {
-            child,
-            url: format!(
-                "s3://aobake-test/blobs?endpoint=http://{addr}:{port}&allow_http=true\
-                 &region=us-east-1&access_key_id=test&secret_access_key=test"
-            ),
-        };
         // Up when it answers; the bucket then (moto takes unsigned requests).
         let started = Instant::now();
         let bucket = format!("http://{addr}:{port}/aobake-test");
@@ -509,16 +524,21 @@ impl TestS3 {
             );
             std::thread::sleep(Duration::from_millis(100));
         }
-        server
+        child
     }
-}
 
-impl TestS3 {
     /// Kills the server, as an outage would (moto keeps its objects in
     /// memory: they are gone).
     pub fn stop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+
+    /// Starts it again where it was, with an empty bucket (the end of an
+    /// outage that lost the objects).
+    pub fn start_again(&mut self) {
+        self.stop();
+        self.child = Self::spawn(self.host.as_ref(), &self.addr, self.port);
     }
 }
 

@@ -136,3 +136,75 @@ pub trait Blobs: Send + Sync + std::fmt::Debug + 'static {
         self.len(&"0".repeat(64)).await.map(|_| ())
     }
 }
+
+/// A blob store whose outages end in the server's log: each request it
+/// fails logs a 503, and the first answer after them says so, with how
+/// long the store was away (as the reaper does for the database).
+#[derive(Debug)]
+pub struct Watched {
+    inner: std::sync::Arc<dyn Blobs>,
+    /// Since the store first failed to answer, while it does.
+    down_since: std::sync::Mutex<Option<std::time::Instant>>,
+}
+
+impl Watched {
+    /// `inner`, watched.
+    pub fn over(inner: std::sync::Arc<dyn Blobs>) -> std::sync::Arc<dyn Blobs> {
+        std::sync::Arc::new(Self {
+            inner,
+            down_since: std::sync::Mutex::default(),
+        })
+    }
+
+    /// `result`, after noting whether the store answered.
+    fn heard<T>(&self, result: Result<T, BlobError>) -> Result<T, BlobError> {
+        let mut down = self
+            .down_since
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        match &result {
+            Err(e) if e.unreachable() => {
+                // (Each request it fails logs its own line, as a 503.)
+                down.get_or_insert_with(std::time::Instant::now);
+            }
+            // Any answer, a refusal included, means it is back.
+            _ => {
+                if let Some(since) = down.take() {
+                    log_line!(
+                        "the blob store answers again, after {:.0} s",
+                        since.elapsed().as_secs_f64()
+                    );
+                }
+            }
+        }
+        result
+    }
+}
+
+#[async_trait::async_trait]
+impl Blobs for Watched {
+    async fn put(&self, digest: &str, bytes: &[u8]) -> Result<(), BlobError> {
+        self.heard(self.inner.put(digest, bytes).await)
+    }
+
+    async fn get(&self, digest: &str) -> Result<Option<Vec<u8>>, BlobError> {
+        self.heard(self.inner.get(digest).await)
+    }
+
+    async fn get_range(
+        &self,
+        digest: &str,
+        start: u64,
+        end: u64,
+    ) -> Result<Option<Vec<u8>>, BlobError> {
+        self.heard(self.inner.get_range(digest, start, end).await)
+    }
+
+    async fn len(&self, digest: &str) -> Result<Option<u64>, BlobError> {
+        self.heard(self.inner.len(digest).await)
+    }
+
+    async fn probe(&self) -> Result<(), BlobError> {
+        self.heard(self.inner.probe().await)
+    }
+}

@@ -336,6 +336,8 @@ fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
 }
 
+/// An S3 outage answers 503 with Retry-After, names the store, and its
+/// end is logged.
 #[test]
 fn an_s3_outage_answers_503_with_retry_after() {
     let mut s3 = TestS3::start();
@@ -396,6 +398,29 @@ fn an_s3_outage_answers_503_with_retry_after() {
     assert_eq!(probe.status().as_u16(), 503);
     let text = probe.body_mut().read_to_string().unwrap();
     assert!(text.contains("the blob store is not answering"), "{text}");
+    // Back (empty, as moto keeps nothing): ready again, and the log says
+    // when the outage ended, not only each request it failed.
+    s3.start_again();
+    let started = Instant::now();
+    while agent
+        .get(format!("{}/readyz", env.url))
+        .call()
+        .unwrap()
+        .status()
+        != 200
+    {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "not ready again"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let log = env.server_log();
+    assert!(log.contains("not answering (503)"), "{log}");
+    assert!(
+        log.contains("the blob store answers again, after "),
+        "{log}"
+    );
 }
 
 /// A server given a bucket that is not there refuses to start and names
