@@ -277,11 +277,14 @@ impl Follow<'_> {
         mut call: impl FnMut(&Client) -> aobake_api::client::Result<T>,
     ) -> anyhow::Result<T> {
         let (bar, away, conn, api) = (self.bar, &mut self.away, self.conn, &self.api);
+        // Whether the server moved during the current window of asking.
+        let moved_here = std::cell::Cell::new(false);
         // A server that `aobake serve` restarted on this data folder may
         // have a new port or a new admin token: follow it there.
         let refresh = |away: &mut bool| {
             let fresh = conn.fresh(&api.borrow());
             let moved = fresh.is_some();
+            moved_here.set(moved_here.get() || moved);
             if let Some(now) = fresh {
                 bar.suspend(|| {
                     eprintln!(
@@ -295,26 +298,35 @@ impl Follow<'_> {
             }
             moved
         };
-        let answer = aobake_api::client::retry(
-            AWAY_FOR,
-            Duration::from_secs(1),
-            || true,
-            |e, left| {
-                if refresh(away) {
-                    return;
-                }
-                if !*away {
-                    bar.suspend(|| {
-                        eprintln!(
-                            "{e}; the bake goes on there: asking again for up to {} s",
-                            left.as_secs()
-                        );
-                    });
-                    *away = true;
-                }
-            },
-            || call(&api.borrow()),
-        );
+        let answer = loop {
+            moved_here.set(false);
+            let answer = aobake_api::client::retry(
+                AWAY_FOR,
+                Duration::from_secs(1),
+                || true,
+                |e, left| {
+                    if refresh(away) {
+                        return;
+                    }
+                    if !*away {
+                        bar.suspend(|| {
+                            eprintln!(
+                                "{e}; the bake goes on there: asking again for up to {} s",
+                                left.as_secs()
+                            );
+                        });
+                        *away = true;
+                    }
+                },
+                || call(&api.borrow()),
+            );
+            // A server found where it moved gets a window of its own, not
+            // what its restart left of the old one.
+            if answer.is_err() && moved_here.get() {
+                continue;
+            }
+            break answer;
+        };
         // A refused token whose file a restart rewrote: ask again with it.
         let answer = match answer {
             Err(e) if e.status() == Some(401) && refresh(away) => call(&api.borrow()),

@@ -339,6 +339,7 @@ pub(crate) async fn complete(
 pub(crate) async fn complete_many(
     State(state): State<AppState>,
     _caller: Need<Worker>,
+    headers: axum::http::HeaderMap,
     Body(req): Body<CompleteManyRequest>,
 ) -> ApiResult<Json<CompleteManyReply>> {
     if req.completions.is_empty() || req.completions.len() > MAX_BATCH {
@@ -353,7 +354,22 @@ pub(crate) async fn complete_many(
         .zip(record(&state, req.completions).await?)
         .map(|(job, answer)| CompletionResult {
             job,
-            problem: answer.err().map(|e| e.problem()),
+            problem: answer.err().map(|e| match e {
+                // Logged with the request's id, as a whole request's
+                // internal error is (app::log_failures), and the item says
+                // which.
+                ApiError::Internal(what) => {
+                    let id = headers
+                        .get("x-request-id")
+                        .and_then(|v| v.to_str().ok())
+                        .unwrap_or("?");
+                    log_line!(
+                        "error: internal, request {id} (POST /v1/jobs/completions, job {job}): {what}"
+                    );
+                    ApiError::internal_problem(id)
+                }
+                refused => refused.problem(),
+            }),
         })
         .collect();
     Ok(Json(CompleteManyReply { results }))
