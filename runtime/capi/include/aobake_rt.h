@@ -106,9 +106,10 @@ typedef struct AobakeGrid AobakeGrid;
 /**
  * A vertex-method asset (static average, vertex-linear or
  * vertex-clustered), its rig and the pose being set, the GPU form once
- * asked for, and the per-pose step's buffers (behind a lock: the
- * weights and the evaluation take a `const` handle, which several
- * threads may share while none sets a node). Opaque to C.
+ * asked for, the per-pose step's buffers (behind a lock: the weights and
+ * the evaluation take a `const` handle, which several threads may share
+ * while none sets a node), and the rig's node names as C strings.
+ * Opaque to C.
  */
 typedef struct AobakeVertexAo AobakeVertexAo;
 
@@ -573,6 +574,27 @@ bool aobake_vertex_ao_gpu_sparse(const struct AobakeVertexAo *ao);
  * `ao` must be NULL or a live handle.
  */
 size_t aobake_vertex_ao_node_count(const struct AobakeVertexAo *ao);
+
+/**
+ * The name of node `node` (NUL-terminated UTF-8, valid until the handle
+ * is freed; empty where the file names none), or NULL past the rig (or
+ * for NULL): with [`aobake_vertex_ao_node_count`] and
+ * [`aobake_vertex_ao_node_parent`], how an engine lists the rig to map
+ * its own bones onto.
+ *
+ * # Safety
+ * `ao` must be NULL or a live handle.
+ */
+const char *aobake_vertex_ao_node_name(const struct AobakeVertexAo *ao, size_t node);
+
+/**
+ * Writes the parent of node `node` to `out`: its index, or -1 for a root.
+ * `false` past the rig (or for NULL).
+ *
+ * # Safety
+ * `ao` must be NULL or a live handle; `out` NULL or writable.
+ */
+bool aobake_vertex_ao_node_parent(const struct AobakeVertexAo *ao, size_t node, int64_t *out);
 
 /**
  * The node named `name` (NUL-terminated UTF-8), or -1 if the rig has

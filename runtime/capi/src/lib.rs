@@ -31,9 +31,10 @@
 //! header it was compiled with.
 //!
 //! Errors: a function that can fail returns `false` or `NULL`, and
-//! `aobake_last_error` gives the reason, on the calling thread. A handle
-//! may be used from one thread at a time; separate handles are
-//! independent.
+//! `aobake_last_error` gives the reason, on the calling thread. A call
+//! that changes a handle (`set_local`, `reset`, `free`) has it to itself;
+//! calls that take it `const` may come from several threads at once;
+//! separate handles are independent.
 
 use std::{
     cell::RefCell,

@@ -3,7 +3,7 @@
 //! and the coefficients' GPU form.
 
 use std::{
-    ffi::{CStr, c_char},
+    ffi::{CStr, CString, c_char},
     sync::{Mutex, MutexGuard, OnceLock, PoisonError},
 };
 
@@ -21,14 +21,16 @@ use crate::{copy_array, fail, free, live, open, out_floats, packed, put};
 
 /// A vertex-method asset (static average, vertex-linear or
 /// vertex-clustered), its rig and the pose being set, the GPU form once
-/// asked for, and the per-pose step's buffers (behind a lock: the
-/// weights and the evaluation take a `const` handle, which several
-/// threads may share while none sets a node). Opaque to C.
+/// asked for, the per-pose step's buffers (behind a lock: the weights and
+/// the evaluation take a `const` handle, which several threads may share
+/// while none sets a node), and the rig's node names as C strings.
+/// Opaque to C.
 #[derive(Debug)]
 pub struct AobakeVertexAo(
     VertexAo,
     OnceLock<Result<GpuArrays, String>>,
     Mutex<PoseScratch>,
+    Vec<CString>,
 );
 
 impl AobakeVertexAo {
@@ -76,7 +78,23 @@ pub unsafe extern "C" fn aobake_vertex_ao_open(
     // SAFETY: forwarded from the caller.
     unsafe {
         open(bytes, len, "vertex", |a| match a {
-            Asset::Vertex(ao) => Some(AobakeVertexAo(*ao, OnceLock::new(), Mutex::default())),
+            Asset::Vertex(ao) => {
+                let names = ao
+                    .skeleton()
+                    .nodes
+                    .iter()
+                    .map(|n| {
+                        let name = n.name.as_deref().unwrap_or_default();
+                        CString::new(name.replace('\0', " ")).unwrap_or_default()
+                    })
+                    .collect();
+                Some(AobakeVertexAo(
+                    *ao,
+                    OnceLock::new(),
+                    Mutex::default(),
+                    names,
+                ))
+            }
             _ => None,
         })
     }
@@ -216,6 +234,56 @@ pub unsafe extern "C" fn aobake_vertex_ao_gpu_sparse(ao: *const AobakeVertexAo) 
 pub unsafe extern "C" fn aobake_vertex_ao_node_count(ao: *const AobakeVertexAo) -> usize {
     // SAFETY: forwarded from the caller.
     unsafe { handle(ao) }.map_or(0, |h| h.skeleton().nodes.len())
+}
+
+/// The name of node `node` (NUL-terminated UTF-8, valid until the handle
+/// is freed; empty where the file names none), or NULL past the rig (or
+/// for NULL): with [`aobake_vertex_ao_node_count`] and
+/// [`aobake_vertex_ao_node_parent`], how an engine lists the rig to map
+/// its own bones onto.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_node_name(
+    ao: *const AobakeVertexAo,
+    node: usize,
+) -> *const c_char {
+    // SAFETY: forwarded from the caller.
+    let Some(h) = (unsafe { live(ao) }) else {
+        return std::ptr::null();
+    };
+    match h.3.get(node) {
+        Some(name) => name.as_ptr(),
+        None => {
+            fail(format!("node {node} of {}", h.3.len()));
+            std::ptr::null()
+        }
+    }
+}
+
+/// Writes the parent of node `node` to `out`: its index, or -1 for a root.
+/// `false` past the rig (or for NULL).
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `out` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_node_parent(
+    ao: *const AobakeVertexAo,
+    node: usize,
+    out: *mut i64,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    let Some(h) = (unsafe { handle(ao) }) else {
+        return false;
+    };
+    let Some(n) = h.skeleton().nodes.get(node) else {
+        fail(format!("node {node} of {}", h.skeleton().nodes.len()));
+        return false;
+    };
+    let parent = n.parent.map_or(-1, |p| p as i64);
+    // SAFETY: forwarded from the caller.
+    unsafe { put(out, parent) }
 }
 
 /// The node named `name` (NUL-terminated UTF-8), or -1 if the rig has

@@ -15,6 +15,7 @@ use aobake_core::{
     import_character,
     method::Method,
 };
+use aobake_rt::AOBAKE_RT_ABI_VERSION;
 use aobake_runtime::method::vertex::VertexAo;
 
 /// The system allocator, counting each thread's allocations (calls and
@@ -144,9 +145,42 @@ fn bake(
     (baked.asset, imported.character, imported.clips)
 }
 
+/// The library installed as docs/engines.md says, in `dir`:
+/// `libaobake_rt.so.N` (its SONAME) and the `libaobake_rt.so` link that
+/// `-laobake_rt` finds.
+fn install(dir: &Path) -> PathBuf {
+    let lib = dir.to_path_buf();
+    let _ = std::fs::remove_dir_all(&lib);
+    std::fs::create_dir_all(&lib).unwrap();
+    let versioned = format!("libaobake_rt.so.{AOBAKE_RT_ABI_VERSION}");
+    std::fs::copy(library_dir().join("libaobake_rt.so"), lib.join(&versioned)).unwrap();
+    std::os::unix::fs::symlink(&versioned, lib.join("libaobake_rt.so")).unwrap();
+    lib
+}
+
+/// The library's SONAME carries its ABI version, so a program linked
+/// against it loads only a library of that ABI.
+#[test]
+fn the_library_is_named_by_its_abi() {
+    let out = Command::new("readelf")
+        .arg("-d")
+        .arg(library_dir().join("libaobake_rt.so"))
+        .output()
+        .expect("readelf (binutils, with the C compiler)");
+    let text = String::from_utf8_lossy(&out.stdout);
+    let soname = text
+        .lines()
+        .find(|l| l.contains("(SONAME)"))
+        .unwrap_or_else(|| panic!("no SONAME: {text}"));
+    assert!(
+        soname.ends_with(&format!("[libaobake_rt.so.{AOBAKE_RT_ABI_VERSION}]")),
+        "{soname}"
+    );
+}
+
 fn compile(dir: &Path, program: &str) -> PathBuf {
     let exe = dir.join(program);
-    let lib = library_dir();
+    let lib = install(&dir.join(format!("lib-{program}")));
     let status = Command::new(std::env::var("CC").unwrap_or_else(|_| "cc".into()))
         .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-I"])
         .arg(crate_dir().join("include"))
@@ -202,6 +236,53 @@ fn a_c_program_plays_an_asset_as_the_runtime_does() {
         assert!(ao.iter().any(|&a| a > 0.0), "{method:?}: some occlusion");
     }
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// An engine lists the rig to map its bones onto: every node's name and
+/// parent as the asset's rig has them, and the name finds the node again.
+#[test]
+fn the_rig_is_listed_by_name_and_parent() {
+    use aobake_rt::{
+        aobake_last_error, aobake_vertex_ao_free, aobake_vertex_ao_node,
+        aobake_vertex_ao_node_count, aobake_vertex_ao_node_name, aobake_vertex_ao_node_parent,
+        aobake_vertex_ao_open,
+    };
+    use std::ffi::CStr;
+    let (asset, character, _) = bake_rigged_figure(Method::VertexLinear);
+    // SAFETY: `asset` holds `len` readable bytes.
+    let ao = unsafe { aobake_vertex_ao_open(asset.as_ptr(), asset.len()) };
+    assert!(!ao.is_null());
+    // SAFETY: a live handle.
+    let count = unsafe { aobake_vertex_ao_node_count(ao) };
+    assert_eq!(count, character.skeleton.nodes.len());
+    for (n, node) in character.skeleton.nodes.iter().enumerate() {
+        // SAFETY: a live handle; the name lives as long as it.
+        let name = unsafe { CStr::from_ptr(aobake_vertex_ao_node_name(ao, n)) };
+        let name = name.to_str().unwrap();
+        assert_eq!(Some(name), node.name.as_deref(), "node {n}");
+        let mut parent = -7i64;
+        // SAFETY: a live handle and a writable i64.
+        assert!(unsafe { aobake_vertex_ao_node_parent(ao, n, &mut parent) });
+        assert_eq!(parent, node.parent.map_or(-1, |p| p as i64), "node {n}");
+        let again = std::ffi::CString::new(name).unwrap();
+        // SAFETY: a live handle and a NUL-terminated name.
+        assert_eq!(
+            unsafe { aobake_vertex_ao_node(ao, again.as_ptr()) },
+            n as i64
+        );
+    }
+    // Past the rig: NULL and false, and the error says why.
+    // SAFETY: a live handle.
+    assert!(unsafe { aobake_vertex_ao_node_name(ao, count) }.is_null());
+    // SAFETY: the library's last error, a NUL-terminated string.
+    let why = unsafe { CStr::from_ptr(aobake_last_error()) };
+    assert_eq!(why.to_str().unwrap(), format!("node {count} of {count}"));
+    let mut parent = 0i64;
+    // SAFETY: a live handle and a writable i64.
+    assert!(!unsafe { aobake_vertex_ao_node_parent(ao, count, &mut parent) });
+    assert_eq!(parent, 0, "nothing written");
+    // SAFETY: a live handle, freed once.
+    unsafe { aobake_vertex_ao_free(ao) };
 }
 
 /// A player's frame allocates nothing: once a handle has computed a pose,
