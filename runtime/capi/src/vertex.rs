@@ -13,7 +13,7 @@ use aobake_runtime::{
         PoseScratch, VertexAo,
         form::{FormRef, GpuArrays},
     },
-    rig::Transform,
+    rig::{Node, Transform},
 };
 use glam::{Quat, Vec3};
 
@@ -118,6 +118,21 @@ pub unsafe extern "C" fn aobake_vertex_ao_free(ao: *mut AobakeVertexAo) {
 unsafe fn handle<'a>(ao: *const AobakeVertexAo) -> Option<&'a VertexAo> {
     // SAFETY: forwarded from the caller.
     unsafe { live(ao) }.map(|h| &h.0)
+}
+
+/// Node `node` of the handle's rig; `None` for NULL, or past the rig
+/// (with the reason left for `aobake_last_error`).
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+unsafe fn rig_node<'a>(ao: *const AobakeVertexAo, node: usize) -> Option<&'a Node> {
+    // SAFETY: forwarded from the caller.
+    let nodes = &unsafe { handle(ao) }?.skeleton().nodes;
+    let found = nodes.get(node);
+    if found.is_none() {
+        fail(format!("node {node} of {}", nodes.len()));
+    }
+    found
 }
 
 /// Vertices the asset covers, in aobake's vertex order (0 for NULL).
@@ -274,11 +289,7 @@ pub unsafe extern "C" fn aobake_vertex_ao_node_parent(
     out: *mut i64,
 ) -> bool {
     // SAFETY: forwarded from the caller.
-    let Some(h) = (unsafe { handle(ao) }) else {
-        return false;
-    };
-    let Some(n) = h.skeleton().nodes.get(node) else {
-        fail(format!("node {node} of {}", h.skeleton().nodes.len()));
+    let Some(n) = (unsafe { rig_node(ao, node) }) else {
         return false;
     };
     let parent = n.parent.map_or(-1, |p| p as i64);
@@ -331,11 +342,7 @@ pub unsafe extern "C" fn aobake_vertex_ao_rest(
     out: *mut AobakeTransform,
 ) -> bool {
     // SAFETY: forwarded from the caller.
-    let Some(h) = (unsafe { handle(ao) }) else {
-        return false;
-    };
-    let Some(n) = h.skeleton().nodes.get(node) else {
-        fail(format!("node {node} of {}", h.skeleton().nodes.len()));
+    let Some(n) = (unsafe { rig_node(ao, node) }) else {
         return false;
     };
     // SAFETY: the caller passes NULL or a writable transform.

@@ -266,10 +266,8 @@ fn the_rig_is_listed_by_name_and_parent() {
         assert_eq!(parent, node.parent.map_or(-1, |p| p as i64), "node {n}");
         let again = std::ffi::CString::new(name).unwrap();
         // SAFETY: a live handle and a NUL-terminated name.
-        assert_eq!(
-            unsafe { aobake_vertex_ao_node(ao, again.as_ptr()) },
-            n as i64
-        );
+        let found = unsafe { aobake_vertex_ao_node(ao, again.as_ptr()) };
+        assert_eq!(found, n as i64);
     }
     // Past the rig: NULL and false, and the error says why.
     // SAFETY: a live handle.
