@@ -58,8 +58,16 @@ impl UploadBytes {
         let files = crate::import::SideFiles::new(&self.side_files);
         let mut wanted = vec![false; self.side_files.len()];
         for name in &used {
-            if let Some(i) = files.position(name) {
-                wanted[i] = true;
+            match files.position(name) {
+                Some(i) => wanted[i] = true,
+                // Not found: keep every file it might have meant, so the
+                // import sees the same ambiguity (two `x.bin` for a URI
+                // `c/x.bin`) rather than the one left after pruning.
+                None => {
+                    for i in files.sharing_last_segment(name) {
+                        wanted[i] = true;
+                    }
+                }
             }
         }
         let (kept, left): (Vec<_>, Vec<_>) = std::mem::take(&mut self.side_files)
@@ -118,6 +126,11 @@ impl UploadBytes {
         let main = take(&mut rest, "main file")?.to_vec();
         let mut side_files = Vec::new();
         while !rest.is_empty() {
+            if side_files.len() == MAX_SIDE_FILES {
+                return Err(BundleError(
+                    "more side files than an upload may have (1,024)",
+                ));
+            }
             let name = std::str::from_utf8(take(&mut rest, "side file name")?)
                 .map_err(|_| BundleError("a side file name is not UTF-8"))?
                 .to_owned();
@@ -129,6 +142,40 @@ impl UploadBytes {
         }
         Ok(Self { main, side_files })
     }
+}
+
+/// Side files one upload may have (a `.gltf`'s buffers and images).
+pub const MAX_SIDE_FILES: usize = 1024;
+
+/// Clip uploads one new bake may name: each is read into memory and
+/// imported with the character.
+pub const MAX_CLIP_FILES: usize = 256;
+
+/// Why a new bake's list of clip uploads is refused.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ClipListError {
+    /// More than [`MAX_CLIP_FILES`] (how many).
+    TooMany(usize),
+    /// The same upload at two places of the list (their indices).
+    Twice(usize, usize),
+}
+
+/// Checks the clip uploads (their digests) of a new bake: at most
+/// [`MAX_CLIP_FILES`], each once (a clip given twice would be baked
+/// twice under one name, and its key would differ from the same bake
+/// given once). Bakes already accepted are not checked again.
+pub fn check_clip_list<S: AsRef<str>>(digests: &[S]) -> Result<(), ClipListError> {
+    if digests.len() > MAX_CLIP_FILES {
+        return Err(ClipListError::TooMany(digests.len()));
+    }
+    let mut seen = std::collections::HashMap::with_capacity(digests.len());
+    for (i, d) in digests.iter().enumerate() {
+        if let Some(&first) = seen.get(d.as_ref()) {
+            return Err(ClipListError::Twice(first, i));
+        }
+        seen.insert(d.as_ref(), i);
+    }
+    Ok(())
 }
 
 /// A bake's inputs, imported: the character, every clip (those of the
@@ -195,8 +242,9 @@ impl BakeInputs {
         all.extend(imported.clips);
         // Clips are chosen by name (`--clip`, train and test clips): a
         // repeated name reaches only the first of its clips.
-        for (i, clip) in all.iter().enumerate() {
-            if all[..i].iter().any(|c| c.name == clip.name) {
+        let mut names = std::collections::HashSet::with_capacity(all.len());
+        for clip in &all {
+            if !names.insert(clip.name.as_str()) {
                 warnings.push(format!(
                     "two clips are named {:?} (the same file given as the character and as --clips?): a clip chosen by that name is the first one",
                     clip.name
@@ -244,6 +292,20 @@ mod tests {
         };
         assert_eq!(bare.keep_referenced(&Limits::default()), ["other.bin"]);
         assert_eq!(bare.side_files.len(), 2);
+        // A URI that two files might mean keeps both: the import then says
+        // it cannot tell, as it does for what was sent, rather than taking
+        // the one left after the other was pruned.
+        let mut two = UploadBytes {
+            main: br#"{"asset":{"version":"2.0"},"buffers":[{"uri":"a/x.bin","byteLength":1},{"uri":"c/x.bin","byteLength":1}]}"#.to_vec(),
+            side_files: vec![file("a/x.bin", b"a"), file("b/x.bin", b"b"), file("y.bin", b"y")],
+        };
+        assert_eq!(two.keep_referenced(&Limits::default()), ["y.bin"]);
+        let err = crate::import_character(two.upload(), &Limits::default()).unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("buffers[1].uri: file \"c/x.bin\" is not among"),
+            "{err}"
+        );
         let used = UploadBytes {
             main: main.clone(),
             side_files: vec![file("rig.bin", b"1234"), file("skin a.png", b"png")],
@@ -270,6 +332,40 @@ mod tests {
         };
         assert!(broken.keep_referenced(&Limits::default()).is_empty());
         assert_eq!(broken.side_files.len(), 1);
+    }
+
+    /// A new bake names each clip upload once, and at most 256.
+    #[test]
+    fn a_clip_list_is_checked() {
+        assert_eq!(check_clip_list(&["a", "b"]), Ok(()));
+        assert_eq!(
+            check_clip_list(&["a", "b", "a"]),
+            Err(ClipListError::Twice(0, 2))
+        );
+        let many = vec!["x".to_owned(); MAX_CLIP_FILES + 1];
+        assert_eq!(check_clip_list(&many), Err(ClipListError::TooMany(257)));
+    }
+
+    /// A bundle of more side files than an upload may have is refused
+    /// while it is read, not after each became an allocation.
+    #[test]
+    fn a_bundle_of_too_many_side_files_is_refused() {
+        let bundle = |files: usize| {
+            let mut blob = Vec::new();
+            blob.extend(2u64.to_le_bytes());
+            blob.extend(b"{}");
+            for i in 0..files {
+                let name = format!("{i}.bin");
+                blob.extend((name.len() as u64).to_le_bytes());
+                blob.extend(name.as_bytes());
+                blob.extend(0u64.to_le_bytes());
+            }
+            blob
+        };
+        let read = UploadBytes::from_blob(&bundle(MAX_SIDE_FILES), true).unwrap();
+        assert_eq!(read.side_files.len(), MAX_SIDE_FILES);
+        let err = UploadBytes::from_blob(&bundle(MAX_SIDE_FILES + 1), true).unwrap_err();
+        assert!(err.to_string().contains("more side files"), "{err}");
     }
 
     /// docs/asset-format.md's table of algorithm versions is the code's.

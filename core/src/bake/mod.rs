@@ -42,7 +42,10 @@ pub mod viewer;
 
 pub use family::{AssetUseError, BakeReport, BakedAsset};
 pub use graph::{GraphOptions, JobGraph, PlannedJob};
-pub use inputs::{BakeInputs, BundleError, InputError, UploadBytes};
+pub use inputs::{
+    BakeInputs, BundleError, ClipListError, InputError, MAX_CLIP_FILES, MAX_SIDE_FILES,
+    UploadBytes, check_clip_list,
+};
 pub use jobs::{
     Bake, Checkpoint, IndexedBlock, JobError, JobOutput, JobSink, JobSpec, NoSink, Output, PoseSet,
     Stop,

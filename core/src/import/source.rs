@@ -123,6 +123,17 @@ impl<'a> SideFiles<'a> {
             .or_else(|| self.by_base.get(last_segment(&wanted)).copied().flatten())
     }
 
+    /// Every file whose last path segment is `path`'s.
+    pub(crate) fn sharing_last_segment(&self, path: &str) -> impl Iterator<Item = usize> + '_ {
+        let wanted = normalize_name(path);
+        let base = last_segment(&wanted).to_owned();
+        self.files
+            .iter()
+            .enumerate()
+            .filter(move |(_, f)| last_segment(&normalize_name(&f.name)) == base)
+            .map(|(i, _)| i)
+    }
+
     /// The file `path` names.
     pub(crate) fn get(&self, path: &str) -> Option<&'a SideFile> {
         self.position(path).map(|i| &self.files[i])

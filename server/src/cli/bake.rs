@@ -63,6 +63,7 @@ pub(super) fn load_inputs(
         .iter()
         .map(|p| super::load::upload(p, limits))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    super::load::check_clips(clip_files, &clips)?;
     // The error names the input (`character` or `clips[i]`) and carries
     // its import error in its message: one line, not a chain that repeats
     // it.

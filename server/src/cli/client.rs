@@ -153,6 +153,12 @@ pub(super) fn submit_files(
 ) -> anyhow::Result<BakeView> {
     let limits = Limits::default();
     let character = super::load::upload(file, &limits)?;
+    // Every file read and the list checked before anything is sent.
+    let clip_uploads = clips
+        .iter()
+        .map(|p| super::load::upload(p, &limits))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    super::load::check_clips(clips, &clip_uploads)?;
     let c = api
         .upload_character(
             &character.to_blob(),
@@ -161,8 +167,7 @@ pub(super) fn submit_files(
         )
         .with_context(|| format!("cannot upload {}", file.display()))?;
     let mut clip_digests = Vec::new();
-    for path in clips {
-        let u = super::load::upload(path, &limits)?;
+    for (path, u) in clips.iter().zip(&clip_uploads) {
         let r = api
             .upload_clips(&c.digest, &u.to_blob(), u.is_bundle(), &display_name(path))
             .with_context(|| format!("cannot upload {}", path.display()))?;

@@ -5,7 +5,7 @@
 //! absolute paths, no `..`), and handed to core as an upload. Core itself
 //! never touches the file system.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use aobake_core::{Clip, Imported, Limits, SideFile, bake::UploadBytes, import::referenced_files};
@@ -63,4 +63,32 @@ pub(super) fn clips(
     let upload = upload(path, limits)?;
     aobake_core::import_clips(upload.upload(), &imported.character, limits)
         .with_context(|| format!("cannot import clips from {}", path.display()))
+}
+
+/// Checks the clip files of a new bake as the server does
+/// ([`aobake_core::bake::check_clip_list`]): at most 256, none given twice
+/// (the same bytes under two paths count as one file given twice). Exits
+/// 5 (bad input) naming the files.
+pub(super) fn check_clips(paths: &[PathBuf], uploads: &[UploadBytes]) -> anyhow::Result<()> {
+    use aobake_core::bake::{ClipListError, MAX_CLIP_FILES, check_clip_list};
+    let digests: Vec<String> = uploads.iter().map(UploadBytes::digest).collect();
+    let message = match check_clip_list(&digests) {
+        Ok(()) => return Ok(()),
+        Err(ClipListError::TooMany(n)) => format!(
+            "error: {n} clip files, over the limit of {MAX_CLIP_FILES}: put animations together in fewer files"
+        ),
+        Err(ClipListError::Twice(first, again)) if paths[first] == paths[again] => {
+            format!("error: clip file {} is given twice", paths[first].display())
+        }
+        Err(ClipListError::Twice(first, again)) => format!(
+            "error: clip files {} and {} are the same file (the same bytes): give it once",
+            paths[first].display(),
+            paths[again].display()
+        ),
+    };
+    Err(super::client::Exit {
+        code: super::exit::BAD_INPUT,
+        message,
+    }
+    .into())
 }

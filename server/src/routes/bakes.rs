@@ -9,7 +9,9 @@ use std::convert::Infallible;
 use std::time::Duration;
 
 use aobake_core::{
-    bake::{Bake, BakeInputs, BakeParams, bake_key},
+    bake::{
+        Bake, BakeInputs, BakeParams, ClipListError, MAX_CLIP_FILES, bake_key, check_clip_list,
+    },
     method::Method,
 };
 use axum::{
@@ -74,10 +76,6 @@ fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
     }
 }
 
-/// Clip files one bake may name: each is read into memory and imported
-/// with the character.
-const MAX_CLIP_FILES: usize = 256;
-
 #[utoipa::path(post, path = "/v1/bakes", tag = "bakes", request_body = BakeRequest,
     security(("bearer" = ["submit"])),
     responses((status = 202, description = "Accepted (or already running)", body = BakeView, headers(("Location" = String, description = "The bake (`/v1/bakes/{id}`)"))), (status = 200, description = "Already baked: the finished bake", body = BakeView, headers(("Location" = String, description = "The bake (`/v1/bakes/{id}`)"))), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 422, description = "The upload cannot be imported", body = Problem, content_type = "application/problem+json"), Refusals))]
@@ -92,21 +90,22 @@ pub(crate) async fn submit(
         .map_err(|e: String| ApiError::bad("bad_method", e))?;
     let params = BakeParams::with_overrides(method, &req.params)
         .map_err(|e| ApiError::bad("bad_params", e.to_string()))?;
-    if req.clips.len() > MAX_CLIP_FILES {
-        return Err(ApiError::bad(
-            "too_many_clips",
-            format!(
-                "{} clip files, over the limit of {MAX_CLIP_FILES}: put animations together in fewer files",
-                req.clips.len()
-            ),
-        ));
-    }
-    let mut seen = std::collections::HashSet::new();
-    if let Some(twice) = req.clips.iter().find(|c| !seen.insert(c.as_str())) {
-        return Err(ApiError::bad(
-            "duplicate_clips",
-            format!("clip file {twice} is named twice"),
-        ));
+    match check_clip_list(&req.clips) {
+        Ok(()) => {}
+        Err(ClipListError::TooMany(n)) => {
+            return Err(ApiError::bad(
+                "too_many_clips",
+                format!(
+                    "{n} clip files, over the limit of {MAX_CLIP_FILES}: put animations together in fewer files"
+                ),
+            ));
+        }
+        Err(ClipListError::Twice(_, again)) => {
+            return Err(ApiError::bad(
+                "duplicate_clips",
+                format!("clip file {} is named twice", req.clips[again]),
+            ));
+        }
     }
     let character = load_upload(&state, &req.character, "character").await?;
     let mut clips = Vec::new();

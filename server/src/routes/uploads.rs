@@ -10,7 +10,12 @@
 // digest), as the one client sends it.
 use aobake_api::schema::{Digest, Refusals};
 use aobake_api::{Uploaded, client::BUNDLE};
-use aobake_core::{SideFile, bake::UploadBytes, import_character, import_clips, summary::Summary};
+use aobake_core::{
+    SideFile,
+    bake::{MAX_SIDE_FILES, UploadBytes},
+    import_character, import_clips,
+    summary::Summary,
+};
 use axum::{
     Json, Router,
     body::Bytes,
@@ -35,9 +40,6 @@ pub(super) fn router() -> Router<AppState> {
         .route("/v1/clips", post(post_clips))
         .route("/v1/clips/{digest}", get(get_clips))
 }
-
-/// Side files one upload may have (a `.gltf`'s buffers and images).
-const MAX_SIDE_FILES: usize = 1024;
 
 /// Reads the body: one file, a bundle, or multipart parts.
 /// An upload's bytes and, for multipart, the main part's file name.

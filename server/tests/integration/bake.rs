@@ -304,6 +304,29 @@ fn bake_names_what_is_wrong() {
     let out = aobake(&["bake", skin.to_str().unwrap(), "--method", "vertex-linear"]);
     assert!(!out.status.success());
     assert!(stderr(&out).contains("--out"), "{}", stderr(&out));
+    // A clip file given twice, or the same bytes under two names, is
+    // refused as the server refuses it (before anything is baked or sent).
+    let rigged = sample("RiggedSimple/RiggedSimple.glb");
+    let copy = dir.path().join("copy.glb");
+    std::fs::copy(&rigged, &copy).unwrap();
+    let (r, c) = (rigged.to_str().unwrap(), copy.to_str().unwrap());
+    for (clips, says) in [
+        ([r, r], format!("clip file {r} is given twice")),
+        ([r, c], format!("clip files {r} and {c} are the same file")),
+    ] {
+        let out = aobake(&[
+            "key",
+            r,
+            "--method",
+            "vertex-linear",
+            "--clips",
+            clips[0],
+            "--clips",
+            clips[1],
+        ]);
+        assert_eq!(out.status.code(), Some(5), "{}", stderr(&out));
+        assert!(stderr(&out).contains(&says), "{}", stderr(&out));
+    }
 }
 
 #[test]
