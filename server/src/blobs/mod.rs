@@ -167,7 +167,12 @@ impl Watched {
                 // (Each request it fails logs its own line, as a 503.)
                 down.get_or_insert_with(std::time::Instant::now);
             }
-            // Any answer, a refusal included, means it is back.
+            // Errors found here before any request (a digest that does
+            // not match, a local file) say nothing of the store.
+            Err(
+                BlobError::DigestMismatch { .. } | BlobError::BadDigest(_) | BlobError::Config(_),
+            ) => {}
+            // An answer, a refusal included, means it is back.
             _ => {
                 if let Some(since) = down.take() {
                     log_line!(
