@@ -577,8 +577,8 @@ size_t aobake_vertex_ao_node_count(const struct AobakeVertexAo *ao);
 
 /**
  * The name of node `node` (NUL-terminated UTF-8, valid until the handle
- * is freed; empty where the file names none), or NULL past the rig (or
- * for NULL): with [`aobake_vertex_ao_node_count`] and
+ * is freed; empty where the file names none; a NUL inside a name is given
+ * as a space), or NULL past the rig (or for NULL): with [`aobake_vertex_ao_node_count`] and
  * [`aobake_vertex_ao_node_parent`], how an engine lists the rig to map
  * its own bones onto.
  *

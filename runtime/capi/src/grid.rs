@@ -17,7 +17,9 @@ use aobake_runtime::{
 };
 use glam::{Mat4, Vec3};
 
-use crate::{copy_array, fail, finite_floats, floats, free, live, open, out_floats, packed, put};
+use crate::{
+    c_string, copy_array, fail, finite_floats, floats, free, live, open, out_floats, packed, put,
+};
 
 /// A grid asset. Opaque to C.
 #[derive(Debug)]
@@ -38,11 +40,7 @@ pub unsafe extern "C" fn aobake_grid_open(bytes: *const u8, len: usize) -> *mut 
     unsafe {
         open(bytes, len, "grid", |a| match a {
             Asset::Grid { model, .. } => {
-                let names = model
-                    .parts
-                    .iter()
-                    .map(|p| CString::new(p.name.replace('\0', " ")).unwrap_or_default())
-                    .collect();
+                let names = model.parts.iter().map(|p| c_string(&p.name)).collect();
                 Some(AobakeGrid(model, OnceLock::new(), names))
             }
             _ => None,

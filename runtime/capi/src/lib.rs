@@ -57,9 +57,14 @@ thread_local! {
 }
 
 fn fail(message: impl Into<String>) {
-    let text = message.into().replace('\0', " ");
-    let c = CString::new(text).unwrap_or_default();
+    let c = c_string(&message.into());
     LAST_ERROR.with(|e| *e.borrow_mut() = Some(c));
+}
+
+/// `text` as a C string, each NUL in it a space (a name with a NUL is
+/// given back with a space there, which finds no node by that name).
+fn c_string(text: &str) -> CString {
+    CString::new(text.replace('\0', " ")).unwrap_or_default()
 }
 
 /// The reason the last failing call on this thread failed, as UTF-8, or

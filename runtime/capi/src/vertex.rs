@@ -17,7 +17,7 @@ use aobake_runtime::{
 };
 use glam::{Quat, Vec3};
 
-use crate::{copy_array, fail, free, live, open, out_floats, packed, put};
+use crate::{c_string, copy_array, fail, free, live, open, out_floats, packed, put};
 
 /// A vertex-method asset (static average, vertex-linear or
 /// vertex-clustered), its rig and the pose being set, the GPU form once
@@ -83,10 +83,7 @@ pub unsafe extern "C" fn aobake_vertex_ao_open(
                     .skeleton()
                     .nodes
                     .iter()
-                    .map(|n| {
-                        let name = n.name.as_deref().unwrap_or_default();
-                        CString::new(name.replace('\0', " ")).unwrap_or_default()
-                    })
+                    .map(|n| c_string(n.name.as_deref().unwrap_or_default()))
                     .collect();
                 Some(AobakeVertexAo(
                     *ao,
@@ -252,8 +249,8 @@ pub unsafe extern "C" fn aobake_vertex_ao_node_count(ao: *const AobakeVertexAo) 
 }
 
 /// The name of node `node` (NUL-terminated UTF-8, valid until the handle
-/// is freed; empty where the file names none), or NULL past the rig (or
-/// for NULL): with [`aobake_vertex_ao_node_count`] and
+/// is freed; empty where the file names none; a NUL inside a name is given
+/// as a space), or NULL past the rig (or for NULL): with [`aobake_vertex_ao_node_count`] and
 /// [`aobake_vertex_ao_node_parent`], how an engine lists the rig to map
 /// its own bones onto.
 ///

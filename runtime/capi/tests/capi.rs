@@ -194,6 +194,18 @@ fn compile(dir: &Path, program: &str) -> PathBuf {
         .status()
         .expect("a C compiler (cc)");
     assert!(status.success(), "{program}.c compiles against the header");
+    // Linked against the SONAME: it loads only a library of its ABI.
+    let out = Command::new("readelf")
+        .arg("-d")
+        .arg(&exe)
+        .output()
+        .unwrap();
+    let needed = format!("Shared library: [libaobake_rt.so.{AOBAKE_RT_ABI_VERSION}]");
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains(&needed),
+        "{program} does not need {needed}: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
     exe
 }
 
