@@ -11,7 +11,7 @@ use gltf::json::{
     validation::Checked,
 };
 
-use super::ImportError;
+use super::{ImportError, document::Document, limits::Limits};
 
 /// Decoded accessor data, flattened: `values.len() == count * width`.
 #[derive(Debug)]
@@ -35,14 +35,20 @@ pub(crate) struct Accessors<'a> {
     /// Accessors read so far whose declared `min` or `max` is not their
     /// data's (ACCESSOR_MIN_MISMATCH / ACCESSOR_MAX_MISMATCH).
     mismatched: std::cell::RefCell<std::collections::BTreeSet<usize>>,
+    /// Numbers decoded so far from accessors without a bufferView (the
+    /// document's count, over every pass that reads it), and their limit.
+    zero_filled: &'a std::cell::Cell<u64>,
+    max_zero_filled: u64,
 }
 
 impl<'a> Accessors<'a> {
-    pub(crate) fn new(root: &'a json::Root, buffers: &'a [Vec<u8>]) -> Self {
+    pub(crate) fn new(doc: &'a Document, limits: &Limits) -> Self {
         Self {
-            root,
-            buffers,
+            root: &doc.root,
+            buffers: &doc.buffers,
             mismatched: Default::default(),
+            zero_filled: &doc.zero_filled,
+            max_zero_filled: limits.max_zero_filled,
         }
     }
 
@@ -307,6 +313,24 @@ impl Accessors<'_> {
                 }
             }
             source = Some((bytes, stride, start as usize));
+        } else {
+            // Zeros (and what a sparse part puts over them): the file need
+            // not carry them, so they are held to a budget of their own
+            // rather than to the upload's size.
+            let numbers = self
+                .zero_filled
+                .get()
+                .saturating_add((count as u64).saturating_mul(width as u64));
+            if numbers > self.max_zero_filled {
+                return Err(ImportError::limit(
+                    format!(
+                        "{path}: numbers decoded from accessors without a bufferView (zeros the file does not carry)"
+                    ),
+                    numbers,
+                    self.max_zero_filled,
+                ));
+            }
+            self.zero_filled.set(numbers);
         }
         let mut values = vec![0.0f64; count * width];
         if let Some((bytes, stride, start)) = source {

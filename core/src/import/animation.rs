@@ -36,7 +36,7 @@ pub(crate) fn read_clips(
             limits.max_animations,
         ));
     }
-    let acc = Accessors::new(root, &doc.buffers);
+    let acc = Accessors::new(doc, limits);
     let mut non_unit = 0usize;
     // Every channel decodes its sampler, so keys are counted per channel.
     let mut keys = 0u64;

@@ -45,6 +45,9 @@ pub(crate) struct Document {
     /// Parent of each node.
     pub(crate) parents: Vec<Option<usize>>,
     pub(crate) warnings: Vec<String>,
+    /// Numbers decoded so far from accessors without a bufferView
+    /// ([`Limits::max_zero_filled`]).
+    pub(crate) zero_filled: std::cell::Cell<u64>,
 }
 
 impl Document {
@@ -87,6 +90,7 @@ impl Document {
             buffers,
             parents,
             warnings,
+            zero_filled: std::cell::Cell::new(0),
         })
     }
 

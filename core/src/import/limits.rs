@@ -35,6 +35,11 @@ pub struct Limits {
     pub max_json_values: u64,
     /// Animations in one file.
     pub max_animations: u64,
+    /// Numbers (components) decoded from accessors without a bufferView,
+    /// over the file: zeros the file does not carry (sparse morph targets
+    /// rest on them), so a few bytes of JSON could otherwise declare
+    /// gigabytes of them.
+    pub max_zero_filled: u64,
 }
 
 impl Limits {
@@ -55,6 +60,7 @@ impl Limits {
             max_json_depth: 64,
             max_json_values: 8_000_000,
             max_animations: 4_096,
+            max_zero_filled: 64_000_000,
         }
     }
 }

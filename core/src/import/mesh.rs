@@ -98,7 +98,7 @@ pub(crate) fn build_character(
     limits: &Limits,
 ) -> Result<(Character, Vec<String>), ImportError> {
     let root = &doc.root;
-    let acc = Accessors::new(root, &doc.buffers);
+    let acc = Accessors::new(doc, limits);
     let instances: Vec<usize> = doc
         .scene_nodes()
         .into_iter()

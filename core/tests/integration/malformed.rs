@@ -248,6 +248,28 @@ fn buffers_sharing_a_side_file_are_held_to_the_upload_limit() {
     assert!(import_character(upload, &Limits::default()).is_ok());
 }
 
+/// Accessors without a bufferView are zeros the file need not carry: a
+/// few bytes of JSON could declare gigabytes of them, so what they decode
+/// to has a limit of its own, over the whole file.
+#[test]
+fn zeros_without_data_are_held_to_a_budget() {
+    let mut g = util::tiny_rig();
+    g.json["accessors"][0]
+        .as_object_mut()
+        .unwrap()
+        .remove("bufferView");
+    let limits = Limits {
+        max_zero_filled: 10,
+        ..Limits::default()
+    };
+    let err = import_character(Upload::single(&g.glb()), &limits).unwrap_err();
+    assert_eq!(err.code(), "limit_exceeded");
+    assert_eq!(
+        err.to_string(),
+        "accessors[0]: numbers decoded from accessors without a bufferView (zeros the file does not carry) is 24, over the limit of 10"
+    );
+}
+
 /// JSON of many small values (each a parsed node of tens of bytes) is
 /// refused before it is parsed.
 #[test]
