@@ -42,11 +42,13 @@ impl UploadBytes {
         self.upload().digest()
     }
 
-    /// Leaves out the side files the main file does not refer to, so that
-    /// a client that sends a folder's every file gets the digest of one
-    /// that sends what the glTF uses (the command line's); returns the
-    /// names left out. A main file that cannot be read keeps them all:
-    /// its import says what is wrong.
+    /// Leaves out the side files the main file does not refer to, and
+    /// names each file kept by the path its URI resolves to, so that a
+    /// client that sends a folder's every file, or bare file names (a
+    /// browser's `rig.bin` for a URI `data/rig.bin`), gets the digest of
+    /// the command line, which sends what the glTF uses under those names;
+    /// returns the names left out. A main file that cannot be read keeps
+    /// them all: its import says what is wrong.
     pub fn keep_referenced(&mut self, limits: &Limits) -> Vec<String> {
         if self.side_files.is_empty() {
             return Vec::new();
@@ -57,9 +59,14 @@ impl UploadBytes {
         // The files the import will use, found as the import finds them.
         let files = crate::import::SideFiles::new(&self.side_files);
         let mut wanted = vec![false; self.side_files.len()];
+        // The path of the first URI that names each file.
+        let mut named: Vec<Option<&String>> = vec![None; self.side_files.len()];
         for name in &used {
             match files.position(name) {
-                Some(i) => wanted[i] = true,
+                Some(i) => {
+                    wanted[i] = true;
+                    named[i].get_or_insert(name);
+                }
                 // Not found: keep every file it might have meant, so the
                 // import sees the same ambiguity (two `x.bin` for a URI
                 // `c/x.bin`) rather than the one left after pruning.
@@ -72,10 +79,20 @@ impl UploadBytes {
         }
         let (kept, left): (Vec<_>, Vec<_>) = std::mem::take(&mut self.side_files)
             .into_iter()
-            .zip(wanted)
-            .partition(|(_, wanted)| *wanted);
-        let kept = kept.into_iter().map(|(f, _)| f).collect();
-        self.side_files = kept;
+            .zip(wanted.into_iter().zip(named))
+            .partition(|(_, (wanted, _))| *wanted);
+        // (A file named by a URI that resolved to it: no other file has
+        // that path, or the URI would have found that one.)
+        self.side_files = kept
+            .into_iter()
+            .map(|(f, (_, named))| match named {
+                Some(path) => SideFile {
+                    name: path.clone(),
+                    ..f
+                },
+                None => f,
+            })
+            .collect();
         left.into_iter().map(|(f, _)| f.name).collect()
     }
 
@@ -291,7 +308,18 @@ mod tests {
             side_files: vec![file("rig.bin", b"1234"), file("./skin.bin", b"s"), file("other.bin", b"o")],
         };
         assert_eq!(bare.keep_referenced(&Limits::default()), ["other.bin"]);
-        assert_eq!(bare.side_files.len(), 2);
+        // Named by their URIs' paths: the digest is the command line's,
+        // which sends them under those names.
+        let names: Vec<&str> = bare.side_files.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, ["data/rig.bin", "skin.bin"]);
+        let as_named = UploadBytes {
+            main: bare.main.clone(),
+            side_files: vec![file("skin.bin", b"s"), file("data/rig.bin", b"1234")],
+        };
+        assert_eq!(bare.digest(), as_named.digest());
+        // And the import finds them under those names (then finds no mesh).
+        let err = crate::import_character(bare.upload(), &Limits::default()).unwrap_err();
+        assert_eq!(err.code(), "no_geometry", "{err}");
         // A URI that two files might mean keeps both: the import then says
         // it cannot tell, as it does for what was sent, rather than taking
         // the one left after the other was pruned.
