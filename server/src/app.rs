@@ -109,14 +109,11 @@ async fn log_failures(req: Request, next: Next) -> Response {
     let Some(InternalFailure(what)) = res.extensions().get::<InternalFailure>().cloned() else {
         return res;
     };
-    let id = id.as_ref().and_then(|v| v.to_str().ok()).unwrap_or("?");
-    log_line!(
-        "error: internal, request {id} ({method} {}): {what}",
-        uri.path()
-    );
+    let problem =
+        ApiError::log_internal(id.as_ref(), format_args!("{method} {}", uri.path()), &what);
     let (mut parts, _) = res.into_parts();
     parts.headers.remove(axum::http::header::CONTENT_LENGTH);
-    let body = serde_json::to_vec(&ApiError::internal_problem(id)).unwrap_or_default();
+    let body = serde_json::to_vec(&problem).unwrap_or_default();
     Response::from_parts(parts, axum::body::Body::from(body))
 }
 

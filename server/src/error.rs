@@ -2,8 +2,8 @@
 //! problem+json with `type`, `title`, `status`, `detail` and `code`.
 //! Internal errors get a generic detail naming the request's id; what
 //! went wrong is logged once, with that id, by `app::log_failures` (an
-//! item of a batch answer, which is not a response of its own, is logged
-//! by [`ApiError::problem`] without it).
+//! item of a batch answer, which is not a response of its own, by
+//! [`ApiError::log_internal`] in its route).
 
 use axum::{
     http::{HeaderValue, StatusCode, header},
@@ -149,17 +149,28 @@ pub use aobake_api::Problem;
 
 impl ApiError {
     /// The problem+json body that tells a client of this error (an
-    /// internal error is logged here, and named only generically).
+    /// internal error only generically: what went wrong is logged with the
+    /// request's id, by `app::log_failures` or [`ApiError::log_internal`],
+    /// never sent).
     pub fn problem(&self) -> Problem {
+        if let Self::Internal(_) = self {
+            return Self::internal_problem("?");
+        }
         let (status, code, title) = self.parts();
-        let detail = match self {
-            Self::Internal(d) => {
-                log_line!("error: internal: {d}");
-                "the server failed; the error was logged".to_owned()
-            }
-            other => other.to_string(),
-        };
-        Self::problem_saying(status, code, title, detail)
+        Self::problem_saying(status, code, title, self.to_string())
+    }
+
+    /// Logs internal error `what` under its request's id (`request`, the
+    /// `x-request-id` header; `?` without) and `place` (the route, and
+    /// more), and gives the problem that names the id.
+    pub fn log_internal(
+        request: Option<&HeaderValue>,
+        place: impl std::fmt::Display,
+        what: &str,
+    ) -> Problem {
+        let id = request.and_then(|v| v.to_str().ok()).unwrap_or("?");
+        log_line!("error: internal, request {id} ({place}): {what}");
+        Self::internal_problem(id)
     }
 
     /// The problem of an internal error whose log line names `request`
@@ -193,22 +204,17 @@ pub struct InternalFailure(pub String);
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let (status, _, _) = self.parts();
-        // An internal error is logged by `app::log_failures`, with the
-        // request's id, which its answer names.
-        if let Self::Internal(d) = self {
-            let mut res = (status, axum::Json(Self::internal_problem("?"))).into_response();
-            res.extensions_mut().insert(InternalFailure(d));
-            res.headers_mut().insert(
-                header::CONTENT_TYPE,
-                HeaderValue::from_static("application/problem+json"),
-            );
-            return res;
-        }
         let mut res = (status, axum::Json(self.problem())).into_response();
         res.headers_mut().insert(
             header::CONTENT_TYPE,
             HeaderValue::from_static("application/problem+json"),
         );
+        // An internal error is logged by `app::log_failures`, with the
+        // request's id, which its answer then names.
+        if let Self::Internal(d) = self {
+            res.extensions_mut().insert(InternalFailure(d));
+            return res;
+        }
         if let Self::RateLimited(s) | Self::Unavailable(_, s) = self {
             res.headers_mut()
                 .insert(header::RETRY_AFTER, HeaderValue::from(s));

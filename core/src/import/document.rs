@@ -1,6 +1,8 @@
 //! Parsing and validating the glTF JSON, resolving its buffers, and checking
 //! the node graph.
 
+use std::borrow::Cow;
+
 use gltf::json::{self, validation::Validate as _};
 
 use super::{
@@ -345,14 +347,13 @@ fn load_buffers(
     let mut buffers = Vec::with_capacity(root.buffers.len());
     for (i, buffer) in root.buffers.iter().enumerate() {
         let path = format!("buffers[{i}]");
-        let decoded;
-        let data: &[u8] = match &buffer.uri {
+        // A data URI's bytes are this buffer's own; a side file's or the
+        // binary chunk's are borrowed, and only the declared ones copied
+        // (a buffer may name a large file for a few of its bytes).
+        let data: Cow<'_, [u8]> = match &buffer.uri {
             Some(uri) => match resolve_uri(uri, &format!("{path}.uri"))? {
-                UriTarget::Data(bytes) => {
-                    decoded = bytes;
-                    &decoded
-                }
-                UriTarget::File(name) => {
+                UriTarget::Data(bytes) => Cow::Owned(bytes),
+                UriTarget::File(name) => Cow::Borrowed(
                     &side_files
                         .get(&name)
                         .ok_or_else(|| ImportError::MissingFile {
@@ -360,12 +361,12 @@ fn load_buffers(
                             name: name.clone(),
                             available: upload.side_file_names(),
                         })?
-                        .bytes
-                }
+                        .bytes,
+                ),
             },
-            None if i == 0 => bin.ok_or_else(|| {
+            None if i == 0 => Cow::Borrowed(bin.ok_or_else(|| {
                 ImportError::invalid(&path, "has no uri and the file has no GLB binary chunk")
-            })?,
+            })?),
             None => return Err(ImportError::invalid(&path, "has no uri")),
         };
         let declared = buffer.byte_length.0;
@@ -378,9 +379,13 @@ fn load_buffers(
                 ),
             ));
         }
-        // Only the declared bytes are copied (a buffer may name a large
-        // file for a few of its bytes).
-        buffers.push(data[..declared as usize].to_vec());
+        buffers.push(match data {
+            Cow::Owned(mut bytes) => {
+                bytes.truncate(declared as usize);
+                bytes
+            }
+            Cow::Borrowed(bytes) => bytes[..declared as usize].to_vec(),
+        });
     }
     Ok(buffers)
 }

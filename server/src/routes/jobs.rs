@@ -358,16 +358,11 @@ pub(crate) async fn complete_many(
                 // Logged with the request's id, as a whole request's
                 // internal error is (app::log_failures), and the item says
                 // which.
-                ApiError::Internal(what) => {
-                    let id = headers
-                        .get("x-request-id")
-                        .and_then(|v| v.to_str().ok())
-                        .unwrap_or("?");
-                    log_line!(
-                        "error: internal, request {id} (POST /v1/jobs/completions, job {job}): {what}"
-                    );
-                    ApiError::internal_problem(id)
-                }
+                ApiError::Internal(what) => ApiError::log_internal(
+                    headers.get("x-request-id"),
+                    format_args!("POST /v1/jobs/completions, job {job}"),
+                    &what,
+                ),
                 refused => refused.problem(),
             }),
         })

@@ -53,17 +53,17 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, 
     let multipart = content_type.starts_with("multipart/form-data");
     let bundle = content_type.starts_with(BUNDLE);
     // Over the body limit (413), or cut off (400), as the rejection says.
-    let unread = |status: StatusCode, text: String| {
+    let unread = |code: &'static str, status: StatusCode, text: String| {
         if status == StatusCode::PAYLOAD_TOO_LARGE {
             ApiError::TooLarge(state.limits.max_body_bytes)
         } else {
-            ApiError::bad("bad_body", format!("cannot read the body: {text}"))
+            ApiError::bad(code, format!("cannot read the body: {text}"))
         }
     };
     if !multipart {
         let bytes = Bytes::from_request(req, &())
             .await
-            .map_err(|e| unread(e.status(), e.body_text()))?;
+            .map_err(|e| unread("bad_body", e.status(), e.body_text()))?;
         if bytes.is_empty() {
             return Err(ApiError::bad(
                 "empty_body",
@@ -85,11 +85,9 @@ async fn read_upload(state: &AppState, req: Request) -> ApiResult<(UploadBytes, 
     let mut side_files = Vec::new();
     // A part's error says which: over the body limit (413), or what is
     // malformed (cut off, no boundary: 400).
-    let part_error =
-        |e: axum::extract::multipart::MultipartError| match unread(e.status(), e.body_text()) {
-            ApiError::BadRequest { detail, .. } => ApiError::bad("bad_multipart", detail),
-            too_large => too_large,
-        };
+    let part_error = |e: axum::extract::multipart::MultipartError| {
+        unread("bad_multipart", e.status(), e.body_text())
+    };
     while let Some(field) = parts.next_field().await.map_err(part_error)? {
         let name = field
             .file_name()

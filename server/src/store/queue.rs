@@ -442,6 +442,20 @@ async fn lock_workers<'a, B: Backend>(
         .collect())
 }
 
+/// Locks the slots' rows in id order, as a lease takes them, where the
+/// store locks rows (PostgreSQL); SQLite runs one writing transaction at a
+/// time, so there it asks nothing (a poll's every wake would otherwise
+/// read the rows for no lock).
+async fn lock_worker_rows<'a, B: Backend>(
+    c: &mut B::Conn,
+    workers: impl ExactSizeIterator<Item = &'a str>,
+) -> Result<()> {
+    if B::FOR_UPDATE.is_empty() {
+        return Ok(());
+    }
+    lock_workers::<B>(c, workers).await.map(drop)
+}
+
 /// Recounts the pending dependencies of the bake's blocked jobs and makes
 /// those with none available (after a retry re-blocks jobs).
 async fn unblock<B: Backend>(c: &mut B::Conn, bake: i64) -> Result<()> {
@@ -1305,7 +1319,7 @@ impl<B: Backend> Store for SqlStore<B> {
             return Ok(true);
         }
         in_tx!(self, Durability::Queue, |c| {
-            lock_workers::<B>(c, workers.iter().map(|w| w.as_str())).await?;
+            lock_worker_rows::<B>(c, workers.iter().map(|w| w.as_str())).await?;
             let waiting = c
                 .execute(
                     B::sql(&format!(
@@ -1328,7 +1342,7 @@ impl<B: Backend> Store for SqlStore<B> {
             // The rows first, in id order as a lease takes them: a lease
             // of these slots under way finishes before this goes on, one
             // after sees them stopped.
-            lock_workers::<B>(c, workers.iter().map(String::as_str)).await?;
+            lock_worker_rows::<B>(c, workers.iter().map(String::as_str)).await?;
             c.execute(
                 B::sql(&format!(
                     "UPDATE workers SET state = 'stopped', job_id = NULL WHERE id IN ({list})"
