@@ -417,6 +417,8 @@ impl Client {
             status,
             detail: gist(&body),
             code: String::new(),
+            reason: None,
+            pointer: None,
         });
         Err(ApiError::Status {
             status,
@@ -424,12 +426,19 @@ impl Client {
         })
     }
 
+    /// The answer's JSON body; a body cut off (the connection broke) is a
+    /// transport error, worth another try, and only a whole body that is
+    /// not the JSON asked for is [`ApiError::Decode`].
     fn read_json<R: DeserializeOwned>(&self, mut res: Response) -> Result<R> {
         res.body_mut()
             .with_config()
             .limit(1 << 30)
             .read_json()
-            .map_err(|e| self.decode(e))
+            .map_err(|e| match &e {
+                ureq::Error::Io(_) | ureq::Error::Timeout(_) => self.transport(e),
+                ureq::Error::Json(j) if j.is_io() || j.is_eof() => self.transport(e),
+                _ => self.decode(e),
+            })
     }
 
     fn get<R: DeserializeOwned>(&self, path: &str) -> Result<R> {
@@ -787,6 +796,8 @@ mod tests {
                 status,
                 detail: "d".into(),
                 code: "c".into(),
+                reason: None,
+                pointer: None,
             }),
         }
     }

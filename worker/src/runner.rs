@@ -176,10 +176,18 @@ impl RunError {
 /// What to check when a lease is refused in a way that waiting does not
 /// mend; `None` for a refusal worth retrying.
 fn refused_for_good(e: &ApiError) -> Option<&'static str> {
+    // A success whose body is not a lease list: a web server or a proxy's
+    // page that answers every path (an aobake server of another version
+    // answers as this one does, its lease list being additive).
+    if let ApiError::Decode { .. } = e {
+        return Some(
+            "--server answered, but not as an aobake server does: is it the address of another service?",
+        );
+    }
     Some(match e.status()? {
         401 => "the token is not valid on this server (revoked, or never created here)",
         403 => "the token lacks the worker scope",
-        404 => "--server is not the address of an aobake server",
+        404 | 405 | 501 => "--server is not the address of an aobake server",
         400 => "the server refused the request as it was sent (--concurrency, --id)",
         _ => return None,
     })

@@ -350,26 +350,45 @@ fn unknown_routes_and_wrong_methods_are_problems_too() {
 }
 
 /// A worker whose token the server refuses (not valid, or without the
-/// `worker` scope) will be refused however long it waits: it exits with
-/// an error that says what to check, instead of retrying forever under a
-/// supervisor.
+/// `worker` scope), or whose `--server` is not an aobake server, will be
+/// refused however long it waits: it exits with an error that says what to
+/// check, instead of retrying forever under a supervisor.
 #[test]
-fn a_worker_with_a_refused_token_exits_saying_why() {
+fn a_worker_refused_for_good_exits_saying_why() {
     let env = TestEnv::start(Options::default());
-    for (token, status, check) in [
+    // Another web service: an app's page for every path (200, HTML), and a
+    // static file server that allows no POST (405).
+    let page = other_service("200 OK", "text/html", "<!doctype html><title>Shop</title>");
+    let files = other_service("405 Method Not Allowed", "text/plain", "Method Not Allowed");
+    let worker = env.token(&["worker"]);
+    for (server, token, status, check) in [
         (
+            env.url.clone(),
             "not-a-token".to_owned(),
             "401",
             "the token is not valid on this server",
         ),
         (
+            env.url.clone(),
             env.token(&["read"]),
             "403",
             "the token lacks the worker scope",
         ),
+        (
+            page,
+            worker.clone(),
+            "unexpected answer",
+            "not as an aobake server does",
+        ),
+        (
+            files,
+            worker,
+            "405",
+            "is not the address of an aobake server",
+        ),
     ] {
         let mut child = std::process::Command::new(aobake_e2e::binary())
-            .args(["worker", "--server", &env.url, "--id", "refused"])
+            .args(["worker", "--server", &server, "--id", "refused"])
             .args(["--token", &token])
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::piped())
@@ -382,7 +401,7 @@ fn a_worker_with_a_refused_token_exits_saying_why() {
             }
             if std::time::Instant::now() > deadline {
                 let _ = child.kill();
-                panic!("a worker with a refused token ({status}) kept retrying");
+                panic!("a worker refused with {status} kept retrying");
             }
             std::thread::sleep(std::time::Duration::from_millis(100));
         };
@@ -403,6 +422,27 @@ fn a_worker_with_a_refused_token_exits_saying_why() {
         let stamp = last.split(' ').next().unwrap();
         assert!(humantime::parse_rfc3339(stamp).is_ok(), "{last}");
     }
+}
+
+/// The address of a web server that answers every request with `status`
+/// and `body`, for as long as the test runs.
+fn other_service(status: &'static str, content_type: &'static str, body: &'static str) -> String {
+    use std::io::{Read as _, Write as _};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    std::thread::spawn(move || {
+        for mut stream in listener.incoming().flatten() {
+            let _ = stream.set_read_timeout(Some(std::time::Duration::from_millis(200)));
+            // The request's head and as much of its body as comes at once.
+            let _ = stream.read(&mut [0u8; 1 << 16]);
+            let _ = write!(
+                stream,
+                "HTTP/1.1 {status}\r\nContent-Type: {content_type}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+                body.len()
+            );
+        }
+    });
+    url
 }
 
 /// Tokens are listed (never their secrets) and revoked: a revoked token is
