@@ -14,7 +14,7 @@
 use half::f16;
 
 use crate::method::Method;
-use serde::{Serialize, de::DeserializeOwned};
+use serde::{Deserialize, Serialize, de::DeserializeOwned};
 
 /// First eight bytes of every asset. Like PNG's: a high-bit byte catches
 /// 7-bit transfers, CR LF and LF catch newline conversion.
@@ -22,7 +22,7 @@ pub const MAGIC: [u8; 8] = *b"\x89AOB\r\n\x1a\n";
 /// Format major version this build writes and reads.
 pub const MAJOR: u16 = 1;
 /// Format minor version this build writes.
-pub const MINOR: u16 = 5;
+pub const MINOR: u16 = 6;
 
 /// Fixed part before the header: magic, major, minor, method, flags,
 /// header length, section count, reserved, CRC.
@@ -434,6 +434,60 @@ pub struct AssetHeaderFields {
     pub clips: Vec<String>,
     /// The bake's fully defaulted parameters.
     pub params: serde_json::Value,
+    /// The character's primitives in aobake's vertex order (written by the
+    /// methods whose arrays are per vertex).
+    pub primitives: Vec<PrimitiveSpan>,
+}
+
+/// Where one glTF primitive's vertices are among an asset's: vertex
+/// `first + i` of the asset is vertex `i` (in accessor order) of primitive
+/// `primitive` of mesh `mesh`, as node `node` instances it (a mesh that
+/// two nodes instance has a span for each). Headers list them in vertex
+/// order, back to back from vertex 0 (format 1.6): what an engine that
+/// imports the glTF its own way maps its vertices by.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PrimitiveSpan {
+    /// The glTF node that instances the mesh.
+    pub node: usize,
+    /// The glTF mesh.
+    pub mesh: usize,
+    /// The primitive's index in the mesh.
+    pub primitive: usize,
+    /// Its first vertex among the asset's.
+    pub first: usize,
+    /// Its vertices.
+    pub count: usize,
+}
+
+/// Checks that a header's `spans` (when it has any: files before format
+/// 1.6 have none) cover vertices `0..vertices` in order, back to back.
+pub fn check_primitives(spans: &[PrimitiveSpan], vertices: usize) -> Result<(), AssetError> {
+    if spans.is_empty() {
+        return Ok(());
+    }
+    let mut next = 0usize;
+    for (i, span) in spans.iter().enumerate() {
+        if span.first != next {
+            return Err(AssetError::Malformed(format!(
+                "primitives[{i}] starts at vertex {}, not {next}",
+                span.first
+            )));
+        }
+        next = next
+            .checked_add(span.count)
+            .filter(|&n| n <= vertices)
+            .ok_or_else(|| {
+                AssetError::Malformed(format!(
+                    "primitives[{i}] ends past the asset's {vertices} vertices"
+                ))
+            })?;
+    }
+    if next != vertices {
+        return Err(AssetError::Malformed(format!(
+            "the primitives cover {next} of the asset's {vertices} vertices"
+        )));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -446,6 +500,7 @@ impl AssetHeaderFields {
             character: "c".into(),
             clips: vec![],
             params: serde_json::json!({}),
+            primitives: vec![],
         }
     }
 }
@@ -453,6 +508,29 @@ impl AssetHeaderFields {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn primitive_spans_must_tile_the_vertices_in_order() {
+        let span = |first, count| PrimitiveSpan {
+            node: 0,
+            mesh: 0,
+            primitive: 0,
+            first,
+            count,
+        };
+        assert!(check_primitives(&[], 10).is_ok(), "none: a file before 1.6");
+        assert!(check_primitives(&[span(0, 4), span(4, 6)], 10).is_ok());
+        for (spans, why) in [
+            (vec![span(1, 9)], "starts at vertex 1, not 0"),
+            (vec![span(0, 4), span(5, 5)], "starts at vertex 5, not 4"),
+            (vec![span(0, 4), span(4, 7)], "ends past"),
+            (vec![span(0, 4), span(4, usize::MAX)], "ends past"),
+            (vec![span(0, 4)], "cover 4 of the asset's 10"),
+        ] {
+            let e = check_primitives(&spans, 10).unwrap_err().to_string();
+            assert!(e.contains(why), "{spans:?}: {e}");
+        }
+    }
 
     fn sample() -> Container {
         Container::new(

@@ -27,7 +27,7 @@ pub mod pose_space;
 pub mod rig;
 
 pub use asset::Asset;
-pub use container::{AssetError, Container, Data, MAGIC, MAJOR, MINOR, Section};
+pub use container::{AssetError, Container, Data, MAGIC, MAJOR, MINOR, PrimitiveSpan, Section};
 pub use method::{Family, Method};
 
 #[cfg(test)]

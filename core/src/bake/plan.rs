@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::{
     Character, Clip,
-    method::vertex::{AssetHeaderFields, FitStats, FitStep, Model, Source},
+    method::vertex::{AssetHeaderFields, FitStats, FitStep, Model, PrimitiveSpan, Source},
     pose_space::{self, ParamError},
     pose_space::{ClipFrame, Handles, JointAngles, LayoutOptions, random_clip_frames},
     rig::pose::Pose,
@@ -355,6 +355,18 @@ impl<'a> Plan<'a> {
             character: character.to_owned(),
             clips: clips.to_vec(),
             params: self.params.canonical(),
+            primitives: self
+                .character
+                .primitives
+                .iter()
+                .map(|p| PrimitiveSpan {
+                    node: p.node,
+                    mesh: p.mesh,
+                    primitive: p.primitive,
+                    first: p.vertices.start,
+                    count: p.vertices.len(),
+                })
+                .collect(),
         }
     }
 }

@@ -168,6 +168,36 @@ typedef struct AobakeCubemapGpuParams {
 } AobakeCubemapGpuParams;
 
 /**
+ * Where one glTF primitive's vertices are among an asset's: vertex
+ * `first + i` of the asset is vertex `i` (in accessor order) of primitive
+ * `primitive` of mesh `mesh`, as node `node` instances it (indices of the
+ * glTF file the asset was baked from). For an engine that imports the
+ * glTF its own way and so orders its vertices its own way.
+ */
+typedef struct AobakePrimitive {
+  /**
+   * The glTF node that instances the mesh.
+   */
+  size_t node;
+  /**
+   * The glTF mesh.
+   */
+  size_t mesh;
+  /**
+   * The primitive's index in the mesh.
+   */
+  size_t primitive;
+  /**
+   * Its first vertex among the asset's.
+   */
+  size_t first;
+  /**
+   * Its vertices.
+   */
+  size_t count;
+} AobakePrimitive;
+
+/**
  * The GPU lookups' `Params` uniform (`shaders/wgsl/common/
  * grid_lookup.wgsl`), field for field and byte for byte: an engine
  * copies it whole into the uniform buffer after filling the fields of a
@@ -375,6 +405,25 @@ void aobake_grid_free(struct AobakeGrid *grid);
 size_t aobake_grid_part_count(const struct AobakeGrid *grid);
 
 /**
+ * The glTF primitives of the character's vertices, in aobake's vertex
+ * order (the order of the static base's vertex offsets): 0 for NULL, and
+ * for an asset written before format 1.6.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle.
+ */
+size_t aobake_grid_primitive_count(const struct AobakeGrid *grid);
+
+/**
+ * Writes primitive `i` (below `aobake_grid_primitive_count`) to `out`;
+ * `false` for NULL or past the count.
+ *
+ * # Safety
+ * `grid` must be NULL or a live handle; `out` NULL or writable.
+ */
+bool aobake_grid_primitive(const struct AobakeGrid *grid, size_t i, struct AobakePrimitive *out);
+
+/**
  * Matrices the palette must hold: the highest joint a part follows, plus
  * one (0 for NULL, with the reason set).
  *
@@ -528,6 +577,24 @@ void aobake_vertex_ao_free(struct AobakeVertexAo *ao);
  * `ao` must be NULL or a live handle.
  */
 size_t aobake_vertex_ao_vertices(const struct AobakeVertexAo *ao);
+
+/**
+ * The glTF primitives whose vertices the asset's are, in order (0 for
+ * NULL, and for an asset written before format 1.6).
+ *
+ * # Safety
+ * `ao` must be NULL or a live handle.
+ */
+size_t aobake_vertex_ao_primitive_count(const struct AobakeVertexAo *ao);
+
+/**
+ * Writes primitive `i` (below `aobake_vertex_ao_primitive_count`) to
+ * `out`; `false` for NULL or past the count.
+ *
+ * # Safety
+ * `ao` must be NULL or a live handle; `out` NULL or writable.
+ */
+bool aobake_vertex_ao_primitive(const struct AobakeVertexAo *ao, size_t i, struct AobakePrimitive *out);
 
 /**
  * Weights per pose: the length `aobake_vertex_ao_weights` fills (0 for

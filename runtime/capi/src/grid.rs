@@ -8,7 +8,7 @@ use std::{
 };
 
 use aobake_runtime::{
-    Asset,
+    Asset, PrimitiveSpan,
     method::grid::{
         base::Receiver,
         gpu::GridGpu,
@@ -18,7 +18,8 @@ use aobake_runtime::{
 use glam::{Mat4, Vec3};
 
 use crate::{
-    c_string, copy_array, fail, finite_floats, floats, free, live, open, out_floats, packed, put,
+    AobakePrimitive, c_string, copy_array, fail, finite_floats, floats, free, live, open,
+    out_floats, packed, put, put_primitive,
 };
 
 /// A grid asset. Opaque to C.
@@ -28,6 +29,8 @@ pub struct AobakeGrid(
     OnceLock<Result<GridForm, String>>,
     /// The parts' names as C strings.
     Vec<CString>,
+    /// The glTF primitives of the receivers' vertices, in order.
+    Vec<PrimitiveSpan>,
 );
 
 /// Reads a grid asset from `len` bytes at `bytes`; NULL on failure.
@@ -39,9 +42,9 @@ pub unsafe extern "C" fn aobake_grid_open(bytes: *const u8, len: usize) -> *mut 
     // SAFETY: forwarded from the caller.
     unsafe {
         open(bytes, len, "grid", |a| match a {
-            Asset::Grid { model, .. } => {
+            Asset::Grid { model, header } => {
                 let names = model.parts.iter().map(|p| c_string(&p.name)).collect();
-                Some(AobakeGrid(model, OnceLock::new(), names))
+                Some(AobakeGrid(model, OnceLock::new(), names, header.primitives))
             }
             _ => None,
         })
@@ -67,6 +70,37 @@ pub unsafe extern "C" fn aobake_grid_free(grid: *mut AobakeGrid) {
 pub unsafe extern "C" fn aobake_grid_part_count(grid: *const AobakeGrid) -> usize {
     // SAFETY: forwarded from the caller.
     unsafe { live(grid) }.map_or(0, |g| g.0.parts.len())
+}
+
+/// The glTF primitives of the character's vertices, in aobake's vertex
+/// order (the order of the static base's vertex offsets): 0 for NULL, and
+/// for an asset written before format 1.6.
+///
+/// # Safety
+/// `grid` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_primitive_count(grid: *const AobakeGrid) -> usize {
+    // SAFETY: forwarded from the caller.
+    unsafe { live(grid) }.map_or(0, |g| g.3.len())
+}
+
+/// Writes primitive `i` (below `aobake_grid_primitive_count`) to `out`;
+/// `false` for NULL or past the count.
+///
+/// # Safety
+/// `grid` must be NULL or a live handle; `out` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_grid_primitive(
+    grid: *const AobakeGrid,
+    i: usize,
+    out: *mut AobakePrimitive,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    let Some(g) = (unsafe { live(grid) }) else {
+        return false;
+    };
+    // SAFETY: forwarded from the caller.
+    unsafe { put_primitive(&g.3, i, out) }
 }
 
 /// Matrices the palette must hold: the highest joint a part follows, plus

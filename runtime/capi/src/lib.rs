@@ -42,7 +42,7 @@ use std::{
     sync::OnceLock,
 };
 
-use aobake_runtime::Asset;
+use aobake_runtime::{Asset, PrimitiveSpan};
 
 mod cubemap;
 mod grid;
@@ -150,6 +150,52 @@ unsafe fn put<T>(out: *mut T, value: T) -> bool {
             false
         }
     }
+}
+
+/// Where one glTF primitive's vertices are among an asset's: vertex
+/// `first + i` of the asset is vertex `i` (in accessor order) of primitive
+/// `primitive` of mesh `mesh`, as node `node` instances it (indices of the
+/// glTF file the asset was baked from). For an engine that imports the
+/// glTF its own way and so orders its vertices its own way.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AobakePrimitive {
+    /// The glTF node that instances the mesh.
+    pub node: usize,
+    /// The glTF mesh.
+    pub mesh: usize,
+    /// The primitive's index in the mesh.
+    pub primitive: usize,
+    /// Its first vertex among the asset's.
+    pub first: usize,
+    /// Its vertices.
+    pub count: usize,
+}
+
+/// Writes span `i` of `spans` to `out`, or the reason it cannot: past
+/// the spans (an asset before format 1.6 has none), or `out` NULL.
+///
+/// # Safety
+/// `out` must be NULL or writable.
+unsafe fn put_primitive(spans: &[PrimitiveSpan], i: usize, out: *mut AobakePrimitive) -> bool {
+    let Some(s) = spans.get(i) else {
+        fail(if spans.is_empty() {
+            "the asset lists no primitives (written before asset format 1.6: bake it again)"
+                .to_owned()
+        } else {
+            format!("primitive {i} of {}", spans.len())
+        });
+        return false;
+    };
+    let primitive = AobakePrimitive {
+        node: s.node,
+        mesh: s.mesh,
+        primitive: s.primitive,
+        first: s.first,
+        count: s.count,
+    };
+    // SAFETY: forwarded from the caller.
+    unsafe { put(out, primitive) }
 }
 
 /// A handle's GPU form, packed by `pack` on first use and kept (an

@@ -17,7 +17,10 @@ use aobake_runtime::{
 };
 use glam::{Quat, Vec3};
 
-use crate::{c_string, copy_array, fail, free, live, open, out_floats, packed, put};
+use crate::{
+    AobakePrimitive, c_string, copy_array, fail, free, live, open, out_floats, packed, put,
+    put_primitive,
+};
 
 /// A vertex-method asset (static average, vertex-linear or
 /// vertex-clustered), its rig and the pose being set, the GPU form once
@@ -140,6 +143,36 @@ unsafe fn rig_node<'a>(ao: *const AobakeVertexAo, node: usize) -> Option<&'a Nod
 pub unsafe extern "C" fn aobake_vertex_ao_vertices(ao: *const AobakeVertexAo) -> usize {
     // SAFETY: forwarded from the caller.
     unsafe { handle(ao) }.map_or(0, VertexAo::vertices)
+}
+
+/// The glTF primitives whose vertices the asset's are, in order (0 for
+/// NULL, and for an asset written before format 1.6).
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_primitive_count(ao: *const AobakeVertexAo) -> usize {
+    // SAFETY: forwarded from the caller.
+    unsafe { handle(ao) }.map_or(0, |a| a.header().primitives.len())
+}
+
+/// Writes primitive `i` (below `aobake_vertex_ao_primitive_count`) to
+/// `out`; `false` for NULL or past the count.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `out` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_primitive(
+    ao: *const AobakeVertexAo,
+    i: usize,
+    out: *mut AobakePrimitive,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    let Some(a) = (unsafe { handle(ao) }) else {
+        return false;
+    };
+    // SAFETY: forwarded from the caller.
+    unsafe { put_primitive(&a.header().primitives, i, out) }
 }
 
 /// Weights per pose: the length `aobake_vertex_ao_weights` fills (0 for

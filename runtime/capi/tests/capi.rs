@@ -951,3 +951,82 @@ fn c_engines_get_part_names_and_ground_heights_and_bad_input_is_refused() {
         aobake_grid_free(g);
     }
 }
+
+/// An engine that imports the glTF its own way finds each primitive's
+/// vertices among the asset's: the table of a vertex asset and of a grid
+/// asset is the importer's, instance by instance (the milk truck's wheel
+/// mesh twice), and past it a call fails saying why.
+#[test]
+fn engines_map_their_vertices_by_the_primitive_table() {
+    use aobake_rt::{
+        AobakePrimitive, aobake_grid_free, aobake_grid_open, aobake_grid_primitive,
+        aobake_grid_primitive_count, aobake_last_error, aobake_vertex_ao_free,
+        aobake_vertex_ao_open, aobake_vertex_ao_primitive, aobake_vertex_ao_primitive_count,
+    };
+    let mut average = BakeParams::new(Method::StaticAverage);
+    average.poses = 4;
+    average.samples = 8;
+    average.eval_poses = 1;
+    average.eval_fps = 2.0;
+    let (vertex, character, _) = bake("CesiumMilkTruck", average);
+    let (grid, _, _) = bake("CesiumMilkTruck", tiny_grid());
+    let expected: Vec<AobakePrimitive> = character
+        .primitives
+        .iter()
+        .map(|p| AobakePrimitive {
+            node: p.node,
+            mesh: p.mesh,
+            primitive: p.primitive,
+            first: p.vertices.start,
+            count: p.vertices.len(),
+        })
+        .collect();
+    assert_eq!(
+        expected.len(),
+        5,
+        "the body's three primitives, the wheels' one twice"
+    );
+    let blank = AobakePrimitive {
+        node: 99,
+        mesh: 99,
+        primitive: 99,
+        first: 99,
+        count: 99,
+    };
+    // SAFETY: each asset holds `len` readable bytes; the handles live
+    // until freed; `out` is a writable struct.
+    unsafe {
+        let ao = aobake_vertex_ao_open(vertex.as_ptr(), vertex.len());
+        let g = aobake_grid_open(grid.as_ptr(), grid.len());
+        assert!(!ao.is_null() && !g.is_null());
+        let tables: [(usize, &dyn Fn(usize, *mut AobakePrimitive) -> bool); 2] = [
+            (aobake_vertex_ao_primitive_count(ao), &|i, out| {
+                aobake_vertex_ao_primitive(ao, i, out)
+            }),
+            (aobake_grid_primitive_count(g), &|i, out| {
+                aobake_grid_primitive(g, i, out)
+            }),
+        ];
+        for (count, get) in tables {
+            let mut table = Vec::new();
+            for i in 0..count {
+                let mut out = blank;
+                assert!(get(i, &mut out));
+                table.push(out);
+            }
+            assert_eq!(table, expected);
+            let mut out = blank;
+            assert!(!get(count, &mut out));
+            assert_eq!(out, blank, "nothing written");
+            let why = std::ffi::CStr::from_ptr(aobake_last_error());
+            assert_eq!(
+                why.to_str().unwrap(),
+                format!("primitive {count} of {count}")
+            );
+            assert!(!get(0, std::ptr::null_mut()));
+        }
+        assert_eq!(aobake_vertex_ao_primitive_count(std::ptr::null()), 0);
+        aobake_vertex_ao_free(ao);
+        aobake_grid_free(g);
+    }
+}

@@ -20,7 +20,7 @@ mod linalg;
 mod linear;
 
 pub use aobake_runtime::method::vertex::codec::{
-    AssetHeader, AssetHeaderFields, BaseLayout, Layout, UNITS,
+    AssetHeader, AssetHeaderFields, BaseLayout, Layout, PrimitiveSpan, UNITS,
 };
 pub use aobake_runtime::method::vertex::form::{
     self, Block, Coefficients, FormRef, LinearForm, SparseForm,

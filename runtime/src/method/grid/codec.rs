@@ -26,7 +26,9 @@ use super::{
     model::{GridModel, PartGrid},
     tclip::TClip,
 };
-use crate::container::{AssetError, AssetHeaderFields, Container, Data, Section};
+use crate::container::{
+    AssetError, AssetHeaderFields, Container, Data, PrimitiveSpan, Section, check_primitives,
+};
 use crate::method::ground::{halves, read_halves};
 
 /// What the stored values mean, written into every header.
@@ -77,6 +79,10 @@ pub struct GridHeader {
     /// The static base's layout, when the asset has one (format 1.5).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub base: Option<BaseLayout>,
+    /// Where each glTF primitive's vertices are, in the order a grid
+    /// bake's receivers and `VOFS` take them (format 1.6; empty before).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub primitives: Vec<PrimitiveSpan>,
 }
 
 /// The static base as the header describes it; its offsets are the
@@ -129,6 +135,7 @@ impl GridModel {
                 ground_gain: b.ground.gain,
                 ground: b.ground.square,
             }),
+            primitives: fields.primitives,
         };
         let mut sections = Vec::new();
         match &self.tclip {
@@ -184,6 +191,22 @@ impl GridModel {
             )));
         }
         let header: GridHeader = container.header()?;
+        // The vertices the spans tile: the base's, or theirs.
+        let vertices = header.base.as_ref().map_or_else(
+            || {
+                header
+                    .primitives
+                    .last()
+                    .map_or(0, |s| s.first.saturating_add(s.count))
+            },
+            |b| b.vertices,
+        );
+        if vertices > MAX_VERTICES {
+            return Err(AssetError::Malformed(format!(
+                "{vertices} vertices, over the limit of {MAX_VERTICES}"
+            )));
+        }
+        check_primitives(&header.primitives, vertices)?;
         if header.method != Method::Grid || container.method != Method::Grid {
             return Err(bad("the asset is not a grid"));
         }

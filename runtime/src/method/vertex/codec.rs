@@ -12,7 +12,8 @@ use super::{
     ALGORITHM_VERSION, Basis, Block, Centering, Coefficients, Features, LinearBase, LinearForm,
     Model, PoseCluster, SparseForm, StaticAverage, VertexClustered, VertexLinear, form,
 };
-pub use crate::container::AssetHeaderFields;
+use crate::container::check_primitives;
+pub use crate::container::{AssetHeaderFields, PrimitiveSpan};
 use crate::{
     Method,
     container::{AssetError, Container, Data, Section},
@@ -131,6 +132,10 @@ pub struct AssetHeader {
     /// node name. Absent in assets written before format 1.4.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rig: Option<Skeleton>,
+    /// Where each glTF primitive's vertices are (format 1.6; empty
+    /// before).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub primitives: Vec<PrimitiveSpan>,
 }
 
 /// What the stored values mean, written into every header.
@@ -215,6 +220,7 @@ impl Model {
             params: header.params,
             layout,
             rig: Some(skeleton.clone()),
+            primitives: header.primitives,
         };
         Container::new(self.method(), &header, sections)
     }
@@ -233,6 +239,7 @@ impl Model {
             return Err(bad("the header's method differs from the preamble's"));
         }
         validate_layout(&header)?;
+        check_primitives(&header.primitives, header.vertices)?;
         if let Some(rig) = &header.rig {
             validate_rig(rig, &header.layout)?;
         }

@@ -390,6 +390,7 @@ pub(super) fn print_text(r: &Report) {
             }
         }
     }
+    print_primitives(&h["primitives"]);
     println!(
         "  params       {}",
         super::super::params::shortest(h["params"].clone())
@@ -399,6 +400,38 @@ pub(super) fn print_text(r: &Report) {
         println!(
             "    {:<6} {:<4} {:>12} values {:>12} bytes",
             s.tag, s.element, s.count, s.bytes
+        );
+    }
+}
+
+/// The header's primitive table (vertex and grid assets from format
+/// 1.6), the first few spans in full.
+fn print_primitives(spans: &serde_json::Value) {
+    const SHOWN: usize = 8;
+    let Some(spans) = spans.as_array() else {
+        return;
+    };
+    println!(
+        "  primitives   {} glTF primitives as nodes instance them, in vertex order (an engine maps its vertices by them):",
+        spans.len()
+    );
+    for s in spans.iter().take(SHOWN) {
+        let (first, count) = (
+            s["first"].as_u64().unwrap_or(0),
+            s["count"].as_u64().unwrap_or(0),
+        );
+        println!(
+            "               node {} mesh {} primitive {}: vertices {first}..{}",
+            s["node"],
+            s["mesh"],
+            s["primitive"],
+            first + count
+        );
+    }
+    if spans.len() > SHOWN {
+        println!(
+            "               and {} more (--json lists them all)",
+            spans.len() - SHOWN
         );
     }
 }
