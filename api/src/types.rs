@@ -649,6 +649,18 @@ pub struct Problem {
     pub detail: String,
     /// Machine-readable code.
     pub code: String,
+    /// For an upload that cannot be imported (422 `invalid_upload`): the
+    /// importer's machine-readable reason, one of `gltf_container`,
+    /// `gltf_json`, `limit_exceeded`, `forbidden_uri`, `missing_file`,
+    /// `unsupported_extension`, `gltf_invalid`, `no_geometry` and
+    /// `no_animations` (docs/import-policy.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// For an upload that cannot be imported: where in the file's glTF
+    /// JSON, as an RFC 6901 JSON Pointer (`/accessors/3`), when the
+    /// reason is at one place.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pointer: Option<String>,
 }
 
 impl BakeRequest {

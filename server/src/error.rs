@@ -23,9 +23,18 @@ pub enum ApiError {
         /// What is wrong.
         detail: String,
     },
-    /// An upload is not a character aobake can bake.
-    #[error("{0}")]
-    Unprocessable(String),
+    /// An upload is not a character aobake can bake, or a request cannot
+    /// be served for what is in one.
+    #[error("{detail}")]
+    Unprocessable {
+        /// The importer's reason ([`aobake_core::ImportError::code`]),
+        /// when an import failed.
+        reason: Option<&'static str>,
+        /// Where in the glTF JSON, as a JSON Pointer.
+        pointer: Option<String>,
+        /// What is wrong.
+        detail: String,
+    },
     /// No or unknown bearer token.
     #[error("a valid bearer token is required")]
     Unauthorized,
@@ -98,10 +107,29 @@ impl ApiError {
         }
     }
 
+    /// A 422 for an upload that `import` refused: `what` says which file
+    /// ("the character cannot be imported").
+    pub fn unimportable(what: &str, import: &aobake_core::ImportError) -> Self {
+        Self::Unprocessable {
+            reason: Some(import.code()),
+            pointer: import.pointer(),
+            detail: format!("{what}: {import}"),
+        }
+    }
+
+    /// A 422 that is not the importer's.
+    pub fn unprocessable(reason: Option<&'static str>, detail: impl Into<String>) -> Self {
+        Self::Unprocessable {
+            reason,
+            pointer: None,
+            detail: detail.into(),
+        }
+    }
+
     fn parts(&self) -> (StatusCode, &'static str, &'static str) {
         match self {
             Self::BadRequest { code, .. } => (StatusCode::BAD_REQUEST, code, "Bad request"),
-            Self::Unprocessable(_) => (
+            Self::Unprocessable { .. } => (
                 StatusCode::UNPROCESSABLE_ENTITY,
                 "invalid_upload",
                 "The upload cannot be used",
@@ -157,7 +185,15 @@ impl ApiError {
             return Self::internal_problem("?");
         }
         let (status, code, title) = self.parts();
-        Self::problem_saying(status, code, title, self.to_string())
+        let mut problem = Self::problem_saying(status, code, title, self.to_string());
+        if let Self::Unprocessable {
+            reason, pointer, ..
+        } = self
+        {
+            problem.reason = reason.map(str::to_owned);
+            problem.pointer.clone_from(pointer);
+        }
+        problem
     }
 
     /// Logs internal error `what` under its request's id (`request`, the
@@ -192,6 +228,8 @@ impl ApiError {
             status: status.as_u16(),
             detail,
             code: code.to_owned(),
+            reason: None,
+            pointer: None,
         }
     }
 }

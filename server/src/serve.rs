@@ -63,6 +63,10 @@ pub struct ServeArgs {
     /// samples).
     #[arg(long, env = "AOBAKE_MAX_BAKE_WORK", default_value_t = 200_000_000_000)]
     pub max_bake_work: u128,
+    /// Most bytes of uploads one bake may use (its character and clip
+    /// files together; every import of the bake holds them in memory).
+    #[arg(long, env = "AOBAKE_MAX_BAKE_INPUT_BYTES", default_value_t = 1 << 30)]
+    pub max_bake_input_bytes: u64,
     /// Requests per second per token.
     #[arg(long, env = "AOBAKE_RATE", default_value_t = 200)]
     pub rate: u32,
@@ -157,6 +161,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         max_body_bytes: args.max_body_bytes,
         requests_per_second: args.rate,
         max_bake_work: args.max_bake_work,
+        max_bake_input_bytes: args.max_bake_input_bytes,
         ..ServerLimits::default()
     };
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());

@@ -27,6 +27,10 @@ pub struct ServerLimits {
     pub max_body_bytes: u64,
     /// Most ray-vertex pairs one bake may trace.
     pub max_bake_work: u128,
+    /// Most bytes of uploads (the character and its clip files) one bake
+    /// may use: each import of the bake (its submit, every worker's jobs)
+    /// holds them all in memory.
+    pub max_bake_input_bytes: u64,
     /// Requests per second per token (bursts of twice that).
     pub requests_per_second: u32,
     /// Longest a request may take (long polls excepted).
@@ -40,6 +44,7 @@ impl Default for ServerLimits {
             // About four hours of tracing on a 2-core machine (14 Mrays/s):
             // CesiumMan's default bake is 2.6e8.
             max_bake_work: 200_000_000_000,
+            max_bake_input_bytes: 1 << 30,
             requests_per_second: 200,
             request_timeout: Duration::from_secs(120),
         }
@@ -281,12 +286,27 @@ impl AppState {
         &self,
         work: impl FnOnce() -> T + Send + 'static,
     ) -> Result<T, ApiError> {
-        let permit = self
-            .imports
+        let permit = self.import_permit().await?;
+        Self::import_holding(permit, work).await
+    }
+
+    /// A turn among the imports [`AppState::imports`] allows at once,
+    /// waited for: a request that reads stored uploads to import them
+    /// takes it first, so that requests waiting their turn hold none of
+    /// those bytes.
+    pub async fn import_permit(&self) -> Result<tokio::sync::OwnedSemaphorePermit, ApiError> {
+        self.imports
             .clone()
             .acquire_owned()
             .await
-            .map_err(|e| ApiError::Internal(e.to_string()))?;
+            .map_err(|e| ApiError::Internal(e.to_string()))
+    }
+
+    /// Runs `work` as [`AppState::import`] does, in the turn `permit`.
+    pub async fn import_holding<T: Send + 'static>(
+        permit: tokio::sync::OwnedSemaphorePermit,
+        work: impl FnOnce() -> T + Send + 'static,
+    ) -> Result<T, ApiError> {
         tokio::task::spawn_blocking(move || {
             let _permit = permit;
             work()

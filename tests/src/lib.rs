@@ -66,6 +66,8 @@ pub struct Options {
     /// `--job-rays`, when not the server's default (0: 4 poses a job,
     /// for tests that need many small jobs).
     pub job_rays: Option<u64>,
+    /// `--max-bake-input-bytes`, when not the server's default.
+    pub max_bake_input_bytes: Option<u64>,
     /// `--blobs`, when not the data directory (an S3 bucket: [`TestS3`]).
     pub blobs: Option<String>,
     /// `--database`, when not SQLite in the data directory (PostgreSQL:
@@ -85,6 +87,7 @@ impl Default for Options {
             rate: 10_000,
             header_timeout_secs: 10.0,
             job_rays: None,
+            max_bake_input_bytes: None,
             blobs: None,
             database: None,
             host: None,
@@ -163,6 +166,10 @@ impl TestEnv {
             .args(["--rate", &o.rate.to_string()])
             .args(["--header-timeout-secs", &o.header_timeout_secs.to_string()])
             .args(o.job_rays.map(|r| format!("--job-rays={r}")))
+            .args(
+                o.max_bake_input_bytes
+                    .map(|b| format!("--max-bake-input-bytes={b}")),
+            )
             .args(o.blobs.as_ref().map(|b| format!("--blobs={b}")))
             .args(o.database.as_ref().map(|d| format!("--database={d}")))
             .env("AOBAKE_ADMIN_TOKEN", ADMIN)

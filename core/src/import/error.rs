@@ -60,6 +60,10 @@ pub enum ImportError {
     /// The file has no triangles to bake.
     #[error("the scene has no triangle meshes")]
     NoGeometry,
+    /// A clips file none of whose animations drives a node of the
+    /// character (by name).
+    #[error("no animation channel targets a node name of the character")]
+    NoAnimations,
 }
 
 impl ImportError {
@@ -90,6 +94,79 @@ impl ImportError {
             Self::UnsupportedExtension(_) => "unsupported_extension",
             Self::Invalid { .. } => "gltf_invalid",
             Self::NoGeometry => "no_geometry",
+            Self::NoAnimations => "no_animations",
         }
+    }
+
+    /// Where in the glTF JSON the error is, as an RFC 6901 JSON Pointer
+    /// (`/meshes/0/primitives/1/attributes/JOINTS_0` for the path
+    /// `meshes[0].primitives[1].attributes.JOINTS_0`), when the error names
+    /// one: for API responses (`problem+json` `pointer`).
+    pub fn pointer(&self) -> Option<String> {
+        match self {
+            Self::Invalid { path, .. }
+            | Self::ForbiddenUri { path, .. }
+            | Self::MissingFile { path, .. } => json_pointer(path),
+            _ => None,
+        }
+    }
+}
+
+/// The JSON Pointer of a JSON path made of member names and array indices
+/// (`a[3].b`: `/a/3/b`); `None` for any other text (a chunk's number, a
+/// description).
+fn json_pointer(path: &str) -> Option<String> {
+    let mut out = String::new();
+    for member in path.split('.') {
+        let (name, mut rest) = member.split_at(member.find('[').unwrap_or(member.len()));
+        let mut chars = name.chars();
+        if !chars
+            .next()
+            .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+            || !chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+        {
+            return None;
+        }
+        out.push('/');
+        out.push_str(name);
+        while !rest.is_empty() {
+            let (index, after) = rest.strip_prefix('[')?.split_once(']')?;
+            if index.is_empty() || !index.bytes().all(|b| b.is_ascii_digit()) {
+                return None;
+            }
+            out.push('/');
+            out.push_str(index);
+            rest = after;
+        }
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_paths_become_pointers_and_other_text_does_not() {
+        for (path, pointer) in [
+            ("accessors[3]", Some("/accessors/3")),
+            (
+                "meshes[0].primitives[1].attributes.JOINTS_0",
+                Some("/meshes/0/primitives/1/attributes/JOINTS_0"),
+            ),
+            ("buffers[0].uri", Some("/buffers/0/uri")),
+            ("skins[2].joints[10]", Some("/skins/2/joints/10")),
+            ("asset", Some("/asset")),
+            ("chunk 2", None),
+            ("accessors[x]", None),
+            ("accessors[]", None),
+            ("accessors[1", None),
+            ("a..b", None),
+            ("", None),
+        ] {
+            let e = ImportError::invalid(path, "is wrong");
+            assert_eq!(e.pointer().as_deref(), pointer, "{path}");
+        }
+        assert_eq!(ImportError::NoGeometry.pointer(), None);
     }
 }

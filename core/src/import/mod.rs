@@ -137,10 +137,7 @@ pub fn import_clips(
         &mut warnings,
     )?;
     if clips.iter().all(|c| c.channels.is_empty()) {
-        return Err(ImportError::invalid(
-            "animations",
-            "no animation channel targets a node name of the character",
-        ));
+        return Err(ImportError::NoAnimations);
     }
     Ok((clips, warnings))
 }

@@ -27,7 +27,7 @@ use axum::{
 use serde::Deserialize;
 use tokio_stream::{Stream, StreamExt as _, wrappers::BroadcastStream};
 
-use super::uploads::load_upload;
+use super::uploads::{upload_bytes, upload_row};
 use crate::{
     auth::{Need, Read, Submit},
     error::{ApiError, ApiResult, Problem},
@@ -107,16 +107,37 @@ pub(crate) async fn submit(
             ));
         }
     }
-    let character = load_upload(&state, &req.character, "character").await?;
-    let mut clips = Vec::new();
+    // The records first: what the bake would hold in memory is known
+    // before a byte of it is read, and read only in the import's turn.
+    let character = upload_row(&state, &req.character, "character").await?;
+    let mut clip_rows = Vec::new();
     for c in &req.clips {
-        clips.push(load_upload(&state, c, "clips").await?);
+        clip_rows.push(upload_row(&state, c, "clips").await?);
+    }
+    let bytes: u64 = std::iter::once(&character)
+        .chain(&clip_rows)
+        .map(|row| u64::try_from(row.bytes).unwrap_or(0))
+        .sum();
+    let max_bytes = state.limits.max_bake_input_bytes;
+    if bytes > max_bytes {
+        return Err(ApiError::bad(
+            "too_much_input",
+            format!(
+                "the character and clip files are {bytes} bytes together, over the limit of {max_bytes}: bake fewer or smaller clip files"
+            ),
+        ));
+    }
+    let permit = state.import_permit().await?;
+    let character = upload_bytes(&state, &character).await?;
+    let mut clips = Vec::new();
+    for row in &clip_rows {
+        clips.push(upload_bytes(&state, row).await?);
     }
     let limits = state.import_limits.clone();
     let max_work = state.limits.max_bake_work;
-    let (key, jobs) = state.import(move || -> ApiResult<_> {
+    let (key, jobs) = AppState::import_holding(permit, move || -> ApiResult<_> {
         let inputs = BakeInputs::load(&character, &clips, &limits)
-            .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
+            .map_err(|e| ApiError::unimportable(&e.what, &e.source))?;
         let bake = Bake::new(&inputs, params.clone())
             .map_err(|e| ApiError::bad("bad_params", e.to_string()))?;
         let work = bake.work();

@@ -220,7 +220,7 @@ pub(crate) async fn post_character(
             Ok::<_, aobake_core::ImportError>((s, upload, left_out))
         })
         .await?
-        .map_err(|e| ApiError::Unprocessable(format!("the character cannot be imported: {e}")))?;
+        .map_err(|e| ApiError::unimportable("the character cannot be imported", &e))?;
     let reply = store_upload(&state, &upload, "character", summary).await?;
     Ok(telling(reply, "characters", &left_out))
 }
@@ -298,10 +298,11 @@ pub(crate) async fn post_clips(
             ApiError::Internal(format!("the stored character no longer imports: {e}"))
         })?;
         let (clips, warnings) = import_clips(upload.upload(), &c.character, &limits)
-            .map_err(|e| ApiError::Unprocessable(format!("the clips cannot be imported: {e}")))?;
+            .map_err(|e| ApiError::unimportable("the clips cannot be imported", &e))?;
         if clips.is_empty() {
-            return Err(ApiError::Unprocessable(
-                "the file has no animations that drive this character".to_owned(),
+            return Err(ApiError::unprocessable(
+                Some("no_animations"),
+                "the file has no animations that drive this character",
             ));
         }
         let names: Vec<serde_json::Value> = clips
@@ -325,16 +326,26 @@ pub(crate) async fn load_upload(
     digest: &str,
     kind: &str,
 ) -> ApiResult<UploadBytes> {
+    let row = upload_row(state, digest, kind).await?;
+    upload_bytes(state, &row).await
+}
+
+/// The record of the stored upload `digest` of `kind`; 404 without one.
+pub(crate) async fn upload_row(state: &AppState, digest: &str, kind: &str) -> ApiResult<UploadRow> {
     crate::blobs::check_digest(digest)?;
-    let row = state
+    state
         .store
         .upload(digest, kind)
         .await?
-        .ok_or_else(|| ApiError::NotFound(format!("no {kind} upload {digest}")))?;
+        .ok_or_else(|| ApiError::NotFound(format!("no {kind} upload {digest}")))
+}
+
+/// The files of the stored upload `row`.
+pub(crate) async fn upload_bytes(state: &AppState, row: &UploadRow) -> ApiResult<UploadBytes> {
     let blob = state
-        .read_blob(digest, None)
+        .read_blob(&row.digest, None)
         .await?
-        .ok_or_else(|| ApiError::Internal(format!("upload {digest} has no blob")))?;
+        .ok_or_else(|| ApiError::Internal(format!("upload {} has no blob", row.digest)))?;
     UploadBytes::from_blob(&blob, row.bundle).map_err(|e| ApiError::Internal(e.to_string()))
 }
 

@@ -101,6 +101,8 @@ async fn load(state: &AppState, id: i64, truth: bool) -> ApiResult<Loaded> {
         .read_blob(&digest, None)
         .await?
         .ok_or_else(|| ApiError::Internal(format!("asset {digest} has no blob")))?;
+    // The inputs are read in the import's turn (see bakes::submit).
+    let permit = state.import_permit().await?;
     let character = load_upload(state, &bake.character, "character").await?;
     let mut clips = Vec::new();
     for c in &bake.clips {
@@ -127,21 +129,20 @@ async fn load(state: &AppState, id: i64, truth: bool) -> ApiResult<Loaded> {
     }
     let limits = state.import_limits.clone();
     let params = bake.params;
-    state
-        .import(move || -> ApiResult<Loaded> {
-            let inputs = BakeInputs::load(&character, &clips, &limits)
-                .map_err(|e| ApiError::Internal(format!("bake {id}'s inputs: {e}")))?;
-            let params = BakeParams::from_canonical(&params)
-                .map_err(|e| ApiError::Internal(format!("bake {id}'s parameters: {e}")))?;
-            Ok(Loaded {
-                inputs,
-                params,
-                family: method.family(),
-                asset,
-                truth: outputs,
-            })
+    AppState::import_holding(permit, move || -> ApiResult<Loaded> {
+        let inputs = BakeInputs::load(&character, &clips, &limits)
+            .map_err(|e| ApiError::Internal(format!("bake {id}'s inputs: {e}")))?;
+        let params = BakeParams::from_canonical(&params)
+            .map_err(|e| ApiError::Internal(format!("bake {id}'s parameters: {e}")))?;
+        Ok(Loaded {
+            inputs,
+            params,
+            family: method.family(),
+            asset,
+            truth: outputs,
         })
-        .await?
+    })
+    .await?
 }
 
 fn bundle(bundle: &Bundle) -> Response {
@@ -158,7 +159,7 @@ fn bundle(bundle: &Bundle) -> Response {
 fn viewer_error(e: ViewerError) -> ApiError {
     match e {
         ViewerError::NoClip(..) => ApiError::NotFound(e.to_string()),
-        ViewerError::TooLarge(_) => ApiError::Unprocessable(e.to_string()),
+        ViewerError::TooLarge(_) => ApiError::unprocessable(None, e.to_string()),
         ViewerError::Job(_) => ApiError::Internal(e.to_string()),
     }
 }

@@ -39,6 +39,10 @@ fn every_hostile_upload_is_refused_and_nothing_is_stored() {
             let (status, body, headers) =
                 env.post_bytes("/v1/characters", ADMIN, content_type, &case.bytes);
             assert_problem(status, &body, &headers, &case.name);
+            if status == 422 {
+                let reason = body["reason"].as_str().unwrap_or_default();
+                assert!(REASONS.contains(&reason), "{}: {body}", case.name);
+            }
         }
     }
     let (status, _) = env.request("GET", "/healthz", ADMIN, None).unwrap();
@@ -63,6 +67,144 @@ fn every_hostile_upload_is_refused_and_nothing_is_stored() {
     let a = upload(&env, &character("RiggedSimple"));
     let (status, body, _) = env.post_bytes("/v1/characters", ADMIN, "model/gltf-binary", &valid);
     assert_eq!((status, body["digest"].as_str()), (200, Some(a.as_str())));
+}
+
+/// The importer's reasons a 422 `invalid_upload` gives (the `reason`
+/// member, as the spec and docs/import-policy.md list them).
+const REASONS: [&str; 9] = [
+    "gltf_container",
+    "gltf_json",
+    "limit_exceeded",
+    "forbidden_uri",
+    "missing_file",
+    "unsupported_extension",
+    "gltf_invalid",
+    "no_geometry",
+    "no_animations",
+];
+
+#[test]
+fn a_refused_import_names_its_reason_and_where_in_the_json() {
+    let env = TestEnv::start(Options::default());
+    let valid = std::fs::read(character("RiggedSimple")).unwrap();
+    let mut pointed = 0;
+    for (case, verdict) in hostile::validator_errors(&valid) {
+        let hostile::Verdict::Refused { path } = verdict else {
+            continue;
+        };
+        let (status, body, _) =
+            env.post_bytes("/v1/characters", ADMIN, "model/gltf-binary", &case.bytes);
+        assert_eq!(
+            (status, body["code"].as_str()),
+            (422, Some("invalid_upload")),
+            "{}: {body}",
+            case.name
+        );
+        // A whole JSON path the error names is in the pointer, as
+        // /member/index segments.
+        let whole = path.contains(['.', ']'])
+            && path.matches('[').count() == path.matches(']').count()
+            && !path.contains(' ');
+        if whole {
+            let segments = format!(
+                "/{}",
+                path.replace("].", "/")
+                    .replace(['[', '.'], "/")
+                    .replace(']', "")
+            );
+            let pointer = body["pointer"].as_str().unwrap_or_default();
+            assert!(
+                pointer.starts_with('/') && pointer.contains(&segments),
+                "{}: {segments} in {body}",
+                case.name
+            );
+            assert_eq!(body["reason"], "gltf_invalid", "{}: {body}", case.name);
+            pointed += 1;
+        } else {
+            assert!(
+                REASONS.contains(&body["reason"].as_str().unwrap_or_default()),
+                "{}: {body}",
+                case.name
+            );
+        }
+    }
+    assert!(pointed >= 10, "only {pointed} cases named a whole path");
+    // A container that is not GLB: its reason, and no place in the JSON.
+    let (status, body, _) =
+        env.post_bytes("/v1/characters", ADMIN, "model/gltf-binary", b"glTF\x01");
+    assert_eq!(
+        (status, &body["reason"], &body["pointer"]),
+        (422, &json!("gltf_container"), &json!(null)),
+        "{body}"
+    );
+    // A .gltf without the side file its buffer names.
+    let json_len = u32::from_le_bytes(valid[12..16].try_into().unwrap()) as usize;
+    let mut gltf: serde_json::Value = serde_json::from_slice(&valid[20..20 + json_len]).unwrap();
+    gltf["buffers"][0]["uri"] = json!("rig.bin");
+    let (status, body, _) = env.post_bytes(
+        "/v1/characters",
+        ADMIN,
+        "model/gltf+json",
+        gltf.to_string().as_bytes(),
+    );
+    assert_eq!(
+        (status, &body["reason"], &body["pointer"]),
+        (422, &json!("missing_file"), &json!("/buffers/0/uri")),
+        "{body}"
+    );
+    // Clips for a character they do not drive.
+    let rigged = upload(&env, &character("RiggedSimple"));
+    let fox = std::fs::read(character("Fox")).unwrap();
+    let (status, body, _) = env.post_bytes(
+        &format!("/v1/clips?character={rigged}"),
+        ADMIN,
+        "model/gltf-binary",
+        &fox,
+    );
+    assert_eq!(
+        (status, &body["reason"]),
+        (422, &json!("no_animations")),
+        "{body}"
+    );
+}
+
+#[test]
+fn a_bake_over_the_input_limit_is_refused_before_its_files_are_read() {
+    let fox = std::fs::read(character("Fox")).unwrap();
+    let env = TestEnv::start(Options {
+        max_bake_input_bytes: Some(fox.len() as u64 + 1),
+        ..Options::default()
+    });
+    let digest = upload(&env, &character("Fox"));
+    let (status, clips, _) = env.post_bytes(
+        &format!("/v1/clips?character={digest}"),
+        ADMIN,
+        "model/gltf-binary",
+        &fox,
+    );
+    assert_eq!(status, 201, "{clips}");
+    let bake = |clips: serde_json::Value| {
+        env.request(
+            "POST",
+            "/v1/bakes",
+            ADMIN,
+            Some(json!({"character": digest, "clips": clips, "method": "static-average",
+                "params": {"poses": 8, "samples": 16, "eval_poses": 1, "eval_fps": 2.0, "test_clips": ["Run"]}})),
+        )
+        .unwrap()
+    };
+    // The character with its clip file: twice the Fox, over the limit.
+    let (status, refused) = bake(json!([clips["digest"]]));
+    assert_eq!(
+        (status, refused["code"].as_str()),
+        (400, Some("too_much_input")),
+        "{refused}"
+    );
+    let detail = refused["detail"].as_str().unwrap();
+    assert!(detail.contains(&(2 * fox.len()).to_string()), "{detail}");
+    // The character alone is within it.
+    let (status, accepted) = bake(json!([]));
+    assert_eq!(status, 202, "{accepted}");
 }
 
 #[test]
