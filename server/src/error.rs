@@ -118,9 +118,9 @@ impl ApiError {
     }
 
     /// A 422 that is not the importer's.
-    pub fn unprocessable(reason: Option<&'static str>, detail: impl Into<String>) -> Self {
+    pub fn unprocessable(detail: impl Into<String>) -> Self {
         Self::Unprocessable {
-            reason,
+            reason: None,
             pointer: None,
             detail: detail.into(),
         }

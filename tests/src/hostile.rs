@@ -13,7 +13,8 @@ pub struct Case {
     pub bytes: Vec<u8>,
 }
 
-fn glb_parts(glb: &[u8]) -> (Value, Vec<u8>) {
+/// A GLB's JSON and BIN chunks.
+pub fn glb_parts(glb: &[u8]) -> (Value, Vec<u8>) {
     let u32_at = |i: usize| u32::from_le_bytes(glb[i..i + 4].try_into().unwrap()) as usize;
     let json_len = u32_at(12);
     let json: Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();

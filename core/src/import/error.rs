@@ -62,7 +62,7 @@ pub enum ImportError {
     NoGeometry,
     /// A clips file none of whose animations drives a node of the
     /// character (by name).
-    #[error("no animation channel targets a node name of the character")]
+    #[error("no animation in the file drives the character: no channel targets a node name it has")]
     NoAnimations,
 }
 
@@ -112,34 +112,67 @@ impl ImportError {
     }
 }
 
-/// The JSON Pointer of a JSON path made of member names and array indices
-/// (`a[3].b`: `/a/3/b`); `None` for any other text (a chunk's number, a
-/// description).
+/// Appends member `key` of a JSON object to the JSON path `path`: `.key`
+/// for a name like glTF's own, `["key"]` for one from the file that is
+/// not (`_UV.x`), as gltf-json writes map keys, so that the path reads
+/// back as one member.
+pub(crate) fn push_member(path: &mut String, key: &str) {
+    if is_name(key) {
+        if !path.is_empty() {
+            path.push('.');
+        }
+        path.push_str(key);
+    } else {
+        path.push_str(&format!("[{key:?}]"));
+    }
+}
+
+/// Whether `key` is written as `.key` in a JSON path.
+fn is_name(key: &str) -> bool {
+    let mut chars = key.chars();
+    chars
+        .next()
+        .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+}
+
+/// The JSON Pointer of a JSON path made of member names, array indices
+/// and quoted keys (`a[3].b["c/d"]`: `/a/3/b/c~1d`); `None` for any other
+/// text (a chunk's number, a description).
 fn json_pointer(path: &str) -> Option<String> {
     let mut out = String::new();
-    for member in path.split('.') {
-        let (name, mut rest) = member.split_at(member.find('[').unwrap_or(member.len()));
-        let mut chars = name.chars();
-        if !chars
-            .next()
-            .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
-            || !chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
-        {
-            return None;
-        }
-        out.push('/');
-        out.push_str(name);
-        while !rest.is_empty() {
-            let (index, after) = rest.strip_prefix('[')?.split_once(']')?;
+    let mut rest = path;
+    let mut first = true;
+    while !rest.is_empty() {
+        if let Some(after) = rest.strip_prefix("[\"") {
+            // A quoted key: up to the closing `"]`, written as Rust's
+            // Debug or gltf-json's writer writes it.
+            let end = after.find("\"]")?;
+            let key = after[..end].replace("\\\"", "\"").replace("\\\\", "\\");
+            out.push('/');
+            out.push_str(&key.replace('~', "~0").replace('/', "~1"));
+            rest = &after[end + 2..];
+        } else if let Some(after) = rest.strip_prefix('[') {
+            let (index, after) = after.split_once(']')?;
             if index.is_empty() || !index.bytes().all(|b| b.is_ascii_digit()) {
                 return None;
             }
             out.push('/');
             out.push_str(index);
             rest = after;
+        } else {
+            let name = if first { rest } else { rest.strip_prefix('.')? };
+            let end = name.find(['.', '[']).unwrap_or(name.len());
+            if !is_name(&name[..end]) {
+                return None;
+            }
+            out.push('/');
+            out.push_str(&name[..end]);
+            rest = &name[end..];
         }
+        first = false;
     }
-    Some(out)
+    (!out.is_empty()).then_some(out)
 }
 
 #[cfg(test)]
@@ -163,10 +196,35 @@ mod tests {
             ("accessors[1", None),
             ("a..b", None),
             ("", None),
+            (
+                "meshes[0].primitives[0].attributes[\"POSITION\"]",
+                Some("/meshes/0/primitives/0/attributes/POSITION"),
+            ),
+            (
+                "meshes[0].primitives[1].attributes[\"_UV.x/y~z\"]",
+                Some("/meshes/0/primitives/1/attributes/_UV.x~1y~0z"),
+            ),
+            ("nodes[2][\"unterminated", None),
+            (".asset", None),
         ] {
             let e = ImportError::invalid(path, "is wrong");
             assert_eq!(e.pointer().as_deref(), pointer, "{path}");
         }
         assert_eq!(ImportError::NoGeometry.pointer(), None);
+    }
+
+    #[test]
+    fn members_from_the_file_read_back_as_one_member() {
+        let mut path = "meshes[0].primitives[1]".to_owned();
+        push_member(&mut path, "attributes");
+        push_member(&mut path, "_UV.x");
+        assert_eq!(path, "meshes[0].primitives[1].attributes[\"_UV.x\"]");
+        assert_eq!(
+            json_pointer(&path).as_deref(),
+            Some("/meshes/0/primitives/1/attributes/_UV.x")
+        );
+        let mut top = String::new();
+        push_member(&mut top, "asset");
+        assert_eq!(top, "asset");
     }
 }

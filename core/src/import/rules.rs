@@ -18,7 +18,7 @@ use gltf::json::{
     validation::Checked,
 };
 
-use super::ImportError;
+use super::{ImportError, error::push_member};
 
 /// Keys whose values (a number, or an array of numbers) are indices or
 /// enums, which `gltf-json` reads as 32-bit.
@@ -104,10 +104,7 @@ pub(crate) fn check_integer_widths(json: &serde_json::Value) -> Result<(), Impor
                         Here::Free
                     };
                     let len = path.len();
-                    if !path.is_empty() {
-                        path.push('.');
-                    }
-                    path.push_str(key);
+                    push_member(path, key);
                     walk(item, path, child)?;
                     path.truncate(len);
                 }
@@ -326,7 +323,8 @@ fn meshes(root: &Root) -> Result<(), ImportError> {
                 let Checked::Valid(semantic) = semantic else {
                     continue;
                 };
-                let path = format!("{here}.attributes.{}", semantic.to_string());
+                let mut path = format!("{here}.attributes");
+                push_member(&mut path, &semantic.to_string());
                 let accessor = accessor(root, index.value(), &path)?;
                 if let Some(expected) = attribute_format(semantic, accessor, quantized) {
                     return Err(ImportError::invalid(

@@ -243,6 +243,20 @@ fn a_model_whose_header_disagrees_with_its_sections_is_refused() {
         .header
         .replacen("\"vertices\":370", "\"vertices\":371", 1);
     let reread = Container::from_bytes(&container.to_bytes()).unwrap();
+    // The primitive table no longer tiles the vertices.
+    assert!(matches!(
+        Model::from_container(&reread),
+        Err(AssetError::Malformed(m)) if m.contains("the primitives cover 370 of the asset's 371 vertices")
+    ));
+    // Without one (a file before format 1.6), the sections do not fit.
+    let mut header: serde_json::Value = serde_json::from_str(&container.header).unwrap();
+    header
+        .as_object_mut()
+        .unwrap()
+        .remove("primitives")
+        .unwrap();
+    container.header = header.to_string();
+    let reread = Container::from_bytes(&container.to_bytes()).unwrap();
     assert!(matches!(
         Model::from_container(&reread),
         Err(AssetError::Malformed(m)) if m.contains("COEF length")

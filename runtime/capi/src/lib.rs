@@ -155,8 +155,9 @@ unsafe fn put<T>(out: *mut T, value: T) -> bool {
 /// Where one glTF primitive's vertices are among an asset's: vertex
 /// `first + i` of the asset is vertex `i` (in accessor order) of primitive
 /// `primitive` of mesh `mesh`, as node `node` instances it (indices of the
-/// glTF file the asset was baked from). For an engine that imports the
-/// glTF its own way and so orders its vertices its own way.
+/// glTF file the asset was baked from, as the asset says: check them
+/// against the file before indexing with them). For an engine that
+/// imports the glTF its own way and so orders its vertices its own way.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct AobakePrimitive {

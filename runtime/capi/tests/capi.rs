@@ -952,6 +952,9 @@ fn c_engines_get_part_names_and_ground_heights_and_bad_input_is_refused() {
     }
 }
 
+/// A handle's `*_primitive` call, bound to it.
+type GetPrimitive<'a> = dyn Fn(usize, *mut aobake_rt::AobakePrimitive) -> bool + 'a;
+
 /// An engine that imports the glTF its own way finds each primitive's
 /// vertices among the asset's: the table of a vertex asset and of a grid
 /// asset is the importer's, instance by instance (the milk truck's wheel
@@ -999,7 +1002,7 @@ fn engines_map_their_vertices_by_the_primitive_table() {
         let ao = aobake_vertex_ao_open(vertex.as_ptr(), vertex.len());
         let g = aobake_grid_open(grid.as_ptr(), grid.len());
         assert!(!ao.is_null() && !g.is_null());
-        let tables: [(usize, &dyn Fn(usize, *mut AobakePrimitive) -> bool); 2] = [
+        let tables: [(usize, &GetPrimitive); 2] = [
             (aobake_vertex_ao_primitive_count(ao), &|i, out| {
                 aobake_vertex_ao_primitive(ao, i, out)
             }),

@@ -114,10 +114,10 @@ pub(crate) async fn submit(
     for c in &req.clips {
         clip_rows.push(upload_row(&state, c, "clips").await?);
     }
-    let bytes: u64 = std::iter::once(&character)
+    let bytes = std::iter::once(&character)
         .chain(&clip_rows)
         .map(|row| u64::try_from(row.bytes).unwrap_or(0))
-        .sum();
+        .fold(0u64, u64::saturating_add);
     let max_bytes = state.limits.max_bake_input_bytes;
     if bytes > max_bytes {
         return Err(ApiError::bad(

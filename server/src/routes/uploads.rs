@@ -285,11 +285,14 @@ pub(crate) async fn post_clips(
     ApiQuery(q): ApiQuery<ClipsQuery>,
     req: Request,
 ) -> ApiResult<(StatusCode, [(HeaderName, String); 1], Json<Uploaded>)> {
-    let character = load_upload(&state, &q.character, "character").await?;
+    let character = upload_row(&state, &q.character, "character").await?;
     let (upload, part_name) = read_upload(&state, req).await?;
     let name = file_name(q.name.or(part_name));
     let limits = state.import_limits.clone();
-    let (summary, upload, left_out) = state.import(move || {
+    // The stored character is read in the import's turn (bakes::submit).
+    let permit = state.import_permit().await?;
+    let character = upload_bytes(&state, &character).await?;
+    let (summary, upload, left_out) = AppState::import_holding(permit, move || {
         let mut upload = upload;
         let left_out = upload.keep_referenced(&limits);
         // Imported when it was uploaded: failing now is the server's
@@ -297,14 +300,10 @@ pub(crate) async fn post_clips(
         let c = import_character(character.upload(), &limits).map_err(|e| {
             ApiError::Internal(format!("the stored character no longer imports: {e}"))
         })?;
+        // No clip that drives the character is the importer's
+        // `no_animations`.
         let (clips, warnings) = import_clips(upload.upload(), &c.character, &limits)
             .map_err(|e| ApiError::unimportable("the clips cannot be imported", &e))?;
-        if clips.is_empty() {
-            return Err(ApiError::unprocessable(
-                Some("no_animations"),
-                "the file has no animations that drive this character",
-            ));
-        }
         let names: Vec<serde_json::Value> = clips
             .iter()
             .map(|c| serde_json::json!({"name": c.name, "duration": c.duration}))

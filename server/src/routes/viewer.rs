@@ -97,12 +97,13 @@ async fn load(state: &AppState, id: i64, truth: bool) -> ApiResult<Loaded> {
         .asset
         .clone()
         .ok_or_else(|| ApiError::Conflict(format!("bake {id} has no asset yet")))?;
+    // The asset and the inputs are read in the import's turn (see
+    // bakes::submit).
+    let permit = state.import_permit().await?;
     let asset = state
         .read_blob(&digest, None)
         .await?
         .ok_or_else(|| ApiError::Internal(format!("asset {digest} has no blob")))?;
-    // The inputs are read in the import's turn (see bakes::submit).
-    let permit = state.import_permit().await?;
     let character = load_upload(state, &bake.character, "character").await?;
     let mut clips = Vec::new();
     for c in &bake.clips {
@@ -159,7 +160,7 @@ fn bundle(bundle: &Bundle) -> Response {
 fn viewer_error(e: ViewerError) -> ApiError {
     match e {
         ViewerError::NoClip(..) => ApiError::NotFound(e.to_string()),
-        ViewerError::TooLarge(_) => ApiError::unprocessable(None, e.to_string()),
+        ViewerError::TooLarge(_) => ApiError::unprocessable(e.to_string()),
         ViewerError::Job(_) => ApiError::Internal(e.to_string()),
     }
 }

@@ -137,6 +137,33 @@ fn a_refused_import_names_its_reason_and_where_in_the_json() {
         (422, &json!("gltf_container"), &json!(null)),
         "{body}"
     );
+    // Pointers name the member exactly: a map key as gltf-json writes
+    // it, and an attribute name from the file that has a dot in it.
+    let (json, bin) = hostile::glb_parts(&valid);
+    for (edit, pointer) in [
+        (
+            ("POSITION", json!(9999)),
+            "/meshes/0/primitives/0/attributes/POSITION",
+        ),
+        (
+            ("_UV.x/y", json!(1u64 << 33)),
+            "/meshes/0/primitives/0/attributes/_UV.x~1y",
+        ),
+    ] {
+        let mut j = json.clone();
+        j["meshes"][0]["primitives"][0]["attributes"][edit.0] = edit.1;
+        let (status, body, _) = env.post_bytes(
+            "/v1/characters",
+            ADMIN,
+            "model/gltf-binary",
+            &hostile::glb(&j, &bin),
+        );
+        assert_eq!(
+            (status, &body["reason"], &body["pointer"]),
+            (422, &json!("gltf_invalid"), &json!(pointer)),
+            "{body}"
+        );
+    }
     // A .gltf without the side file its buffer names.
     let json_len = u32::from_le_bytes(valid[12..16].try_into().unwrap()) as usize;
     let mut gltf: serde_json::Value = serde_json::from_slice(&valid[20..20 + json_len]).unwrap();
@@ -193,8 +220,14 @@ fn a_bake_over_the_input_limit_is_refused_before_its_files_are_read() {
         )
         .unwrap()
     };
-    // The character with its clip file: twice the Fox, over the limit.
+    // The character with its clip file: twice the Fox, over the limit,
+    // refused from the records alone: with the blobs gone, reading one
+    // would have failed (500) instead.
+    let blobs = env.data().join("blobs");
+    let aside = env.data().join("blobs-aside");
+    std::fs::rename(&blobs, &aside).unwrap();
     let (status, refused) = bake(json!([clips["digest"]]));
+    std::fs::rename(&aside, &blobs).unwrap();
     assert_eq!(
         (status, refused["code"].as_str()),
         (400, Some("too_much_input")),

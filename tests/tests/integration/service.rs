@@ -81,7 +81,7 @@ fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
         .request("POST", "/v1/keys", ADMIN, Some(request))
         .unwrap();
     assert_eq!((status, &computed["key"]), (200, &json!(key)), "{computed}");
-    assert_eq!(computed["algorithm_version"], 9, "{computed}");
+    assert_eq!(computed["algorithm_version"], 10, "{computed}");
     assert_eq!(computed["params"]["poses"], 24, "{computed}");
     // Digests need not be uploads; a malformed one, an unknown method or
     // parameter is refused by name.

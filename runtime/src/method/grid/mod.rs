@@ -12,8 +12,10 @@ pub mod tclip;
 use glam::{Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
-/// The version of the grid bake's algorithm, part of the bake key.
-pub const ALGORITHM_VERSION: u32 = 2;
+/// The version of the grid bake's algorithm, part of the bake key: bump
+/// it when a change alters what a bake's asset holds (3: the primitive
+/// table in the header).
+pub const ALGORITHM_VERSION: u32 = 3;
 
 /// Most parts a grid asset may hold.
 pub const MAX_PARTS: usize = 256;

@@ -26,5 +26,5 @@ pub use play::VertexAo;
 /// Version of the vertex methods' algorithms, part of the bake key: bump
 /// it when a change to fitting changes the coefficients a bake produces,
 /// or what an asset holds (8: the rig in the header; 9: the angle ranges
-/// its fitted rows cover).
-pub const ALGORITHM_VERSION: u32 = 9;
+/// its fitted rows cover; 10: the primitive table in the header).
+pub const ALGORITHM_VERSION: u32 = 10;
