@@ -41,6 +41,18 @@ pub enum ApiError {
         /// What failed.
         message: String,
     },
+    /// The TLS handshake with an `https://` server failed: its
+    /// certificate is not trusted, or names another host. Waiting does not
+    /// mend it.
+    #[error(
+        "cannot talk to {base} securely: {message} (a certificate of a private CA is trusted once the CA is in the system's trust store, or in a file SSL_CERT_FILE names)"
+    )]
+    Tls {
+        /// The server.
+        base: String,
+        /// What the handshake said.
+        message: String,
+    },
     /// The answer was not what the API promises.
     #[error("unexpected answer from {base}: {message}")]
     Decode {
@@ -71,7 +83,7 @@ impl ApiError {
         match self {
             Self::Transport { .. } => true,
             Self::Status { status, .. } => *status >= 500,
-            Self::Decode { .. } => false,
+            Self::Tls { .. } | Self::Decode { .. } => false,
         }
     }
 }
@@ -87,7 +99,7 @@ impl ApiError {
         match self {
             Self::Transport { .. } => true,
             Self::Status { status, .. } => matches!(status, 502..=504),
-            Self::Decode { .. } => false,
+            Self::Tls { .. } | Self::Decode { .. } => false,
         }
     }
 }
@@ -132,11 +144,19 @@ pub fn retry<T>(
 type Response = ureq::http::Response<ureq::Body>;
 
 /// An HTTP agent whose calls each take at most `timeout`, every status an
-/// answer (the client reads problems itself).
-fn agent(timeout: Duration) -> ureq::Agent {
+/// answer (the client reads problems itself). `https://` servers are
+/// checked against the system's trust store (with `SSL_CERT_FILE` or
+/// `SSL_CERT_DIR`, those certificates), so a studio's own CA works as the
+/// machine has it.
+pub fn agent(timeout: Duration) -> ureq::Agent {
     ureq::Agent::config_builder()
         .timeout_global(Some(timeout))
         .http_status_as_error(false)
+        .tls_config(
+            ureq::tls::TlsConfig::builder()
+                .root_certs(ureq::tls::RootCerts::PlatformVerifier)
+                .build(),
+        )
         .build()
         .into()
 }
@@ -171,6 +191,18 @@ impl Servers {
 /// connection was made), so another server of the fleet may take it as it
 /// is: a request that timed out or broke after it was sent may have been
 /// done, and is left to [`retry`] on the same server.
+/// Whether `e` is a failed TLS handshake (rustls' own error, or one an
+/// I/O error carries).
+fn tls_failed(e: &ureq::Error) -> bool {
+    match e {
+        ureq::Error::Rustls(_) | ureq::Error::Tls(_) => true,
+        ureq::Error::Io(io) => io
+            .get_ref()
+            .is_some_and(|inner| inner.is::<rustls::Error>()),
+        _ => false,
+    }
+}
+
 fn never_arrived(e: &ureq::Error) -> bool {
     use std::io::ErrorKind;
     match e {
@@ -332,6 +364,12 @@ impl Client {
                 }
             }
         }
+        if tls_failed(&first) {
+            return Err(ApiError::Tls {
+                base: urls[start].clone(),
+                message: first.to_string(),
+            });
+        }
         Err(ApiError::Transport {
             base: urls[start].clone(),
             message: first.to_string(),
@@ -436,7 +474,8 @@ impl Client {
             .read_json()
             .map_err(|e| match &e {
                 ureq::Error::Io(_) | ureq::Error::Timeout(_) => self.transport(e),
-                ureq::Error::Json(j) if j.is_io() || j.is_eof() => self.transport(e),
+                // A body read as it streams (no length): its reads.
+                ureq::Error::Json(j) if j.is_io() => self.transport(e),
                 _ => self.decode(e),
             })
     }

@@ -236,6 +236,11 @@ impl TestEnv {
         self.spawn_worker(None, Some(servers), &[])
     }
 
+    /// [`TestEnv::start_worker_for`] with `env` set for the worker.
+    pub fn start_worker_at(&mut self, servers: &str, env: &[(&str, &str)]) -> usize {
+        self.spawn_worker(None, Some(servers), env)
+    }
+
     fn spawn_worker(
         &mut self,
         host: Option<&netns::Host>,

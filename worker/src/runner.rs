@@ -174,12 +174,21 @@ impl RunError {
 }
 
 /// What to check when a lease is refused in a way that waiting does not
-/// mend; `None` for a refusal worth retrying.
-fn refused_for_good(e: &ApiError) -> Option<&'static str> {
-    // A success whose body is not a lease list: a web server or a proxy's
-    // page that answers every path (an aobake server of another version
-    // answers as this one does, its lease list being additive).
-    if let ApiError::Decode { .. } = e {
+/// mend; `None` for a refusal worth retrying. `answered`: a lease request
+/// has had the server's answer before.
+fn refused_for_good(e: &ApiError, answered: bool) -> Option<&'static str> {
+    // A success whose body is not a lease list, before any that was: a
+    // web server or a proxy's page that answers every path. Once the
+    // server has answered, such a body (a proxy's page in a restart) is
+    // worth waiting out.
+    if let ApiError::Tls { .. } = e {
+        return Some(
+            "the server's certificate is not trusted here: put its CA in the system's trust store, or name it with SSL_CERT_FILE",
+        );
+    }
+    if let ApiError::Decode { .. } = e
+        && !answered
+    {
         return Some(
             "--server answered, but not as an aobake server does: is it the address of another service?",
         );
@@ -259,7 +268,7 @@ fn dispatch(
                 }
             }
             Err(e) => {
-                if let Some(check) = refused_for_good(&e) {
+                if let Some(check) = refused_for_good(&e, told) {
                     // Stop as at SIGTERM: jobs running now stop at their
                     // deadline, and their leases pass to other workers.
                     shutdown.store(true, Ordering::Relaxed);

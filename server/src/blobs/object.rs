@@ -91,6 +91,10 @@ impl ObjectBlobs {
                 "the endpoint is http://: add allow_http=true (or use https://)".into(),
             ));
         }
+        // TLS to the store is reqwest's rustls on ring, the process's
+        // provider (reqwest asks for it when it builds its client); an
+        // error says one is installed already.
+        let _ = rustls::crypto::ring::default_provider().install_default();
         let store = builder.build().map_err(|e| bad(e.to_string()))?;
         let prefix = Path::parse(prefix).map_err(|e| bad(e.to_string()))?;
         Ok(Self::new(Arc::new(store), prefix))
@@ -254,6 +258,32 @@ mod tests {
             refused.contains("no-such-bucket") || refused.contains("NoSuchBucket"),
             "{refused}"
         );
+    }
+
+    /// An `https://` endpoint is spoken to in TLS (rustls on ring, the
+    /// provider this module installs): what reaches the endpoint opens
+    /// with a TLS handshake record, and the store's error is the broken
+    /// connection's, not a missing crypto provider's.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn an_https_endpoint_is_spoken_to_in_tls() {
+        use super::super::Blobs as _;
+        use std::io::Read as _;
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let first = std::thread::spawn(move || {
+            let (mut stream, _) = listener.accept().unwrap();
+            let mut head = [0u8; 3];
+            stream.read_exact(&mut head).unwrap();
+            head
+        });
+        let blobs = super::ObjectBlobs::from_url(&format!(
+            "s3://bucket?endpoint=https://127.0.0.1:{port}&region=us-east-1&access_key_id=a&secret_access_key=b"
+        ))
+        .unwrap();
+        let failed = blobs.get(&"0".repeat(64)).await.unwrap_err().to_string();
+        // A TLS record: handshake (22), protocol 3.x.
+        assert_eq!(first.join().unwrap()[..2], [22, 3], "{failed}");
+        assert!(!failed.contains("CryptoProvider"), "{failed}");
     }
 
     #[test]

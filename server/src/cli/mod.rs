@@ -184,7 +184,7 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
                 ApiError::Status { status, .. } if *status >= 500 => exit::UNAVAILABLE,
                 ApiError::Status { .. } => exit::BAD_INPUT,
                 ApiError::Transport { .. } => exit::UNAVAILABLE,
-                ApiError::Decode { .. } => exit::FAILED,
+                ApiError::Tls { .. } | ApiError::Decode { .. } => exit::FAILED,
             };
         }
         if cause.is::<aobake_core::ImportError>()

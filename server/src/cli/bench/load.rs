@@ -238,18 +238,10 @@ pub(super) fn load(args: &LoadArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn agent(timeout: Duration) -> ureq::Agent {
-    ureq::Agent::config_builder()
-        .http_status_as_error(false)
-        .timeout_global(Some(timeout))
-        .build()
-        .into()
-}
-
 /// Asks for a bake's status every `every_ms`, cycling through `bakes`.
 fn poll(url: &str, token: &str, bakes: &[i64], every_ms: u64, deadline: Instant, tally: &Tally) {
     use rand::RngExt as _;
-    let agent = agent(Duration::from_secs(30));
+    let agent = aobake_api::client::agent(Duration::from_secs(30));
     let auth = format!("Bearer {token}");
     let mut rng = rand::rng();
     // Clients that started at different times.
@@ -281,7 +273,7 @@ fn poll(url: &str, token: &str, bakes: &[i64], every_ms: u64, deadline: Instant,
 fn listen(url: &str, token: &str, deadline: Instant, tally: &Tally, cut: &AtomicU64) {
     while Instant::now() < deadline {
         let left = deadline.saturating_duration_since(Instant::now());
-        let res = agent(left)
+        let res = aobake_api::client::agent(left)
             .get(format!("{url}/v1/events"))
             .header("authorization", format!("Bearer {token}"))
             .call();
@@ -342,7 +334,7 @@ fn variant(tag: &str) -> anyhow::Result<Vec<u8>> {
 
 /// Uploads a new character every `every_ms`.
 fn upload(url: &str, token: &str, every_ms: u64, deadline: Instant, tally: &Tally) {
-    let agent = agent(Duration::from_secs(60));
+    let agent = aobake_api::client::agent(Duration::from_secs(60));
     let mut n = 0u64;
     while Instant::now() < deadline {
         n += 1;
