@@ -20,7 +20,9 @@ use super::params::BakeRequestArgs;
 pub(super) struct Conn {
     /// The server's URL, or a fleet's servers comma-separated (the next is
     /// asked when one cannot be reached). Default: `AOBAKE_SERVER`, else
-    /// the URL `aobake serve` wrote into `aobake-data/server.url`.
+    /// the URL `aobake serve` wrote into `aobake-data/server.url`. An
+    /// https:// server's certificate must be one the machine trusts (its
+    /// store, or SSL_CERT_FILE / SSL_CERT_DIR).
     #[arg(long, env = "AOBAKE_SERVER", value_parser = super::common::server_list)]
     server: Option<String>,
     /// A bearer token. Default: `AOBAKE_TOKEN`, else

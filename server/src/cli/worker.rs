@@ -9,7 +9,9 @@
 pub(super) struct WorkerArgs {
     /// The server's URL; for a fleet without a load balancer, several,
     /// comma-separated (servers on one database and blob store): when the
-    /// one it asks cannot be reached, the worker goes on with the next.
+    /// one it asks cannot be reached, the worker goes on with the next. An
+    /// https:// server's certificate must be one the machine trusts (its
+    /// store, or SSL_CERT_FILE / SSL_CERT_DIR).
     #[arg(long, env = "AOBAKE_SERVER", value_parser = super::common::server_list)]
     server: String,
     /// A token with the worker scope.
