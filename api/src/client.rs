@@ -41,17 +41,20 @@ pub enum ApiError {
         /// What failed.
         message: String,
     },
-    /// The TLS handshake with an `https://` server failed: its
-    /// certificate is not trusted, or names another host. Waiting does not
-    /// mend it.
-    #[error(
-        "cannot talk to {base} securely: {message} (a certificate of a private CA is trusted once the CA is in the system's trust store, or in a file SSL_CERT_FILE names)"
-    )]
+    /// The TLS handshake with an `https://` server this client never had
+    /// an answer from failed (its certificate is not trusted, it does not
+    /// speak TLS, no trust store): a setup problem that waiting does not
+    /// mend. Once a server has answered, a failed handshake (a proxy that
+    /// serves a placeholder certificate while it starts) is a
+    /// [`ApiError::Transport`] error, waited out.
+    #[error("cannot talk to {base} securely: {message}; {hint}")]
     Tls {
         /// The server.
         base: String,
         /// What the handshake said.
         message: String,
+        /// What to do about it.
+        hint: &'static str,
     },
     /// The answer was not what the API promises.
     #[error("unexpected answer from {base}: {message}")]
@@ -167,6 +170,9 @@ pub fn agent(timeout: Duration) -> ureq::Agent {
 struct Servers {
     urls: Vec<String>,
     current: std::sync::atomic::AtomicUsize,
+    /// Whether a server has answered this client (after which a failed
+    /// handshake is an outage, not a setup problem).
+    answered: std::sync::atomic::AtomicBool,
 }
 
 impl Servers {
@@ -174,6 +180,7 @@ impl Servers {
         Self {
             urls,
             current: std::sync::atomic::AtomicUsize::new(0),
+            answered: std::sync::atomic::AtomicBool::new(false),
         }
     }
 
@@ -187,22 +194,34 @@ impl Servers {
     }
 }
 
+/// What to do about `e` when it is a failed TLS handshake (rustls' own
+/// error, or one an I/O error carries); `None` for any other error. A
+/// failed handshake sent no request.
+fn tls_failure(e: &ureq::Error) -> Option<&'static str> {
+    let rustls = match e {
+        ureq::Error::Rustls(r) => Some(r),
+        ureq::Error::Tls(_) => None,
+        ureq::Error::Io(io) => Some(io.get_ref()?.downcast_ref::<rustls::Error>()?),
+        _ => return None,
+    };
+    Some(match rustls {
+        Some(rustls::Error::InvalidCertificate(_)) => {
+            "its certificate is not one this machine trusts: add the CA that signed it to the system's trust store, or name a bundle that holds it (and the public roots, if other servers need them) with SSL_CERT_FILE"
+        }
+        Some(rustls::Error::InvalidMessage(_) | rustls::Error::InappropriateMessage { .. }) => {
+            "it does not answer in TLS: is it an http:// address?"
+        }
+        Some(rustls::Error::General(_)) | None => {
+            "no certificate could be checked: the system's trust store is empty, or SSL_CERT_FILE or SSL_CERT_DIR names no certificates"
+        }
+        Some(_) => "the TLS handshake failed",
+    })
+}
+
 /// Whether a request failed before any server could have seen it (no
 /// connection was made), so another server of the fleet may take it as it
 /// is: a request that timed out or broke after it was sent may have been
 /// done, and is left to [`retry`] on the same server.
-/// Whether `e` is a failed TLS handshake (rustls' own error, or one an
-/// I/O error carries).
-fn tls_failed(e: &ureq::Error) -> bool {
-    match e {
-        ureq::Error::Rustls(_) | ureq::Error::Tls(_) => true,
-        ureq::Error::Io(io) => io
-            .get_ref()
-            .is_some_and(|inner| inner.is::<rustls::Error>()),
-        _ => false,
-    }
-}
-
 fn never_arrived(e: &ureq::Error) -> bool {
     use std::io::ErrorKind;
     match e {
@@ -340,11 +359,18 @@ impl Client {
     ) -> Result<Response> {
         let urls = &self.servers.urls;
         let start = self.servers.index();
+        let answered = |res| {
+            self.servers
+                .answered
+                .store(true, std::sync::atomic::Ordering::Relaxed);
+            Ok(res)
+        };
         let first = match request(&urls[start]) {
-            Ok(res) => return Ok(res),
+            Ok(res) => return answered(res),
             Err(e) => e,
         };
-        if never_arrived(&first) {
+        let tls = tls_failure(&first);
+        if never_arrived(&first) || tls.is_some() {
             for k in 1..urls.len() {
                 let i = (start + k) % urls.len();
                 if let Ok(res) = request(&urls[i]) {
@@ -360,14 +386,20 @@ impl Client {
                             urls[start], urls[i]
                         ));
                     }
-                    return Ok(res);
+                    return answered(res);
                 }
             }
         }
-        if tls_failed(&first) {
+        if let Some(hint) = tls
+            && !self
+                .servers
+                .answered
+                .load(std::sync::atomic::Ordering::Relaxed)
+        {
             return Err(ApiError::Tls {
                 base: urls[start].clone(),
                 message: first.to_string(),
+                hint,
             });
         }
         Err(ApiError::Transport {
@@ -1088,5 +1120,58 @@ mod tests {
         let me = client.whoami().unwrap();
         assert_eq!((me.name.as_str(), me.scopes.len()), ("ci", 2));
         assert!(matches!(client.whoami(), Err(ApiError::Decode { .. })));
+    }
+
+    /// A failed handshake is a setup problem (`Tls`, saying what to do)
+    /// until a server has answered the client; after that, an outage to
+    /// wait out (a proxy serving a placeholder certificate as it starts).
+    #[test]
+    fn a_failed_handshake_is_final_only_before_the_first_answer() {
+        let client = Client::new("https://127.0.0.1:1", "t");
+        let untrusted = || {
+            ureq::Error::Io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                rustls::Error::InvalidCertificate(rustls::CertificateError::UnknownIssuer),
+            ))
+        };
+        match client.reach(&|_| Err(untrusted())) {
+            Err(ApiError::Tls { hint, .. }) => {
+                assert!(hint.contains("not one this machine trusts"), "{hint}");
+            }
+            other => panic!("{other:?}"),
+        }
+        let answered = client.reach(&|_| {
+            Ok(ureq::http::Response::builder()
+                .status(200)
+                .body(ureq::Body::builder().data("ok"))
+                .unwrap())
+        });
+        assert!(answered.is_ok());
+        let later = client.reach(&|_| Err(untrusted())).unwrap_err();
+        assert!(
+            matches!(later, ApiError::Transport { .. }) && later.is_outage(),
+            "{later:?}"
+        );
+    }
+
+    /// `https://` to a server that speaks plain HTTP says so.
+    #[test]
+    fn https_to_a_plain_http_server_says_it_does_not_answer_in_tls() {
+        use std::io::Read as _;
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = listener.local_addr().unwrap();
+        std::thread::spawn(move || {
+            let (mut stream, _) = listener.accept().unwrap();
+            let _ = stream.read(&mut [0u8; 4096]);
+            let _ = stream.write_all(
+                b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+            );
+        });
+        match Client::new(&format!("https://{addr}"), "t").whoami() {
+            Err(e @ ApiError::Tls { hint, .. }) => {
+                assert!(hint.contains("is it an http:// address"), "{e}");
+            }
+            other => panic!("{other:?}"),
+        }
     }
 }

@@ -177,15 +177,15 @@ impl RunError {
 /// mend; `None` for a refusal worth retrying. `answered`: a lease request
 /// has had the server's answer before.
 fn refused_for_good(e: &ApiError, answered: bool) -> Option<&'static str> {
+    // A failed handshake is `Tls` only before any server answered the
+    // client (later it is an outage, waited out).
+    if let ApiError::Tls { hint, .. } = e {
+        return Some(hint);
+    }
     // A success whose body is not a lease list, before any that was: a
     // web server or a proxy's page that answers every path. Once the
     // server has answered, such a body (a proxy's page in a restart) is
     // worth waiting out.
-    if let ApiError::Tls { .. } = e {
-        return Some(
-            "the server's certificate is not trusted here: put its CA in the system's trust store, or name it with SSL_CERT_FILE",
-        );
-    }
     if let ApiError::Decode { .. } = e
         && !answered
     {

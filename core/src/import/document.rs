@@ -201,12 +201,14 @@ fn validate(root: &json::Root, warnings: &mut Vec<String>) -> Result<(), ImportE
         for (p, prim) in mesh.primitives.iter().enumerate() {
             for (semantic, index) in &prim.attributes {
                 if index.value() >= root.accessors.len() {
-                    let name = match semantic {
-                        json::validation::Checked::Valid(s) => s.to_string(),
-                        json::validation::Checked::Invalid => "?".to_owned(),
-                    };
+                    // An attribute whose name did not parse is named by
+                    // the primitive's attributes as a whole.
+                    let mut path = format!("meshes[{m}].primitives[{p}].attributes");
+                    if let json::validation::Checked::Valid(s) = semantic {
+                        path.push_str(&format!("[\"{}\"]", s.to_string()));
+                    }
                     return Err(ImportError::invalid(
-                        format!("meshes[{m}].primitives[{p}].attributes[\"{name}\"]"),
+                        path,
                         format!("accessor {} does not exist", index.value()),
                     ));
                 }

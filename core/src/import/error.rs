@@ -123,7 +123,7 @@ pub(crate) fn push_member(path: &mut String, key: &str) {
         }
         path.push_str(key);
     } else {
-        path.push_str(&format!("[{key:?}]"));
+        path.push_str(&format!("[\"{key}\"]"));
     }
 }
 
@@ -145,10 +145,11 @@ fn json_pointer(path: &str) -> Option<String> {
     let mut first = true;
     while !rest.is_empty() {
         if let Some(after) = rest.strip_prefix("[\"") {
-            // A quoted key: up to the closing `"]`, written as Rust's
-            // Debug or gltf-json's writer writes it.
+            // A quoted key, as gltf-json and `push_member` write it: as
+            // it is, up to the closing `"]` (a key holding `"]` itself
+            // reads short, and the path then does not parse).
             let end = after.find("\"]")?;
-            let key = after[..end].replace("\\\"", "\"").replace("\\\\", "\\");
+            let key = &after[..end];
             out.push('/');
             out.push_str(&key.replace('~', "~0").replace('/', "~1"));
             rest = &after[end + 2..];

@@ -22,7 +22,7 @@ pub(super) struct Conn {
     /// asked when one cannot be reached). Default: `AOBAKE_SERVER`, else
     /// the URL `aobake serve` wrote into `aobake-data/server.url`. An
     /// https:// server's certificate must be one the machine trusts (its
-    /// store, or SSL_CERT_FILE / SSL_CERT_DIR).
+    /// store; SSL_CERT_FILE or SSL_CERT_DIR replace the store).
     #[arg(long, env = "AOBAKE_SERVER", value_parser = super::common::server_list)]
     server: Option<String>,
     /// A bearer token. Default: `AOBAKE_TOKEN`, else

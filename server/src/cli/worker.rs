@@ -11,7 +11,7 @@ pub(super) struct WorkerArgs {
     /// comma-separated (servers on one database and blob store): when the
     /// one it asks cannot be reached, the worker goes on with the next. An
     /// https:// server's certificate must be one the machine trusts (its
-    /// store, or SSL_CERT_FILE / SSL_CERT_DIR).
+    /// store; SSL_CERT_FILE or SSL_CERT_DIR replace the store).
     #[arg(long, env = "AOBAKE_SERVER", value_parser = super::common::server_list)]
     server: String,
     /// A token with the worker scope.

@@ -7,17 +7,23 @@ use std::{path::Path, sync::Arc, time::Duration};
 
 use aobake_e2e::{Options, TestEnv, character};
 
+/// A CA of its own, its certificate's PEM written to `file`: its
+/// parameters and key, to sign with.
+fn certificate_authority(file: &Path) -> rcgen::Issuer<'static, rcgen::KeyPair> {
+    use rcgen::{BasicConstraints, CertificateParams, IsCa, Issuer, KeyPair};
+    let key = KeyPair::generate().unwrap();
+    let mut params = CertificateParams::new(Vec::<String>::new()).unwrap();
+    params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+    std::fs::write(file, params.self_signed(&key).unwrap().pem()).unwrap();
+    Issuer::new(params, key)
+}
+
 /// A TLS front on `localhost` for the server at `backend` (`host:port`),
 /// its certificate from a CA of its own whose PEM it writes to
 /// `ca_file`; its `https://` URL. It runs as long as the test.
 fn tls_front(backend: &str, ca_file: &Path) -> String {
-    use rcgen::{BasicConstraints, CertificateParams, IsCa, Issuer, KeyPair};
-    let ca_key = KeyPair::generate().unwrap();
-    let mut ca_params = CertificateParams::new(Vec::<String>::new()).unwrap();
-    ca_params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
-    let ca = ca_params.self_signed(&ca_key).unwrap();
-    std::fs::write(ca_file, ca.pem()).unwrap();
-    let issuer = Issuer::new(ca_params, ca_key);
+    use rcgen::{CertificateParams, KeyPair};
+    let issuer = certificate_authority(ca_file);
     let key = KeyPair::generate().unwrap();
     let cert = CertificateParams::new(vec!["localhost".to_owned()])
         .unwrap()
@@ -105,19 +111,24 @@ fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
     let bake: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(bake["state"], "done", "{bake}");
 
-    // Without the CA the certificate is refused at once, not waited on
-    // as an outage: exit 1, saying what to do.
+    // A machine that trusts another CA refuses the certificate in the
+    // handshake at once, not waited on as an outage: exit 1, saying what
+    // to do.
+    let other = env.dir.path().join("other-ca.pem");
+    certificate_authority(&other);
     let started = std::time::Instant::now();
     let out = env
         .aobake_command(&["workers"])
         .env("AOBAKE_SERVER", &url)
-        .env("SSL_CERT_FILE", env.dir.path().join("empty.pem"))
+        .env("SSL_CERT_FILE", &other)
         .output()
         .unwrap();
     let said = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{said}");
     assert!(
-        said.contains("securely") && said.contains("SSL_CERT_FILE"),
+        said.contains("invalid peer certificate")
+            && said.contains("not one this machine trusts")
+            && said.contains("SSL_CERT_FILE"),
         "{said}"
     );
     assert!(started.elapsed() < Duration::from_secs(20), "{said}");
@@ -125,7 +136,7 @@ fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
     let mut worker = std::process::Command::new(aobake_e2e::binary())
         .args(["worker", "--server", &url, "--id", "untrusting"])
         .args(["--token", &env.token(&["worker"])])
-        .env("SSL_CERT_FILE", env.dir.path().join("empty.pem"))
+        .env("SSL_CERT_FILE", &other)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -144,5 +155,8 @@ fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
     let mut stderr = String::new();
     std::io::Read::read_to_string(&mut worker.stderr.take().unwrap(), &mut stderr).unwrap();
     assert_eq!(exit.code(), Some(3), "{stderr}");
-    assert!(stderr.contains("certificate is not trusted"), "{stderr}");
+    assert!(
+        stderr.contains("refused to lease jobs") && stderr.contains("not one this machine trusts"),
+        "{stderr}"
+    );
 }
