@@ -205,6 +205,12 @@ fn tls_failure(e: &ureq::Error) -> Option<&'static str> {
         _ => return None,
     };
     Some(match rustls {
+        // webpki's error, which rustls carries as an opaque one.
+        Some(rustls::Error::InvalidCertificate(c))
+            if format!("{c:?}").contains("CaUsedAsEndEntity") =>
+        {
+            "it presents a CA's certificate as its own: give the server a certificate of its own, signed by a CA this machine trusts"
+        }
         Some(rustls::Error::InvalidCertificate(_)) => {
             "its certificate is not one this machine trusts: add the CA that signed it to the system's trust store, or name a bundle that holds it (and the public roots, if other servers need them) with SSL_CERT_FILE"
         }
@@ -1152,6 +1158,44 @@ mod tests {
             matches!(later, ApiError::Transport { .. }) && later.is_outage(),
             "{later:?}"
         );
+    }
+
+    /// Each failed handshake says what to do about its cause.
+    #[test]
+    fn a_failed_handshake_says_what_to_do_about_its_cause() {
+        // webpki's error as rustls carries it (its Debug is the variant's
+        // name, as `Other(OtherError(CaUsedAsEndEntity))` reads).
+        #[derive(Debug)]
+        struct CaUsedAsEndEntity;
+        impl std::fmt::Display for CaUsedAsEndEntity {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("CA used as end entity")
+            }
+        }
+        impl std::error::Error for CaUsedAsEndEntity {}
+        let io = |e: rustls::Error| {
+            ureq::Error::Io(std::io::Error::new(std::io::ErrorKind::InvalidData, e))
+        };
+        let ca_as_leaf = rustls::Error::InvalidCertificate(rustls::CertificateError::Other(
+            rustls::OtherError(std::sync::Arc::new(CaUsedAsEndEntity)),
+        ));
+        for (e, says) in [
+            (io(ca_as_leaf), "presents a CA's certificate as its own"),
+            (
+                io(rustls::Error::InvalidCertificate(
+                    rustls::CertificateError::UnknownIssuer,
+                )),
+                "not one this machine trusts",
+            ),
+            (
+                ureq::Error::Rustls(rustls::Error::General("No CA certificates".into())),
+                "trust store is empty",
+            ),
+        ] {
+            let hint = tls_failure(&e).unwrap_or_else(|| panic!("{e}: not a TLS failure"));
+            assert!(hint.contains(says), "{e}: {hint}");
+        }
+        assert_eq!(tls_failure(&ureq::Error::ConnectionFailed), None);
     }
 
     /// `https://` to a server that speaks plain HTTP says so.

@@ -202,6 +202,20 @@ fn refused_for_good(e: &ApiError, answered: bool) -> Option<&'static str> {
     })
 }
 
+/// An empty lease answer sooner than this is early: the server did not
+/// hold the poll (it holds one for up to `wait_secs`, 20 s).
+const EARLY_EMPTY: Duration = Duration::from_secs(1);
+/// Early empty answers in a row before the worker says so.
+const EARLY_TOLD: u32 = 5;
+/// The longest pause before asking again after early empty answers.
+const MAX_EARLY_PAUSE: Duration = Duration::from_secs(10);
+
+/// The pause after the `n`th early empty answer in a row: 0.25 s,
+/// doubling, up to [`MAX_EARLY_PAUSE`].
+fn early_pause(n: u32) -> Duration {
+    (Duration::from_millis(250) * 2u32.pow(n.saturating_sub(1).min(6))).min(MAX_EARLY_PAUSE)
+}
+
 /// Leases jobs for the idle slots, one request for all of them, until
 /// shutdown.
 fn dispatch(
@@ -222,6 +236,8 @@ fn dispatch(
     // Sent again unchanged until an answer arrives: a request whose answer
     // was lost gets what it leased (`LeaseManyRequest::request`).
     let mut nonce = next_nonce();
+    // Empty answers in a row that came at once.
+    let mut early = 0u32;
     while !shutdown.load(Ordering::Relaxed) {
         if idle.is_empty() {
             // Every slot is busy: wait for one, looking at shutdown.
@@ -235,6 +251,7 @@ fn dispatch(
         }
         idle.extend(freed.try_iter());
         let asked: Vec<String> = idle.iter().map(|&s| ids[s].clone()).collect();
+        let polled = Instant::now();
         let leased = match poller.lease(asked, (!told).then(|| tracer.clone()), &nonce, shutdown)? {
             Polled::Answer(answer) => answer,
             // Shutdown during the long poll: stop waiting for it.
@@ -245,6 +262,26 @@ fn dispatch(
             Ok(leases) => {
                 failures = 0;
                 nonce = next_nonce();
+                // No job, long before the poll's end: a server ending its
+                // polls as it shuts down, or one that does not hold them.
+                // Ask again after a pause, not at once.
+                if leases.is_empty() && polled.elapsed() < EARLY_EMPTY {
+                    early += 1;
+                    if early == EARLY_TOLD {
+                        say!(
+                            "worker {}: the server at {} answers every lease request at once with no job (shutting down, or not holding long polls); asking every {:?} or less",
+                            config.id,
+                            client.base(),
+                            MAX_EARLY_PAUSE
+                        );
+                    }
+                    let until = Instant::now() + early_pause(early);
+                    while Instant::now() < until && !shutdown.load(Ordering::Relaxed) {
+                        std::thread::sleep(Duration::from_millis(50));
+                    }
+                    continue;
+                }
+                early = 0;
                 for lease in leases {
                     let slot = lease
                         .job
@@ -272,11 +309,16 @@ fn dispatch(
                     // Stop as at SIGTERM: jobs running now stop at their
                     // deadline, and their leases pass to other workers.
                     shutdown.store(true, Ordering::Relaxed);
-                    return Err(RunError::Refused(format!(
-                        "worker {}: the server at {} refused to lease jobs ({e}): {check}",
-                        config.id,
-                        client.base()
-                    )));
+                    return Err(RunError::Refused(match e {
+                        // The worker refused the server, and the error
+                        // says what to do.
+                        ApiError::Tls { .. } => format!("worker {}: {e}", config.id),
+                        _ => format!(
+                            "worker {}: the server at {} refused to lease jobs ({e}): {check}",
+                            config.id,
+                            client.base()
+                        ),
+                    }));
                 }
                 failures += 1;
                 let wait = Duration::from_millis(200 * u64::from(failures.min(25)));

@@ -61,9 +61,17 @@ pub enum ImportError {
     #[error("the scene has no triangle meshes")]
     NoGeometry,
     /// A clips file none of whose animations drives a node of the
-    /// character (by name).
-    #[error("no animation in the file drives the character: no channel targets a node name it has")]
-    NoAnimations,
+    /// character (by name); `in_file`: whether it has animations at all.
+    #[error("{}", if *in_file {
+        "no animation in the file drives the character: no channel targets a node name it has"
+    } else {
+        "the file has no animations"
+    })]
+    NoAnimations {
+        /// The file has animations (that drive none of the character's
+        /// nodes).
+        in_file: bool,
+    },
 }
 
 impl ImportError {
@@ -94,7 +102,7 @@ impl ImportError {
             Self::UnsupportedExtension(_) => "unsupported_extension",
             Self::Invalid { .. } => "gltf_invalid",
             Self::NoGeometry => "no_geometry",
-            Self::NoAnimations => "no_animations",
+            Self::NoAnimations { .. } => "no_animations",
         }
     }
 

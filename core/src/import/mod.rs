@@ -137,7 +137,9 @@ pub fn import_clips(
         &mut warnings,
     )?;
     if clips.iter().all(|c| c.channels.is_empty()) {
-        return Err(ImportError::NoAnimations);
+        return Err(ImportError::NoAnimations {
+            in_file: !doc.root.animations.is_empty(),
+        });
     }
     Ok((clips, warnings))
 }

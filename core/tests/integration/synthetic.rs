@@ -293,8 +293,22 @@ fn clips_from_a_second_file_bind_by_node_name() {
         "channels": [{"sampler": 0, "target": {"node": x, "path": "translation"}}]}]);
     let err = import_clips(Upload::single(&none.glb()), c, &Limits::default()).unwrap_err();
     assert!(
-        matches!(err, aobake_core::ImportError::NoAnimations)
-            && err.to_string().contains("no channel targets a node name"),
+        matches!(
+            err,
+            aobake_core::ImportError::NoAnimations { in_file: true }
+        ) && err.to_string().contains("no channel targets a node name"),
+        "{err}"
+    );
+    // One with no animations at all says that.
+    let mut still = Gltf::new();
+    let x = still.node(json!({"name": "x"}));
+    still.add_root(x);
+    let err = import_clips(Upload::single(&still.glb()), c, &Limits::default()).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            aobake_core::ImportError::NoAnimations { in_file: false }
+        ) && err.to_string() == "the file has no animations",
         "{err}"
     );
 }

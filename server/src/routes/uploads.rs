@@ -211,7 +211,8 @@ pub(crate) async fn post_character(
         .import(move || {
             let mut upload = upload;
             let left_out = upload.keep_referenced(&limits);
-            let imported = import_character(upload.upload(), &limits)?;
+            let imported = import_character(upload.upload(), &limits)
+                .map_err(|e| naming_left_out(e, &left_out))?;
             let mut s = serde_json::to_value(Summary::of(&imported.character, &imported.clips))
                 .expect("summaries serialise");
             s["warnings"] = serde_json::json!(imported.warnings);
@@ -223,6 +224,25 @@ pub(crate) async fn post_character(
         .map_err(|e| ApiError::unimportable("the character cannot be imported", &e))?;
     let reply = store_upload(&state, &upload, "character", summary).await?;
     Ok(telling(reply, "characters", &left_out))
+}
+
+/// `e`, and when it names a side file the upload lacks, the parts sent
+/// with it under names the glTF does not use (left out before the
+/// import): a name that differs in case or folder is then in sight.
+fn naming_left_out(
+    mut e: aobake_core::ImportError,
+    left_out: &[String],
+) -> aobake_core::ImportError {
+    if let aobake_core::ImportError::MissingFile { available, .. } = &mut e
+        && !left_out.is_empty()
+    {
+        let sent: Vec<String> = left_out.iter().map(|n| format!("{n:?}")).collect();
+        available.push_str(&format!(
+            "; sent too, under names the glTF does not use: {}",
+            sent.join(", ")
+        ));
+    }
+    e
 }
 
 /// The reply to an upload: `Location` is its record under
@@ -303,7 +323,12 @@ pub(crate) async fn post_clips(
         // No clip that drives the character is the importer's
         // `no_animations`.
         let (clips, warnings) = import_clips(upload.upload(), &c.character, &limits)
-            .map_err(|e| ApiError::unimportable("the clips cannot be imported", &e))?;
+            .map_err(|e| {
+                ApiError::unimportable(
+                    "the clips cannot be imported",
+                    &naming_left_out(e, &left_out),
+                )
+            })?;
         let names: Vec<serde_json::Value> = clips
             .iter()
             .map(|c| serde_json::json!({"name": c.name, "duration": c.duration}))

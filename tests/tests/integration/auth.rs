@@ -427,11 +427,23 @@ fn a_worker_refused_for_good_exits_saying_why() {
 /// The address of a web server that answers every request with `status`
 /// and `body`, for as long as the test runs.
 fn other_service(status: &'static str, content_type: &'static str, body: &'static str) -> String {
+    counted_service(status, content_type, body).0
+}
+
+/// [`other_service`], and the count of requests it has answered.
+fn counted_service(
+    status: &'static str,
+    content_type: &'static str,
+    body: &'static str,
+) -> (String, std::sync::Arc<std::sync::atomic::AtomicUsize>) {
     use std::io::{Read as _, Write as _};
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let url = format!("http://{}", listener.local_addr().unwrap());
+    let count = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let counted = count.clone();
     std::thread::spawn(move || {
         for mut stream in listener.incoming().flatten() {
+            counted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             let _ = stream.set_read_timeout(Some(std::time::Duration::from_millis(200)));
             // The request's head and as much of its body as comes at once.
             let _ = stream.read(&mut [0u8; 1 << 16]);
@@ -442,7 +454,39 @@ fn other_service(status: &'static str, content_type: &'static str, body: &'stati
             );
         }
     });
-    url
+    (url, count)
+}
+
+/// A server that answers every lease request at once with no job (204:
+/// as an aobake server does when it ends its polls to shut down) is asked
+/// again after a growing pause, not hundreds of times a second, and the
+/// worker says what it sees.
+#[test]
+fn a_worker_answered_at_once_with_no_job_asks_again_after_a_pause() {
+    let env = TestEnv::start(Options::default());
+    let (url, requests) = counted_service("204 No Content", "text/plain", "");
+    let mut child = std::process::Command::new(aobake_e2e::binary())
+        .args(["worker", "--server", &url, "--id", "early", "--gpu", "off"])
+        .args(["--token", &env.token(&["worker"])])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(6));
+    let _ = child.kill();
+    let _ = child.wait();
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+    // Pauses of 0.25, 0.5, 1, 2 and 4 s: about 6 requests in 6 s.
+    let asked = requests.load(std::sync::atomic::Ordering::Relaxed);
+    assert!(
+        (3..=10).contains(&asked),
+        "{asked} requests in 6 s\n{stderr}"
+    );
+    assert!(
+        stderr.contains("answers every lease request at once with no job"),
+        "{stderr}"
+    );
 }
 
 /// Tokens are listed (never their secrets) and revoked: a revoked token is

@@ -179,6 +179,35 @@ fn a_refused_import_names_its_reason_and_where_in_the_json() {
         (422, &json!("missing_file"), &json!("/buffers/0/uri")),
         "{body}"
     );
+    // Sent with it under another case: the part is named beside the
+    // missing file, not left out of sight.
+    let boundary = "b0undary";
+    let mut multipart = Vec::new();
+    for (file, bytes) in [
+        ("rig.gltf", gltf.to_string().into_bytes()),
+        ("Rig.bin", bin.clone()),
+    ] {
+        multipart.extend(format!("--{boundary}\r\nContent-Disposition: form-data; name=\"f\"; filename=\"{file}\"\r\n\r\n").bytes());
+        multipart.extend(bytes);
+        multipart.extend(b"\r\n");
+    }
+    multipart.extend(format!("--{boundary}--\r\n").bytes());
+    let (status, body, _) = env.post_bytes(
+        "/v1/characters",
+        ADMIN,
+        &format!("multipart/form-data; boundary={boundary}"),
+        &multipart,
+    );
+    assert_eq!(
+        (status, &body["reason"]),
+        (422, &json!("missing_file")),
+        "{body}"
+    );
+    let detail = body["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("under names the glTF does not use: \"Rig.bin\""),
+        "{detail}"
+    );
     // Clips for a character they do not drive.
     let rigged = upload(&env, &character("RiggedSimple"));
     let fox = std::fs::read(character("Fox")).unwrap();

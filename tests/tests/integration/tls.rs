@@ -156,7 +156,7 @@ fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
     std::io::Read::read_to_string(&mut worker.stderr.take().unwrap(), &mut stderr).unwrap();
     assert_eq!(exit.code(), Some(3), "{stderr}");
     assert!(
-        stderr.contains("refused to lease jobs") && stderr.contains("not one this machine trusts"),
+        stderr.contains("cannot talk to") && stderr.contains("not one this machine trusts"),
         "{stderr}"
     );
 }

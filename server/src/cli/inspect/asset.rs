@@ -412,8 +412,13 @@ fn print_primitives(spans: &serde_json::Value) {
         return;
     };
     println!(
-        "  primitives   {} glTF primitives as nodes instance them, in vertex order (an engine maps its vertices by them):",
-        spans.len()
+        "  primitives   {} glTF {} as nodes instance them, in vertex order (an engine maps its vertices by them):",
+        spans.len(),
+        if spans.len() == 1 {
+            "primitive"
+        } else {
+            "primitives"
+        }
     );
     for s in spans.iter().take(SHOWN) {
         let (first, count) = (
