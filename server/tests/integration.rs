@@ -1057,6 +1057,22 @@ fn a_restart_leaves_no_revoked_token_behind_and_a_refusal_names_the_tokens_sourc
             && text.contains("401"),
         "{text}"
     );
+    // The stopped server's address, left in its data folder, is named as
+    // where the client took it from.
+    let unreached = Command::new(env!("CARGO_BIN_EXE_aobake"))
+        .args(["status", "1", "--token", admin, "--data"])
+        .arg(&data)
+        .env_remove("AOBAKE_SERVER")
+        .output()
+        .unwrap();
+    assert_eq!(unreached.status.code(), Some(7), "{}", stderr(&unreached));
+    let text = stderr(&unreached);
+    assert!(
+        text.contains("the server's address came from")
+            && text.contains("server.url")
+            && text.contains("is that server running?"),
+        "{text}"
+    );
 }
 
 /// A revoked admin secret stays revoked when a server starts with it

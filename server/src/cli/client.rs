@@ -39,19 +39,32 @@ pub(super) struct Conn {
 /// with one token), for an error that refuses it.
 static TOKEN_SOURCE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
 
+/// Where this process's server address came from when no flag or
+/// variable gave it (`DIR/server.url`, or the default).
+static SERVER_SOURCE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+
 /// `err`, saying where its token came from when the server refused it
 /// (401): a token file left by an earlier `aobake serve`, or a variable
-/// set long ago, is otherwise hard to tell from a typo.
+/// set long ago, is otherwise hard to tell from a typo; and where the
+/// server's address came from when it cannot be reached and no flag gave
+/// it (a `server.url` that a stopped `aobake serve` left).
 pub fn explain_refusal(err: anyhow::Error) -> anyhow::Error {
-    let refused = err.chain().any(|cause| {
-        cause
-            .downcast_ref::<aobake_api::ApiError>()
-            .is_some_and(|e| e.status() == Some(401))
-    });
-    match TOKEN_SOURCE.get() {
-        Some(source) if refused => {
+    let api_error = |matches: fn(&aobake_api::ApiError) -> bool| {
+        err.chain().any(|cause| {
+            cause
+                .downcast_ref::<aobake_api::ApiError>()
+                .is_some_and(matches)
+        })
+    };
+    let refused = api_error(|e| e.status() == Some(401));
+    let unreached = api_error(|e| matches!(e, aobake_api::ApiError::Transport { .. }));
+    match (TOKEN_SOURCE.get(), SERVER_SOURCE.get()) {
+        (Some(source), _) if refused => {
             err.context(format!("the server refused the token from {source}"))
         }
+        (_, Some(source)) if unreached => err.context(format!(
+            "the server's address came from {source}: is that server running? (--server or AOBAKE_SERVER names another)"
+        )),
         _ => err,
     }
 }
@@ -81,11 +94,20 @@ impl Conn {
 
     fn api(&self) -> anyhow::Result<Client> {
         let read = |name: &str| std::fs::read_to_string(self.data.join(name)).ok();
-        let server = self
-            .server
-            .clone()
-            .or_else(|| read("server.url"))
-            .unwrap_or_else(|| "http://127.0.0.1:8080".to_owned());
+        let server = match (&self.server, read("server.url")) {
+            (Some(s), _) => s.clone(),
+            (None, Some(s)) => {
+                let _ = SERVER_SOURCE.set(self.data.join("server.url").display().to_string());
+                s
+            }
+            (None, None) => {
+                let _ = SERVER_SOURCE.set(format!(
+                    "the default (no --server, AOBAKE_SERVER or {})",
+                    self.data.join("server.url").display()
+                ));
+                "http://127.0.0.1:8080".to_owned()
+            }
+        };
         let source = match &self.token {
             Some(_) => "--token or AOBAKE_TOKEN".to_owned(),
             None => self.data.join("admin.token").display().to_string(),
