@@ -115,6 +115,13 @@ impl ImportError {
             Self::Invalid { path, .. }
             | Self::ForbiddenUri { path, .. }
             | Self::MissingFile { path, .. } => json_pointer(path),
+            // A count at a place (`accessors[3].count`, `meshes[0].
+            // primitives[1].targets count`, `…: JOINTS_n/WEIGHTS_n sets`),
+            // not a file-wide one (`vertex count`).
+            Self::Limit { what, .. } => {
+                let place = what.split([':', ' ']).next().unwrap_or_default();
+                place.contains('[').then(|| json_pointer(place)).flatten()
+            }
             _ => None,
         }
     }
@@ -220,6 +227,22 @@ mod tests {
             assert_eq!(e.pointer().as_deref(), pointer, "{path}");
         }
         assert_eq!(ImportError::NoGeometry.pointer(), None);
+        for (what, pointer) in [
+            ("accessors[3].count", Some("/accessors/3/count")),
+            (
+                "meshes[0].primitives[1].targets count",
+                Some("/meshes/0/primitives/1/targets"),
+            ),
+            (
+                "meshes[2].primitives[0]: JOINTS_n/WEIGHTS_n sets",
+                Some("/meshes/2/primitives/0"),
+            ),
+            ("vertex count", None),
+            ("animation count", None),
+        ] {
+            let e = ImportError::limit(what, 10, 5);
+            assert_eq!(e.pointer().as_deref(), pointer, "{what}");
+        }
     }
 
     #[test]

@@ -164,6 +164,27 @@ fn a_refused_import_names_its_reason_and_where_in_the_json() {
             "{body}"
         );
     }
+    // A count over a limit at one place is pointed at too (the JOINTS_0
+    // accessor, read up to the primitive's vertex count).
+    let mut j = json.clone();
+    let joints = j["meshes"][0]["primitives"][0]["attributes"]["JOINTS_0"].clone();
+    let joints = joints.as_u64().unwrap() as usize;
+    j["accessors"][joints]["count"] = json!(100_000_000);
+    let (status, body, _) = env.post_bytes(
+        "/v1/characters",
+        ADMIN,
+        "model/gltf-binary",
+        &hostile::glb(&j, &bin),
+    );
+    assert_eq!(
+        (status, &body["reason"], &body["pointer"]),
+        (
+            422,
+            &json!("limit_exceeded"),
+            &json!(format!("/accessors/{joints}/count"))
+        ),
+        "{body}"
+    );
     // A .gltf without the side file its buffer names.
     let json_len = u32::from_le_bytes(valid[12..16].try_into().unwrap()) as usize;
     let mut gltf: serde_json::Value = serde_json::from_slice(&valid[20..20 + json_len]).unwrap();
