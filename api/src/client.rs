@@ -199,28 +199,26 @@ impl Servers {
 /// failed handshake sent no request.
 fn tls_failure(e: &ureq::Error) -> Option<&'static str> {
     let rustls = match e {
-        ureq::Error::Rustls(r) => Some(r),
-        ureq::Error::Tls(_) => None,
-        ureq::Error::Io(io) => Some(io.get_ref()?.downcast_ref::<rustls::Error>()?),
+        ureq::Error::Rustls(r) => r,
+        ureq::Error::Tls(_) => return Some("the TLS handshake failed"),
+        ureq::Error::Io(io) => io.get_ref()?.downcast_ref::<rustls::Error>()?,
         _ => return None,
     };
     Some(match rustls {
         // webpki's error, which rustls carries as an opaque one.
-        Some(rustls::Error::InvalidCertificate(c))
-            if format!("{c:?}").contains("CaUsedAsEndEntity") =>
-        {
+        rustls::Error::InvalidCertificate(c) if format!("{c:?}").contains("CaUsedAsEndEntity") => {
             "it presents a CA's certificate as its own: give the server a certificate of its own, signed by a CA this machine trusts"
         }
-        Some(rustls::Error::InvalidCertificate(_)) => {
+        rustls::Error::InvalidCertificate(_) => {
             "its certificate is not one this machine trusts: add the CA that signed it to the system's trust store, or name a bundle that holds it (and the public roots, if other servers need them) with SSL_CERT_FILE"
         }
-        Some(rustls::Error::InvalidMessage(_) | rustls::Error::InappropriateMessage { .. }) => {
+        rustls::Error::InvalidMessage(_) | rustls::Error::InappropriateMessage { .. } => {
             "it does not answer in TLS: is it an http:// address?"
         }
-        Some(rustls::Error::General(_)) | None => {
+        rustls::Error::General(_) => {
             "no certificate could be checked: the system's trust store is empty, or SSL_CERT_FILE or SSL_CERT_DIR names no certificates"
         }
-        Some(_) => "the TLS handshake failed",
+        _ => "the TLS handshake failed",
     })
 }
 
@@ -277,6 +275,13 @@ impl Client {
     /// whose calls each take at most ten minutes.
     pub fn new(base: &str, token: &str) -> Self {
         Self::with_timeout(base, token, Duration::from_secs(600))
+    }
+
+    /// Whether a server has answered this client (or a clone of it).
+    pub fn answered(&self) -> bool {
+        self.servers
+            .answered
+            .load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// A client whose calls each take at most `timeout`.
@@ -356,9 +361,11 @@ impl Client {
 
     /// `request`'s response (it is given the server's URL), from the next
     /// servers of the fleet in turn when the one asked cannot be reached
-    /// ([`never_arrived`]), each once; the first error when none answers.
-    /// Threads share where they are: the first to move on says so, the
-    /// others follow it.
+    /// ([`never_arrived`]) or refused the handshake ([`tls_failure`]: no
+    /// request went), each once; when none answers, the first error, or
+    /// before any server has answered this client, the first failed
+    /// handshake's ([`ApiError::Tls`]). Threads share where they are: the
+    /// first to move on says so, the others follow it.
     fn reach(
         &self,
         request: &impl Fn(&str) -> std::result::Result<Response, ureq::Error>,
@@ -375,36 +382,44 @@ impl Client {
             Ok(res) => return answered(res),
             Err(e) => e,
         };
-        let tls = tls_failure(&first);
-        if never_arrived(&first) || tls.is_some() {
+        // The first failed handshake among the servers asked.
+        let mut handshake = tls_failure(&first).map(|hint| (start, first.to_string(), hint));
+        if never_arrived(&first) || handshake.is_some() {
             for k in 1..urls.len() {
                 let i = (start + k) % urls.len();
-                if let Ok(res) = request(&urls[i]) {
-                    let moved = self.servers.current.compare_exchange(
-                        start,
-                        i,
-                        std::sync::atomic::Ordering::Relaxed,
-                        std::sync::atomic::Ordering::Relaxed,
-                    );
-                    if let (Ok(_), Some(notice)) = (moved, &self.notice.0) {
-                        notice(&format!(
-                            "{} cannot be reached: going on with {}",
-                            urls[start], urls[i]
-                        ));
+                match request(&urls[i]) {
+                    Ok(res) => {
+                        let moved = self.servers.current.compare_exchange(
+                            start,
+                            i,
+                            std::sync::atomic::Ordering::Relaxed,
+                            std::sync::atomic::Ordering::Relaxed,
+                        );
+                        if let (Ok(_), Some(notice)) = (moved, &self.notice.0) {
+                            let why = match tls_failure(&first) {
+                                Some(hint) => {
+                                    format!("cannot be reached securely ({first}; {hint})")
+                                }
+                                None => "cannot be reached".to_owned(),
+                            };
+                            notice(&format!("{} {why}: going on with {}", urls[start], urls[i]));
+                        }
+                        return answered(res);
                     }
-                    return answered(res);
+                    Err(e) => {
+                        if handshake.is_none() {
+                            handshake = tls_failure(&e).map(|hint| (i, e.to_string(), hint));
+                        }
+                    }
                 }
             }
         }
-        if let Some(hint) = tls
-            && !self
-                .servers
-                .answered
-                .load(std::sync::atomic::Ordering::Relaxed)
+        if let Some((i, message, hint)) = handshake
+            && !self.answered()
         {
             return Err(ApiError::Tls {
-                base: urls[start].clone(),
-                message: first.to_string(),
+                base: urls[i].clone(),
+                message,
                 hint,
             });
         }
@@ -1157,6 +1172,58 @@ mod tests {
         assert!(
             matches!(later, ApiError::Transport { .. }) && later.is_outage(),
             "{later:?}"
+        );
+    }
+
+    /// A fleet's next server is asked after a failed handshake (no request
+    /// went), saying why; when none answers, a failed handshake anywhere
+    /// is the error, not the first server's refused connection.
+    #[test]
+    fn a_fleet_goes_on_past_a_failed_handshake_and_names_it() {
+        let untrusted = || {
+            ureq::Error::Io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                rustls::Error::InvalidCertificate(rustls::CertificateError::UnknownIssuer),
+            ))
+        };
+        let ok = || {
+            Ok(ureq::http::Response::builder()
+                .status(200)
+                .body(ureq::Body::builder().data("ok"))
+                .unwrap())
+        };
+        let heard = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
+        let into = heard.clone();
+        let client = Client::new("https://a", "t")
+            .with_fallbacks(&["https://b".to_owned()])
+            .with_notice(move |line| into.lock().unwrap().push(line.to_owned()));
+        let answer = client.reach(&|url| {
+            if url == "https://a" {
+                Err(untrusted())
+            } else {
+                ok()
+            }
+        });
+        assert!(answer.is_ok());
+        let heard = heard.lock().unwrap();
+        assert!(
+            heard.len() == 1
+                && heard[0].starts_with("https://a cannot be reached securely")
+                && heard[0].contains("not one this machine trusts")
+                && heard[0].ends_with("going on with https://b"),
+            "{heard:?}"
+        );
+        let fleet = Client::new("https://a", "t").with_fallbacks(&["https://b".to_owned()]);
+        let refused = fleet.reach(&|url| {
+            if url == "https://a" {
+                Err(ureq::Error::ConnectionFailed)
+            } else {
+                Err(untrusted())
+            }
+        });
+        assert!(
+            matches!(&refused, Err(ApiError::Tls { base, .. }) if base == "https://b"),
+            "{refused:?}"
         );
     }
 

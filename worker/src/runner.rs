@@ -202,8 +202,9 @@ fn refused_for_good(e: &ApiError, answered: bool) -> Option<&'static str> {
     })
 }
 
-/// An empty lease answer sooner than this is early: the server did not
-/// hold the poll (it holds one for up to `wait_secs`, 20 s).
+/// An empty lease answer sooner than this (or than half of `wait_secs`,
+/// which a worker that does not long-poll sets to 0) is early: the server
+/// did not hold the poll (it holds one for up to `wait_secs`, 20 s).
 const EARLY_EMPTY: Duration = Duration::from_secs(1);
 /// Early empty answers in a row before the worker says so.
 const EARLY_TOLD: u32 = 5;
@@ -265,7 +266,8 @@ fn dispatch(
                 // No job, long before the poll's end: a server ending its
                 // polls as it shuts down, or one that does not hold them.
                 // Ask again after a pause, not at once.
-                if leases.is_empty() && polled.elapsed() < EARLY_EMPTY {
+                let early_empty = EARLY_EMPTY.min(Duration::from_secs(config.wait_secs) / 2);
+                if leases.is_empty() && polled.elapsed() < early_empty {
                     early += 1;
                     if early == EARLY_TOLD {
                         say!(

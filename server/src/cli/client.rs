@@ -39,9 +39,11 @@ pub(super) struct Conn {
 /// with one token), for an error that refuses it.
 static TOKEN_SOURCE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
 
-/// Where this process's server address came from when no flag or
-/// variable gave it (`DIR/server.url`, or the default).
-static SERVER_SOURCE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+/// Where the address of this process's latest client came from when no
+/// flag or variable gave it (`DIR/server.url`, or the default), and that
+/// client: set again whenever a client is made (`submit --wait` makes
+/// one again when the files change).
+static SERVER_SOURCE: std::sync::Mutex<Option<(String, Client)>> = std::sync::Mutex::new(None);
 
 /// `err`, saying where its token came from when the server refused it
 /// (401): a token file left by an earlier `aobake serve`, or a variable
@@ -58,7 +60,14 @@ pub fn explain_refusal(err: anyhow::Error) -> anyhow::Error {
     };
     let refused = api_error(|e| e.status() == Some(401));
     let unreached = api_error(|e| matches!(e, aobake_api::ApiError::Transport { .. }));
-    match (TOKEN_SOURCE.get(), SERVER_SOURCE.get()) {
+    // A server that never answered at an address no flag gave.
+    let stale = SERVER_SOURCE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .as_ref()
+        .filter(|(_, client)| !client.answered())
+        .map(|(source, _)| source.clone());
+    match (TOKEN_SOURCE.get(), stale) {
         (Some(source), _) if refused => {
             err.context(format!("the server refused the token from {source}"))
         }
@@ -89,30 +98,49 @@ impl Conn {
         if self.server.is_some() && self.token.is_some() {
             return None;
         }
-        self.api().ok().filter(|now| !now.same_as(api))
+        let (now, source) = self.build().ok()?;
+        if now.same_as(api) {
+            return None;
+        }
+        Self::remember(source, &now);
+        Some(now)
     }
 
     fn api(&self) -> anyhow::Result<Client> {
+        let (client, source) = self.build()?;
+        Self::remember(source, &client);
+        Ok(client)
+    }
+
+    /// Keeps where the address of `client`, the one this process now
+    /// uses, came from, when no flag gave it (for [`explain_refusal`]).
+    fn remember(source: Option<String>, client: &Client) {
+        *SERVER_SOURCE
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) =
+            source.map(|s| (s, client.clone()));
+    }
+
+    /// A client from the flags and the data folder's files, and where its
+    /// address came from when no flag or variable gave it.
+    fn build(&self) -> anyhow::Result<(Client, Option<String>)> {
         let read = |name: &str| std::fs::read_to_string(self.data.join(name)).ok();
-        let server = match (&self.server, read("server.url")) {
-            (Some(s), _) => s.clone(),
-            (None, Some(s)) => {
-                let _ = SERVER_SOURCE.set(self.data.join("server.url").display().to_string());
-                s
-            }
-            (None, None) => {
-                let _ = SERVER_SOURCE.set(format!(
+        let (server, source) = match (&self.server, read("server.url")) {
+            (Some(s), _) => (s.clone(), None),
+            (None, Some(s)) => (s, Some(self.data.join("server.url").display().to_string())),
+            (None, None) => (
+                "http://127.0.0.1:8080".to_owned(),
+                Some(format!(
                     "the default (no --server, AOBAKE_SERVER or {})",
                     self.data.join("server.url").display()
-                ));
-                "http://127.0.0.1:8080".to_owned()
-            }
+                )),
+            ),
         };
-        let source = match &self.token {
+        let token_source = match &self.token {
             Some(_) => "--token or AOBAKE_TOKEN".to_owned(),
             None => self.data.join("admin.token").display().to_string(),
         };
-        let _ = TOKEN_SOURCE.set(source);
+        let _ = TOKEN_SOURCE.set(token_source);
         let token = self
             .token
             .clone()
@@ -127,9 +155,10 @@ impl Conn {
         // cannot be reached.
         let (first, others) = super::common::servers(&server)?;
         // A wait through an outage says so, rather than look like a hang.
-        Ok(Client::new(&first, token.trim())
+        let client = Client::new(&first, token.trim())
             .with_fallbacks(&others)
-            .with_notice(|line| eprintln!("{line}")))
+            .with_notice(|line| eprintln!("{line}"));
+        Ok((client, source))
     }
 }
 
