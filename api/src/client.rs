@@ -206,7 +206,12 @@ fn tls_failure(e: &ureq::Error) -> Option<&'static str> {
     };
     Some(match rustls {
         // webpki's error, which rustls carries as an opaque one.
-        rustls::Error::InvalidCertificate(c) if format!("{c:?}").contains("CaUsedAsEndEntity") => {
+        rustls::Error::InvalidCertificate(rustls::CertificateError::Other(other))
+            if matches!(
+                other.0.downcast_ref::<webpki::Error>(),
+                Some(webpki::Error::CaUsedAsEndEntity)
+            ) =>
+        {
             "it presents a CA's certificate as its own: give the server a certificate of its own, signed by a CA this machine trusts"
         }
         rustls::Error::InvalidCertificate(_) => {
@@ -396,11 +401,11 @@ impl Client {
                             std::sync::atomic::Ordering::Relaxed,
                         );
                         if let (Ok(_), Some(notice)) = (moved, &self.notice.0) {
-                            let why = match tls_failure(&first) {
-                                Some(hint) => {
-                                    format!("cannot be reached securely ({first}; {hint})")
+                            let why = match &handshake {
+                                Some((at, message, hint)) if *at == start => {
+                                    format!("cannot be reached securely ({message}; {hint})")
                                 }
-                                None => "cannot be reached".to_owned(),
+                                _ => "cannot be reached".to_owned(),
                             };
                             notice(&format!("{} {why}: going on with {}", urls[start], urls[i]));
                         }
@@ -1230,21 +1235,11 @@ mod tests {
     /// Each failed handshake says what to do about its cause.
     #[test]
     fn a_failed_handshake_says_what_to_do_about_its_cause() {
-        // webpki's error as rustls carries it (its Debug is the variant's
-        // name, as `Other(OtherError(CaUsedAsEndEntity))` reads).
-        #[derive(Debug)]
-        struct CaUsedAsEndEntity;
-        impl std::fmt::Display for CaUsedAsEndEntity {
-            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-                f.write_str("CA used as end entity")
-            }
-        }
-        impl std::error::Error for CaUsedAsEndEntity {}
         let io = |e: rustls::Error| {
             ureq::Error::Io(std::io::Error::new(std::io::ErrorKind::InvalidData, e))
         };
         let ca_as_leaf = rustls::Error::InvalidCertificate(rustls::CertificateError::Other(
-            rustls::OtherError(std::sync::Arc::new(CaUsedAsEndEntity)),
+            rustls::OtherError(std::sync::Arc::new(webpki::Error::CaUsedAsEndEntity)),
         ));
         for (e, says) in [
             (io(ca_as_leaf), "presents a CA's certificate as its own"),

@@ -743,3 +743,22 @@ impl Drop for TestPostgres {
         );
     }
 }
+
+/// The boundary of [`multipart`] bodies.
+pub const BOUNDARY: &str = "aobake-test-boundary";
+
+/// A `multipart/form-data` body of `parts` (field name, file name,
+/// bytes) and its content type, as a browser's form or `curl -F` sends
+/// one.
+pub fn multipart(parts: &[(&str, &str, &[u8])]) -> (String, Vec<u8>) {
+    let mut body = Vec::new();
+    for (name, file, bytes) in parts {
+        body.extend(format!(
+            "--{BOUNDARY}\r\nContent-Disposition: form-data; name=\"{name}\"; filename=\"{file}\"\r\nContent-Type: application/octet-stream\r\n\r\n"
+        ).bytes());
+        body.extend(*bytes);
+        body.extend(b"\r\n");
+    }
+    body.extend(format!("--{BOUNDARY}--\r\n").bytes());
+    (format!("multipart/form-data; boundary={BOUNDARY}"), body)
+}

@@ -217,6 +217,14 @@ fn early_pause(n: u32) -> Duration {
     (Duration::from_millis(250) * 2u32.pow(n.saturating_sub(1).min(6))).min(MAX_EARLY_PAUSE)
 }
 
+/// Sleeps `wait`, or less when `shutdown` comes first.
+fn pause(wait: Duration, shutdown: &AtomicBool) {
+    let until = Instant::now() + wait;
+    while Instant::now() < until && !shutdown.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// Leases jobs for the idle slots, one request for all of them, until
 /// shutdown.
 fn dispatch(
@@ -277,10 +285,7 @@ fn dispatch(
                             MAX_EARLY_PAUSE
                         );
                     }
-                    let until = Instant::now() + early_pause(early);
-                    while Instant::now() < until && !shutdown.load(Ordering::Relaxed) {
-                        std::thread::sleep(Duration::from_millis(50));
-                    }
+                    pause(early_pause(early), shutdown);
                     continue;
                 }
                 early = 0;
@@ -328,10 +333,7 @@ fn dispatch(
                     "worker {}: cannot lease ({e}); retrying in {wait:?}",
                     config.id
                 );
-                let until = Instant::now() + wait;
-                while Instant::now() < until && !shutdown.load(Ordering::Relaxed) {
-                    std::thread::sleep(Duration::from_millis(50));
-                }
+                pause(wait, shutdown);
             }
         }
     }

@@ -71,7 +71,7 @@ impl UploadBytes {
                 // import sees the same ambiguity (two `x.bin` for a URI
                 // `c/x.bin`) rather than the one left after pruning.
                 None => {
-                    for i in files.sharing_last_segment(name) {
+                    for &i in files.sharing_last_segment(name) {
                         wanted[i] = true;
                     }
                 }

@@ -90,20 +90,20 @@ impl<'a> Upload<'a> {
 pub(crate) struct SideFiles<'a> {
     files: &'a [SideFile],
     by_path: HashMap<String, usize>,
-    /// `None` where two files share the segment.
-    by_base: HashMap<String, Option<usize>>,
+    /// The files of each last path segment, in upload order.
+    by_base: HashMap<String, Vec<usize>>,
 }
 
 impl<'a> SideFiles<'a> {
     pub(crate) fn new(files: &'a [SideFile]) -> Self {
         let mut by_path = HashMap::with_capacity(files.len());
-        let mut by_base: HashMap<String, Option<usize>> = HashMap::with_capacity(files.len());
+        let mut by_base: HashMap<String, Vec<usize>> = HashMap::with_capacity(files.len());
         for (i, f) in files.iter().enumerate() {
             let path = normalize_name(&f.name);
             by_base
                 .entry(last_segment(&path).to_owned())
-                .and_modify(|found| *found = None)
-                .or_insert(Some(i));
+                .or_default()
+                .push(i);
             // The first of two files with one name, as a scan would find.
             by_path.entry(path).or_insert(i);
         }
@@ -120,18 +120,18 @@ impl<'a> SideFiles<'a> {
         self.by_path
             .get(&wanted)
             .copied()
-            .or_else(|| self.by_base.get(last_segment(&wanted)).copied().flatten())
+            .or_else(|| match self.sharing_last_segment(&wanted) {
+                [one] => Some(*one),
+                _ => None,
+            })
     }
 
-    /// Every file whose last path segment is `path`'s.
-    pub(crate) fn sharing_last_segment(&self, path: &str) -> impl Iterator<Item = usize> + '_ {
+    /// Every file whose last path segment is `path`'s, in upload order.
+    pub(crate) fn sharing_last_segment(&self, path: &str) -> &[usize] {
         let wanted = normalize_name(path);
-        let base = last_segment(&wanted).to_owned();
-        self.files
-            .iter()
-            .enumerate()
-            .filter(move |(_, f)| last_segment(&normalize_name(&f.name)) == base)
-            .map(|(i, _)| i)
+        self.by_base
+            .get(last_segment(&wanted))
+            .map_or(&[], Vec::as_slice)
     }
 
     /// The file `path` names.

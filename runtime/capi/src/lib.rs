@@ -188,15 +188,20 @@ unsafe fn put_primitive(spans: &[PrimitiveSpan], i: usize, out: *mut AobakePrimi
         });
         return false;
     };
-    let primitive = AobakePrimitive {
-        node: s.node,
-        mesh: s.mesh,
-        primitive: s.primitive,
-        first: s.first,
-        count: s.count,
-    };
     // SAFETY: forwarded from the caller.
-    unsafe { put(out, primitive) }
+    unsafe { put(out, AobakePrimitive::from(*s)) }
+}
+
+impl From<PrimitiveSpan> for AobakePrimitive {
+    fn from(s: PrimitiveSpan) -> Self {
+        Self {
+            node: s.node,
+            mesh: s.mesh,
+            primitive: s.primitive,
+            first: s.first,
+            count: s.count,
+        }
+    }
 }
 
 /// A handle's GPU form, packed by `pack` on first use and kept (an

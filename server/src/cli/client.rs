@@ -125,16 +125,19 @@ impl Conn {
     /// address came from when no flag or variable gave it.
     fn build(&self) -> anyhow::Result<(Client, Option<String>)> {
         let read = |name: &str| std::fs::read_to_string(self.data.join(name)).ok();
-        let (server, source) = match (&self.server, read("server.url")) {
-            (Some(s), _) => (s.clone(), None),
-            (None, Some(s)) => (s, Some(self.data.join("server.url").display().to_string())),
-            (None, None) => (
-                "http://127.0.0.1:8080".to_owned(),
-                Some(format!(
-                    "the default (no --server, AOBAKE_SERVER or {})",
-                    self.data.join("server.url").display()
-                )),
-            ),
+        let url_file = || self.data.join("server.url").display().to_string();
+        let (server, source) = match &self.server {
+            Some(s) => (s.clone(), None),
+            None => match read("server.url") {
+                Some(s) => (s, Some(url_file())),
+                None => (
+                    "http://127.0.0.1:8080".to_owned(),
+                    Some(format!(
+                        "the default (no --server, AOBAKE_SERVER or {})",
+                        url_file()
+                    )),
+                ),
+            },
         };
         let token_source = match &self.token {
             Some(_) => "--token or AOBAKE_TOKEN".to_owned(),

@@ -387,27 +387,8 @@ fn a_worker_refused_for_good_exits_saying_why() {
             "is not the address of an aobake server",
         ),
     ] {
-        let mut child = std::process::Command::new(aobake_e2e::binary())
-            .args(["worker", "--server", &server, "--id", "refused"])
-            .args(["--token", &token])
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
-        let exit = loop {
-            if let Some(exit) = child.try_wait().unwrap() {
-                break exit;
-            }
-            if std::time::Instant::now() > deadline {
-                let _ = child.kill();
-                panic!("a worker refused with {status} kept retrying");
-            }
-            std::thread::sleep(std::time::Duration::from_millis(100));
-        };
-        let mut stderr = String::new();
-        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
-        assert_eq!(exit.code(), Some(3), "{stderr}");
+        let (exit, stderr) = crate::util::worker_until_it_exits(&server, &token, &[]);
+        assert_eq!(exit.code(), Some(3), "{status}: {stderr}");
         assert!(
             stderr.contains("refused to lease jobs")
                 && stderr.contains(status)

@@ -186,8 +186,7 @@ fn a_refused_import_names_its_reason_and_where_in_the_json() {
         );
     }
     // A .gltf without the side file its buffer names.
-    let json_len = u32::from_le_bytes(valid[12..16].try_into().unwrap()) as usize;
-    let mut gltf: serde_json::Value = serde_json::from_slice(&valid[20..20 + json_len]).unwrap();
+    let mut gltf = json.clone();
     gltf["buffers"][0]["uri"] = json!("rig.bin");
     let (status, body, _) = env.post_bytes(
         "/v1/characters",
@@ -202,23 +201,11 @@ fn a_refused_import_names_its_reason_and_where_in_the_json() {
     );
     // Sent with it under another case: the part is named beside the
     // missing file, not left out of sight.
-    let boundary = "b0undary";
-    let mut multipart = Vec::new();
-    for (file, bytes) in [
-        ("rig.gltf", gltf.to_string().into_bytes()),
-        ("Rig.bin", bin.clone()),
-    ] {
-        multipart.extend(format!("--{boundary}\r\nContent-Disposition: form-data; name=\"f\"; filename=\"{file}\"\r\n\r\n").bytes());
-        multipart.extend(bytes);
-        multipart.extend(b"\r\n");
-    }
-    multipart.extend(format!("--{boundary}--\r\n").bytes());
-    let (status, body, _) = env.post_bytes(
-        "/v1/characters",
-        ADMIN,
-        &format!("multipart/form-data; boundary={boundary}"),
-        &multipart,
-    );
+    let (content_type, multipart) = aobake_e2e::multipart(&[
+        ("f", "rig.gltf", gltf.to_string().as_bytes()),
+        ("f", "Rig.bin", &bin),
+    ]);
+    let (status, body, _) = env.post_bytes("/v1/characters", ADMIN, &content_type, &multipart);
     assert_eq!(
         (status, &body["reason"]),
         (422, &json!("missing_file")),

@@ -1140,27 +1140,12 @@ fn clips_and_multi_file_characters_upload_and_bake() {
     env.start_worker(&[]);
     // A .gltf with its buffer as a side file, as multipart/form-data.
     let glb = std::fs::read(character("RiggedSimple")).unwrap();
-    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
-    let mut json: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
-    let bin_len =
-        u32::from_le_bytes(glb[20 + json_len..24 + json_len].try_into().unwrap()) as usize;
-    let bin = &glb[28 + json_len..28 + json_len + bin_len];
+    let (mut json, bin) = aobake_e2e::hostile::glb_parts(&glb);
     json["buffers"][0]["uri"] = serde_json::json!("rig.bin");
-    let boundary = "aobake-test-boundary";
-    let mut body = Vec::new();
-    for (name, file, bytes) in [
-        ("main", "rig.gltf", json.to_string().into_bytes()),
-        ("rig.bin", "rig.bin", bin.to_vec()),
-    ] {
-        body.extend(format!(
-            "--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"; filename=\"{file}\"\r\nContent-Type: application/octet-stream\r\n\r\n"
-        ).bytes());
-        body.extend(bytes);
-        body.extend(b"\r\n");
-    }
-    body.extend(format!("--{boundary}--\r\n").bytes());
-    let multipart = format!("multipart/form-data; boundary={boundary}");
-    let post = |path: &str, body: &[u8]| env.post_bytes(path, ADMIN, &multipart, body);
+    let gltf = json.to_string().into_bytes();
+    let (content_type, body) =
+        aobake_e2e::multipart(&[("main", "rig.gltf", &gltf), ("rig.bin", "rig.bin", &bin)]);
+    let post = |path: &str, body: &[u8]| env.post_bytes(path, ADMIN, &content_type, body);
     let (status, uploaded, _) = post("/v1/characters", &body);
     assert_eq!(status, 201, "{uploaded}");
     let (_, glb_upload, _) = env.post_bytes("/v1/characters", ADMIN, "model/gltf-binary", &glb);
@@ -1189,10 +1174,11 @@ fn clips_and_multi_file_characters_upload_and_bake() {
     // With a file the glTF does not use (a folder sent whole): that part
     // is left out and said so, and the digest, hence the cache key, is the
     // same.
-    let mut extra = body[..body.len() - format!("--{boundary}--\r\n").len()].to_vec();
-    extra.extend(format!(
-        "--{boundary}\r\nContent-Disposition: form-data; name=\"files\"; filename=\"notes.txt\"\r\n\r\nnot a buffer\r\n--{boundary}--\r\n"
-    ).bytes());
+    let (_, extra) = aobake_e2e::multipart(&[
+        ("main", "rig.gltf", &gltf),
+        ("rig.bin", "rig.bin", &bin),
+        ("files", "notes.txt", b"not a buffer"),
+    ]);
     let (status, with_extra, _) = post("/v1/characters", &extra);
     assert_eq!(status, 200, "{with_extra}");
     assert_eq!(with_extra["digest"], uploaded["digest"], "{with_extra}");

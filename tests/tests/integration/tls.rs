@@ -133,27 +133,11 @@ fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
     );
     assert!(started.elapsed() < Duration::from_secs(20), "{said}");
     // A worker that does not trust it exits 3, saying the same.
-    let mut worker = std::process::Command::new(aobake_e2e::binary())
-        .args(["worker", "--server", &url, "--id", "untrusting"])
-        .args(["--token", &env.token(&["worker"])])
-        .env("SSL_CERT_FILE", &other)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let deadline = std::time::Instant::now() + Duration::from_secs(60);
-    let exit = loop {
-        if let Some(exit) = worker.try_wait().unwrap() {
-            break exit;
-        }
-        assert!(
-            std::time::Instant::now() < deadline,
-            "a worker that does not trust the server kept trying"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    let mut stderr = String::new();
-    std::io::Read::read_to_string(&mut worker.stderr.take().unwrap(), &mut stderr).unwrap();
+    let (exit, stderr) = crate::util::worker_until_it_exits(
+        &url,
+        &env.token(&["worker"]),
+        &[("SSL_CERT_FILE", other.as_os_str())],
+    );
     assert_eq!(exit.code(), Some(3), "{stderr}");
     assert!(
         stderr.contains("cannot talk to") && stderr.contains("not one this machine trusts"),

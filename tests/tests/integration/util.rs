@@ -216,3 +216,35 @@ impl Follower {
         }
     }
 }
+
+/// Runs `aobake worker` for `server` with `token` and `env` until it
+/// exits, within a minute (else the test fails: it kept trying); its exit
+/// status and log.
+pub(crate) fn worker_until_it_exits(
+    server: &str,
+    token: &str,
+    env: &[(&str, &std::ffi::OsStr)],
+) -> (std::process::ExitStatus, String) {
+    let mut child = std::process::Command::new(aobake_e2e::binary())
+        .args(["worker", "--server", server, "--id", "refused"])
+        .args(["--token", token])
+        .envs(env.iter().copied())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let exit = loop {
+        if let Some(exit) = child.try_wait().unwrap() {
+            break exit;
+        }
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("a worker for {server} kept trying for a minute");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+    (exit, stderr)
+}

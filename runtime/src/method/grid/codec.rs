@@ -191,7 +191,8 @@ impl GridModel {
             )));
         }
         let header: GridHeader = container.header()?;
-        // The vertices the spans tile: the base's, or theirs.
+        // The vertices the spans tile: the base's (whose count the base's
+        // reader checks), or theirs (nothing is sized by them).
         let vertices = header.base.as_ref().map_or_else(
             || {
                 header
@@ -201,11 +202,6 @@ impl GridModel {
             },
             |b| b.vertices,
         );
-        if vertices > MAX_VERTICES {
-            return Err(AssetError::Malformed(format!(
-                "{vertices} vertices, over the limit of {MAX_VERTICES}"
-            )));
-        }
         check_primitives(&header.primitives, vertices)?;
         if header.method != Method::Grid || container.method != Method::Grid {
             return Err(bad("the asset is not a grid"));
