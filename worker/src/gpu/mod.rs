@@ -14,7 +14,10 @@
 //! every wgpu program; by default Vulkan and GL are both tried and the
 //! best adapter wins (a real GPU before a software one).
 
-use std::sync::OnceLock;
+use std::{
+    collections::HashMap,
+    sync::{Mutex, OnceLock},
+};
 
 pub mod cubemap_ao;
 pub mod grid_ao;
@@ -62,6 +65,10 @@ pub struct Gpu {
     adapter: wgpu::Adapter,
     device: wgpu::Device,
     queue: wgpu::Queue,
+    /// The vertex-stage evaluators' render pipelines by shader label,
+    /// built on first use: a software adapter takes seconds to compile
+    /// one, and the tests that compare these evaluators draw many times.
+    point_pipelines: Mutex<HashMap<&'static str, wgpu::RenderPipeline>>,
 }
 
 impl Gpu {
@@ -165,6 +172,7 @@ impl Gpu {
             adapter,
             device,
             queue,
+            point_pipelines: Mutex::default(),
         })
     }
 }

@@ -71,12 +71,62 @@ fn target_size(count: u32) -> (u32, u32) {
     (width, count.div_ceil(width).max(1))
 }
 
+/// The format of the target the points are drawn into.
+const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
+
+/// `source`'s point-drawing pipeline, built once per [`Gpu`] and
+/// `label`.
+fn point_pipeline(gpu: &Gpu, label: &'static str, source: &str) -> wgpu::RenderPipeline {
+    let mut built = gpu
+        .point_pipelines
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(pipeline) = built.get(label) {
+        return pipeline.clone();
+    }
+    let device = &gpu.device;
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_main"),
+            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::PointList,
+            ..wgpu::PrimitiveState::default()
+        },
+        depth_stencil: None,
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_main"),
+            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: TARGET_FORMAT,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    });
+    built.insert(label, pipeline.clone());
+    pipeline
+}
+
 /// Draws points `0..count` with `source`'s `vs_main` and `fs_main` (the
 /// entry points of common/point_target.wgsl) and `resources` bound, and
 /// reads each point's value back.
 fn draw_points(
     gpu: &Gpu,
-    label: &str,
+    label: &'static str,
     source: &str,
     resources: &[(u32, Resource<'_>)],
     count: u32,
@@ -104,39 +154,8 @@ fn draw_points(
             },
         ));
     }
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(label),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    });
-    let format = wgpu::TextureFormat::R32Uint;
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: None,
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_main"),
-            compilation_options: wgpu::PipelineCompilationOptions::default(),
-            buffers: &[],
-        },
-        primitive: wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::PointList,
-            ..wgpu::PrimitiveState::default()
-        },
-        depth_stencil: None,
-        multisample: wgpu::MultisampleState::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs_main"),
-            compilation_options: wgpu::PipelineCompilationOptions::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
-        cache: None,
-    });
+    let pipeline = point_pipeline(gpu, label, source);
+    let format = TARGET_FORMAT;
     let entries: Vec<wgpu::BindGroupEntry<'_>> = bound
         .iter()
         .map(|(binding, b)| wgpu::BindGroupEntry {

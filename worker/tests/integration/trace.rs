@@ -181,14 +181,18 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
     set_engine(None);
     let (cpu_mesh, cpu_character, cpu_obscurance) = (mesh_ao(), character_ao(), obscurance_ao());
     assert_eq!(cpu_character.poses(), 3);
+    // Run to run, each tracer is compared with itself on the batch of
+    // three posed scenes (one dispatch over several scenes, where an
+    // order that depended on scheduling would show); the 3.2 M rays of
+    // the benchmark mesh are cast once per tracer: on the software
+    // adapters a second pass doubled this test, the suite's longest.
     for gpu in both_adapters() {
         announce(&gpu);
-        let (first, second) = gpu_twice(&gpu, mesh_ao);
-        assert_eq!(first, second, "the same bits run to run");
+        let first = on_gpu(&gpu, 1, mesh_ao).remove(0);
         agree("benchmark mesh", &cpu_mesh, &first, 1.0 / 64.0);
 
         let (first, second) = gpu_twice(&gpu, character_ao);
-        assert_eq!(first, second);
+        assert_eq!(first, second, "the same bits run to run");
         agree(
             "character poses",
             &cpu_character.values,
@@ -196,8 +200,7 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
             1.0 / 128.0,
         );
 
-        let (first, second) = gpu_twice(&gpu, obscurance_ao);
-        assert_eq!(first, second);
+        let first = on_gpu(&gpu, 1, obscurance_ao).remove(0);
         // f32 sums of e^(−τt) per group of rays against the CPU's f64 sum.
         let (close, worst) = near(&cpu_obscurance, &first);
         assert!(
