@@ -128,7 +128,9 @@ fn ground(height: f32) -> Option<Ground> {
 
 #[test]
 fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
-    // The benchmark mesh (101,120 triangles) on a solid ground.
+    // The benchmark mesh (101,120 triangles) on a solid ground: 50,570
+    // values of 32 rays each (1.6 M rays per tracer and estimator; 99.99 %
+    // of as many values is at most 5 that may differ).
     let mesh = shapes::timing_mesh();
     let normals = mesh.normals();
     let options = SceneOptions {
@@ -142,7 +144,7 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
         triangles: &mesh.triangles,
     };
     let params = SurfaceParams {
-        samples: 64,
+        samples: 32,
         max_distance: 3.0,
         seed: 7,
         falloff: Falloff::None,
@@ -183,13 +185,13 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
     assert_eq!(cpu_character.poses(), 3);
     // Run to run, each tracer is compared with itself on the batch of
     // three posed scenes (one dispatch over several scenes, where an
-    // order that depended on scheduling would show); the 3.2 M rays of
-    // the benchmark mesh are cast once per tracer: on the software
-    // adapters a second pass doubled this test, the suite's longest.
+    // order that depended on scheduling would show); the benchmark mesh
+    // is cast once per tracer: on the software adapters a second pass
+    // doubled this test, the suite's longest.
     for gpu in both_adapters() {
         announce(&gpu);
         let first = on_gpu(&gpu, 1, mesh_ao).remove(0);
-        agree("benchmark mesh", &cpu_mesh, &first, 1.0 / 64.0);
+        agree("benchmark mesh", &cpu_mesh, &first, 1.0 / 32.0);
 
         let (first, second) = gpu_twice(&gpu, character_ao);
         assert_eq!(first, second, "the same bits run to run");
@@ -204,7 +206,7 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
         // f32 sums of e^(−τt) per group of rays against the CPU's f64 sum.
         let (close, worst) = near(&cpu_obscurance, &first);
         assert!(
-            close as f64 >= 0.9999 * cpu_obscurance.len() as f64 && worst <= 1.0 / 64.0,
+            close as f64 >= 0.9999 * cpu_obscurance.len() as f64 && worst <= 1.0 / 32.0,
             "obscurance: {close} of {} within 1e-5, worst {worst}",
             cpu_obscurance.len()
         );
