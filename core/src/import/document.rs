@@ -160,9 +160,13 @@ impl Document {
 }
 
 fn validate(root: &json::Root, warnings: &mut Vec<String>) -> Result<(), ImportError> {
-    for ext in &root.extensions_required {
+    for (index, ext) in root.extensions_required.iter().enumerate() {
+        let unsupported = || ImportError::UnsupportedExtension {
+            index,
+            name: ext.clone(),
+        };
         if GEOMETRY_EXTENSIONS.contains(&ext.as_str()) {
-            return Err(ImportError::UnsupportedExtension(ext.clone()));
+            return Err(unsupported());
         }
         if DECODED_EXTENSIONS.contains(&ext.as_str()) {
             continue;
@@ -171,7 +175,7 @@ fn validate(root: &json::Root, warnings: &mut Vec<String>) -> Result<(), ImportE
             .iter()
             .any(|p| ext.starts_with(p))
         {
-            return Err(ImportError::UnsupportedExtension(ext.clone()));
+            return Err(unsupported());
         }
         warnings.push(format!(
             "required extension {ext} is ignored: it does not change geometry or animation"
@@ -276,20 +280,27 @@ fn node_parents(root: &json::Root) -> Result<Vec<Option<usize>>, ImportError> {
     let n = root.nodes.len();
     let mut parents = vec![None; n];
     for (i, node) in root.nodes.iter().enumerate() {
-        for child in node.children.iter().flatten() {
+        for (k, child) in node.children.iter().flatten().enumerate() {
             let c = child.value();
             if c == i {
                 return Err(ImportError::invalid(
-                    format!("nodes[{i}].children"),
+                    format!("nodes[{i}].children[{k}]"),
                     "a node is its own child",
                 ));
             }
             if let Some(p) = parents[c].replace(i) {
-                return Err(ImportError::invalid(
-                    format!("nodes[{i}].children"),
-                    format!(
+                let problem = match node.children.iter().flatten().position(|d| d.value() == c) {
+                    // The same node listed twice.
+                    Some(first) if p == i => {
+                        format!("lists {c} again (first at [{first}]); its entries are unique")
+                    }
+                    _ => format!(
                         "node {c} is already a child of node {p}: the node graph must be a forest"
                     ),
+                };
+                return Err(ImportError::invalid(
+                    format!("nodes[{i}].children[{k}]"),
+                    problem,
                 ));
             }
         }

@@ -47,8 +47,13 @@ pub enum ImportError {
     },
     /// The file requires an extension that changes geometry and that aobake
     /// does not decode.
-    #[error("extensionsRequired lists {0:?}, which aobake does not support")]
-    UnsupportedExtension(String),
+    #[error("extensionsRequired[{index}] is {name:?}, which aobake does not support")]
+    UnsupportedExtension {
+        /// Its place in `extensionsRequired`.
+        index: usize,
+        /// The extension's name.
+        name: String,
+    },
     /// Anything else that is wrong at a given place in the file.
     #[error("{path}: {problem}")]
     Invalid {
@@ -99,7 +104,7 @@ impl ImportError {
             Self::Limit { .. } => "limit_exceeded",
             Self::ForbiddenUri { .. } => "forbidden_uri",
             Self::MissingFile { .. } => "missing_file",
-            Self::UnsupportedExtension(_) => "unsupported_extension",
+            Self::UnsupportedExtension { .. } => "unsupported_extension",
             Self::Invalid { .. } => "gltf_invalid",
             Self::NoGeometry => "no_geometry",
             Self::NoAnimations { .. } => "no_animations",
@@ -121,6 +126,9 @@ impl ImportError {
             Self::Limit { what, .. } => {
                 let place = what.split([':', ' ']).next().unwrap_or_default();
                 place.contains('[').then(|| json_pointer(place)).flatten()
+            }
+            Self::UnsupportedExtension { index, .. } => {
+                Some(format!("/extensionsRequired/{index}"))
             }
             _ => None,
         }

@@ -8,7 +8,7 @@
 //! Each rule refuses the file with the JSON path of the first offence;
 //! problems inside images (which AO never decodes) are counted as warnings.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 
 use gltf::json::{
     self, Root,
@@ -577,13 +577,15 @@ fn is(accessor: &json::Accessor, component: ComponentType) -> bool {
     matches!(accessor.component_type, Checked::Valid(json::accessor::GenericComponentType(c)) if c == component)
 }
 
+/// Refuses an entry of the list at `path` that repeats an earlier one,
+/// naming the repeat (`path[k]`) and where it was first.
 fn unique(items: impl Iterator<Item = usize>, path: &str) -> Result<(), ImportError> {
-    let mut seen = HashSet::new();
-    for item in items {
-        if !seen.insert(item) {
+    let mut seen = HashMap::new();
+    for (k, item) in items.enumerate() {
+        if let Some(first) = seen.insert(item, k) {
             return Err(ImportError::invalid(
-                path,
-                format!("lists {item} twice; its entries are unique"),
+                format!("{path}[{k}]"),
+                format!("lists {item} again (first at [{first}]); its entries are unique"),
             ));
         }
     }

@@ -187,12 +187,20 @@ fn cyclic_and_shared_node_graphs() {
     let mut g = util::tiny_rig();
     g.json["nodes"][1]["children"] = json!([0]);
     expect_err(&g, "cycle");
+    // Each refusal points at the child entry that is wrong.
     let mut g = util::tiny_rig();
     g.json["nodes"][2]["children"] = json!([1]);
-    expect_err(&g, "already a child");
+    let err = expect_err(&g, "already a child");
+    assert_eq!(err.pointer().as_deref(), Some("/nodes/2/children/0"));
     let mut g = util::tiny_rig();
     g.json["nodes"][1]["children"] = json!([1]);
-    expect_err(&g, "own child");
+    let err = expect_err(&g, "own child");
+    assert_eq!(err.pointer().as_deref(), Some("/nodes/1/children/0"));
+    let mut g = util::tiny_rig();
+    let children = g.json["nodes"][0]["children"][0].clone();
+    g.json["nodes"][0]["children"] = json!([children, children]);
+    let err = expect_err(&g, "again (first at [0])");
+    assert_eq!(err.pointer().as_deref(), Some("/nodes/0/children/1"));
 }
 
 #[test]
@@ -373,8 +381,15 @@ fn bad_references_and_types() {
     g.json["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
     assert_eq!(
         g.import().unwrap_err(),
-        ImportError::UnsupportedExtension("KHR_draco_mesh_compression".into())
+        ImportError::UnsupportedExtension {
+            index: 0,
+            name: "KHR_draco_mesh_compression".into()
+        }
     );
+    g.json["extensionsRequired"] = json!(["KHR_mesh_quantization", "KHR_draco_mesh_compression"]);
+    let err = g.import().unwrap_err();
+    assert_eq!(err.pointer().as_deref(), Some("/extensionsRequired/1"));
+    assert!(err.to_string().contains("extensionsRequired[1]"), "{err}");
     let mut g = util::tiny_rig();
     g.json["animations"][0]["samplers"][0]["output"] = json!(4);
     expect_err(&g, "animations[0].samplers[0].output");
@@ -461,7 +476,7 @@ fn validator_errors_are_refused() {
     g.json["extensionsRequired"] = json!(["ACME_teleport"]);
     assert!(matches!(
         g.import(),
-        Err(ImportError::UnsupportedExtension(e)) if e == "ACME_teleport"
+        Err(ImportError::UnsupportedExtension { name, .. }) if name == "ACME_teleport"
     ));
     // Appearance-only extensions are accepted with a warning.
     g.json["extensionsUsed"] = json!(["KHR_materials_unlit"]);
