@@ -247,6 +247,17 @@ fn never_arrived(e: &ureq::Error) -> bool {
     }
 }
 
+/// Whether a request had no HTTP answer: the peer closed the connection
+/// without one, or answered in something else (a TLS alert), as a server
+/// that speaks only https does to a plain request.
+fn no_http_answer(e: &ureq::Error) -> bool {
+    match e {
+        ureq::Error::Io(io) => io.kind() == std::io::ErrorKind::UnexpectedEof,
+        ureq::Error::Protocol(_) => true,
+        _ => false,
+    }
+}
+
 /// A connection to the server with a bearer token.
 #[derive(Debug, Clone)]
 pub struct Client {
@@ -428,9 +439,17 @@ impl Client {
                 hint,
             });
         }
+        let base = &urls[start];
+        let mut message = first.to_string();
+        if base.starts_with("http://") && no_http_answer(&first) && !self.answered() {
+            message.push_str(&format!(
+                " (no HTTP answer: if the server speaks https, its address is https://{})",
+                &base["http://".len()..]
+            ));
+        }
         Err(ApiError::Transport {
-            base: urls[start].clone(),
-            message: first.to_string(),
+            base: base.clone(),
+            message,
         })
     }
 

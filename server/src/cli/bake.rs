@@ -59,11 +59,7 @@ pub(super) fn load_inputs(
     limits: &Limits,
 ) -> anyhow::Result<BakeInputs> {
     let character = super::load::upload(file, limits)?;
-    let clips = clip_files
-        .iter()
-        .map(|p| super::load::upload(p, limits))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    super::load::check_clips(clip_files, &clips)?;
+    let clips = super::load::clip_uploads(clip_files, limits)?;
     // The error names the input (`character` or `clips[i]`) and carries
     // its import error in its message: one line, not a chain that repeats
     // it.

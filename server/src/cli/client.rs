@@ -148,11 +148,12 @@ impl Conn {
             .token
             .clone()
             .or_else(|| read("admin.token"))
-            .with_context(|| {
-                format!(
-                    "no token: pass --token or set AOBAKE_TOKEN (there is no {}: run this where `aobake serve` keeps its data, or point --data at that folder)",
+            .ok_or_else(|| Exit {
+                code: super::exit::TOKEN,
+                message: format!(
+                    "error: no token: pass --token or set AOBAKE_TOKEN (there is no {}: run this where `aobake serve` keeps its data, or point --data at that folder)",
                     self.data.join("admin.token").display()
-                )
+                ),
             })?;
         // A fleet's servers: the first asked first, the next when one
         // cannot be reached.
@@ -210,11 +211,7 @@ pub(super) fn submit_files(
     let limits = Limits::default();
     let character = super::load::upload(file, &limits)?;
     // Every file read and the list checked before anything is sent.
-    let clip_uploads = clips
-        .iter()
-        .map(|p| super::load::upload(p, &limits))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    super::load::check_clips(clips, &clip_uploads)?;
+    let clip_uploads = super::load::clip_uploads(clips, &limits)?;
     let c = api
         .upload_character(
             &character.to_blob(),

@@ -65,18 +65,35 @@ pub(super) fn clips(
         .with_context(|| format!("cannot import clips from {}", path.display()))
 }
 
-/// Checks the clip files of a new bake as the server does
-/// ([`aobake_core::bake::check_clip_list`]): at most 256, none given twice
-/// (the same bytes under two paths count as one file given twice). Exits
-/// 5 (bad input) naming the files.
-pub(super) fn check_clips(paths: &[PathBuf], uploads: &[UploadBytes]) -> anyhow::Result<()> {
+/// Reads the clip files of a new bake (with their side files) and checks
+/// them as the server does ([`aobake_core::bake::check_clip_list`]): at
+/// most 256, counted before any is read, none given twice (the same bytes
+/// under two paths count as one file given twice). Exits 5 (bad input)
+/// naming the files.
+pub(super) fn clip_uploads(paths: &[PathBuf], limits: &Limits) -> anyhow::Result<Vec<UploadBytes>> {
     use aobake_core::bake::{ClipListError, MAX_CLIP_FILES, check_clip_list};
+    let bad_input = |message| {
+        anyhow::Error::from(super::client::Exit {
+            code: super::exit::BAD_INPUT,
+            message,
+        })
+    };
+    let too_many = |n: usize| {
+        format!(
+            "error: {n} clip files, over the limit of {MAX_CLIP_FILES}: put animations together in fewer files"
+        )
+    };
+    if paths.len() > MAX_CLIP_FILES {
+        return Err(bad_input(too_many(paths.len())));
+    }
+    let uploads = paths
+        .iter()
+        .map(|p| upload(p, limits))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let digests: Vec<String> = uploads.iter().map(UploadBytes::digest).collect();
     let message = match check_clip_list(&digests) {
-        Ok(()) => return Ok(()),
-        Err(ClipListError::TooMany(n)) => format!(
-            "error: {n} clip files, over the limit of {MAX_CLIP_FILES}: put animations together in fewer files"
-        ),
+        Ok(()) => return Ok(uploads),
+        Err(ClipListError::TooMany(n)) => too_many(n),
         Err(ClipListError::Twice(first, again)) if paths[first] == paths[again] => {
             format!("error: clip file {} is given twice", paths[first].display())
         }
@@ -86,9 +103,5 @@ pub(super) fn check_clips(paths: &[PathBuf], uploads: &[UploadBytes]) -> anyhow:
             paths[again].display()
         ),
     };
-    Err(super::client::Exit {
-        code: super::exit::BAD_INPUT,
-        message,
-    }
-    .into())
+    Err(bad_input(message))
 }

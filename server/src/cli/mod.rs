@@ -141,7 +141,7 @@ const EXIT_CODES: &str = "Exit codes (for scripts to branch on):
   5  the input was refused: a file that does not import (a character or an
      asset), a parameter out of range, or a request the server answered 4xx (a
      bake that does not exist, an action its state forbids)
-  6  the server refused the token (401) or its scope (403)
+  6  no token was given, or the server refused the token (401) or its scope (403)
   7  the server could not be reached, failed (5xx) or stayed too busy (429), after
      waiting out an outage: try again later
   8  submit --wait: the bake failed or was cancelled
@@ -155,7 +155,7 @@ pub mod exit {
     pub const NOT_BAKED: u8 = 4;
     /// The input was refused, here or by the server (a 4xx).
     pub const BAD_INPUT: u8 = 5;
-    /// The server refused the token or its scope.
+    /// No token, or the server refused the token or its scope.
     pub const TOKEN: u8 = 6;
     /// The server could not be reached or failed.
     pub const UNAVAILABLE: u8 = 7;

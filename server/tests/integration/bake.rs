@@ -327,6 +327,31 @@ fn bake_names_what_is_wrong() {
         assert_eq!(out.status.code(), Some(5), "{}", stderr(&out));
         assert!(stderr(&out).contains(&says), "{}", stderr(&out));
     }
+    // Too many clip files are counted before any is read: 257 paths
+    // that do not exist are refused for their number.
+    let mut args = vec![
+        "key".to_owned(),
+        r.to_owned(),
+        "--method".into(),
+        "vertex-linear".into(),
+    ];
+    for n in 0..257 {
+        args.push("--clips".into());
+        args.push(
+            dir.path()
+                .join(format!("absent-{n}.glb"))
+                .display()
+                .to_string(),
+        );
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = aobake(&args);
+    assert_eq!(out.status.code(), Some(5), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("257 clip files, over the limit of 256"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 #[test]

@@ -631,6 +631,19 @@ fn client_exit_codes_tell_failures_apart() {
     let mut command = env.aobake_command(&["status", "1"]);
     command.env("AOBAKE_TOKEN", "not-a-token");
     exits(command, 6);
+    // No token at all (none given, no admin.token in the data folder):
+    // the same exit, with what to do, before anything is sent.
+    let out = env
+        .aobake_command(&["status", "1", "--data", "no-such-folder"])
+        .env_remove("AOBAKE_TOKEN")
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(6), "{said}");
+    assert!(
+        said.starts_with("error: no token: pass --token or set AOBAKE_TOKEN"),
+        "{said}"
+    );
     let mut command = env.aobake_command(&["status", "1"]);
     command.env("AOBAKE_SERVER", "http://127.0.0.1:1");
     exits(command, 7);

@@ -132,6 +132,20 @@ fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
         "{said}"
     );
     assert!(started.elapsed() < Duration::from_secs(20), "{said}");
+    // A plain http:// address of the TLS port: no HTTP answer comes
+    // back, and the error says what the address likely is.
+    let plain = url.replace("https://", "http://");
+    let out = env
+        .aobake_command(&["workers"])
+        .env("AOBAKE_SERVER", &plain)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(7), "{said}");
+    assert!(
+        said.contains(&format!("if the server speaks https, its address is {url}")),
+        "{said}"
+    );
     // A worker that does not trust it exits 3, saying the same.
     let (exit, stderr) = crate::util::worker_until_it_exits(
         &url,
