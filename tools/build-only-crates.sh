@@ -8,14 +8,21 @@
 #
 # Cargo's `package."*"` override outranks `build-override`, so such a
 # crate not listed is compiled at opt-level 2 (slower builds, nothing
-# wrong). A crate used at run time too (syn, quote and proc-macro2 through
-# cbindgen in the header test) is listed by hand in Cargo.toml.
+# wrong). Crates that also run in a test (cbindgen in the header test,
+# and the syn, quote, proc-macro2 and unicode-ident it parses with) are
+# listed by hand in Cargo.toml. The check looks for `NAME = { opt-level =
+# 0 }` lines, the form Cargo.toml's table uses.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+export LC_ALL=C
 
 packages() {
-    cargo tree --workspace --prefix none --format '{p}' "$@" 2>/dev/null |
-        awk '{print $1}' | sort -u
+    local tree
+    tree=$(cargo tree --workspace --prefix none --format '{p}' "$@") || {
+        echo "cargo tree failed" >&2
+        exit 2
+    }
+    echo "$tree" | awk '{print $1}' | sort -u
 }
 
 all=$(packages -e normal,build,dev)

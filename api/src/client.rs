@@ -247,12 +247,16 @@ fn never_arrived(e: &ureq::Error) -> bool {
     }
 }
 
-/// Whether a request had no HTTP answer: the peer closed the connection
-/// without one, or answered in something else (a TLS alert), as a server
-/// that speaks only https does to a plain request.
+/// Whether a request had no HTTP answer: the peer closed or reset the
+/// connection without one, or answered in something else (a TLS alert),
+/// as a server that speaks only https does to a plain request.
 fn no_http_answer(e: &ureq::Error) -> bool {
+    use std::io::ErrorKind;
     match e {
-        ureq::Error::Io(io) => io.kind() == std::io::ErrorKind::UnexpectedEof,
+        ureq::Error::Io(io) => matches!(
+            io.kind(),
+            ErrorKind::UnexpectedEof | ErrorKind::ConnectionReset
+        ),
         ureq::Error::Protocol(_) => true,
         _ => false,
     }

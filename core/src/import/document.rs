@@ -292,7 +292,7 @@ fn node_parents(root: &json::Root) -> Result<Vec<Option<usize>>, ImportError> {
                 let problem = match node.children.iter().flatten().position(|d| d.value() == c) {
                     // The same node listed twice.
                     Some(first) if p == i => {
-                        format!("lists {c} again (first at [{first}]); its entries are unique")
+                        format!("repeats {c} (first at [{first}]); its entries are unique")
                     }
                     _ => format!(
                         "node {c} is already a child of node {p}: the node graph must be a forest"

@@ -158,6 +158,9 @@ fn nodes(root: &Root) -> Result<(), ImportError> {
                 "has both a matrix and translation, rotation or scale; a node has one or the other",
             ));
         }
+        // The parent check (`document::node_parents`) refuses a repeated
+        // child first, in the same words; the rule stands here with the
+        // spec's others.
         if let Some(children) = &node.children {
             unique(
                 children.iter().map(|c| c.value()),
@@ -585,7 +588,7 @@ fn unique(items: impl Iterator<Item = usize>, path: &str) -> Result<(), ImportEr
         if let Some(first) = seen.insert(item, k) {
             return Err(ImportError::invalid(
                 format!("{path}[{k}]"),
-                format!("lists {item} again (first at [{first}]); its entries are unique"),
+                format!("repeats {item} (first at [{first}]); its entries are unique"),
             ));
         }
     }

@@ -199,7 +199,7 @@ fn cyclic_and_shared_node_graphs() {
     let mut g = util::tiny_rig();
     let children = g.json["nodes"][0]["children"][0].clone();
     g.json["nodes"][0]["children"] = json!([children, children]);
-    let err = expect_err(&g, "again (first at [0])");
+    let err = expect_err(&g, "repeats 1 (first at [0])");
     assert_eq!(err.pointer().as_deref(), Some("/nodes/0/children/1"));
 }
 

@@ -65,9 +65,10 @@ pub struct Gpu {
     adapter: wgpu::Adapter,
     device: wgpu::Device,
     queue: wgpu::Queue,
-    /// The vertex-stage evaluators' render pipelines by shader label,
-    /// built on first use: a software adapter takes seconds to compile
-    /// one, and the tests that compare these evaluators draw many times.
+    /// The vertex-stage evaluators' render pipelines by their shader's
+    /// source, built on first use: a software adapter takes seconds to
+    /// compile one, and the tests that compare these evaluators draw many
+    /// times.
     point_pipelines: Mutex<HashMap<&'static str, wgpu::RenderPipeline>>,
 }
 

@@ -74,17 +74,24 @@ fn target_size(count: u32) -> (u32, u32) {
 /// The format of the target the points are drawn into.
 const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 
-/// `source`'s point-drawing pipeline, built once per [`Gpu`] and
-/// `label`.
-fn point_pipeline(gpu: &Gpu, label: &'static str, source: &str) -> wgpu::RenderPipeline {
-    let mut built = gpu
-        .point_pipelines
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    if let Some(pipeline) = built.get(label) {
-        return pipeline.clone();
+/// `source`'s point-drawing pipeline, built once per [`Gpu`]: compiled
+/// outside the cache's lock (seconds on a software adapter), and kept
+/// only when it compiled, so that a rejected shader says why every time.
+fn point_pipeline(
+    gpu: &Gpu,
+    label: &str,
+    source: &'static str,
+) -> Result<wgpu::RenderPipeline, GpuError> {
+    let built = || {
+        gpu.point_pipelines
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    };
+    if let Some(pipeline) = built().get(source) {
+        return Ok(pipeline.clone());
     }
     let device = &gpu.device;
+    let scope = ErrorScopes::push(device);
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -117,8 +124,10 @@ fn point_pipeline(gpu: &Gpu, label: &'static str, source: &str) -> wgpu::RenderP
         multiview_mask: None,
         cache: None,
     });
-    built.insert(label, pipeline.clone());
-    pipeline
+    if let Some(e) = scope.pop() {
+        return Err(GpuError::Pipeline(e.to_string()));
+    }
+    Ok(built().entry(source).or_insert(pipeline).clone())
 }
 
 /// Draws points `0..count` with `source`'s `vs_main` and `fs_main` (the
@@ -126,8 +135,8 @@ fn point_pipeline(gpu: &Gpu, label: &'static str, source: &str) -> wgpu::RenderP
 /// reads each point's value back.
 fn draw_points(
     gpu: &Gpu,
-    label: &'static str,
-    source: &str,
+    label: &str,
+    source: &'static str,
     resources: &[(u32, Resource<'_>)],
     count: u32,
 ) -> Result<Vec<f32>, GpuError> {
@@ -154,7 +163,7 @@ fn draw_points(
             },
         ));
     }
-    let pipeline = point_pipeline(gpu, label, source);
+    let pipeline = point_pipeline(gpu, label, source)?;
     let format = TARGET_FORMAT;
     let entries: Vec<wgpu::BindGroupEntry<'_>> = bound
         .iter()

@@ -179,14 +179,40 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
         .unwrap()
     };
     let obscurance_ao = || vertex_occlusion(&scene, &surface, &obscurance, &no_progress).unwrap();
+    // The same poses standing on a solid ground, in obscurance: the
+    // ground and the closest-hit query in one batch.
+    let feet = c
+        .positions
+        .iter()
+        .map(|p| p[1])
+        .fold(f32::INFINITY, f32::min);
+    let grounded = SceneOptions {
+        ground: Some(Ground {
+            up: Axis::Y,
+            height: feet,
+            half_size: None,
+        }),
+        ..SceneOptions::default()
+    };
+    let grounded_obscurance = SurfaceParams {
+        falloff: Falloff::Exponential { tau: 4.0 },
+        ..character
+    };
+    let grounded_ao = || {
+        trace_poses(c, &poses, &grounded, &grounded_obscurance, &no_progress)
+            .unwrap()
+            .values
+    };
     // The CPU's answers once: they are the same for every tracer.
     set_engine(None);
     let (cpu_mesh, cpu_character, cpu_obscurance) = (mesh_ao(), character_ao(), obscurance_ao());
+    let cpu_grounded = grounded_ao();
     assert_eq!(cpu_character.poses(), 3);
-    // Run to run, each tracer is compared with itself on the batch of
-    // three posed scenes (one dispatch over several scenes, where an
-    // order that depended on scheduling would show); the benchmark mesh
-    // is cast once per tracer: on the software adapters a second pass
+    // Run to run, each tracer is compared with itself on the batches of
+    // three posed scenes, with and without the ground, in AO and in
+    // obscurance (one dispatch over several scenes, where an order that
+    // depended on scheduling would show); the benchmark mesh is cast once
+    // per tracer and estimator: on the software adapters a second pass
     // doubled this test, the suite's longest.
     for gpu in both_adapters() {
         announce(&gpu);
@@ -200,6 +226,19 @@ fn per_vertex_ao_is_the_cpus_but_at_float_ties_on_lavapipe_and_llvmpipe() {
             &cpu_character.values,
             &first.values,
             1.0 / 128.0,
+        );
+
+        let (first, second) = gpu_twice(&gpu, grounded_ao);
+        assert_eq!(first, second, "the same bits run to run, grounded");
+        let (close, worst) = near(&cpu_grounded, &first);
+        assert!(
+            close as f64 >= 0.999 * cpu_grounded.len() as f64 && worst <= 1.0 / 128.0,
+            "grounded obscurance: {close} of {} within 1e-5, worst {worst}",
+            cpu_grounded.len()
+        );
+        assert!(
+            first.iter().any(|&v| v > 0.05),
+            "the ground and the figure occlude"
         );
 
         let first = on_gpu(&gpu, 1, obscurance_ao).remove(0);
