@@ -194,13 +194,16 @@ impl Servers {
     }
 }
 
+/// The hint for a failed handshake without a more precise one.
+const HANDSHAKE_FAILED: &str = "the TLS handshake failed";
+
 /// What to do about `e` when it is a failed TLS handshake (rustls' own
 /// error, or one an I/O error carries); `None` for any other error. A
 /// failed handshake sent no request.
 fn tls_failure(e: &ureq::Error) -> Option<&'static str> {
     let rustls = match e {
         ureq::Error::Rustls(r) => r,
-        ureq::Error::Tls(_) => return Some("the TLS handshake failed"),
+        ureq::Error::Tls(_) => return Some(HANDSHAKE_FAILED),
         ureq::Error::Io(io) => io.get_ref()?.downcast_ref::<rustls::Error>()?,
         _ => return None,
     };
@@ -223,7 +226,7 @@ fn tls_failure(e: &ureq::Error) -> Option<&'static str> {
         rustls::Error::General(_) => {
             "no certificate could be checked: the system's trust store is empty, or SSL_CERT_FILE or SSL_CERT_DIR names no certificates"
         }
-        _ => "the TLS handshake failed",
+        _ => HANDSHAKE_FAILED,
     })
 }
 
@@ -392,14 +395,14 @@ impl Client {
     ) -> Result<Response> {
         let urls = &self.servers.urls;
         let start = self.servers.index();
-        let answered = |res| {
+        let mark_answered = |res| {
             self.servers
                 .answered
                 .store(true, std::sync::atomic::Ordering::Relaxed);
             Ok(res)
         };
         let first = match request(&urls[start]) {
-            Ok(res) => return answered(res),
+            Ok(res) => return mark_answered(res),
             Err(e) => e,
         };
         // The first failed handshake among the servers asked.
@@ -424,7 +427,7 @@ impl Client {
                             };
                             notice(&format!("{} {why}: going on with {}", urls[start], urls[i]));
                         }
-                        return answered(res);
+                        return mark_answered(res);
                     }
                     Err(e) => {
                         if handshake.is_none() {
@@ -445,10 +448,12 @@ impl Client {
         }
         let base = &urls[start];
         let mut message = first.to_string();
-        if base.starts_with("http://") && no_http_answer(&first) && !self.answered() {
+        if let Some(address) = base.strip_prefix("http://")
+            && no_http_answer(&first)
+            && !self.answered()
+        {
             message.push_str(&format!(
-                " (no HTTP answer: if the server speaks https, its address is https://{})",
-                &base["http://".len()..]
+                " (no HTTP answer: if the server speaks https, its address is https://{address})"
             ));
         }
         Err(ApiError::Transport {
@@ -1171,30 +1176,36 @@ mod tests {
         assert!(matches!(client.whoami(), Err(ApiError::Decode { .. })));
     }
 
+    /// A handshake that met a certificate no CA here signed, as rustls
+    /// reports it through ureq.
+    fn untrusted() -> ureq::Error {
+        ureq::Error::Io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            rustls::Error::InvalidCertificate(rustls::CertificateError::UnknownIssuer),
+        ))
+    }
+
+    /// A 200 answer.
+    fn ok() -> std::result::Result<Response, ureq::Error> {
+        Ok(ureq::http::Response::builder()
+            .status(200)
+            .body(ureq::Body::builder().data("ok"))
+            .unwrap())
+    }
+
     /// A failed handshake is a setup problem (`Tls`, saying what to do)
     /// until a server has answered the client; after that, an outage to
     /// wait out (a proxy serving a placeholder certificate as it starts).
     #[test]
     fn a_failed_handshake_is_final_only_before_the_first_answer() {
         let client = Client::new("https://127.0.0.1:1", "t");
-        let untrusted = || {
-            ureq::Error::Io(std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                rustls::Error::InvalidCertificate(rustls::CertificateError::UnknownIssuer),
-            ))
-        };
         match client.reach(&|_| Err(untrusted())) {
             Err(ApiError::Tls { hint, .. }) => {
                 assert!(hint.contains("not one this machine trusts"), "{hint}");
             }
             other => panic!("{other:?}"),
         }
-        let answered = client.reach(&|_| {
-            Ok(ureq::http::Response::builder()
-                .status(200)
-                .body(ureq::Body::builder().data("ok"))
-                .unwrap())
-        });
+        let answered = client.reach(&|_| ok());
         assert!(answered.is_ok());
         let later = client.reach(&|_| Err(untrusted())).unwrap_err();
         assert!(
@@ -1208,18 +1219,6 @@ mod tests {
     /// is the error, not the first server's refused connection.
     #[test]
     fn a_fleet_goes_on_past_a_failed_handshake_and_names_it() {
-        let untrusted = || {
-            ureq::Error::Io(std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                rustls::Error::InvalidCertificate(rustls::CertificateError::UnknownIssuer),
-            ))
-        };
-        let ok = || {
-            Ok(ureq::http::Response::builder()
-                .status(200)
-                .body(ureq::Body::builder().data("ok"))
-                .unwrap())
-        };
         let heard = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
         let into = heard.clone();
         let client = Client::new("https://a", "t")

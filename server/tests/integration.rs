@@ -969,8 +969,10 @@ fn stop_serve(mut serve: std::process::Child) {
 /// Switching `aobake serve` to an admin token of one's own leaves no
 /// revoked token file for clients to pick up, the demo's dashboard token
 /// and the local workers' go with the start that made them (a start
-/// without local workers makes them none), and a client whose token is
-/// refused is told where it came from.
+/// without local workers makes them none), a client whose token is
+/// refused is told where it came from, and one that cannot reach the
+/// server is told where its address came from (the stopped server's
+/// `server.url`).
 #[test]
 fn a_restart_leaves_no_revoked_token_behind_and_a_refusal_names_the_tokens_source() {
     let dir = tempfile::tempdir().unwrap();
@@ -1068,9 +1070,10 @@ fn a_restart_leaves_no_revoked_token_behind_and_a_refusal_names_the_tokens_sourc
     assert_eq!(unreached.status.code(), Some(7), "{}", stderr(&unreached));
     let text = stderr(&unreached);
     assert!(
-        text.contains("the server's address came from")
-            && text.contains("server.url")
-            && text.contains("is that server running?"),
+        text.contains(&format!(
+            "the server's address came from {}:",
+            data.join("server.url").display()
+        )) && text.contains("is that server running?"),
         "{text}"
     );
 }

@@ -745,7 +745,7 @@ impl Drop for TestPostgres {
 }
 
 /// The boundary of [`multipart`] bodies.
-pub const BOUNDARY: &str = "aobake-test-boundary";
+const BOUNDARY: &str = "aobake-test-boundary";
 
 /// A `multipart/form-data` body of `parts` (field name, file name,
 /// bytes) and its content type, as a browser's form or `curl -F` sends

@@ -173,15 +173,10 @@ impl RunError {
     pub const REFUSED_EXIT: u8 = 3;
 }
 
-/// What to check when a lease is refused in a way that waiting does not
-/// mend; `None` for a refusal worth retrying. `answered`: a lease request
-/// has had the server's answer before.
+/// What to check when the server refuses a lease in a way that waiting
+/// does not mend; `None` for a refusal worth retrying. `answered`: a lease
+/// request has had the server's answer before.
 fn refused_for_good(e: &ApiError, answered: bool) -> Option<&'static str> {
-    // A failed handshake is `Tls` only before any server answered the
-    // client (later it is an outage, waited out).
-    if let ApiError::Tls { hint, .. } = e {
-        return Some(hint);
-    }
     // A success whose body is not a lease list, before any that was: a
     // web server or a proxy's page that answers every path. Once the
     // server has answered, such a body (a proxy's page in a restart) is
@@ -245,8 +240,9 @@ fn dispatch(
     // Sent again unchanged until an answer arrives: a request whose answer
     // was lost gets what it leased (`LeaseManyRequest::request`).
     let mut nonce = next_nonce();
-    // Empty answers in a row that came at once.
+    // Empty answers in a row that came at once, and how soon is at once.
     let mut early = 0u32;
+    let early_empty = EARLY_EMPTY.min(Duration::from_secs(config.wait_secs) / 2);
     while !shutdown.load(Ordering::Relaxed) {
         if idle.is_empty() {
             // Every slot is busy: wait for one, looking at shutdown.
@@ -274,7 +270,6 @@ fn dispatch(
                 // No job, long before the poll's end: a server ending its
                 // polls as it shuts down, or one that does not hold them.
                 // Ask again after a pause, not at once.
-                let early_empty = EARLY_EMPTY.min(Duration::from_secs(config.wait_secs) / 2);
                 if leases.is_empty() && polled.elapsed() < early_empty {
                     early += 1;
                     if early == EARLY_TOLD {
@@ -312,20 +307,25 @@ fn dispatch(
                 }
             }
             Err(e) => {
-                if let Some(check) = refused_for_good(&e, told) {
+                let refused = match refused_for_good(&e, told) {
+                    // The worker refused the server (a failed handshake is
+                    // `Tls` only before any server answered; later it is an
+                    // outage, waited out), and the error says what to do.
+                    _ if matches!(e, ApiError::Tls { .. }) => {
+                        Some(format!("worker {}: {e}", config.id))
+                    }
+                    Some(check) => Some(format!(
+                        "worker {}: the server at {} refused to lease jobs ({e}): {check}",
+                        config.id,
+                        client.base()
+                    )),
+                    None => None,
+                };
+                if let Some(message) = refused {
                     // Stop as at SIGTERM: jobs running now stop at their
                     // deadline, and their leases pass to other workers.
                     shutdown.store(true, Ordering::Relaxed);
-                    return Err(RunError::Refused(match e {
-                        // The worker refused the server, and the error
-                        // says what to do.
-                        ApiError::Tls { .. } => format!("worker {}: {e}", config.id),
-                        _ => format!(
-                            "worker {}: the server at {} refused to lease jobs ({e}): {check}",
-                            config.id,
-                            client.base()
-                        ),
-                    }));
+                    return Err(RunError::Refused(message));
                 }
                 failures += 1;
                 let wait = Duration::from_millis(200 * u64::from(failures.min(25)));

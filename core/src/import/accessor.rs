@@ -271,7 +271,8 @@ impl Accessors<'_> {
         });
         let count = accessor.count.0;
         if count > max_count {
-            return Err(ImportError::limit(
+            return Err(ImportError::limit_at(
+                format!("{path}.count"),
                 format!("{path}.count"),
                 count,
                 max_count,
@@ -322,7 +323,8 @@ impl Accessors<'_> {
                 .get()
                 .saturating_add((count as u64).saturating_mul(width as u64));
             if numbers > self.max_zero_filled {
-                return Err(ImportError::limit(
+                return Err(ImportError::limit_at(
+                    &path,
                     format!(
                         "{path}: numbers decoded from accessors without a bufferView (zeros the file does not carry)"
                     ),

@@ -280,8 +280,9 @@ fn node_parents(root: &json::Root) -> Result<Vec<Option<usize>>, ImportError> {
     let n = root.nodes.len();
     let mut parents = vec![None; n];
     for (i, node) in root.nodes.iter().enumerate() {
-        for (k, child) in node.children.iter().flatten().enumerate() {
-            let c = child.value();
+        let children = || node.children.iter().flatten().map(|c| c.value());
+        rules::unique(children(), &format!("nodes[{i}].children"))?;
+        for (k, c) in children().enumerate() {
             if c == i {
                 return Err(ImportError::invalid(
                     format!("nodes[{i}].children[{k}]"),
@@ -289,18 +290,11 @@ fn node_parents(root: &json::Root) -> Result<Vec<Option<usize>>, ImportError> {
                 ));
             }
             if let Some(p) = parents[c].replace(i) {
-                let problem = match node.children.iter().flatten().position(|d| d.value() == c) {
-                    // The same node listed twice.
-                    Some(first) if p == i => {
-                        format!("repeats {c} (first at [{first}]); its entries are unique")
-                    }
-                    _ => format!(
-                        "node {c} is already a child of node {p}: the node graph must be a forest"
-                    ),
-                };
                 return Err(ImportError::invalid(
                     format!("nodes[{i}].children[{k}]"),
-                    problem,
+                    format!(
+                        "node {c} is already a child of node {p}: the node graph must be a forest"
+                    ),
                 ));
             }
         }

@@ -16,6 +16,9 @@ pub enum ImportError {
     Limit {
         /// What was counted.
         what: String,
+        /// Where in the glTF the count is, when it is at one place (the
+        /// JSON path `accessors[3].count`); `None` for a file-wide count.
+        at: Option<String>,
         /// The count the file declares.
         count: u64,
         /// The configured limit.
@@ -87,9 +90,26 @@ impl ImportError {
         }
     }
 
+    /// A file-wide count over its limit.
     pub(crate) fn limit(what: impl Into<String>, count: u64, limit: u64) -> Self {
         Self::Limit {
             what: what.into(),
+            at: None,
+            count,
+            limit,
+        }
+    }
+
+    /// A count at the JSON path `at` over its limit.
+    pub(crate) fn limit_at(
+        at: impl Into<String>,
+        what: impl Into<String>,
+        count: u64,
+        limit: u64,
+    ) -> Self {
+        Self::Limit {
+            what: what.into(),
+            at: Some(at.into()),
             count,
             limit,
         }
@@ -119,14 +139,8 @@ impl ImportError {
         match self {
             Self::Invalid { path, .. }
             | Self::ForbiddenUri { path, .. }
-            | Self::MissingFile { path, .. } => json_pointer(path),
-            // A count at a place (`accessors[3].count`, `meshes[0].
-            // primitives[1].targets count`, `…: JOINTS_n/WEIGHTS_n sets`),
-            // not a file-wide one (`vertex count`).
-            Self::Limit { what, .. } => {
-                let place = what.split([':', ' ']).next().unwrap_or_default();
-                place.contains('[').then(|| json_pointer(place)).flatten()
-            }
+            | Self::MissingFile { path, .. }
+            | Self::Limit { at: Some(path), .. } => json_pointer(path),
             Self::UnsupportedExtension { index, .. } => {
                 Some(format!("/extensionsRequired/{index}"))
             }
@@ -235,21 +249,19 @@ mod tests {
             assert_eq!(e.pointer().as_deref(), pointer, "{path}");
         }
         assert_eq!(ImportError::NoGeometry.pointer(), None);
-        for (what, pointer) in [
-            ("accessors[3].count", Some("/accessors/3/count")),
+        for (at, pointer) in [
+            ("accessors[3].count", "/accessors/3/count"),
             (
-                "meshes[0].primitives[1].targets count",
-                Some("/meshes/0/primitives/1/targets"),
+                "meshes[0].primitives[1].targets",
+                "/meshes/0/primitives/1/targets",
             ),
-            (
-                "meshes[2].primitives[0]: JOINTS_n/WEIGHTS_n sets",
-                Some("/meshes/2/primitives/0"),
-            ),
-            ("vertex count", None),
-            ("animation count", None),
+            ("meshes[2].primitives[0]", "/meshes/2/primitives/0"),
         ] {
-            let e = ImportError::limit(what, 10, 5);
-            assert_eq!(e.pointer().as_deref(), pointer, "{what}");
+            let e = ImportError::limit_at(at, "a count", 10, 5);
+            assert_eq!(e.pointer().as_deref(), Some(pointer), "{at}");
+        }
+        for what in ["vertex count", "animation count"] {
+            assert_eq!(ImportError::limit(what, 10, 5).pointer(), None, "{what}");
         }
     }
 

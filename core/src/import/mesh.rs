@@ -135,7 +135,8 @@ pub(crate) fn build_character(
                     })
                     .count();
                 if s > MAX_INFLUENCE_SETS {
-                    return Err(ImportError::limit(
+                    return Err(ImportError::limit_at(
+                        &path,
                         format!("{path}: JOINTS_n/WEIGHTS_n sets"),
                         s as u64,
                         MAX_INFLUENCE_SETS as u64,
@@ -579,7 +580,8 @@ impl Builder<'_> {
             return Ok(None);
         };
         if targets.len() as u64 > self.limits.max_morph_targets {
-            return Err(ImportError::limit(
+            return Err(ImportError::limit_at(
+                format!("{path}.targets"),
                 format!("{path}.targets count"),
                 targets.len() as u64,
                 self.limits.max_morph_targets,

@@ -158,15 +158,6 @@ fn nodes(root: &Root) -> Result<(), ImportError> {
                 "has both a matrix and translation, rotation or scale; a node has one or the other",
             ));
         }
-        // The parent check (`document::node_parents`) refuses a repeated
-        // child first, in the same words; the rule stands here with the
-        // spec's others.
-        if let Some(children) = &node.children {
-            unique(
-                children.iter().map(|c| c.value()),
-                &format!("nodes[{n}].children"),
-            )?;
-        }
         if let Some(weights) = &node.weights {
             let targets = node
                 .mesh
@@ -582,7 +573,7 @@ fn is(accessor: &json::Accessor, component: ComponentType) -> bool {
 
 /// Refuses an entry of the list at `path` that repeats an earlier one,
 /// naming the repeat (`path[k]`) and where it was first.
-fn unique(items: impl Iterator<Item = usize>, path: &str) -> Result<(), ImportError> {
+pub(super) fn unique(items: impl Iterator<Item = usize>, path: &str) -> Result<(), ImportError> {
     let mut seen = HashMap::new();
     for (k, item) in items.enumerate() {
         if let Some(first) = seen.insert(item, k) {

@@ -117,13 +117,12 @@ impl<'a> SideFiles<'a> {
     /// The index of the file `path` names.
     pub(crate) fn position(&self, path: &str) -> Option<usize> {
         let wanted = normalize_name(path);
-        self.by_path
-            .get(&wanted)
-            .copied()
-            .or_else(|| match self.sharing_last_segment(&wanted) {
-                [one] => Some(*one),
+        self.by_path.get(&wanted).copied().or_else(|| {
+            match self.by_base.get(last_segment(&wanted)) {
+                Some(files) if files.len() == 1 => Some(files[0]),
                 _ => None,
-            })
+            }
+        })
     }
 
     /// Every file whose last path segment is `path`'s, in upload order.

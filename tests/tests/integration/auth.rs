@@ -444,11 +444,11 @@ fn counted_service(
 /// worker says what it sees.
 #[test]
 fn a_worker_answered_at_once_with_no_job_asks_again_after_a_pause() {
-    let env = TestEnv::start(Options::default());
+    // The stand-in server checks no token.
     let (url, requests) = counted_service("204 No Content", "text/plain", "");
     let mut child = std::process::Command::new(aobake_e2e::binary())
         .args(["worker", "--server", &url, "--id", "early", "--gpu", "off"])
-        .args(["--token", &env.token(&["worker"])])
+        .args(["--token", "any-token"])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())
         .spawn()

@@ -164,7 +164,6 @@ fn draw_points(
         ));
     }
     let pipeline = point_pipeline(gpu, label, source)?;
-    let format = TARGET_FORMAT;
     let entries: Vec<wgpu::BindGroupEntry<'_>> = bound
         .iter()
         .map(|(binding, b)| wgpu::BindGroupEntry {
@@ -191,7 +190,7 @@ fn draw_points(
         mip_level_count: 1,
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
-        format,
+        format: TARGET_FORMAT,
         usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
         view_formats: &[],
     });
