@@ -16,6 +16,10 @@ use crate::{
     auth::{Scope, new_token, token_hash},
     blobs::{self, Blobs, LocalBlobs},
     error::ApiError,
+    listen::{
+        Listener,
+        tls::{Certificate, TlsFiles},
+    },
     state::{AppState, ServerLimits},
     store::{PgStore, QueuePolicy, SqliteStore, Store, StoreError},
 };
@@ -46,6 +50,27 @@ pub struct ServeArgs {
     /// Address to listen on; port 0 picks a free one.
     #[arg(long, env = "AOBAKE_LISTEN", default_value = "127.0.0.1:8080")]
     pub listen: SocketAddr,
+    /// Speak https on --listen with this certificate: a PEM file, the
+    /// server's own certificate first, then the chain to its CA (with
+    /// --tls-key). SIGHUP reads both files again. The commands and local
+    /// workers of this machine then use a plain-HTTP listener on
+    /// 127.0.0.1 that `server.url` names.
+    #[arg(
+        long,
+        env = "AOBAKE_TLS_CERT",
+        requires = "tls_key",
+        value_name = "PEM"
+    )]
+    pub tls_cert: Option<PathBuf>,
+    /// The private key of --tls-cert: a PEM file (PKCS#8, PKCS#1 or SEC1,
+    /// not encrypted; may be the certificate's own file).
+    #[arg(
+        long,
+        env = "AOBAKE_TLS_KEY",
+        requires = "tls_cert",
+        value_name = "PEM"
+    )]
+    pub tls_key: Option<PathBuf>,
     /// Local worker processes to start and supervise (default: one per
     /// core; 0: none, for remote workers only).
     #[arg(long, env = "AOBAKE_WORKERS")]
@@ -124,6 +149,20 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     if let Err(e) = tikv_jemalloc_ctl::background_thread::write(true) {
         log_line!("warning: jemalloc's background purging is off: {e}");
     }
+    // Files that cannot serve are told before anything else starts.
+    let certificate = match (&args.tls_cert, &args.tls_key) {
+        (Some(cert), Some(key)) => Some(Certificate::load(TlsFiles {
+            cert: cert.clone(),
+            key: key.clone(),
+        })?),
+        _ => None,
+    };
+    if let Some(why) = certificate
+        .as_deref()
+        .and_then(Certificate::refused_by_clients)
+    {
+        log_line!("warning: {why}");
+    }
     std::fs::create_dir_all(&args.data)
         .with_context(|| format!("cannot create {}", args.data.display()))?;
     let store: Arc<dyn Store> = match &args.database {
@@ -175,17 +214,55 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     state.graph.sample_rays = args.job_rays;
     store.listen(state.jobs_ready.clone()).await?;
     state.share_events().await?;
-    let listener = tokio::net::TcpListener::bind(args.listen)
+    let tcp = tokio::net::TcpListener::bind(args.listen)
         .await
         .with_context(|| format!("cannot listen on {}", args.listen))?;
-    let url = format!("http://{}", listener.local_addr()?);
+    // `url` is where this machine's commands and local workers reach the
+    // server (`server.url`); `public`, where others do.
+    let (url, public, listeners) = match &certificate {
+        None => {
+            let url = format!("http://{}", tcp.local_addr()?);
+            println!("{} listening on {url}", stamp());
+            let plain = Listener { tcp, tls: None };
+            (url.clone(), url, vec![plain])
+        }
+        Some(certificate) => {
+            // The certificate names the server's public name, not
+            // 127.0.0.1, and this machine may not trust its CA: the
+            // commands here and the local workers use a listener of
+            // their own on the loopback, which nothing off the machine
+            // reaches.
+            let local = tokio::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, 0))
+                .await
+                .context("cannot listen on 127.0.0.1")?;
+            let public = format!("https://{}", tcp.local_addr()?);
+            let url = format!("http://{}", local.local_addr()?);
+            println!(
+                "{} listening on {public} (TLS, certificate {}) and, for this machine's commands and workers, on {url}",
+                stamp(),
+                certificate.files().cert.display()
+            );
+            let tls = Listener {
+                tcp,
+                tls: Some(certificate.config()?),
+            };
+            let local = Listener {
+                tcp: local,
+                tls: None,
+            };
+            (url, public, vec![tls, local])
+        }
+    };
     write_private(&args.data.join("server.url"), &url)?;
-    println!("{} listening on {url}", stamp());
     if !args.demo {
         println!(
-            "{} dashboard: {url}/ (sign in with a token from `aobake token create --scope read`)",
+            "{} dashboard: {public}/ (sign in with a token from `aobake token create --scope read`)",
             stamp()
         );
+    }
+    #[cfg(unix)]
+    if let Some(certificate) = certificate.clone() {
+        reload_on_hangup(certificate)?;
     }
 
     // Leases that expire without a heartbeat free their jobs.
@@ -332,13 +409,41 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         }
     };
     crate::listen::serve(
-        listener,
+        listeners,
         app(state),
         Duration::from_secs_f64(args.header_timeout_secs),
         shutdown,
     )
     .await?;
     reaper.abort();
+    Ok(())
+}
+
+/// Reads the certificate's files again at every SIGHUP (as nginx does):
+/// a renewed certificate is served from the next handshake on, and one
+/// that does not load is logged and leaves the previous one served.
+#[cfg(unix)]
+fn reload_on_hangup(certificate: Arc<Certificate>) -> anyhow::Result<()> {
+    use tokio::signal::unix::{SignalKind, signal};
+    let mut hangups = signal(SignalKind::hangup()).context("cannot handle SIGHUP")?;
+    tokio::spawn(async move {
+        while hangups.recv().await.is_some() {
+            match certificate.reload() {
+                Ok(()) => {
+                    log_line!(
+                        "reloaded the TLS certificate {}",
+                        certificate.files().cert.display()
+                    );
+                    if let Some(why) = certificate.refused_by_clients() {
+                        log_line!("warning: {why}");
+                    }
+                }
+                Err(e) => log_line!(
+                    "error: the TLS certificate was not reloaded, the previous one is still served: {e:#}"
+                ),
+            }
+        }
+    });
     Ok(())
 }
 

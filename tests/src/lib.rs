@@ -76,6 +76,12 @@ pub struct Options {
     /// The host of a [`netns::TestNet`] the server runs on (on its
     /// address, port 8080), when not this one.
     pub host: Option<netns::Host>,
+    /// `--tls-cert` and `--tls-key`: https on the server's port
+    /// ([`TestEnv::public_url`]); [`TestEnv::url`] is then its plain
+    /// listener for this machine.
+    pub tls: Option<(PathBuf, PathBuf)>,
+    /// Local worker processes the server starts (`--workers`).
+    pub local_workers: usize,
 }
 
 impl Default for Options {
@@ -91,6 +97,8 @@ impl Default for Options {
             blobs: None,
             database: None,
             host: None,
+            tls: None,
+            local_workers: 0,
         }
     }
 }
@@ -156,8 +164,10 @@ impl TestEnv {
             Some(h) => h.command(binary()),
             None => Command::new(binary()),
         };
+        let out = std::fs::File::create(self.dir.path().join("server.out")).expect("out");
         let child = command
-            .args(["serve", "--listen", listen, "--workers", "0"])
+            .args(["serve", "--listen", listen])
+            .args(["--workers", &o.local_workers.to_string()])
             .arg("--data")
             .arg(self.data())
             .args(["--lease-secs", &o.lease_secs.to_string()])
@@ -172,8 +182,21 @@ impl TestEnv {
             )
             .args(o.blobs.as_ref().map(|b| format!("--blobs={b}")))
             .args(o.database.as_ref().map(|d| format!("--database={d}")))
+            .args(
+                o.tls
+                    .iter()
+                    .flat_map(|(cert, key)| {
+                        [
+                            "--tls-cert".into(),
+                            cert.into(),
+                            "--tls-key".into(),
+                            key.into(),
+                        ]
+                    })
+                    .collect::<Vec<std::ffi::OsString>>(),
+            )
             .env("AOBAKE_ADMIN_TOKEN", ADMIN)
-            .stdout(Stdio::null())
+            .stdout(out)
             .stderr(log)
             .spawn()
             .expect("aobake serve starts");
@@ -199,6 +222,16 @@ impl TestEnv {
             let _ = s.kill();
             let _ = s.wait();
         }
+    }
+
+    /// The server's `https://` address (`listening on https://…`, when
+    /// started with [`Options::tls`]).
+    pub fn public_url(&self) -> String {
+        let out = std::fs::read_to_string(self.dir.path().join("server.out")).unwrap_or_default();
+        out.split_whitespace()
+            .find(|w| w.starts_with("https://"))
+            .unwrap_or_else(|| panic!("the server does not say it speaks https: {out}"))
+            .to_owned()
     }
 
     /// The server's stderr so far.

@@ -1,9 +1,14 @@
 //! `https://` servers: the command line and workers reach a server behind
-//! TLS (the way a studio runs one: a proxy that holds the certificate in
-//! front of `aobake serve`), trusting a private CA the way the machine
-//! does, and refuse, saying why, a certificate they do not trust.
+//! TLS (a proxy that holds the certificate in front of `aobake serve`, or
+//! `aobake serve --tls-cert` itself), trusting a private CA the way the
+//! machine does, and refuse, saying why, a certificate they do not trust;
+//! the server reads a renewed certificate on SIGHUP.
 
-use std::{path::Path, sync::Arc, time::Duration};
+use std::{
+    path::Path,
+    sync::Arc,
+    time::{Duration, Instant},
+};
 
 use aobake_e2e::{Options, TestEnv, character};
 
@@ -18,17 +23,23 @@ fn certificate_authority(file: &Path) -> rcgen::Issuer<'static, rcgen::KeyPair> 
     Issuer::new(params, key)
 }
 
+/// A new certificate for `localhost` that `issuer` signed, and its key.
+fn localhost_certificate(
+    issuer: &rcgen::Issuer<'static, rcgen::KeyPair>,
+) -> (rcgen::Certificate, rcgen::KeyPair) {
+    let key = rcgen::KeyPair::generate().unwrap();
+    let cert = rcgen::CertificateParams::new(vec!["localhost".to_owned()])
+        .unwrap()
+        .signed_by(&key, issuer)
+        .unwrap();
+    (cert, key)
+}
+
 /// A TLS front on `localhost` for the server at `backend` (`host:port`),
 /// its certificate from a CA of its own whose PEM it writes to
 /// `ca_file`; its `https://` URL. It runs as long as the test.
 fn tls_front(backend: &str, ca_file: &Path) -> String {
-    use rcgen::{CertificateParams, KeyPair};
-    let issuer = certificate_authority(ca_file);
-    let key = KeyPair::generate().unwrap();
-    let cert = CertificateParams::new(vec!["localhost".to_owned()])
-        .unwrap()
-        .signed_by(&key, &issuer)
-        .unwrap();
+    let (cert, key) = localhost_certificate(&certificate_authority(ca_file));
     let config = tokio_rustls::rustls::ServerConfig::builder_with_provider(Arc::new(
         tokio_rustls::rustls::crypto::ring::default_provider(),
     ))
@@ -157,4 +168,214 @@ fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
         stderr.contains("cannot talk to") && stderr.contains("not one this machine trusts"),
         "{stderr}"
     );
+}
+
+/// Writes a new `localhost` certificate from `issuer` and its key to
+/// `cert` and `key` (PEM).
+fn write_localhost_certificate(
+    issuer: &rcgen::Issuer<'static, rcgen::KeyPair>,
+    cert: &Path,
+    key: &Path,
+) {
+    let (made, made_key) = localhost_certificate(issuer);
+    std::fs::write(cert, made.pem()).unwrap();
+    std::fs::write(key, made_key.serialize_pem()).unwrap();
+}
+
+/// `aobake workers` against `url`, trusting only the CA in `ca`.
+fn workers_trusting(env: &TestEnv, url: &str, ca: &Path) -> std::process::Output {
+    env.aobake_command(&["workers"])
+        .env("AOBAKE_SERVER", url)
+        .env("SSL_CERT_FILE", ca)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn serve_speaks_https_itself_and_reads_a_renewed_certificate_on_sighup() {
+    let files = tempfile::tempdir().unwrap();
+    let path = |name: &str| files.path().join(name);
+    let (cert, key) = (path("cert.pem"), path("key.pem"));
+    write_localhost_certificate(&certificate_authority(&path("ca.pem")), &cert, &key);
+    let env = TestEnv::start(Options {
+        tls: Some((cert.clone(), key.clone())),
+        local_workers: 1,
+        header_timeout_secs: 2.0,
+        ..Options::default()
+    });
+    // https on the port asked for (the certificate names localhost); a
+    // plain listener of its own on the loopback in server.url, for the
+    // local worker and this machine's commands.
+    let https = env.public_url().replace("127.0.0.1", "localhost");
+    assert!(https.starts_with("https://localhost:"), "{https}");
+    assert!(env.url.starts_with("http://127.0.0.1:"), "{}", env.url);
+    assert_ne!(
+        env.url.rsplit(':').next(),
+        https.rsplit(':').next(),
+        "two listeners"
+    );
+
+    // A submit over https, trusting the CA; the local worker bakes it
+    // over the loopback.
+    let out = env
+        .aobake_command(&[
+            "submit",
+            character("RiggedSimple").to_str().unwrap(),
+            "--method",
+            "static-average",
+            "--poses",
+            "8",
+            "--samples",
+            "16",
+            "--eval-poses",
+            "2",
+            "--wait",
+            "--json",
+        ])
+        .env("AOBAKE_SERVER", &https)
+        .env("SSL_CERT_FILE", path("ca.pem"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.server_log()
+    );
+    let bake: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(bake["state"], "done", "{bake}");
+
+    // A client that opens the TLS port and never says hello is cut off at
+    // the header deadline (2 s), as a plain one is.
+    {
+        use std::io::Read as _;
+        let addr = https.trim_start_matches("https://localhost:");
+        let mut idle =
+            std::net::TcpStream::connect(("127.0.0.1", addr.parse::<u16>().unwrap())).unwrap();
+        idle.set_read_timeout(Some(Duration::from_secs(30)))
+            .unwrap();
+        let started = Instant::now();
+        let read = idle.read(&mut [0u8; 64]);
+        assert!(
+            matches!(read, Ok(0))
+                || read
+                    .as_ref()
+                    .is_err_and(|e| e.kind() == std::io::ErrorKind::ConnectionReset),
+            "{read:?}"
+        );
+        assert!(
+            started.elapsed() < Duration::from_secs(15),
+            "{:?}",
+            started.elapsed()
+        );
+    }
+
+    // Renewal: a certificate from another CA in the same files, then
+    // SIGHUP. New handshakes present it: a machine that trusts only the
+    // new CA gets in, one that trusts only the old one is refused.
+    write_localhost_certificate(&certificate_authority(&path("ca2.pem")), &cert, &key);
+    let hangup = || {
+        let pid = nix::unistd::Pid::from_raw(env.server_pid().unwrap() as i32);
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGHUP).unwrap();
+    };
+    hangup();
+    let started = Instant::now();
+    while !env.server_log().contains("reloaded the TLS certificate") {
+        assert!(
+            started.elapsed() < Duration::from_secs(20),
+            "{}",
+            env.server_log()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = workers_trusting(&env, &https, &path("ca2.pem"));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = workers_trusting(&env, &https, &path("ca.pem"));
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{said}");
+    assert!(said.contains("not one this machine trusts"), "{said}");
+
+    // A renewal that does not load is logged, and the certificate served
+    // stays.
+    std::fs::write(&key, "not a key").unwrap();
+    hangup();
+    let started = Instant::now();
+    while !env.server_log().contains("was not reloaded") {
+        assert!(
+            started.elapsed() < Duration::from_secs(20),
+            "{}",
+            env.server_log()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(
+        env.server_log().contains("key.pem holds no private key"),
+        "{}",
+        env.server_log()
+    );
+    let out = workers_trusting(&env, &https, &path("ca2.pem"));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn serve_refuses_tls_files_that_cannot_serve_before_it_starts() {
+    let files = tempfile::tempdir().unwrap();
+    let path = |name: &str| files.path().join(name);
+    let issuer = certificate_authority(&path("ca.pem"));
+    write_localhost_certificate(&issuer, &path("cert.pem"), &path("key.pem"));
+    write_localhost_certificate(&issuer, &path("other.pem"), &path("other.key"));
+    let serve = |tls: &[&str]| {
+        let mut command = std::process::Command::new(aobake_e2e::binary());
+        command
+            .args([
+                "serve",
+                "--listen",
+                "127.0.0.1:0",
+                "--workers",
+                "0",
+                "--data",
+            ])
+            .arg(path("data"));
+        for arg in tls {
+            command.arg(if arg.starts_with("--") {
+                arg.into()
+            } else {
+                path(arg)
+            });
+        }
+        let out = command.output().unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    // Another certificate's key: the server does not start, and says so
+    // before it makes its data folder.
+    let (code, said) = serve(&["--tls-cert", "cert.pem", "--tls-key", "other.key"]);
+    assert_eq!(code, Some(1), "{said}");
+    assert!(
+        said.contains("other.key is not the key of the first certificate in")
+            && said.contains("cert.pem"),
+        "{said}"
+    );
+    assert!(!path("data").exists());
+    // A file that is not there is named.
+    let (code, said) = serve(&["--tls-cert", "gone.pem", "--tls-key", "key.pem"]);
+    assert_eq!(code, Some(1), "{said}");
+    assert!(
+        said.contains("cannot read the TLS certificate") && said.contains("gone.pem"),
+        "{said}"
+    );
+    // One without the other is a wrong command line.
+    let (code, said) = serve(&["--tls-cert", "cert.pem"]);
+    assert_eq!(code, Some(2), "{said}");
+    assert!(said.contains("--tls-key"), "{said}");
 }
