@@ -707,6 +707,20 @@ impl Client {
         self.post_for("/v1/tokens", request)
     }
 
+    /// `GET /v1/bakes`: the newest `limit` bakes (1 to 1000), of the
+    /// method named `method` (such as `vertex-linear`) alone when given,
+    /// newest first.
+    pub fn bakes(&self, method: Option<&str>, limit: u32) -> Result<Vec<BakeView>> {
+        let method = method.map_or_else(String::new, |m| format!("&method={m}"));
+        self.get(&format!("/v1/bakes?limit={limit}{method}"))
+    }
+
+    /// `GET /v1/characters/{digest}`: a character upload's record (its
+    /// file name and summary).
+    pub fn character(&self, digest: &str) -> Result<crate::UploadRow> {
+        self.get(&format!("/v1/characters/{digest}"))
+    }
+
     /// `GET /v1/workers`: the workers the server knows, last seen first.
     pub fn workers(&self) -> Result<Vec<crate::WorkerRow>> {
         self.get("/v1/workers")

@@ -755,6 +755,90 @@ fn table<const N: usize>(head: [&str; N], rows: &[[String; N]]) -> Vec<String> {
         .collect()
 }
 
+/// Arguments of `aobake bakes`.
+#[derive(Debug, clap::Args)]
+pub(super) struct BakesArgs {
+    /// Only bakes of this method.
+    #[arg(long)]
+    method: Option<Method>,
+    /// At most this many, the newest (1 to 1000).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    limit: u32,
+    /// Print JSON (`GET /v1/bakes`) instead of a table.
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    conn: Conn,
+}
+
+/// `aobake bakes`: a server's newest bakes, as the dashboard's list shows
+/// them.
+pub(super) fn bakes(args: &BakesArgs) -> anyhow::Result<()> {
+    let api = args.conn.api()?;
+    let method = args.method.map(Method::name);
+    if args.json {
+        // The server's documents as they are, fields this build does not
+        // know included.
+        let method = method.map_or_else(String::new, |m| format!("&method={m}"));
+        let path = format!("/v1/bakes?limit={}{method}", args.limit);
+        let raw: Value = serde_json::from_slice(&api.get_bytes(&path)?)?;
+        println!("{}", serde_json::to_string_pretty(&raw)?);
+        return Ok(());
+    }
+    let bakes = api.bakes(method, args.limit)?;
+    // Each character's file name, asked once.
+    let mut names = std::collections::HashMap::new();
+    for b in &bakes {
+        if !names.contains_key(&b.bake.character) {
+            let name = api.character(&b.bake.character).ok().and_then(|u| {
+                u.summary["name"]
+                    .as_str()
+                    .filter(|n| !n.is_empty())
+                    .map(str::to_owned)
+            });
+            names.insert(b.bake.character.clone(), name);
+        }
+    }
+    let now = crate::auth::now_ms();
+    let rows: Vec<[String; 6]> = bakes
+        .iter()
+        .map(|v| {
+            let b = &v.bake;
+            let progress = if v.progress.total > 0 {
+                format!("{} %", 100 * v.progress.done / v.progress.total)
+            } else {
+                String::new()
+            };
+            let character = names[&b.character]
+                .clone()
+                .unwrap_or_else(|| b.character[..12.min(b.character.len())].to_owned());
+            let when = match b.finished_at {
+                Some(end) => format!(
+                    "ended {} ago (took {})",
+                    age(now - end),
+                    age(end - b.created_at)
+                ),
+                None => format!("submitted {} ago", age(now - b.created_at)),
+            };
+            [
+                b.id.to_string(),
+                b.state.as_str().to_owned(),
+                progress,
+                b.method.clone(),
+                character,
+                when,
+            ]
+        })
+        .collect();
+    for line in table(
+        ["bake", "state", "progress", "method", "character", "when"],
+        &rows,
+    ) {
+        println!("{line}");
+    }
+    Ok(())
+}
+
 /// Arguments of `aobake workers`.
 #[derive(Debug, clap::Args)]
 pub(super) struct WorkersArgs {

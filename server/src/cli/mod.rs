@@ -103,6 +103,9 @@ enum Command {
     Fetch(client::FetchArgs),
     /// Manage API tokens.
     Token(client::TokenArgs),
+    /// List a server's bakes, newest first: each one's id, state,
+    /// progress, method, character and age.
+    Bakes(client::BakesArgs),
     /// List the workers a server knows: each one's state (idle, busy,
     /// stopped), the job it runs, its tracer and when it was last seen.
     Workers(client::WorkersArgs),
@@ -227,5 +230,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Fetch(args) => client::fetch(&args).map_err(client::explain_refusal),
         Command::Token(args) => client::token(&args).map_err(client::explain_refusal),
         Command::Workers(args) => client::workers(&args).map_err(client::explain_refusal),
+        Command::Bakes(args) => client::bakes(&args).map_err(client::explain_refusal),
     }
 }

@@ -730,6 +730,38 @@ fn the_cli_pauses_resumes_cancels_and_retries_a_bake() {
         !ok && stderr.contains("409") && stderr.contains("only a paused bake can be resumed"),
         "{stderr}"
     );
+
+    // `aobake bakes` lists them newest first, the character by its file
+    // name; --method and --limit are the list's.
+    let (_, second) = submit(&env, &digest, 4);
+    let second = second["id"].as_i64().unwrap().to_string();
+    let list = |args: &[&str]| {
+        let out = env.aobake(&[&["bakes"], args].concat());
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        stdout
+            .lines()
+            .map(|l| l.split_whitespace().map(str::to_owned).collect())
+            .collect::<Vec<Vec<String>>>()
+    };
+    let rows = list(&[]);
+    assert_eq!(rows[0][..3], ["bake", "state", "progress"], "{rows:?}");
+    let ids: Vec<&str> = rows[1..].iter().map(|r| r[0].as_str()).collect();
+    assert_eq!(ids, [second.as_str(), id.as_str()], "{rows:?}");
+    for row in &rows[1..] {
+        assert_eq!(row[1..5], ["queued", "0", "%", "vertex-linear"], "{rows:?}");
+        assert_eq!(row[5], "RiggedSimple.glb", "{rows:?}");
+        assert_eq!(row[6], "submitted", "{rows:?}");
+    }
+    assert_eq!(list(&["--limit", "1"]).len(), 2);
+    assert_eq!(list(&["--method", "grid"]).len(), 1, "the head alone");
+    let out = env.aobake(&["bakes", "--json", "--limit", "1"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json[0]["id"].to_string(), second, "{json}");
 }
 
 #[test]
