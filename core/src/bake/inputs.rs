@@ -168,12 +168,17 @@ pub const MAX_SIDE_FILES: usize = 1024;
 /// imported with the character.
 pub const MAX_CLIP_FILES: usize = 256;
 
-/// Why a new bake's list of clip uploads is refused.
-#[derive(Debug, Clone, PartialEq, Eq)]
+/// Why a new bake's list of clip uploads is refused. (The message of
+/// `Twice` names indices; the command line and the API name the files.)
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ClipListError {
     /// More than [`MAX_CLIP_FILES`] (how many).
+    #[error(
+        "{0} clip files, over the limit of {MAX_CLIP_FILES}: put animations together in fewer files"
+    )]
     TooMany(usize),
     /// The same upload at two places of the list (their indices).
+    #[error("clip files {0} and {1} are the same")]
     Twice(usize, usize),
 }
 

@@ -78,13 +78,9 @@ pub(super) fn clip_uploads(paths: &[PathBuf], limits: &Limits) -> anyhow::Result
             message,
         })
     };
-    let too_many = |n: usize| {
-        format!(
-            "error: {n} clip files, over the limit of {MAX_CLIP_FILES}: put animations together in fewer files"
-        )
-    };
     if paths.len() > MAX_CLIP_FILES {
-        return Err(bad_input(too_many(paths.len())));
+        let e = ClipListError::TooMany(paths.len());
+        return Err(bad_input(format!("error: {e}")));
     }
     let uploads = paths
         .iter()
@@ -93,7 +89,7 @@ pub(super) fn clip_uploads(paths: &[PathBuf], limits: &Limits) -> anyhow::Result
     let digests: Vec<String> = uploads.iter().map(UploadBytes::digest).collect();
     let message = match check_clip_list(&digests) {
         Ok(()) => return Ok(uploads),
-        Err(ClipListError::TooMany(n)) => too_many(n),
+        Err(e @ ClipListError::TooMany(_)) => format!("error: {e}"),
         Err(ClipListError::Twice(first, again)) if paths[first] == paths[again] => {
             format!("error: clip file {} is given twice", paths[first].display())
         }

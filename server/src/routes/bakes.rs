@@ -9,9 +9,7 @@ use std::convert::Infallible;
 use std::time::Duration;
 
 use aobake_core::{
-    bake::{
-        Bake, BakeInputs, BakeParams, ClipListError, MAX_CLIP_FILES, bake_key, check_clip_list,
-    },
+    bake::{Bake, BakeInputs, BakeParams, ClipListError, bake_key, check_clip_list},
     method::Method,
 };
 use axum::{
@@ -92,13 +90,8 @@ pub(crate) async fn submit(
         .map_err(|e| ApiError::bad("bad_params", e.to_string()))?;
     match check_clip_list(&req.clips) {
         Ok(()) => {}
-        Err(ClipListError::TooMany(n)) => {
-            return Err(ApiError::bad(
-                "too_many_clips",
-                format!(
-                    "{n} clip files, over the limit of {MAX_CLIP_FILES}: put animations together in fewer files"
-                ),
-            ));
+        Err(e @ ClipListError::TooMany(_)) => {
+            return Err(ApiError::bad("too_many_clips", e.to_string()));
         }
         Err(ClipListError::Twice(_, again)) => {
             return Err(ApiError::bad(
