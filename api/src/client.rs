@@ -711,8 +711,13 @@ impl Client {
     /// method named `method` (such as `vertex-linear`) alone when given,
     /// newest first.
     pub fn bakes(&self, method: Option<&str>, limit: u32) -> Result<Vec<BakeView>> {
+        self.get(&Self::bakes_path(method, limit))
+    }
+
+    /// The path [`Client::bakes`] asks.
+    pub fn bakes_path(method: Option<&str>, limit: u32) -> String {
         let method = method.map_or_else(String::new, |m| format!("&method={m}"));
-        self.get(&format!("/v1/bakes?limit={limit}{method}"))
+        format!("/v1/bakes?limit={limit}{method}")
     }
 
     /// `GET /v1/characters/{digest}`: a character upload's record (its

@@ -163,6 +163,17 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     {
         log_line!("warning: {why}");
     }
+    // SIGHUP is taken from here on: a renewal's hook that sends one while
+    // the server still starts must not stop it (the signal's default),
+    // and the reload waits until the listeners are up.
+    #[cfg(unix)]
+    let hangups = match &certificate {
+        Some(_) => Some(
+            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())
+                .context("cannot handle SIGHUP")?,
+        ),
+        None => None,
+    };
     std::fs::create_dir_all(&args.data)
         .with_context(|| format!("cannot create {}", args.data.display()))?;
     let store: Arc<dyn Store> = match &args.database {
@@ -261,8 +272,8 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         );
     }
     #[cfg(unix)]
-    if let Some(certificate) = certificate.clone() {
-        reload_on_hangup(certificate)?;
+    if let (Some(certificate), Some(hangups)) = (certificate.clone(), hangups) {
+        reload_on_hangup(certificate, hangups);
     }
 
     // Leases that expire without a heartbeat free their jobs.
@@ -379,9 +390,9 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         }));
     }
     if let Some(dashboard) = demo_token {
-        let (url, admin) = (url.clone(), admin.clone());
+        let (url, public, admin) = (url.clone(), public.clone(), admin.clone());
         tokio::spawn(async move {
-            if let Err(e) = crate::demo::run(&url, &admin, &dashboard).await {
+            if let Err(e) = crate::demo::run(&url, &public, &admin, &dashboard).await {
                 log_line!("error: the demo bake could not be submitted: {e:#}");
             }
         });
@@ -423,9 +434,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
 /// a renewed certificate is served from the next handshake on, and one
 /// that does not load is logged and leaves the previous one served.
 #[cfg(unix)]
-fn reload_on_hangup(certificate: Arc<Certificate>) -> anyhow::Result<()> {
-    use tokio::signal::unix::{SignalKind, signal};
-    let mut hangups = signal(SignalKind::hangup()).context("cannot handle SIGHUP")?;
+fn reload_on_hangup(certificate: Arc<Certificate>, mut hangups: tokio::signal::unix::Signal) {
     tokio::spawn(async move {
         while hangups.recv().await.is_some() {
             match certificate.reload() {
@@ -444,7 +453,6 @@ fn reload_on_hangup(certificate: Arc<Certificate>) -> anyhow::Result<()> {
             }
         }
     });
-    Ok(())
 }
 
 /// The secrets a start uses: the admin token, its local workers' and the

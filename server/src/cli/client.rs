@@ -779,8 +779,7 @@ pub(super) fn bakes(args: &BakesArgs) -> anyhow::Result<()> {
     if args.json {
         // The server's documents as they are, fields this build does not
         // know included.
-        let method = method.map_or_else(String::new, |m| format!("&method={m}"));
-        let path = format!("/v1/bakes?limit={}{method}", args.limit);
+        let path = Client::bakes_path(method, args.limit);
         let raw: Value = serde_json::from_slice(&api.get_bytes(&path)?)?;
         println!("{}", serde_json::to_string_pretty(&raw)?);
         return Ok(());
@@ -790,45 +789,15 @@ pub(super) fn bakes(args: &BakesArgs) -> anyhow::Result<()> {
     let mut names = std::collections::HashMap::new();
     for b in &bakes {
         if !names.contains_key(&b.bake.character) {
-            let name = api.character(&b.bake.character).ok().and_then(|u| {
-                u.summary["name"]
-                    .as_str()
-                    .filter(|n| !n.is_empty())
-                    .map(str::to_owned)
-            });
-            names.insert(b.bake.character.clone(), name);
+            let summary = api.character(&b.bake.character)?.summary;
+            let name = summary["name"].as_str().filter(|n| !n.is_empty());
+            names.insert(b.bake.character.clone(), name.map(str::to_owned));
         }
     }
     let now = crate::auth::now_ms();
     let rows: Vec<[String; 6]> = bakes
         .iter()
-        .map(|v| {
-            let b = &v.bake;
-            let progress = if v.progress.total > 0 {
-                format!("{} %", 100 * v.progress.done / v.progress.total)
-            } else {
-                String::new()
-            };
-            let character = names[&b.character]
-                .clone()
-                .unwrap_or_else(|| b.character[..12.min(b.character.len())].to_owned());
-            let when = match b.finished_at {
-                Some(end) => format!(
-                    "ended {} ago (took {})",
-                    age(now - end),
-                    age(end - b.created_at)
-                ),
-                None => format!("submitted {} ago", age(now - b.created_at)),
-            };
-            [
-                b.id.to_string(),
-                b.state.as_str().to_owned(),
-                progress,
-                b.method.clone(),
-                character,
-                when,
-            ]
-        })
+        .map(|v| bake_row(v, names[&v.bake.character].as_deref(), now))
         .collect();
     for line in table(
         ["bake", "state", "progress", "method", "character", "when"],
@@ -837,6 +806,35 @@ pub(super) fn bakes(args: &BakesArgs) -> anyhow::Result<()> {
         println!("{line}");
     }
     Ok(())
+}
+
+/// A bake's row in `aobake bakes` at `now` (ms), its character named
+/// `character` (else by its digest's start).
+fn bake_row(view: &BakeView, character: Option<&str>, now: i64) -> [String; 6] {
+    let b = &view.bake;
+    let progress = if view.progress.total > 0 {
+        format!("{} %", 100 * view.progress.done / view.progress.total)
+    } else {
+        String::new()
+    };
+    let when = match b.finished_at {
+        Some(end) => format!(
+            "ended {} ago, {} after submit",
+            age(now - end),
+            age(end - b.created_at)
+        ),
+        None => format!("submitted {} ago", age(now - b.created_at)),
+    };
+    [
+        b.id.to_string(),
+        b.state.as_str().to_owned(),
+        progress,
+        b.method.clone(),
+        character
+            .unwrap_or_else(|| short_id(&b.character))
+            .to_owned(),
+        when,
+    ]
 }
 
 /// Arguments of `aobake workers`.
@@ -917,6 +915,46 @@ fn age(ms: i64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_bakes_row_says_how_far_and_when() {
+        let view = |state: &str, done: i64, total: i64, finished: Option<i64>| -> BakeView {
+            serde_json::from_value(serde_json::json!({
+                "id": 7, "key": "k", "character": "0123456789abcdef", "clips": [],
+                "method": "grid", "params": {}, "state": state, "priority": 0,
+                "total_work": total, "done_work": done, "jobs_total": 3, "jobs_done": 1,
+                "asset": null, "report": null, "plot": null, "error": null,
+                "created_at": 1_000, "updated_at": 1_000, "finished_at": finished,
+                "progress": {"done": done, "total": total},
+            }))
+            .unwrap()
+        };
+        let now = 1_000 + 3_600_000;
+        assert_eq!(
+            bake_row(&view("running", 1, 3, None), Some("Fox.glb"), now),
+            [
+                "7",
+                "running",
+                "33 %",
+                "grid",
+                "Fox.glb",
+                "submitted 1 h ago"
+            ]
+        );
+        assert_eq!(
+            bake_row(&view("done", 3, 3, Some(1_000 + 90_000)), None, now),
+            [
+                "7",
+                "done",
+                "100 %",
+                "grid",
+                "0123456789ab",
+                "ended 58 min ago, 1 min after submit"
+            ]
+        );
+        // No work known yet: no figure.
+        assert_eq!(bake_row(&view("queued", 0, 0, None), None, now)[2], "");
+    }
 
     /// A client made from `aobake serve`'s files is made again when a
     /// restart rewrote them (a new port, a new generated admin token), and

@@ -9,12 +9,10 @@ pub mod tls;
 use std::{sync::Arc, time::Duration};
 
 use axum::Router;
+use hyper::server::conn::http1::Builder;
 use hyper_util::{
-    rt::{TokioExecutor, TokioIo, TokioTimer},
-    server::{
-        conn::auto::Builder,
-        graceful::{GracefulShutdown, Watcher},
-    },
+    rt::{TokioIo, TokioTimer},
+    server::graceful::{GracefulShutdown, Watcher},
     service::TowerToHyperService,
 };
 use tokio::io::{AsyncRead, AsyncWrite};
@@ -38,9 +36,12 @@ pub async fn serve(
     header_timeout: Duration,
     shutdown: impl Future<Output = ()>,
 ) -> std::io::Result<()> {
-    let mut builder = Builder::new(TokioExecutor::new());
+    // HTTP/1.1 alone: its header deadline runs from the moment a request
+    // is awaited, so a connection that never sends a byte is cut off
+    // too (hyper-util's auto builder first waits, with no deadline, for
+    // the bytes that tell HTTP/2 apart).
+    let mut builder = Builder::new();
     builder
-        .http1()
         .timer(TokioTimer::new())
         .header_read_timeout(header_timeout);
     let graceful = GracefulShutdown::new();
@@ -70,8 +71,8 @@ pub async fn serve(
             match tls {
                 None => serve_connection(&builder, watcher, stream, app).await,
                 Some(tls) => {
-                    // The header deadline covers the handshake: a client
-                    // that never finishes it is cut off too.
+                    // The handshake has a deadline of the same length: a
+                    // client that never finishes it is cut off too.
                     let handshake = TlsAcceptor::from(tls).accept(stream);
                     if let Ok(Ok(stream)) = tokio::time::timeout(header_timeout, handshake).await {
                         serve_connection(&builder, watcher, stream, app).await;
@@ -80,10 +81,12 @@ pub async fn serve(
             }
         });
     }
-    // The sockets close: new connections are refused from here on.
+    // The sockets close: new connections are refused from here on, and
+    // those accepted but not yet started are closed.
     for acceptor in acceptors {
         acceptor.abort();
     }
+    drop(accepted);
     graceful.shutdown().await;
     Ok(())
 }
@@ -113,11 +116,11 @@ async fn accept(
 
 /// Serves HTTP/1 on one connection (plain or TLS) until it closes or,
 /// once shutdown begins, its request in flight is answered.
-async fn serve_connection<I>(builder: &Builder<TokioExecutor>, watcher: Watcher, io: I, app: Router)
+async fn serve_connection<I>(builder: &Builder, watcher: Watcher, io: I, app: Router)
 where
     I: AsyncRead + AsyncWrite + Unpin + Send + 'static,
 {
     let service = TowerToHyperService::new(app);
-    let conn = builder.serve_connection_with_upgrades(TokioIo::new(io), service);
-    let _ = watcher.watch(conn.into_owned()).await;
+    let conn = builder.serve_connection(TokioIo::new(io), service);
+    let _ = watcher.watch(conn).await;
 }

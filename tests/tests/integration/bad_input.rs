@@ -410,7 +410,7 @@ fn bad_requests_name_what_is_wrong() {
 }
 
 #[test]
-fn a_client_that_trickles_its_headers_is_cut_off() {
+fn a_client_that_trickles_its_headers_or_sends_nothing_is_cut_off() {
     let env = TestEnv::start(Options {
         header_timeout_secs: 1.0,
         ..Options::default()
@@ -429,6 +429,20 @@ fn a_client_that_trickles_its_headers_is_cut_off() {
         "cut off after {waited:?}"
     );
     // Closed (hyper may first answer 408).
+    let text = String::from_utf8_lossy(&buf[..n]);
+    assert!(n == 0 || text.starts_with("HTTP/1.1 408"), "{text}");
+    // So is one that never sends a byte.
+    let mut silent = std::net::TcpStream::connect(addr).unwrap();
+    silent
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let started = std::time::Instant::now();
+    let n = silent.read(&mut buf).unwrap_or(0);
+    let waited = started.elapsed();
+    assert!(
+        waited >= Duration::from_millis(900) && waited < Duration::from_secs(5),
+        "cut off after {waited:?}"
+    );
     let text = String::from_utf8_lossy(&buf[..n]);
     assert!(n == 0 || text.starts_with("HTTP/1.1 408"), "{text}");
     // Other clients are served meanwhile and after.

@@ -246,7 +246,8 @@ fn serve_speaks_https_itself_and_reads_a_renewed_certificate_on_sighup() {
     assert_eq!(bake["state"], "done", "{bake}");
 
     // A client that opens the TLS port and never says hello is cut off at
-    // the header deadline (2 s), as a plain one is.
+    // the deadline (2 s), as a plain one is; so is one that says hello
+    // and then no request.
     {
         use std::io::Read as _;
         let addr = https.trim_start_matches("https://localhost:");
@@ -267,6 +268,46 @@ fn serve_speaks_https_itself_and_reads_a_renewed_certificate_on_sighup() {
             started.elapsed() < Duration::from_secs(15),
             "{:?}",
             started.elapsed()
+        );
+    }
+
+    {
+        use std::io::Read as _;
+        use tokio_rustls::rustls;
+        let mut roots = rustls::RootCertStore::empty();
+        let ca = std::fs::read(path("ca.pem")).unwrap();
+        let ca = rustls::pki_types::pem::PemObject::from_pem_slice(&ca).unwrap();
+        roots.add(ca).unwrap();
+        let config = rustls::ClientConfig::builder_with_provider(Arc::new(
+            rustls::crypto::ring::default_provider(),
+        ))
+        .with_safe_default_protocol_versions()
+        .unwrap()
+        .with_root_certificates(roots)
+        .with_no_client_auth();
+        let name = rustls::pki_types::ServerName::try_from("localhost").unwrap();
+        let conn = rustls::ClientConnection::new(Arc::new(config), name).unwrap();
+        let port = https.rsplit(':').next().unwrap().parse::<u16>().unwrap();
+        let tcp = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+        tcp.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        let mut tls = rustls::StreamOwned::new(conn, tcp);
+        while tls.conn.is_handshaking() {
+            tls.conn.complete_io(&mut tls.sock).unwrap();
+        }
+        let started = Instant::now();
+        let read = tls.read(&mut [0u8; 64]);
+        let waited = started.elapsed();
+        // Closed, with or without close_notify (or a 408 first).
+        assert!(
+            read.is_ok()
+                || read
+                    .as_ref()
+                    .is_err_and(|e| e.kind() == std::io::ErrorKind::UnexpectedEof),
+            "{read:?}"
+        );
+        assert!(
+            waited > Duration::from_millis(1500) && waited < Duration::from_secs(15),
+            "{waited:?}"
         );
     }
 
