@@ -217,8 +217,19 @@ fn tls_failure(e: &ureq::Error) -> Option<&'static str> {
         {
             "it presents a CA's certificate as its own: give the server a certificate of its own, signed by a CA this machine trusts"
         }
+        rustls::Error::InvalidCertificate(
+            rustls::CertificateError::NotValidForName
+            | rustls::CertificateError::NotValidForNameContext { .. },
+        ) => {
+            "its certificate does not name the host of this address (the names it has are in its subjectAltName): use an address it names, or give the server a certificate that names this host"
+        }
+        rustls::Error::InvalidCertificate(
+            rustls::CertificateError::Expired | rustls::CertificateError::ExpiredContext { .. },
+        ) => {
+            "its certificate has expired: the server needs a renewed one (aobake serve reads it again on SIGHUP)"
+        }
         rustls::Error::InvalidCertificate(_) => {
-            "its certificate is not one this machine trusts: add the CA that signed it to the system's trust store, or name a bundle that holds it (and the public roots, if other servers need them) with SSL_CERT_FILE"
+            "its certificate is not one this machine trusts: add the CA that signed it to the system's trust store, or name a bundle that holds it (and the public roots, if other servers need them) with SSL_CERT_FILE; a self-signed certificate is its own CA, so the bundle may be the certificate itself"
         }
         rustls::Error::InvalidMessage(_) | rustls::Error::InappropriateMessage { .. } => {
             "it does not answer in TLS: is it an http:// address?"
@@ -1293,6 +1304,18 @@ mod tests {
             (
                 ureq::Error::Rustls(rustls::Error::General("No CA certificates".into())),
                 "trust store is empty",
+            ),
+            (
+                io(rustls::Error::InvalidCertificate(
+                    rustls::CertificateError::NotValidForName,
+                )),
+                "does not name the host of this address",
+            ),
+            (
+                io(rustls::Error::InvalidCertificate(
+                    rustls::CertificateError::Expired,
+                )),
+                "has expired",
             ),
         ] {
             let hint = tls_failure(&e).unwrap_or_else(|| panic!("{e}: not a TLS failure"));

@@ -246,12 +246,19 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             let local = tokio::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, 0))
                 .await
                 .context("cannot listen on 127.0.0.1")?;
-            let public = format!("https://{}", tcp.local_addr()?);
+            let addr = tcp.local_addr()?;
+            let names = certificate.names();
+            let public = https_url(addr, &names);
             let url = format!("http://{}", local.local_addr()?);
             println!(
-                "{} listening on {public} (TLS, certificate {}) and, for this machine's commands and workers, on {url}",
+                "{} listening on https://{addr} (TLS, certificate {} for {}) and, for this machine's commands and workers, on {url}",
                 stamp(),
-                certificate.files().cert.display()
+                certificate.files().cert.display(),
+                if names.is_empty() {
+                    "no host".to_owned()
+                } else {
+                    names.join(", ")
+                }
             );
             let tls = Listener {
                 tcp,
@@ -428,6 +435,23 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     .await?;
     reaper.abort();
     Ok(())
+}
+
+/// The https address others reach a server listening on `addr` at: the
+/// address itself when its certificate names that IP (or names nothing),
+/// else the certificate's first name that is not a wildcard, on the port.
+fn https_url(addr: SocketAddr, names: &[String]) -> String {
+    let ip = addr.ip().to_string();
+    if names.contains(&ip) {
+        return format!("https://{addr}");
+    }
+    match names.iter().find(|n| !n.starts_with('*')) {
+        Some(name) if name.parse::<std::net::Ipv6Addr>().is_ok() => {
+            format!("https://[{name}]:{}", addr.port())
+        }
+        Some(name) => format!("https://{name}:{}", addr.port()),
+        None => format!("https://{addr}"),
+    }
 }
 
 /// Reads the certificate's files again at every SIGHUP (as nginx does):
@@ -680,4 +704,27 @@ async fn terminate(child: &mut Child) {
         }
     }
     let _ = child.kill().await;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_https_address_is_one_the_certificate_names() {
+        let at = |addr: &str, names: &[&str]| {
+            let names: Vec<String> = names.iter().map(|&n| n.to_owned()).collect();
+            https_url(addr.parse().unwrap(), &names)
+        };
+        assert_eq!(
+            at("127.0.0.1:8443", &["localhost", "127.0.0.1"]),
+            "https://127.0.0.1:8443"
+        );
+        assert_eq!(
+            at("0.0.0.0:8443", &["*.studio.lan", "bake.studio.lan"]),
+            "https://bake.studio.lan:8443"
+        );
+        assert_eq!(at("0.0.0.0:8443", &["::1"]), "https://[::1]:8443");
+        assert_eq!(at("[::]:8443", &[]), "https://[::]:8443");
+    }
 }

@@ -43,19 +43,70 @@ impl Certificate {
         &self.files
     }
 
-    /// Why a client refuses the certificate served, whoever its CA is,
-    /// if one does: expired or not yet valid, a CA's certificate served
-    /// as a server's, or one not for servers. The server still presents
-    /// it (a browser told to may take it); the log says so at once,
-    /// instead of each client failing its handshake.
-    pub fn refused_by_clients(&self) -> Option<String> {
-        let current = self
-            .current
+    /// The certificate served now.
+    fn current(&self) -> Arc<CertifiedKey> {
+        self.current
             .read()
             .unwrap_or_else(|e| e.into_inner())
-            .clone();
+            .clone()
+    }
+
+    /// The host names and addresses the certificate served is for (its
+    /// subjectAltName; clients read no other), as clients compare them.
+    pub fn names(&self) -> Vec<String> {
+        let current = self.current();
+        let Some(cert) = current
+            .end_entity_cert()
+            .ok()
+            .and_then(|der| webpki::EndEntityCert::try_from(der).ok())
+        else {
+            return Vec::new();
+        };
+        // Checked against a name no certificate holds, the refusal lists
+        // the names it does hold.
+        let nobody = rustls::pki_types::ServerName::try_from("aobake.invalid").expect("a name");
+        let Err(webpki::Error::CertNotValidForName(context)) =
+            cert.verify_is_valid_for_subject_name(&nobody)
+        else {
+            return Vec::new();
+        };
+        // webpki lists them in their Debug form, `DnsName("…")` and
+        // `IpAddress(…)` (the unit test pins it); other kinds of name
+        // (a URI, a directory name) are no host.
+        context
+            .presented
+            .iter()
+            .filter_map(|shown| {
+                if let Some(dns) = shown
+                    .strip_prefix("DnsName(\"")
+                    .and_then(|r| r.strip_suffix("\")"))
+                {
+                    return Some(dns.to_owned());
+                }
+                let ip = shown.strip_prefix("IpAddress(")?.strip_suffix(')')?;
+                Some(
+                    ip.parse::<std::net::IpAddr>()
+                        .map_or_else(|_| ip.to_owned(), |ip| ip.to_string()),
+                )
+            })
+            .collect()
+    }
+
+    /// Why a client refuses the certificate served, whoever its CA is,
+    /// if one does: expired or not yet valid, a CA's certificate served
+    /// as a server's, one not for servers, or one that names no host. The
+    /// server still presents it (a browser told to may take it); the log
+    /// says so at once, instead of each client failing its handshake.
+    pub fn refused_by_clients(&self) -> Option<String> {
+        let current = self.current();
         let der = current.end_entity_cert().ok()?;
         let cert = webpki::EndEntityCert::try_from(der).ok()?;
+        let path = self.files.cert.display();
+        if self.names().is_empty() {
+            return Some(format!(
+                "{path} names no host: clients look for the server's name in its subjectAltName extension, which it lacks (a CN alone is not read); make one that has it, e.g. {SELF_SIGNED}"
+            ));
+        }
         let provider = rustls::crypto::ring::default_provider();
         // No trust anchor: what fails first is what a client checks of
         // the certificate alone (dates, basic constraints, key usage),
@@ -69,12 +120,11 @@ impl Certificate {
             None,
             None,
         );
-        let path = self.files.cert.display();
         match checked.err()? {
             webpki::Error::CertExpired { .. } => Some(format!("{path} has expired")),
             webpki::Error::CertNotValidYet { .. } => Some(format!("{path} is not valid yet")),
             webpki::Error::CaUsedAsEndEntity => Some(format!(
-                "{path} is a CA's certificate (basicConstraints CA:TRUE, which `openssl req -x509` writes unless given `-addext basicConstraints=critical,CA:FALSE`), and TLS clients such as aobake's refuse it as a server's own: serve a certificate that a CA signed, or a self-signed one that is not a CA's"
+                "{path} is a CA's certificate (basicConstraints CA:TRUE, which `openssl req -x509` writes unless told otherwise), and TLS clients such as aobake's refuse it as a server's own: serve a certificate that a CA signed, or a self-signed one that is not a CA's, e.g. {SELF_SIGNED}"
             )),
             webpki::Error::RequiredEkuNotFoundContext(_) => Some(format!(
                 "{path} is not a server's certificate (its extended key usage lacks serverAuth)"
@@ -116,18 +166,36 @@ impl ResolvesServerCert for Certificate {
     }
 }
 
+/// A self-signed certificate that clients take (once they trust it), as
+/// the warnings suggest it.
+const SELF_SIGNED: &str = "`openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -days 365 -subj /CN=HOST -addext subjectAltName=DNS:HOST -addext basicConstraints=critical,CA:FALSE -keyout key.pem -out cert.pem` (HOST: the name clients use)";
+
 /// The chain and key of `files`, checked to belong together.
 fn read(files: &TlsFiles) -> anyhow::Result<CertifiedKey> {
     let cert_pem = read_file(&files.cert, "certificate")?;
     let chain = CertificateDer::pem_slice_iter(&cert_pem)
         .collect::<Result<Vec<_>, _>>()
         .with_context(|| format!("{} is not a PEM file", files.cert.display()))?;
-    anyhow::ensure!(
-        !chain.is_empty(),
-        "{} holds no certificate (a PEM \"BEGIN CERTIFICATE\" block)",
-        files.cert.display()
-    );
     let key_pem = read_file(&files.key, "key")?;
+    if chain.is_empty() {
+        let swapped = PrivateKeyDer::from_pem_slice(&cert_pem).is_ok()
+            && CertificateDer::pem_slice_iter(&key_pem).any(|c| c.is_ok());
+        anyhow::bail!(
+            "{} holds no certificate (a PEM \"BEGIN CERTIFICATE\" block){}",
+            files.cert.display(),
+            if swapped {
+                ": it holds a key, and the key file a certificate; are --tls-cert and --tls-key swapped?"
+            } else {
+                ""
+            }
+        );
+    }
+    if is_encrypted(&key_pem) {
+        anyhow::bail!(
+            "{0} is encrypted, and a server that starts on its own has no passphrase to give: decrypt it into a file only the server's user reads (`openssl pkey -in {0} -out key.pem`)",
+            files.key.display()
+        );
+    }
     let key = PrivateKeyDer::from_pem_slice(&key_pem).map_err(|e| match e {
         rustls::pki_types::pem::Error::NoItemsFound => anyhow::anyhow!(
             "{} holds no private key (an unencrypted PKCS#8, PKCS#1 or SEC1 PEM block)",
@@ -148,6 +216,14 @@ fn read(files: &TlsFiles) -> anyhow::Result<CertifiedKey> {
             files.key.display()
         ),
     })
+}
+
+/// Whether a PEM file holds an encrypted key: PKCS#8's `ENCRYPTED
+/// PRIVATE KEY` block, or OpenSSL's traditional `Proc-Type: 4,ENCRYPTED`
+/// header (whose body the PEM reader cannot even parse).
+fn is_encrypted(pem: &[u8]) -> bool {
+    let has = |needle: &[u8]| pem.windows(needle.len()).any(|w| w == needle);
+    has(b"-----BEGIN ENCRYPTED PRIVATE KEY-----") || has(b"Proc-Type: 4,ENCRYPTED")
 }
 
 fn read_file(path: &Path, what: &str) -> anyhow::Result<Vec<u8>> {
@@ -196,6 +272,22 @@ mod tests {
         );
         let said = refused(files(dir.path(), &key, &key));
         assert!(said.contains("cert.pem holds no certificate"), "{said}");
+        assert!(!said.contains("swapped"), "{said}");
+        let said = refused(files(dir.path(), &key, &cert));
+        assert!(
+            said.contains("are --tls-cert and --tls-key swapped?"),
+            "{said}"
+        );
+        // Encrypted keys, both ways OpenSSL writes them.
+        let pkcs8 = "-----BEGIN ENCRYPTED PRIVATE KEY-----\nMIIFHDBOBgkqhkiG9w0BBQ0wQTApBgkqhkiG9w0BBQwwHAQI\n-----END ENCRYPTED PRIVATE KEY-----\n";
+        let traditional = "-----BEGIN RSA PRIVATE KEY-----\nProc-Type: 4,ENCRYPTED\nDEK-Info: AES-256-CBC,0123456789ABCDEF0123456789ABCDEF\n\nAAAA\n-----END RSA PRIVATE KEY-----\n";
+        for encrypted in [pkcs8, traditional] {
+            let said = refused(files(dir.path(), &cert, encrypted));
+            assert!(
+                said.contains("key.pem is encrypted") && said.contains("openssl pkey"),
+                "{said}"
+            );
+        }
         let said = refused(files(dir.path(), &cert, &cert));
         assert!(said.contains("key.pem holds no private key"), "{said}");
         let cut = &cert[..cert.len() - 30];
@@ -227,6 +319,26 @@ mod tests {
         // A self-signed server certificate is fine (its client trusts it
         // or does not).
         assert_eq!(said(localhost()), None);
+        let mut both = localhost();
+        both.subject_alt_names
+            .push(rcgen::SanType::IpAddress([127, 0, 0, 1].into()));
+        both.subject_alt_names.push(rcgen::SanType::IpAddress(
+            std::net::Ipv6Addr::LOCALHOST.into(),
+        ));
+        let key = KeyPair::generate().unwrap();
+        let cert = both.self_signed(&key).unwrap().pem();
+        let loaded = Certificate::load(files(dir.path(), &cert, &key.serialize_pem())).unwrap();
+        assert_eq!(loaded.names(), ["localhost", "127.0.0.1", "::1"]);
+        // A CN alone names nothing a client reads.
+        let mut cn_only = CertificateParams::new(Vec::<String>::new()).unwrap();
+        cn_only
+            .distinguished_name
+            .push(rcgen::DnType::CommonName, "localhost");
+        assert!(
+            said(cn_only).is_some_and(
+                |s| s.contains("names no host") && s.contains("subjectAltName=DNS:HOST")
+            )
+        );
         let mut ca = localhost();
         ca.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
         assert!(said(ca).is_some_and(|s| s.contains("is a CA's certificate")));
