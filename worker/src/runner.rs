@@ -489,6 +489,11 @@ fn complete_batches(client: &Client, patience: Patience<'_>, finished: &mpsc::Re
                 let mut results = results.into_iter();
                 for f in batch {
                     let answer = match results.next() {
+                        // The server keeps no result of a job that is no
+                        // longer this worker's: say why that can be.
+                        Some(Err(e)) if e.is_lease_lost() => Err(format!(
+                            "{e} (the lease is no longer this worker's: the bake was cancelled, or the lease ran out and the job went to another worker)"
+                        )),
                         Some(r) => r.map_err(|e| e.to_string()),
                         None => Err("the server gave no answer for it".to_owned()),
                     };

@@ -84,6 +84,26 @@ fn tls_front(backend: &str, ca_file: &Path) -> String {
     format!("https://localhost:{port}")
 }
 
+/// `aobake submit --wait --json` of a small bake (for the server and
+/// trust its caller sets).
+fn small_bake_submitted(env: &TestEnv) -> std::process::Command {
+    let character = character("RiggedSimple");
+    env.aobake_command(&[
+        "submit",
+        character.to_str().unwrap(),
+        "--method",
+        "static-average",
+        "--poses",
+        "8",
+        "--samples",
+        "16",
+        "--eval-poses",
+        "2",
+        "--wait",
+        "--json",
+    ])
+}
+
 #[test]
 fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
     let mut env = TestEnv::start(Options::default());
@@ -93,22 +113,7 @@ fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
     // A worker and a submit over https, the CA trusted as the system's
     // own (SSL_CERT_FILE stands in for the trust store): the bake ends.
     env.start_worker_at(&url, &trusted);
-    let cm = character("RiggedSimple");
-    let out = env
-        .aobake_command(&[
-            "submit",
-            cm.to_str().unwrap(),
-            "--method",
-            "static-average",
-            "--poses",
-            "8",
-            "--samples",
-            "16",
-            "--eval-poses",
-            "2",
-            "--wait",
-            "--json",
-        ])
+    let out = small_bake_submitted(&env)
         .env("AOBAKE_SERVER", &url)
         .env("SSL_CERT_FILE", &ca)
         .output()
@@ -217,21 +222,7 @@ fn serve_speaks_https_itself_and_reads_a_renewed_certificate_on_sighup() {
 
     // A submit over https, trusting the CA; the local worker bakes it
     // over the loopback.
-    let out = env
-        .aobake_command(&[
-            "submit",
-            character("RiggedSimple").to_str().unwrap(),
-            "--method",
-            "static-average",
-            "--poses",
-            "8",
-            "--samples",
-            "16",
-            "--eval-poses",
-            "2",
-            "--wait",
-            "--json",
-        ])
+    let out = small_bake_submitted(&env)
         .env("AOBAKE_SERVER", &https)
         .env("SSL_CERT_FILE", path("ca.pem"))
         .output()
