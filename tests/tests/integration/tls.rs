@@ -84,24 +84,38 @@ fn tls_front(backend: &str, ca_file: &Path) -> String {
     format!("https://localhost:{port}")
 }
 
-/// `aobake submit --wait --json` of a small bake (for the server and
-/// trust its caller sets).
-fn small_bake_submitted(env: &TestEnv) -> std::process::Command {
+/// `aobake submit --wait --json` of a small bake to `url`, trusting the
+/// CA in `ca` alone: it ends done.
+fn a_small_bake_ends_done(env: &TestEnv, url: &str, ca: &Path) {
     let character = character("RiggedSimple");
-    env.aobake_command(&[
-        "submit",
-        character.to_str().unwrap(),
-        "--method",
-        "static-average",
-        "--poses",
-        "8",
-        "--samples",
-        "16",
-        "--eval-poses",
-        "2",
-        "--wait",
-        "--json",
-    ])
+    let out = env
+        .aobake_command(&[
+            "submit",
+            character.to_str().unwrap(),
+            "--method",
+            "static-average",
+            "--poses",
+            "8",
+            "--samples",
+            "16",
+            "--eval-poses",
+            "2",
+            "--wait",
+            "--json",
+        ])
+        .env("AOBAKE_SERVER", url)
+        .env("SSL_CERT_FILE", ca)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}\n{}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        env.server_log(),
+        env.worker_logs()
+    );
+    let bake: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(bake["state"], "done", "{bake}");
 }
 
 #[test]
@@ -113,19 +127,7 @@ fn clients_and_workers_reach_an_https_server_that_the_machine_trusts() {
     // A worker and a submit over https, the CA trusted as the system's
     // own (SSL_CERT_FILE stands in for the trust store): the bake ends.
     env.start_worker_at(&url, &trusted);
-    let out = small_bake_submitted(&env)
-        .env("AOBAKE_SERVER", &url)
-        .env("SSL_CERT_FILE", &ca)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.worker_logs()
-    );
-    let bake: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(bake["state"], "done", "{bake}");
+    a_small_bake_ends_done(&env, &url, &ca);
 
     // A machine that trusts another CA refuses the certificate in the
     // handshake at once, not waited on as an outage: exit 1, saying what
@@ -222,19 +224,7 @@ fn serve_speaks_https_itself_and_reads_a_renewed_certificate_on_sighup() {
 
     // A submit over https, trusting the CA; the local worker bakes it
     // over the loopback.
-    let out = small_bake_submitted(&env)
-        .env("AOBAKE_SERVER", &https)
-        .env("SSL_CERT_FILE", path("ca.pem"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        env.server_log()
-    );
-    let bake: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(bake["state"], "done", "{bake}");
+    a_small_bake_ends_done(&env, &https, &path("ca.pem"));
 
     // A client that opens the TLS port and never says hello is cut off at
     // the deadline (2 s), as a plain one is; so is one that says hello
