@@ -55,41 +55,7 @@ impl Certificate {
     /// subjectAltName; clients read no other), as clients compare them.
     pub fn names(&self) -> Vec<String> {
         let current = self.current();
-        let Some(cert) = current
-            .end_entity_cert()
-            .ok()
-            .and_then(|der| webpki::EndEntityCert::try_from(der).ok())
-        else {
-            return Vec::new();
-        };
-        // Checked against a name no certificate holds, the refusal lists
-        // the names it does hold.
-        let nobody = rustls::pki_types::ServerName::try_from("aobake.invalid").expect("a name");
-        let Err(webpki::Error::CertNotValidForName(context)) =
-            cert.verify_is_valid_for_subject_name(&nobody)
-        else {
-            return Vec::new();
-        };
-        // webpki lists them in their Debug form, `DnsName("…")` and
-        // `IpAddress(…)` (the unit test pins it); other kinds of name
-        // (a URI, a directory name) are no host.
-        context
-            .presented
-            .iter()
-            .filter_map(|shown| {
-                if let Some(dns) = shown
-                    .strip_prefix("DnsName(\"")
-                    .and_then(|r| r.strip_suffix("\")"))
-                {
-                    return Some(dns.to_owned());
-                }
-                let ip = shown.strip_prefix("IpAddress(")?.strip_suffix(')')?;
-                Some(
-                    ip.parse::<std::net::IpAddr>()
-                        .map_or_else(|_| ip.to_owned(), |ip| ip.to_string()),
-                )
-            })
-            .collect()
+        end_entity(&current).map_or_else(Vec::new, |cert| names(&cert))
     }
 
     /// Why a client refuses the certificate served, whoever its CA is,
@@ -99,20 +65,18 @@ impl Certificate {
     /// says so at once, instead of each client failing its handshake.
     pub fn refused_by_clients(&self) -> Option<String> {
         let current = self.current();
-        let der = current.end_entity_cert().ok()?;
-        let cert = webpki::EndEntityCert::try_from(der).ok()?;
+        let cert = end_entity(&current)?;
         let path = self.files.cert.display();
-        if self.names().is_empty() {
+        if names(&cert).is_empty() {
             return Some(format!(
                 "{path} names no host: clients look for the server's name in its subjectAltName extension, which it lacks (a CN alone is not read); make one that has it, e.g. {SELF_SIGNED}"
             ));
         }
-        let provider = rustls::crypto::ring::default_provider();
         // No trust anchor: what fails first is what a client checks of
         // the certificate alone (dates, basic constraints, key usage),
         // else the unknown issuer, which is the client's to know.
         let checked = cert.verify_for_usage(
-            provider.signature_verification_algorithms.all,
+            provider().signature_verification_algorithms.all,
             &[],
             &current.cert[1..],
             rustls::pki_types::UnixTime::now(),
@@ -144,8 +108,7 @@ impl Certificate {
     /// A server's TLS that presents this certificate (as reloaded): TLS
     /// 1.2 and 1.3 on ring, HTTP/1.1.
     pub fn config(self: &Arc<Self>) -> anyhow::Result<Arc<rustls::ServerConfig>> {
-        let provider = Arc::new(rustls::crypto::ring::default_provider());
-        let mut config = rustls::ServerConfig::builder_with_provider(provider)
+        let mut config = rustls::ServerConfig::builder_with_provider(Arc::new(provider()))
             .with_safe_default_protocol_versions()
             .context("TLS setup")?
             .with_no_client_auth()
@@ -157,13 +120,50 @@ impl Certificate {
 
 impl ResolvesServerCert for Certificate {
     fn resolve(&self, _: ClientHello<'_>) -> Option<Arc<CertifiedKey>> {
-        Some(
-            self.current
-                .read()
-                .unwrap_or_else(|e| e.into_inner())
-                .clone(),
-        )
+        Some(self.current())
     }
+}
+
+/// The certificate's end-entity certificate, parsed.
+fn end_entity(key: &CertifiedKey) -> Option<webpki::EndEntityCert<'_>> {
+    webpki::EndEntityCert::try_from(key.end_entity_cert().ok()?).ok()
+}
+
+/// The host names and addresses `cert`'s subjectAltName holds.
+fn names(cert: &webpki::EndEntityCert<'_>) -> Vec<String> {
+    // Checked against a name no certificate holds, the refusal lists
+    // the names it does hold.
+    let nobody = rustls::pki_types::ServerName::try_from("aobake.invalid").expect("a name");
+    let Err(webpki::Error::CertNotValidForName(context)) =
+        cert.verify_is_valid_for_subject_name(&nobody)
+    else {
+        return Vec::new();
+    };
+    // webpki lists them in their Debug form, `DnsName("…")` and
+    // `IpAddress(…)` (the unit test pins it); other kinds of name
+    // (a URI, a directory name) are no host.
+    context
+        .presented
+        .iter()
+        .filter_map(|shown| {
+            if let Some(dns) = shown
+                .strip_prefix("DnsName(\"")
+                .and_then(|r| r.strip_suffix("\")"))
+            {
+                return Some(dns.to_owned());
+            }
+            let ip = shown.strip_prefix("IpAddress(")?.strip_suffix(')')?;
+            Some(
+                ip.parse::<std::net::IpAddr>()
+                    .map_or_else(|_| ip.to_owned(), |ip| ip.to_string()),
+            )
+        })
+        .collect()
+}
+
+/// The crypto every TLS piece here uses: ring, as the rest of aobake.
+fn provider() -> rustls::crypto::CryptoProvider {
+    rustls::crypto::ring::default_provider()
 }
 
 /// A self-signed certificate that clients take (once they trust it), as
@@ -203,8 +203,7 @@ fn read(files: &TlsFiles) -> anyhow::Result<CertifiedKey> {
         ),
         e => anyhow::anyhow!("{} is not a PEM file: {e}", files.key.display()),
     })?;
-    let provider = rustls::crypto::ring::default_provider();
-    CertifiedKey::from_der(chain, key, &provider).map_err(|e| match e {
+    CertifiedKey::from_der(chain, key, &provider()).map_err(|e| match e {
         rustls::Error::InconsistentKeys(_) => anyhow::anyhow!(
             "the key in {} is not the key of the first certificate in {} (the server's own certificate comes first, then its chain)",
             files.key.display(),
@@ -356,7 +355,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (cert, key) = self_signed();
         let loaded = Certificate::load(files(dir.path(), &cert, &key)).unwrap();
-        let served = || loaded.current.read().unwrap().cert[0].clone();
+        let served = || loaded.current().cert[0].clone();
         let first = served();
         std::fs::write(&loaded.files().key, "not a key").unwrap();
         assert!(loaded.reload().is_err());

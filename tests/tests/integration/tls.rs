@@ -229,31 +229,34 @@ fn serve_speaks_https_itself_and_reads_a_renewed_certificate_on_sighup() {
     // A client that opens the TLS port and never says hello is cut off at
     // the deadline (2 s), as a plain one is; so is one that says hello
     // and then no request.
-    {
-        use std::io::Read as _;
-        let addr = https.trim_start_matches("https://localhost:");
-        let mut idle =
-            std::net::TcpStream::connect(("127.0.0.1", addr.parse::<u16>().unwrap())).unwrap();
-        idle.set_read_timeout(Some(Duration::from_secs(30)))
-            .unwrap();
+    let port = https.rsplit(':').next().unwrap().parse::<u16>().unwrap();
+    let connect = || {
+        let tcp = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+        tcp.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        tcp
+    };
+    // The server closes it at the deadline, before the read times out:
+    // what the read got.
+    let cut_off = |mut stream: Box<dyn std::io::Read>| {
         let started = Instant::now();
-        let read = idle.read(&mut [0u8; 64]);
+        let read = stream.read(&mut [0u8; 64]);
+        let waited = started.elapsed();
         assert!(
-            matches!(read, Ok(0))
-                || read
-                    .as_ref()
-                    .is_err_and(|e| e.kind() == std::io::ErrorKind::ConnectionReset),
-            "{read:?}"
+            waited > Duration::from_millis(1500) && waited < Duration::from_secs(15),
+            "{waited:?}"
         );
-        assert!(
-            started.elapsed() < Duration::from_secs(15),
-            "{:?}",
-            started.elapsed()
-        );
-    }
-
+        read
+    };
+    // Before hello: the connection ends, or is reset.
+    let read = cut_off(Box::new(connect()));
+    assert!(
+        matches!(read, Ok(0))
+            || read
+                .as_ref()
+                .is_err_and(|e| e.kind() == std::io::ErrorKind::ConnectionReset),
+        "{read:?}"
+    );
     {
-        use std::io::Read as _;
         use tokio_rustls::rustls;
         let mut roots = rustls::RootCertStore::empty();
         let ca = std::fs::read(path("ca.pem")).unwrap();
@@ -268,17 +271,12 @@ fn serve_speaks_https_itself_and_reads_a_renewed_certificate_on_sighup() {
         .with_no_client_auth();
         let name = rustls::pki_types::ServerName::try_from("localhost").unwrap();
         let conn = rustls::ClientConnection::new(Arc::new(config), name).unwrap();
-        let port = https.rsplit(':').next().unwrap().parse::<u16>().unwrap();
-        let tcp = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
-        tcp.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
-        let mut tls = rustls::StreamOwned::new(conn, tcp);
+        let mut tls = rustls::StreamOwned::new(conn, connect());
         while tls.conn.is_handshaking() {
             tls.conn.complete_io(&mut tls.sock).unwrap();
         }
-        let started = Instant::now();
-        let read = tls.read(&mut [0u8; 64]);
-        let waited = started.elapsed();
         // Closed, with or without close_notify (or a 408 first).
+        let read = cut_off(Box::new(tls));
         assert!(
             read.is_ok()
                 || read
@@ -286,30 +284,27 @@ fn serve_speaks_https_itself_and_reads_a_renewed_certificate_on_sighup() {
                     .is_err_and(|e| e.kind() == std::io::ErrorKind::UnexpectedEof),
             "{read:?}"
         );
-        assert!(
-            waited > Duration::from_millis(1500) && waited < Duration::from_secs(15),
-            "{waited:?}"
-        );
     }
 
     // Renewal: a certificate from another CA in the same files, then
     // SIGHUP. New handshakes present it: a machine that trusts only the
     // new CA gets in, one that trusts only the old one is refused.
     write_localhost_certificate(&certificate_authority(&path("ca2.pem")), &cert, &key);
-    let hangup = || {
+    // SIGHUP, then the log's line that says what came of it.
+    let hangup_until_it_says = |line: &str| {
         let pid = nix::unistd::Pid::from_raw(env.server_pid().unwrap() as i32);
         nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGHUP).unwrap();
+        let started = Instant::now();
+        while !env.server_log().contains(line) {
+            assert!(
+                started.elapsed() < Duration::from_secs(20),
+                "{}",
+                env.server_log()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
     };
-    hangup();
-    let started = Instant::now();
-    while !env.server_log().contains("reloaded the TLS certificate") {
-        assert!(
-            started.elapsed() < Duration::from_secs(20),
-            "{}",
-            env.server_log()
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    hangup_until_it_says("reloaded the TLS certificate");
     let out = workers_trusting(&env, &https, &path("ca2.pem"));
     assert!(
         out.status.success(),
@@ -324,16 +319,7 @@ fn serve_speaks_https_itself_and_reads_a_renewed_certificate_on_sighup() {
     // A renewal that does not load is logged, and the certificate served
     // stays.
     std::fs::write(&key, "not a key").unwrap();
-    hangup();
-    let started = Instant::now();
-    while !env.server_log().contains("was not reloaded") {
-        assert!(
-            started.elapsed() < Duration::from_secs(20),
-            "{}",
-            env.server_log()
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    hangup_until_it_says("was not reloaded");
     assert!(
         env.server_log().contains("key.pem holds no private key"),
         "{}",
