@@ -274,6 +274,7 @@ impl<'a> Bake<'a> {
             character: &self.inputs.character,
             model,
             surface,
+            texel_floor: None,
         };
         let mut previews = subject.stills(
             frames.clip,

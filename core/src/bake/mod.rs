@@ -51,7 +51,7 @@ pub use jobs::{
     Stop,
 };
 pub use params::{BakeError, BakeParams, ReferenceSource, bake_key};
-pub use plan::{Plan, TestPose};
+pub use plan::{Plan, Receivers, TestPose};
 pub use preview::{
     Camera, Panel, Preview, PreviewInfo, PreviewModel, RenderFrame, RenderScene, Renderer,
 };

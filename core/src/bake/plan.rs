@@ -3,17 +3,24 @@
 //! reference, held-out and noise poses that `sample` jobs trace.
 
 use std::ops::Range;
+use std::sync::Arc;
 
 use rand::SeedableRng as _;
 use rand_chacha::ChaCha8Rng;
 
 use crate::{
     Character, Clip,
+    method::texel::{
+        atlas::TexelAtlas,
+        trace::{drawn_texels, trace_texels},
+    },
     method::vertex::{AssetHeaderFields, FitStats, FitStep, Model, PrimitiveSpan, Source},
     pose_space::{self, ParamError},
     pose_space::{ClipFrame, Handles, JointAngles, LayoutOptions, random_clip_frames},
     rig::pose::Pose,
-    trace::{AoBlock, HELD_OUT_SEED},
+    trace::{
+        AoBlock, HELD_OUT_SEED, Progress, SceneOptions, SurfaceParams, TraceError, trace_poses,
+    },
 };
 
 use super::{
@@ -42,9 +49,22 @@ pub struct Plan<'a> {
     pub handles: Handles,
     /// The parameters.
     pub params: BakeParams,
+    /// Where AO is traced, fitted and judged.
+    pub receivers: Receivers,
     /// The training clips, in `train` order (what clip-frame sampling and
     /// the joint-angle ranges read).
     train_clips: Vec<Clip>,
+}
+
+/// Where a bake traces, fits and judges AO: the columns of its
+/// [`AoBlock`]s.
+#[derive(Debug, Clone, Default)]
+pub enum Receivers {
+    /// The character's vertices (the per-vertex family).
+    #[default]
+    Vertices,
+    /// The texels of an atlas of the character (the texel family).
+    Texels(Arc<TexelAtlas>),
 }
 
 fn select(clips: &[Clip], names: &[String]) -> Result<Vec<usize>, BakeError> {
@@ -118,8 +138,50 @@ impl<'a> Plan<'a> {
             joint_angles,
             handles: pose_space::handles(character),
             params,
+            receivers: Receivers::Vertices,
             train_clips,
         })
+    }
+
+    /// The plan with AO traced, fitted and judged at `receivers`.
+    pub fn with_receivers(self, receivers: Receivers) -> Self {
+        Self { receivers, ..self }
+    }
+
+    /// Receivers per pose: the columns of the bake's [`AoBlock`]s.
+    pub fn receiver_count(&self) -> usize {
+        match &self.receivers {
+            Receivers::Vertices => self.character.vertex_count(),
+            Receivers::Texels(t) => t.texels.len(),
+        }
+    }
+
+    /// The AO of every receiver in every pose of a batch (see
+    /// [`trace_poses`] and [`trace_texels`]).
+    pub fn trace(
+        &self,
+        poses: &[Pose],
+        options: &SceneOptions,
+        surface: &SurfaceParams,
+        progress: Progress<'_>,
+    ) -> Result<AoBlock, TraceError> {
+        match &self.receivers {
+            Receivers::Vertices => trace_poses(self.character, poses, options, surface, progress),
+            Receivers::Texels(t) => {
+                trace_texels(self.character, &t.texels, poses, options, surface, progress)
+            }
+        }
+    }
+
+    /// Which receivers draw something in `pose` (see
+    /// [`Character::drawn_vertices`] and [`drawn_texels`]): the
+    /// evaluations judge only them.
+    pub fn drawn(&self, pose: &Pose) -> Vec<bool> {
+        let character = self.character;
+        match &self.receivers {
+            Receivers::Vertices => character.drawn_vertices(&character.skin(pose).positions),
+            Receivers::Texels(t) => drawn_texels(character, &t.texels, pose),
+        }
     }
 
     /// Poses `range` of `count` random joint-angle poses: every vector is

@@ -28,7 +28,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::{
     Character,
-    method::{Method, cubemap::model::CubemapModel, grid::model::GridModel, vertex::Model},
+    method::{
+        Method, cubemap::model::CubemapModel, grid::model::GridModel, texel::atlas::TexelAtlas,
+        vertex::Model,
+    },
     rig::{clip::Clip, pose::Pose},
     trace::{
         AoBlock, KroonParams, SceneOptions, SurfaceParams, kroon_occlusion, no_progress,
@@ -38,7 +41,7 @@ use crate::{
 
 use super::{
     JobError,
-    screen_space::{Gtao, ScreenFrame, ScreenSpaceInfo},
+    screen_space::{Gtao, ScreenFrame, ScreenSpaceInfo, TexelJudge},
 };
 
 /// Side of a still's panels in pixels.
@@ -367,6 +370,9 @@ pub struct Subject<'a> {
     pub model: PreviewModel<'a>,
     /// The ray tracing of the ground truth (the bake's held-out seed).
     pub surface: SurfaceParams,
+    /// An atlas whose texel floor the stills measure beside the
+    /// per-vertex one ([`ScreenSpaceInfo::measure`]).
+    pub texel_floor: Option<&'a TexelAtlas>,
 }
 
 impl Subject<'_> {
@@ -594,6 +600,8 @@ impl Subject<'_> {
                     &prepared.camera,
                     scene.gtao,
                     &self.surface,
+                    self.texel_floor
+                        .map(|atlas| TexelJudge { atlas, models: &[] }),
                 )
                 .map_err(|e| JobError::Invalid(e.to_string()))
             })

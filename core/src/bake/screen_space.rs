@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 use super::preview::{Camera, PreviewModel, RenderFrame};
 use crate::{
     asset::metrics::FrameError,
+    method::texel::atlas::{TexelAtlas, barycentric},
     trace::{Scene, SceneOptions, SurfaceParams, TraceError, no_progress, surface_occlusion},
 };
 
@@ -135,6 +136,45 @@ pub struct SurfaceErrors {
     /// The per-vertex ray-traced AO interpolated across triangles: the
     /// best any per-vertex storage can do at these pixels.
     pub per_vertex_truth: FrameError,
+    /// The ray-traced AO at the texel centres of an atlas, filtered as a
+    /// GPU's linear sampler filters the dilated texture: the best any
+    /// texture of that atlas can do at these pixels (the character only,
+    /// when the preview is given an atlas).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texel_truth: Option<FrameError>,
+    /// The texel models the still was given ([`TexelJudge::models`]),
+    /// looked up as the texel floor is.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub texel_models: Vec<FrameError>,
+}
+
+/// What a still judges in texture space: an atlas, whose texel floor is
+/// traced at the frame, and the per-texel values of texel models at the
+/// frame's pose, each looked up per pixel as an engine's linear sampler
+/// would read its dilated texture.
+#[derive(Debug, Clone, Copy)]
+pub struct TexelJudge<'a> {
+    /// The atlas.
+    pub atlas: &'a TexelAtlas,
+    /// Per model, one value per texel of the atlas.
+    pub models: &'a [Vec<f32>],
+}
+
+/// The atlas a still's texel floor was measured with.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AtlasInfo {
+    /// Texels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Charts.
+    pub charts: u32,
+    /// Texels that show the surface (inside and on chart borders).
+    pub texels: usize,
+    /// The share of the atlas's texels whose centre lies on the surface.
+    pub utilisation: f64,
+    /// Seconds spent tracing the texels.
+    pub trace_s: f64,
 }
 
 /// The screen-space baseline beside the model at one still, as
@@ -161,6 +201,9 @@ pub struct ScreenSpaceInfo {
     pub fetches_per_pixel: u32,
     /// Pixels GTAO runs on per frame (the whole panel).
     pub pixels: u64,
+    /// The atlas of the texel floor, when one was measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub atlas: Option<AtlasInfo>,
 }
 
 /// Every `STRIDE`-th pixel in x and y is ray-traced.
@@ -178,8 +221,23 @@ impl ScreenSpaceInfo {
         camera: &Camera,
         gtao: Gtao,
         surface: &SurfaceParams,
+        texels: Option<TexelJudge<'_>>,
     ) -> Result<Self, TraceError> {
+        let atlas = texels.map(|t| t.atlas);
+        let models: Vec<Vec<f32>> = texels.map_or_else(Vec::new, |t| {
+            t.models.iter().map(|m| t.atlas.texels.image(m)).collect()
+        });
         let scene = Scene::new(&frame.positions, triangles, &SceneOptions::default())?;
+        let started = std::time::Instant::now();
+        let texel_image = atlas
+            .map(|a| {
+                let (points, normals) =
+                    a.texels.points(&frame.positions, &frame.normals, triangles);
+                let values = surface_occlusion(&scene, &points, &normals, surface, &no_progress)?;
+                Ok::<_, TraceError>(a.texels.image(&values))
+            })
+            .transpose()?;
+        let texel_trace_s = started.elapsed().as_secs_f64();
         let contact = camera.scene_radius();
         let target = camera.target;
         let mut character = Vec::new();
@@ -207,7 +265,34 @@ impl ScreenSpaceInfo {
             PreviewModel::Cubemap(..) => (Some(cubemap), Some(cubemap)),
             PreviewModel::Grid(..) => (None, None),
         };
-        let judge = |pixels: &[usize], up: Option<Vec3>, not_judged: Option<&str>| {
+        // The textures at a pixel (the floor's, then the models'): each
+        // looked up at the point of the posed mesh the eye sees through it.
+        let texel_lookups = |pixels: &[usize]| -> Option<Vec<Vec<f32>>> {
+            let (a, floor) = atlas.zip(texel_image.as_ref())?;
+            let images: Vec<&Vec<f32>> = std::iter::once(floor).chain(&models).collect();
+            let mut out = vec![Vec::with_capacity(pixels.len()); images.len()];
+            for &i in pixels {
+                let dir = screen.positions[i] - camera.eye;
+                let hit = scene.first_hit(camera.eye, dir).map(|(t, distance)| {
+                    let p = camera.eye + dir.normalize() * distance;
+                    let corners = triangles[t].map(|v| frame.positions[v as usize]);
+                    (t, barycentric(p, corners))
+                });
+                for (o, image) in out.iter_mut().zip(&images) {
+                    o.push(match hit {
+                        Some((t, bary)) => a.sample(image, t, bary),
+                        // A pixel the eye's ray misses (a silhouette's
+                        // rounding): the interpolated per-vertex truth.
+                        None => screen.truth[i].max(0.0),
+                    });
+                }
+            }
+            Some(out)
+        };
+        let judge = |pixels: &[usize],
+                     up: Option<Vec3>,
+                     not_judged: Option<&str>,
+                     texels: Option<Vec<Vec<f32>>>| {
             let with_model = not_judged.is_none();
             if pixels.is_empty() {
                 return Ok(None);
@@ -229,18 +314,35 @@ impl ScreenSpaceInfo {
                 model: with_model.then(|| FrameError::of(&pick(&screen.model), &truth)),
                 model_not_judged: not_judged.map(str::to_owned),
                 per_vertex_truth: FrameError::of(&pick(&screen.truth), &truth),
+                texel_truth: texels.as_ref().map(|t| FrameError::of(&t[0], &truth)),
+                texel_models: texels.map_or_else(Vec::new, |t| {
+                    t[1..].iter().map(|m| FrameError::of(m, &truth)).collect()
+                }),
             }))
         };
         Ok(Self {
             gtao,
             stride: STRIDE,
             rays: surface.samples,
-            character: judge(&character, None, model_on_character)?,
-            ground: judge(&ground, Some(Vec3::Y), model_on_ground)?,
+            character: judge(
+                &character,
+                None,
+                model_on_character,
+                texel_lookups(&character),
+            )?,
+            ground: judge(&ground, Some(Vec3::Y), model_on_ground, None)?,
             gtao_ms: screen.gtao_ms,
             model_ms: screen.model_ms,
             fetches_per_pixel: gtao.fetches_per_pixel(),
             pixels: u64::from(screen.width) * u64::from(screen.height),
+            atlas: atlas.map(|a| AtlasInfo {
+                width: a.atlas.width,
+                height: a.atlas.height,
+                charts: a.atlas.charts,
+                texels: a.texels.len(),
+                utilisation: a.texels.utilisation(),
+                trace_s: texel_trace_s,
+            }),
         })
     }
 }
@@ -257,8 +359,15 @@ impl ScreenSpaceInfo {
                 (None, Some(why)) => format!("not judged ({why})"),
                 (None, None) => "—".to_owned(),
             };
+            let texel = match (e.texel_truth, &self.atlas) {
+                (Some(t), Some(a)) => format!(
+                    ", texel truth {:.4} ({}×{} atlas, {} texels)",
+                    t.rmse, a.width, a.height, a.texels
+                ),
+                _ => String::new(),
+            };
             out.push_str(&format!(
-                "  {name} ({} pixels): RMSE against per-pixel ray-traced AO: baked model {model}, GTAO {:.4} ({:.1} dB), per-vertex truth {:.4}\n",
+                "  {name} ({} pixels): RMSE against per-pixel ray-traced AO: baked model {model}, GTAO {:.4} ({:.1} dB), per-vertex truth {:.4}{texel}\n",
                 e.pixels, e.gtao.rmse, e.gtao.psnr_db, e.per_vertex_truth.rmse
             ));
         }

@@ -35,7 +35,7 @@ use crate::{
     method::Method,
     method::vertex::{FitStats, FitStep, Model, Rows, Source, StaticAverage, fit_static_average},
     rig::pose::Pose,
-    trace::{AoBlock, SceneOptions, no_progress, trace_poses},
+    trace::{AoBlock, SceneOptions, no_progress},
 };
 
 use super::{
@@ -72,7 +72,7 @@ impl Bake<'_> {
     /// the workers beside it.
     pub(super) fn vertex_graph(&self, options: GraphOptions) -> JobGraph {
         let p = &self.plan.params;
-        let rays = self.inputs.character.vertex_count() as u64 * u64::from(p.samples);
+        let rays = self.plan.receiver_count() as u64 * u64::from(p.samples);
         let batch = options.batch(rays);
         let mut jobs: Vec<PlannedJob> = Vec::new();
         let samples = |set: PoseSet, jobs: &mut Vec<PlannedJob>| -> Vec<usize> {
@@ -201,7 +201,7 @@ impl Bake<'_> {
             )));
         };
         let poses = self.poses(set, first..end);
-        let vertices = self.inputs.character.vertex_count();
+        let vertices = self.plan.receiver_count();
         let mut done = IndexedBlock {
             first,
             block: AoBlock {
@@ -235,14 +235,10 @@ impl Bake<'_> {
         let mut next = done.block.poses();
         while next < poses.len() {
             let end = (next + step).min(poses.len());
-            let rows = trace_poses(
-                &self.inputs.character,
-                &poses[next..end],
-                &options,
-                &surface,
-                &no_progress,
-            )
-            .map_err(|e| JobError::Invalid(e.to_string()))?;
+            let rows = self
+                .plan
+                .trace(&poses[next..end], &options, &surface, &no_progress)
+                .map_err(|e| JobError::Invalid(e.to_string()))?;
             next = end;
             done.block.values.extend(rows.values);
             let cursor = done.block.poses() as u64;
@@ -273,7 +269,7 @@ impl Bake<'_> {
         stack_blocks(
             deps,
             set.output(),
-            self.inputs.character.vertex_count(),
+            self.plan.receiver_count(),
             self.poses_in(set),
         )
     }
@@ -380,7 +376,7 @@ impl Bake<'_> {
         }
         let noise_rows = self.plan.noise_rows();
         let ground_truth_noise = NoiseEstimate::of(&noise_rows, &truth, &again);
-        let vertices = self.inputs.character.vertex_count() as u64;
+        let vertices = self.plan.receiver_count() as u64;
         let rays = (self.plan.params.poses + tests.len()) as u64
             * vertices
             * u64::from(self.plan.params.samples);
@@ -561,14 +557,6 @@ impl Plan<'_> {
             multiply_adds_per_vertex: multiply_adds / tests.len().max(1) as f64,
             undrawn_vertex_frames: hidden,
         }
-    }
-
-    /// Which vertices draw something in `pose` (see
-    /// [`crate::Character::drawn_vertices`]): the evaluations judge only
-    /// them.
-    fn drawn(&self, pose: &Pose) -> Vec<bool> {
-        let character = self.character;
-        character.drawn_vertices(&character.skin(pose).positions)
     }
 
     /// The clips an unseen-clips evaluation leaves out in turn: up to

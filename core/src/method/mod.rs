@@ -11,6 +11,7 @@
 pub mod cubemap;
 pub mod fit;
 pub mod grid;
+pub mod texel;
 pub mod vertex;
 
 /// A method's identity lives in the runtime crate, which engines read

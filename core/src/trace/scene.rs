@@ -216,6 +216,8 @@ pub struct Scene {
     accel: Accel,
     /// Triangles in BVH primitive order, in the local frame.
     triangles: Vec<RtTriangle>,
+    /// The index in the caller's triangle list of each of `triangles`.
+    ids: Vec<u32>,
     centre: Vec3A,
     /// local = (world − centre) · scale.
     scale: f32,
@@ -270,27 +272,31 @@ impl Scene {
         let centre = Vec3A::from((lo + hi) * 0.5);
         let local = |p: Vec3| (Vec3A::from(p) - centre) * scale;
 
-        let mut tris: Vec<RtTriangle> = triangles
+        let (mut tris, mut ids): (Vec<RtTriangle>, Vec<u32>) = triangles
             .iter()
-            .map(|t| {
-                RtTriangle::new(
+            .enumerate()
+            .map(|(i, t)| {
+                let tri = RtTriangle::new(
                     local(positions[t[0] as usize]),
                     local(positions[t[1] as usize]),
                     local(positions[t[2] as usize]),
-                )
+                );
+                (tri, i as u32)
             })
-            .filter(|t| t.ng.length_squared() > 0.0 && t.ng.is_finite())
-            .collect();
+            .filter(|(t, _)| t.ng.length_squared() > 0.0 && t.ng.is_finite())
+            .unzip();
         let params = options.quality.params();
         let accel = if tris.is_empty() {
             Accel::Empty
         } else if options.traversal == Traversal::ObvhsBvh2 {
             let bvh = build_bvh2(&tris, params, &mut std::time::Duration::default());
             tris = in_order(&tris, &bvh.primitive_indices);
+            ids = in_order(&ids, &bvh.primitive_indices);
             Accel::Bvh2(bvh)
         } else {
             let bvh = build_cwbvh(&tris, params, &mut std::time::Duration::default());
             tris = in_order(&tris, &bvh.primitive_indices);
+            ids = in_order(&ids, &bvh.primitive_indices);
             if options.traversal == Traversal::Wide {
                 Accel::Wide(Bvh8::new(&bvh, &tris))
             } else {
@@ -319,6 +325,7 @@ impl Scene {
         Ok(Scene {
             accel,
             triangles: tris,
+            ids,
             centre,
             scale,
             lift: (LIFT * local_diagonal).max(4.0 * TMIN),
@@ -418,6 +425,35 @@ impl Scene {
         )
     }
 
+    /// The first triangle of the mesh (ground excluded) along the ray from
+    /// `origin` in direction `dir` (world units, `dir` need not be unit
+    /// length): its index in the triangle list the scene was built from,
+    /// and the world distance along the unit direction. What a camera ray
+    /// through a pixel sees.
+    pub fn first_hit(&self, origin: Vec3, dir: Vec3) -> Option<(usize, f32)> {
+        let d = dir.normalize_or_zero();
+        if d == Vec3::ZERO || !origin.is_finite() {
+            return None;
+        }
+        let ray = Ray::new(self.to_local(origin), Vec3A::from(d), TMIN, f32::INFINITY);
+        let mut stack = Vec::with_capacity(64);
+        let hit = match &self.accel {
+            Accel::Empty => None,
+            Accel::Wide(bvh) => bvh.traverse::<false>(&self.triangles, ray, &mut stack),
+            Accel::Obvhs(bvh) => {
+                let mut hit = RayHit::none();
+                bvh.ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray))
+                    .then_some((hit.primitive_id as usize, hit.t))
+            }
+            Accel::Bvh2(bvh) => {
+                let mut hit = RayHit::none();
+                bvh.ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray))
+                    .then_some((hit.primitive_id as usize, hit.t))
+            }
+        };
+        hit.map(|(i, t)| (self.ids[i] as usize, t / self.scale))
+    }
+
     /// A ray-query context for one thread (it owns the traversal stack).
     pub(crate) fn tracer(&self) -> Tracer<'_> {
         Tracer {
@@ -427,12 +463,12 @@ impl Scene {
     }
 }
 
-/// `triangles` in a BVH's primitive order, so that its leaves index them
-/// directly.
-fn in_order(triangles: &[RtTriangle], primitive_indices: &[u32]) -> Vec<RtTriangle> {
+/// `items` (one per triangle) in a BVH's primitive order, so that its
+/// leaves index them directly.
+fn in_order<T: Copy>(items: &[T], primitive_indices: &[u32]) -> Vec<T> {
     primitive_indices
         .iter()
-        .map(|&i| triangles[i as usize])
+        .map(|&i| items[i as usize])
         .collect()
 }
 
@@ -496,5 +532,44 @@ impl Tracer<'_> {
             back_face: scene.triangles[id].ng.dot(dir) < 0.0,
         })
         .or(ground)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_first_hit_names_the_callers_triangle_on_every_traversal() {
+        // A degenerate triangle first (dropped from the BVH), then three
+        // unit squares' halves stacked along z at 0, 1 and 2.
+        let mut positions = vec![Vec3::ZERO, Vec3::ZERO, Vec3::ZERO];
+        let mut triangles = vec![[0, 1, 2]];
+        for z in [2.0, 0.0, 1.0] {
+            let base = positions.len() as u32;
+            positions.extend([
+                Vec3::new(0.0, 0.0, z),
+                Vec3::new(1.0, 0.0, z),
+                Vec3::new(0.0, 1.0, z),
+            ]);
+            triangles.push([base, base + 1, base + 2]);
+        }
+        for traversal in [Traversal::Wide, Traversal::Obvhs, Traversal::ObvhsBvh2] {
+            let options = SceneOptions {
+                traversal,
+                ..SceneOptions::default()
+            };
+            let scene = Scene::new(&positions, &triangles, &options).unwrap();
+            let eye = Vec3::new(0.25, 0.25, -3.0);
+            let (t, d) = scene.first_hit(eye, Vec3::Z * 5.0).unwrap();
+            assert_eq!(t, 2, "{traversal:?}: the square at z = 0");
+            assert!((d - 3.0).abs() < 1e-4, "{traversal:?}: {d}");
+            let (t, _) = scene
+                .first_hit(Vec3::new(0.25, 0.25, 1.5), Vec3::Z)
+                .unwrap();
+            assert_eq!(t, 1, "{traversal:?}: the square at z = 2");
+            assert_eq!(scene.first_hit(eye, -Vec3::Z), None);
+            assert_eq!(scene.first_hit(eye, Vec3::ZERO), None);
+        }
     }
 }

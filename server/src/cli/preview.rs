@@ -10,6 +10,7 @@ use aobake_core::{
     Character, Clip, Limits,
     asset::Container,
     bake::{AssetUseError, BakedAsset, preview::Subject},
+    method::texel::atlas::{AtlasOptions, PADDING, TexelAtlas},
 };
 use aobake_worker::gpu::{Gpu, PreviewRenderer};
 
@@ -41,6 +42,12 @@ pub(super) struct Args {
     /// truth.
     #[arg(long)]
     animate: bool,
+    /// With --time: also measure the texel floor of a generated atlas of
+    /// this side (texels): the ray-traced AO at its texel centres,
+    /// filtered as a GPU filters the texture, against per-pixel
+    /// ray-traced AO (the best any texture of that atlas can show).
+    #[arg(long, value_name = "SIDE", requires = "time")]
+    texel_floor: Option<u32>,
     /// Where to write the PNG.
     #[arg(long)]
     out: PathBuf,
@@ -73,12 +80,27 @@ impl Loaded {
         })
     }
 
+    /// A generated atlas of `side` texels of the character's bind pose.
+    fn atlas(&self, side: u32) -> anyhow::Result<TexelAtlas> {
+        let c = &self.character;
+        TexelAtlas::generate(
+            &c.positions,
+            &c.triangles,
+            &AtlasOptions {
+                size: side,
+                padding: PADDING,
+            },
+        )
+        .context("cannot measure the texel floor")
+    }
+
     fn subject(&self) -> anyhow::Result<Subject<'_>> {
         let (model, surface) = self.asset.preview_model()?;
         Ok(Subject {
             character: &self.character,
             model,
             surface,
+            texel_floor: None,
         })
     }
 }
@@ -95,7 +117,14 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     }
     let gpu = Gpu::shared().context("no GPU adapter for the preview")?;
     let mut renderer = PreviewRenderer::new(gpu)?;
-    let subject = loaded.subject()?;
+    let atlas = args
+        .texel_floor
+        .map(|side| loaded.atlas(side))
+        .transpose()?;
+    let subject = Subject {
+        texel_floor: atlas.as_ref(),
+        ..loaded.subject()?
+    };
     let preview = match args.time {
         Some(t) if !t.is_finite() => bail!("--time must be a finite number of seconds"),
         Some(t) => subject
@@ -147,6 +176,11 @@ pub(super) struct BenchArgs {
     /// Timed runs per adapter (medians are quoted).
     #[arg(long, default_value_t = 5)]
     runs: usize,
+    /// Also the texel floor of generated atlases of these sides (texels,
+    /// comma-separated) at the still, against the per-vertex floor and
+    /// GTAO.
+    #[arg(long, value_name = "SIDES", value_delimiter = ',')]
+    texel_floor: Vec<u32>,
 }
 
 /// Milliseconds per rendered panel of a still (4 panels) and of an
@@ -236,6 +270,75 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         println!(
             "the still at {still_time:.2} s, against per-pixel ray-traced AO:\n{}",
             screen.summary()
+        );
+    }
+    if !args.texel_floor.is_empty() {
+        texel_floors(
+            &loaded,
+            &subject,
+            clip,
+            still_time,
+            &args.texel_floor,
+            &mut renderers[0],
+        )?;
+    }
+    Ok(())
+}
+
+/// The texel floor of an atlas of each side in `sides` at the still, as a
+/// table beside the per-vertex floor and GTAO on the same pixels.
+fn texel_floors(
+    loaded: &Loaded,
+    subject: &Subject<'_>,
+    clip: &Clip,
+    time: f32,
+    sides: &[u32],
+    renderer: &mut PreviewRenderer<'_>,
+) -> anyhow::Result<()> {
+    println!(
+        "texel floors at {time:.2} s on the character, RMSE against per-pixel ray-traced AO ({} rays):",
+        subject.surface.samples
+    );
+    println!(
+        "| atlas | charts | texels | utilisation | atlas (s) | texel trace (s) | texel floor | per-vertex floor | GTAO |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for &side in sides {
+        let started = std::time::Instant::now();
+        let atlas = match loaded.atlas(side) {
+            Ok(a) => a,
+            Err(e) => {
+                println!("| {side} | {e:#} | | | | | | | |");
+                continue;
+            }
+        };
+        let atlas_s = started.elapsed().as_secs_f64();
+        let with_atlas = Subject {
+            texel_floor: Some(&atlas),
+            ..*subject
+        };
+        let still = with_atlas
+            .stills(Some(clip), &[time], None, renderer)?
+            .remove(0);
+        let screen = still
+            .info
+            .screen_space
+            .context("the still measured nothing")?;
+        let (Some(e), Some(a)) = (&screen.character, &screen.atlas) else {
+            bail!("the still shows no character");
+        };
+        let floor = e.texel_truth.context("no texel floor was measured")?;
+        println!(
+            "| {}×{} | {} | {} | {:.0} % | {atlas_s:.2} | {:.2} | {:.4} | {:.4} | {:.4} |",
+            a.width,
+            a.height,
+            a.charts,
+            a.texels,
+            100.0 * a.utilisation,
+            a.trace_s,
+            floor.rmse,
+            e.per_vertex_truth.rmse,
+            e.gtao.rmse
         );
     }
     Ok(())

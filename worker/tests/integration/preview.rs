@@ -14,6 +14,7 @@ use aobake_core::{
     bake::{BakeParams, Camera, Panel, Plan, RenderFrame, RenderScene, Renderer},
     image::{HEAT_MAP, Image},
     method::Method,
+    method::texel::atlas::{AtlasOptions, TexelAtlas},
     method::vertex::Model,
     trace::{AoBlock, SceneOptions, no_progress, trace_poses},
 };
@@ -73,6 +74,7 @@ fn fixture() -> Fixture {
         character: &c,
         model: aobake_core::bake::PreviewModel::Vertex(&model),
         surface: params.held_out_surface(),
+        texel_floor: None,
     };
     let camera = subject.camera(Some(clip));
     let ground = camera.ground();
@@ -286,7 +288,10 @@ fn the_screen_space_comparison_judges_the_model_and_gtao_per_pixel() {
         p.samples = 64;
         p
     };
-    let measure = |r: &mut PreviewRenderer<'_>, model: &Model, frame: &RenderFrame| {
+    let measure_with = |r: &mut PreviewRenderer<'_>,
+                        model: &Model,
+                        frame: &RenderFrame,
+                        atlas: Option<&TexelAtlas>| {
         let scene = scene(&f, model);
         let screen = r
             .screen_space(&scene, std::slice::from_ref(frame))
@@ -300,10 +305,15 @@ fn the_screen_space_comparison_judges_the_model_and_gtao_per_pixel() {
             &f.camera,
             scene.gtao,
             &params.held_out_surface(),
+            atlas.map(|atlas| aobake_core::bake::screen_space::TexelJudge { atlas, models: &[] }),
         )
         .unwrap()
     };
+    let measure = |r: &mut PreviewRenderer<'_>, model: &Model, frame: &RenderFrame| {
+        measure_with(r, model, frame, None)
+    };
     let baked = measure(&mut r, &f.model, &f.frame);
+    assert!(baked.atlas.is_none() && baked.character.as_ref().unwrap().texel_truth.is_none());
     eprint!("{}", baked.summary());
     let character = baked.character.unwrap();
     let ground = baked.ground.unwrap();
@@ -336,6 +346,26 @@ fn the_screen_space_comparison_judges_the_model_and_gtao_per_pixel() {
     );
     // GTAO does not depend on the model.
     assert_eq!(wrong.character.as_ref().unwrap().gtao, character.gtao);
+    // With an atlas, the texel floor: the traced texels looked up where
+    // the eye meets the figure, closer to per-pixel AO than the per-vertex
+    // truth on its flat, low-poly limbs (the figure's 370 vertices sit on
+    // creases that interpolation spreads over open faces).
+    let c = &f.character;
+    let atlas = TexelAtlas::generate(&c.positions, &c.triangles, &AtlasOptions::default()).unwrap();
+    let texel = measure_with(&mut r, &f.model, &f.frame, Some(&atlas));
+    eprint!("{}", texel.summary());
+    let info = texel.atlas.as_ref().unwrap();
+    assert_eq!(info.texels, atlas.texels.len());
+    let on_character = texel.character.as_ref().unwrap();
+    let floor = on_character.texel_truth.unwrap();
+    assert_eq!(on_character.per_vertex_truth, character.per_vertex_truth);
+    assert!(
+        floor.rmse < 0.75 * character.per_vertex_truth.rmse,
+        "texel floor {} against the per-vertex truth's {}",
+        floor.rmse,
+        character.per_vertex_truth.rmse
+    );
+    assert!(texel.summary().contains("texel truth"));
 }
 
 #[test]
@@ -469,6 +499,7 @@ fn previews_match_one_go(
         character: &bake.inputs.character,
         model,
         surface,
+        texel_floor: None,
     };
     let mut one_go = subject
         .stills(frames.clip, &frames.stills, None, r)
@@ -577,6 +608,7 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
             character: &inputs.character,
             model: PreviewModel::Cubemap(m, kroon),
             surface: p.held_out_surface(),
+            texel_floor: None,
         };
         truth_and_model(&subject, clip, 0.5, r)
     };
@@ -636,6 +668,7 @@ fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
             character: c,
             model: PreviewModel::Grid(m, &owner),
             surface,
+            texel_floor: None,
         };
         truth_and_model(&subject, clip, 0.4, r)
     };

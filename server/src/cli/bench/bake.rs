@@ -215,7 +215,7 @@ fn time_stages(bake: &Bake<'_>, renderer: Option<&mut dyn Renderer>) -> anyhow::
 
 /// The process's peak resident set since the last [`reset_peak_rss`]
 /// (Linux's `VmHWM`); `None` where the system does not say.
-fn peak_rss() -> Option<u64> {
+pub(super) fn peak_rss() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
@@ -224,6 +224,6 @@ fn peak_rss() -> Option<u64> {
 
 /// Starts the peak resident set afresh (Linux: `5` to `clear_refs`); where
 /// it cannot, peaks are the process's since it started.
-fn reset_peak_rss() {
+pub(super) fn reset_peak_rss() {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
 }

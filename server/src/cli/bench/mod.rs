@@ -6,6 +6,7 @@ mod grid;
 mod load;
 mod service;
 mod tables;
+mod texel;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -72,6 +73,12 @@ enum What {
     /// (cross-validation of the reference rows, of the ridge, of the
     /// basis), evaluation, assembly and previews.
     Bake(bake::Args),
+    /// texel-linear (the vertex-linear model per texel of a generated
+    /// atlas) traced and fitted here, stage by stage, and judged per pixel
+    /// on stills of training clips and of clips left out of its training,
+    /// beside the texel static average, the texel floor, the per-vertex
+    /// floor and GTAO.
+    Texel(texel::Args),
 }
 
 #[derive(Debug, clap::Args)]
@@ -317,6 +324,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         What::Preview(a) => super::preview::bench(a),
         What::Cubemap(a) => cubemap::run(a),
         What::Bake(a) => bake::run(a),
+        What::Texel(a) => texel::run(a),
         What::Grid(a) => grid::run(a),
     }
 }

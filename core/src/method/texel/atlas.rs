@@ -1,0 +1,617 @@
+//! A lightmap atlas of the character and its texels as surface points.
+//!
+//! The atlas is generated from the bind-pose mesh by uvunwrap (pure Rust,
+//! `forbid(unsafe_code)`, bit-identical output on any thread count and,
+//! without its `direct-solver` feature, on any platform): xatlas's
+//! charting, LSCM and ARAP parameterisation and shape packing, with
+//! padding between charts. Every character gets one, whatever UVs it
+//! came with (none, palette UVs, mirrored halves), and the same mesh
+//! always gets the same atlas.
+//!
+//! **Texels.** A texel whose centre lies in a triangle's UV image is that
+//! surface point (inside). A texel whose square only touches a chart
+//! (its centre within half a diagonal of a triangle) is the nearest point
+//! of the nearest such triangle (border): bilinear filtering anywhere on
+//! a chart reads the four texels around it, and each of those is inside
+//! or border, so it reads traced values, never padding. The texels beyond
+//! are padding: [`dilate`] fills them from their neighbours so that
+//! mipmaps do not bleed the background into the charts.
+//!
+//! A texel is posed with the mesh by its barycentric coordinates on the
+//! posed triangle: the very point the rasteriser shows there.
+
+use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+
+/// The atlas's side in texels when a request names none: the smallest
+/// power of two at which every shared character's texel floor (exact AO
+/// at the texel centres, bilinearly filtered) is under half GTAO's error
+/// per pixel. At 256 the milk truck's 1,811 charts leave 7 % of the page
+/// on its surface and its floor (0.062) is above half GTAO's (0.042); at
+/// 512 the floors are 0.028 (Kenney), 0.010 (Fox), 0.007 (CesiumMan) and
+/// 0.019 (the truck) against GTAO's 0.108, 0.085, 0.112 and 0.084
+/// (`aobake bench preview --texel-floor`, `docs/methods/texel.md`).
+pub const DEFAULT_SIZE: u32 = 512;
+
+/// Empty texels around each chart (charts are at least twice this apart):
+/// two keep bilinear filtering and one mip level free of bleeding once
+/// the padding is dilated.
+pub const PADDING: u32 = 2;
+
+/// The smallest and largest atlas sides accepted.
+pub const SIZES: std::ops::RangeInclusive<u32> = 16..=4096;
+
+/// How an atlas is generated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AtlasOptions {
+    /// The page's side in texels: the densest packing that fits one page
+    /// of this width (its height is cropped to the rows used).
+    pub size: u32,
+    /// Empty texels around each chart.
+    pub padding: u32,
+}
+
+impl Default for AtlasOptions {
+    fn default() -> Self {
+        Self {
+            size: DEFAULT_SIZE,
+            padding: PADDING,
+        }
+    }
+}
+
+/// Why no atlas was made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AtlasError {
+    /// The size is outside [`SIZES`] or leaves no room inside the padding.
+    #[error(
+        "an atlas of {size} texels with {padding} of padding: the side must be {}..={} and more than 4 × the padding",
+        SIZES.start(),
+        SIZES.end()
+    )]
+    Size {
+        /// The side asked for.
+        size: u32,
+        /// The padding asked for.
+        padding: u32,
+    },
+    /// The mesh has no triangle with area.
+    #[error("the mesh has no triangle with area to put in an atlas")]
+    Empty,
+    /// The unwrapper refused the mesh.
+    #[error("the atlas could not be generated: {0}")]
+    Unwrap(String),
+    /// The charts did not fit one page.
+    #[error(
+        "the charts need {pages} pages of {size} texels: use a larger atlas (each chart needs {padding} texels of padding)"
+    )]
+    Pages {
+        /// Pages the unwrapper used.
+        pages: u32,
+        /// The side asked for.
+        size: u32,
+        /// The padding asked for.
+        padding: u32,
+    },
+}
+
+/// A UV atlas of a triangle mesh: the mesh's triangles in its order, over
+/// vertices split where charts meet.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Atlas {
+    /// Texels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Charts.
+    pub charts: u32,
+    /// Per atlas vertex, the mesh vertex it was made from.
+    pub xref: Vec<u32>,
+    /// Per atlas vertex, its texture coordinate in `[0, 1]²`: `(0, 0)` is
+    /// the outer corner of texel row 0, column 0, and `v` grows with the
+    /// row (wgpu's, Vulkan's and glTF's convention).
+    pub uvs: Vec<Vec2>,
+    /// The mesh's triangles in its order, corner for corner, indexing the
+    /// atlas vertices.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Atlas {
+    /// Unwraps the mesh (`positions`, `triangles`: the bind pose) into one
+    /// page. Deterministic: the same mesh and options give the same atlas.
+    pub fn generate(
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        options: &AtlasOptions,
+    ) -> Result<Self, AtlasError> {
+        let AtlasOptions { size, padding } = *options;
+        if !SIZES.contains(&size) || size <= 4 * padding {
+            return Err(AtlasError::Size { size, padding });
+        }
+        let area = |t: &[u32; 3]| {
+            let [a, b, c] = t.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::ZERO));
+            (b - a).cross(c - a).length()
+        };
+        if !triangles.iter().any(|t| area(t) > 0.0) {
+            return Err(AtlasError::Empty);
+        }
+        let points: Vec<[f32; 3]> = positions.iter().map(|p| p.to_array()).collect();
+        let indices: Vec<u32> = triangles.iter().flatten().copied().collect();
+        let input = uvunwrap::MeshInput::new(&points, &indices);
+        let unwrap_options = uvunwrap::Options {
+            density: uvunwrap::Density::Auto { page_size: size },
+            padding,
+            ..uvunwrap::Options::default()
+        };
+        let out = uvunwrap::generate(&[input], &unwrap_options)
+            .map_err(|e| AtlasError::Unwrap(e.to_string()))?;
+        if out.page_count != 1 {
+            return Err(AtlasError::Pages {
+                pages: out.page_count,
+                size,
+                padding,
+            });
+        }
+        let mesh = out
+            .meshes
+            .into_iter()
+            .next()
+            .ok_or_else(|| AtlasError::Unwrap("no mesh came back".into()))?;
+        if mesh.indices.len() != indices.len() {
+            return Err(AtlasError::Unwrap(format!(
+                "{} corners came back for {}",
+                mesh.indices.len(),
+                indices.len()
+            )));
+        }
+        Ok(Self {
+            width: out.width,
+            height: out.height,
+            charts: out.chart_count,
+            xref: mesh.vertices.iter().map(|v| v.xref).collect(),
+            uvs: mesh.vertices.iter().map(|v| Vec2::from(v.uv)).collect(),
+            triangles: mesh
+                .indices
+                .chunks_exact(3)
+                .map(|c| [c[0], c[1], c[2]])
+                .collect(),
+        })
+    }
+
+    /// The texture coordinate of the point with barycentric coordinates
+    /// `bary` (weights of the corners, in order) on triangle `triangle`.
+    pub fn uv(&self, triangle: usize, bary: Vec3) -> Vec2 {
+        let [a, b, c] = self.triangles[triangle].map(|i| self.uvs[i as usize]);
+        a * bary.x + b * bary.y + c * bary.z
+    }
+
+    /// A triangle's corners in texel units.
+    fn corners(&self, triangle: usize) -> [Vec2; 3] {
+        let scale = Vec2::new(self.width as f32, self.height as f32);
+        self.triangles[triangle].map(|i| self.uvs[i as usize] * scale)
+    }
+
+    /// The texels that show the surface, row-major: inside texels and the
+    /// border texels around every chart (see the module's notes).
+    pub fn texels(&self) -> Texels {
+        let (w, h) = (self.width as usize, self.height as usize);
+        // Per texel: (triangle, barycentrics, distance in texels; 0 inside).
+        let mut best: Vec<Option<(u32, Vec3, f32)>> = vec![None; w * h];
+        let reach = std::f32::consts::FRAC_1_SQRT_2;
+        for t in 0..self.triangles.len() {
+            let [a, b, c] = self.corners(t);
+            let area = (b - a).perp_dot(c - a);
+            if !(area.abs() > 0.0) || !area.is_finite() {
+                continue;
+            }
+            let lo = a.min(b).min(c) - Vec2::splat(reach);
+            let hi = a.max(b).max(c) + Vec2::splat(reach);
+            // Texel centres (x + ½, y + ½) within the reach of the triangle.
+            let first = |lo: f32| (lo - 0.5).ceil().max(0.0) as i64;
+            let last = |hi: f32, n: usize| ((hi - 0.5).floor() as i64).min(n as i64 - 1);
+            for y in first(lo.y)..=last(hi.y, h) {
+                for x in first(lo.x)..=last(hi.x, w) {
+                    let (x, y) = (x as usize, y as usize);
+                    let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                    let (bary, distance) = nearest_on_triangle(centre, [a, b, c], area);
+                    if distance > reach {
+                        continue;
+                    }
+                    let slot = &mut best[y * w + x];
+                    // The nearest triangle wins; among equals (inside
+                    // several, on a shared edge) the first.
+                    if slot.is_none_or(|(_, _, d)| distance < d) {
+                        *slot = Some((t as u32, bary, distance));
+                    }
+                }
+            }
+        }
+        let texels = best
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| {
+                s.map(|(triangle, bary, distance)| Texel {
+                    index: i as u32,
+                    triangle,
+                    bary: bary.to_array(),
+                    inside: distance == 0.0,
+                })
+            })
+            .collect();
+        Texels {
+            width: self.width,
+            height: self.height,
+            texels,
+        }
+    }
+}
+
+/// An atlas with its texels, as the texel methods and the per-pixel
+/// judge use it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TexelAtlas {
+    /// The atlas.
+    pub atlas: Atlas,
+    /// Its texels that show the surface.
+    pub texels: Texels,
+}
+
+impl TexelAtlas {
+    /// The atlas of a mesh ([`Atlas::generate`]) and its texels.
+    pub fn generate(
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        options: &AtlasOptions,
+    ) -> Result<Self, AtlasError> {
+        let atlas = Atlas::generate(positions, triangles, options)?;
+        let texels = atlas.texels();
+        Ok(Self { atlas, texels })
+    }
+
+    /// Per-texel `values` filtered as a GPU's linear sampler filters the
+    /// dilated image, at the point with barycentric coordinates `bary` on
+    /// `triangle`.
+    pub fn sample(&self, image: &[f32], triangle: usize, bary: Vec3) -> f32 {
+        let uv = self.atlas.uv(triangle, bary);
+        bilinear(image, self.atlas.width, self.atlas.height, uv)
+    }
+}
+
+/// A texel that shows a point of the surface.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Texel {
+    /// `row × width + column`.
+    pub index: u32,
+    /// The triangle (the mesh's order) the point lies on.
+    pub triangle: u32,
+    /// The point's barycentric coordinates on it (corner weights, in
+    /// order; they sum to 1).
+    pub bary: [f32; 3],
+    /// The texel's centre lies inside the triangle's UV image (else the
+    /// texel is on a chart's border and shows the nearest point).
+    pub inside: bool,
+}
+
+/// The texels of an atlas that show the surface.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Texels {
+    /// Texels per row of the atlas.
+    pub width: u32,
+    /// Rows of the atlas.
+    pub height: u32,
+    /// Row-major.
+    pub texels: Vec<Texel>,
+}
+
+impl Texels {
+    /// Number of texels that show the surface.
+    pub fn len(&self) -> usize {
+        self.texels.len()
+    }
+
+    /// No texel shows the surface.
+    pub fn is_empty(&self) -> bool {
+        self.texels.is_empty()
+    }
+
+    /// The share of the atlas's texels whose centre lies on the surface.
+    pub fn utilisation(&self) -> f64 {
+        let inside = self.texels.iter().filter(|t| t.inside).count();
+        inside as f64 / (f64::from(self.width) * f64::from(self.height)).max(1.0)
+    }
+
+    /// Every texel's point and unit normal on a posed mesh (`positions`
+    /// and unit `normals` per mesh vertex, the mesh's `triangles`): the
+    /// barycentric blend of its triangle's corners, the normal
+    /// renormalised (the face's where the blend vanishes).
+    pub fn points(
+        &self,
+        positions: &[Vec3],
+        normals: &[Vec3],
+        triangles: &[[u32; 3]],
+    ) -> (Vec<Vec3>, Vec<Vec3>) {
+        self.texels
+            .iter()
+            .map(|t| {
+                let corners = triangles[t.triangle as usize].map(|i| i as usize);
+                let [pa, pb, pc] = corners.map(|i| positions[i]);
+                let [na, nb, nc] = corners.map(|i| normals[i]);
+                let [u, v, w] = t.bary;
+                let p = pa * u + pb * v + pc * w;
+                let face = (pb - pa).cross(pc - pa).normalize_or(Vec3::Y);
+                let n = (na * u + nb * v + nc * w).normalize_or(face);
+                (p, n)
+            })
+            .unzip()
+    }
+
+    /// The atlas image of per-texel `values` (in [`Texels::texels`]'s
+    /// order), its padding dilated from the charts.
+    pub fn image(&self, values: &[f32]) -> Vec<f32> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut image = vec![0.0; w * h];
+        let mut filled = vec![false; w * h];
+        for (t, &v) in self.texels.iter().zip(values) {
+            image[t.index as usize] = v;
+            filled[t.index as usize] = true;
+        }
+        dilate(&mut image, &mut filled, self.width, self.height);
+        image
+    }
+}
+
+/// Fills every unfilled texel from its filled neighbours, ring by ring
+/// outwards from the charts: each takes the mean of its filled 8-
+/// neighbours of the previous ring, until every texel is filled (a mip
+/// chain of any depth then averages chart values only). Deterministic.
+pub fn dilate(image: &mut [f32], filled: &mut [bool], width: u32, height: u32) {
+    let (w, h) = (width as usize, height as usize);
+    if !filled.iter().any(|&f| f) {
+        return;
+    }
+    let mut ring: Vec<(usize, f32)> = Vec::new();
+    loop {
+        ring.clear();
+        for y in 0..h {
+            for x in 0..w {
+                if filled[y * w + x] {
+                    continue;
+                }
+                let (mut sum, mut n) = (0.0f32, 0u32);
+                for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+                    for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                        if filled[ny * w + nx] {
+                            sum += image[ny * w + nx];
+                            n += 1;
+                        }
+                    }
+                }
+                if n > 0 {
+                    ring.push((y * w + x, sum / n as f32));
+                }
+            }
+        }
+        if ring.is_empty() {
+            return;
+        }
+        for &(i, v) in &ring {
+            image[i] = v;
+            filled[i] = true;
+        }
+    }
+}
+
+/// Bilinear filtering of a `width × height` image at texture coordinate
+/// `uv` with clamp-to-edge addressing: what a GPU's linear sampler
+/// returns (texel centres at half-integers).
+pub fn bilinear(image: &[f32], width: u32, height: u32, uv: Vec2) -> f32 {
+    let (w, h) = (width as i64, height as i64);
+    let x = uv.x * width as f32 - 0.5;
+    let y = uv.y * height as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let at = |xi: i64, yi: i64| {
+        let xi = xi.clamp(0, w - 1) as usize;
+        let yi = yi.clamp(0, h - 1) as usize;
+        image[yi * width as usize + xi]
+    };
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
+    let bottom = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
+    top * (1.0 - fy) + bottom * fy
+}
+
+/// Barycentric coordinates of `p` on a triangle of 3D corners, from the
+/// projection of `p` on its plane, clamped into the triangle: the point
+/// of the triangle nearest `p`'s projection.
+pub fn barycentric(p: Vec3, [a, b, c]: [Vec3; 3]) -> Vec3 {
+    let (e1, e2, d) = (b - a, c - a, p - a);
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d1, d2) = (d.dot(e1), d.dot(e2));
+    let det = d11 * d22 - d12 * d12;
+    if !(det.abs() > 0.0) {
+        return Vec3::new(1.0, 0.0, 0.0);
+    }
+    let v = (d22 * d1 - d12 * d2) / det;
+    let w = (d11 * d2 - d12 * d1) / det;
+    let bary = Vec3::new(1.0 - v - w, v, w).max(Vec3::ZERO);
+    bary / bary.element_sum().max(f32::MIN_POSITIVE)
+}
+
+/// The point of triangle `[a, b, c]` (2D, signed double area `area`)
+/// nearest `p`: its barycentric coordinates and its distance (0 inside).
+fn nearest_on_triangle(p: Vec2, [a, b, c]: [Vec2; 3], area: f32) -> (Vec3, f32) {
+    let wa = (b - p).perp_dot(c - p) / area;
+    let wb = (c - p).perp_dot(a - p) / area;
+    let wc = 1.0 - wa - wb;
+    if wa >= 0.0 && wb >= 0.0 && wc >= 0.0 {
+        return (Vec3::new(wa, wb, wc), 0.0);
+    }
+    // Outside: the nearest point lies on one of the edges.
+    let edge = |(s, t): (Vec2, Vec2)| {
+        let d = t - s;
+        let f = ((p - s).dot(d) / d.length_squared().max(f32::MIN_POSITIVE)).clamp(0.0, 1.0);
+        (f, p.distance(s + d * f))
+    };
+    let (fab, dab) = edge((a, b));
+    let (fbc, dbc) = edge((b, c));
+    let (fca, dca) = edge((c, a));
+    if dab <= dbc && dab <= dca {
+        (Vec3::new(1.0 - fab, fab, 0.0), dab)
+    } else if dbc <= dca {
+        (Vec3::new(0.0, 1.0 - fbc, fbc), dbc)
+    } else {
+        (Vec3::new(fca, 0.0, 1.0 - fca), dca)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A unit cube's 12 triangles over 8 shared corners (outward faces).
+    fn cube() -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let positions = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
+            .collect();
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let triangles = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        (positions, triangles)
+    }
+
+    #[test]
+    fn a_cube_unwraps_into_one_page_the_same_way_every_time() {
+        let (positions, triangles) = cube();
+        let options = AtlasOptions {
+            size: 64,
+            padding: 2,
+        };
+        let atlas = Atlas::generate(&positions, &triangles, &options).unwrap();
+        assert_eq!(
+            atlas,
+            Atlas::generate(&positions, &triangles, &options).unwrap()
+        );
+        assert_eq!(atlas.width, 64);
+        assert!(atlas.height <= 64);
+        assert_eq!(atlas.triangles.len(), triangles.len());
+        // Corners keep their mesh vertex.
+        for (t, at) in triangles.iter().zip(&atlas.triangles) {
+            for k in 0..3 {
+                assert_eq!(atlas.xref[at[k] as usize], t[k]);
+            }
+        }
+        assert!(
+            atlas
+                .uvs
+                .iter()
+                .all(|uv| (0.0..=1.0).contains(&uv.x) && (0.0..=1.0).contains(&uv.y))
+        );
+        // The six faces' texels: about a sixth of the page each at most,
+        // and every face gets some.
+        let texels = atlas.texels();
+        let mut per_face = [0usize; 6];
+        for t in &texels.texels {
+            per_face[t.triangle as usize / 2] += t.inside as usize;
+        }
+        assert!(per_face.iter().all(|&n| n > 16), "{per_face:?}");
+        assert!(texels.utilisation() > 0.2, "{}", texels.utilisation());
+    }
+
+    #[test]
+    fn no_texel_shows_two_places_and_each_point_lies_on_its_triangle() {
+        let (positions, triangles) = cube();
+        let atlas = Atlas::generate(
+            &positions,
+            &triangles,
+            &AtlasOptions {
+                size: 48,
+                padding: 2,
+            },
+        )
+        .unwrap();
+        let texels = atlas.texels();
+        let mut seen = std::collections::HashSet::new();
+        for t in &texels.texels {
+            assert!(seen.insert(t.index), "texel {} listed twice", t.index);
+            let b = Vec3::from(t.bary);
+            assert!((b.element_sum() - 1.0).abs() < 1e-5 && b.min_element() >= 0.0);
+            // The texel's point maps back into (or next to) the texel.
+            let uv = atlas.uv(t.triangle as usize, b) * Vec2::new(48.0, atlas.height as f32);
+            let centre = Vec2::new((t.index % 48) as f32 + 0.5, (t.index / 48) as f32 + 0.5);
+            let reach = if t.inside { 1e-3 } else { 0.71 };
+            assert!(uv.distance(centre) <= reach, "{uv} {centre} {}", t.inside);
+        }
+        // Posed at rest, the points lie on the cube's faces.
+        let normals: Vec<Vec3> = positions.iter().map(|p| (*p - 0.5).normalize()).collect();
+        let (points, _) = texels.points(&positions, &normals, &triangles);
+        for p in points {
+            let on_face = (0..3).any(|a| p[a].abs() < 1e-5 || (p[a] - 1.0).abs() < 1e-5);
+            assert!(
+                on_face && p.min_element() > -1e-5 && p.max_element() < 1.0 + 1e-5,
+                "{p}"
+            );
+        }
+    }
+
+    #[test]
+    fn dilation_fills_the_padding_from_the_charts() {
+        // A 4 × 3 image with one filled texel in a corner and one in the
+        // middle of the bottom row.
+        let mut image = vec![0.0; 12];
+        let mut filled = vec![false; 12];
+        (image[0], filled[0]) = (1.0, true);
+        (image[10], filled[10]) = (3.0, true);
+        dilate(&mut image, &mut filled, 4, 3);
+        assert!(filled.iter().all(|&f| f));
+        assert_eq!(image[1], 1.0);
+        assert_eq!(image[5], 2.0, "between both: the mean");
+        assert_eq!(image[11], 3.0);
+    }
+
+    #[test]
+    fn bilinear_filtering_matches_a_gpu_sampler() {
+        let image = [0.0, 1.0, 2.0, 3.0];
+        // Texel centres give their values; halfway between, the mean;
+        // outside, the edge.
+        assert_eq!(bilinear(&image, 2, 2, Vec2::new(0.25, 0.25)), 0.0);
+        assert_eq!(bilinear(&image, 2, 2, Vec2::new(0.75, 0.75)), 3.0);
+        assert_eq!(bilinear(&image, 2, 2, Vec2::new(0.5, 0.25)), 0.5);
+        assert_eq!(bilinear(&image, 2, 2, Vec2::new(0.5, 0.5)), 1.5);
+        assert_eq!(bilinear(&image, 2, 2, Vec2::new(0.0, 0.0)), 0.0);
+        assert_eq!(bilinear(&image, 2, 2, Vec2::new(1.0, 0.25)), 1.0);
+    }
+
+    #[test]
+    fn barycentric_coordinates_recover_a_point_and_clamp_outside() {
+        let tri = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let b = barycentric(Vec3::new(0.25, 0.5, 0.3), tri);
+        assert!((b - Vec3::new(0.25, 0.25, 0.5)).length() < 1e-6, "{b}");
+        let b = barycentric(Vec3::new(2.0, -1.0, 0.0), tri);
+        assert_eq!(b, Vec3::new(0.0, 1.0, 0.0));
+    }
+
+    #[test]
+    fn sizes_outside_the_range_are_refused() {
+        let (positions, triangles) = cube();
+        for (size, padding) in [(8, 2), (5000, 2), (32, 8)] {
+            assert_eq!(
+                Atlas::generate(&positions, &triangles, &AtlasOptions { size, padding }),
+                Err(AtlasError::Size { size, padding })
+            );
+        }
+        assert_eq!(
+            Atlas::generate(&positions, &[[0, 0, 1]], &AtlasOptions::default()),
+            Err(AtlasError::Empty)
+        );
+    }
+}
