@@ -23,5 +23,7 @@ mod real_characters;
 mod skinning;
 #[path = "integration/synthetic.rs"]
 mod synthetic;
+#[path = "integration/texel.rs"]
+mod texel;
 #[path = "integration/tracing.rs"]
 mod tracing;

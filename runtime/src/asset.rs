@@ -7,7 +7,8 @@ use crate::{
     method::{
         cubemap::{CubemapHeader, CubemapModel},
         grid::{codec::GridHeader, model::GridModel},
-        vertex::VertexAo,
+        texel::TexelModel,
+        vertex::{AssetHeader, VertexAo},
     },
 };
 
@@ -32,6 +33,14 @@ pub enum Asset {
         /// The header.
         header: Box<GridHeader>,
     },
+    /// texel-linear: the per-pose weights of a vertex method, and per
+    /// texel of its atlas the coefficients they weight.
+    Texel {
+        /// The model and its atlas.
+        model: Box<TexelModel>,
+        /// The header.
+        header: Box<AssetHeader>,
+    },
 }
 
 impl Asset {
@@ -54,6 +63,13 @@ impl Asset {
                     header: Box::new(header),
                 }
             }
+            Family::Texel => {
+                let (model, header) = TexelModel::from_container(&container, None)?;
+                Self::Texel {
+                    model: Box::new(model),
+                    header: Box::new(header),
+                }
+            }
         })
     }
 
@@ -63,6 +79,7 @@ impl Asset {
             Self::Vertex(v) => v.header().method,
             Self::Cubemap { model, .. } => model.method(),
             Self::Grid { header, .. } => header.method,
+            Self::Texel { model, .. } => model.method,
         }
     }
 }

@@ -37,7 +37,8 @@ impl<'a> Bake<'a> {
         };
         let params = &bake.plan.params;
         match params.method.family() {
-            Family::Vertex => {}
+            // A texel bake's atlas is generated (and checked) by the plan.
+            Family::Vertex | Family::Texel => {}
             Family::Cubemap => {
                 if let Some(name) = &params.cubemap.clip {
                     super::plan::clip_index(&inputs.clips, name)?;
@@ -58,15 +59,15 @@ impl<'a> Bake<'a> {
         let frames = self.poses_in(PoseSet::HeldOut).saturating_sub(p.eval_poses);
         let parts = match p.method.family() {
             Family::Grid => self.grid_parts().map_or(0, |p| p.len()),
-            Family::Vertex | Family::Cubemap => 0,
+            Family::Vertex | Family::Cubemap | Family::Texel => 0,
         };
-        p.work(self.inputs.character.vertex_count(), frames, parts)
+        p.work(self.plan.receiver_count(), frames, parts)
     }
 
     /// The job graph of this bake.
     pub fn graph(&self, options: GraphOptions) -> JobGraph {
         match self.plan.params.method.family() {
-            Family::Vertex => self.vertex_graph(options),
+            Family::Vertex | Family::Texel => self.vertex_graph(options),
             Family::Cubemap => self.cubemap_graph(options),
             Family::Grid => self.grid_graph(options),
         }
@@ -85,7 +86,7 @@ impl<'a> Bake<'a> {
             return self.preview_truth(*first, *count);
         }
         match self.plan.params.method.family() {
-            Family::Vertex => self.vertex_job(spec, deps, resume, sink),
+            Family::Vertex | Family::Texel => self.vertex_job(spec, deps, resume, sink),
             Family::Cubemap => self.cubemap_job(spec, deps, resume, sink),
             Family::Grid => self.grid_job(spec, deps, resume, sink),
         }
@@ -99,7 +100,7 @@ impl<'a> Bake<'a> {
         let params = &self.plan.params;
         let surface = params.held_out_surface();
         Ok(match params.method.family() {
-            Family::Vertex => TruthTracing {
+            Family::Vertex | Family::Texel => TruthTracing {
                 surface,
                 kroon: None,
             },
@@ -123,7 +124,7 @@ impl<'a> Bake<'a> {
         let clips = &self.inputs.clips;
         let clip = match self.plan.params.method.family() {
             Family::Cubemap => Some(&clips[self.cubemap_clip()?]),
-            Family::Vertex | Family::Grid => {
+            Family::Vertex | Family::Grid | Family::Texel => {
                 preview_clip(clips, &self.plan.test).map(|i| &clips[i])
             }
         };
@@ -141,6 +142,9 @@ impl<'a> Bake<'a> {
     /// ([`GraphOptions::batch`]); none without previews.
     pub(super) fn preview_truth_jobs(&self, options: GraphOptions) -> Vec<PlannedJob> {
         let frames = match self.preview_frames() {
+            // A texel bake's preview says why it has none (see
+            // `Bake::preview`): nothing to trace for it.
+            Ok(_) if self.plan.params.method.family() == Family::Texel => 0,
             Ok(f) if options.previews => f.len(),
             // A bake without previews, or one whose clip is missing (its
             // preview job says so).
@@ -260,6 +264,9 @@ impl<'a> Bake<'a> {
         renderer: &mut dyn Renderer,
     ) -> Result<JobOutput, JobError> {
         let assembled = find(deps, "asset")?;
+        if self.plan.params.method.family() == Family::Texel {
+            return Ok(preview::unavailable(super::texel::NO_PREVIEWS));
+        }
         let container = Container::from_bytes(named(assembled, "asset")?)
             .map_err(|e| JobError::Invalid(e.to_string()))?;
         let baked = BakedAsset::read(&container, Some(&self.inputs.character))
@@ -332,7 +339,8 @@ impl<'de> Deserialize<'de> for BakeReport {
         let method: Method = serde_json::from_value(value["method"].clone())
             .map_err(|e| D::Error::custom(format!("report.method: {e}")))?;
         match method.family() {
-            Family::Vertex => serde_json::from_value(value).map(Self::Vertex),
+            // A texel bake's report is the per-vertex family's, over texels.
+            Family::Vertex | Family::Texel => serde_json::from_value(value).map(Self::Vertex),
             Family::Cubemap => serde_json::from_value(value).map(Self::Cubemap),
             Family::Grid => serde_json::from_value(value).map(Self::Grid),
         }
@@ -379,6 +387,8 @@ pub struct BakedAsset {
 #[derive(Debug)]
 enum AssetModel {
     Vertex(Box<crate::method::vertex::Model>),
+    /// A texel model and its atlas.
+    Texel(Box<crate::method::texel::TexelModel>),
     /// The model and its clip's name.
     Cubemap(crate::method::cubemap::model::CubemapModel, String),
     /// The grids and, with the character, each vertex's part (`u32::MAX`
@@ -416,6 +426,14 @@ impl BakedAsset {
                     params: params(&header.params)?,
                     character: header.character,
                     model: AssetModel::Vertex(Box::new(model)),
+                }
+            }
+            Family::Texel => {
+                let (model, header) = super::texel::read(container, character)?;
+                Self {
+                    params: params(&header.params)?,
+                    character: header.character,
+                    model: AssetModel::Texel(Box::new(model)),
                 }
             }
             Family::Cubemap => {
@@ -469,7 +487,7 @@ impl BakedAsset {
     pub fn clip(&self) -> Option<&str> {
         match &self.model {
             AssetModel::Cubemap(_, clip) => Some(clip),
-            AssetModel::Vertex(_) | AssetModel::Grid(..) => None,
+            AssetModel::Vertex(_) | AssetModel::Grid(..) | AssetModel::Texel(_) => None,
         }
     }
 
@@ -482,6 +500,9 @@ impl BakedAsset {
         let surface = self.params.held_out_surface();
         Ok(match &self.model {
             AssetModel::Vertex(m) => (PreviewModel::Vertex(m), surface),
+            AssetModel::Texel(_) => {
+                return Err(AssetUseError::Unsupported(super::texel::NO_PREVIEWS.into()));
+            }
             AssetModel::Cubemap(m, _) => (
                 PreviewModel::Cubemap(m, self.params.cubemap_truth(&m.layout.spheroid)),
                 surface,
@@ -507,6 +528,7 @@ impl BakedAsset {
         use crate::method::grid::base::Receiver;
         match &self.model {
             AssetModel::Vertex(m) => Ok(m.evaluate(&character.skeleton, &pose.locals)),
+            AssetModel::Texel(m) => Ok(super::texel::vertex_ao(m, character, pose)),
             AssetModel::Cubemap(..) => Err(AssetUseError::Unsupported(
                 "it holds the occlusion cast into space, not per-vertex AO; `aobake preview` renders it on the ground and `aobake export --exr` writes its faces".into(),
             )),
@@ -542,6 +564,7 @@ impl BakedAsset {
             AssetModel::Vertex(_) => Err(AssetUseError::Unsupported(
                 "per-vertex AO has no image to export".into(),
             )),
+            AssetModel::Texel(m) => super::texel::images(m),
             AssetModel::Cubemap(m, clip) => {
                 let mut images = super::cubemap::face_strips(m, clip, times);
                 images.extend(m.ground.as_ref().map(ground_offsets));

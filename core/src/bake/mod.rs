@@ -37,6 +37,7 @@ pub mod preview;
 pub mod report;
 pub mod runner;
 pub mod screen_space;
+pub mod texel;
 pub mod vertex;
 pub mod viewer;
 

@@ -14,6 +14,7 @@ use crate::{
         Family, Method,
         cubemap::CubemapOptions,
         grid::GridOptions,
+        texel::TexelOptions,
         vertex::{ClusteredOptions, LinearOptions},
     },
     pose_space::ParamError,
@@ -96,6 +97,8 @@ pub struct BakeParams {
     pub cubemap: CubemapOptions,
     /// Grid options.
     pub grid: GridOptions,
+    /// Texel options (the atlas; the fit reads `linear`).
+    pub texel: TexelOptions,
 }
 
 impl BakeParams {
@@ -113,7 +116,16 @@ impl BakeParams {
             // InterpolationTest's most distinct unseen clip at +1.87 dB
             // over the static average; 2048 lifts it past +2.3 at seeds
             // 0–2 for a third more tracing (docs/methods/vertex.md).
-            poses: if method.fits_poses() { 2048 } else { 256 },
+            // texel-linear: a texel costs a vertex's rays, and an atlas
+            // holds tens of times more texels than a character vertices;
+            // 512 poses × 64 rays judged the Kenney character's texel model
+            // at half of GTAO's per-pixel error on training clips
+            // (docs/methods/texel.md).
+            poses: match method.family() {
+                Family::Texel => 512,
+                _ if method.fits_poses() => 2048,
+                _ => 256,
+            },
             // Random joint angles alone combine every joint's extremes and
             // fit clip poses poorly (Fox: +0.5 dB over the baseline on
             // clip frames against +9 dB with half clip frames); clip frames
@@ -131,13 +143,22 @@ impl BakeParams {
             // Perturbed frames at ±25 % of the ranges barely differed
             // from plain ones; ±75 % won on InterpolationTest (docs/methods/vertex.md).
             perturbation: 0.75,
-            samples: 256,
+            samples: match method.family() {
+                Family::Texel => 64,
+                _ => 256,
+            },
             max_distance: None,
             seed: 0,
             train_clips: Vec::new(),
             test_clips: Vec::new(),
             eval_poses: 32,
-            eval_fps: 30.0,
+            // Every held-out clip frame is traced at every receiver: at
+            // 10 frames a second the texel evaluation costs a third of
+            // the reference trace on the Kenney character's 32 clips.
+            eval_fps: match method.family() {
+                Family::Texel => 10.0,
+                _ => 30.0,
+            },
             eval_folds: 8,
             range_margin: 0.1,
             // On InterpolationTest's unseen clips (three of which only
@@ -149,6 +170,7 @@ impl BakeParams {
             clustered: ClusteredOptions::default(),
             cubemap: CubemapOptions::default(),
             grid: GridOptions::default(),
+            texel: TexelOptions::default(),
         }
     }
 
@@ -207,22 +229,23 @@ impl BakeParams {
 }
 
 /// The methods' option blocks.
-const BLOCKS: [&str; 4] = ["linear", "clustered", "cubemap", "grid"];
+const BLOCKS: [&str; 5] = ["linear", "clustered", "cubemap", "grid", "texel"];
 
 /// Whether `key` (a top-level parameter name) is the option block of
 /// another method than `method`: one it neither reads nor keys on.
 fn foreign_block(method: Method, key: &str) -> bool {
-    BLOCKS.contains(&key) && own_block(method) != Some(key)
+    BLOCKS.contains(&key) && !own_blocks(method).contains(&key)
 }
 
-/// The block of options `method` reads, if it has one.
-fn own_block(method: Method) -> Option<&'static str> {
+/// The blocks of options `method` reads.
+fn own_blocks(method: Method) -> &'static [&'static str] {
     match method {
-        Method::StaticAverage => None,
-        Method::VertexLinear => Some("linear"),
-        Method::VertexClustered => Some("clustered"),
-        Method::CubemapDiscrete | Method::CubemapContinuous => Some("cubemap"),
-        Method::Grid => Some("grid"),
+        Method::StaticAverage => &[],
+        Method::VertexLinear => &["linear"],
+        Method::VertexClustered => &["clustered"],
+        Method::CubemapDiscrete | Method::CubemapContinuous => &["cubemap"],
+        Method::Grid => &["grid"],
+        Method::TexelLinear => &["linear", "texel"],
     }
 }
 
@@ -277,15 +300,15 @@ impl BakeParams {
             if foreign_block(method, path[0]) {
                 let whose: Vec<&str> = Method::ALL
                     .into_iter()
-                    .filter(|&m| own_block(m) == Some(path[0]))
+                    .filter(|&m| own_blocks(m).contains(&path[0]))
                     .map(Method::name)
                     .collect();
                 return Err(BakeError::Override(format!(
                     "{key:?} is an option of {}; a {method} bake does not take it{}",
                     whose.join(" and "),
-                    match own_block(method) {
-                        Some(own) => format!(" (its own are under \"{own}\")"),
-                        None => String::new(),
+                    match own_blocks(method) {
+                        [] => String::new(),
+                        own => format!(" (its own are under \"{}\")", own.join("\" and \"")),
                     }
                 )));
             }
@@ -393,6 +416,15 @@ impl BakeParams {
         }
         p.cubemap.validate().map_err(BakeError::Param)?;
         p.grid.validate().map_err(BakeError::Param)?;
+        p.texel.validate().map_err(BakeError::Param)?;
+        if p.method.family() == Family::Texel
+            && p.linear.locality != crate::method::vertex::Locality::Off
+        {
+            return Err(BakeError::Param(
+                "linear.locality must be off for texel-linear: a texel's joints are not gathered yet"
+                    .into(),
+            ));
+        }
         Ok(())
     }
 
@@ -405,7 +437,8 @@ impl BakeParams {
         match self.method.family() {
             Family::Cubemap => self.cubemap.rays_total(),
             Family::Grid => self.grid.rays_total(parts, vertices),
-            Family::Vertex => {
+            // `vertices`: the receivers, a texel bake's texels.
+            Family::Vertex | Family::Texel => {
                 let poses = self.poses + self.eval_poses + test_frames + NOISE_POSES;
                 poses as u128 * vertices as u128 * u128::from(self.samples)
             }

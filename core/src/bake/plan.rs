@@ -10,8 +10,9 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::{
     Character, Clip,
+    method::Family,
     method::texel::{
-        atlas::TexelAtlas,
+        atlas::{AtlasOptions, PADDING, TexelAtlas},
         trace::{drawn_texels, trace_texels},
     },
     method::vertex::{AssetHeaderFields, FitStats, FitStep, Model, PrimitiveSpan, Source},
@@ -54,6 +55,24 @@ pub struct Plan<'a> {
     /// The training clips, in `train` order (what clip-frame sampling and
     /// the joint-angle ranges read).
     train_clips: Vec<Clip>,
+}
+
+/// Where a bake of `params` traces, fits and judges AO: a texel bake
+/// generates its atlas here, from the bind pose (deterministic: every
+/// job of a bake, on any worker, sees the same texels).
+fn receivers(character: &Character, params: &BakeParams) -> Result<Receivers, BakeError> {
+    Ok(match params.method.family() {
+        Family::Texel => {
+            let options = AtlasOptions {
+                size: params.texel.atlas,
+                padding: PADDING,
+            };
+            let atlas = TexelAtlas::generate(&character.positions, &character.triangles, &options)
+                .map_err(|e| BakeError::Param(format!("texel.atlas: {e}")))?;
+            Receivers::Texels(Arc::new(atlas))
+        }
+        Family::Vertex | Family::Cubemap | Family::Grid => Receivers::Vertices,
+    })
 }
 
 /// Where a bake traces, fits and judges AO: the columns of its
@@ -137,8 +156,8 @@ impl<'a> Plan<'a> {
             test,
             joint_angles,
             handles: pose_space::handles(character),
+            receivers: receivers(character, &params)?,
             params,
-            receivers: Receivers::Vertices,
             train_clips,
         })
     }

@@ -40,7 +40,7 @@ use crate::{
 
 use super::{
     Bake, BakeError, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph, JobOutput, JobSink,
-    JobSpec, Plan, PlannedJob, PoseSet, TestPose,
+    JobSpec, Plan, PlannedJob, PoseSet, Receivers, TestPose,
     jobs::{IndexedBlock, decode_with, find, json, named, parse, stack_blocks},
     report::{CharacterInfo, Sizes, Timings},
 };
@@ -284,8 +284,35 @@ impl Bake<'_> {
     }
 
     pub(super) fn header(&self) -> crate::method::vertex::AssetHeaderFields {
-        self.plan
-            .header(&self.inputs.character_digest, &self.inputs.clip_digests)
+        let mut header = self
+            .plan
+            .header(&self.inputs.character_digest, &self.inputs.clip_digests);
+        if let Receivers::Texels(_) = self.plan.receivers {
+            // A texel asset's columns are texels: the glTF primitives'
+            // vertices are found through its atlas instead.
+            header.primitives.clear();
+        }
+        header
+    }
+
+    /// The fitted model as the bake's asset: a texel bake's with its
+    /// atlas.
+    fn encode_model(&self, model: Model) -> Vec<u8> {
+        let skeleton = &self.plan.character.skeleton;
+        match &self.plan.receivers {
+            Receivers::Vertices => model.to_container(self.header(), skeleton).to_bytes(),
+            Receivers::Texels(t) => {
+                super::texel::encode(self.plan.params.method, model, t, self.header(), skeleton)
+            }
+        }
+    }
+
+    /// The model of an asset [`Self::encode_model`] wrote.
+    fn decode_model(&self, bytes: &[u8]) -> Result<Model, JobError> {
+        match &self.plan.receivers {
+            Receivers::Vertices => decode(bytes),
+            Receivers::Texels(_) => super::texel::decode(bytes).map(|m| m.model),
+        }
     }
 
     fn fit(&self, deps: &[&JobOutput], sink: &mut dyn JobSink) -> Result<JobOutput, JobError> {
@@ -303,10 +330,7 @@ impl Bake<'_> {
         ));
         let mut out = JobOutput::default();
         let skeleton = &self.plan.character.skeleton;
-        out.push(
-            "model",
-            model.to_container(self.header(), skeleton).to_bytes(),
-        );
+        out.push("model", self.encode_model(model));
         out.push(
             "baseline",
             baseline.to_container(self.header(), skeleton).to_bytes(),
@@ -353,7 +377,7 @@ impl Bake<'_> {
 
     fn evaluate(&self, deps: &[&JobOutput]) -> Result<JobOutput, JobError> {
         let fit = find(deps, "model")?;
-        let model = decode(named(fit, "model")?)?;
+        let model = self.decode_model(named(fit, "model")?)?;
         let Model::StaticAverage(baseline) = decode(named(fit, "baseline")?)? else {
             return Err(JobError::Invalid(
                 "the baseline is not a static average".into(),
@@ -404,7 +428,7 @@ impl Bake<'_> {
         let fit = find(deps, "model")?;
         let evaluated = find(deps, "evaluation.json")?;
         let asset = named(fit, "model")?.to_vec();
-        let model = decode(&asset)?;
+        let model = self.decode_model(&asset)?;
         let FitInfo { fit: fit_stats } = parse(named(fit, "fit.json")?)?;
         let info: EvaluationInfo = parse(named(evaluated, "evaluation.json")?)?;
         let plan = &self.plan;
@@ -433,7 +457,7 @@ impl Bake<'_> {
             sizes: Sizes {
                 asset_bytes: asset.len(),
                 model_bytes: model.bytes(),
-                baseline_bytes: 2 * vertices,
+                baseline_bytes: 2 * self.plan.receiver_count(),
             },
             evaluation: info.evaluation,
             ground_truth_noise: info.ground_truth_noise,

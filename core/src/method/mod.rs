@@ -30,6 +30,7 @@ pub fn algorithm_version(method: Method) -> u32 {
         Family::Vertex => vertex::ALGORITHM_VERSION,
         Family::Cubemap => cubemap::ALGORITHM_VERSION,
         Family::Grid => grid::ALGORITHM_VERSION,
+        Family::Texel => texel::ALGORITHM_VERSION,
     }
 }
 

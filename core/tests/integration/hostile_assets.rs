@@ -313,6 +313,15 @@ fn read_and_evaluate(bytes: &[u8], character: &Character, clips: &[Clip]) -> Res
                     unit("a vertex asset far from rest", v)?;
                 }
             }
+            Asset::Texel { model, header } => {
+                if let Some(rig) = &header.rig {
+                    let rest: Vec<Transform> = rig.nodes.iter().map(|n| n.rest).collect();
+                    let values = model.model.evaluate(rig, &rest);
+                    for v in model.atlas.image(&values) {
+                        unit("a texel asset's texture at rest", v)?;
+                    }
+                }
+            }
             Asset::Cubemap { model, .. } => {
                 let s = model.layout.spheroid;
                 for t in [0.0, 0.3, -5.0, 1e9] {

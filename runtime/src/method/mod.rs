@@ -6,6 +6,7 @@
 pub mod cubemap;
 pub mod grid;
 pub mod ground;
+pub mod texel;
 pub mod vertex;
 
 use serde::{Deserialize, Serialize};
@@ -45,6 +46,9 @@ pub enum Method {
     /// Malmer et al. 2005: a 3D grid of the occlusion each rigid part
     /// casts into space, moved with the part.
     Grid = 6,
+    /// Beyond the papers: vertex-linear's model fitted per texel of a UV
+    /// atlas (its coefficients as textures).
+    TexelLinear = 7,
 }
 
 /// How a method's bake is split into jobs.
@@ -56,6 +60,9 @@ pub enum Family {
     Cubemap,
     /// Occlusion cast into space by each rigid part, `slab` jobs per part.
     Grid,
+    /// Per-texel AO of an atlas fitted to traced reference poses: the
+    /// per-vertex family's jobs with texels for vertices.
+    Texel,
 }
 
 impl Family {
@@ -65,7 +72,7 @@ impl Family {
     /// baked per part, so neither needs them.
     pub fn needs_joint_angles(self) -> bool {
         match self {
-            Self::Vertex => true,
+            Self::Vertex | Self::Texel => true,
             Self::Cubemap | Self::Grid => false,
         }
     }
@@ -73,13 +80,14 @@ impl Family {
 
 impl Method {
     /// Every method, in code order.
-    pub const ALL: [Self; 6] = [
+    pub const ALL: [Self; 7] = [
         Self::StaticAverage,
         Self::VertexLinear,
         Self::VertexClustered,
         Self::CubemapDiscrete,
         Self::CubemapContinuous,
         Self::Grid,
+        Self::TexelLinear,
     ];
 
     /// The method's name, as the CLI and the API spell it.
@@ -91,6 +99,7 @@ impl Method {
             Self::CubemapDiscrete => "cubemap-discrete",
             Self::CubemapContinuous => "cubemap-continuous",
             Self::Grid => "grid",
+            Self::TexelLinear => "texel-linear",
         }
     }
 
@@ -115,6 +124,7 @@ impl Method {
             Self::StaticAverage | Self::VertexLinear | Self::VertexClustered => Family::Vertex,
             Self::CubemapDiscrete | Self::CubemapContinuous => Family::Cubemap,
             Self::Grid => Family::Grid,
+            Self::TexelLinear => Family::Texel,
         }
     }
 
@@ -123,7 +133,7 @@ impl Method {
     /// parameters serve).
     pub fn fits_poses(self) -> bool {
         match self {
-            Self::VertexLinear | Self::VertexClustered => true,
+            Self::VertexLinear | Self::VertexClustered | Self::TexelLinear => true,
             Self::StaticAverage | Self::CubemapDiscrete | Self::CubemapContinuous | Self::Grid => {
                 false
             }

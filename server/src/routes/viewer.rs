@@ -18,7 +18,9 @@ use aobake_api::schema::Refusals;
 use aobake_core::{
     asset::Container,
     bake::{
-        Bake, BakeInputs, BakeParams, BakedAsset, JobOutput, Output, Panel, PreviewModel,
+        AssetUseError, Bake, BakeInputs, BakeParams, BakedAsset, JobOutput, Output, Panel,
+        PreviewModel,
+        texel::NO_PREVIEWS,
         viewer::{self, Bundle, FrameModel, PreviewTruth, ViewerError},
     },
     image::HEAT_MAP,
@@ -80,7 +82,12 @@ impl Loaded {
 }
 
 fn preview_model(baked: &BakedAsset) -> ApiResult<PreviewModel<'_>> {
-    Ok(baked.preview_model().map_err(internal)?.0)
+    match baked.preview_model() {
+        Ok((model, _)) => Ok(model),
+        // A texel asset: the viewer cannot draw it yet, and says so.
+        Err(AssetUseError::Unsupported(why)) => Err(ApiError::Conflict(why)),
+        Err(e) => Err(internal(e)),
+    }
 }
 
 async fn load(state: &AppState, id: i64, truth: bool) -> ApiResult<Loaded> {
@@ -189,6 +196,8 @@ pub(crate) async fn scene(
             Family::Vertex => "vertex",
             Family::Grid => "grid",
             Family::Cubemap => "cubemap",
+            // preview_model refused it above.
+            Family::Texel => return Err(ApiError::Conflict(NO_PREVIEWS.into())),
         };
         let program = aobake_shaders::export::webgl_viewer(family).map_err(internal)?;
         scene.meta["program"] = serde_json::to_value(program).unwrap_or_default();
@@ -231,7 +240,7 @@ pub(crate) async fn frames(
                 VertexAo::from_bytes(&loaded.asset)
                     .map_err(|e| ApiError::Internal(format!("the bake's asset: {e}")))?,
             ),
-            Family::Grid | Family::Cubemap => None,
+            Family::Grid | Family::Cubemap | Family::Texel => None,
         };
         let mut model = match (preview_model(&baked)?, runtime.as_mut()) {
             (PreviewModel::Vertex(_), Some(runtime)) => FrameModel::Vertex(runtime),

@@ -20,18 +20,9 @@
 //! A texel is posed with the mesh by its barycentric coordinates on the
 //! posed triangle: the very point the rasteriser shows there.
 
+pub use aobake_runtime::method::texel::dilate;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
-
-/// The atlas's side in texels when a request names none: the smallest
-/// power of two at which every shared character's texel floor (exact AO
-/// at the texel centres, bilinearly filtered) is under half GTAO's error
-/// per pixel. At 256 the milk truck's 1,811 charts leave 7 % of the page
-/// on its surface and its floor (0.062) is above half GTAO's (0.042); at
-/// 512 the floors are 0.028 (Kenney), 0.010 (Fox), 0.007 (CesiumMan) and
-/// 0.019 (the truck) against GTAO's 0.108, 0.085, 0.112 and 0.084
-/// (`aobake bench preview --texel-floor`, `docs/methods/texel.md`).
-pub const DEFAULT_SIZE: u32 = 512;
 
 /// Empty texels around each chart (charts are at least twice this apart):
 /// two keep bilinear filtering and one mip level free of bleeding once
@@ -54,7 +45,7 @@ pub struct AtlasOptions {
 impl Default for AtlasOptions {
     fn default() -> Self {
         Self {
-            size: DEFAULT_SIZE,
+            size: super::DEFAULT_ATLAS,
             padding: PADDING,
         }
     }
@@ -268,6 +259,19 @@ impl TexelAtlas {
         Ok(Self { atlas, texels })
     }
 
+    /// The atlas as an asset stores it, its columns these texels.
+    pub fn layout(&self) -> super::AtlasLayout {
+        let a = &self.atlas;
+        super::AtlasLayout {
+            width: a.width,
+            height: a.height,
+            xref: a.xref.clone(),
+            uvs: a.uvs.iter().map(|uv| uv.to_array()).collect(),
+            triangles: a.triangles.clone(),
+            texels: self.texels.texels.iter().map(|t| t.index).collect(),
+        }
+    }
+
     /// Per-texel `values` filtered as a GPU's linear sampler filters the
     /// dilated image, at the point with barycentric coordinates `bary` on
     /// `triangle`.
@@ -360,65 +364,10 @@ impl Texels {
     }
 }
 
-/// Fills every unfilled texel from its filled neighbours, ring by ring
-/// outwards from the charts: each takes the mean of its filled 8-
-/// neighbours of the previous ring, until every texel is filled (a mip
-/// chain of any depth then averages chart values only). Deterministic.
-pub fn dilate(image: &mut [f32], filled: &mut [bool], width: u32, height: u32) {
-    let (w, h) = (width as usize, height as usize);
-    if !filled.iter().any(|&f| f) {
-        return;
-    }
-    let mut ring: Vec<(usize, f32)> = Vec::new();
-    loop {
-        ring.clear();
-        for y in 0..h {
-            for x in 0..w {
-                if filled[y * w + x] {
-                    continue;
-                }
-                let (mut sum, mut n) = (0.0f32, 0u32);
-                for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                    for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                        if filled[ny * w + nx] {
-                            sum += image[ny * w + nx];
-                            n += 1;
-                        }
-                    }
-                }
-                if n > 0 {
-                    ring.push((y * w + x, sum / n as f32));
-                }
-            }
-        }
-        if ring.is_empty() {
-            return;
-        }
-        for &(i, v) in &ring {
-            image[i] = v;
-            filled[i] = true;
-        }
-    }
-}
-
-/// Bilinear filtering of a `width × height` image at texture coordinate
-/// `uv` with clamp-to-edge addressing: what a GPU's linear sampler
-/// returns (texel centres at half-integers).
+/// Bilinear filtering as a GPU's linear sampler filters (the runtime's,
+/// as engines evaluate texel assets), at `uv`.
 pub fn bilinear(image: &[f32], width: u32, height: u32, uv: Vec2) -> f32 {
-    let (w, h) = (width as i64, height as i64);
-    let x = uv.x * width as f32 - 0.5;
-    let y = uv.y * height as f32 - 0.5;
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    let at = |xi: i64, yi: i64| {
-        let xi = xi.clamp(0, w - 1) as usize;
-        let yi = yi.clamp(0, h - 1) as usize;
-        image[yi * width as usize + xi]
-    };
-    let (x0, y0) = (x0 as i64, y0 as i64);
-    let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
-    let bottom = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
-    top * (1.0 - fy) + bottom * fy
+    aobake_runtime::method::texel::bilinear(image, width, height, uv.to_array())
 }
 
 /// Barycentric coordinates of `p` on a triangle of 3D corners, from the

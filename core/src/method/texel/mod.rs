@@ -17,3 +17,55 @@
 
 pub mod atlas;
 pub mod trace;
+
+use serde::{Deserialize, Serialize};
+
+/// The texel methods' algorithm version and their run-time form live in
+/// the runtime crate, which engines read assets with.
+pub use aobake_runtime::method::texel::{ALGORITHM_VERSION, AtlasLayout, TexelModel};
+
+/// A texel bake's atlas side (texels) when the request names none.
+///
+/// Where the floor points: at 512 every shared character's texel floor
+/// (exact AO at the texel centres, bilinearly filtered) is under half of
+/// GTAO's per-pixel error: 0.028 (Kenney), 0.010 (Fox), 0.007
+/// (CesiumMan), 0.019 (the milk truck) against 0.108, 0.085, 0.112 and
+/// 0.084; at 256 all but the truck's (0.062; its 1,811 charts leave 7 %
+/// of the page on its surface) are (`aobake bench preview --texel-floor`,
+/// docs/methods/texel.md). The fit still holds every reference pose's
+/// values several times over, and 512's five times as many texels take
+/// it past 2 GB on the Kenney character, so 256 until it streams.
+pub const DEFAULT_ATLAS: u32 = 256;
+
+/// A texel bake's options; its fit reads vertex-linear's (`linear`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TexelOptions {
+    /// The atlas's side in texels: the densest packing of the generated
+    /// atlas's charts that fits one page this wide.
+    pub atlas: u32,
+}
+
+impl Default for TexelOptions {
+    fn default() -> Self {
+        Self {
+            atlas: DEFAULT_ATLAS,
+        }
+    }
+}
+
+impl TexelOptions {
+    /// Checks the ranges; the error names the parameter.
+    pub fn validate(&self) -> Result<(), String> {
+        if atlas::SIZES.contains(&self.atlas) {
+            Ok(())
+        } else {
+            Err(format!(
+                "texel.atlas must be between {} and {} texels, not {}",
+                atlas::SIZES.start(),
+                atlas::SIZES.end(),
+                self.atlas
+            ))
+        }
+    }
+}

@@ -61,3 +61,57 @@ pub fn drawn_texels(character: &Character, texels: &Texels, pose: &Pose) -> Vec<
         .map(|t| drawn[t.triangle as usize])
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{
+        Limits, Upload, import_character,
+        method::texel::atlas::{AtlasOptions, TexelAtlas},
+        trace::{Falloff, no_progress},
+    };
+
+    #[test]
+    fn texel_batches_stack_into_the_whole_and_follow_the_pose() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tests/data/characters/RiggedFigure/RiggedFigure.glb"
+        );
+        let bytes = std::fs::read(path).unwrap();
+        let imported = import_character(Upload::single(&bytes), &Limits::default()).unwrap();
+        let c = &imported.character;
+        let atlas = TexelAtlas::generate(
+            &c.positions,
+            &c.triangles,
+            &AtlasOptions {
+                size: 64,
+                padding: 2,
+            },
+        )
+        .unwrap();
+        let clip = &imported.clips[0];
+        let poses: Vec<Pose> = [0.0, 0.6, 1.2]
+            .iter()
+            .map(|&t| Pose::sample(&c.skeleton, clip, t))
+            .collect();
+        let params = SurfaceParams {
+            samples: 16,
+            max_distance: 1.0,
+            seed: 4,
+            falloff: Falloff::None,
+        };
+        let options = SceneOptions::default();
+        let t = &atlas.texels;
+        let whole = trace_texels(c, t, &poses, &options, &params, &no_progress).unwrap();
+        assert_eq!((whole.poses(), whole.vertices), (3, t.len()));
+        assert!(whole.values.iter().all(|v| (0.0..=1.0).contains(v)));
+        let first = trace_texels(c, t, &poses[..1], &options, &params, &no_progress).unwrap();
+        let rest = trace_texels(c, t, &poses[1..], &options, &params, &no_progress).unwrap();
+        assert_eq!([first.values, rest.values].concat(), whole.values);
+        // The pose changes the occlusion, and some texels are occluded.
+        assert_ne!(whole.row(0), whole.row(2));
+        assert!(whole.row(0).iter().any(|&v| v > 0.3));
+        // Every texel of a figure whose triangles all have area draws.
+        assert!(drawn_texels(c, t, &poses[1]).iter().all(|&d| d));
+    }
+}

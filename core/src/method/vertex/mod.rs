@@ -318,7 +318,8 @@ fn fit_rows(
             Model::StaticAverage(average::fit(ao)),
             FitStats::StaticAverage,
         ),
-        Method::VertexLinear => {
+        // texel-linear: vertex-linear over texels (`method::texel`).
+        Method::VertexLinear | Method::TexelLinear => {
             let (m, stats) = fit_linear(character, joint_angles, q, ao, sources, linear)?;
             (
                 Model::VertexLinear(joint_angles.clone(), m),
@@ -517,7 +518,9 @@ fn add_basis(
     let (poses, q, ao, sources) = rows;
     let (model, stats) = fitted;
     let (most, threshold, basis_cv) = match method {
-        Method::VertexLinear => (linear.basis, linear.basis_threshold, linear.basis_cv),
+        Method::VertexLinear | Method::TexelLinear => {
+            (linear.basis, linear.basis_threshold, linear.basis_cv)
+        }
         Method::VertexClustered => (
             clustered.basis,
             clustered.basis_threshold,

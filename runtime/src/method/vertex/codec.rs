@@ -145,6 +145,19 @@ impl Model {
     /// The asset: header and sections, with the `skeleton` the model reads
     /// as its rig.
     pub fn to_container(&self, header: AssetHeaderFields, skeleton: &Skeleton) -> Container {
+        self.to_container_as(self.method(), UNITS, header, skeleton)
+    }
+
+    /// [`Model::to_container`] under another method's name and units: a
+    /// texel method's model is a vertex method's over texels
+    /// (`super::super::texel`).
+    pub(crate) fn to_container_as(
+        &self,
+        method: Method,
+        units: &str,
+        header: AssetHeaderFields,
+        skeleton: &Skeleton,
+    ) -> Container {
         let (layout, sections) = match self {
             Self::StaticAverage(m) => (Layout::StaticAverage, form_sections(&m.form)),
             Self::VertexLinear(joint_angles, m) => {
@@ -210,28 +223,44 @@ impl Model {
         };
         let header = AssetHeader {
             generator: header.generator,
-            method: self.method(),
-            algorithm_version: ALGORITHM_VERSION,
+            method,
+            algorithm_version: match method.family() {
+                crate::Family::Texel => super::super::texel::ALGORITHM_VERSION,
+                _ => ALGORITHM_VERSION,
+            },
             bake_key: header.bake_key,
             character: header.character,
             clips: header.clips,
             vertices: self.vertices(),
-            units: UNITS.to_owned(),
+            units: units.to_owned(),
             params: header.params,
             layout,
             rig: Some(skeleton.clone()),
             primitives: header.primitives,
         };
-        Container::new(self.method(), &header, sections)
+        Container::new(method, &header, sections)
     }
 
     /// Reads a model back from its container, checking every length
     /// against the header.
     pub fn from_container(container: &Container) -> Result<(Self, AssetHeader), AssetError> {
-        if container.method.family() != crate::Family::Vertex {
+        Self::from_container_of(container, crate::Family::Vertex)
+    }
+
+    /// [`Model::from_container`] of an asset of `family`'s (a texel
+    /// method's model is a vertex method's over texels).
+    pub(crate) fn from_container_of(
+        container: &Container,
+        family: crate::Family,
+    ) -> Result<(Self, AssetHeader), AssetError> {
+        if container.method.family() != family {
             return Err(AssetError::Unsupported(format!(
-                "a {} asset is not a vertex method's",
-                container.method.name()
+                "a {} asset is not a {} method's",
+                container.method.name(),
+                match family {
+                    crate::Family::Texel => "texel",
+                    _ => "vertex",
+                }
             )));
         }
         let header: AssetHeader = container.header()?;

@@ -20,7 +20,10 @@ use aobake_core::{
     image::HEAT_MAP,
     method::{
         Method,
-        texel::atlas::{AtlasOptions, DEFAULT_SIZE, PADDING, TexelAtlas},
+        texel::{
+            DEFAULT_ATLAS,
+            atlas::{AtlasOptions, PADDING, TexelAtlas},
+        },
         vertex::{Model, fit_static_average},
     },
     trace::{AoBlock, SceneOptions, no_progress},
@@ -38,7 +41,7 @@ pub(super) struct Args {
     #[arg(long, num_args = 1..)]
     clips: Vec<PathBuf>,
     /// The atlas's side in texels.
-    #[arg(long, default_value_t = DEFAULT_SIZE)]
+    #[arg(long, default_value_t = DEFAULT_ATLAS)]
     atlas: u32,
     /// Reference poses (a third each random, clip frames and perturbed
     /// frames, as the vertex methods draw them).
@@ -141,7 +144,18 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     );
     reset_peak_rss();
     let started = Instant::now();
-    let (model, stats) = plan.fit(&poses, &reference, &plan.reference_sources())?;
+    let mut step_started = Instant::now();
+    let (model, stats) =
+        plan.fit_stepwise(&poses, &reference, &plan.reference_sources(), &mut |step| {
+            println!(
+                "| fit: {} | {:.1} | {} |",
+                step.name(),
+                step_started.elapsed().as_secs_f64(),
+                mb()
+            );
+            reset_peak_rss();
+            step_started = Instant::now();
+        })?;
     let baseline = fit_static_average(&reference.select(plan.baseline_rows())).evaluate();
     println!(
         "| fit | {:.1} | {} |",

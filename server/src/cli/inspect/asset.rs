@@ -10,6 +10,7 @@ use aobake_core::{
         Family, Method,
         cubemap::model::{CubemapModel, Encoding},
         grid::model::GridModel,
+        texel::TexelModel,
         vertex::{Layout, Model},
     },
 };
@@ -84,6 +85,26 @@ enum ModelInfo {
         /// Texels per side of the static base's ground.
         ground_resolution: Option<usize>,
     },
+    Texel {
+        atlas: AtlasSummary,
+        /// Weights computed per pose (`Model::weights`' length).
+        weights_per_pose: usize,
+        /// Bytes of the model's numbers.
+        model_bytes: usize,
+        /// One line on the model's structure.
+        structure: String,
+    },
+}
+
+/// A texel asset's atlas, as `inspect` lists it.
+#[derive(Serialize)]
+struct AtlasSummary {
+    /// Texels per row and rows.
+    size: [u32; 2],
+    /// Texels that hold a value (the model's columns).
+    texels: usize,
+    /// Atlas vertices (the character's, split where charts meet).
+    vertices: usize,
 }
 
 /// A grid asset's part: its name and the palette entry (the skinning
@@ -167,6 +188,20 @@ fn model_info(container: &Container) -> anyhow::Result<ModelInfo> {
                 cubemaps: layout.cubemaps(),
                 encoding: layout.encoding,
                 ground_resolution: model.ground.as_ref().map(|g| g.square.resolution),
+            }
+        }
+        Family::Texel => {
+            let (texel, header) = TexelModel::from_container(container, None)?;
+            let model = &texel.model;
+            ModelInfo::Texel {
+                atlas: AtlasSummary {
+                    size: [texel.atlas.width, texel.atlas.height],
+                    texels: texel.atlas.texels.len(),
+                    vertices: texel.atlas.xref.len(),
+                },
+                weights_per_pose: model.weight_count(),
+                model_bytes: model.bytes(),
+                structure: structure(model, &header.layout),
             }
         }
         Family::Grid => {
@@ -312,6 +347,21 @@ pub(super) fn print_text(r: &Report) {
                     "  rig          none (written before format 1.4): evaluate it with the character's glTF, or bake again"
                 ),
             }
+        }
+        ModelInfo::Texel {
+            atlas,
+            weights_per_pose,
+            model_bytes,
+            structure,
+        } => {
+            println!(
+                "  atlas        {}×{} texels, {} of them valued; {} atlas vertices",
+                atlas.size[0], atlas.size[1], atlas.texels, atlas.vertices
+            );
+            println!("  model        per texel; {structure}");
+            println!(
+                "  run time     {weights_per_pose} weights per pose, then per pixel one texture fetch and multiply-add per weight; the model's numbers take {model_bytes} bytes"
+            );
         }
         ModelInfo::Cubemap {
             clip,

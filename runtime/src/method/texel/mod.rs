@@ -1,0 +1,254 @@
+//! The texel methods as an engine reads them: a vertex method's model
+//! whose columns are texels of a UV atlas instead of vertices, and the
+//! atlas itself ([`AtlasLayout`]): the UV set to draw the character with,
+//! and where each column's value goes in the textures. Per pose the
+//! weights are the vertex method's ([`Model::weights`]); each texture is
+//! one row of coefficients scattered into the atlas and dilated past the
+//! charts' borders ([`AtlasLayout::image`]); per pixel the AO is the
+//! weighted sum of the textures, bilinearly filtered ([`bilinear`]).
+//! aobake-core generates atlases and fits the models.
+
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    Family, Method,
+    container::{AssetError, AssetHeaderFields, Container, Data, Section},
+    method::vertex::{AssetHeader, Model},
+    rig::Skeleton,
+};
+
+/// Version of the texel methods' algorithms (the atlas, the texels and
+/// the fit over them), part of the bake key.
+pub const ALGORITHM_VERSION: u32 = 1;
+
+/// What a texel asset's values mean, written into its header.
+pub const UNITS: &str =
+    "occlusion per texel (the ATTX section places each in the atlas): 0 = open, 1 = blocked";
+
+/// The largest atlas side an asset may declare.
+const MAX_SIDE: u32 = 16_384;
+
+/// The atlas of a texel asset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AtlasLayout {
+    /// Texels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Per atlas vertex, the character vertex (aobake's vertex order) it
+    /// was made from: its position, normal and skin.
+    pub xref: Vec<u32>,
+    /// Per atlas vertex, its texture coordinate in `[0, 1]²`: `(0, 0)` is
+    /// the outer corner of texel row 0, column 0, and `v` grows with the
+    /// row (glTF's, wgpu's and Vulkan's convention).
+    pub uvs: Vec<[f32; 2]>,
+    /// The character's triangles in its order, corner for corner, over
+    /// the atlas vertices.
+    pub triangles: Vec<[u32; 3]>,
+    /// Per model column, its texel: `row × width + column`.
+    pub texels: Vec<u32>,
+}
+
+impl AtlasLayout {
+    /// The `width × height` texture of per-column `values`: each at its
+    /// texel, every other texel dilated from the charts ([`dilate`]).
+    pub fn image(&self, values: &[f32]) -> Vec<f32> {
+        let n = self.width as usize * self.height as usize;
+        let mut image = vec![0.0; n];
+        let mut filled = vec![false; n];
+        for (&t, &v) in self.texels.iter().zip(values) {
+            image[t as usize] = v;
+            filled[t as usize] = true;
+        }
+        dilate(&mut image, &mut filled, self.width, self.height);
+        image
+    }
+
+    /// Checks the layout against itself and `columns`, the model's.
+    fn check(&self, columns: usize, vertices: Option<usize>) -> Result<(), AssetError> {
+        let bad = |m: &str| AssetError::Malformed(format!("the atlas: {m}"));
+        if !(1..=MAX_SIDE).contains(&self.width) || !(1..=MAX_SIDE).contains(&self.height) {
+            return Err(bad("its size is 0 or absurdly large"));
+        }
+        let area = self.width as usize * self.height as usize;
+        if self.texels.len() != columns {
+            return Err(bad("it places a number of texels other than the model's"));
+        }
+        let mut seen = vec![false; area];
+        for &t in &self.texels {
+            let slot = seen
+                .get_mut(t as usize)
+                .ok_or_else(|| bad("a texel is outside it"))?;
+            if std::mem::replace(slot, true) {
+                return Err(bad("two columns share a texel"));
+            }
+        }
+        if self.uvs.len() != self.xref.len() {
+            return Err(bad("its vertices have other than one UV each"));
+        }
+        if self.uvs.iter().flatten().any(|x| !x.is_finite()) {
+            return Err(bad("a UV is not a finite number"));
+        }
+        let n = self.xref.len() as u32;
+        if self.triangles.iter().flatten().any(|&i| i >= n) {
+            return Err(bad("a triangle names a vertex it does not have"));
+        }
+        if let Some(v) = vertices
+            && self.xref.iter().any(|&x| x as usize >= v)
+        {
+            return Err(bad("a vertex comes from one the character does not have"));
+        }
+        Ok(())
+    }
+}
+
+/// A texel method's model: the vertex method's model over the atlas's
+/// texels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TexelModel {
+    /// The method.
+    pub method: Method,
+    /// The model; its columns are [`AtlasLayout::texels`].
+    pub model: Model,
+    /// The atlas.
+    pub atlas: AtlasLayout,
+}
+
+impl TexelModel {
+    /// The asset: the model's header and sections under the texel
+    /// method's name, and the atlas's sections (`ATSZ` width and height,
+    /// `ATXR` vertex sources, `ATUV` UVs, `ATTR` triangles, `ATTX` texels).
+    pub fn to_container(&self, header: AssetHeaderFields, skeleton: &Skeleton) -> Container {
+        let mut c = self
+            .model
+            .to_container_as(self.method, UNITS, header, skeleton);
+        let a = &self.atlas;
+        let section = |tag: &[u8; 4], data| Section { tag: *tag, data };
+        c.sections.extend([
+            section(b"ATSZ", Data::U32(vec![a.width, a.height])),
+            section(b"ATXR", Data::U32(a.xref.clone())),
+            section(
+                b"ATUV",
+                Data::F32(a.uvs.iter().flatten().copied().collect()),
+            ),
+            section(
+                b"ATTR",
+                Data::U32(a.triangles.iter().flatten().copied().collect()),
+            ),
+            section(b"ATTX", Data::U32(a.texels.clone())),
+        ]);
+        c
+    }
+
+    /// Reads a texel asset back, checking the atlas against the model
+    /// (and against a character of `vertices` vertices, when given).
+    pub fn from_container(
+        container: &Container,
+        vertices: Option<usize>,
+    ) -> Result<(Self, AssetHeader), AssetError> {
+        let (model, header) = Model::from_container_of(container, Family::Texel)?;
+        let u32s = |tag: &[u8; 4]| match container.section(tag)? {
+            Data::U32(v) => Ok(v.clone()),
+            _ => Err(AssetError::Malformed(format!(
+                "{} must be u32",
+                String::from_utf8_lossy(tag)
+            ))),
+        };
+        let size = u32s(b"ATSZ")?;
+        let [width, height] = size[..] else {
+            return Err(AssetError::Malformed(
+                "ATSZ must hold the width and the height".into(),
+            ));
+        };
+        let Data::F32(uvs) = container.section(b"ATUV")? else {
+            return Err(AssetError::Malformed("ATUV must be f32".into()));
+        };
+        let triangles = u32s(b"ATTR")?;
+        if uvs.len() % 2 != 0 || triangles.len() % 3 != 0 {
+            return Err(AssetError::Malformed(
+                "ATUV must hold pairs and ATTR triples".into(),
+            ));
+        }
+        let atlas = AtlasLayout {
+            width,
+            height,
+            xref: u32s(b"ATXR")?,
+            uvs: uvs.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+            triangles: triangles
+                .chunks_exact(3)
+                .map(|c| [c[0], c[1], c[2]])
+                .collect(),
+            texels: u32s(b"ATTX")?,
+        };
+        atlas.check(model.vertices(), vertices)?;
+        Ok((
+            Self {
+                method: container.method,
+                model,
+                atlas,
+            },
+            header,
+        ))
+    }
+}
+
+/// Fills every unfilled texel from its filled neighbours, ring by ring
+/// outwards from the charts: each takes the mean of its filled
+/// 8-neighbours of the previous ring, until every texel is filled (a mip
+/// chain of any depth then averages chart values only). Deterministic.
+pub fn dilate(image: &mut [f32], filled: &mut [bool], width: u32, height: u32) {
+    let (w, h) = (width as usize, height as usize);
+    if !filled.iter().any(|&f| f) {
+        return;
+    }
+    let mut ring: Vec<(usize, f32)> = Vec::new();
+    loop {
+        ring.clear();
+        for y in 0..h {
+            for x in 0..w {
+                if filled[y * w + x] {
+                    continue;
+                }
+                let (mut sum, mut n) = (0.0f32, 0u32);
+                for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+                    for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
+                        if filled[ny * w + nx] {
+                            sum += image[ny * w + nx];
+                            n += 1;
+                        }
+                    }
+                }
+                if n > 0 {
+                    ring.push((y * w + x, sum / n as f32));
+                }
+            }
+        }
+        if ring.is_empty() {
+            return;
+        }
+        for &(i, v) in &ring {
+            image[i] = v;
+            filled[i] = true;
+        }
+    }
+}
+
+/// Bilinear filtering of a `width × height` image at texture coordinate
+/// `uv` with clamp-to-edge addressing: what a GPU's linear sampler
+/// returns (texel centres at half-integers).
+pub fn bilinear(image: &[f32], width: u32, height: u32, uv: [f32; 2]) -> f32 {
+    let (w, h) = (i64::from(width), i64::from(height));
+    let x = uv[0] * width as f32 - 0.5;
+    let y = uv[1] * height as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let at = |xi: i64, yi: i64| {
+        let xi = xi.clamp(0, w - 1) as usize;
+        let yi = yi.clamp(0, h - 1) as usize;
+        image[yi * width as usize + xi]
+    };
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
+    let bottom = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
+    top * (1.0 - fy) + bottom * fy
+}
