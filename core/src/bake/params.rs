@@ -418,6 +418,14 @@ impl BakeParams {
         p.grid.validate().map_err(BakeError::Param)?;
         p.texel.validate().map_err(BakeError::Param)?;
         if p.method.family() == Family::Texel
+            && (p.linear.threshold != 0.0 || p.linear.basis_threshold != 0.0)
+        {
+            return Err(BakeError::Param(
+                "linear.threshold and linear.basis_threshold must be 0 for texel-linear: a texture holds every texel, so dropping small coefficients saves nothing"
+                    .into(),
+            ));
+        }
+        if p.method.family() == Family::Texel
             && p.linear.locality != crate::method::vertex::Locality::Off
         {
             return Err(BakeError::Param(

@@ -463,9 +463,13 @@ held-out random poses ({}): {:.2} dB against {:.2} dB for the static average; ti
         && let (Some(chosen), Some(best)) = (c.chosen(), c.best())
     {
         out.push_str(&format!(
-            "eigen-AO basis: {} ({:.1} multiply-adds a vertex), the cheapest of {} candidates within {} dB of the best on left-out clips (cross-validation over clips: {:.2} dB; the best, {}, {:.2} dB)\n",
+            "eigen-AO basis: {} ({:.1} multiply-adds a {}), the cheapest of {} candidates within {} dB of the best on left-out clips (cross-validation over clips: {:.2} dB; the best, {}, {:.2} dB)\n",
             basis_name(b.rank, b.threshold),
             b.multiply_adds,
+            match report.method.family() {
+                aobake_core::method::Family::Texel => "texel",
+                _ => "vertex",
+            },
             c.candidates.len(),
             c.tolerance_db,
             chosen.psnr_db,

@@ -22,8 +22,9 @@ pub(super) struct BakeRequestArgs {
     pub clips: Vec<std::path::PathBuf>,
     /// The method: vertex-linear (Kontkanen & Aila 2006), vertex-clustered
     /// (Kirk & Arikan 2007), static-average (the baseline alone),
-    /// cubemap-discrete or cubemap-continuous (Kroon 2023), or grid
-    /// (Malmer et al. 2005).
+    /// cubemap-discrete or cubemap-continuous (Kroon 2023), grid (Malmer
+    /// et al. 2005), or texel-linear (vertex-linear per texel of a
+    /// generated atlas; `--param texel.atlas=SIDE`).
     #[arg(long)]
     pub method: Method,
     #[command(flatten)]

@@ -555,7 +555,17 @@ fn add_basis(
                 );
                 fitted.ok().map(|(m, _)| m)
             };
-            basis_by_clips(skeleton, poses, ao, sources, (model, &weights), most, fit)
+            let dense = method.family() == crate::method::Family::Texel;
+            basis_by_clips(
+                skeleton,
+                poses,
+                ao,
+                sources,
+                (model, &weights),
+                most,
+                dense,
+                fit,
+            )
         } else {
             None
         };
@@ -644,6 +654,7 @@ fn basis_by_clips(
     sources: &[Source],
     fitted: (&Model, &[Vec<f32>]),
     most: usize,
+    dense: bool,
     fit: impl Fn(&[usize]) -> Option<Model> + Sync,
 ) -> Option<BasisChoice> {
     use std::collections::HashMap;
@@ -657,7 +668,13 @@ fn basis_by_clips(
     let (model, weights) = fitted;
     let whole = basis::Truncations::new(model.form(), weights, most)?;
     let cost = mean_multiply_adds(model, weights);
-    let thresholds = cv::BASIS_THRESHOLDS;
+    // A texture holds every texel whatever its rows' small entries, so a
+    // texel method's basis rows stay dense.
+    let thresholds: &[f32] = if dense {
+        &cv::BASIS_THRESHOLDS[..1]
+    } else {
+        &cv::BASIS_THRESHOLDS
+    };
     let candidates: Vec<(usize, f32, f64)> = thresholds
         .iter()
         .flat_map(|&t| {
