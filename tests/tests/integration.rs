@@ -17,6 +17,8 @@ mod dashboard;
 mod grid;
 #[path = "integration/service.rs"]
 mod service;
+#[path = "integration/texel.rs"]
+mod texel;
 #[path = "integration/tls.rs"]
 mod tls;
 #[path = "integration/tracer.rs"]

@@ -61,9 +61,10 @@ pub(super) struct Args {
     /// written into the GLB as animations.
     #[arg(long, requires = "gltf")]
     clips: Option<PathBuf>,
-    /// Write a cubemap asset's decoded faces, or a grid asset's parts as
-    /// z-slices, as OpenEXR files into this folder (created if missing),
-    /// and the static ground's texture, when the asset has one.
+    /// Write a cubemap asset's decoded faces, a grid asset's parts as
+    /// z-slices, or a texel asset's coefficient textures (`texel-ao.exr`,
+    /// a channel per row), as OpenEXR files into this folder (created if
+    /// missing), and the static ground's texture, when the asset has one.
     #[arg(long, requires = "asset")]
     exr: Option<PathBuf>,
     /// Clip times (seconds) to decode at; default: the start of the

@@ -60,7 +60,8 @@ enum Command {
     /// per-vertex AO as CSV.
     Eval(eval::Args),
     /// Write a baked asset's data for other tools: a cubemap's decoded
-    /// faces, or a grid asset's parts as z-slices, as OpenEXR (--exr DIR);
+    /// faces, a grid asset's parts as z-slices, or a texel asset's
+    /// coefficient textures, as OpenEXR (--exr DIR);
     /// the character with a vertex asset's AO as glTF (--gltf OUT.glb); or
     /// the run-time shaders for engines (--shaders DIR).
     Export(export::Args),
