@@ -212,7 +212,11 @@ pub const STRIDE: u32 = 3;
 impl ScreenSpaceInfo {
     /// Measures one frame: the per-pixel truth traced on `frame`'s posed
     /// character (and its ground plane) at the pixels `screen` shows, with
-    /// the bake's rays and distance limit (`surface`).
+    /// the bake's rays and distance limit (`surface`). With `texels`, the
+    /// frame's AO is also traced at an atlas's texels (the texel floor),
+    /// and it and the texel models are looked up per character pixel
+    /// where a ray from the eye meets the posed mesh.
+    #[allow(clippy::too_many_arguments)]
     pub fn measure(
         screen: &ScreenFrame,
         frame: &RenderFrame,

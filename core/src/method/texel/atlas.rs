@@ -192,7 +192,7 @@ impl Atlas {
         for t in 0..self.triangles.len() {
             let [a, b, c] = self.corners(t);
             let area = (b - a).perp_dot(c - a);
-            if !(area.abs() > 0.0) || !area.is_finite() {
+            if area == 0.0 || !area.is_finite() {
                 continue;
             }
             let lo = a.min(b).min(c) - Vec2::splat(reach);
@@ -378,7 +378,7 @@ pub fn barycentric(p: Vec3, [a, b, c]: [Vec3; 3]) -> Vec3 {
     let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
     let (d1, d2) = (d.dot(e1), d.dot(e2));
     let det = d11 * d22 - d12 * d12;
-    if !(det.abs() > 0.0) {
+    if det == 0.0 || !det.is_finite() {
         return Vec3::new(1.0, 0.0, 0.0);
     }
     let v = (d22 * d1 - d12 * d2) / det;

@@ -646,7 +646,9 @@ fn mean_multiply_adds(model: &Model, weights: &[Vec<f32>]) -> f64 {
 /// clamps; each candidate costs what it would cost `fitted`, and one that
 /// would not save `fitted` a multiply-add (so that it ships as fitted) is
 /// scored as each fold's model as fitted. `None` when the frames come from
-/// fewer than two clips.
+/// fewer than two clips. With `dense` (a texel method's) every candidate
+/// keeps all its rows' entries.
+#[allow(clippy::too_many_arguments)]
 fn basis_by_clips(
     skeleton: &Skeleton,
     poses: &[Pose],
