@@ -436,10 +436,17 @@ impl Scene {
             return None;
         }
         let ray = Ray::new(self.to_local(origin), Vec3A::from(d), TMIN, f32::INFINITY);
-        let mut stack = Vec::with_capacity(64);
-        let hit = match &self.accel {
+        let hit = self.nearest_triangle(ray, &mut Vec::with_capacity(64));
+        hit.map(|(i, t)| (self.ids[i] as usize, t / self.scale))
+    }
+
+    /// The nearest triangle along `ray` (local frame; the ground left
+    /// out): its index in BVH order and the distance.
+    #[inline]
+    fn nearest_triangle(&self, ray: Ray, stack: &mut Vec<u32>) -> Option<(usize, f32)> {
+        match &self.accel {
             Accel::Empty => None,
-            Accel::Wide(bvh) => bvh.traverse::<false>(&self.triangles, ray, &mut stack),
+            Accel::Wide(bvh) => bvh.traverse::<false>(&self.triangles, ray, stack),
             Accel::Obvhs(bvh) => {
                 let mut hit = RayHit::none();
                 bvh.ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray))
@@ -450,8 +457,7 @@ impl Scene {
                 bvh.ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray))
                     .then_some((hit.primitive_id as usize, hit.t))
             }
-        };
-        hit.map(|(i, t)| (self.ids[i] as usize, t / self.scale))
+        }
     }
 
     /// A ray-query context for one thread (it owns the traversal stack).
@@ -511,20 +517,7 @@ impl Tracer<'_> {
         let ground = scene.ground.as_ref().and_then(|g| g.hit(origin, dir, tmax));
         let tmax = ground.map_or(tmax, |g| g.t);
         let ray = Ray::new(origin, dir, TMIN, tmax);
-        let mesh = match &scene.accel {
-            Accel::Empty => None,
-            Accel::Wide(bvh) => bvh.traverse::<false>(&scene.triangles, ray, &mut self.stack),
-            Accel::Obvhs(bvh) => {
-                let mut hit = RayHit::none();
-                bvh.ray_traverse(ray, &mut hit, |ray, id| scene.triangles[id].intersect(ray))
-                    .then_some((hit.primitive_id as usize, hit.t))
-            }
-            Accel::Bvh2(bvh) => {
-                let mut hit = RayHit::none();
-                bvh.ray_traverse(ray, &mut hit, |ray, id| scene.triangles[id].intersect(ray))
-                    .then_some((hit.primitive_id as usize, hit.t))
-            }
-        };
+        let mesh = scene.nearest_triangle(ray, &mut self.stack);
         mesh.map(|(id, t)| Hit {
             t,
             // RtTriangle stores ng = (v0 − v1) × (v2 − v0), the opposite of

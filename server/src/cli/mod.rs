@@ -56,8 +56,8 @@ enum Command {
     /// without baking: what `fetch --key` looks up, so CI can fetch a
     /// cached asset before deciding to submit.
     Key(key::Args),
-    /// Evaluate a baked asset (per-vertex or grid) at a pose and write
-    /// per-vertex AO as CSV.
+    /// Evaluate a baked asset (per-vertex, grid, or texel: its textures
+    /// sampled at the vertices) at a pose and write per-vertex AO as CSV.
     Eval(eval::Args),
     /// Write a baked asset's data for other tools: a cubemap's decoded
     /// faces, a grid asset's parts as z-slices, or a texel asset's

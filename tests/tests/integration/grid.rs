@@ -10,7 +10,7 @@ use std::time::Duration;
 use aobake_e2e::{ADMIN, Options, TestEnv, character};
 use serde_json::{Value, json};
 
-use crate::util::{aobake_bake, asset, bake_view, deep_running_job, job_info, upload};
+use crate::util::{aobake_bake, asset, bake_view, deep_running_job, export_exr, job_info, upload};
 
 /// 32³ cells with 512 rays: a slab of 8 layers is a few seconds of
 /// tracing with a checkpoint after each layer; a token evaluation.
@@ -103,20 +103,7 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
         "the disturbed bake's asset differs from an undisturbed one"
     );
     // `aobake export --exr`: one file per part, read back cell for cell.
-    let path = env.dir.path().join("served.aob");
-    std::fs::write(&path, &served).unwrap();
-    let exr_dir = env.dir.path().join("exr");
-    let out = env.aobake(&[
-        "export",
-        path.to_str().unwrap(),
-        "--exr",
-        exr_dir.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let exr_dir = export_exr(&env, &served);
     let (model, _) = aobake_core::method::grid::model::GridModel::from_container(
         &aobake_core::asset::Container::from_bytes(&served).unwrap(),
     )

@@ -13,7 +13,7 @@ use aobake_core::{
 use aobake_e2e::{ADMIN, Options, TestEnv, character};
 use serde_json::json;
 
-use crate::util::{aobake_bake, asset, upload};
+use crate::util::{aobake_bake, asset, export_exr, upload};
 
 #[test]
 fn a_texel_bake_through_the_service_matches_aobake_bake_and_exports_its_textures() {
@@ -59,20 +59,7 @@ fn a_texel_bake_through_the_service_matches_aobake_bake_and_exports_its_textures
 
     // `aobake export --exr`: one file, a channel per coefficient row,
     // each the row scattered into the atlas and dilated, bit for bit.
-    let path = env.dir.path().join("served.aob");
-    std::fs::write(&path, &served).unwrap();
-    let exr_dir = env.dir.path().join("exr");
-    let out = env.aobake(&[
-        "export",
-        path.to_str().unwrap(),
-        "--exr",
-        exr_dir.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let exr_dir = export_exr(&env, &served);
     let (model, _) =
         TexelModel::from_container(&Container::from_bytes(&served).unwrap(), None).unwrap();
     let FormRef::Dense(form) = model.model.form() else {

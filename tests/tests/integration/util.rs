@@ -1,6 +1,6 @@
 //! Shared steps: uploads, submissions and local reference bakes.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use aobake_e2e::{ADMIN, TestEnv, binary};
 use serde_json::{Value, json};
@@ -247,4 +247,24 @@ pub(crate) fn worker_until_it_exits(
     let mut stderr = String::new();
     std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
     (exit, stderr)
+}
+
+/// `aobake export ASSET --exr DIR` of `asset` (written beside it as
+/// `served.aob`), which must succeed: the folder it wrote.
+pub(crate) fn export_exr(env: &TestEnv, asset: &[u8]) -> PathBuf {
+    let path = env.dir.path().join("served.aob");
+    std::fs::write(&path, asset).unwrap();
+    let exr_dir = env.dir.path().join("exr");
+    let out = env.aobake(&[
+        "export",
+        path.to_str().unwrap(),
+        "--exr",
+        exr_dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    exr_dir
 }
