@@ -133,6 +133,10 @@ impl Default for LinearOptions {
     }
 }
 
+/// Columns of AO projected at a time in [`fit_many`]: `poses × 4096`
+/// f64 (16 MB at 512 poses) instead of the whole block.
+const PROJECT_COLUMNS: usize = 4096;
+
 /// The ridge weights cross-validation chooses from.
 pub const RIDGE_CANDIDATES: [f64; 6] = [1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0];
 
@@ -494,7 +498,6 @@ pub fn fit_many(
     };
     let local = if components.is_some() { None } else { local };
     let m = js.ncols();
-    let ac = Mat::from_fn(p, v, |r, i| f64::from(ao.row(r)[i]) - mean_a[i]);
     // The whole design's factorisation: the report's conditioning and
     // every global vertex's solve; one more per set of local
     // parameters.
@@ -558,11 +561,26 @@ pub fn fit_many(
             &solvers[params]
         }
     };
+    // `Uᵀ (A − mean)` a chunk of columns at a time, read from the f32
+    // block: never a poses × columns f64 copy of it (a texel fit's block
+    // is hundreds of MB; each copy doubled it). Each output column depends
+    // only on its own column of A.
     let projections: std::collections::BTreeMap<(&[usize], &[usize]), Mat<f64>> = keys
         .par_iter()
         .map(|&(params, vertices)| {
-            let y = Mat::from_fn(p, vertices.len(), |r, c| ac[(r, vertices[c])]);
-            ((params, vertices), solver(params).project(y.as_ref()))
+            let solver = solver(params);
+            let mut out: Option<Mat<f64>> = None;
+            for (k, chunk) in vertices.chunks(PROJECT_COLUMNS).enumerate() {
+                let y = Mat::from_fn(p, chunk.len(), |r, c| {
+                    f64::from(ao.row(r)[chunk[c]]) - mean_a[chunk[c]]
+                });
+                let uty = solver.project(y.as_ref());
+                let out = out.get_or_insert_with(|| Mat::zeros(uty.nrows(), vertices.len()));
+                out.as_mut()
+                    .submatrix_mut(0, k * PROJECT_COLUMNS, uty.nrows(), chunk.len())
+                    .copy_from(&uty);
+            }
+            ((params, vertices), out.expect("every set has a vertex"))
         })
         .collect();
     let shared = Shared {
