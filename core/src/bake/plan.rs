@@ -63,12 +63,40 @@ pub struct Plan<'a> {
 fn receivers(character: &Character, params: &BakeParams) -> Result<Receivers, BakeError> {
     Ok(match params.method.family() {
         Family::Texel => {
-            let options = AtlasOptions {
-                size: params.texel.atlas,
-                padding: PADDING,
-            };
-            let atlas = TexelAtlas::generate(&character.positions, &character.triangles, &options)
-                .map_err(|e| BakeError::Param(format!("texel.atlas: {e}")))?;
+            let t = &params.texel;
+            let atlas = match t.uv_set {
+                None => TexelAtlas::generate(
+                    &character.positions,
+                    &character.triangles,
+                    &AtlasOptions {
+                        size: t.atlas,
+                        padding: PADDING,
+                    },
+                ),
+                Some(k) => {
+                    let uvs = match character.uv_sets.get(k as usize) {
+                        Some(Ok(uvs)) => uvs,
+                        Some(Err(why)) => {
+                            return Err(BakeError::Param(format!(
+                                "texel.uv_set: TEXCOORD_{k} is not whole: {why}"
+                            )));
+                        }
+                        None => {
+                            return Err(BakeError::Param(format!(
+                                "texel.uv_set: the character has no TEXCOORD_{k} ({} UV sets)",
+                                character.uv_sets.len()
+                            )));
+                        }
+                    };
+                    TexelAtlas::of_uv_set(
+                        &character.positions,
+                        &character.triangles,
+                        (k, uvs),
+                        t.atlas,
+                    )
+                }
+            }
+            .map_err(|e| BakeError::Param(format!("texel: {e}")))?;
             Receivers::Texels(Arc::new(atlas))
         }
         Family::Vertex | Family::Cubemap | Family::Grid => Receivers::Vertices,

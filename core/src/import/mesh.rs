@@ -2,7 +2,7 @@
 
 use std::ops::Range;
 
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec2, Vec3};
 use gltf::json::{
     self,
     mesh::{Mode, Semantic},
@@ -91,7 +91,15 @@ struct Builder<'a> {
     zero_weight_out_of_range: usize,
     /// Normals further than the validator's tolerance from unit length.
     non_unit_normals: usize,
+    /// `TEXCOORD_k` of every vertex so far, or why set k is not whole.
+    uv_sets: Vec<Result<Vec<Vec2>, String>>,
+    /// Whether any primitive has `TEXCOORD_k`.
+    uv_seen: Vec<bool>,
 }
+
+/// The UV sets read (`TEXCOORD_0` to `TEXCOORD_3`): what a texel bake may
+/// name instead of a generated atlas.
+const UV_SETS: usize = 4;
 
 pub(crate) fn build_character(
     doc: &Document,
@@ -184,6 +192,8 @@ pub(crate) fn build_character(
         unweighted: 0,
         zero_weight_out_of_range: 0,
         non_unit_normals: 0,
+        uv_sets: vec![Ok(Vec::new()); UV_SETS],
+        uv_seen: vec![false; UV_SETS],
     };
     let mut warnings = Vec::new();
     let mut skipped = 0usize;
@@ -253,11 +263,13 @@ pub(crate) fn build_character(
             .sum(),
         skins: root.skins.len(),
     };
+    let vertex_count = b.positions.len();
     let character = Character {
         skeleton,
         joints: b.joints,
         positions: b.positions,
         normals: b.normals,
+        uv_sets: uv_sets(b.uv_sets, &b.uv_seen, vertex_count),
         triangles: b.triangles,
         influences: b.influences,
         joint_indices: b.joint_indices,
@@ -496,6 +508,7 @@ impl Builder<'_> {
             self.triangles
                 .extend(triangles.iter().map(|t| t.map(|i| i + base as u32)));
             self.positions.extend_from_slice(&positions);
+            self.read_uv_sets(prim, count, &path);
             let computed_normals = normals.is_none();
             match normals {
                 Some(normals) => {
@@ -550,6 +563,31 @@ impl Builder<'_> {
             });
         }
         Ok(skipped)
+    }
+
+    /// Appends each UV set of a primitive's `count` vertices, or records
+    /// why the set is not whole. Leniently: an unreadable or missing set
+    /// fails only a bake that names it, never the import.
+    fn read_uv_sets(&mut self, prim: &json::mesh::Primitive, count: usize, path: &str) {
+        for (k, set) in self.uv_sets.iter_mut().enumerate() {
+            let attr = attribute(prim, Semantic::TexCoords(k as u32));
+            self.uv_seen[k] |= attr.is_some();
+            let Ok(uvs) = set else { continue };
+            let read = match attr {
+                None => Err(format!("{path} has no TEXCOORD_{k}")),
+                Some(a) => match self.acc.floats(a, count as u64) {
+                    Ok(d) if d.width == 2 && d.values.len() == 2 * count => Ok(d.values),
+                    Ok(_) => Err(format!(
+                        "{path}.attributes.TEXCOORD_{k} (accessor {a}) must be VEC2 with {count} elements, like POSITION"
+                    )),
+                    Err(e) => Err(format!("{path}.attributes.TEXCOORD_{k}: {e}")),
+                },
+            };
+            match read {
+                Ok(values) => uvs.extend(values.chunks_exact(2).map(|c| Vec2::new(c[0], c[1]))),
+                Err(why) => *set = Err(why),
+            }
+        }
     }
 
     fn vec3_attribute(
@@ -751,4 +789,29 @@ mod tests {
         assert_eq!(triangulate(Mode::Triangles, &[0, 1, 2, 3]), vec![[0, 1, 2]]);
         assert!(triangulate(Mode::TriangleStrip, &[0, 1]).is_empty());
     }
+}
+
+/// The UV sets of a merged mesh of `vertices` vertices, up to the last
+/// that some primitive has (`seen`).
+fn uv_sets(
+    sets: Vec<Result<Vec<Vec2>, String>>,
+    seen: &[bool],
+    vertices: usize,
+) -> Vec<Result<Vec<Vec2>, String>> {
+    let keep = seen.iter().rposition(|&s| s).map_or(0, |k| k + 1);
+    sets.into_iter()
+        .take(keep)
+        .map(|set| {
+            set.and_then(|uvs| {
+                if uvs.len() == vertices {
+                    Ok(uvs)
+                } else {
+                    Err(format!(
+                        "it covers {} of the {vertices} vertices",
+                        uvs.len()
+                    ))
+                }
+            })
+        })
+        .collect()
 }

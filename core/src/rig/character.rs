@@ -94,6 +94,11 @@ pub struct Character {
     pub normals: Vec<Vec3>,
     /// Triangles as vertex indices, counter-clockwise front faces.
     pub triangles: Vec<[u32; 3]>,
+    /// The glTF UV sets (`TEXCOORD_k`, k < 4, up to the last some
+    /// primitive has): one UV per vertex when every primitive has the set
+    /// and it reads, else why not. A texel bake may name one as its atlas.
+    #[serde(default)]
+    pub uv_sets: Vec<Result<Vec<glam::Vec2>, String>>,
     /// Influences per vertex (a multiple of 4, at least 4).
     pub influences: usize,
     /// Palette index per influence, `influences` per vertex.

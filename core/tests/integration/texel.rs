@@ -128,3 +128,35 @@ fn texel_options_are_checked_and_keyed() {
     let local = serde_json::json!({"linear.locality": "on"});
     assert!(BakeParams::with_overrides(Method::TexelLinear, local.as_object().unwrap()).is_err());
 }
+
+#[test]
+fn a_uv_set_of_the_characters_own_is_the_atlas_or_is_refused_by_name() {
+    let plan_with = |name: &str, set: u32| {
+        let imported = util::load(&util::character_path(name).unwrap());
+        let mut p = BakeParams::new(Method::TexelLinear);
+        p.texel.uv_set = Some(set);
+        let receivers = aobake_core::bake::Plan::new(&imported.character, &imported.clips, p)
+            .map(|plan| plan.receivers);
+        (imported.character, receivers)
+    };
+    // CesiumMan's TEXCOORD_0: 138 islands, no two places on one texel.
+    let (c, receivers) = plan_with("CesiumMan.glb", 0);
+    let Ok(Receivers::Texels(atlas)) = receivers else {
+        panic!("{:?}", receivers.err());
+    };
+    let own = c.uv_sets[0].as_ref().unwrap();
+    assert_eq!(own.len(), c.vertex_count());
+    assert_eq!(&atlas.atlas.uvs, own);
+    assert_eq!(atlas.atlas.charts, 138);
+    // The milk truck's second primitive has no TEXCOORD_0; the figure has
+    // no UV set at all.
+    let (_, refused) = plan_with("CesiumMilkTruck.glb", 0);
+    let e = refused.err().unwrap().to_string();
+    assert!(
+        e.contains("meshes[0].primitives[1] has no TEXCOORD_0"),
+        "{e}"
+    );
+    let (_, refused) = plan_with("RiggedFigure.glb", 0);
+    let e = refused.err().unwrap().to_string();
+    assert!(e.contains("no TEXCOORD_0"), "{e}");
+}

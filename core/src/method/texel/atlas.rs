@@ -72,6 +72,38 @@ pub enum AtlasError {
     /// The unwrapper refused the mesh.
     #[error("the atlas could not be generated: {0}")]
     Unwrap(String),
+    /// A UV of the character's own set lies outside the page.
+    #[error(
+        "TEXCOORD_{set} of vertex {vertex} is ({}, {}), outside [0, 1]²: a texel atlas gives every place of the surface its own texel, so UVs that tile or wrap cannot be one (leave texel.uv_set out for a generated atlas)",
+        uv[0],
+        uv[1]
+    )]
+    UvOutside {
+        /// The set.
+        set: u32,
+        /// The vertex (aobake's order).
+        vertex: usize,
+        /// Its UV.
+        uv: [f32; 2],
+    },
+    /// Two places of the surface share a texel of the character's own set.
+    #[error(
+        "TEXCOORD_{set} puts triangles {} and {} (aobake's order) on the same texel ({}, {}) of a {size}-texel atlas, two places of the surface on one texel (mirrored or shared UVs): leave texel.uv_set out for a generated atlas",
+        triangles[0],
+        triangles[1],
+        texel[0],
+        texel[1]
+    )]
+    Overlap {
+        /// The set.
+        set: u32,
+        /// The atlas side.
+        size: u32,
+        /// The texel (column, row).
+        texel: [u32; 2],
+        /// The two triangles.
+        triangles: [u32; 2],
+    },
     /// The charts did not fit one page.
     #[error(
         "the charts need {pages} pages of {size} texels: use a larger atlas (each chart needs {padding} texels of padding)"
@@ -167,6 +199,92 @@ impl Atlas {
                 .map(|c| [c[0], c[1], c[2]])
                 .collect(),
         })
+    }
+
+    /// An atlas of the mesh's own UV set `set` (`uvs`, one per vertex) at
+    /// `size` × `size` texels: used as it is when every UV lies in the
+    /// page and no texel centre falls on two places of the surface (a
+    /// texel on an edge two triangles share is one place); refused
+    /// otherwise, naming the first UV or texel at fault. Its charts are
+    /// the UV islands (triangles joined by shared vertices); the padding
+    /// between them is the file's.
+    pub fn from_uv_set(
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        (set, uvs): (u32, &[Vec2]),
+        size: u32,
+    ) -> Result<Self, AtlasError> {
+        if !SIZES.contains(&size) {
+            return Err(AtlasError::Size { size, padding: 0 });
+        }
+        if let Some((vertex, uv)) = uvs.iter().enumerate().find(|(_, uv)| {
+            !(uv.is_finite() && uv.cmpge(Vec2::ZERO).all() && uv.cmple(Vec2::ONE).all())
+        }) {
+            return Err(AtlasError::UvOutside {
+                set,
+                vertex,
+                uv: uv.to_array(),
+            });
+        }
+        let atlas = Self {
+            width: size,
+            height: size,
+            charts: islands(triangles, uvs.len()),
+            xref: (0..uvs.len() as u32).collect(),
+            uvs: uvs.to_vec(),
+            triangles: triangles.to_vec(),
+        };
+        match atlas.overlap(positions) {
+            Some((texel, triangles)) => Err(AtlasError::Overlap {
+                set,
+                size,
+                texel,
+                triangles,
+            }),
+            None => Ok(atlas),
+        }
+    }
+
+    /// The first texel (column, row) whose centre lies in two triangles at
+    /// two places of the surface (`positions`, the mesh's vertices), and
+    /// those triangles.
+    fn overlap(&self, positions: &[Vec3]) -> Option<([u32; 2], [u32; 2])> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let (lo, hi) =
+            crate::geometry::bounds(positions.iter().copied()).unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        let same = 1e-4 * (hi - lo).length();
+        let mut first: Vec<Option<(u32, Vec3)>> = vec![None; w * h];
+        for t in 0..self.triangles.len() {
+            let [a, b, c] = self.corners(t);
+            let area = (b - a).perp_dot(c - a);
+            if area == 0.0 || !area.is_finite() {
+                continue;
+            }
+            let corners = self.triangles[t].map(|i| positions[self.xref[i as usize] as usize]);
+            let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+            let x0 = (lo.x - 0.5).ceil().max(0.0) as usize;
+            let y0 = (lo.y - 0.5).ceil().max(0.0) as usize;
+            let x1 = ((hi.x - 0.5).floor() as i64).min(w as i64 - 1);
+            let y1 = ((hi.y - 0.5).floor() as i64).min(h as i64 - 1);
+            for y in y0 as i64..=y1 {
+                for x in x0 as i64..=x1 {
+                    let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                    let (bary, distance) = nearest_on_triangle(centre, [a, b, c], area);
+                    if distance > 0.0 {
+                        continue;
+                    }
+                    let p = corners[0] * bary.x + corners[1] * bary.y + corners[2] * bary.z;
+                    match &first[y as usize * w + x as usize] {
+                        None => first[y as usize * w + x as usize] = Some((t as u32, p)),
+                        Some((u, q)) if q.distance(p) > same => {
+                            return Some(([x as u32, y as u32], [*u, t as u32]));
+                        }
+                        Some(_) => {}
+                    }
+                }
+            }
+        }
+        None
     }
 
     /// The texture coordinate of the point with barycentric coordinates
@@ -272,6 +390,19 @@ impl TexelAtlas {
         }
     }
 
+    /// The atlas of a UV set of the mesh's own ([`Atlas::from_uv_set`])
+    /// and its texels.
+    pub fn of_uv_set(
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        set: (u32, &[Vec2]),
+        size: u32,
+    ) -> Result<Self, AtlasError> {
+        let atlas = Atlas::from_uv_set(positions, triangles, set, size)?;
+        let texels = atlas.texels();
+        Ok(Self { atlas, texels })
+    }
+
     /// Per-texel `values` filtered as a GPU's linear sampler filters the
     /// dilated image, at the point with barycentric coordinates `bary` on
     /// `triangle`.
@@ -362,6 +493,35 @@ impl Texels {
         dilate(&mut image, &mut filled, self.width, self.height);
         image
     }
+}
+
+/// The islands of a triangle mesh over `vertices` vertices: groups of
+/// triangles joined by shared vertices (a UV set's charts, its vertices
+/// split where UVs are).
+fn islands(triangles: &[[u32; 3]], vertices: usize) -> u32 {
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    let mut parent: Vec<usize> = (0..vertices).collect();
+    for t in triangles {
+        let a = root(&mut parent, t[0] as usize);
+        for &v in &t[1..] {
+            let b = root(&mut parent, v as usize);
+            parent[b] = a;
+        }
+    }
+    let mut used = vec![false; vertices];
+    triangles
+        .iter()
+        .flatten()
+        .for_each(|&v| used[v as usize] = true);
+    (0..vertices)
+        .filter(|&v| used[v] && root(&mut parent, v) == v)
+        .count() as u32
 }
 
 /// Bilinear filtering as a GPU's linear sampler filters (the runtime's,
@@ -547,6 +707,63 @@ mod tests {
         assert!((b - Vec3::new(0.25, 0.25, 0.5)).length() < 1e-6, "{b}");
         let b = barycentric(Vec3::new(2.0, -1.0, 0.0), tri);
         assert_eq!(b, Vec3::new(0.0, 1.0, 0.0));
+    }
+
+    #[test]
+    fn a_uv_set_is_used_as_it_is_unless_it_leaves_the_page_or_overlaps() {
+        // Two unit squares side by side in space (x 0..1 and 2..3), each
+        // its own four vertices.
+        let positions: Vec<Vec3> = [0.0, 2.0]
+            .iter()
+            .flat_map(|&x| {
+                [
+                    Vec3::new(x, 0.0, 0.0),
+                    Vec3::new(x + 1.0, 0.0, 0.0),
+                    Vec3::new(x + 1.0, 1.0, 0.0),
+                    Vec3::new(x, 1.0, 0.0),
+                ]
+            })
+            .collect();
+        let triangles = vec![[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]];
+        let square = |x: f32| {
+            [
+                Vec2::new(x, 0.1),
+                Vec2::new(x + 0.4, 0.1),
+                Vec2::new(x + 0.4, 0.5),
+                Vec2::new(x, 0.5),
+            ]
+        };
+        // Apart on the page: used as it is, two charts.
+        let apart: Vec<Vec2> = square(0.05).into_iter().chain(square(0.55)).collect();
+        let atlas = TexelAtlas::of_uv_set(&positions, &triangles, (0, &apart), 32).unwrap();
+        assert_eq!(atlas.atlas.uvs, apart);
+        assert_eq!((atlas.atlas.width, atlas.atlas.charts), (32, 2));
+        assert!(atlas.texels.len() > 2 * 12 * 12);
+        // Mirrored (both squares on the same UVs): refused, naming a
+        // triangle of each square.
+        let shared: Vec<Vec2> = square(0.05).into_iter().chain(square(0.05)).collect();
+        match Atlas::from_uv_set(&positions, &triangles, (1, &shared), 32) {
+            Err(AtlasError::Overlap {
+                set: 1, triangles, ..
+            }) => {
+                assert!(triangles[0] < 2 && triangles[1] >= 2, "{triangles:?}")
+            }
+            other => panic!("{other:?}"),
+        }
+        // Tiling UVs: refused, naming the vertex.
+        let mut tiled = apart.clone();
+        tiled[5].x = 1.5;
+        assert!(matches!(
+            Atlas::from_uv_set(&positions, &triangles, (0, &tiled), 32),
+            Err(AtlasError::UvOutside { vertex: 5, .. })
+        ));
+        let message = Atlas::from_uv_set(&positions, &triangles, (1, &shared), 32)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("TEXCOORD_1") && message.contains("uv_set"),
+            "{message}"
+        );
     }
 
     #[test]

@@ -42,14 +42,21 @@ pub const DEFAULT_ATLAS: u32 = 256;
 #[serde(deny_unknown_fields)]
 pub struct TexelOptions {
     /// The atlas's side in texels: the densest packing of the generated
-    /// atlas's charts that fits one page this wide.
+    /// atlas's charts that fits one page this wide (or the page a UV set
+    /// of the character's own is drawn at).
     pub atlas: u32,
+    /// A UV set of the character's own (`TEXCOORD_k`) to use as the
+    /// atlas instead of a generated one: refused, naming the place, when
+    /// a UV leaves [0, 1]² or two places of the surface share a texel.
+    #[serde(default)]
+    pub uv_set: Option<u32>,
 }
 
 impl Default for TexelOptions {
     fn default() -> Self {
         Self {
             atlas: DEFAULT_ATLAS,
+            uv_set: None,
         }
     }
 }
