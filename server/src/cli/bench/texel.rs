@@ -6,7 +6,6 @@
 //! The figures the texel family's defaults are chosen from.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context as _;
@@ -20,10 +19,7 @@ use aobake_core::{
     image::HEAT_MAP,
     method::{
         Method,
-        texel::{
-            DEFAULT_ATLAS,
-            atlas::{AtlasOptions, PADDING, TexelAtlas},
-        },
+        texel::DEFAULT_ATLAS,
         vertex::{Model, fit_static_average},
     },
     trace::{AoBlock, SceneOptions, no_progress},
@@ -44,12 +40,12 @@ pub(super) struct Args {
     #[arg(long, default_value_t = DEFAULT_ATLAS)]
     atlas: u32,
     /// Reference poses (a third each random, clip frames and perturbed
-    /// frames, as the vertex methods draw them).
-    #[arg(long, default_value_t = 256)]
-    poses: usize,
-    /// Rays per texel and reference pose.
-    #[arg(long, default_value_t = 64)]
-    samples: u32,
+    /// frames, as the vertex methods draw them). Default: texel-linear's.
+    #[arg(long)]
+    poses: Option<usize>,
+    /// Rays per texel and reference pose. Default: texel-linear's.
+    #[arg(long)]
+    samples: Option<u32>,
     /// Rays per pixel of the per-pixel truth and per texel of the floor.
     #[arg(long, default_value_t = 256)]
     truth_samples: u32,
@@ -87,9 +83,11 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             "no clip {name:?} to leave out"
         );
     }
-    let mut params = BakeParams::new(Method::VertexLinear);
-    params.poses = args.poses;
-    params.samples = args.samples;
+    // A texel-linear bake's plan: its defaults, its atlas, its fit.
+    let mut params = BakeParams::new(Method::TexelLinear);
+    params.texel.atlas = args.atlas;
+    params.poses = args.poses.unwrap_or(params.poses);
+    params.samples = args.samples.unwrap_or(params.samples);
     params.seed = args.seed;
     params.eval_folds = 0;
     params.train_clips = clips
@@ -98,19 +96,11 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         .filter(|n| !args.leave_out.contains(n))
         .collect();
     let started = Instant::now();
-    let atlas = Arc::new(
-        TexelAtlas::generate(
-            &c.positions,
-            &c.triangles,
-            &AtlasOptions {
-                size: args.atlas,
-                padding: PADDING,
-            },
-        )
-        .context("cannot generate the atlas")?,
-    );
+    let plan = Plan::new(c, clips, params)?;
     let atlas_s = started.elapsed().as_secs_f64();
-    let plan = Plan::new(c, clips, params)?.with_receivers(Receivers::Texels(atlas.clone()));
+    let Receivers::Texels(atlas) = plan.receivers.clone() else {
+        anyhow::bail!("a texel-linear plan traces texels");
+    };
     println!(
         "{}: {} vertices, {} triangles; atlas {}×{} ({} charts, {} texels, {:.0} % used); {} reference poses × {} rays; {} threads",
         args.file.display(),
@@ -121,8 +111,8 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         atlas.atlas.charts,
         atlas.texels.len(),
         100.0 * atlas.texels.utilisation(),
-        args.poses,
-        args.samples,
+        plan.params.poses,
+        plan.params.samples,
         rayon::current_num_threads()
     );
     println!("| stage | seconds | peak RSS |\n|---|---|---|");
