@@ -429,7 +429,11 @@ impl BakedAsset {
                 }
             }
             Family::Texel => {
-                let (model, header) = super::texel::read(container, character)?;
+                let (model, header) =
+                    super::texel::read(container, character).map_err(|r| match r {
+                        super::texel::Refusal::Unreadable(e) => AssetUseError::Unreadable(e),
+                        super::texel::Refusal::Mismatch(e) => AssetUseError::Mismatch(e),
+                    })?;
                 Self {
                     params: params(&header.params)?,
                     character: header.character,
@@ -564,7 +568,7 @@ impl BakedAsset {
             AssetModel::Vertex(_) => Err(AssetUseError::Unsupported(
                 "per-vertex AO has no image to export".into(),
             )),
-            AssetModel::Texel(m) => super::texel::images(m),
+            AssetModel::Texel(m) => super::texel::images(m).map_err(AssetUseError::Unsupported),
             AssetModel::Cubemap(m, clip) => {
                 let mut images = super::cubemap::face_strips(m, clip, times);
                 images.extend(m.ground.as_ref().map(ground_offsets));

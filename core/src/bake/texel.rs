@@ -18,7 +18,17 @@ use crate::{
     rig::skeleton::Skeleton,
 };
 
-use super::{AssetUseError, JobError, jobs::decode_with};
+use super::{JobError, jobs::decode_with};
+
+/// Why a published texel asset cannot serve a character (`bake::family`
+/// turns it into its `AssetUseError`).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum Refusal {
+    /// Its header or sections do not decode.
+    Unreadable(String),
+    /// It was baked for another character: what differs.
+    Mismatch(String),
+}
 
 /// Why a texel bake has no previews yet: the preview renderer draws
 /// per-vertex AO, and texel assets need their textures sampled per pixel.
@@ -51,13 +61,13 @@ pub(super) fn decode(bytes: &[u8]) -> Result<TexelModel, JobError> {
 pub(super) fn read(
     container: &Container,
     character: Option<&Character>,
-) -> Result<(TexelModel, crate::method::vertex::AssetHeader), AssetUseError> {
+) -> Result<(TexelModel, crate::method::vertex::AssetHeader), Refusal> {
     let (model, header) =
         TexelModel::from_container(container, character.map(|c| c.vertex_count()))
-            .map_err(|e| AssetUseError::Unreadable(e.to_string()))?;
+            .map_err(|e| Refusal::Unreadable(e.to_string()))?;
     if let Some(c) = character {
         let mismatch =
-            |e: String| AssetUseError::Mismatch(format!("{e} (character {})", header.character));
+            |e: String| Refusal::Mismatch(format!("{e} (character {})", header.character));
         if model.atlas.triangles.len() != c.triangles.len() {
             return Err(mismatch(format!(
                 "the character has {} triangles but the asset's atlas {}",
@@ -120,20 +130,19 @@ pub(super) fn vertex_ao(model: &TexelModel, character: &Character, pose: &Pose) 
 /// channel `w{k}` is the model's coefficient row k scattered into the
 /// atlas and dilated, exactly what an engine samples; per pixel
 /// `ao = clamp(Σ_k w_k · w{k}, 0, 1)` with the pose's weights.
-pub(super) fn images(model: &TexelModel) -> Result<Vec<FloatImage>, AssetUseError> {
+/// A model whose coefficients are not dense rows says why it has none.
+pub(super) fn images(model: &TexelModel) -> Result<Vec<FloatImage>, String> {
     let FormRef::Dense(form) = model.model.form() else {
-        return Err(AssetUseError::Unsupported(
+        return Err(
             "a sparse texel model has no textures to export (bake with linear.threshold 0)".into(),
-        ));
+        );
     };
     let atlas = &model.atlas;
     let mut channels = Vec::new();
     let mut k = 0;
     for block in &form.blocks {
         if block.map.is_some() {
-            return Err(AssetUseError::Unsupported(
-                "a texel model with clustered columns has no textures to export".into(),
-            ));
+            return Err("a texel model with clustered columns has no textures to export".into());
         }
         for row in block.coefficients.chunks_exact(block.columns) {
             let values: Vec<f32> = row.iter().map(|c| c.to_f32()).collect();

@@ -772,25 +772,6 @@ impl Builder<'_> {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn strips_and_fans_become_lists_with_consistent_winding() {
-        assert_eq!(
-            triangulate(Mode::TriangleStrip, &[0, 1, 2, 3, 4]),
-            vec![[0, 1, 2], [1, 3, 2], [2, 3, 4]]
-        );
-        assert_eq!(
-            triangulate(Mode::TriangleFan, &[0, 1, 2, 3]),
-            vec![[1, 2, 0], [2, 3, 0]]
-        );
-        assert_eq!(triangulate(Mode::Triangles, &[0, 1, 2, 3]), vec![[0, 1, 2]]);
-        assert!(triangulate(Mode::TriangleStrip, &[0, 1]).is_empty());
-    }
-}
-
 /// The UV sets of a merged mesh of `vertices` vertices, up to the last
 /// that some primitive has (`seen`).
 fn uv_sets(
@@ -814,4 +795,23 @@ fn uv_sets(
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_and_fans_become_lists_with_consistent_winding() {
+        assert_eq!(
+            triangulate(Mode::TriangleStrip, &[0, 1, 2, 3, 4]),
+            vec![[0, 1, 2], [1, 3, 2], [2, 3, 4]]
+        );
+        assert_eq!(
+            triangulate(Mode::TriangleFan, &[0, 1, 2, 3]),
+            vec![[1, 2, 0], [2, 3, 0]]
+        );
+        assert_eq!(triangulate(Mode::Triangles, &[0, 1, 2, 3]), vec![[0, 1, 2]]);
+        assert!(triangulate(Mode::TriangleStrip, &[0, 1]).is_empty());
+    }
 }

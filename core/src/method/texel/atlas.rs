@@ -20,9 +20,23 @@
 //! A texel is posed with the mesh by its barycentric coordinates on the
 //! posed triangle: the very point the rasteriser shows there.
 
+use aobake_runtime::method::texel::AtlasLayout;
 pub use aobake_runtime::method::texel::dilate;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
+
+/// A texel bake's atlas side (texels) when the request names none.
+///
+/// Where the floor points: at 512 every shared character's texel floor
+/// (exact AO at the texel centres, bilinearly filtered) is under half of
+/// GTAO's per-pixel error: 0.028 (Kenney), 0.010 (Fox), 0.007
+/// (CesiumMan), 0.019 (the milk truck) against 0.108, 0.085, 0.112 and
+/// 0.084; at 256 all but the truck's (0.062; its 1,811 charts leave 7 %
+/// of the page on its surface) are (`aobake bench preview --texel-floor`,
+/// docs/methods/texel.md). The fit still holds every reference pose's
+/// values several times over, and 512's five times as many texels take
+/// it past 2 GB on the Kenney character, so 256 until it streams.
+pub const DEFAULT_ATLAS: u32 = 256;
 
 /// Empty texels around each chart (charts are at least twice this apart):
 /// two keep bilinear filtering and one mip level free of bleeding once
@@ -45,7 +59,7 @@ pub struct AtlasOptions {
 impl Default for AtlasOptions {
     fn default() -> Self {
         Self {
-            size: super::DEFAULT_ATLAS,
+            size: DEFAULT_ATLAS,
             padding: PADDING,
         }
     }
@@ -378,9 +392,9 @@ impl TexelAtlas {
     }
 
     /// The atlas as an asset stores it, its columns these texels.
-    pub fn layout(&self) -> super::AtlasLayout {
+    pub fn layout(&self) -> AtlasLayout {
         let a = &self.atlas;
-        super::AtlasLayout {
+        AtlasLayout {
             width: a.width,
             height: a.height,
             xref: a.xref.clone(),

@@ -555,7 +555,7 @@ fn add_basis(
                 );
                 fitted.ok().map(|(m, _)| m)
             };
-            let dense = method.family() == crate::method::Family::Texel;
+            let dense = method.family() == aobake_runtime::Family::Texel;
             basis_by_clips(
                 skeleton,
                 poses,
