@@ -10,7 +10,9 @@ use std::time::Duration;
 use aobake_e2e::{ADMIN, Options, TestEnv, character};
 use serde_json::{Value, json};
 
-use crate::util::{aobake_bake, asset, bake_view, deep_running_job, export_exr, job_info, upload};
+use crate::util::{
+    aobake_bake, asset, bake_view, deep_running_job, export_exr, exr_channel, job_info, upload,
+};
 
 /// 32³ cells with 512 rays: a slab of 8 layers is a few seconds of
 /// tracing with a checkpoint after each layer; a token evaluation.
@@ -130,17 +132,7 @@ fn a_grid_bake_survives_killed_slab_workers_with_the_same_bytes() {
     let image = exr::prelude::read_all_flat_layers_from_file(exr_dir.join(file)).unwrap();
     let layer = &image.layer_data[0];
     assert_eq!((layer.size.width(), layer.size.height()), (32, 32 * 32));
-    let channel = |name: &str| -> Vec<f32> {
-        layer
-            .channel_data
-            .list
-            .iter()
-            .find(|c| c.name.to_string() == name)
-            .unwrap_or_else(|| panic!("no channel {name}"))
-            .sample_data
-            .values_as_f32()
-            .collect()
-    };
+    let channel = |name: &str| exr_channel(layer, name);
     let (ao, axis_y) = (channel("ao_grid"), channel("axis.y"));
     let dirs = part.directions.as_ref().expect("cones by default");
     for (z, y, x) in [(0, 0, 0), (16, 5, 30), (31, 31, 7), (9, 20, 11)] {

@@ -13,7 +13,7 @@ use aobake_core::{
 use aobake_e2e::{ADMIN, Options, TestEnv, character};
 use serde_json::json;
 
-use crate::util::{aobake_bake, asset, export_exr, upload};
+use crate::util::{aobake_bake, asset, export_exr, exr_channel, upload};
 
 #[test]
 fn a_texel_bake_through_the_service_matches_aobake_bake_and_exports_its_textures() {
@@ -79,15 +79,10 @@ fn a_texel_bake_through_the_service_matches_aobake_bake_and_exports_its_textures
             .map(|c| c.to_f32())
             .collect();
         let name = format!("w{k:02}");
-        let channel: Vec<f32> = layer
-            .channel_data
-            .list
-            .iter()
-            .find(|c| c.name.to_string() == name)
-            .unwrap_or_else(|| panic!("no channel {name}"))
-            .sample_data
-            .values_as_f32()
-            .collect();
-        assert_eq!(channel, model.atlas.image(&row), "{name} bit for bit");
+        assert_eq!(
+            exr_channel(layer, &name),
+            model.atlas.image(&row),
+            "{name} bit for bit"
+        );
     }
 }

@@ -268,3 +268,19 @@ pub(crate) fn export_exr(env: &TestEnv, asset: &[u8]) -> PathBuf {
     );
     exr_dir
 }
+
+/// The values of channel `name` of an OpenEXR layer as f32.
+pub(crate) fn exr_channel(
+    layer: &exr::prelude::Layer<exr::prelude::AnyChannels<exr::prelude::FlatSamples>>,
+    name: &str,
+) -> Vec<f32> {
+    layer
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name.to_string() == name)
+        .unwrap_or_else(|| panic!("no channel {name}"))
+        .sample_data
+        .values_as_f32()
+        .collect()
+}
