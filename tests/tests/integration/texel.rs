@@ -32,6 +32,23 @@ fn a_texel_bake_through_the_service_matches_aobake_bake_and_exports_its_textures
         )
         .unwrap();
     assert_eq!(status, 202, "{b}");
+    // A UV set the figure does not have is refused at once, by name.
+    let (refused, problem) = env
+        .request(
+            "POST",
+            "/v1/bakes",
+            ADMIN,
+            Some(json!({"character": digest, "method": "texel-linear",
+                "params": {"texel": {"uv_set": 0}}})),
+        )
+        .unwrap();
+    assert!((400..500).contains(&refused), "{refused} {problem}");
+    assert!(
+        problem["detail"]
+            .as_str()
+            .is_some_and(|d| d.contains("no TEXCOORD_0")),
+        "{problem}"
+    );
     let done = env.wait_bake(b["id"].as_i64().unwrap(), Duration::from_secs(300));
     assert_eq!(done["state"], "done", "{done}");
     let served = asset(&env, &done);
