@@ -497,15 +497,12 @@ impl Texels {
     /// The atlas image of per-texel `values` (in [`Texels::texels`]'s
     /// order), its padding dilated from the charts.
     pub fn image(&self, values: &[f32]) -> Vec<f32> {
-        let (w, h) = (self.width as usize, self.height as usize);
-        let mut image = vec![0.0; w * h];
-        let mut filled = vec![false; w * h];
-        for (t, &v) in self.texels.iter().zip(values) {
-            image[t.index as usize] = v;
-            filled[t.index as usize] = true;
-        }
-        dilate(&mut image, &mut filled, self.width, self.height);
-        image
+        aobake_runtime::method::texel::texture(
+            self.width,
+            self.height,
+            self.texels.iter().map(|t| t.index),
+            values,
+        )
     }
 }
 

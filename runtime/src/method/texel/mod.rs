@@ -53,15 +53,7 @@ impl AtlasLayout {
     /// The `width × height` texture of per-column `values`: each at its
     /// texel, every other texel dilated from the charts ([`dilate`]).
     pub fn image(&self, values: &[f32]) -> Vec<f32> {
-        let n = self.width as usize * self.height as usize;
-        let mut image = vec![0.0; n];
-        let mut filled = vec![false; n];
-        for (&t, &v) in self.texels.iter().zip(values) {
-            image[t as usize] = v;
-            filled[t as usize] = true;
-        }
-        dilate(&mut image, &mut filled, self.width, self.height);
-        image
+        texture(self.width, self.height, self.texels.iter().copied(), values)
     }
 
     /// Checks the layout against itself and `columns`, the model's.
@@ -190,6 +182,26 @@ impl TexelModel {
             header,
         ))
     }
+}
+
+/// The `width × height` texture with `values[i]` at texel `texels[i]`
+/// (`row × width + column`) and every other texel dilated from them
+/// ([`dilate`]).
+pub fn texture(
+    width: u32,
+    height: u32,
+    texels: impl IntoIterator<Item = u32>,
+    values: &[f32],
+) -> Vec<f32> {
+    let n = width as usize * height as usize;
+    let mut image = vec![0.0; n];
+    let mut filled = vec![false; n];
+    for (t, &v) in texels.into_iter().zip(values) {
+        image[t as usize] = v;
+        filled[t as usize] = true;
+    }
+    dilate(&mut image, &mut filled, width, height);
+    image
 }
 
 /// Fills every unfilled texel from its filled neighbours, ring by ring
