@@ -25,8 +25,10 @@ pub const ALGORITHM_VERSION: u32 = 1;
 pub const UNITS: &str =
     "occlusion per texel (the ATTX section places each in the atlas): 0 = open, 1 = blocked";
 
-/// The largest atlas side an asset may declare.
-const MAX_SIDE: u32 = 16_384;
+/// The largest atlas side an asset may declare: core's largest (4096²
+/// texels, 64 MB of f32 per texture), so that a hostile header cannot
+/// make a reader allocate more.
+const MAX_SIDE: u32 = 4096;
 
 /// The atlas of a texel asset.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -263,4 +265,94 @@ pub fn bilinear(image: &[f32], width: u32, height: u32, uv: [f32; 2]) -> f32 {
     let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
     let bottom = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
     top * (1.0 - fy) + bottom * fy
+}
+
+#[cfg(test)]
+mod tests {
+    use half::f16;
+
+    use super::*;
+    use crate::method::vertex::{Block, LinearForm, StaticAverage};
+
+    /// A static average over three texels of a 4 × 2 atlas of one
+    /// triangle.
+    fn asset() -> TexelModel {
+        TexelModel {
+            method: Method::TexelLinear,
+            model: Model::StaticAverage(StaticAverage {
+                form: LinearForm {
+                    vertices: 3,
+                    blocks: vec![Block {
+                        rows: 1,
+                        columns: 3,
+                        coefficients: [0.25, 0.5, 1.0].map(f16::from_f32).to_vec(),
+                        map: None,
+                    }],
+                },
+            }),
+            atlas: AtlasLayout {
+                width: 4,
+                height: 2,
+                xref: vec![0, 1, 2],
+                uvs: vec![[0.1, 0.1], [0.9, 0.1], [0.1, 0.9]],
+                triangles: vec![[0, 1, 2]],
+                texels: vec![0, 1, 4],
+            },
+        }
+    }
+
+    fn round_trip(edit: impl FnOnce(&mut Container)) -> Result<TexelModel, AssetError> {
+        let skeleton = Skeleton {
+            nodes: Vec::new(),
+            order: Vec::new(),
+        };
+        let mut c = asset().to_container(AssetHeaderFields::for_tests(), &skeleton);
+        edit(&mut c);
+        let c = Container::from_bytes(&c.to_bytes())?;
+        TexelModel::from_container(&c, Some(3)).map(|(m, _)| m)
+    }
+
+    fn set(c: &mut Container, tag: &[u8; 4], data: Data) {
+        c.sections.iter_mut().find(|s| &s.tag == tag).unwrap().data = data;
+    }
+
+    #[test]
+    fn a_texel_asset_round_trips_and_its_texture_is_dilated() {
+        let back = round_trip(|_| {}).unwrap();
+        assert_eq!(back, asset());
+        // The values at their texels; the others from their neighbours.
+        let image = back.atlas.image(&[0.25, 0.5, 1.0]);
+        assert_eq!((image[0], image[1], image[4]), (0.25, 0.5, 1.0));
+        assert!(image.iter().all(|v| (0.25..=1.0).contains(v)));
+        // Texel (0, 0)'s centre reads its value.
+        assert_eq!(bilinear(&image, 4, 2, [0.125, 0.25]), 0.25);
+    }
+
+    #[test]
+    fn a_hostile_atlas_is_refused_not_followed() {
+        let refused = |edit: &dyn Fn(&mut Container)| {
+            round_trip(|c| edit(c)).expect_err("a broken atlas must be refused")
+        };
+        // A page no atlas has: refused before anything is allocated for it.
+        refused(&|c| set(c, b"ATSZ", Data::U32(vec![1 << 20, 1 << 20])));
+        refused(&|c| set(c, b"ATSZ", Data::U32(vec![4])));
+        // Columns outside the page, or two on one texel.
+        refused(&|c| set(c, b"ATTX", Data::U32(vec![0, 1, 8])));
+        refused(&|c| set(c, b"ATTX", Data::U32(vec![0, 1, 1])));
+        refused(&|c| set(c, b"ATTX", Data::U32(vec![0, 1])));
+        // A triangle over a vertex it does not have; a vertex from one
+        // the character does not have; a UV that is not a number.
+        refused(&|c| set(c, b"ATTR", Data::U32(vec![0, 1, 3])));
+        refused(&|c| set(c, b"ATXR", Data::U32(vec![0, 1, 3])));
+        refused(&|c| {
+            set(
+                c,
+                b"ATUV",
+                Data::F32(vec![0.1, 0.1, 0.9, 0.1, f32::NAN, 0.9]),
+            )
+        });
+        refused(&|c| set(c, b"ATUV", Data::F32(vec![0.1, 0.1, 0.9])));
+        // A vertex asset is not a texel asset.
+        refused(&|c| c.method = Method::VertexLinear);
+    }
 }
