@@ -12,7 +12,7 @@ use crate::{
     Character, Clip,
     method::Family,
     method::texel::{
-        atlas::{AtlasOptions, PADDING, TexelAtlas},
+        atlas::{AtlasOptions, PADDING, TexelAtlas, rest_positions},
         trace::{drawn_texels, trace_texels},
     },
     method::vertex::{AssetHeaderFields, FitStats, FitStep, Model, PrimitiveSpan, Source},
@@ -65,9 +65,8 @@ fn receivers(character: &Character, params: &BakeParams) -> Result<Receivers, Ba
         Family::Texel => {
             let t = &params.texel;
             let atlas = match t.uv_set {
-                None => TexelAtlas::generate(
-                    &character.positions,
-                    &character.triangles,
+                None => TexelAtlas::of_character(
+                    character,
                     &AtlasOptions {
                         size: t.atlas,
                         padding: PADDING,
@@ -88,8 +87,10 @@ fn receivers(character: &Character, params: &BakeParams) -> Result<Receivers, Ba
                             )));
                         }
                     };
+                    // At rest, as the scene places it: two instances of
+                    // one mesh on the same UVs are two places.
                     TexelAtlas::of_uv_set(
-                        &character.positions,
+                        &rest_positions(character),
                         &character.triangles,
                         (k, uvs),
                         t.atlas,

@@ -34,6 +34,10 @@ pub(super) enum Refusal {
 /// per-vertex AO, and texel assets need their textures sampled per pixel.
 pub const NO_PREVIEWS: &str = "texel assets are not previewed yet: the preview renderer draws per-vertex AO (see docs/methods/texel.md; `aobake bench texel` judges texel-linear per pixel)";
 
+/// The most values `images` writes (4 GB of f32): 33 textures of 4096²
+/// fit; a hostile header's 4097 cannot ask for hundreds of GB.
+const MAX_EXPORT_VALUES: u64 = 1 << 30;
+
 /// A texel bake's asset: `model` over the texels of `atlas`.
 pub(super) fn encode(
     method: Method,
@@ -138,6 +142,15 @@ pub(super) fn images(model: &TexelModel) -> Result<Vec<FloatImage>, String> {
         );
     };
     let atlas = &model.atlas;
+    let values = form.weight_count() as u64 * u64::from(atlas.width) * u64::from(atlas.height);
+    if values > MAX_EXPORT_VALUES {
+        return Err(format!(
+            "{} textures of {} × {} texels are {values} values, more than the {MAX_EXPORT_VALUES} an export writes",
+            form.weight_count(),
+            atlas.width,
+            atlas.height
+        ));
+    }
     let mut channels = Vec::new();
     let mut k = 0;
     for block in &form.blocks {

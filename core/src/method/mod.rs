@@ -30,7 +30,8 @@ pub fn algorithm_version(method: Method) -> u32 {
         Family::Vertex => vertex::ALGORITHM_VERSION,
         Family::Cubemap => cubemap::ALGORITHM_VERSION,
         Family::Grid => grid::ALGORITHM_VERSION,
-        Family::Texel => texel::ALGORITHM_VERSION,
+        // Its fit is vertex-linear's: a change there changes its bytes too.
+        Family::Texel => (texel::ALGORITHM_VERSION << 16) | vertex::ALGORITHM_VERSION,
     }
 }
 

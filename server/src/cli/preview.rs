@@ -82,10 +82,8 @@ impl Loaded {
 
     /// A generated atlas of `side` texels of the character's bind pose.
     fn atlas(&self, side: u32) -> anyhow::Result<TexelAtlas> {
-        let c = &self.character;
-        TexelAtlas::generate(
-            &c.positions,
-            &c.triangles,
+        TexelAtlas::of_character(
+            &self.character,
             &AtlasOptions {
                 size: side,
                 padding: PADDING,

@@ -9,11 +9,12 @@
 //! always gets the same atlas.
 //!
 //! **Texels.** A texel whose centre lies in a triangle's UV image is that
-//! surface point (inside). A texel whose square only touches a chart
-//! (its centre within half a diagonal of a triangle) is the nearest point
-//! of the nearest such triangle (border): bilinear filtering anywhere on
-//! a chart reads the four texels around it, and each of those is inside
-//! or border, so it reads traced values, never padding. The texels beyond
+//! surface point (inside). A texel whose centre lies within a diagonal of
+//! a triangle is the nearest point of the nearest such triangle (border):
+//! bilinear filtering anywhere on a chart reads the four texel centres
+//! within one texel of it along each axis, each of those is inside or
+//! border, so it reads traced values, never padding (charts are four
+//! texels apart, so no border texel is near two). The texels beyond
 //! are padding: [`dilate`] fills them from their neighbours so that
 //! mipmaps do not bleed the background into the charts.
 //!
@@ -320,7 +321,9 @@ impl Atlas {
         let (w, h) = (self.width as usize, self.height as usize);
         // Per texel: (triangle, barycentrics, distance in texels; 0 inside).
         let mut best: Vec<Option<(u32, Vec3, f32)>> = vec![None; w * h];
-        let reach = std::f32::consts::FRAC_1_SQRT_2;
+        // A bilinear read anywhere on a chart takes the four centres within
+        // one texel of it along each axis, up to a diagonal away.
+        let reach = std::f32::consts::SQRT_2;
         for t in 0..self.triangles.len() {
             let [a, b, c] = self.corners(t);
             let area = (b - a).perp_dot(c - a);
@@ -402,6 +405,17 @@ impl TexelAtlas {
             triangles: a.triangles.clone(),
             texels: self.texels.texels.iter().map(|t| t.index).collect(),
         }
+    }
+
+    /// The generated atlas of a character at rest, as its scene places it
+    /// (two nodes instancing one mesh, or a part its node mirrors or
+    /// scales, are two places of the surface, each at its own size; the
+    /// merged mesh holds each instance in its mesh's own space).
+    pub fn of_character(
+        character: &crate::Character,
+        options: &AtlasOptions,
+    ) -> Result<Self, AtlasError> {
+        Self::generate(&rest_positions(character), &character.triangles, options)
     }
 
     /// The atlas of a UV set of the mesh's own ([`Atlas::from_uv_set`])
@@ -504,6 +518,13 @@ impl Texels {
             values,
         )
     }
+}
+
+/// The character's vertices at rest, where its scene places them.
+pub fn rest_positions(character: &crate::Character) -> Vec<Vec3> {
+    character
+        .skin(&crate::Pose::rest(&character.skeleton))
+        .positions
 }
 
 /// The islands of a triangle mesh over `vertices` vertices: groups of
@@ -668,7 +689,7 @@ mod tests {
             // The texel's point maps back into (or next to) the texel.
             let uv = atlas.uv(t.triangle as usize, b) * Vec2::new(48.0, atlas.height as f32);
             let centre = Vec2::new((t.index % 48) as f32 + 0.5, (t.index / 48) as f32 + 0.5);
-            let reach = if t.inside { 1e-3 } else { 0.71 };
+            let reach = if t.inside { 1e-3 } else { 1.415 };
             assert!(uv.distance(centre) <= reach, "{uv} {centre} {}", t.inside);
         }
         // Posed at rest, the points lie on the cube's faces.

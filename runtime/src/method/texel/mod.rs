@@ -80,8 +80,8 @@ impl AtlasLayout {
         if self.uvs.len() != self.xref.len() {
             return Err(bad("its vertices have other than one UV each"));
         }
-        if self.uvs.iter().flatten().any(|x| !x.is_finite()) {
-            return Err(bad("a UV is not a finite number"));
+        if self.uvs.iter().flatten().any(|x| !(0.0..=1.0).contains(x)) {
+            return Err(bad("a UV is not a number in [0, 1]"));
         }
         let n = self.xref.len() as u32;
         if self.triangles.iter().flatten().any(|&i| i >= n) {
@@ -141,6 +141,13 @@ impl TexelModel {
         vertices: Option<usize>,
     ) -> Result<(Self, AssetHeader), AssetError> {
         let (model, header) = Model::from_container_of(container, Family::Texel)?;
+        // texel-linear's model is vertex-linear's (its static average
+        // too); no other layout is one, and its joints go unchecked.
+        if !matches!(model, Model::VertexLinear(..) | Model::StaticAverage(_)) {
+            return Err(AssetError::Malformed(
+                "a texel asset holds a vertex-linear model, not this layout".into(),
+            ));
+        }
         let u32s = |tag: &[u8; 4]| match container.section(tag)? {
             Data::U32(v) => Ok(v.clone()),
             _ => Err(AssetError::Malformed(format!(
@@ -212,38 +219,44 @@ pub fn texture(
 /// chain of any depth then averages chart values only). Deterministic.
 pub fn dilate(image: &mut [f32], filled: &mut [bool], width: u32, height: u32) {
     let (w, h) = (width as usize, height as usize);
-    if !filled.iter().any(|&f| f) {
-        return;
-    }
+    let neighbours = |i: usize| {
+        let (x, y) = (i % w, i / w);
+        (y.saturating_sub(1)..=(y + 1).min(h - 1)).flat_map(move |ny| {
+            (x.saturating_sub(1)..=(x + 1).min(w - 1)).map(move |nx| ny * w + nx)
+        })
+    };
+    // The ring to fill next: the unfilled neighbours of the last ring (at
+    // first, of every filled texel), each once, in row-major order. Each
+    // ring costs its own size, not the image's.
+    let mut last: Vec<usize> = (0..w * h).filter(|&i| filled[i]).collect();
+    let mut queued = vec![false; w * h];
     let mut ring: Vec<(usize, f32)> = Vec::new();
-    loop {
-        ring.clear();
-        for y in 0..h {
-            for x in 0..w {
-                if filled[y * w + x] {
-                    continue;
-                }
-                let (mut sum, mut n) = (0.0f32, 0u32);
-                for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                    for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                        if filled[ny * w + nx] {
-                            sum += image[ny * w + nx];
-                            n += 1;
-                        }
-                    }
-                }
-                if n > 0 {
-                    ring.push((y * w + x, sum / n as f32));
+    while !last.is_empty() {
+        let mut next: Vec<usize> = Vec::new();
+        for &i in &last {
+            for n in neighbours(i) {
+                if !filled[n] && !std::mem::replace(&mut queued[n], true) {
+                    next.push(n);
                 }
             }
         }
-        if ring.is_empty() {
-            return;
+        next.sort_unstable();
+        ring.clear();
+        for &i in &next {
+            let (mut sum, mut count) = (0.0f32, 0u32);
+            for n in neighbours(i) {
+                if filled[n] {
+                    sum += image[n];
+                    count += 1;
+                }
+            }
+            ring.push((i, sum / count as f32));
         }
         for &(i, v) in &ring {
             image[i] = v;
             filled[i] = true;
         }
+        last = next;
     }
 }
 
@@ -352,6 +365,7 @@ mod tests {
             )
         });
         refused(&|c| set(c, b"ATUV", Data::F32(vec![0.1, 0.1, 0.9])));
+        refused(&|c| set(c, b"ATUV", Data::F32(vec![0.1, 0.1, 0.9, 0.1, 1e30, 0.9])));
         // A vertex asset is not a texel asset.
         refused(&|c| c.method = Method::VertexLinear);
     }
