@@ -26,17 +26,15 @@ pub use aobake_runtime::method::texel::dilate;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
-/// A texel bake's atlas side (texels) when the request names none.
-///
-/// Where the floor points: at 512 every shared character's texel floor
+/// A texel bake's atlas side (texels) when the request names none: the
+/// smallest power of two at which every shared character's texel floor
 /// (exact AO at the texel centres, bilinearly filtered) is under half of
-/// GTAO's per-pixel error: 0.028 (Kenney), 0.010 (Fox), 0.007
-/// (CesiumMan), 0.019 (the milk truck) against 0.108, 0.085, 0.112 and
-/// 0.084; at 256 all but the truck's (0.062; its 1,811 charts leave 7 %
-/// of the page on its surface) are (`aobake bench preview --texel-floor`,
-/// docs/methods/texel.md). The fit still holds every reference pose's
-/// values several times over, and 512's five times as many texels take
-/// it past 2 GB on the Kenney character, so 256 until it streams.
+/// GTAO's per-pixel error: 0.039 (Kenney), 0.012 (Fox), 0.012
+/// (CesiumMan), 0.028 (the milk truck) against 0.108, 0.085, 0.112 and
+/// 0.084; at 128 the Kenney character's and the truck's are not (0.066,
+/// 0.081) (`aobake bench preview --texel-floor`, docs/methods/texel.md).
+/// 512 halves the floors again, but takes the fit past 2 GB on the Kenney
+/// character until it streams.
 pub const DEFAULT_ATLAS: u32 = 256;
 
 /// Empty texels around each chart (charts are at least twice this apart):
