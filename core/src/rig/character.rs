@@ -128,19 +128,34 @@ impl Character {
     /// and its AO is undefined (its normal is skinned to nothing): the
     /// evaluations leave it out of that pose's errors.
     pub fn drawn_vertices(&self, positions: &[Vec3]) -> Vec<bool> {
-        let (lo, hi) = crate::geometry::bounds(self.positions.iter().copied())
-            .unwrap_or((Vec3::ZERO, Vec3::ZERO));
-        let least = (1e-6 * (hi - lo).length()).powi(2);
         let mut drawn = vec![false; positions.len()];
-        for t in &self.triangles {
-            let [a, b, c] = t.map(|i| positions[i as usize]);
-            if (b - a).cross(c - a).length() > least {
-                for &i in t {
-                    drawn[i as usize] = true;
-                }
+        for (t, _) in self
+            .triangles
+            .iter()
+            .zip(self.drawn_triangles(positions))
+            .filter(|(_, d)| *d)
+        {
+            for &i in t {
+                drawn[i as usize] = true;
             }
         }
         drawn
+    }
+
+    /// Which triangles draw something at these posed `positions`: those
+    /// of non-zero area (twice the area above (10⁻⁶ of the bind pose's
+    /// bounding-box diagonal)²), [`Character::drawn_vertices`]' rule.
+    pub fn drawn_triangles(&self, positions: &[Vec3]) -> Vec<bool> {
+        let (lo, hi) = crate::geometry::bounds(self.positions.iter().copied())
+            .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        let least = (1e-6 * (hi - lo).length()).powi(2);
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| positions[i as usize]);
+                (b - a).cross(c - a).length() > least
+            })
+            .collect()
     }
 
     /// Nodes that move vertices (palette nodes), each once, in palette

@@ -23,6 +23,8 @@
 
 use aobake_runtime::method::texel::AtlasLayout;
 pub use aobake_runtime::method::texel::dilate;
+use std::ops::ControlFlow;
+
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -267,32 +269,51 @@ impl Atlas {
             crate::geometry::bounds(positions.iter().copied()).unwrap_or((Vec3::ZERO, Vec3::ZERO));
         let same = 1e-4 * (hi - lo).length();
         let mut first: Vec<Option<(u32, Vec3)>> = vec![None; w * h];
+        let found = self.walk_centres(0.0, |t, i, bary, _| {
+            let [a, b, c] = self.triangles[t].map(|v| positions[self.xref[v as usize] as usize]);
+            let p = a * bary.x + b * bary.y + c * bary.z;
+            match first[i] {
+                None => first[i] = Some((t as u32, p)),
+                Some((u, q)) if q.distance(p) > same => {
+                    return ControlFlow::Break((i, [u, t as u32]));
+                }
+                Some(_) => {}
+            }
+            ControlFlow::Continue(())
+        });
+        found.map(|(i, triangles)| ([(i % w) as u32, (i / w) as u32], triangles))
+    }
+
+    /// Walks the texel centres within `reach` texels of each triangle with
+    /// area in UV, triangle by triangle in order: `visit(triangle, texel,
+    /// barycentrics of the triangle's point nearest the centre, its
+    /// distance in texels, 0 inside)`, until `visit` breaks with a value.
+    fn walk_centres<B>(
+        &self,
+        reach: f32,
+        mut visit: impl FnMut(usize, usize, Vec3, f32) -> ControlFlow<B>,
+    ) -> Option<B> {
+        let (w, h) = (self.width as usize, self.height as usize);
         for t in 0..self.triangles.len() {
             let [a, b, c] = self.corners(t);
             let area = (b - a).perp_dot(c - a);
             if area == 0.0 || !area.is_finite() {
                 continue;
             }
-            let corners = self.triangles[t].map(|i| positions[self.xref[i as usize] as usize]);
-            let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-            let x0 = (lo.x - 0.5).ceil().max(0.0) as usize;
-            let y0 = (lo.y - 0.5).ceil().max(0.0) as usize;
-            let x1 = ((hi.x - 0.5).floor() as i64).min(w as i64 - 1);
-            let y1 = ((hi.y - 0.5).floor() as i64).min(h as i64 - 1);
-            for y in y0 as i64..=y1 {
-                for x in x0 as i64..=x1 {
+            let lo = a.min(b).min(c) - Vec2::splat(reach);
+            let hi = a.max(b).max(c) + Vec2::splat(reach);
+            // Texel centres (x + ½, y + ½) within the reach of the triangle.
+            let first = |lo: f32| (lo - 0.5).ceil().max(0.0) as i64;
+            let last = |hi: f32, n: usize| ((hi - 0.5).floor() as i64).min(n as i64 - 1);
+            for y in first(lo.y)..=last(hi.y, h) {
+                for x in first(lo.x)..=last(hi.x, w) {
                     let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                     let (bary, distance) = nearest_on_triangle(centre, [a, b, c], area);
-                    if distance > 0.0 {
-                        continue;
-                    }
-                    let p = corners[0] * bary.x + corners[1] * bary.y + corners[2] * bary.z;
-                    match &first[y as usize * w + x as usize] {
-                        None => first[y as usize * w + x as usize] = Some((t as u32, p)),
-                        Some((u, q)) if q.distance(p) > same => {
-                            return Some(([x as u32, y as u32], [*u, t as u32]));
-                        }
-                        Some(_) => {}
+                    if distance <= reach
+                        && let ControlFlow::Break(b) =
+                            visit(t, y as usize * w + x as usize, bary, distance)
+                    {
+                        return Some(b);
                     }
                 }
             }
@@ -321,35 +342,15 @@ impl Atlas {
         let mut best: Vec<Option<(u32, Vec3, f32)>> = vec![None; w * h];
         // A bilinear read anywhere on a chart takes the four centres within
         // one texel of it along each axis, up to a diagonal away.
-        let reach = std::f32::consts::SQRT_2;
-        for t in 0..self.triangles.len() {
-            let [a, b, c] = self.corners(t);
-            let area = (b - a).perp_dot(c - a);
-            if area == 0.0 || !area.is_finite() {
-                continue;
+        self.walk_centres(std::f32::consts::SQRT_2, |t, i, bary, distance| {
+            // The nearest triangle wins; among equals (inside several, on
+            // a shared edge) the first.
+            let slot = &mut best[i];
+            if slot.is_none_or(|(_, _, d)| distance < d) {
+                *slot = Some((t as u32, bary, distance));
             }
-            let lo = a.min(b).min(c) - Vec2::splat(reach);
-            let hi = a.max(b).max(c) + Vec2::splat(reach);
-            // Texel centres (x + ½, y + ½) within the reach of the triangle.
-            let first = |lo: f32| (lo - 0.5).ceil().max(0.0) as i64;
-            let last = |hi: f32, n: usize| ((hi - 0.5).floor() as i64).min(n as i64 - 1);
-            for y in first(lo.y)..=last(hi.y, h) {
-                for x in first(lo.x)..=last(hi.x, w) {
-                    let (x, y) = (x as usize, y as usize);
-                    let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                    let (bary, distance) = nearest_on_triangle(centre, [a, b, c], area);
-                    if distance > reach {
-                        continue;
-                    }
-                    let slot = &mut best[y * w + x];
-                    // The nearest triangle wins; among equals (inside
-                    // several, on a shared edge) the first.
-                    if slot.is_none_or(|(_, _, d)| distance < d) {
-                        *slot = Some((t as u32, bary, distance));
-                    }
-                }
-            }
-        }
+            ControlFlow::<()>::Continue(())
+        });
         let texels = best
             .iter()
             .enumerate()

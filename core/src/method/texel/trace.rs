@@ -40,21 +40,10 @@ pub fn trace_texels(
 }
 
 /// Which texels draw something in a pose: those whose triangle has area
-/// there ([`Character::drawn_vertices`]'s rule: a part scaled to zero
+/// there ([`Character::drawn_triangles`]: a part scaled to zero
 /// covers no pixel, and its AO is undefined).
 pub fn drawn_texels(character: &Character, texels: &Texels, pose: &Pose) -> Vec<bool> {
-    let posed = character.skin(pose);
-    let (lo, hi) = crate::geometry::bounds(character.positions.iter().copied())
-        .unwrap_or((glam::Vec3::ZERO, glam::Vec3::ZERO));
-    let least = (1e-6 * (hi - lo).length()).powi(2);
-    let drawn: Vec<bool> = character
-        .triangles
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| posed.positions[i as usize]);
-            (b - a).cross(c - a).length() > least
-        })
-        .collect();
+    let drawn = character.drawn_triangles(&character.skin(pose).positions);
     texels
         .texels
         .iter()
