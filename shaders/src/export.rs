@@ -21,7 +21,7 @@ use naga::{
     valid::{Capabilities, ModuleInfo, ValidationFlags, Validator},
 };
 
-use crate::{CUBEMAP_AO, CUBEMAP_AO_VS, GRID_AO, GRID_AO_VS, VERTEX_AO, VERTEX_AO_VS};
+use crate::{CUBEMAP_AO, CUBEMAP_AO_VS, GRID_AO, GRID_AO_VS, TEXEL_AO, VERTEX_AO, VERTEX_AO_VS};
 
 /// What the MSL files say about the extra buffer that holds the byte sizes
 /// of the runtime-sized arrays.
@@ -99,8 +99,9 @@ pub struct ExportError {
 }
 
 /// The run-time evaluators an engine needs, by name.
-pub fn runtime_sources() -> [(&'static str, &'static str); 6] {
+pub fn runtime_sources() -> [(&'static str, &'static str); 7] {
     [
+        ("texel_ao", TEXEL_AO),
         ("vertex_ao", VERTEX_AO),
         ("vertex_ao_vs", VERTEX_AO_VS),
         ("cubemap_ao", CUBEMAP_AO),
@@ -611,9 +612,10 @@ mod tests {
                 )
             })
             .collect();
-        // In 4.50 and ES 3.10: vertex 2, cubemap 1, grid 1, and 2 for each
-        // vertex-stage twin; in ES 3.00 the vertex-stage twins' only.
-        assert_eq!(glsl.len(), 2 * 10 + 3 * 2);
+        // In 4.50 and ES 3.10: vertex 2, cubemap 1, grid 1, 2 for each
+        // vertex-stage twin, and texel 2 (vertex and fragment); in ES 3.00
+        // the vertex-stage twins' and texel's only.
+        assert_eq!(glsl.len(), 2 * 12 + 3 * 2 + 2);
         for f in glsl {
             let path = dir.path().join(&f.path);
             let (ok, said) = run("glslangValidator", &[path.as_os_str()]);

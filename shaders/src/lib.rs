@@ -17,7 +17,11 @@
 //!   (`grid_occlusion`, and `cs_main` over a batch).
 //! * [`TRACE`]: ray casting in compute, the estimators of core's CPU
 //!   tracer with the same rays (`cs_trace`).
-//! * [`PREVIEW`]: the preview raster (`vs_main`, `fs_main`).
+//! * [`TEXEL_AO`]: the texel methods' run-time AO per pixel
+//!   (`texel_ao(uv)`: the basis textures weighted and summed), drawn over
+//!   a whole atlas.
+//! * [`PREVIEW`]: the preview raster (`vs_main`, `fs_main`; `vs_texel`,
+//!   `fs_texel` for a texel model).
 //! * [`CUBEMAP_AO_VS`], [`GRID_AO_VS`]: the lookups in a vertex shader
 //!   (data in textures), for WebGL2.
 //! * [`VIEWER_VERTEX`], [`VIEWER_GRID`], [`VIEWER_CUBEMAP`]: the
@@ -34,8 +38,8 @@ pub mod mirror;
 
 pub use mirror::{
     BlockInfo, CubemapAoParams, GridAoParams, GridPartInfo, GridReceiver, GtaoParams,
-    PreviewUniforms, TraceParams, TracePoint, TraceScene, TraceTally, VertexAoParams,
-    VertexAoVsParams,
+    PreviewUniforms, TexelProbe, TexelWeights, TraceParams, TracePoint, TraceScene, TraceTally,
+    VertexAoParams, VertexAoVsParams,
 };
 
 /// Half-float decoding shared by the pipelines.
@@ -108,9 +112,19 @@ pub const GRID_AO_VS: &str = compose!(
     "grid_ao_vs.wgsl"
 );
 
-/// The preview raster shader, composed: `common/shade.wgsl` then
-/// `preview.wgsl`.
-pub const PREVIEW: &str = compose!("common/shade.wgsl", "preview.wgsl");
+/// The preview raster shader, composed: `common/shade.wgsl`,
+/// `common/texel_ao.wgsl` then `preview.wgsl`.
+pub const PREVIEW: &str = compose!("common/shade.wgsl", "common/texel_ao.wgsl", "preview.wgsl");
+
+/// The texel methods' run-time AO (`texel_ao(uv)`, k texture fetches per
+/// pixel) drawn over a whole atlas (`vs_main`, `fs_main`): the tests'
+/// draw, and the file engines start from. Composed:
+/// `common/texel_ao.wgsl` then `texel_ao.wgsl`.
+pub const TEXEL_AO: &str = compose!("common/texel_ao.wgsl", "texel_ao.wgsl");
+
+/// The most basis layers (weights) a texel model may have on the GPU
+/// (`TEXEL_MAX_LAYERS` in common/texel_ao.wgsl).
+pub const TEXEL_MAX_LAYERS: u32 = 256;
 
 /// The screen-space baseline (GTAO) over a G-buffer: `gtao.wgsl`.
 pub const GTAO: &str = compose!("gtao.wgsl");
@@ -157,8 +171,9 @@ pub const VIEWER_CUBEMAP: &str = compose!(
 pub const TRACE: &str = compose!("trace.wgsl");
 
 /// Every composed pipeline source, by file name.
-pub fn sources() -> [(&'static str, &'static str); 12] {
+pub fn sources() -> [(&'static str, &'static str); 13] {
     [
+        ("texel_ao.wgsl", TEXEL_AO),
         ("trace.wgsl", TRACE),
         ("vertex_ao.wgsl", VERTEX_AO),
         ("vertex_ao_vs.wgsl", VERTEX_AO_VS),
@@ -246,6 +261,26 @@ mod tests {
     }
 
     #[test]
+    fn the_texel_layer_limit_is_the_hosts() {
+        let module = naga::front::wgsl::parse_str(TEXEL_AO).unwrap();
+        let (_, c) = module
+            .constants
+            .iter()
+            .find(|(_, c)| c.name.as_deref() == Some("TEXEL_MAX_LAYERS"))
+            .unwrap();
+        assert!(matches!(
+            module.global_expressions[c.init],
+            naga::Expression::Literal(naga::Literal::U32(TEXEL_MAX_LAYERS))
+        ));
+        let zero: TexelWeights = bytemuck::Zeroable::zeroed();
+        assert_eq!(zero.w.len() * 4, TEXEL_MAX_LAYERS as usize);
+        let weights: Vec<f32> = (0..TEXEL_MAX_LAYERS).map(|k| k as f32).collect();
+        let full = TexelWeights::new(&weights).unwrap();
+        assert_eq!((full.count, full.w[3][2]), (TEXEL_MAX_LAYERS, 14.0));
+        assert!(TexelWeights::new(&[0.0; TEXEL_MAX_LAYERS as usize + 1]).is_none());
+    }
+
+    #[test]
     fn the_tracers_constants_are_the_hosts() {
         let module = naga::front::wgsl::parse_str(TRACE).unwrap();
         let constant = |name: &str| {
@@ -302,6 +337,14 @@ mod tests {
             size_of::<CubemapAoParams>()
         );
         assert_eq!(wgsl_size(GTAO, "Params") as usize, size_of::<GtaoParams>());
+        assert_eq!(
+            wgsl_size(TEXEL_AO, "TexelWeights") as usize,
+            size_of::<TexelWeights>()
+        );
+        assert_eq!(
+            wgsl_size(TEXEL_AO, "TexelProbe") as usize,
+            size_of::<TexelProbe>()
+        );
         for (name, size) in [
             ("Params", size_of::<GridAoParams>()),
             ("PartInfo", size_of::<GridPartInfo>()),
@@ -330,7 +373,15 @@ mod tests {
             .collect();
         assert_eq!(
             names,
-            ["vs_main", "fs_main", "fs_gbuffer", "fs_screen_space"]
+            [
+                "vs_main",
+                "fs_main",
+                "fs_gbuffer",
+                "fs_screen_space",
+                "vs_texel",
+                "fs_texel",
+                "fs_gbuffer_texel"
+            ]
         );
     }
 }

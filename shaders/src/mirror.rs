@@ -181,6 +181,45 @@ pub struct PreviewUniforms {
     pub _pad: [u32; 2],
 }
 
+/// `TexelWeights` of common/texel_ao.wgsl: a pose's weights, four to a
+/// vector.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct TexelWeights {
+    /// Weights in use.
+    pub count: u32,
+    /// Padding.
+    pub _pad: [u32; 3],
+    /// Weight k is `w[k / 4][k % 4]`.
+    pub w: [[f32; 4]; 64],
+}
+
+impl TexelWeights {
+    /// The uniform of a pose's `weights`; `None` past
+    /// [`crate::TEXEL_MAX_LAYERS`] of them.
+    pub fn new(weights: &[f32]) -> Option<Self> {
+        let mut out = Self::zeroed();
+        if weights.len() > 4 * out.w.len() {
+            return None;
+        }
+        for (k, &w) in weights.iter().enumerate() {
+            out.w[k / 4][k % 4] = w;
+        }
+        out.count = weights.len() as u32;
+        Some(out)
+    }
+}
+
+/// `TexelProbe` of texel_ao.wgsl.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct TexelProbe {
+    /// The target's size in pixels.
+    pub size: [f32; 2],
+    /// Added to each pixel centre, in texels.
+    pub offset: [f32; 2],
+}
+
 /// `Params` of gtao.wgsl.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
@@ -324,6 +363,8 @@ const _: () = assert!(size_of::<VertexAoParams>() == 16);
 const _: () = assert!(size_of::<BlockInfo>() == 32);
 const _: () = assert!(size_of::<CubemapAoParams>() == 64);
 const _: () = assert!(size_of::<PreviewUniforms>() == 224);
+const _: () = assert!(size_of::<TexelWeights>() == 1040);
+const _: () = assert!(size_of::<TexelProbe>() == 16);
 const _: () = assert!(size_of::<GridAoParams>() == 32);
 const _: () = assert!(size_of::<GridPartInfo>() == 16);
 const _: () = assert!(size_of::<GridReceiver>() == 32);

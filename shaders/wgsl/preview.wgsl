@@ -13,12 +13,19 @@
 // `fs_screen_space` shades a panel with its per-pixel occlusion (drawn
 // with `panel` 1, the AO taken from `screen` instead of `model`).
 //
+// A texel model draws the character through `vs_texel` with the atlas's
+// texture coordinate per vertex: `fs_texel` and `fs_gbuffer_texel` take
+// the model's AO per pixel from its basis textures (texel_ao.wgsl), and
+// the truth panel's from `texel_truth`, the ray-traced AO at the atlas's
+// texels (dilated as the basis is); the G-buffer keeps the per-vertex
+// truth, so the per-vertex floor is judged as for every model.
+//
 // Lighting is linear; the target is an sRGB texture, so the hardware
 // encodes on store and resolves multisamples in linear space.
 // Mirrored field for field by aobake_shaders::PreviewUniforms.
 
 // Prepended at load time: common/shade.wgsl (Uniforms, SurfaceIn, Shaded,
-// shade).
+// shade), common/texel_ao.wgsl (texel_ao, bindings 3 to 5).
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
 
@@ -48,13 +55,17 @@ struct GBuffer {
     @location(1) normal: vec4<u32>,
 }
 
+fn gbuffer(world: vec3<f32>, normal: vec3<f32>, truth: f32, model_ao: f32) -> GBuffer {
+    var out: GBuffer;
+    let model = u32(clamp(model_ao, 0.0, 1.0) * 1048575.0 + 0.5);
+    out.position = vec4<u32>(bitcast<vec3<u32>>(world), (model << 2u) | (u.surface + 1u));
+    out.normal = vec4<u32>(bitcast<vec3<u32>>(normal), bitcast<u32>(truth));
+    return out;
+}
+
 @fragment
 fn fs_gbuffer(in: Shaded) -> GBuffer {
-    var out: GBuffer;
-    let model = u32(clamp(in.model, 0.0, 1.0) * 1048575.0 + 0.5);
-    out.position = vec4<u32>(bitcast<vec3<u32>>(in.world), (model << 2u) | (u.surface + 1u));
-    out.normal = vec4<u32>(bitcast<vec3<u32>>(in.normal), bitcast<u32>(in.truth));
-    return out;
+    return gbuffer(in.world, in.normal, in.truth, in.model);
 }
 
 // The screen-space occlusion per pixel (gtao.wgsl's output) and the
@@ -69,4 +80,47 @@ fn fs_screen_space(in: Shaded) -> @location(0) vec4<f32> {
     // edge sample of the multisampled panel): open.
     let ao = max(screen[pixel.y * screen_width.x + pixel.x], 0.0);
     return vec4<f32>(shade(in.world, in.normal, in.truth, ao), 1.0);
+}
+
+// A texel model's character: SurfaceIn with the atlas's UV.
+struct TexelSurfaceIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) truth: f32,
+    @location(3) model: f32,
+    @location(4) uv: vec2<f32>,
+}
+
+struct TexelShaded {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) truth: f32,
+    @location(4) uv: vec2<f32>,
+}
+
+// The ray-traced AO at the atlas's texels, dilated (sampled with
+// texel_sampler).
+@group(0) @binding(6) var texel_truth: texture_2d<f32>;
+
+@vertex
+fn vs_texel(v: TexelSurfaceIn) -> TexelShaded {
+    var out: TexelShaded;
+    out.clip = u.clip_from_world * vec4<f32>(v.position, 1.0);
+    out.world = v.position;
+    out.normal = v.normal;
+    out.truth = v.truth;
+    out.uv = v.uv;
+    return out;
+}
+
+@fragment
+fn fs_texel(in: TexelShaded) -> @location(0) vec4<f32> {
+    let truth = textureSample(texel_truth, texel_sampler, in.uv).x;
+    return vec4<f32>(shade(in.world, in.normal, truth, texel_ao(in.uv)), 1.0);
+}
+
+@fragment
+fn fs_gbuffer_texel(in: TexelShaded) -> GBuffer {
+    return gbuffer(in.world, in.normal, in.truth, texel_ao(in.uv));
 }

@@ -16,7 +16,7 @@ use crate::{
 
 use super::{
     Bake, BakeError, BakeInputs, BakeParams, Checkpoint, GraphOptions, JobError, JobGraph,
-    JobOutput, JobSink, JobSpec, Plan, PlannedJob, PoseSet,
+    JobOutput, JobSink, JobSpec, Plan, PlannedJob, PoseSet, Receivers,
     cubemap::CubemapReport,
     grid::GridReport,
     jobs::{IndexedBlock, find, json, named, parse, stack_blocks},
@@ -142,9 +142,6 @@ impl<'a> Bake<'a> {
     /// ([`GraphOptions::batch`]); none without previews.
     pub(super) fn preview_truth_jobs(&self, options: GraphOptions) -> Vec<PlannedJob> {
         let frames = match self.preview_frames() {
-            // A texel bake's preview says why it has none (see
-            // `Bake::preview`): nothing to trace for it.
-            Ok(_) if self.plan.params.method.family() == Family::Texel => 0,
             Ok(f) if options.previews => f.len(),
             // A bake without previews, or one whose clip is missing (its
             // preview job says so).
@@ -153,7 +150,9 @@ impl<'a> Bake<'a> {
         // About: the character's rays and the ground's, per frame.
         let samples = u64::from(self.plan.params.held_out_surface().samples);
         let ground = (GROUND_GRID * GROUND_GRID) as u64 * samples.min(GROUND_SAMPLES.into());
-        let rays = self.inputs.character.vertex_count() as u64 * samples + ground;
+        let points =
+            self.inputs.character.vertex_count() + self.preview_texels().map_or(0, |t| t.len());
+        let rays = points as u64 * samples + ground;
         let batch = options.batch(rays);
         (0..frames)
             .step_by(batch)
@@ -167,11 +166,22 @@ impl<'a> Bake<'a> {
             .collect()
     }
 
+    /// The texels whose truth a texel bake's previews show (the plan's
+    /// atlas, whose texels are the asset's columns); none for the other
+    /// families.
+    fn preview_texels(&self) -> Option<&crate::method::texel::atlas::Texels> {
+        match &self.plan.receivers {
+            Receivers::Texels(atlas) => Some(&atlas.texels),
+            Receivers::Vertices => None,
+        }
+    }
+
     /// Runs a `preview-truth` job: the ground truth of preview frames
     /// `first..first + count`, as three outputs: `preview-truth` and
     /// `preview-ground` ([`IndexedBlock`]s of the character's and the
     /// ground's occlusion) and `preview-truth.json` (the seconds each
-    /// frame took).
+    /// frame took); a texel bake's a fourth, `preview-texels` (the
+    /// occlusion at its atlas's texels).
     fn preview_truth(&self, first: usize, count: usize) -> Result<JobOutput, JobError> {
         let frames = self.preview_frames()?;
         let times = frames.times();
@@ -186,8 +196,13 @@ impl<'a> Bake<'a> {
         let character = &self.inputs.character;
         let ground = preview::camera(character, frames.clip).ground();
         let poses = frame_poses(character, frames.clip, &times[first..end]);
-        let truth = self.preview_tracing()?.trace(character, &poses, &ground)?;
+        let truth =
+            self.preview_tracing()?
+                .trace(character, &poses, &ground, self.preview_texels())?;
         let mut out = JobOutput::default();
+        if let Some(block) = truth.texels {
+            out.push(TEXELS, IndexedBlock { first, block }.to_bytes());
+        }
         out.push(
             TRUTH,
             IndexedBlock {
@@ -235,6 +250,10 @@ impl<'a> Bake<'a> {
         let ground = GROUND_GRID * GROUND_GRID;
         let character = stack_blocks(deps, TRUTH, self.inputs.character.vertex_count(), frames)?;
         let ground = stack_blocks(deps, GROUND, ground, frames)?;
+        let texels = self
+            .preview_texels()
+            .map(|t| stack_blocks(deps, TEXELS, t.len(), frames))
+            .transpose()?;
         let mut parts: Vec<TruthSeconds> = deps
             .iter()
             .filter_map(|d| d.get(SECONDS))
@@ -251,6 +270,7 @@ impl<'a> Bake<'a> {
         Ok(Some(FrameTruth {
             character,
             ground,
+            texels,
             seconds,
         }))
     }
@@ -264,9 +284,6 @@ impl<'a> Bake<'a> {
         renderer: &mut dyn Renderer,
     ) -> Result<JobOutput, JobError> {
         let assembled = find(deps, "asset")?;
-        if self.plan.params.method.family() == Family::Texel {
-            return Ok(preview::unavailable(super::texel::NO_PREVIEWS));
-        }
         let container = Container::from_bytes(named(assembled, "asset")?)
             .map_err(|e| JobError::Invalid(e.to_string()))?;
         let baked = BakedAsset::read(&container, Some(&self.inputs.character))
@@ -308,6 +325,9 @@ impl<'a> Bake<'a> {
 const TRUTH: &str = "preview-truth";
 /// A `preview-truth` job's ground occlusion ([`IndexedBlock`]).
 const GROUND: &str = "preview-ground";
+/// A texel bake's `preview-truth` job's occlusion at the atlas's texels
+/// ([`IndexedBlock`]).
+const TEXELS: &str = "preview-texels";
 /// A `preview-truth` job's seconds per frame ([`TruthSeconds`]).
 const SECONDS: &str = "preview-truth.json";
 
@@ -387,8 +407,12 @@ pub struct BakedAsset {
 #[derive(Debug)]
 enum AssetModel {
     Vertex(Box<crate::method::vertex::Model>),
-    /// A texel model and its atlas.
-    Texel(Box<crate::method::texel::TexelModel>),
+    /// A texel model and, with the character, its atlas's texels as
+    /// surface points (for the previews).
+    Texel(
+        Box<crate::method::texel::TexelModel>,
+        Option<Box<crate::method::texel::atlas::TexelAtlas>>,
+    ),
     /// The model and its clip's name.
     Cubemap(crate::method::cubemap::model::CubemapModel, String),
     /// The grids and, with the character, each vertex's part (`u32::MAX`
@@ -434,10 +458,17 @@ impl BakedAsset {
                         super::texel::Refusal::Unreadable(e) => AssetUseError::Unreadable(e),
                         super::texel::Refusal::Mismatch(e) => AssetUseError::Mismatch(e),
                     })?;
+                let atlas = match character {
+                    Some(_) => Some(Box::new(
+                        crate::method::texel::atlas::TexelAtlas::from_layout(&model.atlas)
+                            .map_err(|e| unreadable(&e))?,
+                    )),
+                    None => None,
+                };
                 Self {
                     params: params(&header.params)?,
                     character: header.character,
-                    model: AssetModel::Texel(Box::new(model)),
+                    model: AssetModel::Texel(Box::new(model), atlas),
                 }
             }
             Family::Cubemap => {
@@ -491,7 +522,7 @@ impl BakedAsset {
     pub fn clip(&self) -> Option<&str> {
         match &self.model {
             AssetModel::Cubemap(_, clip) => Some(clip),
-            AssetModel::Vertex(_) | AssetModel::Grid(..) | AssetModel::Texel(_) => None,
+            AssetModel::Vertex(_) | AssetModel::Grid(..) | AssetModel::Texel(..) => None,
         }
     }
 
@@ -504,8 +535,9 @@ impl BakedAsset {
         let surface = self.params.held_out_surface();
         Ok(match &self.model {
             AssetModel::Vertex(m) => (PreviewModel::Vertex(m), surface),
-            AssetModel::Texel(_) => {
-                return Err(AssetUseError::Unsupported(super::texel::NO_PREVIEWS.into()));
+            AssetModel::Texel(m, atlas) => {
+                let atlas = atlas.as_ref().ok_or_else(not_fitted)?;
+                (PreviewModel::Texel(m, atlas), surface)
             }
             AssetModel::Cubemap(m, _) => (
                 PreviewModel::Cubemap(m, self.params.cubemap_truth(&m.layout.spheroid)),
@@ -532,7 +564,7 @@ impl BakedAsset {
         use crate::method::grid::base::Receiver;
         match &self.model {
             AssetModel::Vertex(m) => Ok(m.evaluate(&character.skeleton, &pose.locals)),
-            AssetModel::Texel(m) => Ok(super::texel::vertex_ao(m, character, pose)),
+            AssetModel::Texel(m, _) => Ok(super::texel::vertex_ao(m, character, pose)),
             AssetModel::Cubemap(..) => Err(AssetUseError::Unsupported(
                 "it holds the occlusion cast into space, not per-vertex AO; `aobake preview` renders it on the ground and `aobake export --exr` writes its faces".into(),
             )),
@@ -568,7 +600,7 @@ impl BakedAsset {
             AssetModel::Vertex(_) => Err(AssetUseError::Unsupported(
                 "per-vertex AO has no image to export".into(),
             )),
-            AssetModel::Texel(m) => super::texel::images(m).map_err(AssetUseError::Unsupported),
+            AssetModel::Texel(m, _) => super::texel::images(m).map_err(AssetUseError::Unsupported),
             AssetModel::Cubemap(m, clip) => {
                 let mut images = super::cubemap::face_strips(m, clip, times);
                 images.extend(m.ground.as_ref().map(ground_offsets));

@@ -29,7 +29,13 @@ use serde::{Deserialize, Serialize};
 use crate::{
     Character,
     method::{
-        Method, cubemap::model::CubemapModel, grid::model::GridModel, texel::atlas::TexelAtlas,
+        Method,
+        cubemap::model::CubemapModel,
+        grid::model::GridModel,
+        texel::{
+            TexelModel,
+            atlas::{TexelAtlas, Texels},
+        },
         vertex::Model,
     },
     rig::{clip::Clip, pose::Pose},
@@ -75,6 +81,11 @@ pub enum PreviewModel<'a> {
     /// vertices (each on its own part: the owners, `u32::MAX` for none)
     /// and on the ground.
     Grid(&'a GridModel, &'a [u32]),
+    /// A texel model: the renderer samples its basis textures
+    /// ([`TexelModel::basis`]) per pixel at the atlas's UVs, weighted by
+    /// the frame's weights (the ground is ray-traced in every panel); the
+    /// atlas's texels are where the truth panel's AO is traced.
+    Texel(&'a TexelModel, &'a TexelAtlas),
 }
 
 /// Floats per part in a grid frame's weights: `grid_from_world` then
@@ -102,6 +113,7 @@ impl PreviewModel<'_> {
             Self::Vertex(m) => m.method(),
             Self::Cubemap(m, _) => m.method(),
             Self::Grid(m, _) => m.method(),
+            Self::Texel(m, _) => m.method,
         }
     }
 
@@ -110,6 +122,9 @@ impl PreviewModel<'_> {
         match self {
             Self::Vertex(_) => {
                 "ground: ray-traced in every panel (the vertex methods bake the character only)"
+            }
+            Self::Texel(..) => {
+                "character: per pixel from the atlas's textures; ground ray-traced in every panel"
             }
             Self::Cubemap(..) => {
                 "character: ray-traced in every panel (the cubemap bakes the occlusion it casts)"
@@ -297,6 +312,11 @@ pub struct RenderFrame {
     pub ground_ao: Vec<f32>,
     /// The frame's phase of the clip's cycle (a cubemap's lookup).
     pub phase: f32,
+    /// Ray-traced occlusion at the texels of the subject's atlas (a texel
+    /// model's, or the texel floor's; [`Texels::texels`]' order), empty
+    /// without one: a texel model's truth panel samples it as the model
+    /// panel samples the model.
+    pub texel_truth: Vec<f32>,
 }
 
 /// Draws frames: implemented by the worker on wgpu.
@@ -387,8 +407,17 @@ impl Subject<'_> {
             surface: self.surface,
             kroon: match self.model {
                 PreviewModel::Cubemap(_, kroon) => Some(kroon),
-                PreviewModel::Vertex(_) | PreviewModel::Grid(..) => None,
+                PreviewModel::Vertex(_) | PreviewModel::Grid(..) | PreviewModel::Texel(..) => None,
             },
+        }
+    }
+
+    /// The atlas whose texels the truth is traced at: a texel model's, or
+    /// the texel floor's.
+    pub fn atlas(&self) -> Option<&TexelAtlas> {
+        match self.model {
+            PreviewModel::Texel(_, atlas) => Some(atlas),
+            _ => self.texel_floor,
         }
     }
 
@@ -402,7 +431,10 @@ impl Subject<'_> {
         ground: &Ground,
     ) -> Result<Vec<RenderFrame>, JobError> {
         let poses = frame_poses(self.character, clip, times);
-        let truth = self.tracing().trace(self.character, &poses, ground)?;
+        let texels = self.atlas().map(|a| &a.texels);
+        let truth = self
+            .tracing()
+            .trace(self.character, &poses, ground, texels)?;
         self.frames_with(&poses, times, truth)
     }
 
@@ -415,13 +447,16 @@ impl Subject<'_> {
         truth: FrameTruth,
     ) -> Result<Vec<RenderFrame>, JobError> {
         let skeleton = &self.character.skeleton;
+        let texels = self.atlas().map_or(0, |a| a.texels.len());
         if truth.frames() != poses.len()
             || truth.character.vertices != self.character.vertex_count()
+            || truth.texels.as_ref().map_or(0, |t| t.vertices) != texels
         {
             return Err(JobError::Invalid(format!(
-                "the preview's truth holds {} frames of {} vertices, not {} of {}",
+                "the preview's truth holds {} frames of {} vertices and {} texels, not {} of {} and {texels}",
                 truth.frames(),
                 truth.character.vertices,
+                truth.texels.as_ref().map_or(0, |t| t.vertices),
                 poses.len(),
                 self.character.vertex_count()
             )));
@@ -433,6 +468,9 @@ impl Subject<'_> {
                 let posed = self.character.skin(pose);
                 let (weights, phase) = match self.model {
                     PreviewModel::Vertex(model) => (model.weights(skeleton, &pose.locals), 0.0),
+                    PreviewModel::Texel(model, _) => {
+                        (model.model.weights(skeleton, &pose.locals), 0.0)
+                    }
                     PreviewModel::Grid(model, _) => (
                         grid_weights(model, &self.character.joint_matrices(pose)),
                         0.0,
@@ -446,6 +484,10 @@ impl Subject<'_> {
                     weights,
                     ground_ao: truth.ground.row(i).to_vec(),
                     phase,
+                    texel_truth: truth
+                        .texels
+                        .as_ref()
+                        .map_or_else(Vec::new, |t| t.row(i).to_vec()),
                 }
             })
             .collect())
@@ -516,7 +558,12 @@ impl Subject<'_> {
         let poses = frame_poses(self.character, clip, times);
         let truth = match truth {
             Some(t) => t,
-            None => self.tracing().trace(self.character, &poses, &ground)?,
+            None => self.tracing().trace(
+                self.character,
+                &poses,
+                &ground,
+                self.atlas().map(|a| &a.texels),
+            )?,
         };
         let trace_s = truth.seconds.clone();
         let frames = self.frames_with(&poses, times, truth)?;
@@ -600,8 +647,7 @@ impl Subject<'_> {
                     &prepared.camera,
                     scene.gtao,
                     &self.surface,
-                    self.texel_floor
-                        .map(|atlas| TexelJudge { atlas, models: &[] }),
+                    self.atlas().map(|atlas| TexelJudge { atlas, models: &[] }),
                 )
                 .map_err(|e| JobError::Invalid(e.to_string()))
             })
@@ -766,6 +812,8 @@ pub struct FrameTruth {
     pub character: AoBlock,
     /// Occlusion of each ground vertex by the character, a row per frame.
     pub ground: AoBlock,
+    /// Occlusion at an atlas's texels, a row per frame, when traced.
+    pub texels: Option<AoBlock>,
     /// Seconds each frame took to trace.
     pub seconds: Vec<f64>,
 }
@@ -781,21 +829,24 @@ impl FrameTruth {
         Self {
             character: self.character.select(range.clone()),
             ground: self.ground.select(range.clone()),
+            texels: self.texels.as_ref().map(|t| t.select(range.clone())),
             seconds: self.seconds[range].to_vec(),
         }
     }
 }
 
 impl TruthTracing {
-    /// The truth of `character` in `poses` over `ground`. Frames are traced
-    /// one at a time (each in parallel inside) and do not depend on each
-    /// other: a run of frames traced in batches stacks into the whole, bit
-    /// for bit.
+    /// The truth of `character` in `poses` over `ground`, and at
+    /// `texels` when given (with the character's rays and seed). Frames
+    /// are traced one at a time (each in parallel inside) and do not
+    /// depend on each other: a run of frames traced in batches stacks into
+    /// the whole, bit for bit.
     pub fn trace(
         &self,
         character: &Character,
         poses: &[Pose],
         ground: &Ground,
+        texels: Option<&Texels>,
     ) -> Result<FrameTruth, JobError> {
         let invalid = |e: crate::trace::TraceError| JobError::Invalid(e.to_string());
         let up = vec![Vec3::Y; ground.positions.len()];
@@ -813,6 +864,10 @@ impl TruthTracing {
                 vertices: ground.positions.len(),
                 values: Vec::with_capacity(ground.positions.len() * poses.len()),
             },
+            texels: texels.map(|t| AoBlock {
+                vertices: t.len(),
+                values: Vec::with_capacity(t.len() * poses.len()),
+            }),
             seconds: Vec::with_capacity(poses.len()),
         };
         for pose in poses {
@@ -834,6 +889,15 @@ impl TruthTracing {
                 ),
             }
             .map_err(invalid)?;
+            if let (Some(texels), Some(block)) = (texels, truth.texels.as_mut()) {
+                let posed = character.skin(pose);
+                let (points, normals) =
+                    texels.points(&posed.positions, &posed.normals, &character.triangles);
+                block.values.extend(
+                    surface_occlusion(&scene, &points, &normals, &self.surface, &no_progress)
+                        .map_err(invalid)?,
+                );
+            }
             truth.character.values.extend(ao);
             truth.ground.values.extend(ground_ao);
             truth.seconds.push(started.elapsed().as_secs_f64());

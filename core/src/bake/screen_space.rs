@@ -173,7 +173,9 @@ pub struct AtlasInfo {
     pub texels: usize,
     /// The share of the atlas's texels whose centre lies on the surface.
     pub utilisation: f64,
-    /// Seconds spent tracing the texels.
+    /// Seconds spent tracing the texels here (0 when the frame's truth
+    /// held them already: a texel model's preview traces them with the
+    /// frame).
     pub trace_s: f64,
 }
 
@@ -235,6 +237,18 @@ impl ScreenSpaceInfo {
         let started = std::time::Instant::now();
         let texel_image = atlas
             .map(|a| {
+                // The frame's own texel truth when it was traced with it
+                // (a texel model's preview), else traced here.
+                if frame.texel_truth.len() == a.texels.len() {
+                    return Ok(a.texels.image(&frame.texel_truth));
+                }
+                if !frame.texel_truth.is_empty() {
+                    return Err(TraceError::Invalid(format!(
+                        "the frame's truth holds {} texels, the atlas {}",
+                        frame.texel_truth.len(),
+                        a.texels.len()
+                    )));
+                }
                 let (points, normals) =
                     a.texels.points(&frame.positions, &frame.normals, triangles);
                 let values = surface_occlusion(&scene, &points, &normals, surface, &no_progress)?;
@@ -265,6 +279,10 @@ impl ScreenSpaceInfo {
             PreviewModel::Vertex(_) => (
                 None,
                 Some("a vertex asset shades the character, not the ground"),
+            ),
+            PreviewModel::Texel(..) => (
+                None,
+                Some("a texel asset shades the character, not the ground"),
             ),
             PreviewModel::Cubemap(..) => (Some(cubemap), Some(cubemap)),
             PreviewModel::Grid(..) => (None, None),

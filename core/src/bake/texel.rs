@@ -13,7 +13,7 @@ use crate::{
     method::{
         Method,
         texel::{TexelModel, atlas::TexelAtlas},
-        vertex::{AssetHeaderFields, FormRef, Model},
+        vertex::{AssetHeaderFields, Model},
     },
     rig::skeleton::Skeleton,
 };
@@ -30,13 +30,9 @@ pub(super) enum Refusal {
     Mismatch(String),
 }
 
-/// Why a texel bake has no previews yet: the preview renderer draws
-/// per-vertex AO, and texel assets need their textures sampled per pixel.
-pub const NO_PREVIEWS: &str = "texel assets are not previewed yet: the preview renderer draws per-vertex AO (see docs/methods/texel.md; `aobake bench texel` judges texel-linear per pixel)";
-
-/// The most values `images` writes (4 GB of f32): 33 textures of 4096²
-/// fit; a hostile header's 4097 cannot ask for hundreds of GB.
-const MAX_EXPORT_VALUES: u64 = 1 << 30;
+/// Why the dashboard's live viewer does not play texel assets yet: it
+/// draws per-vertex AO in WebGL2 (the previews render texel assets).
+pub const NO_VIEWER: &str = "the dashboard's live viewer does not play texel assets yet (it draws per-vertex AO); the bake's previews show them per pixel, and `aobake preview` renders any clip";
 
 /// A texel bake's asset: `model` over the texels of `atlas`.
 pub(super) fn encode(
@@ -136,33 +132,14 @@ pub(super) fn vertex_ao(model: &TexelModel, character: &Character, pose: &Pose) 
 /// `ao = clamp(Σ_k w_k · w{k}, 0, 1)` with the pose's weights.
 /// A model whose coefficients are not dense rows says why it has none.
 pub(super) fn images(model: &TexelModel) -> Result<Vec<FloatImage>, String> {
-    let FormRef::Dense(form) = model.model.form() else {
-        return Err(
-            "a sparse texel model has no textures to export (bake with linear.threshold 0)".into(),
-        );
-    };
     let atlas = &model.atlas;
-    let values = form.weight_count() as u64 * u64::from(atlas.width) * u64::from(atlas.height);
-    if values > MAX_EXPORT_VALUES {
-        return Err(format!(
-            "{} textures of {} × {} texels are {values} values, more than the {MAX_EXPORT_VALUES} an export writes",
-            form.weight_count(),
-            atlas.width,
-            atlas.height
-        ));
-    }
-    let mut channels = Vec::new();
-    let mut k = 0;
-    for block in &form.blocks {
-        if block.map.is_some() {
-            return Err("a texel model with clustered columns has no textures to export".into());
-        }
-        for row in block.coefficients.chunks_exact(block.columns) {
-            let values: Vec<f32> = row.iter().map(|c| c.to_f32()).collect();
-            channels.push((format!("w{k:02}"), atlas.image(&values)));
-            k += 1;
-        }
-    }
+    let basis = model.basis().map_err(|e| e.to_string())?;
+    let k = basis.len();
+    let channels = basis
+        .into_iter()
+        .enumerate()
+        .map(|(k, image)| (format!("w{k:02}"), image))
+        .collect();
     Ok(vec![FloatImage {
         file: "texel-ao.exr".into(),
         layer: "texel".into(),

@@ -143,6 +143,9 @@ pub enum ViewerError {
     /// The bake's jobs disagree with its inputs.
     #[error(transparent)]
     Job(#[from] JobError),
+    /// The viewer cannot draw this model.
+    #[error("{0}")]
+    Unsupported(&'static str),
 }
 
 /// Texels per row of the data textures (WebGL2's smallest
@@ -245,6 +248,9 @@ pub fn scene(
                 "frame": {"kind": "texture", "binding": 4, "floats": gpu.weights},
                 "model_on": {"character": true, "ground": false},
             })
+        }
+        PreviewModel::Texel(..) => {
+            return Err(ViewerError::Unsupported(super::texel::NO_VIEWER));
         }
         PreviewModel::Grid(model, owners) => {
             let gpu = GridGpu::new(model).map_err(too_large)?;

@@ -314,6 +314,9 @@ fn read_and_evaluate(bytes: &[u8], character: &Character, clips: &[Clip]) -> Res
                 }
             }
             Asset::Texel { model, header } => {
+                // Its texels found again from its UVs (as a preview does):
+                // an error or the atlas, at a bounded cost.
+                let _ = aobake_core::method::texel::atlas::TexelAtlas::from_layout(&model.atlas);
                 if let Some(rig) = &header.rig {
                     let rest: Vec<Transform> = rig.nodes.iter().map(|n| n.rest).collect();
                     let values = model.model.evaluate(rig, &rest);

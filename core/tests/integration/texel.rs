@@ -59,10 +59,15 @@ fn a_texel_bake_fits_per_texel_round_trips_and_beats_its_static_average() {
     assert_eq!(ao.len(), c.vertex_count());
     assert!(ao.iter().all(|v| (0.0..=1.0).contains(v)));
     assert!(ao.iter().any(|&v| v > 0.05), "some vertices are occluded");
-    assert!(matches!(
-        baked.preview_model(),
-        Err(AssetUseError::Unsupported(_))
-    ));
+    // Its previews draw the model per pixel over the asset's atlas, whose
+    // texels are the plan's (found again from the asset's UVs).
+    match baked.preview_model().unwrap().0 {
+        aobake_core::bake::PreviewModel::Texel(m, a) => {
+            assert_eq!(m.atlas, atlas.layout());
+            assert_eq!(a.texels, atlas.texels);
+        }
+        _ => panic!("a texel asset previews as a texel model"),
+    }
 
     // Its textures give back the model: at each texel, the pose's weights
     // times the textures' values are the model's value there.

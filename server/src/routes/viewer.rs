@@ -20,7 +20,7 @@ use aobake_core::{
     bake::{
         AssetUseError, Bake, BakeInputs, BakeParams, BakedAsset, JobOutput, Output, Panel,
         PreviewModel,
-        texel::NO_PREVIEWS,
+        texel::NO_VIEWER,
         viewer::{self, Bundle, FrameModel, PreviewTruth, ViewerError},
     },
     image::HEAT_MAP,
@@ -83,8 +83,9 @@ impl Loaded {
 
 fn preview_model(baked: &BakedAsset) -> ApiResult<PreviewModel<'_>> {
     match baked.preview_model() {
-        Ok((model, _)) => Ok(model),
         // A texel asset: the viewer cannot draw it yet, and says so.
+        Ok((PreviewModel::Texel(..), _)) => Err(ApiError::Conflict(NO_VIEWER.into())),
+        Ok((model, _)) => Ok(model),
         Err(AssetUseError::Unsupported(why)) => Err(ApiError::Conflict(why)),
         Err(e) => Err(internal(e)),
     }
@@ -169,6 +170,7 @@ fn viewer_error(e: ViewerError) -> ApiError {
         ViewerError::NoClip(..) => ApiError::NotFound(e.to_string()),
         ViewerError::TooLarge(_) => ApiError::unprocessable(e.to_string()),
         ViewerError::Job(_) => ApiError::Internal(e.to_string()),
+        ViewerError::Unsupported(why) => ApiError::Conflict(why.into()),
     }
 }
 
@@ -197,7 +199,7 @@ pub(crate) async fn scene(
             Family::Grid => "grid",
             Family::Cubemap => "cubemap",
             // preview_model refused it above.
-            Family::Texel => return Err(ApiError::Conflict(NO_PREVIEWS.into())),
+            Family::Texel => return Err(ApiError::Conflict(NO_VIEWER.into())),
         };
         let program = aobake_shaders::export::webgl_viewer(family).map_err(internal)?;
         scene.meta["program"] = serde_json::to_value(program).unwrap_or_default();
@@ -246,7 +248,7 @@ pub(crate) async fn frames(
             (PreviewModel::Vertex(_), Some(runtime)) => FrameModel::Vertex(runtime),
             (PreviewModel::Grid(model, owners), _) => FrameModel::Grid(model, owners),
             (PreviewModel::Cubemap(model, _), _) => FrameModel::Cubemap(model),
-            (PreviewModel::Vertex(_), None) => {
+            (PreviewModel::Vertex(_), None) | (PreviewModel::Texel(..), _) => {
                 return Err(ApiError::Internal(
                     "a vertex asset of another family".into(),
                 ));

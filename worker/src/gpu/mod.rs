@@ -5,6 +5,8 @@
 //! * [`VertexAo`] ([`vertex_ao`]): the vertex methods' run-time evaluation.
 //! * [`CubemapAo`] ([`cubemap_ao`]): the cubemap methods' run-time lookup.
 //! * [`GridAo`] ([`grid_ao`]): the grid method's run-time lookup.
+//! * [`TexelAo`] ([`texel_ao`]): the texel methods' basis textures,
+//!   sampled per pixel.
 //! * [`GpuTracer`] ([`trace`]): core's ray estimators in compute, the
 //!   same rays as the CPU tracer.
 //! * [`PreviewRenderer`] ([`preview`]): core's preview [`Renderer`]
@@ -22,6 +24,7 @@ use std::{
 pub mod cubemap_ao;
 pub mod grid_ao;
 pub mod preview;
+pub mod texel_ao;
 pub mod trace;
 pub mod vertex_ao;
 pub mod vertex_ao_vs;
@@ -29,6 +32,7 @@ pub mod vertex_ao_vs;
 pub use cubemap_ao::CubemapAo;
 pub use grid_ao::GridAo;
 pub use preview::PreviewRenderer;
+pub use texel_ao::TexelAo;
 pub use trace::{GpuMode, GpuTracer};
 pub use vertex_ao::VertexAo;
 pub use vertex_ao_vs::{cubemap_vertex_stage, evaluate_vertex_stage, grid_vertex_stage};

@@ -4,7 +4,10 @@
 //! as a vertex attribute (the AO never leaves the GPU), and the resolved
 //! image read back. A vertex model is evaluated on the character by
 //! [`VertexAo`]; a cubemap is looked up on the ground's vertices by
-//! [`CubemapAo`] at the frame's phase.
+//! [`CubemapAo`] at the frame's phase; a texel model's basis textures
+//! ([`TexelAo`]) are sampled per pixel of the character, drawn over its
+//! atlas's vertices, and its truth panel samples the ray-traced AO at the
+//! atlas's texels the same way.
 
 use aobake_core::bake::screen_space::{ScreenFrame, Surface};
 use aobake_core::bake::{Camera, Panel, PreviewModel, RenderFrame, RenderScene, Renderer};
@@ -14,7 +17,10 @@ use aobake_shaders::{GridReceiver, GtaoParams, PreviewUniforms};
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;
 
-use super::{CubemapAo, ErrorScopes, Gpu, GpuError, GridAo, VertexAo};
+use super::{
+    CubemapAo, ErrorScopes, Gpu, GpuError, GridAo, TexelAo, VertexAo,
+    texel_ao::{f16_bits, float_texture},
+};
 
 const COLOR: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -52,7 +58,137 @@ pub struct PreviewRenderer<'g> {
     /// Bindings 0–2 of `screen`.
     screen_layout: wgpu::BindGroupLayout,
     samples: u32,
+    /// preview.wgsl, for the texel pipelines.
+    module: wgpu::ShaderModule,
+    /// A texel model's pipelines, built on first use (a software adapter
+    /// takes seconds per pipeline, and most previews draw no texel model).
+    texel: std::sync::OnceLock<Result<TexelPipelines, GpuError>>,
 }
+
+/// The pipelines that draw a texel model's character (`vs_texel`).
+#[derive(Debug)]
+struct TexelPipelines {
+    /// Bindings 0 (uniforms), 3–5 (the model's textures and weights) and
+    /// 6 (the truth's texture).
+    layout: wgpu::BindGroupLayout,
+    /// The panels (`fs_texel`), multisampled.
+    colour: wgpu::RenderPipeline,
+    /// The G-buffer (`fs_gbuffer_texel`).
+    gbuffer: wgpu::RenderPipeline,
+}
+
+/// The vertex attributes, one buffer each: position, normal, truth,
+/// model, and (a texel model's) the atlas's UV.
+const ATTRIBUTES: [[wgpu::VertexAttribute; 1]; 5] = {
+    const fn at(shader_location: u32, format: wgpu::VertexFormat) -> [wgpu::VertexAttribute; 1] {
+        [wgpu::VertexAttribute {
+            format,
+            offset: 0,
+            shader_location,
+        }]
+    }
+    [
+        at(0, wgpu::VertexFormat::Float32x3),
+        at(1, wgpu::VertexFormat::Float32x3),
+        at(2, wgpu::VertexFormat::Float32),
+        at(3, wgpu::VertexFormat::Float32),
+        at(4, wgpu::VertexFormat::Float32x2),
+    ]
+};
+
+/// The vertex buffers of the first `count` [`ATTRIBUTES`].
+fn vertex_buffers(count: usize) -> Vec<Option<wgpu::VertexBufferLayout<'static>>> {
+    ATTRIBUTES[..count]
+        .iter()
+        .map(|a| {
+            Some(wgpu::VertexBufferLayout {
+                array_stride: a[0].format.size(),
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: a,
+            })
+        })
+        .collect()
+}
+
+/// One raster pipeline of preview.wgsl.
+struct Raster<'a> {
+    label: &'a str,
+    layout: &'a wgpu::PipelineLayout,
+    vertex: &'a str,
+    buffers: &'a [Option<wgpu::VertexBufferLayout<'static>>],
+    fragment: &'a str,
+    samples: u32,
+    targets: &'a [Option<wgpu::ColorTargetState>],
+}
+
+fn raster(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    r: Raster<'_>,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(r.label),
+        layout: Some(r.layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some(r.vertex),
+            compilation_options: Default::default(),
+            buffers: r.buffers,
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            front_face: wgpu::FrontFace::Ccw,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: wgpu::MultisampleState {
+            count: r.samples,
+            ..Default::default()
+        },
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some(r.fragment),
+            compilation_options: Default::default(),
+            targets: r.targets,
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+fn pipeline_layout(device: &wgpu::Device, group: &wgpu::BindGroupLayout) -> wgpu::PipelineLayout {
+    device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("preview"),
+        bind_group_layouts: &[Some(group)],
+        immediate_size: 0,
+    })
+}
+
+fn layout_entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+    ty: wgpu::BindingType,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty,
+        count: None,
+    }
+}
+
+const UNIFORM: wgpu::BindingType = wgpu::BindingType::Buffer {
+    ty: wgpu::BufferBindingType::Uniform,
+    has_dynamic_offset: false,
+    min_binding_size: None,
+};
 
 /// The G-buffer's targets, integer texels (renderable on every adapter,
 /// unlike float formats on GL): world position (f32 bits), surface and the
@@ -89,42 +225,10 @@ impl<'g> PreviewRenderer<'g> {
             label: Some("preview.wgsl"),
             source: wgpu::ShaderSource::Wgsl(aobake_shaders::PREVIEW.into()),
         });
-        let attribute = |location, format| {
-            [wgpu::VertexAttribute {
-                format,
-                offset: 0,
-                shader_location: location,
-            }]
-        };
-        let attributes = [
-            attribute(0, wgpu::VertexFormat::Float32x3),
-            attribute(1, wgpu::VertexFormat::Float32x3),
-            attribute(2, wgpu::VertexFormat::Float32),
-            attribute(3, wgpu::VertexFormat::Float32),
-        ];
-        let buffers: Vec<Option<wgpu::VertexBufferLayout<'_>>> = attributes
-            .iter()
-            .enumerate()
-            .map(|(i, a)| {
-                Some(wgpu::VertexBufferLayout {
-                    array_stride: if i < 2 { 12 } else { 4 },
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: a,
-                })
-            })
-            .collect();
+        let buffers = vertex_buffers(4);
         use wgpu::ShaderStages as S;
-        let entry = |binding, visibility, ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility,
-            ty,
-            count: None,
-        };
-        let uniform = wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        };
+        let entry = layout_entry;
+        let uniform = UNIFORM;
         let surface_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("preview surface"),
             entries: &[entry(0, S::VERTEX_FRAGMENT, uniform)],
@@ -145,54 +249,27 @@ impl<'g> PreviewRenderer<'g> {
                 entry(2, S::FRAGMENT, uniform),
             ],
         });
-        let layout = |group: &wgpu::BindGroupLayout| {
-            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("preview"),
-                bind_group_layouts: &[Some(group)],
-                immediate_size: 0,
-            })
-        };
-        let (surface_pipeline_layout, screen_pipeline_layout) =
-            (layout(&surface_layout), layout(&screen_layout));
+        let (surface_pipeline_layout, screen_pipeline_layout) = (
+            pipeline_layout(device, &surface_layout),
+            pipeline_layout(device, &screen_layout),
+        );
         let gbuffer_targets: Vec<Option<wgpu::ColorTargetState>> =
             GBUFFER.iter().map(|&f| Some(f.into())).collect();
         let color_targets = [Some(COLOR.into())];
-        let raster = |label, layout, entry_point, samples, targets| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
+        let raster = |label, layout, fragment, samples, targets| {
+            raster(
+                device,
+                &module,
+                Raster {
+                    label,
+                    layout,
+                    vertex: "vs_main",
                     buffers: &buffers,
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    front_face: wgpu::FrontFace::Ccw,
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: wgpu::MultisampleState {
-                    count: samples,
-                    ..Default::default()
-                },
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(entry_point),
-                    compilation_options: Default::default(),
+                    fragment,
+                    samples,
                     targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+                },
+            )
         };
         let pipeline = raster(
             "preview",
@@ -239,7 +316,78 @@ impl<'g> PreviewRenderer<'g> {
             surface_layout,
             screen_layout,
             samples,
+            module,
+            texel: std::sync::OnceLock::new(),
         })
+    }
+
+    /// The texel pipelines, built on first use.
+    fn texel_pipelines(&self) -> Result<&TexelPipelines, GpuError> {
+        self.texel
+            .get_or_init(|| {
+                let device = &self.gpu.device;
+                let scope = ErrorScopes::push(device);
+                use wgpu::ShaderStages as S;
+                let texture = |view_dimension| wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension,
+                    multisampled: false,
+                };
+                let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("preview texel"),
+                    entries: &[
+                        layout_entry(0, S::VERTEX_FRAGMENT, UNIFORM),
+                        layout_entry(3, S::FRAGMENT, texture(wgpu::TextureViewDimension::D2Array)),
+                        layout_entry(
+                            4,
+                            S::FRAGMENT,
+                            wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                        ),
+                        layout_entry(5, S::FRAGMENT, UNIFORM),
+                        layout_entry(6, S::FRAGMENT, texture(wgpu::TextureViewDimension::D2)),
+                    ],
+                });
+                let pipeline_layout = pipeline_layout(device, &layout);
+                let buffers = vertex_buffers(5);
+                let gbuffer_targets: Vec<Option<wgpu::ColorTargetState>> =
+                    GBUFFER.iter().map(|&f| Some(f.into())).collect();
+                let raster = |label, fragment, samples, targets| {
+                    raster(
+                        device,
+                        &self.module,
+                        Raster {
+                            label,
+                            layout: &pipeline_layout,
+                            vertex: "vs_texel",
+                            buffers: &buffers,
+                            fragment,
+                            samples,
+                            targets,
+                        },
+                    )
+                };
+                let pipelines = TexelPipelines {
+                    colour: raster(
+                        "preview texel",
+                        "fs_texel",
+                        self.samples,
+                        &[Some(COLOR.into())],
+                    ),
+                    gbuffer: raster(
+                        "preview texel g-buffer",
+                        "fs_gbuffer_texel",
+                        1,
+                        &gbuffer_targets,
+                    ),
+                    layout,
+                };
+                match scope.pop() {
+                    Some(e) => Err(GpuError::Pipeline(e.to_string())),
+                    None => Ok(pipelines),
+                }
+            })
+            .as_ref()
+            .map_err(Clone::clone)
     }
 
     /// Samples per pixel of the target (4, or 1 where the adapter cannot).
@@ -303,6 +451,17 @@ enum Evaluator<'g> {
     /// The grids, their model (for the static base's offsets) and each
     /// character vertex's part.
     Grid(GridAo<'g>, &'g GridModel, &'g [u32]),
+    /// A texel model's textures, and what its character is drawn with.
+    Texel(TexelAo<'g>, TexelStage<'g>),
+}
+
+/// A texel model's character: drawn over its atlas's vertices (each a
+/// character vertex, `xref`), with the truth at the atlas's texels in a
+/// texture rewritten per frame.
+struct TexelStage<'s> {
+    atlas: &'s aobake_core::method::texel::AtlasLayout,
+    truth: wgpu::Texture,
+    truth_view: wgpu::TextureView,
 }
 
 /// Vertex buffers of one surface.
@@ -311,12 +470,17 @@ struct Mesh {
     normals: wgpu::Buffer,
     truth: wgpu::Buffer,
     model: wgpu::Buffer,
+    /// A texel model's character: the atlas's UVs (attribute 4).
+    uvs: Option<wgpu::Buffer>,
     indices: wgpu::Buffer,
     index_count: u32,
 }
 
 impl Mesh {
     fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
+        if let Some(uvs) = &self.uvs {
+            pass.set_vertex_buffer(4, uvs.slice(..));
+        }
         pass.set_vertex_buffer(0, self.positions.slice(..));
         pass.set_vertex_buffer(1, self.normals.slice(..));
         pass.set_vertex_buffer(2, self.truth.slice(..));
@@ -423,7 +587,7 @@ impl<'g> PreviewRenderer<'g> {
         let device = &gpu.device;
         let vertices = match scene.model {
             PreviewModel::Vertex(m) => m.vertices(),
-            PreviewModel::Cubemap(..) | PreviewModel::Grid(..) => {
+            PreviewModel::Cubemap(..) | PreviewModel::Grid(..) | PreviewModel::Texel(..) => {
                 frames.first().map_or(0, |f| f.positions.len())
             }
         };
@@ -436,6 +600,15 @@ impl<'g> PreviewRenderer<'g> {
                 return Err(GpuError::TooLarge(format!(
                     "a frame has {} positions for a model of {vertices} vertices",
                     f.positions.len()
+                )));
+            }
+            if let PreviewModel::Texel(m, _) = scene.model
+                && f.texel_truth.len() != m.atlas.texels.len()
+            {
+                return Err(GpuError::TooLarge(format!(
+                    "a frame's truth holds {} texels for an atlas of {}",
+                    f.texel_truth.len(),
+                    m.atlas.texels.len()
                 )));
             }
             if f.ground_ao.len() != g.positions.len() {
@@ -458,12 +631,49 @@ impl<'g> PreviewRenderer<'g> {
                 }
                 Evaluator::Grid(GridAo::new(gpu, m)?, m, owners)
             }
+            PreviewModel::Texel(m, _) => {
+                let atlas = &m.atlas;
+                if atlas.xref.iter().any(|&x| x as usize >= vertices)
+                    || atlas.triangles.len() != scene.triangles.len()
+                {
+                    return Err(GpuError::TooLarge(format!(
+                        "an atlas over {} triangles for a character of {} triangles and {vertices} vertices",
+                        atlas.triangles.len(),
+                        scene.triangles.len()
+                    )));
+                }
+                let size = (atlas.width, atlas.height);
+                let truth = float_texture(
+                    gpu,
+                    "texel truth",
+                    size,
+                    1,
+                    &vec![0; (size.0 * size.1) as usize],
+                    wgpu::TextureUsages::COPY_DST,
+                );
+                let truth_view = truth.create_view(&Default::default());
+                Evaluator::Texel(
+                    TexelAo::new(gpu, m)?,
+                    TexelStage {
+                        atlas,
+                        truth,
+                        truth_view,
+                    },
+                )
+            }
         };
+        let texel = match &evaluator {
+            Evaluator::Texel(_, t) => Some(t.atlas),
+            _ => None,
+        };
+        // The character's vertices as drawn: a texel model's atlas
+        // vertices, else the character's.
+        let drawn = texel.map_or(vertices, |a| a.xref.len());
         let cubemap = matches!(evaluator, Evaluator::Cubemap(_));
         let grid = matches!(evaluator, Evaluator::Grid(..));
         use wgpu::BufferUsages as U;
         let dynamic = U::VERTEX | U::COPY_DST;
-        let n = vertices.max(1) as u64;
+        let n = drawn.max(1) as u64;
         let buffer = |label, size, usage| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -472,18 +682,32 @@ impl<'g> PreviewRenderer<'g> {
                 mapped_at_creation: false,
             })
         };
-        let indices: Vec<u32> = scene.triangles.iter().flatten().copied().collect();
+        let triangles = texel.map_or(scene.triangles, |a| &a.triangles);
+        let indices: Vec<u32> = triangles.iter().flatten().copied().collect();
         let truth = buffer("truth", 4 * n, dynamic);
         let character = Mesh {
             positions: buffer("positions", 12 * n, dynamic),
             normals: buffer("normals", 12 * n, dynamic),
-            // A cubemap does not shade the character: ray-traced in both.
-            model: if cubemap {
+            // A cubemap does not shade the character: ray-traced in both;
+            // a texel model shades it from its textures.
+            model: if cubemap || texel.is_some() {
                 truth.clone()
             } else {
                 buffer("model ao", 4 * n, U::VERTEX | U::STORAGE)
             },
             truth,
+            uvs: texel.map(|a| {
+                init(
+                    device,
+                    "atlas uvs",
+                    bytemuck::cast_slice(if a.uvs.is_empty() {
+                        &[[0.0f32; 2]]
+                    } else {
+                        &a.uvs
+                    }),
+                    U::VERTEX,
+                )
+            }),
             indices: init(
                 device,
                 "indices",
@@ -547,6 +771,7 @@ impl<'g> PreviewRenderer<'g> {
             ),
             truth: ground_ao,
             model: ground_model,
+            uvs: None,
             indices: init(
                 device,
                 "ground indices",
@@ -575,9 +800,26 @@ impl<'g> PreviewRenderer<'g> {
     ) -> Result<(), GpuError> {
         let queue = &self.gpu.queue;
         let c = &stage.character;
-        queue.write_buffer(&c.positions, 0, bytemuck::cast_slice(&frame.positions));
-        queue.write_buffer(&c.normals, 0, bytemuck::cast_slice(&frame.normals));
-        queue.write_buffer(&c.truth, 0, bytemuck::cast_slice(&frame.truth));
+        match &stage.evaluator {
+            // Per atlas vertex, its character vertex's.
+            Evaluator::Texel(_, t) => {
+                fn expand<T: Copy>(xref: &[u32], values: &[T]) -> Vec<T> {
+                    xref.iter().map(|&x| values[x as usize]).collect()
+                }
+                let xref = &t.atlas.xref;
+                let positions = expand(xref, &frame.positions);
+                queue.write_buffer(&c.positions, 0, bytemuck::cast_slice(&positions));
+                let normals = expand(xref, &frame.normals);
+                queue.write_buffer(&c.normals, 0, bytemuck::cast_slice(&normals));
+                let truth = expand(xref, &frame.truth);
+                queue.write_buffer(&c.truth, 0, bytemuck::cast_slice(&truth));
+            }
+            _ => {
+                queue.write_buffer(&c.positions, 0, bytemuck::cast_slice(&frame.positions));
+                queue.write_buffer(&c.normals, 0, bytemuck::cast_slice(&frame.normals));
+                queue.write_buffer(&c.truth, 0, bytemuck::cast_slice(&frame.truth));
+            }
+        }
         queue.write_buffer(
             &stage.ground.truth,
             0,
@@ -585,6 +827,26 @@ impl<'g> PreviewRenderer<'g> {
         );
         match &stage.evaluator {
             Evaluator::Vertex(e) => e.record(encoder, &frame.weights, &c.model),
+            Evaluator::Texel(e, t) => {
+                e.write_weights(&frame.weights)?;
+                let a = t.atlas;
+                let image = a.image(&frame.texel_truth);
+                queue.write_texture(
+                    t.truth.as_image_copy(),
+                    bytemuck::cast_slice(&f16_bits(&image)),
+                    wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(2 * a.width),
+                        rows_per_image: Some(a.height),
+                    },
+                    wgpu::Extent3d {
+                        width: a.width,
+                        height: a.height,
+                        depth_or_array_layers: 1,
+                    },
+                );
+                Ok(())
+            }
             Evaluator::Cubemap(e) => e.record(
                 encoder,
                 &stage.ground_positions,
@@ -628,13 +890,15 @@ impl<'g> PreviewRenderer<'g> {
         }
     }
 
-    /// The bind group of one surface of one panel.
+    /// The bind group of one surface of one panel: a texel model's
+    /// character's also binds its textures.
     fn surface_group(
         &self,
         scene: &RenderScene<'_>,
+        stage: &Stage<'_>,
         panel: Panel,
         ground: bool,
-    ) -> wgpu::BindGroup {
+    ) -> Result<wgpu::BindGroup, GpuError> {
         let device = &self.gpu.device;
         let u = init(
             device,
@@ -642,13 +906,40 @@ impl<'g> PreviewRenderer<'g> {
             bytemuck::bytes_of(&Self::uniforms(scene, panel, ground)),
             wgpu::BufferUsages::UNIFORM,
         );
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let mut entries = vec![wgpu::BindGroupEntry {
+            binding: 0,
+            resource: u.as_entire_binding(),
+        }];
+        let layout = match &stage.evaluator {
+            Evaluator::Texel(e, t) if !ground => {
+                entries.extend(e.entries());
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: wgpu::BindingResource::TextureView(&t.truth_view),
+                });
+                &self.texel_pipelines()?.layout
+            }
+            _ => &self.surface_layout,
+        };
+        Ok(device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("preview"),
-            layout: &self.surface_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: u.as_entire_binding(),
-            }],
+            layout,
+            entries: &entries,
+        }))
+    }
+
+    /// The pipelines the character is drawn with: a texel model's
+    /// (colour, G-buffer), or the others'.
+    fn character_pipelines(
+        &self,
+        stage: &Stage<'_>,
+    ) -> Result<(&wgpu::RenderPipeline, &wgpu::RenderPipeline), GpuError> {
+        Ok(match stage.evaluator {
+            Evaluator::Texel(..) => {
+                let t = self.texel_pipelines()?;
+                (&t.colour, &t.gbuffer)
+            }
+            _ => (&self.pipeline, &self.gbuffer),
         })
     }
 
@@ -773,6 +1064,7 @@ impl<'g> PreviewRenderer<'g> {
         stage: &Stage<'_>,
         screen: &ScreenPass,
         groups: &(wgpu::BindGroup, wgpu::BindGroup),
+        character: &wgpu::RenderPipeline,
         encoder: &mut wgpu::CommandEncoder,
     ) {
         let attachments: Vec<Option<wgpu::RenderPassColorAttachment<'_>>> = screen
@@ -801,6 +1093,7 @@ impl<'g> PreviewRenderer<'g> {
         pass.set_pipeline(&self.gbuffer);
         pass.set_bind_group(0, &groups.1, &[]);
         stage.ground.draw(&mut pass);
+        pass.set_pipeline(character);
         pass.set_bind_group(0, &groups.0, &[]);
         stage.character.draw(&mut pass);
     }
@@ -830,12 +1123,13 @@ impl<'g> PreviewRenderer<'g> {
         let groups: Vec<(wgpu::BindGroup, wgpu::BindGroup)> = panels
             .iter()
             .map(|&p| {
-                (
-                    self.surface_group(scene, p, false),
-                    self.surface_group(scene, p, true),
-                )
+                Ok((
+                    self.surface_group(scene, &stage, p, false)?,
+                    self.surface_group(scene, &stage, p, true)?,
+                ))
             })
-            .collect();
+            .collect::<Result<_, GpuError>>()?;
+        let (colour, gbuffer) = self.character_pipelines(&stage)?;
         let screen = panels
             .contains(&Panel::ScreenSpace)
             .then(|| self.screen_pass(scene));
@@ -874,7 +1168,7 @@ impl<'g> PreviewRenderer<'g> {
                 device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
             self.evaluate(&stage, frame, &mut encoder)?;
             if let Some(screen) = &screen {
-                self.record_gbuffer(&stage, screen, &groups[0], &mut encoder);
+                self.record_gbuffer(&stage, screen, &groups[0], gbuffer, &mut encoder);
                 self.record_gtao(screen, &mut encoder);
             }
             for (k, (&panel, (on_character, on_ground))) in panels.iter().zip(&groups).enumerate() {
@@ -915,6 +1209,7 @@ impl<'g> PreviewRenderer<'g> {
                             pass.set_pipeline(&self.pipeline);
                             pass.set_bind_group(0, on_ground, &[]);
                             stage.ground.draw(&mut pass);
+                            pass.set_pipeline(colour);
                             pass.set_bind_group(0, on_character, &[]);
                         }
                     }
@@ -980,9 +1275,10 @@ impl<'g> PreviewRenderer<'g> {
         let scope = ErrorScopes::push(device);
         let stage = self.stage(scene, frames)?;
         let groups = (
-            self.surface_group(scene, Panel::Model, false),
-            self.surface_group(scene, Panel::Model, true),
+            self.surface_group(scene, &stage, Panel::Model, false)?,
+            self.surface_group(scene, &stage, Panel::Model, true)?,
         );
+        let (_, gbuffer) = self.character_pipelines(&stage)?;
         let screen = self.screen_pass(scene);
         let pixels = (width * height) as usize;
         // Rows of the G-buffer's copies, then GTAO's output.
@@ -1009,7 +1305,7 @@ impl<'g> PreviewRenderer<'g> {
             self.evaluate(&stage, frame, &mut encoder)?;
             let model_ms = self.timed(encoder)?;
             let mut encoder = new_encoder();
-            self.record_gbuffer(&stage, &screen, &groups, &mut encoder);
+            self.record_gbuffer(&stage, &screen, &groups, gbuffer, &mut encoder);
             self.timed(encoder)?;
             let mut encoder = new_encoder();
             self.record_gtao(&screen, &mut encoder);

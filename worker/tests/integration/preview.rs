@@ -680,3 +680,115 @@ fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
         "and bring it closer to the truth"
     );
 }
+
+/// A texel-linear bake's previews: the truth at the atlas's texels traced
+/// by its `preview-truth` jobs, the model drawn per pixel from its basis
+/// textures (byte for byte what `aobake preview` renders from the asset),
+/// judged per pixel; and the shader's textures weighted as the runtime's.
+#[test]
+fn a_texel_bakes_previews_draw_its_textures_per_pixel() {
+    use aobake_core::{
+        asset::Container,
+        bake::{Bake, BakedAsset, PreviewModel, bake_in_process},
+        method::texel::TexelModel,
+    };
+    use aobake_worker::gpu::TexelAo;
+    let inputs = test_inputs("characters/RiggedFigure/RiggedFigure.glb");
+    let mut p = BakeParams::new(Method::TexelLinear);
+    p.poses = 48;
+    p.samples = 16;
+    p.eval_poses = 4;
+    p.texel.atlas = 128;
+    let bake = Bake::new(&inputs, p).unwrap();
+    let mut r = renderer();
+    let baked = bake_in_process(&bake, Some(&mut r)).unwrap();
+    previews_match_one_go(&bake, &baked, &mut r);
+    let still = &baked.previews[0].0;
+    let screen = still.screen_space.as_ref().unwrap();
+    eprint!("{}", screen.summary());
+    let on_character = screen.character.as_ref().unwrap();
+    let model = on_character
+        .model
+        .expect("a texel model is judged per pixel");
+    let floor = on_character.texel_truth.expect("its texel floor beside it");
+    assert_eq!(screen.atlas.as_ref().unwrap().width, 128);
+    assert!(
+        screen.ground.as_ref().unwrap().model.is_none(),
+        "a texel model does not shade the ground"
+    );
+    // The fitted model sits near the floor of its own atlas, and both are
+    // far closer to per-pixel AO than a closed or open surface would be.
+    assert!(
+        model.rmse < floor.rmse + 0.05 && model.rmse < 0.15,
+        "model {} against its floor {}",
+        model.rmse,
+        floor.rmse
+    );
+
+    // The shader's sum over the basis textures is the runtime's: exact at
+    // texel centres (the textures hold the asset's f16 coefficients), and
+    // the bilinear blend between them.
+    let container = Container::from_bytes(&baked.asset).unwrap();
+    let (texel, _) = TexelModel::from_container(&container, None).unwrap();
+    let c = &inputs.character;
+    let clip = &inputs.clips[0];
+    let pose = aobake_core::Pose::sample(&c.skeleton, clip, 0.3 * clip.duration);
+    let w = texel.model.weights(&c.skeleton, &pose.locals);
+    let basis: Vec<Vec<f32>> = texel
+        .basis()
+        .unwrap()
+        .into_iter()
+        .map(|l| {
+            l.into_iter()
+                .map(|v| half::f16::from_f32(v).to_f32())
+                .collect()
+        })
+        .collect();
+    let (width, height) = (texel.atlas.width, texel.atlas.height);
+    let cpu = |uv: [f32; 2]| -> f32 {
+        let sum: f32 = basis
+            .iter()
+            .zip(&w)
+            .map(|(layer, wk)| {
+                wk * aobake_core::method::texel::atlas::bilinear(layer, width, height, uv.into())
+            })
+            .sum();
+        sum.clamp(0.0, 1.0)
+    };
+    let gpu = TexelAo::new(r.gpu(), &texel).unwrap();
+    assert_eq!(gpu.layers() as usize, w.len());
+    let values = texel.model.evaluate_weights(&w);
+    for (offset, tolerance) in [([0.0, 0.0], 1e-5), ([0.3, -0.45], 2e-2)] {
+        let drawn = gpu.evaluate(&w, offset).unwrap();
+        assert_eq!(drawn.len(), (width * height) as usize);
+        let mut worst = 0.0f32;
+        for y in 0..height {
+            for x in 0..width {
+                let uv = [
+                    (x as f32 + 0.5 + offset[0]) / width as f32,
+                    (y as f32 + 0.5 + offset[1]) / height as f32,
+                ];
+                worst = worst.max((drawn[(y * width + x) as usize] - cpu(uv)).abs());
+            }
+        }
+        assert!(worst <= tolerance, "offset {offset:?}: {worst}");
+    }
+    // At the texels themselves, the model's own values (f16 coefficients).
+    let centres = gpu.evaluate(&w, [0.0, 0.0]).unwrap();
+    for (column, &t) in texel.atlas.texels.iter().enumerate() {
+        let d = (centres[t as usize] - values[column]).abs();
+        assert!(
+            d < 1e-4,
+            "texel {t}: {} against {}",
+            centres[t as usize],
+            values[column]
+        );
+    }
+
+    // The asset read with its character previews as a texel model.
+    let asset = BakedAsset::read(&container, Some(c)).unwrap();
+    assert!(matches!(
+        asset.preview_model().unwrap().0,
+        PreviewModel::Texel(..)
+    ));
+}

@@ -57,6 +57,12 @@ pub struct AtlasOptions {
     pub padding: u32,
 }
 
+/// Texel centres per texel of the page that an atlas's walks may visit
+/// ([`Atlas::check_walk`]).
+const WALK_PER_TEXEL: f64 = 64.0;
+/// Texel centres per triangle that an atlas's walks may visit besides.
+const WALK_PER_TRIANGLE: f64 = 32.0;
+
 impl Default for AtlasOptions {
     fn default() -> Self {
         Self {
@@ -119,6 +125,24 @@ pub enum AtlasError {
         /// The two triangles.
         triangles: [u32; 2],
     },
+    /// The triangles' UVs cover the page many times over (UVs that stack
+    /// triangles on one another): finding their texels would cost too
+    /// much.
+    #[error(
+        "the UVs' triangles cover {boxes:.0} texel centres of a page of {page}: they stack many times over, as no atlas does"
+    )]
+    Overdrawn {
+        /// Texel centres the triangles' boxes (with reach) hold, summed.
+        boxes: f64,
+        /// Texels of the page.
+        page: u64,
+    },
+    /// A texel asset's atlas places its columns on other texels than
+    /// its UVs give.
+    #[error(
+        "the asset's texels are not the ones its atlas's UVs give (written by another atlas version, or edited)"
+    )]
+    Texels,
     /// The charts did not fit one page.
     #[error(
         "the charts need {pages} pages of {size} texels: use a larger atlas (each chart needs {padding} texels of padding)"
@@ -249,6 +273,7 @@ impl Atlas {
             uvs: uvs.to_vec(),
             triangles: triangles.to_vec(),
         };
+        atlas.check_walk()?;
         match atlas.overlap(positions) {
             Some((texel, triangles)) => Err(AtlasError::Overlap {
                 set,
@@ -282,6 +307,32 @@ impl Atlas {
             ControlFlow::Continue(())
         });
         found.map(|(i, triangles)| ([(i % w) as u32, (i / w) as u32], triangles))
+    }
+
+    /// Refuses an atlas whose texel walks ([`Atlas::walk_centres`], with
+    /// up to a diagonal's reach) would visit more than
+    /// [`WALK_PER_TEXEL`] centres per texel of the page, plus
+    /// [`WALK_PER_TRIANGLE`] per triangle: real atlases visit a few per
+    /// texel; a hostile one stacking every triangle over the page would
+    /// cost triangles × page.
+    fn check_walk(&self) -> Result<(), AtlasError> {
+        let reach = std::f32::consts::SQRT_2;
+        let (w, h) = (self.width as f64, self.height as f64);
+        let mut boxes = 0.0f64;
+        for t in 0..self.triangles.len() {
+            let [a, b, c] = self.corners(t);
+            let lo = (a.min(b).min(c) - Vec2::splat(reach)).max(Vec2::ZERO);
+            let hi = (a.max(b).max(c) + Vec2::splat(reach)).min(Vec2::new(w as f32, h as f32));
+            let side = (hi - lo).max(Vec2::ZERO);
+            boxes += f64::from(side.x + 1.0) * f64::from(side.y + 1.0);
+        }
+        let page = self.width as u64 * self.height as u64;
+        let budget = WALK_PER_TEXEL * page as f64 + WALK_PER_TRIANGLE * self.triangles.len() as f64;
+        // A box that is not a number is refused too.
+        if boxes.is_nan() || boxes > budget {
+            return Err(AtlasError::Overdrawn { boxes, page });
+        }
+        Ok(())
     }
 
     /// Walks the texel centres within `reach` texels of each triangle with
@@ -415,6 +466,31 @@ impl TexelAtlas {
         options: &AtlasOptions,
     ) -> Result<Self, AtlasError> {
         Self::generate(&rest_positions(character), &character.triangles, options)
+    }
+
+    /// The atlas a texel asset stores, with its texels: they must be the
+    /// asset's columns (`layout.texels`), as the bake that wrote it found
+    /// them. How a texel asset is previewed and judged per pixel.
+    pub fn from_layout(layout: &AtlasLayout) -> Result<Self, AtlasError> {
+        let atlas = Atlas {
+            width: layout.width,
+            height: layout.height,
+            charts: islands(&layout.triangles, layout.xref.len()),
+            xref: layout.xref.clone(),
+            uvs: layout.uvs.iter().map(|&uv| Vec2::from(uv)).collect(),
+            triangles: layout.triangles.clone(),
+        };
+        atlas.check_walk()?;
+        let texels = atlas.texels();
+        if !texels
+            .texels
+            .iter()
+            .map(|t| t.index)
+            .eq(layout.texels.iter().copied())
+        {
+            return Err(AtlasError::Texels);
+        }
+        Ok(Self { atlas, texels })
     }
 
     /// The atlas of a UV set of the mesh's own ([`Atlas::from_uv_set`])
@@ -795,6 +871,48 @@ mod tests {
             message.contains("TEXCOORD_1") && message.contains("uv_set"),
             "{message}"
         );
+    }
+
+    #[test]
+    fn an_assets_layout_gives_back_its_atlas_and_an_edited_one_is_refused() {
+        let (positions, triangles) = cube();
+        let options = AtlasOptions {
+            size: 64,
+            padding: 2,
+        };
+        let made = TexelAtlas::generate(&positions, &triangles, &options).unwrap();
+        let layout = made.layout();
+        let back = TexelAtlas::from_layout(&layout).unwrap();
+        assert_eq!(back.texels, made.texels);
+        assert_eq!(back.layout(), layout);
+        // Columns on other texels than the UVs give.
+        let mut moved = layout.clone();
+        moved.texels.swap(0, 1);
+        assert_eq!(TexelAtlas::from_layout(&moved), Err(AtlasError::Texels));
+        let mut shrunk = layout;
+        shrunk.uvs.iter_mut().for_each(|uv| uv[0] *= 0.5);
+        assert_eq!(TexelAtlas::from_layout(&shrunk), Err(AtlasError::Texels));
+    }
+
+    #[test]
+    fn uvs_that_stack_triangles_over_the_page_are_refused_before_the_walk() {
+        // 400 triangles, each over half the page, each its own place.
+        let n = 400;
+        let positions: Vec<Vec3> = (0..3 * n)
+            .map(|i| Vec3::new(i as f32, (i % 3) as f32, 0.0))
+            .collect();
+        let triangles: Vec<[u32; 3]> = (0..n as u32)
+            .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+            .collect();
+        let uvs: Vec<Vec2> = (0..n)
+            .flat_map(|_| [Vec2::ZERO, Vec2::X, Vec2::Y])
+            .collect();
+        let e = Atlas::from_uv_set(&positions, &triangles, (0, &uvs), 16).unwrap_err();
+        assert!(matches!(e, AtlasError::Overdrawn { page: 256, .. }), "{e}");
+        assert!(e.to_string().contains("stack"), "{e}");
+        // A few stacked triangles cost little: found as an overlap.
+        let few = Atlas::from_uv_set(&positions[..6], &triangles[..2], (0, &uvs[..6]), 16);
+        assert!(matches!(few, Err(AtlasError::Overlap { .. })), "{few:?}");
     }
 
     #[test]

@@ -193,6 +193,68 @@ impl TexelModel {
     }
 }
 
+/// Why a texel model has no basis textures.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum BasisError {
+    /// Its coefficients are sparse (a vertex-linear fit with a
+    /// threshold): rows with holes, not textures.
+    #[error("a sparse texel model has no basis textures (bake with linear.threshold 0)")]
+    Sparse,
+    /// A block's columns are clusters of texels, not texels.
+    #[error("a texel model with clustered columns has no basis textures")]
+    Clustered,
+    /// More texture values than a reader should allocate.
+    #[error(
+        "{layers} textures of {width} × {height} texels are more than the {max} values a reader allocates"
+    )]
+    TooLarge {
+        /// Textures (weights).
+        layers: usize,
+        /// Texels per row.
+        width: u32,
+        /// Rows.
+        height: u32,
+        /// The most values allowed.
+        max: u64,
+    },
+}
+
+/// The most values [`TexelModel::basis`] makes (4 GB of f32): 64 textures
+/// of 4096² fit; a hostile header cannot ask for hundreds of GB.
+pub const MAX_BASIS_VALUES: u64 = 1 << 30;
+
+impl TexelModel {
+    /// The basis textures an engine samples, one per weight in weight
+    /// order: coefficient row k scattered into the atlas and dilated
+    /// ([`AtlasLayout::image`]), `width × height` row-major. Per pixel
+    /// `ao = clamp(Σ_k w_k · basis_k(uv), 0, 1)` with the pose's weights
+    /// ([`Model::weights`]), bilinear filtering commuting with the sum.
+    pub fn basis(&self) -> Result<Vec<Vec<f32>>, BasisError> {
+        let crate::method::vertex::FormRef::Dense(form) = self.model.form() else {
+            return Err(BasisError::Sparse);
+        };
+        let a = &self.atlas;
+        let layers = form.weight_count();
+        if layers as u64 * u64::from(a.width) * u64::from(a.height) > MAX_BASIS_VALUES {
+            return Err(BasisError::TooLarge {
+                layers,
+                width: a.width,
+                height: a.height,
+                max: MAX_BASIS_VALUES,
+            });
+        }
+        if form.blocks.iter().any(|b| b.map.is_some()) {
+            return Err(BasisError::Clustered);
+        }
+        Ok(form
+            .blocks
+            .iter()
+            .flat_map(|b| b.coefficients.chunks_exact(b.columns.max(1)))
+            .map(|row| a.image(&row.iter().map(|c| c.to_f32()).collect::<Vec<f32>>()))
+            .collect())
+    }
+}
+
 /// The `width × height` texture with `values[i]` at texel `texels[i]`
 /// (`row × width + column`) and every other texel dilated from them
 /// ([`dilate`]).
