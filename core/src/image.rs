@@ -50,6 +50,8 @@ fn png_error(e: png::EncodingError) -> ImageError {
 /// [`Image`]s: one, or an animation's frames with seconds per frame.
 enum Pixels<'a> {
     Rgb(&'a [u8]),
+    /// Grey samples: bytes at 8 bits, big-endian pairs at 16.
+    Grey(&'a [u8], png::BitDepth),
     Rgba(&'a [Image], Option<f32>),
 }
 
@@ -62,6 +64,10 @@ fn encode(pixels: Pixels<'_>, width: u32, height: u32) -> Result<Vec<u8>, ImageE
         e.set_depth(png::BitDepth::Eight);
         match &pixels {
             Pixels::Rgb(_) => e.set_color(png::ColorType::Rgb),
+            Pixels::Grey(_, depth) => {
+                e.set_color(png::ColorType::Grayscale);
+                e.set_depth(*depth);
+            }
             Pixels::Rgba(frames, animation) => {
                 e.set_color(png::ColorType::Rgba);
                 e.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
@@ -74,7 +80,9 @@ fn encode(pixels: Pixels<'_>, width: u32, height: u32) -> Result<Vec<u8>, ImageE
         }
         let mut w = e.write_header().map_err(png_error)?;
         match pixels {
-            Pixels::Rgb(rgb) => w.write_image_data(rgb).map_err(png_error)?,
+            Pixels::Rgb(rgb) | Pixels::Grey(rgb, _) => {
+                w.write_image_data(rgb).map_err(png_error)?
+            }
             Pixels::Rgba(frames, _) => {
                 for f in frames {
                     w.write_image_data(&f.rgba).map_err(png_error)?;
@@ -89,6 +97,25 @@ fn encode(pixels: Pixels<'_>, width: u32, height: u32) -> Result<Vec<u8>, ImageE
 /// An RGB8 image as PNG bytes.
 pub(crate) fn encode_rgb_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>, ImageError> {
     encode(Pixels::Rgb(rgb), width, height)
+}
+
+/// A grey PNG of 8-bit samples, row-major.
+pub(crate) fn encode_grey8_png(
+    samples: &[u8],
+    width: u32,
+    height: u32,
+) -> Result<Vec<u8>, ImageError> {
+    encode(Pixels::Grey(samples, png::BitDepth::Eight), width, height)
+}
+
+/// A grey PNG of 16-bit samples, row-major.
+pub(crate) fn encode_grey16_png(
+    samples: &[u16],
+    width: u32,
+    height: u32,
+) -> Result<Vec<u8>, ImageError> {
+    let bytes: Vec<u8> = samples.iter().flat_map(|s| s.to_be_bytes()).collect();
+    encode(Pixels::Grey(&bytes, png::BitDepth::Sixteen), width, height)
 }
 
 /// A PNG of one image.

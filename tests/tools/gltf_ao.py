@@ -15,6 +15,13 @@ sampled from the clip (STEP, LINEAR with slerp for rotations, CUBICSPLINE);
 the other nodes keep theirs. The weights: the asset's per-pose step from
 `extras.aobake` (`layout`, `sections`); the AO: per vertex
 `clamp(sum_j w_j * row_j(v), 0, 1)` with the rows in `_AO_BASIS_k`.
+
+A texel asset's export (`extras.aobake.family` "texel") holds the rows as
+16-bit grey PNG images instead (`extras.aobake.basis`: image, offset,
+scale); the AO of a vertex is then `clamp(sum_j w_j * basis_j(uv), 0, 1)`,
+each basis filtered bilinearly at the UV (`TEXCOORD_<texcoord>`) of the
+first exported vertex that is that vertex (`vertex_of`), as `aobake eval`
+samples it. The PNGs are decoded here too (zlib and the five filters).
 """
 
 import argparse
@@ -22,6 +29,7 @@ import json
 import math
 import struct
 import sys
+import zlib
 
 F32 = struct.Struct("<f")
 
@@ -382,6 +390,87 @@ def weights(meta, gltf, locals_, rest):
     return w
 
 
+def png_grey(data):
+    """A non-interlaced grey PNG (8 or 16 bits): width, height, samples."""
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        sys.exit("an image is not a PNG")
+    at, idat, header = 8, b"", None
+    while at < len(data):
+        length, kind = struct.unpack_from(">I4s", data, at)
+        body = data[at + 8 : at + 8 + length]
+        if kind == b"IHDR":
+            header = struct.unpack(">IIBBBBB", body)
+        elif kind == b"IDAT":
+            idat += body
+        at += 12 + length
+    width, height, depth, colour, _compression, _filter, interlace = header
+    if colour != 0 or interlace != 0 or depth not in (8, 16):
+        sys.exit("an image is not a plain grey PNG")
+    bpp = depth // 8
+    stride = width * bpp
+    raw = zlib.decompress(idat)
+    prev = bytearray(stride)
+    samples = []
+    for y in range(height):
+        kind = raw[y * (stride + 1)]
+        line = bytearray(raw[y * (stride + 1) + 1 : (y + 1) * (stride + 1)])
+        for i in range(stride):
+            a = line[i - bpp] if i >= bpp else 0
+            b = prev[i]
+            c = prev[i - bpp] if i >= bpp else 0
+            if kind == 1:
+                line[i] = (line[i] + a) & 255
+            elif kind == 2:
+                line[i] = (line[i] + b) & 255
+            elif kind == 3:
+                line[i] = (line[i] + (a + b) // 2) & 255
+            elif kind == 4:
+                p = a + b - c
+                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+                line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
+        samples.extend(struct.unpack(f">{width}H", line) if depth == 16 else line)
+        prev = line
+    return width, height, samples
+
+
+def image(gltf, binary, index):
+    view = gltf["bufferViews"][gltf["images"][index]["bufferView"]]
+    at = view.get("byteOffset", 0)
+    return png_grey(binary[at : at + view["byteLength"]])
+
+
+def bilinear(values, width, height, u, v):
+    """A linear sampler's filtering, clamped to the edge (centres at halves)."""
+    x, y = u * width - 0.5, v * height - 0.5
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+
+    def at(xi, yi):
+        return values[min(max(yi, 0), height - 1) * width + min(max(xi, 0), width - 1)]
+
+    top = at(x0, y0) * (1 - fx) + at(x0 + 1, y0) * fx
+    bottom = at(x0, y0 + 1) * (1 - fx) + at(x0 + 1, y0 + 1) * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def texel_ao(meta, gltf, binary, w):
+    """Per vertex of aobake's order: the texel textures at its UV."""
+    basis = []
+    for layer in meta["basis"]:
+        width, height, samples = image(gltf, binary, layer["image"])
+        basis.append([layer["offset"] + layer["scale"] * q / 65535.0 for q in samples])
+    out = {}
+    for p in meta["primitives"]:
+        attributes = gltf["meshes"][p["mesh"]]["primitives"][p["primitive"]]["attributes"]
+        uvs = accessor(gltf, binary, attributes[f"TEXCOORD_{p['texcoord']}"])
+        vertex_of = accessor(gltf, binary, p["vertex_of"])
+        for (x,), (u, v) in zip(vertex_of, uvs):
+            if x not in out:
+                ao = sum(wj * bilinear(b, width, height, u, v) for wj, b in zip(w, basis))
+                out[x] = min(max(ao, 0.0), 1.0)
+    return out
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("file")
@@ -400,6 +489,11 @@ def main():
     # The weights as an engine uploads them: single precision.
     w = [f32(x) for x in weights(meta, gltf, locals_, rest)]
     print("index,occlusion")
+    if meta.get("family") == "texel":
+        ao = texel_ao(meta, gltf, binary, w)
+        for x in range(meta["vertices"]):
+            print(f"{x},{ao.get(x, 0.0)!r}")
+        return
     for p in meta["primitives"]:
         attributes = gltf["meshes"][p["mesh"]]["primitives"][p["primitive"]]["attributes"]
         if meta["basis"]:

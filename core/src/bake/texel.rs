@@ -22,11 +22,13 @@ use super::{JobError, jobs::decode_with};
 
 /// Why a published texel asset cannot serve a character (`bake::family`
 /// turns it into its `AssetUseError`).
-#[derive(Debug, Clone, PartialEq)]
-pub(super) enum Refusal {
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub(crate) enum Refusal {
     /// Its header or sections do not decode.
+    #[error("{0}")]
     Unreadable(String),
     /// It was baked for another character: what differs.
+    #[error("{0}")]
     Mismatch(String),
 }
 
@@ -58,7 +60,7 @@ pub(super) fn decode(bytes: &[u8]) -> Result<TexelModel, JobError> {
 
 /// A published texel asset read and, with `character`, checked against
 /// it: its joints, and an atlas over its vertices and triangles.
-pub(super) fn read(
+pub(crate) fn read(
     container: &Container,
     character: Option<&Character>,
 ) -> Result<(TexelModel, crate::method::vertex::AssetHeader), Refusal> {
@@ -102,15 +104,32 @@ pub(super) fn read(
     Ok((model, header))
 }
 
-/// AO at each vertex of `character` in `pose`, as an engine's sampler
-/// reads the texel model's texture there (at the UV of the vertex's first
-/// atlas vertex; 0 for a vertex of no triangle).
+/// AO at each vertex of `character` in `pose`, as the texel shader reads
+/// it there: the basis textures weighted and summed, filtered at the UV
+/// of the vertex's first atlas vertex that a triangle uses, then clamped
+/// (0 for a vertex of no triangle).
 pub(super) fn vertex_ao(model: &TexelModel, character: &Character, pose: &Pose) -> Vec<f32> {
-    let values = model.model.evaluate(&character.skeleton, &pose.locals);
+    let weights = model.model.weights(&character.skeleton, &pose.locals);
     let atlas = &model.atlas;
-    let image = atlas.image(&values);
+    // A model without textures (sparse rows): its clamped values, dilated.
+    let image = model
+        .texture(&weights)
+        .unwrap_or_else(|_| atlas.image(&model.model.evaluate_weights(&weights)));
+    // Only atlas vertices a triangle uses (the glTF export writes those).
+    let mut used = vec![false; atlas.xref.len()];
+    atlas
+        .triangles
+        .iter()
+        .flatten()
+        .for_each(|&a| used[a as usize] = true);
     let mut uv_of: Vec<Option<[f32; 2]>> = vec![None; character.vertex_count()];
-    for (&x, &uv) in atlas.xref.iter().zip(&atlas.uvs) {
+    for ((&x, &uv), _) in atlas
+        .xref
+        .iter()
+        .zip(&atlas.uvs)
+        .zip(&used)
+        .filter(|(_, u)| **u)
+    {
         let slot = &mut uv_of[x as usize];
         if slot.is_none() {
             *slot = Some(uv);
@@ -121,6 +140,7 @@ pub(super) fn vertex_ao(model: &TexelModel, character: &Character, pose: &Pose) 
         .map(|uv| {
             uv.map_or(0.0, |uv| {
                 aobake_runtime::method::texel::bilinear(&image, atlas.width, atlas.height, uv)
+                    .clamp(0.0, 1.0)
             })
         })
         .collect()

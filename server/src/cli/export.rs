@@ -4,7 +4,9 @@
 //!
 //! `--gltf OUT.glb` writes the character a vertex asset was baked for
 //! (`FILE`) with the AO as vertex attributes and the per-pose step in the
-//! root's `extras.aobake` (`aobake_core::asset::gltf`, `docs/engines.md`).
+//! root's `extras.aobake` (`aobake_core::asset::gltf`, `docs/engines.md`);
+//! a texel asset's character re-indexed over its atlas, the static AO as
+//! each material's `occlusionTexture` and the basis textures as images.
 //!
 //! `--exr DIR` writes a cubemap asset's decoded faces as OpenEXR (the
 //! `exr` crate): one file per clip time and shell, `t{time}-shell{k}.exr`,
@@ -48,9 +50,12 @@ pub(super) struct Args {
     /// The character the asset was baked for (.glb, or .gltf with its side
     /// files beside it); `--gltf` needs it.
     file: Option<PathBuf>,
-    /// Write the character with a vertex asset's AO as a GLB: `_AO` (the
-    /// AO averaged over the file's clips) and `COLOR_0` per vertex, the
-    /// model's coefficient rows as `_AO_BASIS_k` (VEC4), and the per-pose
+    /// Write the character with the asset's AO as a GLB. A vertex asset:
+    /// `_AO` (the AO averaged over the file's clips) and `COLOR_0` per
+    /// vertex, the model's coefficient rows as `_AO_BASIS_k` (VEC4). A
+    /// texel asset: the atlas as a new TEXCOORD set, the averaged AO as
+    /// every material's standard occlusionTexture (shown by any glTF
+    /// viewer), the basis textures as 16-bit PNGs. Both: the per-pose
     /// weights' numbers in the root's `extras.aobake` (see
     /// docs/engines.md).
     #[arg(long, requires_all = ["asset", "file"])]
@@ -131,12 +136,10 @@ fn export_gltf(asset: &Path, file: &Path, clips: Option<&Path>, out: &Path) -> a
     }
     std::fs::write(out, &export.glb).with_context(|| format!("cannot write {}", out.display()))?;
     eprintln!(
-        "wrote {} ({} bytes): _AO over {} clip frames, COLOR_0, {} coefficient rows in {} _AO_BASIS attributes",
+        "wrote {} ({} bytes): {}",
         out.display(),
         export.glb.len(),
-        export.frames,
-        export.rows,
-        export.rows.div_ceil(4)
+        export.summary
     );
     Ok(())
 }

@@ -224,6 +224,22 @@ pub enum BasisError {
 pub const MAX_BASIS_VALUES: u64 = 1 << 30;
 
 impl TexelModel {
+    /// A pose's texture before the clamp: `Σ_k w_k · basis_k` per texel
+    /// of the atlas, dilated, row-major; per pixel
+    /// `ao = clamp(bilinear(texture, uv), 0, 1)`, what the shader computes
+    /// from the basis textures (filtering is linear).
+    pub fn texture(&self, weights: &[f32]) -> Result<Vec<f32>, BasisError> {
+        let crate::method::vertex::FormRef::Dense(form) = self.model.form() else {
+            return Err(BasisError::Sparse);
+        };
+        if form.blocks.iter().any(|b| b.map.is_some()) {
+            return Err(BasisError::Clustered);
+        }
+        let mut sums = vec![0.0; form.vertices];
+        form.sum_into(weights, &mut sums);
+        Ok(self.atlas.image(&sums))
+    }
+
     /// The basis textures an engine samples, one per weight in weight
     /// order: coefficient row k scattered into the atlas and dilated
     /// ([`AtlasLayout::image`]), `width × height` row-major. Per pixel

@@ -63,6 +63,14 @@ impl LinearForm {
     /// [`LinearForm::evaluate`] into `out`, one value per vertex, without
     /// allocating.
     pub fn evaluate_into(&self, weights: &[f32], out: &mut [f32]) {
+        self.sum_into(weights, out);
+        out.iter_mut().for_each(|x| *x = x.clamp(0.0, 1.0));
+    }
+
+    /// The weighted sum per vertex before [`LinearForm::evaluate`]'s
+    /// clamp, into `out`: what a texel method's textures hold, since its
+    /// shader clamps after filtering.
+    pub fn sum_into(&self, weights: &[f32], out: &mut [f32]) {
         assert_eq!(weights.len(), self.weight_count(), "one weight per row");
         assert_eq!(out.len(), self.vertices, "one value per vertex");
         out.fill(0.0);
@@ -87,7 +95,6 @@ impl LinearForm {
                 }
             }
         }
-        out.iter_mut().for_each(|x| *x = x.clamp(0.0, 1.0));
     }
 
     /// Coefficient and map bytes (f16 values, u16 or u32 map entries).

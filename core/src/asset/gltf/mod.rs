@@ -26,10 +26,18 @@
 //! node indices) and its small sections (`NORM`, `PROJ`, `BMIX`, `CENT`,
 //! `AXES`, `BNRM`, `BPRJ`) as arrays of numbers (`docs/engines.md`).
 //!
+//! A texel asset ([`texel`]) is exported over its atlas instead: each
+//! primitive is re-indexed over the atlas's vertices (split where charts
+//! meet) and gains the atlas as its next free `TEXCOORD_n`, its material
+//! the static AO as the standard `occlusionTexture`, and `extras.aobake`
+//! the basis textures as 16-bit images.
+//!
 //! Everything else in the file is kept: buffers are merged into the one
 //! GLB buffer (views moved accordingly), images given by URI are embedded,
 //! and a mesh that several nodes instance is copied per extra instance,
 //! since each instance has its own AO.
+
+mod texel;
 
 use serde_json::{Map, Value, json};
 
@@ -39,7 +47,8 @@ use crate::{
     import::{ImportError, Upload, import_with_source},
     method::{
         Family,
-        vertex::{FormRef, Model, check_character},
+        texel::TexelModel,
+        vertex::{AssetHeader, FormRef, Model, check_character},
     },
     rig::{
         clip::{Clip, Interpolation, Property},
@@ -82,6 +91,8 @@ pub struct GltfExport {
     pub rows: usize,
     /// Clip frames the static `_AO` averages.
     pub frames: usize,
+    /// What was written, as a person reads it.
+    pub summary: String,
 }
 
 /// Exports `upload` (the character the asset was baked for) with the AO of
@@ -94,17 +105,38 @@ pub fn export_gltf(
     limits: &Limits,
     asset: &Container,
 ) -> Result<GltfExport, GltfExportError> {
-    if asset.method.family() != Family::Vertex {
+    let family = asset.method.family();
+    if !matches!(family, Family::Vertex | Family::Texel) {
         return Err(GltfExportError::Unsupported(format!(
-            "a {} asset has no per-vertex AO to put in a glTF file (its data exports with --exr)",
+            "a {} asset has no per-vertex or texture-space AO to put in a glTF file (its data exports with --exr)",
             asset.method.name()
         )));
     }
     let source = import_with_source(upload, limits)?;
     let character = &source.imported.character;
-    let (model, header) = Model::from_container(asset)?;
-    check_character(&model, character).map_err(GltfExportError::Unsupported)?;
     let v = character.vertex_count();
+    // A texel asset's model is over its atlas's texels.
+    let (texel, header): (Option<TexelModel>, AssetHeader) = match family {
+        Family::Texel => {
+            let (m, header) = crate::bake::texel::read(asset, Some(character))
+                .map_err(|e| GltfExportError::Unsupported(e.to_string()))?;
+            (Some(m), header)
+        }
+        _ => (None, Model::from_container(asset)?.1),
+    };
+    let vertex_model = match &texel {
+        Some(_) => None,
+        None => {
+            let (model, _) = Model::from_container(asset)?;
+            check_character(&model, character).map_err(GltfExportError::Unsupported)?;
+            Some(model)
+        }
+    };
+    let model = match (&texel, &vertex_model) {
+        (Some(t), _) => &t.model,
+        (None, Some(m)) => m,
+        (None, None) => unreachable!("one of the two is read"),
+    };
 
     let imported = &source.imported;
     let mut all_clips = imported.clips.clone();
@@ -124,18 +156,13 @@ pub fn export_gltf(
         all_clips.extend(more);
         warnings.extend(clip_warnings);
     }
-    let (static_ao, frames) = static_ao(&model, &imported.character.skeleton, &all_clips);
+    let (static_ao, frames) = static_ao(model, &imported.character.skeleton, &all_clips);
     if frames == 0 {
         warnings.push(
-            "no clips: _AO is the AO at rest (give the clips the asset was baked with, --clips)"
+            "no clips: the static AO is the AO at rest (give the clips the asset was baked with, --clips)"
                 .to_owned(),
         );
     }
-    let (rows, coefficients) = match &model {
-        Model::StaticAverage(_) => (0, Vec::new()),
-        _ => rows_per_vertex(&model)?,
-    };
-    let attributes_per_vertex = rows.div_ceil(4);
 
     let mut out = Glb::default();
     let mut json = source.json;
@@ -210,6 +237,110 @@ pub fn export_gltf(
         mesh_of_node.insert(p.node, mesh);
     }
 
+    let specific = match &texel {
+        Some(t) => texel::write(
+            &mut json,
+            &mut out,
+            character,
+            &mesh_of_node,
+            t,
+            &static_ao,
+            frames,
+            &mut warnings,
+        )?,
+        None => vertex_attributes(
+            &mut json,
+            &mut out,
+            character,
+            &mesh_of_node,
+            model,
+            &static_ao,
+            frames,
+        )?,
+    };
+    for clip in &added_clips {
+        write_animation(&mut json, &mut out, clip);
+    }
+
+    let sections: Map<String, Value> = asset
+        .sections
+        .iter()
+        .filter(|s| {
+            [
+                b"NORM", b"PROJ", b"BMIX", b"CENT", b"AXES", b"BNRM", b"BPRJ",
+            ]
+            .contains(&&s.tag)
+        })
+        .filter_map(|s| match &s.data {
+            Data::F32(values) => Some((
+                String::from_utf8_lossy(&s.tag).into_owned(),
+                Value::from(values.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>()),
+            )),
+            _ => None,
+        })
+        .collect();
+    let mut aobake = json!({
+        "version": 1,
+        "method": header.method,
+        "format": format!("{}.{}", asset.version.0, asset.version.1),
+        "algorithm_version": header.algorithm_version,
+        "bake_key": header.bake_key,
+        "character": header.character,
+        "vertices": v,
+        "layout": serde_json::to_value(&header.layout).expect("layouts serialise"),
+        "sections": sections,
+    });
+    let fields = aobake.as_object_mut().expect("an object");
+    fields.extend(specific.extras);
+    let root = json.as_object_mut().expect("a glTF root is an object");
+    match root.entry("extras") {
+        serde_json::map::Entry::Occupied(mut e) => match e.get_mut().as_object_mut() {
+            Some(extras) => {
+                extras.insert("aobake".into(), aobake);
+            }
+            None => {
+                warnings.push("the file's root extras were not an object: replaced".into());
+                e.insert(json!({ "aobake": aobake }));
+            }
+        },
+        serde_json::map::Entry::Vacant(e) => {
+            e.insert(json!({ "aobake": aobake }));
+        }
+    }
+    root.insert("buffers".into(), json!([{ "byteLength": out.bin.len() }]));
+    Ok(GltfExport {
+        glb: out.finish(&json),
+        warnings,
+        rows: specific.rows,
+        frames,
+        summary: specific.summary,
+    })
+}
+
+/// What one family's part of an export adds: its fields of
+/// `extras.aobake`, and the coefficient rows it stores.
+struct Specific {
+    extras: Map<String, Value>,
+    rows: usize,
+    summary: String,
+}
+
+/// A vertex asset's attributes on every primitive: `_AO`, its grey
+/// `COLOR_n` and the `_AO_BASIS_k` rows.
+fn vertex_attributes(
+    json: &mut Value,
+    out: &mut Glb,
+    character: &crate::Character,
+    mesh_of_node: &std::collections::BTreeMap<usize, usize>,
+    model: &Model,
+    static_ao: &[f32],
+    frames: usize,
+) -> Result<Specific, GltfExportError> {
+    let (rows, coefficients) = match model {
+        Model::StaticAverage(_) => (0, Vec::new()),
+        _ => rows_per_vertex(model)?,
+    };
+    let attributes_per_vertex = rows.div_ceil(4);
     let mut color_names = Vec::new();
     let mut order = Vec::new();
     for p in &character.primitives {
@@ -234,7 +365,7 @@ pub fn export_gltf(
         }));
         let ao: Vec<f32> = static_ao[vertices.clone()].to_vec();
         let grey: Vec<f32> = ao.iter().flat_map(|&a| [1.0 - a; 3]).collect();
-        let mut added = vec![("_AO".to_owned(), out.accessor(&mut json, &ao, "SCALAR"))];
+        let mut added = vec![("_AO".to_owned(), out.accessor(json, &ao, "SCALAR"))];
         let attributes = json["meshes"][mesh]["primitives"][p.primitive]["attributes"]
             .as_object()
             .cloned()
@@ -244,7 +375,7 @@ pub fn export_gltf(
             .find(|name| !attributes.contains_key(name))
             .expect("a free COLOR_n");
         color_names.push(color.clone());
-        added.push((color, out.accessor(&mut json, &grey, "VEC3")));
+        added.push((color, out.accessor(json, &grey, "VEC3")));
         let width = 4 * attributes_per_vertex;
         for k in 0..attributes_per_vertex {
             let values: Vec<f32> = vertices
@@ -253,7 +384,7 @@ pub fn export_gltf(
                 .collect();
             added.push((
                 format!("_AO_BASIS_{k}"),
-                out.accessor(&mut json, &values, "VEC4"),
+                out.accessor(json, &values, "VEC4"),
             ));
         }
         let target = &mut json["meshes"][mesh]["primitives"][p.primitive]["attributes"];
@@ -263,63 +394,18 @@ pub fn export_gltf(
     }
     color_names.sort();
     color_names.dedup();
-    for clip in &added_clips {
-        write_animation(&mut json, &mut out, clip);
-    }
-
-    let sections: Map<String, Value> = asset
-        .sections
-        .iter()
-        .filter(|s| {
-            [
-                b"NORM", b"PROJ", b"BMIX", b"CENT", b"AXES", b"BNRM", b"BPRJ",
-            ]
-            .contains(&&s.tag)
-        })
-        .filter_map(|s| match &s.data {
-            Data::F32(values) => Some((
-                String::from_utf8_lossy(&s.tag).into_owned(),
-                Value::from(values.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>()),
-            )),
-            _ => None,
-        })
-        .collect();
-    let aobake = json!({
-        "version": 1,
-        "method": header.method,
-        "format": format!("{}.{}", asset.version.0, asset.version.1),
-        "algorithm_version": header.algorithm_version,
-        "bake_key": header.bake_key,
-        "character": header.character,
-        "vertices": v,
+    let extras = json!({
         "primitives": order,
         "static": { "attribute": "_AO", "color": color_names, "frames": frames },
         "rows": rows,
         "basis": (0..attributes_per_vertex).map(|k| format!("_AO_BASIS_{k}")).collect::<Vec<_>>(),
-        "layout": serde_json::to_value(&header.layout).expect("layouts serialise"),
-        "sections": sections,
     });
-    let root = json.as_object_mut().expect("a glTF root is an object");
-    match root.entry("extras") {
-        serde_json::map::Entry::Occupied(mut e) => match e.get_mut().as_object_mut() {
-            Some(extras) => {
-                extras.insert("aobake".into(), aobake);
-            }
-            None => {
-                warnings.push("the file's root extras were not an object: replaced".into());
-                e.insert(json!({ "aobake": aobake }));
-            }
-        },
-        serde_json::map::Entry::Vacant(e) => {
-            e.insert(json!({ "aobake": aobake }));
-        }
-    }
-    root.insert("buffers".into(), json!([{ "byteLength": out.bin.len() }]));
-    Ok(GltfExport {
-        glb: out.finish(&json),
-        warnings,
+    Ok(Specific {
+        extras: extras.as_object().cloned().unwrap_or_default(),
         rows,
-        frames,
+        summary: format!(
+            "_AO over {frames} clip frames, COLOR_0, {rows} coefficient rows in {attributes_per_vertex} _AO_BASIS attributes"
+        ),
     })
 }
 
@@ -517,6 +603,7 @@ impl Glb {
     ) -> usize {
         let width = match kind {
             "SCALAR" => 1,
+            "VEC2" => 2,
             "VEC3" => 3,
             _ => 4,
         };
@@ -539,6 +626,28 @@ impl Glb {
             "componentType": 5126,
             "count": values.len() / width,
             "type": kind,
+        }));
+        accessors.len() - 1
+    }
+
+    /// An UNSIGNED_INT SCALAR accessor over `values` in a view of its
+    /// own, bound to `target` (34963: indices; `None` for other data);
+    /// its index.
+    fn u32_accessor(&mut self, json: &mut Value, values: &[u32], target: Option<u32>) -> usize {
+        let bytes: Vec<u8> = values.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let offset = self.append(&bytes);
+        let mut view = json!({ "buffer": 0, "byteOffset": offset, "byteLength": bytes.len() });
+        if let Some(target) = target {
+            view["target"] = target.into();
+        }
+        array(json, "bufferViews").push(view);
+        let view = array(json, "bufferViews").len() - 1;
+        let accessors = array(json, "accessors");
+        accessors.push(json!({
+            "bufferView": view,
+            "componentType": 5125,
+            "count": values.len(),
+            "type": "SCALAR",
         }));
         accessors.len() - 1
     }

@@ -1,0 +1,404 @@
+//! A texel asset in the glTF export ([`super::export_gltf`]): the
+//! character over its atlas, so that every glTF viewer shows the static
+//! AO and an engine can play the model per pixel.
+//!
+//! * Each primitive is re-indexed over the atlas's vertices that its
+//!   triangles use, in atlas order (a vertex on a seam between charts
+//!   becomes one vertex per chart): every attribute and morph target is
+//!   gathered as it was (same component type, type and normalisation),
+//!   the indices become UNSIGNED_INT triangles, and the atlas's UVs are
+//!   the primitive's next free `TEXCOORD_n`.
+//! * Each primitive gets a copy of its material (or a new one) whose
+//!   standard `occlusionTexture` is the static AO over that set: an 8-bit
+//!   grey PNG holding `1 − AO` (glTF's convention: 1 is unoccluded), the
+//!   model averaged over the clips' frames per texel, dilated past the
+//!   charts.
+//! * `extras.aobake.basis` lists the basis textures ([`TexelModel::basis`],
+//!   one per weight) as 16-bit grey PNGs in `images`, each with the
+//!   `offset` and `scale` that decode it: `value = offset + scale · q /
+//!   65535`. Per pixel `ao = clamp(Σ_k w_k · basis_k(uv), 0, 1)`, with
+//!   the pose's weights `w` from `layout` and `sections`, as for the
+//!   vertex methods.
+//! * `extras.aobake.primitives[i].vertex_of` is an accessor (UNSIGNED_INT)
+//!   giving each exported vertex's vertex in aobake's order, so that a
+//!   reader can compare with `aobake eval`, which samples the texture at
+//!   each vertex's first atlas vertex.
+
+use std::collections::BTreeMap;
+
+use serde_json::{Map, Value, json};
+
+use super::{Glb, GltfExportError, Specific, array};
+use crate::{Character, image::ImageError, method::texel::TexelModel};
+
+/// How `extras.aobake` says the basis images decode.
+const BASIS_ENCODING: &str =
+    "16-bit grey PNG, texel row 0 at v = 0: value = offset + scale * sample / 65535";
+
+/// Writes the texel asset's part of the export (see the module's notes).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn write(
+    json: &mut Value,
+    out: &mut Glb,
+    character: &Character,
+    mesh_of_node: &BTreeMap<usize, usize>,
+    model: &TexelModel,
+    static_ao: &[f32],
+    frames: usize,
+    warnings: &mut Vec<String>,
+) -> Result<Specific, GltfExportError> {
+    let atlas = &model.atlas;
+    let (width, height) = (atlas.width, atlas.height);
+    let image_error = |e: ImageError| GltfExportError::Unsupported(e.to_string());
+
+    // The static occlusion texture: 1 − AO per texel, dilated.
+    let occlusion: Vec<u8> = atlas
+        .image(static_ao)
+        .iter()
+        .map(|&a| (255.0 * (1.0 - a.clamp(0.0, 1.0))).round() as u8)
+        .collect();
+    let png = crate::image::encode_grey8_png(&occlusion, width, height).map_err(image_error)?;
+    let static_image = push_image(json, out, &png, "aobake occlusion (1 - AO)");
+    array(json, "samplers").push(json!({
+        "magFilter": 9729,
+        "minFilter": 9987,
+        "wrapS": 33071,
+        "wrapT": 33071,
+    }));
+    let sampler = array(json, "samplers").len() - 1;
+    array(json, "textures").push(json!({ "sampler": sampler, "source": static_image }));
+    let texture = array(json, "textures").len() - 1;
+
+    // The basis textures, quantised per texture.
+    let basis = model
+        .basis()
+        .map_err(|e| GltfExportError::Unsupported(e.to_string()))?;
+    let mut layers = Vec::with_capacity(basis.len());
+    for (k, layer) in basis.iter().enumerate() {
+        let (lo, hi) = layer
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        let (lo, hi) = if lo.is_finite() && hi.is_finite() {
+            (lo, hi)
+        } else {
+            (0.0, 0.0)
+        };
+        let scale = if hi > lo { hi - lo } else { 1.0 };
+        let samples: Vec<u16> = layer
+            .iter()
+            .map(|&v| (65535.0 * ((v - lo) / scale)).round().clamp(0.0, 65535.0) as u16)
+            .collect();
+        let png = crate::image::encode_grey16_png(&samples, width, height).map_err(image_error)?;
+        let image = push_image(json, out, &png, &format!("aobake basis {k}"));
+        layers.push(json!({ "image": image, "offset": lo, "scale": scale }));
+    }
+
+    // Each primitive over its atlas vertices.
+    let mut local = vec![u32::MAX; atlas.xref.len()];
+    let mut order = Vec::with_capacity(character.primitives.len());
+    let mut replaced_occlusion = false;
+    for p in &character.primitives {
+        let mesh = mesh_of_node[&p.node];
+        let count = p.vertices.len();
+        let at = |json: &Value| json["meshes"][mesh]["primitives"][p.primitive].clone();
+        let primitive = at(json);
+        let triangles = atlas.triangles.get(p.triangles.clone()).ok_or_else(|| {
+            GltfExportError::Unsupported("the asset's atlas has fewer triangles".into())
+        })?;
+        let mut used: Vec<u32> = triangles.iter().flatten().copied().collect();
+        used.sort_unstable();
+        used.dedup();
+        let mut source = Vec::with_capacity(used.len());
+        for (i, &a) in used.iter().enumerate() {
+            local[a as usize] = i as u32;
+            let v = atlas.xref[a as usize] as usize;
+            if !p.vertices.contains(&v) {
+                return Err(GltfExportError::Unsupported(format!(
+                    "meshes[{}].primitives[{}]: the atlas joins it to another primitive's vertex",
+                    p.mesh, p.primitive
+                )));
+            }
+            source.push((v - p.vertices.start) as u32);
+        }
+        let fail = |what: String| {
+            GltfExportError::Unsupported(format!(
+                "meshes[{}].primitives[{}]: {what}",
+                p.mesh, p.primitive
+            ))
+        };
+        let mut attributes = primitive["attributes"]
+            .as_object()
+            .cloned()
+            .unwrap_or_default();
+        for (name, accessor) in attributes.iter_mut() {
+            let index = accessor
+                .as_u64()
+                .ok_or_else(|| fail(format!("{name} is no accessor")))?;
+            *accessor = gather(
+                json,
+                out,
+                index as usize,
+                count,
+                &source,
+                name == "POSITION",
+            )
+            .map_err(|e| fail(format!("{name}: {e}")))?
+            .into();
+        }
+        let set = (0..)
+            .find(|n| !attributes.contains_key(&format!("TEXCOORD_{n}")))
+            .expect("a free TEXCOORD_n");
+        let uvs: Vec<f32> = used.iter().flat_map(|&a| atlas.uvs[a as usize]).collect();
+        attributes.insert(
+            format!("TEXCOORD_{set}"),
+            out.accessor(json, &uvs, "VEC2").into(),
+        );
+        let mut targets = primitive["targets"].as_array().cloned().unwrap_or_default();
+        for (t, target) in targets.iter_mut().enumerate() {
+            let Some(target) = target.as_object_mut() else {
+                continue;
+            };
+            for (name, accessor) in target.iter_mut() {
+                let index = accessor
+                    .as_u64()
+                    .ok_or_else(|| fail(format!("targets[{t}].{name} is no accessor")))?;
+                *accessor = gather(
+                    json,
+                    out,
+                    index as usize,
+                    count,
+                    &source,
+                    name == "POSITION",
+                )
+                .map_err(|e| fail(format!("targets[{t}].{name}: {e}")))?
+                .into();
+            }
+        }
+        let indices: Vec<u32> = triangles
+            .iter()
+            .flatten()
+            .map(|&a| local[a as usize])
+            .collect();
+        let indices = out.u32_accessor(json, &indices, Some(34963));
+        let vertex_of: Vec<u32> = source
+            .iter()
+            .map(|&s| (p.vertices.start + s as usize) as u32)
+            .collect();
+        let vertex_of = out.u32_accessor(json, &vertex_of, None);
+        // Its own material: the file's with the occlusion texture.
+        let mut material = primitive
+            .get("material")
+            .and_then(Value::as_u64)
+            .and_then(|m| json["materials"].get(m as usize).cloned())
+            .unwrap_or_else(|| json!({ "name": "aobake occlusion" }));
+        if let Some(m) = material.as_object_mut() {
+            replaced_occlusion |= m.contains_key("occlusionTexture");
+            m.insert(
+                "occlusionTexture".into(),
+                json!({ "index": texture, "texCoord": set }),
+            );
+        }
+        array(json, "materials").push(material);
+        let material = array(json, "materials").len() - 1;
+        let target = &mut json["meshes"][mesh]["primitives"][p.primitive];
+        target["attributes"] = Value::Object(attributes);
+        if !targets.is_empty() {
+            target["targets"] = Value::Array(targets);
+        }
+        target["indices"] = indices.into();
+        target["mode"] = 4.into();
+        target["material"] = material.into();
+        order.push(json!({
+            "node": p.node,
+            "mesh": mesh,
+            "primitive": p.primitive,
+            "first": p.vertices.start,
+            "count": count,
+            "exported": used.len(),
+            "texcoord": set,
+            "vertex_of": vertex_of,
+        }));
+    }
+    if replaced_occlusion {
+        warnings.push(
+            "a material's own occlusionTexture was replaced by the baked static AO".to_owned(),
+        );
+    }
+    let extras = json!({
+        "family": "texel",
+        "primitives": order,
+        "atlas": { "width": width, "height": height, "texels": atlas.texels.len() },
+        "static": {
+            "texture": texture,
+            "image": static_image,
+            "frames": frames,
+            "encoding": "8-bit grey PNG of 1 - AO (glTF's occlusion: 1 is unoccluded), the model averaged over the frames",
+        },
+        "rows": basis.len(),
+        "basis": layers,
+        "basis_encoding": BASIS_ENCODING,
+        "ao": "per pixel: clamp(sum_k w_k * basis_k(uv), 0, 1), bilinear, uv the primitive's TEXCOORD_<texcoord>",
+    });
+    Ok(Specific {
+        extras: extras.as_object().cloned().unwrap_or_default(),
+        rows: basis.len(),
+        summary: format!(
+            "the static AO over {frames} clip frames as each material's occlusionTexture on a {width} × {height} atlas (a new TEXCOORD set), {} basis textures as 16-bit PNGs listed in extras.aobake",
+            basis.len()
+        ),
+    })
+}
+
+/// A PNG image in the GLB's buffer; its index in `images`.
+fn push_image(json: &mut Value, out: &mut Glb, png: &[u8], name: &str) -> usize {
+    let offset = out.append(png);
+    array(json, "bufferViews").push(json!({
+        "buffer": 0,
+        "byteOffset": offset,
+        "byteLength": png.len(),
+    }));
+    let view = array(json, "bufferViews").len() - 1;
+    array(json, "images").push(json!({
+        "name": name,
+        "mimeType": "image/png",
+        "bufferView": view,
+    }));
+    array(json, "images").len() - 1
+}
+
+/// A vertex attribute's accessor gathered at `source` (indices into its
+/// `count` elements) into a new accessor of the same component type,
+/// type and normalisation, with bounds when `bounds` (POSITION's, which
+/// glTF requires); its index. The elements are read as the file lays
+/// them out: in a view with or without a stride, with sparse
+/// substitutions, or zeros without a view.
+fn gather(
+    json: &mut Value,
+    out: &mut Glb,
+    index: usize,
+    count: usize,
+    source: &[u32],
+    bounds: bool,
+) -> Result<usize, String> {
+    let accessor = json["accessors"]
+        .get(index)
+        .cloned()
+        .ok_or("no such accessor")?;
+    let component_type = accessor["componentType"].as_u64().unwrap_or(0);
+    let component = match component_type {
+        5120 | 5121 => 1,
+        5122 | 5123 => 2,
+        5125 | 5126 => 4,
+        other => return Err(format!("component type {other}")),
+    };
+    let kind = accessor["type"].as_str().unwrap_or("").to_owned();
+    let components = match kind.as_str() {
+        "SCALAR" => 1,
+        "VEC2" => 2,
+        "VEC3" => 3,
+        "VEC4" => 4,
+        other => return Err(format!("a vertex attribute of type {other:?}")),
+    };
+    let element = component * components;
+    // Every attribute of a primitive has its POSITION's count.
+    if accessor["count"].as_u64() != Some(count as u64) {
+        return Err(format!("{} elements, not {count}", accessor["count"]));
+    }
+    let bin = &out.bin;
+    let slice = |at: u64, len: usize| -> Result<&[u8], String> {
+        usize::try_from(at)
+            .ok()
+            .and_then(|at| bin.get(at..at.checked_add(len)?))
+            .ok_or_else(|| "its data lie outside the buffer".to_owned())
+    };
+    let view_of = |v: &Value| -> Result<(u64, Option<u64>), String> {
+        let view = v
+            .as_u64()
+            .and_then(|v| json["bufferViews"].get(v as usize))
+            .ok_or("no such buffer view")?;
+        Ok((
+            view["byteOffset"].as_u64().unwrap_or(0),
+            view["byteStride"].as_u64(),
+        ))
+    };
+    let mut data = vec![0u8; count * element];
+    if let Some(view) = accessor.get("bufferView") {
+        let (offset, stride) = view_of(view)?;
+        let base = offset + accessor["byteOffset"].as_u64().unwrap_or(0);
+        let stride = stride.unwrap_or(element as u64);
+        for (i, chunk) in data.chunks_exact_mut(element).enumerate() {
+            chunk.copy_from_slice(slice(base + i as u64 * stride, element)?);
+        }
+    }
+    if let Some(sparse) = accessor.get("sparse") {
+        let n = sparse["count"]
+            .as_u64()
+            .ok_or("a sparse accessor without count")? as usize;
+        let (at, _) = view_of(&sparse["indices"]["bufferView"])?;
+        let at = at + sparse["indices"]["byteOffset"].as_u64().unwrap_or(0);
+        let width = match sparse["indices"]["componentType"].as_u64() {
+            Some(5121) => 1,
+            Some(5123) => 2,
+            Some(5125) => 4,
+            _ => return Err("sparse indices of another type".into()),
+        };
+        let (values, _) = view_of(&sparse["values"]["bufferView"])?;
+        let values = values + sparse["values"]["byteOffset"].as_u64().unwrap_or(0);
+        let indices = slice(at, n.checked_mul(width).ok_or("too many")?)?.to_vec();
+        let replaced = slice(values, n.checked_mul(element).ok_or("too many")?)?.to_vec();
+        for (j, index) in indices.chunks_exact(width).enumerate() {
+            let mut i = 0usize;
+            for (b, &byte) in index.iter().enumerate() {
+                i |= usize::from(byte) << (8 * b);
+            }
+            let to = data
+                .get_mut(i * element..(i + 1) * element)
+                .ok_or("a sparse index past the end")?;
+            to.copy_from_slice(&replaced[j * element..(j + 1) * element]);
+        }
+    }
+    // Each element starts on 4 bytes (glTF's rule for vertex attributes).
+    let stride = element.next_multiple_of(4);
+    let mut gathered = vec![0u8; source.len() * stride];
+    for (chunk, &s) in gathered.chunks_exact_mut(stride).zip(source) {
+        let s = s as usize;
+        chunk[..element].copy_from_slice(&data[s * element..(s + 1) * element]);
+    }
+    let offset = out.append(&gathered);
+    let mut view = json!({
+        "buffer": 0,
+        "byteOffset": offset,
+        "byteLength": gathered.len(),
+        "target": 34962,
+    });
+    if stride != element {
+        view["byteStride"] = stride.into();
+    }
+    array(json, "bufferViews").push(view);
+    let view = array(json, "bufferViews").len() - 1;
+    let mut written = Map::new();
+    written.insert("bufferView".into(), view.into());
+    written.insert("componentType".into(), component_type.into());
+    written.insert("count".into(), source.len().into());
+    written.insert("type".into(), kind.into());
+    if accessor["normalized"].as_bool() == Some(true) {
+        written.insert("normalized".into(), true.into());
+    }
+    if bounds && component_type == 5126 && !source.is_empty() {
+        let mut lo = vec![f32::INFINITY; components];
+        let mut hi = vec![f32::NEG_INFINITY; components];
+        for chunk in gathered.chunks_exact(stride) {
+            for c in 0..components {
+                let x = f32::from_le_bytes(chunk[4 * c..4 * c + 4].try_into().expect("4 bytes"));
+                lo[c] = lo[c].min(x);
+                hi[c] = hi[c].max(x);
+            }
+        }
+        written.insert("min".into(), json!(lo));
+        written.insert("max".into(), json!(hi));
+    }
+    array(json, "accessors").push(Value::Object(written));
+    Ok(array(json, "accessors").len() - 1)
+}
