@@ -63,6 +63,23 @@
 #define AOBAKE_GRID_GPU_GROUND 3
 
 /**
+ * `aobake_texel_atlas_words`' arrays: per atlas vertex, the vertex of
+ * aobake's order it was made from (its position, normal and skin).
+ */
+#define AOBAKE_TEXEL_ATLAS_VERTEX_OF 0
+
+/**
+ * The character's triangles in its order, three atlas vertices each.
+ */
+#define AOBAKE_TEXEL_ATLAS_TRIANGLES 1
+
+/**
+ * Per model column (texel), its place in the textures: row × width +
+ * column.
+ */
+#define AOBAKE_TEXEL_ATLAS_TEXELS 2
+
+/**
  * `aobake_vertex_ao_gpu_words`' arrays: the dense blocks
  * (`AOBAKE_GPU_BLOCK_WORDS` words each, `vertex_ao.wgsl`'s `BlockInfo`:
  * rows, columns, the first coefficient's offset in f16 elements, the
@@ -102,6 +119,12 @@ typedef struct AobakeCubemap AobakeCubemap;
  * A grid asset. Opaque to C.
  */
 typedef struct AobakeGrid AobakeGrid;
+
+/**
+ * A texel asset: its model posed through a vertex handle, its atlas, and
+ * its basis textures once asked for. Opaque to C.
+ */
+typedef struct AobakeTexel AobakeTexel;
 
 /**
  * A vertex-method asset (static average, vertex-linear or
@@ -551,6 +574,105 @@ const char *aobake_grid_part_name(const struct AobakeGrid *grid, size_t part);
  * `grid` must be NULL or a live handle; `out` NULL or writable.
  */
 bool aobake_grid_ground_height(const struct AobakeGrid *grid, float *out);
+
+/**
+ * Reads a texel asset from `len` bytes at `bytes` (copied). NULL on
+ * failure: not an asset, damaged, or not a texel method.
+ *
+ * # Safety
+ * `bytes` must point to `len` readable bytes.
+ */
+struct AobakeTexel *aobake_texel_open(const uint8_t *bytes, size_t len);
+
+/**
+ * Frees a handle from `aobake_texel_open` (NULL is ignored); the handle
+ * `aobake_texel_pose` gave goes with it.
+ *
+ * # Safety
+ * `texel` must be NULL or a live handle not yet freed.
+ */
+void aobake_texel_free(struct AobakeTexel *texel);
+
+/**
+ * The handle that poses the texel asset: `aobake_vertex_ao_node`,
+ * `aobake_vertex_ao_set_local`, `aobake_vertex_ao_reset`,
+ * `aobake_vertex_ao_weight_count` and `aobake_vertex_ao_weights` on it
+ * set the pose and give its weights, one per basis texture; its
+ * "vertices" are the atlas's texels. Valid until `aobake_texel_free`;
+ * never freed on its own. NULL for a NULL handle.
+ *
+ * # Safety
+ * `texel` must be NULL or a live handle.
+ */
+struct AobakeVertexAo *aobake_texel_pose(struct AobakeTexel *texel);
+
+/**
+ * Writes the atlas's size in texels to `width` and `height`: each basis
+ * texture's. `false` for NULL.
+ *
+ * # Safety
+ * `texel` must be NULL or a live handle; `width` and `height` NULL or
+ * writable.
+ */
+bool aobake_texel_atlas_size(const struct AobakeTexel *texel, uint32_t *width, uint32_t *height);
+
+/**
+ * Writes basis texture `layer` (one per weight, in weight order; width ×
+ * height floats, row 0 at v = 0, dilated past the charts) to `out`;
+ * `false` for a layer past the weights, a `len` other than width ×
+ * height, or a model without textures (sparse rows).
+ *
+ * # Safety
+ * `texel` must be NULL or a live handle; `out` NULL or `len` writable
+ * floats.
+ */
+bool aobake_texel_basis(const struct AobakeTexel *texel, size_t layer, float *out, size_t len);
+
+/**
+ * Sets `*words` to the length of the atlas's array `which`
+ * (`AOBAKE_TEXEL_ATLAS_*`) and copies it to `out` unless `out` is NULL
+ * (then `len` must be at least `*words`): the mesh an engine draws the
+ * character with to sample the textures, its UVs from
+ * `aobake_texel_atlas_uvs`.
+ *
+ * # Safety
+ * `texel` must be NULL or a live handle; `out` NULL or `len` writable
+ * words; `words` a writable `size_t`.
+ */
+bool aobake_texel_atlas_words(const struct AobakeTexel *texel, uint32_t which, uint32_t *out, size_t len, size_t *words);
+
+/**
+ * Atlas vertices (`AOBAKE_TEXEL_ATLAS_VERTEX_OF`'s length); 0 for NULL.
+ *
+ * # Safety
+ * `texel` must be NULL or a live handle.
+ */
+size_t aobake_texel_atlas_vertex_count(const struct AobakeTexel *texel);
+
+/**
+ * Writes each atlas vertex's texture coordinate (u, v in [0, 1]; two
+ * floats a vertex) to `out`; `false` if `len` is not twice
+ * `aobake_texel_atlas_vertex_count`.
+ *
+ * # Safety
+ * `texel` must be NULL or a live handle; `out` NULL or `len` writable
+ * floats.
+ */
+bool aobake_texel_atlas_uvs(const struct AobakeTexel *texel, float *out, size_t len);
+
+/**
+ * The AO at `count` texture coordinates (`uvs`, two floats each) in the
+ * pose set on `aobake_texel_pose`'s handle, written to `out` (`count`
+ * floats): the basis textures weighted by the pose's weights, filtered
+ * bilinearly (clamp to edge) and clamped to [0, 1], what the shader
+ * `texel_ao` computes. A reference for an engine's GPU path, not a
+ * frame's work: it builds the pose's whole texture.
+ *
+ * # Safety
+ * `texel` must be NULL or a live handle; `uvs` NULL or `2 · count`
+ * readable floats; `out` NULL or `len` writable floats.
+ */
+bool aobake_texel_sample(const struct AobakeTexel *texel, const float *uvs, size_t count, float *out, size_t len);
 
 /**
  * Reads a vertex-method asset from `len` bytes at `bytes` (copied; the

@@ -19,6 +19,12 @@
 //!    vertex's AO, on the CPU).
 //! 4. `aobake_vertex_ao_free`.
 //!
+//! A texel asset (texel-linear) opens with `aobake_texel_open`: its pose
+//! is set and its weights read through the vertex functions on the
+//! handle `aobake_texel_pose` gives, and `aobake_texel_basis` and
+//! `aobake_texel_atlas_*` give the textures and the atlas's mesh the
+//! shader `texel_ao` samples (`aobake_texel_sample` does it on the CPU).
+//!
 //! And the lookups in space: `aobake_cubemap_*` (Kroon's cubemaps: the
 //! occlusion a character casts at points, at a time of its clip) and
 //! `aobake_grid_*` (Malmer et al.'s grids: the occlusion rigid parts cast
@@ -46,10 +52,12 @@ use aobake_runtime::{Asset, PrimitiveSpan};
 
 mod cubemap;
 mod grid;
+mod texel;
 mod vertex;
 
 pub use cubemap::*;
 pub use grid::*;
+pub use texel::*;
 pub use vertex::*;
 
 thread_local! {

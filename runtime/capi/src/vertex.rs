@@ -37,9 +37,25 @@ pub struct AobakeVertexAo(
 );
 
 impl AobakeVertexAo {
+    /// The handle of a posable model, its node names ready for C.
+    pub(crate) fn new(ao: VertexAo) -> Self {
+        let names = ao
+            .skeleton()
+            .nodes
+            .iter()
+            .map(|n| c_string(n.name.as_deref().unwrap_or_default()))
+            .collect();
+        Self(ao, OnceLock::new(), Mutex::default(), names)
+    }
+
+    /// The posable model.
+    pub(crate) fn ao(&self) -> &VertexAo {
+        &self.0
+    }
+
     /// The per-pose step's buffers (a lock no call can poison: a panic
     /// does not cross the C ABI).
-    fn scratch(&self) -> MutexGuard<'_, PoseScratch> {
+    pub(crate) fn scratch(&self) -> MutexGuard<'_, PoseScratch> {
         self.2.lock().unwrap_or_else(PoisonError::into_inner)
     }
 }
@@ -81,20 +97,7 @@ pub unsafe extern "C" fn aobake_vertex_ao_open(
     // SAFETY: forwarded from the caller.
     unsafe {
         open(bytes, len, "vertex", |a| match a {
-            Asset::Vertex(ao) => {
-                let names = ao
-                    .skeleton()
-                    .nodes
-                    .iter()
-                    .map(|n| c_string(n.name.as_deref().unwrap_or_default()))
-                    .collect();
-                Some(AobakeVertexAo(
-                    *ao,
-                    OnceLock::new(),
-                    Mutex::default(),
-                    names,
-                ))
-            }
+            Asset::Vertex(ao) => Some(AobakeVertexAo::new(*ao)),
             _ => None,
         })
     }

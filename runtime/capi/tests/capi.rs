@@ -250,6 +250,69 @@ fn a_c_program_plays_an_asset_as_the_runtime_does() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A C program plays a texel asset: its pose through the vertex
+/// functions on `aobake_texel_pose`'s handle, the weights, the AO sampled
+/// at the atlas's UVs and a basis texture bit for bit as the Rust runtime
+/// gives them.
+#[test]
+fn a_c_program_plays_a_texel_asset_as_the_runtime_does() {
+    use aobake_runtime::{Asset, method::texel::bilinear};
+    let dir = std::env::temp_dir().join(format!("aobake-capi-texel-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let exe = compile(&dir, "texel");
+    let mut params = BakeParams::new(Method::TexelLinear);
+    params.poses = 48;
+    params.samples = 16;
+    params.eval_poses = 4;
+    params.texel.atlas = 64;
+    let (asset, character, clips) = bake("RiggedFigure", params);
+    let asset_path = dir.join("figure.aobake");
+    std::fs::write(&asset_path, &asset).unwrap();
+    let pose = Pose::sample(&character.skeleton, &clips[0], 0.7);
+    let mut text = String::new();
+    for (node, t) in character.skeleton.nodes.iter().zip(&pose.locals) {
+        let numbers: Vec<String> = t
+            .translation
+            .to_array()
+            .iter()
+            .chain(&t.rotation.to_array())
+            .chain(&t.scale.to_array())
+            .map(|x| format!("{x:e}"))
+            .collect();
+        text.push_str(&format!(
+            "{}\t{}\n",
+            node.name.as_deref().unwrap(),
+            numbers.join(" ")
+        ));
+    }
+    let pose_path = dir.join("pose.txt");
+    std::fs::write(&pose_path, text).unwrap();
+    let floats = run_c(&exe, &[&asset_path, &pose_path], &dir.join("out.bin"));
+
+    let Asset::Texel { model, header } = Asset::from_bytes(&asset).unwrap() else {
+        panic!("a texel asset");
+    };
+    let mut rust = VertexAo::new(model.model.clone(), *header).unwrap();
+    for (n, t) in pose.locals.iter().enumerate() {
+        assert!(rust.set_local(n, *t));
+    }
+    let w = rust.weights();
+    let a = &model.atlas;
+    let (weights, rest) = floats.split_at(w.len());
+    let (ao, basis) = rest.split_at(a.xref.len());
+    assert_eq!(weights, w, "weights bit for bit");
+    let image = model.texture(&w).unwrap();
+    let want: Vec<f32> = a
+        .uvs
+        .iter()
+        .map(|&uv| bilinear(&image, a.width, a.height, uv).clamp(0.0, 1.0))
+        .collect();
+    assert_eq!(ao, want, "the AO at the atlas's UVs bit for bit");
+    assert!(ao.iter().any(|&x| x > 0.05), "some occlusion");
+    assert_eq!(basis, model.basis().unwrap()[0], "the first basis texture");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// An engine lists the rig to map its bones onto: every node's name and
 /// parent as the asset's rig has them, and the name finds the node again.
 #[test]
