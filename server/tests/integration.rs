@@ -311,7 +311,7 @@ fn export_writes_the_shaders_for_engines_and_says_what_it_needs() {
     let out = aobake(&["export", "--shaders", dir.path().to_str().unwrap()]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(
-        stderr(&out).contains("wrote 50 shader files"),
+        stderr(&out).contains("wrote 60 shader files"),
         "{}",
         stderr(&out)
     );
@@ -322,6 +322,7 @@ fn export_writes_the_shaders_for_engines_and_says_what_it_needs() {
         "glsl-es300/vertex_ao_vs.fs_main.frag",
         "glsl-es300/cubemap_ao_vs.vs_main.vert",
         "glsl-es300/grid_ao_vs.vs_main.vert",
+        "glsl-es300/texel_ao.fs_main.frag",
         "hlsl-sm5_1/grid_ao.hlsl",
         "hlsl-sm6_0/cubemap_ao.hlsl",
         "msl2_1/vertex_ao.metal",

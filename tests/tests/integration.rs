@@ -5,6 +5,8 @@
 mod auth;
 #[path = "integration/bad_input.rs"]
 mod bad_input;
+#[path = "integration/browser.rs"]
+mod browser;
 #[path = "integration/cluster.rs"]
 mod cluster;
 #[path = "integration/crashes.rs"]
@@ -19,6 +21,8 @@ mod grid;
 mod service;
 #[path = "integration/texel.rs"]
 mod texel;
+#[path = "integration/three.rs"]
+mod three;
 #[path = "integration/tls.rs"]
 mod tls;
 #[path = "integration/tracer.rs"]

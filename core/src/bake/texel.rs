@@ -36,6 +36,45 @@ pub(crate) enum Refusal {
 /// draws per-vertex AO in WebGL2 (the previews render texel assets).
 pub const NO_VIEWER: &str = "the dashboard's live viewer does not play texel assets yet (it draws per-vertex AO); the bake's previews show them per pixel, and `aobake preview` renders any clip";
 
+/// A texel bake's atlas and what its textures cost, in its report.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TexelReport {
+    /// Texels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Charts.
+    pub charts: u32,
+    /// Texels that show the surface (the model's columns).
+    pub texels: usize,
+    /// The share of the atlas's texels whose centre lies on the surface.
+    pub utilisation: f64,
+    /// Basis textures (the model's weights): per pixel, as many texture
+    /// fetches and multiply-adds.
+    pub textures: usize,
+    /// Their bytes on the GPU: one R16Float layer each, no mipmaps (a
+    /// full chain adds a third).
+    pub texture_bytes: u64,
+}
+
+/// The report's atlas part of a texel bake (none for the other families).
+pub(super) fn report(receivers: &super::Receivers, model: &Model) -> Option<TexelReport> {
+    let super::Receivers::Texels(atlas) = receivers else {
+        return None;
+    };
+    let a = &atlas.atlas;
+    let textures = model.weight_count();
+    Some(TexelReport {
+        width: a.width,
+        height: a.height,
+        charts: a.charts,
+        texels: atlas.texels.len(),
+        utilisation: atlas.texels.utilisation(),
+        textures,
+        texture_bytes: 2 * textures as u64 * u64::from(a.width) * u64::from(a.height),
+    })
+}
+
 /// A texel bake's asset: `model` over the texels of `atlas`.
 pub(super) fn encode(
     method: Method,

@@ -461,6 +461,7 @@ impl Bake<'_> {
             },
             evaluation: info.evaluation,
             ground_truth_noise: info.ground_truth_noise,
+            texel: super::texel::report(&self.plan.receivers, &model),
         };
         let plot = psnr_plot_png(&report)
             .map_err(|e| JobError::Failed(format!("cannot draw the plot: {e}")))?;
@@ -810,6 +811,9 @@ pub struct Report {
     pub evaluation: Evaluation,
     /// How noisy the ground truth itself is.
     pub ground_truth_noise: NoiseEstimate,
+    /// A texel bake's atlas and textures (`bake::texel`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texel: Option<super::texel::TexelReport>,
 }
 
 /// The Monte Carlo noise of the ground truth: some held-out poses traced a

@@ -51,6 +51,13 @@ fn a_texel_bake_fits_per_texel_round_trips_and_beats_its_static_average() {
         frames.psnr_gain_db
     );
     assert_eq!(report.sizes.baseline_bytes, 2 * texels);
+    // The report's atlas and what its textures cost per pixel.
+    let atlas_report = report
+        .texel
+        .as_ref()
+        .expect("a texel bake reports its atlas");
+    assert_eq!((atlas_report.width, atlas_report.texels), (64, texels));
+    assert!(atlas_report.utilisation > 0.3 && atlas_report.utilisation <= 1.0);
 
     // Read as a published asset with its character.
     let baked = BakedAsset::read(&container, Some(c)).unwrap();
@@ -73,6 +80,11 @@ fn a_texel_bake_fits_per_texel_round_trips_and_beats_its_static_average() {
     // times the textures' values are the model's value there.
     let images = baked.images(&[]).unwrap();
     let w = model.model.weights(&c.skeleton, &pose.locals);
+    assert_eq!(atlas_report.textures, w.len());
+    assert_eq!(
+        atlas_report.texture_bytes,
+        2 * u64::from(model.atlas.width * model.atlas.height) * w.len() as u64
+    );
     assert_eq!(images.len(), 1);
     assert_eq!(images[0].channels.len(), w.len());
     assert_eq!(

@@ -442,6 +442,19 @@ held-out random poses ({}): {:.2} dB against {:.2} dB for the static average; ti
         t.test_trace_s,
         t.fit_s,
     ));
+    if let Some(a) = &report.texel {
+        out.push_str(&format!(
+            "atlas: {} × {} texels, {} charts, {} texels on the surface ({:.0}% of the page); {} basis textures ({:.1} MB as R16Float): per pixel {} texture fetches and multiply-adds (texel errors above are per texel; the previews judge per pixel)\n",
+            a.width,
+            a.height,
+            a.charts,
+            a.texels,
+            100.0 * a.utilisation,
+            a.textures,
+            a.texture_bytes as f64 / 1e6,
+            a.textures
+        ));
+    }
     if e.undrawn_vertex_frames > 0 {
         out.push_str(&format!(
             "{} vertex-frames of the held-out poses are left out of every error: those vertices draw nothing in that pose (every triangle of theirs has zero area, such as a part scaled to zero)\n",
