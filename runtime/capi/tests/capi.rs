@@ -209,6 +209,29 @@ fn compile(dir: &Path, program: &str) -> PathBuf {
     exe
 }
 
+/// A pose as the C programs read it: a line per node, its name, a tab,
+/// then translation, rotation (x y z w) and scale as Rust's shortest
+/// round-trip floats, which C's strtof reads back exactly.
+fn pose_text(character: &aobake_core::Character, pose: &Pose) -> String {
+    let mut text = String::new();
+    for (node, t) in character.skeleton.nodes.iter().zip(&pose.locals) {
+        let name = node
+            .name
+            .as_deref()
+            .expect("the test characters name their nodes");
+        let numbers: Vec<String> = t
+            .translation
+            .to_array()
+            .iter()
+            .chain(&t.rotation.to_array())
+            .chain(&t.scale.to_array())
+            .map(|x| format!("{x:e}"))
+            .collect();
+        text.push_str(&format!("{name}\t{}\n", numbers.join(" ")));
+    }
+    text
+}
+
 #[test]
 fn a_c_program_plays_an_asset_as_the_runtime_does() {
     let dir = std::env::temp_dir().join(format!("aobake-capi-{}", std::process::id()));
@@ -222,21 +245,8 @@ fn a_c_program_plays_an_asset_as_the_runtime_does() {
         // animation gives it: Rust's shortest round-trip floats, which C's
         // strtof reads back exactly.
         let pose = Pose::sample(&character.skeleton, &clips[0], 0.7);
-        let mut text = String::new();
-        for (node, t) in character.skeleton.nodes.iter().zip(&pose.locals) {
-            let name = node.name.as_deref().expect("RiggedFigure names its nodes");
-            let numbers: Vec<String> = t
-                .translation
-                .to_array()
-                .iter()
-                .chain(&t.rotation.to_array())
-                .chain(&t.scale.to_array())
-                .map(|x| format!("{x:e}"))
-                .collect();
-            text.push_str(&format!("{name}\t{}\n", numbers.join(" ")));
-        }
         let pose_path = dir.join("pose.txt");
-        std::fs::write(&pose_path, text).unwrap();
+        std::fs::write(&pose_path, pose_text(&character, &pose)).unwrap();
         let floats = run_c(&exe, &[&asset_path, &pose_path], &dir.join("out.bin"));
         let mut rust = VertexAo::from_bytes(&asset).unwrap();
         for (n, t) in pose.locals.iter().enumerate() {
@@ -269,24 +279,8 @@ fn a_c_program_plays_a_texel_asset_as_the_runtime_does() {
     let asset_path = dir.join("figure.aobake");
     std::fs::write(&asset_path, &asset).unwrap();
     let pose = Pose::sample(&character.skeleton, &clips[0], 0.7);
-    let mut text = String::new();
-    for (node, t) in character.skeleton.nodes.iter().zip(&pose.locals) {
-        let numbers: Vec<String> = t
-            .translation
-            .to_array()
-            .iter()
-            .chain(&t.rotation.to_array())
-            .chain(&t.scale.to_array())
-            .map(|x| format!("{x:e}"))
-            .collect();
-        text.push_str(&format!(
-            "{}\t{}\n",
-            node.name.as_deref().unwrap(),
-            numbers.join(" ")
-        ));
-    }
     let pose_path = dir.join("pose.txt");
-    std::fs::write(&pose_path, text).unwrap();
+    std::fs::write(&pose_path, pose_text(&character, &pose)).unwrap();
     let floats = run_c(&exe, &[&asset_path, &pose_path], &dir.join("out.bin"));
 
     let Asset::Texel { model, header } = Asset::from_bytes(&asset).unwrap() else {

@@ -165,39 +165,8 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
             .as_str()
             .map_or_else(|| "animation_0".to_owned(), str::to_owned);
         for (time, tolerance) in [("1000", AT_KEYS), ("0.37", BETWEEN_KEYS)] {
-            let truth = dir.path().join(format!("{name}-eval.csv"));
-            let eval = aobake(&[
-                "eval",
-                asset.to_str().unwrap(),
-                file.to_str().unwrap(),
-                "--clip",
-                &clip,
-                "--time",
-                time,
-                "--out",
-                truth.to_str().unwrap(),
-            ]);
-            assert!(eval.status.success(), "{name}: {}", stderr(&eval));
-            let python = Command::new("python3")
-                .arg(repo().join("tests/tools/gltf_ao.py"))
-                .arg(&glb)
-                .args(["--clip", &clip, "--time", time])
-                .output()
-                .expect("python3");
-            assert!(
-                python.status.success(),
-                "{name}: {}",
-                String::from_utf8_lossy(&python.stderr)
-            );
-            let mine = dir.path().join(format!("{name}-py.csv"));
-            std::fs::write(&mine, &python.stdout).unwrap();
-            let (a, b) = (csv(&truth), csv(&mine));
-            assert_eq!(a.len(), b.len(), "{name}: one value per vertex");
-            let worst = a
-                .iter()
-                .zip(&b)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0, f64::max);
+            let (_, worst) =
+                python_against_eval(dir.path(), &name, &asset, &file, &glb, &clip, time);
             eprintln!(
                 "{name}: {rows} rows, at {time} s of {clip}, Python against aobake eval: worst {worst:.2e}"
             );
@@ -212,6 +181,54 @@ fn exports_validate_and_evaluate_from_the_file_alone() {
         evaluated >= 6,
         "at least three characters exported by both methods"
     );
+}
+
+/// `aobake eval` of `asset` at `time` of `clip`, and `tests/tools/gltf_ao.py`
+/// of the export `glb` at the same time: `aobake eval`'s values and the
+/// worst difference between the two, one value per vertex.
+fn python_against_eval(
+    dir: &Path,
+    name: &str,
+    asset: &Path,
+    file: &Path,
+    glb: &Path,
+    clip: &str,
+    time: &str,
+) -> (Vec<f64>, f64) {
+    let truth = dir.join(format!("{name}-eval.csv"));
+    let eval = aobake(&[
+        "eval",
+        asset.to_str().unwrap(),
+        file.to_str().unwrap(),
+        "--clip",
+        clip,
+        "--time",
+        time,
+        "--out",
+        truth.to_str().unwrap(),
+    ]);
+    assert!(eval.status.success(), "{name}: {}", stderr(&eval));
+    let python = Command::new("python3")
+        .arg(repo().join("tests/tools/gltf_ao.py"))
+        .arg(glb)
+        .args(["--clip", clip, "--time", time])
+        .output()
+        .expect("python3");
+    assert!(
+        python.status.success(),
+        "{name}: {}",
+        String::from_utf8_lossy(&python.stderr)
+    );
+    let mine = dir.join(format!("{name}-py.csv"));
+    std::fs::write(&mine, &python.stdout).unwrap();
+    let (a, b) = (csv(&truth), csv(&mine));
+    assert_eq!(a.len(), b.len(), "{name}: one value per vertex");
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    (a, worst)
 }
 
 /// How closely the Python evaluation matches `aobake eval` at a key of
@@ -439,43 +456,12 @@ fn a_texel_export_validates_and_evaluates_from_the_file_alone() {
             .as_str()
             .map_or_else(|| "animation_0".to_owned(), str::to_owned);
         for time in ["0", "0.37"] {
-            let truth = dir.path().join(format!("{name}-eval.csv"));
-            let eval = aobake(&[
-                "eval",
-                asset.to_str().unwrap(),
-                file.to_str().unwrap(),
-                "--clip",
-                &clip,
-                "--time",
-                time,
-                "--out",
-                truth.to_str().unwrap(),
-            ]);
-            assert!(eval.status.success(), "{name}: {}", stderr(&eval));
-            let python = Command::new("python3")
-                .arg(repo().join("tests/tools/gltf_ao.py"))
-                .arg(&glb)
-                .args(["--clip", &clip, "--time", time])
-                .output()
-                .expect("python3");
-            assert!(
-                python.status.success(),
-                "{name}: {}",
-                String::from_utf8_lossy(&python.stderr)
-            );
-            let mine = dir.path().join(format!("{name}-py.csv"));
-            std::fs::write(&mine, &python.stdout).unwrap();
-            let (a, b) = (csv(&truth), csv(&mine));
-            assert_eq!(a.len(), b.len(), "{name}: one value per vertex");
+            let (a, worst) =
+                python_against_eval(dir.path(), name, &asset, &file, &glb, &clip, time);
             assert!(
                 a.iter().any(|&x| x > 0.05),
                 "{name}: some vertices are occluded"
             );
-            let worst = a
-                .iter()
-                .zip(&b)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0, f64::max);
             eprintln!(
                 "{name}: {rows} basis textures, at {time} s, Python against aobake eval: worst {worst:.2e}"
             );

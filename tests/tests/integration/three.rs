@@ -6,14 +6,15 @@
 //! (`tests/tools/three/occlusion.html`). The renders are written under
 //! `target/tmp/dashboard/` for a person to look at.
 
-use std::net::TcpListener;
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use aobake_e2e::{binary, character, repo};
 use serde_json::Value;
 
-use crate::browser::{Driver, artifacts, block_on, browser_with, wait_for};
+use crate::browser::{
+    Driver, artifacts, block_on, browser_with, free_port, wait_for, wait_for_port,
+};
 use crate::util::aobake_bake;
 
 /// `python3 -m http.server` over a folder, killed on drop: module scripts
@@ -25,11 +26,7 @@ struct Site {
 
 impl Site {
     fn serve(dir: &std::path::Path) -> Self {
-        let port = TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port();
+        let port = free_port();
         let child = Command::new("python3")
             .args([
                 "-m",
@@ -43,14 +40,7 @@ impl Site {
             .stderr(Stdio::null())
             .spawn()
             .expect("python3");
-        let started = Instant::now();
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(
-                started.elapsed() < Duration::from_secs(20),
-                "the site did not start"
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        wait_for_port(port, "the site");
         Self { child, port }
     }
 }

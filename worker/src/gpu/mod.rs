@@ -273,6 +273,96 @@ impl Gpu {
         Ok(bytemuck::cast_slice::<u8, f32>(&bytes)[..count].to_vec())
     }
 
+    /// Draws `vertices` with `pipeline` and `group` (group 0) into a new
+    /// `width × height` target of `format` (4 bytes a texel), cleared to
+    /// `clear` first, and reads it back: 4 bytes a texel, row-major. What
+    /// the tests' harness draws (points, a full-screen triangle) go
+    /// through.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn draw_and_read(
+        &self,
+        label: &str,
+        pipeline: &wgpu::RenderPipeline,
+        group: &wgpu::BindGroup,
+        format: wgpu::TextureFormat,
+        (width, height): (u32, u32),
+        clear: wgpu::Color,
+        vertices: std::ops::Range<u32>,
+    ) -> Result<Vec<u8>, GpuError> {
+        let device = &self.device;
+        let scope = ErrorScopes::push(device);
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        let target = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = target.create_view(&wgpu::TextureViewDescriptor::default());
+        let row = (4 * width).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: u64::from(row) * u64::from(height),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some(label),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(clear),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, group, &[]);
+            pass.draw(vertices, 0..1);
+        }
+        encoder.copy_texture_to_buffer(
+            target.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &staging,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(height),
+                },
+            },
+            size,
+        );
+        let submission = self.queue.submit(Some(encoder.finish()));
+        if let Some(e) = scope.pop() {
+            return Err(GpuError::Pipeline(e.to_string()));
+        }
+        self.read_with(&staging, staging.size(), submission, |bytes| {
+            (0..height as usize)
+                .flat_map(|y| {
+                    let at = y * row as usize;
+                    bytes[at..at + 4 * width as usize].iter().copied()
+                })
+                .collect()
+        })
+    }
+
     /// Waits for `submission` and copies a `MAP_READ` buffer out.
     pub(crate) fn read(
         &self,

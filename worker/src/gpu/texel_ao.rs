@@ -228,79 +228,19 @@ impl<'g> TexelAo<'g> {
             layout: &pipeline.get_bind_group_layout(0),
             entries: &entries,
         });
-        let target = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("texel_ao target"),
-            size: wgpu::Extent3d {
-                width,
-                height,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: target_format,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
-        let view = target.create_view(&Default::default());
-        let row = (4 * width).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("texel_ao readback"),
-            size: u64::from(row) * u64::from(height),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder =
-            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("texel_ao"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &group, &[]);
-            pass.draw(0..3, 0..1);
-        }
-        encoder.copy_texture_to_buffer(
-            target.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &staging,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(height),
-                },
-            },
-            wgpu::Extent3d {
-                width,
-                height,
-                depth_or_array_layers: 1,
-            },
+        let bytes = gpu.draw_and_read(
+            "texel_ao",
+            &pipeline,
+            &group,
+            target_format,
+            (width, height),
+            wgpu::Color::TRANSPARENT,
+            0..3,
         );
-        let submission = gpu.queue.submit(Some(encoder.finish()));
         if let Some(e) = scope.pop() {
             return Err(GpuError::Pipeline(e.to_string()));
         }
-        gpu.read_with(&staging, staging.size(), submission, |bytes| {
-            (0..height as usize)
-                .flat_map(|y| {
-                    let at = y * row as usize;
-                    bytemuck::pod_collect_to_vec::<u8, f32>(&bytes[at..at + 4 * width as usize])
-                })
-                .collect()
-        })
+        Ok(bytemuck::pod_collect_to_vec::<u8, f32>(&bytes?))
     }
 }
 

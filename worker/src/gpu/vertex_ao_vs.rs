@@ -179,82 +179,26 @@ fn draw_points(
         layout: &pipeline.get_bind_group_layout(0),
         entries: &entries,
     });
-    let size = wgpu::Extent3d {
-        width: target_width,
-        height: target_height,
-        depth_or_array_layers: 1,
+    // A pixel no point reached reads as a NaN.
+    let clear = wgpu::Color {
+        r: f64::from(u32::MAX),
+        g: 0.0,
+        b: 0.0,
+        a: 0.0,
     };
-    let target = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size,
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: TARGET_FORMAT,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    });
-    let view = target.create_view(&wgpu::TextureViewDescriptor::default());
-    let row = (4 * target_width).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-    let staging = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: u64::from(row * target_height),
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder =
-        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some(label),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    // A pixel no point reached reads as a NaN.
-                    load: wgpu::LoadOp::Clear(wgpu::Color {
-                        r: f64::from(u32::MAX),
-                        g: 0.0,
-                        b: 0.0,
-                        a: 0.0,
-                    }),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.draw(0..count, 0..1);
-    }
-    encoder.copy_texture_to_buffer(
-        target.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &staging,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(row),
-                rows_per_image: Some(target_height),
-            },
-        },
-        size,
+    let bytes = gpu.draw_and_read(
+        label,
+        &pipeline,
+        &bind_group,
+        TARGET_FORMAT,
+        (target_width, target_height),
+        clear,
+        0..count,
     );
-    let submission = gpu.queue.submit(Some(encoder.finish()));
     if let Some(e) = scope.pop() {
         return Err(GpuError::Pipeline(e.to_string()));
     }
-    let bytes = gpu.read(&staging, submission)?;
-    Ok((0..count)
-        .map(|n| {
-            let (x, y) = (n % target_width, n / target_width);
-            let at = (y * row + 4 * x) as usize;
-            f32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"))
-        })
-        .collect())
+    Ok(bytemuck::pod_collect_to_vec::<u8, f32>(&bytes?)[..count as usize].to_vec())
 }
 
 /// The data layout uniform of the cubemap and grid vertex stages

@@ -132,21 +132,7 @@ pub(super) fn write(
             .as_object()
             .cloned()
             .unwrap_or_default();
-        for (name, accessor) in attributes.iter_mut() {
-            let index = accessor
-                .as_u64()
-                .ok_or_else(|| fail(format!("{name} is no accessor")))?;
-            *accessor = gather(
-                json,
-                out,
-                index as usize,
-                count,
-                &source,
-                name == "POSITION",
-            )
-            .map_err(|e| fail(format!("{name}: {e}")))?
-            .into();
-        }
+        gather_all(json, out, &mut attributes, count, &source).map_err(fail)?;
         let set = (0..)
             .find(|n| !attributes.contains_key(&format!("TEXCOORD_{n}")))
             .expect("a free TEXCOORD_n");
@@ -160,21 +146,8 @@ pub(super) fn write(
             let Some(target) = target.as_object_mut() else {
                 continue;
             };
-            for (name, accessor) in target.iter_mut() {
-                let index = accessor
-                    .as_u64()
-                    .ok_or_else(|| fail(format!("targets[{t}].{name} is no accessor")))?;
-                *accessor = gather(
-                    json,
-                    out,
-                    index as usize,
-                    count,
-                    &source,
-                    name == "POSITION",
-                )
-                .map_err(|e| fail(format!("targets[{t}].{name}: {e}")))?
-                .into();
-            }
+            gather_all(json, out, target, count, &source)
+                .map_err(|e| fail(format!("targets[{t}].{e}")))?;
         }
         let indices: Vec<u32> = triangles
             .iter()
@@ -266,6 +239,27 @@ fn push_image(json: &mut Value, out: &mut Glb, png: &[u8], name: &str) -> usize 
         "bufferView": view,
     }));
     array(json, "images").len() - 1
+}
+
+/// Every attribute of `map` (a primitive's attributes, or one morph
+/// target's) replaced by its accessor [`gather`]ed at `source`; the error
+/// names the attribute.
+fn gather_all(
+    json: &mut Value,
+    out: &mut Glb,
+    map: &mut Map<String, Value>,
+    count: usize,
+    source: &[u32],
+) -> Result<(), String> {
+    for (name, accessor) in map.iter_mut() {
+        let index = accessor
+            .as_u64()
+            .ok_or_else(|| format!("{name} is no accessor"))?;
+        *accessor = gather(json, out, index as usize, count, source, name == "POSITION")
+            .map_err(|e| format!("{name}: {e}"))?
+            .into();
+    }
+    Ok(())
 }
 
 /// A vertex attribute's accessor gathered at `source` (indices into its

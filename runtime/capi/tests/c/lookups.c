@@ -25,21 +25,7 @@
 #include <string.h>
 
 #include "aobake_rt.h"
-
-#define EXPECT(cond, ...) do { if (!(cond)) { fprintf(stderr, __VA_ARGS__); fputc('\n', stderr); exit(1); } } while (0)
-
-static void *slurp(const char *path, size_t *len) {
-    FILE *f = fopen(path, "rb");
-    EXPECT(f, "cannot open %s", path);
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    void *data = malloc((size_t)n);
-    EXPECT(fread(data, 1, (size_t)n, f) == (size_t)n, "cannot read %s", path);
-    fclose(f);
-    *len = (size_t)n;
-    return data;
-}
+#include "test.h"
 
 /* Every number of a text file, in order. */
 static float *numbers(const char *path, size_t *count) {

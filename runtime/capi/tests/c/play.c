@@ -13,21 +13,7 @@
 #include <string.h>
 
 #include "aobake_rt.h"
-
-static void *slurp(const char *path, size_t *len) {
-    FILE *f = fopen(path, "rb");
-    if (!f) { perror(path); exit(2); }
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    void *data = malloc((size_t)n);
-    if (fread(data, 1, (size_t)n, f) != (size_t)n) { perror(path); exit(2); }
-    fclose(f);
-    *len = (size_t)n;
-    return data;
-}
-
-#define EXPECT(cond, ...) do { if (!(cond)) { fprintf(stderr, __VA_ARGS__); fputc('\n', stderr); exit(1); } } while (0)
+#include "test.h"
 
 int main(int argc, char **argv) {
     EXPECT(argc == 4, "usage: play ASSET POSE OUT");
