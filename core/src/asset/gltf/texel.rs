@@ -28,7 +28,7 @@ use std::collections::BTreeMap;
 
 use serde_json::{Map, Value, json};
 
-use super::{Glb, GltfExportError, Specific, array};
+use super::glb::{Glb, Specific, array};
 use crate::{Character, image::ImageError, method::texel::TexelModel};
 
 /// How `extras.aobake` says the basis images decode.
@@ -46,10 +46,10 @@ pub(super) fn write(
     static_ao: &[f32],
     frames: usize,
     warnings: &mut Vec<String>,
-) -> Result<Specific, GltfExportError> {
+) -> Result<Specific, String> {
     let atlas = &model.atlas;
     let (width, height) = (atlas.width, atlas.height);
-    let image_error = |e: ImageError| GltfExportError::Unsupported(e.to_string());
+    let image_error = |e: ImageError| e.to_string();
 
     // The static occlusion texture: 1 − AO per texel, dilated.
     let occlusion: Vec<u8> = atlas
@@ -70,9 +70,7 @@ pub(super) fn write(
     let texture = array(json, "textures").len() - 1;
 
     // The basis textures, quantised per texture.
-    let basis = model
-        .basis()
-        .map_err(|e| GltfExportError::Unsupported(e.to_string()))?;
+    let basis = model.basis().map_err(|e| e.to_string())?;
     let mut layers = Vec::with_capacity(basis.len());
     for (k, layer) in basis.iter().enumerate() {
         let (lo, hi) = layer
@@ -104,9 +102,10 @@ pub(super) fn write(
         let count = p.vertices.len();
         let at = |json: &Value| json["meshes"][mesh]["primitives"][p.primitive].clone();
         let primitive = at(json);
-        let triangles = atlas.triangles.get(p.triangles.clone()).ok_or_else(|| {
-            GltfExportError::Unsupported("the asset's atlas has fewer triangles".into())
-        })?;
+        let triangles = atlas
+            .triangles
+            .get(p.triangles.clone())
+            .ok_or_else(|| "the asset's atlas has fewer triangles".to_owned())?;
         let mut used: Vec<u32> = triangles.iter().flatten().copied().collect();
         used.sort_unstable();
         used.dedup();
@@ -115,19 +114,14 @@ pub(super) fn write(
             local[a as usize] = i as u32;
             let v = atlas.xref[a as usize] as usize;
             if !p.vertices.contains(&v) {
-                return Err(GltfExportError::Unsupported(format!(
+                return Err(format!(
                     "meshes[{}].primitives[{}]: the atlas joins it to another primitive's vertex",
                     p.mesh, p.primitive
-                )));
+                ));
             }
             source.push((v - p.vertices.start) as u32);
         }
-        let fail = |what: String| {
-            GltfExportError::Unsupported(format!(
-                "meshes[{}].primitives[{}]: {what}",
-                p.mesh, p.primitive
-            ))
-        };
+        let fail = |what: String| format!("meshes[{}].primitives[{}]: {what}", p.mesh, p.primitive);
         let mut attributes = primitive["attributes"]
             .as_object()
             .cloned()
