@@ -49,8 +49,29 @@ fn a_texel_bake_through_the_service_matches_aobake_bake_and_exports_its_textures
             .is_some_and(|d| d.contains("no TEXCOORD_0")),
         "{problem}"
     );
-    let done = env.wait_bake(b["id"].as_i64().unwrap(), Duration::from_secs(300));
+    let id = b["id"].as_i64().unwrap();
+    let done = env.wait_bake(id, Duration::from_secs(300));
     assert_eq!(done["state"], "done", "{done}");
+    // Its previews, drawn per pixel from the textures by the worker, each
+    // still judging the model beside GTAO and the texel floor.
+    let (status, previews) = env
+        .request("GET", &format!("/v1/bakes/{id}/previews"), ADMIN, None)
+        .unwrap();
+    assert_eq!(status, 200);
+    assert_eq!(previews["state"], "completed", "{previews}");
+    let stills: Vec<&serde_json::Value> = previews["previews"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["kind"] == "still")
+        .collect();
+    assert!(!stills.is_empty(), "{previews}");
+    for still in stills {
+        let on_character = &still["screen_space"]["character"];
+        assert!(on_character["model"]["rmse"].is_number(), "{still}");
+        assert!(on_character["texel_truth"]["rmse"].is_number(), "{still}");
+        assert_eq!(still["screen_space"]["atlas"]["width"], 64, "{still}");
+    }
     let served = asset(&env, &done);
     let flags = [
         "--method",
