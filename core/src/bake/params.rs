@@ -425,6 +425,14 @@ impl BakeParams {
                     .into(),
             ));
         }
+        let layers = aobake_runtime::method::texel::MAX_TEXTURES;
+        if p.method.family() == Family::Texel && !(1..layers).contains(&p.linear.basis) {
+            return Err(BakeError::Param(format!(
+                "linear.basis must be 1 to {} for texel-linear: each weight is a texture, one layer of an array that GPUs hold at most {layers} of, not {}",
+                layers - 1,
+                p.linear.basis
+            )));
+        }
         if p.method.family() == Family::Texel
             && p.linear.locality != crate::method::vertex::Locality::Off
         {

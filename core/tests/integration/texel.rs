@@ -145,6 +145,17 @@ fn texel_options_are_checked_and_keyed() {
     // A texel's joints are not gathered: no local fit.
     let local = serde_json::json!({"linear.locality": "on"});
     assert!(BakeParams::with_overrides(Method::TexelLinear, local.as_object().unwrap()).is_err());
+    // Each weight is a layer of a GPU array texture: the basis is kept
+    // under their number, and a model without one (basis 0) is refused.
+    for basis in [0, aobake_core::method::texel::MAX_TEXTURES] {
+        let wide = serde_json::json!({"linear.basis": basis});
+        let e = BakeParams::with_overrides(Method::TexelLinear, wide.as_object().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("linear.basis") && e.contains("layer"), "{e}");
+    }
+    let most = serde_json::json!({"linear.basis": aobake_core::method::texel::MAX_TEXTURES - 1});
+    assert!(BakeParams::with_overrides(Method::TexelLinear, most.as_object().unwrap()).is_ok());
 }
 
 #[test]

@@ -13,6 +13,12 @@ use wgpu::util::DeviceExt as _;
 
 use super::{ErrorScopes, Gpu, GpuError};
 
+// The runtime's bound on a texel model's textures is the shader's.
+const _: () = assert!(
+    aobake_core::method::texel::MAX_TEXTURES == TEXEL_MAX_LAYERS as usize,
+    "the runtime's MAX_TEXTURES is texel_ao.wgsl's TEXEL_MAX_LAYERS"
+);
+
 /// The sampled format of the basis and truth textures: filterable on
 /// every adapter (f32 is not without a feature), and exact for the
 /// asset's f16 coefficients.

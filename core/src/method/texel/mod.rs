@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 
 /// The texel methods' algorithm version and their run-time form live in
 /// the runtime crate, which engines read assets with.
-pub use aobake_runtime::method::texel::{ALGORITHM_VERSION, AtlasLayout, TexelModel};
+pub use aobake_runtime::method::texel::{ALGORITHM_VERSION, AtlasLayout, MAX_TEXTURES, TexelModel};
 
 pub use atlas::DEFAULT_ATLAS;
 

@@ -219,6 +219,13 @@ pub enum BasisError {
     },
 }
 
+/// The most textures (weights) a texel model may have: one layer each of
+/// an array texture, and 256 layers is what every GPU holds (WebGPU's and
+/// WebGL2's least `maxTextureArrayLayers`; `TEXEL_MAX_LAYERS` in
+/// `shaders/wgsl/common/texel_ao.wgsl`). texel-linear's `linear.basis` is
+/// kept below it.
+pub const MAX_TEXTURES: usize = 256;
+
 /// The most values [`TexelModel::basis`] makes (4 GB of f32): 64 textures
 /// of 4096² fit; a hostile header cannot ask for hundreds of GB.
 pub const MAX_BASIS_VALUES: u64 = 1 << 30;
