@@ -455,9 +455,12 @@ def bilinear(values, width, height, u, v):
 
 def texel_ao(meta, gltf, binary, w):
     """Per vertex of aobake's order: the texel textures at its UV."""
+    width, height = meta["atlas"]["width"], meta["atlas"]["height"]
     basis = []
     for layer in meta["basis"]:
-        width, height, samples = image(gltf, binary, layer["image"])
+        w_, h_, samples = image(gltf, binary, layer["image"])
+        if (w_, h_) != (width, height):
+            sys.exit(f"a basis image is {w_} x {h_}, the atlas {width} x {height}")
         basis.append([layer["offset"] + layer["scale"] * q / 65535.0 for q in samples])
     out = {}
     for p in meta["primitives"]:

@@ -291,6 +291,18 @@ impl<'a> Bake<'a> {
         let (model, surface) = baked
             .preview_model()
             .map_err(|e| JobError::Invalid(e.to_string()))?;
+        // A texel model whose fit kept more weights than GPUs hold array
+        // layers (its basis compression found nothing to compress): the
+        // asset stands, its previews cannot be drawn.
+        let layers = crate::method::texel::MAX_TEXTURES;
+        if let PreviewModel::Texel(m, _) = model
+            && m.model.weight_count() > layers
+        {
+            return Ok(preview::unavailable(&format!(
+                "the texel model takes {} weights, more than the {layers} texture layers GPUs hold: its previews cannot be drawn",
+                m.model.weight_count()
+            )));
+        }
         let frames = self.preview_frames()?;
         let truth = self.stacked_truth(deps, frames.len())?;
         let stills = frames.stills.len();
@@ -407,11 +419,13 @@ pub struct BakedAsset {
 #[derive(Debug)]
 enum AssetModel {
     Vertex(Box<crate::method::vertex::Model>),
-    /// A texel model and, with the character, its atlas's texels as
-    /// surface points (for the previews).
+    /// A texel model; whether it was read with its character; and its
+    /// atlas's texels as surface points, found from its UVs when the
+    /// previews first ask (evaluating and exporting need none).
     Texel(
         Box<crate::method::texel::TexelModel>,
-        Option<Box<crate::method::texel::atlas::TexelAtlas>>,
+        bool,
+        std::sync::OnceLock<Result<crate::method::texel::atlas::TexelAtlas, String>>,
     ),
     /// The model and its clip's name.
     Cubemap(crate::method::cubemap::model::CubemapModel, String),
@@ -458,17 +472,14 @@ impl BakedAsset {
                         super::texel::Refusal::Unreadable(e) => AssetUseError::Unreadable(e),
                         super::texel::Refusal::Mismatch(e) => AssetUseError::Mismatch(e),
                     })?;
-                let atlas = match character {
-                    Some(_) => Some(Box::new(
-                        crate::method::texel::atlas::TexelAtlas::from_layout(&model.atlas)
-                            .map_err(|e| unreadable(&e))?,
-                    )),
-                    None => None,
-                };
                 Self {
                     params: params(&header.params)?,
                     character: header.character,
-                    model: AssetModel::Texel(Box::new(model), atlas),
+                    model: AssetModel::Texel(
+                        Box::new(model),
+                        character.is_some(),
+                        std::sync::OnceLock::new(),
+                    ),
                 }
             }
             Family::Cubemap => {
@@ -535,8 +546,17 @@ impl BakedAsset {
         let surface = self.params.held_out_surface();
         Ok(match &self.model {
             AssetModel::Vertex(m) => (PreviewModel::Vertex(m), surface),
-            AssetModel::Texel(m, atlas) => {
-                let atlas = atlas.as_ref().ok_or_else(not_fitted)?;
+            AssetModel::Texel(m, with_character, atlas) => {
+                if !with_character {
+                    return Err(not_fitted());
+                }
+                let atlas = atlas
+                    .get_or_init(|| {
+                        crate::method::texel::atlas::TexelAtlas::from_layout(&m.atlas)
+                            .map_err(|e| e.to_string())
+                    })
+                    .as_ref()
+                    .map_err(|e| AssetUseError::Unreadable(e.clone()))?;
                 (PreviewModel::Texel(m, atlas), surface)
             }
             AssetModel::Cubemap(m, _) => (
@@ -564,7 +584,7 @@ impl BakedAsset {
         use crate::method::grid::base::Receiver;
         match &self.model {
             AssetModel::Vertex(m) => Ok(m.evaluate(&character.skeleton, &pose.locals)),
-            AssetModel::Texel(m, _) => Ok(super::texel::vertex_ao(m, character, pose)),
+            AssetModel::Texel(m, ..) => Ok(super::texel::vertex_ao(m, character, pose)),
             AssetModel::Cubemap(..) => Err(AssetUseError::Unsupported(
                 "it holds the occlusion cast into space, not per-vertex AO; `aobake preview` renders it on the ground and `aobake export --exr` writes its faces".into(),
             )),
@@ -600,7 +620,7 @@ impl BakedAsset {
             AssetModel::Vertex(_) => Err(AssetUseError::Unsupported(
                 "per-vertex AO has no image to export".into(),
             )),
-            AssetModel::Texel(m, _) => super::texel::images(m).map_err(AssetUseError::Unsupported),
+            AssetModel::Texel(m, ..) => super::texel::images(m).map_err(AssetUseError::Unsupported),
             AssetModel::Cubemap(m, clip) => {
                 let mut images = super::cubemap::face_strips(m, clip, times);
                 images.extend(m.ground.as_ref().map(ground_offsets));

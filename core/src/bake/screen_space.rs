@@ -173,9 +173,9 @@ pub struct AtlasInfo {
     pub texels: usize,
     /// The share of the atlas's texels whose centre lies on the surface.
     pub utilisation: f64,
-    /// Seconds spent tracing the texels here (0 when the frame's truth
-    /// held them already: a texel model's preview traces them with the
-    /// frame).
+    /// Seconds spent tracing the texels here: 0 when the frame's truth
+    /// held them already, as a preview's frames do (they are traced with
+    /// the frame, and counted in its `trace_s`).
     pub trace_s: f64,
 }
 

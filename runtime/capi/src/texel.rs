@@ -72,14 +72,14 @@ pub unsafe extern "C" fn aobake_texel_free(texel: *mut AobakeTexel) {
 /// `texel` must be NULL or a live handle.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn aobake_texel_pose(texel: *mut AobakeTexel) -> *mut AobakeVertexAo {
-    // SAFETY: the caller passes NULL or a live handle.
-    match unsafe { texel.as_mut() } {
-        Some(t) => &raw mut t.pose,
-        None => {
-            fail("the handle is NULL");
-            std::ptr::null_mut()
-        }
+    if texel.is_null() {
+        fail("the handle is NULL");
+        return std::ptr::null_mut();
     }
+    // SAFETY: the caller passes a live handle, which is not NULL; the
+    // field's place is taken without making a reference, so the pointer
+    // and the handle's `const` calls may be used in any order.
+    unsafe { &raw mut (*texel).pose }
 }
 
 /// Writes the atlas's size in texels to `width` and `height`: each basis

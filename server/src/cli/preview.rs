@@ -298,7 +298,7 @@ fn texel_floors(
         subject.surface.samples
     );
     println!(
-        "| atlas | charts | texels | utilisation | atlas (s) | texel trace (s) | texel floor | per-vertex floor | GTAO |"
+        "| atlas | charts | texels | utilisation | atlas (s) | truth trace (s) | texel floor | per-vertex floor | GTAO |"
     );
     println!("|---|---|---|---|---|---|---|---|---|");
     for &side in sides {
@@ -333,7 +333,8 @@ fn texel_floors(
             a.charts,
             a.texels,
             100.0 * a.utilisation,
-            a.trace_s,
+            // The still's truth: its vertices, ground and the atlas's texels.
+            still.info.trace_s,
             floor.rmse,
             e.per_vertex_truth.rmse,
             e.gtao.rmse

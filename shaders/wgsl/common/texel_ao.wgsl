@@ -10,7 +10,8 @@
 // borders (aobake_runtime's TexelModel::basis), so that bilinear filtering
 // and mipmaps read chart values only. The weights are computed once per
 // pose on the CPU, exactly as the vertex methods' (aobake-runtime's
-// Model::weights; the C ABI's aobake_weights). Filtering is linear, so
+// Model::weights; the C ABI's aobake_vertex_ao_weights on the handle
+// aobake_texel_pose gives). Filtering is linear, so
 // sampling each layer and summing is the sum's texture sampled. Per pixel:
 // k texture fetches and k multiply-adds.
 //

@@ -102,6 +102,11 @@ pub(super) fn write(
         let count = p.vertices.len();
         let at = |json: &Value| json["meshes"][mesh]["primitives"][p.primitive].clone();
         let primitive = at(json);
+        // A primitive no triangle of the atlas is on (all of its
+        // triangles had no area) keeps its own vertices, and is not listed.
+        if p.triangles.is_empty() {
+            continue;
+        }
         let triangles = atlas
             .triangles
             .get(p.triangles.clone())
@@ -301,7 +306,8 @@ fn gather(
             .and_then(|at| bin.get(at..at.checked_add(len)?))
             .ok_or_else(|| "its data lie outside the buffer".to_owned())
     };
-    let view_of = |v: &Value| -> Result<(u64, Option<u64>), String> {
+    // A view's start, its stride and its length.
+    let view_of = |v: &Value| -> Result<(u64, Option<u64>, u64), String> {
         let view = v
             .as_u64()
             .and_then(|v| json["bufferViews"].get(v as usize))
@@ -309,33 +315,62 @@ fn gather(
         Ok((
             view["byteOffset"].as_u64().unwrap_or(0),
             view["byteStride"].as_u64(),
+            view["byteLength"].as_u64().unwrap_or(0),
         ))
+    };
+    // Where `len` bytes at `at` within a view begin in the buffer, if
+    // they lie within the view.
+    let within = |(offset, _, length): (u64, Option<u64>, u64), at: u64, len: u64| {
+        at.checked_add(len)
+            .filter(|&end| end <= length)
+            .and_then(|_| offset.checked_add(at))
+            .ok_or_else(|| "its data lie outside their buffer view".to_owned())
     };
     let mut data = vec![0u8; count * element];
     if let Some(view) = accessor.get("bufferView") {
-        let (offset, stride) = view_of(view)?;
-        let base = offset + accessor["byteOffset"].as_u64().unwrap_or(0);
-        let stride = stride.unwrap_or(element as u64);
+        let view = view_of(view)?;
+        let stride = view.1.unwrap_or(element as u64);
+        if stride < element as u64 {
+            return Err(format!(
+                "a stride of {stride} bytes for elements of {element}"
+            ));
+        }
+        let first = accessor["byteOffset"].as_u64().unwrap_or(0);
         for (i, chunk) in data.chunks_exact_mut(element).enumerate() {
-            chunk.copy_from_slice(slice(base + i as u64 * stride, element)?);
+            let at = (i as u64)
+                .checked_mul(stride)
+                .and_then(|d| first.checked_add(d))
+                .ok_or("its data lie outside their buffer view")?;
+            chunk.copy_from_slice(slice(within(view, at, element as u64)?, element)?);
         }
     }
     if let Some(sparse) = accessor.get("sparse") {
         let n = sparse["count"]
             .as_u64()
             .ok_or("a sparse accessor without count")? as usize;
-        let (at, _) = view_of(&sparse["indices"]["bufferView"])?;
-        let at = at + sparse["indices"]["byteOffset"].as_u64().unwrap_or(0);
         let width = match sparse["indices"]["componentType"].as_u64() {
             Some(5121) => 1,
             Some(5123) => 2,
             Some(5125) => 4,
             _ => return Err("sparse indices of another type".into()),
         };
-        let (values, _) = view_of(&sparse["values"]["bufferView"])?;
-        let values = values + sparse["values"]["byteOffset"].as_u64().unwrap_or(0);
-        let indices = slice(at, n.checked_mul(width).ok_or("too many")?)?.to_vec();
-        let replaced = slice(values, n.checked_mul(element).ok_or("too many")?)?.to_vec();
+        let too_many = || "too many sparse values".to_owned();
+        let (indices_len, values_len) = (
+            n.checked_mul(width).ok_or_else(too_many)?,
+            n.checked_mul(element).ok_or_else(too_many)?,
+        );
+        let at = within(
+            view_of(&sparse["indices"]["bufferView"])?,
+            sparse["indices"]["byteOffset"].as_u64().unwrap_or(0),
+            indices_len as u64,
+        )?;
+        let values = within(
+            view_of(&sparse["values"]["bufferView"])?,
+            sparse["values"]["byteOffset"].as_u64().unwrap_or(0),
+            values_len as u64,
+        )?;
+        let indices = slice(at, indices_len)?.to_vec();
+        let replaced = slice(values, values_len)?.to_vec();
         for (j, index) in indices.chunks_exact(width).enumerate() {
             let mut i = 0usize;
             for (b, &byte) in index.iter().enumerate() {
@@ -374,19 +409,134 @@ fn gather(
     if accessor["normalized"].as_bool() == Some(true) {
         written.insert("normalized".into(), true.into());
     }
-    if bounds && component_type == 5126 && !source.is_empty() {
-        let mut lo = vec![f32::INFINITY; components];
-        let mut hi = vec![f32::NEG_INFINITY; components];
-        for chunk in gathered.chunks_exact(stride) {
-            for c in 0..components {
-                let x = f32::from_le_bytes(chunk[4 * c..4 * c + 4].try_into().expect("4 bytes"));
-                lo[c] = lo[c].min(x);
-                hi[c] = hi[c].max(x);
+    if bounds && !source.is_empty() {
+        // In the component type's own numbers (a quantised POSITION's
+        // integers), as glTF states bounds.
+        let value = |bytes: &[u8]| -> Value {
+            match component_type {
+                5120 => json!(bytes[0] as i8),
+                5121 => json!(bytes[0]),
+                5122 => json!(i16::from_le_bytes([bytes[0], bytes[1]])),
+                5123 => json!(u16::from_le_bytes([bytes[0], bytes[1]])),
+                5125 => json!(u32::from_le_bytes(bytes[..4].try_into().expect("4 bytes"))),
+                _ => json!(f32::from_le_bytes(bytes[..4].try_into().expect("4 bytes"))),
             }
+        };
+        let number = |v: &Value| v.as_f64().unwrap_or(0.0);
+        let mut lo: Vec<Value> = Vec::with_capacity(components);
+        let mut hi: Vec<Value> = Vec::with_capacity(components);
+        for c in 0..components {
+            let (mut min, mut max) = (None::<Value>, None::<Value>);
+            for chunk in gathered.chunks_exact(stride) {
+                let v = value(&chunk[c * component..(c + 1) * component]);
+                if min.as_ref().is_none_or(|m| number(&v) < number(m)) {
+                    min = Some(v.clone());
+                }
+                if max.as_ref().is_none_or(|m| number(&v) > number(m)) {
+                    max = Some(v);
+                }
+            }
+            lo.push(min.unwrap_or_default());
+            hi.push(max.unwrap_or_default());
         }
-        written.insert("min".into(), json!(lo));
-        written.insert("max".into(), json!(hi));
+        written.insert("min".into(), Value::Array(lo));
+        written.insert("max".into(), Value::Array(hi));
     }
     array(json, "accessors").push(Value::Object(written));
     Ok(array(json, "accessors").len() - 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bytes of accessor `index` as `gather` wrote it, and its JSON.
+    fn written(json: &Value, out: &Glb, index: usize) -> (Vec<u8>, Value) {
+        let a = json["accessors"][index].clone();
+        let view = &json["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
+        let at = view["byteOffset"].as_u64().unwrap() as usize;
+        let len = view["byteLength"].as_u64().unwrap() as usize;
+        (out.bin[at..at + len].to_vec(), a)
+    }
+
+    #[test]
+    fn gather_reads_strided_sparse_and_quantised_attributes_as_the_file_lays_them_out() {
+        let mut out = Glb::default();
+        // Three VEC3 u16 positions (quantised), interleaved in a 12-byte
+        // stride after 2 bytes of something else.
+        let mut interleaved = Vec::new();
+        for p in [[1u16, 2, 3], [40, 50, 60], [7, 8, 900]] {
+            interleaved.extend([0xAA, 0xBB]);
+            for c in p {
+                interleaved.extend(c.to_le_bytes());
+            }
+            interleaved.extend([0xCC; 4]);
+        }
+        let a = out.append(&interleaved);
+        // Sparse: element 1 of an all-zero VEC2 float accessor set to (5, 6).
+        let sparse_indices = out.append(&[1u8]);
+        let sparse_values = out.append(&[5.0f32, 6.0].map(f32::to_le_bytes).concat());
+        let mut json = json!({
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": a, "byteLength": 36, "byteStride": 12},
+                {"buffer": 0, "byteOffset": sparse_indices, "byteLength": 1},
+                {"buffer": 0, "byteOffset": sparse_values, "byteLength": 8},
+            ],
+            "accessors": [
+                {"bufferView": 0, "byteOffset": 2, "componentType": 5123, "count": 3, "type": "VEC3"},
+                {"componentType": 5126, "count": 3, "type": "VEC2", "sparse": {
+                    "count": 1,
+                    "indices": {"bufferView": 1, "componentType": 5121},
+                    "values": {"bufferView": 2}}},
+                {"bufferView": 0, "byteOffset": 30, "componentType": 5123, "count": 3, "type": "VEC3"},
+                {"bufferView": 0, "byteOffset": 2, "componentType": 5123, "count": 3, "type": "VEC3",
+                 "sparse": {"count": 1, "indices": {"bufferView": 1, "componentType": 5121, "byteOffset": 1},
+                            "values": {"bufferView": 2}}},
+            ],
+        });
+        // Gathered in another order, one repeated.
+        let source = [2u32, 0, 2];
+        let positions = gather(&mut json, &mut out, 0, 3, &source, true).unwrap();
+        let (bytes, accessor) = written(&json, &out, positions);
+        // 6-byte elements padded to 8, with a stride saying so.
+        let view = &json["bufferViews"][accessor["bufferView"].as_u64().unwrap() as usize];
+        assert_eq!(view["byteStride"], 8);
+        let element = |i: usize| -> Vec<u16> {
+            (0..3)
+                .map(|c| u16::from_le_bytes([bytes[8 * i + 2 * c], bytes[8 * i + 2 * c + 1]]))
+                .collect()
+        };
+        assert_eq!(element(0), [7, 8, 900]);
+        assert_eq!(element(1), [1, 2, 3]);
+        assert_eq!(element(2), [7, 8, 900]);
+        // A quantised POSITION's bounds in its own integers.
+        assert_eq!(accessor["min"], json!([1, 2, 3]));
+        assert_eq!(accessor["max"], json!([7, 8, 900]));
+        assert_eq!(
+            (
+                accessor["componentType"].as_u64(),
+                accessor["count"].as_u64()
+            ),
+            (Some(5123), Some(3))
+        );
+        // Sparse values over zeros.
+        let uv = gather(&mut json, &mut out, 1, 3, &[1, 0], false).unwrap();
+        let (bytes, accessor) = written(&json, &out, uv);
+        let floats: Vec<f32> = bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+        assert_eq!(floats, [5.0, 6.0, 0.0, 0.0]);
+        assert!(accessor.get("min").is_none());
+        // Data past the view, or a sparse index past the count, are
+        // refused with a reason, never a panic.
+        let e = gather(&mut json, &mut out, 2, 3, &source, true).unwrap_err();
+        assert!(e.contains("outside their buffer view"), "{e}");
+        let e = gather(&mut json, &mut out, 3, 3, &source, true).unwrap_err();
+        assert!(e.contains("outside") || e.contains("past the end"), "{e}");
+        // Another count than the primitive's, or a huge offset.
+        assert!(gather(&mut json, &mut out, 0, 4, &source, true).is_err());
+        json["accessors"][0]["byteOffset"] = json!(u64::MAX - 3);
+        assert!(gather(&mut json, &mut out, 0, 3, &source, true).is_err());
+    }
 }

@@ -59,7 +59,7 @@ pub struct AtlasOptions {
 
 /// Texel centres per texel of the page that an atlas's walks may visit
 /// ([`Atlas::check_walk`]).
-const WALK_PER_TEXEL: f64 = 64.0;
+const WALK_PER_TEXEL: f64 = 8.0;
 /// Texel centres per triangle that an atlas's walks may visit besides.
 const WALK_PER_TRIANGLE: f64 = 32.0;
 
