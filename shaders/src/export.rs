@@ -404,6 +404,8 @@ struct Binding {
     binding: ResourceBinding,
     writable: bool,
     texture: bool,
+    /// A sampler (the texel methods' basis textures are filtered).
+    sampler: bool,
     /// The WGSL variable's name.
     name: String,
     /// naga's handle index (the `size{i}` of MSL's `_mslBufferSizes`),
@@ -424,6 +426,7 @@ fn bindings(module: &naga::Module) -> Vec<Binding> {
             let binding = g.binding?;
             let inner = &module.types[g.ty].inner;
             let texture = matches!(inner, TypeInner::Image { .. });
+            let sampler = matches!(inner, TypeInner::Sampler { .. });
             let writable = matches!(g.space, AddressSpace::Storage { access } if access.contains(StorageAccess::STORE));
             let runtime_sized = |inner: &TypeInner| {
                 matches!(inner, TypeInner::Array { size: naga::ArraySize::Dynamic, .. })
@@ -439,6 +442,7 @@ fn bindings(module: &naga::Module) -> Vec<Binding> {
                 binding,
                 writable,
                 texture,
+                sampler,
                 name: g.name.clone().unwrap_or_default(),
                 sized: sized.then(|| handle.index()),
             })
@@ -448,10 +452,10 @@ fn bindings(module: &naga::Module) -> Vec<Binding> {
     all
 }
 
-/// Each binding's Metal slot: buffers and textures numbered apart, each in
-/// binding order.
+/// Each binding's Metal slot: buffers, textures and samplers numbered
+/// apart, each in binding order.
 fn msl_slots(bindings: &[Binding]) -> Vec<msl::BindTarget> {
-    let (mut buffers, mut textures) = (0u8, 0u8);
+    let (mut buffers, mut textures, mut samplers) = (0u8, 0u8, 0u8);
     bindings
         .iter()
         .map(|b| {
@@ -459,6 +463,9 @@ fn msl_slots(bindings: &[Binding]) -> Vec<msl::BindTarget> {
             if b.texture {
                 slot.texture = Some(textures);
                 textures += 1;
+            } else if b.sampler {
+                slot.sampler = Some(msl::BindSamplerTarget::Resource(samplers));
+                samplers += 1;
             } else {
                 slot.buffer = Some(buffers);
                 slot.mutable = b.writable;
@@ -476,9 +483,10 @@ fn msl_manifest(bindings: &[Binding], slots: &[msl::BindTarget], sizes_slot: u8)
     let mut lines =
         vec!["// Slots (the WGSL's @group(0) @binding(b) in binding order):".to_owned()];
     for (b, target) in bindings.iter().zip(slots) {
-        let slot = match (target.buffer, target.texture) {
-            (Some(i), _) => format!("[[buffer({i})]]"),
-            (_, Some(i)) => format!("[[texture({i})]]"),
+        let slot = match (target.buffer, target.texture, &target.sampler) {
+            (Some(i), ..) => format!("[[buffer({i})]]"),
+            (_, Some(i), _) => format!("[[texture({i})]]"),
+            (.., Some(msl::BindSamplerTarget::Resource(i))) => format!("[[sampler({i})]]"),
             _ => String::new(),
         };
         lines.push(format!(
@@ -722,7 +730,8 @@ mod tests {
                 .find(|(n, _)| *n == name)
                 .unwrap();
             // `@group(0) @binding(N) var<…> NAME: TYPE` or `var NAME: texture_…`.
-            let mut resources: Vec<(u32, String, bool)> = wgsl
+            // The kind: 0 a buffer, 1 a texture, 2 a sampler.
+            let mut resources: Vec<(u32, String, u8)> = wgsl
                 .lines()
                 .filter_map(|line| {
                     let rest = line.trim().strip_prefix("@group(0) @binding(")?;
@@ -730,24 +739,28 @@ mod tests {
                     let decl = rest.trim().strip_prefix("var")?;
                     let decl = decl.split_once('>').map_or(decl, |(_, after)| after);
                     let (var, ty) = decl.split_once(':')?;
-                    Some((
-                        n.parse().ok()?,
-                        var.trim().to_owned(),
-                        ty.trim().starts_with("texture"),
-                    ))
+                    let ty = ty.trim();
+                    let kind = if ty.starts_with("texture") {
+                        1
+                    } else if ty.starts_with("sampler") {
+                        2
+                    } else {
+                        0
+                    };
+                    Some((n.parse().ok()?, var.trim().to_owned(), kind))
                 })
                 .collect();
             resources.sort();
             assert!(!resources.is_empty(), "{name}");
-            let (mut buffers, mut textures) = (0, 0);
-            for (_, var, texture) in &resources {
-                let slot = if *texture {
-                    textures += 1;
-                    format!("{var} [[texture({})]]", textures - 1)
-                } else {
-                    buffers += 1;
-                    format!("{var} [[buffer({})]]", buffers - 1)
-                };
+            let mut next = [0; 3];
+            for (_, var, kind) in &resources {
+                let k = usize::from(*kind);
+                let slot = format!(
+                    "{var} [[{}({})]]",
+                    ["buffer", "texture", "sampler"][k],
+                    next[k]
+                );
+                next[k] += 1;
                 assert!(msl.contains(&slot), "{name}: no `{slot}`");
                 checked += 1;
             }

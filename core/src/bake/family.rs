@@ -527,6 +527,12 @@ impl BakedAsset {
         })
     }
 
+    /// Whether it is a texel asset (its stills measure its own atlas's
+    /// texel floor).
+    pub fn is_texel(&self) -> bool {
+        matches!(self.model, AssetModel::Texel(..))
+    }
+
     /// The clip a cubemap asset was baked over (it darkens the world as
     /// that clip plays); `None` for the other families, which follow any
     /// pose.

@@ -103,16 +103,26 @@ pub(crate) fn read(
     container: &Container,
     character: Option<&Character>,
 ) -> Result<(TexelModel, crate::method::vertex::AssetHeader), Refusal> {
-    let (model, header) =
-        TexelModel::from_container(container, character.map(|c| c.vertex_count()))
-            .map_err(|e| Refusal::Unreadable(e.to_string()))?;
+    let (model, header) = TexelModel::from_container(container, None)
+        .map_err(|e| Refusal::Unreadable(e.to_string()))?;
     if let Some(c) = character {
-        let mismatch =
-            |e: String| Refusal::Mismatch(format!("{e} (character {})", header.character));
-        if model.atlas.triangles.len() != c.triangles.len() {
+        let mismatch = |e: String| {
+            Refusal::Mismatch(format!(
+                "{e} (the asset's character is {})",
+                header.character
+            ))
+        };
+        if model.atlas.triangles.len() != c.triangles.len()
+            || model
+                .atlas
+                .xref
+                .iter()
+                .any(|&x| x as usize >= c.vertex_count())
+        {
             return Err(mismatch(format!(
-                "the character has {} triangles but the asset's atlas {}",
+                "it was baked for another character: this one has {} triangles and {} vertices, the asset's atlas covers {} triangles",
                 c.triangles.len(),
+                c.vertex_count(),
                 model.atlas.triangles.len()
             )));
         }

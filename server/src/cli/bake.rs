@@ -444,7 +444,7 @@ held-out random poses ({}): {:.2} dB against {:.2} dB for the static average; ti
     ));
     if let Some(a) = &report.texel {
         out.push_str(&format!(
-            "atlas: {} × {} texels, {} charts, {} texels on the surface ({:.0}% of the page); {} basis textures ({:.1} MB as R16Float): per pixel {} texture fetches and multiply-adds (texel errors above are per texel; the previews judge per pixel)\n",
+            "atlas: {} × {} texels, {} charts, {} texels show the surface ({:.0}% of the page lies inside its triangles); {} basis textures ({:.1} MB as R16Float): per pixel {} texture fetches and multiply-adds (texel errors above are per texel; the previews judge per pixel)\n",
             a.width,
             a.height,
             a.charts,

@@ -181,7 +181,7 @@ fn export_exr(asset: &Path, exr: &Path, times: &[f32]) -> anyhow::Result<()> {
     let images = match BakedAsset::read(&container, None).and_then(|b| b.images(times)) {
         Ok(images) => images,
         Err(AssetUseError::Unsupported(e)) => bail!(
-            "{} holds a {} asset: --exr exports cubemap and grid assets ({e})",
+            "{} holds a {} asset: --exr exports cubemap, grid and texel assets ({e})",
             asset.display(),
             container.method
         ),

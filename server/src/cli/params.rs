@@ -35,8 +35,8 @@ pub(super) struct BakeRequestArgs {
 #[derive(Debug, Clone, Default, clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub(super) struct ParamArgs {
-    /// Reference poses to trace. Default: 2048 for the vertex methods,
-    /// 256 otherwise.
+    /// Reference poses to trace. Default: 2048 for the vertex methods, 512
+    /// for texel-linear, 256 otherwise.
     #[arg(long)]
     poses: Option<usize>,
     /// Where reference poses come from: random joint angles in the clips'
@@ -45,11 +45,12 @@ pub(super) struct ParamArgs {
     /// to `--param perturbation=F` of each range, default 0.75), or a
     /// third of each of random poses, clip frames and perturbed frames,
     /// the fit using the ones that predict left-out clips best (cv: mixed,
-    /// perturbed or all). Default: cv for vertex-linear and
-    /// vertex-clustered, clips otherwise.
+    /// perturbed or all). Default: cv for vertex-linear, vertex-clustered
+    /// and texel-linear, clips otherwise.
     #[arg(long, value_parser = ["random", "clips", "mixed", "perturbed", "cv"])]
     reference: Option<String>,
-    /// Rays per vertex and pose. Default: 256.
+    /// Rays per vertex (texel for texel-linear) and pose. Default: 256 (64
+    /// for texel-linear).
     #[arg(long)]
     samples: Option<u32>,
     /// Hits farther than this (model units) do not occlude. Default: no

@@ -113,6 +113,12 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             args.clip
         );
     }
+    if args.texel_floor.is_some() && loaded.asset.is_texel() {
+        bail!(
+            "{} is a texel asset: its stills measure the floor of its own atlas already (\"texel truth\"); --texel-floor measures another atlas beside a vertex, grid or cubemap asset",
+            args.asset.display()
+        );
+    }
     let gpu = Gpu::shared().context("no GPU adapter for the preview")?;
     let mut renderer = PreviewRenderer::new(gpu)?;
     let atlas = args
@@ -271,6 +277,12 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         );
     }
     if !args.texel_floor.is_empty() {
+        if loaded.asset.is_texel() {
+            bail!(
+                "{} is a texel asset: its stills above measure the floor of its own atlas (\"texel truth\"); --texel-floor measures other atlases beside a vertex, grid or cubemap asset",
+                args.asset.display()
+            );
+        }
         texel_floors(
             &loaded,
             &subject,
