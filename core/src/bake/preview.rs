@@ -41,7 +41,7 @@ use crate::{
     rig::{clip::Clip, pose::Pose},
     trace::{
         AoBlock, KroonParams, SceneOptions, SurfaceParams, kroon_occlusion, no_progress,
-        surface_occlusion, trace_pose,
+        surface_occlusion, trace_posed,
     },
 };
 
@@ -872,7 +872,8 @@ impl TruthTracing {
         };
         for pose in poses {
             let started = Instant::now();
-            let (scene, ao) = trace_pose(character, pose, &options, &self.surface, &no_progress)
+            let posed = character.skin(pose);
+            let (scene, ao) = trace_posed(character, &posed, &options, &self.surface, &no_progress)
                 .map_err(invalid)?;
             // The ground's truth: what the cubemap stores (Eq. 3.1), else
             // surface AO under the character.
@@ -890,7 +891,6 @@ impl TruthTracing {
             }
             .map_err(invalid)?;
             if let (Some(texels), Some(block)) = (texels, truth.texels.as_mut()) {
-                let posed = character.skin(pose);
                 let (points, normals) =
                     texels.points(&posed.positions, &posed.normals, &character.triangles);
                 block.values.extend(

@@ -109,7 +109,18 @@ pub fn trace_pose(
     params: &SurfaceParams,
     progress: Progress<'_>,
 ) -> Result<(Scene, Vec<f32>), TraceError> {
-    let posed = character.skin(pose);
+    trace_posed(character, &character.skin(pose), options, params, progress)
+}
+
+/// [`trace_pose`] of a pose already skinned into `posed`, for callers
+/// that trace more points on the same mesh (a texel atlas's).
+pub fn trace_posed(
+    character: &Character,
+    posed: &crate::PosedMesh,
+    options: &SceneOptions,
+    params: &SurfaceParams,
+    progress: Progress<'_>,
+) -> Result<(Scene, Vec<f32>), TraceError> {
     let scene = Scene::new(&posed.positions, &character.triangles, options)?;
     let mesh = SurfaceMesh {
         positions: &posed.positions,

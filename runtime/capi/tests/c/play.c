@@ -37,32 +37,7 @@ int main(int argc, char **argv) {
     EXPECT(strstr(aobake_last_error(), "no node named"), "missing node: %s", aobake_last_error());
 
     /* The pose: each node by name, its local transform. */
-    FILE *pose = fopen(argv[2], "r");
-    EXPECT(pose, "cannot open %s", argv[2]);
-    char line[1024];
-    int set = 0;
-    while (fgets(line, sizeof line, pose)) {
-        char *tab = strchr(line, '\t');
-        EXPECT(tab, "bad pose line: %s", line);
-        *tab = '\0';
-        int64_t node = aobake_vertex_ao_node(ao, line);
-        EXPECT(node >= 0, "%s", aobake_last_error());
-        AobakeTransform rest, t;
-        EXPECT(aobake_vertex_ao_rest(ao, (size_t)node, &rest), "%s", aobake_last_error());
-        float *v[10] = {&t.translation[0], &t.translation[1], &t.translation[2],
-                        &t.rotation[0], &t.rotation[1], &t.rotation[2], &t.rotation[3],
-                        &t.scale[0], &t.scale[1], &t.scale[2]};
-        char *at = tab + 1;
-        for (int i = 0; i < 10; i++) {
-            char *end;
-            *v[i] = strtof(at, &end);
-            EXPECT(end != at, "bad number in pose line for %s", line);
-            at = end;
-        }
-        EXPECT(aobake_vertex_ao_set_local(ao, (size_t)node, &t), "%s", aobake_last_error());
-        set++;
-    }
-    fclose(pose);
+    int set = set_pose(ao, argv[2]);
     EXPECT(set > 0, "the pose set no node");
     AobakeTransform nan = {{0.0f / 0.0f, 0, 0}, {0, 0, 0, 1}, {1, 1, 1}};
     EXPECT(!aobake_vertex_ao_set_local(ao, 0, &nan), "a NaN transform was taken");

@@ -29,29 +29,7 @@ int main(int argc, char **argv) {
     AobakeVertexAo *pose = aobake_texel_pose(texel);
     EXPECT(pose, "pose: %s", aobake_last_error());
 
-    FILE *lines = fopen(argv[2], "r");
-    EXPECT(lines, "cannot open %s", argv[2]);
-    char line[1024];
-    while (fgets(line, sizeof line, lines)) {
-        char *tab = strchr(line, '\t');
-        EXPECT(tab, "bad pose line: %s", line);
-        *tab = '\0';
-        int64_t node = aobake_vertex_ao_node(pose, line);
-        EXPECT(node >= 0, "%s", aobake_last_error());
-        AobakeTransform t;
-        float *v[10] = {&t.translation[0], &t.translation[1], &t.translation[2],
-                        &t.rotation[0], &t.rotation[1], &t.rotation[2], &t.rotation[3],
-                        &t.scale[0], &t.scale[1], &t.scale[2]};
-        char *at = tab + 1;
-        for (int i = 0; i < 10; i++) {
-            char *end;
-            *v[i] = strtof(at, &end);
-            EXPECT(end != at, "bad number in pose line for %s", line);
-            at = end;
-        }
-        EXPECT(aobake_vertex_ao_set_local(pose, (size_t)node, &t), "%s", aobake_last_error());
-    }
-    fclose(lines);
+    EXPECT(set_pose(pose, argv[2]) > 0, "the pose set no node");
 
     size_t weights = aobake_vertex_ao_weight_count(pose);
     uint32_t width, height;
