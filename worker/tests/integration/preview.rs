@@ -785,10 +785,65 @@ fn a_texel_bakes_previews_draw_its_textures_per_pixel() {
         );
     }
 
-    // The asset read with its character previews as a texel model.
+    // The asset read with its character previews as a texel model, and
+    // the pixels the GPU drew from its textures score as the model's
+    // values looked up on the CPU where the eye meets the mesh: the
+    // G-buffer holds the textures' AO, not a per-vertex one.
     let asset = BakedAsset::read(&container, Some(c)).unwrap();
-    assert!(matches!(
-        asset.preview_model().unwrap().0,
-        PreviewModel::Texel(..)
-    ));
+    let (model, surface) = asset.preview_model().unwrap();
+    let PreviewModel::Texel(_, atlas) = model else {
+        panic!("a texel asset previews as a texel model");
+    };
+    let subject = Subject {
+        character: c,
+        model,
+        surface,
+        texel_floor: None,
+    };
+    let camera = subject.camera(Some(clip));
+    let ground = camera.ground();
+    let frame = subject
+        .frames(Some(clip), &[0.3 * clip.duration], &ground)
+        .unwrap()
+        .remove(0);
+    let scene = RenderScene {
+        triangles: &c.triangles,
+        model,
+        camera,
+        ground: &ground,
+        size: (SIZE, SIZE),
+        heat_map: HEAT_MAP,
+        gtao: Gtao::for_camera(&camera, f32::INFINITY),
+    };
+    let screen = r
+        .screen_space(&scene, std::slice::from_ref(&frame))
+        .unwrap()
+        .remove(0);
+    let values = texel.model.evaluate_weights(&frame.weights);
+    let judged = ScreenSpaceInfo::measure(
+        &screen,
+        &frame,
+        &c.triangles,
+        &model,
+        &camera,
+        scene.gtao,
+        &surface,
+        Some(aobake_core::bake::screen_space::TexelJudge {
+            atlas,
+            models: std::slice::from_ref(&values),
+        }),
+    )
+    .unwrap();
+    let on_character = judged.character.unwrap();
+    let (gpu, cpu) = (on_character.model.unwrap(), on_character.texel_models[0]);
+    eprintln!(
+        "per pixel: GPU-drawn model {:.4}, CPU lookup {:.4}",
+        gpu.rmse, cpu.rmse
+    );
+    assert!(
+        (gpu.rmse - cpu.rmse).abs() < 0.01,
+        "GPU {} against CPU {}",
+        gpu.rmse,
+        cpu.rmse
+    );
 }
