@@ -703,6 +703,11 @@ impl Client {
         self.get_bytes(&format!("/v1/bakes/{id}/report"))
     }
 
+    /// `GET /v1/bakes/{id}/previews`.
+    pub fn previews(&self, id: i64) -> Result<crate::PreviewList> {
+        self.get(&format!("/v1/bakes/{id}/previews"))
+    }
+
     /// `GET /v1/assets/{digest}`: the published bytes.
     pub fn asset(&self, digest: &str) -> Result<Vec<u8>> {
         self.get_bytes(&format!("/v1/assets/{digest}"))

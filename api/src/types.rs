@@ -332,7 +332,8 @@ pub struct PreviewItem {
     /// Output name, such as `still-0.png` or `animation.png`.
     pub name: String,
     /// `still` (truth, model, screen-space AO and the model's error side
-    /// by side) or `animation` (an
+    /// by side), `unseen` (a still of a clip an unseen-clip fold left out,
+    /// drawn with the fold's model) or `animation` (an
     /// APNG of a whole clip, model beside truth).
     pub kind: String,
     /// The clip shown, if any.
@@ -375,6 +376,14 @@ pub struct PreviewList {
     /// adapter, not even a software one).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unavailable: Option<String>,
+    /// The stills' per-pixel errors on the character, pooled per clip:
+    /// the bake's model on its preview clip and (texel bakes) each
+    /// unseen-clip fold's model on the clip it left out, beside the static
+    /// average, the texel and per-vertex floors and GTAO (core's
+    /// `bake::screen_space::PixelSummary`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "schema", schema(value_type = Option<Object>))]
+    pub pixels: Option<serde_json::Value>,
 }
 
 // `PATCH /v1/bakes/{id}`: the new priority.

@@ -20,6 +20,7 @@ use super::{
     cubemap::CubemapReport,
     grid::GridReport,
     jobs::{IndexedBlock, find, json, named, parse, stack_blocks},
+    screen_space::{PIXELS, PixelSummary},
     preview::{
         self, FrameTruth, GROUND_GRID, GROUND_SAMPLES, PreviewFrames, PreviewInfo, PreviewModel,
         Renderer, STILL_FRACTIONS, Subject, TruthTracing, animation_times, frame_poses,
@@ -311,6 +312,8 @@ impl<'a> Bake<'a> {
             model,
             surface,
             texel_floor: None,
+            static_texels: None,
+            left_out: None,
         };
         let mut previews = subject.stills(
             frames.clip,
@@ -322,8 +325,22 @@ impl<'a> Bake<'a> {
             let animation = truth.as_ref().map(|t| t.select(stills..t.frames()));
             previews.push(subject.animation(c, animation, renderer)?);
         }
+        if let PreviewModel::Texel(m, atlas) = model {
+            previews.extend(super::texel::unseen_previews(
+                self, deps, m, atlas, surface, renderer,
+            )?);
+        }
         let mut out = JobOutput::default();
-        let infos: Vec<&PreviewInfo> = previews.iter().map(|p| &p.info).collect();
+        let infos: Vec<PreviewInfo> = previews.iter().map(|p| p.info.clone()).collect();
+        let trained = |clip: &str| {
+            self.plan
+                .train
+                .iter()
+                .any(|&c| self.inputs.clips[c].name == clip)
+        };
+        if let Some(pixels) = PixelSummary::of(&infos, trained) {
+            out.push(PIXELS, json(&pixels));
+        }
         out.push("previews.json", json(&infos));
         for p in previews {
             out.push(&p.info.name, p.png);

@@ -60,6 +60,10 @@ pub const ANIMATION_FPS: f32 = 24.0;
 pub const ANIMATION_MAX_FRAMES: usize = 48;
 /// Where in a clip a bake's stills are taken, as fractions of its length.
 pub const STILL_FRACTIONS: [f32; 3] = [0.15, 0.5, 0.85];
+/// Where a texel bake's previews judge each unseen-clip fold per pixel:
+/// fractions of the way through the left-out clip's held-out frames (two
+/// stills a fold: eight folds add sixteen stills to the previews).
+pub const UNSEEN_STILL_FRACTIONS: [f32; 2] = [0.25, 0.75];
 /// The ground's half side, in scene radii ([`Camera::scene_radius`]).
 const GROUND_RADII: f32 = 3.0;
 /// Vertices per side of the ground grid.
@@ -393,6 +397,13 @@ pub struct Subject<'a> {
     /// An atlas whose texel floor the stills measure beside the
     /// per-vertex one ([`ScreenSpaceInfo::measure`]).
     pub texel_floor: Option<&'a TexelAtlas>,
+    /// A texel model's static average (one value per texel of its atlas),
+    /// judged per pixel beside it at every still: an unseen-clip fold's,
+    /// the baseline of its gain.
+    pub static_texels: Option<&'a [f32]>,
+    /// The clip the model never saw, when it is one (an unseen-clip
+    /// fold's model): the stills' titles say so.
+    pub left_out: Option<&'a str>,
 }
 
 impl Subject<'_> {
@@ -519,9 +530,13 @@ impl Subject<'_> {
                     Some(c) => format!("{} at {t:.2} s", c.name),
                     None => "rest pose".to_owned(),
                 };
+                let baked = match self.left_out {
+                    Some(clip) => format!("baked without {clip}: {method}"),
+                    None => format!("baked: {method}"),
+                };
                 let titles = [
                     format!("ray-traced: {when}"),
-                    format!("baked: {method}"),
+                    baked,
                     "screen-space: GTAO".to_owned(),
                     "error: baked − ray-traced".to_owned(),
                 ];
@@ -635,6 +650,7 @@ impl Subject<'_> {
                 prepared.frames.len()
             )));
         }
+        let statics: Vec<Vec<f32>> = self.static_texels.map(<[f32]>::to_vec).into_iter().collect();
         screens
             .iter()
             .zip(&prepared.frames)
@@ -647,7 +663,10 @@ impl Subject<'_> {
                     &prepared.camera,
                     scene.gtao,
                     &self.surface,
-                    self.atlas().map(|atlas| TexelJudge { atlas, models: &[] }),
+                    self.atlas().map(|atlas| TexelJudge {
+                        atlas,
+                        models: &statics,
+                    }),
                 )
                 .map_err(|e| JobError::Invalid(e.to_string()))
             })

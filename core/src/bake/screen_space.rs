@@ -400,3 +400,195 @@ impl ScreenSpaceInfo {
         out
     }
 }
+
+/// The name of a preview job's per-pixel summary ([`PixelSummary`]).
+pub const PIXELS: &str = "pixels.json";
+
+/// Per-pixel errors on the character against ray-traced AO, pooled over
+/// the stills of one clip (RMSEs over all their compared pixels).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PixelErrors {
+    /// The clip.
+    pub clip: String,
+    /// Whether the model judged here was trained on the clip (an
+    /// unseen-clip fold's model never saw it).
+    pub trained: bool,
+    /// Stills pooled.
+    pub stills: usize,
+    /// Pixels compared.
+    pub pixels: usize,
+    /// The baked model.
+    pub model: f64,
+    /// The static average judged beside it (an unseen fold's: the mean of
+    /// the other clips' frames), where one was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub static_average: Option<f64>,
+    /// The model's PSNR over the static average's (dB), where one was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain_db: Option<f64>,
+    /// GTAO.
+    pub gtao: f64,
+    /// The per-vertex floor: the exact AO at the vertices, interpolated.
+    pub per_vertex_floor: f64,
+    /// The texel floor: the exact AO at the atlas's texels, filtered as
+    /// the shader filters (texel models only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texel_floor: Option<f64>,
+}
+
+/// A bake's models judged per pixel on its previews' stills, per clip:
+/// the bake's own model on the stills of its preview clip, and (texel
+/// bakes) each unseen-clip fold's model on stills of the clip it left out.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PixelSummary {
+    /// The bake's model on its previews' stills.
+    pub stills: Vec<PixelErrors>,
+    /// Each unseen-clip fold's model on the clip it left out.
+    pub unseen: Vec<PixelErrors>,
+    /// Mean over the unseen clips of the gain over the static average
+    /// (dB).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unseen_mean_gain_db: Option<f64>,
+    /// The smallest gain of an unseen clip (dB).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unseen_worst_gain_db: Option<f64>,
+    /// The largest ratio of a model's RMSE to GTAO's over every entry
+    /// (below 1: the model beats screen-space AO everywhere judged).
+    pub worst_gtao_ratio: f64,
+}
+
+impl PixelSummary {
+    /// The summary of a preview job's stills (`infos`): those of kind
+    /// `still` and `unseen` whose model was judged on the character,
+    /// pooled per kind and clip; `trained` says whether the bake's model
+    /// saw a clip. `None` when no still was judged.
+    pub fn of(infos: &[super::PreviewInfo], trained: impl Fn(&str) -> bool) -> Option<Self> {
+        struct Pool {
+            clip: String,
+            trained: bool,
+            stills: usize,
+            pixels: usize,
+            // Sums of pixels × MSE.
+            model: f64,
+            statics: Option<f64>,
+            gtao: f64,
+            vertex: f64,
+            texel: Option<f64>,
+        }
+        let mut pools: [Vec<Pool>; 2] = [Vec::new(), Vec::new()];
+        for info in infos {
+            let unseen = match info.kind.as_str() {
+                "still" => false,
+                super::texel::UNSEEN_KIND => true,
+                _ => continue,
+            };
+            let (Some(clip), Some(s)) = (&info.clip, &info.screen_space) else {
+                continue;
+            };
+            let Some(e) = &s.character else { continue };
+            let Some(model) = e.model else { continue };
+            let pool = &mut pools[usize::from(unseen)];
+            if pool.last().is_none_or(|p| &p.clip != clip) {
+                pool.push(Pool {
+                    clip: clip.clone(),
+                    trained: !unseen && trained(clip),
+                    stills: 0,
+                    pixels: 0,
+                    model: 0.0,
+                    statics: Some(0.0),
+                    gtao: 0.0,
+                    vertex: 0.0,
+                    texel: Some(0.0),
+                });
+            }
+            let p = pool.last_mut().expect("just pushed");
+            let n = e.pixels as f64;
+            let sq = |f: &FrameError| n * f.rmse * f.rmse;
+            p.stills += 1;
+            p.pixels += e.pixels;
+            p.model += sq(&model);
+            p.gtao += sq(&e.gtao);
+            p.vertex += sq(&e.per_vertex_truth);
+            // Judged at every still of the clip, or not reported.
+            p.statics = p.statics.zip(e.texel_models.first()).map(|(a, f)| a + sq(f));
+            p.texel = p.texel.zip(e.texel_truth.as_ref()).map(|(a, f)| a + sq(f));
+        }
+        let [stills, unseen] = pools.map(|pool| {
+            pool.into_iter()
+                .map(|p| {
+                    let rmse = |sum: f64| (sum / p.pixels.max(1) as f64).sqrt();
+                    let model = rmse(p.model);
+                    let static_average = p.statics.map(rmse);
+                    PixelErrors {
+                        clip: p.clip,
+                        trained: p.trained,
+                        stills: p.stills,
+                        pixels: p.pixels,
+                        model,
+                        static_average,
+                        gain_db: static_average.map(|s| 20.0 * (s / model).log10()),
+                        gtao: rmse(p.gtao),
+                        per_vertex_floor: rmse(p.vertex),
+                        texel_floor: p.texel.map(rmse),
+                    }
+                })
+                .collect::<Vec<_>>()
+        });
+        if stills.is_empty() && unseen.is_empty() {
+            return None;
+        }
+        let gains: Vec<f64> = unseen.iter().filter_map(|e| e.gain_db).collect();
+        let worst_gtao_ratio = stills
+            .iter()
+            .chain(&unseen)
+            .map(|e| e.model / e.gtao)
+            .fold(0.0, f64::max);
+        Some(Self {
+            unseen_mean_gain_db: (!gains.is_empty())
+                .then(|| gains.iter().sum::<f64>() / gains.len() as f64),
+            unseen_worst_gain_db: gains.iter().copied().reduce(f64::min),
+            worst_gtao_ratio,
+            stills,
+            unseen,
+        })
+    }
+
+    /// The summary as a person reads it: a table per clip, then the
+    /// unseen clips' gains.
+    pub fn lines(&self) -> String {
+        let opt = |x: Option<f64>| x.map_or("—".to_owned(), |x| format!("{x:.4}"));
+        let mut out = String::from(
+            "per pixel on the character, RMSE against ray-traced AO:\n| clip | model | stills | pixels | model | static average | gain | texel floor | per-vertex floor | GTAO | model / GTAO |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        );
+        for (e, whose) in self
+            .stills
+            .iter()
+            .map(|e| (e, if e.trained { "the bake's (trained on it)" } else { "the bake's (held out of training)" }))
+            .chain(self.unseen.iter().map(|e| (e, "refitted without it")))
+        {
+            out.push_str(&format!(
+                "| {} | {whose} | {} | {} | {:.4} | {} | {} | {} | {:.4} | {:.4} | {:.2} |\n",
+                e.clip,
+                e.stills,
+                e.pixels,
+                e.model,
+                opt(e.static_average),
+                e.gain_db.map_or("—".to_owned(), |g| format!("{g:+.2} dB")),
+                opt(e.texel_floor),
+                e.per_vertex_floor,
+                e.gtao,
+                e.model / e.gtao,
+            ));
+        }
+        if let (Some(mean), Some(worst)) = (self.unseen_mean_gain_db, self.unseen_worst_gain_db) {
+            out.push_str(&format!(
+                "unseen clips per pixel: {mean:+.2} dB over the static average on average, worst clip {worst:+.2} dB; "
+            ));
+        }
+        out.push_str(&format!(
+            "worst model / GTAO {:.2}\n",
+            self.worst_gtao_ratio
+        ));
+        out
+    }
+}

@@ -18,7 +18,12 @@ use crate::{
     rig::skeleton::Skeleton,
 };
 
-use super::{JobError, jobs::decode_with};
+use super::{
+    Bake, JobError, JobOutput,
+    jobs::{IndexedBlock, decode_with, named, parse},
+    preview::{Preview, PreviewModel, Renderer, Subject, frame_poses},
+    vertex::{UnseenFold, unseen_model, unseen_output, unseen_texels},
+};
 
 /// Why a published texel asset cannot serve a character (`bake::family`
 /// turns it into its `AssetUseError`).
@@ -220,4 +225,85 @@ pub(super) fn images(model: &TexelModel) -> Result<Vec<FloatImage>, String> {
         height: atlas.height as usize,
         channels,
     }])
+}
+
+/// The kind (in `previews.json`) of a still of a clip a texel bake's
+/// unseen-clip fold left out, drawn with the fold's model.
+pub const UNSEEN_KIND: &str = "unseen";
+
+/// A texel bake's unseen-clip folds judged per pixel: for each fold's
+/// `unseen` job among `deps`, stills of the clip it left out
+/// ([`UnseenFold::stills`]) drawn with the fold's model, which never saw
+/// that clip, and judged per pixel beside the fold's static average, the
+/// texel floor, the per-vertex floor and GTAO. Named
+/// `unseen-{fold}-{i}.png`, of kind [`UNSEEN_KIND`]. `model` is the bake's
+/// own texel model, whose atlas the folds share. A fold whose model takes
+/// more weights than GPUs hold texture layers is left out.
+pub(super) fn unseen_previews(
+    bake: &Bake<'_>,
+    deps: &[&JobOutput],
+    model: &TexelModel,
+    atlas: &TexelAtlas,
+    surface: crate::trace::SurfaceParams,
+    renderer: &mut dyn Renderer,
+) -> Result<Vec<Preview>, JobError> {
+    let character = &bake.inputs.character;
+    let texels = atlas.texels.len();
+    let mut previews = Vec::new();
+    for (fold, &c) in bake.plan.fold_clips().iter().enumerate() {
+        let name = unseen_output(fold);
+        let Some(out) = deps.iter().find(|d| d.get(&name).is_some()) else {
+            continue;
+        };
+        let info: UnseenFold = parse(named(out, &name)?)?;
+        let clip = &bake.inputs.clips[c];
+        let folded = decode(named(out, &unseen_model(fold))?)?;
+        let block = IndexedBlock::from_bytes(named(out, &unseen_texels(fold))?, texels)?.block;
+        if info.clip != clip.name
+            || folded.atlas != model.atlas
+            || block.poses() != 1 + info.stills.len()
+        {
+            return Err(JobError::Invalid(format!(
+                "unseen fold {fold} does not match the bake: clip {:?} (the plan's {:?}), {} rows for {} stills, {} atlas",
+                info.clip,
+                clip.name,
+                block.poses(),
+                info.stills.len(),
+                if folded.atlas == model.atlas {
+                    "the same"
+                } else {
+                    "another"
+                }
+            )));
+        }
+        if folded.model.weight_count() > crate::method::texel::MAX_TEXTURES {
+            continue;
+        }
+        let subject = Subject {
+            character,
+            model: PreviewModel::Texel(&folded, atlas),
+            surface,
+            texel_floor: None,
+            static_texels: Some(block.row(0)),
+            left_out: Some(&clip.name),
+        };
+        let ground = subject.camera(Some(clip)).ground();
+        let poses = frame_poses(character, Some(clip), &info.stills);
+        // The vertices and the ground traced here; the texels were traced
+        // with the held-out poses (the same rays and seed).
+        let mut truth = subject
+            .tracing()
+            .trace(character, &poses, &ground, None)?;
+        truth.texels = Some(crate::trace::AoBlock {
+            vertices: texels,
+            values: block.values[texels..].to_vec(),
+        });
+        let stills = subject.stills(Some(clip), &info.stills, Some(truth), renderer)?;
+        for (i, mut p) in stills.into_iter().enumerate() {
+            p.info.name = format!("unseen-{fold}-{i}.png");
+            p.info.kind = UNSEEN_KIND.into();
+            previews.push(p);
+        }
+    }
+    Ok(previews)
 }

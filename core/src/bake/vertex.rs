@@ -63,7 +63,8 @@ impl Bake<'_> {
     /// `sample` (reference) → `fit`; `sample` (reference, held-out) →
     /// one `unseen` per unseen-clips fold; `fit`, the `unseen` folds and
     /// `sample` (held-out, noise) → `evaluate`; `fit` and `evaluate` →
-    /// `assemble`; `assemble` and the `preview-truth` jobs → `preview`.
+    /// `assemble`; `assemble` and the `preview-truth` jobs (and a texel
+    /// bake's `unseen` folds) → `preview`.
     ///
     /// Workers take the first ready job in this order, so it is the
     /// schedule: `fit`, the longest chain, comes right after the
@@ -100,13 +101,15 @@ impl Bake<'_> {
         let fit = jobs.len() - 1;
         let held_out = samples(PoseSet::HeldOut, &mut jobs);
         let mut deps = vec![fit];
+        let mut unseen = Vec::new();
         for fold in 0..self.plan.fold_clips().len() {
             jobs.push(PlannedJob {
                 spec: JobSpec::Unseen { fold },
                 deps: reference.iter().chain(&held_out).copied().collect(),
             });
-            deps.push(jobs.len() - 1);
+            unseen.push(jobs.len() - 1);
         }
+        deps.extend(&unseen);
         let noise = samples(PoseSet::Noise, &mut jobs);
         // The previews' truth: it needs no model.
         let mut truth = Vec::new();
@@ -129,6 +132,11 @@ impl Bake<'_> {
             let assemble = jobs.len() - 1;
             let mut deps = vec![assemble];
             deps.extend(truth);
+            // A texel bake's previews judge each fold's model per pixel
+            // on stills of the clip it left out.
+            if let Receivers::Texels(_) = self.plan.receivers {
+                deps.extend(unseen);
+            }
             jobs.push(PlannedJob {
                 spec: JobSpec::Preview,
                 deps,
@@ -370,7 +378,26 @@ impl Bake<'_> {
             &mut fit_progress(sink),
         )?;
         let mut out = JobOutput::default();
-        out.push(&unseen_output(fold), json(&result));
+        out.push(&unseen_output(fold), json(&result.fold));
+        if let Receivers::Texels(atlas) = &self.plan.receivers {
+            // What the previews judge the fold with per pixel: its model
+            // as an asset, and its static average and the traced AO of
+            // its stills, one row each.
+            let texels = atlas.texels.len();
+            let mut values = result.baseline;
+            for &r in &result.still_rows {
+                values.extend_from_slice(truth.row(r));
+            }
+            let block = IndexedBlock {
+                first: 0,
+                block: AoBlock {
+                    vertices: texels,
+                    values,
+                },
+            };
+            out.push(&unseen_model(fold), self.encode_model(result.model));
+            out.push(&unseen_texels(fold), block.to_bytes());
+        }
         out.timings.unseen_s = started.elapsed().as_secs_f64();
         Ok(out)
     }
@@ -486,7 +513,18 @@ fn fit_progress(sink: &mut dyn JobSink) -> impl FnMut(FitStep) + '_ {
 }
 
 /// The output of the `unseen` job of `fold`.
-fn unseen_output(fold: usize) -> String {
+/// A texel bake's fold model, as an asset ([`Bake::unseen`]).
+pub(super) fn unseen_model(fold: usize) -> String {
+    format!("unseen-{fold}-model")
+}
+
+/// A texel bake's fold's static average (row 0) and the traced AO at its
+/// stills (one row each), an [`IndexedBlock`] over the atlas's texels.
+pub(super) fn unseen_texels(fold: usize) -> String {
+    format!("unseen-{fold}-texels")
+}
+
+pub(super) fn unseen_output(fold: usize) -> String {
     format!("unseen-{fold}.json")
 }
 
@@ -621,7 +659,7 @@ impl Plan<'_> {
         tests: &[TestPose],
         truth: &AoBlock,
         on_step: &mut dyn FnMut(FitStep),
-    ) -> Result<UnseenFold, BakeError> {
+    ) -> Result<FoldFit, BakeError> {
         let plain: std::collections::BTreeSet<usize> = self.baseline_rows().into_iter().collect();
         let skeleton = &self.character.skeleton;
         let keep: Vec<usize> = (0..sources.len())
@@ -642,10 +680,24 @@ impl Plan<'_> {
             frames
         }))
         .evaluate();
-        let judged: Vec<(FrameError, FrameError)> = tests
+        let of_clip: Vec<usize> = (0..tests.len())
+            .filter(|&i| tests[i].frame.is_some_and(|f| f.clip == c))
+            .collect();
+        let still_rows: Vec<usize> = super::preview::UNSEEN_STILL_FRACTIONS
+            .iter()
+            .filter_map(|&f| {
+                let last = of_clip.len().checked_sub(1)?;
+                Some(of_clip[((f * last as f32).round() as usize).min(last)])
+            })
+            .fold(Vec::new(), |mut rows, r| {
+                if rows.last() != Some(&r) {
+                    rows.push(r);
+                }
+                rows
+            });
+        let judged: Vec<(FrameError, FrameError)> = of_clip
             .par_iter()
-            .enumerate()
-            .filter(|(_, t)| t.frame.is_some_and(|f| f.clip == c))
+            .map(|&i| (i, &tests[i]))
             .map(|(i, t)| {
                 let predicted = model.evaluate(skeleton, &t.pose.locals);
                 let drawn = self.drawn(&t.pose);
@@ -656,14 +708,39 @@ impl Plan<'_> {
             })
             .collect();
         let (m, b): (Vec<FrameError>, Vec<FrameError>) = judged.into_iter().unzip();
-        Ok(UnseenFold {
+        let fold = UnseenFold {
             clip: self.clips[c].name.clone(),
             reference_poses: keep.len(),
             rows: stats.reference().map(|r| r.rows),
             basis: stats.basis().map(|b| b.rank),
             errors: Comparison::new(Errors::of(&m), Errors::of(&b)),
+            stills: still_rows
+                .iter()
+                .filter_map(|&i| tests[i].frame.map(|f| f.time))
+                .collect(),
+        };
+        Ok(FoldFit {
+            fold,
+            model,
+            baseline,
+            still_rows,
         })
     }
+}
+
+/// One fold of the unseen-clips evaluation as [`Plan::unseen_fold`]
+/// leaves it: its figures, and what a texel bake's previews judge per
+/// pixel at the clip's stills.
+#[derive(Debug, Clone)]
+pub struct FoldFit {
+    /// The figures.
+    pub fold: UnseenFold,
+    /// The model refitted without the clip.
+    pub model: Model,
+    /// The other clips' static average, one value per receiver.
+    pub baseline: Vec<f32>,
+    /// The held-out rows of the stills ([`UnseenFold::stills`]).
+    pub still_rows: Vec<usize>,
 }
 
 /// One left-out clip of the unseen-clips evaluation.
@@ -685,6 +762,11 @@ pub struct UnseenFold {
     /// The fold's model and the other clips' static average on every
     /// frame of the clip.
     pub errors: Comparison,
+    /// Clip times (s) of the held-out frames where a texel bake's previews
+    /// judge the fold per pixel ([`super::preview::UNSEEN_STILL_FRACTIONS`]
+    /// of the way through the clip's frames).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stills: Vec<f32>,
 }
 
 /// Leave one clip out (see [`Plan::unseen_fold`]).

@@ -10,7 +10,11 @@ use std::time::Duration;
 
 use anyhow::{Context as _, bail};
 use aobake_api::{BakeRequest, BakeState, BakeView, Client, JobState, NewTokenRequest, TokenView};
-use aobake_core::{Limits, bake::BakeReport, method::Method};
+use aobake_core::{
+    Limits,
+    bake::{BakeReport, screen_space::PixelSummary},
+    method::Method,
+};
 use serde_json::Value;
 
 use super::params::BakeRequestArgs;
@@ -298,6 +302,14 @@ fn wait(conn: &Conn, api: &Client, id: i64, json: bool) -> anyhow::Result<()> {
                     b.asset.as_deref().unwrap_or("?")
                 );
                 print!("{}", super::bake::summary(&report));
+                // The previews' per-pixel judgement, when they have one
+                // (a server whose workers draw previews).
+                if let Ok(list) = follow.ask(|api| api.previews(id))
+                    && let Some(pixels) = list.pixels
+                    && let Ok(pixels) = serde_json::from_value::<PixelSummary>(pixels)
+                {
+                    print!("{}", pixels.lines());
+                }
                 return Ok(());
             }
             BakeState::Failed | BakeState::Cancelled => {

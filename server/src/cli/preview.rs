@@ -99,6 +99,8 @@ impl Loaded {
             model,
             surface,
             texel_floor: None,
+            static_texels: None,
+            left_out: None,
         })
     }
 }
@@ -127,6 +129,8 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         .transpose()?;
     let subject = Subject {
         texel_floor: atlas.as_ref(),
+        static_texels: None,
+        left_out: None,
         ..loaded.subject()?
     };
     let preview = match args.time {
@@ -325,6 +329,8 @@ fn texel_floors(
         let atlas_s = started.elapsed().as_secs_f64();
         let with_atlas = Subject {
             texel_floor: Some(&atlas),
+            static_texels: None,
+            left_out: None,
             ..*subject
         };
         let still = with_atlas

@@ -281,6 +281,7 @@ pub(crate) async fn previews(
             state: None,
             previews: Vec::new(),
             unavailable: None,
+            pixels: None,
         }));
     };
     let outputs = job.outputs.as_deref().unwrap_or_default();
@@ -312,10 +313,22 @@ pub(crate) async fn previews(
             .map(|b| String::from_utf8_lossy(&b).into_owned()),
         None => None,
     };
+    let pixels = match digest_of(aobake_core::bake::screen_space::PIXELS) {
+        Some(d) => {
+            let bytes = state.read_blob(&d, None).await?.ok_or_else(|| {
+                ApiError::Internal(format!("the per-pixel summary {d} has no blob"))
+            })?;
+            Some(serde_json::from_slice(&bytes).map_err(|e| {
+                ApiError::Internal(format!("the per-pixel summary {d}: {e}"))
+            })?)
+        }
+        None => None,
+    };
     Ok(Json(PreviewList {
         state: Some(job.state),
         previews,
         unavailable,
+        pixels,
     }))
 }
 

@@ -75,6 +75,8 @@ fn fixture() -> Fixture {
         model: aobake_core::bake::PreviewModel::Vertex(&model),
         surface: params.held_out_surface(),
         texel_floor: None,
+        static_texels: None,
+        left_out: None,
     };
     let camera = subject.camera(Some(clip));
     let ground = camera.ground();
@@ -500,6 +502,8 @@ fn previews_match_one_go(
         model,
         surface,
         texel_floor: None,
+        static_texels: None,
+        left_out: None,
     };
     let mut one_go = subject
         .stills(frames.clip, &frames.stills, None, r)
@@ -516,6 +520,110 @@ fn previews_match_one_go(
 }
 
 /// A test file's inputs (`tests/data/…`), imported for a bake.
+/// A texel bake with unseen-clip folds judges each fold per pixel on
+/// stills of the clip it left out, drawn with the fold's model (which
+/// never saw the clip) beside the fold's static average; the preview job
+/// pools every still per clip into its per-pixel summary.
+#[test]
+fn a_texel_bake_judges_its_unseen_folds_per_pixel() {
+    use aobake_core::bake::{
+        Bake, BakeReport, bake_in_process, screen_space::PixelSummary, texel::UNSEEN_KIND,
+    };
+    let inputs = test_inputs("characters/Fox/Fox.glb");
+    let mut p = BakeParams::new(Method::TexelLinear);
+    p.poses = 48;
+    p.samples = 8;
+    p.eval_poses = 2;
+    p.eval_fps = 4.0;
+    p.eval_folds = 2;
+    p.texel.atlas = 64;
+    let bake = Bake::new(&inputs, p).unwrap();
+    let mut r = renderer();
+    let baked = bake_in_process(&bake, Some(&mut r)).unwrap();
+    let BakeReport::Vertex(report) = &baked.report else {
+        panic!("a texel bake's report is the vertex family's");
+    };
+    let folds = &report.evaluation.unseen_clips.as_ref().unwrap().folds;
+    assert_eq!(folds.len(), 2);
+    let unseen: Vec<_> = baked
+        .previews
+        .iter()
+        .map(|(info, _)| info)
+        .filter(|i| i.kind == UNSEEN_KIND)
+        .collect();
+    // Two stills a fold, at the fold's own times, named by fold.
+    assert_eq!(unseen.len(), 4);
+    for (fold, f) in folds.iter().enumerate() {
+        assert_eq!(f.stills.len(), 2, "{f:?}");
+        for (i, &t) in f.stills.iter().enumerate() {
+            let info = unseen[2 * fold + i];
+            assert_eq!(info.name, format!("unseen-{fold}-{i}.png"));
+            assert_eq!(info.clip.as_deref(), Some(f.clip.as_str()));
+            assert_eq!(info.times, [t]);
+            let e = info.screen_space.as_ref().unwrap().character.as_ref().unwrap();
+            assert!(e.model.is_some() && e.texel_truth.is_some());
+            assert_eq!(e.texel_models.len(), 1, "the fold's static average beside it");
+        }
+    }
+    // The fold's model is not the bake's: the bake's own model, which
+    // trained on the clip, drawn at the same still scores otherwise.
+    let (info, _) = baked
+        .previews
+        .iter()
+        .find(|(i, _)| i.name == "unseen-0-0.png")
+        .unwrap();
+    let container = aobake_core::asset::Container::from_bytes(&baked.asset).unwrap();
+    let asset = aobake_core::bake::BakedAsset::read(&container, Some(&inputs.character)).unwrap();
+    let (model, surface) = asset.preview_model().unwrap();
+    let subject = Subject {
+        character: &inputs.character,
+        model,
+        surface,
+        texel_floor: None,
+        static_texels: None,
+        left_out: None,
+    };
+    let clip = inputs
+        .clips
+        .iter()
+        .find(|c| Some(&c.name) == info.clip.as_ref())
+        .unwrap();
+    let own = subject.stills(Some(clip), &info.times, None, &mut r).unwrap();
+    let score = |s: &aobake_core::bake::screen_space::ScreenSpaceInfo| {
+        s.character.as_ref().unwrap().model.unwrap().rmse
+    };
+    let (folded, trained) = (
+        score(info.screen_space.as_ref().unwrap()),
+        score(own[0].info.screen_space.as_ref().unwrap()),
+    );
+    assert!(
+        (folded - trained).abs() > 1e-4,
+        "the fold's model scores {folded}, the bake's {trained}"
+    );
+
+    // The summary pools the stills per clip, as the preview job wrote it.
+    let summary = PixelSummary::of(
+        &baked.previews.iter().map(|(i, _)| i.clone()).collect::<Vec<_>>(),
+        |clip| report.character.train_clips.iter().any(|c| c == clip),
+    )
+    .unwrap();
+    eprint!("{}", summary.lines());
+    assert_eq!(summary.unseen.len(), 2);
+    assert!(summary.stills.iter().all(|e| e.trained && e.stills == 3));
+    for (e, f) in summary.unseen.iter().zip(folds) {
+        assert_eq!((e.clip.as_str(), e.trained, e.stills), (f.clip.as_str(), false, 2));
+        let (model, statics) = (e.model, e.static_average.unwrap());
+        assert!((e.gain_db.unwrap() - 20.0 * (statics / model).log10()).abs() < 1e-9);
+        assert!(e.texel_floor.unwrap() > 0.0 && e.gtao > 0.0);
+    }
+    let worst = summary
+        .unseen
+        .iter()
+        .map(|e| e.gain_db.unwrap())
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(summary.unseen_worst_gain_db, Some(worst));
+}
+
 fn test_inputs(path: &str) -> aobake_core::bake::BakeInputs {
     use aobake_core::bake::{BakeInputs, UploadBytes};
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -609,6 +717,8 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
             model: PreviewModel::Cubemap(m, kroon),
             surface: p.held_out_surface(),
             texel_floor: None,
+            static_texels: None,
+            left_out: None,
         };
         truth_and_model(&subject, clip, 0.5, r)
     };
@@ -669,6 +779,8 @@ fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
             model: PreviewModel::Grid(m, &owner),
             surface,
             texel_floor: None,
+            static_texels: None,
+            left_out: None,
         };
         truth_and_model(&subject, clip, 0.4, r)
     };
@@ -799,6 +911,8 @@ fn a_texel_bakes_previews_draw_its_textures_per_pixel() {
         model,
         surface,
         texel_floor: None,
+        static_texels: None,
+        left_out: None,
     };
     let camera = subject.camera(Some(clip));
     let ground = camera.ground();

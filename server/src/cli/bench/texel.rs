@@ -179,6 +179,8 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         model: PreviewModel::Vertex(&open),
         surface,
         texel_floor: None,
+        static_texels: None,
+        left_out: None,
     };
     let judged_clips: Vec<usize> = plan
         .train

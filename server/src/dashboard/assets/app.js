@@ -544,11 +544,47 @@ function previewFigure(p, url) {
   const times = p.kind === "animation"
     ? `${p.times.length} frames`
     : `t = ${p.times.map((t) => t.toFixed(2)).join(", ")} s`;
-  return h("figure", { class: p.kind === "still" ? "wide preview" : "preview", "data-kind": p.kind },
+  const what = p.kind === "unseen"
+    ? `still of ${p.clip}, drawn with the model refitted without it`
+    : `${p.kind}${p.clip ? ` of ${p.clip}` : ""}`;
+  return h("figure", { class: p.kind === "animation" ? "preview" : "wide preview", "data-kind": p.kind },
     h("img", { src: url, alt: `${p.kind} ${p.name}`, width: p.width, height: p.height }),
-    h("figcaption", {}, `${p.kind}${p.clip ? ` of ${p.clip}` : ""}, ${times}; `,
+    h("figcaption", {}, `${what}, ${times}; `,
       `${fmt(p.frame_ms, 1)} ms per panel on ${p.adapter}`),
     p.screen_space ? screenSpaceTable(p.screen_space) : null);
+}
+
+// The stills judged per pixel, pooled per clip: the bake's model on its
+// preview clip and each unseen-clip fold's model on the clip it left out,
+// beside the static average, the floors and GTAO.
+function pixelTable(s) {
+  const opt = (x) => (x === undefined || x === null ? "—" : fmt(x));
+  const gain = (g) => (g === undefined || g === null ? "—" : `${g >= 0 ? "+" : ""}${fmt(g, 2)} dB`);
+  const rows = [
+    ...s.stills.map((e) => [e, e.trained ? "the bake's (trained on it)" : "the bake's (held out of training)"]),
+    ...s.unseen.map((e) => [e, "refitted without it"]),
+  ];
+  return h("div", { id: "pixels" },
+    h("table", {},
+      h("caption", {}, "Per pixel on the character: RMSE against ray-traced AO, pooled over each clip's stills"),
+      h("thead", {}, h("tr", {}, ...["Clip", "Model", "Stills", "Model RMSE", "Static average", "Gain",
+        "Texel floor", "Per-vertex floor", "GTAO", "Model / GTAO"].map((t) => h("th", {}, t)))),
+      h("tbody", {}, ...rows.map(([e, whose]) => h("tr", {},
+        h("td", {}, e.clip),
+        h("td", {}, whose),
+        h("td", { class: "num" }, e.stills),
+        h("td", { class: "num" }, fmt(e.model)),
+        h("td", { class: "num" }, opt(e.static_average)),
+        h("td", { class: "num" }, gain(e.gain_db)),
+        h("td", { class: "num" }, opt(e.texel_floor)),
+        h("td", { class: "num" }, fmt(e.per_vertex_floor)),
+        h("td", { class: "num" }, fmt(e.gtao)),
+        h("td", { class: "num" }, fmt(e.model / e.gtao, 2)))))),
+    h("p", { class: "muted" },
+      s.unseen_mean_gain_db !== undefined
+        ? `Unseen clips per pixel: ${gain(s.unseen_mean_gain_db)} over the static average on average, worst clip ${gain(s.unseen_worst_gain_db)}. `
+        : "",
+      `Worst model / GTAO: ${fmt(s.worst_gtao_ratio, 2)} (below 1, the bake beats screen-space AO on every clip judged).`));
 }
 
 // A still's screen-space baseline (GTAO, its third panel) beside the
@@ -568,14 +604,22 @@ function screenSpaceTable(s) {
     return h("tr", {},
       h("td", {}, `${name} (${e.pixels} px)`),
       model,
+      statics ? h("td", { class: "num" }, e.texel_models?.length ? fmt(e.texel_models[0].rmse) : "—") : null,
       h("td", { class: "num" }, fmt(e.gtao.rmse)),
-      h("td", { class: "num" }, fmt(e.per_vertex_truth.rmse)));
+      h("td", { class: "num" }, fmt(e.per_vertex_truth.rmse)),
+      texels ? h("td", { class: "num" }, e.texel_truth ? fmt(e.texel_truth.rmse) : "—") : null);
   };
+  // A texel model's still: its texel floor; an unseen fold's: its static
+  // average too.
+  const texels = !!s.atlas;
+  const statics = !!s.character?.texel_models?.length;
   const rows = [row("character", s.character), row("ground", s.ground)];
   return h("div", { class: "screen-space" },
     h("table", { class: "screen-space-errors" },
       h("caption", {}, "RMSE against per-pixel ray-traced AO"),
-      h("tr", {}, h("th", {}, "surface"), h("th", {}, "baked model"), h("th", {}, "GTAO"), h("th", {}, "per-vertex truth")),
+      h("tr", {}, h("th", {}, "surface"), h("th", {}, "baked model"),
+        statics ? h("th", {}, "static average") : null, h("th", {}, "GTAO"), h("th", {}, "per-vertex truth"),
+        texels ? h("th", {}, "texel truth") : null),
       rows),
     unjudged.length ? h("p", { class: "muted not-judged" },
       unjudged.map(([name, why]) => `* The baked model on the ${name} is not judged: ${why}. `)) : null,
@@ -720,6 +764,7 @@ async function bakePage(signal, id) {
       }
       fill(results,
         h("h2", {}, "Previews"),
+        list.pixels ? pixelTable(list.pixels) : null,
         figures.length
           ? h("div", { class: "grid", id: "previews" }, figures)
           : h("p", { class: "muted", id: "no-previews" }, list.unavailable
