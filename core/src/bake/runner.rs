@@ -27,6 +27,9 @@ pub struct Baked {
     /// The previews (PNG or APNG) and how each was made, when the graph
     /// had a `preview` job.
     pub previews: Vec<(PreviewInfo, Vec<u8>)>,
+    /// The previews' stills judged per pixel, pooled per clip
+    /// (`pixels.json`), when the previews judged any.
+    pub pixels: Option<super::screen_space::PixelSummary>,
 }
 
 impl Baked {
@@ -49,7 +52,15 @@ impl Baked {
                 previews.push((info, png));
             }
         }
+        let pixels = match get(super::screen_space::PIXELS) {
+            Ok(bytes) => Some(
+                serde_json::from_slice(&bytes)
+                    .map_err(|e| JobError::Invalid(format!("pixels.json: {e}")))?,
+            ),
+            Err(_) => None,
+        };
         Ok(Self {
+            pixels,
             asset: get("asset")?,
             report: serde_json::from_slice(&report_json)
                 .map_err(|e| JobError::Invalid(format!("report.json: {e}")))?,

@@ -49,6 +49,15 @@ pub(super) struct Args {
     /// report's path with `.png`.
     #[arg(long)]
     plot: Option<PathBuf>,
+    /// Also render the previews with wgpu (a GPU, else a software
+    /// adapter) into this folder, as the service's workers do: stills of
+    /// truth, model, GTAO and error, the clip's animation, and for texel
+    /// bakes stills of each clip an unseen-clip fold left out, drawn with
+    /// the model refitted without it; with `previews.json` (how each was
+    /// made and judged) and `pixels.json` (every still judged per pixel,
+    /// pooled per clip), whose table is printed.
+    #[arg(long, value_name = "DIR")]
+    previews: Option<PathBuf>,
 }
 
 /// Reads the character and clip files (with the side files a `.gltf`
@@ -155,10 +164,40 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         Some(plot) => check_writable(plot, "--plot")?,
         None => check_writable(&args.report.with_extension("png"), "the plot")?,
     }
+    if let Some(dir) = &args.previews {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot make the previews folder {}", dir.display()))?;
+    }
     let inputs = load_inputs(&r.file, &r.clips, &limits)?;
     let bake = Bake::new(&inputs, params)?;
     args.tracer.install(false)?;
     with_threads(args.threads, || run_bake(args, &bake))?
+}
+
+/// Writes a bake's previews into `dir`, with `previews.json` and
+/// `pixels.json`; prints the per-pixel table.
+fn write_previews(dir: &Path, baked: &Baked) -> anyhow::Result<()> {
+    for (info, png) in &baked.previews {
+        write(&dir.join(&info.name), png)?;
+    }
+    let infos: Vec<_> = baked.previews.iter().map(|(i, _)| i).collect();
+    write(
+        &dir.join("previews.json"),
+        &serde_json::to_vec_pretty(&infos)?,
+    )?;
+    eprintln!(
+        "wrote {} previews and previews.json into {}",
+        baked.previews.len(),
+        dir.display()
+    );
+    if let Some(pixels) = &baked.pixels {
+        write(
+            &dir.join(aobake_core::bake::screen_space::PIXELS),
+            &serde_json::to_vec_pretty(pixels)?,
+        )?;
+        eprint!("{}", pixels.lines());
+    }
+    Ok(())
 }
 
 fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
@@ -204,7 +243,24 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
             names(&plan.test).join(", "),
         );
     }
-    let outputs = run_with_progress(bake, &HashMap::new(), None)?;
+    // The renderer is made on the thread that runs the bake.
+    let mut renderer = match &args.previews {
+        Some(_) => Some(
+            aobake_worker::gpu::Gpu::shared()
+                .map_err(anyhow::Error::from)
+                .and_then(|g| {
+                    aobake_worker::gpu::PreviewRenderer::new(g)
+                        .context("cannot make the preview renderer")
+                })
+                .context("--previews needs a wgpu adapter (a GPU, or Mesa's llvmpipe or lavapipe)")?,
+        ),
+        None => None,
+    };
+    let outputs = run_with_progress(
+        bake,
+        &HashMap::new(),
+        renderer.as_mut().map(|r| r as &mut dyn Renderer),
+    )?;
     if let Some(summary) = aobake_core::trace::engine::engine().and_then(|e| e.summary()) {
         eprintln!("GPU tracer: {summary}");
     }
@@ -224,6 +280,9 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
         plot_path.display()
     );
     eprint!("{}", summary(&baked.report));
+    if let Some(dir) = &args.previews {
+        write_previews(dir, &baked)?;
+    }
     Ok(())
 }
 
