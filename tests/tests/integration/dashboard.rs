@@ -483,6 +483,26 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
                 "model and GTAO RMSE: {screen}"
             );
         }
+        // The stills pooled per pixel above them: one row for the clip,
+        // its model RMSE between the stills' own.
+        let pooled = eval(
+            &c,
+            "return [...document.querySelectorAll('#pixels tbody tr')].map(r => [...r.querySelectorAll('td')].map(td => td.textContent))",
+        )
+        .await;
+        let pooled = pooled.as_array().unwrap();
+        assert_eq!(pooled.len(), 1, "{pooled:?}");
+        let cell = |i: usize| pooled[0][i].as_str().unwrap().parse::<f64>().unwrap();
+        let stills_model: Vec<f64> = rows.iter().map(|r| r[0].as_f64().unwrap()).collect();
+        let (lo, hi) = stills_model
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(a, b), &x| (a.min(x), b.max(x)));
+        assert_eq!(cell(2), 3.0, "three stills pooled: {pooled:?}");
+        assert!(
+            cell(3) >= lo - 1e-4 && cell(3) <= hi + 1e-4,
+            "pooled {} against the stills' {stills_model:?}",
+            cell(3)
+        );
         // A vertex asset does not shade the ground: each still says so
         // under its table, not only in the dash's tooltip.
         let notes = eval(&c, "return [...document.querySelectorAll('#previews figure[data-kind=\"still\"] .not-judged')].map(p => p.textContent)").await;
