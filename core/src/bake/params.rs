@@ -285,6 +285,11 @@ impl BakeParams {
         overrides: &Map<String, Value>,
     ) -> Result<Self, BakeError> {
         let mut value = serde_json::to_value(Self::new(method)).expect("params serialise");
+        // The names a typo is matched against: this method's own.
+        let mut known = Vec::new();
+        leaf_paths(&value, "", &mut known);
+        known.retain(|k| !foreign_block(method, k.split('.').next().unwrap_or_default()));
+        let names = Names { method, known };
         for (key, v) in overrides {
             if key == "method" {
                 if v.as_str() != Some(method.name()) {
@@ -312,7 +317,7 @@ impl BakeParams {
                     }
                 )));
             }
-            merge(&mut value, &path, v.clone(), key)?;
+            merge(&mut value, &path, v.clone(), key, &names)?;
         }
         let params: Self =
             serde_json::from_value(value).map_err(|e| BakeError::Override(e.to_string()))?;
@@ -465,27 +470,99 @@ impl BakeParams {
 /// Held-out poses traced twice to estimate the ground truth's noise.
 pub(crate) const NOISE_POSES: usize = 8;
 
+/// A method's parameter names, for the hint of an unknown one.
+struct Names {
+    method: Method,
+    /// Dotted paths of its leaves (`linear.ridge`).
+    known: Vec<String>,
+}
+
+impl Names {
+    /// The refusal of `key`, with the nearest names (a typo's fix, or the
+    /// same last part under its section: `rays` → `grid.rays`) and where
+    /// to see them all.
+    fn unknown(&self, key: &str) -> BakeError {
+        let last = key.rsplit('.').next().unwrap_or(key);
+        // What the vertex methods call samples, the volume methods call
+        // rays.
+        let synonym = match last {
+            "rays" => "samples",
+            "samples" => "rays",
+            _ => last,
+        };
+        let mut near: Vec<(usize, &str)> = self
+            .known
+            .iter()
+            .filter_map(|k| {
+                let d = strsim::damerau_levenshtein(key, k);
+                let same_last = k
+                    .rsplit('.')
+                    .next()
+                    .is_some_and(|t| t == last || t == synonym);
+                (d <= (key.len() / 3).max(2) || same_last).then_some((d, k.as_str()))
+            })
+            .collect();
+        near.sort_unstable();
+        near.truncate(3);
+        let hint = match near.as_slice() {
+            [] => String::new(),
+            [(_, one)] => format!("; did you mean \"{one}\"?"),
+            many => format!(
+                "; did you mean one of \"{}\"?",
+                many.iter().map(|(_, k)| *k).collect::<Vec<_>>().join("\", \"")
+            ),
+        };
+        BakeError::Override(format!(
+            "unknown parameter {key:?}{hint} (`aobake params --method {}` lists them all)",
+            self.method
+        ))
+    }
+}
+
+/// Every leaf of `value` as a dotted path under `prefix`.
+fn leaf_paths(value: &Value, prefix: &str, out: &mut Vec<String>) {
+    match value.as_object() {
+        Some(map) => {
+            for (k, v) in map {
+                let path = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                leaf_paths(v, &path, out);
+            }
+        }
+        None => out.push(prefix.to_owned()),
+    }
+}
+
 /// Sets `path` in `value` (an object) to `v`, refusing keys the defaults
 /// do not have so that a typo is an error, not a silently ignored option.
-fn merge(value: &mut Value, path: &[&str], v: Value, key: &str) -> Result<(), BakeError> {
+fn merge(
+    value: &mut Value,
+    path: &[&str],
+    v: Value,
+    key: &str,
+    names: &Names,
+) -> Result<(), BakeError> {
     let Some((first, rest)) = path.split_first() else {
         return Ok(());
     };
     let Some(slot) = value.as_object_mut().and_then(|m| m.get_mut(*first)) else {
-        return Err(BakeError::Override(format!("unknown parameter {key:?}")));
+        return Err(names.unknown(key));
     };
     if rest.is_empty() {
         match (slot.is_object(), v) {
             (true, Value::Object(inner)) => {
                 for (k, x) in inner {
-                    merge(slot, &[k.as_str()], x, &format!("{key}.{k}"))?;
+                    merge(slot, &[k.as_str()], x, &format!("{key}.{k}"), names)?;
                 }
             }
             (_, v) => *slot = v,
         }
         Ok(())
     } else {
-        merge(slot, rest, v, key)
+        merge(slot, rest, v, key, names)
     }
 }
 

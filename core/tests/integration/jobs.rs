@@ -315,6 +315,12 @@ fn parameters_come_from_one_schema_with_named_errors() {
     };
     assert!(err(json!({"posez": 1})).contains("unknown parameter \"posez\""));
     assert!(err(json!({"linear.ridg": 1})).contains("unknown parameter \"linear.ridg\""));
+    // The nearest names, and where to see them all.
+    let typo = err(json!({"linear.ridg": 1}));
+    assert!(typo.contains("did you mean \"linear.ridge\"?"), "{typo}");
+    assert!(typo.contains("`aobake params --method "), "{typo}");
+    let rays = err(json!({"rays": 64}));
+    assert!(rays.contains("did you mean \"samples\"?"), "{rays}");
     assert!(err(json!({"poses": "many"})).contains("invalid type"));
     assert!(err(json!({"poses": 0})).contains("poses must be between 1 and 100000"));
     assert!(err(json!({"method": "vertex-clustered"})).contains("differs"));

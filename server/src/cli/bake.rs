@@ -41,9 +41,10 @@ pub(super) struct Args {
     #[arg(long)]
     out: PathBuf,
     /// The JSON report to write: held-out errors of the model and the
-    /// static-average baseline, sizes, timings.
+    /// static-average baseline, sizes, timings. Default: beside the
+    /// asset, its name with `.report.json` (`fox.aob` → `fox.report.json`).
     #[arg(long)]
-    report: PathBuf,
+    report: Option<PathBuf>,
     /// The report's plot (PNG): PSNR per frame, a cubemap's time ×
     /// distance charts, or slices of every part's grid. Default: the
     /// report's path with `.png`.
@@ -58,6 +59,19 @@ pub(super) struct Args {
     /// pooled per clip), whose table is printed.
     #[arg(long, value_name = "DIR")]
     previews: Option<PathBuf>,
+}
+
+impl Args {
+    /// `--report`, or beside the asset: its name with `.report.json`.
+    fn report_path(&self) -> PathBuf {
+        self.report.clone().unwrap_or_else(|| {
+            let stem = self
+                .out
+                .file_stem()
+                .map_or_else(|| "aobake".into(), |s| s.to_string_lossy().into_owned());
+            self.out.with_file_name(format!("{stem}.report.json"))
+        })
+    }
 }
 
 /// Reads the character and clip files (with the side files a `.gltf`
@@ -155,14 +169,15 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let limits = Limits::default();
     let r = &args.request;
     let params = r.params.params(r.method)?;
-    if args.out == args.report {
+    let report = args.report_path();
+    if args.out == report {
         bail!("--out and --report must be different files");
     }
     check_writable(&args.out, "--out")?;
-    check_writable(&args.report, "--report")?;
+    check_writable(&report, "--report")?;
     match &args.plot {
         Some(plot) => check_writable(plot, "--plot")?,
-        None => check_writable(&args.report.with_extension("png"), "the plot")?,
+        None => check_writable(&report.with_extension("png"), "the plot")?,
     }
     if let Some(dir) = &args.previews {
         std::fs::create_dir_all(dir)
@@ -266,17 +281,18 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
     }
     let baked = Baked::from_outputs(&outputs)?;
     write(&args.out, &baked.asset)?;
-    write(&args.report, &baked.report_json)?;
+    let report = args.report_path();
+    write(&report, &baked.report_json)?;
     let plot_path = args
         .plot
         .clone()
-        .unwrap_or_else(|| args.report.with_extension("png"));
+        .unwrap_or_else(|| report.with_extension("png"));
     write(&plot_path, &baked.plot)?;
     eprintln!(
         "wrote {} ({} bytes), {}, {}",
         args.out.display(),
         baked.asset.len(),
-        args.report.display(),
+        report.display(),
         plot_path.display()
     );
     eprint!("{}", summary(&baked.report));

@@ -268,7 +268,23 @@ const AWAY_FOR: Duration = Duration::from_secs(300);
 /// Follows a bake until it ends, with a progress bar; prints the summary
 /// (`json`: the bake's row as JSON, whatever its end).
 fn wait(conn: &Conn, api: &Client, id: i64, json: bool) -> anyhow::Result<()> {
+    // Ctrl-C stops the following, not the bake: say so, and how to go on.
+    let server = conn
+        .server
+        .as_deref()
+        .map(|s| format!(" --server {s}"))
+        .unwrap_or_default();
+    let note = interrupted_note(id, &server);
+    // A second handler cannot be set (a process follows one bake); the
+    // default one then stays, which only loses the note.
+    let _ = ctrlc::set_handler(move || {
+        eprintln!("{note}");
+        std::process::exit(super::exit::INTERRUPTED);
+    });
     let bar = super::trace::progress_bar(1, "baking");
+    // The rate and time left count from here: a bake joined half done has
+    // not run at the speed of its units over this process's first second.
+    let mut joined = false;
     let mut follow = Follow {
         bar: &bar,
         id,
@@ -280,6 +296,11 @@ fn wait(conn: &Conn, api: &Client, id: i64, json: bool) -> anyhow::Result<()> {
         let view = follow.ask(|api| api.bake(id))?;
         bar.set_length(u64::try_from(view.progress.total).unwrap_or(1));
         bar.set_position(u64::try_from(view.progress.done).unwrap_or(0));
+        if !joined {
+            bar.reset_eta();
+            bar.reset_elapsed();
+            joined = true;
+        }
         bar.set_message(running_jobs(&view));
         let b = &view.bake;
         if json
@@ -327,6 +348,15 @@ fn wait(conn: &Conn, api: &Client, id: i64, json: bool) -> anyhow::Result<()> {
             _ => std::thread::sleep(Duration::from_millis(500)),
         }
     }
+}
+
+/// What `submit --wait` prints when Ctrl-C stops it: the bake goes on,
+/// and the commands that follow or stop it (`server`: the `--server`
+/// flag given, if any).
+pub(super) fn interrupted_note(id: i64, server: &str) -> String {
+    format!(
+        "\nstopped following bake {id}; it goes on on the server.\n  follow it: aobake status {id}{server}   (or run the same submit again: it joins the bake)\n  stop it:   aobake cancel {id}{server}"
+    )
 }
 
 /// A bake followed through outages of its server: says so once, and

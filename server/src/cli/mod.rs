@@ -149,6 +149,7 @@ const EXIT_CODES: &str = "Exit codes (for scripts to branch on):
   7  the server could not be reached, failed (5xx) or stayed too busy (429), after
      waiting out an outage: try again later
   8  submit --wait: the bake failed or was cancelled
+130  submit --wait: Ctrl-C stopped the following (the bake goes on on the server)
 141  stdout was closed (a pipe into head)";
 
 /// What a script can branch on ([`EXIT_CODES`]).
@@ -165,6 +166,9 @@ pub mod exit {
     pub const UNAVAILABLE: u8 = 7;
     /// `submit --wait`: the bake failed or was cancelled.
     pub const BAKE_FAILED: u8 = 8;
+    /// `submit --wait`: Ctrl-C stopped the following (128 + SIGINT, as a
+    /// shell reports it); the bake goes on.
+    pub const INTERRUPTED: i32 = 130;
 }
 
 /// The exit code for `err` ([`EXIT_CODES`]): by the first cause that

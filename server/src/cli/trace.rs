@@ -135,9 +135,21 @@ pub(super) fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(len);
     bar.set_style(
         indicatif::ProgressStyle::with_template(&format!(
-            "{what} {{bar:40}} {{pos}}/{{len}} {{per_sec}} eta {{eta}} {{msg}}"
+            "{what} {{bar:40}} {{pos}}/{{len}} {{percent}}% {{rate}} eta {{eta}} {{msg}}"
         ))
-        .expect("valid template"),
+        .expect("valid template")
+        // indicatif's own per_sec prints four decimals.
+        .with_key(
+            "rate",
+            |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                let r = state.per_sec();
+                let _ = if r >= 10.0 {
+                    write!(w, "{r:.0}/s")
+                } else {
+                    write!(w, "{r:.1}/s")
+                };
+            },
+        ),
     );
     bar
 }

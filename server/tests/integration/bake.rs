@@ -109,7 +109,8 @@ fn the_summary_names_the_reference_rows_and_basis_cross_validation_chose() {
     // InterpolationTest has nine clips: `cv` (the default) chooses the
     // rows, and the summary and the report say which and why.
     let dir = tempfile::tempdir().unwrap();
-    let report = dir.path().join("r.json");
+    // Without --report, the report and its plot go beside the asset.
+    let report = dir.path().join("r.report.json");
     let cubes = sample("InterpolationTest/InterpolationTest.glb");
     let out = aobake(&[
         "bake",
@@ -126,10 +127,9 @@ fn the_summary_names_the_reference_rows_and_basis_cross_validation_chose() {
         "eval_folds=0",
         "--out",
         dir.path().join("r.aob").to_str().unwrap(),
-        "--report",
-        report.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.path().join("r.report.png").is_file());
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     let choice = &report["fit"]["reference"];

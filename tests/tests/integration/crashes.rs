@@ -207,6 +207,41 @@ fn work_finished_while_the_server_restarts_is_handed_in_when_it_is_back() {
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, poses));
 }
 
+/// Ctrl-C during `submit --wait` stops the following, not the bake: it
+/// says so, with the commands that follow or cancel it, and exits 130.
+#[test]
+fn ctrl_c_during_submit_wait_leaves_the_bake_running_and_says_how_to_follow_it() {
+    let env = TestEnv::start(Options::default());
+    let rig = character("RiggedSimple");
+    let mut args = vec!["submit", rig.to_str().unwrap(), "--poses", "8", "--wait"];
+    args.extend(QUICK);
+    let mut follower = Follower::spawn(env.aobake_command(&args), env.dir.path(), "interrupted");
+    // No worker: the bake waits in the queue while it is followed.
+    let id = follower.submitted();
+    // The handler is set as the following starts, right after that line.
+    std::thread::sleep(Duration::from_secs(1));
+    let pid = follower.child.id().to_string();
+    let sent = std::process::Command::new("kill")
+        .args(["-INT", &pid])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let status = follower.child.wait().unwrap();
+    let stderr = follower.stderr();
+    assert_eq!(status.code(), Some(130), "{stderr}");
+    for said in [
+        format!("stopped following bake {id}; it goes on on the server"),
+        format!("follow it: aobake status {id}"),
+        format!("stop it:   aobake cancel {id}"),
+    ] {
+        assert!(stderr.contains(&said), "{said:?} in {stderr}");
+    }
+    let (_, bake) = env
+        .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap();
+    assert_eq!(bake["state"], "queued", "{bake}");
+}
+
 /// `submit --wait` that took the server's address from the data folder
 /// (as on one machine) follows a server started again on another port:
 /// port 0 picks a new one at each start, and `DIR/server.url` says which.
