@@ -20,12 +20,12 @@ use super::{
     cubemap::CubemapReport,
     grid::GridReport,
     jobs::{IndexedBlock, find, json, named, parse, stack_blocks},
-    screen_space::{PIXELS, PixelSummary},
     preview::{
         self, FrameTruth, GROUND_GRID, GROUND_SAMPLES, PreviewFrames, PreviewInfo, PreviewModel,
         Renderer, STILL_FRACTIONS, Subject, TruthTracing, animation_times, frame_poses,
         preview_clip, still_times,
     },
+    screen_space::{PIXELS, PixelSummary},
     vertex::Report,
 };
 

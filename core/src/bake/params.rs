@@ -509,7 +509,10 @@ impl Names {
             [(_, one)] => format!("; did you mean \"{one}\"?"),
             many => format!(
                 "; did you mean one of \"{}\"?",
-                many.iter().map(|(_, k)| *k).collect::<Vec<_>>().join("\", \"")
+                many.iter()
+                    .map(|(_, k)| *k)
+                    .collect::<Vec<_>>()
+                    .join("\", \"")
             ),
         };
         BakeError::Override(format!(

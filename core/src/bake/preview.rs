@@ -650,7 +650,11 @@ impl Subject<'_> {
                 prepared.frames.len()
             )));
         }
-        let statics: Vec<Vec<f32>> = self.static_texels.map(<[f32]>::to_vec).into_iter().collect();
+        let statics: Vec<Vec<f32>> = self
+            .static_texels
+            .map(<[f32]>::to_vec)
+            .into_iter()
+            .collect();
         screens
             .iter()
             .zip(&prepared.frames)

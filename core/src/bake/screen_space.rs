@@ -510,7 +510,10 @@ impl PixelSummary {
             p.gtao += sq(&e.gtao);
             p.vertex += sq(&e.per_vertex_truth);
             // Judged at every still of the clip, or not reported.
-            p.statics = p.statics.zip(e.texel_models.first()).map(|(a, f)| a + sq(f));
+            p.statics = p
+                .statics
+                .zip(e.texel_models.first())
+                .map(|(a, f)| a + sq(f));
             p.texel = p.texel.zip(e.texel_truth.as_ref()).map(|(a, f)| a + sq(f));
         }
         let [stills, unseen] = pools.map(|pool| {
@@ -563,7 +566,16 @@ impl PixelSummary {
         for (e, whose) in self
             .stills
             .iter()
-            .map(|e| (e, if e.trained { "the bake's (trained on it)" } else { "the bake's (held out of training)" }))
+            .map(|e| {
+                (
+                    e,
+                    if e.trained {
+                        "the bake's (trained on it)"
+                    } else {
+                        "the bake's (held out of training)"
+                    },
+                )
+            })
             .chain(self.unseen.iter().map(|e| (e, "refitted without it")))
         {
             out.push_str(&format!(

@@ -291,9 +291,7 @@ pub(super) fn unseen_previews(
         let poses = frame_poses(character, Some(clip), &info.stills);
         // The vertices and the ground traced here; the texels were traced
         // with the held-out poses (the same rays and seed).
-        let mut truth = subject
-            .tracing()
-            .trace(character, &poses, &ground, None)?;
+        let mut truth = subject.tracing().trace(character, &poses, &ground, None)?;
         truth.texels = Some(crate::trace::AoBlock {
             vertices: texels,
             values: block.values[texels..].to_vec(),

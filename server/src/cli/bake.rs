@@ -267,7 +267,9 @@ fn run_bake(args: &Args, bake: &Bake<'_>) -> anyhow::Result<()> {
                     aobake_worker::gpu::PreviewRenderer::new(g)
                         .context("cannot make the preview renderer")
                 })
-                .context("--previews needs a wgpu adapter (a GPU, or Mesa's llvmpipe or lavapipe)")?,
+                .context(
+                    "--previews needs a wgpu adapter (a GPU, or Mesa's llvmpipe or lavapipe)",
+                )?,
         ),
         None => None,
     };

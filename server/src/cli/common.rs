@@ -50,18 +50,63 @@ pub(super) fn character_and_clips(
     Ok((imported.character, clips))
 }
 
+/// Input the command refuses (exit 5, [`super::exit::BAD_INPUT`]): a
+/// file that cannot be read, an asset that does not fit its character or
+/// does not serve the command, a clip the character does not have.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub(super) struct Refused(pub String);
+
+/// A [`Refused`] error with this message.
+pub(super) fn refused(message: impl std::fmt::Display) -> anyhow::Error {
+    Refused(message.to_string()).into()
+}
+
+/// The asset file `path` read and its container parsed; refused when it
+/// cannot be read or is not an asset. `other` is the command's character
+/// file: when `path` is not an asset and `other` is, the arguments were
+/// given the wrong way round, and the error says so.
+pub(super) fn read_asset(
+    path: &Path,
+    other: Option<&Path>,
+) -> anyhow::Result<(Vec<u8>, aobake_core::asset::Container)> {
+    let bytes =
+        std::fs::read(path).map_err(|e| refused(format!("cannot read {}: {e}", path.display())))?;
+    match aobake_core::asset::Container::from_bytes(&bytes) {
+        Ok(container) => Ok((bytes, container)),
+        Err(e) => {
+            let swapped = other
+                .filter(|o| {
+                    std::fs::read(o)
+                        .is_ok_and(|b| aobake_core::asset::Container::from_bytes(&b).is_ok())
+                })
+                .map(|o| {
+                    format!(
+                        " ({} is one: the asset comes first, then the character)",
+                        o.display()
+                    )
+                })
+                .unwrap_or_default();
+            Err(refused(format!(
+                "cannot read {}: {e}{swapped}",
+                path.display()
+            )))
+        }
+    }
+}
+
 /// The clip named `name`, or an error that lists the clips.
 pub(super) fn find_clip<'c>(clips: &'c [Clip], name: &str) -> anyhow::Result<&'c Clip> {
     clips.iter().find(|c| c.name == name).ok_or_else(|| {
         let names: Vec<&str> = clips.iter().map(|c| c.name.as_str()).collect();
-        anyhow::anyhow!(
+        refused(format!(
             "no clip named {name:?}; the clips are: {}",
             if names.is_empty() {
                 "none".to_owned()
             } else {
                 names.join(", ")
             }
-        )
+        ))
     })
 }
 

@@ -1,10 +1,11 @@
 //! `aobake eval`: a baked asset evaluated at a pose, as an engine would at
 //! run time, written as CSV.
 
+use super::common::refused;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use anyhow::{Context as _, bail};
+use anyhow::Context as _;
 use aobake_core::{
     Limits,
     asset::Container,
@@ -28,10 +29,7 @@ pub(super) struct Args {
 }
 
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
-    let bytes = std::fs::read(&args.asset)
-        .with_context(|| format!("cannot read {}", args.asset.display()))?;
-    let container = Container::from_bytes(&bytes)
-        .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    let (_, container) = super::common::read_asset(&args.asset, Some(&args.file))?;
     let posed = pose(&args.file, &args.pose, &Limits::default())?;
     let character = &posed.character;
     let values = BakedAsset::read(&container, Some(character))
@@ -58,16 +56,14 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
 /// Why the asset gives no per-vertex AO for this character, naming both.
 fn refuse<T>(args: &Args, container: &Container, e: AssetUseError) -> anyhow::Result<T> {
     let (asset, file) = (args.asset.display(), args.file.display());
-    match e {
-        AssetUseError::Unreadable(e) => bail!("cannot read {asset}: {e}"),
+    Err(refused(match e {
+        AssetUseError::Unreadable(e) => format!("cannot read {asset}: {e}"),
         AssetUseError::Mismatch(e) => match other_character(args, container) {
-            Some(note) => bail!("{asset} does not fit {file}: {note} ({e})"),
-            None => bail!("{asset} does not fit {file}: {e}"),
+            Some(note) => format!("{asset} does not fit {file}: {note} ({e})"),
+            None => format!("{asset} does not fit {file}: {e}"),
         },
-        AssetUseError::Unsupported(e) => {
-            bail!("{asset} is a {} asset: {e}", container.method)
-        }
-    }
+        AssetUseError::Unsupported(e) => format!("{asset} is a {} asset: {e}", container.method),
+    }))
 }
 
 /// Why, when the asset names another character upload than `args.file`

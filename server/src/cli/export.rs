@@ -26,12 +26,12 @@
 //! static base, its ground texture as `ground-offsets.exr` (channel
 //! `offset`, texel (x, z) at pixel (x, z)).
 
+use super::common::refused;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use aobake_core::{
     Limits,
-    asset::Container,
     bake::{AssetUseError, BakedAsset},
     image::FloatImage,
 };
@@ -103,9 +103,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
 
 /// `--gltf OUT.glb`: the character with the asset's AO.
 fn export_gltf(asset: &Path, file: &Path, clips: Option<&Path>, out: &Path) -> anyhow::Result<()> {
-    let bytes = std::fs::read(asset).with_context(|| format!("cannot read {}", asset.display()))?;
-    let container = Container::from_bytes(&bytes)
-        .with_context(|| format!("cannot read {}", asset.display()))?;
+    let (_, container) = super::common::read_asset(asset, Some(file))?;
     let limits = Limits::default();
     let upload = super::load::upload(file, &limits)?;
     let clips = clips.map(|c| super::load::upload(c, &limits)).transpose()?;
@@ -172,20 +170,20 @@ fn write_shaders(dir: &Path) -> anyhow::Result<()> {
 
 /// `--exr DIR`: a cubemap's faces or a grid's parts as OpenEXR.
 fn export_exr(asset: &Path, exr: &Path, times: &[f32]) -> anyhow::Result<()> {
-    let bytes = std::fs::read(asset).with_context(|| format!("cannot read {}", asset.display()))?;
-    let container = Container::from_bytes(&bytes)
-        .with_context(|| format!("cannot read {}", asset.display()))?;
+    let (_, container) = super::common::read_asset(asset, None)?;
     if let Some(t) = times.iter().find(|t| !t.is_finite()) {
         bail!("--times must be finite numbers of seconds, not {t}");
     }
     let images = match BakedAsset::read(&container, None).and_then(|b| b.images(times)) {
         Ok(images) => images,
-        Err(AssetUseError::Unsupported(e)) => bail!(
-            "{} holds a {} asset: --exr exports cubemap, grid and texel assets ({e})",
-            asset.display(),
-            container.method
-        ),
-        Err(e) => bail!("cannot read {}: {e}", asset.display()),
+        Err(AssetUseError::Unsupported(e)) => {
+            return Err(refused(format!(
+                "{} holds a {} asset: --exr exports cubemap, grid and texel assets ({e})",
+                asset.display(),
+                container.method
+            )));
+        }
+        Err(e) => return Err(refused(format!("cannot read {}: {e}", asset.display()))),
     };
     std::fs::create_dir_all(exr).with_context(|| format!("cannot create {}", exr.display()))?;
     for image in &images {

@@ -7,21 +7,22 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, bail};
+use anyhow::Context as _;
 use aobake_core::{Clip, Imported, Limits, SideFile, bake::UploadBytes, import::referenced_files};
 
+use super::common::refused;
+
 fn read_limited(path: &Path, limits: &Limits) -> anyhow::Result<Vec<u8>> {
-    let size = std::fs::metadata(path)
-        .with_context(|| format!("cannot read {}", path.display()))?
-        .len();
+    let unreadable = |e: std::io::Error| refused(format!("cannot read {}: {e}", path.display()));
+    let size = std::fs::metadata(path).map_err(unreadable)?.len();
     if size > limits.max_file_bytes {
-        bail!(
+        return Err(refused(format!(
             "{} is {size} bytes, over the limit of {} bytes",
             path.display(),
             limits.max_file_bytes
-        );
+        )));
     }
-    std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
+    std::fs::read(path).map_err(unreadable)
 }
 
 /// The main file's bytes and the side files it refers to that exist beside

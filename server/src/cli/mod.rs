@@ -195,7 +195,8 @@ pub fn exit_code(err: &anyhow::Error) -> u8 {
                 ApiError::Tls { .. } | ApiError::Decode { .. } => exit::FAILED,
             };
         }
-        if cause.is::<aobake_core::ImportError>()
+        if cause.is::<common::Refused>()
+            || cause.is::<aobake_core::ImportError>()
             || cause.is::<aobake_core::bake::BakeError>()
             || cause.is::<aobake_core::asset::AssetError>()
         {

@@ -3,12 +3,12 @@
 //! ray-traced ground truth, the model, and the error) or an animated PNG
 //! of a whole clip (the model beside the ground truth).
 
+use super::common::refused;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use aobake_core::{
     Character, Clip, Limits,
-    asset::Container,
     bake::{AssetUseError, BakedAsset, preview::Subject},
     method::texel::atlas::{AtlasOptions, PADDING, TexelAtlas},
 };
@@ -62,16 +62,15 @@ struct Loaded {
 
 impl Loaded {
     fn new(asset: &Path, file: &Path, clips: Option<&Path>) -> anyhow::Result<Self> {
-        let bytes =
-            std::fs::read(asset).with_context(|| format!("cannot read {}", asset.display()))?;
-        let container = Container::from_bytes(&bytes)
-            .with_context(|| format!("cannot read {}", asset.display()))?;
+        let (_, container) = super::common::read_asset(asset, Some(file))?;
         let (character, clips) = character_and_clips(file, clips, &Limits::default())?;
         let baked = BakedAsset::read(&container, Some(&character)).map_err(|e| match e {
-            AssetUseError::Mismatch(e) => {
-                anyhow::anyhow!("{} does not fit {}: {e}", asset.display(), file.display())
-            }
-            e => anyhow::anyhow!("cannot read {}: {e}", asset.display()),
+            AssetUseError::Mismatch(e) => refused(format!(
+                "{} does not fit {}: {e}",
+                asset.display(),
+                file.display()
+            )),
+            e => refused(format!("cannot read {}: {e}", asset.display())),
         })?;
         Ok(Self {
             asset: baked,

@@ -318,9 +318,10 @@ pub(crate) async fn previews(
             let bytes = state.read_blob(&d, None).await?.ok_or_else(|| {
                 ApiError::Internal(format!("the per-pixel summary {d} has no blob"))
             })?;
-            Some(serde_json::from_slice(&bytes).map_err(|e| {
-                ApiError::Internal(format!("the per-pixel summary {d}: {e}"))
-            })?)
+            Some(
+                serde_json::from_slice(&bytes)
+                    .map_err(|e| ApiError::Internal(format!("the per-pixel summary {d}: {e}")))?,
+            )
         }
         None => None,
     };

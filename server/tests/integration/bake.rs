@@ -267,13 +267,59 @@ fn eval_and_inspect_refuse_damaged_newer_and_foreign_assets() {
     );
 
     let out = eval(&dir.path().join("m.aob"), "RiggedSimple/RiggedSimple.glb");
-    assert!(!out.status.success());
+    assert_eq!(
+        out.status.code(),
+        Some(5),
+        "another character's asset is refused input"
+    );
     assert!(
         stderr(&out).contains("baked for 370 vertices")
             && stderr(&out).contains("it was baked for another character upload"),
         "{}",
         stderr(&out)
     );
+
+    // Refused input exits 5 (aobake --help), with what to do.
+    let figure = sample("RiggedFigure/RiggedFigure.glb");
+    let asset = dir.path().join("m.aob");
+    let (figure, asset) = (figure.to_str().unwrap(), asset.to_str().unwrap());
+    let missing = dir.path().join("absent.aob");
+    let csv = csv.to_str().unwrap();
+    for (args, says) in [
+        (
+            vec!["eval", missing.to_str().unwrap(), figure, "--out", csv],
+            "cannot read ".to_owned() + missing.to_str().unwrap(),
+        ),
+        (
+            vec![
+                "eval", asset, figure, "--clip", "Dance", "--time", "0.1", "--out", csv,
+            ],
+            "no clip named \"Dance\"; the clips are: animation_0".to_owned(),
+        ),
+        // The arguments swapped: the character is not an asset, and the
+        // error sees that the other one is.
+        (
+            vec!["eval", figure, asset, "--out", csv],
+            format!(
+                "not an aobake asset (bad magic bytes) ({asset} is one: the asset comes first, then the character)"
+            ),
+        ),
+        (
+            vec![
+                "bake",
+                "absent.glb",
+                "--method",
+                "static-average",
+                "--out",
+                asset,
+            ],
+            "cannot read absent.glb".to_owned(),
+        ),
+    ] {
+        let out = aobake(&args);
+        assert_eq!(out.status.code(), Some(5), "{args:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains(&says), "{says:?} in {}", stderr(&out));
+    }
 }
 
 #[test]

@@ -74,7 +74,11 @@ fn a_texel_bake_through_the_service_matches_aobake_bake_and_exports_its_textures
     }
     // Pooled per pixel: one clip, no folds (the figure has one clip).
     let pixels = &previews["pixels"];
-    assert_eq!(pixels["stills"].as_array().map(Vec::len), Some(1), "{pixels}");
+    assert_eq!(
+        pixels["stills"].as_array().map(Vec::len),
+        Some(1),
+        "{pixels}"
+    );
     assert!(pixels["stills"][0]["texel_floor"].is_number(), "{pixels}");
     assert_eq!(pixels["unseen"], json!([]), "{pixels}");
     let served = asset(&env, &done);

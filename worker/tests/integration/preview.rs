@@ -560,9 +560,19 @@ fn a_texel_bake_judges_its_unseen_folds_per_pixel() {
             assert_eq!(info.name, format!("unseen-{fold}-{i}.png"));
             assert_eq!(info.clip.as_deref(), Some(f.clip.as_str()));
             assert_eq!(info.times, [t]);
-            let e = info.screen_space.as_ref().unwrap().character.as_ref().unwrap();
+            let e = info
+                .screen_space
+                .as_ref()
+                .unwrap()
+                .character
+                .as_ref()
+                .unwrap();
             assert!(e.model.is_some() && e.texel_truth.is_some());
-            assert_eq!(e.texel_models.len(), 1, "the fold's static average beside it");
+            assert_eq!(
+                e.texel_models.len(),
+                1,
+                "the fold's static average beside it"
+            );
         }
     }
     // The fold's model is not the bake's: the bake's own model, which
@@ -588,7 +598,9 @@ fn a_texel_bake_judges_its_unseen_folds_per_pixel() {
         .iter()
         .find(|c| Some(&c.name) == info.clip.as_ref())
         .unwrap();
-    let own = subject.stills(Some(clip), &info.times, None, &mut r).unwrap();
+    let own = subject
+        .stills(Some(clip), &info.times, None, &mut r)
+        .unwrap();
     let score = |s: &aobake_core::bake::screen_space::ScreenSpaceInfo| {
         s.character.as_ref().unwrap().model.unwrap().rmse
     };
@@ -603,7 +615,11 @@ fn a_texel_bake_judges_its_unseen_folds_per_pixel() {
 
     // The summary pools the stills per clip, as the preview job wrote it.
     let summary = PixelSummary::of(
-        &baked.previews.iter().map(|(i, _)| i.clone()).collect::<Vec<_>>(),
+        &baked
+            .previews
+            .iter()
+            .map(|(i, _)| i.clone())
+            .collect::<Vec<_>>(),
         |clip| report.character.train_clips.iter().any(|c| c == clip),
     )
     .unwrap();
@@ -611,7 +627,10 @@ fn a_texel_bake_judges_its_unseen_folds_per_pixel() {
     assert_eq!(summary.unseen.len(), 2);
     assert!(summary.stills.iter().all(|e| e.trained && e.stills == 3));
     for (e, f) in summary.unseen.iter().zip(folds) {
-        assert_eq!((e.clip.as_str(), e.trained, e.stills), (f.clip.as_str(), false, 2));
+        assert_eq!(
+            (e.clip.as_str(), e.trained, e.stills),
+            (f.clip.as_str(), false, 2)
+        );
         let (model, statics) = (e.model, e.static_average.unwrap());
         assert!((e.gain_db.unwrap() - 20.0 * (statics / model).log10()).abs() < 1e-9);
         assert!(e.texel_floor.unwrap() > 0.0 && e.gtao > 0.0);
