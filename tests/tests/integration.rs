@@ -17,6 +17,8 @@ mod cubemap;
 mod dashboard;
 #[path = "integration/grid.rs"]
 mod grid;
+#[path = "integration/props.rs"]
+mod props;
 #[path = "integration/service.rs"]
 mod service;
 #[path = "integration/texel.rs"]

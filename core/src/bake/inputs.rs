@@ -229,6 +229,10 @@ pub struct InputError {
     pub source: ImportError,
 }
 
+/// The one-frame clip a character without animation is baked with: its
+/// rest pose (see [`BakeInputs::load`]).
+pub const REST_CLIP: &str = "rest";
+
 impl BakeInputs {
     /// Imports the character and binds the clip uploads' animations to its
     /// nodes by name.
@@ -262,6 +266,20 @@ impl BakeInputs {
             clip_digests.push(upload.digest());
         }
         all.extend(imported.clips);
+        // A static mesh (no animation at all) is baked in the one pose it
+        // has: a clip of that pose, so every stage that reads clip frames
+        // (the static average's rows, the evaluation, the previews) reads
+        // it, and the methods that fit AO to poses say they need more.
+        if all.is_empty() {
+            warnings.push(format!(
+                "the character has no animation: it is baked as modelled, its rest pose as a one-frame clip {REST_CLIP:?} (static-average bakes its per-vertex AO, texel-linear an AO texture, grid and the cubemaps the AO it casts; vertex-linear and vertex-clustered need clips: pass --clips FILE)"
+            ));
+            all.push(Clip {
+                name: REST_CLIP.into(),
+                channels: Vec::new(),
+                duration: 0.0,
+            });
+        }
         // Clips are chosen by name (`--clip`, train and test clips): a
         // repeated name reaches only the first of its clips.
         let mut names = std::collections::HashSet::with_capacity(all.len());

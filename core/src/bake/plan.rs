@@ -10,12 +10,12 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::{
     Character, Clip,
-    method::Family,
     method::texel::{
         atlas::{AtlasOptions, PADDING, TexelAtlas, rest_positions},
         trace::{drawn_texels, trace_texels},
     },
     method::vertex::{AssetHeaderFields, FitStats, FitStep, Model, PrimitiveSpan, Source},
+    method::{Family, Method},
     pose_space::{self, ParamError},
     pose_space::{ClipFrame, Handles, JointAngles, LayoutOptions, random_clip_frames},
     rig::pose::Pose,
@@ -173,8 +173,19 @@ impl<'a> Plan<'a> {
             },
         ) {
             Ok(layout) => layout,
-            Err(ParamError::NothingAnimated) if !p.method.family().needs_joint_angles() => {
+            // A static mesh's one pose: the static average needs no
+            // angles, and texel-linear is then its static AO texture.
+            Err(ParamError::NothingAnimated)
+                if !p.method.family().needs_joint_angles()
+                    || matches!(p.method, Method::StaticAverage | Method::TexelLinear) =>
+            {
                 JointAngles::default()
+            }
+            Err(ParamError::NothingAnimated) => {
+                return Err(BakeError::Param(format!(
+                    "no clip moves the mesh (a static mesh, or clips that animate nothing it is skinned to): {} fits AO to poses; bake static-average (per-vertex AO) or texel-linear (an AO texture) for a mesh that does not move, or give clips that move it (--clips FILE)",
+                    p.method
+                )));
             }
             Err(e) => return Err(e.into()),
         };

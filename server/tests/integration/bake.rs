@@ -322,6 +322,72 @@ fn eval_and_inspect_refuse_damaged_newer_and_foreign_assets() {
     }
 }
 
+/// A static prop (no skin, no animation) bakes in its one pose: its
+/// static AO per vertex, darkest where it meets the floor; a method that
+/// fits AO to poses is refused with what to use.
+#[test]
+fn a_static_prop_bakes_its_ao_as_modelled() {
+    let dir = tempfile::tempdir().unwrap();
+    let crates = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/data/props/Crates/Crates.glb");
+    let crates = crates.to_str().unwrap();
+    let asset = dir.path().join("c.aob");
+    let csv = dir.path().join("c.csv");
+    let out = aobake(&[
+        "bake",
+        crates,
+        "--method",
+        "static-average",
+        "--poses",
+        "8",
+        "--samples",
+        "64",
+        "--out",
+        asset.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("the character has no animation: it is baked as modelled"),
+        "{}",
+        stderr(&out)
+    );
+    let out = aobake(&[
+        "eval",
+        asset.to_str().unwrap(),
+        crates,
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let ao: Vec<f32> = std::fs::read_to_string(&csv)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(ao.len(), 76);
+    // The floor's far corners (0-3) are open; the big box's +z side
+    // (vertices 12-15) is darker where it meets the floor (12, 13: half
+    // its hemisphere is floor) than at its top (14, 15).
+    assert!(ao[0..4].iter().all(|&a| a < 0.2), "{:?}", &ao[0..4]);
+    let (foot, top) = ((ao[12] + ao[13]) / 2.0, (ao[14] + ao[15]) / 2.0);
+    assert!(foot > 0.3 && foot > top + 0.2, "{:?}", &ao[12..16]);
+    let out = aobake(&[
+        "bake",
+        crates,
+        "--method",
+        "vertex-linear",
+        "--out",
+        asset.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(5), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("vertex-linear fits AO to poses; bake static-average"),
+        "{}",
+        stderr(&out)
+    );
+}
+
 #[test]
 fn bake_names_what_is_wrong() {
     let dir = tempfile::tempdir().unwrap();
