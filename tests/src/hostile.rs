@@ -544,6 +544,100 @@ pub fn validator_errors(valid: &[u8]) -> Vec<(Case, Verdict)> {
             j["nodes"][animated as usize]["rotation"] = json!([0.0, 0.0, 0.0, 2.0]);
         },
     );
+    // Buffer views are structure, whoever reads them: one past the end of
+    // its buffer (here one holding an image, which AO never decodes) is
+    // refused.
+    for (name, offset, length) in [
+        (
+            "buffer view past the end of its buffer, holding an image (BUFFER_VIEW_TOO_LONG)",
+            bin.len() as u64 - 4,
+            64u64,
+        ),
+        (
+            "buffer view declaring 16 GiB, holding an image (BUFFER_VIEW_TOO_LONG)",
+            0,
+            1 << 34,
+        ),
+    ] {
+        edit(
+            name,
+            Refused {
+                path: "past the end of buffer 0",
+            },
+            &|j, _| {
+                let views = j["bufferViews"].as_array_mut().unwrap();
+                views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": length}));
+                let v = views.len() - 1;
+                j["images"] = json!([{ "bufferView": v, "mimeType": "image/png" }]);
+            },
+        );
+    }
+    // Sparse parts over POSITION: indices that do not strictly increase,
+    // no elements, values in a strided view.
+    let sparse = |j: &mut Value, b: &mut Vec<u8>, indices: &[u16], count: usize, stride: bool| {
+        let at = accessor_offset(j, position);
+        let mut ib: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+        while !ib.len().is_multiple_of(4) {
+            ib.push(0);
+        }
+        let pad = if stride { 4 } else { 0 };
+        let values: Vec<u8> = indices
+            .iter()
+            .flat_map(|&i| {
+                let p = at + 12 * i as usize;
+                b[p..p + 12]
+                    .iter()
+                    .copied()
+                    .chain(std::iter::repeat_n(0, pad))
+                    .collect::<Vec<u8>>()
+            })
+            .collect();
+        let (istart, vstart) = (b.len(), b.len() + ib.len());
+        b.extend(&ib);
+        b.extend(&values);
+        j["buffers"][0]["byteLength"] = json!(b.len());
+        let views = j["bufferViews"].as_array_mut().unwrap();
+        views.push(json!({"buffer": 0, "byteOffset": istart, "byteLength": ib.len()}));
+        let mut vv = json!({"buffer": 0, "byteOffset": vstart, "byteLength": values.len()});
+        if stride {
+            vv["byteStride"] = json!(12 + pad);
+        }
+        views.push(vv);
+        let n = views.len();
+        j["accessors"][position]["sparse"] = json!({
+            "count": count,
+            "indices": {"bufferView": n - 2, "componentType": 5123},
+            "values": {"bufferView": n - 1},
+        });
+    };
+    edit(
+        "sparse indices decreasing (ACCESSOR_SPARSE_INDICES_NON_INCREASING)",
+        Refused {
+            path: "sparse.indices",
+        },
+        &|j, b| sparse(j, b, &[1, 0], 2, false),
+    );
+    edit(
+        "sparse index repeated (ACCESSOR_SPARSE_INDICES_NON_INCREASING)",
+        Refused {
+            path: "sparse.indices",
+        },
+        &|j, b| sparse(j, b, &[1, 1], 2, false),
+    );
+    edit(
+        "sparse count 0 (VALUE_NOT_IN_RANGE)",
+        Refused {
+            path: "sparse.count",
+        },
+        &|j, b| sparse(j, b, &[0, 1], 0, false),
+    );
+    edit(
+        "sparse values in a strided buffer view (BUFFER_VIEW_INVALID_BYTE_STRIDE)",
+        Refused {
+            path: "sparse.values",
+        },
+        &|j, b| sparse(j, b, &[0, 1], 2, true),
+    );
     // Images AO never reads: warned about, as the texture exception says.
     edit(
         "image in a buffer view without mimeType (UNSATISFIED_DEPENDENCY)",

@@ -417,6 +417,7 @@ impl Accessors<'_> {
                 format!("{n} values do not fit in their bufferView"),
             ));
         }
+        let mut previous: Option<usize> = None;
         for k in 0..n {
             let target = decode(
                 &ibytes[istart + k * isize..],
@@ -429,6 +430,13 @@ impl Accessors<'_> {
                     format!("index {k} is {target}, past the accessor's {count} elements"),
                 ));
             }
+            if let Some(p) = previous.filter(|&p| target <= p) {
+                return Err(ImportError::invalid(
+                    format!("{spath}.indices"),
+                    format!("index {k} is {target}, after {p}: sparse indices strictly increase"),
+                ));
+            }
+            previous = Some(target);
             let base = vstart + k * element_size;
             for (c, offset) in offsets.iter().enumerate() {
                 values[target * width + c] = decode(&vbytes[base + offset..], ct, kind);

@@ -86,6 +86,7 @@ impl Document {
         }
         let side_files = SideFiles::new(upload.side_files);
         let buffers = load_buffers(&root, upload, &side_files, container.bin, limits)?;
+        check_views(&root, &buffers)?;
         check_images(&root, &side_files, &mut warnings)?;
         Ok(Self {
             root,
@@ -395,6 +396,35 @@ fn load_buffers(
         });
     }
     Ok(buffers)
+}
+
+/// Every buffer view lies inside its buffer, whether or not an accessor
+/// reads it (one holding an image, say): a view past the end is a broken
+/// file, not a texture problem.
+fn check_views(root: &json::Root, buffers: &[Vec<u8>]) -> Result<(), ImportError> {
+    for (i, view) in root.buffer_views.iter().enumerate() {
+        let path = format!("bufferViews[{i}]");
+        let b = view.buffer.value();
+        let buffer = buffers
+            .get(b)
+            .ok_or_else(|| ImportError::invalid(&path, format!("buffer {b} does not exist")))?;
+        let offset = view.byte_offset.map_or(0, |o| o.0);
+        let len = view.byte_length.0;
+        if offset
+            .checked_add(len)
+            .is_none_or(|end| end > buffer.len() as u64)
+        {
+            return Err(ImportError::invalid(
+                &path,
+                format!(
+                    "bytes {offset}..{} lie past the end of buffer {b} ({} bytes)",
+                    offset.saturating_add(len),
+                    buffer.len()
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Image URIs must be safe; a missing image is only a warning, since AO

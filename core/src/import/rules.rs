@@ -125,6 +125,7 @@ pub(crate) fn check(root: &Root, parents: &[Option<usize>]) -> Result<usize, Imp
     meshes(root)?;
     animations(root)?;
     strides(root)?;
+    sparse(root)?;
     for (i, accessor) in root.accessors.iter().enumerate() {
         let small = [
             ComponentType::I8,
@@ -532,6 +533,42 @@ fn strides(root: &Root) -> Result<(), ImportError> {
             let here = format!("animations[{a}].samplers[{s}]");
             check(sampler.input.value(), format!("{here}.input"))?;
             check(sampler.output.value(), format!("{here}.output"))?;
+        }
+    }
+    Ok(())
+}
+
+/// A sparse part has at least one element, and its indices and values
+/// lie in buffer views without a `byteStride` (the glTF schema's rules;
+/// that the indices strictly increase is checked as they are read).
+fn sparse(root: &Root) -> Result<(), ImportError> {
+    for (i, accessor) in root.accessors.iter().enumerate() {
+        let Some(sparse) = &accessor.sparse else {
+            continue;
+        };
+        let path = format!("accessors[{i}].sparse");
+        if sparse.count.0 == 0 {
+            return Err(ImportError::invalid(
+                format!("{path}.count"),
+                "is 0; a sparse part has at least one element",
+            ));
+        }
+        for (part, view) in [
+            ("indices", sparse.indices.buffer_view.value()),
+            ("values", sparse.values.buffer_view.value()),
+        ] {
+            if root
+                .buffer_views
+                .get(view)
+                .is_some_and(|v| v.byte_stride.is_some())
+            {
+                return Err(ImportError::invalid(
+                    format!("{path}.{part}"),
+                    format!(
+                        "lie in bufferViews[{view}], which has a byteStride; sparse parts are tightly packed"
+                    ),
+                ));
+            }
         }
     }
     Ok(())

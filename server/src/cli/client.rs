@@ -459,6 +459,30 @@ fn running_jobs(view: &BakeView) -> String {
     }
 }
 
+/// How `aobake status` and the dashboard's stage table group jobs, in
+/// their order: `queued` waits for a worker (a retry too), `blocked` for
+/// the jobs it needs, `failed` ran out of attempts.
+const JOB_GROUPS: [&str; 6] = [
+    "done",
+    "running",
+    "queued",
+    "blocked",
+    "failed",
+    "cancelled",
+];
+
+/// A job state's group ([`JOB_GROUPS`]).
+fn job_group(state: JobState) -> &'static str {
+    match state {
+        JobState::Completed => "done",
+        JobState::Running => "running",
+        JobState::Available | JobState::Retryable => "queued",
+        JobState::Blocked => "blocked",
+        JobState::Dead => "failed",
+        JobState::Cancelled => "cancelled",
+    }
+}
+
 /// Arguments of `aobake status`.
 #[derive(Debug, clap::Args)]
 pub(super) struct StatusArgs {
@@ -482,10 +506,15 @@ pub(super) fn status(args: &StatusArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let view = api.bake(args.id)?;
-    let mut states: std::collections::BTreeMap<&str, usize> = Default::default();
+    // Counted in the dashboard's groups, in its order.
+    let mut states: Vec<(&str, usize)> = JOB_GROUPS.iter().map(|&g| (g, 0)).collect();
     for j in view.jobs.iter().flatten() {
-        *states.entry(j.state.as_str()).or_default() += 1;
+        let group = job_group(j.state);
+        if let Some(slot) = states.iter_mut().find(|(g, _)| *g == group) {
+            slot.1 += 1;
+        }
     }
+    states.retain(|&(_, n)| n > 0);
     let b = &view.bake;
     println!(
         "bake {}: {} ({} of {} units), {}; jobs: {}; key {}",
@@ -496,8 +525,7 @@ pub(super) fn status(args: &StatusArgs) -> anyhow::Result<()> {
         b.method,
         states
             .iter()
-            // The dashboard's word for a job waiting for a worker.
-            .map(|(s, n)| format!("{n} {}", if *s == "available" { "queued" } else { s }))
+            .map(|(s, n)| format!("{n} {s}"))
             .collect::<Vec<_>>()
             .join(", "),
         b.key,

@@ -122,6 +122,12 @@ fn two_versions_compare_their_parameters_and_quality() {
             eval(&c, "return location.hash").await,
             json!(format!("#/compare/{first}/{second}"))
         );
+        // A page without an event stream says the server is online, not
+        // offline.
+        assert_eq!(
+            eval(&c, "return document.getElementById('live').textContent").await,
+            json!("online")
+        );
         let same = eval(&c, "return Object.fromEntries([...document.querySelectorAll('#compare-inputs tr[data-same]')].map(r => [r.dataset.input, r.dataset.same]))").await;
         assert_eq!(
             same,
@@ -483,6 +489,23 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
                 "model and GTAO RMSE: {screen}"
             );
         }
+        // What the bake found, at the top: its gain and the per-pixel
+        // comparison with screen-space AO, numbers from the report and the
+        // stills; the bar's count with its percentage.
+        let headline = eval(&c, "return [document.querySelector('#headline-gain')?.textContent, document.querySelector('#headline-pixels')?.textContent, document.querySelector('#count').textContent]").await;
+        let gain = headline[0].as_str().unwrap_or_default();
+        let per_pixel = headline[1].as_str().unwrap_or_default();
+        assert!(
+            gain.starts_with("Over the static average: ")
+                && gain.contains(" dB on frames of its training clips"),
+            "{headline}"
+        );
+        assert!(
+            per_pixel.contains("from ray-traced AO") && per_pixel.contains("GTAO"),
+            "{headline}"
+        );
+        let count = headline[2].as_str().unwrap_or_default();
+        assert!(count.ends_with("(100%)"), "{headline}");
         // The stills pooled per pixel above them: one row for the clip,
         // its model RMSE between the stills' own.
         let pooled = eval(
@@ -627,7 +650,7 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         let aligned = eval(&c, "return [...document.querySelectorAll('#stages thead th')].map(th => th.classList.contains('num'))").await;
         assert_eq!(
             aligned,
-            json!([false, true, true, true, true, true, true, true])
+            json!([false, true, true, true, true, true, true, true, true])
         );
         shot(&c, "4-bake-cancelled").await;
 
@@ -1373,6 +1396,17 @@ fn the_viewer_plays_every_method_and_matches_aobake_preview() {
                 share > EDGE_SHARE,
                 "a drag did not turn the camera: {share}"
             );
+            // A drag up or down, however far, keeps the eye above the
+            // ground (40 px up once put it under).
+            for dy in [40, 400, -400] {
+                let above = eval(&c, &format!("const cv = document.querySelector('#viewer canvas');
+                      const at = (type, y) => cv.dispatchEvent(new PointerEvent(type, {{clientX: 200, clientY: y, pointerId: 1, bubbles: true}}));
+                      at('pointerdown', 500); at('pointermove', 500 - {dy}); at('pointerup', 500 - {dy}); return Number(cv.dataset.eyeAboveGround)")).await;
+                assert!(
+                    above.as_f64().is_some_and(|y| y > 0.0),
+                    "a drag of {dy} px up put the eye {above} above the ground"
+                );
+            }
             // The keyboard: Home goes back to the previews' camera (the
             // model's pixels again), an arrow key turns the view.
             let canvas = c.find(Locator::Css("#viewer canvas")).await.unwrap();

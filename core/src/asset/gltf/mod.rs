@@ -355,6 +355,7 @@ fn vertex_attributes(
         order.push(json!({
             "node": p.node,
             "mesh": mesh,
+            "source_mesh": p.mesh,
             "primitive": p.primitive,
             "first": vertices.start,
             "count": count,

@@ -106,10 +106,17 @@ async function refused(res, sent) {
 
 async function api(path, options = {}) {
   const sent = token;
-  const res = await fetch(path, {
-    ...options,
-    headers: { authorization: `Bearer ${sent}`, ...(options.headers || {}) },
-  });
+  let res;
+  try {
+    res = await fetch(path, {
+      ...options,
+      headers: { authorization: `Bearer ${sent}`, ...(options.headers || {}) },
+    });
+  } catch (e) {
+    connection(false);
+    throw e;
+  }
+  connection(true);
   if (res.status === 401) throw await refused(res, sent);
   if (!res.ok) {
     let problem = {};
@@ -127,6 +134,19 @@ async function imageUrl(path, digest) {
     blobUrls.set(digest, URL.createObjectURL(blob));
   }
   return blobUrls.get(digest);
+}
+
+// The badge in the header: "live" while a page's event stream is open,
+// "online" while the server answers a page that has none (the versions
+// and compare pages), "offline" when a request could not reach it.
+function connection(answered) {
+  const live = document.getElementById("live");
+  if (!answered) {
+    live.textContent = "offline";
+    live.classList.remove("on");
+  } else if (!live.classList.contains("on")) {
+    live.textContent = "online";
+  }
 }
 
 // Server-sent events over fetch; reconnects until the page goes away or
@@ -196,6 +216,10 @@ function progressBar(done, total, state) {
   setBar(bar, done, total, state);
   return bar;
 }
+
+// Units done of all, and the share as the bar shows it.
+const countText = (done, total) =>
+  `${done}/${total} (${total > 0 ? Math.floor((100 * done) / total) : 0}%)`;
 
 function setBar(bar, done, total, state) {
   const pct = total > 0 ? Math.min(100, (100 * done) / total) : 0;
@@ -287,7 +311,7 @@ async function bakesPage(signal) {
   for (const b of bakes) {
     const bar = progressBar(b.progress.done, b.progress.total, b.state);
     const state = h("td", {}, badge(b.state));
-    const count = h("td", { class: "num mono" }, `${b.progress.done}/${b.progress.total}`);
+    const count = h("td", { class: "num mono" }, countText(b.progress.done, b.progress.total));
     rows.set(b.id, { bar, state, count });
     tbody.append(h("tr", { "data-bake": b.id },
       h("td", {}, h("a", { href: `#/bakes/${b.id}` }, `#${b.id}`)),
@@ -296,14 +320,16 @@ async function bakesPage(signal) {
       state,
       h("td", {}, bar),
       count,
-      h("td", { class: "muted" }, when(b.created_at))));
+      h("td", { class: "muted" }, when(b.created_at)),
+      h("td", { class: "muted", "data-ended": b.finished_at ? "yes" : "no" }, when(b.finished_at) || "—"),
+      h("td", { class: "num muted" }, b.finished_at ? duration((b.finished_at - b.created_at) / 1000) : "—")));
   }
   show(
     h("h1", {}, "Bakes"),
     bakes.length === 0
       ? h("p", { class: "muted" }, "No bakes yet: ", h("code", {}, "aobake submit CHARACTER.glb"), ".")
       : h("table", {},
-        h("thead", {}, h("tr", {}, ...["Bake", "Method", "Character", "State", "Progress", "", "Created"]
+        h("thead", {}, h("tr", {}, ...["Bake", "Method", "Character", "State", "Progress", "", "Created", "Ended", "Took"]
           .map((t) => h("th", {}, t)))),
         tbody),
   );
@@ -316,7 +342,7 @@ async function bakesPage(signal) {
     if (!row) return reload(); // a new bake
     setBar(row.bar, e.done, e.total, e.state);
     fill(row.state, badge(e.state));
-    row.count.textContent = `${e.done}/${e.total}`;
+    row.count.textContent = countText(e.done, e.total);
   });
 }
 
@@ -330,8 +356,10 @@ function jobLabel(j) {
 
 // Job states as people read them: done, running, queued (blocked,
 // available or waiting to retry), failed (out of attempts) or cancelled.
+// As `aobake status` counts them: queued waits for a worker (a retry
+// too), blocked for the jobs it needs.
 const JOB_GROUP = {
-  completed: "done", running: "running", blocked: "queued", available: "queued",
+  completed: "done", running: "running", blocked: "blocked", available: "queued",
   retryable: "queued", dead: "failed", cancelled: "cancelled",
 };
 
@@ -341,7 +369,7 @@ function stagesTable(jobs) {
   const stages = new Map();
   for (const j of jobs) {
     if (!stages.has(j.kind)) {
-      stages.set(j.kind, { jobs: 0, done: 0, running: 0, queued: 0, failed: 0, cancelled: 0, work: 0, worked: 0 });
+      stages.set(j.kind, { jobs: 0, done: 0, running: 0, queued: 0, blocked: 0, failed: 0, cancelled: 0, work: 0, worked: 0 });
     }
     const st = stages.get(j.kind);
     st.jobs += 1;
@@ -350,7 +378,7 @@ function stagesTable(jobs) {
     st.worked += j.state === "completed" ? j.work : j.progress;
   }
   return h("table", { id: "stages" },
-    h("thead", {}, h("tr", {}, ...["Stage", "Jobs", "Done", "Running", "Queued", "Failed", "Cancelled", "Work"]
+    h("thead", {}, h("tr", {}, ...["Stage", "Jobs", "Done", "Running", "Queued", "Blocked", "Failed", "Cancelled", "Work"]
       .map((t) => h("th", {}, t)))),
     h("tbody", {}, ...[...stages].map(([kind, st]) => h("tr", { "data-stage": kind },
       h("td", {}, kind),
@@ -358,6 +386,7 @@ function stagesTable(jobs) {
       h("td", { class: "num", "data-count": "done" }, st.done),
       h("td", { class: "num", "data-count": "running" }, st.running),
       h("td", { class: "num", "data-count": "queued" }, st.queued),
+      h("td", { class: "num", "data-count": "blocked" }, st.blocked),
       h("td", { class: st.failed ? "num error" : "num", "data-count": "failed" }, st.failed),
       h("td", { class: "num", "data-count": "cancelled" }, st.cancelled),
       h("td", { class: "num" }, `${st.worked}/${st.work}`)))));
@@ -554,6 +583,47 @@ function previewFigure(p, url) {
     p.screen_space ? screenSpaceTable(p.screen_space) : null);
 }
 
+// What the bake found, in a few sentences a producer reads at the top:
+// its gain over the static average on clips it never saw and on training
+// frames, and per pixel against screen-space AO, with the per-vertex
+// floor named when it is what holds the model back.
+function headlineOf(report, pixels) {
+  const db = (x) => `${x >= 0 ? "+" : ""}${fmt(x, 1)} dB`;
+  const out = [];
+  const ev = report.evaluation;
+  const unseen = ev?.unseen_clips;
+  const seen = ev?.training_clip_frames;
+  if (unseen && seen) {
+    out.push(h("span", { id: "headline-gain" },
+      `Over the static average: ${db(unseen.mean_psnr_gain_db)} on clips the model never saw `,
+      `(worst clip ${db(unseen.min_psnr_gain_db)}), ${db(seen.psnr_gain_db)} on frames of its training clips. `));
+  } else if (seen) {
+    out.push(h("span", { id: "headline-gain" },
+      `Over the static average: ${db(seen.psnr_gain_db)} on frames of its training clips. `));
+  }
+  const still = pixels?.stills?.[0];
+  if (still) {
+    const better = still.model < still.gtao;
+    out.push(h("span", { id: "headline-pixels" },
+      `Per pixel on the character, the bake is ${fmt(still.model, 3)} from ray-traced AO; screen-space AO `,
+      `(GTAO, what an engine computes without a bake) is ${fmt(still.gtao, 3)}: the bake is `,
+      better ? "closer. " : "further. "));
+    // A per-vertex model at its floor: the mesh, not the fit, is the limit.
+    if (!better && still.texel_floor == null && still.per_vertex_floor >= 0.9 * still.model) {
+      out.push(h("span", { id: "headline-floor" },
+        `The per-vertex floor (the exact AO at the vertices, interpolated) is ${fmt(still.per_vertex_floor, 3)}: `,
+        "no per-vertex bake of this mesh can do better; texel-linear stores AO per texel of an atlas. "));
+    }
+  }
+  const folds = pixels?.unseen;
+  if (folds?.length && pixels.unseen_mean_gain_db != null) {
+    out.push(h("span", { id: "headline-unseen" },
+      `On clips it never saw, per pixel: ${db(pixels.unseen_mean_gain_db)} over the static average `,
+      `(worst ${db(pixels.unseen_worst_gain_db)}). `));
+  }
+  return out;
+}
+
 // The stills judged per pixel, pooled per clip: the bake's model on its
 // preview clip and each unseen-clip fold's model on the clip it left out,
 // beside the static average, the floors and GTAO.
@@ -585,6 +655,17 @@ function pixelTable(s) {
         ? `Unseen clips per pixel: ${gain(s.unseen_mean_gain_db)} over the static average on average, worst clip ${gain(s.unseen_worst_gain_db)}. `
         : "",
       `Worst model / GTAO: ${fmt(s.worst_gtao_ratio, 2)} (below 1, the bake beats screen-space AO on every clip judged).`));
+}
+
+// The footnote of surfaces whose model is not judged: one sentence per
+// reason, naming every surface it holds for (not the same one twice).
+function notJudged(unjudged) {
+  const byWhy = new Map();
+  for (const [name, why] of unjudged) {
+    if (!byWhy.has(why)) byWhy.set(why, []);
+    byWhy.get(why).push(name);
+  }
+  return [...byWhy].map(([why, names]) => `* The baked model on the ${names.join(" and the ")} is not judged: ${why}. `);
 }
 
 // A still's screen-space baseline (GTAO, its third panel) beside the
@@ -621,8 +702,7 @@ function screenSpaceTable(s) {
         statics ? h("th", {}, "static average") : null, h("th", {}, "GTAO"), h("th", {}, "per-vertex truth"),
         texels ? h("th", {}, "texel truth") : null),
       rows),
-    unjudged.length ? h("p", { class: "muted not-judged" },
-      unjudged.map(([name, why]) => `* The baked model on the ${name} is not judged: ${why}. `)) : null,
+    unjudged.length ? h("p", { class: "muted not-judged" }, notJudged(unjudged)) : null,
     h("p", { class: "muted" },
       `Per frame on this adapter: GTAO ${fmt(s.gtao_ms, 2)} ms (${s.fetches_per_pixel} texel reads per pixel, radius ${fmt(s.gtao.radius, 3)}), `,
       `the model's evaluation ${fmt(s.model_ms, 2)} ms.`));
@@ -632,7 +712,7 @@ async function bakePage(signal, id) {
   let bake = await json(`/v1/bakes/${id}`);
   const bar = progressBar(bake.progress.done, bake.progress.total, bake.state);
   const state = h("span", { id: "state" }, ...stateBadge(bake));
-  const count = h("span", { class: "mono", id: "count" }, `${bake.progress.done}/${bake.progress.total}`);
+  const count = h("span", { class: "mono", id: "count" }, countText(bake.progress.done, bake.progress.total));
   // Jobs: a summary by stage with the time left, the running and failed
   // jobs, and every job folded away (a vertex bake has hundreds).
   const stages = h("div");
@@ -669,6 +749,7 @@ async function bakePage(signal, id) {
   drawQueue().catch(() => {});
   const jobs = h("div", {}, stages, queue, eta, h("h3", {}, "Running and failed"), active, folded);
   const results = h("div", { id: "results" });
+  const headline = h("p", { id: "headline" });
   // The 3D viewer, once the bake has its asset: it shows the character's
   // mesh, which needs the submit scope as the uploads do.
   const viewerSlot = h("div");
@@ -762,6 +843,7 @@ async function bakePage(signal, id) {
       for (const p of list.previews) {
         figures.push(previewFigure(p, await imageUrl(`/v1/previews/${p.digest}`, p.digest)));
       }
+      fill(headline, ...headlineOf(report, list.pixels));
       fill(results,
         h("h2", {}, "Previews"),
         list.pixels ? pixelTable(list.pixels) : null,
@@ -782,7 +864,7 @@ async function bakePage(signal, id) {
     bake = await json(`/v1/bakes/${id}`);
     setBar(bar, bake.progress.done, bake.progress.total, bake.state);
     fill(state, ...stateBadge(bake));
-    count.textContent = `${bake.progress.done}/${bake.progress.total}`;
+    count.textContent = countText(bake.progress.done, bake.progress.total);
     drawJobs();
     drawQueue().catch(() => {});
     drawDetails();
@@ -807,6 +889,7 @@ async function bakePage(signal, id) {
   show(
     h("h1", {}, `Bake #${id} `, characterLabel(bake.character), " ", h("span", { class: "muted" }, bake.method), " ", state),
     h("div", { class: "actions" }, bar, count),
+    headline,
     actions,
     status,
     details,
@@ -825,7 +908,7 @@ async function bakePage(signal, id) {
     const e = JSON.parse(data);
     setBar(bar, e.done, e.total, e.state);
     fill(state, badge(e.state));
-    count.textContent = `${e.done}/${e.total}`;
+    count.textContent = countText(e.done, e.total);
     eta.textContent = estimate(e.done, e.total, e.state);
     later();
   });
@@ -1008,8 +1091,12 @@ async function comparePage(signal, a, b) {
       })))
       : h("p", { class: "muted", id: "no-quality" }, "The two reports share no figure (different methods).");
   }
-  show(h("h1", {}, "Bake ", label(bakeA), " against ", label(bakeB), " ", characterLabel(bakeB.character),
-    " ", h("span", { class: "muted" }, bakeB.method)),
+  // Each bake's character and method, once where both share it.
+  const what = (bake) => [characterLabel(bake.character), " ", h("span", { class: "muted" }, bake.method)];
+  const title = bakeA.character === bakeB.character && bakeA.method === bakeB.method
+    ? ["Bake ", label(bakeA), " against ", label(bakeB), " ", ...what(bakeB)]
+    : ["Bake ", label(bakeA), " ", ...what(bakeA), " against ", label(bakeB), " ", ...what(bakeB)];
+  show(h("h1", {}, ...title),
   inputs, params, h("h2", {}, "Quality"), quality);
 }
 
@@ -1020,6 +1107,13 @@ async function route() {
   if (page) page.abort();
   page = new AbortController();
   const signal = page.signal;
+  // The last page's stream ended with it: until this page opens one (or
+  // never, as the versions and compare pages), the server is "online".
+  const live = document.getElementById("live");
+  if (live.classList.contains("on")) {
+    live.classList.remove("on");
+    live.textContent = "online";
+  }
   const path = location.hash.replace(/^#/, "") || "/";
   const parts = path.split("/").filter(Boolean);
   for (const a of document.querySelectorAll("[data-nav]")) {

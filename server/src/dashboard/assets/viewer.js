@@ -292,11 +292,22 @@ export function viewerSection(id, { api, h }) {
     return { azimuth: Math.atan2(offset[0], offset[2]), elevation: Math.asin(offset[1] / distance), distance, home: true };
   }
 
+  // The orbit's elevation kept between straight down and the lowest
+  // that leaves the eye above the ground (a drag or a zoom never puts the
+  // camera under it).
+  function elevationIn(elevation, distance) {
+    const c = clip.meta.camera;
+    const above = (c.ground_y + 0.02 * distance - c.target[1]) / distance;
+    const lowest = Math.max(-1.5, Math.asin(Math.max(-1, Math.min(1, above))));
+    return Math.max(lowest, Math.min(1.5, elevation));
+  }
+
   function cameraEye() {
     const c = clip.meta.camera;
     // The previews' eye exactly while the camera has not been moved.
     if (orbit.home) return c.eye;
-    const { azimuth, elevation, distance } = orbit;
+    const { azimuth, distance } = orbit;
+    const elevation = elevationIn(orbit.elevation, distance);
     return [c.target[0] + distance * Math.sin(azimuth) * Math.cos(elevation),
       c.target[1] + distance * Math.sin(elevation),
       c.target[2] + distance * Math.cos(azimuth) * Math.cos(elevation)];
@@ -350,6 +361,8 @@ export function viewerSection(id, { api, h }) {
     ];
     const c = cm.camera;
     const eye = cameraEye();
+    // Where the eye is, above the ground's height: what a page test reads.
+    canvas.dataset.eyeAboveGround = (eye[1] - c.ground_y).toFixed(5);
     const matrix = clipFromWorld(eye, c.target, c.fov_y, canvas.width / canvas.height, c.near, c.far);
     const panel = effective === "truth" ? 0 : effective === "error" ? 2 : 1;
     gl.viewport(0, 0, canvas.width, canvas.height);
@@ -431,7 +444,7 @@ export function viewerSection(id, { api, h }) {
   canvas.addEventListener("pointermove", (e) => {
     if (!drag || !orbit) return;
     orbit.azimuth -= (e.clientX - drag.x) * 0.01;
-    orbit.elevation = Math.max(-1.5, Math.min(1.5, orbit.elevation + (e.clientY - drag.y) * 0.01));
+    orbit.elevation = elevationIn(orbit.elevation + (e.clientY - drag.y) * 0.01, orbit.distance);
     orbit.home = false;
     drag = { x: e.clientX, y: e.clientY };
     draw();
@@ -441,7 +454,7 @@ export function viewerSection(id, { api, h }) {
   canvas.addEventListener("keydown", (e) => {
     if (!orbit || !clip || e.altKey || e.ctrlKey || e.metaKey) return;
     const turn = Math.PI / 12; // 15°
-    const elevate = (by) => Math.max(-1.5, Math.min(1.5, orbit.elevation + by));
+    const elevate = (by) => elevationIn(orbit.elevation + by, orbit.distance);
     switch (e.key) {
       case "ArrowLeft": orbit.azimuth += turn; break;
       case "ArrowRight": orbit.azimuth -= turn; break;
