@@ -203,6 +203,26 @@ fn eval_gives_per_vertex_ao_at_a_pose() {
     assert_eq!(a.len(), 370);
     assert!(a.iter().all(|v| (0.0..=1.0).contains(v)));
     assert_ne!(a, eval("0.9"), "the pose changes the AO");
+    // --rest: the nodes' rest transforms instead of the bind pose; it
+    // takes no clip.
+    let rest = |extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            asset.to_str().unwrap(),
+            figure.to_str().unwrap(),
+            "--rest",
+            "--out",
+            csv.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        aobake(&args)
+    };
+    let out = rest(&[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let rows = std::fs::read_to_string(&csv).unwrap().lines().count();
+    assert_eq!(rows, 371);
+    let out = rest(&["--clip", "animation_0", "--time", "0.2"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
 }
 
 #[test]
