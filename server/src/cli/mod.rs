@@ -239,3 +239,125 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bakes(args) => client::bakes(&args).map_err(client::explain_refusal),
     }
 }
+
+/// Every command, its arguments and their help, as Markdown: the
+/// reference `docs/cli.md` holds, generated from the definitions above
+/// (a test keeps the file equal to it; `AOBAKE_BLESS=1` rewrites it).
+pub fn reference_markdown() -> String {
+    use clap::CommandFactory as _;
+    let mut cli = Cli::command();
+    cli.build();
+    let mut out = String::from(
+        "# Command reference\n\nGenerated from `aobake --help` and each command's `--help` (a test keeps\nthis file equal to them; `AOBAKE_BLESS=1 cargo nextest run -p aobake-server\ncli_reference` rewrites it). [usage.md](usage.md) says what the commands\nare for and how they fit together.\n",
+    );
+    for sub in cli.get_subcommands() {
+        command_markdown(&mut out, sub, "aobake");
+    }
+    out
+}
+
+fn command_markdown(out: &mut String, cmd: &clap::Command, parent: &str) {
+    if cmd.is_hide_set() || cmd.get_name() == "help" {
+        return;
+    }
+    let path = format!("{parent} {}", cmd.get_name());
+    out.push_str(&format!("\n## `{path}`\n\n"));
+    if let Some(about) = cmd.get_long_about().or(cmd.get_about()) {
+        out.push_str(&format!("{}\n\n", about.to_string().trim()));
+    }
+    let usage = cmd
+        .clone()
+        .bin_name(&path)
+        .render_usage()
+        .to_string()
+        .replace("Usage: ", "");
+    out.push_str(&format!("Usage: `{}`\n", usage.trim()));
+    let args: Vec<&clap::Arg> = cmd
+        .get_arguments()
+        .filter(|a| !a.is_hide_set() && !matches!(a.get_id().as_str(), "help" | "version"))
+        .collect();
+    if !args.is_empty() {
+        out.push_str("\n| argument | what |\n|---|---|\n");
+        for a in args {
+            let takes = a.get_action().takes_values();
+            let names = a
+                .get_value_names()
+                .filter(|_| takes)
+                .map(|v| {
+                    v.iter()
+                        .map(|n| format!("<{n}>"))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                })
+                .unwrap_or_default();
+            let name = match (a.is_positional(), a.get_long()) {
+                (true, _) => names.clone(),
+                (false, Some(long)) => format!("--{long} {names}").trim().to_owned(),
+                (false, None) => a.get_id().to_string(),
+            };
+            let mut what = a
+                .get_long_help()
+                .or(a.get_help())
+                .map(|h| {
+                    h.to_string()
+                        .split_whitespace()
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                })
+                .unwrap_or_default();
+            if !what.is_empty() && !what.ends_with(['.', ')', ':']) {
+                what.push('.');
+            }
+            let possible: Vec<String> = a
+                .get_possible_values()
+                .iter()
+                .filter(|p| !p.is_hide_set())
+                .map(|p| format!("`{}`", p.get_name()))
+                .collect();
+            if !possible.is_empty() && takes {
+                what.push_str(&format!(" One of {}.", possible.join(", ")));
+            }
+            let defaults: Vec<String> = a
+                .get_default_values()
+                .iter()
+                .map(|d| d.to_string_lossy().into_owned())
+                .collect();
+            if !defaults.is_empty() && takes {
+                what.push_str(&format!(" Default: `{}`.", defaults.join(" ")));
+            }
+            if let Some(env) = a.get_env() {
+                what.push_str(&format!(" Environment: `{}`.", env.to_string_lossy()));
+            }
+            if a.is_required_set() {
+                what.push_str(" Required.");
+            }
+            out.push_str(&format!(
+                "| `{}` | {} |\n",
+                name.replace('|', "\\|"),
+                what.trim().replace('|', "\\|")
+            ));
+        }
+    }
+    for sub in cmd.get_subcommands() {
+        command_markdown(out, sub, &path);
+    }
+}
+
+#[cfg(test)]
+mod reference_tests {
+    /// `docs/cli.md` is what the command definitions say, word for word:
+    /// a flag added, renamed or reworded without it fails here.
+    #[test]
+    fn cli_reference_is_the_commands_own() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/cli.md");
+        let want = super::reference_markdown();
+        if std::env::var_os("AOBAKE_BLESS").is_some() {
+            std::fs::write(&path, &want).unwrap();
+        }
+        let have = std::fs::read_to_string(&path).unwrap_or_default();
+        assert!(
+            have == want,
+            "docs/cli.md differs from the commands' help: AOBAKE_BLESS=1 cargo nextest run -p aobake-server cli_reference"
+        );
+    }
+}

@@ -118,8 +118,9 @@ struct TraceArgs {
     /// figures of the same run are compared, and the values too.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "cpu")]
     tracer: Vec<BenchTracer>,
-    /// Also bake with Blender: the path of `bake_vertex_ao.py` (in
-    /// `shared/tools/blender-ao`); `blender` must be on the PATH. Runs
+    /// Also bake with Blender: the path of a Blender script that bakes
+    /// vertex AO (the developers' `blender-ao` tool's `bake_vertex_ao.py`,
+    /// not part of this repository); `blender` must be on the PATH. Runs
     /// alternate between aobake and Blender, so drift in machine speed hits
     /// both alike.
     #[arg(long, value_name = "BAKE_VERTEX_AO_PY")]
