@@ -84,8 +84,8 @@
  * (`AOBAKE_GPU_BLOCK_WORDS` words each, `vertex_ao.wgsl`'s `BlockInfo`:
  * rows, columns, the first coefficient's offset in f16 elements, the
  * map's offset in `AOBAKE_GPU_MAPS` (0xffffffff: the columns are the
- * vertices), the first weight's index, three words of padding; none for
- * a sparse model).
+ * vertices), the first weight's index, three words of padding; a sparse
+ * model's is one word of 0).
  */
 #define AOBAKE_GPU_BLOCKS 0
 
@@ -264,6 +264,74 @@ typedef struct AobakeGridGpuParams {
    */
   float ground_gain;
 } AobakeGridGpuParams;
+
+/**
+ * The compute evaluator's `Params` uniform (`shaders/wgsl/vertex_ao.wgsl`),
+ * field for field and byte for byte: `aobake_vertex_ao_gpu_params` fills
+ * the asset's fields and leaves the dispatch's (`row_stride`) at 0 for
+ * the engine; it is then copied whole into the uniform buffer (binding 0).
+ */
+typedef struct AobakeVertexGpuParams {
+  /**
+   * Vertices to evaluate.
+   */
+  uint32_t vertices;
+  /**
+   * Dense blocks (`AOBAKE_GPU_BLOCKS`' words ÷ `AOBAKE_GPU_BLOCK_WORDS`;
+   * 0 for a sparse model).
+   */
+  uint32_t blocks;
+  /**
+   * The engine's: vertices per row of the dispatch grid (workgroups in
+   * x × 64).
+   */
+  uint32_t row_stride;
+  /**
+   * Padding (0).
+   */
+  uint32_t pad;
+} AobakeVertexGpuParams;
+
+/**
+ * The vertex-stage evaluator's `VsParams` uniform
+ * (`shaders/wgsl/vertex_ao_vs.wgsl`, binding 0), field for field and
+ * byte for byte: `aobake_vertex_ao_vs_params` fills the asset's fields
+ * and leaves the engine's (`width`, and the harness's target size) at 0.
+ */
+typedef struct AobakeVertexVsParams {
+  /**
+   * Vertices to evaluate.
+   */
+  uint32_t vertices;
+  /**
+   * Dense blocks (0 for a sparse model).
+   */
+  uint32_t blocks;
+  /**
+   * 1 for a sparse model (CSR rows), 0 for dense blocks.
+   */
+  uint32_t sparse;
+  /**
+   * The engine's: texels per row of every data texture (the arrays as
+   * R32Uint textures, word i at (i mod width, i div width); aobake uses
+   * 2048, WebGL2's smallest MAX_TEXTURE_SIZE).
+   */
+  uint32_t width;
+  /**
+   * The harness's (`vs_main` of the shader's test): its target's width
+   * in pixels; an engine calling `vertex_ao` from its own vertex shader
+   * leaves it 0.
+   */
+  uint32_t target_width;
+  /**
+   * The harness's target height in pixels (0 likewise).
+   */
+  uint32_t target_height;
+  /**
+   * Padding (0).
+   */
+  uint32_t pad[2];
+} AobakeVertexVsParams;
 
 /**
  * A node's local transform, as glTF and engines animate it: translation,
@@ -732,9 +800,10 @@ size_t aobake_vertex_ao_weight_count(const struct AobakeVertexAo *ao);
  * The GPU form of the asset's coefficients, as the evaluators in
  * `shaders/` read them (`vertex_ao.wgsl`'s bindings 1 to 3 and 6, and
  * their translations; `docs/engines.md`; its `Params` are the vertices,
- * the blocks, and the dispatch's row stride). An array of no words is
- * bound, where a shader binds it, as one word of 0: a GPU binding
- * cannot be empty. Sets `*words` to the length in
+ * the blocks, and the dispatch's row stride: `aobake_vertex_ao_gpu_params`).
+ * Every array has one word at least, as a GPU binding must: an array the
+ * model does not use (a sparse model's blocks, a dense model's sparse
+ * rows) is one word of 0, bound all the same. Sets `*words` to the length in
  * words of array `which` (`AOBAKE_GPU_BLOCKS`, `_COEFFICIENTS`, `_MAPS`
  * or `_SPARSE_ROWS`) and copies it to `out` when `out` is not NULL (then
  * `len` must be at least `*words`). Call it with `out` NULL to size the
@@ -746,6 +815,26 @@ size_t aobake_vertex_ao_weight_count(const struct AobakeVertexAo *ao);
  * words; `words` a writable `size_t`.
  */
 bool aobake_vertex_ao_gpu_words(const struct AobakeVertexAo *ao, uint32_t which, uint32_t *out, size_t len, size_t *words);
+
+/**
+ * Writes the compute evaluator's `Params` to `out`, `row_stride` at 0
+ * for the engine to fill (`docs/engines.md`). `false` for NULL or a
+ * model too large for 32-bit GPU indices.
+ *
+ * # Safety
+ * `ao` must be NULL or a live handle; `out` NULL or writable.
+ */
+bool aobake_vertex_ao_gpu_params(const struct AobakeVertexAo *ao, struct AobakeVertexGpuParams *out);
+
+/**
+ * Writes the vertex-stage evaluator's `VsParams` to `out`, `width` and
+ * the harness's target size at 0 for the engine to fill. `false` for
+ * NULL or a model too large for 32-bit GPU indices.
+ *
+ * # Safety
+ * `ao` must be NULL or a live handle; `out` NULL or writable.
+ */
+bool aobake_vertex_ao_vs_params(const struct AobakeVertexAo *ao, struct AobakeVertexVsParams *out);
 
 /**
  * Whether the GPU form is sparse (evaluate with `cs_sparse`, reading the

@@ -193,8 +193,8 @@ pub unsafe extern "C" fn aobake_vertex_ao_weight_count(ao: *const AobakeVertexAo
 /// (`AOBAKE_GPU_BLOCK_WORDS` words each, `vertex_ao.wgsl`'s `BlockInfo`:
 /// rows, columns, the first coefficient's offset in f16 elements, the
 /// map's offset in `AOBAKE_GPU_MAPS` (0xffffffff: the columns are the
-/// vertices), the first weight's index, three words of padding; none for
-/// a sparse model).
+/// vertices), the first weight's index, three words of padding; a sparse
+/// model's is one word of 0).
 pub const AOBAKE_GPU_BLOCKS: u32 = 0;
 /// The f16 coefficients, two per word (element 2i in the low half).
 pub const AOBAKE_GPU_COEFFICIENTS: u32 = 1;
@@ -210,9 +210,10 @@ const _: () = assert!(AOBAKE_GPU_BLOCK_WORDS == aobake_runtime::method::vertex::
 /// The GPU form of the asset's coefficients, as the evaluators in
 /// `shaders/` read them (`vertex_ao.wgsl`'s bindings 1 to 3 and 6, and
 /// their translations; `docs/engines.md`; its `Params` are the vertices,
-/// the blocks, and the dispatch's row stride). An array of no words is
-/// bound, where a shader binds it, as one word of 0: a GPU binding
-/// cannot be empty. Sets `*words` to the length in
+/// the blocks, and the dispatch's row stride: `aobake_vertex_ao_gpu_params`).
+/// Every array has one word at least, as a GPU binding must: an array the
+/// model does not use (a sparse model's blocks, a dense model's sparse
+/// rows) is one word of 0, bound all the same. Sets `*words` to the length in
 /// words of array `which` (`AOBAKE_GPU_BLOCKS`, `_COEFFICIENTS`, `_MAPS`
 /// or `_SPARSE_ROWS`) and copies it to `out` when `out` is not NULL (then
 /// `len` must be at least `*words`). Call it with `out` NULL to size the
@@ -231,21 +232,18 @@ pub unsafe extern "C" fn aobake_vertex_ao_gpu_words(
     words: *mut usize,
 ) -> bool {
     // SAFETY: forwarded from the caller.
-    let Some(h) = (unsafe { live(ao) }) else {
+    let Some(arrays) = (unsafe { vertex_gpu(ao) }) else {
         return false;
     };
-    let packed = packed(&h.1, || {
-        GpuArrays::new(h.0.model().form()).map_err(|e| format!("the model has no GPU form: {e}"))
-    });
-    let Some(arrays) = packed else {
-        return false;
+    // Every array has a word at least, as GPU bindings must: a sparse
+    // model's blocks are one word of 0, as a dense model's unused sparse
+    // rows are.
+    let blocks: &[u32] = match arrays.blocks.as_flattened() {
+        [] => &[0],
+        words => words,
     };
     let named: [(u32, &str, &[u32]); 4] = [
-        (
-            AOBAKE_GPU_BLOCKS,
-            "AOBAKE_GPU_BLOCKS",
-            arrays.blocks.as_flattened(),
-        ),
+        (AOBAKE_GPU_BLOCKS, "AOBAKE_GPU_BLOCKS", blocks),
         (
             AOBAKE_GPU_COEFFICIENTS,
             "AOBAKE_GPU_COEFFICIENTS",
@@ -260,6 +258,118 @@ pub unsafe extern "C" fn aobake_vertex_ao_gpu_words(
     ];
     // SAFETY: forwarded from the caller.
     unsafe { copy_array(which, &named, out, len, words) }
+}
+
+/// The compute evaluator's `Params` uniform (`shaders/wgsl/vertex_ao.wgsl`),
+/// field for field and byte for byte: `aobake_vertex_ao_gpu_params` fills
+/// the asset's fields and leaves the dispatch's (`row_stride`) at 0 for
+/// the engine; it is then copied whole into the uniform buffer (binding 0).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AobakeVertexGpuParams {
+    /// Vertices to evaluate.
+    pub vertices: u32,
+    /// Dense blocks (`AOBAKE_GPU_BLOCKS`' words ÷ `AOBAKE_GPU_BLOCK_WORDS`;
+    /// 0 for a sparse model).
+    pub blocks: u32,
+    /// The engine's: vertices per row of the dispatch grid (workgroups in
+    /// x × 64).
+    pub row_stride: u32,
+    /// Padding (0).
+    pub pad: u32,
+}
+
+/// The vertex-stage evaluator's `VsParams` uniform
+/// (`shaders/wgsl/vertex_ao_vs.wgsl`, binding 0), field for field and
+/// byte for byte: `aobake_vertex_ao_vs_params` fills the asset's fields
+/// and leaves the engine's (`width`, and the harness's target size) at 0.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AobakeVertexVsParams {
+    /// Vertices to evaluate.
+    pub vertices: u32,
+    /// Dense blocks (0 for a sparse model).
+    pub blocks: u32,
+    /// 1 for a sparse model (CSR rows), 0 for dense blocks.
+    pub sparse: u32,
+    /// The engine's: texels per row of every data texture (the arrays as
+    /// R32Uint textures, word i at (i mod width, i div width); aobake uses
+    /// 2048, WebGL2's smallest MAX_TEXTURE_SIZE).
+    pub width: u32,
+    /// The harness's (`vs_main` of the shader's test): its target's width
+    /// in pixels; an engine calling `vertex_ao` from its own vertex shader
+    /// leaves it 0.
+    pub target_width: u32,
+    /// The harness's target height in pixels (0 likewise).
+    pub target_height: u32,
+    /// Padding (0).
+    pub pad: [u32; 2],
+}
+
+/// Writes the compute evaluator's `Params` to `out`, `row_stride` at 0
+/// for the engine to fill (`docs/engines.md`). `false` for NULL or a
+/// model too large for 32-bit GPU indices.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `out` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_gpu_params(
+    ao: *const AobakeVertexAo,
+    out: *mut AobakeVertexGpuParams,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    let Some(arrays) = (unsafe { vertex_gpu(ao) }) else {
+        return false;
+    };
+    let params = AobakeVertexGpuParams {
+        vertices: arrays.vertices,
+        blocks: arrays.blocks.len() as u32,
+        row_stride: 0,
+        pad: 0,
+    };
+    // SAFETY: the caller passes NULL or a writable struct.
+    unsafe { put(out, params) }
+}
+
+/// Writes the vertex-stage evaluator's `VsParams` to `out`, `width` and
+/// the harness's target size at 0 for the engine to fill. `false` for
+/// NULL or a model too large for 32-bit GPU indices.
+///
+/// # Safety
+/// `ao` must be NULL or a live handle; `out` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn aobake_vertex_ao_vs_params(
+    ao: *const AobakeVertexAo,
+    out: *mut AobakeVertexVsParams,
+) -> bool {
+    // SAFETY: forwarded from the caller.
+    let Some(arrays) = (unsafe { vertex_gpu(ao) }) else {
+        return false;
+    };
+    let params = AobakeVertexVsParams {
+        vertices: arrays.vertices,
+        blocks: arrays.blocks.len() as u32,
+        sparse: u32::from(arrays.sparse),
+        width: 0,
+        target_width: 0,
+        target_height: 0,
+        pad: [0; 2],
+    };
+    // SAFETY: the caller passes NULL or a writable struct.
+    unsafe { put(out, params) }
+}
+
+/// The GPU form of the model at `ao`, packed once per handle, or why
+/// there is none (NULL, or too large for 32-bit GPU indices).
+///
+/// # Safety
+/// `ao` must be NULL or a live handle.
+unsafe fn vertex_gpu<'a>(ao: *const AobakeVertexAo) -> Option<&'a GpuArrays> {
+    // SAFETY: forwarded from the caller.
+    let h = unsafe { live(ao) }?;
+    packed(&h.1, || {
+        GpuArrays::new(h.0.model().form()).map_err(|e| format!("the model has no GPU form: {e}"))
+    })
 }
 
 /// Whether the GPU form is sparse (evaluate with `cs_sparse`, reading the

@@ -656,8 +656,9 @@ fn c_programs_look_up_cubemaps_and_grids_as_the_runtime_does() {
 fn the_gpu_arrays_reach_c_as_the_runtime_packs_them() {
     use aobake_rt::{
         AOBAKE_GPU_BLOCKS, AOBAKE_GPU_COEFFICIENTS, AOBAKE_GPU_MAPS, AOBAKE_GPU_SPARSE_ROWS,
-        aobake_last_error, aobake_vertex_ao_free, aobake_vertex_ao_gpu_sparse,
-        aobake_vertex_ao_gpu_words, aobake_vertex_ao_open,
+        AobakeVertexGpuParams, AobakeVertexVsParams, aobake_last_error, aobake_vertex_ao_free,
+        aobake_vertex_ao_gpu_params, aobake_vertex_ao_gpu_sparse, aobake_vertex_ao_gpu_words,
+        aobake_vertex_ao_open, aobake_vertex_ao_vs_params,
     };
     use aobake_runtime::method::vertex::form::GpuArrays;
     let mut sparse_params = BakeParams::new(Method::VertexLinear);
@@ -686,8 +687,52 @@ fn the_gpu_arrays_reach_c_as_the_runtime_packs_them() {
         assert!(!ao.is_null());
         // SAFETY: a live handle.
         assert_eq!(unsafe { aobake_vertex_ao_gpu_sparse(ao) }, want.sparse);
+        // The uniforms byte for byte as the shaders' (their engine fields
+        // at 0).
+        let mut params = std::mem::MaybeUninit::<AobakeVertexGpuParams>::zeroed();
+        let mut vs = std::mem::MaybeUninit::<AobakeVertexVsParams>::zeroed();
+        // SAFETY: a live handle and writable structs.
+        assert!(unsafe { aobake_vertex_ao_gpu_params(ao, params.as_mut_ptr()) });
+        // SAFETY: likewise.
+        assert!(unsafe { aobake_vertex_ao_vs_params(ao, vs.as_mut_ptr()) });
+        // SAFETY: both were written whole above.
+        let (params, vs) = unsafe { (params.assume_init(), vs.assume_init()) };
+        let uniform = aobake_shaders::mirror::VertexAoParams {
+            vertices: want.vertices,
+            blocks: want.blocks.len() as u32,
+            row_stride: 0,
+            _pad: 0,
+        };
+        let vs_uniform = aobake_shaders::mirror::VertexAoVsParams {
+            vertices: want.vertices,
+            blocks: want.blocks.len() as u32,
+            sparse: u32::from(want.sparse),
+            width: 0,
+            target_width: 0,
+            target_height: 0,
+            _pad: [0; 2],
+        };
+        // SAFETY: plain repr(C) structs of u32s, read as their bytes.
+        let bytes_of =
+            |p: *const u8, n: usize| unsafe { std::slice::from_raw_parts(p, n) }.to_vec();
+        assert_eq!(
+            bytes_of(
+                (&raw const params).cast(),
+                size_of::<AobakeVertexGpuParams>()
+            ),
+            bytemuck::bytes_of(&uniform)
+        );
+        assert_eq!(
+            bytes_of((&raw const vs).cast(), size_of::<AobakeVertexVsParams>()),
+            bytemuck::bytes_of(&vs_uniform)
+        );
+        // Every array has a word at least: an unused one is one word of 0.
+        let blocks = match want.blocks.concat() {
+            b if b.is_empty() => vec![0],
+            b => b,
+        };
         for (which, expected) in [
-            (AOBAKE_GPU_BLOCKS, want.blocks.concat()),
+            (AOBAKE_GPU_BLOCKS, blocks),
             (AOBAKE_GPU_COEFFICIENTS, want.coefficients.clone()),
             (AOBAKE_GPU_MAPS, want.maps.clone()),
             (AOBAKE_GPU_SPARSE_ROWS, want.sparse_rows.clone()),
