@@ -330,6 +330,15 @@ fn export_writes_the_shaders_for_engines_and_says_what_it_needs() {
         let text = std::fs::read_to_string(dir.path().join(file)).unwrap();
         assert!(!text.is_empty(), "{file}");
     }
+    // Each shader's binding table beside it: naga's GLSL ES names, which
+    // WebGL2 binds by.
+    let table =
+        std::fs::read_to_string(dir.path().join("glsl-es300/vertex_ao_vs.bindings.md")).unwrap();
+    assert!(
+        table.contains("vs_main: `_group_0_binding_4_vs`")
+            && table.contains("AobakeVertexVsParams"),
+        "{table}"
+    );
     let spirv = std::fs::read(dir.path().join("spirv1_3/vertex_ao.spv")).unwrap();
     assert_eq!(
         spirv[..4],

@@ -127,6 +127,213 @@ pub fn export_all() -> Result<Vec<ShaderFile>, ExportError> {
     Ok(files)
 }
 
+/// The binding table of every run-time evaluator in every target
+/// (`crate::bindings`): `glsl450/vertex_ao.bindings.md` beside
+/// `glsl450/vertex_ao.cs_main.comp`, and so on.
+pub fn binding_tables() -> Result<Vec<ShaderFile>, ExportError> {
+    let mut files = Vec::new();
+    for (name, source) in runtime_sources() {
+        let (module, info) = parse(name, source).map_err(|message| ExportError {
+            shader: name,
+            target: None,
+            message,
+        })?;
+        let compute = module
+            .entry_points
+            .iter()
+            .any(|e| e.stage == ShaderStage::Compute);
+        for target in Target::ALL {
+            if target == Target::GlslEs300 && compute {
+                continue;
+            }
+            let bound = bindings(&module);
+            let heres = binding_places(name, &module, &info, target, &bound)?;
+            let resources: Vec<crate::bindings::Resource> = bound
+                .iter()
+                .zip(heres)
+                .map(|(b, here)| crate::bindings::Resource {
+                    group: b.binding.group,
+                    binding: b.binding.binding,
+                    name: b.name.clone(),
+                    declaration: crate::bindings::declaration(
+                        &module,
+                        &module.global_variables[b.handle],
+                    ),
+                    here,
+                })
+                .collect();
+            let notes = match target {
+                Target::Glsl450 | Target::GlslEs310 => {
+                    "GLSL binds `layout(binding = 8·group + binding)`; naga names each resource per entry point, as listed."
+                }
+                Target::GlslEs300 => {
+                    "GLSL ES 3.00 has no `layout(binding)`: bind uniform blocks with `uniformBlockBinding` and textures with `uniform1i`, by the names listed (naga's, per entry point)."
+                }
+                Target::HlslSm51 | Target::HlslSm60 => {
+                    "HLSL binds `register(…binding, space group)`; a sampler comes from naga's sampler heap (`nagaSamplerHeap`) at the index `nagaGroup0SamplerIndexArray[binding]` holds."
+                }
+                Target::Msl21 => MSL_SIZES_NOTE,
+                Target::SpirV13 => {
+                    "SPIR-V keeps the WGSL's set and binding (`DescriptorSet`, `Binding`)."
+                }
+            };
+            files.push(ShaderFile {
+                target,
+                path: format!("{}/{name}.bindings.md", target.dir()),
+                bytes: crate::bindings::table(name, target.dir(), notes, &resources).into_bytes(),
+            });
+        }
+    }
+    Ok(files)
+}
+
+/// Where `target` binds each of `bound` (in order), and its name there.
+fn binding_places(
+    name: &'static str,
+    module: &naga::Module,
+    info: &ModuleInfo,
+    target: Target,
+    bound: &[Binding],
+) -> Result<Vec<String>, ExportError> {
+    let fail = |message: String| ExportError {
+        shader: name,
+        target: Some(target),
+        message,
+    };
+    Ok(match target {
+        Target::Glsl450 | Target::GlslEs300 | Target::GlslEs310 => {
+            let options = glsl_options(target, bound);
+            // naga's names, per entry point.
+            let mut names: Vec<(
+                String,
+                std::collections::HashMap<naga::Handle<naga::GlobalVariable>, String>,
+            )> = Vec::new();
+            for entry in &module.entry_points {
+                let pipeline = glsl::PipelineOptions {
+                    shader_stage: entry.stage,
+                    entry_point: entry.name.clone(),
+                    multiview: None,
+                };
+                let mut text = String::new();
+                let reflection = glsl::Writer::new(
+                    &mut text,
+                    module,
+                    info,
+                    &options,
+                    &pipeline,
+                    naga::proc::BoundsCheckPolicies::default(),
+                )
+                .and_then(|mut w| w.write())
+                .map_err(|e| fail(e.to_string()))?;
+                let mut of: std::collections::HashMap<_, String> = reflection
+                    .uniforms
+                    .iter()
+                    .map(|(h, n)| (*h, n.clone()))
+                    .collect();
+                for (n, mapping) in &reflection.texture_mapping {
+                    of.insert(mapping.texture, n.clone());
+                    if let Some(sampler) = mapping.sampler {
+                        of.insert(sampler, format!("{n} (combined with its texture)"));
+                    }
+                }
+                names.push((entry.name.clone(), of));
+            }
+            bound
+                .iter()
+                .map(|b| {
+                    let used: Vec<String> = names
+                        .iter()
+                        .filter_map(|(entry, of)| {
+                            of.get(&b.handle).map(|n| format!("{entry}: `{n}`"))
+                        })
+                        .collect();
+                    let place = match target {
+                        Target::GlslEs300 => String::new(),
+                        _ => format!(
+                            "`layout(binding = {})` ",
+                            8 * b.binding.group + b.binding.binding
+                        ),
+                    };
+                    format!(
+                        "{place}{}",
+                        if used.is_empty() {
+                            "(unused by the entry points)".to_owned()
+                        } else {
+                            used.join("; ")
+                        }
+                    )
+                })
+                .collect()
+        }
+        Target::HlslSm51 | Target::HlslSm60 => bound
+            .iter()
+            .map(|b| {
+                let global = &module.global_variables[b.handle];
+                let class = if b.sampler {
+                    return format!(
+                        "sampler heap index at `nagaGroup{}SamplerIndexArray[{}]`",
+                        b.binding.group, b.binding.binding
+                    );
+                } else if b.texture {
+                    't'
+                } else {
+                    match global.space {
+                        AddressSpace::Uniform => 'b',
+                        _ if b.writable => 'u',
+                        _ => 't',
+                    }
+                };
+                format!(
+                    "`register({class}{}, space{})`",
+                    b.binding.binding, b.binding.group
+                )
+            })
+            .collect(),
+        Target::Msl21 => msl_slots(bound)
+            .iter()
+            .map(|slot| match (slot.buffer, slot.texture, &slot.sampler) {
+                (Some(i), ..) => format!("`[[buffer({i})]]`"),
+                (_, Some(i), _) => format!("`[[texture({i})]]`"),
+                (.., Some(msl::BindSamplerTarget::Resource(i))) => format!("`[[sampler({i})]]`"),
+                _ => String::new(),
+            })
+            .collect(),
+        Target::SpirV13 => bound
+            .iter()
+            .map(|b| {
+                format!(
+                    "`set = {}, binding = {}`",
+                    b.binding.group, b.binding.binding
+                )
+            })
+            .collect(),
+    })
+}
+
+/// GLSL's options for `target`: `binding = 8·group + binding`.
+fn glsl_options(target: Target, bound: &[Binding]) -> glsl::Options {
+    let version = match target {
+        Target::Glsl450 => glsl::Version::Desktop(450),
+        Target::GlslEs300 => glsl::Version::Embedded {
+            version: 300,
+            is_webgl: true,
+        },
+        _ => glsl::Version::Embedded {
+            version: 310,
+            is_webgl: false,
+        },
+    };
+    glsl::Options {
+        version,
+        writer_flags: glsl::WriterFlags::empty(),
+        binding_map: bound
+            .iter()
+            .map(|b| (b.binding, (8 * b.binding.group + b.binding.binding) as u8))
+            .collect(),
+        zero_initialize_workgroup_memory: true,
+    }
+}
+
 /// Parses and validates a WGSL source with the capabilities of a
 /// WebGPU-level adapter (nothing optional).
 pub fn parse(name: &'static str, source: &str) -> Result<(naga::Module, ModuleInfo), String> {
@@ -166,26 +373,7 @@ pub fn translate(
             Vec::new()
         }
         Target::Glsl450 | Target::GlslEs300 | Target::GlslEs310 => {
-            let version = match target {
-                Target::Glsl450 => glsl::Version::Desktop(450),
-                Target::GlslEs300 => glsl::Version::Embedded {
-                    version: 300,
-                    is_webgl: true,
-                },
-                _ => glsl::Version::Embedded {
-                    version: 310,
-                    is_webgl: false,
-                },
-            };
-            let options = glsl::Options {
-                version,
-                writer_flags: glsl::WriterFlags::empty(),
-                binding_map: bindings
-                    .iter()
-                    .map(|b| (b.binding, (8 * b.binding.group + b.binding.binding) as u8))
-                    .collect(),
-                zero_initialize_workgroup_memory: true,
-            };
+            let options = glsl_options(target, &bindings);
             let mut files = Vec::new();
             for entry in &module.entry_points {
                 let pipeline = glsl::PipelineOptions {
@@ -402,6 +590,8 @@ pub fn webgl_viewer(family: &str) -> Result<WebGlProgram, ExportError> {
 /// A resource the shader binds.
 struct Binding {
     binding: ResourceBinding,
+    /// The global variable.
+    handle: naga::Handle<naga::GlobalVariable>,
     writable: bool,
     texture: bool,
     /// A sampler (the texel methods' basis textures are filtered).
@@ -440,6 +630,7 @@ fn bindings(module: &naga::Module) -> Vec<Binding> {
                 };
             Some(Binding {
                 binding,
+                handle,
                 writable,
                 texture,
                 sampler,
@@ -538,6 +729,46 @@ mod tests {
             String::from_utf8_lossy(&out.stderr)
         );
         (out.status.success(), text)
+    }
+
+    /// Every resource of every evaluator has its binding table line, in
+    /// every target, with the place the translation binds it.
+    #[test]
+    fn every_binding_table_says_what_to_put_everywhere() {
+        let tables = binding_tables().unwrap();
+        assert!(tables.len() >= 7 * 6);
+        for t in &tables {
+            let text = String::from_utf8(t.bytes.clone()).unwrap();
+            assert!(!text.contains("(not documented)"), "{}:\n{text}", t.path);
+            assert!(
+                !text.contains("| |"),
+                "{}: a resource without its place:\n{text}",
+                t.path
+            );
+        }
+        let glsl = |path: &str| {
+            String::from_utf8(
+                tables
+                    .iter()
+                    .find(|t| t.path == path)
+                    .unwrap()
+                    .bytes
+                    .clone(),
+            )
+            .unwrap()
+        };
+        // naga's GLSL names, which an engine cannot guess.
+        let vertex = glsl("glsl450/vertex_ao.bindings.md");
+        assert!(
+            vertex.contains("| `layout(binding = 2)` cs_main: `"),
+            "{vertex}"
+        );
+        // WebGL2 binds by name: every resource has one.
+        let webgl = glsl("glsl-es300/vertex_ao_vs.bindings.md");
+        eprintln!("{webgl}");
+        assert!(!webgl.contains("unused by the entry points"), "{webgl}");
+        let hlsl = glsl("hlsl-sm6_0/vertex_ao.bindings.md");
+        assert!(hlsl.contains("`register(u5, space0)`"), "{hlsl}");
     }
 
     #[test]

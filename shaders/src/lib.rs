@@ -33,6 +33,7 @@
 //! field for field with size assertions; [`export`] translates the
 //! run-time evaluators for engines (GLSL, HLSL, MSL, SPIR-V).
 
+pub mod bindings;
 pub mod export;
 pub mod mirror;
 

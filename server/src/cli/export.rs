@@ -143,10 +143,11 @@ fn export_gltf(asset: &Path, file: &Path, clips: Option<&Path>, out: &Path) -> a
 }
 
 /// `--shaders DIR`: every run-time evaluator in every target, one folder
-/// per target.
+/// per target, with each evaluator's binding table beside it.
 fn write_shaders(dir: &Path) -> anyhow::Result<()> {
     let files = aobake_shaders::export::export_all()?;
-    for f in &files {
+    let tables = aobake_shaders::export::binding_tables()?;
+    for f in files.iter().chain(&tables) {
         let path = dir.join(&f.path);
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent)
@@ -160,7 +161,7 @@ fn write_shaders(dir: &Path) -> anyhow::Result<()> {
         .map(|t| t.dir())
         .collect();
     eprintln!(
-        "wrote {} shader files into {} ({})",
+        "wrote {} shader files into {} ({}), each shader's bindings beside it (NAME.bindings.md: set, binding, its name there, type, what to put there)",
         files.len(),
         dir.display(),
         targets.join(", ")
