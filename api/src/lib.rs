@@ -9,6 +9,7 @@
 //! OpenAPI schemas, from which the server writes `api-spec/openapi.yaml`.
 
 pub mod client;
+pub mod progress;
 #[cfg(feature = "schema")]
 pub mod schema;
 pub mod types;

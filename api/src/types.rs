@@ -144,6 +144,13 @@ pub struct JobRow {
     pub outputs: Option<Vec<OutputRef>>,
     /// The last error.
     pub error: Option<String>,
+    /// When its current (or last) attempt was leased, in milliseconds
+    /// since the epoch.
+    #[serde(default)]
+    pub started_at: Option<i64>,
+    /// When it completed, in milliseconds since the epoch.
+    #[serde(default)]
+    pub finished_at: Option<i64>,
     /// Indices of the jobs it needs.
     pub deps: Vec<i64>,
 }

@@ -281,10 +281,10 @@ fn wait(conn: &Conn, api: &Client, id: i64, json: bool) -> anyhow::Result<()> {
         eprintln!("{note}");
         std::process::exit(super::exit::INTERRUPTED);
     });
-    let bar = super::trace::progress_bar(1, "baking");
-    // The rate and time left count from here: a bake joined half done has
-    // not run at the speed of its units over this process's first second.
-    let mut joined = false;
+    // The time left from the jobs' own paces (`aobake_api::progress`):
+    // right from the start for a bake joined half done, and not "0 s"
+    // while the last slow jobs run.
+    let bar = super::trace::follow_bar(1, "baking");
     let mut follow = Follow {
         bar: &bar,
         id,
@@ -296,12 +296,11 @@ fn wait(conn: &Conn, api: &Client, id: i64, json: bool) -> anyhow::Result<()> {
         let view = follow.ask(|api| api.bake(id))?;
         bar.set_length(u64::try_from(view.progress.total).unwrap_or(1));
         bar.set_position(u64::try_from(view.progress.done).unwrap_or(0));
-        if !joined {
-            bar.reset_eta();
-            bar.reset_elapsed();
-            joined = true;
-        }
-        bar.set_message(running_jobs(&view));
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as i64);
+        let left = aobake_api::progress::time_left(view.jobs.as_deref().unwrap_or_default(), now);
+        bar.set_message(format!("{left}; {}", running_jobs(&view)));
         let b = &view.bake;
         if json
             && matches!(

@@ -132,10 +132,21 @@ fn load(args: &Args, limits: &Limits) -> anyhow::Result<Mesh> {
 
 /// A progress bar on stderr (drawn only when stderr is a terminal).
 pub(super) fn progress_bar(len: u64, what: &str) -> indicatif::ProgressBar {
+    styled_bar(len, what, "{rate} eta {eta} {msg}")
+}
+
+/// A bar whose message says the time left (a bake followed on a server:
+/// its stages' own paces, `aobake_api::progress`), not indicatif's one
+/// rate over all units.
+pub(super) fn follow_bar(len: u64, what: &str) -> indicatif::ProgressBar {
+    styled_bar(len, what, "{msg}")
+}
+
+fn styled_bar(len: u64, what: &str, tail: &str) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(len);
     bar.set_style(
         indicatif::ProgressStyle::with_template(&format!(
-            "{what} {{bar:40}} {{pos}}/{{len}} {{percent}}% {{rate}} eta {{eta}} {{msg}}"
+            "{what} {{bar:40}} {{pos}}/{{len}} {{percent}}% {tail}"
         ))
         .expect("valid template")
         // indicatif's own per_sec prints four decimals.

@@ -968,7 +968,7 @@ impl<B: Backend> Store for SqlStore<B> {
                     None => {
                         let token = lease_token();
                         c.optional::<RawJob>(
-                            B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, progress = 0, lease_request = $4 WHERE id = $5 AND state = 'available' RETURNING *, {deps} AS deps")
+                            B::sql("UPDATE jobs SET state = 'running', lease_token = $1, worker = $2, attempts = attempts + 1, lease_expires_at = {now} + $3, started_at = {now}, progress = 0, lease_request = $4 WHERE id = $5 AND state = 'available' RETURNING *, {deps} AS deps")
                                 .bind(&token)
                                 .bind(worker)
                                 .bind(policy.lease_ms)

@@ -99,6 +99,8 @@ pub(super) struct RawJob {
     checkpoint_blob: Option<String>,
     outputs: Option<String>,
     error: Option<String>,
+    started_at: Option<i64>,
+    finished_at: Option<i64>,
     /// Graph indices of the dependencies, comma-separated.
     deps: Option<String>,
 }
@@ -128,6 +130,8 @@ impl RawJob {
             checkpoint,
             outputs: self.outputs.map(|o| serde_json::from_str(&o)).transpose()?,
             error: self.error,
+            started_at: self.started_at,
+            finished_at: self.finished_at,
             deps: self
                 .deps
                 .map(|d| d.split(',').filter_map(|x| x.parse().ok()).collect())

@@ -437,6 +437,20 @@ async fn a_batch_leases_a_job_per_slot_and_completes_each_on_its_own(store: &dyn
         .await
         .unwrap();
     assert_eq!(end[0].as_ref().unwrap().state, BakeState::Done);
+    // Each job says when it was leased and when it completed: the
+    // clients' estimates of the time left are made of them.
+    assert!(
+        leases.iter().all(|l| l.job.started_at.is_some()),
+        "{leases:?}"
+    );
+    let jobs = store.jobs(b.id).await.unwrap();
+    assert!(
+        jobs.iter().all(|j| matches!(
+            (j.started_at, j.finished_at),
+            (Some(s), Some(f)) if f >= s
+        )),
+        "{jobs:?}"
+    );
     for l in &fit[1..] {
         store.release(l.job.id, &l.token).await.unwrap();
     }

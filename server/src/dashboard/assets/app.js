@@ -400,24 +400,47 @@ function duration(s) {
   return `${(s / 3600).toFixed(1)} h`;
 }
 
-// The time left from the rate this page has measured: work done over the
-// last minute of progress events (at least 3 s of them), or "—".
-function makeEta() {
-  const samples = []; // [ms, done]
-  return (done, total, state) => {
-    if (finished(state) || state === "paused" || state === "queued") {
-      samples.length = 0; // a pause or a wait in the queue is not a slow rate
-      return state === "paused" ? "paused" : "";
+// The time left from the bake's jobs, each stage (job kind) at its own
+// pace: its finished jobs' seconds per unit of work (lease to completion),
+// the work left spread over the jobs running side by side. A kind with no
+// finished job yet has no pace: the estimate is then a floor, and says
+// which kinds it lacks. aobake-api's progress::time_left is the same in
+// Rust (what `aobake submit --wait` shows).
+function timeLeft(bake, now = Date.now()) {
+  if (finished(bake.state) || bake.state === "queued") return "";
+  if (bake.state === "paused") return "paused";
+  const jobs = bake.jobs || [];
+  const pace = new Map(); // kind → [seconds, units]
+  for (const j of jobs) {
+    if (j.state !== "completed" || j.started_at == null || j.finished_at == null || j.work <= 0) continue;
+    const p = pace.get(j.kind) || [0, 0];
+    p[0] += Math.max(0, j.finished_at - j.started_at) / 1000;
+    p[1] += j.work;
+    pace.set(j.kind, p);
+  }
+  let left = 0;
+  let running = 0;
+  let any = false;
+  const unknown = [];
+  for (const j of jobs) {
+    if (!["blocked", "available", "retryable", "running"].includes(j.state)) continue;
+    any = true;
+    const p = pace.get(j.kind);
+    if (!p || p[1] <= 0) {
+      if (!unknown.includes(j.kind)) unknown.push(j.kind);
+      continue;
     }
-    const now = Date.now();
-    samples.push([now, done]);
-    while (samples.length > 2 && now - samples[1][0] > 60_000) samples.shift();
-    const [t0, d0] = samples[0];
-    const seconds = (now - t0) / 1000;
-    if (seconds < 3 || done <= d0) return "measuring the rate…";
-    const rate = (done - d0) / seconds;
-    return `about ${duration((total - done) / rate)} left (${rate.toFixed(rate < 10 ? 1 : 0)} work units/s over the last ${Math.round(seconds)} s)`;
-  };
+    const whole = (j.work * p[0]) / p[1];
+    if (j.state === "running" && j.started_at != null) {
+      running += 1;
+      left += Math.max(0, whole - Math.max(0, now - j.started_at) / 1000);
+    } else left += whole;
+  }
+  if (!any) return "";
+  const at = left / Math.max(1, running);
+  return unknown.length
+    ? `at least ${duration(at)} left (no ${unknown.join(" or ")} job has finished yet)`
+    : `about ${duration(at)} left (each stage at the pace of its finished jobs)`;
 }
 
 function jobsTable(jobs, id = "jobs") {
@@ -721,7 +744,6 @@ async function bakePage(signal, id) {
   const allJobs = h("div");
   const foldTitle = h("summary");
   const folded = h("details", { id: "all-jobs" }, foldTitle, allJobs);
-  const estimate = makeEta();
   const drawJobs = () => {
     fill(stages, stagesTable(bake.jobs));
     const shown = bake.jobs.filter((j) => j.state === "running" || j.state === "dead" || j.state === "retryable");
@@ -731,9 +753,9 @@ async function bakePage(signal, id) {
       : h("p", { class: "muted", id: "active" }, "No job is running or failing."));
     fill(allJobs, jobsTable(bake.jobs));
     foldTitle.textContent = `All ${bake.jobs.length} jobs`;
+    eta.textContent = timeLeft(bake);
   };
   drawJobs();
-  eta.textContent = estimate(bake.progress.done, bake.progress.total, bake.state);
   // A queued bake's place: the bakes with work that run before it (higher
   // priority, or as high and older; the server leases in that order).
   const queue = h("p", { id: "queue", class: "muted" });
@@ -909,7 +931,6 @@ async function bakePage(signal, id) {
     setBar(bar, e.done, e.total, e.state);
     fill(state, badge(e.state));
     count.textContent = countText(e.done, e.total);
-    eta.textContent = estimate(e.done, e.total, e.state);
     later();
   });
 }
