@@ -142,9 +142,10 @@ const EXIT_CODES: &str = "Exit codes (for scripts to branch on):
   2  the command line is wrong
   3  worker: the server refuses its leases for good (token, scope, address)
   4  fetch: no finished bake for that id or key
-  5  the input was refused: a file that does not import (a character or an
-     asset), a parameter out of range, or a request the server answered 4xx (a
-     bake that does not exist, an action its state forbids)
+  5  the input was refused: a file that cannot be read or does not import (a
+     character or an asset), an asset for another character or command, a clip
+     the character lacks, a parameter out of range, or a request the server
+     answered 4xx (a bake that does not exist, an action its state forbids)
   6  no token was given, or the server refused the token (401) or its scope (403)
   7  the server could not be reached, failed (5xx) or stayed too busy (429), after
      waiting out an outage: try again later
