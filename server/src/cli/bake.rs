@@ -521,15 +521,24 @@ held-out random poses ({}): {:.2} dB against {:.2} dB for the static average; ti
     ));
     if let Some(a) = &report.texel {
         out.push_str(&format!(
-            "atlas: {} × {} texels, {} charts, {} texels show the surface ({:.0}% of the page lies inside its triangles); {} basis textures ({:.1} MB as R16Float): per pixel {} texture fetches and multiply-adds (texel errors above are per texel; the previews judge per pixel)\n",
+            "atlas: {} × {} texels, {} charts, {} texels show the surface ({:.0}% of the page lies inside its triangles); {} ({:.1} MB as R16Float): per pixel {} and multiply-add{} (texel errors above are per texel; the previews judge per pixel: `--previews DIR`)\n",
             a.width,
             a.height,
             a.charts,
             a.texels,
             100.0 * a.utilisation,
-            a.textures,
+            if a.textures == 1 {
+                "1 basis texture".to_owned()
+            } else {
+                format!("{} basis textures", a.textures)
+            },
             a.texture_bytes as f64 / 1e6,
-            a.textures
+            if a.textures == 1 {
+                "1 texture fetch".to_owned()
+            } else {
+                format!("{} texture fetches", a.textures)
+            },
+            if a.textures == 1 { "" } else { "s" }
         ));
     }
     if e.undrawn_vertex_frames > 0 {
