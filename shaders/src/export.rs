@@ -114,12 +114,7 @@ pub fn runtime_sources() -> [(&'static str, &'static str); 7] {
 /// Every run-time evaluator in every target.
 pub fn export_all() -> Result<Vec<ShaderFile>, ExportError> {
     let mut files = Vec::new();
-    for (name, source) in runtime_sources() {
-        let (module, info) = parse(name, source).map_err(|message| ExportError {
-            shader: name,
-            target: None,
-            message,
-        })?;
+    for (name, module, info) in parsed_sources()? {
         for target in Target::ALL {
             files.extend(translate(name, &module, &info, target)?);
         }
@@ -127,17 +122,27 @@ pub fn export_all() -> Result<Vec<ShaderFile>, ExportError> {
     Ok(files)
 }
 
+/// Every run-time evaluator parsed and validated ([`parse`]).
+fn parsed_sources() -> Result<Vec<(&'static str, naga::Module, ModuleInfo)>, ExportError> {
+    runtime_sources()
+        .into_iter()
+        .map(|(name, source)| {
+            let (module, info) = parse(name, source).map_err(|message| ExportError {
+                shader: name,
+                target: None,
+                message,
+            })?;
+            Ok((name, module, info))
+        })
+        .collect()
+}
+
 /// The binding table of every run-time evaluator in every target
 /// (`crate::bindings`): `glsl450/vertex_ao.bindings.md` beside
 /// `glsl450/vertex_ao.cs_main.comp`, and so on.
 pub fn binding_tables() -> Result<Vec<ShaderFile>, ExportError> {
     let mut files = Vec::new();
-    for (name, source) in runtime_sources() {
-        let (module, info) = parse(name, source).map_err(|message| ExportError {
-            shader: name,
-            target: None,
-            message,
-        })?;
+    for (name, module, info) in parsed_sources()? {
         let compute = module
             .entry_points
             .iter()
