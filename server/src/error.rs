@@ -87,6 +87,8 @@ pub enum Outage {
     Database,
     /// The blob store (local disk, or an S3-compatible bucket).
     Blobs,
+    /// The blob store's bucket, which is not there.
+    Bucket,
 }
 
 impl std::fmt::Display for Outage {
@@ -94,6 +96,9 @@ impl std::fmt::Display for Outage {
         f.write_str(match self {
             Self::Database => "the database",
             Self::Blobs => "the blob store",
+            Self::Bucket => {
+                "the blob store (its bucket does not exist: create it again or restore it, and the service goes on)"
+            }
         })
     }
 }
@@ -317,6 +322,10 @@ impl From<BlobError> for ApiError {
         match e {
             BlobError::DigestMismatch { .. } | BlobError::BadDigest(_) => {
                 Self::bad("bad_digest", e.to_string())
+            }
+            BlobError::NoBucket(_) => {
+                log_line!("error: not answering (503): {e}");
+                Self::Unavailable(Outage::Bucket, BLOBS_RETRY_SECS)
             }
             BlobError::Store(_) if e.unreachable() => {
                 log_line!("error: not answering (503): {e}");

@@ -536,8 +536,28 @@ impl TestS3 {
         }
     }
 
+    /// Starts it again where it was without its bucket: an S3 server
+    /// restarted without its data, or a bucket deleted.
+    pub fn start_again_without_bucket(&mut self) {
+        self.stop();
+        self.child = Self::spawn_with(self.host.as_ref(), &self.addr, self.port, false);
+    }
+
+    /// Makes the (empty) bucket again.
+    pub fn make_bucket(&self) {
+        let bucket = format!("http://{}:{}/aobake-test", self.addr, self.port);
+        ureq::put(&bucket)
+            .send_empty()
+            .expect("the bucket made again");
+    }
+
     /// Runs moto on `addr:port` and makes the (empty) bucket.
     fn spawn(host: Option<&netns::Host>, addr: &str, port: u16) -> Child {
+        Self::spawn_with(host, addr, port, true)
+    }
+
+    /// Runs moto on `addr:port`, with the (empty) bucket when `bucket`.
+    fn spawn_with(host: Option<&netns::Host>, addr: &str, port: u16, bucket: bool) -> Child {
         let program = std::env::var("AOBAKE_MOTO_SERVER").unwrap_or_else(|_| "moto_server".into());
         let mut command = match host {
             Some(h) => h.command(&program),
@@ -556,9 +576,18 @@ impl TestS3 {
             });
         // Up when it answers; the bucket then (moto takes unsigned requests).
         let started = Instant::now();
-        let bucket = format!("http://{addr}:{port}/aobake-test");
+        let url = format!("http://{addr}:{port}/aobake-test");
         loop {
-            match ureq::put(&bucket).send_empty() {
+            let answer = if bucket {
+                ureq::put(&url).send_empty()
+            } else {
+                // Any answer (the missing bucket's 404) means it is up.
+                match ureq::get(&url).call() {
+                    Err(ureq::Error::StatusCode(_)) => break,
+                    other => other,
+                }
+            };
+            match answer {
                 Ok(_) => break,
                 Err(ureq::Error::StatusCode(code)) => panic!("creating the bucket: {code}"),
                 Err(_) => {}

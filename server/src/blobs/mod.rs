@@ -39,9 +39,21 @@ pub enum BlobError {
     /// The blob store's settings cannot be used.
     #[error("{0}")]
     Config(String),
+    /// The bucket is not there (deleted, or an S3 server started again
+    /// without its data): an outage until it is made again, not a request
+    /// gone wrong.
+    #[error("blob store: its bucket does not exist (create it again, or restore it): {0}")]
+    NoBucket(String),
 }
 
 impl BlobError {
+    /// Whether the store cannot serve now, for a while ([`Self::unreachable`]
+    /// or a bucket that is not there): a client may try again later, and
+    /// the server answers 503.
+    pub fn outage(&self) -> bool {
+        self.unreachable() || matches!(self, Self::NoBucket(_))
+    }
+
     /// Whether the store could not be reached (down, refusing, timing
     /// out, cut off), not that the request was wrong: a client may try
     /// again later.
@@ -163,7 +175,7 @@ impl Watched {
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         match &result {
-            Err(e) if e.unreachable() => {
+            Err(e) if e.outage() => {
                 // (Each request it fails logs its own line, as a 503.)
                 down.get_or_insert_with(std::time::Instant::now);
             }

@@ -114,8 +114,33 @@ impl ObjectBlobs {
 fn missing_is_none<T>(r: object_store::Result<T>) -> Result<Option<T>, BlobError> {
     match r {
         Ok(v) => Ok(Some(v)),
+        Err(e) if no_bucket(&e) => Err(BlobError::NoBucket(e.to_string())),
         Err(object_store::Error::NotFound { .. }) => Ok(None),
         Err(e) => Err(e.into()),
+    }
+}
+
+/// Whether the store said the bucket is not there (S3's `NoSuchBucket`,
+/// somewhere in the error's chain). A HEAD has no body to say it in: a
+/// missing bucket then reads as a missing object.
+fn no_bucket(e: &object_store::Error) -> bool {
+    let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(err) = source {
+        if err.to_string().contains("NoSuchBucket") {
+            return true;
+        }
+        source = err.source();
+    }
+    false
+}
+
+/// An object store error as a [`BlobError`]; a write's "not found" can
+/// only be the bucket's (`write`).
+fn store_error(e: object_store::Error, write: bool) -> BlobError {
+    if no_bucket(&e) || (write && matches!(e, object_store::Error::NotFound { .. })) {
+        BlobError::NoBucket(e.to_string())
+    } else {
+        e.into()
     }
 }
 
@@ -150,11 +175,15 @@ impl Blobs for ObjectBlobs {
             if self.head(&path).await?.is_some() {
                 return Ok(());
             }
-            let upload = self.store.put_multipart(&path).await?;
+            let upload = self
+                .store
+                .put_multipart(&path)
+                .await
+                .map_err(|e| store_error(e, true))?;
             let mut writer = WriteMultipart::new_with_chunk_size(upload, MULTIPART_BYTES);
             writer.write(bytes);
             // A failed finish aborts the upload itself: no parts are left.
-            writer.finish().await?;
+            writer.finish().await.map_err(|e| store_error(e, true))?;
             return Ok(());
         }
         let create = PutOptions {
@@ -164,7 +193,7 @@ impl Blobs for ObjectBlobs {
         let payload = PutPayload::from(bytes.to_vec());
         match self.store.put_opts(&path, payload, create).await {
             Ok(_) | Err(object_store::Error::AlreadyExists { .. }) => Ok(()),
-            Err(e) => Err(e.into()),
+            Err(e) => Err(store_error(e, true)),
         }
     }
 
@@ -209,10 +238,7 @@ impl Blobs for ObjectBlobs {
         match self.store.list_with_delimiter(prefix).await {
             Ok(_) => Ok(()),
             // Said plainly, for `serve`'s start and the readiness log.
-            Err(e) if e.to_string().contains("NoSuchBucket") => Err(BlobError::Config(format!(
-                "its bucket does not exist (create it first): {e}"
-            ))),
-            Err(e) => Err(e.into()),
+            Err(e) => Err(store_error(e, true)),
         }
     }
 }
@@ -253,11 +279,22 @@ mod tests {
         let missing =
             ObjectBlobs::from_url(&s3.url.replace("aobake-test", "no-such-bucket")).unwrap();
         assert_eq!(missing.len(&"0".repeat(64)).await.unwrap(), None);
-        let refused = missing.probe().await.unwrap_err().to_string();
+        let refused = missing.probe().await.unwrap_err();
+        assert!(matches!(refused, BlobError::NoBucket(_)), "{refused:?}");
         assert!(
-            refused.contains("no-such-bucket") || refused.contains("NoSuchBucket"),
+            refused.to_string().contains("its bucket does not exist"),
             "{refused}"
         );
+        // Writing to it is an outage (a 503 over HTTP), not a failure:
+        // the bucket may be made again.
+        let put = missing.put(&sha256_hex(bytes), bytes).await.unwrap_err();
+        assert!(
+            put.outage() && matches!(put, BlobError::NoBucket(_)),
+            "{put:?}"
+        );
+        let big = vec![7u8; MULTIPART_BYTES + 1];
+        let put = missing.put(&sha256_hex(&big), &big).await.unwrap_err();
+        assert!(matches!(put, BlobError::NoBucket(_)), "{put:?}");
     }
 
     /// An `https://` endpoint is spoken to in TLS (rustls on ring, the

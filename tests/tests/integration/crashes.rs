@@ -433,9 +433,32 @@ fn an_s3_outage_answers_503_with_retry_after() {
     assert_eq!(probe.status().as_u16(), 503);
     let text = probe.body_mut().read_to_string().unwrap();
     assert!(text.contains("the blob store is not answering"), "{text}");
-    // Back (empty, as moto keeps nothing): ready again, and the log says
-    // when the outage ended, not only each request it failed.
-    s3.start_again();
+    // Back without its bucket (an S3 server restarted without its data):
+    // still an outage, which says what is missing, and not "answers
+    // again" while nothing can be stored.
+    s3.start_again_without_bucket();
+    let (status, problem, _) = env.post_bytes(
+        "/v1/characters?name=Fox.glb",
+        ADMIN,
+        "model/gltf-binary",
+        &fox,
+    );
+    assert_eq!(status, 503, "{problem}");
+    let detail = problem["detail"].as_str().unwrap_or_default();
+    assert!(detail.contains("its bucket does not exist"), "{detail}");
+    let mut probe = agent.get(format!("{}/readyz", env.url)).call().unwrap();
+    assert_eq!(probe.status().as_u16(), 503);
+    let text = probe.body_mut().read_to_string().unwrap();
+    assert!(text.contains("its bucket does not exist"), "{text}");
+    assert!(
+        !env.server_log().contains("the blob store answers again"),
+        "{}",
+        env.server_log()
+    );
+    // The bucket made again (empty, as moto keeps nothing): ready again,
+    // and the log says when the outage ended, not only each request it
+    // failed.
+    s3.make_bucket();
     let started = Instant::now();
     while agent
         .get(format!("{}/readyz", env.url))
