@@ -157,14 +157,22 @@ pub(crate) async fn submit(
         Ok((key, (jobs, params.canonical())))
     })
     .await??;
-    if let Some(existing) = state.store.bake_for_key(&key).await? {
-        let status = if existing.state == crate::store::BakeState::Done {
-            StatusCode::OK
-        } else {
-            StatusCode::ACCEPTED
-        };
-        let location = bake_location(existing.id);
-        return Ok((status, location, Json(view(existing, None))).into_response());
+    match key_state(&state, &key).await? {
+        KeyState::Served(existing) => {
+            let location = bake_location(existing.id);
+            return Ok((StatusCode::OK, location, Json(view(existing, None))).into_response());
+        }
+        KeyState::UnderWay(existing) => {
+            let location = bake_location(existing.id);
+            return Ok((StatusCode::ACCEPTED, location, Json(view(existing, None))).into_response());
+        }
+        // Baked once, its asset since lost from the blob store: baked
+        // again (below), never answered as done.
+        KeyState::Lost(old) => log_line!(
+            "key {key}: bake {}'s asset is gone from the blob store; baking it again",
+            old.id
+        ),
+        KeyState::Unknown => {}
     }
     let (jobs, params) = jobs;
     let bake = state
@@ -410,11 +418,16 @@ pub(crate) async fn cache(
     ApiPath(key): ApiPath<String>,
 ) -> ApiResult<Json<BakeView>> {
     crate::blobs::check_digest(&key)?;
-    match state.store.bake_for_key(&key).await? {
-        Some(b) if b.state == crate::store::BakeState::Done => Ok(Json(view(b, None))),
+    match key_state(&state, &key).await? {
+        KeyState::Served(b) => Ok(Json(view(b, None))),
+        // Never a hit for what cannot be fetched.
+        KeyState::Lost(b) => Err(ApiError::NotFound(format!(
+            "bake {} with key {key} finished, but its asset is gone from the blob store: submit the request again to bake it again",
+            b.id
+        ))),
         // One under way: say which and how far, so a pipeline waits for it
         // rather than submits again.
-        Some(b) => {
+        KeyState::UnderWay(b) => {
             let done = crate::state::progress_done(&b);
             Err(ApiError::NotFound(format!(
                 "no finished bake for key {key} yet: bake {} with this key is {} ({done} of {} units done)",
@@ -423,10 +436,53 @@ pub(crate) async fn cache(
                 b.total_work
             )))
         }
-        None => Err(ApiError::NotFound(format!(
+        KeyState::Unknown => Err(ApiError::NotFound(format!(
             "no finished bake for key {key}"
         ))),
     }
+}
+
+/// What a bake key stands for now.
+enum KeyState {
+    /// A finished bake whose asset and report the blob store holds.
+    Served(BakeRow),
+    /// A bake with the key under way (queued, running or paused).
+    UnderWay(BakeRow),
+    /// Only finished bakes whose asset or report is gone from the blob
+    /// store (an emptied bucket, an expired object): the newest.
+    Lost(BakeRow),
+    /// No bake with the key.
+    Unknown,
+}
+
+/// The key's bakes looked at in turn: a finished one is served only when
+/// the blob store still holds its asset and report.
+async fn key_state(state: &AppState, key: &str) -> ApiResult<KeyState> {
+    let bakes = state.store.bakes_for_key(key).await?;
+    let mut lost = None;
+    for b in &bakes {
+        if b.state != crate::store::BakeState::Done {
+            continue;
+        }
+        let mut held = true;
+        for digest in [&b.asset, &b.report] {
+            held &= match digest {
+                Some(d) => state.blobs.len(d).await?.is_some(),
+                None => false,
+            };
+        }
+        if held {
+            return Ok(KeyState::Served(b.clone()));
+        }
+        lost.get_or_insert_with(|| b.clone());
+    }
+    if let Some(b) = bakes
+        .iter()
+        .find(|b| b.state != crate::store::BakeState::Done)
+    {
+        return Ok(KeyState::UnderWay(b.clone()));
+    }
+    Ok(lost.map_or(KeyState::Unknown, KeyState::Lost))
 }
 
 #[utoipa::path(post, path = "/v1/keys", tag = "bakes", request_body = BakeRequest,

@@ -213,6 +213,10 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn bake(&self, id: i64) -> Result<Option<BakeRow>>;
     /// The newest bake with this key that is done or still active.
     async fn bake_for_key(&self, key: &str) -> Result<Option<BakeRow>>;
+    /// The bakes with this key that are done or still active, done first,
+    /// newest first (at most 16): a done bake whose asset was lost is
+    /// passed over for the next.
+    async fn bakes_for_key(&self, key: &str) -> Result<Vec<BakeRow>>;
     /// Bakes, newest first, optionally of one character and method.
     async fn bakes(
         &self,

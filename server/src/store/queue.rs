@@ -837,6 +837,19 @@ impl<B: Backend> Store for SqlStore<B> {
         row.map(RawBake::cook).transpose()
     }
 
+    async fn bakes_for_key(&self, key: &str) -> Result<Vec<BakeRow>> {
+        let rows: Vec<RawBake> = self
+            .backend
+            .read()
+            .await?
+            .all(
+                B::sql(&format!("SELECT {} FROM bakes WHERE key = $1 AND state IN ('done', 'queued', 'running', 'paused') ORDER BY state = 'done' DESC, id DESC LIMIT 16", bake_columns()))
+                    .bind(key),
+            )
+            .await?;
+        rows.into_iter().map(RawBake::cook).collect()
+    }
+
     async fn bakes(
         &self,
         character: Option<&str>,
