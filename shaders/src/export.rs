@@ -214,22 +214,8 @@ fn binding_places(
                 std::collections::HashMap<naga::Handle<naga::GlobalVariable>, String>,
             )> = Vec::new();
             for entry in &module.entry_points {
-                let pipeline = glsl::PipelineOptions {
-                    shader_stage: entry.stage,
-                    entry_point: entry.name.clone(),
-                    multiview: None,
-                };
-                let mut text = String::new();
-                let reflection = glsl::Writer::new(
-                    &mut text,
-                    module,
-                    info,
-                    &options,
-                    &pipeline,
-                    naga::proc::BoundsCheckPolicies::default(),
-                )
-                .and_then(|mut w| w.write())
-                .map_err(|e| fail(e.to_string()))?;
+                let (_, reflection) =
+                    glsl_entry(module, info, &options, entry).map_err(|e| fail(e.to_string()))?;
                 let mut of: std::collections::HashMap<_, String> = reflection
                     .uniforms
                     .iter()
@@ -315,6 +301,31 @@ fn binding_places(
     })
 }
 
+/// One entry point in GLSL, and what naga named its resources.
+fn glsl_entry(
+    module: &naga::Module,
+    info: &ModuleInfo,
+    options: &glsl::Options,
+    entry: &naga::EntryPoint,
+) -> Result<(String, glsl::ReflectionInfo), glsl::Error> {
+    let pipeline = glsl::PipelineOptions {
+        shader_stage: entry.stage,
+        entry_point: entry.name.clone(),
+        multiview: None,
+    };
+    let mut text = String::new();
+    let reflection = glsl::Writer::new(
+        &mut text,
+        module,
+        info,
+        options,
+        &pipeline,
+        naga::proc::BoundsCheckPolicies::default(),
+    )?
+    .write()?;
+    Ok((text, reflection))
+}
+
 /// GLSL's options for `target`: `binding = 8·group + binding`.
 fn glsl_options(target: Target, bound: &[Binding]) -> glsl::Options {
     let version = match target {
@@ -381,22 +392,8 @@ pub fn translate(
             let options = glsl_options(target, &bindings);
             let mut files = Vec::new();
             for entry in &module.entry_points {
-                let pipeline = glsl::PipelineOptions {
-                    shader_stage: entry.stage,
-                    entry_point: entry.name.clone(),
-                    multiview: None,
-                };
-                let mut text = String::new();
-                glsl::Writer::new(
-                    &mut text,
-                    module,
-                    info,
-                    &options,
-                    &pipeline,
-                    naga::proc::BoundsCheckPolicies::default(),
-                )
-                .and_then(|mut w| w.write().map(|_| ()))
-                .map_err(|e| fail(e.to_string()))?;
+                let (text, _) =
+                    glsl_entry(module, info, &options, entry).map_err(|e| fail(e.to_string()))?;
                 let ext = match entry.stage {
                     ShaderStage::Vertex => "vert",
                     ShaderStage::Fragment => "frag",

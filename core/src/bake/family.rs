@@ -307,14 +307,7 @@ impl<'a> Bake<'a> {
         let frames = self.preview_frames()?;
         let truth = self.stacked_truth(deps, frames.len())?;
         let stills = frames.stills.len();
-        let subject = Subject {
-            character: &self.inputs.character,
-            model,
-            surface,
-            texel_floor: None,
-            static_texels: None,
-            left_out: None,
-        };
+        let subject = Subject::new(&self.inputs.character, model, surface);
         let mut previews = subject.stills(
             frames.clip,
             &frames.stills,
@@ -331,14 +324,14 @@ impl<'a> Bake<'a> {
             )?);
         }
         let mut out = JobOutput::default();
-        let infos: Vec<PreviewInfo> = previews.iter().map(|p| p.info.clone()).collect();
+        let infos: Vec<&PreviewInfo> = previews.iter().map(|p| &p.info).collect();
         let trained = |clip: &str| {
             self.plan
                 .train
                 .iter()
                 .any(|&c| self.inputs.clips[c].name == clip)
         };
-        if let Some(pixels) = PixelSummary::of(&infos, trained) {
+        if let Some(pixels) = PixelSummary::of(infos.iter().copied(), trained) {
             out.push(PIXELS, json(&pixels));
         }
         out.push("previews.json", json(&infos));

@@ -406,7 +406,20 @@ pub struct Subject<'a> {
     pub left_out: Option<&'a str>,
 }
 
-impl Subject<'_> {
+impl<'a> Subject<'a> {
+    /// `model` on `character`, its truth traced with `surface`: no other
+    /// atlas's floor, no static average beside it, trained on every clip
+    /// it is shown on (set the fields for those).
+    pub fn new(character: &'a Character, model: PreviewModel<'a>, surface: SurfaceParams) -> Self {
+        Self {
+            character,
+            model,
+            surface,
+            texel_floor: None,
+            static_texels: None,
+            left_out: None,
+        }
+    }
     /// The camera for a clip or for the rest pose ([`camera`]).
     pub fn camera(&self, clip: Option<&Clip>) -> Camera {
         camera(self.character, clip)

@@ -462,7 +462,10 @@ impl PixelSummary {
     /// `still` and `unseen` whose model was judged on the character,
     /// pooled per kind and clip; `trained` says whether the bake's model
     /// saw a clip. `None` when no still was judged.
-    pub fn of(infos: &[super::PreviewInfo], trained: impl Fn(&str) -> bool) -> Option<Self> {
+    pub fn of<'i>(
+        infos: impl IntoIterator<Item = &'i super::PreviewInfo>,
+        trained: impl Fn(&str) -> bool,
+    ) -> Option<Self> {
         struct Pool {
             clip: String,
             trained: bool,

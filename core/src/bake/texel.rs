@@ -280,12 +280,9 @@ pub(super) fn unseen_previews(
             continue;
         }
         let subject = Subject {
-            character,
-            model: PreviewModel::Texel(&folded, atlas),
-            surface,
-            texel_floor: None,
             static_texels: Some(block.row(0)),
             left_out: Some(&clip.name),
+            ..Subject::new(character, PreviewModel::Texel(&folded, atlas), surface)
         };
         let ground = subject.camera(Some(clip)).ground();
         let poses = frame_poses(character, Some(clip), &info.stills);

@@ -93,14 +93,7 @@ impl Loaded {
 
     fn subject(&self) -> anyhow::Result<Subject<'_>> {
         let (model, surface) = self.asset.preview_model()?;
-        Ok(Subject {
-            character: &self.character,
-            model,
-            surface,
-            texel_floor: None,
-            static_texels: None,
-            left_out: None,
-        })
+        Ok(Subject::new(&self.character, model, surface))
     }
 }
 
@@ -128,8 +121,6 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         .transpose()?;
     let subject = Subject {
         texel_floor: atlas.as_ref(),
-        static_texels: None,
-        left_out: None,
         ..loaded.subject()?
     };
     let preview = match args.time {
@@ -328,8 +319,6 @@ fn texel_floors(
         let atlas_s = started.elapsed().as_secs_f64();
         let with_atlas = Subject {
             texel_floor: Some(&atlas),
-            static_texels: None,
-            left_out: None,
             ..*subject
         };
         let still = with_atlas

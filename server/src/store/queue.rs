@@ -824,19 +824,6 @@ impl<B: Backend> Store for SqlStore<B> {
         row.map(RawBake::cook).transpose()
     }
 
-    async fn bake_for_key(&self, key: &str) -> Result<Option<BakeRow>> {
-        let row: Option<RawBake> = self
-            .backend
-            .read()
-            .await?
-            .optional(
-                B::sql(&format!("SELECT {} FROM bakes WHERE key = $1 AND state IN ('done', 'queued', 'running', 'paused') ORDER BY state = 'done' DESC, id DESC LIMIT 1", bake_columns()))
-                    .bind(key),
-            )
-            .await?;
-        row.map(RawBake::cook).transpose()
-    }
-
     async fn bakes_for_key(&self, key: &str) -> Result<Vec<BakeRow>> {
         let rows: Vec<RawBake> = self
             .backend

@@ -220,12 +220,8 @@ fn ctrl_c_during_submit_wait_leaves_the_bake_running_and_says_how_to_follow_it()
     let id = follower.submitted();
     // The handler is set as the following starts, right after that line.
     std::thread::sleep(Duration::from_secs(1));
-    let pid = follower.child.id().to_string();
-    let sent = std::process::Command::new("kill")
-        .args(["-INT", &pid])
-        .status()
-        .unwrap();
-    assert!(sent.success());
+    let pid = nix::unistd::Pid::from_raw(follower.child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
     let status = follower.child.wait().unwrap();
     let stderr = follower.stderr();
     assert_eq!(status.code(), Some(130), "{stderr}");

@@ -70,14 +70,11 @@ fn fixture() -> Fixture {
     let ao = trace_poses(&c, &poses, &SceneOptions::default(), &surface, &no_progress).unwrap();
     let (model, _) = plan.fit(&poses, &ao, &plan.reference_sources()).unwrap();
     let clip = &imported.clips[0];
-    let subject = Subject {
-        character: &c,
-        model: aobake_core::bake::PreviewModel::Vertex(&model),
-        surface: params.held_out_surface(),
-        texel_floor: None,
-        static_texels: None,
-        left_out: None,
-    };
+    let subject = Subject::new(
+        &c,
+        aobake_core::bake::PreviewModel::Vertex(&model),
+        params.held_out_surface(),
+    );
     let camera = subject.camera(Some(clip));
     let ground = camera.ground();
     let frame = subject
@@ -497,14 +494,7 @@ fn previews_match_one_go(
     let container = Container::from_bytes(&baked.asset).unwrap();
     let asset = BakedAsset::read(&container, Some(&bake.inputs.character)).unwrap();
     let (model, surface) = asset.preview_model().unwrap();
-    let subject = Subject {
-        character: &bake.inputs.character,
-        model,
-        surface,
-        texel_floor: None,
-        static_texels: None,
-        left_out: None,
-    };
+    let subject = Subject::new(&bake.inputs.character, model, surface);
     let mut one_go = subject
         .stills(frames.clip, &frames.stills, None, r)
         .unwrap();
@@ -585,14 +575,7 @@ fn a_texel_bake_judges_its_unseen_folds_per_pixel() {
     let container = aobake_core::asset::Container::from_bytes(&baked.asset).unwrap();
     let asset = aobake_core::bake::BakedAsset::read(&container, Some(&inputs.character)).unwrap();
     let (model, surface) = asset.preview_model().unwrap();
-    let subject = Subject {
-        character: &inputs.character,
-        model,
-        surface,
-        texel_floor: None,
-        static_texels: None,
-        left_out: None,
-    };
+    let subject = Subject::new(&inputs.character, model, surface);
     let clip = inputs
         .clips
         .iter()
@@ -614,14 +597,9 @@ fn a_texel_bake_judges_its_unseen_folds_per_pixel() {
     );
 
     // The summary pools the stills per clip, as the preview job wrote it.
-    let summary = PixelSummary::of(
-        &baked
-            .previews
-            .iter()
-            .map(|(i, _)| i.clone())
-            .collect::<Vec<_>>(),
-        |clip| report.character.train_clips.iter().any(|c| c == clip),
-    )
+    let summary = PixelSummary::of(baked.previews.iter().map(|(i, _)| i), |clip| {
+        report.character.train_clips.iter().any(|c| c == clip)
+    })
     .unwrap();
     eprint!("{}", summary.lines());
     assert_eq!(summary.unseen.len(), 2);
@@ -731,14 +709,11 @@ fn a_cubemap_preview_shades_the_ground_with_the_gpu_lookup_and_the_bake_gets_its
     let kroon = p.cubemap_truth(&model.layout.spheroid);
     let clip = &inputs.clips[0];
     let render = |m: &CubemapModel, r: &mut PreviewRenderer<'_>| {
-        let subject = Subject {
-            character: &inputs.character,
-            model: PreviewModel::Cubemap(m, kroon),
-            surface: p.held_out_surface(),
-            texel_floor: None,
-            static_texels: None,
-            left_out: None,
-        };
+        let subject = Subject::new(
+            &inputs.character,
+            PreviewModel::Cubemap(m, kroon),
+            p.held_out_surface(),
+        );
         truth_and_model(&subject, clip, 0.5, r)
     };
     let (truth, with, without) = brightness(&render(&model, &mut r), &render(&open, &mut r));
@@ -793,14 +768,7 @@ fn a_grid_preview_shades_the_parts_and_the_ground_with_the_gpu_lookup() {
         .truth(bake.grid_distance(&bake.grid_parts().unwrap()), 99);
     let clip = &inputs.clips[0];
     let render = |m: &GridModel, r: &mut PreviewRenderer<'_>| {
-        let subject = Subject {
-            character: c,
-            model: PreviewModel::Grid(m, &owner),
-            surface,
-            texel_floor: None,
-            static_texels: None,
-            left_out: None,
-        };
+        let subject = Subject::new(c, PreviewModel::Grid(m, &owner), surface);
         truth_and_model(&subject, clip, 0.4, r)
     };
     let (truth, with, without) = brightness(&render(&model, &mut r), &render(&open, &mut r));
@@ -925,14 +893,7 @@ fn a_texel_bakes_previews_draw_its_textures_per_pixel() {
     let PreviewModel::Texel(_, atlas) = model else {
         panic!("a texel asset previews as a texel model");
     };
-    let subject = Subject {
-        character: c,
-        model,
-        surface,
-        texel_floor: None,
-        static_texels: None,
-        left_out: None,
-    };
+    let subject = Subject::new(c, model, surface);
     let camera = subject.camera(Some(clip));
     let ground = camera.ground();
     let frame = subject

@@ -174,14 +174,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         samples: args.truth_samples,
         ..plan.params.held_out_surface()
     };
-    let subject = Subject {
-        character: c,
-        model: PreviewModel::Vertex(&open),
-        surface,
-        texel_floor: None,
-        static_texels: None,
-        left_out: None,
-    };
+    let subject = Subject::new(c, PreviewModel::Vertex(&open), surface);
     let judged_clips: Vec<usize> = plan
         .train
         .iter()
