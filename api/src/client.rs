@@ -483,15 +483,20 @@ impl Client {
         &self,
         request: impl Fn(&str) -> std::result::Result<Response, ureq::Error>,
     ) -> Result<Response> {
-        let mut waited = Duration::ZERO;
+        // Since the first request the server asked to come back later was
+        // sent: the outage as this caller saw it, its own waits for
+        // answers included.
+        let mut began: Option<std::time::Instant> = None;
         let mut told = false;
         loop {
+            let asked = std::time::Instant::now();
             let res = self.reach(&request)?;
             let come_back = match res.status().as_u16() {
                 429 => true,
                 503 => res.headers().contains_key("retry-after"),
                 _ => false,
             };
+            let waited = began.map_or(Duration::ZERO, |t| t.elapsed());
             if !come_back || waited >= self.rate_wait {
                 // An outage it said it waits out is said to be over.
                 if let Some(notice) = &self.notice.0
@@ -499,9 +504,9 @@ impl Client {
                     && !come_back
                 {
                     notice(&format!(
-                        "{} answers again after {} s",
+                        "{} answers again after {:.0} s",
                         self.base(),
-                        waited.as_secs()
+                        waited.as_secs_f64()
                     ));
                 }
                 return self.check(res);
@@ -517,7 +522,7 @@ impl Client {
             );
             if let Some(notice) = &self.notice.0
                 && unavailable
-                && waited.is_zero()
+                && began.is_none()
             {
                 let said = match self.check(res) {
                     Err(ApiError::Status { problem, .. }) => problem.detail,
@@ -530,8 +535,8 @@ impl Client {
                 ));
                 told = true;
             }
+            began.get_or_insert(asked);
             std::thread::sleep(wait);
-            waited += wait;
         }
     }
 

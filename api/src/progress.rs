@@ -129,6 +129,7 @@ mod tests {
             max_attempts: 3,
             worker: None,
             progress: 0,
+            reached: 0,
             checkpoint: None,
             outputs: None,
             error: None,

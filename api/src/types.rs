@@ -87,10 +87,16 @@ pub struct BakeRow {
     pub total_work: i64,
     /// Units of work of completed jobs.
     pub done_work: i64,
-    /// Work units the running jobs have done so far (their progress):
-    /// with `done_work`, what a progress bar shows.
+    /// Work units the unfinished jobs have reached so far (the furthest
+    /// any attempt of each got): with `done_work`, what a progress bar
+    /// shows, which only moves forward while jobs are leased again.
     #[serde(default)]
     pub running_work: i64,
+    /// Of `running_work`, the units running jobs are doing again (leased
+    /// again after a lost lease, or run again for a lost output) before
+    /// they pass where they had got.
+    #[serde(default)]
+    pub redo_work: i64,
     /// Jobs in all.
     pub jobs_total: i64,
     /// Jobs completed.
@@ -138,6 +144,10 @@ pub struct JobRow {
     pub worker: Option<String>,
     /// Units done in the current attempt.
     pub progress: i64,
+    /// The furthest any attempt got (units): a job leased again does its
+    /// work again up to here before its bake's progress moves on.
+    #[serde(default)]
+    pub reached: i64,
     /// Last checkpoint: step, cursor and blob.
     pub checkpoint: Option<CheckpointRef>,
     /// Outputs, once completed.
@@ -227,7 +237,8 @@ pub enum Action {
     Pause,
     /// Lease them again.
     Resume,
-    /// Re-queue its dead and cancelled jobs with fresh attempts.
+    /// Re-queue its dead and cancelled jobs with fresh attempts, and
+    /// its completed jobs whose outputs the blob store lost.
     Retry,
 }
 
@@ -317,8 +328,16 @@ pub struct BakeKey {
 #[derive(Debug, Serialize, Deserialize)]
 #[cfg_attr(feature = "schema", derive(utoipa::ToSchema))]
 pub struct Progress {
+    /// Units done: finished jobs' work and how far the others got. It
+    /// only moves forward, also when jobs are leased again.
     pub done: i64,
+    /// Units in all.
     pub total: i64,
+    /// Of `done`, the units being done again (jobs leased again after a
+    /// lost lease or run again for a lost output), until they pass where
+    /// they had got.
+    #[serde(default)]
+    pub redo: i64,
 }
 
 /// A bake as the API shows it.
@@ -330,6 +349,11 @@ pub struct BakeView {
     pub progress: Progress,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub jobs: Option<Vec<JobRow>>,
+    /// In a submit's answer: the finished bake with the same key whose
+    /// asset or report the blob store lost, which this new bake makes
+    /// again (the cache never answers with it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rebakes: Option<i64>,
 }
 
 /// One preview image of a bake.

@@ -284,7 +284,7 @@ impl From<StoreError> for ApiError {
             StoreError::LeaseLost(m) | StoreError::Conflict(m) => Self::Conflict(m),
             e @ StoreError::Revoked(_) => Self::Conflict(e.to_string()),
             StoreError::NotFound(m) => Self::NotFound(m),
-            StoreError::Database(e) if unreachable(&e) => {
+            StoreError::Database(e) if crate::store::unreachable(&e) => {
                 log_line!("error: the database is not answering: {e}");
                 Self::Unavailable(Outage::Database, DATABASE_RETRY_SECS)
             }
@@ -298,24 +298,6 @@ const DATABASE_RETRY_SECS: u64 = 2;
 
 /// What a client is told to wait while the blob store does not answer.
 pub(crate) const BLOBS_RETRY_SECS: u64 = 5;
-
-/// Whether `e` says the database could not be reached (down, restarting,
-/// its connections gone), not that a query failed.
-fn unreachable(e: &sqlx::Error) -> bool {
-    match e {
-        sqlx::Error::Io(_)
-        | sqlx::Error::PoolTimedOut
-        | sqlx::Error::PoolClosed
-        | sqlx::Error::WorkerCrashed
-        | sqlx::Error::Tls(_) => true,
-        // SQLSTATE classes 08 (connection exception) and 57P (operator
-        // intervention: shutting down, cannot connect now).
-        sqlx::Error::Database(d) => d
-            .code()
-            .is_some_and(|c| c.starts_with("08") || c.starts_with("57P")),
-        _ => false,
-    }
-}
 
 impl From<BlobError> for ApiError {
     fn from(e: BlobError) -> Self {

@@ -23,7 +23,7 @@
 //! `preview` renders its images, the last completion finishes the bake,
 //! and `GET /v1/cache/{key}` finds it from then on.
 //!
-//! **Layers**, bottom up: `store`, `blobs`, `error`, `state`, `auth`,
+//! **Layers**, bottom up: `store`, `blobs`, `repair`, `error`, `state`, `auth`,
 //! `extract`, `dashboard`, `routes`, `openapi`, `app`, `listen`, `demo`,
 //! `serve`, `cli`. No file imports one of a higher layer
 //! (`python3 tools/import-graph.py server <layers>`). The wire types and
@@ -47,6 +47,7 @@ pub mod error;
 mod extract;
 pub mod listen;
 pub mod openapi;
+pub mod repair;
 mod routes;
 pub mod serve;
 pub mod state;

@@ -37,7 +37,7 @@ pub struct ServeArgs {
     /// The metadata store: empty for SQLite in --data (the embedded
     /// default), or a PostgreSQL URL (`postgres://user@host:port/db`) for
     /// several servers and remote workers.
-    #[arg(long, env = "AOBAKE_DATABASE", value_parser = postgres_url)]
+    #[arg(long, env = "AOBAKE_DATABASE", value_parser = postgres_url_arg)]
     pub database: Option<String>,
     /// Where blobs (uploads, assets, checkpoints) live: empty for a folder
     /// in --data (the embedded default), a directory, or an S3-compatible
@@ -131,7 +131,7 @@ const FORGET_WORKERS_MS: i64 = 24 * 3600 * 1000;
 
 /// `--database`: a PostgreSQL URL (the only other store than the
 /// embedded SQLite), so another scheme is a wrong command line.
-fn postgres_url(s: &str) -> Result<String, String> {
+pub(crate) fn postgres_url_arg(s: &str) -> Result<String, String> {
     match s.split_once("://") {
         Some(("postgres" | "postgresql", _)) => Ok(s.to_owned()),
         _ => Err(
@@ -174,34 +174,8 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         ),
         None => None,
     };
-    std::fs::create_dir_all(&args.data)
-        .with_context(|| format!("cannot create {}", args.data.display()))?;
-    let store: Arc<dyn Store> = match &args.database {
-        Some(url) => Arc::new(
-            PgStore::connect(url)
-                .await
-                .context("cannot connect to PostgreSQL")?,
-        ),
-        None => Arc::new(
-            SqliteStore::open(&args.data.join("aobake.db"))
-                .await
-                .context("cannot open the database")?,
-        ),
-    };
-    let blobs: Arc<dyn Blobs> = blobs::Watched::over(match &args.blobs {
-        Some(url) => blobs::open(url)?,
-        None => Arc::new(LocalBlobs::open(&args.data.join("blobs"))?),
-    });
-    // A bucket that is not there (or refuses these credentials) would
-    // fail every upload with a 500: refuse to start instead.
-    if let Some(url) = &args.blobs {
-        let shown = blobs::redacted(url);
-        match tokio::time::timeout(std::time::Duration::from_secs(15), blobs.probe()).await {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => anyhow::bail!("the blob store {shown} cannot be used: {e}"),
-            Err(_) => anyhow::bail!("the blob store {shown} did not answer in 15 s"),
-        }
-    }
+    let (store, blobs) =
+        open_backing(&args.data, args.database.as_deref(), args.blobs.as_deref()).await?;
     let policy = QueuePolicy {
         lease_ms: (args.lease_secs * 1000.0) as i64,
         max_attempts: args.max_attempts,
@@ -295,8 +269,6 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         tokio::spawn(async move {
             let mut hold_until = Some(tokio::time::Instant::now() + grace);
             let mut forgot = tokio::time::Instant::now();
-            // Since the database first failed a ping, while it does.
-            let mut down_since: Option<tokio::time::Instant> = None;
             loop {
                 tokio::time::sleep(Duration::from_millis(500)).await;
                 // Once a minute: workers gone for a day leave the list
@@ -311,19 +283,10 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 match hold_until {
                     // The database is down: wait for it to answer.
                     None => {
+                        // (The store's connections log when it answers
+                        // again: `store::Outages`.)
                         if state.store.ping().await.is_ok() {
                             hold_until = Some(tokio::time::Instant::now() + grace);
-                            // The log says when an outage ended, not only
-                            // each request it failed (an error that was
-                            // not one, such as a deadlock, says nothing).
-                            if let Some(since) = down_since.take() {
-                                log_line!(
-                                    "the database answers again, after {:.0} s",
-                                    since.elapsed().as_secs_f64()
-                                );
-                            }
-                        } else {
-                            down_since.get_or_insert_with(tokio::time::Instant::now);
                         }
                         continue;
                     }
@@ -704,6 +667,43 @@ async fn terminate(child: &mut Child) {
         }
     }
     let _ = child.kill().await;
+}
+
+/// The metadata store and the blob store `serve` runs on (what `--data`,
+/// `--database` and `--blobs` name), as an operator's command opens them
+/// too: a bucket that is not there (or refuses these credentials) is
+/// refused here, not at the first upload.
+pub(crate) async fn open_backing(
+    data: &std::path::Path,
+    database: Option<&str>,
+    blob_url: Option<&str>,
+) -> anyhow::Result<(Arc<dyn Store>, Arc<dyn Blobs>)> {
+    std::fs::create_dir_all(data).with_context(|| format!("cannot create {}", data.display()))?;
+    let store: Arc<dyn Store> = match database {
+        Some(url) => Arc::new(
+            PgStore::connect(url)
+                .await
+                .context("cannot connect to PostgreSQL")?,
+        ),
+        None => Arc::new(
+            SqliteStore::open(&data.join("aobake.db"))
+                .await
+                .context("cannot open the database")?,
+        ),
+    };
+    let blobs: Arc<dyn Blobs> = blobs::Watched::over(match blob_url {
+        Some(url) => blobs::open(url)?,
+        None => Arc::new(LocalBlobs::open(&data.join("blobs"))?),
+    });
+    if let Some(url) = blob_url {
+        let shown = blobs::redacted(url);
+        match tokio::time::timeout(std::time::Duration::from_secs(15), blobs.probe()).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => anyhow::bail!("the blob store {shown} cannot be used: {e}"),
+            Err(_) => anyhow::bail!("the blob store {shown} did not answer in 15 s"),
+        }
+    }
+    Ok((store, blobs))
 }
 
 #[cfg(test)]

@@ -63,6 +63,10 @@ pub struct BakeEvent {
     pub done: i64,
     /// Units in all.
     pub total: i64,
+    /// Of `done`, the units being done again (the view's
+    /// `progress.redo`).
+    #[serde(default)]
+    pub redo: i64,
 }
 
 impl BakeEvent {
@@ -73,12 +77,13 @@ impl BakeEvent {
             state: bake.state,
             done: progress_done(bake),
             total: bake.total_work,
+            redo: bake.redo_work,
         }
     }
 }
 
-/// A bake's units done: its finished jobs' work and its running jobs'
-/// progress.
+/// A bake's units done: its finished jobs' work and how far its other
+/// jobs got (the furthest attempt of each), so it only moves forward.
 pub fn progress_done(bake: &crate::store::BakeRow) -> i64 {
     (bake.done_work + bake.running_work).min(bake.total_work)
 }

@@ -501,6 +501,10 @@ pub struct TestS3 {
     port: u16,
 }
 
+/// An `Authorization` header moto takes (it checks no signature, but
+/// refuses some requests without one).
+const MOTO_AUTH: &str = "AWS4-HMAC-SHA256 Credential=test/20260101/us-east-1/s3/aws4_request, SignedHeaders=host, Signature=0";
+
 impl TestS3 {
     /// Starts the server and makes the bucket.
     pub fn start() -> Self {
@@ -549,6 +553,34 @@ impl TestS3 {
         ureq::put(&bucket)
             .send_empty()
             .expect("the bucket made again");
+    }
+
+    /// The URL of a blob's object (no credentials: moto does not ask).
+    fn object(&self, digest: &str) -> String {
+        format!(
+            "http://{}:{}/aobake-test/blobs/{}/{digest}",
+            self.addr,
+            self.port,
+            &digest[..2]
+        )
+    }
+
+    /// Deletes a blob's object behind the server's back (an object a
+    /// lifecycle rule expired).
+    pub fn delete_blob(&self, digest: &str) {
+        ureq::delete(&self.object(digest))
+            .header("authorization", MOTO_AUTH)
+            .call()
+            .expect("the object deleted");
+    }
+
+    /// Writes other bytes under a blob's name behind the server's back (a
+    /// corrupted object).
+    pub fn overwrite_blob(&self, digest: &str, bytes: &[u8]) {
+        ureq::put(&self.object(digest))
+            .header("authorization", MOTO_AUTH)
+            .send(bytes)
+            .expect("the object written");
     }
 
     /// Runs moto on `addr:port` and makes the (empty) bucket.

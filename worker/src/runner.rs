@@ -726,13 +726,27 @@ fn execute(
         deps.push(out);
     }
     let resume = match &lease.job.checkpoint {
-        Some(c) => Some(Checkpoint {
-            step: c.step.clone(),
-            cursor: c.cursor as u64,
-            data: patience
-                .call(|| client.get_blob(&c.blob))
-                .map_err(|e| JobError::Failed(format!("cannot fetch the checkpoint: {e}")))?,
-        }),
+        Some(c) => match patience.call(|| client.get_blob(&c.blob)) {
+            Ok(data) => Some(Checkpoint {
+                step: c.step.clone(),
+                cursor: c.cursor as u64,
+                data,
+            }),
+            // Gone from the blob store (emptied, expired): the job starts
+            // over, as it would without one.
+            Err(e) if e.status() == Some(404) => {
+                say!(
+                    "job {}: its checkpoint is gone from the blob store; starting over",
+                    lease.job.id
+                );
+                None
+            }
+            Err(e) => {
+                return Err(JobError::Failed(format!(
+                    "cannot fetch the checkpoint: {e}"
+                )));
+            }
+        },
         None => None,
     };
     let dep_refs: Vec<&JobOutput> = deps.iter().collect();

@@ -89,6 +89,10 @@ impl Blobs for LocalBlobs {
     async fn len(&self, digest: &str) -> Result<Option<u64>, BlobError> {
         Ok(missing_is_none(tokio::fs::metadata(self.path(digest)?).await)?.map(|m| m.len()))
     }
+
+    async fn delete(&self, digest: &str) -> Result<bool, BlobError> {
+        Ok(missing_is_none(tokio::fs::remove_file(self.path(digest)?).await)?.is_some())
+    }
 }
 
 #[cfg(test)]

@@ -141,6 +141,10 @@ pub trait Blobs: Send + Sync + std::fmt::Debug + 'static {
     ) -> Result<Option<Vec<u8>>, BlobError>;
     /// The blob's length, or `None`.
     async fn len(&self, digest: &str) -> Result<Option<u64>, BlobError>;
+    /// Removes the blob (an operator's repair of one whose bytes no longer
+    /// match its name, so that the next `put` stores it again); `false`
+    /// when it was not there.
+    async fn delete(&self, digest: &str) -> Result<bool, BlobError>;
     /// Whether the store can be used at all (a bucket that exists and
     /// answers): what `serve` checks at its start and `/readyz` at each
     /// probe. The default asks for a blob no one stores.
@@ -219,6 +223,10 @@ impl Blobs for Watched {
 
     async fn len(&self, digest: &str) -> Result<Option<u64>, BlobError> {
         self.heard(self.inner.len(digest).await)
+    }
+
+    async fn delete(&self, digest: &str) -> Result<bool, BlobError> {
+        self.heard(self.inner.delete(digest).await)
     }
 
     async fn probe(&self) -> Result<(), BlobError> {

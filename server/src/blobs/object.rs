@@ -230,6 +230,19 @@ impl Blobs for ObjectBlobs {
         self.head(&self.path(digest)?).await
     }
 
+    async fn delete(&self, digest: &str) -> Result<bool, BlobError> {
+        let path = self.path(digest)?;
+        // S3's DELETE answers alike whether the object was there.
+        if self.head(&path).await?.is_none() {
+            return Ok(false);
+        }
+        self.store
+            .delete(&path)
+            .await
+            .map_err(|e| store_error(e, true))?;
+        Ok(true)
+    }
+
     /// A listing of the prefix's first level: a HEAD on an object that is
     /// not there answers 404 alike for a bucket that is not there, a list
     /// does not.

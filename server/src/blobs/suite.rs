@@ -30,6 +30,12 @@ pub(crate) async fn run_all(blobs: &dyn Blobs) {
     blobs.put(&d, &bytes).await.unwrap();
     assert_eq!(blobs.get(&d).await.unwrap().unwrap(), bytes);
     assert_eq!(blobs.len(&d).await.unwrap(), Some(11));
+    // A deleted blob is gone, and a put stores it again.
+    assert!(blobs.delete(&d).await.unwrap());
+    assert!(blobs.len(&d).await.unwrap().is_none());
+    assert!(!blobs.delete(&d).await.unwrap(), "not there");
+    blobs.put(&d, &bytes).await.unwrap();
+    assert_eq!(blobs.len(&d).await.unwrap(), Some(11));
     // Ranges are clamped to the blob.
     let range = |s, e| blobs.get_range(&d, s, e);
     assert_eq!(range(6, 100).await.unwrap().unwrap(), b"blobs");

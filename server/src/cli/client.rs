@@ -253,6 +253,11 @@ pub(super) fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
             bake.bake.key,
             bake.bake.state.as_str()
         );
+        if let Some(lost) = bake.rebakes {
+            println!(
+                "  bake {lost} with this key finished, but its asset is gone from the blob store: bake {id} makes it again"
+            );
+        }
     }
     if args.wait {
         wait(&args.conn, &api, id, args.json)?;
@@ -300,7 +305,13 @@ fn wait(conn: &Conn, api: &Client, id: i64, json: bool) -> anyhow::Result<()> {
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_millis() as i64);
         let left = aobake_api::progress::time_left(view.jobs.as_deref().unwrap_or_default(), now);
-        bar.set_message(format!("{left}; {}", running_jobs(&view)));
+        // Work done again (jobs leased again after a lost lease, or run
+        // again for a lost output) is counted once, and said.
+        let redo = match view.progress.redo {
+            0 => String::new(),
+            n => format!("; {n} units being done again"),
+        };
+        bar.set_message(format!("{left}; {}{redo}", running_jobs(&view)));
         let b = &view.bake;
         if json
             && matches!(

@@ -6,6 +6,7 @@
 
 mod bake;
 mod bench;
+mod blobs;
 pub mod client;
 mod common;
 mod eval;
@@ -97,7 +98,9 @@ enum Command {
     /// Resume a paused bake.
     Resume(client::ControlArgs),
     /// Queue a failed or cancelled bake again: its unfinished jobs with
-    /// fresh attempts (what finished is kept).
+    /// fresh attempts (what finished is kept, unless the blob store lost
+    /// its outputs: those jobs run again). A done bake that lost its
+    /// asset, report or previews is queued again the same way.
     Retry(client::ControlArgs),
     /// Download a finished bake's asset by bake id or bake key (exit 4 when
     /// there is none).
@@ -110,6 +113,10 @@ enum Command {
     /// List the workers a server knows: each one's state (idle, busy,
     /// stopped), the job it runs, its tracer and when it was last seen.
     Workers(client::WorkersArgs),
+    /// Operators' checks of the blob store: `aobake blobs verify
+    /// [--repair]` finds blobs the database names that are missing or
+    /// corrupt, on local disk or S3, and repairs what can be.
+    Blobs(blobs::Args),
     /// Print the HTTP API's OpenAPI 3.1 description (YAML).
     Openapi,
     /// Measure speed: print figures for the benchmarks that issues and
@@ -220,6 +227,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Export(args) => export::run(&args),
         Command::Preview(args) => preview::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Blobs(args) => blobs::run(&args),
         Command::Serve(args) => {
             tokio::runtime::Runtime::new()?.block_on(crate::serve::serve(*args))
         }

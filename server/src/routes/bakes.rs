@@ -52,25 +52,28 @@ fn view(bake: BakeRow, jobs: Option<Vec<JobRow>>) -> BakeView {
     // With its jobs, from them: the bake's row and its jobs are read one
     // after the other, and a heartbeat between the two would show a job
     // further on than the bar.
-    let done = match &jobs {
-        Some(jobs) => jobs
-            .iter()
-            .map(|j| match j.state {
-                crate::store::JobState::Completed => j.work,
-                crate::store::JobState::Running => j.progress,
-                _ => 0,
-            })
-            .sum::<i64>()
-            .min(bake.total_work),
-        None => crate::state::progress_done(&bake),
+    let (done, redo) = match &jobs {
+        Some(jobs) => {
+            let (done, redo) = jobs.iter().fold((0, 0), |(done, redo), j| match j.state {
+                crate::store::JobState::Completed => (done + j.work, redo),
+                crate::store::JobState::Running => {
+                    (done + j.reached, redo + (j.reached - j.progress).max(0))
+                }
+                _ => (done + j.reached, redo),
+            });
+            (done.min(bake.total_work), redo)
+        }
+        None => (crate::state::progress_done(&bake), bake.redo_work),
     };
     BakeView {
         progress: Progress {
             done,
             total: bake.total_work,
+            redo,
         },
         bake,
         jobs,
+        rebakes: None,
     }
 }
 
@@ -157,6 +160,7 @@ pub(crate) async fn submit(
         Ok((key, (jobs, params.canonical())))
     })
     .await??;
+    let mut rebakes = None;
     match key_state(&state, &key).await? {
         KeyState::Served(existing) => {
             let location = bake_location(existing.id);
@@ -167,11 +171,14 @@ pub(crate) async fn submit(
             return Ok((StatusCode::ACCEPTED, location, Json(view(existing, None))).into_response());
         }
         // Baked once, its asset since lost from the blob store: baked
-        // again (below), never answered as done.
-        KeyState::Lost(old) => log_line!(
-            "key {key}: bake {}'s asset is gone from the blob store; baking it again",
-            old.id
-        ),
+        // again (below), never answered as done, and the answer says so.
+        KeyState::Lost(old) => {
+            log_line!(
+                "key {key}: bake {}'s asset is gone from the blob store; baking it again",
+                old.id
+            );
+            rebakes = Some(old.id);
+        }
         KeyState::Unknown => {}
     }
     let (jobs, params) = jobs;
@@ -190,7 +197,11 @@ pub(crate) async fn submit(
         .await?;
     state.announce(&bake);
     let location = bake_location(bake.id);
-    Ok((StatusCode::ACCEPTED, location, Json(view(bake, None))).into_response())
+    let view = BakeView {
+        rebakes,
+        ..view(bake, None)
+    };
+    Ok((StatusCode::ACCEPTED, location, Json(view)).into_response())
 }
 
 /// `Location` of a bake a submit answers with.
@@ -384,7 +395,7 @@ pub(crate) async fn patch(
     Ok(Json(view(bake, None)))
 }
 
-#[utoipa::path(post, path = "/v1/bakes/{id}/{action}", tag = "bakes", params(("id" = i64, Path, description = "Bake id"), ("action" = String, Path, description = "cancel, pause, resume or retry")),
+#[utoipa::path(post, path = "/v1/bakes/{id}/{action}", tag = "bakes", params(("id" = i64, Path, description = "Bake id"), ("action" = String, Path, description = "cancel, pause, resume or retry (a failed or cancelled bake, its unfinished jobs with fresh attempts and its completed jobs whose outputs the blob store lost run again; also a done bake that lost what it serves)")),
     security(("bearer" = ["submit"])),
     responses((status = 200, description = "Done", body = BakeView), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"), (status = 409, description = "Conflict: the state forbids it, or the lease is gone", body = Problem, content_type = "application/problem+json"), Refusals))]
 pub(crate) async fn control(
@@ -403,8 +414,23 @@ pub(crate) async fn control(
             )));
         }
     };
-    find(&state, id).await?;
-    let bake = state.store.control(id, action).await?;
+    let found = find(&state, id).await?;
+    let bake = if action == Action::Retry {
+        // Completed jobs whose outputs the blob store lost run again (a
+        // done bake that lost what it serves is queued again for them).
+        let jobs = state.store.jobs(id).await?;
+        let lost = crate::repair::lost_outputs(&*state.blobs, &jobs).await?;
+        let again = crate::repair::jobs_to_run_again(&found, &jobs, &lost);
+        if !again.is_empty() {
+            log_line!(
+                "bake {id}: the blob store lost outputs of {} completed job(s); retry runs them again",
+                again.len()
+            );
+        }
+        state.store.retry(id, &again).await?
+    } else {
+        state.store.control(id, action).await?
+    };
     state.announce(&bake);
     Ok(Json(view(bake, None)))
 }

@@ -60,6 +60,62 @@ pub enum StoreError {
     Json(serde_json::Error),
 }
 
+/// Whether `e` says the database could not be reached (down, restarting,
+/// its connections gone), not that a query failed.
+pub(crate) fn unreachable(e: &sqlx::Error) -> bool {
+    match e {
+        sqlx::Error::Io(_)
+        | sqlx::Error::PoolTimedOut
+        | sqlx::Error::PoolClosed
+        | sqlx::Error::WorkerCrashed
+        | sqlx::Error::Tls(_) => true,
+        // SQLSTATE classes 08 (connection exception) and 57P (operator
+        // intervention: shutting down, cannot connect now).
+        sqlx::Error::Database(d) => d
+            .code()
+            .is_some_and(|c| c.starts_with("08") || c.starts_with("57P")),
+        _ => false,
+    }
+}
+
+/// The database's outages as this process sees them, at each connection
+/// it asks for: the first one it gets after it could not says so in the
+/// log, with how long since the first request that could not
+/// (`the database answers again, after N s`), however the outage was
+/// noticed (a request's 503, the reaper, a heartbeat).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Outages(std::sync::Arc<std::sync::Mutex<Option<std::time::Instant>>>);
+
+impl Outages {
+    /// `result`, of an ask for a connection that began at `asked`, after
+    /// noting whether the database answered.
+    pub(crate) fn heard<T>(
+        &self,
+        asked: std::time::Instant,
+        result: std::result::Result<T, sqlx::Error>,
+    ) -> std::result::Result<T, sqlx::Error> {
+        let mut down = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        match &result {
+            Err(e) if unreachable(e) => {
+                down.get_or_insert(asked);
+            }
+            Err(_) => {}
+            Ok(_) => {
+                if let Some(since) = down.take() {
+                    log_line!(
+                        "the database answers again, after {:.0} s",
+                        since.elapsed().as_secs_f64()
+                    );
+                }
+            }
+        }
+        result
+    }
+}
+
 impl From<sqlx::Error> for StoreError {
     fn from(e: sqlx::Error) -> Self {
         Self::Database(e)
@@ -204,6 +260,11 @@ impl Default for QueuePolicy {
 pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     /// Records an upload; `false` when it was there already.
     async fn put_upload(&self, upload: &UploadRow) -> Result<bool>;
+    /// Every upload, oldest first.
+    async fn uploads(&self) -> Result<Vec<UploadRow>>;
+    /// Forgets an unfinished job's checkpoint (its blob is gone): its next
+    /// attempt starts over.
+    async fn forget_checkpoint(&self, job: i64) -> Result<()>;
     /// An upload by digest and kind (`character` or `clips`).
     async fn upload(&self, digest: &str, kind: &str) -> Result<Option<UploadRow>>;
     /// Creates a bake and its jobs; jobs without dependencies start
@@ -310,6 +371,13 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn reap(&self) -> Result<u64>;
     /// Cancels, pauses, resumes or retries a bake.
     async fn control(&self, bake: i64, action: Action) -> Result<BakeRow>;
+    /// Queues a bake again, as [`Action::Retry`] does for a failed or
+    /// cancelled one (its unfinished jobs with fresh attempts), with its
+    /// completed jobs `lost` run again: the blob store lost their outputs.
+    /// A done bake is queued again only for lost jobs. Their work counts
+    /// as reached, so the bake's progress does not move back; what the
+    /// bake published from them is forgotten until they publish it again.
+    async fn retry(&self, bake: i64, lost: &[i64]) -> Result<BakeRow>;
     /// Sets a bake's priority.
     async fn set_priority(&self, bake: i64, priority: i64) -> Result<BakeRow>;
     /// Records that `workers` are alive and waiting for a job, in one

@@ -26,6 +26,8 @@ pub type PgStore = SqlStore<Postgres>;
 #[derive(Debug, Clone)]
 pub struct Postgres {
     pool: PgPool,
+    /// Its outages, for the log.
+    outages: super::Outages,
 }
 
 impl PgStore {
@@ -56,7 +58,10 @@ impl PgStore {
         };
         sqlx::migrate!("migrations/postgres").run(&pool).await?;
         Ok(Self {
-            backend: Postgres { pool },
+            backend: Postgres {
+                pool,
+                outages: super::Outages::default(),
+            },
         })
     }
 }
@@ -73,7 +78,8 @@ impl Backend for Postgres {
     const SKIP_LOCKED: &'static str = " FOR UPDATE SKIP LOCKED";
 
     async fn begin(&self, durability: Durability) -> Result<Self::Tx> {
-        let mut tx = self.pool.begin().await?;
+        let asked = std::time::Instant::now();
+        let mut tx = self.outages.heard(asked, self.pool.begin().await)?;
         if durability == Durability::Queue {
             sqlx::query("SET LOCAL synchronous_commit TO OFF")
                 .execute(&mut *tx)
@@ -92,7 +98,8 @@ impl Backend for Postgres {
     }
 
     async fn read(&self) -> Result<Self::Read> {
-        Ok(self.pool.acquire().await?)
+        let asked = std::time::Instant::now();
+        Ok(self.outages.heard(asked, self.pool.acquire().await)?)
     }
 
     async fn wake(tx: &mut PgConnection) -> Result<()> {

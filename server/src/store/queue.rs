@@ -325,17 +325,22 @@ const JOB_SELECT: &str = "SELECT jobs.*, {deps} AS deps FROM jobs";
 const WORKER_IDLE: &str =
     "UPDATE workers SET state = 'idle', job_id = NULL, last_seen = {now} WHERE id = $1";
 
-/// The progress of bake `$1`'s running jobs, which a view and an event
-/// add to its finished jobs' work (`BakeRow::running_work`).
-const RUNNING_WORK: &str = "SELECT CAST(COALESCE(SUM(r.progress), 0) AS BIGINT) FROM jobs r WHERE r.bake_id = $1 AND r.state = 'running'";
+/// How far bake `$1`'s unfinished jobs got (the furthest attempt of
+/// each), which a view and an event add to its finished jobs' work
+/// (`BakeRow::running_work`), and what its running jobs are doing again
+/// (`BakeRow::redo_work`).
+const RUNNING_WORK: &str = "SELECT CAST(COALESCE(SUM(r.reached), 0) AS BIGINT) FROM jobs r WHERE r.bake_id = $1 AND r.state != 'completed'";
+const REDO_WORK: &str = "SELECT CAST(COALESCE(SUM(r.reached - r.progress), 0) AS BIGINT) FROM jobs r WHERE r.bake_id = $1 AND r.state = 'running' AND r.reached > r.progress";
 
-/// A bake's columns with [`RUNNING_WORK`], read in one statement (one
-/// snapshot: a completion cannot fall between the two numbers).
+/// A bake's columns with [`RUNNING_WORK`] and [`REDO_WORK`], read in one
+/// statement (one snapshot: a completion cannot fall between the
+/// numbers).
 fn bake_columns() -> &'static str {
     static COLUMNS: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
         format!(
-            "bakes.*, ({}) AS running_work",
-            RUNNING_WORK.replace("$1", "bakes.id")
+            "bakes.*, ({}) AS running_work, ({}) AS redo_work",
+            RUNNING_WORK.replace("$1", "bakes.id"),
+            REDO_WORK.replace("$1", "bakes.id")
         )
     });
     &COLUMNS
@@ -367,11 +372,14 @@ async fn bake_by_id<B: Backend>(c: &mut B::Conn, id: i64, lock: bool) -> Result<
     bake.ok_or_else(|| StoreError::NotFound(format!("bake {id}")))
 }
 
-/// `bake` with its running jobs' progress, for a row read or written
+/// `bake` with its unfinished jobs' progress, for a row read or written
 /// without it (a locked read, `RETURNING`).
 async fn with_running_work<B: Backend>(c: &mut B::Conn, mut bake: BakeRow) -> Result<BakeRow> {
-    let (running,): (i64,) = c.one(B::sql(RUNNING_WORK).bind(bake.id)).await?;
+    let (running, redo): (i64, i64) = c
+        .one(B::sql(&format!("SELECT ({RUNNING_WORK}), ({REDO_WORK})")).bind(bake.id))
+        .await?;
     bake.running_work = running;
+    bake.redo_work = redo;
     Ok(bake)
 }
 
@@ -697,25 +705,69 @@ async fn apply<B: Backend>(c: &mut B::Conn, b: &BakeRow, action: Action) -> Resu
             )
             .await?;
         }
-        Action::Retry => {
-            if !matches!(b.state, BakeState::Failed | BakeState::Cancelled) {
-                return refuse("only a failed or cancelled bake can be retried");
-            }
-            c.execute(
-                B::sql("UPDATE jobs SET state = 'blocked', attempts = 0, error = NULL, run_at = 0 WHERE bake_id = $1 AND state IN ('dead', 'cancelled', 'retryable', 'available')")
-                    .bind(bake),
-            )
-            .await?;
-            c.execute(B::sql("DELETE FROM worker_failures WHERE bake_id = $1").bind(bake))
-                .await?;
-            unblock::<B>(c, bake).await?;
-            c.execute(
-                B::sql("UPDATE bakes SET state = 'queued', error = NULL, finished_at = NULL, updated_at = {now} WHERE id = $1")
-                    .bind(bake),
-            )
-            .await?;
-        }
+        Action::Retry => requeue::<B>(c, b, &[]).await?,
     }
+    Ok(())
+}
+
+/// Queues bake `b` (its row held) again: its unfinished jobs with fresh
+/// attempts, and its completed jobs `lost` (whose outputs the blob store
+/// lost) run again, their outputs forgotten and their work counted as
+/// reached, so the bake's progress does not move back. A failed or
+/// cancelled bake, or a done one with jobs to run again.
+async fn requeue<B: Backend>(c: &mut B::Conn, b: &BakeRow, lost: &[i64]) -> Result<()> {
+    let bake = b.id;
+    let retryable = matches!(b.state, BakeState::Failed | BakeState::Cancelled)
+        || (b.state == BakeState::Done && !lost.is_empty());
+    if !retryable {
+        return Err(StoreError::Conflict(format!(
+            "bake {bake} is {}: only a failed or cancelled bake can be retried, or a done one whose outputs the blob store lost",
+            b.state.as_str()
+        )));
+    }
+    let (mut work, mut jobs) = (0i64, 0i64);
+    // What the bake publishes from a job run again is forgotten with it
+    // (the run publishes it again).
+    let mut forgotten: BTreeSet<String> = BTreeSet::new();
+    for &job in lost {
+        let row: Option<(i64, Option<String>)> = c
+            .optional(
+                B::sql("SELECT work, outputs FROM jobs WHERE id = $1 AND bake_id = $2 AND state = 'completed'")
+                    .bind(job)
+                    .bind(bake),
+            )
+            .await?;
+        let Some((w, outputs)) = row else { continue };
+        let outputs: Vec<super::OutputRef> =
+            serde_json::from_str(outputs.as_deref().unwrap_or("[]"))?;
+        forgotten.extend(outputs.into_iter().map(|o| o.digest));
+        c.execute(
+            B::sql("UPDATE jobs SET state = 'blocked', attempts = 0, error = NULL, run_at = 0, progress = 0, reached = work, outputs = NULL, finished_at = NULL, lease_token = NULL, lease_expires_at = NULL WHERE id = $1")
+                .bind(job),
+        )
+        .await?;
+        work += w;
+        jobs += 1;
+    }
+    let keep = |d: &Option<String>| d.clone().filter(|d| !forgotten.contains(d));
+    c.execute(
+        B::sql("UPDATE jobs SET state = 'blocked', attempts = 0, error = NULL, run_at = 0 WHERE bake_id = $1 AND state IN ('dead', 'cancelled', 'retryable', 'available')")
+            .bind(bake),
+    )
+    .await?;
+    c.execute(B::sql("DELETE FROM worker_failures WHERE bake_id = $1").bind(bake))
+        .await?;
+    unblock::<B>(c, bake).await?;
+    c.execute(
+        B::sql("UPDATE bakes SET state = 'queued', error = NULL, finished_at = NULL, done_work = done_work - $2, jobs_done = jobs_done - $3, asset = $4, report = $5, plot = $6, updated_at = {now} WHERE id = $1")
+            .bind(bake)
+            .bind(work)
+            .bind(jobs)
+            .bind(keep(&b.asset))
+            .bind(keep(&b.report))
+            .bind(keep(&b.plot)),
+    )
+    .await?;
     Ok(())
 }
 
@@ -734,6 +786,27 @@ impl<B: Backend> Store for SqlStore<B> {
                 )
                 .await?;
             Ok(done == 1)
+        })
+    }
+
+    async fn uploads(&self) -> Result<Vec<UploadRow>> {
+        let rows: Vec<RawUpload> = self
+            .backend
+            .read()
+            .await?
+            .all(B::sql("SELECT * FROM uploads ORDER BY created_at, digest"))
+            .await?;
+        rows.into_iter().map(RawUpload::cook).collect()
+    }
+
+    async fn forget_checkpoint(&self, job: i64) -> Result<()> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            c.execute(
+                B::sql("UPDATE jobs SET checkpoint_step = NULL, checkpoint_cursor = NULL, checkpoint_blob = NULL WHERE id = $1 AND state != 'completed'")
+                    .bind(job),
+            )
+            .await?;
+            Ok(())
         })
     }
 
@@ -1045,10 +1118,11 @@ impl<B: Backend> Store for SqlStore<B> {
             let progress = progress.clamp(0, j.work);
             c.execute(
                 B::sql(
-                    "UPDATE jobs SET lease_expires_at = {now} + $1, progress = $2 WHERE id = $3",
+                    "UPDATE jobs SET lease_expires_at = {now} + $1, progress = $2, reached = $3 WHERE id = $4",
                 )
                 .bind(policy.lease_ms)
                 .bind(progress)
+                .bind(progress.max(j.reached))
                 .bind(job),
             )
             .await?;
@@ -1099,7 +1173,7 @@ impl<B: Backend> Store for SqlStore<B> {
                 // same completion sent again.
                 let row: Option<(i64, i64, Option<String>)> = c
                     .optional(
-                        B::sql("UPDATE jobs SET state = 'completed', lease_expires_at = NULL, progress = work, outputs = $1, timings = $2, error = NULL, finished_at = {now} WHERE id = $3 AND lease_token = $4 AND state = 'running' RETURNING bake_id, work, worker")
+                        B::sql("UPDATE jobs SET state = 'completed', lease_expires_at = NULL, progress = work, reached = work, outputs = $1, timings = $2, error = NULL, finished_at = {now} WHERE id = $3 AND lease_token = $4 AND state = 'running' RETURNING bake_id, work, worker")
                             .bind(serde_json::to_string(&item.completion.outputs)?)
                             .bind(item.completion.timings.to_string())
                             .bind(item.job)
@@ -1276,6 +1350,15 @@ impl<B: Backend> Store for SqlStore<B> {
             // slip in between.
             let b = bake_by_id::<B>(c, bake, true).await?;
             apply::<B>(c, &b, action).await?;
+            B::wake(c).await?;
+            bake_by_id::<B>(c, bake, false).await
+        })
+    }
+
+    async fn retry(&self, bake: i64, lost: &[i64]) -> Result<BakeRow> {
+        in_tx!(self, Durability::Acknowledged, |c| {
+            let b = bake_by_id::<B>(c, bake, true).await?;
+            requeue::<B>(c, &b, lost).await?;
             B::wake(c).await?;
             bake_by_id::<B>(c, bake, false).await
         })

@@ -42,6 +42,9 @@ pub(super) struct RawBake {
     /// [`super::queue`]); else filled in after, or 0 where it is.
     #[sqlx(default)]
     running_work: i64,
+    /// Computed with `running_work`.
+    #[sqlx(default)]
+    redo_work: i64,
     jobs_total: i64,
     jobs_done: i64,
     asset: Option<String>,
@@ -67,6 +70,7 @@ impl RawBake {
             total_work: self.total_work,
             done_work: self.done_work,
             running_work: self.running_work,
+            redo_work: self.redo_work,
             jobs_total: self.jobs_total,
             jobs_done: self.jobs_done,
             asset: self.asset,
@@ -94,6 +98,7 @@ pub(super) struct RawJob {
     worker: Option<String>,
     pub(super) lease_expires_at: Option<i64>,
     progress: i64,
+    reached: i64,
     checkpoint_step: Option<String>,
     checkpoint_cursor: Option<i64>,
     checkpoint_blob: Option<String>,
@@ -127,6 +132,7 @@ impl RawJob {
             max_attempts: self.max_attempts,
             worker: self.worker,
             progress: self.progress,
+            reached: self.reached,
             checkpoint,
             outputs: self.outputs.map(|o| serde_json::from_str(&o)).transpose()?,
             error: self.error,

@@ -76,6 +76,7 @@ pub(crate) async fn run_all(store: &dyn Store) {
     stale_tokens_are_refused(store).await;
     failures_retry_then_kill_the_bake(store).await;
     cancel_pause_resume_retry(store).await;
+    progress_only_moves_forward_and_lost_outputs_run_again(store).await;
     a_worker_that_keeps_failing_a_bake_is_kept_off_it(store).await;
     tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store).await;
     a_stopped_worker_is_listed_so_at_once_and_holds_no_job_back(store).await;
@@ -846,6 +847,111 @@ async fn failures_retry_then_kill_the_bake(store: &dyn Store) {
     );
     let retried = store.control(b.id, Action::Retry).await.unwrap();
     assert_eq!(retried.state, BakeState::Queued);
+}
+
+/// A job leased again counts what it had reached (the bake's progress
+/// never moves back) and shows the work it does again as such; a done
+/// bake whose outputs the blob store lost is queued again with the jobs
+/// that made them, its progress kept, and publishes its asset again.
+async fn progress_only_moves_forward_and_lost_outputs_run_again(store: &dyn Store) {
+    let c = character(store).await;
+    let key = "9".repeat(64);
+    // Above every other case's bakes: its jobs are leased first.
+    let b = store
+        .create_bake(&NewBake {
+            priority: 100,
+            ..bake(&c, &key)
+        })
+        .await
+        .unwrap();
+    let p = policy();
+    let output = |name: &str, d: char| Completion {
+        outputs: vec![OutputRef {
+            name: name.into(),
+            digest: d.to_string().repeat(64),
+        }],
+        timings: json!({}),
+    };
+    let a = store.lease("w", &p).await.unwrap().unwrap();
+    assert_eq!((a.job.bake_id, a.job.index), (b.id, 0));
+    store.heartbeat(a.job.id, &a.token, 1, &p).await.unwrap();
+    // The attempt fails; what it reached still counts.
+    let failed = store
+        .fail(a.job.id, &a.token, "flaky", true, &p)
+        .await
+        .unwrap();
+    assert_eq!((failed.running_work, failed.redo_work), (1, 0));
+    assert_eq!(crate::state::progress_done(&failed), 1);
+    tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+    let again = store.lease("w", &p).await.unwrap().unwrap();
+    assert_eq!(again.job.id, a.job.id);
+    let row = store.bake(b.id).await.unwrap().unwrap();
+    assert_eq!((row.running_work, row.redo_work), (1, 1), "{row:?}");
+    let beat = store
+        .heartbeat(a.job.id, &again.token, 2, &p)
+        .await
+        .unwrap();
+    assert_eq!((beat.bake.running_work, beat.bake.redo_work), (2, 0));
+    let jobs = store.jobs(b.id).await.unwrap();
+    assert_eq!((jobs[0].progress, jobs[0].reached), (2, 2));
+    store
+        .complete(a.job.id, &again.token, &output("ao", 'a'))
+        .await
+        .unwrap();
+    let s2 = store.lease("w", &p).await.unwrap().unwrap();
+    store
+        .complete(s2.job.id, &s2.token, &output("ao", 'b'))
+        .await
+        .unwrap();
+    let fit = store.lease("w", &p).await.unwrap().unwrap();
+    let finished = store
+        .complete(fit.job.id, &fit.token, &output("asset", 'f'))
+        .await
+        .unwrap();
+    assert_eq!(finished.state, BakeState::Done);
+    assert_eq!(finished.asset.as_deref(), Some("f".repeat(64).as_str()));
+    // Nothing lost: a done bake is not queued again.
+    assert!(matches!(
+        store.retry(b.id, &[]).await,
+        Err(StoreError::Conflict(_))
+    ));
+    // The first sample's output and the asset lost: both run again, the
+    // second sample's is kept; the progress stays where it was and the
+    // lost asset is not published meanwhile.
+    let queued = store.retry(b.id, &[a.job.id, fit.job.id]).await.unwrap();
+    assert_eq!(queued.state, BakeState::Queued);
+    assert_eq!(
+        (queued.done_work, queued.jobs_done, queued.running_work),
+        (2, 1, 4)
+    );
+    assert_eq!(crate::state::progress_done(&queued), queued.total_work);
+    assert_eq!(queued.asset, None);
+    assert!(
+        store.bake_for_key(&key).await.unwrap().unwrap().state != BakeState::Done,
+        "never a cache hit while lost"
+    );
+    let jobs = store.jobs(b.id).await.unwrap();
+    let states: Vec<JobState> = jobs.iter().map(|j| j.state).collect();
+    assert_eq!(
+        states,
+        [JobState::Available, JobState::Completed, JobState::Blocked]
+    );
+    let redo = store.lease("w", &p).await.unwrap().unwrap();
+    assert_eq!(redo.job.id, a.job.id);
+    assert_eq!(store.bake(b.id).await.unwrap().unwrap().redo_work, 2);
+    store
+        .complete(redo.job.id, &redo.token, &output("ao", 'a'))
+        .await
+        .unwrap();
+    let refit = store.lease("w", &p).await.unwrap().unwrap();
+    assert_eq!(refit.job.id, fit.job.id);
+    let again = store
+        .complete(refit.job.id, &refit.token, &output("asset", 'f'))
+        .await
+        .unwrap();
+    assert_eq!(again.state, BakeState::Done);
+    assert_eq!((again.done_work, again.jobs_done), (6, 3));
+    assert_eq!(again.asset.as_deref(), Some("f".repeat(64).as_str()));
 }
 
 async fn cancel_pause_resume_retry(store: &dyn Store) {

@@ -8,7 +8,7 @@ use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
 use rand::RngExt as _;
 use serde_json::Value;
 
-use crate::util::{Follower, QUICK, asset, local_bake, submit, upload};
+use crate::util::{Follower, QUICK, asset, follow_events, local_bake, submit, upload};
 
 fn jobs(env: &TestEnv, id: i64) -> Vec<Value> {
     let (_, b) = env
@@ -46,6 +46,11 @@ fn workers_killed_at_random_moments_change_no_byte() {
     assert_eq!(status, 202, "{b}");
     let id = b["id"].as_i64().unwrap();
     assert!(jobs(&env, id).len() >= 50);
+    // Its events, followed throughout.
+    let events = {
+        let url = env.url.clone();
+        std::thread::spawn(move || follow_events(&url, id, || {}))
+    };
     // One worker aborts right after its first checkpoint; the others are
     // killed at random.
     env.start_worker(&[("AOBAKE_FAULT", "after_checkpoint")]);
@@ -53,11 +58,17 @@ fn workers_killed_at_random_moments_change_no_byte() {
     let mut rng = rand::rng();
     let mut kills = 0;
     let started = Instant::now();
+    let mut seen = 0;
     loop {
         std::thread::sleep(Duration::from_millis(rng.random_range(150..600)));
         let (_, now) = env
             .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
             .unwrap();
+        // Jobs leased again count what they had done: the bar never moves
+        // back.
+        let done = now["progress"]["done"].as_i64().unwrap();
+        assert!(done >= seen, "progress went back from {seen} to {done}");
+        seen = done;
         if now["state"] != "queued" && now["state"] != "running" {
             break;
         }
@@ -73,6 +84,21 @@ fn workers_killed_at_random_moments_change_no_byte() {
     let jobs = jobs(&env, id);
     assert_counted_once(&bake, &jobs);
     assert!(kills >= 5, "only {kills} kills");
+    // Nor do the events, however many jobs were leased again.
+    let events = events.join().unwrap();
+    let dones: Vec<i64> = events.iter().map(|e| e["done"].as_i64().unwrap()).collect();
+    assert!(
+        dones.windows(2).all(|w| w[0] <= w[1]),
+        "the events' progress went back: {dones:?}"
+    );
+    let redone = events
+        .iter()
+        .filter(|e| e["redo"].as_i64() > Some(0))
+        .count();
+    eprintln!(
+        "{} events, {redone} with work being done again",
+        events.len()
+    );
     let logs = env.worker_logs();
     assert!(logs.contains("fault injected after checkpoint"), "{logs}");
     // The aborted job resumed from its checkpoint: some sample job took
@@ -362,8 +388,21 @@ fn a_postgres_restart_mid_bake_answers_503_then_loses_nothing() {
     );
     // And when it was over, as the server's log does.
     assert!(logs.contains(" answers again after "), "{logs}");
+    // Each says how long the whole outage was, as it saw it: at least
+    // the 3 s it was down after this test's own 503s.
+    let seconds = |text: &str, said: &str| -> Vec<u64> {
+        text.match_indices(said)
+            .filter_map(|(i, _)| {
+                let rest = &text[i + said.len()..];
+                rest[..rest.find(' ')?].parse().ok()
+            })
+            .collect()
+    };
     let log = env.server_log();
-    assert!(log.contains("the database answers again, after "), "{log}");
+    let server = seconds(&log, "the database answers again, after ");
+    assert!(server.iter().any(|&s| s >= 3), "{server:?}\n{log}");
+    let clients = seconds(&logs, " answers again after ");
+    assert!(clients.iter().any(|&s| s >= 3), "{clients:?}\n{logs}");
     assert!(asset(&env, &bake) == local_bake(env.dir.path(), &cm, 64));
 }
 

@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use aobake_e2e::{ADMIN, Options, TestEnv};
+use aobake_e2e::{ADMIN, Options, TestEnv, TestS3};
 use serde_json::json;
 
 use crate::util::{aobake_bake, asset, upload};
@@ -114,6 +114,7 @@ fn a_lost_asset_is_not_a_cache_hit_and_is_baked_again() {
     assert_eq!(status, 202, "{again}");
     let second = again["id"].as_i64().unwrap();
     assert_ne!(second, id);
+    assert_eq!(again["rebakes"].as_i64(), Some(id), "the answer says so");
     // Asked again while it runs: the same new bake, not a third.
     let (_, same) = submit();
     assert_eq!(same["id"].as_i64(), Some(second), "{same}");
@@ -128,5 +129,124 @@ fn a_lost_asset_is_not_a_cache_hit_and_is_baked_again() {
         aobake_core::digest::sha256_hex(&bytes),
         lost,
         "the same request bakes the same bytes"
+    );
+}
+
+/// `aobake blobs verify` on the blob store a server runs on (`blobs`:
+/// none for the data folder's): a done bake, then its asset deleted, its
+/// report's bytes changed and a sample job's output deleted behind the
+/// server's back (`lose`, `corrupt`). Verify lists all three and exits 1;
+/// `--repair` queues the bake again, which bakes the same bytes; verify
+/// then finds nothing.
+fn blobs_verify_finds_and_repairs(
+    env: &mut TestEnv,
+    blobs: Option<&str>,
+    lose: &dyn Fn(&TestEnv, &str),
+    corrupt: &dyn Fn(&TestEnv, &str),
+) {
+    env.start_worker(&[]);
+    let digest = upload(env, &crates());
+    let request = json!({"character": digest, "method": "static-average",
+        "params": {"poses": 4, "samples": 16, "eval_poses": 2}});
+    let (status, first) = env
+        .request("POST", "/v1/bakes", ADMIN, Some(request))
+        .unwrap();
+    assert_eq!(status, 202, "{first}");
+    let id = first["id"].as_i64().unwrap();
+    let done = env.wait_bake(id, Duration::from_secs(120));
+    let (asset_digest, report) = (
+        done["asset"].as_str().unwrap().to_owned(),
+        done["report"].as_str().unwrap().to_owned(),
+    );
+    let (_, view) = env
+        .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+        .unwrap();
+    let sample = view["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|j| j["kind"] == "sample")
+        .expect("a sample job")
+        .clone();
+    let sampled = sample["outputs"][0]["digest"].as_str().unwrap().to_owned();
+    let data = env.data();
+    let data = data.to_str().unwrap();
+    let verify = |repair: bool| {
+        let mut args = vec!["blobs", "verify", "--data", data];
+        if let Some(url) = blobs {
+            args.extend(["--blobs", url]);
+        }
+        if repair {
+            args.push("--repair");
+        }
+        let out = env.aobake(&args);
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, text, err) = verify(false);
+    assert_eq!(code, Some(0), "{text}{err}");
+    assert!(text.contains(", 0 damaged"), "{text}");
+    lose(env, &asset_digest);
+    lose(env, &sampled);
+    corrupt(env, &report);
+    let (code, text, err) = verify(false);
+    assert_eq!(code, Some(1), "{text}{err}");
+    for line in [
+        format!("missing  {asset_digest}  bake {id} asset: `--repair` queues the bake again"),
+        format!("corrupt  {report}  bake {id} report: `--repair` queues the bake again"),
+        format!("missing  {sampled}  job {} (sample) output ", sample["id"]),
+    ] {
+        assert!(text.contains(&line), "{line:?} in\n{text}");
+    }
+    assert!(err.contains("--repair deletes what is corrupt"), "{err}");
+    let (code, text, err) = verify(true);
+    assert_eq!(code, Some(0), "{text}{err}");
+    assert!(
+        text.contains(&format!(
+            "corrupt  {report}  bake {id} report: deleted; the bake is queued again"
+        )),
+        "{text}"
+    );
+    assert!(
+        text.contains(&format!("bakes queued again: {id}")),
+        "{text}"
+    );
+    let redone = env.wait_bake(id, Duration::from_secs(120));
+    assert_eq!(redone["state"], "done", "{redone}");
+    assert_eq!(redone["report"].as_str(), Some(report.as_str()));
+    let bytes = asset(env, &redone);
+    assert_eq!(aobake_core::digest::sha256_hex(&bytes), asset_digest);
+    let (code, text, err) = verify(false);
+    assert_eq!(code, Some(0), "{text}{err}");
+    assert!(text.contains(", 0 damaged"), "{text}");
+}
+
+#[test]
+fn blobs_verify_finds_and_repairs_lost_and_corrupt_blobs_on_disk() {
+    let mut env = TestEnv::start(Options::default());
+    let file = |env: &TestEnv, d: &str| env.data().join("blobs").join(&d[..2]).join(d);
+    blobs_verify_finds_and_repairs(
+        &mut env,
+        None,
+        &|env, d| std::fs::remove_file(file(env, d)).unwrap(),
+        &|env, d| std::fs::write(file(env, d), b"not the report").unwrap(),
+    );
+}
+
+#[test]
+fn blobs_verify_finds_and_repairs_lost_and_corrupt_blobs_on_s3() {
+    let s3 = TestS3::start();
+    let mut env = TestEnv::start(Options {
+        blobs: Some(s3.url.clone()),
+        ..Options::default()
+    });
+    blobs_verify_finds_and_repairs(
+        &mut env,
+        Some(&s3.url),
+        &|_, d| s3.delete_blob(d),
+        &|_, d| s3.overwrite_blob(d, b"not the report"),
     );
 }

@@ -6,7 +6,9 @@ use serde_json::json;
 
 use aobake_e2e::{ADMIN, Options, TestEnv, TestPostgres, TestS3, character};
 
-use crate::util::{Follower, QUICK, asset, local_bake, quick_params, submit, upload};
+use crate::util::{
+    Follower, QUICK, asset, follow_events, local_bake, quick_params, submit, upload,
+};
 
 #[test]
 fn a_service_bake_is_byte_identical_to_aobake_bake_and_cached_by_key() {
@@ -787,41 +789,6 @@ fn progress_arrives_as_server_sent_events() {
         progress.last(),
         events.last().unwrap()["total"].as_i64().as_ref()
     );
-}
-
-/// Bake `id`'s server-sent events from the server at `url`, from its
-/// current state (`start` runs once the stream is open) to `done`.
-fn follow_events(url: &str, id: i64, start: impl FnOnce()) -> Vec<serde_json::Value> {
-    use std::io::BufRead as _;
-    let agent: ureq::Agent = ureq::Agent::config_builder()
-        .timeout_global(Some(Duration::from_secs(120)))
-        .build()
-        .into();
-    let mut res = agent
-        .get(format!("{url}/v1/bakes/{id}/events"))
-        .header("authorization", format!("Bearer {ADMIN}"))
-        .call()
-        .unwrap();
-    assert_eq!(
-        res.headers()["content-type"].to_str().unwrap(),
-        "text/event-stream"
-    );
-    start();
-    let reader = std::io::BufReader::new(res.body_mut().as_reader());
-    let mut events = Vec::new();
-    for line in reader.lines() {
-        let line = line.unwrap();
-        if let Some(data) = line.strip_prefix("data: ") {
-            let e: serde_json::Value = serde_json::from_str(data).unwrap();
-            assert_eq!(e["id"], id);
-            let done = e["state"] == "done";
-            events.push(e);
-            if done {
-                break;
-            }
-        }
-    }
-    events
 }
 
 #[test]

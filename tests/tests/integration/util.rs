@@ -284,3 +284,38 @@ pub(crate) fn exr_channel(
         .values_as_f32()
         .collect()
 }
+
+/// Bake `id`'s server-sent events from the server at `url`, from its
+/// current state (`start` runs once the stream is open) to `done`.
+pub(crate) fn follow_events(url: &str, id: i64, start: impl FnOnce()) -> Vec<serde_json::Value> {
+    use std::io::BufRead as _;
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .timeout_global(Some(std::time::Duration::from_secs(600)))
+        .build()
+        .into();
+    let mut res = agent
+        .get(format!("{url}/v1/bakes/{id}/events"))
+        .header("authorization", format!("Bearer {ADMIN}"))
+        .call()
+        .unwrap();
+    assert_eq!(
+        res.headers()["content-type"].to_str().unwrap(),
+        "text/event-stream"
+    );
+    start();
+    let reader = std::io::BufReader::new(res.body_mut().as_reader());
+    let mut events = Vec::new();
+    for line in reader.lines() {
+        let line = line.unwrap();
+        if let Some(data) = line.strip_prefix("data: ") {
+            let e: serde_json::Value = serde_json::from_str(data).unwrap();
+            assert_eq!(e["id"], id);
+            let done = e["state"] == "done";
+            events.push(e);
+            if done {
+                break;
+            }
+        }
+    }
+    events
+}

@@ -217,9 +217,12 @@ function progressBar(done, total, state) {
   return bar;
 }
 
-// Units done of all, and the share as the bar shows it.
-const countText = (done, total) =>
-  `${done}/${total} (${total > 0 ? Math.floor((100 * done) / total) : 0}%)`;
+// Units done of all, and the share as the bar shows it; work being done
+// again (jobs leased again after a lost lease or a lost output) is counted
+// once, and said.
+const countText = (done, total, redo = 0) =>
+  `${done}/${total} (${total > 0 ? Math.floor((100 * done) / total) : 0}%)` +
+  (redo > 0 ? `, ${redo} being done again` : "");
 
 function setBar(bar, done, total, state) {
   const pct = total > 0 ? Math.min(100, (100 * done) / total) : 0;
@@ -311,7 +314,7 @@ async function bakesPage(signal) {
   for (const b of bakes) {
     const bar = progressBar(b.progress.done, b.progress.total, b.state);
     const state = h("td", {}, badge(b.state));
-    const count = h("td", { class: "num mono" }, countText(b.progress.done, b.progress.total));
+    const count = h("td", { class: "num mono" }, countText(b.progress.done, b.progress.total, b.progress.redo));
     rows.set(b.id, { bar, state, count });
     tbody.append(h("tr", { "data-bake": b.id },
       h("td", {}, h("a", { href: `#/bakes/${b.id}` }, `#${b.id}`)),
@@ -342,7 +345,7 @@ async function bakesPage(signal) {
     if (!row) return reload(); // a new bake
     setBar(row.bar, e.done, e.total, e.state);
     fill(row.state, badge(e.state));
-    row.count.textContent = countText(e.done, e.total);
+    row.count.textContent = countText(e.done, e.total, e.redo);
   });
 }
 
@@ -735,7 +738,7 @@ async function bakePage(signal, id) {
   let bake = await json(`/v1/bakes/${id}`);
   const bar = progressBar(bake.progress.done, bake.progress.total, bake.state);
   const state = h("span", { id: "state" }, ...stateBadge(bake));
-  const count = h("span", { class: "mono", id: "count" }, countText(bake.progress.done, bake.progress.total));
+  const count = h("span", { class: "mono", id: "count" }, countText(bake.progress.done, bake.progress.total, bake.progress.redo));
   // Jobs: a summary by stage with the time left, the running and failed
   // jobs, and every job folded away (a vertex bake has hundreds).
   const stages = h("div");
@@ -886,7 +889,7 @@ async function bakePage(signal, id) {
     bake = await json(`/v1/bakes/${id}`);
     setBar(bar, bake.progress.done, bake.progress.total, bake.state);
     fill(state, ...stateBadge(bake));
-    count.textContent = countText(bake.progress.done, bake.progress.total);
+    count.textContent = countText(bake.progress.done, bake.progress.total, bake.progress.redo);
     drawJobs();
     drawQueue().catch(() => {});
     drawDetails();
@@ -930,7 +933,7 @@ async function bakePage(signal, id) {
     const e = JSON.parse(data);
     setBar(bar, e.done, e.total, e.state);
     fill(state, badge(e.state));
-    count.textContent = countText(e.done, e.total);
+    count.textContent = countText(e.done, e.total, e.redo);
     later();
   });
 }
