@@ -61,11 +61,21 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         for f in &verified.findings {
             println!("{:<8} {}  {}: {}", f.damage, f.digest, f.named_by, f.action);
         }
+        // A blob several name (an output that is also the asset) is one.
+        let damaged: std::collections::BTreeSet<&str> = verified
+            .findings
+            .iter()
+            .map(|f| f.digest.as_str())
+            .collect();
         println!(
-            "{} blobs read ({:.1} MB), {} damaged{}",
+            "{} blobs read ({:.1} MB), {} damaged{}{}",
             verified.blobs,
             verified.bytes as f64 / 1e6,
-            verified.findings.len(),
+            damaged.len(),
+            match verified.findings.len() {
+                n if n > damaged.len() => format!(" (named {n} times)"),
+                _ => String::new(),
+            },
             match verified.requeued.as_slice() {
                 [] => String::new(),
                 ids => format!(
@@ -78,12 +88,18 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             }
         );
     }
-    let open = verified.findings.iter().filter(|f| f.open).count();
+    let open: std::collections::BTreeSet<&str> = verified
+        .findings
+        .iter()
+        .filter(|f| f.open)
+        .map(|f| f.digest.as_str())
+        .collect();
+    let open = open.len();
     if open > 0 {
         return Err(super::client::Exit {
             code: super::exit::FAILED,
             message: format!(
-                "error: {open} of them need more than this run did ({})",
+                "error: {open} damaged blob(s) need more than this run did ({})",
                 if a.repair {
                     "lost uploads: submit their files again"
                 } else {

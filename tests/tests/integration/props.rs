@@ -6,7 +6,7 @@
 use std::time::Duration;
 
 use aobake_e2e::{ADMIN, Options, TestEnv, TestS3};
-use serde_json::json;
+use serde_json::{Value, json};
 
 use crate::util::{aobake_bake, asset, upload};
 
@@ -129,6 +129,44 @@ fn a_lost_asset_is_not_a_cache_hit_and_is_baked_again() {
         aobake_core::digest::sha256_hex(&bytes),
         lost,
         "the same request bakes the same bytes"
+    );
+    // Lost again: `aobake retry` queues the done bake again, running only
+    // the jobs that make what it lost.
+    let finished = |id: i64| -> Vec<(String, Value)> {
+        let (_, view) = env
+            .request("GET", &format!("/v1/bakes/{id}"), ADMIN, None)
+            .unwrap();
+        view["jobs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|j| {
+                (
+                    j["kind"].as_str().unwrap().to_owned(),
+                    j["finished_at"].clone(),
+                )
+            })
+            .collect()
+    };
+    let before = finished(second);
+    std::fs::remove_file(&file).unwrap();
+    let out = env.aobake(&["retry", &second.to_string()]);
+    assert!(out.status.success(), "{out:?}");
+    let retried = env.wait_bake(second, Duration::from_secs(120));
+    assert_eq!(retried["state"], "done", "{retried}");
+    assert_eq!(retried["asset"].as_str(), Some(lost.as_str()));
+    assert!(file.exists(), "the asset stored again");
+    let after = finished(second);
+    let ran: Vec<&str> = before
+        .iter()
+        .zip(&after)
+        .filter(|(b, a)| b.1 != a.1)
+        .map(|(b, _)| b.0.as_str())
+        .collect();
+    assert!(ran.contains(&"assemble"), "{ran:?}");
+    assert!(
+        !ran.contains(&"sample"),
+        "the samples it held were kept: {ran:?}"
     );
 }
 
