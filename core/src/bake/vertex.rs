@@ -785,6 +785,21 @@ pub struct UnseenClips {
 }
 
 impl UnseenClips {
+    /// The fold the model did worst on against the static average (the
+    /// first on a tie): what a studio's next clip risks, shown first.
+    pub fn worst(&self) -> Option<&UnseenFold> {
+        self.folds
+            .iter()
+            .min_by(|a, b| a.errors.psnr_gain_db.total_cmp(&b.errors.psnr_gain_db))
+    }
+
+    /// The folds, the worst first (by gain over the static average).
+    pub fn worst_first(&self) -> Vec<&UnseenFold> {
+        let mut folds: Vec<&UnseenFold> = self.folds.iter().collect();
+        folds.sort_by(|a, b| a.errors.psnr_gain_db.total_cmp(&b.errors.psnr_gain_db));
+        folds
+    }
+
     /// Summarises folds.
     pub fn of(folds: Vec<UnseenFold>) -> Self {
         let n = folds.len().max(1) as f64;
@@ -1039,6 +1054,34 @@ pub fn psnr_plot_png(report: &Report) -> Result<Vec<u8>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_worst_left_out_clip_comes_first() {
+        use crate::asset::metrics::{Errors, FrameError};
+        // A fold whose model is off by `model` and the static average by
+        // 0.1 on one vertex of one frame.
+        let fold = |clip: &str, model: f32| {
+            let errors = |e: f32| Errors::of(&[FrameError::of(&[0.5 + e], &[0.5])]);
+            UnseenFold {
+                clip: clip.into(),
+                reference_poses: 1,
+                rows: None,
+                basis: None,
+                errors: Comparison::new(errors(model), errors(0.1)),
+                stills: Vec::new(),
+            }
+        };
+        let u = UnseenClips::of(vec![
+            fold("walk", 0.02),
+            fold("wave", 0.2),
+            fold("run", 0.05),
+        ]);
+        assert_eq!(u.worst().unwrap().clip, "wave");
+        assert!(u.worst().unwrap().errors.psnr_gain_db < 0.0);
+        assert_eq!(u.worst().unwrap().errors.psnr_gain_db, u.min_psnr_gain_db);
+        let order: Vec<&str> = u.worst_first().iter().map(|f| f.clip.as_str()).collect();
+        assert_eq!(order, ["wave", "run", "walk"]);
+    }
 
     #[test]
     fn noise_of_one_estimate_is_the_difference_over_root_two() {

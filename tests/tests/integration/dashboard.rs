@@ -980,19 +980,47 @@ fn the_dashboard_follows_a_bake_live_and_shows_its_results() {
         let rows = wait_for(
             &c,
             "the unseen clips",
-            "document.querySelector('#unseen') && [...document.querySelectorAll('#report tbody tr')].map(r => r.cells[0].textContent)",
+            "document.querySelector('#unseen') && [...document.querySelectorAll('#report tbody tr')].map(r => [r.cells[0].textContent, parseFloat(r.cells[8].textContent)])",
             Duration::from_secs(30),
         )
         .await;
+        let rows = rows.as_array().unwrap();
+        let names: Vec<&str> = rows.iter().map(|r| r[0].as_str().unwrap()).collect();
+        let mut folds = names[..3].to_vec();
+        folds.sort_unstable();
         assert_eq!(
-            rows,
-            json!([
+            folds,
+            [
+                "unseen clip Run (refitted without it)",
                 "unseen clip Survey (refitted without it)",
                 "unseen clip Walk (refitted without it)",
-                "unseen clip Run (refitted without it)",
+            ],
+            "{rows:?}"
+        );
+        assert_eq!(
+            names[3..],
+            [
                 "frames of the training clips, fresh rays",
                 "held-out random poses"
-            ])
+            ]
+        );
+        // The worst left-out clip first, by its gain over the static
+        // average, and the headline names it.
+        let gains: Vec<f64> = rows[..3].iter().map(|r| r[1].as_f64().unwrap()).collect();
+        assert!(gains.windows(2).all(|w| w[0] <= w[1]), "{rows:?}");
+        let gain = eval(
+            &c,
+            "return document.querySelector('#headline-gain').textContent",
+        )
+        .await;
+        let worst = names[0]
+            .trim_start_matches("unseen clip ")
+            .trim_end_matches(" (refitted without it)");
+        assert!(
+            gain.as_str().unwrap().contains(&format!(
+                "on {worst}, the clip it never saw that it does worst on"
+            )),
+            "{gain}"
         );
         let note = eval(&c, "return document.querySelector('#unseen').textContent").await;
         assert!(note.as_str().unwrap().contains("3 folds"), "{note}");
