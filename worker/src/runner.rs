@@ -717,7 +717,16 @@ fn execute(
         for o in d.outputs.iter().filter(|o| spec.reads(&o.name)) {
             let bytes = patience
                 .call(|| client.get_blob(&o.digest))
-                .map_err(|e| JobError::Failed(format!("cannot fetch {}: {e}", o.name)))?;
+                .map_err(|e| match e.status() {
+                    // Stored when its job completed, gone since (an emptied
+                    // bucket, an expired object): every attempt would fail
+                    // alike, so the bake fails now, saying how to go on.
+                    Some(404) => JobError::Invalid(format!(
+                        "input {} ({}) is gone from the blob store: `aobake retry {}` runs the job that made it again",
+                        o.name, o.digest, lease.job.bake_id
+                    )),
+                    _ => JobError::Failed(format!("cannot fetch {}: {e}", o.name)),
+                })?;
             out.outputs.push(Output {
                 name: o.name.clone(),
                 bytes,

@@ -819,3 +819,48 @@ fn a_completion_whose_answer_was_lost_is_answered_again_and_counted_once() {
     assert!(!logs.contains("completion refused"), "{logs}");
     assert_eq!(done["jobs_done"], done["jobs_total"], "{done}");
 }
+
+/// A bake in flight whose finished jobs' outputs vanish from the blob
+/// store (an emptied bucket, an expired object): the first job that reads
+/// one fails the bake at once, without burning attempts, saying how to go
+/// on; `aobake retry` then runs the lost jobs again, and the bake ends
+/// with the same bytes as `aobake bake`.
+#[test]
+fn a_bake_whose_inputs_vanish_mid_flight_fails_at_once_and_retry_finishes_it() {
+    let mut env = TestEnv::start(Options {
+        job_rays: Some(0),
+        ..Options::default()
+    });
+    let cm = character("CesiumMan");
+    let digest = upload(&env, &cm);
+    let (status, b) = submit(&env, &digest, 64);
+    assert_eq!(status, 202, "{b}");
+    let id = b["id"].as_i64().unwrap();
+    env.start_worker(&[]);
+    env.wait_jobs_done(id, 1, Duration::from_secs(120));
+    // What the jobs finished so far stored, deleted behind the server's
+    // back.
+    let mut deleted = 0;
+    for j in jobs(&env, id).iter().filter(|j| j["state"] == "completed") {
+        for o in j["outputs"].as_array().unwrap() {
+            let d = o["digest"].as_str().unwrap();
+            let file = env.data().join("blobs").join(&d[..2]).join(d);
+            deleted += usize::from(std::fs::remove_file(file).is_ok());
+        }
+    }
+    assert!(deleted > 0);
+    let failed = env.wait_bake(id, Duration::from_secs(240));
+    assert_eq!(failed["state"], "failed", "{failed}");
+    let error = failed["error"].as_str().unwrap_or_default();
+    assert!(
+        error.contains(&format!(
+            "is gone from the blob store: `aobake retry {id}` runs the job that made it again"
+        )) && error.contains("after 1 attempt"),
+        "{error}"
+    );
+    let out = env.aobake(&["retry", &id.to_string()]);
+    assert!(out.status.success(), "{out:?}");
+    let done = env.wait_bake(id, Duration::from_secs(240));
+    assert_eq!(done["state"], "done", "{done}");
+    assert!(asset(&env, &done) == local_bake(env.dir.path(), &cm, 64));
+}
