@@ -32,6 +32,23 @@ impl AoBlock {
         }
     }
 
+    /// [`AoBlock::select`] of only the columns `columns`: a block as wide
+    /// as the range (what a fit a chunk of columns at a time copies, not
+    /// the whole width).
+    pub fn select_columns(
+        &self,
+        rows: impl IntoIterator<Item = usize>,
+        columns: std::ops::Range<usize>,
+    ) -> Self {
+        Self {
+            vertices: columns.len(),
+            values: rows
+                .into_iter()
+                .flat_map(|r| self.row(r)[columns.clone()].iter().copied())
+                .collect(),
+        }
+    }
+
     /// Number of poses.
     pub fn poses(&self) -> usize {
         self.values.len().checked_div(self.vertices).unwrap_or(0)

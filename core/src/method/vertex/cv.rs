@@ -302,42 +302,115 @@ pub fn sse_by_clips<M: Send + Sync>(
     fit: impl Fn(&[usize]) -> Vec<Option<M>> + Sync,
     predict: impl Fn(&M, usize) -> Vec<f32> + Sync,
 ) -> Option<ClipErrors> {
+    let columns = Columns {
+        count: ao.vertices,
+        chunk: ao.vertices.max(1),
+    };
+    sse_by_clips_in_columns(
+        sources,
+        |r| ao.row(r),
+        columns,
+        candidates,
+        |train, _| fit(train),
+        |model, r, _| predict(model, r),
+    )
+}
+
+/// How many columns (vertices, texels) a block has, and how many of them
+/// [`sse_by_clips_in_columns`] fits and scores at a time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Columns {
+    /// Columns in all.
+    pub count: usize,
+    /// Columns fitted and scored at a time (at least 1).
+    pub chunk: usize,
+}
+
+impl Columns {
+    /// The chunks, in order.
+    fn chunks(self) -> impl Iterator<Item = std::ops::Range<usize>> {
+        let chunk = self.chunk.max(1);
+        (0..self.count)
+            .step_by(chunk)
+            .map(move |start| start..(start + chunk).min(self.count))
+    }
+}
+
+/// [`sse_by_clips`] a chunk of columns at a time, so that no group's
+/// candidate models over every column are held at once: for each group
+/// and each chunk `cols` of `columns`, `fit(training rows, cols)` gives
+/// one model per candidate over those columns, scored by `predict(model,
+/// row, cols)` (the chunk's predictions) against `truth(row)[cols]`. A
+/// row is an index into `sources`; `truth(row)` is all its columns. Each
+/// column's errors and each frame's running sum over the columns are
+/// added in the same order as in one chunk, so the result is the same
+/// bits whatever the chunk (and on any number of threads).
+pub fn sse_by_clips_in_columns<'a, M: Send + Sync>(
+    sources: &[Source],
+    truth: impl Fn(usize) -> &'a [f32] + Sync,
+    columns: Columns,
+    candidates: usize,
+    fit: impl Fn(&[usize], std::ops::Range<usize>) -> Vec<Option<M>> + Sync,
+    predict: impl Fn(&M, usize, std::ops::Range<usize>) -> Vec<f32> + Sync,
+) -> Option<ClipErrors> {
     let (folds, groups) = clip_folds(sources)?;
     if candidates == 0 {
         return None;
     }
+    let v = columns.count;
     // Each group is fitted and scored on its own thread, its sums started
     // from zero; the groups are then added in their order, so the result
     // is the same bits on any number of threads.
     let per_group: Vec<(Vec<Vec<f64>>, Vec<f64>)> = groups
         .par_iter()
         .map(|(train, test)| {
-            let models = fit(train);
-            // Each candidate scored on its own thread, its rows in order.
-            let scored: Vec<(Vec<f64>, f64)> = (0..candidates)
-                .into_par_iter()
-                .map(|k| {
-                    let Some(model) = models.get(k).and_then(Option::as_ref) else {
-                        return (vec![f64::INFINITY; ao.vertices], f64::NEG_INFINITY);
-                    };
-                    let mut e = vec![0.0f64; ao.vertices];
-                    let mut frames = 0.0;
-                    for &r in test {
-                        let mut frame = 0.0;
-                        for ((x, &a), &b) in e.iter_mut().zip(&predict(model, r)).zip(ao.row(r)) {
-                            let d = (f64::from(a) - f64::from(b)).powi(2);
-                            *x += d;
-                            frame += d;
-                        }
-                        frames += crate::asset::metrics::psnr(frame / ao.vertices.max(1) as f64);
-                    }
-                    (e, frames / test.len() as f64)
-                })
+            // Per candidate: its errors per column, each test frame's
+            // running sum over the columns, and whether it could be
+            // fitted on every chunk.
+            let mut sums: Vec<(Vec<f64>, Vec<f64>, bool)> = (0..candidates)
+                .map(|_| (vec![0.0f64; v], vec![0.0f64; test.len()], true))
                 .collect();
-            scored.into_iter().unzip::<_, _, Vec<_>, Vec<_>>()
+            for cols in columns.chunks() {
+                let models = fit(train, cols.clone());
+                // Each candidate scored on its own thread, its rows in order.
+                sums.par_iter_mut()
+                    .enumerate()
+                    .for_each(|(k, (e, frames, fitted))| {
+                        let Some(model) = models.get(k).and_then(Option::as_ref) else {
+                            *fitted = false;
+                            return;
+                        };
+                        if !*fitted {
+                            return;
+                        }
+                        let e = &mut e[cols.clone()];
+                        for (frame, &r) in frames.iter_mut().zip(test) {
+                            let predicted = predict(model, r, cols.clone());
+                            for ((x, &a), &b) in
+                                e.iter_mut().zip(&predicted).zip(&truth(r)[cols.clone()])
+                            {
+                                let d = (f64::from(a) - f64::from(b)).powi(2);
+                                *x += d;
+                                *frame += d;
+                            }
+                        }
+                    });
+            }
+            sums.into_iter()
+                .map(|(e, frames, fitted)| {
+                    if !fitted {
+                        return (vec![f64::INFINITY; v], f64::NEG_INFINITY);
+                    }
+                    let psnr = frames
+                        .iter()
+                        .map(|&f| crate::asset::metrics::psnr(f / v.max(1) as f64))
+                        .sum::<f64>();
+                    (e, psnr / test.len() as f64)
+                })
+                .unzip::<_, _, Vec<_>, Vec<_>>()
         })
         .collect();
-    let mut sse = vec![vec![0.0f64; ao.vertices]; candidates];
+    let mut sse = vec![vec![0.0f64; v]; candidates];
     let mut fold_psnr = vec![Vec::new(); candidates];
     for (group_sse, group_psnr) in per_group {
         for (total, e) in sse.iter_mut().zip(group_sse) {
@@ -496,6 +569,55 @@ mod tests {
         // Frames of one clip: nothing to leave out.
         let one = [Random, Frame(0), Frame(0), Frame(0), Frame(0), Perturbed(1)];
         assert!(choose_by_clips(&one, &ao, &candidates, each, |&v, _| vec![v as f32]).is_none());
+    }
+
+    #[test]
+    fn scoring_a_chunk_of_columns_at_a_time_gives_the_same_bits() {
+        use Source::{Frame, Random};
+        // Three clips' frames and random rows over seven columns; each
+        // candidate predicts its factor times the training rows' mean.
+        let (v, p) = (7, 12);
+        let ao = AoBlock {
+            vertices: v,
+            values: (0..v * p)
+                .map(|i| ((i as f32) * 0.618).fract() * 0.9)
+                .collect(),
+        };
+        let sources: Vec<Source> = (0..p)
+            .map(|r| if r % 4 == 3 { Random } else { Frame(r % 3) })
+            .collect();
+        let factors = [0.5f32, 1.0, 1.5];
+        let score = |chunk: usize| {
+            sse_by_clips_in_columns(
+                &sources,
+                |r| ao.row(r),
+                Columns { count: v, chunk },
+                factors.len(),
+                |train, cols| {
+                    let mean: Vec<f32> = cols
+                        .clone()
+                        .map(|c| {
+                            train.iter().map(|&r| ao.row(r)[c]).sum::<f32>() / train.len() as f32
+                        })
+                        .collect();
+                    factors
+                        .iter()
+                        .map(|&f| Some(mean.iter().map(|m| m * f).collect::<Vec<f32>>()))
+                        .collect()
+                },
+                |model, _, cols| {
+                    assert_eq!(model.len(), cols.len(), "one prediction per column");
+                    model.clone()
+                },
+            )
+            .unwrap()
+        };
+        let whole = score(v);
+        assert_eq!((whole.folds, whole.sse.len()), (3, 3));
+        assert_eq!(whole.best(), Some(1), "the mean itself predicts best");
+        for chunk in [1, 2, 3, 100] {
+            assert_eq!(score(chunk), whole, "chunks of {chunk}");
+        }
     }
 
     #[test]

@@ -151,45 +151,62 @@ pub fn choose_ridge(
     options: &LinearOptions,
     local: Option<&[Vec<usize>]>,
 ) -> Option<RidgeChoice> {
+    let rows: Vec<usize> = (0..ao.poses()).collect();
     RidgeChoice::of(
         &RIDGE_CANDIDATES,
-        &ridge_errors(poses, angles, ao, sources, options, local)?,
+        &ridge_errors(poses, angles, (ao, &rows), sources, options, local)?,
     )
 }
 
+/// Columns cross-validation fits and scores at a time
+/// ([`super::cv::sse_by_clips_in_columns`]): the candidates' models over
+/// every column of a texel block (hundreds of thousands) are never held
+/// at once. A multiple of [`PROJECT_COLUMNS`], so that each column's
+/// projection is computed as in one fit over every column (the same
+/// bits); wider than most characters' vertices, whose fits take one
+/// chunk.
+pub(crate) const CV_COLUMNS: usize = 2 * PROJECT_COLUMNS;
+
 /// The errors over left-out clips of every ridge weight of
-/// [`RIDGE_CANDIDATES`] (see [`super::cv::sse_by_clips`]), what
-/// [`choose_ridge`] chooses by.
+/// [`RIDGE_CANDIDATES`] (see [`super::cv::sse_by_clips_in_columns`]),
+/// what [`choose_ridge`] chooses by: `poses` and `sources` per row of
+/// `rows`, the rows of `ao` fitted (read in place, not copied whole), a
+/// chunk of [`CV_COLUMNS`] at a time.
 pub(super) fn ridge_errors(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
-    ao: &AoBlock,
+    (ao, rows): (&AoBlock, &[usize]),
     sources: &[super::cv::Source],
     options: &LinearOptions,
     local: Option<&[Vec<usize>]>,
 ) -> Option<super::cv::ClipErrors> {
-    super::cv::sse_by_clips(
+    super::cv::sse_by_clips_in_columns(
         sources,
-        ao,
+        |i| ao.row(rows[i]),
+        super::cv::Columns {
+            count: ao.vertices,
+            chunk: CV_COLUMNS,
+        },
         RIDGE_CANDIDATES.len(),
-        |train| fit_ridges(poses, angles, ao, train, options, local),
-        |model, r| model.evaluate(&poses[r]),
+        |train, columns| {
+            let q: Vec<Vec<f32>> = train.iter().map(|&i| poses[i].clone()).collect();
+            let block = ao.select_columns(train.iter().map(|&i| rows[i]), columns.clone());
+            fit_ridges(&q, angles, &block, options, local.map(|l| &l[columns]))
+        },
+        |model, i, _| model.evaluate(&poses[i]),
     )
 }
 
 /// One model per ridge weight of [`RIDGE_CANDIDATES`] (`None` where the
-/// fit overflows), fitted to `rows` of `poses` and `ao`, local with
+/// fit overflows), fitted to `poses` and `ao` (one row each), local with
 /// `local`: one factorisation per design serves every candidate.
 fn fit_ridges(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
     ao: &AoBlock,
-    rows: &[usize],
     options: &LinearOptions,
     local: Option<&[Vec<usize>]>,
 ) -> Vec<Option<VertexLinear>> {
-    let q: Vec<Vec<f32>> = rows.iter().map(|&r| poses[r].clone()).collect();
-    let block = ao.select(rows.iter().copied());
     let scope = if local.is_some() {
         Scope::Local
     } else {
@@ -197,10 +214,10 @@ fn fit_ridges(
     };
     let models: Vec<Vec<Column>> = RIDGE_CANDIDATES
         .iter()
-        .map(|&ridge| vec![Column { ridge, scope }; block.vertices])
+        .map(|&ridge| vec![Column { ridge, scope }; ao.vertices])
         .collect();
     let models: Vec<&[Column]> = models.iter().map(Vec::as_slice).collect();
-    fit_many(&q, angles, &block, &models, local, options, None, false)
+    fit_many(poses, angles, ao, &models, local, options, None, false)
         .into_iter()
         .map(|fitted| fitted.ok().map(|(m, _)| m))
         .collect()
@@ -253,8 +270,10 @@ pub fn choose_columns(
             let mut fitted: Vec<Option<Fitted>> = Vec::with_capacity(candidates.len());
             for &scope in &scopes {
                 let sets = (scope == Scope::Local).then_some(local).flatten();
+                let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
+                let block = ao.select(train.iter().copied());
                 fitted.extend(
-                    fit_ridges(poses, angles, ao, train, options, sets)
+                    fit_ridges(&q, angles, &block, options, sets)
                         .into_iter()
                         .map(|m| m.map(|m| Fitted::Model(Box::new(m)))),
                 );

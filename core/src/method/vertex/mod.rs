@@ -266,8 +266,9 @@ pub fn fit(
         cv::rows_to_fit(sources, |rows| {
             let q: Vec<Vec<f32>> = rows.iter().map(|&r| q[r].clone()).collect();
             let s: Vec<Source> = rows.iter().map(|&r| sources[r]).collect();
-            let block = ao.select(rows.iter().copied());
-            let errors = linear::ridge_errors(&q, ranges, &block, &s, options.0, None)?;
+            // The candidate's rows read in place: three candidates side by
+            // side would otherwise copy the block three times.
+            let errors = linear::ridge_errors(&q, ranges, (ao, rows), &s, options.0, None)?;
             Some(errors.psnr[errors.best()?])
         })
     } else {
