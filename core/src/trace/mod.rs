@@ -48,7 +48,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use error::TraceError;
-pub use poses::{AoBlock, trace_pose, trace_posed, trace_poses};
+pub use poses::{AoBlock, AoRows, trace_pose, trace_posed, trace_poses};
 pub use sampling::MAX_SAMPLES;
 pub use scene::{Axis, BvhQuality, Ground, Scene, SceneOptions, Traversal};
 

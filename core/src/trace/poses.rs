@@ -61,9 +61,82 @@ impl AoBlock {
 
     /// Each vertex's mean occlusion over the poses (zeros without poses).
     pub fn mean(&self) -> Vec<f64> {
-        let mut sums = vec![0.0f64; self.vertices];
-        for r in 0..self.poses() {
-            for (s, &x) in sums.iter_mut().zip(self.row(r)) {
+        AoRows::all(self).mean()
+    }
+}
+
+/// Some rows of an [`AoBlock`] read in place: what a fit to part of a
+/// block (a fold of cross-validation, the reference rows it chose) reads
+/// without copying it, as [`AoBlock::select`] would. The same values in
+/// the same order, so a fit to a view gives the bits a fit to the copy
+/// gives.
+#[derive(Debug, Clone, Copy)]
+pub struct AoRows<'a> {
+    block: &'a AoBlock,
+    /// The block's rows, in order (`None`: all of them).
+    rows: Option<&'a [usize]>,
+}
+
+impl<'a> AoRows<'a> {
+    /// Every row of `block`.
+    pub fn all(block: &'a AoBlock) -> Self {
+        Self { block, rows: None }
+    }
+
+    /// Rows `rows` of `block`, in that order.
+    pub fn some(block: &'a AoBlock, rows: &'a [usize]) -> Self {
+        Self {
+            block,
+            rows: Some(rows),
+        }
+    }
+
+    /// The block the rows are of.
+    pub fn block(&self) -> &'a AoBlock {
+        self.block
+    }
+
+    /// Columns (vertices or texels) per row.
+    pub fn columns(&self) -> usize {
+        self.block.vertices
+    }
+
+    /// Rows in the view.
+    pub fn poses(&self) -> usize {
+        self.rows.map_or(self.block.poses(), <[usize]>::len)
+    }
+
+    /// The block's row of the view's row `i`.
+    pub fn index(&self, i: usize) -> usize {
+        self.rows.map_or(i, |rows| rows[i])
+    }
+
+    /// The view's row `i`.
+    pub fn row(&self, i: usize) -> &'a [f32] {
+        self.block.row(self.index(i))
+    }
+
+    /// The block's rows of the view's rows `positions`: a view of them is
+    /// a view of this one's.
+    pub fn rows_of(&self, positions: &[usize]) -> Vec<usize> {
+        positions.iter().map(|&i| self.index(i)).collect()
+    }
+
+    /// The rows as a block of their own: borrowed when the view has
+    /// every row, else copied (for a fit that needs one).
+    pub fn to_block(&self) -> std::borrow::Cow<'a, AoBlock> {
+        match self.rows {
+            None => std::borrow::Cow::Borrowed(self.block),
+            Some(rows) => std::borrow::Cow::Owned(self.block.select(rows.iter().copied())),
+        }
+    }
+
+    /// Each column's mean over the rows, summed in the rows' order (zeros
+    /// without rows).
+    pub fn mean(&self) -> Vec<f64> {
+        let mut sums = vec![0.0f64; self.columns()];
+        for i in 0..self.poses() {
+            for (s, &x) in sums.iter_mut().zip(self.row(i)) {
                 *s += f64::from(x);
             }
         }

@@ -478,7 +478,7 @@ fn clip_folds(sources: &[Source]) -> Option<(usize, Vec<(Vec<usize>, Vec<usize>)
 /// vertices of that frame. Only the PSNRs are kept (`sse` is empty).
 pub fn psnr_by_clips<M: Sync>(
     sources: &[Source],
-    ao: &AoBlock,
+    columns: usize,
     candidates: usize,
     fit: impl Fn(&[usize]) -> Option<M> + Sync,
     frame_sse: impl Fn(&M, usize) -> Vec<f64> + Sync,
@@ -501,7 +501,7 @@ pub fn psnr_by_clips<M: Sync>(
             for sse in scored {
                 assert_eq!(sse.len(), candidates, "one error per candidate");
                 for (f, e) in frames.iter_mut().zip(sse) {
-                    *f += crate::asset::metrics::psnr(e / ao.vertices.max(1) as f64);
+                    *f += crate::asset::metrics::psnr(e / columns.max(1) as f64);
                 }
             }
             frames.iter().map(|f| f / test.len() as f64).collect()

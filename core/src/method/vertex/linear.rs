@@ -9,7 +9,10 @@ use serde::{Deserialize, Serialize};
 
 use super::cv::RidgeChoice;
 use super::linalg::{RidgeSolver, SolveStats};
-use crate::{pose_space::Range, trace::AoBlock};
+use crate::{
+    pose_space::Range,
+    trace::{AoBlock, AoRows},
+};
 use aobake_runtime::method::vertex::form::{Block, Coefficients, LinearForm, SparseForm};
 pub use aobake_runtime::method::vertex::linear::{Features, VertexLinear};
 
@@ -146,15 +149,14 @@ pub const RIDGE_CANDIDATES: [f64; 6] = [1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0];
 pub fn choose_ridge(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
-    ao: &AoBlock,
+    ao: AoRows<'_>,
     sources: &[super::cv::Source],
     options: &LinearOptions,
     local: Option<&[Vec<usize>]>,
 ) -> Option<RidgeChoice> {
-    let rows: Vec<usize> = (0..ao.poses()).collect();
     RidgeChoice::of(
         &RIDGE_CANDIDATES,
-        &ridge_errors(poses, angles, (ao, &rows), sources, options, local)?,
+        &ridge_errors(poses, angles, ao, sources, options, local)?,
     )
 }
 
@@ -170,27 +172,29 @@ pub(crate) const CV_COLUMNS: usize = 2 * PROJECT_COLUMNS;
 /// The errors over left-out clips of every ridge weight of
 /// [`RIDGE_CANDIDATES`] (see [`super::cv::sse_by_clips_in_columns`]),
 /// what [`choose_ridge`] chooses by: `poses` and `sources` per row of
-/// `rows`, the rows of `ao` fitted (read in place, not copied whole), a
-/// chunk of [`CV_COLUMNS`] at a time.
+/// `ao` (read in place, not copied whole), a chunk of [`CV_COLUMNS`] at a
+/// time.
 pub(super) fn ridge_errors(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
-    (ao, rows): (&AoBlock, &[usize]),
+    ao: AoRows<'_>,
     sources: &[super::cv::Source],
     options: &LinearOptions,
     local: Option<&[Vec<usize>]>,
 ) -> Option<super::cv::ClipErrors> {
     super::cv::sse_by_clips_in_columns(
         sources,
-        |i| ao.row(rows[i]),
+        |i| ao.row(i),
         super::cv::Columns {
-            count: ao.vertices,
+            count: ao.columns(),
             chunk: CV_COLUMNS,
         },
         RIDGE_CANDIDATES.len(),
         |train, columns| {
             let q: Vec<Vec<f32>> = train.iter().map(|&i| poses[i].clone()).collect();
-            let block = ao.select_columns(train.iter().map(|&i| rows[i]), columns.clone());
+            let block = ao
+                .block()
+                .select_columns(train.iter().map(|&i| ao.index(i)), columns.clone());
             fit_ridges(&q, angles, &block, options, local.map(|l| &l[columns]))
         },
         |model, i, _| model.evaluate(&poses[i]),
@@ -217,10 +221,19 @@ fn fit_ridges(
         .map(|&ridge| vec![Column { ridge, scope }; ao.vertices])
         .collect();
     let models: Vec<&[Column]> = models.iter().map(Vec::as_slice).collect();
-    fit_many(poses, angles, ao, &models, local, options, None, false)
-        .into_iter()
-        .map(|fitted| fitted.ok().map(|(m, _)| m))
-        .collect()
+    fit_many(
+        poses,
+        angles,
+        AoRows::all(ao),
+        &models,
+        local,
+        options,
+        None,
+        false,
+    )
+    .into_iter()
+    .map(|fitted| fitted.ok().map(|(m, _)| m))
+    .collect()
 }
 
 /// Chooses each vertex's [`Column`] by leaving groups of clips out (see
@@ -403,7 +416,7 @@ pub(crate) const F16_MAX: f64 = 65504.0;
 pub fn fit(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
-    ao: &AoBlock,
+    ao: AoRows<'_>,
     options: &LinearOptions,
     local: Option<&[Vec<usize>]>,
 ) -> Result<(VertexLinear, LinearFitStats), FitOverflow> {
@@ -419,7 +432,7 @@ pub fn fit(
         poses,
         angles,
         ao,
-        &vec![column; ao.vertices],
+        &vec![column; ao.columns()],
         local,
         options,
         None,
@@ -434,7 +447,7 @@ pub fn fit(
 pub fn fit_columns(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
-    ao: &AoBlock,
+    ao: AoRows<'_>,
     columns: &[Column],
     local: Option<&[Vec<usize>]>,
     options: &LinearOptions,
@@ -465,7 +478,7 @@ pub fn fit_columns(
 pub fn fit_many(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
-    ao: &AoBlock,
+    ao: AoRows<'_>,
     models: &[&[Column]],
     local: Option<&[Vec<usize>]>,
     options: &LinearOptions,
@@ -492,7 +505,7 @@ pub fn fit_many(
     });
     let local = local.as_deref();
     let n = features.count(angles.ranges.len(), rotations);
-    let v = ao.vertices;
+    let v = ao.columns();
     let (mean_j, inv_std) = standardise(&poses, n);
     let mean_a = ao.mean();
     let js = Mat::from_fn(p, n, |r, k| {
@@ -658,7 +671,7 @@ fn principal_directions(d: faer::MatRef<'_, f64>, k: usize) -> Mat<f64> {
 struct Shared<'a> {
     /// The reference poses' joint angles, as given.
     raw: &'a [Vec<f32>],
-    ao: &'a AoBlock,
+    ao: AoRows<'a>,
     angles: Angles<'a>,
     options: &'a LinearOptions,
     /// Standardised (and maybe projected) features: poses × parameters.
@@ -684,7 +697,7 @@ impl Shared<'_> {
         t: &Mat<f64>,
         constants: Option<&[f32]>,
     ) -> Result<(VertexLinear, LinearFitStats), FitOverflow> {
-        let (p, v, m) = (self.raw.len(), self.ao.vertices, t.nrows());
+        let (p, v, m) = (self.raw.len(), self.ao.columns(), t.nrows());
         let (features, rotations) = (self.options.features, self.angles.rotations);
         let mut mean_a = self.mean_a.to_vec();
         if let Some(constants) = constants {
@@ -856,7 +869,7 @@ mod tests {
             features: Features::RotationVector,
             ..LinearOptions::default()
         };
-        let (model, stats) = fit(&q, wide(), &ao, &exact, None).unwrap();
+        let (model, stats) = fit(&q, wide(), AoRows::all(&ao), &exact, None).unwrap();
         assert_eq!(stats.solve.rank, 3);
         assert!(stats.training_rmse < 1e-6, "{stats:?}");
         assert!(
@@ -884,7 +897,7 @@ mod tests {
             threshold: 0.01,
             ..LinearOptions::default()
         };
-        let (model, stats) = fit(&q, wide(), &ao, &options, None).unwrap();
+        let (model, stats) = fit(&q, wide(), AoRows::all(&ao), &options, None).unwrap();
         // 3 of the 9 angle coefficients are non-zero, plus 3 constants.
         let Coefficients::Sparse(s) = &model.coefficients else {
             panic!("sparse expected")
@@ -895,7 +908,7 @@ mod tests {
         let (ridged, rs) = fit(
             &q,
             wide(),
-            &ao,
+            AoRows::all(&ao),
             &LinearOptions {
                 ridge: 1.0,
                 ..LinearOptions::default()

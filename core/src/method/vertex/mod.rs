@@ -47,7 +47,7 @@ use serde::{Deserialize, Serialize};
 use crate::{
     pose_space::{Handles, JointAngles},
     rig::{pose::Pose, skeleton::Skeleton},
-    trace::AoBlock,
+    trace::{AoBlock, AoRows},
 };
 
 pub use aobake_runtime::method::vertex::{ALGORITHM_VERSION, Model, VertexAo};
@@ -268,7 +268,8 @@ pub fn fit(
             let s: Vec<Source> = rows.iter().map(|&r| sources[r]).collect();
             // The candidate's rows read in place: three candidates side by
             // side would otherwise copy the block three times.
-            let errors = linear::ridge_errors(&q, ranges, (ao, rows), &s, options.0, None)?;
+            let errors =
+                linear::ridge_errors(&q, ranges, AoRows::some(ao, rows), &s, options.0, None)?;
             Some(errors.psnr[errors.best()?])
         })
     } else {
@@ -277,16 +278,33 @@ pub fn fit(
     on_step(FitStep::ReferenceRows);
     let (model, mut stats) = if rows == Rows::All {
         fit_rows(
-            method, options, seed, character, spaces, poses, &q, ao, sources, on_step,
+            method,
+            options,
+            seed,
+            character,
+            spaces,
+            poses,
+            &q,
+            AoRows::all(ao),
+            sources,
+            on_step,
         )?
     } else {
         let keep = rows.select(sources);
         let pick = |r: &usize| (poses[*r].clone(), q[*r].clone());
         let (poses, q): (Vec<Pose>, Vec<Vec<f32>>) = keep.iter().map(pick).unzip();
         let sources: Vec<Source> = keep.iter().map(|&r| sources[r]).collect();
-        let ao = ao.select(keep.iter().copied());
         fit_rows(
-            method, options, seed, character, spaces, &poses, &q, &ao, &sources, on_step,
+            method,
+            options,
+            seed,
+            character,
+            spaces,
+            &poses,
+            &q,
+            AoRows::some(ao, &keep),
+            &sources,
+            on_step,
         )?
     };
     match &mut stats {
@@ -308,7 +326,7 @@ fn fit_rows(
     spaces: (&JointAngles, &Handles),
     poses: &[Pose],
     q: &[Vec<f32>],
-    ao: &AoBlock,
+    ao: AoRows<'_>,
     sources: &[Source],
     on_step: &mut dyn FnMut(FitStep),
 ) -> Result<(Model, FitStats), String> {
@@ -316,7 +334,7 @@ fn fit_rows(
     let (joint_angles, _) = spaces;
     let (mut model, mut stats) = match method {
         Method::StaticAverage => (
-            Model::StaticAverage(average::fit(ao)),
+            Model::StaticAverage(average::fit(&ao.to_block())),
             FitStats::StaticAverage,
         ),
         // texel-linear: vertex-linear over texels (`method::texel`).
@@ -327,9 +345,16 @@ fn fit_rows(
                 FitStats::VertexLinear(Box::new(stats)),
             )
         }
-        Method::VertexClustered => {
-            fit_clustered(character, spaces, options, seed, poses, q, ao, sources)?
-        }
+        Method::VertexClustered => fit_clustered(
+            character,
+            spaces,
+            options,
+            seed,
+            poses,
+            q,
+            &ao.to_block(),
+            sources,
+        )?,
         // Methods of other families have no per-vertex fit.
         other => return Err(format!("{other} is not a per-vertex method")),
     };
@@ -389,7 +414,14 @@ fn fit_clustered(
                 basis: 0,
                 ..*linear
             };
-            Some(fit_linear(character, joint_angles, q, ao, sources, &dense)?)
+            Some(fit_linear(
+                character,
+                joint_angles,
+                q,
+                AoRows::all(ao),
+                sources,
+                &dense,
+            )?)
         }
     };
     let leftover;
@@ -511,7 +543,7 @@ fn add_basis(
     seed: u64,
     character: &crate::Character,
     spaces: (&JointAngles, &Handles),
-    rows: (&[Pose], &[Vec<f32>], &AoBlock, &[Source]),
+    rows: (&[Pose], &[Vec<f32>], AoRows<'_>, &[Source]),
     fitted: (&mut Model, &mut FitStats),
 ) {
     let (linear, clustered) = options;
@@ -541,7 +573,9 @@ fn add_basis(
                 let pick = |r: &usize| (poses[*r].clone(), q[*r].clone());
                 let (poses, q): (Vec<Pose>, Vec<Vec<f32>>) = train.iter().map(pick).unzip();
                 let sources: Vec<Source> = train.iter().map(|&r| sources[r]).collect();
-                let ao = ao.select(train.iter().copied());
+                // The fold's rows read in place, not copied (two folds side
+                // by side held two copies of nearly the whole block).
+                let rows = ao.rows_of(train);
                 let fitted = fit_rows(
                     method,
                     (&settled.0, &settled.1),
@@ -550,7 +584,7 @@ fn add_basis(
                     spaces,
                     &poses,
                     &q,
-                    &ao,
+                    AoRows::some(ao.block(), &rows),
                     &sources,
                     &mut |_| {},
                 );
@@ -653,7 +687,7 @@ fn mean_multiply_adds(model: &Model, weights: &[Vec<f32>]) -> f64 {
 fn basis_by_clips(
     skeleton: &Skeleton,
     poses: &[Pose],
-    ao: &AoBlock,
+    ao: AoRows<'_>,
     sources: &[Source],
     fitted: (&Model, &[Vec<f32>]),
     most: usize,
@@ -735,7 +769,7 @@ fn basis_by_clips(
             })
             .collect()
     };
-    let errors = cv::psnr_by_clips(sources, ao, candidates.len(), fold, frame_sse)?;
+    let errors = cv::psnr_by_clips(sources, ao.columns(), candidates.len(), fold, frame_sse)?;
     cv::choose_basis(&candidates, &errors)
 }
 
@@ -770,12 +804,19 @@ fn fit_linear_per_vertex(
     let all: Vec<usize> = (0..sources.len()).collect();
     let constants = baseline(&all);
     Some(
-        linear::fit_columns(q, ranges, ao, &columns, sets, options, Some(&constants)).map(
-            |(m, mut stats)| {
-                stats.per_vertex = Some(linear::count_columns(&columns));
-                (m, stats)
-            },
-        ),
+        linear::fit_columns(
+            q,
+            ranges,
+            AoRows::all(ao),
+            &columns,
+            sets,
+            options,
+            Some(&constants),
+        )
+        .map(|(m, mut stats)| {
+            stats.per_vertex = Some(linear::count_columns(&columns));
+            (m, stats)
+        }),
     )
 }
 
@@ -816,7 +857,7 @@ fn fit_linear(
     character: &crate::Character,
     joint_angles: &JointAngles,
     q: &[Vec<f32>],
-    ao: &AoBlock,
+    ao: AoRows<'_>,
     sources: &[Source],
     linear: &LinearOptions,
 ) -> Result<(VertexLinear, linear::LinearFitStats), String> {
@@ -828,7 +869,8 @@ fn fit_linear(
         rotations: joint_angles.joints.len(),
     };
     if linear.per_vertex
-        && let Some(fitted) = fit_linear_per_vertex(q, ranges, ao, sources, linear, sets.as_deref())
+        && let Some(fitted) =
+            fit_linear_per_vertex(q, ranges, &ao.to_block(), sources, linear, sets.as_deref())
     {
         return fitted.map_err(|e| e.to_string());
     }
