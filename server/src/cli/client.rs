@@ -307,11 +307,11 @@ fn wait(conn: &Conn, api: &Client, id: i64, json: bool) -> anyhow::Result<()> {
         let left = aobake_api::progress::time_left(view.jobs.as_deref().unwrap_or_default(), now);
         // Work done again (jobs leased again after a lost lease, or run
         // again for a lost output) is counted once, and said.
-        let redo = match view.progress.redo {
-            0 => String::new(),
-            n => format!("; {n} units being done again"),
-        };
-        bar.set_message(format!("{left}; {}{redo}", running_jobs(&view)));
+        bar.set_message(format!(
+            "{left}; {}{}",
+            running_jobs(&view),
+            redo_note(&view.progress)
+        ));
         let b = &view.bake;
         if json
             && matches!(
@@ -527,11 +527,12 @@ pub(super) fn status(args: &StatusArgs) -> anyhow::Result<()> {
     states.retain(|&(_, n)| n > 0);
     let b = &view.bake;
     println!(
-        "bake {}: {} ({} of {} units), {}; jobs: {}; key {}",
+        "bake {}: {} ({} of {} units{}), {}; jobs: {}; key {}",
         args.id,
         b.state.as_str(),
         view.progress.done,
         view.progress.total,
+        redo_note(&view.progress),
         b.method,
         states
             .iter()
@@ -562,13 +563,24 @@ pub(super) struct ControlArgs {
 pub(super) fn control(args: &ControlArgs, action: &str) -> anyhow::Result<()> {
     let view = args.conn.api()?.control(args.id, action)?;
     println!(
-        "bake {}: {} ({} of {} units)",
+        "bake {}: {} ({} of {} units{})",
         args.id,
         view.bake.state.as_str(),
         view.progress.done,
-        view.progress.total
+        view.progress.total,
+        redo_note(&view.progress)
     );
     Ok(())
+}
+
+/// `, N being done again` when some of a bake's units are being done
+/// again (jobs leased again, or run again for lost outputs): counted once
+/// in its progress, and said.
+fn redo_note(progress: &aobake_api::Progress) -> String {
+    match progress.redo {
+        0 => String::new(),
+        n => format!(", {n} being done again"),
+    }
 }
 
 /// Arguments of `aobake fetch`.
@@ -995,6 +1007,17 @@ fn age(ms: i64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn work_done_again_is_said_only_when_there_is_some() {
+        let progress = |redo| aobake_api::Progress {
+            done: 10,
+            total: 20,
+            redo,
+        };
+        assert_eq!(redo_note(&progress(0)), "");
+        assert_eq!(redo_note(&progress(3)), ", 3 being done again");
+    }
 
     #[test]
     fn a_bakes_row_says_how_far_and_when() {
