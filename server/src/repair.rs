@@ -112,7 +112,8 @@ impl Damage {
 pub struct Finding {
     /// The blob.
     pub digest: String,
-    /// `missing` or `corrupt`.
+    /// `missing` or `corrupt` (`skipped`: a bake whose state changed
+    /// while the verify ran, not queued again).
     pub damage: &'static str,
     /// Who names it: `upload character`, `bake 12 asset`, `job 40 (fit)
     /// output asset`, `job 41 checkpoint`.
@@ -193,6 +194,7 @@ pub async fn verify(
         }
     }
     let mut newest: std::collections::BTreeMap<String, i64> = Default::default();
+    let mut deleted_once: BTreeSet<String> = BTreeSet::new();
     for bake in store.bakes(None, None, i64::MAX).await? {
         let jobs = store.jobs(bake.id).await?;
         let mut lost: BTreeSet<String> = BTreeSet::new();
@@ -225,7 +227,7 @@ pub async fn verify(
                 && let Some(cp) = &j.checkpoint
                 && let Some(d) = check(blobs, &mut seen, &mut v, &cp.blob).await?
             {
-                checkpoints.push(j.id);
+                checkpoints.push((j.id, cp.blob.clone()));
                 found.push((
                     cp.blob.clone(),
                     d,
@@ -237,10 +239,11 @@ pub async fn verify(
         // Bakes come newest first: a newer bake of the same key that
         // serves (or will) makes an older one's loss moot.
         let newer = newest.get(&bake.key).copied();
-        let requeue =
-            repair && bake.state == BakeState::Done && !again.is_empty() && newer.is_none();
-        if bake.state.is_active()
-            || (bake.state == BakeState::Done && (again.is_empty() || requeue))
+        // (Whether `--repair` queues it, with or without the flag, so that
+        // a run without it says what a run with it does.)
+        let queues = bake.state == BakeState::Done && !again.is_empty() && newer.is_none();
+        let requeue = repair && queues;
+        if bake.state.is_active() || (bake.state == BakeState::Done && (again.is_empty() || queues))
         {
             newest.entry(bake.key.clone()).or_insert(bake.id);
         }
@@ -251,7 +254,12 @@ pub async fn verify(
             .map(|n| format!("not needed: bake {n} with the same key serves it"))
             .unwrap_or_default();
         for (digest, d, named_by) in found {
-            let deleted = repair && d == Damage::Corrupt && blobs.delete(&digest).await?;
+            // Each corrupt blob deleted once: a bake queued again may have
+            // stored it again, whole, by the time another names it.
+            let deleted = repair
+                && d == Damage::Corrupt
+                && deleted_once.insert(digest.clone())
+                && blobs.delete(&digest).await?;
             // (What it says, and whether an operator must still act.)
             let (what, open) = if named_by.ends_with("checkpoint") {
                 if repair {
@@ -295,13 +303,24 @@ pub async fn verify(
             });
         }
         if repair {
-            for job in checkpoints {
-                store.forget_checkpoint(job).await?;
+            for (job, blob) in checkpoints {
+                store.forget_checkpoint(job, &blob).await?;
             }
         }
         if requeue {
-            store.retry(bake.id, &again).await?;
-            v.requeued.push(bake.id);
+            match store.retry(bake.id, &again).await {
+                Ok(_) => v.requeued.push(bake.id),
+                // Its state changed since it was read (a retry, a cancel
+                // on the server): said, and the other bakes still checked.
+                Err(StoreError::Conflict(why)) => v.findings.push(Finding {
+                    digest: String::new(),
+                    damage: "skipped",
+                    named_by: format!("bake {}", bake.id),
+                    action: format!("not queued again: {why}"),
+                    open: true,
+                }),
+                Err(e) => return Err(e.into()),
+            }
         }
     }
     Ok(v)

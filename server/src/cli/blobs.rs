@@ -66,6 +66,7 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
             .findings
             .iter()
             .map(|f| f.digest.as_str())
+            .filter(|d| !d.is_empty())
             .collect();
         println!(
             "{} blobs read ({:.1} MB), {} damaged{}{}",

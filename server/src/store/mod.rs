@@ -262,9 +262,10 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn put_upload(&self, upload: &UploadRow) -> Result<bool>;
     /// Every upload, oldest first.
     async fn uploads(&self) -> Result<Vec<UploadRow>>;
-    /// Forgets an unfinished job's checkpoint (its blob is gone): its next
-    /// attempt starts over.
-    async fn forget_checkpoint(&self, job: i64) -> Result<()>;
+    /// Forgets an unfinished job's checkpoint `blob` (gone from the blob
+    /// store): its next attempt starts over. A newer checkpoint, saved
+    /// since, is kept.
+    async fn forget_checkpoint(&self, job: i64, blob: &str) -> Result<()>;
     /// An upload by digest and kind (`character` or `clips`).
     async fn upload(&self, digest: &str, kind: &str) -> Result<Option<UploadRow>>;
     /// Creates a bake and its jobs; jobs without dependencies start

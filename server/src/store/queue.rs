@@ -749,9 +749,19 @@ async fn requeue<B: Backend>(c: &mut B::Conn, b: &BakeRow, lost: &[i64]) -> Resu
         work += w;
         jobs += 1;
     }
+    if b.state == BakeState::Done && jobs == 0 {
+        // (None of them completed: nothing would run, and the bake would
+        // stay queued.)
+        return Err(StoreError::Conflict(format!(
+            "bake {bake} is done and none of the jobs named is a completed job of it: nothing to run again"
+        )));
+    }
     let keep = |d: &Option<String>| d.clone().filter(|d| !forgotten.contains(d));
+    // Jobs still running in a failed or cancelled bake are taken back
+    // too (their workers' next heartbeat hears the lease is gone): one
+    // may read an output run again, or be on its last attempt.
     c.execute(
-        B::sql("UPDATE jobs SET state = 'blocked', attempts = 0, error = NULL, run_at = 0 WHERE bake_id = $1 AND state IN ('dead', 'cancelled', 'retryable', 'available')")
+        B::sql("UPDATE jobs SET state = 'blocked', attempts = 0, error = NULL, run_at = 0, lease_token = NULL, lease_expires_at = NULL WHERE bake_id = $1 AND state IN ('dead', 'cancelled', 'retryable', 'available', 'running')")
             .bind(bake),
     )
     .await?;
@@ -799,11 +809,12 @@ impl<B: Backend> Store for SqlStore<B> {
         rows.into_iter().map(RawUpload::cook).collect()
     }
 
-    async fn forget_checkpoint(&self, job: i64) -> Result<()> {
+    async fn forget_checkpoint(&self, job: i64, blob: &str) -> Result<()> {
         in_tx!(self, Durability::Acknowledged, |c| {
             c.execute(
-                B::sql("UPDATE jobs SET checkpoint_step = NULL, checkpoint_cursor = NULL, checkpoint_blob = NULL WHERE id = $1 AND state != 'completed'")
-                    .bind(job),
+                B::sql("UPDATE jobs SET checkpoint_step = NULL, checkpoint_cursor = NULL, checkpoint_blob = NULL WHERE id = $1 AND state != 'completed' AND checkpoint_blob = $2")
+                    .bind(job)
+                    .bind(blob),
             )
             .await?;
             Ok(())
@@ -1070,9 +1081,9 @@ impl<B: Backend> Store for SqlStore<B> {
                         )
                         .await?;
                     let bake = match started {
-                        // A bake that was queued has no running work yet:
-                        // its jobs leased now start at 0.
-                        Some(row) => row.cook()?,
+                        // A queued bake may have reached work already (a
+                        // retry keeps what its jobs had reached).
+                        Some(row) => with_running_work::<B>(c, row.cook()?).await?,
                         None => bake_by_id::<B>(c, job.bake_id, false).await?,
                     };
                     let uploads = bake_uploads::<B>(c, &bake).await?;

@@ -77,6 +77,7 @@ pub(crate) async fn run_all(store: &dyn Store) {
     failures_retry_then_kill_the_bake(store).await;
     cancel_pause_resume_retry(store).await;
     progress_only_moves_forward_and_lost_outputs_run_again(store).await;
+    a_retry_takes_back_the_jobs_a_failed_bake_still_ran(store).await;
     a_worker_that_keeps_failing_a_bake_is_kept_off_it(store).await;
     tracing_jobs_wait_for_a_waiting_gpu_worker_not_for_a_busy_one(store).await;
     a_stopped_worker_is_listed_so_at_once_and_holds_no_job_back(store).await;
@@ -952,6 +953,53 @@ async fn progress_only_moves_forward_and_lost_outputs_run_again(store: &dyn Stor
     assert_eq!(again.state, BakeState::Done);
     assert_eq!((again.done_work, again.jobs_done), (6, 3));
     assert_eq!(again.asset.as_deref(), Some("f".repeat(64).as_str()));
+}
+
+/// A failed bake's jobs that were still running are taken back by a
+/// retry, with fresh attempts: their workers hear the lease is gone, and
+/// none runs on with inputs a retry makes again or on its last attempt.
+async fn a_retry_takes_back_the_jobs_a_failed_bake_still_ran(store: &dyn Store) {
+    let c = character(store).await;
+    let b = store
+        .create_bake(&NewBake {
+            priority: 100,
+            ..bake(&c, &"8".repeat(64))
+        })
+        .await
+        .unwrap();
+    let p = policy();
+    let one = store.lease("w1", &p).await.unwrap().unwrap();
+    let two = store.lease("w2", &p).await.unwrap().unwrap();
+    assert_eq!((one.job.bake_id, two.job.bake_id), (b.id, b.id));
+    store
+        .heartbeat(two.job.id, &two.token, 1, &p)
+        .await
+        .unwrap();
+    let failed = store
+        .fail(one.job.id, &one.token, "broken", false, &p)
+        .await
+        .unwrap();
+    assert_eq!(failed.state, BakeState::Failed);
+    let queued = store.control(b.id, Action::Retry).await.unwrap();
+    assert_eq!(queued.state, BakeState::Queued);
+    // What the running job had reached still counts.
+    assert_eq!(crate::state::progress_done(&queued), 1);
+    assert!(matches!(
+        store.heartbeat(two.job.id, &two.token, 2, &p).await,
+        Err(StoreError::LeaseLost(_))
+    ));
+    let jobs = store.jobs(b.id).await.unwrap();
+    assert_eq!(
+        (jobs[1].state, jobs[1].attempts),
+        (JobState::Available, 0),
+        "{jobs:?}"
+    );
+    // Leased again, by the first lease of the queued bake, with its
+    // progress so far as work done again.
+    let again = store.lease("w3", &p).await.unwrap().unwrap();
+    let row = store.bake(b.id).await.unwrap().unwrap();
+    assert_eq!(again.job.bake_id, b.id);
+    assert_eq!(crate::state::progress_done(&row), 1, "{row:?}");
 }
 
 async fn cancel_pause_resume_retry(store: &dyn Store) {
