@@ -91,6 +91,17 @@ pub enum Outage {
     Bucket,
 }
 
+impl Outage {
+    /// What a blob store that does not serve names: its bucket, when that
+    /// is what is missing, else the store.
+    pub(crate) fn of_blobs(e: &BlobError) -> Self {
+        match e {
+            BlobError::NoBucket(_) => Self::Bucket,
+            _ => Self::Blobs,
+        }
+    }
+}
+
 impl std::fmt::Display for Outage {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
@@ -305,17 +316,15 @@ impl From<BlobError> for ApiError {
             BlobError::DigestMismatch { .. } | BlobError::BadDigest(_) => {
                 Self::bad("bad_digest", e.to_string())
             }
-            BlobError::NoBucket(_) => {
+            _ if e.outage() => {
                 log_line!("error: not answering (503): {e}");
-                Self::Unavailable(Outage::Bucket, BLOBS_RETRY_SECS)
+                Self::Unavailable(Outage::of_blobs(&e), BLOBS_RETRY_SECS)
             }
-            BlobError::Store(_) if e.unreachable() => {
-                log_line!("error: not answering (503): {e}");
-                Self::Unavailable(Outage::Blobs, BLOBS_RETRY_SECS)
-            }
-            BlobError::Io(_) | BlobError::Store(_) | BlobError::Config(_) => {
-                Self::Internal(e.to_string())
-            }
+            // (A bucket that is not there is an outage, above.)
+            BlobError::Io(_)
+            | BlobError::Store(_)
+            | BlobError::Config(_)
+            | BlobError::NoBucket(_) => Self::Internal(e.to_string()),
         }
     }
 }

@@ -90,7 +90,8 @@ pub async fn lost_outputs(
 }
 
 /// What happened to one blob the metadata names.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Damage {
     /// The blob store does not hold it.
     Missing,
@@ -98,12 +99,13 @@ pub enum Damage {
     Corrupt,
 }
 
-impl Damage {
-    fn as_str(self) -> &'static str {
-        match self {
+impl std::fmt::Display for Damage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // (`pad`: a width in the format string lines the findings up.)
+        f.pad(match self {
             Self::Missing => "missing",
             Self::Corrupt => "corrupt",
-        }
+        })
     }
 }
 
@@ -112,9 +114,8 @@ impl Damage {
 pub struct Finding {
     /// The blob.
     pub digest: String,
-    /// `missing` or `corrupt` (`skipped`: a bake whose state changed
-    /// while the verify ran, not queued again).
-    pub damage: &'static str,
+    /// What happened to it.
+    pub damage: Damage,
     /// Who names it: `upload character`, `bake 12 asset`, `job 40 (fit)
     /// output asset`, `job 41 checkpoint`.
     pub named_by: String,
@@ -136,6 +137,10 @@ pub struct Verified {
     pub findings: Vec<Finding>,
     /// Bakes queued again (with `--repair`).
     pub requeued: Vec<i64>,
+    /// Bakes `--repair` would have queued again but whose state changed
+    /// while the verify ran (a retry or a cancel on the server), with
+    /// why they were not: left for an operator.
+    pub skipped: Vec<(i64, String)>,
 }
 
 /// Looks at every blob the store names (uploads, bakes' assets, reports
@@ -176,17 +181,23 @@ pub async fn verify(
         seen.insert(digest.to_owned(), damage);
         Ok(damage)
     }
+    // Each corrupt blob deleted once: a bake queued again may have stored
+    // it again, whole, by the time another names it.
+    let mut deleted_once: BTreeSet<String> = BTreeSet::new();
     for u in store.uploads().await? {
         if let Some(d) = check(blobs, &mut seen, &mut v, &u.digest).await? {
-            let action = if d == Damage::Corrupt && repair {
-                blobs.delete(&u.digest).await?;
+            let deleted = repair
+                && d == Damage::Corrupt
+                && deleted_once.insert(u.digest.clone())
+                && blobs.delete(&u.digest).await?;
+            let action = if deleted {
                 "deleted; upload the file again (`aobake submit` uploads it)"
             } else {
                 "upload the file again (`aobake submit` uploads it)"
             };
             v.findings.push(Finding {
                 digest: u.digest.clone(),
-                damage: d.as_str(),
+                damage: d,
                 named_by: format!("upload {}", u.kind),
                 action: action.into(),
                 open: true,
@@ -194,11 +205,12 @@ pub async fn verify(
         }
     }
     let mut newest: std::collections::BTreeMap<String, i64> = Default::default();
-    let mut deleted_once: BTreeSet<String> = BTreeSet::new();
     for bake in store.bakes(None, None, i64::MAX).await? {
         let jobs = store.jobs(bake.id).await?;
         let mut lost: BTreeSet<String> = BTreeSet::new();
-        let mut found: Vec<(String, Damage, String)> = Vec::new();
+        // (The blob, its damage, who names it, and whether that is a
+        // checkpoint.)
+        let mut found: Vec<(String, Damage, String, bool)> = Vec::new();
         for (name, digest) in [
             ("asset", &bake.asset),
             ("report", &bake.report),
@@ -208,7 +220,7 @@ pub async fn verify(
                 && let Some(d) = check(blobs, &mut seen, &mut v, digest).await?
             {
                 lost.insert(digest.clone());
-                found.push((digest.clone(), d, format!("bake {} {name}", bake.id)));
+                found.push((digest.clone(), d, format!("bake {} {name}", bake.id), false));
             }
         }
         let mut checkpoints = Vec::new();
@@ -220,6 +232,7 @@ pub async fn verify(
                         o.digest.clone(),
                         d,
                         format!("job {} ({}) output {}", j.id, j.kind, o.name),
+                        false,
                     ));
                 }
             }
@@ -232,6 +245,7 @@ pub async fn verify(
                     cp.blob.clone(),
                     d,
                     format!("job {} ({}) checkpoint", j.id, j.kind),
+                    true,
                 ));
             }
         }
@@ -253,15 +267,13 @@ pub async fn verify(
         let superseded = newer
             .map(|n| format!("not needed: bake {n} with the same key serves it"))
             .unwrap_or_default();
-        for (digest, d, named_by) in found {
-            // Each corrupt blob deleted once: a bake queued again may have
-            // stored it again, whole, by the time another names it.
+        for (digest, d, named_by, checkpoint) in found {
             let deleted = repair
                 && d == Damage::Corrupt
                 && deleted_once.insert(digest.clone())
                 && blobs.delete(&digest).await?;
             // (What it says, and whether an operator must still act.)
-            let (what, open) = if named_by.ends_with("checkpoint") {
+            let (what, open) = if checkpoint {
                 if repair {
                     ("forgotten: the job starts over", false)
                 } else {
@@ -292,7 +304,7 @@ pub async fn verify(
             };
             v.findings.push(Finding {
                 digest,
-                damage: d.as_str(),
+                damage: d,
                 named_by,
                 action: if deleted {
                     format!("deleted; {what}")
@@ -312,13 +324,7 @@ pub async fn verify(
                 Ok(_) => v.requeued.push(bake.id),
                 // Its state changed since it was read (a retry, a cancel
                 // on the server): said, and the other bakes still checked.
-                Err(StoreError::Conflict(why)) => v.findings.push(Finding {
-                    digest: String::new(),
-                    damage: "skipped",
-                    named_by: format!("bake {}", bake.id),
-                    action: format!("not queued again: {why}"),
-                    open: true,
-                }),
+                Err(StoreError::Conflict(why)) => v.skipped.push((bake.id, why)),
                 Err(e) => return Err(e.into()),
             }
         }

@@ -28,9 +28,10 @@ use crate::{
 /// (else it makes one and writes it to `admin.token`).
 pub const ADMIN_TOKEN_ENV: &str = "AOBAKE_ADMIN_TOKEN";
 
-/// `aobake serve`'s settings.
+/// The stores a server runs on: `serve`'s, and an operator's command's
+/// (`aobake blobs verify`) given the same.
 #[derive(Debug, Clone, clap::Args)]
-pub struct ServeArgs {
+pub struct Backing {
     /// Where the database, the blobs, `server.url` and `admin.token` live.
     #[arg(long, env = "AOBAKE_DATA", default_value = "aobake-data")]
     pub data: PathBuf,
@@ -47,6 +48,14 @@ pub struct ServeArgs {
     /// AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY).
     #[arg(long, env = "AOBAKE_BLOBS")]
     pub blobs: Option<String>,
+}
+
+/// `aobake serve`'s settings.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ServeArgs {
+    /// Its stores.
+    #[command(flatten)]
+    pub backing: Backing,
     /// Address to listen on; port 0 picks a free one.
     #[arg(long, env = "AOBAKE_LISTEN", default_value = "127.0.0.1:8080")]
     pub listen: SocketAddr,
@@ -131,7 +140,7 @@ const FORGET_WORKERS_MS: i64 = 24 * 3600 * 1000;
 
 /// `--database`: a PostgreSQL URL (the only other store than the
 /// embedded SQLite), so another scheme is a wrong command line.
-pub(crate) fn postgres_url_arg(s: &str) -> Result<String, String> {
+fn postgres_url_arg(s: &str) -> Result<String, String> {
     match s.split_once("://") {
         Some(("postgres" | "postgresql", _)) => Ok(s.to_owned()),
         _ => Err(
@@ -174,8 +183,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         ),
         None => None,
     };
-    let (store, blobs) =
-        open_backing(&args.data, args.database.as_deref(), args.blobs.as_deref()).await?;
+    let (store, blobs) = args.backing.open().await?;
     let policy = QueuePolicy {
         lease_ms: (args.lease_secs * 1000.0) as i64,
         max_attempts: args.max_attempts,
@@ -245,7 +253,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
             (url, public, vec![tls, local])
         }
     };
-    write_private(&args.data.join("server.url"), &url)?;
+    write_private(&args.backing.data.join("server.url"), &url)?;
     if !args.demo {
         println!(
             "{} dashboard: {public}/ (sign in with a token from `aobake token create --scope read`)",
@@ -313,7 +321,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let runtime_dir = match std::env::var_os("XDG_RUNTIME_DIR") {
         // libwayland takes only an absolute path.
         Some(d) if Path::new(&d).is_absolute() => None,
-        _ => Some(private_dir(&args.data.join("run"))?),
+        _ => Some(private_dir(&args.backing.data.join("run"))?),
     };
     for slot in 0..workers {
         // (Made exactly when there are local workers.)
@@ -464,7 +472,7 @@ async fn start_tokens(
     // its admin secret (the file now gets a new one) and its local
     // workers' must not stay valid. An admin token from the environment
     // is the operator's to keep; it is never revoked here.
-    let own_tokens = args.data.join("own-tokens");
+    let own_tokens = args.backing.data.join("own-tokens");
     let previous = std::fs::read_to_string(&own_tokens).unwrap_or_default();
     let previous: Vec<&str> = previous
         .lines()
@@ -489,11 +497,11 @@ async fn start_tokens(
     let origin = format!(
         "serve on {}, {}",
         host_name(),
-        std::path::absolute(&args.data)
-            .unwrap_or_else(|_| args.data.clone())
+        std::path::absolute(&args.backing.data)
+            .unwrap_or_else(|_| args.backing.data.clone())
             .display()
     );
-    let admin_file = args.data.join("admin.token");
+    let admin_file = args.backing.data.join("admin.token");
     let (admin, admin_name) = match given {
         Some(t) => {
             // The file holds a token an earlier start generated, revoked
@@ -669,41 +677,41 @@ async fn terminate(child: &mut Child) {
     let _ = child.kill().await;
 }
 
-/// The metadata store and the blob store `serve` runs on (what `--data`,
-/// `--database` and `--blobs` name), as an operator's command opens them
-/// too: a bucket that is not there (or refuses these credentials) is
-/// refused here, not at the first upload.
-pub(crate) async fn open_backing(
-    data: &std::path::Path,
-    database: Option<&str>,
-    blob_url: Option<&str>,
-) -> anyhow::Result<(Arc<dyn Store>, Arc<dyn Blobs>)> {
-    std::fs::create_dir_all(data).with_context(|| format!("cannot create {}", data.display()))?;
-    let store: Arc<dyn Store> = match database {
-        Some(url) => Arc::new(
-            PgStore::connect(url)
-                .await
-                .context("cannot connect to PostgreSQL")?,
-        ),
-        None => Arc::new(
-            SqliteStore::open(&data.join("aobake.db"))
-                .await
-                .context("cannot open the database")?,
-        ),
-    };
-    let blobs: Arc<dyn Blobs> = blobs::Watched::over(match blob_url {
-        Some(url) => blobs::open(url)?,
-        None => Arc::new(LocalBlobs::open(&data.join("blobs"))?),
-    });
-    if let Some(url) = blob_url {
-        let shown = blobs::redacted(url);
-        match tokio::time::timeout(std::time::Duration::from_secs(15), blobs.probe()).await {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => anyhow::bail!("the blob store {shown} cannot be used: {e}"),
-            Err(_) => anyhow::bail!("the blob store {shown} did not answer in 15 s"),
+impl Backing {
+    /// The metadata store and the blob store (what `--data`, `--database`
+    /// and `--blobs` name): a bucket that is not there (or refuses these
+    /// credentials) is refused here, not at the first upload.
+    pub(crate) async fn open(&self) -> anyhow::Result<(Arc<dyn Store>, Arc<dyn Blobs>)> {
+        let (data, database, blob_url) =
+            (&self.data, self.database.as_deref(), self.blobs.as_deref());
+        std::fs::create_dir_all(data)
+            .with_context(|| format!("cannot create {}", data.display()))?;
+        let store: Arc<dyn Store> = match database {
+            Some(url) => Arc::new(
+                PgStore::connect(url)
+                    .await
+                    .context("cannot connect to PostgreSQL")?,
+            ),
+            None => Arc::new(
+                SqliteStore::open(&data.join("aobake.db"))
+                    .await
+                    .context("cannot open the database")?,
+            ),
+        };
+        let blobs: Arc<dyn Blobs> = blobs::Watched::over(match blob_url {
+            Some(url) => blobs::open(url)?,
+            None => Arc::new(LocalBlobs::open(&data.join("blobs"))?),
+        });
+        if let Some(url) = blob_url {
+            let shown = blobs::redacted(url);
+            match tokio::time::timeout(std::time::Duration::from_secs(15), blobs.probe()).await {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => anyhow::bail!("the blob store {shown} cannot be used: {e}"),
+                Err(_) => anyhow::bail!("the blob store {shown} did not answer in 15 s"),
+            }
         }
+        Ok((store, blobs))
     }
-    Ok((store, blobs))
 }
 
 #[cfg(test)]

@@ -77,6 +77,12 @@ pub struct AoRows<'a> {
     rows: Option<&'a [usize]>,
 }
 
+impl<'a> From<&'a AoBlock> for AoRows<'a> {
+    fn from(block: &'a AoBlock) -> Self {
+        Self::all(block)
+    }
+}
+
 impl<'a> AoRows<'a> {
     /// Every row of `block`.
     pub fn all(block: &'a AoBlock) -> Self {

@@ -1,8 +1,6 @@
 //! `aobake blobs verify`: an operator's check of the blob store against
 //! what the database names (`crate::repair`).
 
-use std::path::PathBuf;
-
 /// `aobake blobs`.
 #[derive(Debug, clap::Args)]
 pub(super) struct Args {
@@ -26,17 +24,8 @@ enum Command {
 /// `aobake blobs verify`: the same stores `aobake serve` is given.
 #[derive(Debug, clap::Args)]
 pub(super) struct VerifyArgs {
-    /// The server's data folder (the SQLite database and local blobs
-    /// when --database and --blobs are not given.)
-    #[arg(long, env = "AOBAKE_DATA", default_value = "aobake-data")]
-    data: PathBuf,
-    /// The server's PostgreSQL URL, if it has one.
-    #[arg(long, env = "AOBAKE_DATABASE", value_parser = crate::serve::postgres_url_arg)]
-    database: Option<String>,
-    /// The server's blob store (`s3://BUCKET[/PREFIX]?endpoint=…` or a
-    /// directory), if not --data's.
-    #[arg(long, env = "AOBAKE_BLOBS")]
-    blobs: Option<String>,
+    #[command(flatten)]
+    backing: crate::serve::Backing,
     /// Repair what can be: delete corrupt blobs, queue done bakes that
     /// lost their asset, report, plot or previews again, forget lost
     /// checkpoints.
@@ -51,8 +40,7 @@ pub(super) struct VerifyArgs {
 pub(super) fn run(args: &Args) -> anyhow::Result<()> {
     let Command::Verify(a) = &args.command;
     let verified = tokio::runtime::Runtime::new()?.block_on(async {
-        let (store, blobs) =
-            crate::serve::open_backing(&a.data, a.database.as_deref(), a.blobs.as_deref()).await?;
+        let (store, blobs) = a.backing.open().await?;
         anyhow::Ok(crate::repair::verify(&*store, &*blobs, a.repair).await?)
     })?;
     if a.json {
@@ -61,12 +49,14 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         for f in &verified.findings {
             println!("{:<8} {}  {}: {}", f.damage, f.digest, f.named_by, f.action);
         }
+        for (bake, why) in &verified.skipped {
+            println!("skipped  bake {bake}: not queued again: {why}");
+        }
         // A blob several name (an output that is also the asset) is one.
         let damaged: std::collections::BTreeSet<&str> = verified
             .findings
             .iter()
             .map(|f| f.digest.as_str())
-            .filter(|d| !d.is_empty())
             .collect();
         println!(
             "{} blobs read ({:.1} MB), {} damaged{}{}",
@@ -95,12 +85,12 @@ pub(super) fn run(args: &Args) -> anyhow::Result<()> {
         .filter(|f| f.open)
         .map(|f| f.digest.as_str())
         .collect();
-    let open = open.len();
-    if open > 0 {
+    let (open, skipped) = (open.len(), verified.skipped.len());
+    if open + skipped > 0 {
         return Err(super::client::Exit {
             code: super::exit::FAILED,
             message: format!(
-                "error: {open} damaged blob(s) need more than this run did ({})",
+                "error: {open} damaged blob(s) and {skipped} bake(s) need more than this run did ({})",
                 if a.repair {
                     "lost uploads: submit their files again"
                 } else {

@@ -180,11 +180,10 @@ pub(crate) async fn ready(State(state): State<AppState>) -> ApiResult<&'static s
         // there, settings it refuses): the log says what.
         Ok(Err(e)) => {
             log_line!("error: the blob store fails the readiness probe: {e}");
-            let outage = match e {
-                crate::blobs::BlobError::NoBucket(_) => Outage::Bucket,
-                _ => Outage::Blobs,
-            };
-            return Err(ApiError::Unavailable(outage, BLOBS_RETRY_SECS));
+            return Err(ApiError::Unavailable(
+                Outage::of_blobs(&e),
+                BLOBS_RETRY_SECS,
+            ));
         }
         Err(_) => {
             log_line!(

@@ -273,11 +273,6 @@ pub trait Store: Send + Sync + std::fmt::Debug + 'static {
     async fn create_bake(&self, bake: &NewBake) -> Result<BakeRow>;
     /// A bake by id.
     async fn bake(&self, id: i64) -> Result<Option<BakeRow>>;
-    /// The newest bake with this key that is done, else the newest still
-    /// active (the first of [`Store::bakes_for_key`]).
-    async fn bake_for_key(&self, key: &str) -> Result<Option<BakeRow>> {
-        Ok(self.bakes_for_key(key).await?.into_iter().next())
-    }
     /// The bakes with this key that are done or still active, done first,
     /// newest first (at most 16): a done bake whose asset was lost is
     /// passed over for the next.

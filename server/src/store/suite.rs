@@ -680,7 +680,13 @@ async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {
     assert_eq!((beat.bake.done_work, beat.bake.running_work), (0, 1));
     let read = store.bake(b.id).await.unwrap().unwrap();
     let listed = store.bakes(Some(&c), None, 10).await.unwrap();
-    let by_key = store.bake_for_key(&"1".repeat(64)).await.unwrap().unwrap();
+    let by_key = store
+        .bakes_for_key(&"1".repeat(64))
+        .await
+        .unwrap()
+        .into_iter()
+        .next()
+        .unwrap();
     for row in [
         &read,
         &by_key,
@@ -727,7 +733,13 @@ async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {
         .unwrap();
     assert_eq!(end.state, BakeState::Done);
     assert_eq!(end.asset.as_deref(), Some("d".repeat(64).as_str()));
-    let found = store.bake_for_key(&"1".repeat(64)).await.unwrap().unwrap();
+    let found = store
+        .bakes_for_key(&"1".repeat(64))
+        .await
+        .unwrap()
+        .into_iter()
+        .next()
+        .unwrap();
     assert_eq!(found.id, end.id);
     let jobs = store.jobs(end.id).await.unwrap();
     assert!(jobs.iter().all(|j| j.state == JobState::Completed));
@@ -928,7 +940,15 @@ async fn progress_only_moves_forward_and_lost_outputs_run_again(store: &dyn Stor
     assert_eq!(crate::state::progress_done(&queued), queued.total_work);
     assert_eq!(queued.asset, None);
     assert!(
-        store.bake_for_key(&key).await.unwrap().unwrap().state != BakeState::Done,
+        store
+            .bakes_for_key(&key)
+            .await
+            .unwrap()
+            .into_iter()
+            .next()
+            .unwrap()
+            .state
+            != BakeState::Done,
         "never a cache hit while lost"
     );
     let jobs = store.jobs(b.id).await.unwrap();
@@ -1023,7 +1043,13 @@ async fn cancel_pause_resume_retry(store: &dyn Store) {
             .iter()
             .all(|j| j.state == JobState::Cancelled)
     );
-    assert!(store.bake_for_key(&"4".repeat(64)).await.unwrap().is_none());
+    assert!(
+        store
+            .bakes_for_key(&"4".repeat(64))
+            .await
+            .unwrap()
+            .is_empty()
+    );
     let p = store.set_priority(b.id, 7).await.unwrap();
     assert_eq!(p.priority, 7);
 }

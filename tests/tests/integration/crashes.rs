@@ -827,17 +827,12 @@ fn a_completion_whose_answer_was_lost_is_answered_again_and_counted_once() {
 /// with the same bytes as `aobake bake`.
 #[test]
 fn a_bake_whose_inputs_vanish_mid_flight_fails_at_once_and_retry_finishes_it() {
+    // Small jobs: most of the samples are still to run when four are done.
     let mut env = TestEnv::start(Options {
         job_rays: Some(0),
         ..Options::default()
     });
-    let cm = character("CesiumMan");
-    let digest = upload(&env, &cm);
-    let (status, b) = submit(&env, &digest, 64);
-    assert_eq!(status, 202, "{b}");
-    let id = b["id"].as_i64().unwrap();
-    env.start_worker(&[]);
-    env.wait_jobs_done(id, 1, Duration::from_secs(120));
+    let (cm, id) = cesium_man_under_way(&mut env);
     // What the jobs finished so far stored, deleted behind the server's
     // back.
     let mut deleted = 0;

@@ -3,19 +3,21 @@
 
 use half::f16;
 
-use crate::trace::AoBlock;
+use crate::trace::AoRows;
 use aobake_runtime::method::vertex::form::{Block, LinearForm};
 
 pub use aobake_runtime::method::vertex::average::StaticAverage;
 
-/// The static average of `ao`: the mean over its rows.
-pub fn fit(ao: &AoBlock) -> StaticAverage {
+/// The static average of `ao` (a block, or some of its rows read in
+/// place): the mean over its rows.
+pub fn fit<'a>(ao: impl Into<AoRows<'a>>) -> StaticAverage {
+    let ao = ao.into();
     StaticAverage {
         form: LinearForm {
-            vertices: ao.vertices,
+            vertices: ao.columns(),
             blocks: vec![Block {
                 rows: 1,
-                columns: ao.vertices,
+                columns: ao.columns(),
                 coefficients: ao.mean().into_iter().map(f16::from_f64).collect(),
                 map: None,
             }],
@@ -26,6 +28,7 @@ pub fn fit(ao: &AoBlock) -> StaticAverage {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::trace::AoBlock;
 
     #[test]
     fn mean_of_rows() {

@@ -195,7 +195,13 @@ pub(super) fn ridge_errors(
             let block = ao
                 .block()
                 .select_columns(train.iter().map(|&i| ao.index(i)), columns.clone());
-            fit_ridges(&q, angles, &block, options, local.map(|l| &l[columns]))
+            fit_ridges(
+                &q,
+                angles,
+                AoRows::all(&block),
+                options,
+                local.map(|l| &l[columns]),
+            )
         },
         |model, i, _| model.evaluate(&poses[i]),
     )
@@ -207,7 +213,7 @@ pub(super) fn ridge_errors(
 fn fit_ridges(
     poses: &[Vec<f32>],
     angles: Angles<'_>,
-    ao: &AoBlock,
+    ao: AoRows<'_>,
     options: &LinearOptions,
     local: Option<&[Vec<usize>]>,
 ) -> Vec<Option<VertexLinear>> {
@@ -218,22 +224,13 @@ fn fit_ridges(
     };
     let models: Vec<Vec<Column>> = RIDGE_CANDIDATES
         .iter()
-        .map(|&ridge| vec![Column { ridge, scope }; ao.vertices])
+        .map(|&ridge| vec![Column { ridge, scope }; ao.columns()])
         .collect();
     let models: Vec<&[Column]> = models.iter().map(Vec::as_slice).collect();
-    fit_many(
-        poses,
-        angles,
-        AoRows::all(ao),
-        &models,
-        local,
-        options,
-        None,
-        false,
-    )
-    .into_iter()
-    .map(|fitted| fitted.ok().map(|(m, _)| m))
-    .collect()
+    fit_many(poses, angles, ao, &models, local, options, None, false)
+        .into_iter()
+        .map(|fitted| fitted.ok().map(|(m, _)| m))
+        .collect()
 }
 
 /// Chooses each vertex's [`Column`] by leaving groups of clips out (see
@@ -284,9 +281,8 @@ pub fn choose_columns(
             for &scope in &scopes {
                 let sets = (scope == Scope::Local).then_some(local).flatten();
                 let q: Vec<Vec<f32>> = train.iter().map(|&r| poses[r].clone()).collect();
-                let block = ao.select(train.iter().copied());
                 fitted.extend(
-                    fit_ridges(&q, angles, &block, options, sets)
+                    fit_ridges(&q, angles, AoRows::some(ao, train), options, sets)
                         .into_iter()
                         .map(|m| m.map(|m| Fitted::Model(Box::new(m)))),
                 );

@@ -334,7 +334,7 @@ fn fit_rows(
     let (joint_angles, _) = spaces;
     let (mut model, mut stats) = match method {
         Method::StaticAverage => (
-            Model::StaticAverage(average::fit(&ao.to_block())),
+            Model::StaticAverage(average::fit(ao)),
             FitStats::StaticAverage,
         ),
         // texel-linear: vertex-linear over texels (`method::texel`).
@@ -793,7 +793,7 @@ fn fit_linear_per_vertex(
             .filter(|&r| matches!(sources[r], Source::Frame(_)))
             .collect();
         let rows = if frames.is_empty() { rows } else { &frames };
-        average::fit(&ao.select(rows.iter().copied())).evaluate()
+        average::fit(AoRows::some(ao, rows)).evaluate()
     };
     let scopes: &[Scope] = match options.locality {
         Locality::Off => &[Scope::Global],
