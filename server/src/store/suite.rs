@@ -57,6 +57,12 @@ fn bake(character: &str, key: &str) -> NewBake {
     }
 }
 
+/// The first of the key's bakes (a done one before an active one).
+async fn first_for_key(store: &dyn Store, key: &str) -> super::BakeRow {
+    let bakes = store.bakes_for_key(key).await.unwrap();
+    bakes.into_iter().next().expect("a bake with the key")
+}
+
 fn done(name: &str) -> Completion {
     Completion {
         outputs: vec![OutputRef {
@@ -680,13 +686,7 @@ async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {
     assert_eq!((beat.bake.done_work, beat.bake.running_work), (0, 1));
     let read = store.bake(b.id).await.unwrap().unwrap();
     let listed = store.bakes(Some(&c), None, 10).await.unwrap();
-    let by_key = store
-        .bakes_for_key(&"1".repeat(64))
-        .await
-        .unwrap()
-        .into_iter()
-        .next()
-        .unwrap();
+    let by_key = first_for_key(store, &"1".repeat(64)).await;
     for row in [
         &read,
         &by_key,
@@ -733,13 +733,7 @@ async fn jobs_run_in_dependency_order_and_publish_the_asset(store: &dyn Store) {
         .unwrap();
     assert_eq!(end.state, BakeState::Done);
     assert_eq!(end.asset.as_deref(), Some("d".repeat(64).as_str()));
-    let found = store
-        .bakes_for_key(&"1".repeat(64))
-        .await
-        .unwrap()
-        .into_iter()
-        .next()
-        .unwrap();
+    let found = first_for_key(store, &"1".repeat(64)).await;
     assert_eq!(found.id, end.id);
     let jobs = store.jobs(end.id).await.unwrap();
     assert!(jobs.iter().all(|j| j.state == JobState::Completed));
